@@ -1,0 +1,3 @@
+from sherpa_cli.cli.app import main
+
+main()

@@ -1,0 +1,201 @@
+"""Typed, frozen model of an arm configuration.
+
+Units: positions in feedback counts of the drive's controlling sensor, velocities in
+counts/s, accelerations in counts/s^2, currents in A, times in s. ``cpr`` converts a
+joint's counts to radians (``rad = counts * 2*pi / cpr``), gearing included.
+
+Ranges of one joint (docs/config.md, "Ranges"):
+
+    overshoot range  [pos_min - overshoot, pos_max + overshoot]   -> LL[3] / HL[3] (trip)
+    full range       [pos_min, pos_max]                           -> VL[3] / VH[3] (clip)
+    normal range     [pos_min + margin, pos_max - margin]         where the tool moves a joint
+
+Every object keeps ``where`` (file, line, key path) so later checks, like the current
+check against the catalog, can still point at the line a technician must edit.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from enum import Enum
+from typing import Any, Mapping
+
+from sherpa_cli.errors import Location
+
+
+class SwitchKind(str, Enum):
+    STOP = "stop"  # end-detection switch: the drive stops motion toward it (IL = il_codes.stop)
+    HOME = "home"  # position-detection switch used by homing (IL = il_codes.home)
+
+
+class JointRole(str, Enum):
+    PLAIN = "plain"  # one drive, one joint
+    SIGMA = "sigma"  # Σ joint of a differential pair (sum of motor positions)
+    DELTA = "delta"  # Δ joint of a differential pair (difference of motor positions)
+
+
+@dataclass(frozen=True)
+class BusConfig:
+    name: str
+    interface: str | None = None  # python-can interface; None = python-can's own config decides
+    channel: str | None = None
+    bitrate: int | None = None
+    send_interval_us: int = 1000  # minimum gap between frames this tool sends on the bus
+    poll_interval_ms: int = 10  # how often drives are polled while watching motion
+    options: Mapping[str, Any] = field(default_factory=dict)  # extra keyword args for can.Bus
+    where: Location = field(default_factory=Location, compare=False)
+
+
+@dataclass(frozen=True)
+class DriveModel:
+    """A servo drive type from the catalog (seed Table 3.2)."""
+
+    name: str
+    nominal_voltage: float
+    max_voltage: float
+    current_cont: float  # A
+    current_peak: float  # A
+    inputs: int = 6  # digital inputs IL[1..inputs]
+
+
+@dataclass(frozen=True)
+class MotorModel:
+    """A motor type from the catalog (seed Table 3.1)."""
+
+    name: str
+    voltage: float
+    current_cont: float  # A
+    power: float  # W
+    current_peak: float  # A
+    peak_power: float  # W
+
+
+@dataclass(frozen=True)
+class Catalog:
+    drives: Mapping[str, DriveModel]
+    motors: Mapping[str, MotorModel]
+    peak_fraction: float = 0.75  # seed 3.4: use at most 75 % of the motor's peak current
+
+
+@dataclass(frozen=True)
+class DriveConfig:
+    name: str
+    bus: str
+    node: int  # CAN node id 1..127
+    model: str | None = None  # key into catalog.drives; None = unknown model (no rating checks)
+    motor: str | None = None  # key into catalog.motors
+    where: Location = field(default_factory=Location, compare=False)
+
+
+@dataclass(frozen=True)
+class CurrentLimits:
+    continuous: float  # A -> CL[1]
+    peak: float  # A -> PL[1]
+    peak_time: float  # s -> PL[2]
+    where: Location = field(default_factory=Location, compare=False)
+
+
+@dataclass(frozen=True)
+class SwitchConfig:
+    input: int  # digital input number on the drive(s), 1-based
+    kind: SwitchKind
+    position: int  # joint position (counts) where the switch trips
+    side: str | None = None  # "low" / "high" for stop switches at the ends of the range
+    drives: tuple[str, ...] = ()  # drives it is wired to; empty = the joint's drive(s)
+    where: Location = field(default_factory=Location, compare=False)
+
+
+@dataclass(frozen=True)
+class AbsEncoderConfig:
+    """An absolute encoder that gives the joint position without homing."""
+
+    source: str  # e.g. "drive:PY" (aux position of the drive) or a topic/name
+    offset: int = 0  # counts added to the encoder reading to get the joint position
+    where: Location = field(default_factory=Location, compare=False)
+
+
+@dataclass(frozen=True)
+class JointConfig:
+    name: str
+    role: JointRole
+    drive: str | None  # the drive of a plain joint; None for Σ/Δ joints
+    pair: str | None  # the differential pair of a Σ/Δ joint
+    cpr: int  # counts per joint revolution
+    pos_min: int
+    pos_max: int
+    margin: int = 0  # full range edge -> normal range edge (inward)
+    overshoot: int = 0  # full range edge -> overshoot range edge (outward)
+    # None = not configured: the derivation then leaves that drive parameter alone
+    # (the seed's rosparam format has no velocity, acceleration or current keys).
+    vel_limit: int | None = None  # counts/s -> VL[2]/VH[2]
+    vel_trip: int | None = None  # counts/s -> LL[2]/HL[2]
+    accel: int | None = None  # counts/s^2 -> AC
+    decel: int | None = None  # counts/s^2 -> DC
+    current: CurrentLimits | None = None  # plain joints; pairs carry theirs on the pair
+    switches: tuple[SwitchConfig, ...] = ()
+    cal_speed: int | None = None  # counts/s toward the calibration switch
+    cal_pos: int | None = None  # joint position set when the calibration switch is reached
+    abs_encoder: AbsEncoderConfig | None = None
+    where: Location = field(default_factory=Location, compare=False)
+
+    @property
+    def full_range(self) -> tuple[int, int]:
+        return (self.pos_min, self.pos_max)
+
+    @property
+    def normal_range(self) -> tuple[int, int]:
+        return (self.pos_min + self.margin, self.pos_max - self.margin)
+
+    @property
+    def overshoot_range(self) -> tuple[int, int]:
+        return (self.pos_min - self.overshoot, self.pos_max + self.overshoot)
+
+
+@dataclass(frozen=True)
+class PairConfig:
+    """Two drives that together move a Σ joint (m_a + m_b) and a Δ joint (m_a - m_b).
+
+    ``drive_a`` is the drive with the lower node id (seed D.1.3); the loader sorts them.
+    """
+
+    name: str
+    drive_a: str
+    drive_b: str
+    sigma: str  # joint name
+    delta: str  # joint name
+    current: CurrentLimits | None = None  # applied to both motors
+    where: Location = field(default_factory=Location, compare=False)
+
+
+@dataclass(frozen=True)
+class ILCodes:
+    """Input-logic values written to IL[n]; public tables disagree across firmware, so they are settings."""
+
+    stop: int = 21
+    home: int = 5
+
+
+@dataclass(frozen=True)
+class ArmConfig:
+    name: str
+    buses: Mapping[str, BusConfig]
+    drives: Mapping[str, DriveConfig]
+    joints: Mapping[str, JointConfig]
+    pairs: Mapping[str, PairConfig]
+    catalog: Catalog
+    il_codes: ILCodes = field(default_factory=ILCodes)
+    source: str | None = None  # file the config came from
+    warnings: tuple[str, ...] = ()  # non-fatal findings of validation, shown by `config check`
+
+    def joint_of_drive(self, drive: str) -> JointConfig | None:
+        """The plain joint a drive moves, if any."""
+        for joint in self.joints.values():
+            if joint.drive == drive:
+                return joint
+        return None
+
+    def pair_of_drive(self, drive: str) -> PairConfig | None:
+        for pair in self.pairs.values():
+            if drive in (pair.drive_a, pair.drive_b):
+                return pair
+        return None

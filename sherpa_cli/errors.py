@@ -1,0 +1,106 @@
+"""One exception root for the whole package, and the documented exit codes.
+
+Every error a user can cause or meet carries what they must know to act on it
+(file and line, drive and node, Elmo error code). The CLI turns a SherpaError
+into one line on stderr and its exit code; only ``--debug`` shows a traceback.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from enum import IntEnum
+
+
+class ExitCode(IntEnum):
+    """Process exit codes; docs/exit-codes.md is the user-facing copy of this table."""
+
+    OK = 0
+    PROBLEM = 1  # the operation ran and found a problem (missing drive, diff, verify mismatch)
+    USAGE = 2  # bad arguments or bad configuration
+    BUS = 3  # bus or communication error (timeout, adapter missing)
+    REFUSED = 4  # a drive refused a command (Elmo error reply)
+    INTERRUPTED = 130  # Ctrl-C
+
+
+@dataclass(frozen=True)
+class Location:
+    """Where in an input a problem sits: file, 1-based line, and key path like ``joints.elbow.pos_min``."""
+
+    file: str | None = None
+    line: int | None = None
+    path: str | None = None
+
+    def __str__(self) -> str:
+        where = self.file or "<input>"
+        if self.line is not None:
+            where += f":{self.line}"
+        if self.path:
+            where += f": {self.path}"
+        return where
+
+
+class SherpaError(Exception):
+    """Root of every error sherpa-cli raises on purpose."""
+
+    exit_code: ExitCode = ExitCode.PROBLEM
+
+    def __init__(self, message: str, *, hint: str | None = None) -> None:
+        super().__init__(message)
+        self.message = message
+        self.hint = hint
+
+    def __str__(self) -> str:
+        return self.message
+
+
+class UsageError(SherpaError):
+    """Bad command-line arguments or values (exit 2)."""
+
+    exit_code = ExitCode.USAGE
+
+
+class ConfigError(SherpaError):
+    """A configuration file is wrong; the message names file, line and key path (exit 2)."""
+
+    exit_code = ExitCode.USAGE
+
+    def __init__(self, message: str, location: Location | None = None, *, hint: str | None = None) -> None:
+        self.location = location or Location()
+        self.problem = message
+        text = f"{self.location}: {message}"
+        super().__init__(text, hint=hint)
+
+
+class CodecError(SherpaError, ValueError):
+    """A frame or command could not be encoded or decoded (bad letters, index, value, length)."""
+
+    exit_code = ExitCode.USAGE
+
+
+class CommunicationError(SherpaError):
+    """The bus or a drive did not answer as it must (exit 3)."""
+
+    exit_code = ExitCode.BUS
+
+
+class DriveTimeoutError(CommunicationError, TimeoutError):
+    """A drive did not answer in time; names the drive and what was asked."""
+
+
+class DriveRefusedError(SherpaError):
+    """A drive answered with an Elmo error code (exit 4)."""
+
+    exit_code = ExitCode.REFUSED
+
+    def __init__(self, message: str, *, drive: str | None = None, command: str | None = None,
+                 code: int | None = None, hint: str | None = None) -> None:
+        super().__init__(message, hint=hint)
+        self.drive = drive
+        self.command = command
+        self.code = code
+
+
+class SafetyError(SherpaError):
+    """An operation was refused by a safety rule (motor on, outside limits, unconfirmed save)."""
+
+    exit_code = ExitCode.PROBLEM
