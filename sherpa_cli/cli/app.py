@@ -1,0 +1,120 @@
+"""Root of the ``sherpa`` command: global options, the command list, and the error boundary.
+
+Command modules are imported here, but they import the CAN stack (python-can, canopen)
+only inside the functions that need it, so ``sherpa --help`` stays fast.
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+from pathlib import Path
+from typing import Optional, Sequence
+
+import typer
+
+from sherpa_cli import __version__
+from sherpa_cli.cli import context
+from sherpa_cli.cli.context import AppState
+from sherpa_cli.errors import ExitCode, SherpaError
+
+DEFAULT_CONFIG = Path("configs/sherpa-arm.yaml")
+
+app = typer.Typer(
+    name="sherpa",
+    help="Commission and diagnose the SHERPA arm's Elmo SimplIQ Whistle drives over CAN.\n\n"
+    "Exit codes: 0 ok, 1 problem found, 2 usage/config error, 3 bus error, "
+    "4 drive refused, 130 interrupted (docs/exit-codes.md).",
+    no_args_is_help=True,
+    add_completion=False,
+    rich_markup_mode=None,  # plain click help: rich's help formatter doubles start-up time
+    pretty_exceptions_enable=False,
+    context_settings={"help_option_names": ["-h", "--help"]},
+)
+
+
+def _version_callback(value: bool) -> None:
+    if value:
+        typer.echo(f"sherpa-cli {__version__}")
+        raise typer.Exit()
+
+
+def default_config_path() -> Path:
+    env = os.environ.get("SHERPA_CONFIG")
+    return Path(env) if env else DEFAULT_CONFIG
+
+
+@app.callback()
+def root(
+    ctx: typer.Context,
+    config: Optional[Path] = typer.Option(
+        None, "--config", "-c", metavar="FILE",
+        help="Arm configuration (native YAML or the seed's rosparam format). "
+        "Default: $SHERPA_CONFIG, else configs/sherpa-arm.yaml.",
+    ),
+    json_out: bool = typer.Option(False, "--json", help="Print results as JSON on stdout."),
+    debug: bool = typer.Option(False, "--debug", help="Show tracebacks for errors."),
+    no_color: bool = typer.Option(False, "--no-color", help="No colour (NO_COLOR is honoured too)."),
+    version: bool = typer.Option(False, "--version", callback=_version_callback, is_eager=True,
+                                 help="Print the version and exit."),
+) -> None:
+    ctx.obj = context.CURRENT = AppState.create(
+        config_path=config if config is not None else default_config_path(),
+        config_given=config is not None,
+        json_mode=json_out,
+        debug=debug,
+        no_color=no_color,
+    )
+
+
+def _register() -> None:
+    from sherpa_cli.cli import config_cmd, diffdrive_cmd, limits_cmd
+
+    app.add_typer(config_cmd.app, name="config")
+    app.add_typer(limits_cmd.app, name="limits")
+    app.add_typer(diffdrive_cmd.app, name="diffdrive")
+
+
+_register()
+
+
+def run(argv: Sequence[str] | None = None) -> int:
+    """Run the CLI and return its exit code; tests call this, the console script wraps it."""
+    args = list(sys.argv[1:] if argv is None else argv)
+    debug = "--debug" in args
+    context.CURRENT = None
+    try:
+        code = app(args=args, prog_name="sherpa", standalone_mode=False)
+        return int(code) if isinstance(code, int) else int(ExitCode.OK)
+    except SherpaError as exc:
+        if debug:
+            raise
+        _report(str(exc), exc.hint)
+        return int(exc.exit_code)
+    except (KeyboardInterrupt, typer.Abort):
+        if debug:
+            raise
+        _report("interrupted", None)
+        return int(ExitCode.INTERRUPTED)
+    except typer.Exit as exc:
+        return int(exc.exit_code)
+    except typer.TyperException as exc:
+        # usage errors: the parser's own message already names the option or argument
+        show = getattr(exc, "show", None)
+        if show is not None:
+            show(file=sys.stderr)
+        else:
+            sys.stderr.write(f"error: {exc.format_message()}\n")
+        return int(ExitCode.USAGE)
+
+
+def _report(message: str, hint: str | None) -> None:
+    from sherpa_cli.cli.output import Output
+
+    state = context.CURRENT
+    out = state.out if state is not None else Output.create(no_color=True)
+    out.error(message, hint)
+
+
+def main(argv: Sequence[str] | None = None) -> None:
+    sys.exit(run(argv))

@@ -1,0 +1,123 @@
+"""The one output sink: results to stdout, progress/warnings/errors to stderr, ``--json`` for machines.
+
+Consoles are created per invocation (not at import) so tests that swap sys.stdout see
+everything, and so ``sherpa --help`` never imports rich.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import sys
+from dataclasses import dataclass, field
+from typing import Any, Iterable, Sequence
+
+from sherpa_cli.errors import SafetyError, UsageError
+
+
+def _color_allowed(no_color_flag: bool) -> bool:
+    # https://no-color.org: any non-empty NO_COLOR disables colour
+    return not no_color_flag and not os.environ.get("NO_COLOR")
+
+
+@dataclass
+class Output:
+    json_mode: bool = False
+    color: bool = True
+    assume_yes: bool = False
+    _out: Any = field(default=None, repr=False)
+    _err: Any = field(default=None, repr=False)
+
+    @classmethod
+    def create(cls, *, json_mode: bool = False, no_color: bool = False) -> "Output":
+        return cls(json_mode=json_mode, color=_color_allowed(no_color))
+
+    def _console(self, stderr: bool):
+        from rich.console import Console
+
+        attr = "_err" if stderr else "_out"
+        console = getattr(self, attr)
+        if console is None:
+            console = Console(
+                file=sys.stderr if stderr else sys.stdout,
+                no_color=not self.color,
+                color_system="auto" if self.color else None,
+                highlight=False,
+                soft_wrap=False,
+                emoji=False,
+            )
+            setattr(self, attr, console)
+        return console
+
+    @property
+    def console(self):
+        return self._console(stderr=False)
+
+    # results (stdout)
+    def result(self, renderable: Any) -> None:
+        self._console(stderr=False).print(renderable)
+
+    def line(self, text: str = "") -> None:
+        self._console(stderr=False).print(text, markup=False)
+
+    def json(self, obj: Any) -> None:
+        sys.stdout.write(json.dumps(obj, indent=2, ensure_ascii=False) + "\n")
+        sys.stdout.flush()
+
+    def table(self, title: str | None, columns: Sequence[str], rows: Iterable[Sequence[Any]],
+              *, right: Iterable[int] = ()) -> None:
+        self.result(make_table(title, columns, rows, right=right))
+
+    # diagnostics (stderr)
+    def info(self, text: str) -> None:
+        self._console(stderr=True).print(text, markup=False)
+
+    def warn(self, text: str) -> None:
+        self._console(stderr=True).print(f"warning: {text}", style="yellow", markup=False)
+
+    def error(self, text: str, hint: str | None = None) -> None:
+        err = self._console(stderr=True)
+        err.print(f"error: {text}", style="bold red", markup=False)
+        if hint:
+            err.print(f"hint: {hint}", markup=False)
+
+    def confirm(self, question: str) -> bool:
+        """Ask yes/no on the terminal; refuse (never hang) when nobody can answer."""
+        if self.assume_yes:
+            return True
+        if self.json_mode or not sys.stdin.isatty():
+            raise SafetyError(f"{question} -- refusing: not an interactive terminal",
+                              hint="pass --yes to confirm in scripts")
+        answer = input(f"{question} [y/N] ").strip().lower()
+        return answer in ("y", "yes")
+
+
+def make_table(title: str | None, columns: Sequence[str], rows: Iterable[Sequence[Any]],
+               *, right: Iterable[int] = ()):
+    from rich import box
+    from rich.table import Table
+
+    table = Table(title=title, box=box.SIMPLE_HEAD, title_justify="left", pad_edge=False)
+    right_cols = set(right)
+    for i, name in enumerate(columns):
+        table.add_column(name, justify="right" if i in right_cols else "left", no_wrap=True)
+    for row in rows:
+        table.add_row(*("" if v is None else str(v) for v in row))
+    return table
+
+
+def fmt_value(value: Any) -> str:
+    """Parameters as a technician types them: ints plain, floats without float32 noise."""
+    if value is None:
+        return "-"
+    if isinstance(value, bool):
+        return str(int(value))
+    if isinstance(value, float):
+        text = f"{value:.6g}"
+        return text if any(c in text for c in ".en") else text + ".0"
+    return str(value)
+
+
+def require(condition: bool, message: str) -> None:
+    if not condition:
+        raise UsageError(message)
