@@ -1,3 +1,92 @@
+"""`sherpa config check|convert`: validate a configuration and show what it describes."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Optional
+
 import typer
 
-app = typer.Typer(no_args_is_help=True)
+from sherpa_cli.cli.context import state
+from sherpa_cli.errors import ExitCode
+
+app = typer.Typer(no_args_is_help=True, help="Validate and convert arm configurations.")
+
+FileArg = typer.Argument(None, metavar="[FILE]", help="Config file; default: the global --config.")
+
+
+@app.command("check")
+def check(ctx: typer.Context, file: Optional[Path] = FileArg) -> None:
+    """Validate a config and print its buses, drives, joints, pairs and warnings.
+
+    Exit 0 when valid (warnings allowed), 1 when the current limits break the catalog
+    ratings, 2 when the file is invalid.
+    """
+    from sherpa_cli.config.summary import summarize
+    from sherpa_cli.joints.currents import check_currents
+
+    st = state(ctx)
+    cfg = st.load_config(file)
+    findings = check_currents(cfg)
+    summary = summarize(cfg, findings)
+    if st.json_mode:
+        st.out.json(summary)
+    else:
+        _render(st.out, summary)
+    if any(f["level"] == "error" for f in summary["findings"]):
+        raise typer.Exit(ExitCode.PROBLEM)
+
+
+def _render(out, s: dict) -> None:
+    out.line(f"config {s['source']}: {s['name']} -- valid")
+    out.line(f"  {len(s['buses'])} buses, {len(s['drives'])} drives, {len(s['joints'])} joints, "
+             f"{len(s['pairs'])} differential pairs")
+    out.line()
+    out.table("Buses", ["bus", "interface", "channel", "bitrate", "send gap µs", "poll ms", "drives"],
+              [[b["name"], b["interface"] or "(python-can config)", b["channel"] or "-", b["bitrate"] or "-",
+                b["send_interval_us"], b["poll_interval_ms"], b["drives"]] for b in s["buses"]],
+              right=(3, 4, 5, 6))
+    out.table("Drives", ["drive", "bus:node", "model", "motor", "moves"],
+              [[d["name"], f"{d['bus']}:{d['node']}", d["model"] or "?", d["motor"] or "-", d["moves"] or "-"]
+               for d in s["drives"]])
+    out.table("Joints (counts)", ["joint", "moved by", "cpr", "full range", "normal range", "overshoot range"],
+              [[j["name"], j["drive"] or f"{j['pair']} ({j['role']})", j["cpr"], _rng(j["full_range"]),
+                _rng(j["normal_range"]), _rng(j["overshoot_range"])]
+               for j in s["joints"]], right=(2,))
+    switches = [[j["name"], sw["input"], sw["kind"], sw["side"] or "-", sw["position"], ", ".join(sw["drives"])]
+                for j in s["joints"] for sw in j["switches"]]
+    if switches:
+        out.table("Switches", ["joint", "input", "kind", "side", "position", "wired to"], switches,
+                  right=(1, 4))
+    if s["pairs"]:
+        out.table("Differential pairs", ["pair", "drive a (lower id)", "drive b", "Σ joint", "Δ joint"],
+                  [[p["name"], p["drive_a"], p["drive_b"], p["sigma"], p["delta"]] for p in s["pairs"]])
+    if s["warnings"]:
+        out.line("Warnings:")
+        for w in s["warnings"]:
+            out.line(f"  - {w}")
+    for f in s["findings"]:
+        out.line(f"{f['level']}: {f['message']}")
+
+
+def _rng(r: list[int]) -> str:
+    return f"{r[0]}..{r[1]}"
+
+
+@app.command("convert")
+def convert(ctx: typer.Context, file: Path = typer.Argument(..., metavar="FILE",
+                                                            help="Config to convert (e.g. the seed's rosparam file).")) -> None:
+    """Print a config (typically the seed's rosparam format) as native sherpa YAML."""
+    from sherpa_cli.config import dump_native
+
+    st = state(ctx)
+    cfg = st.load_config(file)
+    text = dump_native(cfg)
+    if st.json_mode:
+        import yaml
+
+        st.out.json(yaml.safe_load(text))
+    else:
+        st.out.raw(text)
+    for w in cfg.warnings:
+        st.out.warn(w)

@@ -1,3 +1,73 @@
+"""`sherpa limits show`: the Appendix C parameter set each drive should hold."""
+
+from __future__ import annotations
+
+from typing import List, Optional
+
 import typer
 
-app = typer.Typer(no_args_is_help=True)
+from sherpa_cli.cli.context import state
+from sherpa_cli.cli.output import fmt_value
+
+app = typer.Typer(no_args_is_help=True, help="Drive limits derived from the config (seed Appendix C).")
+
+# What each programmed parameter is for, in the words of Appendix C.
+MEANING = {
+    "LL[2]": "speed trip, low (motor off beyond it)",
+    "HL[2]": "speed trip, high (motor off beyond it)",
+    "VL[2]": "speed command limit, low (clipped)",
+    "VH[2]": "speed command limit, high (clipped)",
+    "LL[3]": "position trip, low = overshoot range",
+    "HL[3]": "position trip, high = overshoot range",
+    "VL[3]": "position command limit, low = full range",
+    "VH[3]": "position command limit, high = full range",
+    "AC": "acceleration, counts/s²",
+    "DC": "deceleration, counts/s²",
+    "CL[1]": "continuous current limit, A",
+    "PL[1]": "peak current limit, A",
+    "PL[2]": "peak current duration, s",
+}
+
+
+def _il_meaning(value: int, il_codes) -> str:
+    if value == il_codes.stop:
+        return "input logic: stop switch"
+    if value == il_codes.home:
+        return "input logic: home switch"
+    return "input logic"
+
+
+@app.command("show")
+def show(ctx: typer.Context,
+         names: Optional[List[str]] = typer.Argument(None, metavar="[JOINT|DRIVE|PAIR]...",
+                                                     help="What to show; default: every drive.")) -> None:
+    """Show the parameters Appendix C derives for each drive (nothing is sent to a drive)."""
+    from sherpa_cli.joints.limits import derive_checked
+
+    st = state(ctx)
+    cfg = st.load_config()
+    derived, warnings = derive_checked(cfg, names or None)
+    for w in warnings:
+        st.out.warn(w)
+    if st.json_mode:
+        st.out.json({"drives": [{"drive": d.drive, "bus": d.bus, "node": d.node, "params": dict(d.params)}
+                                for d in derived]})
+        return
+    for d in derived:
+        moves = _moves(cfg, d.drive)
+        rows = []
+        for key, value in d.params.items():
+            text = _il_meaning(value, cfg.il_codes) if key.startswith("IL[") else MEANING.get(key, "")
+            rows.append([key, fmt_value(value), text])
+        st.out.table(f"{d.drive} ({d.bus}:{d.node}) - {moves}", ["param", "value", "meaning"], rows, right=(1,))
+
+
+def _moves(cfg, drive: str) -> str:
+    joint = cfg.joint_of_drive(drive)
+    if joint is not None:
+        return f"joint {joint.name}"
+    pair = cfg.pair_of_drive(drive)
+    if pair is not None:
+        side = "a" if pair.drive_a == drive else "b"
+        return f"pair {pair.name}, motor {side}"
+    return "no joint"

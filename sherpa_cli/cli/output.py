@@ -58,7 +58,13 @@ class Output:
         self._console(stderr=False).print(renderable)
 
     def line(self, text: str = "") -> None:
-        self._console(stderr=False).print(text, markup=False)
+        # soft_wrap: a long line stays one line (the terminal wraps it), so it greps and diffs well
+        self._console(stderr=False).print(text, markup=False, soft_wrap=True)
+
+    def raw(self, text: str) -> None:
+        """Text that must reach stdout byte for byte (YAML, frames): no wrapping, no styling."""
+        sys.stdout.write(text)
+        sys.stdout.flush()
 
     def json(self, obj: Any) -> None:
         sys.stdout.write(json.dumps(obj, indent=2, ensure_ascii=False) + "\n")
@@ -70,16 +76,16 @@ class Output:
 
     # diagnostics (stderr)
     def info(self, text: str) -> None:
-        self._console(stderr=True).print(text, markup=False)
+        self._console(stderr=True).print(text, markup=False, soft_wrap=True)
 
     def warn(self, text: str) -> None:
-        self._console(stderr=True).print(f"warning: {text}", style="yellow", markup=False)
+        self._console(stderr=True).print(f"warning: {text}", style="yellow", markup=False, soft_wrap=True)
 
     def error(self, text: str, hint: str | None = None) -> None:
         err = self._console(stderr=True)
-        err.print(f"error: {text}", style="bold red", markup=False)
+        err.print(f"error: {text}", style="bold red", markup=False, soft_wrap=True)
         if hint:
-            err.print(f"hint: {hint}", markup=False)
+            err.print(f"hint: {hint}", markup=False, soft_wrap=True)
 
     def confirm(self, question: str) -> bool:
         """Ask yes/no on the terminal; refuse (never hang) when nobody can answer."""
@@ -100,7 +106,10 @@ def make_table(title: str | None, columns: Sequence[str], rows: Iterable[Sequenc
     table = Table(title=title, box=box.SIMPLE_HEAD, title_justify="left", pad_edge=False)
     right_cols = set(right)
     for i, name in enumerate(columns):
-        table.add_column(name, justify="right" if i in right_cols else "left", no_wrap=True)
+        # a technician must see the whole name or number:
+        # fold, never truncate; the first column (the name) stays on one line
+        table.add_column(name, justify="right" if i in right_cols else "left", overflow="fold",
+                         no_wrap=(i == 0))
     for row in rows:
         table.add_row(*("" if v is None else str(v) for v in row))
     return table

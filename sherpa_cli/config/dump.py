@@ -1,0 +1,112 @@
+"""ArmConfig -> native YAML (``sherpa config convert``); ``load(dump(cfg)) == cfg``.
+
+Every value the model holds is written, defaults included, so a converted file shows the
+technician what the tool will do; only empty blocks (no velocity, no switches, ...) and the
+catalog entries that equal the built-in ones are left out.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import yaml
+
+from sherpa_cli.config.catalog import builtin_catalog
+from sherpa_cli.config.model import ArmConfig, BusConfig, CurrentLimits, ILCodes, JointConfig, JointRole
+
+
+def dump_native(cfg: ArmConfig) -> str:
+    sections: list[dict[str, Any]] = [{"name": cfg.name}]
+    if cfg.il_codes != ILCodes():
+        sections.append({"il_codes": {"stop": cfg.il_codes.stop, "home": cfg.il_codes.home}})
+    sections.append({"buses": {b.name: _bus(b) for b in cfg.buses.values()}})
+    sections.append({"drives": {d.name: _drop_none({"bus": d.bus, "node": d.node, "model": d.model,
+                                                    "motor": d.motor})
+                                for d in cfg.drives.values()}})
+    plain = {j.name: {"drive": j.drive, **_joint_body(j)} for j in cfg.joints.values() if j.role is JointRole.PLAIN}
+    for name, j in ((j.name, j) for j in cfg.joints.values() if j.role is JointRole.PLAIN):
+        if j.current is not None:
+            plain[name]["current"] = _current(j.current)
+    if plain:
+        sections.append({"joints": plain})
+    pairs: dict[str, Any] = {}
+    for p in cfg.pairs.values():
+        entry: dict[str, Any] = {"drives": [p.drive_a, p.drive_b]}
+        if p.current is not None:
+            entry["current"] = _current(p.current)
+        for key, jname in (("sigma", p.sigma), ("delta", p.delta)):
+            entry[key] = {"name": jname, **_joint_body(cfg.joints[jname])}
+        pairs[p.name] = entry
+    if pairs:
+        sections.append({"pairs": pairs})
+    catalog = _catalog_diff(cfg)
+    if catalog:
+        sections.append({"catalog": catalog})
+    header = f"# sherpa-cli native config, written from {cfg.source}\n" if cfg.source else ""
+    # Flow style for leaf blocks keeps one joint readable at a glance: range: {min: .., max: ..}.
+    return header + "\n".join(
+        yaml.safe_dump(s, sort_keys=False, default_flow_style=None if i else False, allow_unicode=True, width=120)
+        for i, s in enumerate(sections))
+
+
+def _drop_none(d: dict[str, Any]) -> dict[str, Any]:
+    return {k: v for k, v in d.items() if v is not None}
+
+
+def _bus(b: BusConfig) -> dict[str, Any]:
+    out = _drop_none({"interface": b.interface, "channel": b.channel, "bitrate": b.bitrate})
+    out["send_interval_us"] = b.send_interval_us
+    out["poll_interval_ms"] = b.poll_interval_ms
+    if b.options:
+        out["options"] = dict(b.options)
+    return out
+
+
+def _current(c: CurrentLimits) -> dict[str, Any]:
+    return {"continuous": c.continuous, "peak": c.peak, "peak_time": c.peak_time}
+
+
+def _joint_body(j: JointConfig) -> dict[str, Any]:
+    out: dict[str, Any] = {"cpr": j.cpr,
+                           "range": {"min": j.pos_min, "max": j.pos_max, "margin": j.margin,
+                                     "overshoot": j.overshoot}}
+    vel = _drop_none({"limit": j.vel_limit, "trip": j.vel_trip})
+    if vel:
+        out["velocity"] = vel
+    acc = _drop_none({"accel": j.accel, "decel": j.decel})
+    if acc:
+        out["acceleration"] = acc
+    if j.switches:
+        out["switches"] = []
+        for s in j.switches:
+            sw: dict[str, Any] = {"input": s.input, "kind": s.kind.value}
+            if s.side is not None:
+                sw["side"] = s.side
+            sw["position"] = s.position
+            if s.drives:
+                sw["drives"] = list(s.drives)
+            out["switches"].append(sw)
+    cal = _drop_none({"speed": j.cal_speed, "position": j.cal_pos})
+    if cal:
+        out["calibration"] = cal
+    if j.abs_encoder is not None:
+        out["abs_encoder"] = {"source": j.abs_encoder.source, "offset": j.abs_encoder.offset}
+    return out
+
+
+def _catalog_diff(cfg: ArmConfig) -> dict[str, Any]:
+    base = builtin_catalog()
+    out: dict[str, Any] = {}
+    drives = {k: {"nominal_voltage": m.nominal_voltage, "max_voltage": m.max_voltage,
+                  "current_cont": m.current_cont, "current_peak": m.current_peak, "inputs": m.inputs}
+              for k, m in cfg.catalog.drives.items() if base.drives.get(k) != m}
+    motors = {k: {"voltage": m.voltage, "current_cont": m.current_cont, "power": m.power,
+                  "current_peak": m.current_peak, "peak_power": m.peak_power}
+              for k, m in cfg.catalog.motors.items() if base.motors.get(k) != m}
+    if drives:
+        out["drives"] = drives
+    if motors:
+        out["motors"] = motors
+    if cfg.catalog.peak_fraction != base.peak_fraction:
+        out["peak_fraction"] = cfg.catalog.peak_fraction
+    return out

@@ -1,0 +1,263 @@
+"""The native sherpa-cli config schema (docs/config.md) -> ArmConfig.
+
+This module checks shape and types (unknown/missing keys, wrong types); the value and
+cross-reference rules (ranges, node ids, buses, switch inputs...) live in validate.py so
+the rosparam loader gets exactly the same checks.
+"""
+
+from __future__ import annotations
+
+from pathlib import PurePath
+
+from sherpa_cli.config.catalog import builtin_catalog
+from sherpa_cli.config.model import (AbsEncoderConfig, ArmConfig, BusConfig, Catalog, CurrentLimits, DriveConfig,
+                                     DriveModel, ILCodes, JointConfig, JointRole, MotorModel, PairConfig,
+                                     SwitchConfig, SwitchKind)
+from sherpa_cli.config.yamlnodes import (Locs, Section, YNode, as_int, as_map, as_name, as_seq, as_str, named_items,
+                                         plain, suggest)
+from sherpa_cli.errors import ConfigError
+
+TOP_KEYS = ["name", "il_codes", "buses", "drives", "joints", "pairs", "catalog"]
+IL_KEYS = ["stop", "home"]
+BUS_KEYS = ["interface", "channel", "bitrate", "send_interval_us", "poll_interval_ms", "options"]
+DRIVE_KEYS = ["bus", "node", "model", "motor"]
+JOINT_BODY_KEYS = ["cpr", "range", "velocity", "acceleration", "switches", "calibration", "abs_encoder"]
+JOINT_KEYS = ["drive", *JOINT_BODY_KEYS, "current"]
+PAIR_JOINT_KEYS = ["name", *JOINT_BODY_KEYS]
+PAIR_KEYS = ["drives", "current", "sigma", "delta"]
+RANGE_KEYS = ["min", "max", "margin", "overshoot"]
+RANGE_ALIASES = {"pos_min": "min", "pos_max": "max", "pos_margin": "margin", "minimum": "min", "maximum": "max"}
+VELOCITY_KEYS = ["limit", "trip"]
+ACCEL_KEYS = ["accel", "decel"]
+CURRENT_KEYS = ["continuous", "peak", "peak_time"]
+SWITCH_KEYS = ["input", "kind", "side", "position", "drives"]
+CALIBRATION_KEYS = ["speed", "position"]
+ABS_KEYS = ["source", "offset"]
+CATALOG_KEYS = ["drives", "motors", "peak_fraction"]
+DRIVE_MODEL_KEYS = ["nominal_voltage", "max_voltage", "current_cont", "current_peak", "inputs"]
+MOTOR_MODEL_KEYS = ["voltage", "current_cont", "power", "current_peak", "peak_power"]
+
+SIDES = ("low", "high")
+
+
+def catalog_key(name: str) -> str:
+    """Catalog names are compared lower-case with blanks as '-', so 'Whistle 10/60' finds 'whistle-10/60'."""
+    return "-".join(name.lower().split())
+
+
+def default_name(filename: str) -> str:
+    return PurePath(filename).stem or "arm"
+
+
+def register(locs: Locs, prefix: tuple[str, ...], sec: Section) -> None:
+    """Remember where the section and each of its keys are, for the checks in validate.py."""
+    locs.put(prefix, sec.node.loc)
+    for key, child in sec.node.value.items():
+        locs.put(prefix + (key,), child.loc)
+
+
+def load_native(root: YNode, filename: str) -> tuple[ArmConfig, Locs, list[str]]:
+    """Shape and types only; the caller runs validate() on the result."""
+    locs = Locs(filename)
+    top = Section(root, TOP_KEYS, what="a mapping of configuration keys (name, buses, drives, joints, pairs)")
+    name = as_name(top.req("name"), "arm") if "name" in top else default_name(filename)
+
+    il = ILCodes()
+    il_sec = top.section("il_codes", IL_KEYS)
+    if il_sec is not None:
+        register(locs, ("il_codes",), il_sec)
+        il = ILCodes(stop=il_sec.int("stop", il.stop), home=il_sec.int("home", il.home))
+
+    catalog = parse_catalog(top.get("catalog"), locs)
+
+    buses: dict[str, BusConfig] = {}
+    for bname, bnode in named_items(top.req("buses"), "bus"):
+        sec = Section(bnode, BUS_KEYS, what="a bus mapping like {interface: socketcan, channel: can0}",
+                      null_ok=True)
+        register(locs, ("bus", bname), sec)
+        opts = sec.get("options")
+        if opts is not None:
+            as_map(opts, "a mapping of keyword arguments for can.Bus")
+        options = plain(opts) if opts is not None else {}
+        buses[bname] = BusConfig(
+            name=bname, interface=sec.str("interface"), channel=sec.str("channel"), bitrate=sec.int("bitrate"),
+            send_interval_us=sec.int("send_interval_us", 1000), poll_interval_ms=sec.int("poll_interval_ms", 10),
+            options=options, where=sec.node.loc)
+
+    drives: dict[str, DriveConfig] = {}
+    for dname, dnode in named_items(top.req("drives"), "drive"):
+        sec = Section(dnode, DRIVE_KEYS, what="a drive mapping like {bus: can0, node: 10, model: whistle-10/60}")
+        register(locs, ("drive", dname), sec)
+        model, motor = sec.str("model"), sec.str("motor")
+        drives[dname] = DriveConfig(
+            name=dname, bus=as_str(sec.req("bus")), node=as_int(sec.req("node")),
+            model=catalog_key(model) if model is not None else None,
+            motor=catalog_key(motor) if motor is not None else None, where=sec.node.loc)
+
+    joints: dict[str, JointConfig] = {}
+    joints_node = top.get("joints")
+    if joints_node is not None:
+        for jname, jnode in named_items(joints_node, "joint"):
+            sec = Section(jnode, JOINT_KEYS, what="a joint mapping (drive, cpr, range, ...)")
+            register(locs, ("joint", jname), sec)
+            drive = as_str(sec.req("drive"))
+            current = parse_current(sec, ("joint", jname), locs)
+            joints[jname] = parse_joint_body(sec, jname, JointRole.PLAIN, drive, None, current, locs)
+
+    pairs: dict[str, PairConfig] = {}
+    pairs_node = top.get("pairs")
+    if pairs_node is not None:
+        for pname, pnode in named_items(pairs_node, "pair"):
+            sec = Section(pnode, PAIR_KEYS, what="a differential pair mapping (drives, sigma, delta, current)")
+            register(locs, ("pair", pname), sec)
+            dnode = sec.req("drives")
+            items = as_seq(dnode, "a list of the pair's two drives, like [shoulder_2a, shoulder_2b]")
+            if len(items) != 2:
+                raise dnode.error(f"a differential pair needs exactly 2 drives, got {len(items)}")
+            pair_drives = [as_str(i) for i in items]
+            for i, dn in zip(items, pair_drives):
+                locs.put(("pair", pname, "drive", dn), i.loc)
+            # Σ = a + b, Δ = a - b with a = the lower node id (seed D.1.3); the sign of Δ depends on it.
+            if all(d in drives for d in pair_drives):
+                pair_drives.sort(key=lambda d: drives[d].node)
+            current = parse_current(sec, ("pair", pname), locs)
+            names = []
+            for role, key in ((JointRole.SIGMA, "sigma"), (JointRole.DELTA, "delta")):
+                jsec = Section(sec.req(key), PAIR_JOINT_KEYS, what=f"the {key} joint's mapping (name, cpr, range, ...)")
+                jname = as_name(jsec.req("name"), "joint")
+                if jname in joints:
+                    first = locs.get("joint", jname)
+                    raise ConfigError(f"joint name '{jname}' is already used (line {first.line})", jsec.loc("name"))
+                register(locs, ("joint", jname), jsec)
+                joints[jname] = parse_joint_body(jsec, jname, role, None, pname, None, locs)
+                names.append(jname)
+            pairs[pname] = PairConfig(name=pname, drive_a=pair_drives[0], drive_b=pair_drives[1], sigma=names[0],
+                                      delta=names[1], current=current, where=sec.node.loc)
+
+    cfg = ArmConfig(name=name, buses=buses, drives=drives, joints=joints, pairs=pairs, catalog=catalog,
+                    il_codes=il, source=filename)
+    return cfg, locs, []
+
+
+def parse_current(sec: Section, prefix: tuple[str, ...], locs: Locs) -> CurrentLimits | None:
+    csec = sec.section("current", CURRENT_KEYS, what="a mapping {continuous: A, peak: A, peak_time: s}")
+    if csec is None:
+        return None
+    register(locs, prefix + ("current",), csec)
+    return CurrentLimits(continuous=csec.num("continuous", required=True), peak=csec.num("peak", required=True),
+                         peak_time=csec.num("peak_time", required=True), where=csec.node.loc)
+
+
+def parse_joint_body(sec: Section, name: str, role: JointRole, drive: str | None, pair: str | None,
+                     current: CurrentLimits | None, locs: Locs) -> JointConfig:
+    prefix = ("joint", name)
+    cpr = sec.int("cpr", required=True)
+    rng = sec.section("range", RANGE_KEYS, required=True, what="a mapping {min, max, margin, overshoot}",
+                      aliases=RANGE_ALIASES)
+    assert rng is not None
+    register(locs, prefix + ("range",), rng)
+    pos_min, pos_max = rng.int("min", required=True), rng.int("max", required=True)
+
+    vel = sec.section("velocity", VELOCITY_KEYS, what="a mapping {limit: counts/s, trip: counts/s}")
+    acc = sec.section("acceleration", ACCEL_KEYS, what="a mapping {accel: counts/s², decel: counts/s²}")
+    cal = sec.section("calibration", CALIBRATION_KEYS, what="a mapping {speed: counts/s, position: counts}")
+    for key, sub in (("velocity", vel), ("acceleration", acc), ("calibration", cal)):
+        if sub is not None:
+            register(locs, prefix + (key,), sub)
+
+    abs_enc = None
+    asec = sec.section("abs_encoder", ABS_KEYS, what='a mapping {source: "drive:PY", offset: counts}')
+    if asec is not None:
+        register(locs, prefix + ("abs_encoder",), asec)
+        abs_enc = AbsEncoderConfig(source=asec.str("source", required=True), offset=asec.int("offset", 0),
+                                   where=asec.node.loc)
+
+    switches: list[SwitchConfig] = []
+    snode = sec.get("switches")
+    if snode is not None:
+        items = as_seq(snode, "a list of switches like [{input: 3, kind: stop, side: low}]")
+        locs.put(prefix + ("switches",), snode.loc)
+        for i, item in enumerate(items):
+            switches.append(parse_switch(item, prefix + ("switches", str(i)), pos_min, pos_max, locs))
+
+    return JointConfig(
+        name=name, role=role, drive=drive, pair=pair, cpr=cpr, pos_min=pos_min, pos_max=pos_max,
+        margin=rng.int("margin", 0), overshoot=rng.int("overshoot", 0),
+        vel_limit=vel.int("limit") if vel else None, vel_trip=vel.int("trip") if vel else None,
+        accel=acc.int("accel") if acc else None, decel=acc.int("decel") if acc else None,
+        current=current, switches=tuple(switches),
+        cal_speed=cal.int("speed") if cal else None, cal_pos=cal.int("position") if cal else None,
+        abs_encoder=abs_enc, where=sec.node.loc)
+
+
+def parse_switch(item: YNode, prefix: tuple[str, ...], pos_min: int, pos_max: int, locs: Locs) -> SwitchConfig:
+    s = Section(item, SWITCH_KEYS, what="a switch mapping like {input: 3, kind: stop, side: low}")
+    register(locs, prefix, s)
+    inp = s.int("input", required=True)
+    knode = s.req("kind")
+    kind_text = as_str(knode)
+    try:
+        kind = SwitchKind(kind_text)
+    except ValueError:
+        close = suggest(kind_text, [k.value for k in SwitchKind])
+        more = f"; did you mean '{close}'?" if close else ""
+        raise knode.error(f"unknown switch kind {kind_text!r}; expected 'stop' or 'home'{more}") from None
+    side = None
+    snode = s.get("side")
+    if snode is not None:
+        side = as_str(snode)
+        if side not in SIDES:
+            raise snode.error(f"unknown switch side {side!r}; expected 'low' or 'high'")
+        if kind is SwitchKind.HOME:
+            raise snode.error("'side' is only for stop switches; a home switch has just a position")
+    if kind is SwitchKind.STOP and side is None:
+        raise ConfigError("a stop switch needs 'side: low' or 'side: high' (the end of the range it guards)",
+                          s.loc("side"))
+    position = s.int("position")
+    if position is None:
+        if kind is SwitchKind.HOME:
+            raise ConfigError("missing required key 'position' of a home switch (the joint position where it trips)",
+                              s.loc("position"))
+        position = pos_min if side == "low" else pos_max
+    wired: tuple[str, ...] = ()
+    wnode = s.get("drives")
+    if wnode is not None:
+        wired = tuple(as_str(w) for w in as_seq(wnode, "a list of drive names"))
+    return SwitchConfig(input=inp, kind=kind, position=position, side=side, drives=wired, where=s.node.loc)
+
+
+def parse_catalog(node: YNode | None, locs: Locs) -> Catalog:
+    base = builtin_catalog()
+    if node is None:
+        return base
+    sec = Section(node, CATALOG_KEYS, what="a mapping {drives: ..., motors: ..., peak_fraction: ...}")
+    register(locs, ("catalog",), sec)
+    drives = dict(base.drives)
+    dnode = sec.get("drives")
+    if dnode is not None:
+        for raw, child in as_map(dnode, "a mapping of drive model names").items():
+            key = catalog_key(raw)
+            esec = Section(child, DRIVE_MODEL_KEYS, what="a drive model mapping (nominal_voltage, max_voltage, ...)")
+            register(locs, ("catalog", "drives", key), esec)
+            old = drives.get(key)
+            vals = {k: _entry_num(esec, k, old) for k in DRIVE_MODEL_KEYS[:4]}
+            inputs = esec.int("inputs", old.inputs if old else 6)
+            drives[key] = DriveModel(key, inputs=inputs, **vals)
+    motors = dict(base.motors)
+    mnode = sec.get("motors")
+    if mnode is not None:
+        for raw, child in as_map(mnode, "a mapping of motor names").items():
+            key = catalog_key(raw)
+            esec = Section(child, MOTOR_MODEL_KEYS, what="a motor mapping (voltage, current_cont, ...)")
+            register(locs, ("catalog", "motors", key), esec)
+            old = motors.get(key)
+            motors[key] = MotorModel(key, **{k: _entry_num(esec, k, old) for k in MOTOR_MODEL_KEYS})
+    fraction = sec.num("peak_fraction", base.peak_fraction)
+    return Catalog(drives=drives, motors=motors, peak_fraction=fraction)
+
+
+def _entry_num(sec: Section, key: str, old: object | None) -> float:
+    # Overriding a built-in entry may name only the keys that change; a new entry needs all of them.
+    if old is not None and key not in sec:
+        return float(getattr(old, key))
+    return sec.num(key, required=True)

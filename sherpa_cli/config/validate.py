@@ -1,0 +1,335 @@
+"""Value and cross-reference checks shared by both config formats.
+
+Loaders check shape and types and hand over the model plus a table of locations; here we
+check what the values mean. All problems are collected and the first in file order is
+raised, so fixing errors top to bottom works; the hint says how many more were found.
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+from sherpa_cli.config.model import ArmConfig, DriveModel, JointConfig, JointRole, SwitchKind
+from sherpa_cli.config.yamlnodes import Locs, suggest
+from sherpa_cli.errors import ConfigError, Location
+
+MAX_NODE_ID = 127
+DEFAULT_INPUTS = DriveModel.__dataclass_fields__["inputs"].default
+
+
+def _line(loc: Location) -> str:
+    return f"line {loc.line}" if loc.line is not None else "unknown line"
+
+
+def _did_you_mean(word: str, choices: list[str]) -> str:
+    close = suggest(word, choices)
+    if close:
+        return f"; did you mean '{close}'?"
+    return f"; expected one of: {', '.join(sorted(choices))}" if choices else ""
+
+
+class _Report:
+    def __init__(self, source: str | None) -> None:
+        self.source = source
+        self.errors: list[ConfigError] = []
+        self.warnings: list[str] = []
+        self.warn_no_model = True
+
+    def error(self, loc: Location, message: str, hint: str | None = None) -> None:
+        self.errors.append(ConfigError(message, loc, hint=hint))
+
+    def warn(self, loc: Location, message: str) -> None:
+        self.warnings.append(f"{loc}: {message}")
+
+    def raise_first(self) -> None:
+        if not self.errors:
+            return
+        ordered = sorted(self.errors, key=lambda e: (e.location.line is None, e.location.line or 0))
+        first = ordered[0]
+        if len(ordered) > 1:
+            more = f"{len(ordered) - 1} more problem(s) found in this file after this one"
+            first.hint = f"{first.hint}; {more}" if first.hint else more
+        raise first
+
+
+def validate(cfg: ArmConfig, locs: Locs, warnings: list[str] | None = None, *,
+             warn_no_model: bool = True) -> ArmConfig:
+    """Raise ConfigError for the first problem in file order; return cfg with its warnings.
+
+    ``warn_no_model=False`` is for formats that cannot name a model at all (rosparam); their
+    loader says so once instead of once per drive.
+    """
+    r = _Report(cfg.source)
+    r.warn_no_model = warn_no_model
+    r.warnings.extend(warnings or [])
+    _check_il_codes(cfg, locs, r)
+    _check_catalog(cfg, locs, r)
+    _check_buses(cfg, locs, r)
+    _check_drives(cfg, locs, r)
+    _check_names(cfg, locs, r)
+    _check_usage(cfg, locs, r)
+    for joint in cfg.joints.values():
+        _check_joint(cfg, joint, locs, r)
+    _check_switch_inputs(cfg, locs, r)
+    r.raise_first()
+    return replace(cfg, warnings=tuple(r.warnings))
+
+
+def _check_il_codes(cfg: ArmConfig, locs: Locs, r: _Report) -> None:
+    for key in ("stop", "home"):
+        value = getattr(cfg.il_codes, key)
+        if value < 0:
+            r.error(locs.get("il_codes", key), f"IL code {value} is negative; expected a value >= 0")
+    if cfg.il_codes.stop == cfg.il_codes.home:
+        r.error(locs.get("il_codes", "home"),
+                f"il_codes.stop and il_codes.home are both {cfg.il_codes.stop}; a stop switch and a home switch "
+                "need different input logic")
+
+
+def _check_catalog(cfg: ArmConfig, locs: Locs, r: _Report) -> None:
+    cat = cfg.catalog
+    if not 0 < cat.peak_fraction <= 1:
+        r.error(locs.get("catalog", "peak_fraction"),
+                f"peak_fraction {cat.peak_fraction} must be above 0 and at most 1")
+    for key, dm in cat.drives.items():
+        if ("catalog", "drives", key) not in locs.table:
+            continue
+        at = lambda f: locs.get("catalog", "drives", key, f)  # noqa: E731
+        for f in ("nominal_voltage", "max_voltage", "current_cont", "current_peak"):
+            if getattr(dm, f) <= 0:
+                r.error(at(f), f"{f} of drive model '{key}' must be positive, got {getattr(dm, f)}")
+        if dm.max_voltage < dm.nominal_voltage:
+            r.error(at("max_voltage"), f"max_voltage {dm.max_voltage} of '{key}' is below its nominal_voltage "
+                                       f"{dm.nominal_voltage}")
+        if dm.current_peak < dm.current_cont:
+            r.error(at("current_peak"), f"current_peak {dm.current_peak} of '{key}' is below its current_cont "
+                                        f"{dm.current_cont}")
+        if not 1 <= dm.inputs <= 32:
+            r.error(at("inputs"), f"inputs {dm.inputs} of '{key}' must be 1..32")
+    for key, mm in cat.motors.items():
+        if ("catalog", "motors", key) not in locs.table:
+            continue
+        for f in ("voltage", "current_cont", "power", "current_peak", "peak_power"):
+            if getattr(mm, f) <= 0:
+                r.error(locs.get("catalog", "motors", key, f),
+                        f"{f} of motor '{key}' must be positive, got {getattr(mm, f)}")
+        if mm.current_peak < mm.current_cont:
+            r.error(locs.get("catalog", "motors", key, "current_peak"),
+                    f"current_peak {mm.current_peak} of motor '{key}' is below its current_cont {mm.current_cont}")
+
+
+def _check_buses(cfg: ArmConfig, locs: Locs, r: _Report) -> None:
+    if not cfg.buses:
+        r.error(locs.get("buses"), "no buses defined; expected at least one, like can0: {interface: socketcan, "
+                                   "channel: can0}")
+    for b in cfg.buses.values():
+        if b.bitrate is not None and b.bitrate <= 0:
+            r.error(locs.get("bus", b.name, "bitrate"), f"bitrate {b.bitrate} must be positive (bit/s, e.g. 1000000)")
+        if b.send_interval_us < 0:
+            r.error(locs.get("bus", b.name, "send_interval_us"),
+                    f"send_interval_us {b.send_interval_us} is negative; expected >= 0 µs")
+        if b.poll_interval_ms <= 0:
+            r.error(locs.get("bus", b.name, "poll_interval_ms"),
+                    f"poll_interval_ms {b.poll_interval_ms} must be at least 1 ms")
+        if not any(d.bus == b.name for d in cfg.drives.values()):
+            r.warn(locs.get("bus", b.name), f"bus '{b.name}' has no drives")
+
+
+def _check_drives(cfg: ArmConfig, locs: Locs, r: _Report) -> None:
+    seen: dict[tuple[str, int], str] = {}
+    for d in cfg.drives.values():
+        if not 1 <= d.node <= MAX_NODE_ID:
+            r.error(locs.get("drive", d.name, "node"),
+                    f"node id {d.node} of drive '{d.name}' is not a valid CAN node id; expected 1..{MAX_NODE_ID}")
+        if d.bus not in cfg.buses:
+            r.error(locs.get("drive", d.name, "bus"),
+                    f"drive '{d.name}' is on bus '{d.bus}', which is not defined" + _did_you_mean(d.bus, list(cfg.buses)))
+        if d.model is not None and d.model not in cfg.catalog.drives:
+            r.error(locs.get("drive", d.name, "model"),
+                    f"unknown drive model '{d.model}'" + _did_you_mean(d.model, list(cfg.catalog.drives)),
+                    hint="add it under catalog.drives if it is a model the built-in catalog lacks")
+        if d.motor is not None and d.motor not in cfg.catalog.motors:
+            r.error(locs.get("drive", d.name, "motor"),
+                    f"unknown motor '{d.motor}'" + _did_you_mean(d.motor, list(cfg.catalog.motors)),
+                    hint="add it under catalog.motors if it is a motor the built-in catalog lacks")
+        if d.model is None and r.warn_no_model:
+            r.warn(locs.get("drive", d.name), f"drive '{d.name}' has no model; rating and input checks use "
+                                              f"defaults ({DEFAULT_INPUTS} inputs)")
+        key = (d.bus, d.node)
+        if key in seen:
+            other = seen[key]
+            r.error(locs.get("drive", d.name, "node"),
+                    f"drives '{other}' ({_line(locs.get('drive', other, 'node'))}) and '{d.name}' "
+                    f"({_line(locs.get('drive', d.name, 'node'))}) both use node id {d.node} on bus '{d.bus}'; "
+                    "node ids must be unique per bus")
+        else:
+            seen[key] = d.name
+
+
+def _check_names(cfg: ArmConfig, locs: Locs, r: _Report) -> None:
+    # Drives, joints and pairs are all CLI targets, so one name must mean one thing.
+    for j in cfg.joints.values():
+        if j.name in cfg.drives and not (j.role is JointRole.PLAIN and j.drive == j.name):
+            r.error(locs.get("joint", j.name),
+                    f"joint '{j.name}' has the same name as drive '{j.name}' "
+                    f"({_line(locs.get('drive', j.name))}) but is not moved by it; names are shared by drives and "
+                    "joints on the command line")
+    for p in cfg.pairs.values():
+        for kind, table in (("drive", cfg.drives), ("joint", cfg.joints)):
+            if p.name in table:
+                r.error(locs.get("pair", p.name),
+                        f"pair '{p.name}' has the same name as {kind} '{p.name}' ({_line(locs.get(kind, p.name))}); "
+                        "names are shared by drives, joints and pairs on the command line")
+
+
+def _check_usage(cfg: ArmConfig, locs: Locs, r: _Report) -> None:
+    user: dict[str, tuple[str, Location]] = {}
+
+    def use(drive: str, who: str, loc: Location) -> None:
+        if drive in user:
+            prev, ploc = user[drive]
+            r.error(loc, f"drive '{drive}' is used by both {prev} ({_line(ploc)}) and {who}; a drive moves one "
+                         "joint or one pair")
+        else:
+            user[drive] = (who, loc)
+
+    for j in cfg.joints.values():
+        if j.role is not JointRole.PLAIN or j.drive is None:
+            continue
+        dloc = locs.get("joint", j.name, "drive")
+        if j.drive not in cfg.drives:
+            r.error(dloc, f"joint '{j.name}' uses drive '{j.drive}', which is not defined"
+                    + _did_you_mean(j.drive, list(cfg.drives)))
+            continue
+        use(j.drive, f"joint '{j.name}'", dloc)
+        if j.current is None:
+            r.warn(locs.get("joint", j.name), f"joint '{j.name}' has no current limits; CL/PL stay as on the drive")
+    for p in cfg.pairs.values():
+        if p.drive_a == p.drive_b:
+            r.error(locs.get("pair", p.name, "drives"), f"pair '{p.name}' names drive '{p.drive_a}' twice; "
+                                                        "expected two different drives")
+            continue
+        known = True
+        for d in (p.drive_a, p.drive_b):
+            dloc = locs.get("pair", p.name, "drive", d)
+            if d not in cfg.drives:
+                r.error(dloc, f"pair '{p.name}' uses drive '{d}', which is not defined"
+                        + _did_you_mean(d, list(cfg.drives)))
+                known = False
+            else:
+                use(d, f"pair '{p.name}'", dloc)
+        if known:
+            a, b = cfg.drives[p.drive_a], cfg.drives[p.drive_b]
+            if a.bus != b.bus:
+                r.error(locs.get("pair", p.name, "drives"),
+                        f"pair '{p.name}' drives '{a.name}' (bus {a.bus}) and '{b.name}' (bus {b.bus}) are on "
+                        "different buses; both motors of a differential pair must be on one bus")
+        if p.current is None:
+            r.warn(locs.get("pair", p.name), f"pair '{p.name}' has no current limits; CL/PL stay as on the drives")
+        else:
+            _check_current(p.current, ("pair", p.name), locs, r)
+    for d in cfg.drives.values():
+        if d.name not in user:
+            r.warn(locs.get("drive", d.name), f"drive '{d.name}' moves no joint or pair")
+
+
+def _check_current(cur, prefix: tuple[str, ...], locs: Locs, r: _Report) -> None:
+    at = lambda f: locs.get(*prefix, "current", f)  # noqa: E731
+    for f in ("continuous", "peak", "peak_time"):
+        if getattr(cur, f) <= 0:
+            r.error(at(f), f"current {f} must be positive, got {getattr(cur, f)}")
+    if cur.peak < cur.continuous:
+        r.error(at("peak"), f"peak current {cur.peak} A is below the continuous current {cur.continuous} A")
+
+
+def _check_joint(cfg: ArmConfig, j: JointConfig, locs: Locs, r: _Report) -> None:
+    at = lambda *k: locs.get("joint", j.name, *k)  # noqa: E731
+    if j.cpr <= 0:
+        r.error(at("cpr"), f"cpr {j.cpr} must be positive (counts per joint revolution)")
+    range_ok = True
+    if j.pos_min >= j.pos_max:
+        r.error(at("range", "max"), f"range max {j.pos_max} must be above range min {j.pos_min}")
+        range_ok = False
+    if j.margin < 0:
+        r.error(at("range", "margin"), f"margin {j.margin} is negative; expected >= 0 counts (inward from the "
+                                       "full range)")
+        range_ok = False
+    if j.overshoot < 0:
+        r.error(at("range", "overshoot"), f"overshoot {j.overshoot} is negative; expected >= 0 counts (outward "
+                                          "from the full range)")
+        range_ok = False
+    if range_ok and 2 * j.margin >= j.pos_max - j.pos_min:
+        r.error(at("range", "margin"),
+                f"margin {j.margin} leaves no normal range: 2*margin must be less than max-min = "
+                f"{j.pos_max - j.pos_min}")
+    for key, sub, value in (("velocity", "limit", j.vel_limit), ("velocity", "trip", j.vel_trip),
+                            ("acceleration", "accel", j.accel), ("acceleration", "decel", j.decel)):
+        if value is not None and value <= 0:
+            r.error(at(key, sub), f"{key} {sub} {value} must be positive")
+    if j.vel_limit is not None and j.vel_trip is not None and 0 < j.vel_trip <= j.vel_limit:
+        r.error(at("velocity", "trip"),
+                f"velocity trip {j.vel_trip} must be above the velocity limit {j.vel_limit} (it is the safeguard "
+                "that stops the drive, LL/HL[2])")
+    if j.current is not None:
+        _check_current(j.current, ("joint", j.name), locs, r)
+    if j.cal_speed is not None and j.cal_speed == 0:
+        r.error(at("calibration", "speed"), "calibration speed 0 would never reach the switch; expected a "
+                                            "non-zero counts/s")
+    lo, hi = j.overshoot_range
+    if range_ok and j.cal_pos is not None and not lo <= j.cal_pos <= hi:
+        r.error(at("calibration", "position"),
+                f"calibration position {j.cal_pos} is outside the overshoot range {lo}..{hi}")
+    if range_ok:
+        for i, s in enumerate(j.switches):
+            sloc = locs.get("joint", j.name, "switches", str(i), "position")
+            if s.kind is SwitchKind.STOP and not lo <= s.position <= hi:
+                r.error(sloc, f"stop switch at {s.position} is outside the overshoot range {lo}..{hi} of joint "
+                              f"'{j.name}'; the drive could never reach it")
+            if s.kind is SwitchKind.HOME and not j.pos_min <= s.position <= j.pos_max:
+                r.error(sloc, f"home switch at {s.position} is outside the full range {j.pos_min}..{j.pos_max} "
+                              f"of joint '{j.name}'")
+    if not j.switches and j.abs_encoder is None:
+        r.warn(locs.get("joint", j.name), f"joint '{j.name}' has no home or stop switch and no absolute encoder; "
+                                          "it cannot be calibrated")
+
+
+def _joint_drives(cfg: ArmConfig, j: JointConfig) -> tuple[str, ...]:
+    if j.role is JointRole.PLAIN:
+        return (j.drive,) if j.drive else ()
+    pair = cfg.pairs.get(j.pair or "")
+    return (pair.drive_a, pair.drive_b) if pair else ()
+
+
+def _check_switch_inputs(cfg: ArmConfig, locs: Locs, r: _Report) -> None:
+    taken: dict[tuple[str, int], tuple[str, Location]] = {}
+    for j in cfg.joints.values():
+        own = _joint_drives(cfg, j)
+        for i, s in enumerate(j.switches):
+            base = ("joint", j.name, "switches", str(i))
+            if s.drives:
+                for d in s.drives:
+                    if d not in own:
+                        r.error(locs.get(*base, "drives"),
+                                f"switch is wired to drive '{d}', which does not move joint '{j.name}'; expected "
+                                f"one of: {', '.join(own) or '(none)'}")
+            wired = [d for d in (s.drives or own) if d in cfg.drives]
+            iloc = locs.get(*base, "input")
+            if s.input < 1:
+                r.error(iloc, f"switch input {s.input} is not a digital input number; inputs count from 1")
+                continue
+            for d in wired:
+                drive = cfg.drives[d]
+                dm = cfg.catalog.drives.get(drive.model) if drive.model else None
+                n = dm.inputs if dm else DEFAULT_INPUTS
+                if s.input > n:
+                    model = f"model {drive.model}" if dm else "an unknown model (assumed)"
+                    r.error(iloc, f"switch input {s.input} is outside the inputs of drive '{d}' ({model} has "
+                                  f"inputs 1..{n})")
+                    continue
+                key = (d, s.input)
+                if key in taken:
+                    who, ploc = taken[key]
+                    r.error(iloc, f"input {s.input} of drive '{d}' is already used by {who} ({_line(ploc)}); "
+                                  "one input can carry one switch")
+                else:
+                    taken[key] = (f"a switch of joint '{j.name}'", iloc)
