@@ -35,7 +35,7 @@ CASES = (
         ("diffdrive-convert-rad", ["diffdrive", "convert", "shoulder_diff", "--unit", "rad",
                                    "--sigma", "0.5", "--delta", "0.25"]),
         ("diffdrive-convert-rad-parity", ["diffdrive", "convert", "shoulder_diff", "--unit", "rad",
-                                          "--sigma", "0.5", "--delta", "0.2"]),
+                                          "--sigma", "0.5", "--delta", "0.2094"]),
         ("diffdrive-convert-outside", ["diffdrive", "convert", "shoulder_diff", "--sigma", "3000", "--delta", "0"]),
         ("config-convert-seed-d1", ["config", "convert", "configs/seed-d1.yaml"]),
         ("help", ["--help"]),

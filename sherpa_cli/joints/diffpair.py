@@ -72,7 +72,7 @@ def to_motors(sigma: int, delta: int) -> tuple[int, int]:
         raise UsageError(
             f"Σ={s} and Δ={d} cannot be reached: m_a=(Σ+Δ)/2 and m_b=(Σ-Δ)/2 are whole counts only "
             f"when Σ and Δ are both even or both odd",
-            hint="change one of them by 1 count (see nearest_reachable)")
+            hint="change Σ or Δ by 1 count")
     return (s + d) // 2, (s - d) // 2
 
 
