@@ -85,6 +85,19 @@ class Bad:
 
 
 NATIVE = [
+    # --- protocol settings
+    Bad("protocol-negative-retries", "il_codes: {stop: 21, home: 5}\n",
+        "il_codes: {stop: 21, home: 5}\nprotocol: {retries: -1}\n", "protocol:", "protocol.retries",
+        "retries -1 is negative"),
+    Bad("protocol-zero-timeout", "il_codes: {stop: 21, home: 5}\n",
+        "il_codes: {stop: 21, home: 5}\nprotocol: {reply_timeout: 0}\n", "protocol:", "protocol.reply_timeout",
+        "must be > 0"),
+    Bad("protocol-echo-not-bool", "il_codes: {stop: 21, home: 5}\n",
+        "il_codes: {stop: 21, home: 5}\nprotocol: {set_echo: 1}\n", "protocol:", "protocol.set_echo",
+        "expected true or false"),
+    Bad("protocol-unknown-key", "il_codes: {stop: 21, home: 5}\n",
+        "il_codes: {stop: 21, home: 5}\nprotocol: {set_ecko: false}\n", "protocol:", "protocol.set_ecko",
+        "did you mean 'set_echo'?"),
     # --- YAML syntax
     Bad("yaml-mapping-in-value", "    drive: wrist_a\n", "    drive: wrist_a: x\n", "drive: wrist_a: x",
         "joints.wrist", "YAML syntax error: mapping values are not allowed here"),

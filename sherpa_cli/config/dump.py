@@ -7,18 +7,22 @@ catalog entries that equal the built-in ones are left out.
 
 from __future__ import annotations
 
+import dataclasses
+
 from typing import Any
 
 import yaml
 
 from sherpa_cli.config.catalog import builtin_catalog
-from sherpa_cli.config.model import ArmConfig, BusConfig, CurrentLimits, ILCodes, JointConfig, JointRole
+from sherpa_cli.config.model import ArmConfig, BusConfig, CurrentLimits, ILCodes, JointConfig, JointRole, ProtocolConfig
 
 
 def dump_native(cfg: ArmConfig) -> str:
     sections: list[dict[str, Any]] = [{"name": cfg.name}]
     if cfg.il_codes != ILCodes():
         sections.append({"il_codes": {"stop": cfg.il_codes.stop, "home": cfg.il_codes.home}})
+    if cfg.protocol != ProtocolConfig():
+        sections.append({"protocol": dataclasses.asdict(cfg.protocol)})
     sections.append({"buses": {b.name: _bus(b) for b in cfg.buses.values()}})
     sections.append({"drives": {d.name: _drop_none({"bus": d.bus, "node": d.node, "model": d.model,
                                                     "motor": d.motor})

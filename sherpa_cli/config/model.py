@@ -176,6 +176,23 @@ class ILCodes:
 
 
 @dataclass(frozen=True)
+class ProtocolConfig:
+    """Protocol behaviour no public source confirms (elmo-protocol.md marks it UNCONFIRMED).
+
+    Each is a setting with the seed's or the safest value as default, so a real arm is
+    matched by configuration; the simulator plays either way.
+    """
+
+    set_echo: bool = True  # the drive echoes a set on TPDO2 (False: confirm by reading back)
+    query_long: bool = False  # 8-byte queries with the query bit instead of 4-byte ones
+    reply_timeout: float = 0.1  # s to wait for one interpreter reply
+    retries: int = 1  # resends after a timeout (never for SV)
+    mo_settle: float = 0.5  # s the drive ignores the interpreter after MO=0/1 (seed: up to 500 ms)
+    mo_confirm_timeout: float = 3.0  # s to wait for MO to read back after MO=0/1
+    sv_blackout: float = 0.5  # s the drive's CAN is deaf after SV ("a few hundred ms")
+
+
+@dataclass(frozen=True)
 class ArmConfig:
     name: str
     buses: Mapping[str, BusConfig]
@@ -184,6 +201,7 @@ class ArmConfig:
     pairs: Mapping[str, PairConfig]
     catalog: Catalog
     il_codes: ILCodes = field(default_factory=ILCodes)
+    protocol: ProtocolConfig = field(default_factory=ProtocolConfig)
     source: str | None = None  # file the config came from
     warnings: tuple[str, ...] = ()  # non-fatal findings of validation, shown by `config check`
 

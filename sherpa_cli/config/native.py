@@ -7,17 +7,19 @@ the rosparam loader gets exactly the same checks.
 
 from __future__ import annotations
 
+import dataclasses
+
 from pathlib import PurePath
 
 from sherpa_cli.config.catalog import builtin_catalog
 from sherpa_cli.config.model import (AbsEncoderConfig, ArmConfig, BusConfig, Catalog, CurrentLimits, DriveConfig,
-                                     DriveModel, ILCodes, JointConfig, JointRole, MotorModel, PairConfig,
+                                     DriveModel, ILCodes, ProtocolConfig, JointConfig, JointRole, MotorModel, PairConfig,
                                      SwitchConfig, SwitchKind)
 from sherpa_cli.config.yamlnodes import (Locs, Section, YNode, as_int, as_map, as_name, as_seq, as_str, named_items,
                                          plain, suggest)
 from sherpa_cli.errors import ConfigError
 
-TOP_KEYS = ["name", "il_codes", "buses", "drives", "joints", "pairs", "catalog"]
+TOP_KEYS = ["name", "il_codes", "protocol", "buses", "drives", "joints", "pairs", "catalog"]
 IL_KEYS = ["stop", "home"]
 BUS_KEYS = ["interface", "channel", "bitrate", "send_interval_us", "poll_interval_ms", "options"]
 DRIVE_KEYS = ["bus", "node", "model", "motor"]
@@ -56,6 +58,26 @@ def register(locs: Locs, prefix: tuple[str, ...], sec: Section) -> None:
         locs.put(prefix + (key,), child.loc)
 
 
+PROTOCOL_KEYS = [f.name for f in dataclasses.fields(ProtocolConfig)]
+
+
+def parse_protocol(top: Section, locs: Locs) -> ProtocolConfig:
+    sec = top.section("protocol", PROTOCOL_KEYS, what="a mapping of protocol settings")
+    if sec is None:
+        return ProtocolConfig()
+    register(locs, ("protocol",), sec)
+    d = ProtocolConfig()
+    return ProtocolConfig(
+        set_echo=sec.bool("set_echo", d.set_echo),
+        query_long=sec.bool("query_long", d.query_long),
+        reply_timeout=sec.num("reply_timeout", d.reply_timeout),
+        retries=sec.int("retries", d.retries),
+        mo_settle=sec.num("mo_settle", d.mo_settle),
+        mo_confirm_timeout=sec.num("mo_confirm_timeout", d.mo_confirm_timeout),
+        sv_blackout=sec.num("sv_blackout", d.sv_blackout),
+    )
+
+
 def load_native(root: YNode, filename: str) -> tuple[ArmConfig, Locs, list[str]]:
     """Shape and types only; the caller runs validate() on the result."""
     locs = Locs(filename)
@@ -68,6 +90,7 @@ def load_native(root: YNode, filename: str) -> tuple[ArmConfig, Locs, list[str]]
         register(locs, ("il_codes",), il_sec)
         il = ILCodes(stop=il_sec.int("stop", il.stop), home=il_sec.int("home", il.home))
 
+    protocol = parse_protocol(top, locs)
     catalog = parse_catalog(top.get("catalog"), locs)
 
     buses: dict[str, BusConfig] = {}
@@ -135,7 +158,7 @@ def load_native(root: YNode, filename: str) -> tuple[ArmConfig, Locs, list[str]]
                                       delta=names[1], current=current, where=sec.node.loc)
 
     cfg = ArmConfig(name=name, buses=buses, drives=drives, joints=joints, pairs=pairs, catalog=catalog,
-                    il_codes=il, source=filename)
+                    il_codes=il, protocol=protocol, source=filename)
     return cfg, locs, []
 
 

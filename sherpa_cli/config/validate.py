@@ -63,6 +63,7 @@ def validate(cfg: ArmConfig, locs: Locs, warnings: list[str] | None = None, *,
     r.warn_no_model = warn_no_model
     r.warnings.extend(warnings or [])
     _check_il_codes(cfg, locs, r)
+    _check_protocol(cfg, locs, r)
     _check_catalog(cfg, locs, r)
     _check_buses(cfg, locs, r)
     _check_drives(cfg, locs, r)
@@ -73,6 +74,17 @@ def validate(cfg: ArmConfig, locs: Locs, warnings: list[str] | None = None, *,
     _check_switch_inputs(cfg, locs, r)
     r.raise_first()
     return replace(cfg, warnings=tuple(r.warnings))
+
+
+def _check_protocol(cfg: ArmConfig, locs: Locs, r: _Report) -> None:
+    p = cfg.protocol
+    if not p.reply_timeout > 0:
+        r.error(locs.get("protocol", "reply_timeout"), f"reply_timeout {p.reply_timeout} s must be > 0")
+    if p.retries < 0:
+        r.error(locs.get("protocol", "retries"), f"retries {p.retries} is negative; expected 0 or more")
+    for key in ("mo_settle", "mo_confirm_timeout", "sv_blackout"):
+        if getattr(p, key) < 0:
+            r.error(locs.get("protocol", key), f"{key} {getattr(p, key)} s is negative; expected >= 0")
 
 
 def _check_il_codes(cfg: ArmConfig, locs: Locs, r: _Report) -> None:

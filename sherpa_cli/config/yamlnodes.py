@@ -266,6 +266,10 @@ class Section:
         node = self.req(key) if required else self.get(key)
         return default if node is None else as_num(node)
 
+    def bool(self, key: str, default: Any = None) -> Any:
+        node = self.get(key)
+        return default if node is None else as_bool(node)
+
     def str(self, key: str, default: Any = None, *, required: bool = False) -> Any:
         node = self.req(key) if required else self.get(key)
         return default if node is None else as_str(node)
@@ -281,6 +285,12 @@ def as_int(node: YNode) -> int:
     if node.kind != "scalar" or isinstance(v, bool) or not isinstance(v, int):
         raise node.error(f"expected an integer, got {describe(node)}")
     return v
+
+
+def as_bool(node: YNode) -> bool:
+    if node.kind != "scalar" or not isinstance(node.value, bool):
+        raise node.error(f"expected true or false, got {describe(node)}")
+    return node.value
 
 
 def as_num(node: YNode) -> float:

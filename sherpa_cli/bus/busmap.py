@@ -1,0 +1,75 @@
+"""``--bus-map BUS=INTERFACE:CHANNEL``: point configured buses somewhere else without editing the config.
+
+This is how a second terminal reaches ``sherpa sim --serve`` (``remote`` interface), how a
+developer uses kernel ``vcan`` (``socketcan:vcan0``), and how ``--sim`` maps every bus to an
+in-process ``virtual`` channel. The result is a plain python-can configuration: no bus
+type is special-cased anywhere else.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Iterable, Mapping
+
+from sherpa_cli.config.model import ArmConfig, BusConfig
+from sherpa_cli.errors import UsageError
+
+ENV_VAR = "SHERPA_BUS_MAP"
+
+
+@dataclasses.dataclass(frozen=True)
+class BusTarget:
+    interface: str
+    channel: str
+
+    def __str__(self) -> str:
+        return f"{self.interface}:{self.channel}"
+
+
+def parse_bus_map(specs: Iterable[str]) -> dict[str, BusTarget]:
+    """Parse ``can0=socketcan:vcan0`` items (several per argument, comma-separated)."""
+    result: dict[str, BusTarget] = {}
+    for spec in specs:
+        for item in filter(None, (part.strip() for part in spec.split(","))):
+            bus, sep, target = item.partition("=")
+            interface, sep2, channel = target.partition(":")
+            if not sep or not sep2 or not bus.strip() or not interface or not channel:
+                raise UsageError(f"--bus-map: '{item}' is not BUS=INTERFACE:CHANNEL",
+                                 hint="e.g. --bus-map can0=socketcan:vcan0,can1=remote:127.0.0.1:54702")
+            if interface == "udp_multicast":
+                # it sends out of the network interface; a sim or test must stay on loopback
+                raise UsageError("--bus-map: the udp_multicast interface is not supported; "
+                                 "use remote (python-can-remote) or socketcan")
+            result[bus.strip()] = BusTarget(interface.strip(), channel.strip())
+    return result
+
+
+def apply_bus_map(cfg: ArmConfig, mapping: Mapping[str, BusTarget]) -> ArmConfig:
+    """A copy of ``cfg`` whose named buses use the mapped interface/channel."""
+    unknown = sorted(set(mapping) - set(cfg.buses))
+    if unknown:
+        raise UsageError(f"--bus-map names bus(es) not in the config: {', '.join(unknown)}",
+                         hint=f"configured buses: {', '.join(cfg.buses)}")
+    buses = dict(cfg.buses)
+    for name, target in mapping.items():
+        old = buses[name]
+        # options of the old interface (e.g. socketcan's fd) may not apply to the new one
+        buses[name] = dataclasses.replace(old, interface=target.interface, channel=target.channel,
+                                          options={})
+    return dataclasses.replace(cfg, buses=buses)
+
+
+def format_bus_map(mapping: Mapping[str, BusTarget]) -> str:
+    return ",".join(f"{bus}={target}" for bus, target in mapping.items())
+
+
+def bus_kwargs(bus: BusConfig) -> dict:
+    """Keyword arguments for ``can.Bus``; what the config leaves open, python-can's own config decides."""
+    kwargs: dict = dict(bus.options)
+    if bus.interface is not None:
+        kwargs["interface"] = bus.interface
+    if bus.channel is not None:
+        kwargs["channel"] = bus.channel
+    if bus.bitrate is not None and bus.interface not in ("virtual", "remote"):
+        kwargs["bitrate"] = bus.bitrate
+    return kwargs

@@ -1,0 +1,114 @@
+"""Open the configured buses: a python-can bus and a paced canopen Network for each."""
+
+from __future__ import annotations
+
+import errno
+import time
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any, Callable, Iterable, Mapping
+
+from sherpa_cli.bus.busmap import bus_kwargs
+from sherpa_cli.config.model import ArmConfig, BusConfig
+from sherpa_cli.errors import CommunicationError
+
+if TYPE_CHECKING:
+    import can
+    import canopen
+
+
+def _paced_network_class():
+    import can
+    import canopen
+
+    class PacedNetwork(canopen.Network):
+        """canopen.Network that keeps the bus's send gap and retries a full socket buffer.
+
+        Overriding send_message is canopen's documented seam; every SDO, NMT and interpreter
+        frame of this tool goes through it.
+        """
+
+        #: seconds between two frames sent by this tool on the bus (config: send_interval_us)
+        gap: float = 0.0
+        #: attempts when the kernel's socket buffer is full (ENOBUFS, python-can issue #2004)
+        send_attempts: int = 5
+        clock: Callable[[], float] = staticmethod(time.monotonic)
+        sleep: Callable[[float], None] = staticmethod(time.sleep)
+
+        def __init__(self, bus: "can.BusABC | None" = None) -> None:
+            super().__init__(bus)
+            self._last_send = float("-inf")
+
+        def send_message(self, can_id: int, data: bytes, remote: bool = False) -> None:
+            if not self.bus:
+                raise CommunicationError("bus is closed")
+            msg = can.Message(is_extended_id=can_id > 0x7FF, arbitration_id=can_id, data=data,
+                              is_remote_frame=remote)
+            with self.send_lock:
+                wait = self._last_send + self.gap - self.clock()
+                if wait > 0:
+                    self.sleep(wait)
+                for attempt in range(self.send_attempts):
+                    try:
+                        self.bus.send(msg)
+                        break
+                    except can.CanOperationError as exc:
+                        if getattr(exc, "error_code", None) != errno.ENOBUFS or attempt == self.send_attempts - 1:
+                            raise CommunicationError(f"sending 0x{can_id:03X} failed: {exc}") from exc
+                        self.sleep(0.001 * (attempt + 1))
+                self._last_send = self.clock()
+            self.check()
+
+    return PacedNetwork
+
+
+@dataclass
+class BusLink:
+    """One open bus of the arm."""
+
+    name: str
+    config: BusConfig
+    bus: Any  # can.BusABC
+    network: Any  # PacedNetwork (canopen.Network)
+
+    def describe(self) -> str:
+        return f"bus {self.name} ({self.config.interface or 'python-can config'}:{self.config.channel or '-'})"
+
+
+def open_bus(cfg: BusConfig) -> Any:
+    import can
+
+    kwargs = bus_kwargs(cfg)
+    where = f"bus {cfg.name} ({kwargs.get('interface', 'python-can config')}:{kwargs.get('channel', '-')})"
+    try:
+        return can.Bus(**kwargs)
+    except (can.CanError, OSError, ValueError, ImportError, TypeError) as exc:
+        raise CommunicationError(f"{where}: cannot open: {exc}",
+                                 hint="check the adapter is plugged in and up (ip link), or use --sim") from exc
+    except Exception as exc:  # third-party backends raise anything; name the bus, keep the cause
+        raise CommunicationError(f"{where}: cannot open: {type(exc).__name__}: {exc}") from exc
+
+
+def open_links(cfg: ArmConfig, names: Iterable[str] | None = None) -> dict[str, BusLink]:
+    """Open the named buses (default: all); on failure, close what was opened and raise."""
+    links: dict[str, BusLink] = {}
+    network_cls = _paced_network_class()
+    try:
+        for name in names if names is not None else cfg.buses:
+            bus_cfg = cfg.buses[name]
+            bus = open_bus(bus_cfg)
+            network = network_cls(bus)
+            network.gap = bus_cfg.send_interval_us / 1e6
+            network.connect()
+            links[name] = BusLink(name, bus_cfg, bus, network)
+    except BaseException:
+        close_links(links)
+        raise
+    return links
+
+
+def close_links(links: Mapping[str, BusLink]) -> None:
+    for link in links.values():
+        try:
+            link.network.disconnect()
+        except Exception:  # closing must not hide the error that made us close
+            pass

@@ -1,0 +1,39 @@
+"""Run work on several buses (or drives) at once and collect every outcome."""
+
+from __future__ import annotations
+
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass
+from typing import Any, Callable, Generic, Hashable, Mapping, TypeVar
+
+K = TypeVar("K", bound=Hashable)
+
+
+@dataclass
+class Outcome(Generic[K]):
+    key: K
+    value: Any = None
+    error: BaseException | None = None
+
+    @property
+    def ok(self) -> bool:
+        return self.error is None
+
+
+def run_concurrently(jobs: Mapping[K, Callable[[], Any]], *, max_workers: int | None = None) -> dict[K, Outcome[K]]:
+    """Run every job in its own thread; an exception in one job never stops the others.
+
+    CAN work is I/O-bound (waiting for replies), so threads overlap it well even under the GIL.
+    Results keep the order of ``jobs`` so output stays deterministic whatever finished first.
+    """
+    if not jobs:
+        return {}
+    outcomes: dict[K, Outcome[K]] = {}
+    with ThreadPoolExecutor(max_workers=max_workers or len(jobs), thread_name_prefix="sherpa") as pool:
+        futures = {key: pool.submit(job) for key, job in jobs.items()}
+        for key, future in futures.items():
+            try:
+                outcomes[key] = Outcome(key, value=future.result())
+            except BaseException as exc:  # noqa: BLE001 - reported per key to the caller
+                outcomes[key] = Outcome(key, error=exc)
+    return outcomes

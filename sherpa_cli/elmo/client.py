@@ -1,0 +1,336 @@
+"""Host side of one Elmo drive's binary interpreter (elmo-protocol.md sections 1, 3.2, 3.6, 4).
+
+Requests go out on RPDO2 (0x300+node), replies come back on TPDO2 (0x280+node) and are matched
+on (letters, index). At most one request is in flight per drive (section 4.2: the drive's
+receive buffer is overwritten by the next frame). The client owns no bus: it talks through a
+:class:`~sherpa_cli.elmo.transport.Transport`, whose callbacks may arrive on a receive thread
+or, in tests, synchronously inside ``send``.
+
+Protocol points the sources leave open are :class:`ClientSettings`, not guesses in the code.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+
+from sherpa_cli.elmo import codec
+from sherpa_cli.elmo.codec import Reply
+from sherpa_cli.elmo.commands import COMMANDS
+from sherpa_cli.elmo.faults import Emcy, decode_emcy, ec_text
+from sherpa_cli.elmo.transport import Transport
+from sherpa_cli.errors import CodecError, CommunicationError, DriveRefusedError, DriveTimeoutError
+
+log = logging.getLogger(__name__)
+
+RPDO2_BASE = 0x300
+TPDO2_BASE = 0x280
+EMCY_BASE = 0x080
+NMT_COB_ID = 0x000
+NMT_START = 0x01
+NMT_RESET_COMMUNICATION = 0x82
+EMCY_RPDO_ERROR = 0x6300  # "RPDO-mapped object returned an interpretation error" (0x2F21 bit 8)
+
+_TIMEOUT_HINT = "check that the drive is powered, on this bus with this node id, and NMT-started"
+
+
+@dataclass(frozen=True)
+class ClientSettings:
+    """Choices for protocol behaviour no source confirms (elmo-protocol.md 1.3, 4.1)."""
+
+    expect_set_echo: bool = True  # False: a set is confirmed by reading it back
+    query_long: bool = False  # True: DLC 8 queries with the query bit instead of DLC 4
+    mo_confirm_timeout: float = 3.0  # s to wait for MO to read back after MO=0/1
+    mo_poll_interval: float = 0.01  # s between MO polls
+    sv_blackout: float = 0.5  # s of silence after SV before the drive is asked anything
+
+    def __post_init__(self) -> None:
+        for name in ("mo_confirm_timeout", "mo_poll_interval", "sv_blackout"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, (int, float)) or not value >= 0:
+                raise ValueError(f"ClientSettings.{name} must be a number >= 0, got {value!r}")
+
+
+class _Pending:
+    """The one request of a drive that is waiting for its reply."""
+
+    __slots__ = ("letters", "index", "event", "reply")
+
+    def __init__(self, letters: str, index: int) -> None:
+        self.letters = letters
+        self.index = index
+        self.event = threading.Event()
+        self.reply: Reply | None = None
+
+
+def _key(letters: str, index: int) -> str:
+    spec = COMMANDS.get(letters)
+    return f"{letters}[{index}]" if index or (spec is not None and spec.is_array) else letters
+
+
+def _request_text(request: codec.Request) -> str:
+    key = _key(request.letters, request.index)
+    return f"{key}={request.value}" if request.kind == "set" else key
+
+
+class DriveClient:
+    """One drive's binary interpreter. Thread-safe: callers queue on a per-drive lock.
+
+    ``timeout`` is the wait for one reply; a request is sent ``1 + retries`` times before
+    :class:`DriveTimeoutError`. That wait is a real-time ``Event.wait``, because replies come
+    from the transport's thread. ``clock`` and ``sleep`` drive every longer wait (MO settle
+    window, SV blackout) so tests can run them on a fake clock.
+    """
+
+    def __init__(self, transport: Transport, node: int, *, name: str, timeout: float = 0.1, retries: int = 1,
+                 clock: Callable[[], float] = time.monotonic, sleep: Callable[[float], None] = time.sleep,
+                 settings: ClientSettings | None = None) -> None:
+        if isinstance(node, bool) or not isinstance(node, int) or not 1 <= node <= 127:
+            raise ValueError(f"node id must be 1..127, got {node!r}")
+        if not timeout > 0:
+            raise ValueError(f"timeout must be > 0 s, got {timeout!r}")
+        if isinstance(retries, bool) or not isinstance(retries, int) or retries < 0:
+            raise ValueError(f"retries must be an integer >= 0, got {retries!r}")
+        self.transport = transport
+        self.node = node
+        self.name = name
+        self.timeout = timeout
+        self.retries = retries
+        self.settings = settings or ClientSettings()
+        self._clock = clock
+        self._sleep = sleep
+        # Reentrant so composite operations (save, motor_on) keep the drive for their whole
+        # sequence while reusing the single-request helpers.
+        self._lock = threading.RLock()
+        # Guards what the receive thread touches; never held while sending or waiting.
+        self._state = threading.Lock()
+        self._pending: _Pending | None = None
+        self._emcy_callbacks: list[Callable[[Emcy], None]] = []
+        self._last_emcy: Emcy | None = None
+        self._emcy_count = 0
+        transport.subscribe(TPDO2_BASE + node, self._on_reply)
+        transport.subscribe(EMCY_BASE + node, self._on_emcy)
+
+    @property
+    def label(self) -> str:
+        """``"shoulder_1a (node 10)"``: how every message names this drive."""
+        return f"{self.name} (node {self.node})"
+
+    @property
+    def last_emcy(self) -> Emcy | None:
+        with self._state:
+            return self._last_emcy
+
+    # -- interpreter commands ---------------------------------------------------------------------
+
+    def get(self, letters: str, index: int = 0) -> int | float:
+        """Query ``letters[index]``; the value's type follows the reply's type bit."""
+        frame = codec.encode_query(letters, index, long=self.settings.query_long)
+        what = _key(letters, index)
+        with self._lock:
+            reply = self._transact(frame, letters, index, what)
+        return self._value(reply, what)
+
+    def set(self, letters: str, index: int, value: int | float) -> None:
+        """Assign and confirm, by the drive's echo or (echo off or missing) by reading it back."""
+        frame = codec.encode_set(letters, index, value)
+        # The drive holds the float32-rounded value; compare against that, not the caller's float.
+        expected = codec.decode_request(frame).value
+        key = _key(letters, index)
+        what = f"{key}={expected if isinstance(expected, int) else value}"
+        with self._lock:
+            emcy_before = self._emcy_seen()
+            if self.settings.expect_set_echo:
+                echo = self._exchange(frame, letters, index, attempts=1)
+                if echo is not None:
+                    if not echo.ok:
+                        raise self._refused(what, echo.error_code)
+                    if echo.value != expected:
+                        raise CommunicationError(f"{self.label}: {what} was echoed as {key}={echo.value}")
+                    return
+                # elmo-protocol.md 1.3: a missing echo means "unknown", not "failed".
+                log.info("%s: no echo to %s within %g s; reading it back", self.label, what, self.timeout)
+            else:
+                self.transport.send(RPDO2_BASE + self.node, frame)
+            readback = self._value(self._transact(self._query_frame(letters, index), letters, index, key), key)
+            if readback == expected:
+                return
+            emcy = self._emcy_since(emcy_before)
+            if emcy is not None and emcy.code == EMCY_RPDO_ERROR and emcy.elmo_code:
+                raise self._refused(what, emcy.elmo_code)
+            raise CommunicationError(f"{self.label}: {what} not confirmed: {key} reads back {readback}")
+
+    def execute(self, letters: str, index: int = 0) -> None:
+        """Run an execute command (BG, ST, ...). ``SV`` goes through :meth:`save`."""
+        if letters == "SV":
+            self.save()
+            return
+        frame = codec.encode_execute(letters, index)
+        what = _key(letters, index)
+        with self._lock:
+            self._value(self._transact(frame, letters, index, what), what)
+
+    def request(self, frame: bytes) -> Reply:
+        """Send one raw RPDO2 frame and return the matching reply, error replies included.
+
+        It always waits for a TPDO2, so a raw set to a drive that does not echo sets times out.
+        A raw SV is sent once and its blackout is the caller's business; prefer :meth:`save`.
+        """
+        req = codec.decode_request(frame)
+        attempts = 1 if req.letters == "SV" else None
+        with self._lock:
+            return self._transact(bytes(frame), req.letters, req.index, _request_text(req), attempts=attempts)
+
+    # -- composite operations ---------------------------------------------------------------------
+
+    def motor_on(self) -> None:
+        """MO=1, then poll MO until it reads 1 (the drive is deaf while it settles)."""
+        self._switch_motor(1)
+
+    def motor_off(self) -> None:
+        """MO=0, then poll MO until it reads 0."""
+        self._switch_motor(0)
+
+    def save(self) -> None:
+        """SV once, stay silent for the blackout, then check that the drive answers again."""
+        frame = codec.encode_execute("SV")
+        with self._lock:
+            start = self._clock()
+            # Never resent: every SV is a flash write, and a lost reply is normal during the save.
+            reply = self._exchange(frame, "SV", 0, attempts=1)
+            if reply is not None and not reply.ok:
+                raise self._refused("SV", reply.error_code)
+            remaining = start + self.settings.sv_blackout - self._clock()
+            if remaining > 0:
+                self._sleep(remaining)
+            self._value(self._transact(self._query_frame("MO", 0), "MO", 0, "MO (after SV)"), "MO (after SV)")
+
+    def _switch_motor(self, value: int) -> None:
+        what = f"MO={value}"
+        timeout = self.settings.mo_confirm_timeout
+        with self._lock:
+            frame = codec.encode_set("MO", 0, value)
+            if self.settings.expect_set_echo:
+                echo = self._exchange(frame, "MO", 0, attempts=1)
+                if echo is not None and not echo.ok:
+                    raise self._refused(what, echo.error_code)
+            else:
+                self.transport.send(RPDO2_BASE + self.node, frame)
+            query = self._query_frame("MO", 0)
+            deadline = self._clock() + timeout
+            last: int | float | None = None
+            while True:
+                # One attempt per poll: the poll loop is the retry, bounded by the deadline.
+                reply = self._exchange(query, "MO", 0, attempts=1)
+                if reply is not None:
+                    last = self._value(reply, "MO")
+                    if last == value:
+                        return
+                if self._clock() >= deadline:
+                    break
+                self._sleep(self.settings.mo_poll_interval)
+            if last is None:
+                raise DriveTimeoutError(f"{self.label}: {what} not confirmed: no answer to MO within {timeout:g} s",
+                                        hint=_TIMEOUT_HINT)
+            raise CommunicationError(f"{self.label}: {what} not confirmed: MO still reads {last} after {timeout:g} s",
+                                     hint="read MF and EC for the reason")
+
+    # -- NMT and EMCY -----------------------------------------------------------------------------
+
+    def nmt_start(self) -> None:
+        """NMT "start remote node": PDOs, hence the binary interpreter, work only in Operational."""
+        self._nmt(NMT_START)
+
+    def nmt_reset_communication(self) -> None:
+        self._nmt(NMT_RESET_COMMUNICATION)
+
+    def _nmt(self, command: int) -> None:
+        # Under the drive lock so NMT never lands inside an SV blackout or between a request and its reply.
+        with self._lock:
+            self.transport.send(NMT_COB_ID, bytes([command, self.node]))
+
+    def on_emcy(self, callback: Callable[[Emcy], None]) -> None:
+        """Call ``callback(emcy)`` for every EMCY of this drive (on the transport's receive thread)."""
+        with self._state:
+            self._emcy_callbacks.append(callback)
+
+    # -- internals --------------------------------------------------------------------------------
+
+    def _query_frame(self, letters: str, index: int) -> bytes:
+        return codec.encode_query(letters, index, long=self.settings.query_long)
+
+    def _transact(self, frame: bytes, letters: str, index: int, what: str, *, attempts: int | None = None) -> Reply:
+        attempts = 1 + self.retries if attempts is None else attempts
+        reply = self._exchange(frame, letters, index, attempts=attempts)
+        if reply is None:
+            tries = f" ({attempts} attempts)" if attempts > 1 else ""
+            raise DriveTimeoutError(f"{self.label}: no answer to {what} within {self.timeout:g} s{tries}",
+                                    hint=_TIMEOUT_HINT)
+        return reply
+
+    def _exchange(self, frame: bytes, letters: str, index: int, *, attempts: int) -> Reply | None:
+        """Send ``frame`` up to ``attempts`` times; the matching reply, or None if none came."""
+        pending = _Pending(letters, index)
+        # Registered before sending: with a synchronous transport the reply arrives inside send().
+        with self._state:
+            self._pending = pending
+        try:
+            for attempt in range(attempts):
+                self.transport.send(RPDO2_BASE + self.node, frame)
+                if pending.event.wait(self.timeout):
+                    return pending.reply
+                log.debug("%s: no reply to %s (attempt %d of %d)", self.label, frame.hex(" "), attempt + 1, attempts)
+            return None
+        finally:
+            with self._state:
+                self._pending = None
+
+    def _on_reply(self, can_id: int, data: bytes, timestamp: float) -> None:
+        try:
+            reply = codec.decode_reply(data)
+        except CodecError as exc:
+            log.warning("%s: ignoring malformed TPDO2 frame: %s", self.label, exc)
+            return
+        with self._state:
+            pending = self._pending
+            if pending is None or pending.reply is not None or (reply.letters, reply.index) != (
+                    pending.letters, pending.index):
+                log.debug("%s: ignoring unrequested reply %s", self.label, bytes(data).hex(" "))
+                return
+            pending.reply = reply
+            pending.event.set()
+
+    def _on_emcy(self, can_id: int, data: bytes, timestamp: float) -> None:
+        try:
+            emcy = decode_emcy(data)
+        except CodecError as exc:
+            log.warning("%s: ignoring malformed EMCY frame: %s", self.label, exc)
+            return
+        with self._state:
+            self._last_emcy = emcy
+            self._emcy_count += 1
+            callbacks = list(self._emcy_callbacks)
+        for callback in callbacks:
+            callback(emcy)
+
+    def _emcy_seen(self) -> int:
+        with self._state:
+            return self._emcy_count
+
+    def _emcy_since(self, count: int) -> Emcy | None:
+        with self._state:
+            return self._last_emcy if self._emcy_count > count else None
+
+    def _value(self, reply: Reply, what: str) -> int | float:
+        if not reply.ok:
+            raise self._refused(what, reply.error_code)
+        assert reply.value is not None  # decode_reply sets a value on every success reply
+        return reply.value
+
+    def _refused(self, what: str, code: int | None) -> DriveRefusedError:
+        text = ec_text(code) if code is not None else "unknown error"
+        return DriveRefusedError(f"{self.label}: {what} refused: error {code} {text}",
+                                 drive=self.label, command=what, code=code)
