@@ -9,7 +9,7 @@ from __future__ import annotations
 import os
 import sys
 from pathlib import Path
-from typing import Optional, Sequence
+from typing import List, Optional, Sequence
 
 import typer
 
@@ -55,6 +55,12 @@ def root(
     json_out: bool = typer.Option(False, "--json", help="Print results as JSON on stdout."),
     debug: bool = typer.Option(False, "--debug", help="Show tracebacks for errors."),
     no_color: bool = typer.Option(False, "--no-color", help="No colour (NO_COLOR is honoured too)."),
+    sim: bool = typer.Option(False, "--sim", help="Run against the simulated arm, in this process "
+                             "(python-can virtual buses; the drives' flash persists in the state dir)."),
+    bus_map: Optional[List[str]] = typer.Option(
+        None, "--bus-map", metavar="BUS=INTERFACE:CHANNEL",
+        help="Point configured buses elsewhere, e.g. can0=socketcan:vcan0 or can0=remote:127.0.0.1:54701 "
+        "(repeat or comma-separate; default $SHERPA_BUS_MAP). `sherpa sim --serve` prints the one to use."),
     version: bool = typer.Option(False, "--version", callback=_version_callback, is_eager=True,
                                  help="Print the version and exit."),
 ) -> None:
@@ -64,12 +70,17 @@ def root(
         json_mode=json_out,
         debug=debug,
         no_color=no_color,
+        sim=sim,
+        bus_map=bus_map if bus_map else ([os.environ["SHERPA_BUS_MAP"]] if os.environ.get("SHERPA_BUS_MAP") else []),
+        bus_map_from_env=not bus_map and bool(os.environ.get("SHERPA_BUS_MAP")),
     )
 
 
 def _register() -> None:
-    from sherpa_cli.cli import config_cmd, diffdrive_cmd, limits_cmd
+    from sherpa_cli.cli import cmd_cmd, config_cmd, diffdrive_cmd, limits_cmd, sim_cmd
 
+    app.command("cmd")(cmd_cmd.cmd)
+    app.command("sim")(sim_cmd.sim)
     app.add_typer(config_cmd.app, name="config")
     app.add_typer(limits_cmd.app, name="limits")
     app.add_typer(diffdrive_cmd.app, name="diffdrive")

@@ -14,7 +14,8 @@ from typing import Any
 import yaml
 
 from sherpa_cli.config.catalog import builtin_catalog
-from sherpa_cli.config.model import ArmConfig, BusConfig, CurrentLimits, ILCodes, JointConfig, JointRole, ProtocolConfig
+from sherpa_cli.config.model import (ArmConfig, BusConfig, CurrentLimits, ILCodes, JointConfig, JointRole,
+                                     ProtocolConfig, SimDriveConfig)
 
 
 def dump_native(cfg: ArmConfig) -> str:
@@ -23,6 +24,9 @@ def dump_native(cfg: ArmConfig) -> str:
         sections.append({"il_codes": {"stop": cfg.il_codes.stop, "home": cfg.il_codes.home}})
     if cfg.protocol != ProtocolConfig():
         sections.append({"protocol": dataclasses.asdict(cfg.protocol)})
+    if cfg.sim:
+        sections.append({"sim": {"drives": {name: _drop_default(dataclasses.asdict(f), SimDriveConfig())
+                                            for name, f in cfg.sim.items()}}})
     sections.append({"buses": {b.name: _bus(b) for b in cfg.buses.values()}})
     sections.append({"drives": {d.name: _drop_none({"bus": d.bus, "node": d.node, "model": d.model,
                                                     "motor": d.motor})
@@ -114,3 +118,7 @@ def _catalog_diff(cfg: ArmConfig) -> dict[str, Any]:
     if cfg.catalog.peak_fraction != base.peak_fraction:
         out["peak_fraction"] = cfg.catalog.peak_fraction
     return out
+
+
+def _drop_default(values: dict[str, Any], default: Any) -> dict[str, Any]:
+    return {k: v for k, v in values.items() if v != getattr(default, k)}

@@ -193,6 +193,19 @@ class ProtocolConfig:
 
 
 @dataclass(frozen=True)
+class SimDriveConfig:
+    """How one simulated drive differs from a healthy one (faults and mismatch); only the simulator reads it."""
+
+    reply_latency: float = 0.0  # s added to every interpreter reply
+    drop_probability: float = 0.0  # chance that a frame to or from the drive is lost
+    die_at: float | None = None  # s after start: the drive goes silent for good
+    reboot_at: float | None = None  # s after start: the drive reboots once
+    speed_gain: float = 1.0  # runs its profiles this much faster (seed Fig. 9.10/9.11 mismatch)
+    heartbeat_ms: int = 0  # 0x1017 producer heartbeat at power-up
+    seed: int = 0  # random seed of drop_probability, so a failing run replays
+
+
+@dataclass(frozen=True)
 class ArmConfig:
     name: str
     buses: Mapping[str, BusConfig]
@@ -202,6 +215,7 @@ class ArmConfig:
     catalog: Catalog
     il_codes: ILCodes = field(default_factory=ILCodes)
     protocol: ProtocolConfig = field(default_factory=ProtocolConfig)
+    sim: Mapping[str, SimDriveConfig] = field(default_factory=dict)  # drive name -> simulated faults
     source: str | None = None  # file the config came from
     warnings: tuple[str, ...] = ()  # non-fatal findings of validation, shown by `config check`
 

@@ -13,13 +13,13 @@ from pathlib import PurePath
 
 from sherpa_cli.config.catalog import builtin_catalog
 from sherpa_cli.config.model import (AbsEncoderConfig, ArmConfig, BusConfig, Catalog, CurrentLimits, DriveConfig,
-                                     DriveModel, ILCodes, ProtocolConfig, JointConfig, JointRole, MotorModel, PairConfig,
+                                     DriveModel, ILCodes, ProtocolConfig, SimDriveConfig, JointConfig, JointRole, MotorModel, PairConfig,
                                      SwitchConfig, SwitchKind)
 from sherpa_cli.config.yamlnodes import (Locs, Section, YNode, as_int, as_map, as_name, as_seq, as_str, named_items,
                                          plain, suggest)
 from sherpa_cli.errors import ConfigError
 
-TOP_KEYS = ["name", "il_codes", "protocol", "buses", "drives", "joints", "pairs", "catalog"]
+TOP_KEYS = ["name", "il_codes", "protocol", "sim", "buses", "drives", "joints", "pairs", "catalog"]
 IL_KEYS = ["stop", "home"]
 BUS_KEYS = ["interface", "channel", "bitrate", "send_interval_us", "poll_interval_ms", "options"]
 DRIVE_KEYS = ["bus", "node", "model", "motor"]
@@ -78,6 +78,31 @@ def parse_protocol(top: Section, locs: Locs) -> ProtocolConfig:
     )
 
 
+SIM_DRIVE_KEYS = [f.name for f in dataclasses.fields(SimDriveConfig)]
+
+
+def parse_sim(top: Section, locs: Locs) -> dict[str, SimDriveConfig]:
+    sec = top.section("sim", ["drives"], what="a mapping with 'drives'")
+    if sec is None or sec.get("drives") is None:
+        return {}
+    result: dict[str, SimDriveConfig] = {}
+    for dname, dnode in named_items(sec.req("drives"), "drive"):
+        d = Section(dnode, SIM_DRIVE_KEYS, what="a mapping of simulated faults")
+        register(locs, ("sim", "drives", dname), d)
+        locs.put(("sim", "drives", dname), dnode.loc)
+        base = SimDriveConfig()
+        die_at, reboot_at = d.num("die_at"), d.num("reboot_at")
+        result[dname] = SimDriveConfig(
+            reply_latency=d.num("reply_latency", base.reply_latency),
+            drop_probability=d.num("drop_probability", base.drop_probability),
+            die_at=die_at, reboot_at=reboot_at,
+            speed_gain=d.num("speed_gain", base.speed_gain),
+            heartbeat_ms=d.int("heartbeat_ms", base.heartbeat_ms),
+            seed=d.int("seed", base.seed),
+        )
+    return result
+
+
 def load_native(root: YNode, filename: str) -> tuple[ArmConfig, Locs, list[str]]:
     """Shape and types only; the caller runs validate() on the result."""
     locs = Locs(filename)
@@ -91,6 +116,7 @@ def load_native(root: YNode, filename: str) -> tuple[ArmConfig, Locs, list[str]]
         il = ILCodes(stop=il_sec.int("stop", il.stop), home=il_sec.int("home", il.home))
 
     protocol = parse_protocol(top, locs)
+    sim = parse_sim(top, locs)
     catalog = parse_catalog(top.get("catalog"), locs)
 
     buses: dict[str, BusConfig] = {}
@@ -158,7 +184,7 @@ def load_native(root: YNode, filename: str) -> tuple[ArmConfig, Locs, list[str]]
                                       delta=names[1], current=current, where=sec.node.loc)
 
     cfg = ArmConfig(name=name, buses=buses, drives=drives, joints=joints, pairs=pairs, catalog=catalog,
-                    il_codes=il, protocol=protocol, source=filename)
+                    il_codes=il, protocol=protocol, sim=sim, source=filename)
     return cfg, locs, []
 
 

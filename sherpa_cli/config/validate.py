@@ -7,6 +7,8 @@ raised, so fixing errors top to bottom works; the hint says how many more were f
 
 from __future__ import annotations
 
+import difflib
+
 from dataclasses import replace
 
 from sherpa_cli.config.model import ArmConfig, DriveModel, JointConfig, JointRole, SwitchKind
@@ -64,6 +66,7 @@ def validate(cfg: ArmConfig, locs: Locs, warnings: list[str] | None = None, *,
     r.warnings.extend(warnings or [])
     _check_il_codes(cfg, locs, r)
     _check_protocol(cfg, locs, r)
+    _check_sim(cfg, locs, r)
     _check_catalog(cfg, locs, r)
     _check_buses(cfg, locs, r)
     _check_drives(cfg, locs, r)
@@ -85,6 +88,22 @@ def _check_protocol(cfg: ArmConfig, locs: Locs, r: _Report) -> None:
     for key in ("mo_settle", "mo_confirm_timeout", "sv_blackout"):
         if getattr(p, key) < 0:
             r.error(locs.get("protocol", key), f"{key} {getattr(p, key)} s is negative; expected >= 0")
+
+
+def _check_sim(cfg: ArmConfig, locs: Locs, r: _Report) -> None:
+    for name, faults in cfg.sim.items():
+        if name not in cfg.drives:
+            close = difflib.get_close_matches(name, list(cfg.drives), n=1)
+            r.error(locs.get("sim", "drives", name), f"sim fault for unknown drive '{name}'"
+                    + (f"; did you mean '{close[0]}'?" if close else ""))
+            continue
+        if not 0.0 <= faults.drop_probability <= 1.0:
+            r.error(locs.get("sim", "drives", name, "drop_probability"),
+                    f"drop_probability {faults.drop_probability} must be within 0..1")
+        if faults.reply_latency < 0:
+            r.error(locs.get("sim", "drives", name, "reply_latency"), "reply_latency must be >= 0")
+        if not faults.speed_gain > 0:
+            r.error(locs.get("sim", "drives", name, "speed_gain"), "speed_gain must be > 0")
 
 
 def _check_il_codes(cfg: ArmConfig, locs: Locs, r: _Report) -> None:

@@ -1,0 +1,99 @@
+"""`sherpa sim`: the simulated arm as its own process, for a second terminal or a second machine."""
+
+from __future__ import annotations
+
+import threading
+from typing import Optional
+
+import typer
+
+from sherpa_cli.cli.context import state
+from sherpa_cli.errors import UsageError
+
+
+def sim(
+    ctx: typer.Context,
+    serve: Optional[str] = typer.Option(
+        None, "--serve", metavar="HOST:PORT",
+        help="Serve each bus over python-can-remote on PORT, PORT+1, ... (bind 127.0.0.1 unless "
+        "--allow-remote)."),
+    allow_remote: bool = typer.Option(False, "--allow-remote", help="Allow --serve on a non-loopback address."),
+    reset_state: bool = typer.Option(False, "--reset-state",
+                                     help="Forget what the simulated drives saved (SV): factory flash."),
+    duration: Optional[float] = typer.Option(None, "--duration", metavar="SECONDS",
+                                             help="Stop by itself after this long (default: until Ctrl-C)."),
+) -> None:
+    """Run the simulated arm until Ctrl-C, as drives on a bus would be.
+
+    With --serve the buses are served over python-can-remote and the command prints the
+    --bus-map a second terminal must use. With the global --bus-map (e.g.
+    can0=socketcan:vcan0) the drives answer on those interfaces, e.g. kernel vcan.
+    The drives' flash (what SV saved) persists between runs in the state directory.
+
+    \b
+    Examples:
+      sherpa sim --serve 127.0.0.1:54701
+      sherpa --bus-map can0=socketcan:vcan0,can1=socketcan:vcan1,can2=socketcan:vcan2 sim
+      sherpa sim --reset-state
+    """
+    from sherpa_cli.bus.busmap import apply_bus_map, bus_kwargs, parse_bus_map
+    from sherpa_cli.sim import serve as serving
+    from sherpa_cli.sim import state as sim_state
+
+    st = state(ctx)
+    cfg = st.load_config()
+    if st.sim:
+        raise UsageError("sherpa sim is the simulator itself; --sim does not apply to it")
+    # an exported SHERPA_BUS_MAP points clients at a served sim; it must not stop serving one
+    mapping = parse_bus_map(st.bus_map) if not (serve and st.bus_map_from_env) else {}
+    if serve and mapping:
+        raise UsageError("give either --serve (python-can-remote) or --bus-map (interfaces), not both")
+    if reset_state:
+        path = sim_state.state_path(cfg)
+        removed = sim_state.reset(cfg)
+        st.out.line(f"simulated arm '{cfg.name}': factory flash ({'removed ' if removed else 'no saved state at '}{path})")
+        if not serve and not mapping:
+            return
+    if duration is not None and duration <= 0:
+        raise UsageError(f"--duration must be > 0 seconds, got {duration}")
+    if serve:
+        host, port = serving.parse_host_port(serve)
+        serving.check_bind_address(host, allow_remote)
+        served = serving.serve(cfg, host, port)
+        bus_map = ",".join(f"{bus}={target}" for bus, target in served.bus_map.items())
+        lines = [
+            f"simulated arm '{cfg.name}': {len(cfg.drives)} drives on {len(cfg.buses)} buses, "
+            f"served over python-can-remote on {host}:{port}..{port + len(cfg.buses) - 1}",
+            "in another terminal:",
+            f"  export SHERPA_BUS_MAP={bus_map}",
+            f"  sherpa --config {st.config_path} cmd {next(iter(cfg.drives))} PX",
+            f"or give each command --bus-map {bus_map}",
+            f"flash (SV) persists in {sim_state.state_path(cfg)}; Ctrl-C stops the simulator",
+        ]
+        stopper = served.stop
+        arm = served.arm
+    elif mapping:
+        mapped = apply_bus_map(cfg, mapping)
+        endpoints = {name: bus_kwargs(mapped.buses[name]) for name in mapping}
+        arm = serving.run_on_buses(cfg, endpoints)
+        lines = [f"simulated arm '{cfg.name}': drives answering on "
+                 + ", ".join(f"{b}={t}" for b, t in mapping.items()),
+                 f"flash (SV) persists in {sim_state.state_path(cfg)}; Ctrl-C stops the simulator"]
+        stopper = arm.stop
+    else:
+        raise UsageError("nothing to run the simulator on: give --serve HOST:PORT, or --bus-map "
+                         "BUS=INTERFACE:CHANNEL (e.g. can0=socketcan:vcan0)",
+                         hint="for one command against the simulator, use the global --sim instead")
+    for line in lines:
+        st.out.line(line)
+    import sys
+
+    sys.stdout.flush()
+    try:
+        threading.Event().wait(duration)
+    except KeyboardInterrupt:
+        st.out.info("stopping the simulated arm")
+    finally:
+        stopper()
+    if arm.errors:
+        raise arm.errors[0]

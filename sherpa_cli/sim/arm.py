@@ -1,0 +1,242 @@
+"""The simulated arm on CAN: one SimDrive per configured drive, the arm's mechanics, one pump per bus.
+
+Each bus gets one thread that receives frames, hands them to the addressed drives (SDO to
+the drive's SdoServer), advances every drive of the bus to the present and sends what they
+produced. One thread per bus fixes the order of events on that bus, like the bus itself.
+
+Mechanics: a plain joint's position is its motor's physical position; a differential
+pair's Σ = m_a + m_b and Δ = m_a - m_b. Switches sit at their configured joint positions
+and drive the configured inputs of the drives they are wired to; a stop switch tells the
+drive which motor direction leads into it.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import threading
+from typing import Any, Callable, Mapping
+
+from sherpa_cli.config.model import ArmConfig, JointConfig, PairConfig, SwitchConfig, SwitchKind
+from sherpa_cli.sim import state as sim_state
+from sherpa_cli.sim.clock import Clock, RealClock
+from sherpa_cli.sim.drive import SimDrive
+from sherpa_cli.sim.settings import SimSettings
+
+NMT_ID = 0x000
+SDO_RX = 0x600
+HOME_SWITCH_HALF_WIDTH = 2  # counts either side of a home switch's position where it reads pressed
+SIM_SV_SHARE = 0.6  # the simulated drive is deaf for this share of protocol.sv_blackout (the tool's bound)
+
+
+def settings_for(cfg: ArmConfig, drive: str, **overrides: Any) -> SimSettings:
+    """Simulator behaviour from the config: the drive plays the protocol the config describes."""
+    d = cfg.drives[drive]
+    model = cfg.catalog.drives.get(d.model) if d.model else None
+    p = cfg.protocol
+    base = dict(
+        echo_sets=p.set_echo,
+        mo_settle_s=p.mo_settle,
+        sv_blackout_s=round(p.sv_blackout * SIM_SV_SHARE, 6),
+        inputs=model.inputs if model else 6,
+        max_current=model.current_peak if model else 20.0,
+        stop_code=cfg.il_codes.stop,
+        device_name=_device_name(d.model),
+    )
+    faults = cfg.sim.get(drive)
+    if faults is not None:
+        base.update(reply_latency_s=faults.reply_latency, drop_probability=faults.drop_probability,
+                    die_at=faults.die_at, reboot_at=faults.reboot_at, heartbeat_ms=faults.heartbeat_ms,
+                    seed=faults.seed)
+    base.update(overrides)
+    return SimSettings(**base)
+
+
+def _device_name(model: str | None) -> str:
+    if not model:
+        return "Whistle"
+    kind, _, rating = model.partition("-")
+    return f"{kind.capitalize()} {rating}".strip()
+
+
+class _Mechanics:
+    """Moves switches with the joints; called by a drive after each of its model steps."""
+
+    def __init__(self, cfg: ArmConfig, drives: Mapping[str, SimDrive]) -> None:
+        self.cfg = cfg
+        self.drives = drives
+        # per drive: (switch, joint position function, +1/-1 = the switch is at the joint's high/low
+        # side (0 for home switches), motor direction that leads into it)
+        self.wiring: dict[str, list[tuple[SwitchConfig, Callable[[], float], int, int]]] = {n: [] for n in drives}
+        for joint in cfg.joints.values():
+            self._wire(joint)
+
+    def _wire(self, joint: JointConfig) -> None:
+        if joint.drive is not None:
+            drive = self.drives[joint.drive]
+            position: Callable[[], float] = lambda d=drive: d.position
+            signs = {joint.drive: 1}
+        else:
+            pair: PairConfig = self.cfg.pairs[joint.pair]
+            a, b = self.drives[pair.drive_a], self.drives[pair.drive_b]
+            if joint.name == pair.sigma:
+                position = lambda a=a, b=b: a.position + b.position
+                signs = {pair.drive_a: 1, pair.drive_b: 1}
+            else:
+                position = lambda a=a, b=b: a.position - b.position
+                signs = {pair.drive_a: 1, pair.drive_b: -1}
+        for sw in joint.switches:
+            wired = sw.drives or tuple(signs)
+            toward = 0
+            if sw.kind is SwitchKind.STOP:
+                toward = 1 if (sw.side == "high" or (sw.side is None and sw.position > 0)) else -1
+            for name in wired:
+                self.wiring[name].append((sw, position, toward, toward * signs.get(name, 1)))
+
+    def update(self, drive_name: str) -> None:
+        drive = self.drives[drive_name]
+        for sw, position, side, direction in self.wiring[drive_name]:
+            pos = position()
+            if side == 0:
+                active = abs(pos - sw.position) <= HOME_SWITCH_HALF_WIDTH
+            elif side > 0:
+                active = pos >= sw.position
+            else:
+                active = pos <= sw.position
+            drive.set_input(sw.input, active, direction)
+
+
+class SimArm:
+    """The simulated arm on python-can buses (``virtual``, ``socketcan`` on vcan, ...)."""
+
+    def __init__(self, cfg: ArmConfig, endpoints: Mapping[str, Mapping[str, Any]], *,
+                 clock: Clock | None = None, flash: Mapping[str, sim_state.DriveFlash] | None = None,
+                 settings: Mapping[str, SimSettings] | None = None, persist: bool = False,
+                 tick_s: float = 0.002) -> None:
+        """``endpoints``: bus name -> keyword arguments for ``can.Bus`` (interface, channel)."""
+        self.cfg = cfg
+        self.endpoints = dict(endpoints)
+        self.clock = clock or RealClock()
+        self.persist = persist
+        self.tick_s = tick_s
+        self.flash = dict(flash) if flash is not None else sim_state.load(cfg) if persist else {
+            name: sim_state.DriveFlash(sim_state.default_serial(cfg, name)) for name in cfg.drives}
+        self.drives: dict[str, SimDrive] = {}
+        for name, d in cfg.drives.items():
+            saved = self.flash[name]
+            self.drives[name] = SimDrive(
+                d.node, clock=self.clock,
+                settings=(settings or {}).get(name) or settings_for(cfg, name),
+                serial=saved.serial, flash=saved.flash, save_count=saved.save_count,
+                speed_gain=cfg.sim[name].speed_gain if name in cfg.sim else 1.0,
+                on_step=lambda drive, name=name: self._mechanics.update(name))
+        self._mechanics = _Mechanics(cfg, self.drives)
+        self.lock = threading.RLock()  # held by the pumps while they touch drives; tests take it too
+        self._stop = threading.Event()
+        self._threads: list[threading.Thread] = []
+        self._buses: dict[str, Any] = {}
+        self._sdo: dict[str, Any] = {}
+        self.errors: list[BaseException] = []
+
+    @classmethod
+    def for_session(cls, cfg: ArmConfig, channels: Mapping[str, str]) -> "SimArm":
+        """The in-process arm of ``--sim``: virtual channels, flash kept in the state directory."""
+        return cls(cfg, {bus: {"interface": "virtual", "channel": ch} for bus, ch in channels.items()},
+                   persist=True)
+
+    def drive_by_node(self, bus: str, node: int) -> SimDrive | None:
+        for name, d in self.cfg.drives.items():
+            if d.bus == bus and d.node == node:
+                return self.drives[name]
+        return None
+
+    # -- running -------------------------------------------------------------------------------
+
+    def start(self) -> "SimArm":
+        import can
+
+        from sherpa_cli.sim.sdo import SdoServer
+
+        try:
+            for bus_name, kwargs in self.endpoints.items():
+                self._buses[bus_name] = can.Bus(**kwargs)
+        except BaseException:
+            self._close_buses()
+            raise
+        for name, d in self.cfg.drives.items():
+            if d.bus in self._buses:
+                send = self._sender(self._buses[d.bus])
+                self._sdo[name] = SdoServer(d.node, self.drives[name], send)
+        for bus_name in self._buses:
+            t = threading.Thread(target=self._pump, args=(bus_name,), name=f"sim-{bus_name}", daemon=True)
+            self._threads.append(t)
+            t.start()
+        return self
+
+    def stop(self) -> None:
+        self._stop.set()
+        for t in self._threads:
+            t.join(timeout=2)
+        self._threads.clear()
+        self._close_buses()
+        if self.persist:
+            self.save_state()
+
+    def save_state(self) -> None:
+        with self.lock:
+            for name, drive in self.drives.items():
+                self.flash[name] = dataclasses.replace(self.flash[name], flash=dict(drive.flash),
+                                                       save_count=drive.save_count)
+        sim_state.save(self.cfg, self.flash)
+
+    def __enter__(self) -> "SimArm":
+        return self.start()
+
+    def __exit__(self, *exc: Any) -> None:
+        self.stop()
+
+    def _close_buses(self) -> None:
+        for bus in self._buses.values():
+            try:
+                bus.shutdown()
+            except Exception:  # shutting down must not hide the error that stopped the sim
+                pass
+        self._buses.clear()
+
+    @staticmethod
+    def _sender(bus: Any) -> Callable[[int, bytes], None]:
+        import can
+
+        def send(can_id: int, data: bytes) -> None:
+            bus.send(can.Message(arbitration_id=can_id, data=data, is_extended_id=False))
+        return send
+
+    def _pump(self, bus_name: str) -> None:
+        bus = self._buses[bus_name]
+        send = self._sender(bus)
+        names = [n for n, d in self.cfg.drives.items() if d.bus == bus_name]
+        by_node = {self.cfg.drives[n].node: n for n in names}
+        try:
+            while not self._stop.is_set():
+                msg = bus.recv(timeout=self.tick_s)
+                with self.lock:
+                    if msg is not None and not msg.is_error_frame and not msg.is_extended_id:
+                        self._dispatch(msg.arbitration_id, bytes(msg.data), names, by_node)
+                    for name in names:
+                        drive = self.drives[name]
+                        drive.tick()
+                        for can_id, data in drive.pop_frames():
+                            send(can_id, data)
+        except BaseException as exc:  # a dead pump must be visible to tests and to `sim --serve`
+            if not self._stop.is_set():
+                self.errors.append(exc)
+
+    def _dispatch(self, can_id: int, data: bytes, names: list[str], by_node: Mapping[int, str]) -> None:
+        if can_id == NMT_ID or 0x700 <= can_id <= 0x77F:
+            targets = names  # NMT broadcast / host heartbeats: every drive decides for itself
+        else:
+            name = by_node.get(can_id & 0x7F)
+            targets = [name] if name is not None else []
+        for name in targets:
+            arrived = self.drives[name].receive(can_id, data)
+            if arrived and SDO_RX + 1 <= can_id <= SDO_RX + 0x7F:
+                self._sdo[name].receive(can_id, data)

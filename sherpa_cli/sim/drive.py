@@ -1,0 +1,473 @@
+"""One simulated Elmo SimplIQ Whistle at CAN-frame level: NMT, heartbeat producer and
+consumer, EMCY, the binary interpreter (RPDO2/TPDO2) and a kinematic motor.
+
+No bus and no threads: the owner feeds frames with :meth:`SimDrive.receive`, advances time
+with :meth:`SimDrive.tick` and drains :meth:`SimDrive.pop_frames`. SDO is served elsewhere
+over :meth:`SimDrive.od_read` / :meth:`SimDrive.od_write`.
+"""
+
+from __future__ import annotations
+
+import heapq
+import itertools
+import math
+import random
+import struct
+from collections.abc import Callable, Mapping
+
+from sherpa_cli.sim import interpreter
+from sherpa_cli.sim.clock import Clock
+from sherpa_cli.sim.interpreter import Refused
+from sherpa_cli.sim.inputs import Inputs
+from sherpa_cli.sim.motor import Motor, motion_status
+from sherpa_cli.sim.od import OdValue, build_od, flash_key
+from sherpa_cli.sim.params import Value, factory_ram, is_persistent, parse_flash, wrap_int32
+from sherpa_cli.sim.settings import SimSettings
+
+Frame = tuple[int, bytes]
+TIME_EPS = 1e-9  # s; float error of summed clock steps, far below any drive timing
+
+NMT, EMCY_BASE, TPDO2_BASE, RPDO2_BASE, SDO_RX_BASE, HEARTBEAT_BASE = 0x000, 0x80, 0x280, 0x300, 0x600, 0x700
+NMT_START, NMT_STOP, NMT_PRE_OP, NMT_RESET_NODE, NMT_RESET_COMM = 0x01, 0x02, 0x80, 0x81, 0x82
+PRE_OPERATIONAL, OPERATIONAL, STOPPED = 0x7F, 0x05, 0x04  # heartbeat state bytes
+
+MF_HEARTBEAT, MF_SPEED_LIMIT, MF_POSITION_LIMIT = 0x800, 0x20000, 0x400000
+EMCY_HEARTBEAT, EMCY_SPEED_LIMIT, EMCY_POSITION_LIMIT = 0x8130, 0x8481, 0x8680
+ERR_REG_GENERIC, ERR_REG_COMMUNICATION = 0x01, 0x11  # 0x1001 values from the 0x2F21 table
+EMCY_FRAME = struct.Struct("<HBBHH")
+
+SR_MO, SR_MF, SR_UM_SHIFT, SR_MS_SHIFT, SR_LIMIT_STOP = 1 << 4, 1 << 6, 7, 14, 1 << 28
+
+
+class SimDrive:
+    """A simulated Whistle on node ``node``.
+
+    ``flash`` is the saved parameter image (keys like ``"LL[3]"`` and ``"0x1017:0"``); it is
+    copied, and :attr:`flash` holds the drive's own copy for the caller to persist.
+    ``speed_gain`` makes the drive run its profiles that much faster than commanded (a
+    mismatched motor of a pair). ``position`` is the motor's physical position in counts at
+    power-up (PX always starts at 0, as with an incremental encoder). ``on_step(drive)`` is
+    called after every model step, so arm mechanics can move switches with the motor.
+    """
+
+    def __init__(self, node: int, *, clock: Clock, settings: SimSettings | None = None, serial: int = 1,
+                 flash: Mapping[str, Value] | None = None, save_count: int = 0, speed_gain: float = 1.0,
+                 position: int = 0, on_step: Callable[[SimDrive], None] | None = None) -> None:
+        if isinstance(node, bool) or not isinstance(node, int) or not 1 <= node <= 127:
+            raise ValueError(f"node id must be 1..127, got {node!r}")
+        if not speed_gain > 0:
+            raise ValueError(f"speed_gain must be > 0, got {speed_gain!r}")
+        self.node = node
+        self.clock = clock
+        self.settings = settings or SimSettings()
+        self.serial = serial
+        self.speed_gain = float(speed_gain)
+        self.on_step = on_step
+        self.flash: dict[str, Value] = parse_flash(flash)
+        self.save_count = save_count  # restored by the caller along with flash
+        self.received: list[tuple[float, int, bytes]] = []  # every frame addressed to this drive
+        self.lost: list[tuple[float, int, bytes]] = []  # the subset that never reached its software
+        self.od_writes: list[tuple[float, int, int, int]] = []  # SDO writes, for "dry run wrote nothing"
+        self.boots = 0
+        self.motor = Motor(counts=int(position))
+        self._outbox: list[Frame] = []
+        self._replies: list[tuple[float, int, Frame]] = []  # heap: (release time, seq, frame)
+        self._seq = itertools.count()
+        self._rng = random.Random(self.settings.seed)
+        self._t = clock.now()
+        self._dead = False
+        self._reboot_due = self.settings.reboot_at
+        self.inputs = Inputs(self.settings.inputs)
+        self._boot()
+
+    # -- public API --------------------------------------------------------------------------
+
+    @property
+    def outbox(self) -> list[Frame]:
+        """Frames waiting to go on the bus, oldest first (drained by :meth:`pop_frames`)."""
+        return self._outbox
+
+    def pop_frames(self) -> list[Frame]:
+        frames, self._outbox = self._outbox, []
+        return frames
+
+    def tick(self) -> None:
+        self.advance_to(self.clock.now())
+
+    def advance_to(self, t: float) -> None:
+        """Run the drive up to time ``t``; several drives can be stepped in lockstep with it."""
+        self._fire_events()
+        while self._t < t:
+            nxt = min(t, self._t + self.settings.model_step_s, self._next_event())
+            if nxt <= self._t:
+                break  # unreachable unless an event failed to reschedule; never spin
+            if not self._dead:
+                self._model_step(nxt - self._t)
+            self._t = nxt
+            self._fire_events()
+
+    def receive(self, can_id: int, data: bytes) -> bool:
+        """A frame from the bus; frames for other nodes are ignored and not recorded.
+
+        Returns True if the frame reached the drive's software (False: not addressed to it,
+        or lost to SV blackout, bus drop or a dead drive), so a bus loop hands an SDO request
+        (0x600+node, recorded here but not served) to the SDO server only when this is True.
+        """
+        data = bytes(data)
+        self.advance_to(self.clock.now())
+        if not self._addressed(can_id, data):
+            return False
+        t = self._t
+        self.received.append((t, can_id, data))
+        if self._dead or t + TIME_EPS < self._blackout_until or self._dropped():
+            self.lost.append((t, can_id, data))
+            return False
+        if can_id == NMT:
+            self._nmt(data[0])
+        elif can_id == RPDO2_BASE + self.node:
+            self._interpreter_frame(data)
+        elif can_id == HEARTBEAT_BASE + self._consumer()[0]:
+            self._hb_last = t
+        return True
+
+    def set_input(self, n: int, active: bool, direction: int = 0) -> None:
+        """Set digital input ``n`` (1-based) for the arm mechanics. ``active`` means the input's
+        function is active (IL polarity is not modelled). ``direction`` says where a stop switch
+        lies: +1 positive side, -1 negative, 0 both (a hard stop freezes motion either way)."""
+        self.inputs.set(n, active, direction)
+
+    def od_read(self, index: int, sub: int) -> OdValue:
+        """Read an object; raises od.ODError. A dead drive still answers here: an SDO server
+        must check :attr:`dead` and stay silent, as the interpreter does."""
+        return self._od.read(index, sub)
+
+    def od_write(self, index: int, sub: int, value: int) -> None:
+        """Write an object; raises od.ODError carrying the SDO abort code on refusal."""
+        self.advance_to(self.clock.now())
+        value = self._od.check_write(index, sub, value)
+        self.od_writes.append((self._t, index, sub, value))
+        self._od.values[(index, sub)] = value
+        if (index, sub) == (0x1016, 1):
+            self._hb_last = None  # a new consumer entry waits for that host's first heartbeat
+        elif (index, sub) == (0x1017, 0):
+            self._next_heartbeat = self._t + value / 1000 if value else math.inf
+
+    @property
+    def nmt_state(self) -> int:
+        return self._nmt_state
+
+    @property
+    def dead(self) -> bool:
+        return self._dead
+
+    @property
+    def motor_on(self) -> bool:
+        return self._motor_on
+
+    @property
+    def position(self) -> float:
+        """Physical motor position in counts (not PX), for arm mechanics."""
+        return self.motor.position
+
+    @property
+    def px(self) -> int:
+        return wrap_int32(self.motor.counts + self._px_offset)
+
+    @property
+    def mf(self) -> int:
+        return self._mf
+
+    # -- interpreter state, used by sim.interpreter -------------------------------------------
+
+    def read_param(self, key: str) -> Value:
+        live = self._live_values()
+        if key in live:
+            return live[key]()
+        if key[:2] in ("SN", "WS"):
+            return self._identity_word(key)
+        return self.ram.get(key, 0)  # never-written entries (ET[n], HM[n], CA[n]) read 0
+
+    def write_param(self, key: str, value: Value) -> None:
+        if key == "MO":
+            self._set_motor(bool(value))
+        elif key == "PX":
+            self._px_offset = int(value) - self.motor.counts
+        else:
+            self.ram[key] = value
+            if key in ("PA", "PR"):
+                self._target_kind = key
+            elif key == "TC" and self._motor_on and self.ram["UM"] == 1:
+                self._apply_torque()
+
+    def execute(self, letters: str) -> None:
+        """BG / ST / SV / LD / HP; raises interpreter.Refused with the Elmo error code."""
+        if letters == "BG":
+            if not self._motor_on:
+                raise Refused(interpreter.EC_MOTOR_MUST_BE_ON)
+            self._begin()
+        elif letters == "ST":
+            if self._motor_on:
+                self.motor.stop(self.ram["SD"] * self.speed_gain)
+        elif letters in ("SV", "LD"):
+            if self._motor_on:
+                raise Refused(interpreter.EC_MOTOR_MUST_BE_OFF)
+            self._save() if letters == "SV" else self._load_ram()
+        # HP: meaning UNCONFIRMED; accepted and ignored so [ELMOCAN]'s HP+SV sequence works.
+
+    # -- boot, NMT, heartbeat ------------------------------------------------------------------
+
+    def _boot(self) -> None:
+        """Power-up and NMT reset: RAM from flash, motor off, Pre-operational, boot-up frame."""
+        self.boots += 1
+        self.last_error = 0
+        self._load_ram()
+        live = {(0x1001, 0): lambda: self._error_register, (0x1002, 0): lambda: self._sr() & 0xFFFFFFFF}
+        self._od = build_od(self.settings, self.serial, self.flash, live)
+        self._motor_on = False
+        self.motor.off()
+        self._px_offset = -self.motor.counts
+        self._mf = 0
+        self._error_register = 0
+        self._limit_stop = False
+        self._target_kind = "PA"
+        self._nmt_state = PRE_OPERATIONAL
+        self._hb_last: float | None = None
+        self._settle_until = self._blackout_until = -math.inf
+        period = self._od.values[(0x1017, 0)]
+        self._next_heartbeat = self._t + period / 1000 if period else math.inf
+        self._replies.clear()
+        self._send(HEARTBEAT_BASE + self.node, b"\x00")
+
+    def _nmt(self, cs: int) -> None:
+        # Unknown command specifiers are ignored (the real drive may raise EMCY 0x8200).
+        if cs == NMT_START:
+            self._nmt_state = OPERATIONAL
+        elif cs == NMT_STOP:
+            self._nmt_state = STOPPED
+        elif cs == NMT_PRE_OP:
+            self._nmt_state = PRE_OPERATIONAL
+        elif cs in (NMT_RESET_NODE, NMT_RESET_COMM):
+            # Reset communication should only reload 0x1000-0x1FFF; the sim reboots fully for
+            # both, which is the stricter case for a tool (unsaved RAM is gone either way).
+            self._boot()
+
+    def _consumer(self) -> tuple[int, float]:
+        """(host node, timeout s) of the 0x1016 sub1 entry; timeout 0 = not monitoring."""
+        entry = self._od.values[(0x1016, 1)]
+        return entry >> 16 & 0x7F, (entry & 0xFFFF) / 1000
+
+    def _heartbeat_lost(self) -> None:
+        self._hb_last = None  # re-armed by the host's next heartbeat
+        self._emcy(EMCY_HEARTBEAT, ERR_REG_COMMUNICATION)
+        if self._od.values[(0x6007, 0)] and self._motor_on:
+            self._shut_down(MF_HEARTBEAT)
+        action = self._od.values[(0x1029, 1)]
+        if action == 0 and self._nmt_state == OPERATIONAL:
+            self._nmt_state = PRE_OPERATIONAL
+        elif action == 2:
+            self._nmt_state = STOPPED
+
+    # -- time ----------------------------------------------------------------------------------
+
+    def _next_event(self) -> float:
+        times = [self._next_heartbeat]
+        if not self._dead and self.settings.die_at is not None:
+            times.append(self.settings.die_at)
+        if self._reboot_due is not None:
+            times.append(self._reboot_due)
+        timeout = self._consumer()[1]
+        if self._hb_last is not None and timeout:
+            times.append(self._hb_last + timeout)
+        if self._replies:
+            times.append(self._replies[0][0])
+        return min(times)
+
+    def _fire_events(self) -> None:
+        # Events due within TIME_EPS count as due: a test clock advanced 10 x 0.01 s sits at
+        # 0.09999999999999999 and must still see the 100 ms heartbeat.
+        t = self._t + TIME_EPS
+        if self._dead:
+            return
+        if self.settings.die_at is not None and t >= self.settings.die_at:
+            self._dead = True
+            self._motor_on = False
+            self.motor.off()
+            self._next_heartbeat = math.inf
+            self._replies.clear()
+            return
+        if self._reboot_due is not None and t >= self._reboot_due:
+            self._reboot_due = None
+            self._boot()
+        timeout = self._consumer()[1]
+        if self._hb_last is not None and timeout and t >= self._hb_last + timeout:
+            self._heartbeat_lost()
+        while self._replies and self._replies[0][0] <= t:
+            _, _, (can_id, data) = heapq.heappop(self._replies)
+            self._send(can_id, data, blackout_applies=False)
+        if t >= self._next_heartbeat:
+            self._send(HEARTBEAT_BASE + self.node, bytes([self._nmt_state]))
+            period = self._od.values[(0x1017, 0)] / 1000
+            while self._next_heartbeat <= t:  # skip beats a coarse tick jumped over
+                self._next_heartbeat += period
+
+    # -- frames ---------------------------------------------------------------------------------
+
+    def _addressed(self, can_id: int, data: bytes) -> bool:
+        if can_id == NMT:
+            return len(data) == 2 and data[1] in (0, self.node)
+        if can_id in (RPDO2_BASE + self.node, SDO_RX_BASE + self.node):
+            return True
+        host, timeout = self._consumer()
+        return bool(timeout) and can_id == HEARTBEAT_BASE + host
+
+    def _dropped(self) -> bool:
+        p = self.settings.drop_probability
+        return p > 0 and self._rng.random() < p
+
+    def _send(self, can_id: int, data: bytes, *, blackout_applies: bool = True) -> None:
+        if self._dead or (blackout_applies and self._t + TIME_EPS < self._blackout_until) or self._dropped():
+            return
+        self._outbox.append((can_id, data))
+
+    def _emcy(self, code: int, register: int) -> None:
+        self._error_register = register
+        self._send(EMCY_BASE + self.node, EMCY_FRAME.pack(code, register, 0, 0, 0))
+
+    def _interpreter_frame(self, data: bytes) -> None:
+        # PDOs only live in Operational; during the MO settle window the interpreter is deaf.
+        if self._nmt_state != OPERATIONAL or self._t + TIME_EPS < self._settle_until:
+            return
+        reply = interpreter.handle(self, data)
+        if reply is None:
+            return
+        release = self._t + self.settings.reply_latency_s
+        heapq.heappush(self._replies, (release, next(self._seq), (TPDO2_BASE + self.node, reply)))
+        self._fire_events()
+
+    # -- parameters -----------------------------------------------------------------------------
+
+    def _load_ram(self) -> None:
+        self.ram = factory_ram(self.settings.inputs)
+        self.ram.update({k: v for k, v in self.flash.items() if not k.startswith("0x")})
+
+    def _save(self) -> None:
+        self.flash = {k: v for k, v in self.ram.items() if is_persistent(k)}
+        self.flash.update({flash_key(*key): value for key, value in self._od.values.items()})
+        self.save_count += 1
+        # The reply goes out first (it is queued before this window starts to count for sends).
+        self._blackout_until = self._t + self.settings.sv_blackout_s
+
+    def _identity_word(self, key: str) -> int:
+        s = self.settings
+        words = {"SN[1]": s.vendor_id, "SN[2]": s.product_code, "SN[3]": s.revision, "SN[4]": self.serial,
+                 "WS[30]": s.hw_version}
+        return wrap_int32(words.get(key, 0))
+
+    def _live_values(self) -> dict[str, Callable[[], Value]]:
+        m = self.motor
+        return {
+            "MO": lambda: int(self._motor_on), "PX": lambda: self.px, "VX": lambda: wrap_int32(round(m.v)),
+            "VY": lambda: 0, "PE": lambda: 0, "VE": lambda: 0, "DV[1]": lambda: 0,
+            "DV[2]": lambda: wrap_int32(round(m.v)), "DV[3]": lambda: self.px, "MS": self._ms,
+            "IQ": self._iq, "ID": lambda: 0.0, "MC": lambda: self.settings.max_current, "LC": lambda: 0,
+            "IP": self._ip, "SR": self._sr, "MF": lambda: self._mf, "EC": lambda: self.last_error,
+            **{f"IB[{n}]": (lambda n=n: self._ip() >> n & 1) for n in range(32)},
+        }
+
+    # -- motion ---------------------------------------------------------------------------------
+
+    def _set_motor(self, on: bool) -> None:
+        self._settle_until = self._t + self.settings.mo_settle_s
+        if on == self._motor_on:
+            return  # [MBARI] re-sends MO=1 while polling: a repeat must not disturb a motion
+        self._limit_stop = False
+        if not on:
+            self._motor_on = False
+            self.motor.off()
+            return
+        self._motor_on = True
+        self._mf = 0  # MF is latched until the next MO=1 ([CR MF])
+        self._error_register = 0
+        self.motor.off()  # hold the current position until BG
+        if self.ram["UM"] == 1:
+            self._apply_torque()
+
+    def _apply_torque(self) -> None:
+        self.motor.torque(self.ram["TC"] * self.settings.torque_accel * self.speed_gain)
+
+    def _begin(self) -> None:
+        um, r, g = self.ram["UM"], self.ram, self.speed_gain
+        self._limit_stop = False
+        if um == 2:
+            jv = min(max(r["JV"], r["VL[2]"]), r["VH[2]"])
+            self.motor.jog(jv * g, r["AC"] * g, r["DC"] * g)
+        elif um == 5:
+            if self._target_kind == "PR":
+                start = self.motor.x_target if self.motor.mode == "position" else self.motor.counts
+                target = start + self._px_offset + r["PR"]
+            else:
+                target = r["PA"]
+            clipped = min(max(target, r["VL[3]"]), r["VH[3]"])
+            self._limit_stop = clipped != target
+            if self._target_kind == "PR":
+                r["PA"], self._target_kind = target, "PA"  # a second BG must not add PR again
+            speed = min(r["SP"], r["VH[2]"], -r["VL[2]"]) if r["VL[2]"] < 0 < r["VH[2]"] else r["SP"]
+            self.motor.move_to(clipped - self._px_offset, speed * g, r["AC"] * g, r["DC"] * g)
+
+    def _model_step(self, dt: float) -> None:
+        m = self.motor
+        if self._motor_on:
+            heading = m.intended_direction()
+            moving = heading and m.mode in ("velocity", "position")
+            if moving and heading in self.inputs.blocked(self._il, self.settings.stop_code):
+                m.stop(self.ram["SD"] * self.speed_gain)
+                self._limit_stop = True
+            m.step(dt)
+            self._check_limits()
+        if self.on_step is not None:
+            self.on_step(self)
+
+    def _check_limits(self) -> None:
+        r = self.ram
+        lo, hi = r["LL[3]"], r["HL[3]"]
+        if (lo or hi) and not lo <= self.px <= hi:  # LL=HL=0 switches the check off
+            self._shut_down(MF_POSITION_LIMIT)
+            self._emcy(EMCY_POSITION_LIMIT, ERR_REG_GENERIC)
+            return
+        lo, hi = r["LL[2]"], r["HL[2]"]
+        if (lo or hi) and not lo <= self.motor.v <= hi:
+            self._shut_down(MF_SPEED_LIMIT)
+            self._emcy(EMCY_SPEED_LIMIT, ERR_REG_GENERIC)
+
+    def _shut_down(self, mf_bit: int) -> None:
+        self._motor_on = False
+        self.motor.off()
+        self._mf |= mf_bit
+
+    # -- status registers -----------------------------------------------------------------------
+
+    def _ms(self) -> int:
+        return motion_status(self.motor, self.ram["UM"], self._motor_on)
+
+    def _iq(self) -> float:
+        if not self._motor_on:
+            return 0.0
+        if self.ram["UM"] == 1:
+            return self.ram["TC"]
+        return self.motor.a / self.settings.torque_accel
+
+    def _il(self, n: int) -> int:
+        return self.ram[f"IL[{n}]"]
+
+    def _ip(self) -> int:
+        return self.inputs.ip(self._il)
+
+    def _sr(self) -> int:
+        sr = (self.ram["UM"] & 7) << SR_UM_SHIFT | self._ms() << SR_MS_SHIFT
+        if self._motor_on:
+            sr |= SR_MO
+        if self._mf:
+            sr |= SR_MF
+        if self._limit_stop:
+            sr |= SR_LIMIT_STOP
+        return wrap_int32(sr)

@@ -1,0 +1,80 @@
+"""Reply rules of the binary interpreter (elmo-protocol.md 1.2-1.4, 2.5): which request gets
+which answer and which Elmo error code. The drive supplies state; this module decides.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+from sherpa_cli.elmo.codec import decode_request, encode_error_reply, encode_reply
+from sherpa_cli.elmo.commands import COMMANDS
+from sherpa_cli.errors import CodecError
+from sherpa_cli.sim.params import coerce, in_range, is_float
+
+if TYPE_CHECKING:
+    from sherpa_cli.sim.drive import SimDrive
+
+EC_BAD_COMMAND = 2
+EC_BAD_INDEX = 3
+EC_SYNTAX = 19  # a query of an execute command (BG with the query bit): nothing to read
+EC_OUT_OF_RANGE = 21
+EC_CANNOT_ASSIGN = 23  # a set of a read-only command
+EC_MOTOR_MUST_BE_OFF = 57
+EC_MOTOR_MUST_BE_ON = 58
+
+
+class Refused(Exception):
+    def __init__(self, code: int) -> None:
+        super().__init__(code)
+        self.code = code
+
+
+def handle(drive: SimDrive, data: bytes) -> bytes | None:
+    """The TPDO2 reply to one RPDO2 frame, or None when the drive stays silent.
+
+    Frames that cannot even be decoded (bad length, lower-case or non-ASCII letters) get no
+    reply: an error reply must repeat the letters, and the real drive's answer is unknown.
+    """
+    try:
+        request = decode_request(data)
+    except CodecError:
+        return None
+    letters, index = request.letters, request.index
+    try:
+        spec = _spec(drive, letters, index)
+        key = f"{letters}[{index}]" if spec.is_array else letters
+        spec = spec.at(index)
+        if request.kind == "query":
+            if spec.access == "x":
+                raise Refused(EC_SYNTAX)
+            return encode_reply(letters, index, drive.read_param(key), is_float(spec))
+        if request.kind == "execute":
+            drive.execute(letters)
+            return encode_reply(letters, index, None, False)
+        if spec.access == "ro":
+            raise Refused(EC_CANNOT_ASSIGN)
+        if spec.motor_off and drive.motor_on:
+            raise Refused(EC_MOTOR_MUST_BE_OFF)
+        value = coerce(spec, request.value)  # type: ignore[arg-type]
+        if value is None or not in_range(key, value, drive.settings.max_current):
+            raise Refused(EC_OUT_OF_RANGE)
+        drive.write_param(key, value)
+        if not drive.settings.echo_sets:
+            return None
+        return encode_reply(letters, index, value, is_float(spec))
+    except Refused as refused:
+        drive.last_error = refused.code
+        return encode_error_reply(letters, index, refused.code)
+
+
+def _spec(drive: SimDrive, letters: str, index: int):
+    spec = COMMANDS.get(letters)
+    if spec is None:
+        raise Refused(EC_BAD_COMMAND)
+    try:
+        spec.check_index(index)
+    except CodecError:
+        raise Refused(EC_BAD_INDEX) from None
+    if letters == "IL" and index > drive.settings.inputs:
+        raise Refused(EC_BAD_INDEX)
+    return spec

@@ -1,0 +1,71 @@
+"""Behaviour knobs of a simulated Whistle.
+
+Every field is either a point the protocol doc (elmo-protocol.md) marks UNCONFIRMED, so that
+tests can exercise both readings of the manual, or a fault to inject. Defaults are the values
+the seed / public sources suggest; a bench measurement should replace them when one exists.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+
+@dataclass(frozen=True)
+class SimSettings:
+    # The guide contradicts itself on whether a set is echoed (section 1.3); public code ([COB])
+    # relies on the echo. False = silent on success; errors are always replied.
+    echo_sets: bool = True
+    # No Elmo figure exists for MO latency (section 4.1); the seed saw the interpreter stay
+    # deaf for up to 500 ms after MO=1/MO=0, so requests in this window get no reply.
+    mo_settle_s: float = 0.5
+    # SV disables the CAN drivers for "a few hundred ms" ([CR 3-138]): frames sent to the
+    # drive in this window are lost and the drive sends nothing (its heartbeat pauses too).
+    sv_blackout_s: float = 0.3
+    # Typical round-trip time is UNCONFIRMED (section 4.2); delay every interpreter reply.
+    reply_latency_s: float = 0.0
+    # Chance that any one frame to or from the drive is lost on the bus; drawn from a
+    # random.Random(seed) so a failing run can be replayed.
+    drop_probability: float = 0.0
+    seed: int = 0
+    # 0x1017 producer heartbeat time in ms; the guide's default is 0 (off).
+    heartbeat_ms: int = 0
+    # Identity (0x1018, SN[1..4], 0x1008/9/A). 0x9A is Elmo's vendor id on EtherCAT; the
+    # SimplIQ-CAN value is UNCONFIRMED. Product code and versions are made up but shaped like
+    # the guide's examples (revision 0x000103E8 = 1.1000, hardware "0x1FF6B").
+    vendor_id: int = 0x9A
+    product_code: int = 0x00010100
+    revision: int = 0x000103E8
+    device_name: str = "Whistle"
+    hw_version: int = 0x1FF6B  # WS[30]; 0x1009 shows it as hex text
+    sw_version: str = "Whistle 1.1.10.4 SIM"
+    # Digital inputs IL[1..inputs]; the catalog's Whistle models have 6.
+    inputs: int = 6
+    # MC (A, read-only): the whistle-10/60's peak current. CL[1] may be at most MC/2 and
+    # PL[1] at most MC ([MBARI]), so this bounds the out-of-range (EC 21) checks.
+    max_current: float = 20.0
+    # IL value whose input acts as an end (stop) switch. The seed's Whistle firmware uses 21;
+    # public tables disagree across firmware (design.md), so it follows the config's il_codes.
+    stop_code: int = 21
+    # Motor model: cnt/s^2 of acceleration per ampere of TC in UM=1 (no friction, no load),
+    # integrated in steps of at most model_step_s so a coarse tick() still brakes in time.
+    torque_accel: float = 10000.0
+    model_step_s: float = 0.001
+    # Fault injection: at die_at the drive goes silent for good (crashed CPU, power stage off);
+    # at reboot_at it resets once as after NMT reset node (brown-out, watchdog).
+    die_at: float | None = None
+    reboot_at: float | None = None
+
+    def __post_init__(self) -> None:
+        for name in ("mo_settle_s", "sv_blackout_s", "reply_latency_s"):
+            if getattr(self, name) < 0:
+                raise ValueError(f"SimSettings.{name} must be >= 0")
+        if not 0.0 <= self.drop_probability <= 1.0:
+            raise ValueError("SimSettings.drop_probability must be within 0..1")
+        if not 0 <= self.heartbeat_ms <= 0xFFFF:
+            raise ValueError("SimSettings.heartbeat_ms must fit u16 (0x1017)")
+        if not 1 <= self.inputs <= 10:
+            raise ValueError("SimSettings.inputs must be 1..10 (IL index range)")
+        if self.model_step_s <= 0:
+            raise ValueError("SimSettings.model_step_s must be > 0")
+        if self.max_current <= 0:
+            raise ValueError("SimSettings.max_current must be > 0")

@@ -1,0 +1,124 @@
+"""The simulated arm in its own process, served over python-can-remote on 127.0.0.1, and `sherpa`
+commands in other processes: real frames over real sockets, as a second terminal would do it."""
+
+from __future__ import annotations
+
+import json
+import os
+import selectors
+import signal
+import socket
+import subprocess
+import sys
+import time
+
+import pytest
+
+from conftest import ROOT
+
+pytestmark = pytest.mark.crossprocess
+
+
+def _free_base_port(count: int = 3) -> int:
+    """A base port with ``count`` free ports after it (loopback only)."""
+    for _ in range(50):
+        with socket.socket() as probe:
+            probe.bind(("127.0.0.1", 0))
+            base = probe.getsockname()[1]
+        if base + count > 65535:
+            continue
+        sockets = []
+        try:
+            for port in range(base, base + count):
+                s = socket.socket()
+                s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+                s.bind(("127.0.0.1", port))
+                sockets.append(s)
+            return base
+        except OSError:
+            continue
+        finally:
+            for s in sockets:
+                s.close()
+    pytest.skip("no three consecutive free ports on 127.0.0.1")
+
+
+def _env(tmp_path) -> dict[str, str]:
+    env = dict(os.environ, XDG_STATE_HOME=str(tmp_path / "state"), NO_COLOR="1", COLUMNS="100")
+    env.pop("SHERPA_BUS_MAP", None)
+    return env
+
+
+@pytest.fixture
+def served_sim(tmp_path):
+    """`sherpa sim --serve` in a subprocess; yields its bus map; always stopped afterwards."""
+    port = _free_base_port()
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "sherpa_cli", "sim", "--serve", f"127.0.0.1:{port}", "--duration", "60"],
+        cwd=ROOT, env=_env(tmp_path), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        bus_map = None
+        selector = selectors.DefaultSelector()
+        selector.register(proc.stdout, selectors.EVENT_READ)
+        deadline = time.monotonic() + 20
+        lines = []
+        while bus_map is None and time.monotonic() < deadline and proc.poll() is None:
+            if selector.select(timeout=0.5):
+                line = proc.stdout.readline()
+                lines.append(line)
+                if "export SHERPA_BUS_MAP=" in line:
+                    bus_map = line.split("=", 1)[1].strip()
+        assert bus_map, f"sim did not start: {''.join(lines)} {proc.stderr.read() if proc.poll() is not None else ''}"
+        yield proc, bus_map
+    finally:
+        if proc.poll() is None:
+            proc.send_signal(signal.SIGINT)
+            try:
+                proc.wait(timeout=10)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+                proc.wait(timeout=10)
+
+
+def _sherpa(tmp_path, *args: str) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "sherpa_cli", *args], cwd=ROOT, env=_env(tmp_path),
+                          capture_output=True, text=True, timeout=60)
+
+
+def test_cmd_in_another_process_talks_to_the_served_sim(served_sim, tmp_path):
+    proc, bus_map = served_sim
+    assert bus_map.startswith("can0=remote:127.0.0.1:")
+    first = _sherpa(tmp_path, "--bus-map", bus_map, "cmd", "shoulder_1a", "AC=150000", "AC", "--apply")
+    assert first.returncode == 0, first.stderr
+    assert "150000" in first.stdout
+    # the served arm keeps running between commands: the RAM value is still there
+    second = _sherpa(tmp_path, "--bus-map", bus_map, "--json", "cmd", "shoulder_1a", "AC")
+    assert second.returncode == 0, second.stderr
+    assert json.loads(second.stdout)["results"][0]["value"] == 150000
+    # a drive on another bus, through the environment variable a technician would export
+    env_run = subprocess.run([sys.executable, "-m", "sherpa_cli", "--json", "cmd", "wrist_3b", "UM"], cwd=ROOT,
+                             env={**_env(tmp_path), "SHERPA_BUS_MAP": bus_map}, capture_output=True, text=True,
+                             timeout=60)
+    assert env_run.returncode == 0, env_run.stderr
+    assert json.loads(env_run.stdout)["results"][0]["value"] == 5
+    proc.send_signal(signal.SIGINT)
+    assert proc.wait(timeout=10) == 0
+
+
+def test_serving_beyond_loopback_is_refused(cli):
+    result = cli("sim", "--serve", "0.0.0.0:54799")
+    assert result.exit_code == 2
+    assert "refusing to serve" in result.stderr and "--allow-remote" in result.stderr
+
+
+def test_sim_needs_somewhere_to_run(cli):
+    result = cli("sim")
+    assert result.exit_code == 2 and "--serve" in result.stderr
+
+
+def test_reset_state(cli):
+    cli("--sim", "cmd", "shoulder_1a", "AC=150000", "SV", "--apply")
+    assert json.loads(cli("--sim", "--json", "cmd", "shoulder_1a", "AC").stdout)["results"][0]["value"] == 150000
+    result = cli("sim", "--reset-state")
+    assert result.exit_code == 0 and "factory flash" in result.stdout
+    assert json.loads(cli("--sim", "--json", "cmd", "shoulder_1a", "AC").stdout)["results"][0]["value"] == 100000
