@@ -49,35 +49,48 @@ def _env(tmp_path) -> dict[str, str]:
     return env
 
 
-@pytest.fixture
-def served_sim(tmp_path):
-    """`sherpa sim --serve` in a subprocess; yields its bus map; always stopped afterwards."""
+def _start_sim(tmp_path):
     port = _free_base_port()
     proc = subprocess.Popen(
         [sys.executable, "-m", "sherpa_cli", "sim", "--serve", f"127.0.0.1:{port}", "--duration", "60"],
         cwd=ROOT, env=_env(tmp_path), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    selector = selectors.DefaultSelector()
+    selector.register(proc.stdout, selectors.EVENT_READ)
+    deadline = time.monotonic() + 30
+    lines = []
+    while time.monotonic() < deadline and proc.poll() is None:
+        if selector.select(timeout=0.5):
+            line = proc.stdout.readline()
+            lines.append(line)
+            if "export SHERPA_BUS_MAP=" in line:
+                return proc, line.split("=", 1)[1].strip(), ""
+    _stop(proc)
+    return None, None, "".join(lines) + proc.stderr.read()
+
+
+def _stop(proc) -> None:
+    if proc.poll() is None:
+        proc.send_signal(signal.SIGINT)
+        try:
+            proc.wait(timeout=10)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait(timeout=10)
+
+
+@pytest.fixture
+def served_sim(tmp_path):
+    """`sherpa sim --serve` in a subprocess; yields (process, bus map); always stopped afterwards."""
+    proc, bus_map, output = None, None, ""
+    for _ in range(3):  # a port taken between probing and binding: try another
+        proc, bus_map, output = _start_sim(tmp_path)
+        if proc is not None:
+            break
+    assert proc is not None, f"sim did not start:\n{output}"
     try:
-        bus_map = None
-        selector = selectors.DefaultSelector()
-        selector.register(proc.stdout, selectors.EVENT_READ)
-        deadline = time.monotonic() + 20
-        lines = []
-        while bus_map is None and time.monotonic() < deadline and proc.poll() is None:
-            if selector.select(timeout=0.5):
-                line = proc.stdout.readline()
-                lines.append(line)
-                if "export SHERPA_BUS_MAP=" in line:
-                    bus_map = line.split("=", 1)[1].strip()
-        assert bus_map, f"sim did not start: {''.join(lines)} {proc.stderr.read() if proc.poll() is not None else ''}"
         yield proc, bus_map
     finally:
-        if proc.poll() is None:
-            proc.send_signal(signal.SIGINT)
-            try:
-                proc.wait(timeout=10)
-            except subprocess.TimeoutExpired:
-                proc.kill()
-                proc.wait(timeout=10)
+        _stop(proc)
 
 
 def _sherpa(tmp_path, *args: str) -> subprocess.CompletedProcess:
