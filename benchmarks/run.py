@@ -110,9 +110,67 @@ def bench_startup(rounds: int = 15) -> Result:
                   _judge(ratio, goal), f"python -c pass: {statistics.median(base) * 1000:.1f} ms")
 
 
+CAN_PAIRS_PER_S = 4_505  # request/reply pairs of 8-byte frames per second at 1 Mbit/s
+
+
+def bench_roundtrip(seconds: float = 2.0) -> Result:
+    """Interpreter get round trips with the arm's 14 simulated drives on 3 buses at once, one process."""
+    import os
+    import tempfile
+    import threading
+    from collections import Counter
+
+    from sherpa_cli.config import load_config
+    from sherpa_cli.ops.session import ArmSession, resolve_target
+
+    import dataclasses
+
+    cfg = load_config(ROOT / "configs/sherpa-arm.yaml")
+    # pacing (send_interval_us) is a deliberate cap; this measures what the stack itself can carry
+    cfg = dataclasses.replace(cfg, buses={name: dataclasses.replace(bus, send_interval_us=0)
+                                          for name, bus in cfg.buses.items()})
+    counts: Counter[str] = Counter()
+    with tempfile.TemporaryDirectory() as state:
+        os.environ["XDG_STATE_HOME"] = state
+        with ArmSession.open(cfg, sim=True) as session:
+            refs = [resolve_target(cfg, name) for name in cfg.drives]
+            clients = [(ref, session.client(ref)) for ref in refs]
+            for _, client in clients:
+                client.nmt_start()
+            for _, client in clients:
+                client.get("PX")  # every drive answers before the clock starts
+            stop = threading.Event()
+
+            def worker(ref, client):
+                n = 0
+                while not stop.is_set():
+                    client.get("PX")
+                    n += 1
+                counts[ref.bus] += n
+
+            threads = [threading.Thread(target=worker, args=pair) for pair in clients]
+            start = time.perf_counter()
+            for t in threads:
+                t.start()
+            time.sleep(seconds)
+            stop.set()
+            for t in threads:
+                t.join()
+            elapsed = time.perf_counter() - start
+    per_bus = {bus: counts[bus] / elapsed for bus in cfg.buses}
+    slowest = min(per_bus.values())
+    goal = ">= 1.0"
+    ratio = slowest / CAN_PAIRS_PER_S
+    detail = ", ".join(f"{bus} {rate:.0f}/s" for bus, rate in per_bus.items())
+    return Result("roundtrip", round(slowest), "pairs/s/bus", round(ratio, 3), goal, _judge(ratio, goal),
+                  f"slowest bus / {CAN_PAIRS_PER_S} pairs/s (1 Mbit/s); {detail}; {len(cfg.drives)} drives, "
+                  "pacing off")
+
+
 BENCHMARKS: dict[str, Callable[[], Result]] = {
     "codec": bench_codec,
     "startup": bench_startup,
+    "roundtrip": bench_roundtrip,
 }
 
 

@@ -541,3 +541,13 @@ def test_received_records_every_frame_addressed_to_the_drive(clock):
     drive.receive(RPDO2, hx("41 43 00 00"))
     drive.receive(0x300 + NODE + 1, hx("41 43 00 00"))  # another drive's RPDO2
     assert drive.received == [(0.0, 0x000, bytes([0x01, NODE])), (0.25, RPDO2, hx("41 43 00 00"))]
+
+
+def test_the_frame_record_stays_bounded(monkeypatch):
+    from sherpa_cli.sim.drive import FrameRecord
+
+    monkeypatch.setattr(FrameRecord, "limit", 10)
+    record = FrameRecord()
+    for i in range(25):
+        record.append(i)
+    assert len(record) <= 10 and record[-1] == 24 and record == list(range(record[0], 25))

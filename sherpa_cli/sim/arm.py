@@ -215,13 +215,21 @@ class SimArm:
         send = self._sender(bus)
         names = [n for n, d in self.cfg.drives.items() if d.bus == bus_name]
         by_node = {self.cfg.drives[n].node: n for n in names}
+        next_tick = 0.0
         try:
             while not self._stop.is_set():
                 msg = bus.recv(timeout=self.tick_s)
                 with self.lock:
+                    # a frame advances only the drives it reached (their replies go out now);
+                    # every drive advances at least once per tick_s (motion, heartbeats, latency)
+                    touched: list[str] = []
                     if msg is not None and not msg.is_error_frame and not msg.is_extended_id:
-                        self._dispatch(msg.arbitration_id, bytes(msg.data), names, by_node)
-                    for name in names:
+                        touched = self._dispatch(msg.arbitration_id, bytes(msg.data), names, by_node)
+                    now = self.clock.now()
+                    if now >= next_tick:
+                        touched = names
+                        next_tick = now + self.tick_s
+                    for name in touched:
                         drive = self.drives[name]
                         drive.tick()
                         for can_id, data in drive.pop_frames():
@@ -230,7 +238,8 @@ class SimArm:
             if not self._stop.is_set():
                 self.errors.append(exc)
 
-    def _dispatch(self, can_id: int, data: bytes, names: list[str], by_node: Mapping[int, str]) -> None:
+    def _dispatch(self, can_id: int, data: bytes, names: list[str], by_node: Mapping[int, str]) -> list[str]:
+        """Hand a frame to the drive(s) it concerns; returns their names."""
         if can_id == NMT_ID or 0x700 <= can_id <= 0x77F:
             targets = names  # NMT broadcast / host heartbeats: every drive decides for itself
         else:
@@ -240,3 +249,4 @@ class SimArm:
             arrived = self.drives[name].receive(can_id, data)
             if arrived and SDO_RX + 1 <= can_id <= SDO_RX + 0x7F:
                 self._sdo[name].receive(can_id, data)
+        return targets

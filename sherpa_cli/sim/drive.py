@@ -39,6 +39,17 @@ EMCY_FRAME = struct.Struct("<HBBHH")
 SR_MO, SR_MF, SR_UM_SHIFT, SR_MS_SHIFT, SR_LIMIT_STOP = 1 << 4, 1 << 6, 7, 14, 1 << 28
 
 
+class FrameRecord(list):
+    """A list that keeps only the newest ``limit`` entries, so a long-running served sim stays bounded."""
+
+    limit = 100_000
+
+    def append(self, item: object) -> None:
+        super().append(item)
+        if len(self) > self.limit:
+            del self[: len(self) - self.limit // 2]  # trim in chunks: amortised O(1) per append
+
+
 class SimDrive:
     """A simulated Whistle on node ``node``.
 
@@ -65,8 +76,8 @@ class SimDrive:
         self.on_step = on_step
         self.flash: dict[str, Value] = parse_flash(flash)
         self.save_count = save_count  # restored by the caller along with flash
-        self.received: list[tuple[float, int, bytes]] = []  # every frame addressed to this drive
-        self.lost: list[tuple[float, int, bytes]] = []  # the subset that never reached its software
+        self.received: list[tuple[float, int, bytes]] = FrameRecord()  # every frame addressed to this drive
+        self.lost: list[tuple[float, int, bytes]] = FrameRecord()  # the subset that never reached its software
         self.od_writes: list[tuple[float, int, int, int]] = []  # SDO writes, for "dry run wrote nothing"
         self.boots = 0
         self.motor = Motor(counts=int(position))
@@ -364,11 +375,18 @@ class SimDrive:
         return wrap_int32(words.get(key, 0))
 
     def _live_values(self) -> dict[str, Callable[[], Value]]:
-        m = self.motor
+        # built once: every status query reads through it
+        live = self.__dict__.get("_live")
+        if live is None:
+            live = self._live = self._build_live_values()
+        return live
+
+    def _build_live_values(self) -> dict[str, Callable[[], Value]]:
         return {
-            "MO": lambda: int(self._motor_on), "PX": lambda: self.px, "VX": lambda: wrap_int32(round(m.v)),
+            "MO": lambda: int(self._motor_on), "PX": lambda: self.px,
+            "VX": lambda: wrap_int32(round(self.motor.v)),
             "VY": lambda: 0, "PE": lambda: 0, "VE": lambda: 0, "DV[1]": lambda: 0,
-            "DV[2]": lambda: wrap_int32(round(m.v)), "DV[3]": lambda: self.px, "MS": self._ms,
+            "DV[2]": lambda: wrap_int32(round(self.motor.v)), "DV[3]": lambda: self.px, "MS": self._ms,
             "IQ": self._iq, "ID": lambda: 0.0, "MC": lambda: self.settings.max_current, "LC": lambda: 0,
             "IP": self._ip, "SR": self._sr, "MF": lambda: self._mf, "EC": lambda: self.last_error,
             **{f"IB[{n}]": (lambda n=n: self._ip() >> n & 1) for n in range(32)},
