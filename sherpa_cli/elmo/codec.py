@@ -10,7 +10,7 @@ import math
 import re
 import struct
 from dataclasses import dataclass
-from typing import Literal
+from typing import Literal, NamedTuple
 
 from sherpa_cli.elmo.commands import (COMMANDS, INDEX_MAX, INT32_MAX, INT32_MIN, CommandSpec, check_letters,
                                       lookup)
@@ -41,9 +41,12 @@ class Request:
     is_float: bool
 
 
-@dataclass(frozen=True)
-class Reply:
-    """A decoded TPDO2 reply; ``error_code`` is set when the drive refused the command."""
+class Reply(NamedTuple):
+    """A decoded TPDO2 reply; ``error_code`` is set when the drive refused the command.
+
+    A NamedTuple rather than a frozen dataclass: one is built per received frame, and
+    tuple construction is several times cheaper (benchmark ``codec``).
+    """
 
     letters: str
     index: int
@@ -116,8 +119,35 @@ def _spec_at(letters: str, index: int) -> CommandSpec:
 
 # -- host side: encode requests, decode replies ---------------------------------------------------
 
+_PACK_INT = struct.Struct("<4si").pack
+_PACK_FLOAT = struct.Struct("<4sf").pack
+_UNPACK_INT_REPLY = struct.Struct("<2sHi").unpack
+_FLT_MAX = 3.4028234663852886e38
+_new_reply = tuple.__new__
+# (letters, index) -> (header bytes, float?) for sets the table allows; filled by the checked path
+_SET_HEADERS: dict[tuple[str, int], tuple[bytes, bool]] = {}
+# the 676 valid letter pairs, so a reply's letters are checked and decoded in one lookup
+_LETTER_PAIRS = {bytes((a, b)): chr(a) + chr(b) for a in range(65, 91) for b in range(65, 91)}
+
+
 def encode_set(letters: str, index: int, value: int | float) -> bytes:
     """8-byte set frame; the type bit and the value's type come from the command table."""
+    cached = _SET_HEADERS.get((letters, index))
+    if cached is not None:
+        header, as_float = cached
+        kind = type(value)
+        # only the plain in-range cases skip the checks; everything else takes the checked path
+        if as_float:
+            if kind is float and -_FLT_MAX <= value <= _FLT_MAX:
+                return _PACK_FLOAT(header, value)
+        elif kind is int and INT32_MIN <= value <= INT32_MAX:
+            return _PACK_INT(header, value)
+    frame = _encode_set_checked(letters, index, value)
+    _SET_HEADERS[(letters, index)] = (frame[:4], bool(frame[3] & 0x80))
+    return frame
+
+
+def _encode_set_checked(letters: str, index: int, value: int | float) -> bytes:
     spec = _spec_at(letters, index)
     what = _what(letters, index)
     if spec.access == "ro":
@@ -186,6 +216,19 @@ def _unpack_value(payload: bytes, is_float: bool, what: str) -> int | float:
 
 def decode_reply(data: bytes) -> Reply:
     """Decode an 8-byte TPDO2 reply. Letters need not be in the table."""
+    if type(data) is bytes and len(data) == 8:
+        raw, word, ival = _UNPACK_INT_REPLY(data)
+        letters = _LETTER_PAIRS.get(raw)
+        if letters is not None and not word & FLAG_ERROR:
+            if not word & FLAG_FLOAT:
+                return _new_reply(Reply, (letters, word & INDEX_MASK, ival, False, None))
+            value = FLOAT32.unpack_from(data, 4)[0]
+            if value - value == 0.0:  # finite (inf - inf and nan - nan are nan)
+                return _new_reply(Reply, (letters, word & INDEX_MASK, value, True, None))
+    return _decode_reply_checked(data)
+
+
+def _decode_reply_checked(data: bytes) -> Reply:
     letters, word, payload = _split(data, (8,), "reply frame")
     index, is_float = word & INDEX_MASK, bool(word & FLAG_FLOAT)
     if word & FLAG_ERROR:
