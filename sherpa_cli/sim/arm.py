@@ -13,6 +13,7 @@ drive which motor direction leads into it.
 from __future__ import annotations
 
 import dataclasses
+import math
 import threading
 from typing import Any, Callable, Mapping
 
@@ -69,6 +70,18 @@ class _Mechanics:
         self.wiring: dict[str, list[tuple[SwitchConfig, Callable[[], float], int, int]]] = {n: [] for n in drives}
         for joint in cfg.joints.values():
             self._wire(joint)
+        # the hard stops at each joint's overshoot range, per drive that can run into them
+        self.hard_stops: dict[str, list[Callable[[], None]]] = {n: [] for n in drives}
+        for joint in cfg.joints.values():
+            if joint.drive is not None:
+                self.hard_stops[joint.drive].append(
+                    lambda d=drives[joint.drive], r=joint.overshoot_range: _clamp_plain(d, r))
+        for pair in cfg.pairs.values():
+            a, b = drives[pair.drive_a], drives[pair.drive_b]
+            check = (lambda a=a, b=b, s=cfg.joints[pair.sigma].overshoot_range,
+                     d=cfg.joints[pair.delta].overshoot_range: _clamp_pair(a, b, s, d))
+            self.hard_stops[pair.drive_a].append(check)
+            self.hard_stops[pair.drive_b].append(check)
 
     def _wire(self, joint: JointConfig) -> None:
         if joint.drive is not None:
@@ -94,6 +107,8 @@ class _Mechanics:
 
     def update(self, drive_name: str) -> None:
         drive = self.drives[drive_name]
+        for check in self.hard_stops[drive_name]:
+            check()
         for sw, position, side, direction in self.wiring[drive_name]:
             pos = position()
             if side == 0:
@@ -103,6 +118,27 @@ class _Mechanics:
             else:
                 active = pos <= sw.position
             drive.set_input(sw.input, active, direction)
+
+
+def _pin(drive: SimDrive, position: float) -> None:
+    """The motor stands at ``position``, pressed against a hard stop (no bounce, no coasting)."""
+    motor = drive.motor
+    whole = math.floor(position)
+    motor.counts, motor.frac, motor.v = whole, position - whole, 0.0
+
+
+def _clamp_plain(drive: SimDrive, bounds: tuple[int, int]) -> None:
+    lo, hi = bounds
+    if not lo <= drive.position <= hi:
+        _pin(drive, min(max(drive.position, lo), hi))
+
+
+def _clamp_pair(a: SimDrive, b: SimDrive, sigma: tuple[int, int], delta: tuple[int, int]) -> None:
+    s, d = a.position + b.position, a.position - b.position
+    s2, d2 = min(max(s, sigma[0]), sigma[1]), min(max(d, delta[0]), delta[1])
+    if (s2, d2) != (s, d):
+        _pin(a, (s2 + d2) / 2)
+        _pin(b, (s2 - d2) / 2)
 
 
 class SimArm:

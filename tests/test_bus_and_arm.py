@@ -1,0 +1,98 @@
+"""Bus layer (bus map, pacing, concurrency) and arm mechanics the drive core does not know about."""
+
+from __future__ import annotations
+
+import threading
+import time
+
+import pytest
+
+from sherpa_cli.bus.busmap import BusTarget, apply_bus_map, bus_kwargs, parse_bus_map
+from sherpa_cli.bus.parallel import run_concurrently
+from sherpa_cli.config import load_config
+from sherpa_cli.errors import CommunicationError, UsageError
+from sherpa_cli.ops.session import ArmSession, resolve_target
+
+
+def test_bus_map_parses_several_forms():
+    mapping = parse_bus_map(["can0=socketcan:vcan0,can1=remote:127.0.0.1:54702", " can2 = virtual:x "])
+    assert mapping == {"can0": BusTarget("socketcan", "vcan0"), "can1": BusTarget("remote", "127.0.0.1:54702"),
+                       "can2": BusTarget("virtual", "x")}
+
+
+@pytest.mark.parametrize("bad", ["can0", "can0=", "can0=socketcan", "=socketcan:vcan0", "can0=:vcan0"])
+def test_bus_map_rejects_malformed_items(bad):
+    with pytest.raises(UsageError, match="BUS=INTERFACE:CHANNEL"):
+        parse_bus_map([bad])
+
+
+def test_bus_map_changes_only_the_named_buses():
+    cfg = load_config("configs/sherpa-arm.yaml")
+    mapped = apply_bus_map(cfg, {"can1": BusTarget("socketcan", "vcan1")})
+    assert bus_kwargs(mapped.buses["can1"]) == {"interface": "socketcan", "channel": "vcan1", "bitrate": 1000000}
+    assert mapped.buses["can0"] == cfg.buses["can0"]
+
+
+def test_open_failure_names_the_bus(tmp_path):
+    cfg = load_config("configs/sherpa-arm.yaml")
+    bad = apply_bus_map(cfg, {"can2": BusTarget("no_such_interface", "x")})
+    from sherpa_cli.bus.links import open_links
+
+    with pytest.raises(CommunicationError, match="bus can2 .*cannot open"):
+        open_links(bad, ["can2"])
+
+
+def test_run_concurrently_overlaps_and_keeps_order():
+    barrier = threading.Barrier(3, timeout=2)  # passes only if all three run at the same time
+
+    def job(value):
+        def run():
+            barrier.wait()
+            if value == "b":
+                raise RuntimeError("b failed")
+            return value
+        return run
+
+    outcomes = run_concurrently({"a": job("a"), "b": job("b"), "c": job("c")})
+    assert list(outcomes) == ["a", "b", "c"]
+    assert outcomes["a"].value == "a" and outcomes["c"].value == "c"
+    assert isinstance(outcomes["b"].error, RuntimeError) and not outcomes["b"].ok
+
+
+def test_paced_network_keeps_the_send_gap():
+    import can
+
+    from sherpa_cli.bus.links import _paced_network_class
+
+    now = [0.0]
+    waits: list[float] = []
+    net = _paced_network_class()(can.Bus(interface="virtual", channel="pace-test"))
+    net.gap = 0.001
+    net.clock = lambda: now[0]
+    net.sleep = lambda s: (waits.append(round(s, 9)), now.__setitem__(0, now[0] + s))
+    try:
+        for _ in range(3):
+            net.send_message(0x300 + 1, b"PX\x00\x00")
+    finally:
+        net.bus.shutdown()
+    assert waits == [0.001, 0.001], "the first frame goes at once, each next one after the gap"
+
+
+def test_a_joint_stops_at_its_hard_stop(tmp_path, monkeypatch):
+    monkeypatch.setenv("XDG_STATE_HOME", str(tmp_path))
+    cfg = load_config("configs/appendix-c/example1.yaml")
+    with ArmSession.open(cfg, sim=True) as session:
+        client = session.client(resolve_target(cfg, "drive1"))
+        client.nmt_start()
+        client.set("IL", 3, 4)  # switches off: only the mechanics stop the joint now
+        client.set("IL", 4, 4)
+        client.set("UM", 0, 2)
+        client.motor_on()
+        client.set("JV", 0, 2000)
+        client.execute("BG")
+        deadline = time.monotonic() + 2
+        while time.monotonic() < deadline and session.sim.drives["drive1"].position < 240:
+            time.sleep(0.02)
+        time.sleep(0.05)
+        assert session.sim.drives["drive1"].position == 240  # overshoot range edge of example 1
+        assert client.get("PX") == 240
