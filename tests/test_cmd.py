@@ -10,13 +10,28 @@ from sherpa_cli.config import load_config
 from sherpa_cli.ops.raw import run_raw
 from sherpa_cli.ops.session import ArmSession, resolve_target
 
+# Meaningful on a real bus: run through arm_cli, so also over python-can-remote and vcan.
+ARM_CASES = [
+    ("cmd-sim-queries", ["cmd", "shoulder_1a", "PX", "LL[3]", "MF", "SR", "IP", "IL[1]", "EC"]),
+    ("cmd-sim-dry-run", ["cmd", "shoulder_1a", "AC=150000", "CL[1]=2.5", "BG"]),
+    ("cmd-sim-apply", ["cmd", "shoulder_1a", "AC=150000", "AC", "CL[1]=2.5", "CL[1]", "--apply"]),
+    ("cmd-sim-json", ["--json", "cmd", "can0:10", "PX", "MF", "AC=1000"]),
+    ("cmd-sim-joint-name", ["cmd", "elbow_pitch", "UM", "VH[3]"]),
+    ("cmd-sim-refused", ["cmd", "shoulder_1a", "AC", "BG", "PX", "--apply"]),
+    ("cmd-sim-other-buses", ["cmd", "wrist_3b", "UM", "IP"]),
+]
+
+
+@pytest.mark.golden
+@pytest.mark.realbus
+@pytest.mark.parametrize("name,args", ARM_CASES, ids=[c[0] for c in ARM_CASES])
+def test_cmd_on_the_arm_golden(arm_cli, golden, name, args):
+    result = arm_cli(*args)
+    assert "Traceback" not in result.stderr
+    golden(f"{name}.txt", result.transcript())
+
+
 CASES = [
-    ("cmd-sim-queries", ["--sim", "cmd", "shoulder_1a", "PX", "LL[3]", "MF", "SR", "IP", "IL[1]", "EC"]),
-    ("cmd-sim-dry-run", ["--sim", "cmd", "shoulder_1a", "AC=150000", "CL[1]=2.5", "BG"]),
-    ("cmd-sim-apply", ["--sim", "cmd", "shoulder_1a", "AC=150000", "AC", "CL[1]=2.5", "CL[1]", "--apply"]),
-    ("cmd-sim-json", ["--sim", "--json", "cmd", "can0:10", "PX", "MF", "AC=1000"]),
-    ("cmd-sim-joint-name", ["--sim", "cmd", "elbow_pitch", "UM", "VH[3]"]),
-    ("cmd-sim-refused", ["--sim", "cmd", "shoulder_1a", "AC", "BG", "PX", "--apply"]),
     ("cmd-sim-missing-node", ["--sim", "cmd", "can0:99", "PX"]),
     ("cmd-bad-index", ["--sim", "cmd", "shoulder_1a", "LL[9]"]),
     ("cmd-lower-case", ["--sim", "cmd", "shoulder_1a", "px"]),

@@ -197,6 +197,7 @@ class SimDriveConfig:
     """How one simulated drive differs from a healthy one (faults and mismatch); only the simulator reads it."""
 
     reply_latency: float = 0.0  # s added to every interpreter reply
+    sdo_latency: float = 0.0  # s added to every SDO answer
     drop_probability: float = 0.0  # chance that a frame to or from the drive is lost
     die_at: float | None = None  # s after start: the drive goes silent for good
     reboot_at: float | None = None  # s after start: the drive reboots once

@@ -94,6 +94,7 @@ def parse_sim(top: Section, locs: Locs) -> dict[str, SimDriveConfig]:
         die_at, reboot_at = d.num("die_at"), d.num("reboot_at")
         result[dname] = SimDriveConfig(
             reply_latency=d.num("reply_latency", base.reply_latency),
+            sdo_latency=d.num("sdo_latency", base.sdo_latency),
             drop_probability=d.num("drop_probability", base.drop_probability),
             die_at=die_at, reboot_at=reboot_at,
             speed_gain=d.num("speed_gain", base.speed_gain),

@@ -102,6 +102,8 @@ def _check_sim(cfg: ArmConfig, locs: Locs, r: _Report) -> None:
                     f"drop_probability {faults.drop_probability} must be within 0..1")
         if faults.reply_latency < 0:
             r.error(locs.get("sim", "drives", name, "reply_latency"), "reply_latency must be >= 0")
+        if faults.sdo_latency < 0:
+            r.error(locs.get("sim", "drives", name, "sdo_latency"), "sdo_latency must be >= 0")
         if not faults.speed_gain > 0:
             r.error(locs.get("sim", "drives", name, "speed_gain"), "speed_gain must be > 0")
 

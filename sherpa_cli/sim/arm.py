@@ -45,7 +45,8 @@ def settings_for(cfg: ArmConfig, drive: str, **overrides: Any) -> SimSettings:
     )
     faults = cfg.sim.get(drive)
     if faults is not None:
-        base.update(reply_latency_s=faults.reply_latency, drop_probability=faults.drop_probability,
+        base.update(reply_latency_s=faults.reply_latency, sdo_latency_s=faults.sdo_latency,
+                    drop_probability=faults.drop_probability,
                     die_at=faults.die_at, reboot_at=faults.reboot_at, heartbeat_ms=faults.heartbeat_ms,
                     seed=faults.seed)
     base.update(overrides)
@@ -201,7 +202,12 @@ class SimArm:
         for name, d in self.cfg.drives.items():
             if d.bus in self._buses:
                 send = self._sender(self._buses[d.bus])
-                self._sdo[name] = SdoServer(d.node, self.drives[name], send)
+                drive = self.drives[name]
+                if drive.settings.sdo_latency_s > 0:
+                    # through the drive's reply queue, so a late answer leaves on a later tick
+                    send = lambda can_id, data, drive=drive: drive.send_later(can_id, data,
+                                                                              drive.settings.sdo_latency_s)
+                self._sdo[name] = SdoServer(d.node, drive, send)
         for bus_name in self._buses:
             t = threading.Thread(target=self._pump, args=(bus_name,), name=f"sim-{bus_name}", daemon=True)
             self._threads.append(t)

@@ -141,6 +141,11 @@ class SimDrive:
             self._hb_last = t
         return True
 
+    def send_later(self, can_id: int, data: bytes, delay: float) -> None:
+        """Queue a frame made outside the drive (an SDO answer) to leave ``delay`` s from now, in
+        order with the interpreter's replies; lost like them if the drive dies or reboots first."""
+        heapq.heappush(self._replies, (self._t + delay, next(self._seq), (can_id, bytes(data))))
+
     def set_input(self, n: int, active: bool, direction: int = 0) -> None:
         """Set digital input ``n`` (1-based) for the arm mechanics. ``active`` means the input's
         function is active (IL polarity is not modelled). ``direction`` says where a stop switch

@@ -23,6 +23,8 @@ class SimSettings:
     sv_blackout_s: float = 0.3
     # Typical round-trip time is UNCONFIRMED (section 4.2); delay every interpreter reply.
     reply_latency_s: float = 0.0
+    # The same for SDO answers (0x580+node), e.g. a drive busy in its own program; 0 = at once.
+    sdo_latency_s: float = 0.0
     # Chance that any one frame to or from the drive is lost on the bus; drawn from a
     # random.Random(seed) so a failing run can be replayed.
     drop_probability: float = 0.0
@@ -56,7 +58,7 @@ class SimSettings:
     reboot_at: float | None = None
 
     def __post_init__(self) -> None:
-        for name in ("mo_settle_s", "sv_blackout_s", "reply_latency_s"):
+        for name in ("mo_settle_s", "sv_blackout_s", "reply_latency_s", "sdo_latency_s"):
             if getattr(self, name) < 0:
                 raise ValueError(f"SimSettings.{name} must be >= 0")
         if not 0.0 <= self.drop_probability <= 1.0:

@@ -1,0 +1,111 @@
+"""`sherpa scan`: which node ids answer on each bus, checked against the config."""
+
+from __future__ import annotations
+
+import sys
+from contextlib import contextmanager
+from typing import Iterator, List, Optional
+
+import typer
+
+from sherpa_cli.cli.context import state
+from sherpa_cli.errors import ExitCode, UsageError
+
+
+def scan(
+    ctx: typer.Context,
+    buses: Optional[List[str]] = typer.Option(None, "--bus", metavar="BUS",
+                                              help="Scan only this bus (repeat for several). Default: every bus."),
+    reset: bool = typer.Option(False, "--reset", help="First send NMT reset communication to every node "
+                               "(unsaved RAM of the drives is lost) and collect their boot-ups. "
+                               "Nothing is NMT-started."),
+) -> None:
+    """Probe node ids 1..127 on every bus and compare what answers with the config.
+
+    Each node is asked for 0x1000 (device type) over SDO, all buses at once; answering nodes
+    are then asked for 0x1018:1 (vendor) and 0x1008 (device name). Verdicts: expected,
+    missing, unexpected, duplicate id, answering slowly, no SDO answer (heard only on 0x700).
+    Exit code 1 when a configured drive is missing or a node the config does not name answers.
+
+    \b
+    Examples:
+      sherpa scan
+      sherpa scan --bus can1 --reset
+    """
+    from sherpa_cli.ops.scan import scan as run_scan
+
+    st = state(ctx)
+    cfg = st.load_config()
+    selected = list(dict.fromkeys(buses)) if buses else list(cfg.buses)
+    unknown = [b for b in selected if b not in cfg.buses]
+    if unknown:
+        raise UsageError(f"no bus '{unknown[0]}' in the config", hint=f"configured buses: {', '.join(cfg.buses)}")
+    with st.session(buses=selected) as session, _progress(st, selected) as progress:
+        report = run_scan(session, selected, reset=reset, progress=progress)
+    _render(st, report)
+    if report.bus_errors:
+        first = report.bus_errors[0]
+        code = getattr(first.error, "exit_code", ExitCode.BUS)
+        raise typer.Exit(int(code) if code != ExitCode.PROBLEM else int(ExitCode.BUS))
+    if report.problems:
+        raise typer.Exit(int(ExitCode.PROBLEM))
+
+
+@contextmanager
+def _progress(st, buses: list[str]) -> Iterator:
+    """A live per-bus progress line on stderr, only for a person watching a terminal."""
+    if st.json_mode or not sys.stderr.isatty():
+        yield None
+        return
+    from rich.progress import BarColumn, Progress, TextColumn
+
+    # through the sink's stderr console so colour and NO_COLOR follow the global options
+    console = st.out._console(stderr=True)
+    with Progress(TextColumn("{task.fields[bus]:6}"), BarColumn(), TextColumn("{task.description}"),
+                  console=console, transient=True) as bar:
+        tasks = {bus: bar.add_task("waiting", total=1, bus=bus) for bus in buses}
+
+        def update(bus: str, phase: str, done: int, total: int) -> None:
+            bar.update(tasks[bus], description=f"{phase} {done}/{total}" if phase != "done" else "done",
+                       completed=done, total=max(total, 1))
+
+        yield update
+
+
+def _render(st, report) -> None:
+    if st.json_mode:
+        st.out.json(report.as_json())
+        return
+    for bus in report.buses:
+        if bus.error is not None:
+            st.out.error(f"bus {bus.bus}: scan failed: {bus.error}")
+            continue
+        rows = []
+        for n in bus.nodes:
+            rows.append([n.node, f"0x{n.device_type:08X}" if n.device_type is not None else "-",
+                         n.vendor or "-", n.device_name or "-", n.drive or "-", n.joint or "-",
+                         n.nmt_state or "-", n.verdict])
+        answered = sum(1 for n in bus.nodes if n.answer_s is not None)
+        st.out.table(f"bus {bus.bus}: {answered} node(s) answered",
+                     ["node", "device type", "vendor", "device name", "drive", "joint", "NMT", "verdict"],
+                     rows, right=(0,))
+        for n in bus.nodes:
+            for note in n.notes:
+                st.out.line(f"  {bus.bus}:{n.node}: {note}")
+    summary = []
+    if report.missing:
+        summary.append(f"missing: {', '.join(report.missing)}")
+    if report.unexpected:
+        summary.append(f"unexpected: {', '.join(report.unexpected)}")
+    duplicates = [f"{b.bus}:{n.node}" for b in report.buses for n in b.nodes if n.verdict == "duplicate id"]
+    if duplicates:
+        summary.append(f"duplicate ids: {', '.join(duplicates)}")
+    slow = [n.drive or f"{b.bus}:{n.node}" for b in report.buses for n in b.nodes if n.verdict == "answering slowly"]
+    if slow:
+        summary.append(f"answering slowly: {', '.join(slow)} (over {report.settings.slow_factor:g}x the bus's "
+                       f"median answer time and over {report.settings.slow_floor_s * 1000:g} ms)")
+    if summary:
+        for line in summary:
+            st.out.line(line)
+    elif not report.bus_errors:
+        st.out.line("every configured drive answered; no unexpected node")

@@ -1,0 +1,405 @@
+"""`sherpa scan`: which node ids answer on each bus, and whether that is what the config says.
+
+canopen's ``network.scanner.search()`` is not used: it gives no completion signal and counts
+any frame with a node's function code as a node (measurements.md). Instead every bus gets
+all 127 SDO uploads of 0x1000 at once (paced by the bus's Network) and its answers are
+collected until the SDO timeout after the last request, or earlier once every configured
+node has answered and the bus has gone quiet. Boot-up and heartbeat frames heard meanwhile
+count as evidence too. Then 0x1018:1 and 0x1008 are read from every node that answered.
+
+Nothing here prints; the CLI renders :class:`ScanReport`.
+"""
+
+from __future__ import annotations
+
+import statistics
+import struct
+import threading
+import time
+from dataclasses import dataclass, field
+from typing import Any, Callable, Iterable, Mapping
+
+from sherpa_cli.bus.parallel import run_concurrently
+from sherpa_cli.config.model import ArmConfig
+from sherpa_cli.errors import SherpaError
+
+NODE_IDS = range(1, 128)
+SDO_TX, SDO_RX, HEARTBEAT = 0x580, 0x600, 0x700
+NMT_COB_ID, NMT_RESET_COMMUNICATION = 0x000, 0x82
+UPLOAD_DEVICE_TYPE = bytes([0x40, 0x00, 0x10, 0x00, 0, 0, 0, 0])
+SDO_ABORT = 0x80
+ELMO_VENDOR_ID = 0x9A
+VENDORS = {ELMO_VENDOR_ID: "Elmo"}
+NMT_STATES = {0x00: "boot-up", 0x04: "stopped", 0x05: "operational", 0x7F: "pre-operational"}
+
+EXPECTED = "expected"
+MISSING = "missing"
+UNEXPECTED = "unexpected"
+DUPLICATE = "duplicate id"
+SLOW = "answering slowly"
+NO_SDO = "no SDO answer"
+# Verdicts that make `sherpa scan` exit 1: the bus is not wired or numbered as configured.
+PROBLEM_VERDICTS = frozenset({MISSING, UNEXPECTED, DUPLICATE, NO_SDO})
+
+
+@dataclass(frozen=True)
+class ScanSettings:
+    """The scan's timing choices; the defaults suit a 1 Mbit/s bus and the in-process simulator."""
+
+    # canopen's SdoClient.RESPONSE_TIMEOUT: the longest any tool here waits for one SDO answer,
+    # so a node slower than this is absent for every other command too.
+    sdo_timeout: float = 0.3
+    # Silence that ends listening early once every configured node has answered. 127 requests
+    # take ~17 ms of bus time at 1 Mbit/s; an unconfigured node answers within that too.
+    quiet_s: float = 0.03
+    # A node answers slowly when its answer took longer than slow_factor x the bus's median
+    # answer time, but never below slow_floor x sdo_timeout: on a loaded host a healthy node's
+    # answer can wait several ms for the GIL, which must not read as a slow drive.
+    slow_factor: float = 3.0
+    slow_floor: float = 0.5
+    # --reset: how long to wait for boot-ups. Elmo gives no boot time after reset communication
+    # (UNCONFIRMED); a quiet period ends the wait once every configured node has booted.
+    boot_timeout: float = 2.0
+    poll_s: float = 0.002
+
+    @property
+    def slow_floor_s(self) -> float:
+        return self.slow_floor * self.sdo_timeout
+
+
+@dataclass(frozen=True)
+class NodeFinding:
+    """One node id of one bus that answered, or that the config expects."""
+
+    node: int
+    verdict: str
+    drive: str | None = None
+    joint: str | None = None  # the plain joint, or the pair a pair motor belongs to
+    device_type: int | None = None
+    vendor_id: int | None = None
+    device_name: str | None = None
+    answer_s: float | None = None  # request to first answer; never rendered into stable output
+    nmt_state: str | None = None  # from the last boot-up or heartbeat heard while scanning
+    notes: tuple[str, ...] = ()
+
+    @property
+    def vendor(self) -> str | None:
+        if self.vendor_id is None:
+            return None
+        return VENDORS.get(self.vendor_id, f"0x{self.vendor_id:08X}")
+
+    def as_json(self) -> dict[str, Any]:
+        return {"node": self.node, "device_type": self.device_type, "vendor_id": self.vendor_id,
+                "vendor": self.vendor, "device_name": self.device_name, "drive": self.drive,
+                "joint": self.joint, "verdict": self.verdict, "nmt_state": self.nmt_state,
+                "notes": list(self.notes)}
+
+
+@dataclass
+class BusScan:
+    bus: str
+    nodes: list[NodeFinding] = field(default_factory=list)
+    error: SherpaError | BaseException | None = None
+    median_answer_s: float | None = None
+    slow_threshold_s: float | None = None
+
+    def with_verdict(self, *verdicts: str) -> list[NodeFinding]:
+        return [n for n in self.nodes if n.verdict in verdicts]
+
+
+@dataclass
+class ScanReport:
+    buses: list[BusScan]
+    settings: ScanSettings
+    reset: bool = False
+
+    @property
+    def missing(self) -> list[str]:
+        """Configured drives that gave no SDO answer (silent, or heard only on 0x700)."""
+        return [n.drive for b in self.buses for n in b.with_verdict(MISSING, NO_SDO) if n.drive]
+
+    @property
+    def unexpected(self) -> list[str]:
+        """``BUS:NODE`` of nodes the config does not name."""
+        return [f"{b.bus}:{n.node}" for b in self.buses for n in b.with_verdict(UNEXPECTED)]
+
+    @property
+    def problems(self) -> bool:
+        return any(n.verdict in PROBLEM_VERDICTS for b in self.buses for n in b.nodes)
+
+    @property
+    def bus_errors(self) -> list[BusScan]:
+        return [b for b in self.buses if b.error is not None]
+
+    def as_json(self) -> dict[str, Any]:
+        return {"buses": [{"bus": b.bus, "nodes": [n.as_json() for n in b.nodes],
+                           **({"error": str(b.error)} if b.error is not None else {})} for b in self.buses],
+                "missing": self.missing, "unexpected": self.unexpected}
+
+
+# -- listening ------------------------------------------------------------------------------------
+
+@dataclass
+class _Heard:
+    """Everything one bus said about one node id while we listened."""
+
+    sent_at: float | None = None
+    answers: list[tuple[float, bytes]] = field(default_factory=list)  # (monotonic time, SDO frame)
+    nmt: list[int] = field(default_factory=list)  # boot-up / heartbeat state bytes, in order
+
+
+class BusProber:
+    """SDO upload of 0x1000 to every node id of one bus without waiting between requests.
+
+    Works on anything with canopen.Network's ``subscribe``, ``unsubscribe`` and
+    ``send_message`` (tests use a fake); callbacks may arrive on a receive thread or inside
+    ``send_message``.
+    """
+
+    def __init__(self, network: Any, configured: Iterable[int], settings: ScanSettings = ScanSettings(), *,
+                 clock: Callable[[], float] = time.monotonic, sleep: Callable[[float], None] = time.sleep,
+                 progress: Callable[[str, int, int], None] | None = None) -> None:
+        self.network = network
+        self.configured = frozenset(configured)
+        self.settings = settings
+        self.clock = clock
+        self.sleep = sleep
+        self.progress = progress or (lambda phase, done, total: None)
+        self.heard: dict[int, _Heard] = {n: _Heard() for n in NODE_IDS}
+        self._lock = threading.Lock()
+        self._last_frame = float("-inf")
+        # Wall-clock time listening began: frames stamped earlier were on the bus before this
+        # scan (a boot-up of the power-up) and say nothing about what answers now.
+        self._since = time.time()
+
+    def run(self, *, reset: bool = False) -> dict[int, _Heard]:
+        self._since = time.time()
+        subscriptions = [(SDO_TX + n, self._on_sdo) for n in NODE_IDS] + [(HEARTBEAT + n, self._on_nmt)
+                                                                            for n in NODE_IDS]
+        for can_id, callback in subscriptions:
+            self.network.subscribe(can_id, callback)
+        try:
+            if reset:
+                self._reset()
+            self._probe()
+        finally:
+            for can_id, callback in subscriptions:
+                try:
+                    self.network.unsubscribe(can_id, callback)
+                except (KeyError, ValueError):  # the bus went away; nothing left to unhook
+                    pass
+        return self.heard
+
+    def _reset(self) -> None:
+        s = self.settings
+        self.network.send_message(NMT_COB_ID, bytes([NMT_RESET_COMMUNICATION, 0]))
+        sent = self.clock()
+        self.progress("waiting for boot-ups", 0, len(self.configured))
+        self._wait(sent + s.boot_timeout, sent, lambda: self._booted(), "waiting for boot-ups")
+
+    def _booted(self) -> set[int]:
+        with self._lock:
+            return {n for n in self.configured if 0x00 in self.heard[n].nmt}
+
+    def _answered(self) -> set[int]:
+        with self._lock:
+            return {n for n in self.configured if self.heard[n].answers}
+
+    def _probe(self) -> None:
+        total = len(NODE_IDS)
+        for i, node in enumerate(NODE_IDS, start=1):
+            self.network.send_message(SDO_RX + node, UPLOAD_DEVICE_TYPE)
+            with self._lock:
+                self.heard[node].sent_at = self.clock()
+            if i % 8 == 0 or i == total:
+                self.progress("probing", i, total)
+        last_send = self.clock()
+        self._wait(last_send + self.settings.sdo_timeout, last_send, self._answered, "listening")
+
+    def _wait(self, deadline: float, last_send: float, done: Callable[[], set[int]], phase: str) -> None:
+        """Until ``deadline``, or until ``done()`` covers every configured node and the bus is quiet."""
+        quiet = self.settings.quiet_s
+        while True:
+            now = self.clock()
+            if now >= deadline:
+                return
+            have = done()
+            self.progress(phase, len(have), len(self.configured))
+            with self._lock:
+                last = max(self._last_frame, last_send)
+            if have >= self.configured and now - last >= quiet:
+                return
+            self.sleep(self.settings.poll_s)
+
+    def _on_sdo(self, can_id: int, data: bytes, timestamp: float) -> None:
+        data = bytes(data)
+        # Only answers to our request (0x1000:00) or aborts of it; anything else is another
+        # tool's transfer and proves nothing about this scan.
+        if len(data) < 8 or data[1:4] != UPLOAD_DEVICE_TYPE[1:4]:
+            return
+        now = self.clock()
+        with self._lock:
+            self.heard[can_id - SDO_TX].answers.append((now, data))
+            self._last_frame = now
+
+    def _on_nmt(self, can_id: int, data: bytes, timestamp: float) -> None:
+        if len(data) < 1 or (timestamp and timestamp > 1e9 and timestamp < self._since):
+            return
+        with self._lock:
+            self.heard[can_id - HEARTBEAT].nmt.append(data[0])
+            self._last_frame = self.clock()
+
+
+def decode_device_type(frame: bytes) -> tuple[int | None, str | None]:
+    """(0x1000 value, None) from an upload answer, or (None, why not)."""
+    cmd = frame[0]
+    if cmd == SDO_ABORT:
+        code = struct.unpack_from("<I", frame, 4)[0]
+        return None, f"0x1000 aborted with 0x{code:08X}"
+    if cmd & 0xE0 != 0x40:
+        return None, f"0x1000: unexpected SDO answer {frame.hex(' ').upper()}"
+    if not cmd & 0x02:
+        return None, "0x1000 answered as a segmented transfer"
+    size = 4 - (cmd >> 2 & 3) if cmd & 0x01 else 4
+    return int.from_bytes(frame[4:4 + size], "little"), None
+
+
+# -- identity -------------------------------------------------------------------------------------
+
+def sdo_upload(network: Any, node: int, index: int, sub: int = 0) -> bytes:
+    """One SDO upload (expedited or segmented) through canopen's client, without an object dictionary."""
+    import canopen
+
+    remote = canopen.RemoteNode(node, canopen.ObjectDictionary())
+    remote.associate_network(network)
+    try:
+        return remote.sdo.upload(index, sub)
+    finally:
+        remote.remove_network()
+
+
+def sdo_error_text(what: str, exc: BaseException) -> str:
+    from canopen.sdo.exceptions import SdoAbortedError
+
+    if isinstance(exc, SdoAbortedError):
+        return f"{what} aborted with 0x{exc.code:08X}"
+    return f"no answer to {what}"
+
+
+def decode_text(data: bytes) -> str:
+    # VISIBLE_STRING; some firmware pads with NULs
+    return data.split(b"\0", 1)[0].decode("latin-1").strip()
+
+
+def _read_identity(network: Any, node: int) -> tuple[int | None, str | None, list[str]]:
+    from canopen.sdo.exceptions import SdoError
+
+    vendor_id = name = None
+    notes: list[str] = []
+    try:
+        vendor_id = int.from_bytes(sdo_upload(network, node, 0x1018, 1)[:4], "little")
+    except SdoError as exc:
+        notes.append(sdo_error_text("0x1018:1", exc))
+    try:
+        name = decode_text(sdo_upload(network, node, 0x1008, 0))
+    except SdoError as exc:
+        notes.append(sdo_error_text("0x1008", exc))
+    return vendor_id, name, notes
+
+
+# -- putting it together --------------------------------------------------------------------------
+
+def _joint_label(cfg: ArmConfig, drive: str) -> str | None:
+    joint = cfg.joint_of_drive(drive)
+    if joint is not None:
+        return joint.name
+    pair = cfg.pair_of_drive(drive)
+    return pair.name if pair is not None else None
+
+
+def _nmt_text(states: list[int]) -> str | None:
+    if not states:
+        return None
+    last = states[-1]
+    # a boot-up leaves the node pre-operational (elmo-protocol.md 3.2)
+    return NMT_STATES[0x7F] if last == 0x00 else NMT_STATES.get(last, f"0x{last:02X}")
+
+
+def scan_bus(cfg: ArmConfig, bus: str, network: Any, settings: ScanSettings = ScanSettings(), *,
+             reset: bool = False, progress: Callable[[str, int, int], None] | None = None) -> BusScan:
+    """Probe one bus, then read the identity of every node that answered; verdicts per node id."""
+    configured = {d.node: d.name for d in cfg.drives.values() if d.bus == bus}
+    prober = BusProber(network, configured, settings, progress=progress)
+    heard = prober.run(reset=reset)
+
+    answer_times = {n: max(0.0, h.answers[0][0] - h.sent_at) for n, h in heard.items()
+                    if h.answers and h.sent_at is not None}
+    median = statistics.median(answer_times.values()) if answer_times else None
+    threshold = max(settings.slow_factor * median, settings.slow_floor_s) if median is not None else None
+
+    present = sorted(n for n, h in heard.items() if h.answers or h.nmt)
+    identity: dict[int, tuple[int | None, str | None, list[str]]] = {}
+    for i, node in enumerate(n for n in present if heard[n].answers):
+        if progress:
+            progress("reading identity", i, len(answer_times))
+        identity[node] = _read_identity(network, node)
+
+    findings = []
+    for node in sorted(set(present) | set(configured)):
+        h = heard[node]
+        drive = configured.get(node)
+        joint = _joint_label(cfg, drive) if drive else None
+        notes: list[str] = []
+        device_type = None
+        distinct = sorted({data for _, data in h.answers})
+        for data in distinct:
+            value, why = decode_device_type(data)
+            if why:
+                notes.append(why)
+            elif device_type is None:
+                device_type = value
+        vendor_id, name, id_notes = identity.get(node, (None, None, []))
+        notes.extend(id_notes)
+        answer = answer_times.get(node)
+        if not h.answers and not h.nmt:
+            verdict = MISSING
+        elif len(distinct) > 1:
+            verdict = DUPLICATE
+            notes.append(f"{len(distinct)} different answers to one request: two nodes share id {node}")
+        elif drive is None:
+            verdict = UNEXPECTED
+        elif not h.answers:
+            verdict = NO_SDO
+            notes.append("heard on 0x700 (boot-up/heartbeat) but no answer to the SDO upload of 0x1000")
+        elif threshold is not None and answer is not None and answer > threshold:
+            verdict = SLOW
+        else:
+            verdict = EXPECTED
+        findings.append(NodeFinding(node, verdict, drive, joint, device_type, vendor_id, name, answer,
+                                    _nmt_text(h.nmt), tuple(notes)))
+    if progress:
+        progress("done", 1, 1)
+    return BusScan(bus, findings, None, median, threshold)
+
+
+def scan(session: Any, buses: Iterable[str] | None = None, settings: ScanSettings = ScanSettings(), *,
+         reset: bool = False, progress: Callable[[str, str, int, int], None] | None = None) -> ScanReport:
+    """Scan the named buses of an open session (default: all it has open), all at once."""
+    cfg: ArmConfig = session.cfg
+    names = list(buses) if buses is not None else list(session.links)
+    links: Mapping[str, Any] = session.links
+
+    def job(bus: str) -> Callable[[], BusScan]:
+        report = (lambda phase, done, total: progress(bus, phase, done, total)) if progress else None
+        return lambda: scan_bus(cfg, bus, links[bus].network, settings, reset=reset, progress=report)
+
+    outcomes = run_concurrently({bus: job(bus) for bus in names})
+    result = []
+    for bus, outcome in outcomes.items():
+        if outcome.ok:
+            result.append(outcome.value)
+        else:
+            if not isinstance(outcome.error, Exception):
+                raise outcome.error  # KeyboardInterrupt and friends end the command
+            result.append(BusScan(bus, error=outcome.error))
+    return ScanReport(result, settings, reset)
