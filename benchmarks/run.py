@@ -167,10 +167,45 @@ def bench_roundtrip(seconds: float = 2.0) -> Result:
                   "pacing off")
 
 
+def bench_scan(rounds: int = 5) -> Result:
+    """`sherpa scan`: node ids 1..127 on the arm's 3 simulated buses (14 drives), over the SDO timeout.
+
+    One SDO timeout is what probing one id after another would cost per id; the whole scan
+    must stay near that: all ids in flight at once, all buses at once (config pacing kept).
+    """
+    import os
+    import tempfile
+
+    from sherpa_cli.config import load_config
+    from sherpa_cli.ops.scan import ScanSettings, scan
+    from sherpa_cli.ops.session import ArmSession
+
+    cfg = load_config(ROOT / "configs/sherpa-arm.yaml")
+    settings = ScanSettings()
+    times = []
+    with tempfile.TemporaryDirectory() as state:
+        os.environ["XDG_STATE_HOME"] = state
+        with ArmSession.open(cfg, sim=True) as session:
+            for _ in range(rounds):
+                start = time.perf_counter()
+                report = scan(session, settings=settings)
+                times.append(time.perf_counter() - start)
+                found = sum(1 for b in report.buses for n in b.nodes if n.verdict == "expected")
+                if found != len(cfg.drives) or report.problems:
+                    raise RuntimeError(f"scan found {found} of {len(cfg.drives)} drives: {report.as_json()}")
+    wall = statistics.median(times)
+    goal = "<= 1.2"
+    ratio = wall / settings.sdo_timeout
+    return Result("scan", round(wall * 1000, 1), "ms", round(ratio, 2), goal, _judge(ratio, goal),
+                  f"median of {rounds} scans / SDO timeout {settings.sdo_timeout * 1000:g} ms; "
+                  f"{len(cfg.buses)} buses, {len(cfg.drives)} drives, ids 1..127, pacing as configured")
+
+
 BENCHMARKS: dict[str, Callable[[], Result]] = {
     "codec": bench_codec,
     "startup": bench_startup,
     "roundtrip": bench_roundtrip,
+    "scan": bench_scan,
 }
 
 

@@ -190,11 +190,6 @@ def test_dead_node_times_out_quickly_naming_the_drive(tmp_path):
         assert alive.get("AC") == FACTORY_AC  # the other drive on the bus is unaffected
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "BUG: SimDriveConfig.die_at is documented as 's after start' (config/model.py) but SimArm "
-    "passes it unchanged to SimDrive, which compares it with its clock: RealClock = "
-    "time.monotonic() (seconds since host boot). So any die_at below the host uptime, e.g. 5.0, "
-    "kills the drive at once instead of 5 s after the simulator started (reboot_at likewise)."))
 def test_die_at_counts_from_simulator_start(tmp_path):
     cfg = write_config(tmp_path, ONE_DRIVE + FAST + "sim:\n  drives:\n    drive1: {die_at: 5.0}\n")
     with sim_session(cfg) as s:

@@ -43,20 +43,31 @@ def _paced_network_class():
                 raise CommunicationError("bus is closed")
             msg = can.Message(is_extended_id=can_id > 0x7FF, arbitration_id=can_id, data=data,
                               is_remote_frame=remote)
+            gap = self.gap
             with self.send_lock:
-                wait = self._last_send + self.gap - self.clock()
-                if wait > 0:
-                    self.sleep(wait)
-                for attempt in range(self.send_attempts):
-                    try:
-                        self.bus.send(msg)
-                        break
-                    except can.CanOperationError as exc:
-                        if getattr(exc, "error_code", None) != errno.ENOBUFS or attempt == self.send_attempts - 1:
-                            raise CommunicationError(f"sending 0x{can_id:03X} failed: {exc}") from exc
-                        self.sleep(0.001 * (attempt + 1))
-                self._last_send = self.clock()
-            self.check()
+                if gap:  # unpaced (gap 0) skips the clock: every interpreter round trip passes here
+                    wait = self._last_send + gap - self.clock()
+                    if wait > 0:
+                        self.sleep(wait)
+                try:
+                    self.bus.send(msg)
+                except can.CanOperationError as exc:
+                    self._resend(msg, exc)
+                if gap:
+                    self._last_send = self.clock()
+            if self.notifier is not None and self.notifier.exception is not None:
+                self.check()  # raises the receive thread's error
+
+        def _resend(self, msg: "can.Message", exc: "can.CanOperationError") -> None:
+            for attempt in range(1, self.send_attempts + 1):
+                if getattr(exc, "error_code", None) != errno.ENOBUFS or attempt == self.send_attempts:
+                    raise CommunicationError(f"sending 0x{msg.arbitration_id:03X} failed: {exc}") from exc
+                self.sleep(0.001 * attempt)
+                try:
+                    self.bus.send(msg)
+                    return
+                except can.CanOperationError as again:
+                    exc = again
 
     return PacedNetwork
 
@@ -77,10 +88,12 @@ class BusLink:
 def open_bus(cfg: BusConfig) -> Any:
     import can
 
+    from sherpa_cli.bus.virtual import open_can_bus
+
     kwargs = bus_kwargs(cfg)
     where = f"bus {cfg.name} ({kwargs.get('interface', 'python-can config')}:{kwargs.get('channel', '-')})"
     try:
-        return can.Bus(**kwargs)
+        return open_can_bus(**kwargs)
     except (can.CanError, OSError, ValueError, ImportError, TypeError) as exc:
         raise CommunicationError(f"{where}: cannot open: {exc}",
                                  hint="check the adapter is plugged in and up (ip link), or use --sim") from exc

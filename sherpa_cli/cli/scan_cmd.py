@@ -72,6 +72,14 @@ def _progress(st, buses: list[str]) -> Iterator:
         yield update
 
 
+def _device(n) -> str:
+    """Vendor (Elmo by name, others as their 0x1018:1 id) and 0x1008, in one column to fit 100 columns."""
+    if n.vendor is None and n.device_name is None:
+        return "-"
+    vendor = n.vendor if n.vendor_id in (None, 0x9A) else f"vendor {n.vendor}"
+    return " ".join(part for part in (vendor, n.device_name) if part)
+
+
 def _render(st, report) -> None:
     if st.json_mode:
         st.out.json(report.as_json())
@@ -80,15 +88,17 @@ def _render(st, report) -> None:
         if bus.error is not None:
             st.out.error(f"bus {bus.bus}: scan failed: {bus.error}")
             continue
+        # NMT only when boot-ups or heartbeats said something (--reset, producers on): no empty column
+        with_nmt = any(n.nmt_state for n in bus.nodes)
         rows = []
         for n in bus.nodes:
             rows.append([n.node, f"0x{n.device_type:08X}" if n.device_type is not None else "-",
-                         n.vendor or "-", n.device_name or "-", n.drive or "-", n.joint or "-",
-                         n.nmt_state or "-", n.verdict])
+                         _device(n), n.drive or "-", n.joint or "-",
+                         *([n.nmt_state or "-"] if with_nmt else []), n.verdict])
         answered = sum(1 for n in bus.nodes if n.answer_s is not None)
         st.out.table(f"bus {bus.bus}: {answered} node(s) answered",
-                     ["node", "device type", "vendor", "device name", "drive", "joint", "NMT", "verdict"],
-                     rows, right=(0,))
+                     ["node", "device type", "device", "drive", "joint",
+                      *(["NMT"] if with_nmt else []), "verdict"], rows, right=(0,))
         for n in bus.nodes:
             for note in n.notes:
                 st.out.line(f"  {bus.bus}:{n.node}: {note}")

@@ -24,9 +24,13 @@ def dump_native(cfg: ArmConfig) -> str:
         sections.append({"il_codes": {"stop": cfg.il_codes.stop, "home": cfg.il_codes.home}})
     if cfg.protocol != ProtocolConfig():
         sections.append({"protocol": dataclasses.asdict(cfg.protocol)})
+    sim: dict[str, Any] = {}
     if cfg.sim:
-        sections.append({"sim": {"drives": {name: _drop_default(dataclasses.asdict(f), SimDriveConfig())
-                                            for name, f in cfg.sim.items()}}})
+        sim["drives"] = {name: _drop_default(dataclasses.asdict(f), SimDriveConfig()) for name, f in cfg.sim.items()}
+    if cfg.sim_extra_nodes:
+        sim["extra_nodes"] = [dataclasses.asdict(e) for e in cfg.sim_extra_nodes]
+    if sim:
+        sections.append({"sim": sim})
     sections.append({"buses": {b.name: _bus(b) for b in cfg.buses.values()}})
     sections.append({"drives": {d.name: _drop_none({"bus": d.bus, "node": d.node, "model": d.model,
                                                     "motor": d.motor})

@@ -204,6 +204,17 @@ class SimDriveConfig:
     speed_gain: float = 1.0  # runs its profiles this much faster (seed Fig. 9.10/9.11 mismatch)
     heartbeat_ms: int = 0  # 0x1017 producer heartbeat at power-up
     seed: int = 0  # random seed of drop_probability, so a failing run replays
+    limit_trip_at: float | None = None  # s after start: trips as if past LL[3]/HL[3] (MF, EMCY 0x8680)
+
+
+@dataclass(frozen=True)
+class SimExtraNode:
+    """A node the simulator puts on a bus although the config names no drive there (a stray device)."""
+
+    bus: str
+    node: int
+    vendor_id: int = 0x9A
+    device_name: str = "Whistle"
 
 
 @dataclass(frozen=True)
@@ -217,6 +228,7 @@ class ArmConfig:
     il_codes: ILCodes = field(default_factory=ILCodes)
     protocol: ProtocolConfig = field(default_factory=ProtocolConfig)
     sim: Mapping[str, SimDriveConfig] = field(default_factory=dict)  # drive name -> simulated faults
+    sim_extra_nodes: tuple[SimExtraNode, ...] = ()  # `sim: extra_nodes:`, only the simulator reads it
     source: str | None = None  # file the config came from
     warnings: tuple[str, ...] = ()  # non-fatal findings of validation, shown by `config check`
 

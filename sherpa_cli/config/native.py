@@ -13,7 +13,7 @@ from pathlib import PurePath
 
 from sherpa_cli.config.catalog import builtin_catalog
 from sherpa_cli.config.model import (AbsEncoderConfig, ArmConfig, BusConfig, Catalog, CurrentLimits, DriveConfig,
-                                     DriveModel, ILCodes, ProtocolConfig, SimDriveConfig, JointConfig, JointRole, MotorModel, PairConfig,
+                                     DriveModel, ILCodes, ProtocolConfig, SimDriveConfig, SimExtraNode, JointConfig, JointRole, MotorModel, PairConfig,
                                      SwitchConfig, SwitchKind)
 from sherpa_cli.config.yamlnodes import (Locs, Section, YNode, as_int, as_map, as_name, as_seq, as_str, named_items,
                                          plain, suggest)
@@ -79,10 +79,26 @@ def parse_protocol(top: Section, locs: Locs) -> ProtocolConfig:
 
 
 SIM_DRIVE_KEYS = [f.name for f in dataclasses.fields(SimDriveConfig)]
+SIM_EXTRA_KEYS = [f.name for f in dataclasses.fields(SimExtraNode)]
+
+
+def parse_sim_extra_nodes(top: Section, locs: Locs) -> tuple[SimExtraNode, ...]:
+    sec = top.section("sim", ["drives", "extra_nodes"], what="a mapping with 'drives' and/or 'extra_nodes'")
+    if sec is None or sec.get("extra_nodes") is None:
+        return ()
+    extras = []
+    for i, item in enumerate(as_seq(sec.req("extra_nodes"), "a list like [{bus: can1, node: 99}]")):
+        e = Section(item, SIM_EXTRA_KEYS, what="an extra node like {bus: can1, node: 99}")
+        register(locs, ("sim", "extra_nodes", str(i)), e)
+        base = SimExtraNode("", 0)
+        extras.append(SimExtraNode(bus=e.str("bus", required=True), node=e.int("node", required=True),
+                                   vendor_id=e.int("vendor_id", base.vendor_id),
+                                   device_name=e.str("device_name", base.device_name)))
+    return tuple(extras)
 
 
 def parse_sim(top: Section, locs: Locs) -> dict[str, SimDriveConfig]:
-    sec = top.section("sim", ["drives"], what="a mapping with 'drives'")
+    sec = top.section("sim", ["drives", "extra_nodes"], what="a mapping with 'drives' and/or 'extra_nodes'")
     if sec is None or sec.get("drives") is None:
         return {}
     result: dict[str, SimDriveConfig] = {}
@@ -100,6 +116,7 @@ def parse_sim(top: Section, locs: Locs) -> dict[str, SimDriveConfig]:
             speed_gain=d.num("speed_gain", base.speed_gain),
             heartbeat_ms=d.int("heartbeat_ms", base.heartbeat_ms),
             seed=d.int("seed", base.seed),
+            limit_trip_at=d.num("limit_trip_at"),
         )
     return result
 
@@ -118,6 +135,7 @@ def load_native(root: YNode, filename: str) -> tuple[ArmConfig, Locs, list[str]]
 
     protocol = parse_protocol(top, locs)
     sim = parse_sim(top, locs)
+    sim_extra_nodes = parse_sim_extra_nodes(top, locs)
     catalog = parse_catalog(top.get("catalog"), locs)
 
     buses: dict[str, BusConfig] = {}
@@ -185,7 +203,8 @@ def load_native(root: YNode, filename: str) -> tuple[ArmConfig, Locs, list[str]]
                                       delta=names[1], current=current, where=sec.node.loc)
 
     cfg = ArmConfig(name=name, buses=buses, drives=drives, joints=joints, pairs=pairs, catalog=catalog,
-                    il_codes=il, protocol=protocol, sim=sim, source=filename)
+                    il_codes=il, protocol=protocol, sim=sim, sim_extra_nodes=sim_extra_nodes,
+                    source=filename)
     return cfg, locs, []
 
 

@@ -106,6 +106,17 @@ def _check_sim(cfg: ArmConfig, locs: Locs, r: _Report) -> None:
             r.error(locs.get("sim", "drives", name, "sdo_latency"), "sdo_latency must be >= 0")
         if not faults.speed_gain > 0:
             r.error(locs.get("sim", "drives", name, "speed_gain"), "speed_gain must be > 0")
+        if faults.limit_trip_at is not None and faults.limit_trip_at < 0:
+            r.error(locs.get("sim", "drives", name, "limit_trip_at"), "limit_trip_at must be >= 0")
+    for i, extra in enumerate(cfg.sim_extra_nodes):
+        where = ("sim", "extra_nodes", str(i))
+        if extra.bus not in cfg.buses:
+            r.error(locs.get(*where, "bus"), f"extra node on unknown bus '{extra.bus}'; "
+                    f"configured buses: {', '.join(cfg.buses)}")
+        if not 1 <= extra.node <= 127:
+            r.error(locs.get(*where, "node"), f"node id {extra.node} out of range 1..127")
+        if not 0 <= extra.vendor_id <= 0xFFFFFFFF:
+            r.error(locs.get(*where, "vendor_id"), f"vendor_id {extra.vendor_id} does not fit 32 bits")
 
 
 def _check_il_codes(cfg: ArmConfig, locs: Locs, r: _Report) -> None:

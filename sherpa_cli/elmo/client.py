@@ -11,6 +11,7 @@ Protocol points the sources leave open are :class:`ClientSettings`, not guesses 
 
 from __future__ import annotations
 
+import functools
 import logging
 import threading
 import time
@@ -55,17 +56,24 @@ class ClientSettings:
 
 
 class _Pending:
-    """The one request of a drive that is waiting for its reply."""
+    """The one request of a drive that is waiting for its reply.
 
-    __slots__ = ("letters", "index", "event", "reply")
+    ``arrived`` is a plain lock held until the reply is in: the receive thread releases it once,
+    the requester's timed ``acquire`` is the wait. A lock costs a fraction of an Event (whose
+    every wait builds a Condition waiter), and every interpreter round trip makes one.
+    """
+
+    __slots__ = ("letters", "index", "arrived", "reply")
 
     def __init__(self, letters: str, index: int) -> None:
         self.letters = letters
         self.index = index
-        self.event = threading.Event()
+        self.arrived = threading.Lock()
+        self.arrived.acquire()
         self.reply: Reply | None = None
 
 
+@functools.lru_cache(maxsize=1024)
 def _key(letters: str, index: int) -> str:
     spec = COMMANDS.get(letters)
     return f"{letters}[{index}]" if index or (spec is not None and spec.is_array) else letters
@@ -280,7 +288,7 @@ class DriveClient:
         try:
             for attempt in range(attempts):
                 self.transport.send(RPDO2_BASE + self.node, frame)
-                if pending.event.wait(self.timeout):
+                if pending.arrived.acquire(timeout=self.timeout):
                     return pending.reply
                 log.debug("%s: no reply to %s (attempt %d of %d)", self.label, frame.hex(" "), attempt + 1, attempts)
             return None
@@ -296,12 +304,12 @@ class DriveClient:
             return
         with self._state:
             pending = self._pending
-            if pending is None or pending.reply is not None or (reply.letters, reply.index) != (
-                    pending.letters, pending.index):
+            if pending is None or pending.reply is not None or reply.letters != pending.letters \
+                    or reply.index != pending.index:
                 log.debug("%s: ignoring unrequested reply %s", self.label, bytes(data).hex(" "))
                 return
             pending.reply = reply
-            pending.event.set()
+            pending.arrived.release()
 
     def _on_emcy(self, can_id: int, data: bytes, timestamp: float) -> None:
         try:

@@ -119,31 +119,47 @@ def _spec_at(letters: str, index: int) -> CommandSpec:
 
 # -- host side: encode requests, decode replies ---------------------------------------------------
 
+# The fast paths below answer from caches of what the checked paths already validated, keyed by
+# (letters, index) or by the frame's first four bytes read as one u32; anything not cached, or not
+# plainly in range, takes the checked path, so errors and bytes are exactly the checked ones.
 _PACK_INT = struct.Struct("<4si").pack
 _PACK_FLOAT = struct.Struct("<4sf").pack
-_UNPACK_INT_REPLY = struct.Struct("<2sHi").unpack
-_FLT_MAX = 3.4028234663852886e38
+_UNPACK_HEAD_INT = struct.Struct("<Ii").unpack
+_UNPACK_FLOAT_AT_4 = struct.Struct("<4xf").unpack
 _new_reply = tuple.__new__
-# (letters, index) -> (header bytes, float?) for sets the table allows; filled by the checked path
-_SET_HEADERS: dict[tuple[str, int], tuple[bytes, bool]] = {}
-# the 676 valid letter pairs, so a reply's letters are checked and decoded in one lookup
-_LETTER_PAIRS = {bytes((a, b)): chr(a) + chr(b) for a in range(65, 91) for b in range(65, 91)}
+_CACHE_LIMIT = 4096  # entries per cache; frames from a bus may carry any letters and index
+_INT_SETS: dict[tuple[str, int], bytes] = {}  # (letters, index) -> header of an int set
+_FLOAT_SETS: dict[tuple[str, int], bytes] = {}
+_QUERIES: dict[tuple[str, int, bool], bytes] = {}  # (letters, index, long) -> whole frame
+_EXECUTES: dict[tuple[str, int], bytes] = {}
+_INT_REPLIES: dict[int, tuple[str, int]] = {}  # u32 header of a success reply -> (letters, index)
+_FLOAT_REPLIES: dict[int, tuple[str, int]] = {}
+_FRAME_TYPES = (bytes, bytearray, memoryview)
+
+
+def _remember(cache: dict, key: object, value: object) -> None:
+    if len(cache) < _CACHE_LIMIT:
+        cache[key] = value
 
 
 def encode_set(letters: str, index: int, value: int | float) -> bytes:
     """8-byte set frame; the type bit and the value's type come from the command table."""
-    cached = _SET_HEADERS.get((letters, index))
-    if cached is not None:
-        header, as_float = cached
-        kind = type(value)
-        # only the plain in-range cases skip the checks; everything else takes the checked path
-        if as_float:
-            if kind is float and -_FLT_MAX <= value <= _FLT_MAX:
+    kind = type(value)
+    try:
+        if type(index) is not int:  # True and 1.0 would find index 1's entry
+            pass
+        elif kind is int:
+            header = _INT_SETS.get((letters, index))
+            if header is not None:
+                return _PACK_INT(header, value)
+        elif kind is float:
+            header = _FLOAT_SETS.get((letters, index))
+            if header is not None and value - value == 0.0:  # finite (inf - inf and nan - nan are nan)
                 return _PACK_FLOAT(header, value)
-        elif kind is int and INT32_MIN <= value <= INT32_MAX:
-            return _PACK_INT(header, value)
+    except (struct.error, OverflowError, TypeError):
+        pass  # out of range or unhashable: the checked path says what is wrong
     frame = _encode_set_checked(letters, index, value)
-    _SET_HEADERS[(letters, index)] = (frame[:4], bool(frame[3] & 0x80))
+    _remember(_FLOAT_SETS if frame[3] & 0x80 else _INT_SETS, (letters, index), frame[:4])
     return frame
 
 
@@ -161,20 +177,37 @@ def _encode_set_checked(letters: str, index: int, value: int | float) -> bytes:
 
 def encode_query(letters: str, index: int = 0, long: bool = False) -> bytes:
     """Query frame: 4 bytes, or 8 bytes with the query bit when ``long``."""
+    try:
+        frame = _QUERIES.get((letters, index, long)) if type(index) is int else None
+    except TypeError:  # unhashable junk: the checked path names what is wrong
+        frame = None
+    if frame is not None:
+        return frame
     spec = _spec_at(letters, index)
     if spec.access == "x":
         raise CodecError(f"{letters} is an execute command and cannot be queried")
     if long:
-        return FRAME.pack(letters.encode("ascii"), _header_word(index, flag6=True), bytes(4))
-    return HEADER.pack(letters.encode("ascii"), index)
+        frame = FRAME.pack(letters.encode("ascii"), _header_word(index, flag6=True), bytes(4))
+    else:
+        frame = HEADER.pack(letters.encode("ascii"), index)
+    _remember(_QUERIES, (letters, index, long), frame)
+    return frame
 
 
 def encode_execute(letters: str, index: int = 0) -> bytes:
     """4-byte execute frame (BG, ST, SV, ...)."""
+    try:
+        frame = _EXECUTES.get((letters, index)) if type(index) is int else None
+    except TypeError:
+        frame = None
+    if frame is not None:
+        return frame
     spec = _spec_at(letters, index)
     if spec.access != "x":
         raise CodecError(f"{letters} is not an execute command", hint=f"query it as {letters} or set {letters}=...")
-    return HEADER.pack(letters.encode("ascii"), index)
+    frame = HEADER.pack(letters.encode("ascii"), index)
+    _remember(_EXECUTES, (letters, index), frame)
+    return frame
 
 
 def encode_request(request: Request, long: bool = False) -> bytes:
@@ -216,15 +249,23 @@ def _unpack_value(payload: bytes, is_float: bool, what: str) -> int | float:
 
 def decode_reply(data: bytes) -> Reply:
     """Decode an 8-byte TPDO2 reply. Letters need not be in the table."""
-    if type(data) is bytes and len(data) == 8:
-        raw, word, ival = _UNPACK_INT_REPLY(data)
-        letters = _LETTER_PAIRS.get(raw)
-        if letters is not None and not word & FLAG_ERROR:
-            if not word & FLAG_FLOAT:
-                return _new_reply(Reply, (letters, word & INDEX_MASK, ival, False, None))
-            value = FLOAT32.unpack_from(data, 4)[0]
-            if value - value == 0.0:  # finite (inf - inf and nan - nan are nan)
-                return _new_reply(Reply, (letters, word & INDEX_MASK, value, True, None))
+    if type(data) in _FRAME_TYPES:
+        try:
+            head, ival = _UNPACK_HEAD_INT(data)
+        except (struct.error, TypeError, ValueError, BufferError):
+            return _decode_reply_checked(data)  # not 8 bytes: the checked path says so
+        known = _INT_REPLIES.get(head)
+        if known is not None:
+            return _new_reply(Reply, (known[0], known[1], ival, False, None))
+        known = _FLOAT_REPLIES.get(head)
+        if known is not None:
+            value = _UNPACK_FLOAT_AT_4(data)[0]
+            if value - value == 0.0:  # finite
+                return _new_reply(Reply, (known[0], known[1], value, True, None))
+        reply = _decode_reply_checked(data)
+        if reply.error_code is None:
+            _remember(_FLOAT_REPLIES if reply.is_float else _INT_REPLIES, head, (reply.letters, reply.index))
+        return reply
     return _decode_reply_checked(data)
 
 
@@ -239,12 +280,25 @@ def _decode_reply_checked(data: bytes) -> Reply:
 
 # -- drive (simulator) side ----------------------------------------------------------------------
 
+_SHORT_REQUESTS: dict[bytes, Request] = {}  # 4-byte frames (queries, executes): no value, so one Request each
+
+
 def decode_request(data: bytes) -> Request:
     """Decode a 4- or 8-byte RPDO2 frame.
 
     Letters must be upper-case ASCII but need not be in the table, so a simulator can answer
     unknown commands and bad indexes with an error reply (EC 2 / EC 3) instead of failing.
     """
+    if type(data) is bytes and len(data) == 4:
+        request = _SHORT_REQUESTS.get(data)
+        if request is None:
+            request = _decode_request_checked(data)
+            _remember(_SHORT_REQUESTS, data, request)
+        return request
+    return _decode_request_checked(data)
+
+
+def _decode_request_checked(data: bytes) -> Request:
     letters, word, payload = _split(data, (4, 8), "request frame")
     index, is_float = word & INDEX_MASK, bool(word & FLAG_FLOAT)
     spec = _known(letters)
@@ -263,8 +317,27 @@ def _known(letters: str) -> CommandSpec | None:
         return None
 
 
+_REPLY_HEADERS: dict[tuple[str, int, bool], bytes] = {}  # (letters, index, float?) -> checked header
+
+
 def encode_reply(letters: str, index: int, value: int | float | None, is_float: bool) -> bytes:
     """8-byte success reply; ``value=None`` gives the all-zero data of an execute reply."""
+    kind = type(value)
+    try:
+        header = _REPLY_HEADERS.get((letters, index, is_float)) if type(index) is int else None
+        if header is not None:
+            if kind is int and not is_float:
+                return _PACK_INT(header, value)
+            if kind is float and is_float and value - value == 0.0:
+                return _PACK_FLOAT(header, value)
+    except (struct.error, OverflowError, TypeError):
+        pass  # out of range or unhashable: the checked path says what is wrong
+    frame = _encode_reply_checked(letters, index, value, is_float)
+    _remember(_REPLY_HEADERS, (letters, index, is_float), frame[:4])
+    return frame
+
+
+def _encode_reply_checked(letters: str, index: int, value: int | float | None, is_float: bool) -> bytes:
     check_letters(letters)
     _check_raw_index(letters, index)
     return FRAME.pack(letters.encode("ascii"), _header_word(index, is_float=is_float),

@@ -32,10 +32,43 @@ class ErrorCode:
     code: int
     text: str
     bliss_only: bool = False  # single source ([BLISS] SimplIQ list), not corroborated
+    check: str | None = None  # what a technician looks at next, where there is an obvious step
+
+    def line(self) -> str:
+        return f"{self.text} - check {self.check}" if self.check else self.text
+
+
+_CHECK_MOTOR_OFF = "MO: send MO=0 first (limits, UM, IL, PX and SV need the motor off)"
+_CHECK_FLASH = "MO=0, no user program running, then CD for why the save failed"
+_CHECK_BUS = "CAN wiring, termination and bit rate"
+
+# What to check per EC code; kept apart from the texts so the table of texts stays one line per code.
+EC_CHECKS: Mapping[int, str] = MappingProxyType({
+    2: "the command letters (upper case, a SimplIQ command)", 3: "the index range of the command",
+    7: "the unit mode's set-up (UM, PM and the motion parameters)",
+    9: "bus load: keep one interpreter request in flight per drive", 10: "use a query or SDO instead of a PDO",
+    11: _CHECK_FLASH, 12: "UM: the command needs another unit mode", 13: "retry after the UART traffic ends",
+    14: "the NMT state of the drive", 15: "the host heartbeat / life guarding (0x1016, 0x1029)",
+    16: "the command needs an index, e.g. LL[3]", 19: "the command's syntax",
+    21: "the value against the command's range (CL[1] <= MC/2, PL[1] <= MC)",
+    22: "the divisor parameters (e.g. CA[18], gear ratios)", 23: "the command is read-only or execute-only",
+    25: "stop the motion first (ST, wait for MS)", 26: "PM against UM", 28: "VL/VH/LL/HL against the value",
+    33: "CA[] feedback / sensor settings", 34: "the other command named in the manual (e.g. UM against CA)",
+    43: "NMT reset communication, then the bus", 47: "the user program (download and compile it)",
+    48: "CD for the reason, MF, and the commutation settings", 51: "IP and IL[n] (inhibit / abort wiring)",
+    54: "CD for the inconsistent parameter", 57: _CHECK_MOTOR_OFF, 58: "MO: send MO=1 first (and read MF if it drops)",
+    60: "UM (1 torque, 2 speed, 5 position)", 61: "all parameters: the database was reset to defaults",
+    67: "wait for the recorder or stop it", 68: "PM against UM", 71: "wait for HM[1] to read 0 or disarm it",
+    72: "XM[1]/XM[2] (their difference must be even)", 82: "stop the user program first",
+    83: "the user program", 90: "NMT start the drive", 92: "the PDO mapping (0x1600/0x1A00 ...)",
+    122: "UM and the motion mode requested", 166: "XM[1]/XM[2] against the target",
+    168: "VH[2]/VL[2] and the speed command", 172: _CHECK_FLASH, 178: _CHECK_BUS,
+    179: "the host heartbeat and 0x1016 (consumer heartbeat time)",
+})
 
 
 def _ec(*rows: tuple[int, str], bliss_only: bool = False) -> dict[int, ErrorCode]:
-    return {code: ErrorCode(code, text, bliss_only) for code, text in rows}
+    return {code: ErrorCode(code, text, bliss_only, EC_CHECKS.get(code)) for code, text in rows}
 
 
 EC_CODES: Mapping[int, ErrorCode] = MappingProxyType({
@@ -64,6 +97,12 @@ def ec_text(code: int) -> str:
     """``"operand out of range"`` for 21; ``"unknown error code 200"`` for codes not in the table."""
     entry = EC_CODES.get(code)
     return entry.text if entry else f"unknown error code {code}"
+
+
+def describe_ec(code: int) -> str:
+    """The text and, where there is one, what to check: ``"motor must be off - check MO: ..."``."""
+    entry = EC_CODES.get(code)
+    return entry.line() if entry else f"unknown error code {code}"
 
 
 # -- SR: status register --------------------------------------------------------------------------
@@ -113,6 +152,32 @@ def decode_sr(value: int) -> StatusRegister:
         motor_failure=bit(6), unit_mode=v >> 7 & 7, gain_scheduling=bit(10), homing=bit(11),
         program_running=bit(12), current_limit=bit(13), motion_status=v >> 14 & 3, recorder=v >> 16 & 3,
         halls=v >> 24 & 7, cpu_fault=bit(27), stopped_by_limit=bit(28), program_error=bit(29))
+
+
+SR_CHECKS = MappingProxyType({
+    "servo": "MF for the detail, then the supply voltage, motor phases or cooling it names",
+    "motor_failure": "MF (why the motor was switched off)",
+    "cpu_fault": "power cycle the drive; if it repeats, the firmware (0x100A)",
+    "program_error": "the user program (EC, CD)",
+    "stopped_by_limit": "IP for the active switch, and VL[3]/VH[3] against the target",
+})
+
+
+def sr_problems(value: int) -> list[Fault]:
+    """Only the SR facts that need attention, each with what to check (empty when SR is healthy)."""
+    sr = decode_sr(value)
+    found: list[Fault] = []
+    if sr.problem or sr.servo_status:
+        text = f"drive problem: {_servo_text(sr.servo_status)}" if sr.servo_status else "drive problem flag set"
+        found.append(Fault(sr.raw & 0xF, text, SR_CHECKS["servo"]))
+    for flag, bit, key, text in ((sr.motor_failure, 6, "motor_failure", "motor failure latched"),
+                                 (sr.cpu_fault, 27, "cpu_fault", "CPU fault: stack overflow or CPU exception"),
+                                 (sr.program_error, 29, "program_error", "error in user program"),
+                                 (sr.stopped_by_limit, 28, "stopped_by_limit",
+                                  "stopped by a limit switch, stop switch or VL[3]/VH[3]")):
+        if flag:
+            found.append(Fault(1 << bit, text, SR_CHECKS[key]))
+    return found
 
 
 def describe_sr(value: int) -> list[str]:
@@ -179,8 +244,8 @@ MF_BITS: Mapping[int, Fault] = MappingProxyType({f.code: f for f in (
     Fault(0x00000800, "heartbeat failure, motor shut down", _CHECK_HEARTBEAT),
     Fault(0x00010000, "failed to find electrical zero", "CA[] commutation settings and the load"),
     Fault(0x00020000, "speed limit exceeded (VX outside LL[2]..HL[2])", _CHECK_SPEED_LIMIT),
-    Fault(0x00040000, "stack overflow (fatal; power cycle)"),
-    Fault(0x00080000, "CPU exception (fatal; power cycle)"),
+    Fault(0x00040000, "stack overflow (fatal; power cycle)", "the user program's depth, then the firmware"),
+    Fault(0x00080000, "CPU exception (fatal; power cycle)", "the firmware version (0x100A); report it to Elmo"),
     Fault(0x00200000, "motor stuck", "CL[2]/CL[3] and the mechanics"),
     Fault(0x00400000, "position limit exceeded (LL[3]/HL[3])", _CHECK_POS_LIMIT),
     Fault(0x20000000, "cannot start motor", "EC and CD"),
@@ -241,12 +306,12 @@ EMCY_CODES: Mapping[int, EmcyCode] = MappingProxyType(dict((
     _emcy(0x0000, "error reset / no error"),
     # 0x2F21 events
     _emcy(0x8110, "CAN message lost (corrupted or overrun)", "bus load: keep one RPDO2 in flight per drive"),
-    _emcy(0x8200, "protocol error (unrecognised NMT request)"),
+    _emcy(0x8200, "protocol error (unrecognised NMT request)", "the NMT frames the host sends (0x000)"),
     _emcy(0x8210, "access to an unconfigured RPDO", "the PDO mapping"),
     _emcy(0x8130, "heartbeat event", _CHECK_HEARTBEAT),
-    _emcy(0x6180, "fatal CPU error: stack overflow (power cycle)"),
-    _emcy(0x6200, "user program aborted by an error"),
-    _emcy(0xFF01, "user program emergency (EMCY())"),
+    _emcy(0x6180, "fatal CPU error: stack overflow (power cycle)", "the user program's depth, then the firmware"),
+    _emcy(0x6200, "user program aborted by an error", "the user program (EC, CD)"),
+    _emcy(0xFF01, "user program emergency (EMCY())", "the user program's EMCY() call and its argument"),
     _emcy(0x6300, "RPDO-mapped object returned an interpretation error / motion failed",
           "the Elmo error code and the object in field 1"),
     _emcy(0xFF02, "DS402 interpolated-position underflow", "the host's set-point rate"),
@@ -268,28 +333,28 @@ EMCY_CODES: Mapping[int, EmcyCode] = MappingProxyType(dict((
     _emcy(0xFF10, "cannot start motor", "EC and CD"),
     # single-source / Gold-line
     _emcy(0x3130, "AC fail", "the mains supply", single=True),
-    _emcy(0x5281, "timing error", single=True),
+    _emcy(0x5281, "timing error", "the sampling / PWM settings and the firmware", single=True),
     _emcy(0x5400, "cannot start motor", "EC and CD", single=True),
-    _emcy(0x6181, "CPU exception (power cycle)", single=True),
+    _emcy(0x6181, "CPU exception (power cycle)", "the firmware version (0x100A)", single=True),
     _emcy(0x6320, "inconsistent database", "SR and CD", single=True),
     _emcy(0x7380, "feedback loss", "the encoder and Hall wiring", single=True),
     _emcy(0x7382, "commutation failed", "CA[] commutation settings", single=True),
     _emcy(0x8140, "recovered from bus-off", "CAN wiring and termination", single=True),
     _emcy(0x8380, "cannot find electrical zero", "CA[] commutation settings and the load", single=True),
-    _emcy(0x8381, "cannot tune current offsets", single=True),
+    _emcy(0x8381, "cannot tune current offsets", "the motor phases and the current sensors", single=True),
     _emcy(0x5442, "additional abort input active", "IP and IL[n]", single=True),
     _emcy(0xFF20, "safe torque off (STO) active", "the STO / safety circuit", single=True),
-    _emcy(0xFF40, "gantry slave disabled", single=True),
+    _emcy(0xFF40, "gantry slave disabled", "the gantry partner drive", single=True),
 )))
 
 EMCY_PVT = 0xFF00
 PVT_CODES: Mapping[int, EmcyCode] = MappingProxyType(dict((
     _emcy(0x56, "PVT queue low", "the host's PVT feed rate"),
-    _emcy(0x5B, "PVT bad head pointer"),
+    _emcy(0x5B, "PVT bad head pointer", "the PVT write pointer the host sends"),
     _emcy(0x5C, "PVT: PDO 0x3xx not mapped", "the PDO mapping"),
     _emcy(0x34, "PVT queue full", "the host's PVT feed rate"),
-    _emcy(0x07, "PVT bad mode initialisation data"),
-    _emcy(0x08, "PVT motion terminated"),
+    _emcy(0x07, "PVT bad mode initialisation data", "the PVT set-up (MP[] parameters)"),
+    _emcy(0x08, "PVT motion terminated", "MF and EC for why the motion stopped"),
     _emcy(0x09, "PVT CAN message lost", "bus load"),
     _emcy(0xA6, "PVT position out of modulo range", "XM[1]/XM[2]"),
 )))

@@ -12,6 +12,7 @@ Nothing here prints; the CLI renders :class:`ScanReport`.
 
 from __future__ import annotations
 
+import logging
 import statistics
 import struct
 import threading
@@ -30,7 +31,7 @@ UPLOAD_DEVICE_TYPE = bytes([0x40, 0x00, 0x10, 0x00, 0, 0, 0, 0])
 SDO_ABORT = 0x80
 ELMO_VENDOR_ID = 0x9A
 VENDORS = {ELMO_VENDOR_ID: "Elmo"}
-NMT_STATES = {0x00: "boot-up", 0x04: "stopped", 0x05: "operational", 0x7F: "pre-operational"}
+NMT_STATES = {0x00: "boot-up", 0x04: "stopped", 0x05: "operational", 0x7F: "pre-op"}
 
 EXPECTED = "expected"
 MISSING = "missing"
@@ -208,9 +209,11 @@ class BusProber:
     def _probe(self) -> None:
         total = len(NODE_IDS)
         for i, node in enumerate(NODE_IDS, start=1):
-            self.network.send_message(SDO_RX + node, UPLOAD_DEVICE_TYPE)
+            # stamped before sending: the answer may arrive inside send_message (a fast node, a
+            # synchronous test network), and a pacing wait only makes the node look slower
             with self._lock:
                 self.heard[node].sent_at = self.clock()
+            self.network.send_message(SDO_RX + node, UPLOAD_DEVICE_TYPE)
             if i % 8 == 0 or i == total:
                 self.progress("probing", i, total)
         last_send = self.clock()
@@ -265,6 +268,10 @@ def decode_device_type(frame: bytes) -> tuple[int | None, str | None]:
 
 
 # -- identity -------------------------------------------------------------------------------------
+
+# canopen logs every SDO it aborts at ERROR; this tool reports each failed read itself (as a note
+# or an error naming the drive), so without a handler Python's last resort would print it twice.
+logging.getLogger("canopen.sdo.client").addHandler(logging.NullHandler())
 
 def sdo_upload(network: Any, node: int, index: int, sub: int = 0) -> bytes:
     """One SDO upload (expedited or segmented) through canopen's client, without an object dictionary."""
@@ -338,10 +345,14 @@ def scan_bus(cfg: ArmConfig, bus: str, network: Any, settings: ScanSettings = Sc
     threshold = max(settings.slow_factor * median, settings.slow_floor_s) if median is not None else None
 
     present = sorted(n for n, h in heard.items() if h.answers or h.nmt)
+    # Two answers to one request mean two nodes share the id. (Two boot-ups do not: a node that
+    # powered up just before a --reset boots twice.)
+    shared = {n for n in present if len(heard[n].answers) > 1}
     identity: dict[int, tuple[int | None, str | None, list[str]]] = {}
-    for i, node in enumerate(n for n in present if heard[n].answers):
+    readable = [n for n in present if heard[n].answers and n not in shared]
+    for i, node in enumerate(readable):
         if progress:
-            progress("reading identity", i, len(answer_times))
+            progress("reading identity", i, len(readable))
         identity[node] = _read_identity(network, node)
 
     findings = []
@@ -363,9 +374,10 @@ def scan_bus(cfg: ArmConfig, bus: str, network: Any, settings: ScanSettings = Sc
         answer = answer_times.get(node)
         if not h.answers and not h.nmt:
             verdict = MISSING
-        elif len(distinct) > 1:
+        elif node in shared:
             verdict = DUPLICATE
-            notes.append(f"{len(distinct)} different answers to one request: two nodes share id {node}")
+            notes.append(f"{len(h.answers)} nodes answer on id {node}; "
+                         "identity not read (the answers would mix)")
         elif drive is None:
             verdict = UNEXPECTED
         elif not h.answers:

@@ -7,6 +7,7 @@ the buses and, for the in-process simulator, saves the simulated drives' flash.
 from __future__ import annotations
 
 import difflib
+import functools
 import uuid
 from contextlib import contextmanager
 from dataclasses import dataclass
@@ -85,7 +86,9 @@ class ArmSession:
             if sim_factory is None:
                 from sherpa_cli.sim.arm import SimArm
 
-                sim_factory = SimArm.for_session
+                from sherpa_cli.bus.virtual import open_can_bus
+
+                sim_factory = functools.partial(SimArm.for_session, bus_factory=open_can_bus)
             arm = sim_factory(cfg, {name: t.channel for name, t in targets.items()})
             arm.start()
         try:

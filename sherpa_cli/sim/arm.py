@@ -48,7 +48,7 @@ def settings_for(cfg: ArmConfig, drive: str, **overrides: Any) -> SimSettings:
         base.update(reply_latency_s=faults.reply_latency, sdo_latency_s=faults.sdo_latency,
                     drop_probability=faults.drop_probability,
                     die_at=faults.die_at, reboot_at=faults.reboot_at, heartbeat_ms=faults.heartbeat_ms,
-                    seed=faults.seed)
+                    seed=faults.seed, limit_trip_at=faults.limit_trip_at)
     base.update(overrides)
     return SimSettings(**base)
 
@@ -148,10 +148,12 @@ class SimArm:
     def __init__(self, cfg: ArmConfig, endpoints: Mapping[str, Mapping[str, Any]], *,
                  clock: Clock | None = None, flash: Mapping[str, sim_state.DriveFlash] | None = None,
                  settings: Mapping[str, SimSettings] | None = None, persist: bool = False,
-                 tick_s: float = 0.002) -> None:
-        """``endpoints``: bus name -> keyword arguments for ``can.Bus`` (interface, channel)."""
+                 tick_s: float = 0.002, bus_factory: Callable[..., Any] | None = None) -> None:
+        """``endpoints``: bus name -> keyword arguments for ``can.Bus`` (interface, channel);
+        ``bus_factory`` opens them instead of ``can.Bus`` (the session's lean virtual bus)."""
         self.cfg = cfg
         self.endpoints = dict(endpoints)
+        self.bus_factory = bus_factory
         self.clock = clock or RealClock()
         self.persist = persist
         self.tick_s = tick_s
@@ -167,6 +169,13 @@ class SimArm:
                 speed_gain=cfg.sim[name].speed_gain if name in cfg.sim else 1.0,
                 on_step=lambda drive, name=name: self._mechanics.update(name))
         self._mechanics = _Mechanics(cfg, self.drives)
+        # `sim: extra_nodes:` -- devices the config does not name (a stray node, a duplicate id):
+        # on their bus like any drive, but outside the arm's mechanics and never saved.
+        self.extras: dict[str, tuple[str, SimDrive]] = {
+            f"extra-{e.bus}-{e.node}-{i}": (e.bus, SimDrive(
+                e.node, clock=self.clock, serial=0x7E000000 + i,
+                settings=SimSettings(vendor_id=e.vendor_id, device_name=e.device_name)))
+            for i, e in enumerate(cfg.sim_extra_nodes)}
         self.lock = threading.RLock()  # held by the pumps while they touch drives; tests take it too
         self._stop = threading.Event()
         self._threads: list[threading.Thread] = []
@@ -175,10 +184,11 @@ class SimArm:
         self.errors: list[BaseException] = []
 
     @classmethod
-    def for_session(cls, cfg: ArmConfig, channels: Mapping[str, str]) -> "SimArm":
+    def for_session(cls, cfg: ArmConfig, channels: Mapping[str, str], *,
+                    bus_factory: Callable[..., Any] | None = None) -> "SimArm":
         """The in-process arm of ``--sim``: virtual channels, flash kept in the state directory."""
         return cls(cfg, {bus: {"interface": "virtual", "channel": ch} for bus, ch in channels.items()},
-                   persist=True)
+                   persist=True, bus_factory=bus_factory)
 
     def drive_by_node(self, bus: str, node: int) -> SimDrive | None:
         for name, d in self.cfg.drives.items():
@@ -195,7 +205,7 @@ class SimArm:
 
         try:
             for bus_name, kwargs in self.endpoints.items():
-                self._buses[bus_name] = can.Bus(**kwargs)
+                self._buses[bus_name] = (self.bus_factory or can.Bus)(**kwargs)
         except BaseException:
             self._close_buses()
             raise
@@ -208,10 +218,19 @@ class SimArm:
                     send = lambda can_id, data, drive=drive: drive.send_later(can_id, data,
                                                                               drive.settings.sdo_latency_s)
                 self._sdo[name] = SdoServer(d.node, drive, send)
+        for name, (bus_name, drive) in self.extras.items():
+            if bus_name in self._buses:
+                self._sdo[name] = SdoServer(drive.node, drive, self._sender(self._buses[bus_name]))
+        powered = {bus_name: threading.Event() for bus_name in self._buses}
         for bus_name in self._buses:
-            t = threading.Thread(target=self._pump, args=(bus_name,), name=f"sim-{bus_name}", daemon=True)
+            t = threading.Thread(target=self._pump, args=(bus_name, powered[bus_name]), name=f"sim-{bus_name}",
+                                 daemon=True)
             self._threads.append(t)
             t.start()
+        # The arm is powered before anyone connects: its power-up boot-ups are on the bus before
+        # start() returns, so a tool opening the bus next never hears them by the luck of timing.
+        for event in powered.values():
+            event.wait(timeout=2.0)
         return self
 
     def stop(self) -> None:
@@ -252,11 +271,15 @@ class SimArm:
             bus.send(can.Message(arbitration_id=can_id, data=data, is_extended_id=False))
         return send
 
-    def _pump(self, bus_name: str) -> None:
+    def _pump(self, bus_name: str, powered: threading.Event | None = None) -> None:
         bus = self._buses[bus_name]
         send = self._sender(bus)
-        names = [n for n, d in self.cfg.drives.items() if d.bus == bus_name]
-        by_node = {self.cfg.drives[n].node: n for n in names}
+        on_bus = {n: self.drives[n] for n, d in self.cfg.drives.items() if d.bus == bus_name}
+        on_bus.update((n, drive) for n, (b, drive) in self.extras.items() if b == bus_name)
+        names = list(on_bus)
+        by_node: dict[int, list[str]] = {}
+        for n, drive in on_bus.items():
+            by_node.setdefault(drive.node, []).append(n)  # two entries: a duplicate node id
         next_tick = 0.0
         try:
             while not self._stop.is_set():
@@ -266,29 +289,31 @@ class SimArm:
                     # every drive advances at least once per tick_s (motion, heartbeats, latency)
                     touched: list[str] = []
                     if msg is not None and not msg.is_error_frame and not msg.is_extended_id:
-                        touched = self._dispatch(msg.arbitration_id, bytes(msg.data), names, by_node)
+                        touched = self._dispatch(msg.arbitration_id, bytes(msg.data), on_bus, by_node)
                     now = self.clock.now()
                     if now >= next_tick:
                         touched = names
                         next_tick = now + self.tick_s
                     for name in touched:
-                        drive = self.drives[name]
+                        drive = on_bus[name]
                         drive.tick()
                         for can_id, data in drive.pop_frames():
                             send(can_id, data)
+                if powered is not None and touched is names:
+                    powered.set()
         except BaseException as exc:  # a dead pump must be visible to tests and to `sim --serve`
             if not self._stop.is_set():
                 self.errors.append(exc)
 
-    def _dispatch(self, can_id: int, data: bytes, names: list[str], by_node: Mapping[int, str]) -> list[str]:
+    def _dispatch(self, can_id: int, data: bytes, on_bus: Mapping[str, SimDrive],
+                  by_node: Mapping[int, list[str]]) -> list[str]:
         """Hand a frame to the drive(s) it concerns; returns their names."""
         if can_id == NMT_ID or 0x700 <= can_id <= 0x77F:
-            targets = names  # NMT broadcast / host heartbeats: every drive decides for itself
+            targets = list(on_bus)  # NMT broadcast / host heartbeats: every drive decides for itself
         else:
-            name = by_node.get(can_id & 0x7F)
-            targets = [name] if name is not None else []
+            targets = by_node.get(can_id & 0x7F, [])
         for name in targets:
-            arrived = self.drives[name].receive(can_id, data)
+            arrived = on_bus[name].receive(can_id, data)
             if arrived and SDO_RX + 1 <= can_id <= SDO_RX + 0x7F:
                 self._sdo[name].receive(can_id, data)
         return targets

@@ -7,7 +7,7 @@ from __future__ import annotations
 from typing import TYPE_CHECKING
 
 from sherpa_cli.elmo.codec import decode_request, encode_error_reply, encode_reply
-from sherpa_cli.elmo.commands import COMMANDS
+from sherpa_cli.elmo.commands import COMMANDS, CommandSpec
 from sherpa_cli.errors import CodecError
 from sherpa_cli.sim.params import coerce, in_range, is_float
 
@@ -41,9 +41,7 @@ def handle(drive: SimDrive, data: bytes) -> bytes | None:
         return None
     letters, index = request.letters, request.index
     try:
-        spec = _spec(drive, letters, index)
-        key = f"{letters}[{index}]" if spec.is_array else letters
-        spec = spec.at(index)
+        key, spec = _resolve(drive, letters, index)
         if request.kind == "query":
             if spec.access == "x":
                 raise Refused(EC_SYNTAX)
@@ -65,6 +63,21 @@ def handle(drive: SimDrive, data: bytes) -> bytes | None:
     except Refused as refused:
         drive.last_error = refused.code
         return encode_error_reply(letters, index, refused.code)
+
+
+_RESOLVED: dict[tuple[str, int], tuple[str, CommandSpec]] = {}  # every frame asks; the table never changes
+
+
+def _resolve(drive: SimDrive, letters: str, index: int) -> tuple[str, CommandSpec]:
+    """The parameter key (``"LL[3]"``) and the spec at that index; raises Refused like the drive."""
+    resolved = _RESOLVED.get((letters, index))
+    if resolved is None:
+        spec = _spec(drive, letters, index)
+        resolved = (f"{letters}[{index}]" if spec.is_array else letters, spec.at(index))
+        _RESOLVED[(letters, index)] = resolved  # bounded: only table commands at valid indexes get here
+    elif letters == "IL" and index > drive.settings.inputs:
+        raise Refused(EC_BAD_INDEX)  # the one check that depends on the drive
+    return resolved
 
 
 def _spec(drive: SimDrive, letters: str, index: int):

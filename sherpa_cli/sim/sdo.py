@@ -19,6 +19,7 @@ from sherpa_cli.sim.od import ODError
 _OBJECTS: list[tuple[int, int | None, str, int, str]] = [
     (0x1000, None, "Device type", od.UNSIGNED32, "ro"),
     (0x1001, None, "Error register", od.UNSIGNED8, "ro"),
+    (0x1003, 1, "Standard error field", od.UNSIGNED32, "ro"),
     (0x1008, None, "Manufacturer device name", od.VISIBLE_STRING, "const"),
     (0x1009, None, "Manufacturer hardware version", od.VISIBLE_STRING, "const"),
     (0x100A, None, "Manufacturer software version", od.VISIBLE_STRING, "const"),
@@ -31,7 +32,7 @@ _OBJECTS: list[tuple[int, int | None, str, int, str]] = [
     (0x1029, 1, "Communication error behaviour", od.UNSIGNED8, "rw"),
     (0x6007, None, "Abort connection option code", od.INTEGER16, "rw"),
 ]
-_RECORD_NAMES = {0x1016: "Consumer heartbeat time", 0x1018: "Identity object", 0x1029: "Error behaviour"}
+_RECORD_NAMES = {0x1003: "Pre-defined error field", 0x1016: "Consumer heartbeat time", 0x1018: "Identity object", 0x1029: "Error behaviour"}
 
 
 def build_object_dictionary() -> "od.ObjectDictionary":
@@ -102,8 +103,8 @@ class SdoServer:
 
     def _read(self, index: int, subindex: int, od: Any) -> Any:
         if subindex == 0 and isinstance(od, canopen.objectdictionary.ODVariable) and od.parent is not None \
-                and not isinstance(od.parent, canopen.objectdictionary.ObjectDictionary):
-            return od.default
+                and not isinstance(od.parent, canopen.objectdictionary.ObjectDictionary) and index != 0x1003:
+            return od.default  # 0x1003:0 counts the stored errors: the drive's, not a constant
         try:
             return self.drive.od_read(index, subindex)
         except ODError as exc:

@@ -56,6 +56,12 @@ class SimSettings:
     # at reboot_at it resets once as after NMT reset node (brown-out, watchdog).
     die_at: float | None = None
     reboot_at: float | None = None
+    # Fault injection: (parameter key, amount) pairs; a set of that key is echoed as sent but
+    # stored off by the amount, as a drive that garbles a value would. Only a read-back shows it.
+    store_skew: tuple[tuple[str, float], ...] = ()
+    # At limit_trip_at the drive trips as if its feedback had left LL[3]..HL[3] (a bumped joint,
+    # a noisy encoder): MO=0, MF 0x400000, EMCY 0x8680 -- a fault a monitor must show decoded.
+    limit_trip_at: float | None = None
 
     def __post_init__(self) -> None:
         for name in ("mo_settle_s", "sv_blackout_s", "reply_latency_s", "sdo_latency_s"):

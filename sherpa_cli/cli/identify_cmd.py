@@ -1,0 +1,116 @@
+"""`sherpa identify [TARGET ...]`: identity, state and position of each drive, and what does not fit."""
+
+from __future__ import annotations
+
+from typing import List, Optional
+
+import typer
+
+from sherpa_cli.cli.context import state
+from sherpa_cli.cli.output import fmt_value
+
+VENDORS = {0x9A: "Elmo"}
+
+
+def identify(
+    ctx: typer.Context,
+    targets: Optional[List[str]] = typer.Argument(
+        None, metavar="[TARGET]...", help="Drive, joint or pair names, or BUS:NODE; default: every configured drive."),
+) -> None:
+    """Read who each drive is (SDO 0x1000, 0x1008, 0x1009, 0x100A, 0x1018) and its state (MO, UM, SR, MF, PX).
+
+    Flags a drive whose device name does not match the model the config names, and drives
+    whose firmware or product code differ from the other drives of the same model.
+    Buses are read at the same time. Exit 1 when something is flagged, 3 when a drive
+    does not answer (the others are still shown).
+
+    \b
+    Examples:
+      sherpa identify
+      sherpa identify shoulder_diff elbow_1a --json
+    """
+    from sherpa_cli.errors import ExitCode
+    from sherpa_cli.ops.identify import identify as run_identify
+    from sherpa_cli.ops.params_read import resolve_drive_names
+
+    st = state(ctx)
+    cfg = st.load_config()
+    drives = resolve_drive_names(cfg, targets)
+    buses = sorted({cfg.drives[d].bus for d in drives})
+    with st.session(buses=buses) as session:
+        report = run_identify(session, drives)
+    _render(st, report)
+    if report.errors:
+        first = report.errors[0]
+        if len(report.errors) > 1 and hasattr(first, "hint"):
+            others = ", ".join(d.drive for d in report.drives if d.error)
+            first.hint = f"drives that did not answer: {others}"
+        raise first
+    if report.findings:
+        raise typer.Exit(int(ExitCode.PROBLEM))
+
+
+def _hex(value, width: int = 8) -> str:
+    return "-" if value is None else f"0x{value & 0xFFFFFFFF:0{width}X}"
+
+
+def _render(st, report) -> None:
+    from sherpa_cli.elmo import faults
+
+    if st.json_mode:
+        st.out.json(report.as_json())
+        return
+    for d in report.drives:
+        title = f"{d.drive} ({d.bus}:{d.node})" + (f" - config model {d.model}" if d.model else "")
+        if d.error:
+            st.out.table(title, ["field", "value", "meaning"], [["error", "not read", d.error]])
+            continue
+        ident = d.identity
+        notes = d.identity_notes
+
+        def text(key: str, shown: str, meaning: str = "") -> list[str]:
+            return [key.replace("_", " "), shown if ident.get(key) is not None else "-",
+                    notes.get(key, meaning)]
+
+        vendor = ident.get("vendor_id")
+        rows = [
+            text("device_name", str(ident.get("device_name"))),
+            text("software_version", str(ident.get("software_version")), "0x100A, firmware"),
+            text("hardware_version", str(ident.get("hardware_version")), "0x1009"),
+            text("vendor_id", _hex(vendor), VENDORS.get(vendor, "") if vendor is not None else ""),
+            text("product_code", _hex(ident.get("product_code"))),
+            text("revision", _hex(ident.get("revision"))),
+            text("serial", _hex(ident.get("serial"))),
+            text("device_type", _hex(ident.get("device_type")), "0x1000"),
+        ]
+        s = d.state
+        mo = s.get("MO")
+        rows.append(["MO", fmt_value(mo), "motor on" if mo == 1 else "motor off"])
+        um = s.get("UM")
+        rows.append(["UM", fmt_value(um), faults.UNIT_MODES.get(um, "unknown unit mode") if um is not None else ""])
+        sr = s.get("SR")
+        rows.append(["SR", _hex(sr), "; ".join(faults.describe_sr(sr)) if isinstance(sr, int) else ""])
+        mf = s.get("MF")
+        rows.append(["MF", _hex(mf), "; ".join(faults.describe_mf(mf) or ["no motor failure"])
+                     if isinstance(mf, int) else ""])
+        px = s.get("PX")
+        where = ""
+        pair = st.load_config().pair_of_drive(d.drive)
+        if d.joint is None and pair is not None:
+            where = f"motor of pair {pair.name}; name both drives to see {pair.sigma} and {pair.delta}"
+        if d.joint is not None:
+            where = f"{d.joint.joint} at {d.joint.counts} counts = {d.joint.rad:.4f} rad"
+            if d.joint.formula:
+                where += f" ({d.joint.formula})"
+        rows.append(["PX", f"{fmt_value(px)} counts", where])
+        st.out.table(title, ["field", "value", "meaning"], rows)
+    findings = report.findings
+    failed = [d.drive for d in report.drives if d.error]
+    read = len(report.drives) - len(failed)
+    for drive, finding in findings:
+        st.out.line(f"{drive}: {finding}")
+    summary = f"{read} of {len(report.drives)} drive(s) identified"
+    summary += f", {len(findings)} finding(s)" if findings else ", no mismatch in model or firmware"
+    if failed:
+        summary += f"; not answering: {', '.join(failed)}"
+    st.out.line(summary)

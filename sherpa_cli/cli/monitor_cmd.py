@@ -1,0 +1,165 @@
+"""`sherpa monitor [TARGET ...]`: a live view of the drives (or one snapshot with --once)."""
+
+from __future__ import annotations
+
+import sys
+import time
+from typing import Callable, List, Optional
+
+import typer
+
+from sherpa_cli.cli.context import state
+from sherpa_cli.errors import ExitCode, UsageError
+
+# Seconds between polls in the live view; the CLI's sleep goes through here so tests can stop it.
+sleep: Callable[[float], None] = time.sleep
+
+
+def monitor(
+    ctx: typer.Context,
+    targets: Optional[List[str]] = typer.Argument(None, metavar="[TARGET ...]",
+                                                  help="Drive, joint, pair or BUS:NODE. Default: every drive."),
+    once: bool = typer.Option(False, "--once", help="Print one snapshot and exit (no ages or times in it)."),
+    interval: float = typer.Option(0.5, "--interval", metavar="S", help="Seconds between polls in the live view."),
+    heartbeat: Optional[int] = typer.Option(
+        None, "--heartbeat", metavar="MS",
+        help="Set the drives' producer heartbeat (0x1017) to MS while monitoring (RAM only, the old value is "
+        "written back at exit). Default: only listen to the heartbeat the drives already send."),
+) -> None:
+    """Show every drive: NMT state and heartbeat, MO, UM, position in joint units, SR and MF decoded,
+    and the last EMCY with its Elmo text.
+
+    Each drive is NMT-started (the binary interpreter answers only when Operational) and then only
+    queried: MO, UM, PX, SR, MF, plus SDO reads of 0x1017 and 0x1003:1 (the last stored error).
+    Nothing else is written unless --heartbeat is given. Drives on different buses are polled at
+    the same time; a drive that stops answering shows "no answer", never its old values.
+    Ctrl-C ends the live view with exit code 0. --once exits 1 when a drive does not answer or
+    has a motor failure latched (MF not 0).
+
+    \b
+    Examples:
+      sherpa monitor
+      sherpa monitor shoulder_diff elbow_pitch --interval 0.2
+      sherpa --json monitor --once
+    """
+    from sherpa_cli.ops.monitor import Monitor, resolve_targets
+
+    st = state(ctx)
+    if st.json_mode and not once:
+        raise UsageError("--json needs --once: the live view is for a terminal", hint="sherpa --json monitor --once")
+    if not interval > 0:
+        raise UsageError(f"--interval {interval}: expected a number of seconds > 0")
+    cfg = st.load_config()
+    refs = resolve_targets(cfg, targets or [])
+    buses = list(dict.fromkeys(ref.bus for ref in refs))
+    with st.session(buses=buses) as session, Monitor(session, refs, heartbeat_ms=heartbeat) as mon:
+        if once:
+            mon.poll()
+            mon.wait_for_heartbeats()
+            rows = mon.snapshot()
+            _render_once(st, rows)
+            if any(not r.answering or r.mf for r in rows):
+                raise typer.Exit(int(ExitCode.PROBLEM))  # a silent drive or a latched motor failure
+            return
+        try:
+            _live(st, mon, interval)
+        except KeyboardInterrupt:
+            pass  # Ctrl-C is how a live view ends: exit 0 after the monitor restores 0x1017
+
+
+def _live(st, mon, interval: float) -> None:
+    if not sys.stdout.isatty():
+        # a log, not a screen: one full snapshot per poll
+        while True:
+            mon.poll()
+            _print(st, *_renderables(mon.snapshot(), mon.cfg, ages=True))
+            st.out.line()
+            sleep(interval)
+    from rich.live import Live
+
+    mon.poll()
+    with Live(_screen(*_renderables(mon.snapshot(), mon.cfg, ages=True)), console=st.out.console,
+              auto_refresh=False) as live:
+        while True:
+            sleep(interval)
+            mon.poll()
+            live.update(_screen(*_renderables(mon.snapshot(), mon.cfg, ages=True)), refresh=True)
+
+
+def _render_once(st, rows) -> None:
+    if st.json_mode:
+        st.out.json({"drives": [r.as_json(ages=False) for r in rows]})
+        return
+    _print(st, *_renderables(rows, st.load_config(), ages=False))
+
+
+def _print(st, tables: list, notes: list[str]) -> None:
+    for table in tables:
+        st.out.result(table)
+    for note in notes:
+        st.out.line(note)
+
+
+def _screen(tables: list, notes: list[str]):
+    from rich.console import Group
+    from rich.text import Text
+
+    return Group(*tables, *(Text(note) for note in notes))
+
+
+def _age(seconds: float | None) -> str:
+    return "-" if seconds is None else f"{seconds:.1f} s ago"
+
+
+def _heartbeat(r, ages: bool) -> str:
+    if r.heartbeat_ms is None:
+        return "-"  # 0x1017 could not be read
+    if not r.heartbeat_ms:
+        return "off"
+    if r.heartbeat_age is None:
+        return "silent"
+    return _age(r.heartbeat_age) if ages else f"{r.heartbeat_ms} ms"
+
+
+def _position(r, cfg) -> str:
+    """Radians of the drive's joint; a pair's drive a shows the Σ joint, drive b the Δ joint."""
+    if r.position_rad is None:
+        return "-"
+    pair = cfg.pair_of_drive(r.drive)
+    mark = "" if pair is None else ("Σ " if r.joint == pair.sigma else "Δ ")
+    return f"{mark}{r.position_rad + 0.0:.4f}"  # + 0.0: no "-0.0000"
+
+
+def _renderables(rows, cfg, *, ages: bool) -> tuple[list, list[str]]:
+    """One table per bus, and one note per thing that needs a look (faults, EMCY, silence)."""
+    from sherpa_cli.cli.output import make_table
+
+    out: list = []
+    for bus in dict.fromkeys(r.bus for r in rows):
+        table_rows = []
+        for r in (r for r in rows if r.bus == bus):
+            table_rows.append([
+                r.node, r.drive, r.nmt, _heartbeat(r, ages),
+                "-" if r.mo is None else ("on" if r.mo else "off"), "-" if r.um is None else r.um,
+                _position(r, cfg) if r.answering else "-",
+                "-" if r.sr is None else ("check" if r.sr_problems else "ok"),
+                "-" if r.mf is None else (f"0x{r.mf & 0xFFFFFFFF:08X}" if r.mf else "ok"),
+                f"0x{r.emcy.code:04X}" if r.emcy is not None else "-"])
+        out.append(make_table(f"bus {bus}", ["node", "drive", "NMT", "heartbeat", "MO", "UM", "rad",
+                                             "SR", "MF", "EMCY"], table_rows, right=(0, 6)))
+    notes = []
+    for r in rows:
+        who = f"{r.drive} ({r.address})"
+        if not r.answering:
+            silent = f" for {r.silent_for:.1f} s" if ages and r.silent_for is not None else ""
+            why = r.problem if r.problem and not r.problem.startswith("no answer") else None
+            what = r.problem if r.problem and why is None else "no answer"
+            notes.append(f"{who}: {what}{silent}" + (f" ({why})" if why else ""))
+        if r.mf:
+            notes.extend(f"{who}: MF: {f.line()}" for f in r.mf_faults)
+        notes.extend(f"{who}: SR: {f.line()}" for f in r.sr_problems)
+        if r.emcy is not None:
+            when = "raised before the monitor started" if r.emcy_before_start else (
+                _age(r.emcy_age) if ages else "heard while monitoring")
+            notes.append(f"{who}: last EMCY ({when}): {r.emcy.text}")
+    return out, notes

@@ -1,0 +1,172 @@
+"""`sherpa dump-params` and the `sherpa params` group (`diff`; `restore` joins it later).
+
+Each subcommand of the group is a plain function registered on ``app`` below, so another
+module can add one with ``params_cmd.app.command("restore")(restore)``.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import List, Optional
+
+import typer
+
+from sherpa_cli.cli.context import state
+
+app = typer.Typer(no_args_is_help=True, help="Drive parameter sets: compare dumps, the drives and the config.")
+
+TARGETS_HELP = "Drive, joint or pair names, or BUS:NODE; default: every configured drive."
+
+
+def dump_params(
+    ctx: typer.Context,
+    targets: Optional[List[str]] = typer.Argument(None, metavar="[TARGET]...", help=TARGETS_HELP),
+    output: Optional[Path] = typer.Option(None, "--output", "-o", metavar="FILE",
+                                          help="Write the YAML dump to FILE (atomically) instead of stdout."),
+) -> None:
+    """Read the parameters commissioning touches, plus identity, into YAML that diffs cleanly in git.
+
+    Per drive: UM, every parameter Appendix C programs, IL[n] for each input of the model,
+    CA[18], and the SDO identity. A header block holds tool version, config file, its
+    SHA-256 and the date (UTC; $SHERPA_DUMP_DATE overrides it); two dumps of unchanged
+    drives differ only there. If any drive fails, nothing is written (exit 3).
+
+    \b
+    Examples:
+      sherpa dump-params -o arm-2024-05-02.yaml
+      sherpa dump-params shoulder_diff
+    """
+    from sherpa_cli.ops.params_file import dump_to_text, sorted_params, write_dump
+    from sherpa_cli.ops.params_read import dump_params as read_dump_params
+    from sherpa_cli.ops.params_read import resolve_drive_names
+
+    st = state(ctx)
+    cfg = st.load_config()
+    drives = resolve_drive_names(cfg, targets)
+    if output is not None and output.is_dir():
+        from sherpa_cli.errors import UsageError
+
+        raise UsageError(f"--output {output}: is a directory, expected a file name")
+    buses = sorted({cfg.drives[d].bus for d in drives})
+    with st.session(buses=buses) as session:
+        dump = read_dump_params(session, drives)
+    for d in dump.drives.values():
+        for key, why in d.unreadable.items():
+            st.out.warn(f"{d.name}: {key} unreadable ({why})")
+    if output is not None:
+        write_dump(output, dump)
+    if st.json_mode:
+        st.out.json({"file": str(output) if output is not None else None, "meta": dump.meta,
+                     "drives": {name: {"bus": d.bus, "node": d.node, "identity": d.identity,
+                                       "params": sorted_params(d.params), "unreadable": sorted_params(d.unreadable)}
+                                for name, d in dump.drives.items()}})
+    elif output is not None:
+        st.out.line(f"wrote {len(dump.drives)} drive(s) to {output}")
+    else:
+        st.out.raw(dump_to_text(dump))
+
+
+@app.command("diff")
+def diff(
+    ctx: typer.Context,
+    a: str = typer.Argument(..., metavar="A", help="A dump file, 'live' (read the drives now) or 'config'."),
+    b: str = typer.Argument("live", metavar="[B]", help="The same choices; default: live."),
+    targets: Optional[List[str]] = typer.Option(None, "--target", "-t", metavar="TARGET",
+                                                help="Only these drives (drive, joint, pair or BUS:NODE; repeat)."),
+    only_differences: bool = typer.Option(False, "--only-differences", help="Show only the rows that differ."),
+) -> None:
+    """Compare two parameter sets per drive and parameter; exit 1 when they differ.
+
+    'config' is what `sherpa limits show` derives and covers only those parameters (UM,
+    CA[18] and IL[n] without a switch are not compared against it). Floats compare within
+    float32 precision. Drives default to those named in the dump file(s), else all.
+
+    \b
+    Examples:
+      sherpa params diff config              # after commissioning: do the drives hold the config?
+      sherpa params diff arm-a.yaml arm-b.yaml
+    """
+    from sherpa_cli.errors import ExitCode
+    from sherpa_cli.ops import params_diff as pd
+    from sherpa_cli.ops.params_read import resolve_drive_names
+
+    st = state(ctx)
+    cfg = st.load_config()
+    pd.check_pair(a, b)
+    warnings: list[str] = []
+    files: dict[str, pd.Side] = {}
+    for spec in (a, b):
+        if pd.side_kind(spec) == "file" and spec not in files:
+            files[spec], w = pd.file_side(Path(spec), cfg)
+            warnings.extend(w)
+    if targets:
+        drives = resolve_drive_names(cfg, targets)
+    elif files:
+        drives = pd.drives_of(list(files.values()), cfg, None)
+    else:
+        drives = list(cfg.drives)
+    sides: dict[str, pd.Side] = dict(files)
+    if pd.CONFIG in (a, b):
+        sides[pd.CONFIG], w = pd.config_side(cfg, drives)
+        warnings.extend(w)
+    if pd.LIVE in (a, b):
+        from sherpa_cli.ops.params_file import ParamDump
+        from sherpa_cli.ops.params_read import read_live
+
+        with st.session(buses=sorted({cfg.drives[d].bus for d in drives})) as session:
+            live = read_live(session, drives)
+        sides[pd.LIVE] = pd.dump_side(pd.LIVE, ParamDump(meta={}, drives=live), kind="live")
+    report = pd.diff_sides(sides[a], sides[b], drives, warnings)
+    for w in report.warnings:
+        st.out.warn(w)
+    if st.json_mode:
+        st.out.json(report.as_json())
+    else:
+        _render(st, report, only_differences)
+    if report.differences:
+        raise typer.Exit(int(ExitCode.PROBLEM))
+
+
+def _fmt(value, note: str | None) -> str:
+    if note is not None:
+        return note
+    if value is None:
+        return "-"
+    if isinstance(value, float):
+        # 7 digits: float32 noise (2.2999999523) reads as 2.3, a real float32 step still shows
+        text = f"{value:.7g}"
+        return text if any(c in text for c in ".en") else text + ".0"
+    return str(value)
+
+
+MARKS = {"same": "", "differs": "differs", "only in A": "only in A", "only in B": "only in B"}
+
+
+def _render(st, report, only_differences: bool) -> None:
+    a, b = report.a.label, report.b.label
+    # labels in a legend, not in the column headers: a long file path must not widen every table
+    st.out.line(f"A: {a}")
+    st.out.line(f"B: {b}")
+    for d in report.drives:
+        if d.only_in:
+            side = a if d.only_in == "A" else b
+            st.out.line(f"{d.drive} ({d.bus}:{d.node}): only in {d.only_in} ({side})")
+            continue
+        rows = [[r.key, _fmt(r.a, r.a_note), _fmt(r.b, r.b_note), MARKS[r.status]] for r in d.rows
+                if not only_differences or r.status != "same"]
+        if only_differences and not rows:
+            continue
+        n = d.differences
+        title = f"{d.drive} ({d.bus}:{d.node}) - " + (f"{n} difference(s)" if n else "same")
+        st.out.table(title, ["param", "A", "B", ""], rows, right=(1, 2))
+    n, count = report.differences, len(report.drives)
+    if n:
+        st.out.line(f"{n} difference(s) in {report.drives_differing} of {count} drive(s)")
+    else:
+        st.out.line(f"no differences in {count} drive(s)")
+
+
+# `params restore` lives with program-limits: both run the same plan / apply / verify / save engine.
+from sherpa_cli.cli.program_cmd import params_restore  # noqa: E402
+
+app.command("restore")(params_restore)

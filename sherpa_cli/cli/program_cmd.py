@@ -1,0 +1,300 @@
+"""`sherpa program-limits` (and the shared plan/apply/save front end of `sherpa params restore`)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any, Callable, List, Optional, Sequence
+
+import typer
+
+from sherpa_cli.cli.context import state
+from sherpa_cli.cli.output import fmt_value
+
+LEDGER_HELP = "$XDG_STATE_HOME/sherpa-cli/save-ledger.json (default ~/.local/state/sherpa-cli/save-ledger.json)"
+
+
+def program_limits(
+    ctx: typer.Context,
+    names: Optional[List[str]] = typer.Argument(None, metavar="[JOINT|PAIR|DRIVE]...",
+                                                help="What to program; default: every drive."),
+    apply: bool = typer.Option(False, "--apply", help="Write the changes; without it nothing is written "
+                               "(not one set, not one SDO download)."),
+    save: bool = typer.Option(False, "--save", help="With --apply: SV once per drive that changed, only "
+                              "after every write of it was read back, then read everything back again."),
+    yes: bool = typer.Option(False, "--yes", "-y", help="Do not ask before saving (needed when stdin is "
+                             "not a terminal: without it --save refuses before writing anything)."),
+    motor_off: bool = typer.Option(False, "--motor-off", help="Switch off (MO=0) a drive whose motor is on "
+                                   "instead of refusing it. Limits, UM and IL need the motor off."),
+) -> None:
+    """Program the Appendix C limits (as `limits show` derives them) into the drives.
+
+    Reads the drives first and shows, per drive and parameter, the value now, the target and
+    whether it changes. Without --apply that is all (a dry run). With --apply only the changes
+    are written, in an order that keeps LL <= VL < VH <= HL and PL[1] >= CL[1] true at every
+    step, and each is read back at once; a mismatch or error stops that drive (exit 1).
+    Drives run concurrently. Ctrl-C stops each drive between two writes; no drive is saved
+    after it, and the report says what was written, verified and saved.
+
+    \b
+    Saves made with --save are counted per drive serial number (0x1018:4) in
+    LEDGER
+    with a warning every 100 saves of a drive and on every save above 1,000 (flash endures
+    about 100,000).
+
+    \b
+    Examples:
+      sherpa program-limits                      # plan only
+      sherpa program-limits elbow_pitch --apply
+      sherpa program-limits --apply --save --yes
+    """
+    from sherpa_cli.joints.limits import derive_checked
+    from sherpa_cli.ops.program import DriveTarget
+
+    st = state(ctx)
+    cfg = st.load_config()
+    _check_options(apply, save)
+    derived, warnings = derive_checked(cfg, names or None)
+    targets = [DriveTarget(d.drive, d.bus, d.node, d.params) for d in derived]
+    run_program(st, "program-limits", targets, warnings, apply=apply, save=save, yes=yes, motor_off=motor_off,
+                need_serial=save, allow_disabled=False, title=lambda drive: _moves(cfg, drive))
+
+
+program_limits.__doc__ = (program_limits.__doc__ or "").replace("LEDGER", LEDGER_HELP)
+
+
+def params_restore(
+    ctx: typer.Context,
+    file: Path = typer.Argument(..., metavar="FILE", help="A file written by `sherpa dump-params`."),
+    apply: bool = typer.Option(False, "--apply", help="Write the changes; without it nothing is written."),
+    save: bool = typer.Option(False, "--save", help="With --apply: SV once per drive that changed, after "
+                              "every write of it was read back."),
+    yes: bool = typer.Option(False, "--yes", "-y", help="Do not ask before saving (needed when stdin is "
+                             "not a terminal)."),
+    motor_off: bool = typer.Option(False, "--motor-off", help="Switch off a drive whose motor is on instead "
+                                   "of refusing it."),
+    other_serial: bool = typer.Option(False, "--other-serial", help="Allow a dump whose serial number "
+                                      "(0x1018:4) differs from the drive's, or that has none."),
+) -> None:
+    """Write a parameter dump back into the drives (plan, apply, verify, save as program-limits).
+
+    Restores every writable setting of the dump, UM and other non-Appendix-C parameters
+    included; never the identity block, read-only values, or moment state (MO, PX, PY, PA,
+    PR, JV, TC, HM, RM). A dump from a drive with another serial number is refused unless
+    --other-serial is given. Saves are counted in the same ledger as program-limits.
+
+    \b
+    Examples:
+      sherpa params restore arm-2024-05.yaml
+      sherpa params restore arm-2024-05.yaml --apply --save --yes
+    """
+    from sherpa_cli.ops.params_file import read_dump
+    from sherpa_cli.ops.restore import restore_targets
+
+    st = state(ctx)
+    cfg = st.load_config()
+    _check_options(apply, save)
+    dump = read_dump(file)
+    targets, warnings = restore_targets(cfg, dump, file, other_serial=other_serial)
+    run_program(st, "params restore", targets, warnings, apply=apply, save=save, yes=yes, motor_off=motor_off,
+                need_serial=True, allow_disabled=True, title=lambda drive: _moves(cfg, drive), source=file)
+
+
+def _check_options(apply: bool, save: bool) -> None:
+    from sherpa_cli.errors import UsageError
+
+    if save and not apply:
+        raise UsageError("--save needs --apply: only written and verified values are saved",
+                         hint="add --apply, or leave out --save for a dry run")
+
+
+def _moves(cfg: Any, drive: str) -> str:
+    if drive not in cfg.drives:
+        return ""
+    joint = cfg.joint_of_drive(drive)
+    if joint is not None:
+        return f"joint {joint.name}"
+    pair = cfg.pair_of_drive(drive)
+    if pair is not None:
+        return f"pair {pair.name}, motor {'a' if pair.drive_a == drive else 'b'}"
+    return "no joint"
+
+
+# --------------------------------------------------------------------------- shared front end
+
+def run_program(st: Any, command: str, targets: Sequence[Any], warnings: Sequence[str], *, apply: bool,
+                save: bool, yes: bool, motor_off: bool, need_serial: bool, allow_disabled: bool,
+                title: Callable[[str], str], where: Callable[[str], Any] | None = None,
+                source: Path | None = None) -> None:
+    """Check, plan, show; with ``apply`` write/verify/save and report. Raises the error to exit with."""
+    from sherpa_cli.ops import program
+    from sherpa_cli.ops.save_ledger import SaveLedger
+
+    _check_options(apply, save)
+    warnings = [*warnings, *program.check_targets(targets, allow_disabled=allow_disabled, where=where)]
+    for w in warnings:
+        st.out.warn(w)
+    st.out.assume_yes = st.out.assume_yes or yes
+    buses = sorted({t.bus for t in targets})
+    result = None
+    with st.session(buses=buses) as session:
+        plans = program.read_plans(session, targets, need_serial=need_serial)
+        if not st.json_mode:
+            _render_plan_text(st, plans, title)  # the technician sees the plan before any question
+        if not apply:
+            _render(st, command, plans, None, apply=False, save=False, source=source)
+            _end_dry_run(st, plans)
+            return
+        try:
+            program.check_apply(plans, motor_off=motor_off)
+            to_save = [p.drive for p in plans if p.changes]
+            if save and to_save:
+                _confirm_save(st, to_save)
+        except Exception:
+            _render(st, command, plans, None, apply=True, save=save, source=source)
+            raise
+        result = program.apply_plans(session, plans, save=save, ledger=SaveLedger() if save else None)
+    _render(st, command, plans, result, apply=True, save=save, source=source)
+    for o in result.outcomes:
+        if o.save_warning:
+            st.out.warn(o.save_warning)
+    if result.interrupted:
+        raise KeyboardInterrupt
+    problem = program.exit_problem(result)
+    if problem is not None:
+        raise problem
+
+
+def _confirm_save(st: Any, drives: Sequence[str]) -> None:
+    """Ask before anything is written; refuse at once when nobody can answer (no tty, --json)."""
+    import sys
+
+    from sherpa_cli.errors import SafetyError
+
+    listed = ", ".join(drives)
+    if not st.out.assume_yes and (st.json_mode or not sys.stdin.isatty()):
+        raise SafetyError(f"--save would write and save {listed}, and there is no terminal to confirm it; "
+                          f"nothing was written", hint="add --yes to confirm in scripts")
+    if not st.out.confirm(f"Write and save to flash (SV): {listed}?"):
+        raise SafetyError("save not confirmed; nothing was written")
+
+
+def _end_dry_run(st: Any, plans: Sequence[Any]) -> None:
+    from sherpa_cli.errors import SafetyError, SherpaError
+
+    bad = [p for p in plans if p.problems]
+    if bad:
+        first = bad[0]
+        err = SherpaError(f"{first.drive}: {first.problems[0]}" +
+                          (f" (and {len(bad) - 1} more drive(s))" if len(bad) > 1 else ""))
+        err.exit_code = first.error.exit_code if first.error is not None else SafetyError.exit_code
+        raise err
+
+
+# --------------------------------------------------------------------------- rendering
+
+def _render(st: Any, command: str, plans: Sequence[Any], result: Any, *, apply: bool, save: bool,
+            source: Path | None) -> None:
+    """JSON: plan and outcome in one document. Text: what follows the plan (already shown)."""
+    outcomes = {o.drive: o for o in result.outcomes} if result is not None else {}
+    if st.json_mode:
+        body: dict[str, Any] = {"command": command}
+        if source is not None:
+            body["file"] = str(source)
+        body.update({"apply": apply, "save": save, "dry_run": not apply,
+                     "drives": [_plan_json(p, outcomes.get(p.drive)) for p in plans],
+                     "interrupted": bool(result is not None and result.interrupted)})
+        st.out.json(body)
+        return
+    if result is not None:
+        st.out.line("result:")
+        for p in plans:
+            st.out.line("  " + _outcome_line(p, outcomes[p.drive], save))
+        if result.interrupted:
+            st.out.line("interrupted: drives not saved above keep their old values in flash; "
+                        "a power cycle brings them back")
+        elif not save and any(o.status == "programmed" for o in result.outcomes):
+            st.out.line("not saved: the new values are in RAM only and are lost at power-off "
+                        "(run again with --save to keep them)")
+        return
+    if not apply:
+        changes = sum(len(p.changes) for p in plans if p.ok)
+        drives = sum(1 for p in plans if p.ok and p.changes)
+        if changes:
+            st.out.line(f"dry run: nothing was written; {changes} change(s) on {drives} drive(s) "
+                        f"-- add --apply to write them")
+        else:
+            st.out.line("dry run: nothing was written; nothing to change")
+
+
+def _render_plan_text(st: Any, plans: Sequence[Any], title: Callable[[str], str]) -> None:
+    for p in plans:
+        t = p.target
+        head = f"{t.drive} ({t.bus}:{t.node})"
+        extra = title(t.drive)
+        if extra:
+            head += f" - {extra}"
+        if p.params:
+            position = {k: i + 1 for i, k in enumerate(p.write_order)}
+            rows = [[q.key, fmt_value(q.now), fmt_value(q.target), "yes" if q.changes else "-",
+                     position.get(q.key, "")] for q in p.params]
+            rows += [[k, "", "", "not written", ""] for k in t.skipped]
+            st.out.line(head)  # not a table title: rich would fold a long one to the table's width
+            st.out.table(None, ["param", "now", "target", "change", "order"], rows, right=(1, 2, 4))
+        else:
+            st.out.line(head)
+            st.out.line("")
+        for k, why in t.skipped.items():
+            st.out.line(f"{t.drive}: {k} not written: {why}")
+        st.out.line(_plan_line(p))
+        st.out.line("")
+
+
+def _plan_line(p: Any) -> str:
+    if p.problems:
+        return f"{p.drive}: cannot be written: " + "; ".join(p.problems)
+    n, c = len(p.params), len(p.changes)
+    serial = f" (serial 0x{p.serial:08X})" if p.serial is not None else ""
+    text = f"{p.drive}{serial}: {n} parameter(s), {c} to change, {n - c} already set"
+    if p.motor_on:
+        text += "; motor is ON"
+    return text
+
+
+def _outcome_line(p: Any, o: Any, save: bool) -> str:
+    from sherpa_cli.ops import program as pr
+
+    n = len(p.changes)
+    off = "motor switched off (--motor-off); " if o.motor_switched_off else ""
+    if o.status == pr.UNCHANGED:
+        return f"{o.drive}: nothing to change, nothing written" + (", no SV needed" if save else "")
+    if o.status == pr.PROGRAMMED:
+        return f"{o.drive}: {off}{n} written and verified, not saved"
+    if o.status == pr.SAVED:
+        count = f" (save {o.save_count} of this drive by this tool)" if o.save_count is not None else ""
+        return f"{o.drive}: {off}{n} written and verified, saved{count}, read back after SV"
+    if o.status == pr.NOT_STARTED:
+        return f"{o.drive}: not started, nothing written"
+    done = f"{len(o.written)} of {n} written ({_keys(o.written)}), {len(o.verified)} verified"
+    saved = "saved" if o.saved else "NOT saved"
+    if o.status == pr.INTERRUPTED:
+        return f"{o.drive}: interrupted: {off}{done}, {saved}"
+    return f"{o.drive}: FAILED: {o.error}; {off}{done}, {saved}"
+
+
+def _keys(keys: Sequence[str]) -> str:
+    return ", ".join(keys) if keys else "none"
+
+
+def _plan_json(p: Any, o: Any) -> dict[str, Any]:
+    position = {k: i + 1 for i, k in enumerate(p.write_order)}
+    params = []
+    for q in p.params:
+        entry = {"key": q.key, "now": q.now, "target": q.target, "changes": q.changes,
+                 "order": position.get(q.key)}
+        if o is not None:
+            entry["result"] = o.param_result(q.key) if q.changes else "unchanged"
+        params.append(entry)
+    t = p.target
+    return {"drive": t.drive, "bus": t.bus, "node": t.node, "serial": p.serial, "motor_on": p.motor_on,
+            "problems": list(p.problems), "params": params, "not_written": dict(t.skipped),
+            "outcome": o.as_json() if o is not None else None}

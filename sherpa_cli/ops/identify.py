@@ -1,0 +1,167 @@
+"""`sherpa identify`: who each drive says it is, what state it is in, and whether that fits.
+
+Identity over SDO (0x1000, 0x1008, 0x1009, 0x100A, 0x1018 sub 1-4), state over the binary
+interpreter (MO, UM, SR, MF, PX), buses read concurrently. Findings flag a drive whose
+device name does not match the model the config names, and drives of one model whose
+firmware or product code differ from the others of that model (a replaced drive with
+other firmware is the classic cause of "same parameters, different behaviour").
+"""
+
+from __future__ import annotations
+
+from collections import Counter
+from dataclasses import dataclass, field
+from typing import Any, Sequence
+
+from sherpa_cli.config.model import ArmConfig
+from sherpa_cli.joints.units import counts_to_rad
+from sherpa_cli.ops.params_read import Progress, per_bus, read_identity, ref_of
+
+STATE_KEYS = ("MO", "UM", "SR", "MF", "PX")
+
+
+@dataclass(frozen=True)
+class JointPosition:
+    """PX in joint units: a plain joint is its motor; a pair motor shows Σ (drive a) or Δ (drive b)."""
+
+    joint: str
+    counts: int
+    rad: float
+    formula: str | None = None  # how a pair joint follows from the two motors
+
+    def as_json(self) -> dict[str, Any]:
+        return {"joint": self.joint, "counts": self.counts, "rad": self.rad, "formula": self.formula}
+
+
+@dataclass(frozen=True)
+class DriveIdentity:
+    drive: str
+    bus: str
+    node: int
+    model: str | None  # what the config names
+    identity: dict[str, Any] = field(default_factory=dict)
+    identity_notes: dict[str, str] = field(default_factory=dict)
+    state: dict[str, int | float] = field(default_factory=dict)
+    joint: JointPosition | None = None
+    error: str | None = None  # the drive could not be read (it is then also in IdentifyReport.failed)
+    findings: tuple[str, ...] = ()
+
+    def as_json(self) -> dict[str, Any]:
+        from sherpa_cli.elmo import faults
+
+        state: dict[str, Any] = dict(self.state)
+        decoded = {}
+        if isinstance(self.state.get("SR"), int):
+            decoded["SR"] = faults.describe_sr(self.state["SR"])
+        if isinstance(self.state.get("MF"), int):
+            decoded["MF"] = faults.describe_mf(self.state["MF"])
+        return {"drive": self.drive, "bus": self.bus, "node": self.node, "model": self.model,
+                "identity": self.identity, "identity_unreadable": self.identity_notes, "state": state,
+                "decoded": decoded, "joint_position": self.joint.as_json() if self.joint else None,
+                "error": self.error, "findings": list(self.findings)}
+
+
+@dataclass(frozen=True)
+class IdentifyReport:
+    drives: tuple[DriveIdentity, ...]
+    errors: tuple[BaseException, ...] = ()  # one per drive that could not be read, in config order
+
+    @property
+    def findings(self) -> list[tuple[str, str]]:
+        return [(d.drive, f) for d in self.drives for f in d.findings]
+
+    def as_json(self) -> dict[str, Any]:
+        return {"drives": [d.as_json() for d in self.drives],
+                "findings": [{"drive": d, "finding": f} for d, f in self.findings],
+                "failed": [d.drive for d in self.drives if d.error]}
+
+
+def _read_one(session: Any, drive: str, progress: Progress | None) -> DriveIdentity:
+    cfg: ArmConfig = session.cfg
+    d = cfg.drives[drive]
+    client = session.client(ref_of(cfg, drive))
+    client.nmt_start()
+    if progress:
+        progress(drive, "identity")
+    identity, notes = read_identity(session.links[d.bus].network, cfg, drive)
+    state: dict[str, int | float] = {}
+    for key in STATE_KEYS:
+        if progress:
+            progress(drive, key)
+        state[key] = client.get(key)
+    return DriveIdentity(drive, d.bus, d.node, d.model, identity, notes, state)
+
+
+def identify(session: Any, drives: Sequence[str], progress: Progress | None = None) -> IdentifyReport:
+    cfg: ArmConfig = session.cfg
+    outcomes = per_bus(session, drives, lambda name: _read_one(session, name, progress))
+    read: list[DriveIdentity] = []
+    errors: list[BaseException] = []
+    for name, o in outcomes.items():
+        if o.ok:
+            read.append(o.value)
+        else:
+            d = cfg.drives[name]
+            read.append(DriveIdentity(name, d.bus, d.node, d.model, error=str(o.error)))
+            errors.append(o.error)
+    positions = joint_positions(cfg, {r.drive: r.state["PX"] for r in read if isinstance(r.state.get("PX"), int)})
+    findings = find_mismatches(cfg, read)
+    out = tuple(DriveIdentity(r.drive, r.bus, r.node, r.model, r.identity, r.identity_notes, r.state,
+                              positions.get(r.drive), r.error, tuple(findings.get(r.drive, ())))
+                for r in read)
+    return IdentifyReport(out, tuple(errors))
+
+
+def joint_positions(cfg: ArmConfig, px: dict[str, int]) -> dict[str, JointPosition]:
+    """Joint positions from motor counts: Σ = m_a + m_b on drive a's row, Δ = m_a - m_b on drive b's."""
+    out: dict[str, JointPosition] = {}
+    for drive, counts in px.items():
+        joint = cfg.joint_of_drive(drive)
+        if joint is not None:
+            out[drive] = JointPosition(joint.name, counts, counts_to_rad(counts, joint.cpr))
+    for pair in cfg.pairs.values():
+        if pair.drive_a in px and pair.drive_b in px:
+            m_a, m_b = px[pair.drive_a], px[pair.drive_b]
+            sigma, delta = cfg.joints[pair.sigma], cfg.joints[pair.delta]
+            out[pair.drive_a] = JointPosition(sigma.name, m_a + m_b, counts_to_rad(m_a + m_b, sigma.cpr),
+                                              f"Σ = {pair.drive_a} + {pair.drive_b}")
+            out[pair.drive_b] = JointPosition(delta.name, m_a - m_b, counts_to_rad(m_a - m_b, delta.cpr),
+                                              f"Δ = {pair.drive_a} - {pair.drive_b}")
+    return out
+
+
+def _norm(text: str) -> str:
+    return "".join(c for c in text.lower() if c.isalnum())
+
+
+def find_mismatches(cfg: ArmConfig, read: Sequence[DriveIdentity]) -> dict[str, list[str]]:
+    """Per drive: device name vs the config's model; firmware / product code vs its model group."""
+    out: dict[str, list[str]] = {}
+    ok = [r for r in read if r.error is None]
+    for r in ok:
+        name = r.identity.get("device_name")
+        if r.model and name is not None and _norm(name) != _norm(r.model):
+            out.setdefault(r.drive, []).append(
+                f"model: the drive reports '{name}', the config names {r.model}")
+    groups: dict[str, list[DriveIdentity]] = {}
+    for r in ok:
+        groups.setdefault(r.model or "(no model in the config)", []).append(r)
+    for model, members in groups.items():
+        for key, what in (("software_version", "firmware"), ("product_code", "product code")):
+            values = [m.identity.get(key) for m in members if m.identity.get(key) is not None]
+            counts = Counter(values).most_common()
+            if len(counts) < 2:
+                continue
+            majority = counts[0][0] if counts[0][1] > counts[1][1] else None
+            for m in members:
+                v = m.identity.get(key)
+                if v is None or v == majority:
+                    continue
+                shown = f"0x{v:08X}" if isinstance(v, int) else f"'{v}'"
+                if majority is not None:
+                    usual = f"0x{majority:08X}" if isinstance(majority, int) else f"'{majority}'"
+                    text = f"{what} {shown} differs from the other {model} drives ({usual})"
+                else:
+                    text = f"{what} {shown}: the {model} drives disagree, no {what} is in the majority"
+                out.setdefault(m.drive, []).append(text)
+    return out

@@ -1,0 +1,364 @@
+"""`sherpa monitor`: what every drive is doing, polled over the binary interpreter, plus what the
+drives say on their own (heartbeat, EMCY).
+
+What the monitor sends, and why (nothing else reaches a drive):
+- NMT start to each drive, as `sherpa cmd` does: the binary interpreter answers only in
+  Operational. It is sent again before polling a drive that did not answer last time (it may
+  have rebooted into Pre-operational).
+- Queries MO, UM, PX, SR, MF; SDO reads of 0x1017 (producer heartbeat time) and 0x1003:1
+  (the one error a SimplIQ stores: the last EMCY from before the monitor started).
+- 0x1017 is written only when the caller asks for it (``heartbeat_ms``, `--heartbeat`), in RAM
+  (never SV), and the old value is written back on close. By default the monitor listens to
+  whatever heartbeat the drive already produces, and says "off" when it produces none.
+
+Drives on different buses are polled at the same time (one thread per bus); a drive that does
+not answer is reported as such with how long it has been silent, never with its last values.
+Nothing here prints; the CLI renders :class:`DriveStatus` rows.
+"""
+
+from __future__ import annotations
+
+import struct
+import threading
+import time
+from dataclasses import dataclass, field
+from typing import Any, Callable, Iterable, Sequence
+
+from sherpa_cli.bus.parallel import run_concurrently
+from sherpa_cli.config.model import ArmConfig
+from sherpa_cli.elmo.faults import Emcy, Fault, decode_emcy, decode_mf, sr_problems
+from sherpa_cli.errors import SherpaError, UsageError
+from sherpa_cli.joints.units import counts_to_rad
+from sherpa_cli.ops.session import DriveRef, resolve_target
+
+HEARTBEAT_BASE = 0x700
+NMT_STATES = {0x00: "boot-up", 0x04: "stopped", 0x05: "operational", 0x7F: "pre-op"}
+POLLED = ("MO", "UM", "PX", "SR", "MF")
+PRODUCER_HEARTBEAT = (0x1017, 0)
+ERROR_FIELD = (0x1003, 1)
+NO_ANSWER = "no answer"
+
+
+def resolve_targets(cfg: ArmConfig, texts: Sequence[str]) -> list[DriveRef]:
+    """Drives to watch: every configured drive by default; a pair or Σ/Δ joint name means both motors."""
+    if not texts:
+        texts = list(cfg.drives)
+    refs: dict[tuple[str, int], DriveRef] = {}
+    for text in texts:
+        joint = cfg.joints.get(text)
+        pair = cfg.pairs.get(text) or (cfg.pairs.get(joint.pair) if joint is not None and joint.pair else None)
+        names = [pair.drive_a, pair.drive_b] if pair is not None else None
+        for ref in ([resolve_target(cfg, n) for n in names] if names else [resolve_target(cfg, text)]):
+            refs.setdefault((ref.bus, ref.node), ref)
+    return list(refs.values())
+
+
+@dataclass
+class _Watch:
+    """Everything known about one drive; written by poll threads and the bus's receive thread."""
+
+    ref: DriveRef
+    heartbeat_ms: int | None = None  # 0x1017 as read (None: could not be read)
+    heartbeat_set_from: int | None = None  # the value we replaced, to write back on close
+    heartbeat_at: float | None = None
+    heartbeat_state: int | None = None
+    emcy: Emcy | None = None
+    emcy_at: float | None = None  # None with an emcy: read from 0x1003, raised before we listened
+    values: dict[str, int | float] = field(default_factory=dict)
+    polled: bool = False
+    answering: bool = False
+    answered_at: float | None = None
+    problem: str | None = None
+
+
+@dataclass(frozen=True)
+class DriveStatus:
+    """One drive in one snapshot; ages are seconds before the snapshot, None when unknown."""
+
+    drive: str
+    bus: str
+    node: int
+    nmt: str
+    heartbeat_ms: int | None
+    heartbeat_age: float | None
+    answering: bool
+    silent_for: float | None
+    mo: int | None
+    um: int | None
+    px: int | None
+    sr: int | None
+    mf: int | None
+    joint: str | None
+    position_rad: float | None
+    sr_problems: tuple[Fault, ...]
+    mf_faults: tuple[Fault, ...]
+    emcy: Emcy | None
+    emcy_age: float | None
+    emcy_before_start: bool
+    problem: str | None
+
+    @property
+    def address(self) -> str:
+        return f"{self.bus}:{self.node}"
+
+    def as_json(self, *, ages: bool = True) -> dict[str, Any]:
+        """``ages=False`` leaves out every time-dependent number (``--once``: stable output)."""
+        emcy = None
+        if self.emcy is not None:
+            e = self.emcy
+            emcy = {"code": f"0x{e.code:04X}", "error_register": e.error_register, "elmo_code": e.elmo_code,
+                    "text": e.text, "before_start": self.emcy_before_start}
+            if ages:
+                emcy["age_s"] = self.emcy_age
+        out: dict[str, Any] = {
+            "drive": self.drive, "bus": self.bus, "node": self.node, "nmt": self.nmt,
+            "heartbeat_ms": self.heartbeat_ms, "answering": self.answering,
+            "MO": self.mo, "UM": self.um, "PX": self.px,
+            "SR": None if self.sr is None else f"0x{self.sr & 0xFFFFFFFF:08X}",
+            "MF": None if self.mf is None else f"0x{self.mf & 0xFFFFFFFF:08X}",
+            "joint": self.joint, "position_rad": self.position_rad,
+            "sr_problems": [f.line() for f in self.sr_problems], "mf_faults": [f.line() for f in self.mf_faults],
+            "last_emcy": emcy, "problem": self.problem,
+        }
+        if ages:
+            out["heartbeat_age_s"] = self.heartbeat_age
+            out["silent_for_s"] = self.silent_for
+        return out
+
+
+class Monitor:
+    """Watches drives of an open session; use as a context manager (close writes 0x1017 back)."""
+
+    def __init__(self, session: Any, refs: Iterable[DriveRef], *, heartbeat_ms: int | None = None,
+                 clock: Callable[[], float] = time.monotonic) -> None:
+        if heartbeat_ms is not None and not 0 < heartbeat_ms <= 0xFFFF:
+            raise UsageError(f"--heartbeat {heartbeat_ms}: expected 1..65535 ms (0x1017 is 16 bits)")
+        self.session = session
+        self.cfg: ArmConfig = session.cfg
+        self.heartbeat_ms = heartbeat_ms
+        self.clock = clock
+        self.watches = [_Watch(ref) for ref in refs]
+        self._lock = threading.Lock()
+        self._subscriptions: list[tuple[Any, int, Callable]] = []
+
+    # -- life cycle -------------------------------------------------------------------------------
+
+    def __enter__(self) -> "Monitor":
+        self.start()
+        return self
+
+    def __exit__(self, *exc: Any) -> None:
+        self.close()
+
+    def start(self) -> None:
+        """Listen, NMT-start, and read 0x1017 / 0x1003:1 of every drive (buses at the same time)."""
+        for w in self.watches:
+            network = self.session.links[w.ref.bus].network
+            on_heartbeat = self._heartbeat_callback(w)
+            network.subscribe(HEARTBEAT_BASE + w.ref.node, on_heartbeat)
+            self._subscriptions.append((network, HEARTBEAT_BASE + w.ref.node, on_heartbeat))
+            self.session.client(w.ref).on_emcy(self._emcy_callback(w))
+        self._per_bus(self._start_drive)
+
+    def close(self) -> None:
+        for network, can_id, callback in self._subscriptions:
+            try:
+                network.unsubscribe(can_id, callback)
+            except (KeyError, ValueError):  # the bus is already gone
+                pass
+        self._subscriptions.clear()
+        restore = [w for w in self.watches if w.heartbeat_set_from is not None]
+        if restore:
+            self._per_bus(self._restore_heartbeat, restore)
+
+    # -- polling ----------------------------------------------------------------------------------
+
+    def poll(self) -> None:
+        """Query every drive once; buses at the same time, the drives of one bus one after another."""
+        self._per_bus(self._poll_drive)
+
+    def wait_for_heartbeats(self, *, limit_s: float = 2.0, sleep: Callable[[float], None] = time.sleep) -> None:
+        """Until every drive that produces a heartbeat was heard once (1.5 periods, at least 0.5 s, at most ``limit_s``)."""
+        producing = [w for w in self.watches if w.heartbeat_ms]
+        if not producing:
+            return
+        # 1.5 periods, but never under 0.5 s: on a loaded host a beat can be a little late
+        deadline = self.clock() + min(limit_s, max(0.5, 1.5 * max(w.heartbeat_ms for w in producing) / 1000))
+        while self.clock() < deadline:
+            with self._lock:
+                if all(w.heartbeat_at is not None for w in producing):
+                    return
+            sleep(0.01)
+
+    def snapshot(self) -> list[DriveStatus]:
+        now = self.clock()
+        with self._lock:
+            positions = self._joint_positions()
+            return [self._status(w, now, positions) for w in self.watches]
+
+    # -- per drive --------------------------------------------------------------------------------
+
+    def _per_bus(self, job: Callable[[_Watch], None], watches: Sequence[_Watch] | None = None) -> None:
+        by_bus: dict[str, list[_Watch]] = {}
+        for w in watches if watches is not None else self.watches:
+            by_bus.setdefault(w.ref.bus, []).append(w)
+
+        def run(ws: list[_Watch]) -> Callable[[], None]:
+            return lambda: [job(w) for w in ws]
+
+        for outcome in run_concurrently({bus: run(ws) for bus, ws in by_bus.items()}).values():
+            if outcome.error is not None:
+                raise outcome.error
+
+    def _start_drive(self, w: _Watch) -> None:
+        client = self.session.client(w.ref)
+        client.nmt_start()
+        network = self.session.links[w.ref.bus].network
+        try:
+            w.heartbeat_ms = int.from_bytes(sdo_upload(network, w.ref.node, *PRODUCER_HEARTBEAT)[:2], "little")
+        except SherpaError as exc:
+            w.problem = f"0x1017: {exc}"
+            return  # no SDO answer: nothing else to ask at start; polling tells the rest
+        if self.heartbeat_ms is not None and w.heartbeat_ms != self.heartbeat_ms:
+            sdo_download(network, w.ref.node, *PRODUCER_HEARTBEAT, self.heartbeat_ms.to_bytes(2, "little"))
+            w.heartbeat_set_from, w.heartbeat_ms = w.heartbeat_ms, self.heartbeat_ms
+        try:
+            stored = int.from_bytes(sdo_upload(network, w.ref.node, *ERROR_FIELD)[:4], "little")
+        except SherpaError:
+            stored = 0  # no stored error, or the object is absent: nothing to show
+        if stored:
+            # 0x1003 entry: code (bits 0..15), error register (16..23), Elmo code (24..31)
+            frame = struct.pack("<HBBHH", stored & 0xFFFF, stored >> 16 & 0xFF, stored >> 24 & 0xFF, 0, 0)
+            with self._lock:
+                if w.emcy is None:  # one heard meanwhile is newer and carries its data fields
+                    w.emcy = decode_emcy(frame)
+
+    def _restore_heartbeat(self, w: _Watch) -> None:
+        network = self.session.links[w.ref.bus].network
+        try:
+            sdo_download(network, w.ref.node, *PRODUCER_HEARTBEAT, w.heartbeat_set_from.to_bytes(2, "little"))
+            w.heartbeat_set_from = None
+        except SherpaError:
+            pass  # the drive went away; its next power-up restores 0x1017 from flash anyway
+
+    def _poll_drive(self, w: _Watch) -> None:
+        client = self.session.client(w.ref)
+        if w.polled and not w.answering:
+            client.nmt_start()  # it may have rebooted into Pre-operational
+        values: dict[str, int | float] = {}
+        problem = None
+        for letters in POLLED:
+            try:
+                values[letters] = client.get(letters)
+            except SherpaError as exc:
+                problem = str(exc).removeprefix(f"{client.label}: ")  # the row already names the drive
+                break  # one silent query is enough: do not wait out the others
+        with self._lock:
+            w.polled = True
+            w.problem = problem
+            w.answering = problem is None
+            if problem is None:
+                w.values = values
+                w.answered_at = self.clock()
+            else:
+                w.values = {}  # never show frozen values of a drive that stopped answering
+
+    def _heartbeat_callback(self, w: _Watch) -> Callable[[int, bytes, float], None]:
+        def on_heartbeat(can_id: int, data: bytes, timestamp: float) -> None:
+            if len(data) >= 1:
+                with self._lock:
+                    w.heartbeat_at = self.clock()
+                    w.heartbeat_state = data[0]
+        return on_heartbeat
+
+    def _emcy_callback(self, w: _Watch) -> Callable[[Emcy], None]:
+        def on_emcy(emcy: Emcy) -> None:
+            with self._lock:
+                w.emcy, w.emcy_at = emcy, self.clock()
+        return on_emcy
+
+    # -- snapshot ---------------------------------------------------------------------------------
+
+    def _joint_positions(self) -> dict[str, tuple[str, float]]:
+        """drive name -> (joint, rad): a plain joint per its drive; a pair's Σ on drive a, Δ on drive b."""
+        px = {w.ref.name: w.values.get("PX") for w in self.watches if w.answering}
+        out: dict[str, tuple[str, float]] = {}
+        for name, counts in px.items():
+            joint = self.cfg.joint_of_drive(name)
+            if joint is not None and isinstance(counts, int):
+                out[name] = (joint.name, counts_to_rad(counts, joint.cpr))
+        for pair in self.cfg.pairs.values():
+            a, b = px.get(pair.drive_a), px.get(pair.drive_b)
+            if isinstance(a, int) and isinstance(b, int):
+                sigma, delta = self.cfg.joints[pair.sigma], self.cfg.joints[pair.delta]
+                out[pair.drive_a] = (sigma.name, counts_to_rad(a + b, sigma.cpr))
+                out[pair.drive_b] = (delta.name, counts_to_rad(a - b, delta.cpr))
+        return out
+
+    def _status(self, w: _Watch, now: float, positions: dict[str, tuple[str, float]]) -> DriveStatus:
+        v = w.values if w.answering else {}
+        sr, mf = v.get("SR"), v.get("MF")
+        joint, rad = positions.get(w.ref.name, (None, None))
+        if joint is None and w.ref.config is not None:
+            j = self.cfg.joint_of_drive(w.ref.name)
+            pair = self.cfg.pair_of_drive(w.ref.name)
+            joint = j.name if j else (pair.sigma if pair and pair.drive_a == w.ref.name else pair.delta if pair else None)
+        return DriveStatus(
+            drive=w.ref.name, bus=w.ref.bus, node=w.ref.node, nmt=self._nmt_text(w),
+            heartbeat_ms=w.heartbeat_ms,
+            heartbeat_age=None if w.heartbeat_at is None else max(0.0, now - w.heartbeat_at),
+            answering=w.answering,
+            silent_for=None if w.answering or w.answered_at is None else max(0.0, now - w.answered_at),
+            mo=_int(v.get("MO")), um=_int(v.get("UM")), px=_int(v.get("PX")), sr=_int(sr), mf=_int(mf),
+            joint=joint, position_rad=rad,
+            sr_problems=tuple(sr_problems(sr)) if isinstance(sr, int) else (),
+            mf_faults=decode_mf(mf).faults if isinstance(mf, int) else (),
+            emcy=w.emcy, emcy_age=None if w.emcy_at is None else max(0.0, now - w.emcy_at),
+            emcy_before_start=w.emcy is not None and w.emcy_at is None, problem=w.problem)
+
+    @staticmethod
+    def _nmt_text(w: _Watch) -> str:
+        if w.heartbeat_state is not None and w.heartbeat_ms:
+            state = w.heartbeat_state
+            # a boot-up leaves the node pre-operational (elmo-protocol.md 3.2)
+            return NMT_STATES[0x7F] if state == 0x00 else NMT_STATES.get(state, f"0x{state:02X}")
+        if not w.polled:
+            return "unknown"
+        # no heartbeat to tell: the interpreter answers only in Operational
+        return NMT_STATES[0x05] if w.answering else NO_ANSWER
+
+
+def _int(value: Any) -> int | None:
+    return value if isinstance(value, int) and not isinstance(value, bool) else None
+
+
+# -- SDO without an object dictionary ---------------------------------------------------------------
+
+def sdo_upload(network: Any, node: int, index: int, sub: int) -> bytes:
+    """One SDO upload; a timeout or abort becomes a CommunicationError naming the object."""
+    from canopen.sdo.exceptions import SdoError
+
+    from sherpa_cli.errors import CommunicationError
+    from sherpa_cli.ops.scan import sdo_error_text, sdo_upload as upload
+
+    try:
+        return upload(network, node, index, sub)
+    except SdoError as exc:
+        raise CommunicationError(f"node {node}: {sdo_error_text(f'0x{index:04X}:{sub}', exc)}") from exc
+
+
+def sdo_download(network: Any, node: int, index: int, sub: int, data: bytes) -> None:
+    import canopen
+    from canopen.sdo.exceptions import SdoError
+
+    from sherpa_cli.errors import CommunicationError
+    from sherpa_cli.ops.scan import sdo_error_text
+
+    remote = canopen.RemoteNode(node, canopen.ObjectDictionary())
+    remote.associate_network(network)
+    try:
+        remote.sdo.download(index, sub, data)
+    except SdoError as exc:
+        raise CommunicationError(f"node {node}: writing {sdo_error_text(f'0x{index:04X}:{sub}', exc)}") from exc
+    finally:
+        remote.remove_network()

@@ -1,0 +1,199 @@
+"""Reading drives now: identity over SDO, parameters over the binary interpreter, buses at once.
+
+Drives of one bus are read one after the other (one bus carries one conversation at a time
+well); the buses run concurrently. A drive that stops answering ends that drive's reading
+with a CommunicationError naming it; a parameter the drive refuses (an Elmo error reply) is
+recorded as unreadable, since firmware differs in what it exposes (CA[18]).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+from datetime import datetime, timezone
+from pathlib import Path
+from typing import Any, Callable, Iterable, Mapping, Sequence
+
+from sherpa_cli import __version__
+from sherpa_cli.bus.parallel import Outcome, run_concurrently
+from sherpa_cli.config.model import ArmConfig
+from sherpa_cli.errors import CommunicationError, DriveRefusedError, UsageError
+from sherpa_cli.joints.limits import PARAM_ORDER, resolve_drives
+from sherpa_cli.ops.params_file import DriveDump, ParamDump
+
+# 0x1018 sub 1-4 and the strings of 0x1008/9/A (CiA 301), in IDENTITY_KEYS order.
+IDENTITY_OBJECTS: tuple[tuple[str, int, int, str], ...] = (
+    ("device_type", 0x1000, 0, "u32"),
+    ("vendor_id", 0x1018, 1, "u32"),
+    ("product_code", 0x1018, 2, "u32"),
+    ("revision", 0x1018, 3, "u32"),
+    ("serial", 0x1018, 4, "u32"),
+    ("device_name", 0x1008, 0, "str"),
+    ("hardware_version", 0x1009, 0, "str"),
+    ("software_version", 0x100A, 0, "str"),
+)
+DEFAULT_INPUTS = 6  # a Whistle's digital inputs when the config names no model
+DUMP_DATE_ENV = "SHERPA_DUMP_DATE"  # fixed date for the dump header (golden tests, reproducible dumps)
+
+Progress = Callable[[str, str], None]  # (drive, what is being read)
+
+
+def resolve_drive_names(cfg: ArmConfig, names: Sequence[str] | None) -> list[str]:
+    """Configured drive names for drive/joint/pair names or BUS:NODE; default every drive."""
+    if not names:
+        return list(cfg.drives)
+    from sherpa_cli.ops.session import resolve_target
+
+    out: list[str] = []
+    for name in names:
+        if ":" in name and name not in cfg.drives:
+            ref = resolve_target(cfg, name)
+            if ref.config is None:
+                raise UsageError(f"target '{name}': no configured drive at {ref.address}",
+                                 hint="identify and dump-params read configured drives only")
+            found = [ref.name]
+        else:
+            found = resolve_drives(cfg, [name])
+        out.extend(d for d in found if d not in out)
+    return out
+
+
+def params_to_read(cfg: ArmConfig, drive: str) -> list[str]:
+    """What commissioning touches: UM, every Appendix C parameter, IL[1..inputs], CA[18]."""
+    model = cfg.drives[drive].model
+    inputs = cfg.catalog.drives[model].inputs if model in cfg.catalog.drives else DEFAULT_INPUTS
+    return ["UM", *PARAM_ORDER, *(f"IL[{n}]" for n in range(1, inputs + 1)), "CA[18]"]
+
+
+def _label(cfg: ArmConfig, drive: str) -> str:
+    return f"{drive} (node {cfg.drives[drive].node})"
+
+
+def read_identity(network: Any, cfg: ArmConfig, drive: str) -> tuple[dict[str, Any], dict[str, str]]:
+    """Identity objects over SDO: (values, why a field is None). Silence raises CommunicationError."""
+    from canopen.sdo.exceptions import SdoAbortedError, SdoError
+
+    from sherpa_cli.ops.scan import decode_text, sdo_upload
+
+    node = cfg.drives[drive].node
+    values: dict[str, Any] = {}
+    notes: dict[str, str] = {}
+    for key, index, sub, kind in IDENTITY_OBJECTS:
+        what = f"0x{index:04X}" + (f":{sub}" if index == 0x1018 else "")
+        try:
+            data = sdo_upload(network, node, index, sub)
+        except SdoAbortedError as exc:
+            values[key] = None
+            notes[key] = f"{what} aborted with 0x{exc.code:08X}"
+            continue
+        except SdoError as exc:
+            raise CommunicationError(f"{_label(cfg, drive)}: no answer to the SDO upload of {what} ({exc})",
+                                     hint="check that the drive is powered and on this bus with this node id") \
+                from None
+        values[key] = decode_text(data) if kind == "str" else int.from_bytes(data[:4], "little")
+    return values, notes
+
+
+def read_params(client: Any, keys: Iterable[str], progress: Progress | None = None,
+                drive: str = "") -> tuple[dict[str, int | float], dict[str, str]]:
+    """(values, unreadable): a refused parameter is unreadable, a silent drive raises."""
+    from sherpa_cli.elmo.commands import parse_param_key
+    from sherpa_cli.elmo.faults import ec_text
+
+    values: dict[str, int | float] = {}
+    unreadable: dict[str, str] = {}
+    for key in keys:
+        if progress:
+            progress(drive, key)
+        letters, index = parse_param_key(key)
+        try:
+            values[key] = client.get(letters, index)
+        except DriveRefusedError as exc:
+            unreadable[key] = f"error {exc.code}: {ec_text(exc.code)}" if exc.code is not None else exc.message
+    return values, unreadable
+
+
+def per_bus(session: Any, drives: Sequence[str], work: Callable[[str], Any]) -> dict[str, Outcome[str]]:
+    """``work(drive)`` for every drive: buses concurrently, drives of a bus in config order.
+
+    Outcomes come back in the order of ``drives`` whatever finished first.
+    """
+    cfg: ArmConfig = session.cfg
+    by_bus: dict[str, list[str]] = {}
+    for d in drives:
+        by_bus.setdefault(cfg.drives[d].bus, []).append(d)
+
+    def bus_job(names: list[str]) -> Callable[[], dict[str, Outcome[str]]]:
+        def run() -> dict[str, Outcome[str]]:
+            done: dict[str, Outcome[str]] = {}
+            for name in names:
+                try:
+                    done[name] = Outcome(name, value=work(name))
+                except Exception as exc:  # noqa: BLE001 - one drive's failure is reported for that drive
+                    done[name] = Outcome(name, error=exc)
+            return done
+        return run
+
+    results: dict[str, Outcome[str]] = {}
+    for bus, outcome in run_concurrently({bus: bus_job(names) for bus, names in by_bus.items()}).items():
+        if not outcome.ok:
+            raise outcome.error  # only KeyboardInterrupt and the like escape bus_job
+        results.update(outcome.value)
+    return {d: results[d] for d in drives}
+
+
+def ref_of(cfg: ArmConfig, drive: str):
+    from sherpa_cli.ops.session import DriveRef
+
+    d = cfg.drives[drive]
+    return DriveRef(d.name, d.bus, d.node, d)
+
+
+def read_drive_dump(session: Any, drive: str, progress: Progress | None = None) -> DriveDump:
+    cfg: ArmConfig = session.cfg
+    d = cfg.drives[drive]
+    client = session.client(ref_of(cfg, drive))
+    client.nmt_start()
+    if progress:
+        progress(drive, "identity")
+    identity, _ = read_identity(session.links[d.bus].network, cfg, drive)
+    params, unreadable = read_params(client, params_to_read(cfg, drive), progress, drive)
+    return DriveDump(name=drive, bus=d.bus, node=d.node, identity=identity, params=params, unreadable=unreadable)
+
+
+def read_live(session: Any, drives: Sequence[str], progress: Progress | None = None) -> dict[str, DriveDump]:
+    """Every drive's dump; the first failed drive (in config order) raises, naming itself."""
+    outcomes = per_bus(session, drives, lambda name: read_drive_dump(session, name, progress))
+    failed = [o for o in outcomes.values() if not o.ok]
+    if failed:
+        first = failed[0].error
+        if len(failed) > 1 and hasattr(first, "hint"):
+            others = ", ".join(o.key for o in failed[1:])
+            first.hint = (first.hint + "; " if first.hint else "") + f"also failed: {others}"
+        raise first
+    return {name: o.value for name, o in outcomes.items()}
+
+
+def dump_meta(cfg: ArmConfig, now: Callable[[], datetime] | None = None,
+              environ: Mapping[str, str] = os.environ) -> dict[str, Any]:
+    """The header block: tool, version, config file and its SHA-256, date (UTC).
+
+    The date is ``$SHERPA_DUMP_DATE`` when set, so a dump can be reproduced byte for byte.
+    """
+    config_hash = None
+    if cfg.source:
+        try:
+            config_hash = hashlib.sha256(Path(cfg.source).read_bytes()).hexdigest()
+        except OSError:
+            config_hash = None
+    date = environ.get(DUMP_DATE_ENV)
+    if not date:
+        moment = now() if now is not None else datetime.now(timezone.utc)
+        date = moment.astimezone(timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ")
+    return {"tool": "sherpa-cli", "tool_version": __version__, "config": cfg.source,
+            "config_sha256": config_hash, "date": date}
+
+
+def dump_params(session: Any, drives: Sequence[str], progress: Progress | None = None,
+                now: Callable[[], datetime] | None = None) -> ParamDump:
+    return ParamDump(meta=dump_meta(session.cfg, now), drives=read_live(session, drives, progress))

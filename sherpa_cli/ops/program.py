@@ -1,0 +1,507 @@
+"""Programming drive parameters: plan, apply, verify, save. Used by `program-limits` and `params restore`.
+
+The engine is the same for any target set:
+
+1. :func:`check_targets` -- every value fits its command (table type and range, writable),
+   and nothing switches a protection off unless the caller allows it. Raises before any I/O.
+2. :func:`read_plans` -- per drive: NMT start, MO, the present value of every target and of
+   the parameters it is ordered against, the serial number (SDO 0x1018:4) when needed. The
+   plan says per parameter now / target / changes, and in which order the changes go.
+3. :func:`check_apply` -- refuses before any write: unreadable drives, inconsistent results,
+   a motor that is on (unless the caller may switch it off).
+4. :func:`apply_plans` -- per drive: MO=0 if allowed and needed, then each change written
+   and read back at once; the first error or mismatch ends that drive. SV once, only if
+   something changed and every write was verified, then every target is read back again.
+
+Drives run in their own worker (bounded), so drives of one bus overlap too: the
+one-outstanding-request rule is per drive (elmo-protocol.md 4.2), and the drive client
+enforces it. A stop request (Ctrl-C in the caller, or a progress callback raising
+KeyboardInterrupt) is honoured between two writes: the drive in hand stops there, is never
+saved, and drives not yet started are not touched.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from dataclasses import dataclass, field
+from types import MappingProxyType
+from typing import Any, Callable, Iterable, Mapping, Sequence
+
+from sherpa_cli.bus.parallel import run_concurrently
+from sherpa_cli.elmo import codec
+from sherpa_cli.elmo.commands import COMMANDS, param_key, parse_param_key
+from sherpa_cli.errors import CodecError, ConfigError, Location, SafetyError, SherpaError
+
+ParamValue = int | float
+
+MAX_DRIVE_WORKERS = 16  # drives programmed at once; the arm has 14
+
+# Orderings a drive must hold after every single write (LL <= VL < VH <= HL; the speed trip
+# strictly outside the speed limit; peak current >= continuous). A write may not break one of
+# these that held before it; one already broken on the drive is not made a reason to refuse.
+ORDER_RULES: tuple[tuple[str, str, bool], ...] = (  # (low, high, strict)
+    ("LL[3]", "VL[3]", False), ("VL[3]", "VH[3]", True), ("VH[3]", "HL[3]", False), ("LL[3]", "HL[3]", True),
+    ("LL[2]", "VL[2]", True), ("VL[2]", "VH[2]", True), ("VH[2]", "HL[2]", True), ("LL[2]", "HL[2]", True),
+    ("CL[1]", "PL[1]", False),
+)
+# The mode goes first: what follows may depend on it.
+FIRST = ("UM", "PM")
+
+# Event kinds passed to the progress callback.
+EV_READ, EV_MOTOR_OFF, EV_WRITTEN, EV_VERIFIED, EV_SAVED = "read", "motor-off", "written", "verified", "saved"
+
+
+@dataclass(frozen=True)
+class Event:
+    drive: str
+    kind: str  # EV_*
+    key: str | None = None
+    value: ParamValue | None = None
+
+
+Progress = Callable[[Event], None]
+
+
+@dataclass(frozen=True)
+class DriveTarget:
+    """What one drive should hold, in the order to prefer when writing."""
+
+    drive: str
+    bus: str
+    node: int
+    params: Mapping[str, ParamValue]
+    # keys the caller chose not to write, with the reason (shown in the plan)
+    skipped: Mapping[str, str] = field(default_factory=lambda: MappingProxyType({}))
+    expected_serial: int | None = None  # restore: the serial the values were read from
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "params", MappingProxyType(dict(self.params)))
+        object.__setattr__(self, "skipped", MappingProxyType(dict(self.skipped)))
+
+
+@dataclass(frozen=True)
+class ParamPlan:
+    key: str
+    now: ParamValue | None
+    target: ParamValue  # as the drive will hold it (float32 for float parameters)
+
+    @property
+    def changes(self) -> bool:
+        return self.now != self.target
+
+
+@dataclass(frozen=True)
+class DrivePlan:
+    target: DriveTarget
+    params: tuple[ParamPlan, ...] = ()
+    motor_on: bool = False
+    serial: int | None = None
+    write_order: tuple[str, ...] = ()
+    problems: tuple[str, ...] = ()  # why this drive must not be written (read failed, bad result)
+    error: SherpaError | None = None  # the read error behind problems, if any
+    elapsed: float = 0.0  # s spent reading; never shown (output must not depend on timing)
+
+    @property
+    def drive(self) -> str:
+        return self.target.drive
+
+    @property
+    def changes(self) -> list[ParamPlan]:
+        return [p for p in self.params if p.changes]
+
+    @property
+    def ok(self) -> bool:
+        return not self.problems
+
+
+# Outcome states of one drive, in the words the report uses.
+UNCHANGED = "unchanged"  # nothing to write
+PROGRAMMED = "programmed"  # every change written and verified, not saved
+SAVED = "saved"  # ... and saved to flash, values read back after SV
+FAILED = "failed"  # an error or mismatch stopped it
+INTERRUPTED = "interrupted"  # stopped by Ctrl-C between two writes
+NOT_STARTED = "not started"  # Ctrl-C came before its turn
+SKIPPED = "skipped"  # not written because of a problem found while planning
+
+
+@dataclass
+class DriveOutcome:
+    drive: str
+    bus: str
+    node: int
+    status: str = NOT_STARTED
+    motor_switched_off: bool = False
+    written: list[str] = field(default_factory=list)
+    verified: list[str] = field(default_factory=list)
+    mismatches: dict[str, ParamValue] = field(default_factory=dict)  # key -> value read back
+    saved: bool = False
+    save_count: int | None = None  # saves of this drive by this tool, this one included
+    save_warning: str | None = None
+    error: str | None = None
+    elapsed: float = 0.0  # s; never shown
+
+    @property
+    def ok(self) -> bool:
+        return self.status in (UNCHANGED, PROGRAMMED, SAVED)
+
+    def param_result(self, key: str) -> str:
+        if key in self.mismatches:
+            return f"MISMATCH: reads {_fmt(self.mismatches[key])}"
+        if key in self.verified:
+            return "written, verified"
+        if key in self.written:
+            return "written, NOT verified"
+        return "not written"
+
+    def as_json(self) -> dict[str, Any]:
+        return {"status": self.status, "motor_switched_off": self.motor_switched_off,
+                "written": list(self.written), "verified": list(self.verified),
+                "mismatches": dict(self.mismatches), "saved": self.saved, "save_count": self.save_count,
+                "save_warning": self.save_warning, "error": self.error}
+
+
+@dataclass
+class ApplyResult:
+    outcomes: list[DriveOutcome]
+    interrupted: bool = False
+
+    @property
+    def ok(self) -> bool:
+        return not self.interrupted and all(o.ok for o in self.outcomes)
+
+
+def _fmt(value: ParamValue | None) -> str:
+    if value is None:
+        return "-"
+    if isinstance(value, float):
+        text = f"{value:.6g}"
+        return text if any(c in text for c in ".en") else text + ".0"
+    return str(value)
+
+
+# --------------------------------------------------------------------------- checks (no I/O)
+
+def drive_value(key: str, value: ParamValue) -> ParamValue:
+    """``value`` as the drive will hold it; CodecError if the command cannot take it."""
+    letters, index = parse_param_key(key)
+    return codec.decode_request(codec.encode_set(letters, index, value)).value  # type: ignore[return-value]
+
+
+def check_targets(targets: Sequence[DriveTarget], *, allow_disabled: bool = False,
+                  where: Callable[[str], Location | None] | None = None) -> list[str]:
+    """Every target must be a writable command with a value it can hold; returns warnings.
+
+    A value that switches a protection off (the table's ``disables_protection``) is an
+    error unless ``allow_disabled``, in which case it is a warning. ``where(drive)`` gives
+    the location named in errors.
+    """
+    warnings: list[str] = []
+    for t in targets:
+        loc = (where(t.drive) if where else None) or Location()
+        for key, value in t.params.items():
+            try:
+                letters, index = parse_param_key(key)
+                spec = COMMANDS[letters]
+                if spec.access != "rw":
+                    raise CodecError(f"{key} is {'read-only' if spec.access == 'ro' else 'an execute command'}")
+                held = drive_value(key, value)
+            except CodecError as exc:
+                raise ConfigError(f"drive {t.drive}: {key}={value!r}: {exc.message}", loc, hint=exc.hint) from None
+            if spec.disables_protection(index, held):
+                what = spec.at(index).description or key
+                text = f"drive {t.drive}: {key}={_fmt(held)} switches a protection off ({what})"
+                if not allow_disabled:
+                    raise ConfigError(text, loc, hint="the config must not switch a protection off by accident")
+                warnings.append(text)
+    return warnings
+
+
+def _holds(lo: ParamValue | None, hi: ParamValue | None, strict: bool) -> bool | None:
+    if lo is None or hi is None:
+        return None
+    return lo < hi if strict else lo <= hi
+
+
+def _disabled_trip(values: Mapping[str, ParamValue | None], key: str) -> bool:
+    # LL/HL = 0 switch a trip off on the drive; an order against a switched-off trip means nothing.
+    if key in ("LL[3]", "HL[3]"):
+        return values.get("LL[3]") == 0 and values.get("HL[3]") == 0
+    if key in ("LL[2]", "HL[2]"):
+        return values.get(key) == 0
+    return False
+
+
+def _broken_rules(values: Mapping[str, ParamValue | None], keys: Iterable[str] | None = None) -> list[str]:
+    wanted = set(keys) if keys is not None else None
+    out = []
+    for lo, hi, strict in ORDER_RULES:
+        if wanted is not None and lo not in wanted and hi not in wanted:
+            continue
+        if _disabled_trip(values, lo) or _disabled_trip(values, hi):
+            continue
+        if _holds(values.get(lo), values.get(hi), strict) is False:
+            out.append(f"{lo} = {_fmt(values[lo])} must be {'<' if strict else '<='} {hi} = {_fmt(values[hi])}")
+    return out
+
+
+def related_keys(keys: Iterable[str]) -> list[str]:
+    """Parameters the given ones are ordered against (to read them too), not already in ``keys``."""
+    keys = list(keys)
+    out: list[str] = []
+    for lo, hi, _ in ORDER_RULES:
+        for a, b in ((lo, hi), (hi, lo)):
+            if a in keys and b not in keys and b not in out:
+                out.append(b)
+    return out
+
+
+def write_order(now: Mapping[str, ParamValue | None], targets: Mapping[str, ParamValue],
+                prefer: Sequence[str] | None = None) -> list[str]:
+    """The changed keys in an order that never breaks an ORDER_RULES relation that holds.
+
+    Greedy in ``prefer`` order (default: the targets' order, mode first): take the first key
+    whose write keeps every relation that holds. Writing a key to its target never makes
+    another key's write impossible when the targets themselves obey the rules, so this finds
+    an order whenever one exists. SafetyError if none does.
+    """
+    state: dict[str, ParamValue | None] = dict(now)
+    base = list(prefer if prefer is not None else targets)
+    base = [k for k in FIRST if k in base] + [k for k in base if k not in FIRST]
+    pending = [k for k in base if k in targets and state.get(k) != targets[k]]
+    order: list[str] = []
+    while pending:
+        for key in pending:
+            if set(_broken_ids({**state, key: targets[key]}, key)) <= set(_broken_ids(state, key)):
+                break
+        else:
+            raise SafetyError("no write order keeps the limits consistent at every step: "
+                              + "; ".join(_broken_rules({**state, **{k: targets[k] for k in pending}})),
+                              hint="check the target values (LL <= VL < VH <= HL, PL[1] >= CL[1])")
+        state[key] = targets[key]
+        order.append(key)
+        pending.remove(key)
+    return order
+
+
+def _broken_ids(values: Mapping[str, ParamValue | None], key: str) -> list[int]:
+    """ORDER_RULES (by position) that involve ``key`` and are broken in ``values``."""
+    out = []
+    for i, (lo, hi, strict) in enumerate(ORDER_RULES):
+        if key not in (lo, hi) or _disabled_trip(values, lo) or _disabled_trip(values, hi):
+            continue
+        if _holds(values.get(lo), values.get(hi), strict) is False:
+            out.append(i)
+    return out
+
+
+# --------------------------------------------------------------------------- plan (reads only)
+
+def _client(session: Any, t: DriveTarget) -> Any:
+    from sherpa_cli.ops.session import DriveRef
+
+    cfg_drive = session.cfg.drives.get(t.drive)
+    return session.client(DriveRef(t.drive, t.bus, t.node, cfg_drive))
+
+
+def read_serial(session: Any, t: DriveTarget) -> int:
+    """0x1018:4 over SDO (the drive's serial number); CommunicationError names the drive."""
+    from sherpa_cli.errors import CommunicationError
+    from sherpa_cli.ops.scan import sdo_error_text, sdo_upload
+
+    try:
+        data = sdo_upload(session.links[t.bus].network, t.node, 0x1018, 4)
+    except Exception as exc:  # canopen raises its own SdoError family
+        raise CommunicationError(f"{t.drive} (node {t.node}): serial number: "
+                                 f"{sdo_error_text('0x1018:4', exc)}") from exc
+    return int.from_bytes(bytes(data)[:4], "little")
+
+
+def _read_plan(session: Any, t: DriveTarget, need_serial: bool, on_event: Progress | None) -> DrivePlan:
+    start = time.perf_counter()
+    targets = {k: drive_value(k, v) for k, v in t.params.items()}
+    extra = related_keys(targets)
+    try:
+        client = _client(session, t)
+        client.nmt_start()
+        motor_on = bool(client.get("MO"))
+        now: dict[str, ParamValue | None] = {}
+        for key in [*targets, *extra]:
+            letters, index = parse_param_key(key)
+            try:
+                now[key] = client.get(letters, index)
+            except SherpaError as exc:
+                if key in extra:  # a parameter we only order against may be missing on this firmware
+                    now[key] = None
+                    continue
+                raise
+        serial = read_serial(session, t) if need_serial else None
+    except SherpaError as exc:
+        return DrivePlan(t, problems=(exc.message,), error=exc, elapsed=time.perf_counter() - start)
+    if on_event is not None:
+        on_event(Event(t.drive, EV_READ))
+    params = tuple(ParamPlan(k, now[k], v) for k, v in targets.items())
+    problems: list[str] = []
+    final = {**now, **targets}
+    changed = [p.key for p in params if p.changes]
+    # the result must be consistent where we change it (a drive's other oddities are its own)
+    problems += [f"result would be inconsistent: {r}" for r in _broken_rules(final, changed)]
+    order: list[str] = []
+    if not problems:
+        try:
+            order = write_order(now, targets)
+        except SafetyError as exc:
+            problems.append(exc.message)
+    if t.expected_serial is not None and serial is not None and serial != t.expected_serial:
+        problems.append(f"serial number is 0x{serial:08X} but the values are from serial "
+                        f"0x{t.expected_serial:08X} (another drive: --other-serial allows it)")
+    return DrivePlan(t, params, motor_on, serial, tuple(order), tuple(problems),
+                     elapsed=time.perf_counter() - start)
+
+
+def read_plans(session: Any, targets: Sequence[DriveTarget], *, need_serial: bool = False,
+               on_event: Progress | None = None, max_workers: int = MAX_DRIVE_WORKERS) -> list[DrivePlan]:
+    """Read every drive's present values (concurrently; nothing is written) and plan the writes."""
+    jobs = {t.drive: (lambda t=t: _read_plan(session, t, need_serial, on_event)) for t in targets}
+    outcomes = run_concurrently(jobs, max_workers=max(1, min(max_workers, len(jobs) or 1)))
+    plans = []
+    for t in targets:
+        o = outcomes[t.drive]
+        if o.error is not None:
+            if isinstance(o.error, (KeyboardInterrupt, SystemExit)):
+                raise o.error
+            if not isinstance(o.error, SherpaError):
+                raise o.error
+            plans.append(DrivePlan(t, problems=(o.error.message,), error=o.error))
+        else:
+            plans.append(o.value)
+    return plans
+
+
+# --------------------------------------------------------------------------- apply
+
+def check_apply(plans: Sequence[DrivePlan], *, motor_off: bool) -> None:
+    """Refuse before any write if a drive cannot be planned or its motor is on (without motor_off)."""
+    bad = [p for p in plans if p.problems]
+    if bad:
+        first = bad[0]
+        more = f" (and {len(bad) - 1} more drive(s))" if len(bad) > 1 else ""
+        raise SafetyError(f"{first.drive}: {first.problems[0]}{more}; nothing was written",
+                          hint="fix what the plan shows, then run again")
+    on = [p.drive for p in plans if p.motor_on and p.changes]
+    if on and not motor_off:
+        raise SafetyError(f"motor is on: {', '.join(on)}; limits, UM and IL can only be written with the "
+                          f"motor off; nothing was written",
+                          hint="stop the motion and switch the motor off, or add --motor-off")
+
+
+def _apply_drive(session: Any, plan: DrivePlan, *, save: bool, ledger: Any, stop: threading.Event,
+                 on_event: Progress | None) -> DriveOutcome:
+    t = plan.target
+    out = DriveOutcome(t.drive, t.bus, t.node)
+    start = time.perf_counter()
+    emit = on_event or (lambda event: None)
+    targets = {p.key: p.target for p in plan.params}
+    try:
+        if not plan.changes:
+            out.status = UNCHANGED
+            return out
+        if stop.is_set():
+            return out  # NOT_STARTED
+        client = _client(session, t)
+        out.status = INTERRUPTED  # until it gets further
+        if plan.motor_on:
+            client.motor_off()
+            out.motor_switched_off = True
+            emit(Event(t.drive, EV_MOTOR_OFF))
+        for key in plan.write_order:
+            if stop.is_set():
+                return out
+            letters, index = parse_param_key(key)
+            client.set(letters, index, targets[key])
+            out.written.append(key)
+            emit(Event(t.drive, EV_WRITTEN, key, targets[key]))
+            back = client.get(letters, index)
+            if back != targets[key]:
+                out.mismatches[key] = back
+                out.status = FAILED
+                out.error = f"{key} was written as {_fmt(targets[key])} but reads back {_fmt(back)}"
+                return out
+            out.verified.append(key)
+            emit(Event(t.drive, EV_VERIFIED, key, back))
+        if not save:
+            out.status = PROGRAMMED
+            return out
+        if stop.is_set():
+            return out  # every write verified, but an interrupted run saves nothing more
+        client.save()
+        out.saved = True
+        if ledger is not None and plan.serial is not None:
+            record = ledger.record(plan.serial, t.drive)
+            out.save_count, out.save_warning = record.count, record.warning
+        emit(Event(t.drive, EV_SAVED))
+        for key, value in targets.items():
+            letters, index = parse_param_key(key)
+            back = client.get(letters, index)
+            if back != value:
+                out.mismatches[key] = back
+        if out.mismatches:
+            out.status = FAILED
+            key = next(iter(out.mismatches))
+            out.error = f"after SV {key} reads back {_fmt(out.mismatches[key])}, expected {_fmt(targets[key])}"
+            return out
+        out.status = SAVED
+        return out
+    except KeyboardInterrupt:
+        stop.set()
+        if out.status != FAILED:
+            out.status = INTERRUPTED
+        return out
+    except SherpaError as exc:
+        out.status = FAILED
+        out.error = exc.message
+        return out
+    finally:
+        out.elapsed = time.perf_counter() - start
+
+
+def apply_plans(session: Any, plans: Sequence[DrivePlan], *, save: bool = False, ledger: Any = None,
+                on_event: Progress | None = None, stop: threading.Event | None = None,
+                max_workers: int = MAX_DRIVE_WORKERS) -> ApplyResult:
+    """Write, verify and (``save``) save every planned drive; call :func:`check_apply` first.
+
+    Never raises for one drive's trouble: each outcome says what happened. Ctrl-C while
+    waiting sets ``stop``; the result is then marked interrupted.
+    """
+    stop = stop or threading.Event()
+    jobs = {p.drive: (lambda p=p: _apply_drive(session, p, save=save, ledger=ledger, stop=stop,
+                                               on_event=on_event)) for p in plans}
+    outcomes = run_concurrently(jobs, max_workers=max(1, min(max_workers, len(jobs) or 1)),
+                                on_interrupt=stop.set)
+    result = []
+    for p in plans:
+        o = outcomes[p.drive]
+        if o.error is not None:
+            if not isinstance(o.error, SherpaError):
+                raise o.error
+            t = p.target
+            result.append(DriveOutcome(t.drive, t.bus, t.node, status=FAILED, error=o.error.message))
+        else:
+            result.append(o.value)
+    return ApplyResult(result, interrupted=stop.is_set())
+
+
+def exit_problem(result: ApplyResult) -> SherpaError | None:
+    """The error the command ends with (exit 1), or None when every drive is fine."""
+    bad = [o for o in result.outcomes if o.status == FAILED]
+    if bad:
+        first = bad[0]
+        more = f" ({len(bad)} drives failed)" if len(bad) > 1 else ""
+        return SafetyError(f"{first.drive}: {first.error}; programming of {first.drive} stopped there, "
+                           f"not saved{more}")
+    return None
+
+
+__all__ = ["DriveTarget", "DrivePlan", "ParamPlan", "DriveOutcome", "ApplyResult", "Event", "check_targets",
+           "read_plans", "check_apply", "apply_plans", "write_order", "related_keys", "drive_value",
+           "exit_problem", "param_key"]

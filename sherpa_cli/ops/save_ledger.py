@@ -1,0 +1,88 @@
+"""How many times this tool has saved (SV) each drive's flash, keyed by the drive's serial number.
+
+A Whistle's flash endures about 100,000 saves (elmo-protocol.md 2.6). One commissioning
+run saves once per drive; a script that saves in a loop would wear the flash out unseen,
+so every save is counted per serial number (0x1018 sub 4, which follows the drive when it
+moves to another node or arm) and a warning grows louder as the count rises.
+
+The ledger is a small JSON file in the user's state directory; it holds counts only, no
+times, so that two identical runs leave identical files.
+"""
+
+from __future__ import annotations
+
+import json
+import threading
+from dataclasses import dataclass
+from pathlib import Path
+
+from sherpa_cli.paths import read_json, state_dir, write_atomic
+
+FORMAT = 1
+FILE_NAME = "save-ledger.json"
+# Where the path is shown to users (help text): the XDG form, not this machine's expansion.
+PATH_TEXT = "$XDG_STATE_HOME/sherpa-cli/save-ledger.json (default ~/.local/state/sherpa-cli/)"
+
+FLASH_ENDURANCE = 100_000  # saves ([CR 3-138])
+WARN_EVERY = 100  # a reminder at every hundredth save of a drive
+WARN_ALWAYS_ABOVE = 1_000  # beyond this every save warns: commissioning never needs that many
+
+
+def ledger_path() -> Path:
+    return state_dir() / FILE_NAME
+
+
+def save_warning(drive: str, serial: int, count: int) -> str | None:
+    """The warning to show after a drive's ``count``-th save by this tool, or None."""
+    if count > WARN_ALWAYS_ABOVE:
+        return (f"{drive} (serial 0x{serial:08X}) has now been saved {count} times by this tool; "
+                f"its flash endures about {FLASH_ENDURANCE:,} saves -- find out what saves it so often")
+    if count % WARN_EVERY == 0:
+        return (f"{drive} (serial 0x{serial:08X}) has now been saved {count} times by this tool "
+                f"(flash endures about {FLASH_ENDURANCE:,} saves)")
+    return None
+
+
+@dataclass(frozen=True)
+class SaveRecord:
+    serial: int
+    count: int  # saves by this tool, this one included
+    warning: str | None
+
+
+class SaveLedger:
+    """The per-serial save counts; thread-safe, each record is written to disk at once."""
+
+    def __init__(self, path: Path | None = None) -> None:
+        self.path = path or ledger_path()
+        self._lock = threading.Lock()
+
+    def count(self, serial: int) -> int:
+        with self._lock:
+            return int(self._load().get(_key(serial), {}).get("saves", 0))
+
+    def record(self, serial: int, drive: str) -> SaveRecord:
+        """Count one save of the drive with this serial (call it only after the drive accepted SV)."""
+        with self._lock:
+            drives = self._load()
+            entry = drives.setdefault(_key(serial), {"saves": 0})
+            entry["saves"] = int(entry.get("saves", 0)) + 1
+            entry["last_name"] = drive
+            body = {"format": FORMAT, "drives": dict(sorted(drives.items()))}
+            write_atomic(self.path, json.dumps(body, indent=1, sort_keys=True) + "\n")
+            count = entry["saves"]
+        return SaveRecord(serial, count, save_warning(drive, serial, count))
+
+    def _load(self) -> dict[str, dict]:
+        try:
+            data = read_json(self.path, {})
+        except (ValueError, OSError):
+            # A damaged ledger must not block commissioning; it restarts from zero (counts only warn).
+            return {}
+        if not isinstance(data, dict) or data.get("format") != FORMAT or not isinstance(data.get("drives"), dict):
+            return {}
+        return {k: dict(v) for k, v in data["drives"].items() if isinstance(v, dict)}
+
+
+def _key(serial: int) -> str:
+    return f"0x{serial & 0xFFFFFFFF:08X}"

@@ -1,0 +1,219 @@
+"""The recipe file format (docs/recipes.md): parsed with a line and key path on every error."""
+
+from __future__ import annotations
+
+import re
+import shlex
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from sherpa_cli.config.yamlnodes import (NAME_RE, Section, YNode, as_int, as_map, as_seq, as_str, describe,
+                                         parse_yaml, plain)
+from sherpa_cli.errors import ConfigError, Location
+
+ON_FAILURE = ("stop", "continue")
+# Flags that make a step write to drives: without `recipe run --apply` they are removed, so the
+# step runs as the command's own dry run (design.md: every write is a dry run unless --apply).
+WRITE_FLAGS = ("--apply", "--save", "--motor-off", "--yes")
+# Global options are the recipe runner's business (it passes its own --config/--sim/--bus-map);
+# a step that set them would run against another arm than the one the operator chose.
+GLOBAL_OPTIONS = ("--config", "-c", "--sim", "--bus-map", "--json", "--debug", "--no-color", "--version")
+VAR_RE = re.compile(r"\{([A-Za-z_][A-Za-z0-9_]*)\}")
+
+
+@dataclass(frozen=True)
+class Expect:
+    """What a step's result must look like for the step to pass."""
+
+    exit: tuple[int, ...] = (0,)
+    stdout_contains: tuple[str, ...] = ()
+    json: tuple[tuple[str, Any], ...] = ()  # (dotted path, expected value); the step then runs with --json
+
+    def as_dict(self) -> dict[str, Any]:
+        d: dict[str, Any] = {"exit": list(self.exit)}
+        if self.stdout_contains:
+            d["stdout_contains"] = list(self.stdout_contains)
+        if self.json:
+            d["json"] = {path: value for path, value in self.json}
+        return d
+
+
+@dataclass(frozen=True)
+class Step:
+    number: int  # 1-based position in the recipe
+    name: str
+    argv: tuple[str, ...] = ()  # a sherpa command line without the program name; empty for confirm
+    confirm: str | None = None
+    expect: Expect = Expect()
+    on_failure: str = "stop"
+    line: int | None = None
+
+    @property
+    def kind(self) -> str:
+        return "confirm" if self.confirm is not None else "run"
+
+    @property
+    def writes(self) -> bool:
+        return any(a in WRITE_FLAGS for a in self.argv)
+
+    def dry_argv(self) -> tuple[str, ...]:
+        return tuple(a for a in self.argv if a not in WRITE_FLAGS)
+
+    def command_text(self) -> str:
+        return "sherpa " + shlex.join(self.argv) if self.argv else ""
+
+
+@dataclass(frozen=True)
+class Recipe:
+    name: str
+    path: str
+    description: str = ""
+    steps: tuple[Step, ...] = ()
+    variables: dict[str, str] = field(default_factory=dict)
+
+    def find_step(self, text: str) -> Step:
+        """A step by its name or 1-based number (``--from``)."""
+        for step in self.steps:
+            if step.name == text or (text.isdigit() and int(text) == step.number):
+                return step
+        from sherpa_cli.errors import UsageError
+
+        names = ", ".join(s.name for s in self.steps)
+        raise UsageError(f"--from {text}: no such step in {self.path}", hint=f"steps: {names}")
+
+
+def load_recipe(path: Path, overrides: dict[str, str] | None = None) -> Recipe:
+    """Read and check a recipe; ``overrides`` (``--set KEY=VALUE``) replace its ``vars``."""
+    try:
+        text = Path(path).read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise ConfigError(f"recipe file not found: {path}") from None
+    except OSError as exc:
+        raise ConfigError(f"cannot read recipe {path}: {exc.strerror}") from None
+    root = parse_yaml(text, str(path))
+    top = Section(root, ["name", "description", "vars", "on_failure", "steps"], what="a recipe mapping")
+    name = top.str("name", Path(path).stem)
+    description = top.str("description", "")
+    default_failure = _on_failure(top.get("on_failure"), "stop")
+    variables = _variables(top.get("vars"), overrides or {}, str(path))
+    steps_node = top.req("steps")
+    items = as_seq(steps_node, "a list of steps")
+    if not items:
+        raise steps_node.error("a recipe needs at least one step")
+    steps: list[Step] = []
+    seen: dict[str, int] = {}
+    for i, item in enumerate(items, start=1):
+        step = _step(item, i, default_failure, variables)
+        if step.name in seen:
+            raise item.error(f"step name '{step.name}' is used twice (also step {seen[step.name]})",
+                             hint="step names must be unique: --from and the report refer to them")
+        seen[step.name] = i
+        steps.append(step)
+    return Recipe(name, str(path), description, tuple(steps), variables)
+
+
+def _variables(node: YNode | None, overrides: dict[str, str], file: str) -> dict[str, str]:
+    values: dict[str, str] = {}
+    if node is not None:
+        for key, child in as_map(node, "a mapping of variable names to values").items():
+            if not NAME_RE.match(key):
+                raise ConfigError(f"invalid variable name {key!r}", Location(file, child.key_line, child.path))
+            if child.kind != "scalar" or child.value is None or isinstance(child.value, bool):
+                raise child.error(f"expected a string or number, got {describe(child)}")
+            values[key] = str(child.value)
+    for key in overrides:
+        if key not in values:
+            known = ", ".join(values) or "none"
+            raise ConfigError(f"--set {key}=...: the recipe has no variable '{key}'",
+                              Location(file, node.line if node is not None else None, "vars"),
+                              hint=f"variables of this recipe: {known}")
+    values.update(overrides)
+    return values
+
+
+def _on_failure(node: YNode | None, default: str) -> str:
+    if node is None:
+        return default
+    value = as_str(node)
+    if value not in ON_FAILURE:
+        raise node.error(f"on_failure must be one of {', '.join(ON_FAILURE)}, got {value!r}")
+    return value
+
+
+def _substitute(text: str, variables: dict[str, str], node: YNode) -> str:
+    def repl(m: re.Match) -> str:
+        key = m.group(1)
+        if key not in variables:
+            raise node.error(f"unknown variable {{{key}}}",
+                             hint=f"define it under vars: (known: {', '.join(variables) or 'none'})")
+        return variables[key]
+
+    return VAR_RE.sub(repl, text)
+
+
+def _argv(node: YNode, variables: dict[str, str]) -> tuple[str, ...]:
+    if node.kind == "seq":
+        parts = [_substitute(str(as_str(p) if p.kind == "scalar" and isinstance(p.value, str) else plain(p)),
+                             variables, p) for p in node.value]
+    else:
+        text = _substitute(as_str(node), variables, node)
+        try:
+            parts = shlex.split(text)
+        except ValueError as exc:
+            raise node.error(f"cannot split the command line: {exc}") from None
+    if parts and parts[0] == "sherpa":
+        parts = parts[1:]
+    if not parts:
+        raise node.error("empty command")
+    for p in parts:
+        opt = p.split("=", 1)[0]
+        if opt in GLOBAL_OPTIONS:
+            raise node.error(f"'{opt}' is a global option: give it to `sherpa recipe run`, not to a step",
+                             hint="the runner passes its own --config, --sim and --bus-map to every step")
+    if parts[0] in ("recipe", "commission"):
+        raise node.error(f"a step cannot run `sherpa {parts[0]}` (recipes do not nest)")
+    return tuple(parts)
+
+
+def _expect(node: YNode | None) -> Expect:
+    if node is None:
+        return Expect()
+    sec = Section(node, ["exit", "stdout_contains", "json"], what="a mapping of expectations")
+    exit_codes: tuple[int, ...] = (0,)
+    if (e := sec.get("exit")) is not None:
+        codes = [as_int(x) for x in as_seq(e)] if e.kind == "seq" else [as_int(e)]
+        for code, src in zip(codes, e.value if e.kind == "seq" else [e]):
+            if not 0 <= code <= 255:
+                raise src.error(f"exit code {code} is outside 0..255")
+        exit_codes = tuple(codes)
+    contains: tuple[str, ...] = ()
+    if (c := sec.get("stdout_contains")) is not None:
+        contains = tuple(as_str(x) for x in as_seq(c)) if c.kind == "seq" else (as_str(c),)
+    checks: tuple[tuple[str, Any], ...] = ()
+    if (j := sec.get("json")) is not None:
+        checks = tuple((key, plain(value)) for key, value in as_map(j, "a mapping of JSON paths to values").items())
+    return Expect(exit_codes, contains, checks)
+
+
+def _step(node: YNode, number: int, default_failure: str, variables: dict[str, str]) -> Step:
+    sec = Section(node, ["name", "run", "confirm", "expect", "on_failure"], what="a step mapping")
+    run, confirm = sec.get("run"), sec.get("confirm")
+    if (run is None) == (confirm is None):
+        raise node.error("a step needs exactly one of 'run' (a sherpa command) or 'confirm' (a question)")
+    name_node = sec.get("name")
+    if name_node is not None:
+        name = as_str(name_node)
+        if not NAME_RE.match(name) or name.isdigit():
+            raise name_node.error(f"invalid step name {name!r}; use letters, digits, '_', '-' or '.', "
+                                  "starting with a letter")
+    else:
+        name = f"step-{number}"
+    on_failure = _on_failure(sec.get("on_failure"), default_failure)
+    if confirm is not None:
+        if sec.get("expect") is not None:
+            raise sec.get("expect").error("a confirm step has no result to expect things of")
+        return Step(number, name, confirm=_substitute(as_str(confirm), variables, confirm),
+                    on_failure=on_failure, line=node.line)
+    return Step(number, name, argv=_argv(run, variables), expect=_expect(sec.get("expect")),
+                on_failure=on_failure, line=node.line)
