@@ -78,94 +78,38 @@ def golden(request: pytest.FixtureRequest):
 
 
 # --------------------------------------------------------------------------------------------
-# The arm under test, over a selectable transport (SHERPA_TEST_BUS):
-#   virtual (default)              `--sim`: the simulated arm in this process
-#   remote                         `sherpa sim --serve` in another process, python-can-remote
-#   socketcan:vcan0,vcan1,vcan2    `sherpa --bus-map ...=socketcan:vcanN sim` in another process
-# Tests marked `realbus` use `arm_cli`; their golden transcripts name the logical command
-# (`sherpa --sim ...`) so the same file must match on every transport.
+# The arm under test, over the transport SHERPA_TEST_BUS selects (virtual | remote |
+# socketcan:IF,IF,IF; see arm_harness.py and docs/testing.md). Tests marked `realbus` use
+# `arm_cli`; their golden transcripts name the logical command (`sherpa --sim ...`), so the same
+# file must match on every transport.
 
 import dataclasses
 import os
-import selectors
-import signal
 import subprocess
 import sys
-import time
 
-TEST_BUS = os.environ.get("SHERPA_TEST_BUS", "virtual")
+from arm_harness import ArmProcess, TestBus, parse_test_bus
+
 ARM_CONFIG = "configs/sherpa-arm.yaml"
+# global options arm_cli supplies itself: a test giving them would test another arm than the bus's
+ARM_OWNED_OPTIONS = ("--sim", "--config", "--bus-map")
+TEST_BUS_KEY = pytest.StashKey[TestBus]()
 
 
-def _free_base_port(count: int) -> int:
-    import socket
-
-    for _ in range(50):
-        with socket.socket() as probe:
-            probe.bind(("127.0.0.1", 0))
-            base = probe.getsockname()[1]
-        sockets = []
-        try:
-            for port in range(base, base + count):
-                s = socket.socket()
-                s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
-                s.bind(("127.0.0.1", port))
-                sockets.append(s)
-            return base
-        except OSError:
-            continue
-        finally:
-            for s in sockets:
-                s.close()
-    raise RuntimeError("no free consecutive ports on 127.0.0.1")
+def pytest_configure(config: pytest.Config) -> None:
+    try:
+        config.stash[TEST_BUS_KEY] = parse_test_bus(os.environ.get("SHERPA_TEST_BUS"))
+    except ValueError as exc:
+        raise pytest.UsageError(str(exc)) from None
 
 
-@dataclasses.dataclass
-class ArmProcess:
-    """The simulated arm in a separate process, and how to reach and power-cycle it."""
-
-    proc: subprocess.Popen
-    config: str
-    bus_map: str
-    drives: int
-
-    def bus_kwargs(self) -> list[dict]:
-        from sherpa_cli.bus.busmap import parse_bus_map
-
-        return [{"interface": t.interface, "channel": t.channel} for t in parse_bus_map([self.bus_map]).values()]
-
-    def power_cycle(self, timeout: float) -> None:
-        """NMT reset-node to all drives, then wait for every boot-up: RAM as after power-on."""
-        import can
-
-        buses = [can.Bus(**kw) for kw in self.bus_kwargs()]
-        try:
-            seen: set[tuple[int, int]] = set()
-            for bus in buses:
-                bus.send(can.Message(arbitration_id=0, data=[0x81, 0], is_extended_id=False))
-            deadline = time.monotonic() + timeout
-            while len(seen) < self.drives and time.monotonic() < deadline:
-                for i, bus in enumerate(buses):
-                    msg = bus.recv(timeout=0.01)
-                    if msg is not None and 0x701 <= msg.arbitration_id <= 0x77F and bytes(msg.data) == b"\x00":
-                        seen.add((i, msg.arbitration_id))
-            assert len(seen) == self.drives, f"only {len(seen)} of {self.drives} drives booted after reset"
-        finally:
-            for bus in buses:
-                bus.shutdown()
-
-    def stop(self) -> None:
-        if self.proc.poll() is None:
-            self.proc.send_signal(signal.SIGINT)
-            try:
-                self.proc.wait(timeout=30)
-            except subprocess.TimeoutExpired:
-                self.proc.kill()
-                self.proc.wait(timeout=30)
+def pytest_report_header(config: pytest.Config) -> str:
+    return f"SHERPA_TEST_BUS: {config.stash[TEST_BUS_KEY].describe()}"
 
 
-def _slow_host_config(tmp_dir) -> str:
-    """The arm config with patient interpreter timeouts: the QEMU guest runs Python 15-20x slower."""
+def _patient_config(tmp_dir: Path) -> str:
+    """The arm config with patient interpreter timeouts: the QEMU guest runs Python 15-20x slower
+    and the command shares one virtual CPU with the simulator."""
     from sherpa_cli.config import dump_native, load_config
 
     cfg = load_config(ROOT / ARM_CONFIG)
@@ -176,68 +120,78 @@ def _slow_host_config(tmp_dir) -> str:
     return str(path)
 
 
-def _start_arm_process(tmp_dir) -> ArmProcess:
-    config = _slow_host_config(tmp_dir)
-    env = dict(os.environ, XDG_STATE_HOME=str(tmp_dir / "state"), NO_COLOR="1")
-    env.pop("SHERPA_BUS_MAP", None)
-    if TEST_BUS == "remote":
-        port = _free_base_port(3)
-        args = ["sim", "--serve", f"127.0.0.1:{port}"]
-        marker = "export SHERPA_BUS_MAP="
-    elif TEST_BUS.startswith("socketcan:"):
-        channels = TEST_BUS.split(":", 1)[1].split(",")
-        bus_map = ",".join(f"can{i}=socketcan:{ch}" for i, ch in enumerate(channels))
-        args = ["--bus-map", bus_map, "sim"]
-        marker = "drives answering on"
-    else:
-        raise RuntimeError(f"SHERPA_TEST_BUS={TEST_BUS!r}: expected virtual, remote or socketcan:IF,IF,IF")
-    proc = subprocess.Popen([sys.executable, "-m", "sherpa_cli", "--config", config, *args, "--duration", "3600"],
-                            cwd=ROOT, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    selector = selectors.DefaultSelector()
-    selector.register(proc.stdout, selectors.EVENT_READ)
-    deadline = time.monotonic() + 300
-    lines: list[str] = []
-    while time.monotonic() < deadline and proc.poll() is None:
-        if selector.select(timeout=1):
-            line = proc.stdout.readline()
-            lines.append(line)
-            if marker in line:
-                if TEST_BUS == "remote":
-                    bus_map = line.split("=", 1)[1].strip()
-                from sherpa_cli.config import load_config
-
-                return ArmProcess(proc, config, bus_map, len(load_config(config).drives))
-    proc.kill()
-    raise RuntimeError("simulated arm did not start:\n" + "".join(lines) + (proc.stderr.read() or ""))
+@pytest.fixture(scope="session")
+def test_bus(request: pytest.FixtureRequest) -> TestBus:
+    return request.config.stash[TEST_BUS_KEY]
 
 
 @pytest.fixture(scope="session")
-def arm_process(tmp_path_factory):
-    if TEST_BUS == "virtual":
+def arm_process(test_bus, tmp_path_factory):
+    """`sherpa sim` in its own process on the selected transport, or None for `virtual`."""
+    if not test_bus.separate_process:
         yield None
         return
-    arm = _start_arm_process(tmp_path_factory.mktemp("arm"))
+    work = tmp_path_factory.mktemp("arm")
+    arm = ArmProcess(test_bus, ROOT, _patient_config(work), work)
+    arm.start()
     try:
         yield arm
     finally:
         arm.stop()
 
 
+def _check_arm_args(args: tuple[str, ...]) -> None:
+    owned = [a for a in args if a.split("=", 1)[0] in ARM_OWNED_OPTIONS]
+    if owned:
+        pytest.fail(f"arm_cli{args}: {', '.join(owned)} is arm_cli's own (the bundled arm on the selected "
+                    "transport); use the cli fixture for another arm", pytrace=False)
+
+
 @pytest.fixture
 def arm_cli(cli, arm_process):
     """``arm_cli(*args)``: `sherpa ARGS` against the simulated arm on the selected transport.
 
-    A fresh (power-cycled) arm for every test. The transcript shows the logical command
-    (``--sim``), so golden files are the same whatever the transport.
+    Every test starts with factory flash, every command with a power-cycled arm, as with
+    `--sim`. The transcript shows the logical command (``--sim``), so golden files are the
+    same whatever the transport.
     """
     if arm_process is not None:
-        arm_process.power_cycle(timeout=120)
+        arm_process.new_test()
 
     def invoke(*args: str, stdin: str = "") -> CliResult:
+        _check_arm_args(args)
         if arm_process is None:
             result = cli("--sim", *args, stdin=stdin)
         else:
+            arm_process.before_command()
             result = cli("--config", arm_process.config, "--bus-map", arm_process.bus_map, *args, stdin=stdin)
+            if not arm_process.alive():
+                pytest.fail(f"the simulated arm stopped during `sherpa {shlex.join(args)}`:\n{arm_process.log()}")
         return dataclasses.replace(result, args=("--sim", *args))
+
+    return invoke
+
+
+@pytest.fixture
+def arm_console(arm_process, tmp_path):
+    """``arm_console(*args)``: like arm_cli, but the installed `sherpa` console script in a process
+    of its own, as a technician runs it (slow in the QEMU guest: use for a few tests only)."""
+    script = Path(sys.executable).parent / "sherpa"
+    assert script.exists(), f"no console script {script}: install the project (pip install -e .)"
+    env = {k: v for k, v in os.environ.items() if k not in ("SHERPA_CONFIG", "SHERPA_BUS_MAP")}
+    env.update(COLUMNS=str(WIDTH), LINES="50", NO_COLOR="1", TERM="dumb", XDG_STATE_HOME=str(tmp_path / "state"))
+    if arm_process is not None:
+        arm_process.new_test()
+
+    def invoke(*args: str, stdin: str = "") -> CliResult:
+        _check_arm_args(args)
+        if arm_process is None:
+            argv = ["--sim", *args]
+        else:
+            arm_process.before_command()
+            argv = ["--config", arm_process.config, "--bus-map", arm_process.bus_map, *args]
+        done = subprocess.run([str(script), *argv], cwd=ROOT, env=env, input=stdin, capture_output=True,
+                              text=True, timeout=600)
+        return CliResult(("--sim", *args), done.returncode, done.stdout, done.stderr)
 
     return invoke

@@ -17,7 +17,7 @@ from sherpa_cli.elmo import codec
 from sherpa_cli.errors import ConfigError, SafetyError
 from sherpa_cli.joints.limits import derive_checked
 from sherpa_cli.ops import program
-from sherpa_cli.ops.program import DriveTarget, ORDER_RULES, write_order
+from sherpa_cli.ops.program import DriveTarget, write_order
 from sherpa_cli.ops.save_ledger import SaveLedger, save_warning
 from sherpa_cli.ops.session import ArmSession, DriveRef
 
@@ -137,7 +137,6 @@ def test_related_keys_are_the_order_partners():
 # --------------------------------------------------------------------------- checks before I/O
 
 def test_check_targets_refuses_protection_off_read_only_and_out_of_range():
-    t = lambda **p: [DriveTarget("d", "can0", 1, {k.replace("_", "["): v for k, v in p.items()})]
     with pytest.raises(ConfigError, match=r"CL\[2\]=1.0 switches a protection off"):
         program.check_targets([DriveTarget("d", "can0", 1, {"CL[2]": 1.0})])
     assert program.check_targets([DriveTarget("d", "can0", 1, {"CL[2]": 1.0})], allow_disabled=True)
@@ -147,7 +146,7 @@ def test_check_targets_refuses_protection_off_read_only_and_out_of_range():
         program.check_targets([DriveTarget("d", "can0", 1, {"AC": 2**31})])
     with pytest.raises(ConfigError, match="not a whole number"):
         program.check_targets([DriveTarget("d", "can0", 1, {"AC": 1.5})])
-    assert program.check_targets(t(AC=1000)) == []
+    assert program.check_targets([DriveTarget("d", "can0", 1, {"AC": 1000, "LL[3]": -5})]) == []
 
 
 def test_save_ledger_counts_per_serial_and_warns(tmp_path):
@@ -221,6 +220,40 @@ def test_second_apply_save_on_a_programmed_arm_writes_nothing_and_sends_no_sv(st
             assert sets(d, mark[name]) == [] and executes(d, mark[name]) == []
             assert d.save_count == 1
     assert SaveLedger().count(plans[0].serial) == 1
+
+
+def test_apply_then_save_in_a_later_run_saves_what_ram_holds(state_home, cfg3):
+    # A real arm keeps RAM between two commands: `--apply` then `--apply --save` finds nothing to
+    # change, yet flash holds the old values. The ledger makes the second run send SV, once.
+    targets = targets_of(cfg3)
+    ledger = SaveLedger()
+    with ArmSession.open(cfg3, sim=True) as session:
+        plans = program.read_plans(session, targets, need_serial=True)
+        applied = program.apply_plans(session, plans, save=False, ledger=ledger)
+        assert [o.status for o in applied.outcomes] == ["programmed", "programmed"]
+        assert all(ledger.unsaved(p.serial) for p in plans)
+        assert all(d.save_count == 0 for d in session.sim.drives.values())
+
+        again = program.read_plans(session, targets, need_serial=True)
+        assert all(p.changes == [] for p in again)
+        due = program.mark_save_due(again, ledger)
+        assert [p.save_due for p in due] == [True, True]
+        mark = {n: len(d.received) for n, d in session.sim.drives.items()}
+        saved = program.apply_plans(session, due, save=True, ledger=ledger)
+        assert [o.status for o in saved.outcomes] == ["saved", "saved"]
+        for name, d in session.sim.drives.items():
+            assert sets(d, mark[name]) == [], "nothing to write again"
+            assert executes(d, mark[name]) == ["SV"]
+            assert d.save_count == 1
+        assert not any(ledger.unsaved(p.serial) for p in plans)
+
+        third = program.mark_save_due(program.read_plans(session, targets, need_serial=True), ledger)
+        result = program.apply_plans(session, third, save=True, ledger=ledger)
+        assert [o.status for o in result.outcomes] == ["unchanged", "unchanged"]
+        assert all(d.save_count == 1 for d in session.sim.drives.values())
+    with ArmSession.open(cfg3, sim=True) as session:  # power cycle: the saved values are in flash
+        plans = program.read_plans(session, targets)
+        assert all(p.changes == [] for p in plans)
 
 
 def _skew(session, drive: str, key: str, amount: float) -> None:
@@ -360,19 +393,18 @@ def sim_arms(monkeypatch):
     from sherpa_cli.sim.arm import SimArm
 
     arms: list = []
-    skews: dict[str, tuple] = {}
+    faults: dict[str, dict] = {}  # drive -> SimSettings fields to replace
     original = SimArm.for_session.__func__
 
-    def for_session(cls, cfg, channels):
-        arm = original(cls, cfg, channels)
-        for name, skew in skews.items():
-            arm.drives[name].settings = dataclasses.replace(arm.drives[name].settings, store_skew=skew)
+    def for_session(cls, cfg, channels, **kwargs):
+        arm = original(cls, cfg, channels, **kwargs)
+        for name, changes in faults.items():
+            arm.drives[name].settings = dataclasses.replace(arm.drives[name].settings, **changes)
         arms.append(arm)
         return arm
 
     monkeypatch.setattr(SimArm, "for_session", classmethod(for_session))
-    arms_skews = (arms, skews)
-    return arms_skews
+    return arms, faults
 
 
 def _cli_sets(arm) -> dict[str, list]:
@@ -392,6 +424,7 @@ GOLDEN_CASES = [
                                       "--apply", "--save", "--yes"]),
     ("program-limits-save-without-apply", ["--config", EXAMPLE3, "--sim", "program-limits", "--save"]),
     ("program-limits-save-no-tty", ["--config", EXAMPLE3, "--sim", "program-limits", "--apply", "--save"]),
+    ("program-limits-help", ["program-limits", "--help"]),
 ]
 
 
@@ -422,13 +455,24 @@ def test_program_limits_save_then_again_writes_nothing(cli, golden, sim_arms):
 
 @pytest.mark.golden
 def test_program_limits_mismatch_golden(cli, golden, sim_arms):
-    arms, skews = sim_arms
-    skews["drive1"] = (("VH[3]", -1),)
+    arms, faults = sim_arms
+    faults["drive1"] = {"store_skew": (("VH[3]", -1),)}
     result = cli("--config", EXAMPLE3, "--sim", "program-limits", "--apply", "--save", "--yes")
     assert result.exit_code == 1
     golden("program-limits-example3-mismatch.txt", result.transcript())
     assert executes(arms[0].drives["drive1"]) == []
     assert executes(arms[0].drives["drive2"]) == ["SV"]
+
+
+def test_a_silent_drive_is_reported_and_nothing_is_written(cli, sim_arms, tmp_path):
+    arms, _ = sim_arms
+    config = tmp_path / "example3-dead.yaml"
+    config.write_text((ROOT / EXAMPLE3).read_text() + "\nsim:\n  drives:\n    drive2: {die_at: 0.001}\n")
+    dry = cli("--config", str(config), "--sim", "program-limits")
+    assert dry.exit_code == 3 and "drive2: cannot be written: drive2 (node 2): no answer" in dry.stdout
+    applied = cli("--config", str(config), "--sim", "program-limits", "--apply")
+    assert applied.exit_code == 3 and "nothing was written" in applied.stderr
+    assert sets(arms[-1].drives["drive1"]) == []
 
 
 def test_appendix_c_example3_numbers_arrive_and_survive_the_power_cycle(cli):

@@ -10,9 +10,6 @@ import typer
 from sherpa_cli.cli.context import state
 from sherpa_cli.cli.output import fmt_value
 
-LEDGER_HELP = "$XDG_STATE_HOME/sherpa-cli/save-ledger.json (default ~/.local/state/sherpa-cli/save-ledger.json)"
-
-
 def program_limits(
     ctx: typer.Context,
     names: Optional[List[str]] = typer.Argument(None, metavar="[JOINT|PAIR|DRIVE]...",
@@ -37,9 +34,10 @@ def program_limits(
 
     \b
     Saves made with --save are counted per drive serial number (0x1018:4) in
-    LEDGER
-    with a warning every 100 saves of a drive and on every save above 1,000 (flash endures
-    about 100,000).
+      $XDG_STATE_HOME/sherpa-cli/save-ledger.json
+      (default ~/.local/state/sherpa-cli/save-ledger.json),
+    with a warning every 100 saves of a drive and on every save above 1,000
+    (the flash endures about 100,000 saves).
 
     \b
     Examples:
@@ -57,9 +55,6 @@ def program_limits(
     targets = [DriveTarget(d.drive, d.bus, d.node, d.params) for d in derived]
     run_program(st, "program-limits", targets, warnings, apply=apply, save=save, yes=yes, motor_off=motor_off,
                 need_serial=save, allow_disabled=False, title=lambda drive: _moves(cfg, drive))
-
-
-program_limits.__doc__ = (program_limits.__doc__ or "").replace("LEDGER", LEDGER_HELP)
 
 
 def params_restore(
@@ -137,7 +132,11 @@ def run_program(st: Any, command: str, targets: Sequence[Any], warnings: Sequenc
     buses = sorted({t.bus for t in targets})
     result = None
     with st.session(buses=buses) as session:
-        plans = program.read_plans(session, targets, need_serial=need_serial)
+        # apply needs the serial too: the ledger remembers drives written but not saved
+        plans = program.read_plans(session, targets, need_serial=need_serial or apply)
+        ledger = SaveLedger() if apply else None
+        if save and ledger is not None:
+            plans = program.mark_save_due(plans, ledger)
         if not st.json_mode:
             _render_plan_text(st, plans, title)  # the technician sees the plan before any question
         if not apply:
@@ -146,13 +145,13 @@ def run_program(st: Any, command: str, targets: Sequence[Any], warnings: Sequenc
             return
         try:
             program.check_apply(plans, motor_off=motor_off)
-            to_save = [p.drive for p in plans if p.changes]
+            to_save = [p.drive for p in plans if p.needs_save]
             if save and to_save:
                 _confirm_save(st, to_save)
         except Exception:
             _render(st, command, plans, None, apply=True, save=save, source=source)
             raise
-        result = program.apply_plans(session, plans, save=save, ledger=SaveLedger() if save else None)
+        result = program.apply_plans(session, plans, save=save, ledger=ledger)
     _render(st, command, plans, result, apply=True, save=save, source=source)
     for o in result.outcomes:
         if o.save_warning:
@@ -257,6 +256,8 @@ def _plan_line(p: Any) -> str:
     text = f"{p.drive}{serial}: {n} parameter(s), {c} to change, {n - c} already set"
     if p.motor_on:
         text += "; motor is ON"
+    if p.save_due:
+        text += "; written by an earlier --apply without --save: SV due"
     return text
 
 
@@ -269,6 +270,9 @@ def _outcome_line(p: Any, o: Any, save: bool) -> str:
         return f"{o.drive}: nothing to change, nothing written" + (", no SV needed" if save else "")
     if o.status == pr.PROGRAMMED:
         return f"{o.drive}: {off}{n} written and verified, not saved"
+    if o.status == pr.SAVED and not n:
+        count = f" (save {o.save_count} of this drive by this tool)" if o.save_count is not None else ""
+        return f"{o.drive}: values of an earlier --apply saved{count}, read back after SV"
     if o.status == pr.SAVED:
         count = f" (save {o.save_count} of this drive by this tool)" if o.save_count is not None else ""
         return f"{o.drive}: {off}{n} written and verified, saved{count}, read back after SV"
@@ -296,5 +300,5 @@ def _plan_json(p: Any, o: Any) -> dict[str, Any]:
         params.append(entry)
     t = p.target
     return {"drive": t.drive, "bus": t.bus, "node": t.node, "serial": p.serial, "motor_on": p.motor_on,
-            "problems": list(p.problems), "params": params, "not_written": dict(t.skipped),
+            "problems": list(p.problems), "save_due": p.save_due, "params": params, "not_written": dict(t.skipped),
             "outcome": o.as_json() if o is not None else None}

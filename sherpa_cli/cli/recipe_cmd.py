@@ -62,17 +62,26 @@ def _invoker(st: AppState):
     return invoke
 
 
+def _shown_path(path: Path) -> Path:
+    """The recipe's path as the operator would type it: relative to the working directory when inside it."""
+    try:
+        return path.resolve().relative_to(Path.cwd().resolve())
+    except ValueError:
+        return path
+
+
 def _indent(text: str) -> list[str]:
     return [INDENT + line if line.strip() else "" for line in text.rstrip("\n").split("\n")] if text.strip() else []
 
 
 def execute(st: AppState, recipe_path: Path, *, apply: bool, yes: bool, start: Optional[str],
-            report: Optional[Path], junit: Optional[Path], sets: Sequence[str] | None, quiet: bool) -> int:
+            report: Optional[Path], junit: Optional[Path], sets: Sequence[str] | None, quiet: bool):
+    """Run a recipe with live step output; returns the RecipeReport (its exit_code ends the command)."""
     from sherpa_cli.recipes import load_recipe
     from sherpa_cli.recipes.report import write_reports
     from sherpa_cli.recipes.runner import FAILED, PASSED, SKIPPED, run_recipe
 
-    recipe = load_recipe(recipe_path, _parse_sets(sets))
+    recipe = load_recipe(_shown_path(recipe_path), _parse_sets(sets))
     start_at = recipe.find_step(start) if start else None
     st.load_config()  # a bad config is reported once, before the first step
     out = st.out
@@ -114,7 +123,7 @@ def execute(st: AppState, recipe_path: Path, *, apply: bool, yes: bool, start: O
     write_reports(rep, report, junit)
     if st.json_mode:
         out.json(rep.as_json())
-        return rep.exit_code
+        return rep
     out.line("")
     counts = ", ".join(f"{rep.count(s)} {s}" for s in ("passed", "failed", "declined", "skipped", "interrupted")
                        if rep.count(s))
@@ -129,7 +138,7 @@ def execute(st: AppState, recipe_path: Path, *, apply: bool, yes: bool, start: O
     for path, kind in ((report, "JSON"), (junit, "JUnit")):
         if path is not None:
             out.info(f"{kind} report written to {path}")
-    return rep.exit_code
+    return rep
 
 
 @app.command("run")
@@ -158,9 +167,9 @@ def run_cmd(
       sherpa recipe run recipes/backup.yaml --set out=arm-2026-11-22.yaml
     """
     st = state(ctx)
-    code = execute(st, file, apply=apply, yes=yes, start=start, report=report, junit=junit, sets=sets, quiet=quiet)
-    if code:
-        raise typer.Exit(code)
+    rep = execute(st, file, apply=apply, yes=yes, start=start, report=report, junit=junit, sets=sets, quiet=quiet)
+    if rep.exit_code:
+        raise typer.Exit(rep.exit_code)
 
 
 @app.command("check")
@@ -192,6 +201,8 @@ def commission(
     report: Optional[Path] = typer.Option(None, "--report", metavar="FILE.json", help="Write a JSON report."),
     junit: Optional[Path] = typer.Option(None, "--junit", metavar="FILE.xml", help="Write a JUnit XML report."),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="Show a step's output only when it fails."),
+    sets: Optional[List[str]] = typer.Option(None, "--set", metavar="KEY=VALUE",
+                                             help="Set a recipe variable, e.g. backup=FILE (where dump-params writes)."),
 ) -> None:
     """Commission the arm: run recipes/commission-arm.yaml (scan, identify, plan, program, save, back up, diff).
 
@@ -201,7 +212,42 @@ def commission(
       sherpa commission                          # dry run on the real arm: shows the plan
     """
     st = state(ctx)
-    code = execute(st, COMMISSION_RECIPE, apply=apply, yes=yes, start=start, report=report, junit=junit,
-                   sets=None, quiet=quiet)
-    if code:
-        raise typer.Exit(code)
+    rep = execute(st, COMMISSION_RECIPE, apply=apply, yes=yes, start=start, report=report, junit=junit,
+                  sets=sets, quiet=quiet)
+    if not st.json_mode:
+        _commission_summary(st, rep)
+    if rep.exit_code:
+        raise typer.Exit(rep.exit_code)
+
+
+def _commission_summary(st: AppState, rep) -> None:
+    """Per drive: did the save step leave it programmed, verified and saved (from its --json output)."""
+    save = rep.result_of("save")
+    verify = rep.result_of("verify")
+    if save is None or not isinstance(save.json, dict) or not rep.apply:
+        st.out.line("no drive was written: this was a dry run (add --apply)" if not rep.apply
+                    else "the save step did not run: no per-drive result")
+        return
+    rows = []
+    complete = True
+    for d in save.json.get("drives", []):
+        o = d.get("outcome") or {}
+        status = o.get("status")
+        targets = len(d.get("params", []))
+        held = status in ("saved", "unchanged") and not o.get("mismatches")
+        if status == "saved":
+            saved = f"yes (SV #{o['save_count']})" if o.get("save_count") else "yes"
+        elif status == "unchanged":
+            saved = "held already, no SV needed"
+        else:
+            saved = "NO"
+        complete &= held
+        rows.append([d["drive"], f"{d['bus']}:{d['node']}", f"{targets}/{targets}" if held else status,
+                     "yes" if held else "NO", saved])
+    st.out.table("commissioning result", ["drive", "bus:node", "programmed", "verified", "saved"], rows)
+    diff_ok = verify is not None and verify.status == "passed"
+    if complete and diff_ok and save.status == "passed":
+        st.out.line(f"every drive is programmed, verified and saved ({len(rows)} drives); "
+                    "the live values match the config")
+    else:
+        st.out.line("commissioning is NOT complete: see the failed step above")

@@ -144,7 +144,11 @@ class Monitor:
     # -- life cycle -------------------------------------------------------------------------------
 
     def __enter__(self) -> "Monitor":
-        self.start()
+        try:
+            self.start()
+        except BaseException:
+            self.close()  # a failed start may already have changed 0x1017 of some drives
+            raise
         return self
 
     def __exit__(self, *exc: Any) -> None:

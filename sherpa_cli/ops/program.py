@@ -100,6 +100,9 @@ class DrivePlan:
     write_order: tuple[str, ...] = ()
     problems: tuple[str, ...] = ()  # why this drive must not be written (read failed, bad result)
     error: SherpaError | None = None  # the read error behind problems, if any
+    # an earlier --apply without --save wrote this drive (save ledger): --save must SV it even
+    # when nothing changes now, or flash keeps the old values
+    save_due: bool = False
     elapsed: float = 0.0  # s spent reading; never shown (output must not depend on timing)
 
     @property
@@ -113,6 +116,10 @@ class DrivePlan:
     @property
     def ok(self) -> bool:
         return not self.problems
+
+    @property
+    def needs_save(self) -> bool:
+        return bool(self.changes) or self.save_due
 
 
 # Outcome states of one drive, in the words the report uses.
@@ -378,6 +385,14 @@ def read_plans(session: Any, targets: Sequence[DriveTarget], *, need_serial: boo
     return plans
 
 
+def mark_save_due(plans: Sequence[DrivePlan], ledger: Any) -> list[DrivePlan]:
+    """Plans of drives an earlier --apply without --save left unsaved, marked ``save_due``."""
+    from dataclasses import replace
+
+    return [replace(p, save_due=True) if p.ok and p.serial is not None and ledger.unsaved(p.serial) else p
+            for p in plans]
+
+
 # --------------------------------------------------------------------------- apply
 
 def check_apply(plans: Sequence[DrivePlan], *, motor_off: bool) -> None:
@@ -386,9 +401,12 @@ def check_apply(plans: Sequence[DrivePlan], *, motor_off: bool) -> None:
     if bad:
         first = bad[0]
         more = f" (and {len(bad) - 1} more drive(s))" if len(bad) > 1 else ""
-        raise SafetyError(f"{first.drive}: {first.problems[0]}{more}; nothing was written",
+        err = SafetyError(f"{first.drive}: {first.problems[0]}{more}; nothing was written",
                           hint="fix what the plan shows, then run again")
-    on = [p.drive for p in plans if p.motor_on and p.changes]
+        if first.error is not None:
+            err.exit_code = first.error.exit_code  # e.g. 3 when a drive did not answer
+        raise err
+    on = [p.drive for p in plans if p.motor_on and p.needs_save]
     if on and not motor_off:
         raise SafetyError(f"motor is on: {', '.join(on)}; limits, UM and IL can only be written with the "
                           f"motor off; nothing was written",
@@ -403,7 +421,7 @@ def _apply_drive(session: Any, plan: DrivePlan, *, save: bool, ledger: Any, stop
     emit = on_event or (lambda event: None)
     targets = {p.key: p.target for p in plan.params}
     try:
-        if not plan.changes:
+        if not (plan.changes or (save and plan.save_due)):
             out.status = UNCHANGED
             return out
         if stop.is_set():
@@ -430,6 +448,8 @@ def _apply_drive(session: Any, plan: DrivePlan, *, save: bool, ledger: Any, stop
             out.verified.append(key)
             emit(Event(t.drive, EV_VERIFIED, key, back))
         if not save:
+            if out.written and ledger is not None and plan.serial is not None:
+                ledger.mark_unsaved(plan.serial, t.drive)
             out.status = PROGRAMMED
             return out
         if stop.is_set():

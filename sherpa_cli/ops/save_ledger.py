@@ -20,8 +20,6 @@ from sherpa_cli.paths import read_json, state_dir, write_atomic
 
 FORMAT = 1
 FILE_NAME = "save-ledger.json"
-# Where the path is shown to users (help text): the XDG form, not this machine's expansion.
-PATH_TEXT = "$XDG_STATE_HOME/sherpa-cli/save-ledger.json (default ~/.local/state/sherpa-cli/)"
 
 FLASH_ENDURANCE = 100_000  # saves ([CR 3-138])
 WARN_EVERY = 100  # a reminder at every hundredth save of a drive
@@ -68,10 +66,29 @@ class SaveLedger:
             entry = drives.setdefault(_key(serial), {"saves": 0})
             entry["saves"] = int(entry.get("saves", 0)) + 1
             entry["last_name"] = drive
-            body = {"format": FORMAT, "drives": dict(sorted(drives.items()))}
-            write_atomic(self.path, json.dumps(body, indent=1, sort_keys=True) + "\n")
+            entry.pop("unsaved", None)
+            self._store(drives)
             count = entry["saves"]
         return SaveRecord(serial, count, save_warning(drive, serial, count))
+
+    # A run with --apply but without --save leaves verified values in RAM only. A later
+    # `--apply --save` then finds nothing to change, yet flash still holds the old values:
+    # the ledger remembers such drives so that run saves them (one SV, never a loop).
+    def mark_unsaved(self, serial: int, drive: str) -> None:
+        with self._lock:
+            drives = self._load()
+            entry = drives.setdefault(_key(serial), {"saves": 0})
+            entry["unsaved"] = True
+            entry["last_name"] = drive
+            self._store(drives)
+
+    def unsaved(self, serial: int) -> bool:
+        with self._lock:
+            return bool(self._load().get(_key(serial), {}).get("unsaved", False))
+
+    def _store(self, drives: dict[str, dict]) -> None:
+        body = {"format": FORMAT, "drives": dict(sorted(drives.items()))}
+        write_atomic(self.path, json.dumps(body, indent=1, sort_keys=True) + "\n")
 
     def _load(self) -> dict[str, dict]:
         try:

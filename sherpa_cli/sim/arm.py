@@ -184,11 +184,10 @@ class SimArm:
         self.errors: list[BaseException] = []
 
     @classmethod
-    def for_session(cls, cfg: ArmConfig, channels: Mapping[str, str], *,
-                    bus_factory: Callable[..., Any] | None = None) -> "SimArm":
+    def for_session(cls, cfg: ArmConfig, channels: Mapping[str, str]) -> "SimArm":
         """The in-process arm of ``--sim``: virtual channels, flash kept in the state directory."""
         return cls(cfg, {bus: {"interface": "virtual", "channel": ch} for bus, ch in channels.items()},
-                   persist=True, bus_factory=bus_factory)
+                   persist=True)
 
     def drive_by_node(self, bus: str, node: int) -> SimDrive | None:
         for name, d in self.cfg.drives.items():
@@ -289,14 +288,17 @@ class SimArm:
                     # every drive advances at least once per tick_s (motion, heartbeats, latency)
                     touched: list[str] = []
                     if msg is not None and not msg.is_error_frame and not msg.is_extended_id:
+                        # receive() ran the drives to now: what the frame caused is in their outbox
                         touched = self._dispatch(msg.arbitration_id, bytes(msg.data), on_bus, by_node)
                     now = self.clock.now()
-                    if now >= next_tick:
+                    ticking = now >= next_tick
+                    if ticking:
                         touched = names
                         next_tick = now + self.tick_s
                     for name in touched:
                         drive = on_bus[name]
-                        drive.tick()
+                        if ticking:
+                            drive.tick()
                         for can_id, data in drive.pop_frames():
                             send(can_id, data)
                 if powered is not None and touched is names:

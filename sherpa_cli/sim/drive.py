@@ -306,9 +306,10 @@ class SimDrive:
             times.append(self._reboot_due)
         if self._trip_due is not None:
             times.append(self._trip_due)
-        timeout = self._consumer()[1]
-        if self._hb_last is not None and timeout:
-            times.append(self._hb_last + timeout)
+        if self._hb_last is not None:  # checked first: _consumer() is a lookup on every step
+            timeout = self._consumer()[1]
+            if timeout:
+                times.append(self._hb_last + timeout)
         if self._replies:
             times.append(self._replies[0][0])
         return min(times)
@@ -333,9 +334,10 @@ class SimDrive:
             self._trip_due = None
             self._shut_down(MF_POSITION_LIMIT)
             self._emcy(EMCY_POSITION_LIMIT, ERR_REG_GENERIC)
-        timeout = self._consumer()[1]
-        if self._hb_last is not None and timeout and t >= self._hb_last + timeout:
-            self._heartbeat_lost()
+        if self._hb_last is not None:
+            timeout = self._consumer()[1]
+            if timeout and t >= self._hb_last + timeout:
+                self._heartbeat_lost()
         while self._replies and self._replies[0][0] <= t:
             _, _, (can_id, data) = heapq.heappop(self._replies)
             self._send(can_id, data, blackout_applies=False)

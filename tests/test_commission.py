@@ -1,0 +1,92 @@
+"""`sherpa commission` and the shipped recipes end to end on the simulated arm."""
+
+from __future__ import annotations
+
+import json
+import xml.etree.ElementTree as ET
+
+import pytest
+import yaml
+
+from sherpa_cli.recipes import load_recipe
+
+EXAMPLE3 = "configs/appendix-c/example3.yaml"
+
+
+def normalized(result, tmp_path) -> str:
+    return result.transcript().replace(str(tmp_path), "<tmp>")
+
+
+@pytest.mark.parametrize("name", ["commission-arm.yaml", "backup.yaml"])
+def test_shipped_recipes_load(name):
+    from sherpa_cli.cli.recipe_cmd import RECIPES_DIR
+
+    recipe = load_recipe(RECIPES_DIR / name)
+    assert recipe.steps and all(s.name for s in recipe.steps)
+
+
+@pytest.mark.golden
+def test_commission_example3_applies_saves_and_the_numbers_arrive(cli, golden, tmp_path):
+    backup = tmp_path / "backup.yaml"
+    report, junit = tmp_path / "report.json", tmp_path / "report.xml"
+    r = cli("--config", EXAMPLE3, "--sim", "commission", "--apply", "--yes", "--set", f"backup={backup}",
+            "--report", str(report), "--junit", str(junit))
+    golden("commission-example3-apply.txt", normalized(r, tmp_path))
+    assert r.exit_code == 0, r.stderr
+    assert "every drive is programmed, verified and saved (2 drives)" in r.stdout
+    data = json.loads(report.read_text())
+    assert data["outcome"] == "passed" and data["counts"]["passed"] == 8
+    save = next(s for s in data["steps"] if s["name"] == "save")
+    assert save["dry_run"] is False and save["command"][-3:] == ["--apply", "--save", "--yes"]
+    suite = ET.parse(junit).getroot().find("testsuite")
+    assert (suite.get("tests"), suite.get("failures")) == ("8", "0")
+    # the backup holds the Appendix C numbers
+    dumped = yaml.safe_load(backup.read_text())["drives"]
+    for drive in ("drive1", "drive2"):
+        params = dumped[drive]["params"]
+        assert (params["VL[3]"], params["VH[3]"], params["LL[3]"], params["HL[3]"]) == (-190, 190, -205, 205)
+        assert [params[f"IL[{n}]"] for n in (1, 2, 3, 4)] == [21, 21, 21, 21]
+    # ... and a new invocation (a power cycle: RAM from flash) reads them back from the drives
+    for drive in ("drive1", "drive2"):
+        r = cli("--config", EXAMPLE3, "--sim", "--json", "cmd", drive, "VL[3]", "VH[3]", "LL[3]", "HL[3]",
+                "IL[1]", "IL[2]", "IL[3]", "IL[4]")
+        values = [x["value"] for x in json.loads(r.stdout)["results"]]
+        assert values == [-190, 190, -205, 205, 21, 21, 21, 21], r.stdout
+    # a second commissioning finds nothing to write and saves nothing
+    r = cli("--config", EXAMPLE3, "--sim", "commission", "--apply", "--yes", "--quiet", "--set", f"backup={backup}")
+    golden("commission-example3-again.txt", normalized(r, tmp_path))
+    assert r.exit_code == 0 and r.stdout.count("held already, no SV needed") == 2
+
+
+@pytest.mark.golden
+def test_commission_dry_run_writes_nothing(cli, golden, tmp_path):
+    r = cli("--config", EXAMPLE3, "--sim", "commission", "--yes", "--quiet", "--set", f"backup={tmp_path / 'b.yaml'}")
+    golden("commission-example3-dry-run.txt", normalized(r, tmp_path))
+    # the verify step fails: nothing was programmed, so the drives differ from the config
+    assert r.exit_code == 1
+    assert "[6/8] save: sherpa program-limits   (dry run)" in r.stdout
+    assert "no drive was written: this was a dry run" in r.stdout
+    r = cli("--config", EXAMPLE3, "--sim", "--json", "cmd", "drive1", "LL[3]")
+    assert json.loads(r.stdout)["results"][0]["value"] != -205
+
+
+@pytest.mark.golden
+def test_commission_whole_arm(cli, golden, tmp_path):
+    r = cli("--sim", "commission", "--apply", "--yes", "--quiet", "--set", f"backup={tmp_path / 'b.yaml'}")
+    golden("commission-arm-apply.txt", normalized(r, tmp_path))
+    assert r.exit_code == 0, r.stdout
+    assert "every drive is programmed, verified and saved (14 drives)" in r.stdout
+
+
+def test_commission_stops_at_a_missing_drive_and_says_where_to_resume(cli, tmp_path):
+    cfg = tmp_path / "arm.yaml"
+    from tests.conftest import ROOT
+
+    base = (ROOT / EXAMPLE3).read_text()
+    cfg.write_text(base + "\nsim:\n  drives:\n    drive2: {die_at: 0}\n")
+    r = cli("--config", str(cfg), "--sim", "commission", "--apply", "--yes", "--quiet",
+            "--set", f"backup={tmp_path / 'b.yaml'}")
+    assert r.exit_code == 1
+    assert "[1/8] scan" in r.stdout and "-> FAILED: exit code 1, expected 0" in r.stdout
+    assert "resume with: --from scan" in r.stdout
+    assert "commissioning is NOT complete" in r.stdout or "the save step did not run" in r.stdout
