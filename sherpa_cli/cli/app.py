@@ -77,27 +77,23 @@ def root(
 
 
 def _register() -> None:
-    from sherpa_cli.cli import cmd_cmd, config_cmd, diffdrive_cmd, limits_cmd, monitor_cmd, scan_cmd, sim_cmd
+    # In the order a technician meets them at the arm: find, look, back up, program, commission.
+    from sherpa_cli.cli import (cmd_cmd, config_cmd, diffdrive_cmd, identify_cmd, limits_cmd, monitor_cmd,
+                                params_cmd, program_cmd, recipe_cmd, scan_cmd, sim_cmd)
 
-    app.command("cmd")(cmd_cmd.cmd)
     app.command("scan")(scan_cmd.scan)
+    app.command("identify")(identify_cmd.identify)
     app.command("monitor")(monitor_cmd.monitor)
+    app.command("cmd")(cmd_cmd.cmd)
+    app.command("dump-params")(params_cmd.dump_params)
+    app.command("program-limits")(program_cmd.program_limits)
+    app.command("commission")(recipe_cmd.commission)
     app.command("sim")(sim_cmd.sim)
-    app.add_typer(config_cmd.app, name="config")
+    app.add_typer(params_cmd.app, name="params")
     app.add_typer(limits_cmd.app, name="limits")
     app.add_typer(diffdrive_cmd.app, name="diffdrive")
-    from sherpa_cli.cli import identify_cmd, params_cmd
-
-    app.command("identify")(identify_cmd.identify)
-    app.command("dump-params")(params_cmd.dump_params)
-    app.add_typer(params_cmd.app, name="params")
-    from sherpa_cli.cli import recipe_cmd
-
     app.add_typer(recipe_cmd.app, name="recipe")
-    app.command("commission")(recipe_cmd.commission)
-    from sherpa_cli.cli import program_cmd
-
-    app.command("program-limits")(program_cmd.program_limits)
+    app.add_typer(config_cmd.app, name="config")
 
 
 _register()
