@@ -316,12 +316,6 @@ def test_motor_on_with_echo_off():
     ])
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "BUG: with expect_set_echo=False DriveClient.set sends the set without a pending request, so "
-    "the drive's error reply (4C 4C 03 40 39 ..., EC 57) is dropped as 'unrequested' and the "
-    "read-back mismatch raises CommunicationError instead of DriveRefusedError(code=57). On a "
-    "threaded bus the outcome depends on timing: if the error reply arrives after the read-back "
-    "query was registered, it matches (LL,3) and becomes DriveRefusedError."))
 def test_set_echo_off_refusal_reports_the_drive_error_code():
     clock, drive, link, c = make(sim=SimSettings(echo_sets=False, mo_settle_s=0.02),
                                  client=ClientSettings(expect_set_echo=False, mo_poll_interval=POLL))
@@ -332,13 +326,13 @@ def test_set_echo_off_refusal_reports_the_drive_error_code():
     assert info.value.code == 57
 
 
-def test_set_echo_off_refusal_transcript_today():
-    # What the bus carries in that case (documents the frames behind the xfail above).
+def test_set_echo_off_refusal_transcript():
+    # The set and its read-back go out under one pending (LL,3): the error reply is caught.
     clock, drive, link, c = make(sim=SimSettings(echo_sets=False, mo_settle_s=0.02),
                                  client=ClientSettings(expect_set_echo=False, mo_poll_interval=POLL))
     c.motor_on()
     link.take()
-    with pytest.raises((DriveRefusedError, CommunicationError)):
+    with pytest.raises(DriveRefusedError):
         c.set("LL", 3, -240)
     assert_transcript(link.take(), [
         tx(RPDO2, "4C 4C 03 00 10 FF FF FF"),

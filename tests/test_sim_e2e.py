@@ -24,7 +24,7 @@ import pytest
 
 from sherpa_cli.config import load_config, load_config_text
 from sherpa_cli.elmo.client import DriveClient
-from sherpa_cli.errors import DriveTimeoutError
+from sherpa_cli.errors import DriveRefusedError, DriveTimeoutError
 from sherpa_cli.ops.session import ArmSession, resolve_target
 from sherpa_cli.sim import state as sim_state
 from sherpa_cli.sim.arm import SimArm
@@ -198,10 +198,6 @@ def test_die_at_counts_from_simulator_start(tmp_path):
         assert c.get("AC") == FACTORY_AC  # 5 s have not passed yet
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "BUG: a drive with die_at already due still sends its boot-up frame (0x700+node, 00): "
-    "SimDrive._boot queues it in the outbox at construction, and death (_fire_events) clears "
-    "only the pending replies, not the outbox, so SimArm's pump sends it after the drive died."))
 def test_dead_node_sends_nothing_at_all(tmp_path):
     cfg = write_config(tmp_path, ONE_DRIVE + "sim:\n  drives:\n    drive1: {die_at: 0.0}\n")
     channel = f"e2e-dead-{time.monotonic_ns()}"
@@ -391,3 +387,24 @@ def test_query_only_run_sends_no_set_frame(tmp_path, query_long):
         c.set("AC", 0, 150_000)
         sets = [f for f in rpdo2_frames(s, "drive1") if is_set_frame(f)]
         assert sets == [bytes.fromhex("41 43 00 00 F0 49 02 00")]
+
+
+# -- (i) drives that do not echo sets ------------------------------------------------------------
+
+def test_echo_off_refusal_is_reported_with_the_drive_error_on_a_threaded_bus(tmp_path):
+    # protocol.set_echo false: the drive answers a good set with nothing and a bad one with an
+    # error reply; the client must report the error code every time, whatever the thread timing.
+    cfg = write_config(tmp_path, ONE_DRIVE + "protocol: {mo_settle: 0.02, sv_blackout: 0.2, set_echo: false}\n")
+    with sim_session(cfg) as s:
+        c = client(s, "drive1")
+        c.nmt_start()
+        c.set("AC", 0, 150_000)  # accepted: confirmed by read-back
+        assert c.get("AC") == 150_000
+        c.motor_on()
+        for _ in range(20):
+            with pytest.raises(DriveRefusedError) as info:
+                c.set("LL", 3, -240)
+            assert info.value.code == 57
+        c.motor_off()
+        c.set("LL", 3, -240)
+        assert c.get("LL", 3) == -240

@@ -161,9 +161,18 @@ class DriveClient:
                     return
                 # elmo-protocol.md 1.3: a missing echo means "unknown", not "failed".
                 log.info("%s: no echo to %s within %g s; reading it back", self.label, what, self.timeout)
+                readback = self._value(self._transact(self._query_frame(letters, index), letters, index, key), key)
             else:
-                self.transport.send(RPDO2_BASE + self.node, frame)
-            readback = self._value(self._transact(self._query_frame(letters, index), letters, index, key), key)
+                # No echo on success, but an error reply on failure: the set and its read-back go
+                # out under one pending (letters, index), so whichever answers first is caught --
+                # the set's error reply (replies come in order) or the read-back value.
+                reply = self._transact(self._query_frame(letters, index), letters, index, key, before=frame)
+                if not reply.ok:
+                    # the read-back's own answer is still on its way: take it off the bus now, or
+                    # the next request for this (letters, index) would take it for its answer
+                    self._exchange(b"", letters, index, attempts=1)
+                    raise self._refused(what, reply.error_code)
+                readback = self._value(reply, key)
             if readback == expected:
                 return
             emcy = self._emcy_since(emcy_before)
@@ -270,24 +279,33 @@ class DriveClient:
     def _query_frame(self, letters: str, index: int) -> bytes:
         return codec.encode_query(letters, index, long=self.settings.query_long)
 
-    def _transact(self, frame: bytes, letters: str, index: int, what: str, *, attempts: int | None = None) -> Reply:
+    def _transact(self, frame: bytes, letters: str, index: int, what: str, *, attempts: int | None = None,
+                  before: bytes | None = None) -> Reply:
         attempts = 1 + self.retries if attempts is None else attempts
-        reply = self._exchange(frame, letters, index, attempts=attempts)
+        reply = self._exchange(frame, letters, index, attempts=attempts, before=before)
         if reply is None:
             tries = f" ({attempts} attempts)" if attempts > 1 else ""
             raise DriveTimeoutError(f"{self.label}: no answer to {what} within {self.timeout:g} s{tries}",
                                     hint=_TIMEOUT_HINT)
         return reply
 
-    def _exchange(self, frame: bytes, letters: str, index: int, *, attempts: int) -> Reply | None:
-        """Send ``frame`` up to ``attempts`` times; the matching reply, or None if none came."""
+    def _exchange(self, frame: bytes, letters: str, index: int, *, attempts: int,
+                  before: bytes | None = None) -> Reply | None:
+        """Send ``frame`` up to ``attempts`` times; the matching reply, or None if none came.
+
+        ``before`` (sent once, first) is a frame whose only possible answer is an error reply
+        with the same (letters, index): a set while the drive does not echo sets.
+        """
         pending = _Pending(letters, index)
         # Registered before sending: with a synchronous transport the reply arrives inside send().
         with self._state:
             self._pending = pending
         try:
+            if before is not None:
+                self.transport.send(RPDO2_BASE + self.node, before)
             for attempt in range(attempts):
-                self.transport.send(RPDO2_BASE + self.node, frame)
+                if frame:  # an empty frame only waits (for a reply already on its way)
+                    self.transport.send(RPDO2_BASE + self.node, frame)
                 if pending.arrived.acquire(timeout=self.timeout):
                     return pending.reply
                 log.debug("%s: no reply to %s (attempt %d of %d)", self.label, frame.hex(" "), attempt + 1, attempts)

@@ -326,6 +326,7 @@ class SimDrive:
             self.motor.off()
             self._next_heartbeat = math.inf
             self._replies.clear()
+            self._outbox.clear()  # not on the bus yet: a dead drive sends nothing more, its boot-up included
             return
         if self._reboot_due is not None and t >= self._reboot_due:
             self._reboot_due = None

@@ -1,0 +1,45 @@
+#!/usr/bin/env bash
+# CI stage: the realbus-marked tests on kernel SocketCAN vcan0..2 inside a throw-away QEMU guest,
+# the simulated arm (`sherpa sim`) in one process and the commands in the pytest process, as on a
+# technician's Linux machine with vcan. One guest start for the whole selection. docs/testing.md.
+#
+# usage: .ci/vcan-stage.sh [PYTEST ARGS...]     (run from anywhere; uses `python` from PATH)
+# env:   SHERPA_VCAN_VM       the guest runner (default: ../shared/tools/run-in-vcan-vm.sh from the repo root)
+#        SHERPA_SKIP_VCAN=1   skip this stage on purpose (a machine without the runner); otherwise a
+#                             missing runner fails the stage
+#        SHERPA_VCAN_TIMEOUT  wall-clock limit of the guest run in seconds (default 570)
+#        SHERPA_VCAN_CPUS     guest vCPUs (default 2: the simulator and the tests each get one)
+set -euo pipefail
+cd "$(dirname "$0")/.."
+root=$PWD
+vm=${SHERPA_VCAN_VM:-$root/../shared/tools/run-in-vcan-vm.sh}
+limit=${SHERPA_VCAN_TIMEOUT:-570}
+cpus=${SHERPA_VCAN_CPUS:-2}
+interfaces=vcan0,vcan1,vcan2
+
+if [ "${SHERPA_SKIP_VCAN:-}" = 1 ]; then
+  echo "CI: vcan stage skipped (SHERPA_SKIP_VCAN=1)" >&2
+  exit 0
+fi
+if [ ! -x "$vm" ]; then
+  echo "CI: vcan stage: no guest runner at $vm" >&2
+  echo "CI: set SHERPA_VCAN_VM to run-in-vcan-vm.sh, or SHERPA_SKIP_VCAN=1 to skip this stage on purpose" >&2
+  exit 1
+fi
+# the guest sees this machine's files read-only, so the same interpreter and virtualenv work there
+python=$(command -v python)
+
+echo "CI: realbus tests on $interfaces in a QEMU guest ($cpus vCPUs, limit ${limit}s)" >&2
+set +e
+"$vm" -c "$cpus" -i "$interfaces" -t "$limit" -- \
+  env SHERPA_TEST_BUS="socketcan:$interfaces" "$python" -m pytest -m realbus --durations=5 "$@"
+rc=$?
+set -e
+case "$rc" in
+  0) ;;
+  5) echo "CI: vcan stage: pytest collected no realbus tests" >&2; exit 1 ;;
+  124) echo "CI: vcan stage: timed out after ${limit}s (SHERPA_VCAN_TIMEOUT)" >&2 ;;
+  125) echo "CI: vcan stage: the QEMU guest could not run (see the runner's message above)" >&2 ;;
+  *) echo "CI: vcan stage: tests failed (exit $rc)" >&2 ;;
+esac
+exit "$rc"
