@@ -108,8 +108,7 @@ def pytest_report_header(config: pytest.Config) -> str:
 
 
 def _patient_config(tmp_dir: Path) -> str:
-    """The arm config with patient interpreter timeouts: the QEMU guest runs Python 15-20x slower
-    and the command shares one virtual CPU with the simulator."""
+    """The arm config with patient interpreter timeouts: the QEMU guest runs Python 15-20x slower."""
     from sherpa_cli.config import dump_native, load_config
 
     cfg = load_config(ROOT / ARM_CONFIG)

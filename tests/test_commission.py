@@ -59,8 +59,27 @@ def test_commission_example3_applies_saves_and_the_numbers_arrive(cli, golden, t
 
 
 @pytest.mark.golden
-def test_commission_dry_run_writes_nothing(cli, golden, tmp_path):
+def test_commission_dry_run_writes_nothing(cli, golden, tmp_path, monkeypatch):
+    from sherpa_cli.elmo import codec
+    from sherpa_cli.sim.arm import SimArm
+
+    # Every step meets a freshly powered arm, so reading a value back afterwards would only catch a
+    # saved write: watch the frames every step's arm received instead.
+    arms = []
+    factory = SimArm.for_session.__func__
+
+    def capture(cls, cfg, channels):
+        arms.append(factory(cls, cfg, channels))
+        return arms[-1]
+
+    monkeypatch.setattr(SimArm, "for_session", classmethod(capture))
     r = cli("--config", EXAMPLE3, "--sim", "commission", "--yes", "--quiet", "--set", f"backup={tmp_path / 'b.yaml'}")
+    assert arms, "the steps ran against the simulated arm"
+    for arm in arms:
+        for d in arm.drives.values():
+            kinds = {codec.decode_request(data).kind for _, can_id, data in d.received if can_id == 0x300 + d.node}
+            assert kinds <= {"query"}, f"{d.node}: only queries in a dry run, got {kinds}"
+            assert d.od_writes == [] and d.save_count == 0
     golden("commission-example3-dry-run.txt", normalized(r, tmp_path))
     # the verify step fails: nothing was programmed, so the drives differ from the config
     assert r.exit_code == 1

@@ -192,3 +192,10 @@ def test_heartbeat_option_sets_0x1017_and_writes_the_old_value_back(tmp_path, mo
     assert (row.heartbeat_ms, row.nmt) == (50, "operational") and row.heartbeat_age is not None
     assert writes == [(0x1017, 0, 50), (0x1017, 0, 0)]
     assert saves == 0
+
+
+@pytest.mark.parametrize("interval", ["inf", "nan", "0", "-1"])
+def test_bad_interval_is_a_usage_error(cli, interval):
+    result = cli("--sim", "monitor", "--interval", interval, "elbow_pitch")
+    assert result.exit_code == 2 and f"--interval {float(interval)}: expected" in result.stderr
+    assert "Traceback" not in result.stderr

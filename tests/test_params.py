@@ -391,3 +391,13 @@ def test_bad_inputs_golden(cli, golden, tmp_path, name, args):
     assert result.exit_code == 2
     assert "Traceback" not in result.stderr and result.stdout == ""
     golden(f"{name}.txt", _clean(result.transcript(), tmp_path))
+
+
+def test_dump_to_an_unwritable_path_is_one_clear_line(cli, tmp_path):
+    blocker = tmp_path / "a-file"
+    blocker.write_text("x")
+    target = blocker / "dump.yaml"  # its directory cannot exist: a file is in the way
+    result = cli("--sim", "dump-params", "elbow_1a", "-o", str(target))
+    assert result.exit_code == 2 and "Traceback" not in result.stderr
+    assert result.stderr.startswith(f"error: --output {target}: cannot write the dump: ")
+    assert blocker.read_text() == "x"

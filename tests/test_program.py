@@ -261,6 +261,30 @@ def _skew(session, drive: str, key: str, amount: float) -> None:
     d.settings = dataclasses.replace(d.settings, store_skew=((key, amount),))
 
 
+def test_an_adapter_error_on_one_drive_keeps_the_other_drives_report(state_home, cfg3, monkeypatch):
+    # python-can raises CanError (not a SherpaError) when an adapter goes away mid-run.
+    import can
+
+    targets = targets_of(cfg3)
+    with ArmSession.open(cfg3, sim=True) as session:
+        plans = program.read_plans(session, targets, need_serial=True)
+        bad = program._client(session, targets[1])
+        real_set = bad.set
+
+        def failing_set(letters, index, value):
+            if letters == "LL":
+                raise can.CanError("adapter unplugged")
+            return real_set(letters, index, value)
+
+        monkeypatch.setattr(bad, "set", failing_set)
+        result = program.apply_plans(session, plans, save=True, ledger=SaveLedger())
+        by_drive = {o.drive: o for o in result.outcomes}
+        assert by_drive["drive1"].status == "saved"
+        failed = by_drive["drive2"]
+        assert failed.status == "failed" and failed.error == "CanError: adapter unplugged"
+        assert not failed.saved and session.sim.drives["drive2"].save_count == 0
+
+
 def test_read_back_mismatch_stops_that_drive_without_sv(state_home, cfg3):
     targets = targets_of(cfg3)
     with ArmSession.open(cfg3, sim=True) as session:
@@ -333,6 +357,51 @@ def test_motor_on_is_refused_without_motor_off(state_home, cfg3):
         assert not d1.motor_on
         written = sets(d1, mark)
         assert written[0] == ("MO", 0), "the motor goes off before the first parameter"
+
+
+def test_sv_without_an_answer_after_it_is_reported_as_sent_and_counted(state_home, cfg3, monkeypatch):
+    # SV is never resent; if the drive stays silent after the blackout its flash may hold the new
+    # values: the report must not say "NOT saved", and the flash-wear count must include it.
+    from sherpa_cli.elmo.client import DriveClient
+    from sherpa_cli.errors import DriveTimeoutError
+
+    real_save = DriveClient.save
+
+    def save_then_silence(self):
+        real_save(self)
+        raise DriveTimeoutError(f"{self.label}: no answer to MO (after SV) within 0.1 s")
+
+    monkeypatch.setattr(DriveClient, "save", save_then_silence)
+    targets = targets_of(cfg3)
+    with ArmSession.open(cfg3, sim=True) as session:
+        plans = program.read_plans(session, targets, need_serial=True)
+        ledger = SaveLedger()
+        result = program.apply_plans(session, plans, save=True, ledger=ledger)
+        for o, p in zip(result.outcomes, plans):
+            assert o.status == "failed" and o.sv_sent and not o.saved
+            assert o.error.startswith("SV was sent but") and "unknown" in o.error
+            assert o.save_count == 1 and ledger.count(p.serial) == 1
+            assert executes(session.sim.drives[o.drive]) == ["SV"], "SV is sent once, never again"
+        err = program.exit_problem(result)
+        assert err is not None and err.exit_code == 1 and "SV sent, save not confirmed" in err.message
+
+
+def test_a_ledger_that_cannot_be_written_does_not_hide_the_saves(state_home, cfg3, tmp_path):
+    blocker = tmp_path / "not-a-dir"
+    blocker.write_text("x")
+    ledger = SaveLedger(blocker / "save-ledger.json")  # its directory cannot be created
+    targets = targets_of(cfg3)
+    with ArmSession.open(cfg3, sim=True) as session:
+        plans = program.read_plans(session, targets, need_serial=True)
+        result = program.apply_plans(session, plans, ledger=ledger)
+        assert result.ok and all(o.status == "programmed" for o in result.outcomes)
+        assert all("save ledger" in o.save_warning and "not updated" in o.save_warning for o in result.outcomes)
+    with ArmSession.open(cfg3, sim=True) as session:  # a new power-up: RAM holds the old values again
+        plans = program.read_plans(session, targets, need_serial=True)
+        result = program.apply_plans(session, plans, save=True, ledger=ledger)
+        assert result.ok and all(o.status == "saved" and o.saved for o in result.outcomes)
+        assert all("not updated" in o.save_warning for o in result.outcomes)
+        assert all(d.save_count == 1 for d in session.sim.drives.values())
 
 
 def test_interrupt_from_progress_callback_leaves_no_drive_saved(state_home, cfg3):

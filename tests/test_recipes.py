@@ -9,7 +9,7 @@ from pathlib import Path
 import pytest
 
 from sherpa_cli.errors import ConfigError, SafetyError, UsageError
-from sherpa_cli.recipes import load_recipe
+from sherpa_cli.recipes import Step, load_recipe
 from sherpa_cli.recipes.report import report_json, report_junit
 from sherpa_cli.recipes.runner import CommandRun, check_json_path, run_recipe
 
@@ -58,6 +58,8 @@ def test_load_substitutes_vars_and_splits_commands(tmp_path):
     assert r.steps[2].argv == ("program-limits", "shoulder_1a", "--apply", "--save", "--yes")
     assert r.steps[2].writes and not r.steps[0].writes
     assert r.steps[2].dry_argv() == ("program-limits", "shoulder_1a")
+    assert Step(9, "s", argv=("scan", "--reset")).dry_argv() == ("scan",)
+    assert Step(9, "s", argv=("program-limits", "--apply", "-y")).dry_argv() == ("program-limits",)
     assert r.steps[3].argv == ("params", "diff", "config", "live")  # a leading "sherpa" is dropped
     assert r.steps[3].expect.exit == (0, 1)
 
@@ -215,3 +217,22 @@ def test_cli_confirm_without_terminal_declines(cli, tmp_path):
     assert "not run: step 2" in r.stdout
     r = cli("recipe", "run", str(path), "--yes")
     assert r.exit_code == 0 and "-> passed (exit 0)" in r.stdout
+
+
+def test_cli_unreadable_recipe_and_unwritable_reports_exit_2_no_traceback(cli, tmp_path):
+    binary = tmp_path / "binary.yaml"
+    binary.write_bytes(b"\xff\xfe\x00\xba garbage")
+    r = cli("recipe", "run", str(binary))
+    assert r.exit_code == 2 and "Traceback" not in r.stderr
+    assert f"{binary}: cannot read recipe: not UTF-8" in r.stderr
+    r = cli("recipe", "run", str(tmp_path))
+    assert r.exit_code == 2 and f"{tmp_path}: is a directory" in r.stderr
+    path = write(tmp_path, "steps:\n  - run: limits show elbow_pitch\n", "ok.yaml")
+    r = cli("recipe", "run", str(path), "--junit", str(tmp_path))
+    assert r.exit_code == 2 and "--junit" in r.stderr and "is a directory" in r.stderr
+    assert "[1/1]" not in r.stdout, "refused before any step ran"
+    blocker = tmp_path / "a-file"
+    blocker.write_text("x")
+    r = cli("recipe", "run", str(path), "--report", str(blocker / "report.json"))
+    assert r.exit_code == 2 and "Traceback" not in r.stderr
+    assert f"--report {blocker / 'report.json'}: cannot write the report" in r.stderr

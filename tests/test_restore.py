@@ -190,3 +190,13 @@ def test_restore_targets_refuses_before_io():
 def state_home(tmp_path, monkeypatch):
     monkeypatch.setenv("XDG_STATE_HOME", str(tmp_path / "state"))
     return tmp_path / "state"
+
+
+def test_restore_value_a_drive_cannot_hold_names_the_file(cli, tmp_path):
+    path = tmp_path / "dump.yaml"
+    path.write_text("meta: {tool: sherpa-cli}\ndrives:\n"
+                    "  drive1: {bus: can0, node: 1, identity: {serial: 1}, params: {AC: 99999999999999}}\n")
+    r = cli(*BASE, "params", "restore", str(path))
+    assert r.exit_code == 2 and "Traceback" not in r.stderr
+    assert r.stderr.startswith(f"error: {path}: drives.drive1.params: ") and "outside int32" in r.stderr
+    assert "<input>" not in r.stderr

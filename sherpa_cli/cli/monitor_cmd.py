@@ -13,6 +13,7 @@ from sherpa_cli.errors import ExitCode, UsageError
 
 # Seconds between polls in the live view; the CLI's sleep goes through here so tests can stop it.
 sleep: Callable[[float], None] = time.sleep
+MAX_INTERVAL = 3600.0  # s between polls of the live view
 
 
 def monitor(
@@ -47,8 +48,8 @@ def monitor(
     st = state(ctx)
     if st.json_mode and not once:
         raise UsageError("--json needs --once: the live view is for a terminal", hint="sherpa --json monitor --once")
-    if not interval > 0:
-        raise UsageError(f"--interval {interval}: expected a number of seconds > 0")
+    if not 0 < interval <= MAX_INTERVAL:  # also refuses nan and inf (time.sleep(inf) overflows)
+        raise UsageError(f"--interval {interval}: expected a number of seconds > 0 and <= {MAX_INTERVAL:g}")
     cfg = st.load_config()
     refs = resolve_targets(cfg, targets or [])
     buses = list(dict.fromkeys(ref.bus for ref in refs))

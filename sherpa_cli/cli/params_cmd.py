@@ -54,7 +54,13 @@ def dump_params(
         for key, why in d.unreadable.items():
             st.out.warn(f"{d.name}: {key} unreadable ({why})")
     if output is not None:
-        write_dump(output, dump)
+        try:
+            write_dump(output, dump)
+        except OSError as exc:
+            from sherpa_cli.errors import UsageError
+
+            raise UsageError(f"--output {output}: cannot write the dump: {exc.strerror or exc}; nothing was written",
+                             hint="choose a writable file name") from None
     if st.json_mode:
         st.out.json({"file": str(output) if output is not None else None, "meta": dump.meta,
                      "drives": {name: {"bus": d.bus, "node": d.node, "identity": d.identity,

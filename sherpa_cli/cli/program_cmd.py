@@ -90,8 +90,11 @@ def params_restore(
     _check_options(apply, save)
     dump = read_dump(file)
     targets, warnings = restore_targets(cfg, dump, file, other_serial=other_serial)
+    from sherpa_cli.errors import Location
+
     run_program(st, "params restore", targets, warnings, apply=apply, save=save, yes=yes, motor_off=motor_off,
-                need_serial=True, allow_disabled=True, title=lambda drive: _moves(cfg, drive), source=file)
+                need_serial=True, allow_disabled=True, title=lambda drive: _moves(cfg, drive), source=file,
+                where=lambda drive: Location(str(file), None, f"drives.{drive}.params"))
 
 
 def _check_options(apply: bool, save: bool) -> None:
@@ -279,7 +282,7 @@ def _outcome_line(p: Any, o: Any, save: bool) -> str:
     if o.status == pr.NOT_STARTED:
         return f"{o.drive}: not started, nothing written"
     done = f"{len(o.written)} of {n} written ({_keys(o.written)}), {len(o.verified)} verified"
-    saved = "saved" if o.saved else "NOT saved"
+    saved = "saved" if o.saved else "SV sent, save NOT confirmed" if o.sv_sent else "NOT saved"
     if o.status == pr.INTERRUPTED:
         return f"{o.drive}: interrupted: {off}{done}, {saved}"
     return f"{o.drive}: FAILED: {o.error}; {off}{done}, {saved}"

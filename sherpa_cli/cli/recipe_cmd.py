@@ -78,10 +78,11 @@ def execute(st: AppState, recipe_path: Path, *, apply: bool, yes: bool, start: O
             report: Optional[Path], junit: Optional[Path], sets: Sequence[str] | None, quiet: bool):
     """Run a recipe with live step output; returns the RecipeReport (its exit_code ends the command)."""
     from sherpa_cli.recipes import load_recipe
-    from sherpa_cli.recipes.report import write_reports
+    from sherpa_cli.recipes.report import check_report_paths, write_reports
     from sherpa_cli.recipes.runner import FAILED, PASSED, SKIPPED, run_recipe
 
     recipe = load_recipe(_shown_path(recipe_path), _parse_sets(sets))
+    check_report_paths(report, junit)
     start_at = recipe.find_step(start) if start else None
     st.load_config()  # a bad config is reported once, before the first step
     out = st.out

@@ -31,7 +31,7 @@ from typing import Any, Callable, Iterable, Mapping, Sequence
 from sherpa_cli.bus.parallel import run_concurrently
 from sherpa_cli.elmo import codec
 from sherpa_cli.elmo.commands import COMMANDS, param_key, parse_param_key
-from sherpa_cli.errors import CodecError, ConfigError, Location, SafetyError, SherpaError
+from sherpa_cli.errors import CodecError, ConfigError, DriveRefusedError, Location, SafetyError, SherpaError
 
 ParamValue = int | float
 
@@ -143,6 +143,8 @@ class DriveOutcome:
     verified: list[str] = field(default_factory=list)
     mismatches: dict[str, ParamValue] = field(default_factory=dict)  # key -> value read back
     saved: bool = False
+    # SV went out but the drive's answer after the blackout never came: flash state unknown
+    sv_sent: bool = False
     save_count: int | None = None  # saves of this drive by this tool, this one included
     save_warning: str | None = None
     error: str | None = None
@@ -449,12 +451,25 @@ def _apply_drive(session: Any, plan: DrivePlan, *, save: bool, ledger: Any, stop
             emit(Event(t.drive, EV_VERIFIED, key, back))
         if not save:
             if out.written and ledger is not None and plan.serial is not None:
-                ledger.mark_unsaved(plan.serial, t.drive)
+                out.save_warning = ledger.mark_unsaved(plan.serial, t.drive)
             out.status = PROGRAMMED
             return out
         if stop.is_set():
             return out  # every write verified, but an interrupted run saves nothing more
-        client.save()
+        out.sv_sent = True
+        try:
+            client.save()
+        except DriveRefusedError:
+            out.sv_sent = False  # the drive answered SV with an error: nothing was saved
+            raise
+        except SherpaError as exc:
+            # SV is never resent; the drive may well have written its flash: count it, say so
+            out.error = f"SV was sent but {exc.message}; whether flash holds the new values is unknown"
+            if ledger is not None and plan.serial is not None:
+                record = ledger.record(plan.serial, t.drive)
+                out.save_count, out.save_warning = record.count, record.warning
+            out.status = FAILED
+            return out
         out.saved = True
         if ledger is not None and plan.serial is not None:
             record = ledger.record(plan.serial, t.drive)
@@ -480,6 +495,13 @@ def _apply_drive(session: Any, plan: DrivePlan, *, save: bool, ledger: Any, stop
     except SherpaError as exc:
         out.status = FAILED
         out.error = exc.message
+        return out
+    except Exception as exc:  # e.g. can.CanError from an unplugged adapter: keep every drive's report
+        import logging
+
+        logging.getLogger(__name__).debug("%s: programming failed", t.drive, exc_info=True)
+        out.status = FAILED
+        out.error = f"{type(exc).__name__}: {exc}"
         return out
     finally:
         out.elapsed = time.perf_counter() - start
@@ -517,8 +539,9 @@ def exit_problem(result: ApplyResult) -> SherpaError | None:
     if bad:
         first = bad[0]
         more = f" ({len(bad)} drives failed)" if len(bad) > 1 else ""
+        saved = "SV sent, save not confirmed" if first.sv_sent else "not saved"
         return SafetyError(f"{first.drive}: {first.error}; programming of {first.drive} stopped there, "
-                           f"not saved{more}")
+                           f"{saved}{more}")
     return None
 
 

@@ -67,28 +67,38 @@ class SaveLedger:
             entry["saves"] = int(entry.get("saves", 0)) + 1
             entry["last_name"] = drive
             entry.pop("unsaved", None)
-            self._store(drives)
+            problem = self._store(drives)
             count = entry["saves"]
-        return SaveRecord(serial, count, save_warning(drive, serial, count))
+        warning = save_warning(drive, serial, count)
+        if problem is not None:
+            # the save happened; a ledger we cannot write must not hide that from the report
+            warning = "; ".join(w for w in (warning, problem) if w)
+        return SaveRecord(serial, count, warning)
 
     # A run with --apply but without --save leaves verified values in RAM only. A later
     # `--apply --save` then finds nothing to change, yet flash still holds the old values:
     # the ledger remembers such drives so that run saves them (one SV, never a loop).
-    def mark_unsaved(self, serial: int, drive: str) -> None:
+    def mark_unsaved(self, serial: int, drive: str) -> str | None:
+        """Remember the drive as written but not saved; a warning if the ledger cannot be written."""
         with self._lock:
             drives = self._load()
             entry = drives.setdefault(_key(serial), {"saves": 0})
             entry["unsaved"] = True
             entry["last_name"] = drive
-            self._store(drives)
+            return self._store(drives)
 
     def unsaved(self, serial: int) -> bool:
         with self._lock:
             return bool(self._load().get(_key(serial), {}).get("unsaved", False))
 
-    def _store(self, drives: dict[str, dict]) -> None:
+    def _store(self, drives: dict[str, dict]) -> str | None:
+        """Write the ledger; on failure the warning to show (the drives' work is already done)."""
         body = {"format": FORMAT, "drives": dict(sorted(drives.items()))}
-        write_atomic(self.path, json.dumps(body, indent=1, sort_keys=True) + "\n")
+        try:
+            write_atomic(self.path, json.dumps(body, indent=1, sort_keys=True) + "\n")
+        except OSError as exc:
+            return f"save ledger {self.path} not updated: {exc.strerror or exc}"
+        return None
 
     def _load(self) -> dict[str, dict]:
         try:

@@ -15,7 +15,8 @@ from sherpa_cli.errors import ConfigError, Location
 ON_FAILURE = ("stop", "continue")
 # Flags that make a step write to drives: without `recipe run --apply` they are removed, so the
 # step runs as the command's own dry run (design.md: every write is a dry run unless --apply).
-WRITE_FLAGS = ("--apply", "--save", "--motor-off", "--yes")
+# `scan --reset` is no write, but it resets every node (unsaved RAM is lost): not in a dry run either.
+WRITE_FLAGS = ("--apply", "--save", "--motor-off", "--yes", "-y", "--reset")
 # Global options are the recipe runner's business (it passes its own --config/--sim/--bus-map);
 # a step that set them would run against another arm than the one the operator chose.
 GLOBAL_OPTIONS = ("--config", "-c", "--sim", "--bus-map", "--json", "--debug", "--no-color", "--version")
@@ -88,9 +89,14 @@ def load_recipe(path: Path, overrides: dict[str, str] | None = None) -> Recipe:
     try:
         text = Path(path).read_text(encoding="utf-8")
     except FileNotFoundError:
-        raise ConfigError(f"recipe file not found: {path}") from None
+        raise ConfigError("recipe file not found", Location(str(path))) from None
+    except IsADirectoryError:
+        raise ConfigError("is a directory, expected a recipe file", Location(str(path))) from None
     except OSError as exc:
-        raise ConfigError(f"cannot read recipe {path}: {exc.strerror}") from None
+        raise ConfigError(f"cannot read recipe: {exc.strerror or exc}", Location(str(path))) from None
+    except UnicodeDecodeError as exc:
+        raise ConfigError(f"cannot read recipe: not UTF-8 text ({exc.reason} at byte {exc.start})",
+                          Location(str(path))) from None
     root = parse_yaml(text, str(path))
     top = Section(root, ["name", "description", "vars", "on_failure", "steps"], what="a recipe mapping")
     name = top.str("name", Path(path).stem)

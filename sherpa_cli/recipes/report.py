@@ -41,8 +41,24 @@ def report_junit(report: RecipeReport) -> str:
     return '<?xml version="1.0" encoding="utf-8"?>\n' + ET.tostring(suites, encoding="unicode") + "\n"
 
 
+def check_report_paths(json_path: Path | None, junit_path: Path | None) -> None:
+    """Refuse report paths that cannot be files before any step runs (UsageError)."""
+    from sherpa_cli.errors import UsageError
+
+    for option, path in (("--report", json_path), ("--junit", junit_path)):
+        if path is not None and Path(path).is_dir():
+            raise UsageError(f"{option} {path}: is a directory, expected a file name")
+
+
 def write_reports(report: RecipeReport, json_path: Path | None, junit_path: Path | None) -> None:
-    if json_path is not None:
-        write_atomic(json_path, report_json(report))
-    if junit_path is not None:
-        write_atomic(junit_path, report_junit(report))
+    """Write the reports; an unwritable path is a UsageError naming the option and the file."""
+    from sherpa_cli.errors import UsageError
+
+    for option, path, render in (("--report", json_path, report_json), ("--junit", junit_path, report_junit)):
+        if path is None:
+            continue
+        try:
+            write_atomic(path, render(report))
+        except OSError as exc:
+            raise UsageError(f"{option} {path}: cannot write the report: {exc.strerror or exc}",
+                             hint=f"the recipe itself ended: {report.outcome}") from None
