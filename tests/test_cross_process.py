@@ -5,42 +5,19 @@ from __future__ import annotations
 
 import json
 import os
-import selectors
+import queue
 import signal
-import socket
 import subprocess
 import sys
+import threading
 import time
 
 import pytest
 
+from arm_harness import free_base_port
 from conftest import ROOT
 
 pytestmark = pytest.mark.crossprocess
-
-
-def _free_base_port(count: int = 3) -> int:
-    """A base port with ``count`` free ports after it (loopback only)."""
-    for _ in range(50):
-        with socket.socket() as probe:
-            probe.bind(("127.0.0.1", 0))
-            base = probe.getsockname()[1]
-        if base + count > 65535:
-            continue
-        sockets = []
-        try:
-            for port in range(base, base + count):
-                s = socket.socket()
-                s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
-                s.bind(("127.0.0.1", port))
-                sockets.append(s)
-            return base
-        except OSError:
-            continue
-        finally:
-            for s in sockets:
-                s.close()
-    pytest.skip("no three consecutive free ports on 127.0.0.1")
 
 
 def _env(tmp_path) -> dict[str, str]:
@@ -50,22 +27,37 @@ def _env(tmp_path) -> dict[str, str]:
 
 
 def _start_sim(tmp_path):
-    port = _free_base_port()
+    try:
+        port = free_base_port(3)
+    except RuntimeError:
+        pytest.skip("no three consecutive free ports on 127.0.0.1")
     proc = subprocess.Popen(
         [sys.executable, "-m", "sherpa_cli", "sim", "--serve", f"127.0.0.1:{port}", "--duration", "60"],
-        cwd=ROOT, env=_env(tmp_path), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    selector = selectors.DefaultSelector()
-    selector.register(proc.stdout, selectors.EVENT_READ)
+        cwd=ROOT, env=_env(tmp_path), stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT, text=True)
+    # A thread drains the pipe: select() on it while readline() buffers ahead loses lines.
+    lines: queue.Queue[str | None] = queue.Queue()
+    seen: list[str] = []
+
+    def drain() -> None:
+        for line in proc.stdout:
+            lines.put(line)
+        lines.put(None)
+
+    threading.Thread(target=drain, daemon=True).start()
     deadline = time.monotonic() + 30
-    lines = []
-    while time.monotonic() < deadline and proc.poll() is None:
-        if selector.select(timeout=0.5):
-            line = proc.stdout.readline()
-            lines.append(line)
-            if "export SHERPA_BUS_MAP=" in line:
-                return proc, line.split("=", 1)[1].strip(), ""
+    while time.monotonic() < deadline:
+        try:
+            line = lines.get(timeout=0.5)
+        except queue.Empty:
+            continue
+        if line is None:
+            break
+        seen.append(line)
+        if "export SHERPA_BUS_MAP=" in line:
+            return proc, line.split("=", 1)[1].strip(), ""
     _stop(proc)
-    return None, None, "".join(lines) + proc.stderr.read()
+    return None, None, "".join(seen)
 
 
 def _stop(proc) -> None:

@@ -27,6 +27,9 @@ def _paced_network_class():
         frame of this tool goes through it.
         """
 
+        #: canopen's receive thread wakes this often to see whether it must stop; its default
+        #: 1 s made every command wait up to a second when it closed its buses
+        NOTIFIER_CYCLE = 0.1
         #: seconds between two frames sent by this tool on the bus (config: send_interval_us)
         gap: float = 0.0
         #: attempts when the kernel's socket buffer is full (ENOBUFS, python-can issue #2004)
