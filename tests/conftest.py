@@ -108,12 +108,12 @@ def pytest_report_header(config: pytest.Config) -> str:
 
 
 def _patient_config(tmp_dir: Path) -> str:
-    """The arm config with patient interpreter timeouts: the QEMU guest runs Python 15-20x slower."""
+    """The arm config with patient interpreter and SDO timeouts: the QEMU guest runs Python 15-20x slower."""
     from sherpa_cli.config import dump_native, load_config
 
     cfg = load_config(ROOT / ARM_CONFIG)
     cfg = dataclasses.replace(cfg, protocol=dataclasses.replace(cfg.protocol, reply_timeout=2.0, retries=2,
-                                                                mo_confirm_timeout=20.0))
+                                                                mo_confirm_timeout=20.0, sdo_timeout=3.0))
     path = tmp_dir / "arm.yaml"
     path.write_text(dump_native(cfg))
     return str(path)

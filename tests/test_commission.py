@@ -113,3 +113,22 @@ def test_commission_stops_at_a_missing_drive_and_says_where_to_resume(cli, tmp_p
     assert "[1/8] scan" in r.stdout and "-> FAILED: exit code 1, expected 0" in r.stdout
     assert "resume with: --from scan" in r.stdout
     assert "commissioning is NOT complete" in r.stdout or "the save step did not run" in r.stdout
+
+
+def test_after_commissioning_one_changed_value_is_the_only_difference(cli, tmp_path):
+    # Issue 4's check after commissioning: the dump of a commissioned drive matches the config;
+    # change one value and the diff shows exactly that one. With --sim a change must be saved
+    # (SV) to outlive the invocation, exactly like a real arm that is power-cycled.
+    r = cli("--config", EXAMPLE3, "--sim", "commission", "--apply", "--yes", "--quiet",
+            "--set", f"backup={tmp_path / 'b.yaml'}")
+    assert r.exit_code == 0, r.stdout
+    r = cli("--config", EXAMPLE3, "--sim", "--json", "params", "diff", "config", "live")
+    assert r.exit_code == 0, r.stdout
+    r = cli("--config", EXAMPLE3, "--sim", "cmd", "drive2", "AC=777", "SV", "--apply")
+    assert r.exit_code == 0, r.stderr
+    r = cli("--config", EXAMPLE3, "--sim", "--json", "params", "diff", "config", "live")
+    assert r.exit_code == 1
+    data = json.loads(r.stdout)
+    differing = [(d["drive"], p["param"], p["a"], p["b"]) for d in data["drives"] for p in d["params"]
+                 if p["status"] != "same"]
+    assert differing == [("drive2", "AC", 500, 777)]

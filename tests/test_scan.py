@@ -220,3 +220,26 @@ def test_buses_are_scanned_at_the_same_time():
 ])
 def test_decode_device_type(frame, value, why):
     assert decode_device_type(frame) == (value, why)
+
+
+def test_sdo_timeout_comes_from_the_config(tmp_path):
+    # protocol.sdo_timeout reaches both the scan's listening time and every SDO read of the session
+    import dataclasses
+
+    from sherpa_cli.config import load_config
+    from sherpa_cli.ops.scan import sdo_upload
+    from sherpa_cli.ops.session import ArmSession
+
+    cfg = load_config("configs/appendix-c/example1.yaml")
+    cfg = dataclasses.replace(cfg, protocol=dataclasses.replace(cfg.protocol, sdo_timeout=0.05))
+    with ArmSession.open(cfg, sim=True) as session:
+        network = next(iter(session.links.values())).network
+        assert network.sdo_timeout == 0.05
+        import time
+
+        from canopen.sdo.exceptions import SdoError
+
+        t0 = time.monotonic()
+        with pytest.raises(SdoError):
+            sdo_upload(network, 99, 0x1000, 0)  # nobody at node 99: one timeout (+ canopen's one retry)
+        assert time.monotonic() - t0 < 0.3 * 2, "canopen's 0.3 s default was used"

@@ -114,6 +114,7 @@ def open_links(cfg: ArmConfig, names: Iterable[str] | None = None) -> dict[str, 
             bus = open_bus(bus_cfg)
             network = network_cls(bus)
             network.gap = bus_cfg.send_interval_us / 1e6
+            network.sdo_timeout = cfg.protocol.sdo_timeout
             network.connect()
             links[name] = BusLink(name, bus_cfg, bus, network)
     except BaseException:

@@ -75,6 +75,7 @@ def parse_protocol(top: Section, locs: Locs) -> ProtocolConfig:
         mo_settle=sec.num("mo_settle", d.mo_settle),
         mo_confirm_timeout=sec.num("mo_confirm_timeout", d.mo_confirm_timeout),
         sv_blackout=sec.num("sv_blackout", d.sv_blackout),
+        sdo_timeout=sec.num("sdo_timeout", d.sdo_timeout),
     )
 
 

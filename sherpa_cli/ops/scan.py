@@ -278,6 +278,10 @@ def sdo_upload(network: Any, node: int, index: int, sub: int = 0) -> bytes:
     import canopen
 
     remote = canopen.RemoteNode(node, canopen.ObjectDictionary())
+    # protocol.sdo_timeout, set on the session's networks (tests pass bare fakes: canopen's default)
+    timeout = getattr(network, "sdo_timeout", None)
+    if isinstance(timeout, (int, float)):
+        remote.sdo.RESPONSE_TIMEOUT = timeout
     remote.associate_network(network)
     try:
         return remote.sdo.upload(index, sub)
@@ -394,10 +398,12 @@ def scan_bus(cfg: ArmConfig, bus: str, network: Any, settings: ScanSettings = Sc
     return BusScan(bus, findings, None, median, threshold)
 
 
-def scan(session: Any, buses: Iterable[str] | None = None, settings: ScanSettings = ScanSettings(), *,
+def scan(session: Any, buses: Iterable[str] | None = None, settings: ScanSettings | None = None, *,
          reset: bool = False, progress: Callable[[str, str, int, int], None] | None = None) -> ScanReport:
     """Scan the named buses of an open session (default: all it has open), all at once."""
     cfg: ArmConfig = session.cfg
+    if settings is None:
+        settings = ScanSettings(sdo_timeout=cfg.protocol.sdo_timeout)
     names = list(buses) if buses is not None else list(session.links)
     links: Mapping[str, Any] = session.links
 
