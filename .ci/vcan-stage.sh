@@ -4,7 +4,8 @@
 # technician's Linux machine with vcan. One guest start for the whole selection. docs/testing.md.
 #
 # usage: .ci/vcan-stage.sh [PYTEST ARGS...]     (run from anywhere; uses `python` from PATH)
-# env:   SHERPA_VCAN_VM       the guest runner (default: ../shared/tools/run-in-vcan-vm.sh from the repo root)
+# env:   SHERPA_VCAN_VM       the guest runner (default: ../shared/tools/run-in-vcan-vm.sh from the repo
+#                             root, else /work/shared/tools/run-in-vcan-vm.sh)
 #        SHERPA_SKIP_VCAN=1   skip this stage on purpose (a machine without the runner); otherwise a
 #                             missing runner fails the stage
 #        SHERPA_VCAN_TIMEOUT  wall-clock limit of the guest run in seconds (default 570)
@@ -12,7 +13,15 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 root=$PWD
-vm=${SHERPA_VCAN_VM:-$root/../shared/tools/run-in-vcan-vm.sh}
+# The runner sits beside the checkout (../shared/tools); a clean clone made elsewhere on the same
+# machine finds it at the workplace's fixed path.
+vm=${SHERPA_VCAN_VM:-}
+if [ -z "$vm" ]; then
+  for candidate in "$root/../shared/tools/run-in-vcan-vm.sh" /work/shared/tools/run-in-vcan-vm.sh; do
+    if [ -x "$candidate" ]; then vm=$candidate; break; fi
+  done
+  vm=${vm:-$root/../shared/tools/run-in-vcan-vm.sh}
+fi
 limit=${SHERPA_VCAN_TIMEOUT:-570}
 cpus=${SHERPA_VCAN_CPUS:-2}
 interfaces=vcan0,vcan1,vcan2
