@@ -16,7 +16,7 @@ import pytest
 
 from sherpa_cli.elmo.client import ClientSettings, DriveClient
 from sherpa_cli.elmo.transport import frame_text
-from sherpa_cli.errors import CommunicationError, DriveRefusedError
+from sherpa_cli.errors import DriveRefusedError
 from sherpa_cli.sim import ManualClock, SimSettings
 from sherpa_cli.sim.drive import SimDrive
 

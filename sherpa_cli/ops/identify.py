@@ -15,7 +15,7 @@ from typing import Any, Sequence
 
 from sherpa_cli.config.model import ArmConfig
 from sherpa_cli.joints.units import counts_to_rad
-from sherpa_cli.ops.params_read import Progress, per_bus, read_identity, ref_of
+from sherpa_cli.ops.params_read import Progress, open_drive, per_bus
 
 STATE_KEYS = ("MO", "UM", "SR", "MF", "PX")
 
@@ -77,13 +77,8 @@ class IdentifyReport:
 
 
 def _read_one(session: Any, drive: str, progress: Progress | None) -> DriveIdentity:
-    cfg: ArmConfig = session.cfg
-    d = cfg.drives[drive]
-    client = session.client(ref_of(cfg, drive))
-    client.nmt_start()
-    if progress:
-        progress(drive, "identity")
-    identity, notes = read_identity(session.links[d.bus].network, cfg, drive)
+    d = session.cfg.drives[drive]
+    client, identity, notes = open_drive(session, drive, progress)
     state: dict[str, int | float] = {}
     for key in STATE_KEYS:
         if progress:

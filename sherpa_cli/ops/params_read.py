@@ -149,14 +149,21 @@ def ref_of(cfg: ArmConfig, drive: str):
     return DriveRef(d.name, d.bus, d.node, d)
 
 
+def open_drive(session: Any, drive: str, progress: Progress | None = None) -> tuple[Any, dict[str, Any], list[str]]:
+    """NMT-start a configured drive and read its identity: (client, identity, notes)."""
+    cfg: ArmConfig = session.cfg
+    client = session.client(ref_of(cfg, drive))
+    client.nmt_start()  # the binary interpreter answers only in Operational
+    if progress:
+        progress(drive, "identity")
+    identity, notes = read_identity(session.links[cfg.drives[drive].bus].network, cfg, drive)
+    return client, identity, notes
+
+
 def read_drive_dump(session: Any, drive: str, progress: Progress | None = None) -> DriveDump:
     cfg: ArmConfig = session.cfg
     d = cfg.drives[drive]
-    client = session.client(ref_of(cfg, drive))
-    client.nmt_start()
-    if progress:
-        progress(drive, "identity")
-    identity, _ = read_identity(session.links[d.bus].network, cfg, drive)
+    client, identity, _ = open_drive(session, drive, progress)
     params, unreadable = read_params(client, params_to_read(cfg, drive), progress, drive)
     return DriveDump(name=drive, bus=d.bus, node=d.node, identity=identity, params=params, unreadable=unreadable)
 

@@ -339,7 +339,7 @@ def _read_plan(session: Any, t: DriveTarget, need_serial: bool, on_event: Progre
             letters, index = parse_param_key(key)
             try:
                 now[key] = client.get(letters, index)
-            except SherpaError as exc:
+            except SherpaError:
                 if key in extra:  # a parameter we only order against may be missing on this firmware
                     now[key] = None
                     continue

@@ -4,4 +4,6 @@ Above ``ops`` and below ``cli``: the runner does not know how a step is executed
 hands it a function that runs one ``sherpa`` command line and returns its exit code and output.
 """
 
-from sherpa_cli.recipes.model import Expect, Recipe, Step, load_recipe  # noqa: F401
+from sherpa_cli.recipes.model import Expect, Recipe, Step, load_recipe
+
+__all__ = ["Expect", "Recipe", "Step", "load_recipe"]
