@@ -110,6 +110,17 @@ def test_cmd_in_another_process_talks_to_the_served_sim(served_sim, tmp_path):
     assert proc.wait(timeout=10) == 0
 
 
+def test_sigterm_stops_the_served_sim_and_keeps_what_sv_saved(served_sim, tmp_path):
+    # A service manager stops `sherpa sim` with SIGTERM: the saved flash must survive that too.
+    proc, bus_map = served_sim
+    saved = _sherpa(tmp_path, "--bus-map", bus_map, "cmd", "shoulder_1a", "AC=123456", "SV", "--apply")
+    assert saved.returncode == 0, saved.stderr
+    proc.send_signal(signal.SIGTERM)
+    assert proc.wait(timeout=20) == 0
+    after = _sherpa(tmp_path, "--sim", "--json", "cmd", "shoulder_1a", "AC")  # same state directory
+    assert json.loads(after.stdout)["results"][0]["value"] == 123456
+
+
 def test_serving_beyond_loopback_is_refused(cli):
     result = cli("sim", "--serve", "0.0.0.0:54799")
     assert result.exit_code == 2

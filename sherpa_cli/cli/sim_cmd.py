@@ -11,6 +11,13 @@ from sherpa_cli.cli.context import state
 from sherpa_cli.errors import UsageError
 
 
+def _stop_on_sigterm(stop: threading.Event) -> None:
+    import signal
+
+    if threading.current_thread() is threading.main_thread():  # signal handlers live there only
+        signal.signal(signal.SIGTERM, lambda signum, frame: stop.set())
+
+
 def sim(
     ctx: typer.Context,
     serve: Optional[str] = typer.Option(
@@ -89,11 +96,14 @@ def sim(
     import sys
 
     sys.stdout.flush()
+    stop = threading.Event()
+    _stop_on_sigterm(stop)
     try:
-        threading.Event().wait(duration)
+        if stop.wait(duration):
+            st.out.info("terminated: stopping the simulated arm")
     except KeyboardInterrupt:
         st.out.info("stopping the simulated arm")
     finally:
-        stopper()
+        stopper()  # saves the drives' flash: a service manager's SIGTERM must not lose an SV
     if arm.errors:
         raise arm.errors[0]
