@@ -116,15 +116,10 @@ def make_table(title: str | None, columns: Sequence[str], rows: Iterable[Sequenc
 
 
 def fmt_value(value: Any) -> str:
-    """Parameters as a technician types them: ints plain, floats without float32 noise."""
-    if value is None:
-        return "-"
-    if isinstance(value, bool):
-        return str(int(value))
-    if isinstance(value, float):
-        text = f"{value:.6g}"
-        return text if any(c in text for c in ".en") else text + ".0"
-    return str(value)
+    """Parameters as a technician types them (the ops layer words its messages the same way)."""
+    from sherpa_cli.elmo.commands import format_value
+
+    return format_value(value)
 
 
 def require(condition: bool, message: str) -> None:

@@ -239,3 +239,15 @@ def parse_param_key(key: str) -> tuple[str, int]:
     if not raw_index.isdigit() or not raw_index.isascii():
         raise CodecError(f"bad index {raw_index!r} in {key!r}: must be a decimal number")
     return letters, spec.check_index(int(raw_index))
+
+
+def format_value(value: object) -> str:
+    """A parameter value as a technician types it: ints plain, floats without float32 noise."""
+    if value is None:
+        return "-"
+    if isinstance(value, bool):
+        return str(int(value))
+    if isinstance(value, float):
+        text = f"{value:.6g}"
+        return text if any(c in text for c in ".en") else text + ".0"
+    return str(value)

@@ -30,7 +30,7 @@ from typing import Any, Callable, Iterable, Mapping, Sequence
 
 from sherpa_cli.bus.parallel import run_concurrently
 from sherpa_cli.elmo import codec
-from sherpa_cli.elmo.commands import COMMANDS, param_key, parse_param_key
+from sherpa_cli.elmo.commands import COMMANDS, format_value, param_key, parse_param_key
 from sherpa_cli.errors import CodecError, ConfigError, DriveRefusedError, Location, SafetyError, SherpaError
 
 ParamValue = int | float
@@ -180,13 +180,7 @@ class ApplyResult:
         return not self.interrupted and all(o.ok for o in self.outcomes)
 
 
-def _fmt(value: ParamValue | None) -> str:
-    if value is None:
-        return "-"
-    if isinstance(value, float):
-        text = f"{value:.6g}"
-        return text if any(c in text for c in ".en") else text + ".0"
-    return str(value)
+_fmt = format_value
 
 
 # --------------------------------------------------------------------------- checks (no I/O)
