@@ -7,6 +7,7 @@ flag bits (0x8000 float, 0x4000 query in a request / error in a reply).
 from __future__ import annotations
 
 import math
+import os
 import re
 import struct
 from dataclasses import dataclass
@@ -434,3 +435,28 @@ def _parse_float(raw: str, what: str) -> float:
     if not math.isfinite(value):
         raise CodecError(f"{what}: value {raw!r} is not a finite number")
     return value
+
+
+# -- compiled front doors -------------------------------------------------------------------------
+
+pure_encode_set, pure_decode_reply = encode_set, decode_reply
+
+
+def _load_compiled() -> object | None:
+    """The C module bound to this module's caches, or None (not built, or SHERPA_PURE_CODEC set)."""
+    if os.environ.get("SHERPA_PURE_CODEC", "") not in ("", "0"):
+        return None
+    try:
+        from sherpa_cli.elmo import _codec_c
+    except ImportError:  # built without a C compiler, or for another interpreter
+        return None
+    _codec_c.bind(_INT_SETS, _FLOAT_SETS, _INT_REPLIES, _FLOAT_REPLIES, Reply, pure_encode_set, pure_decode_reply)
+    return _codec_c
+
+
+_compiled = _load_compiled()
+#: "compiled" when encode_set and decode_reply are the C front doors of _codec_c.c, else "pure Python".
+IMPLEMENTATION = "compiled" if _compiled is not None else "pure Python"
+if _compiled is not None:
+    encode_set = _compiled.encode_set  # type: ignore[attr-defined]  # noqa: F811
+    decode_reply = _compiled.decode_reply  # type: ignore[attr-defined]  # noqa: F811
