@@ -100,15 +100,90 @@ def test_compiled_replies_are_real_reply_tuples():
     assert gc.is_tracked(reply)
 
 
-def test_keywords_and_bad_arity_go_to_the_pure_function():
-    assert codec.encode_set(letters="AC", index=0, value=150000) == bytes.fromhex("41 43 00 00 F0 49 02 00")
-    with pytest.raises(TypeError) as compiled_error:
-        codec.encode_set("AC", 0)
-    with pytest.raises(TypeError) as pure_error:
-        codec.pure_encode_set("AC", 0)
-    assert str(compiled_error.value) == str(pure_error.value)
-    with pytest.raises(TypeError):
-        codec.decode_reply()  # type: ignore[call-arg]
+@pytest.mark.parametrize("pure, compiled, args, kwargs", [
+    ("pure_encode_set", "encode_set", (), {"letters": "AC", "index": 0, "value": 150000}),
+    ("pure_encode_set", "encode_set", ("AC", 0), {}),
+    ("pure_encode_set", "encode_set", ("AC", 0, 1, 2), {}),
+    ("pure_decode_reply", "decode_reply", (), {"data": bytes.fromhex("41 43 00 00 F0 49 02 00")}),
+    ("pure_decode_reply", "decode_reply", (), {}),
+    ("pure_decode_reply", "decode_reply", (bytes(8), 1), {}),
+])
+def test_keywords_and_bad_arity_answer_as_the_pure_function(pure, compiled, args, kwargs):
+    def run(fn):
+        try:
+            return ("ok", fn(*args, **kwargs))
+        except (TypeError, CodecError) as exc:
+            return (type(exc).__name__, str(exc))
+
+    assert run(getattr(codec, compiled)) == run(getattr(codec, pure))
+
+
+class _RaisingEq(str):
+    """A cache key that cannot be compared once armed: the pure path then checks instead of failing."""
+
+    armed = False
+    __hash__ = str.__hash__
+
+    def __eq__(self, other):
+        if _RaisingEq.armed:
+            raise TypeError("cannot compare")
+        return str.__eq__(self, other)
+
+
+@pytest.mark.parametrize("name", ["pure_encode_set", "encode_set"])
+def test_a_cache_lookup_that_raises_falls_back_to_the_checked_path(name):
+    fn = getattr(codec, name)
+    codec._clear_caches()
+    try:
+        fn(_RaisingEq("AC"), 0, 1)  # caches the key ("AC" as the subclass, 0)
+        _RaisingEq.armed = True
+        assert fn("AC", 0, 5) == bytes.fromhex("41 43 00 00 05 00 00 00")
+    finally:
+        _RaisingEq.armed = False
+        codec._clear_caches()
+
+
+def test_a_rebind_by_a_finalizer_during_a_call_frees_nothing_the_call_reads():
+    compiled = codec._compiled
+    ran = []
+
+    class Rebind:
+        def __init__(self):
+            self.cycle = self  # only the cycle collector frees it, at an allocation inside the call
+
+        def __del__(self):
+            ran.append(len(ran))
+            compiled.bind({}, {}, {}, {}, codec.Reply, codec.pure_encode_set, codec.pure_decode_reply)
+            # reuse the freed dicts' memory with a header that would show if it were read
+            ran.append([{("AC", 0): b"XX\xff\xff"} for _ in range(50)])
+
+    threshold = gc.get_threshold()
+    try:
+        compiled.bind({("AC", 0): b"AC\x00\x00"}, {}, {}, {}, codec.Reply, codec.pure_encode_set,
+                      codec.pure_decode_reply)  # the only reference to these dicts is the module's
+        gc.collect()
+        gc.disable()
+        gc.set_threshold(1)
+        Rebind()
+        pending = [(i, -i) for i in range(5000)]  # noqa: F841  # over the threshold: the next allocation collects
+        gc.enable()
+        frame = compiled.encode_set("AC", 0, 1)
+    finally:
+        gc.enable()
+        gc.set_threshold(*threshold)
+        compiled.bind(codec._INT_SETS, codec._FLOAT_SETS, codec._INT_REPLIES, codec._FLOAT_REPLIES, codec.Reply,
+                      codec.pure_encode_set, codec.pure_decode_reply)
+    if not ran:
+        pytest.skip("the collector did not run inside the call on this interpreter")
+    assert frame == bytes.fromhex("41 43 00 00 01 00 00 00")
+
+
+def test_a_function_unpickled_in_a_fresh_process_binds_itself():
+    blob = pickle.dumps((codec.decode_reply, codec.encode_set))
+    script = ("import pickle, sys; decode, encode = pickle.loads(sys.stdin.buffer.read()); "
+              "print(decode(bytes.fromhex('41 43 00 00 F0 49 02 00')).value, encode('AC', 0, 7).hex())")
+    out = subprocess.run([sys.executable, "-c", script], input=blob, capture_output=True, check=True)
+    assert out.stdout.decode().split() == ["150000", "41430000" "07000000"]
 
 
 def test_bind_refuses_what_it_cannot_use():
@@ -157,3 +232,18 @@ def test_SHERPA_PURE_CODEC_selects_the_pure_functions():
                           "print(codec.IMPLEMENTATION, codec.encode_set is codec.pure_encode_set)"],
                          env={**os.environ, "SHERPA_PURE_CODEC": "1"}, capture_output=True, text=True, check=True)
     assert out.stdout.split() == ["pure", "Python", "True"]
+
+
+def test_a_subinterpreter_binds_its_own_module_state():
+    interpreters = pytest.importorskip("_xxsubinterpreters", reason="CPython's private subinterpreter module")
+    frame = bytes.fromhex("41 43 00 00 F0 49 02 00")
+    codec.decode_reply(frame)
+    sub = interpreters.create()
+    try:
+        interpreters.run_string(sub, "from sherpa_cli.elmo import codec\n"
+                                     "codec.decode_reply(bytes.fromhex('41 43 00 00 01 00 00 00'))")
+        assert type(codec.decode_reply(frame)) is codec.Reply  # not the subinterpreter's Reply
+    finally:
+        interpreters.destroy(sub)
+    assert codec.decode_reply(frame) == codec.Reply("AC", 0, 150000, False)
+    assert codec.encode_set("AC", 0, 7) == bytes.fromhex("41 43 00 00 07 00 00 00")
