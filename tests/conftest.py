@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import io
 import shlex
+from collections.abc import Callable
 from contextlib import redirect_stderr, redirect_stdout
 from dataclasses import dataclass
 from pathlib import Path
@@ -169,6 +170,24 @@ def arm_cli(cli, arm_process):
         return dataclasses.replace(result, args=("--sim", *args))
 
     return invoke
+
+
+@pytest.fixture
+def arm_golden(arm_cli, golden):
+    """``arm_golden(name, args, exit_code=None, clean=None)``: run ARGS through arm_cli and compare
+    the transcript (after ``clean``) with ``tests/golden/NAME.txt``; no traceback either way."""
+
+    def check(name: str, args: list[str], *, exit_code: int | None = None,
+              clean: Callable[[str], str] | None = None) -> CliResult:
+        result = arm_cli(*args)
+        assert "Traceback" not in result.stderr
+        if exit_code is not None:
+            assert result.exit_code == exit_code, result.transcript()
+        text = result.transcript()
+        golden(f"{name}.txt", clean(text) if clean else text)
+        return result
+
+    return check
 
 
 @pytest.fixture
