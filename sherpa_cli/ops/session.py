@@ -7,7 +7,6 @@ the buses and, for the in-process simulator, saves the simulated drives' flash.
 from __future__ import annotations
 
 import difflib
-import functools
 import uuid
 from contextlib import contextmanager
 from dataclasses import dataclass
@@ -86,9 +85,11 @@ class ArmSession:
             from sherpa_cli.bus.virtual import open_can_bus
             from sherpa_cli.sim.arm import SimArm
 
-            if sim_factory is None:  # open_can_bus: the virtual interface without its per-frame deep copy
-                sim_factory = functools.partial(SimArm.for_session, bus_factory=open_can_bus)
+            if sim_factory is None:
+                sim_factory = SimArm.for_session
             arm = sim_factory(cfg, {name: t.channel for name, t in targets.items()})
+            if isinstance(arm, SimArm) and arm.bus_factory is None:
+                arm.bus_factory = open_can_bus  # the virtual interface without its per-frame deep copy
             arm.start()
         try:
             links = open_links(wire_cfg, buses)

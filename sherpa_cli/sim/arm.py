@@ -184,11 +184,10 @@ class SimArm:
         self.errors: list[BaseException] = []
 
     @classmethod
-    def for_session(cls, cfg: ArmConfig, channels: Mapping[str, str],
-                    bus_factory: Callable[..., Any] | None = None) -> "SimArm":
+    def for_session(cls, cfg: ArmConfig, channels: Mapping[str, str]) -> "SimArm":
         """The in-process arm of ``--sim``: virtual channels, flash kept in the state directory."""
         return cls(cfg, {bus: {"interface": "virtual", "channel": ch} for bus, ch in channels.items()},
-                   persist=True, bus_factory=bus_factory)
+                   persist=True)
 
     def drive_by_node(self, bus: str, node: int) -> SimDrive | None:
         for name, d in self.cfg.drives.items():
