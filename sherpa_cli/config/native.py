@@ -83,43 +83,31 @@ SIM_DRIVE_KEYS = [f.name for f in dataclasses.fields(SimDriveConfig)]
 SIM_EXTRA_KEYS = [f.name for f in dataclasses.fields(SimExtraNode)]
 
 
-def parse_sim_extra_nodes(top: Section, locs: Locs) -> tuple[SimExtraNode, ...]:
+def parse_sim(top: Section, locs: Locs) -> tuple[dict[str, SimDriveConfig], tuple[SimExtraNode, ...]]:
+    """The ``sim:`` section: per-drive faults and extra nodes on the buses."""
     sec = top.section("sim", ["drives", "extra_nodes"], what="a mapping with 'drives' and/or 'extra_nodes'")
-    if sec is None or sec.get("extra_nodes") is None:
-        return ()
+    if sec is None:
+        return {}, ()
+    drives: dict[str, SimDriveConfig] = {}
+    if sec.get("drives") is not None:
+        for dname, dnode in named_items(sec.req("drives"), "drive"):
+            d = Section(dnode, SIM_DRIVE_KEYS, what="a mapping of simulated faults")
+            register(locs, ("sim", "drives", dname), d)
+            locs.put(("sim", "drives", dname), dnode.loc)
+            # every field is a number; the int ones (heartbeat_ms, seed) must be whole
+            drives[dname] = SimDriveConfig(**{
+                f.name: (d.int if f.type == "int" else d.num)(f.name, f.default)
+                for f in dataclasses.fields(SimDriveConfig)})
     extras = []
-    for i, item in enumerate(as_seq(sec.req("extra_nodes"), "a list like [{bus: can1, node: 99}]")):
-        e = Section(item, SIM_EXTRA_KEYS, what="an extra node like {bus: can1, node: 99}")
-        register(locs, ("sim", "extra_nodes", str(i)), e)
-        base = SimExtraNode("", 0)
-        extras.append(SimExtraNode(bus=e.str("bus", required=True), node=e.int("node", required=True),
-                                   vendor_id=e.int("vendor_id", base.vendor_id),
-                                   device_name=e.str("device_name", base.device_name)))
-    return tuple(extras)
-
-
-def parse_sim(top: Section, locs: Locs) -> dict[str, SimDriveConfig]:
-    sec = top.section("sim", ["drives", "extra_nodes"], what="a mapping with 'drives' and/or 'extra_nodes'")
-    if sec is None or sec.get("drives") is None:
-        return {}
-    result: dict[str, SimDriveConfig] = {}
-    for dname, dnode in named_items(sec.req("drives"), "drive"):
-        d = Section(dnode, SIM_DRIVE_KEYS, what="a mapping of simulated faults")
-        register(locs, ("sim", "drives", dname), d)
-        locs.put(("sim", "drives", dname), dnode.loc)
-        base = SimDriveConfig()
-        die_at, reboot_at = d.num("die_at"), d.num("reboot_at")
-        result[dname] = SimDriveConfig(
-            reply_latency=d.num("reply_latency", base.reply_latency),
-            sdo_latency=d.num("sdo_latency", base.sdo_latency),
-            drop_probability=d.num("drop_probability", base.drop_probability),
-            die_at=die_at, reboot_at=reboot_at,
-            speed_gain=d.num("speed_gain", base.speed_gain),
-            heartbeat_ms=d.int("heartbeat_ms", base.heartbeat_ms),
-            seed=d.int("seed", base.seed),
-            limit_trip_at=d.num("limit_trip_at"),
-        )
-    return result
+    if sec.get("extra_nodes") is not None:
+        for i, item in enumerate(as_seq(sec.req("extra_nodes"), "a list like [{bus: can1, node: 99}]")):
+            e = Section(item, SIM_EXTRA_KEYS, what="an extra node like {bus: can1, node: 99}")
+            register(locs, ("sim", "extra_nodes", str(i)), e)
+            base = SimExtraNode("", 0)
+            extras.append(SimExtraNode(bus=e.str("bus", required=True), node=e.int("node", required=True),
+                                       vendor_id=e.int("vendor_id", base.vendor_id),
+                                       device_name=e.str("device_name", base.device_name)))
+    return drives, tuple(extras)
 
 
 def load_native(root: YNode, filename: str) -> tuple[ArmConfig, Locs, list[str]]:
@@ -135,8 +123,7 @@ def load_native(root: YNode, filename: str) -> tuple[ArmConfig, Locs, list[str]]
         il = ILCodes(stop=il_sec.int("stop", il.stop), home=il_sec.int("home", il.home))
 
     protocol = parse_protocol(top, locs)
-    sim = parse_sim(top, locs)
-    sim_extra_nodes = parse_sim_extra_nodes(top, locs)
+    sim, sim_extra_nodes = parse_sim(top, locs)
     catalog = parse_catalog(top.get("catalog"), locs)
 
     buses: dict[str, BusConfig] = {}
