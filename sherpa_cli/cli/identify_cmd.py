@@ -9,9 +9,6 @@ import typer
 from sherpa_cli.cli.context import state
 from sherpa_cli.cli.output import fmt_value
 
-VENDORS = {0x9A: "Elmo"}
-
-
 def identify(
     ctx: typer.Context,
     targets: Optional[List[str]] = typer.Argument(
@@ -56,6 +53,7 @@ def _hex(value, width: int = 8) -> str:
 
 def _render(st, report) -> None:
     from sherpa_cli.elmo import faults
+    from sherpa_cli.ops.scan import VENDORS
 
     if st.json_mode:
         st.out.json(report.as_json())

@@ -76,7 +76,9 @@ def _device(n) -> str:
     """Vendor (Elmo by name, others as their 0x1018:1 id) and 0x1008, in one column to fit 100 columns."""
     if n.vendor is None and n.device_name is None:
         return "-"
-    vendor = n.vendor if n.vendor_id in (None, 0x9A) else f"vendor {n.vendor}"
+    from sherpa_cli.ops.scan import ELMO_VENDOR_ID
+
+    vendor = n.vendor if n.vendor_id in (None, ELMO_VENDOR_ID) else f"vendor {n.vendor}"
     return " ".join(part for part in (vendor, n.device_name) if part)
 
 
@@ -107,12 +109,10 @@ def _render(st, report) -> None:
         summary.append(f"missing: {', '.join(report.missing)}")
     if report.unexpected:
         summary.append(f"unexpected: {', '.join(report.unexpected)}")
-    duplicates = [f"{b.bus}:{n.node}" for b in report.buses for n in b.nodes if n.verdict == "duplicate id"]
-    if duplicates:
-        summary.append(f"duplicate ids: {', '.join(duplicates)}")
-    slow = [n.drive or f"{b.bus}:{n.node}" for b in report.buses for n in b.nodes if n.verdict == "answering slowly"]
-    if slow:
-        summary.append(f"answering slowly: {', '.join(slow)} (over {report.settings.slow_factor:g}x the bus's "
+    if report.duplicates:
+        summary.append(f"duplicate ids: {', '.join(report.duplicates)}")
+    if report.slow:
+        summary.append(f"answering slowly: {', '.join(report.slow)} (over {report.settings.slow_factor:g}x the bus's "
                        f"median answer time and over {report.settings.slow_floor_s * 1000:g} ms)")
     if summary:
         for line in summary:

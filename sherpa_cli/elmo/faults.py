@@ -183,17 +183,8 @@ def sr_problems(value: int) -> list[Fault]:
 def describe_sr(value: int) -> list[str]:
     """One line per fact the SR value states, problems first."""
     sr = decode_sr(value)
-    lines: list[str] = []
-    if sr.problem or sr.servo_status:
-        lines.append(f"drive problem: {_servo_text(sr.servo_status)}" if sr.servo_status else "drive problem flag set")
-    if sr.motor_failure:
-        lines.append("motor failure latched (read MF)")
-    if sr.cpu_fault:
-        lines.append("CPU fault: stack overflow or CPU exception")
-    if sr.program_error:
-        lines.append("error in user program")
-    if sr.stopped_by_limit:
-        lines.append("stopped by a limit switch, stop switch or VL[3]/VH[3]")
+    # one wording per SR problem; the checks are left out here, so motor failure at least points at MF
+    lines = [f"{f.text} (read MF)" if f.code == 1 << 6 else f.text for f in sr_problems(value)]
     lines.append("motor on" if sr.motor_on else "motor off")
     lines.append(f"unit mode {sr.unit_mode} ({UNIT_MODES.get(sr.unit_mode, 'unknown')})")
     lines.append(f"motion status {sr.motion_status} ({MOTION_STATUS[sr.motion_status]})")
@@ -417,6 +408,18 @@ def decode_emcy(data: bytes) -> Emcy:
         entry = EMCY_CODES.get(code)
         meaning = entry.text if entry else f"unknown code 0x{code:04X}"
     return Emcy(code, register, elmo, field1, field2, meaning, entry.check if entry else None, entry is not None)
+
+
+def encode_error_field(code: int, register: int, elmo_code: int = 0) -> int:
+    """The 0x1003 entry a SimplIQ stores for an EMCY: code (bits 0..15), error register (16..23),
+    Elmo code (24..31); the frame's data fields are not kept."""
+    return code | register << 16 | elmo_code << 24
+
+
+def decode_error_field(value: int) -> Emcy:
+    """A 0x1003 entry (see :func:`encode_error_field`) as the EMCY it records, data fields zero."""
+    v = _u32(value, "0x1003 entry")
+    return decode_emcy(EMCY_FRAME.pack(v & 0xFFFF, v >> 16 & 0xFF, v >> 24 & 0xFF, 0, 0))
 
 
 # -- IP: input port; IL: input functions ----------------------------------------------------------

@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 from typing import Any, Sequence
 
 from sherpa_cli.config.model import ArmConfig
+from sherpa_cli.joints.diffpair import to_joints
 from sherpa_cli.joints.units import counts_to_rad
 from sherpa_cli.ops.params_read import Progress, open_drive, per_bus
 
@@ -116,13 +117,24 @@ def joint_positions(cfg: ArmConfig, px: dict[str, int]) -> dict[str, JointPositi
             out[drive] = JointPosition(joint.name, counts, counts_to_rad(counts, joint.cpr))
     for pair in cfg.pairs.values():
         if pair.drive_a in px and pair.drive_b in px:
-            m_a, m_b = px[pair.drive_a], px[pair.drive_b]
+            s, d = to_joints(px[pair.drive_a], px[pair.drive_b])
             sigma, delta = cfg.joints[pair.sigma], cfg.joints[pair.delta]
-            out[pair.drive_a] = JointPosition(sigma.name, m_a + m_b, counts_to_rad(m_a + m_b, sigma.cpr),
+            out[pair.drive_a] = JointPosition(sigma.name, s, counts_to_rad(s, sigma.cpr),
                                               f"Σ = {pair.drive_a} + {pair.drive_b}")
-            out[pair.drive_b] = JointPosition(delta.name, m_a - m_b, counts_to_rad(m_a - m_b, delta.cpr),
+            out[pair.drive_b] = JointPosition(delta.name, d, counts_to_rad(d, delta.cpr),
                                               f"Δ = {pair.drive_a} - {pair.drive_b}")
     return out
+
+
+def row_joint(cfg: ArmConfig, drive: str) -> str | None:
+    """The joint a drive's row stands for, as in :func:`joint_positions`, whether or not PX is known."""
+    joint = cfg.joint_of_drive(drive)
+    if joint is not None:
+        return joint.name
+    pair = cfg.pair_of_drive(drive)
+    if pair is None:
+        return None
+    return pair.sigma if drive == pair.drive_a else pair.delta
 
 
 def _norm(text: str) -> str:

@@ -18,7 +18,6 @@ Nothing here prints; the CLI renders :class:`DriveStatus` rows.
 
 from __future__ import annotations
 
-import struct
 import threading
 import time
 from dataclasses import dataclass, field
@@ -26,13 +25,15 @@ from typing import Any, Callable, Iterable, Sequence
 
 from sherpa_cli.bus.parallel import run_concurrently
 from sherpa_cli.config.model import ArmConfig
-from sherpa_cli.elmo.faults import Emcy, Fault, decode_emcy, decode_mf, sr_problems
-from sherpa_cli.errors import SherpaError, UsageError
-from sherpa_cli.joints.units import counts_to_rad
+from sherpa_cli.elmo.faults import Emcy, Fault, decode_error_field, decode_mf, sr_problems
+from sherpa_cli.errors import CommunicationError, SherpaError, UsageError
+from sherpa_cli.joints.limits import resolve_drives
+from sherpa_cli.ops.identify import JointPosition, joint_positions, row_joint
+from sherpa_cli.ops.scan import NMT_STATES, nmt_text
+from sherpa_cli.ops.sdo import sdo_download, sdo_error_text, sdo_upload
 from sherpa_cli.ops.session import DriveRef, resolve_target
 
 HEARTBEAT_BASE = 0x700
-NMT_STATES = {0x00: "boot-up", 0x04: "stopped", 0x05: "operational", 0x7F: "pre-op"}
 POLLED = ("MO", "UM", "PX", "SR", "MF")
 PRODUCER_HEARTBEAT = (0x1017, 0)
 ERROR_FIELD = (0x1003, 1)
@@ -45,10 +46,9 @@ def resolve_targets(cfg: ArmConfig, texts: Sequence[str]) -> list[DriveRef]:
         texts = list(cfg.drives)
     refs: dict[tuple[str, int], DriveRef] = {}
     for text in texts:
-        joint = cfg.joints.get(text)
-        pair = cfg.pairs.get(text) or (cfg.pairs.get(joint.pair) if joint is not None and joint.pair else None)
-        names = [pair.drive_a, pair.drive_b] if pair is not None else None
-        for ref in ([resolve_target(cfg, n) for n in names] if names else [resolve_target(cfg, text)]):
+        # a joint without drives falls through to resolve_target, which says what is wrong with it
+        names = resolve_drives(cfg, [text]) if text in cfg.joints or text in cfg.pairs else []
+        for ref in [resolve_target(cfg, n) for n in names] or [resolve_target(cfg, text)]:
             refs.setdefault((ref.bus, ref.node), ref)
     return list(refs.values())
 
@@ -219,28 +219,26 @@ class Monitor:
         client.nmt_start()
         network = self.session.links[w.ref.bus].network
         try:
-            w.heartbeat_ms = int.from_bytes(sdo_upload(network, w.ref.node, *PRODUCER_HEARTBEAT)[:2], "little")
+            w.heartbeat_ms = int.from_bytes(_upload(network, w.ref.node, *PRODUCER_HEARTBEAT)[:2], "little")
         except SherpaError as exc:
             w.problem = f"0x1017: {exc}"
             return  # no SDO answer: nothing else to ask at start; polling tells the rest
         if self.heartbeat_ms is not None and w.heartbeat_ms != self.heartbeat_ms:
-            sdo_download(network, w.ref.node, *PRODUCER_HEARTBEAT, self.heartbeat_ms.to_bytes(2, "little"))
+            _download(network, w.ref.node, *PRODUCER_HEARTBEAT, self.heartbeat_ms.to_bytes(2, "little"))
             w.heartbeat_set_from, w.heartbeat_ms = w.heartbeat_ms, self.heartbeat_ms
         try:
-            stored = int.from_bytes(sdo_upload(network, w.ref.node, *ERROR_FIELD)[:4], "little")
+            stored = int.from_bytes(_upload(network, w.ref.node, *ERROR_FIELD)[:4], "little")
         except SherpaError:
             stored = 0  # no stored error, or the object is absent: nothing to show
         if stored:
-            # 0x1003 entry: code (bits 0..15), error register (16..23), Elmo code (24..31)
-            frame = struct.pack("<HBBHH", stored & 0xFFFF, stored >> 16 & 0xFF, stored >> 24 & 0xFF, 0, 0)
             with self._lock:
                 if w.emcy is None:  # one heard meanwhile is newer and carries its data fields
-                    w.emcy = decode_emcy(frame)
+                    w.emcy = decode_error_field(stored)
 
     def _restore_heartbeat(self, w: _Watch) -> None:
         network = self.session.links[w.ref.bus].network
         try:
-            sdo_download(network, w.ref.node, *PRODUCER_HEARTBEAT, w.heartbeat_set_from.to_bytes(2, "little"))
+            _download(network, w.ref.node, *PRODUCER_HEARTBEAT, w.heartbeat_set_from.to_bytes(2, "little"))
             w.heartbeat_set_from = None
         except SherpaError:
             pass  # the drive went away; its next power-up restores 0x1017 from flash anyway
@@ -283,30 +281,17 @@ class Monitor:
 
     # -- snapshot ---------------------------------------------------------------------------------
 
-    def _joint_positions(self) -> dict[str, tuple[str, float]]:
-        """drive name -> (joint, rad): a plain joint per its drive; a pair's Σ on drive a, Δ on drive b."""
-        px = {w.ref.name: w.values.get("PX") for w in self.watches if w.answering}
-        out: dict[str, tuple[str, float]] = {}
-        for name, counts in px.items():
-            joint = self.cfg.joint_of_drive(name)
-            if joint is not None and isinstance(counts, int):
-                out[name] = (joint.name, counts_to_rad(counts, joint.cpr))
-        for pair in self.cfg.pairs.values():
-            a, b = px.get(pair.drive_a), px.get(pair.drive_b)
-            if isinstance(a, int) and isinstance(b, int):
-                sigma, delta = self.cfg.joints[pair.sigma], self.cfg.joints[pair.delta]
-                out[pair.drive_a] = (sigma.name, counts_to_rad(a + b, sigma.cpr))
-                out[pair.drive_b] = (delta.name, counts_to_rad(a - b, delta.cpr))
-        return out
+    def _joint_positions(self) -> dict[str, JointPosition]:
+        return joint_positions(self.cfg, {w.ref.name: w.values["PX"] for w in self.watches
+                                          if w.answering and isinstance(w.values.get("PX"), int)})
 
-    def _status(self, w: _Watch, now: float, positions: dict[str, tuple[str, float]]) -> DriveStatus:
+    def _status(self, w: _Watch, now: float, positions: dict[str, JointPosition]) -> DriveStatus:
         v = w.values if w.answering else {}
         sr, mf = v.get("SR"), v.get("MF")
-        joint, rad = positions.get(w.ref.name, (None, None))
+        position = positions.get(w.ref.name)
+        joint, rad = (position.joint, position.rad) if position else (None, None)
         if joint is None and w.ref.config is not None:
-            j = self.cfg.joint_of_drive(w.ref.name)
-            pair = self.cfg.pair_of_drive(w.ref.name)
-            joint = j.name if j else (pair.sigma if pair and pair.drive_a == w.ref.name else pair.delta if pair else None)
+            joint = row_joint(self.cfg, w.ref.name)
         return DriveStatus(
             drive=w.ref.name, bus=w.ref.bus, node=w.ref.node, nmt=self._nmt_text(w),
             heartbeat_ms=w.heartbeat_ms,
@@ -323,9 +308,7 @@ class Monitor:
     @staticmethod
     def _nmt_text(w: _Watch) -> str:
         if w.heartbeat_state is not None and w.heartbeat_ms:
-            state = w.heartbeat_state
-            # a boot-up leaves the node pre-operational (elmo-protocol.md 3.2)
-            return NMT_STATES[0x7F] if state == 0x00 else NMT_STATES.get(state, f"0x{state:02X}")
+            return nmt_text(w.heartbeat_state)
         if not w.polled:
             return "unknown"
         # no heartbeat to tell: the interpreter answers only in Operational
@@ -338,31 +321,20 @@ def _int(value: Any) -> int | None:
 
 # -- SDO without an object dictionary ---------------------------------------------------------------
 
-def sdo_upload(network: Any, node: int, index: int, sub: int) -> bytes:
+def _upload(network: Any, node: int, index: int, sub: int) -> bytes:
     """One SDO upload; a timeout or abort becomes a CommunicationError naming the object."""
     from canopen.sdo.exceptions import SdoError
 
-    from sherpa_cli.errors import CommunicationError
-    from sherpa_cli.ops.scan import sdo_error_text, sdo_upload as upload
-
     try:
-        return upload(network, node, index, sub)
+        return sdo_upload(network, node, index, sub)
     except SdoError as exc:
         raise CommunicationError(f"node {node}: {sdo_error_text(f'0x{index:04X}:{sub}', exc)}") from exc
 
 
-def sdo_download(network: Any, node: int, index: int, sub: int, data: bytes) -> None:
-    import canopen
+def _download(network: Any, node: int, index: int, sub: int, data: bytes) -> None:
     from canopen.sdo.exceptions import SdoError
 
-    from sherpa_cli.errors import CommunicationError
-    from sherpa_cli.ops.scan import sdo_error_text
-
-    remote = canopen.RemoteNode(node, canopen.ObjectDictionary())
-    remote.associate_network(network)
     try:
-        remote.sdo.download(index, sub, data)
+        sdo_download(network, node, index, sub, data)
     except SdoError as exc:
         raise CommunicationError(f"node {node}: writing {sdo_error_text(f'0x{index:04X}:{sub}', exc)}") from exc
-    finally:
-        remote.remove_network()

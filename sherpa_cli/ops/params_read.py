@@ -73,7 +73,8 @@ def read_identity(network: Any, cfg: ArmConfig, drive: str) -> tuple[dict[str, A
     """Identity objects over SDO: (values, why a field is None). Silence raises CommunicationError."""
     from canopen.sdo.exceptions import SdoAbortedError, SdoError
 
-    from sherpa_cli.ops.scan import decode_text, sdo_upload
+    from sherpa_cli.ops.scan import decode_text
+    from sherpa_cli.ops.sdo import sdo_error_text, sdo_upload
 
     node = cfg.drives[drive].node
     values: dict[str, Any] = {}
@@ -84,7 +85,7 @@ def read_identity(network: Any, cfg: ArmConfig, drive: str) -> tuple[dict[str, A
             data = sdo_upload(network, node, index, sub)
         except SdoAbortedError as exc:
             values[key] = None
-            notes[key] = f"{what} aborted with 0x{exc.code:08X}"
+            notes[key] = sdo_error_text(what, exc)
             continue
         except SdoError as exc:
             raise CommunicationError(f"{_label(cfg, drive)}: no answer to the SDO upload of {what} ({exc})",

@@ -12,7 +12,6 @@ Nothing here prints; the CLI renders :class:`ScanReport`.
 
 from __future__ import annotations
 
-import logging
 import statistics
 import struct
 import threading
@@ -23,6 +22,7 @@ from typing import Any, Callable, Iterable, Mapping
 from sherpa_cli.bus.parallel import run_concurrently
 from sherpa_cli.config.model import ArmConfig
 from sherpa_cli.errors import SherpaError
+from sherpa_cli.ops.sdo import sdo_error_text, sdo_upload  # noqa: F401 - program.py and tests import them from here
 
 NODE_IDS = range(1, 128)
 SDO_TX, SDO_RX, HEARTBEAT = 0x580, 0x600, 0x700
@@ -123,6 +123,16 @@ class ScanReport:
     def unexpected(self) -> list[str]:
         """``BUS:NODE`` of nodes the config does not name."""
         return [f"{b.bus}:{n.node}" for b in self.buses for n in b.with_verdict(UNEXPECTED)]
+
+    @property
+    def duplicates(self) -> list[str]:
+        """``BUS:NODE`` of ids that more than one node answers on."""
+        return [f"{b.bus}:{n.node}" for b in self.buses for n in b.with_verdict(DUPLICATE)]
+
+    @property
+    def slow(self) -> list[str]:
+        """Nodes answering slowly: the drive name, or ``BUS:NODE`` when the config does not name it."""
+        return [n.drive or f"{b.bus}:{n.node}" for b in self.buses for n in b.with_verdict(SLOW)]
 
     @property
     def problems(self) -> bool:
@@ -269,34 +279,6 @@ def decode_device_type(frame: bytes) -> tuple[int | None, str | None]:
 
 # -- identity -------------------------------------------------------------------------------------
 
-# canopen logs every SDO it aborts at ERROR; this tool reports each failed read itself (as a note
-# or an error naming the drive), so without a handler Python's last resort would print it twice.
-logging.getLogger("canopen.sdo.client").addHandler(logging.NullHandler())
-
-def sdo_upload(network: Any, node: int, index: int, sub: int = 0) -> bytes:
-    """One SDO upload (expedited or segmented) through canopen's client, without an object dictionary."""
-    import canopen
-
-    remote = canopen.RemoteNode(node, canopen.ObjectDictionary())
-    # protocol.sdo_timeout, set on the session's networks (tests pass bare fakes: canopen's default)
-    timeout = getattr(network, "sdo_timeout", None)
-    if isinstance(timeout, (int, float)):
-        remote.sdo.RESPONSE_TIMEOUT = timeout
-    remote.associate_network(network)
-    try:
-        return remote.sdo.upload(index, sub)
-    finally:
-        remote.remove_network()
-
-
-def sdo_error_text(what: str, exc: BaseException) -> str:
-    from canopen.sdo.exceptions import SdoAbortedError
-
-    if isinstance(exc, SdoAbortedError):
-        return f"{what} aborted with 0x{exc.code:08X}"
-    return f"no answer to {what}"
-
-
 def decode_text(data: bytes) -> str:
     # VISIBLE_STRING; some firmware pads with NULs
     return data.split(b"\0", 1)[0].decode("latin-1").strip()
@@ -328,12 +310,14 @@ def _joint_label(cfg: ArmConfig, drive: str) -> str | None:
     return pair.name if pair is not None else None
 
 
-def _nmt_text(states: list[int]) -> str | None:
-    if not states:
-        return None
-    last = states[-1]
+def nmt_text(state: int) -> str:
+    """An NMT state byte of a boot-up or heartbeat frame, as text."""
     # a boot-up leaves the node pre-operational (elmo-protocol.md 3.2)
-    return NMT_STATES[0x7F] if last == 0x00 else NMT_STATES.get(last, f"0x{last:02X}")
+    return NMT_STATES[0x7F] if state == 0x00 else NMT_STATES.get(state, f"0x{state:02X}")
+
+
+def _nmt_text(states: list[int]) -> str | None:
+    return nmt_text(states[-1]) if states else None
 
 
 def scan_bus(cfg: ArmConfig, bus: str, network: Any, settings: ScanSettings = ScanSettings(), *,

@@ -15,6 +15,7 @@ import random
 import struct
 from collections.abc import Callable, Mapping
 
+from sherpa_cli.elmo.faults import encode_error_field
 from sherpa_cli.sim import interpreter
 from sherpa_cli.sim.clock import Clock
 from sherpa_cli.sim.interpreter import Refused
@@ -369,7 +370,7 @@ class SimDrive:
 
     def _emcy(self, code: int, register: int, elmo_code: int = 0) -> None:
         self._error_register = register
-        self._error_field = code | register << 16 | elmo_code << 24
+        self._error_field = encode_error_field(code, register, elmo_code)
         self._send(EMCY_BASE + self.node, EMCY_FRAME.pack(code, register, elmo_code, 0, 0))
 
     def _interpreter_frame(self, data: bytes) -> None:
