@@ -54,7 +54,7 @@ def show(ctx: typer.Context,
                                 for d in derived]})
         return
     for d in derived:
-        moves = _moves(cfg, d.drive)
+        moves = drive_moves(cfg, d.drive)
         rows = []
         for key, value in d.params.items():
             text = _il_meaning(value, cfg.il_codes) if key.startswith("IL[") else MEANING.get(key, "")
@@ -62,7 +62,8 @@ def show(ctx: typer.Context,
         st.out.table(f"{d.drive} ({d.bus}:{d.node}) - {moves}", ["param", "value", "meaning"], rows, right=(1,))
 
 
-def _moves(cfg, drive: str) -> str:
+def drive_moves(cfg, drive: str) -> str:
+    """What a drive moves, for a table or plan title: its joint, or its pair and motor."""
     joint = cfg.joint_of_drive(drive)
     if joint is not None:
         return f"joint {joint.name}"

@@ -87,13 +87,16 @@ class Output:
         if hint:
             err.print(f"hint: {hint}", markup=False, soft_wrap=True)
 
-    def confirm(self, question: str) -> bool:
-        """Ask yes/no on the terminal; refuse (never hang) when nobody can answer."""
+    def confirm(self, question: str, *, refusal: str | None = None,
+                hint: str = "pass --yes to confirm in scripts") -> bool:
+        """Ask yes/no on the terminal; refuse (never hang) when nobody can answer.
+
+        ``refusal``/``hint``: the error then raised, for a caller that can say what was not done.
+        """
         if self.assume_yes:
             return True
         if self.json_mode or not sys.stdin.isatty():
-            raise SafetyError(f"{question} -- refusing: not an interactive terminal",
-                              hint="pass --yes to confirm in scripts")
+            raise SafetyError(refusal or f"{question} -- refusing: not an interactive terminal", hint=hint)
         answer = input(f"{question} [y/N] ").strip().lower()
         return answer in ("y", "yes")
 

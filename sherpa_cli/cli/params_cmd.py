@@ -36,7 +36,7 @@ def dump_params(
       sherpa dump-params -o arm-2024-05-02.yaml
       sherpa dump-params shoulder_diff
     """
-    from sherpa_cli.ops.params_file import dump_to_text, sorted_params, write_dump
+    from sherpa_cli.ops.params_file import drive_block, dump_to_text, write_dump
     from sherpa_cli.ops.params_read import dump_params as read_dump_params
     from sherpa_cli.ops.params_read import resolve_drive_names
 
@@ -63,9 +63,7 @@ def dump_params(
                              hint="choose a writable file name") from None
     if st.json_mode:
         st.out.json({"file": str(output) if output is not None else None, "meta": dump.meta,
-                     "drives": {name: {"bus": d.bus, "node": d.node, "identity": d.identity,
-                                       "params": sorted_params(d.params), "unreadable": sorted_params(d.unreadable)}
-                                for name, d in dump.drives.items()}})
+                     "drives": {name: drive_block(d) for name, d in dump.drives.items()}})
     elif output is not None:
         st.out.line(f"wrote {len(dump.drives)} drive(s) to {output}")
     else:
@@ -108,7 +106,7 @@ def diff(
     if targets:
         drives = resolve_drive_names(cfg, targets)
     elif files:
-        drives = pd.drives_of(list(files.values()), cfg, None)
+        drives = pd.drives_of(list(files.values()), cfg)
     else:
         drives = list(cfg.drives)
     sides: dict[str, pd.Side] = dict(files)
@@ -134,18 +132,10 @@ def diff(
 
 
 def _fmt(value, note: str | None) -> str:
-    if note is not None:
-        return note
-    if value is None:
-        return "-"
-    if isinstance(value, float):
-        # 7 digits: float32 noise (2.2999999523) reads as 2.3, a real float32 step still shows
-        text = f"{value:.7g}"
-        return text if any(c in text for c in ".en") else text + ".0"
-    return str(value)
+    from sherpa_cli.elmo.commands import format_value
 
-
-MARKS = {"same": "", "differs": "differs", "only in A": "only in A", "only in B": "only in B"}
+    # 7 digits: float32 noise (2.2999999523) reads as 2.3, a real float32 step still shows
+    return note if note is not None else format_value(value, digits=7)
 
 
 def _render(st, report, only_differences: bool) -> None:
@@ -158,8 +148,8 @@ def _render(st, report, only_differences: bool) -> None:
             side = a if d.only_in == "A" else b
             st.out.line(f"{d.drive} ({d.bus}:{d.node}): only in {d.only_in} ({side})")
             continue
-        rows = [[r.key, _fmt(r.a, r.a_note), _fmt(r.b, r.b_note), MARKS[r.status]] for r in d.rows
-                if not only_differences or r.status != "same"]
+        rows = [[r.key, _fmt(r.a, r.a_note), _fmt(r.b, r.b_note), "" if r.status == "same" else r.status]
+                for r in d.rows if not only_differences or r.status != "same"]
         if only_differences and not rows:
             continue
         n = d.differences

@@ -8,6 +8,7 @@ from typing import Any, Callable, List, Optional, Sequence
 import typer
 
 from sherpa_cli.cli.context import state
+from sherpa_cli.cli.limits_cmd import drive_moves
 from sherpa_cli.cli.output import fmt_value
 
 def program_limits(
@@ -54,7 +55,7 @@ def program_limits(
     derived, warnings = derive_checked(cfg, names or None)
     targets = [DriveTarget(d.drive, d.bus, d.node, d.params) for d in derived]
     run_program(st, "program-limits", targets, warnings, apply=apply, save=save, yes=yes, motor_off=motor_off,
-                need_serial=save, allow_disabled=False, title=lambda drive: _moves(cfg, drive))
+                need_serial=save, allow_disabled=False, title=lambda drive: drive_moves(cfg, drive))
 
 
 def params_restore(
@@ -93,7 +94,7 @@ def params_restore(
     from sherpa_cli.errors import Location
 
     run_program(st, "params restore", targets, warnings, apply=apply, save=save, yes=yes, motor_off=motor_off,
-                need_serial=True, allow_disabled=True, title=lambda drive: _moves(cfg, drive), source=file,
+                need_serial=True, allow_disabled=True, title=lambda drive: drive_moves(cfg, drive), source=file,
                 where=lambda drive: Location(str(file), None, f"drives.{drive}.params"))
 
 
@@ -105,29 +106,20 @@ def _check_options(apply: bool, save: bool) -> None:
                          hint="add --apply, or leave out --save for a dry run")
 
 
-def _moves(cfg: Any, drive: str) -> str:
-    if drive not in cfg.drives:
-        return ""
-    joint = cfg.joint_of_drive(drive)
-    if joint is not None:
-        return f"joint {joint.name}"
-    pair = cfg.pair_of_drive(drive)
-    if pair is not None:
-        return f"pair {pair.name}, motor {'a' if pair.drive_a == drive else 'b'}"
-    return "no joint"
-
-
 # --------------------------------------------------------------------------- shared front end
 
 def run_program(st: Any, command: str, targets: Sequence[Any], warnings: Sequence[str], *, apply: bool,
                 save: bool, yes: bool, motor_off: bool, need_serial: bool, allow_disabled: bool,
                 title: Callable[[str], str], where: Callable[[str], Any] | None = None,
                 source: Path | None = None) -> None:
-    """Check, plan, show; with ``apply`` write/verify/save and report. Raises the error to exit with."""
+    """Check, plan, show; with ``apply`` write/verify/save and report. Raises the error to exit with.
+
+    Callers run :func:`_check_options` first, before they read files or derive targets, so a
+    bad option combination is reported ahead of any other problem.
+    """
     from sherpa_cli.ops import program
     from sherpa_cli.ops.save_ledger import SaveLedger
 
-    _check_options(apply, save)
     warnings = [*warnings, *program.check_targets(targets, allow_disabled=allow_disabled, where=where)]
     for w in warnings:
         st.out.warn(w)
@@ -144,7 +136,9 @@ def run_program(st: Any, command: str, targets: Sequence[Any], warnings: Sequenc
             _render_plan_text(st, plans, title)  # the technician sees the plan before any question
         if not apply:
             _render(st, command, plans, None, apply=False, save=False, source=source)
-            _end_dry_run(st, plans)
+            err = program.plan_error(plans)
+            if err is not None:
+                raise err
             return
         try:
             program.check_apply(plans, motor_off=motor_off)
@@ -168,28 +162,14 @@ def run_program(st: Any, command: str, targets: Sequence[Any], warnings: Sequenc
 
 def _confirm_save(st: Any, drives: Sequence[str]) -> None:
     """Ask before anything is written; refuse at once when nobody can answer (no tty, --json)."""
-    import sys
-
     from sherpa_cli.errors import SafetyError
 
     listed = ", ".join(drives)
-    if not st.out.assume_yes and (st.json_mode or not sys.stdin.isatty()):
-        raise SafetyError(f"--save would write and save {listed}, and there is no terminal to confirm it; "
-                          f"nothing was written", hint="add --yes to confirm in scripts")
-    if not st.out.confirm(f"Write and save to flash (SV): {listed}?"):
+    refusal = (f"--save would write and save {listed}, and there is no terminal to confirm it; "
+               f"nothing was written")
+    if not st.out.confirm(f"Write and save to flash (SV): {listed}?", refusal=refusal,
+                          hint="add --yes to confirm in scripts"):
         raise SafetyError("save not confirmed; nothing was written")
-
-
-def _end_dry_run(st: Any, plans: Sequence[Any]) -> None:
-    from sherpa_cli.errors import SafetyError, SherpaError
-
-    bad = [p for p in plans if p.problems]
-    if bad:
-        first = bad[0]
-        err = SherpaError(f"{first.drive}: {first.problems[0]}" +
-                          (f" (and {len(bad) - 1} more drive(s))" if len(bad) > 1 else ""))
-        err.exit_code = first.error.exit_code if first.error is not None else SafetyError.exit_code
-        raise err
 
 
 # --------------------------------------------------------------------------- rendering

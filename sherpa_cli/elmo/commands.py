@@ -241,13 +241,14 @@ def parse_param_key(key: str) -> tuple[str, int]:
     return letters, spec.check_index(int(raw_index))
 
 
-def format_value(value: object) -> str:
-    """A parameter value as a technician types it: ints plain, floats without float32 noise."""
+def format_value(value: object, digits: int = 6) -> str:
+    """A parameter value as a technician types it: ints plain, floats to ``digits`` significant
+    digits, which hides float32 noise."""
     if value is None:
         return "-"
     if isinstance(value, bool):
         return str(int(value))
     if isinstance(value, float):
-        text = f"{value:.6g}"
+        text = f"{value:.{digits}g}"
         return text if any(c in text for c in ".en") else text + ".0"
     return str(value)

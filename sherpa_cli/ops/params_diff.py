@@ -161,10 +161,8 @@ def _drive_line(path: Path, name: str) -> int | None:
     return child.key_line if child is not None else None
 
 
-def drives_of(sides: Sequence[Side], cfg: ArmConfig, targets: Sequence[str] | None) -> list[str]:
-    """The drives a diff covers, in config order: the targets, or every drive the non-live sides name."""
-    if targets:
-        return list(targets)
+def drives_of(sides: Sequence[Side], cfg: ArmConfig) -> list[str]:
+    """The drives a diff covers when no target is given: every drive the sides name, in config order."""
     named = {name for s in sides for name in s.drives}
     return [d for d in cfg.drives if d in named]
 

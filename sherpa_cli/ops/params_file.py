@@ -65,7 +65,8 @@ def sorted_params(params: dict[str, Any]) -> dict[str, Any]:
 
 # --------------------------------------------------------------------------- writing
 
-def _drive_block(d: DriveDump) -> dict[str, Any]:
+def drive_block(d: DriveDump) -> dict[str, Any]:
+    """One drive as the dump file and ``dump-params --json`` write it."""
     return {
         "bus": d.bus,
         "node": d.node,
@@ -87,7 +88,7 @@ def dump_to_text(dump: ParamDump) -> str:
     parts = [HEADER_COMMENT, _yaml({"meta": meta}), "\ndrives:\n" if dump.drives else "\ndrives: {}\n"]
     blocks = []
     for name, d in dump.drives.items():
-        text = _yaml({name: _drive_block(d)})
+        text = _yaml({name: drive_block(d)})
         blocks.append("".join("  " + line if line.strip() else line for line in text.splitlines(True)))
     parts.append("\n".join(blocks))
     return "".join(parts)

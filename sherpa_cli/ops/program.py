@@ -26,7 +26,7 @@ import threading
 import time
 from dataclasses import dataclass, field
 from types import MappingProxyType
-from typing import Any, Callable, Iterable, Mapping, Sequence
+from typing import Any, Callable, Iterable, Iterator, Mapping, Sequence
 
 from sherpa_cli.bus.parallel import run_concurrently
 from sherpa_cli.elmo import codec
@@ -235,17 +235,22 @@ def _disabled_trip(values: Mapping[str, ParamValue | None], key: str) -> bool:
     return False
 
 
-def _broken_rules(values: Mapping[str, ParamValue | None], keys: Iterable[str] | None = None) -> list[str]:
+def _broken(values: Mapping[str, ParamValue | None],
+            keys: Iterable[str] | None = None) -> Iterator[tuple[int, str, str, bool]]:
+    """ORDER_RULES broken in ``values`` (position, low, high, strict); only those involving ``keys`` if given."""
     wanted = set(keys) if keys is not None else None
-    out = []
-    for lo, hi, strict in ORDER_RULES:
+    for i, (lo, hi, strict) in enumerate(ORDER_RULES):
         if wanted is not None and lo not in wanted and hi not in wanted:
             continue
         if _disabled_trip(values, lo) or _disabled_trip(values, hi):
             continue
         if _holds(values.get(lo), values.get(hi), strict) is False:
-            out.append(f"{lo} = {_fmt(values[lo])} must be {'<' if strict else '<='} {hi} = {_fmt(values[hi])}")
-    return out
+            yield i, lo, hi, strict
+
+
+def _broken_rules(values: Mapping[str, ParamValue | None], keys: Iterable[str] | None = None) -> list[str]:
+    return [f"{lo} = {_fmt(values[lo])} must be {'<' if strict else '<='} {hi} = {_fmt(values[hi])}"
+            for _, lo, hi, strict in _broken(values, keys)]
 
 
 def related_keys(keys: Iterable[str]) -> list[str]:
@@ -289,13 +294,7 @@ def write_order(now: Mapping[str, ParamValue | None], targets: Mapping[str, Para
 
 def _broken_ids(values: Mapping[str, ParamValue | None], key: str) -> list[int]:
     """ORDER_RULES (by position) that involve ``key`` and are broken in ``values``."""
-    out = []
-    for i, (lo, hi, strict) in enumerate(ORDER_RULES):
-        if key not in (lo, hi) or _disabled_trip(values, lo) or _disabled_trip(values, hi):
-            continue
-        if _holds(values.get(lo), values.get(hi), strict) is False:
-            out.append(i)
-    return out
+    return [i for i, *_ in _broken(values, (key,))]
 
 
 # --------------------------------------------------------------------------- plan (reads only)
@@ -366,14 +365,12 @@ def read_plans(session: Any, targets: Sequence[DriveTarget], *, need_serial: boo
                on_event: Progress | None = None, max_workers: int = MAX_DRIVE_WORKERS) -> list[DrivePlan]:
     """Read every drive's present values (concurrently; nothing is written) and plan the writes."""
     jobs = {t.drive: (lambda t=t: _read_plan(session, t, need_serial, on_event)) for t in targets}
-    outcomes = run_concurrently(jobs, max_workers=max(1, min(max_workers, len(jobs) or 1)))
+    outcomes = run_concurrently(jobs, max_workers=max(1, max_workers))
     plans = []
     for t in targets:
         o = outcomes[t.drive]
         if o.error is not None:
-            if isinstance(o.error, (KeyboardInterrupt, SystemExit)):
-                raise o.error
-            if not isinstance(o.error, SherpaError):
+            if not isinstance(o.error, SherpaError):  # Ctrl-C and bugs end the command
                 raise o.error
             plans.append(DrivePlan(t, problems=(o.error.message,), error=o.error))
         else:
@@ -391,16 +388,23 @@ def mark_save_due(plans: Sequence[DrivePlan], ledger: Any) -> list[DrivePlan]:
 
 # --------------------------------------------------------------------------- apply
 
+def plan_error(plans: Sequence[DrivePlan], *, suffix: str = "", hint: str | None = None) -> SafetyError | None:
+    """The error naming the first drive that cannot be written (and how many more), or None."""
+    bad = [p for p in plans if p.problems]
+    if not bad:
+        return None
+    first = bad[0]
+    more = f" (and {len(bad) - 1} more drive(s))" if len(bad) > 1 else ""
+    err = SafetyError(f"{first.drive}: {first.problems[0]}{more}{suffix}", hint=hint)
+    if first.error is not None:
+        err.exit_code = first.error.exit_code  # e.g. 3 when a drive did not answer
+    return err
+
+
 def check_apply(plans: Sequence[DrivePlan], *, motor_off: bool) -> None:
     """Refuse before any write if a drive cannot be planned or its motor is on (without motor_off)."""
-    bad = [p for p in plans if p.problems]
-    if bad:
-        first = bad[0]
-        more = f" (and {len(bad) - 1} more drive(s))" if len(bad) > 1 else ""
-        err = SafetyError(f"{first.drive}: {first.problems[0]}{more}; nothing was written",
-                          hint="fix what the plan shows, then run again")
-        if first.error is not None:
-            err.exit_code = first.error.exit_code  # e.g. 3 when a drive did not answer
+    err = plan_error(plans, suffix="; nothing was written", hint="fix what the plan shows, then run again")
+    if err is not None:
         raise err
     on = [p.drive for p in plans if p.motor_on and p.needs_save]
     if on and not motor_off:
@@ -459,15 +463,14 @@ def _apply_drive(session: Any, plan: DrivePlan, *, save: bool, ledger: Any, stop
         except SherpaError as exc:
             # SV is never resent; the drive may well have written its flash: count it, say so
             out.error = f"SV was sent but {exc.message}; whether flash holds the new values is unknown"
-            if ledger is not None and plan.serial is not None:
-                record = ledger.record(plan.serial, t.drive)
-                out.save_count, out.save_warning = record.count, record.warning
-            out.status = FAILED
-            return out
-        out.saved = True
+        else:
+            out.saved = True
         if ledger is not None and plan.serial is not None:
             record = ledger.record(plan.serial, t.drive)
             out.save_count, out.save_warning = record.count, record.warning
+        if not out.saved:
+            out.status = FAILED
+            return out
         emit(Event(t.drive, EV_SAVED))
         for key, value in targets.items():
             letters, index = parse_param_key(key)
@@ -512,8 +515,7 @@ def apply_plans(session: Any, plans: Sequence[DrivePlan], *, save: bool = False,
     stop = stop or threading.Event()
     jobs = {p.drive: (lambda p=p: _apply_drive(session, p, save=save, ledger=ledger, stop=stop,
                                                on_event=on_event)) for p in plans}
-    outcomes = run_concurrently(jobs, max_workers=max(1, min(max_workers, len(jobs) or 1)),
-                                on_interrupt=stop.set)
+    outcomes = run_concurrently(jobs, max_workers=max(1, max_workers), on_interrupt=stop.set)
     result = []
     for p in plans:
         o = outcomes[p.drive]
@@ -540,5 +542,5 @@ def exit_problem(result: ApplyResult) -> SherpaError | None:
 
 
 __all__ = ["DriveTarget", "DrivePlan", "ParamPlan", "DriveOutcome", "ApplyResult", "Event", "check_targets",
-           "read_plans", "check_apply", "apply_plans", "write_order", "related_keys", "drive_value",
+           "read_plans", "plan_error", "check_apply", "apply_plans", "write_order", "related_keys", "drive_value",
            "exit_problem", "param_key"]
