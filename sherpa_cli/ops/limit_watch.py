@@ -109,15 +109,19 @@ def check(joints: Sequence[WatchedJoint], motors: Motors) -> list[Breach]:
     return out
 
 
-def recovery_targets(joints: Sequence[WatchedJoint], motors: Motors, breaches: Sequence[Breach]) -> dict[str, int]:
+def recovery_targets(joints: Sequence[WatchedJoint], motors: Motors, breaches: Sequence[Breach],
+                     hold: Mapping[str, int] | None = None) -> dict[str, int]:
     """Motor targets (counts) that bring every breached joint to the nearest edge of its normal range.
 
     A plain joint is its motor. For a pair both joints are clamped into their normal ranges
     (a joint already inside stays where it is) and mapped back through the inverse transform;
     when Σ and Δ differ in parity (no whole motor position) the joint that did not breach gives
-    way by one count, toward the inside of its normal range. Only drives that must move are
-    returned.
+    way by one count, toward the inside of its normal range. ``hold`` gives a pair joint that did
+    not breach the value to keep instead of where it stands (a jog's held joint: its value before
+    the jog, which start and stop skew between the two motors may have shifted by a few counts).
+    Only drives that must move are returned.
     """
+    hold = hold or {}
     breached = {b.joint for b in breaches}
     targets: dict[str, int] = {}
     pairs: dict[tuple[str, str], dict[int, WatchedJoint]] = {}
@@ -133,6 +137,10 @@ def recovery_targets(joints: Sequence[WatchedJoint], motors: Motors, breaches: S
         m_a, m_b = motors[a], motors[b]
         s, d = m_a + m_b, m_a - m_b
         sig, dlt = members.get(1), members.get(-1)
+        if sig is not None and sig.name not in breached and sig.name in hold:
+            s = hold[sig.name]
+        if dlt is not None and dlt.name not in breached and dlt.name in hold:
+            d = hold[dlt.name]
         s2 = _clamp(s, sig.normal) if sig is not None else s
         d2 = _clamp(d, dlt.normal) if dlt is not None else d
         if not is_reachable(s2, d2):
