@@ -30,7 +30,7 @@ import time
 from dataclasses import dataclass, field
 from typing import Any, Callable, Iterable, Sequence
 
-from sherpa_cli.elmo.faults import decode_mf, decode_sr, describe_mf, sr_problems
+from sherpa_cli.elmo.faults import describe_mf, sr_problems
 from sherpa_cli.errors import (CommunicationError, DriveRefusedError, ExitCode, SafetyError, SherpaError,
                                UsageError)
 
@@ -102,6 +102,7 @@ class DriveStop:
     stopped_by: str = "-"  # "ST", "JV=0 + BG", "TC=0 + ST", "motor was off", "not stopped"
     standstill: bool | None = None  # None: not checked (motor off)
     motor_off: bool = False  # the guard switched the motor off (it had switched it on)
+    position: int | None = None  # PX once stopped (None: could not be read)
     restored: list[str] = field(default_factory=list)
     kept: list[str] = field(default_factory=list)
     problems: list[str] = field(default_factory=list)
@@ -123,7 +124,8 @@ class DriveStop:
 
     def as_json(self) -> dict[str, Any]:
         return {"drive": self.drive, "address": self.address, "stopped_by": self.stopped_by,
-                "standstill": self.standstill, "motor_off": self.motor_off, "restored": list(self.restored),
+                "standstill": self.standstill, "motor_off": self.motor_off, "position": self.position,
+                "restored": list(self.restored),
                 "kept": list(self.kept), "problems": list(self.problems)}
 
 
@@ -308,6 +310,8 @@ class MotionGuard:
                 d.um_changed_from = d.um
             d.um = unit_mode
         if not d.mo:
+            if unit_mode == UM_TORQUE and c.get("TC") != 0:
+                c.set("TC", 0, 0.0)  # MO=1 in UM=1 applies TC at once: never an old torque command
             self._pulse(extra=bound)
             d.switched_on = True  # before the request: a lost confirmation must still end in MO=0
             c.motor_on()
@@ -479,6 +483,10 @@ class MotionGuard:
                 r.motor_off = True
             except SherpaError as exc:
                 r.problems.append(f"MO=0: {exc}")
+        try:
+            r.position = int(c.get("PX"))
+        except SherpaError as exc:
+            r.problems.append(f"PX: {exc}")
         if d.um_changed_from is not None:
             if self.keep:
                 r.kept.append(f"UM={d.um}")
