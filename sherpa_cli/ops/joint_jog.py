@@ -194,6 +194,8 @@ def _plan_position(cfg: ArmConfig, axis: Axis, request: JogRequest, motors: Mapp
                    start: int) -> JogPlan:
     if (request.to is None) == (request.by is None):
         raise UsageError("a position jog needs exactly one of --to and --by")
+    if request.duration is not None:
+        raise UsageError("--for applies to --velocity and --torque jogs; a position move ends at its target")
     if request.to is not None:
         target = units.parse_position(request.to, axis.cpr, what="--to")
     else:
@@ -238,6 +240,22 @@ def _motor_targets(axis: Axis, target: int, motors: Mapping[str, int]) -> dict[s
     return dict(zip(axis.drives, diffpair.to_motors(s2, d2)))
 
 
+def check_offline(cfg: ArmConfig, axis: Axis, request: JogRequest) -> JogPlan | None:
+    """Every refusal that needs no bus (a dry run's checks): the whole plan for velocity and torque
+    jogs (they do not depend on where the motors stand), the values and the --to range for a move."""
+    zero = {d: 0 for d in axis.sensed}
+    if request.mode != "position":
+        return plan(cfg, axis, request, zero)
+    if request.to is not None and request.by is None:
+        return plan(cfg, axis, request, zero) if axis.kind != "motor" else None
+    if request.by is not None and request.to is None:
+        units.parse_position(request.by, axis.cpr, what="--by")
+        if request.velocity is not None:
+            _check_speed(axis, abs(units.parse_velocity(request.velocity, axis.cpr, what="--velocity")), "--velocity")
+        return None
+    raise UsageError("a position jog needs exactly one of --to and --by")
+
+
 # --------------------------------------------------------------------------- running it
 
 @dataclass
@@ -264,6 +282,8 @@ class JogResult:
     outcome: str = "done"  # done | limit
     held_correction: dict[str, Any] = field(default_factory=dict)  # the held pair joint put back
     guard_lines: list[str] = field(default_factory=list)
+    stop: dict[str, Any] = field(default_factory=dict)  # the guard's report (GuardReport.as_json)
+    joint_cpr: dict[str, int] = field(default_factory=dict)  # cpr of each watched joint
 
     @property
     def ok(self) -> bool:
@@ -279,7 +299,7 @@ class JogResult:
             "motor_commands": dict(self.motor_commands),
             "calibration": [c.as_dict() for c in self.calibration],
             "limit": [b.as_dict() for b in self.breaches], "recovered_to": dict(self.recovered_to),
-            "held_correction": dict(self.held_correction),
+            "held_correction": dict(self.held_correction), "stop": dict(self.stop),
         }
 
 
@@ -333,7 +353,8 @@ def run(session: Any, axis: Axis, request: JogRequest, *, guard_factory: Callabl
     joints_start = {j.name: j.position(motors) for j in axis.watched}
     result = JogResult(axis.name, axis.kind, p.mode, axis.drives, axis.cpr, p.start, p.start, target=p.target,
                        speed=p.speed, current=p.current, duration=p.duration, joints_start=joints_start,
-                       motors_start=dict(motors), calibration=cals)
+                       motors_start=dict(motors), calibration=cals,
+                       joint_cpr={j.name: cfg.joints[j.name].cpr for j in axis.watched})
     with factory(session, refs, settings=settings, clock=clock, sleep=sleep, on_event=on_event) as guard:
         clients = {d: guard.client(by_name[d]) for d in axis.drives}
         sensors = {**{r.name: session.client(r) for r in _refs(cfg, axis.sensed)}, **clients}
@@ -402,6 +423,7 @@ def run(session: Any, axis: Axis, request: JogRequest, *, guard_factory: Callabl
     result.joints_end = {j.name: j.position(final) for j in axis.watched}
     result.end = axis.position(final)
     result.guard_lines = guard.report.lines()
+    result.stop = guard.report.as_json()
     return result
 
 
