@@ -19,41 +19,7 @@ from sherpa_cli.ops import joint_jog
 from sherpa_cli.ops.joint_jog import JogRequest, resolve_axis
 from sherpa_cli.ops.session import ArmSession, DriveRef
 
-CONFIG = """\
-name: jog-test
-protocol: {mo_settle: 0.05, sv_blackout: 0.2}
-motion: {consumer_time_ms: 300}
-buses:
-  can0: {interface: socketcan, channel: can0}
-drives:
-  yaw: {bus: can0, node: 5, model: whistle-10/60}
-  left: {bus: can0, node: 10, model: whistle-20/60}
-  right: {bus: can0, node: 11, model: whistle-20/60}
-joints:
-  j1:
-    drive: yaw
-    cpr: 4000
-    range: {min: -2000, max: 2000, margin: 100, overshoot: 400}
-    velocity: {limit: 8000, trip: 12000}
-    acceleration: {accel: 40000, decel: 40000}
-    current: {continuous: 2.0, peak: 6.0, peak_time: 1}
-pairs:
-  diff:
-    drives: [left, right]
-    current: {continuous: 3.0, peak: 9.0, peak_time: 1}
-    sigma:
-      name: pitch
-      cpr: 6000
-      range: {min: -3000, max: 3000, margin: 200, overshoot: 600}
-      velocity: {limit: 8000, trip: 12000}
-      acceleration: {accel: 40000, decel: 40000}
-    delta:
-      name: roll
-      cpr: 6000
-      range: {min: -2000, max: 2000, margin: 100, overshoot: 400}
-      velocity: {limit: 8000, trip: 12000}
-      acceleration: {accel: 40000, decel: 40000}
-"""
+CONFIG = Path(__file__).resolve().parent / "data" / "jog-fast-arm.yaml"
 
 
 @pytest.fixture(autouse=True)
@@ -63,10 +29,8 @@ def _isolated(monkeypatch: pytest.MonkeyPatch, tmp_path: Path):
 
 
 @pytest.fixture
-def cfg(tmp_path):
-    path = tmp_path / "arm.yaml"
-    path.write_text(CONFIG, encoding="utf-8")
-    return load_config(path)
+def cfg():
+    return load_config(CONFIG)
 
 
 def calibrate(session, *drives):
@@ -185,3 +149,40 @@ def test_a_pair_motor_alone_is_checked_in_joint_space(cfg):
             jog(s, "right", mode="position", to="1950counts")
         r = jog(s, "right", mode="position", to="400counts")
         assert r.joints_end == {"pitch": 400, "roll": -400}
+
+
+# -- the plain joint's own path (ops/jog.py, what `sherpa jog PLAIN_JOINT` runs) --------------------
+
+@pytest.mark.parametrize("req", [dict(mode="velocity", velocity=9.0, duration=3.0),  # 5730 counts/s
+                                 dict(mode="velocity", velocity=-9.0),  # open-ended: the watch ends it
+                                 dict(mode="torque", torque=1.5, duration=3.0)])
+def test_plain_jog_past_the_full_range_is_stopped_and_brought_back(cfg, req):
+    from sherpa_cli.ops.jog import JogRequest as PlainRequest, resolve_jog_target, run_jog
+    from sherpa_cli.ops.motion import MotionSettings
+
+    with ArmSession.open(cfg, sim=True) as s:
+        r = run_jog(s, resolve_jog_target(cfg, "j1"), PlainRequest(**req), settings=MotionSettings.from_config(cfg))
+        assert r.breach is not None and r.breach.joint == "j1"
+        edge = 1900 if r.breach.side == "high" else -1900
+        assert r.breach.back_to == edge and r.recovered_to == edge and r.end_counts == edge
+        assert r.ended_by == f"left its full range, brought back to {edge} counts"
+        assert r.as_json()["ok"] is False and r.as_json()["limit"]["recovered_to"] == edge
+        assert motors_off(s)
+
+
+def test_plain_position_refusals_before_anything_is_armed(cfg):
+    from sherpa_cli.ops.jog import JogRequest as PlainRequest, resolve_jog_target, run_jog
+    from sherpa_cli.ops.motion import MotionSettings
+
+    settings = MotionSettings.from_config(cfg)
+    with ArmSession.open(cfg, sim=True) as s:
+        target = resolve_jog_target(cfg, "j1")
+        with pytest.raises(SafetyError, match=r"target 7540 counts is outside the joint's normal range \[-1900, 1900\]"):
+            run_jog(s, target, PlainRequest(mode="position", to=11.844), settings=settings)
+        with pytest.raises(SafetyError, match=r"not homed since power-up \(yaw UI\[3\]=0\)"):
+            run_jog(s, target, PlainRequest(mode="position", to=0.5), settings=settings)
+        with s.sim.lock:
+            assert all(d.od_writes == [] for d in s.sim.drives.values())  # the dead-man was never armed
+        calibrate(s, "yaw")
+        r = run_jog(s, target, PlainRequest(mode="position", to=0.5), settings=settings)
+        assert r.calibration.calibrated and abs(r.end_counts - 318) <= 1

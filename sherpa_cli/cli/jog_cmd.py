@@ -139,6 +139,11 @@ def _render(st, name: str, result) -> None:
         return
     for line in result.stop.lines():
         st.out.line(f"stop: {line}")
+    b = result.breach
+    if b is not None:
+        st.out.line(f"limit: {b.joint} left its full range [{b.full[0]}, {b.full[1]}] on the {b.side} side: "
+                    f"stopped, nothing more sent, brought back to {result.recovered_to} counts "
+                    f"(normal range edge {b.back_to})")
     where = result.end_counts
     rad = result.rad(where)
     at = (f"{rad:+.4f} rad ({where} counts)" if rad is not None else f"{where} counts") if where is not None \
