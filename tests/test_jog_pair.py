@@ -186,3 +186,28 @@ def test_plain_position_refusals_before_anything_is_armed(cfg):
         calibrate(s, "yaw")
         r = run_jog(s, target, PlainRequest(mode="position", to=0.5), settings=settings)
         assert r.calibration.calibrated and abs(r.end_counts - 318) <= 1
+
+
+def test_a_motor_that_trips_during_a_pair_jog_ends_it_with_the_reason(cfg):
+    import threading
+    import time
+
+    with ArmSession.open(cfg, sim=True) as s:
+        left = s.sim.drives["left"]
+
+        def trip() -> None:
+            deadline = time.monotonic() + 10
+            while abs(left.position) < 50 and time.monotonic() < deadline:  # the jog is under way
+                time.sleep(0.005)
+            with s.sim.lock:
+                left._shut_down(0x400000, "test trip")  # as past LL[3]/HL[3]
+
+        t = threading.Thread(target=trip)
+        t.start()
+        with pytest.raises(SafetyError, match=r"left \(node 10\): the motor was switched off during the jog: "
+                                              r"position limit") as info:
+            jog(s, "pitch", mode="velocity", velocity="1000counts", duration=3.0)
+        t.join()
+        report = info.value.motion_report
+        assert report.reason == "error" and len(report.drives) == 2
+        assert motors_off(s)

@@ -28,6 +28,7 @@ from dataclasses import dataclass, field
 from typing import Any, Callable, Mapping
 
 from sherpa_cli.config.model import ArmConfig, JointConfig, JointRole, PairConfig
+from sherpa_cli.elmo.faults import decode_sr, describe_mf
 from sherpa_cli.errors import SafetyError, UsageError
 from sherpa_cli.joints import diffpair, units
 from sherpa_cli.ops import calibration, limit_watch
@@ -355,8 +356,36 @@ def run(session: Any, axis: Axis, request: JogRequest, *, guard_factory: Callabl
                        speed=p.speed, current=p.current, duration=p.duration, joints_start=joints_start,
                        motors_start=dict(motors), calibration=cals,
                        joint_cpr={j.name: cfg.joints[j.name].cpr for j in axis.watched})
-    with factory(session, refs, settings=settings, clock=clock, sleep=sleep, on_event=on_event) as guard:
+    guard = factory(session, refs, settings=settings, clock=clock, sleep=sleep, on_event=on_event)
+    try:
+        final = _run_guarded(guard, session, cfg, axis, p, by_name, settings, joints_start, result, clock, sleep)
+    except BaseException as exc:
+        exc.motion_report = guard.report  # type: ignore[attr-defined]  # the CLI shows how it stopped
+        raise
+    # the guard stopped every motor (ST, MO=0) and put back what it changed
+    result.motors_end = final
+    result.joints_end = {j.name: j.position(final) for j in axis.watched}
+    result.end = axis.position(final)
+    result.guard_lines = guard.report.lines()
+    result.stop = guard.report.as_json()
+    return result
+
+
+def _run_guarded(guard: Any, session: Any, cfg: ArmConfig, axis: Axis, p: JogPlan, by_name: Mapping[str, Any],
+                 settings: Any, joints_start: Mapping[str, int], result: "JogResult",
+                 clock: Callable[[], float], sleep: Callable[[float], None]) -> dict[str, int]:
+    with guard:
         clients = {d: guard.client(by_name[d]) for d in axis.drives}
+
+        def check_drives() -> None:
+            """The guard's sign of life, and every moving motor still on (a trip ends the jog)."""
+            guard.check()
+            for c in clients.values():
+                sr = decode_sr(int(c.get("SR")))
+                if not sr.motor_on:
+                    mf = int(c.get("MF"))
+                    why = "; ".join(describe_mf(mf)) if mf else "MO=0 from elsewhere (sherpa stop, another tool)"
+                    raise SafetyError(f"{c.label}: the motor was switched off during the jog: {why}")
         sensors = {**{r.name: session.client(r) for r in _refs(cfg, axis.sensed)}, **clients}
 
         def sample() -> dict[str, int]:
@@ -376,7 +405,7 @@ def run(session: Any, axis: Axis, request: JogRequest, *, guard_factory: Callabl
             watched = limit_watch.watch(
                 axis.watched, sample, clock=clock, sleep=sleep, interval=settings.poll_interval,
                 finished=lambda m: all(int(c.get("MS")) == 0 for c in clients.values()), duration=p.timeout,
-                check_drives=guard.check)
+                check_drives=check_drives)
             if watched.outcome == "elapsed":
                 raise SafetyError(f"{axis.name}: did not reach {p.target} within {p.timeout:g} s "
                                   f"(stopped at {axis.position(watched.motors)})",
@@ -389,14 +418,14 @@ def run(session: Any, axis: Axis, request: JogRequest, *, guard_factory: Callabl
                 c.execute("BG")
             watched = limit_watch.watch(axis.watched, sample, clock=clock, sleep=sleep,
                                         interval=settings.poll_interval, duration=p.duration,
-                                        check_drives=guard.check)
+                                        check_drives=check_drives)
         else:
             result.motor_commands = {d: {"TC": p.motor_currents[d]} for d in axis.drives}
             for d, c in clients.items():
                 c.set("TC", 0, p.motor_currents[d])
             watched = limit_watch.watch(axis.watched, sample, clock=clock, sleep=sleep,
                                         interval=settings.poll_interval, duration=p.duration,
-                                        check_drives=guard.check)
+                                        check_drives=check_drives)
         held = {j.name: joints_start[j.name] for j in axis.watched
                 if axis.kind in ("sigma", "delta") and j.name != axis.name and j.drive_b is not None}
         if watched.outcome == "breach":
@@ -418,13 +447,7 @@ def run(session: Any, axis: Axis, request: JogRequest, *, guard_factory: Callabl
                 # start and stop skew between the two motors shifts the held joint a little (seed
                 # Fig. 9.10/9.11): put it back, keeping the moved joint where it ended
                 final = _restore_held(guard, by_name, clients, axis, final, held, settings, clock, sleep, result)
-    # the guard stopped every motor (ST, MO=0) and put back what it changed
-    result.motors_end = final
-    result.joints_end = {j.name: j.position(final) for j in axis.watched}
-    result.end = axis.position(final)
-    result.guard_lines = guard.report.lines()
-    result.stop = guard.report.as_json()
-    return result
+    return final
 
 
 def _stop_now(clients: Mapping[str, Any], mode: str) -> None:
