@@ -269,15 +269,15 @@ def _watch(guard: MotionGuard, c: Any, target: JogTarget, clock: Callable[[], fl
     t0 = state["t0"]
     while True:
         guard.check()
-        px = int(c.get("PX"))
-        sr = decode_sr(int(c.get("SR")))
+        px = int(guard.query(target.ref, "PX"))
+        sr = decode_sr(int(guard.query(target.ref, "SR")))
         elapsed = clock() - t0
         if on_progress is not None:
             on_progress(JogProgress(elapsed, px, counts_to_rad(px, target.cpr) if target.cpr else None))
         if target.joint is not None and _limit_breach(guard, c, target, px, settings, clock, sleep, state):
             return
         if not sr.motor_on:
-            mf = int(c.get("MF"))
+            mf = int(guard.query(target.ref, "MF"))
             why = "; ".join(describe_mf(mf)) if mf else "MO=0 from elsewhere (sherpa stop, another tool)"
             raise SafetyError(f"{c.label}: the motor was switched off during the jog: {why}")
         if done is not None and done(sr):

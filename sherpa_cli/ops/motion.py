@@ -180,7 +180,8 @@ def stop_drive(client: Any, *, unit_mode: int | None, method: str = "auto", stan
     """Stop one drive's motion: ST (JV=0 + BG where ST is refused), TC=0 first in torque mode; then
     wait for VX = 0 (bounded). Returns (how, standstill reached or None if the motor is off, problems)."""
     problems: list[str] = []
-    if not client.get("MO"):
+    # patient: a drive that was just switched on or off is deaf while it settles (protocol.mo_settle)
+    if not _ask_patiently(client, "MO", clock, sleep, client.settings.mo_confirm_timeout, poll_interval):
         return "motor was off", None, problems
     how = []
     if unit_mode == UM_TORQUE:
@@ -214,6 +215,21 @@ def stop_drive(client: Any, *, unit_mode: int | None, method: str = "auto", stan
             problems.append(f"not at standstill {standstill_timeout:g} s after the stop")
             return " + ".join(how) or "-", False, problems
         sleep(poll_interval)
+
+
+def _ask_patiently(client: Any, letters: str, clock: Callable[[], float], sleep: Callable[[float], None],
+                   patience: float, poll_interval: float) -> int | float:
+    """Query until the drive answers or ``patience`` s have passed (then the timeout propagates)."""
+    from sherpa_cli.errors import DriveTimeoutError
+
+    deadline = clock() + patience
+    while True:
+        try:
+            return client.get(letters)
+        except DriveTimeoutError:
+            if clock() >= deadline:
+                raise
+            sleep(poll_interval)
 
 
 class MotionGuard:
@@ -329,6 +345,19 @@ class MotionGuard:
         if self._hb_given_up is not None:
             raise DeadManError(f"host heartbeat stopped: {self._hb_given_up}")
         self._pulse()
+
+    def query(self, ref: Any, letters: str, index: int = 0) -> int | float:
+        """A query that waits out a drive deaf for its MO settle window (another host switched the motor:
+        `sherpa stop`), up to protocol.mo_confirm_timeout, keeping the dead-man fed meanwhile."""
+        c = self._drive(ref).client
+        patience = c.settings.mo_confirm_timeout
+        self._pulse(extra=patience + self.settings.request_bound)
+        try:
+            if index:
+                return c.get(letters, index)
+            return _ask_patiently(c, letters, self._clock, self._sleep, patience, self.settings.poll_interval)
+        finally:
+            self._pulse()
 
     def unit_mode(self, ref: Any) -> int:
         return self._drive(ref).um

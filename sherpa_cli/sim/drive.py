@@ -467,6 +467,8 @@ class SimDrive:
     def _begin(self) -> None:
         um, r, g = self.ram["UM"], self.ram, self.speed_gain
         self._limit_stop = False
+        kind = "JV" if um == 2 else self._target_kind if um == 5 else None
+        self._record(f"BG: UM={um}" + (f", {kind}={r[kind]}" if kind else ""))
         if um == 2:
             jv = min(max(r["JV"], r["VL[2]"]), r["VH[2]"])
             self.motor.jog(jv * g, r["AC"] * g, r["DC"] * g)
