@@ -380,16 +380,20 @@ def _run_guarded(guard: Any, session: Any, cfg: ArmConfig, axis: Axis, p: JogPla
         def check_drives() -> None:
             """The guard's sign of life, and every moving motor still on (a trip ends the jog)."""
             guard.check()
-            for c in clients.values():
-                sr = decode_sr(int(c.get("SR")))
+            for d, c in clients.items():
+                sr = decode_sr(int(guard.query(by_name[d], "SR")))
                 if not sr.motor_on:
-                    mf = int(c.get("MF"))
+                    mf = int(guard.query(by_name[d], "MF"))
                     why = "; ".join(describe_mf(mf)) if mf else "MO=0 from elsewhere (sherpa stop, another tool)"
                     raise SafetyError(f"{c.label}: the motor was switched off during the jog: {why}")
-        sensors = {**{r.name: session.client(r) for r in _refs(cfg, axis.sensed)}, **clients}
+        others = {r.name: session.client(r) for r in _refs(cfg, axis.sensed) if r.name not in clients}
 
         def sample() -> dict[str, int]:
-            return {d: int(c.get("PX")) for d, c in sensors.items()}
+            # guarded drives through guard.query: it waits out a drive deaf in its MO settle window
+            # (`sherpa stop` from another terminal), so the jog ends with the reason, not a timeout
+            motors = {d: int(guard.query(by_name[d], "PX")) for d in clients}
+            motors.update((d, int(c.get("PX"))) for d, c in others.items())
+            return {d: motors[d] for d in axis.sensed}
 
         um = UM_TORQUE if p.mode == "torque" else (settings.velocity_unit_mode if p.mode == "velocity"
                                                    else UM_POSITION)
