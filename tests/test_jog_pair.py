@@ -1,5 +1,6 @@
-"""Jogging on the simulated arm (in-process, python-can virtual): the Σ and Δ joints of a pair and a
-plain joint, in position, velocity and torque mode, with the joint-limit watch.
+"""Jogging on the simulated arm (in-process, python-can virtual): the Σ and Δ joints of a pair
+(ops/joint_jog.py) and a plain joint (ops/jog.py), in position, velocity and torque mode, with the
+joint-limit watch.
 
 Real time, like tests/test_motion_guard.py: the guard's dead-man heartbeat runs on a thread in
 wall-clock time, so the simulated drives must too (a fake clock running ahead would trip their
@@ -101,8 +102,7 @@ def test_torque_jog_of_a_pair_joint_moves_only_that_joint(cfg, name, other):
     ("pitch", "velocity", {"velocity": "6000counts"}),
     ("roll", "velocity", {"velocity": "-6000counts"}),
     ("pitch", "torque", {"torque": "2A"}),
-    ("j1", "velocity", {"velocity": "6000counts"}),
-    ("j1", "torque", {"torque": "-1.5A"}),
+    ("roll", "torque", {"torque": "-2A"}),
 ])
 def test_leaving_the_full_range_stops_and_comes_back_to_the_normal_range(cfg, name, mode, kw):
     with ArmSession.open(cfg, sim=True) as s:
@@ -211,3 +211,12 @@ def test_a_motor_that_trips_during_a_pair_jog_ends_it_with_the_reason(cfg):
         report = info.value.motion_report
         assert report.reason == "error" and len(report.drives) == 2
         assert motors_off(s)
+
+
+def test_plain_joints_are_not_pair_axes(cfg):
+    with pytest.raises(UsageError, match="plain joint"):
+        resolve_axis(cfg, "j1")
+    with pytest.raises(UsageError, match="not a motor of a differential pair"):
+        resolve_axis(cfg, "yaw")
+    with pytest.raises(UsageError, match="unknown joint or drive 'pich'"):
+        resolve_axis(cfg, "pich")

@@ -222,8 +222,6 @@ def _jog_pair(st, cfg, name: str, mode: str, to, by, velocity, torque, duration,
 
 
 def _axis_label(axis) -> str:
-    if axis.kind == "plain":
-        return f"{axis.name} ({axis.drives[0]})"
     if axis.kind == "motor":
         return f"{axis.name} (one motor of pair {axis.pair.name}; moves {axis.pair.sigma} and {axis.pair.delta})"
     sign = "Σ" if axis.kind == "sigma" else "Δ"

@@ -1,9 +1,9 @@
-"""Jogging one joint -- plain, the Σ or Δ joint of a differential pair, or one motor of a pair --
-inside the motion guard, with the joint-limit watch (docs/motion.md).
+"""Jogging the Σ or Δ joint of a differential pair, or one motor of a pair, inside the motion guard,
+with the joint-limit watch (docs/motion.md). Plain joints go through ops/jog.py, which uses the same
+watch (ops/limit_watch.py), normal-range and calibration checks.
 
 What a jog means per kind of axis (joints/diffpair.py for the transform):
 
-- plain joint: its motor is the joint (PA, JV, TC go straight to the drive).
 - Σ joint: both motors move through the inverse transform; Δ holds (its target is its current
   value). Position: ``m_a = (Σ'+Δ)/2``, ``m_b = (Σ'-Δ)/2`` (when Σ' and Δ differ in parity, Δ gives
   way by one count); speed: both motors at vΣ/2; current: both motors at IΣ.
@@ -44,7 +44,7 @@ class Axis:
     """What a jog moves, with the limits that apply to it."""
 
     name: str  # as the user named it
-    kind: str  # plain | sigma | delta | motor
+    kind: str  # sigma | delta | motor
     cpr: int
     drives: tuple[str, ...]  # one drive, or (drive_a, drive_b) of a pair
     normal: Range | None  # of the moved joint (None for a motor: both pair joints are checked)
@@ -64,37 +64,32 @@ class Axis:
         return tuple(out)
 
     def position(self, motors: Mapping[str, int]) -> int:
-        if self.kind in ("plain", "motor"):
+        if self.kind == "motor":
             return motors[self.drives[0]]
         a, b = (motors[d] for d in self.drives)
         return a + b if self.kind == "sigma" else a - b
 
 
 def resolve_axis(cfg: ArmConfig, name: str) -> Axis:
-    """The axis behind a plain joint, a Σ/Δ joint or a drive name of the config."""
+    """The axis behind a Σ/Δ joint or a pair drive of the config (plain joints: ops/jog.py)."""
     joint = cfg.joints.get(name)
     if joint is None and name in cfg.drives:
-        joint = cfg.joint_of_drive(name)
         pair = cfg.pair_of_drive(name)
-        if joint is None and pair is not None:
-            sigma, delta = cfg.joints[pair.sigma], cfg.joints[pair.delta]
-            cur = pair.current.continuous if pair.current is not None else None
-            # one motor at v moves Σ and Δ at v each: the slower joint limit bounds it
-            limits = [v for v in (sigma.vel_limit, delta.vel_limit) if v is not None]
-            return Axis(name, "motor", sigma.cpr, (name,), None, None, min(limits) if limits else None, cur,
-                        tuple(limit_watch.joints_moved_by(cfg, [name])), (sigma, delta), pair)
-        if joint is None:
-            raise UsageError(f"drive {name} moves no joint of the config; jog needs a joint's limits",
-                             hint="add the joint to the config, or use `sherpa cmd` for raw commands")
+        if pair is None or cfg.joint_of_drive(name) is not None:
+            raise UsageError(f"drive {name} is not a motor of a differential pair; jog it through its plain joint")
+        sigma, delta = cfg.joints[pair.sigma], cfg.joints[pair.delta]
+        cur = pair.current.continuous if pair.current is not None else None
+        # one motor at v moves Σ and Δ at v each: the slower joint limit bounds it
+        limits = [v for v in (sigma.vel_limit, delta.vel_limit) if v is not None]
+        return Axis(name, "motor", sigma.cpr, (name,), None, None, min(limits) if limits else None, cur,
+                    tuple(limit_watch.joints_moved_by(cfg, [name])), (sigma, delta), pair)
     if joint is None:
         from sherpa_cli.joints.limits import _unknown  # the one "did you mean" wording
 
         raise _unknown("joint or drive", name, [*cfg.joints, *cfg.drives])
-    watched = tuple(limit_watch.joints_moved_by(cfg, calibration.joint_drives(cfg, joint)))
     if joint.role is JointRole.PLAIN:
-        cur = joint.current.continuous if joint.current is not None else None
-        return Axis(joint.name, "plain", joint.cpr, (joint.drive,), joint.normal_range,  # type: ignore[arg-type]
-                    joint.full_range, joint.vel_limit, cur, watched, (joint,))
+        raise UsageError(f"{name} is a plain joint; it is jogged through ops/jog.py")
+    watched = tuple(limit_watch.joints_moved_by(cfg, calibration.joint_drives(cfg, joint)))
     pair = cfg.pairs[joint.pair]  # type: ignore[index]
     cur = pair.current.continuous if pair.current is not None else None
     return Axis(joint.name, joint.role.value, joint.cpr, (pair.drive_a, pair.drive_b), joint.normal_range,
@@ -178,14 +173,14 @@ def plan(cfg: ArmConfig, axis: Axis, request: JogRequest, motors: Mapping[str, i
 
 
 def _motor_speeds(axis: Axis, v: int) -> dict[str, int]:
-    if axis.kind in ("plain", "motor"):
+    if axis.kind == "motor":
         return {axis.drives[0]: v}
     a, b = diffpair.motor_velocities(v, 0) if axis.kind == "sigma" else diffpair.motor_velocities(0, v)
     return dict(zip(axis.drives, (a, b)))
 
 
 def _motor_currents(axis: Axis, amps: float) -> dict[str, float]:
-    if axis.kind in ("plain", "motor"):
+    if axis.kind == "motor":
         return {axis.drives[0]: amps}
     a, b = diffpair.motor_currents(amps, 0.0) if axis.kind == "sigma" else diffpair.motor_currents(0.0, amps)
     return dict(zip(axis.drives, (a, b)))
@@ -229,7 +224,7 @@ def _plan_position(cfg: ArmConfig, axis: Axis, request: JogRequest, motors: Mapp
 
 
 def _motor_targets(axis: Axis, target: int, motors: Mapping[str, int]) -> dict[str, int]:
-    if axis.kind in ("plain", "motor"):
+    if axis.kind == "motor":
         return {axis.drives[0]: target}
     a, b = axis.drives
     s, d = motors[a] + motors[b], motors[a] - motors[b]
