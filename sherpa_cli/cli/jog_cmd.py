@@ -1,4 +1,5 @@
-"""`sherpa jog JOINT`: move one plain joint inside the motion guard (ops/jog.py does the work)."""
+"""`sherpa jog JOINT`: move one joint inside the motion guard (ops/jog.py does the work for a plain
+joint, ops/joint_jog.py for a Σ/Δ joint or one motor of a pair)."""
 
 from __future__ import annotations
 
@@ -26,7 +27,7 @@ def parse_number(text: str | None, option: str) -> float | None:
 
 def jog(
     ctx: typer.Context,
-    joint: str = typer.Argument(..., metavar="JOINT", help="A plain joint, or a drive that moves one (or BUS:NODE)."),
+    joint: str = typer.Argument(..., metavar="JOINT", help="A plain joint, a Σ or Δ joint of a pair, or a drive (or BUS:NODE)."),
     to: Optional[str] = typer.Option(None, "--to", metavar="POS", help="Move to this joint position: rad, or "
                                      "with a unit: 10deg, 200counts. Only inside the joint's normal range."),
     by: Optional[str] = typer.Option(None, "--by", metavar="POS", help="Move by this much from where it is "
