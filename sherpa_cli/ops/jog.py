@@ -129,6 +129,11 @@ def check_request(target: JogTarget, req: JogRequest) -> None:
             raise UsageError("a position jog needs exactly one of --to or --by")
         if req.duration is not None:
             raise UsageError("--for applies to --velocity and --torque jogs; a position move ends at its target")
+        if req.to is not None and joint is not None and target.cpr is not None:
+            goal, (lo, hi) = _counts_to(target, req.to), joint.normal_range
+            if not lo <= goal <= hi:  # --by is checked once PX is known (_precheck)
+                raise SafetyError(f"{joint.name}: target {goal} counts is outside the joint's normal range "
+                                  f"[{lo}, {hi}]", hint="jog moves a joint only inside its normal range")
     elif req.mode == "velocity":
         assert req.velocity is not None
         if joint is not None and joint.vel_limit is not None:
