@@ -270,3 +270,43 @@ def test_guard_in_a_worker_thread_leaves_signals_alone(cfg):
     t.start()
     t.join(20)
     assert errors == []
+
+
+# -- the motion: config section ----------------------------------------------------------------------
+
+def test_motion_settings_defaults_and_heartbeat_period():
+    from sherpa_cli.config import load_config as load
+
+    arm = load(Path(__file__).resolve().parent.parent / "configs" / "sherpa-arm.yaml")
+    s = MotionSettings.from_config(arm)
+    assert (s.host_node_id, s.consumer_time_ms, s.loss_action, s.comm_error_behaviour) == (126, 500, 2, 2)
+    assert s.heartbeat_period == 0.125 and s.consumer_entry == 0x7E01F4
+    assert s.poll_interval == 0.01 and s.request_bound == pytest.approx(0.2)
+
+
+@pytest.mark.parametrize("motion,message", [
+    ("{host_node_id: 5}", "host_node_id 5 is the node id of drive 'drive1'"),
+    ("{host_node_id: 0}", "host_node_id 0 out of range 1..127"),
+    ("{consumer_time_ms: 70000}", "consumer_time_ms 70000 must be 1..65535"),
+    ("{consumer_time_ms: 200, heartbeat_period_ms: 150}", "at most half of consumer_time_ms"),
+    ("{loss_action: 4}", "loss_action 4 must be 0..3"),
+    ("{stop_method: brake}", "stop_method 'brake': expected one of auto, st, jv0"),
+    ("{velocity_unit_mode: 3}", "velocity_unit_mode 3"),
+    ("{standstill_timeout: 0}", "standstill_timeout 0.0 s must be > 0"),
+    ("{hostid: 3}", "hostid"),
+])
+def test_motion_config_errors_name_the_key(tmp_path, motion, message):
+    from sherpa_cli.errors import ConfigError
+
+    path = tmp_path / "arm.yaml"
+    path.write_text(CONFIG.replace("motion: {consumer_time_ms: 300}", f"motion: {motion}"), encoding="utf-8")
+    with pytest.raises(ConfigError) as info:
+        load_config(path)
+    assert message in str(info.value) and "arm.yaml:3" in str(info.value)
+
+
+def test_motion_config_round_trips_through_convert(tmp_path, cfg):
+    from sherpa_cli.config import dump_native, load_config_text
+
+    again = load_config_text(dump_native(cfg), "again.yaml")
+    assert again.motion == cfg.motion and again.motion.consumer_time_ms == 300
