@@ -90,6 +90,7 @@ def test_jog_in_position_mode_then_a_move_again(clock):
     reply(drive, encode_execute("BG"))
     run(drive, clock, 0.5)
     assert 480 <= query(drive, "PX") <= 500 and query(drive, "VX") == 1000
+    assert query(drive, "MS") == 2  # the profiler is busy while jogging
     assign(drive, "PA", 0, 0)  # a PA after a jog: the next BG is a move again
     reply(drive, encode_execute("BG"))
     run(drive, clock, 1.0)
