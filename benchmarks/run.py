@@ -49,70 +49,6 @@ def _judge(ratio: float, goal: str) -> bool:
     return _OPS[op](ratio, float(number))
 
 
-def bench_codec(rounds: int = 5, seconds: float = 0.3) -> Result:
-    """Encode a set frame and decode its reply: pairs per second vs. the bus's frame rate.
-
-    Best of ``rounds`` timed rounds after one untimed pass (noise on a shared machine only ever
-    slows a round down). The loop holds the two functions in locals and walks a flat list, as
-    the bare-struct ceiling's loop does, so the harness costs about what the ceiling's does.
-    Judged: the codec as installed (the compiled front doors of _codec_c.c when they were
-    built); the pure-Python functions are measured in the same run and shown beside it.
-    """
-    from sherpa_cli.elmo import codec
-
-    best = _codec_pairs_per_s(codec.encode_set, codec.decode_reply, rounds, seconds)
-    which = f"{codec.IMPLEMENTATION} codec"
-    if codec.encode_set is not codec.pure_encode_set:
-        pure = _codec_pairs_per_s(codec.pure_encode_set, codec.pure_decode_reply, rounds, seconds)
-        which += f" (pure Python in this run: {pure / CAN_8BYTE_FRAMES_PER_S:.0f}x)"
-    goal = ">= 300"
-    ratio = best / CAN_8BYTE_FRAMES_PER_S
-    ceiling = _raw_struct_pairs_per_s() / CAN_8BYTE_FRAMES_PER_S
-    return Result("codec", round(best), "pairs/s", round(ratio, 1), goal, _judge(ratio, goal),
-                  f"{which}; "
-                  f"ratio to {CAN_8BYTE_FRAMES_PER_S} frames/s (1 Mbit/s, 8-byte frames); best of {rounds} x "
-                  f"{seconds:g} s after a warm-up pass; bare struct pack+unpack in this run: {ceiling:.0f}x")
-
-
-def _codec_pairs_per_s(encode_set, decode_reply, rounds: int, seconds: float) -> float:
-    from sherpa_cli.elmo import codec
-
-    cases = [("AC", 0, 150000), ("LL", 3, -240), ("CL", 1, 1.5), ("IL", 3, 21), ("VH", 2, 220)]
-    work = [(letters, index, value, codec.encode_reply(letters, index, value, isinstance(value, float)))
-            for letters, index, value in cases] * 200
-    for letters, index, value, reply in work:  # warm-up: the codec's caches fill on first use
-        encode_set(letters, index, value)
-        decode_reply(reply)
-    best = 0.0
-    for _ in range(rounds):
-        n = 0
-        start = time.perf_counter()
-        deadline = start + seconds
-        while time.perf_counter() < deadline:
-            for letters, index, value, reply in work:
-                encode_set(letters, index, value)
-                decode_reply(reply)
-            n += len(work)
-        best = max(best, n / (time.perf_counter() - start))
-    return best
-
-
-def _raw_struct_pairs_per_s() -> float:
-    """The ceiling on this machine now: one struct pack and one unpack, no validation, no objects."""
-    import struct
-
-    pack, unpack = struct.Struct("<4si").pack, struct.Struct("<2sHi").unpack
-    header = b"AC\x00\x00"
-    n = 0
-    start = time.perf_counter()
-    deadline = start + 0.5
-    while time.perf_counter() < deadline:
-        for i in range(1000):
-            unpack(pack(header, i))
-        n += 1000
-    return n / (time.perf_counter() - start)
-
-
 def _wall(cmd: list[str]) -> float:
     start = time.perf_counter()
     subprocess.run(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, check=True, cwd=ROOT)
@@ -355,7 +291,6 @@ def program_workers() -> int:
 
 
 BENCHMARKS: dict[str, Callable[[], Result]] = {
-    "codec": bench_codec,
     "startup": bench_startup,
     "roundtrip": bench_roundtrip,
     "scan": bench_scan,
