@@ -87,6 +87,7 @@ def bench_roundtrip(rounds: int = 4, seconds: float = 0.5, warmup: float = 0.3) 
 
     from sherpa_cli.config import load_config
     from sherpa_cli.ops.session import ArmSession, resolve_target
+    from sherpa_cli.sim.arm import SimArm
 
     import dataclasses
 
@@ -98,7 +99,7 @@ def bench_roundtrip(rounds: int = 4, seconds: float = 0.5, warmup: float = 0.3) 
     errors: list[BaseException] = []
     with tempfile.TemporaryDirectory() as state:
         os.environ["XDG_STATE_HOME"] = state
-        with ArmSession.open(cfg, sim=True) as session:
+        with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as session:
             refs = [resolve_target(cfg, name) for name in cfg.drives]
             clients = [(ref, session.client(ref)) for ref in refs]
             for _, client in clients:
@@ -205,13 +206,14 @@ def bench_scan(rounds: int = 5) -> Result:
     from sherpa_cli.config import load_config
     from sherpa_cli.ops.scan import ScanSettings, scan
     from sherpa_cli.ops.session import ArmSession
+    from sherpa_cli.sim.arm import SimArm
 
     cfg = load_config(ROOT / "configs/sherpa-arm.yaml")
     settings = ScanSettings()
     times = []
     with tempfile.TemporaryDirectory() as state:
         os.environ["XDG_STATE_HOME"] = state
-        with ArmSession.open(cfg, sim=True) as session:
+        with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as session:
             for _ in range(rounds):
                 start = time.perf_counter()
                 report = scan(session, settings=settings)
@@ -237,12 +239,13 @@ def _program_arm_once(cfg, workers: int) -> tuple[float, float]:
     from sherpa_cli.joints.limits import derive_checked
     from sherpa_cli.ops import program
     from sherpa_cli.ops.session import ArmSession
+    from sherpa_cli.sim.arm import SimArm
 
     derived, _ = derive_checked(cfg)
     targets = [program.DriveTarget(d.drive, d.bus, d.node, d.params) for d in derived]
     with tempfile.TemporaryDirectory() as state:
         os.environ["XDG_STATE_HOME"] = state
-        with ArmSession.open(cfg, sim=True) as session:
+        with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as session:
             for drive in session.sim.drives.values():
                 drive.settings = dataclasses.replace(drive.settings, reply_latency_s=0.001)
             start = time.perf_counter()
