@@ -1,16 +1,19 @@
 """A session with the arm: its buses open, drive clients on demand, and (with --sim) the simulated arm.
 
 Commands open one session, do their work through it and close it; every exit path closes
-the buses and, for the in-process simulator, saves the simulated drives' flash.
+the buses and stops the in-process simulated arm (which saves its drives' flash).
+
+The simulated arm is injected: the CLI (cli/context.py) builds it and hands it over, so
+this module never imports the simulator package (sim/); the session only wires its buses to the
+arm's endpoints, starts it and stops it.
 """
 
 from __future__ import annotations
 
 import difflib
-import uuid
 from contextlib import contextmanager
 from dataclasses import dataclass
-from typing import Any, Iterable, Iterator
+from typing import Any, Iterable, Iterator, Mapping, Protocol
 
 from sherpa_cli.bus.busmap import BusTarget, apply_bus_map
 from sherpa_cli.bus.links import BusLink, close_links, open_links
@@ -62,44 +65,49 @@ def resolve_target(cfg: ArmConfig, text: str) -> DriveRef:
                      hint=f"did you mean {' or '.join(close)}?" if close else "see `sherpa config check` for the names")
 
 
+class InProcessArm(Protocol):
+    """What the session needs of an injected simulated arm (sim/arm.py's ``SimArm``)."""
+
+    #: bus name -> ``can.Bus`` keyword arguments of the arm's end of that bus (interface, channel)
+    endpoints: Mapping[str, Mapping[str, Any]]
+
+    def start(self) -> Any: ...
+
+    def stop(self) -> None: ...
+
+
 class ArmSession:
     """Open buses plus a DriveClient per drive; build with :meth:`open`."""
 
     def __init__(self, cfg: ArmConfig, links: dict[str, BusLink], sim: Any = None) -> None:
         self.cfg = cfg
         self.links = links
-        self.sim = sim  # the in-process SimArm with --sim, for tests and fault injection
+        self.sim = sim  # the injected in-process arm with --sim, for tests and fault injection
         self._clients: dict[tuple[str, int], Any] = {}
 
     @classmethod
     @contextmanager
-    def open(cls, cfg: ArmConfig, *, sim: bool = False, buses: Iterable[str] | None = None,
-             sim_factory: Any = None) -> Iterator["ArmSession"]:
-        """Open the buses (default: all); with ``sim`` start the simulated arm on virtual channels first."""
-        arm = None
+    def open(cls, cfg: ArmConfig, *, sim: InProcessArm | None = None,
+             buses: Iterable[str] | None = None) -> Iterator["ArmSession"]:
+        """Open the buses (default: all). With ``sim`` (a simulated arm built by the caller, not
+        started), start it first and point every configured bus at its endpoint; stop it last."""
+        if sim is not None and not hasattr(sim, "endpoints"):
+            raise TypeError("ArmSession.open(sim=...) takes the simulated arm itself, e.g. "
+                            "SimArm.in_process(cfg) from sim/arm.py, not a flag")
         wire_cfg = cfg
-        if sim:
-            token = uuid.uuid4().hex[:8]  # virtual channels are process-wide: keep sessions apart
-            targets = {name: BusTarget("virtual", f"sherpa-sim-{token}-{name}") for name in cfg.buses}
-            wire_cfg = apply_bus_map(cfg, targets)
-            from sherpa_cli.bus.virtual import open_can_bus
-            from sherpa_cli.sim.arm import SimArm
-
-            if sim_factory is None:
-                sim_factory = SimArm.for_session
-            arm = sim_factory(cfg, {name: t.channel for name, t in targets.items()})
-            if isinstance(arm, SimArm) and arm.bus_factory is None:
-                arm.bus_factory = open_can_bus  # the virtual interface without its per-frame deep copy
-            arm.start()
+        if sim is not None:
+            wire_cfg = apply_bus_map(cfg, {name: BusTarget(str(kw["interface"]), str(kw["channel"]))
+                                           for name, kw in sim.endpoints.items() if name in cfg.buses})
+            sim.start()
         try:
             links = open_links(wire_cfg, buses)
             try:
-                yield cls(wire_cfg, links, arm)
+                yield cls(wire_cfg, links, sim)
             finally:
                 close_links(links)
         finally:
-            if arm is not None:
-                arm.stop()
+            if sim is not None:
+                sim.stop()
 
     def client(self, ref: DriveRef):
         """The DriveClient of a drive (one per drive: it owns the drive's one-request-at-a-time lock)."""
