@@ -19,6 +19,7 @@ from sherpa_cli.config import load_config
 from sherpa_cli.errors import SafetyError
 from sherpa_cli.ops.motion import MotionGuard, MotionSettings, MotionStopped
 from sherpa_cli.ops.session import ArmSession, resolve_target
+from sherpa_cli.sim.arm import SimArm
 
 CONFIG = """\
 name: guard-test
@@ -90,7 +91,7 @@ def assert_stopped_and_restored(session, name="drive1", *, switched_on=True):
 
 def test_position_move_ends_at_target_then_stops_and_restores(cfg):
     settings = MotionSettings.from_config(cfg)
-    with ArmSession.open(cfg, sim=True) as s:
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
         ref = resolve_target(cfg, "drive1")
         events = []
         with MotionGuard(s, [ref], settings=settings, on_event=events.append) as g:
@@ -110,7 +111,7 @@ def test_position_move_ends_at_target_then_stops_and_restores(cfg):
 
 
 def test_exception_in_the_body_stops_and_restores(cfg):
-    with ArmSession.open(cfg, sim=True) as s:
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
         ref = resolve_target(cfg, "drive1")
         with pytest.raises(RuntimeError, match="boom"):
             with MotionGuard(s, [ref], settings=MotionSettings.from_config(cfg)) as g:
@@ -127,7 +128,7 @@ def test_exception_in_the_body_stops_and_restores(cfg):
 
 
 def test_keyboard_interrupt_stops_and_restores(cfg):
-    with ArmSession.open(cfg, sim=True) as s:
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
         ref = resolve_target(cfg, "drive1")
         with pytest.raises(KeyboardInterrupt):
             with MotionGuard(s, [ref], settings=MotionSettings.from_config(cfg)) as g:
@@ -144,7 +145,7 @@ def test_keyboard_interrupt_stops_and_restores(cfg):
 
 @pytest.mark.parametrize("signum", [signal.SIGTERM, signal.SIGHUP])
 def test_signal_to_the_process_stops_and_restores(cfg, signum):
-    with ArmSession.open(cfg, sim=True) as s:
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
         ref = resolve_target(cfg, "drive1")
         with pytest.raises(MotionStopped, match=signal.Signals(signum).name):
             with MotionGuard(s, [ref], settings=MotionSettings.from_config(cfg)) as g:
@@ -165,7 +166,7 @@ def test_signal_to_the_process_stops_and_restores(cfg, signum):
 
 
 def test_a_drive_in_fault_is_refused_with_the_decoded_reason(cfg):
-    with ArmSession.open(cfg, sim=True) as s:
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
         with s.sim.lock:
             sim_drive(s, "drive2")._mf = 0x400000  # latched: a position limit trip
         refs = [resolve_target(cfg, "drive1"), resolve_target(cfg, "drive2")]
@@ -179,7 +180,7 @@ def test_a_drive_in_fault_is_refused_with_the_decoded_reason(cfg):
 
 
 def test_unit_mode_changes_only_when_needed_with_the_motor_off_first(cfg):
-    with ArmSession.open(cfg, sim=True) as s:
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
         ref = resolve_target(cfg, "drive1")
         with MotionGuard(s, [ref], settings=MotionSettings.from_config(cfg)) as g:
             g.enable(ref, 5)  # UM is 5 already: no UM write
@@ -196,7 +197,7 @@ def test_unit_mode_changes_only_when_needed_with_the_motor_off_first(cfg):
 
 
 def test_keep_leaves_the_dead_man_and_unit_mode(cfg):
-    with ArmSession.open(cfg, sim=True) as s:
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
         ref = resolve_target(cfg, "drive1")
         with MotionGuard(s, [ref], settings=MotionSettings.from_config(cfg), keep=True) as g:
             g.enable(ref, 2)
@@ -210,7 +211,7 @@ def test_st_refused_in_speed_mode_falls_back_to_jv0_bg(cfg, monkeypatch):
     import dataclasses
 
     cfg = dataclasses.replace(cfg, sim={"drive1": SimDriveConfig(st_refused_in_speed_mode=True)})
-    with ArmSession.open(cfg, sim=True) as s:
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
         ref = resolve_target(cfg, "drive1")
         with MotionGuard(s, [ref], settings=MotionSettings.from_config(cfg)) as g:
             g.enable(ref, 2)
@@ -226,7 +227,7 @@ def test_a_hung_command_stops_the_heartbeat_and_the_drive_stops_itself(cfg):
     import dataclasses
 
     settings = dataclasses.replace(MotionSettings.from_config(cfg), liveness_timeout=0.2, request_bound=0.01)
-    with ArmSession.open(cfg, sim=True) as s:
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
         ref = resolve_target(cfg, "drive1")
         with MotionGuard(s, [ref], settings=settings) as g:
             g.enable(ref, 5)
@@ -258,7 +259,7 @@ def test_guard_in_a_worker_thread_leaves_signals_alone(cfg):
 
     def work():
         try:
-            with ArmSession.open(cfg, sim=True) as s:
+            with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
                 ref = resolve_target(cfg, "drive1")
                 with MotionGuard(s, [ref], settings=MotionSettings.from_config(cfg)) as g:
                     g.enable(ref, 5)
