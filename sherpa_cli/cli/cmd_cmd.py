@@ -30,11 +30,11 @@ def cmd(
     """
     from sherpa_cli.errors import SherpaError
     from sherpa_cli.ops.raw import parse_all, run_raw
-    from sherpa_cli.ops.session import resolve_target
+    from sherpa_cli.ops.targets import single_drive
 
     st = state(ctx)
     cfg = st.load_config()
-    ref = resolve_target(cfg, target)
+    ref = single_drive(cfg, target)
     parse_all(exprs)  # a typo must not reach the bus, not even the NMT start
     done: list = []
     error: SherpaError | None = None

@@ -28,11 +28,11 @@ def identify(
     """
     from sherpa_cli.errors import ExitCode
     from sherpa_cli.ops.identify import identify as run_identify
-    from sherpa_cli.ops.params_read import resolve_drive_names
+    from sherpa_cli.ops.targets import drive_names
 
     st = state(ctx)
     cfg = st.load_config()
-    drives = resolve_drive_names(cfg, targets)
+    drives = drive_names(cfg, targets)
     buses = sorted({cfg.drives[d].bus for d in drives})
     with st.session(buses=buses) as session:
         report = run_identify(session, drives)

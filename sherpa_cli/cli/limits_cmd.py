@@ -43,10 +43,11 @@ def show(ctx: typer.Context,
                                                      help="What to show; default: every drive.")) -> None:
     """Show the parameters Appendix C derives for each drive (nothing is sent to a drive)."""
     from sherpa_cli.joints.limits import derive_checked
+    from sherpa_cli.ops.targets import drive_names
 
     st = state(ctx)
     cfg = st.load_config()
-    derived, warnings = derive_checked(cfg, names or None)
+    derived, warnings = derive_checked(cfg, drive_names(cfg, names))
     for w in warnings:
         st.out.warn(w)
     if st.json_mode:

@@ -43,7 +43,8 @@ def monitor(
       sherpa monitor shoulder_diff elbow_pitch --interval 0.2
       sherpa --json monitor --once
     """
-    from sherpa_cli.ops.monitor import Monitor, resolve_targets
+    from sherpa_cli.ops.monitor import Monitor
+    from sherpa_cli.ops.targets import drive_refs
 
     st = state(ctx)
     if st.json_mode and not once:
@@ -51,7 +52,7 @@ def monitor(
     if not 0 < interval <= MAX_INTERVAL:  # also refuses nan and inf (time.sleep(inf) overflows)
         raise UsageError(f"--interval {interval}: expected a number of seconds > 0 and <= {MAX_INTERVAL:g}")
     cfg = st.load_config()
-    refs = resolve_targets(cfg, targets or [])
+    refs = drive_refs(cfg, targets)
     buses = list(dict.fromkeys(ref.bus for ref in refs))
     with st.session(buses=buses) as session, Monitor(session, refs, heartbeat_ms=heartbeat) as mon:
         if once:

@@ -47,12 +47,13 @@ def program_limits(
       sherpa program-limits --apply --save --yes
     """
     from sherpa_cli.joints.limits import derive_checked
+    from sherpa_cli.ops.targets import drive_names
     from sherpa_cli.ops.program import DriveTarget
 
     st = state(ctx)
     cfg = st.load_config()
     _check_options(apply, save)
-    derived, warnings = derive_checked(cfg, names or None)
+    derived, warnings = derive_checked(cfg, drive_names(cfg, names))
     targets = [DriveTarget(d.drive, d.bus, d.node, d.params) for d in derived]
     run_program(st, "program-limits", targets, warnings, apply=apply, save=save, yes=yes, motor_off=motor_off,
                 need_serial=save, allow_disabled=False, title=lambda drive: drive_moves(cfg, drive))

@@ -27,30 +27,16 @@ from sherpa_cli.bus.parallel import run_concurrently
 from sherpa_cli.config.model import ArmConfig
 from sherpa_cli.elmo.faults import Emcy, Fault, decode_error_field, decode_mf, sr_problems
 from sherpa_cli.errors import CommunicationError, SherpaError, UsageError
-from sherpa_cli.joints.limits import resolve_drives
 from sherpa_cli.ops.identify import JointPosition, joint_positions, row_joint
 from sherpa_cli.ops.scan import NMT_STATES, nmt_text
 from sherpa_cli.ops.sdo import sdo_download, sdo_error_text, sdo_upload
-from sherpa_cli.ops.session import DriveRef, resolve_target
+from sherpa_cli.ops.targets import DriveRef
 
 HEARTBEAT_BASE = 0x700
 POLLED = ("MO", "UM", "PX", "SR", "MF")
 PRODUCER_HEARTBEAT = (0x1017, 0)
 ERROR_FIELD = (0x1003, 1)
 NO_ANSWER = "no answer"
-
-
-def resolve_targets(cfg: ArmConfig, texts: Sequence[str]) -> list[DriveRef]:
-    """Drives to watch: every configured drive by default; a pair or Σ/Δ joint name means both motors."""
-    if not texts:
-        texts = list(cfg.drives)
-    refs: dict[tuple[str, int], DriveRef] = {}
-    for text in texts:
-        # a joint without drives falls through to resolve_target, which says what is wrong with it
-        names = resolve_drives(cfg, [text]) if text in cfg.joints or text in cfg.pairs else []
-        for ref in [resolve_target(cfg, n) for n in names] or [resolve_target(cfg, text)]:
-            refs.setdefault((ref.bus, ref.node), ref)
-    return list(refs.values())
 
 
 @dataclass

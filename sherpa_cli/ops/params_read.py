@@ -17,8 +17,8 @@ from typing import Any, Callable, Iterable, Mapping, Sequence
 from sherpa_cli import __version__
 from sherpa_cli.bus.parallel import Outcome, run_concurrently
 from sherpa_cli.config.model import ArmConfig
-from sherpa_cli.errors import CommunicationError, DriveRefusedError, UsageError
-from sherpa_cli.joints.limits import PARAM_ORDER, resolve_drives
+from sherpa_cli.errors import CommunicationError, DriveRefusedError
+from sherpa_cli.joints.limits import PARAM_ORDER
 from sherpa_cli.ops.params_file import DriveDump, ParamDump
 
 # 0x1018 sub 1-4 and the strings of 0x1008/9/A (CiA 301), in IDENTITY_KEYS order.
@@ -36,26 +36,6 @@ DEFAULT_INPUTS = 6  # a Whistle's digital inputs when the config names no model
 DUMP_DATE_ENV = "SHERPA_DUMP_DATE"  # fixed date for the dump header (golden tests, reproducible dumps)
 
 Progress = Callable[[str, str], None]  # (drive, what is being read)
-
-
-def resolve_drive_names(cfg: ArmConfig, names: Sequence[str] | None) -> list[str]:
-    """Configured drive names for drive/joint/pair names or BUS:NODE; default every drive."""
-    if not names:
-        return list(cfg.drives)
-    from sherpa_cli.ops.session import resolve_target
-
-    out: list[str] = []
-    for name in names:
-        if ":" in name and name not in cfg.drives:
-            ref = resolve_target(cfg, name)
-            if ref.config is None:
-                raise UsageError(f"target '{name}': no configured drive at {ref.address}",
-                                 hint="identify and dump-params read configured drives only")
-            found = [ref.name]
-        else:
-            found = resolve_drives(cfg, [name])
-        out.extend(d for d in found if d not in out)
-    return out
 
 
 def params_to_read(cfg: ArmConfig, drive: str) -> list[str]:
@@ -144,10 +124,9 @@ def per_bus(session: Any, drives: Sequence[str], work: Callable[[str], Any]) -> 
 
 
 def ref_of(cfg: ArmConfig, drive: str):
-    from sherpa_cli.ops.session import DriveRef
+    from sherpa_cli.ops.targets import drive_ref
 
-    d = cfg.drives[drive]
-    return DriveRef(d.name, d.bus, d.node, d)
+    return drive_ref(cfg, drive)
 
 
 def open_drive(session: Any, drive: str, progress: Progress | None = None) -> tuple[Any, dict[str, Any], list[str]]:
