@@ -4,11 +4,12 @@ from __future__ import annotations
 
 import sys
 import time
-from typing import Callable, List, Optional
+from typing import Callable, Optional
 
 import typer
 
 from sherpa_cli.cli.context import state
+from sherpa_cli.cli.options import Targets
 from sherpa_cli.errors import ExitCode, UsageError
 
 # Seconds between polls in the live view; the CLI's sleep goes through here so tests can stop it.
@@ -18,8 +19,7 @@ MAX_INTERVAL = 3600.0  # s between polls of the live view
 
 def monitor(
     ctx: typer.Context,
-    targets: Optional[List[str]] = typer.Argument(None, metavar="[TARGET ...]",
-                                                  help="Drive, joint, pair or BUS:NODE. Default: every drive."),
+    targets: Targets = None,
     once: bool = typer.Option(False, "--once", help="Print one snapshot and exit (no ages or times in it)."),
     interval: float = typer.Option(0.5, "--interval", metavar="S", help="Seconds between polls in the live view."),
     heartbeat: Optional[int] = typer.Option(

@@ -12,15 +12,13 @@ from typing import List, Optional
 import typer
 
 from sherpa_cli.cli.context import state
+from sherpa_cli.cli.options import Targets
 
 app = typer.Typer(no_args_is_help=True, help="Drive parameter sets: compare dumps, the drives and the config.")
 
-TARGETS_HELP = "Drive, joint or pair names, or BUS:NODE; default: every configured drive."
-
-
 def dump_params(
     ctx: typer.Context,
-    targets: Optional[List[str]] = typer.Argument(None, metavar="[TARGET]...", help=TARGETS_HELP),
+    targets: Targets = None,
     output: Optional[Path] = typer.Option(None, "--output", "-o", metavar="FILE",
                                           help="Write the YAML dump to FILE (atomically) instead of stdout."),
 ) -> None:

@@ -30,6 +30,7 @@ class ArmSession:
         self.links = links
         self.sim = sim  # the in-process SimArm with --sim, for tests and fault injection
         self._clients: dict[tuple[str, int], Any] = {}
+        self._sdo: dict[tuple[str, int], Any] = {}
 
     @classmethod
     @contextmanager
@@ -78,3 +79,16 @@ class ArmSession:
                                  timeout=p.reply_timeout, retries=p.retries, settings=settings)
             self._clients[key] = client
         return client
+
+    def sdo(self, ref: DriveRef):
+        """The SDO client of a drive (ops/sdo.py DriveSdo), one per drive for the whole session."""
+        from sherpa_cli.ops.sdo import DriveSdo
+
+        sdo = self._sdo.get(ref.key)
+        if sdo is None:
+            if ref.bus not in self.links:
+                raise UsageError(f"{ref.name}: bus {ref.bus} is not open in this session")
+            sdo = DriveSdo(self.links[ref.bus].network, ref.node, label=f"{ref.name} (node {ref.node})",
+                           timeout=self.cfg.protocol.sdo_timeout)
+            self._sdo[ref.key] = sdo
+        return sdo
