@@ -7,6 +7,7 @@ from typing import Callable
 
 import pytest
 
+from sherpa_cli.sim.arm import SimArm
 from sherpa_cli.config import load_config
 from sherpa_cli.errors import CommunicationError, ExitCode, SdoError
 from sherpa_cli.ops.canopen_names import abort_text, nmt_text
@@ -122,7 +123,7 @@ def test_nmt_names():
 
 def test_one_client_per_drive_for_the_session():
     cfg = load_config(EXAMPLE1)
-    with ArmSession.open(cfg, sim=True) as session:
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as session:
         ref = drive_ref(cfg, next(iter(cfg.drives)))
         sdo = session.sdo(ref)
         assert session.sdo(ref) is sdo
@@ -141,7 +142,7 @@ def test_identify_and_dump_read_identity_through_the_session_clients():
     from sherpa_cli.ops.params_read import read_live
 
     cfg = load_config(EXAMPLE1)
-    with ArmSession.open(cfg, sim=True) as session:
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as session:
         live = read_live(session, list(cfg.drives))
         assert set(session._sdo) == {(d.bus, d.node) for d in cfg.drives.values()}
         assert all(d.identity["serial"] for d in live.values())
