@@ -11,7 +11,7 @@ import pytest
 
 from sherpa_cli.config import load_config
 from sherpa_cli.config.model import SimDriveConfig
-from sherpa_cli.ops.monitor import resolve_targets
+from sherpa_cli.ops.targets import drive_refs
 from sherpa_cli.ops.motion import MotionSettings
 from sherpa_cli.ops.session import ArmSession, resolve_target
 from sherpa_cli.ops.stop import stop_drives
@@ -41,7 +41,7 @@ def test_stop_stops_moving_drives_and_leaves_the_others_alone(tmp_path, monkeypa
             c.set("JV", 0, 300)
             c.execute("BG")
         time.sleep(0.1)
-        refs = resolve_targets(cfg, ["elbow_pitch", "wrist_2", "wrist_3"])
+        refs = drive_refs(cfg, ["elbow_pitch", "wrist_2", "wrist_3"])
         results = stop_drives(s, refs, MotionSettings.from_config(cfg))
         states = {n: (s.sim.drives[n].motor_on, s.sim.drives[n].motor.v) for n in ("elbow_1a", "wrist_2a")}
         wrist_3a_sets = [d for _, cid, d in s.sim.drives["wrist_3a"].received if cid == 0x300 + 70 and len(d) == 8]

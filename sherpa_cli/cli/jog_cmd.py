@@ -8,6 +8,7 @@ from typing import Optional
 import typer
 
 from sherpa_cli.cli.context import state
+from sherpa_cli.cli.options import ApplyMotion
 from sherpa_cli.errors import UsageError
 
 
@@ -36,7 +37,7 @@ def jog(
                                          "joint's continuous current limit."),
     duration: Optional[str] = typer.Option(None, "--for", metavar="SECONDS", help="How long a velocity or torque "
                                            "jog runs."),
-    apply: bool = typer.Option(False, "--apply", help="Move the motor; without it, only show what would be sent."),
+    apply: ApplyMotion = False,
 ) -> None:
     """Move one plain joint: to/by a position, at a velocity, or with a torque.
 

@@ -22,7 +22,8 @@ from sherpa_cli.elmo.faults import decode_sr, describe_mf
 from sherpa_cli.errors import SafetyError, UsageError
 from sherpa_cli.joints.units import counts_to_rad, rad_per_s_to_counts_per_s, rad_to_counts
 from sherpa_cli.ops.motion import UM_POSITION, UM_TORQUE, GuardReport, MotionGuard, MotionSettings
-from sherpa_cli.ops.session import DriveRef, resolve_target
+from sherpa_cli.ops import targets
+from sherpa_cli.ops.targets import DriveRef
 
 MODES = ("position", "velocity", "torque")
 
@@ -94,13 +95,16 @@ class JogResult:
 
 
 def resolve_jog_target(cfg: ArmConfig, text: str) -> JogTarget:
-    """A plain joint, a drive, or BUS:NODE; a Σ/Δ joint is refused (pairs move through wave/jog's path)."""
-    joint = cfg.joints.get(text)
-    if joint is not None and joint.role is not JointRole.PLAIN:
-        raise UsageError(f"'{text}' is a joint of the differential pair '{joint.pair}': "
-                         "jogging Σ/Δ joints is not supported here", hint="jog a plain joint or one drive")
-    ref = resolve_target(cfg, text)
-    return JogTarget(text, ref, cfg.joint_of_drive(ref.name) if ref.config is not None else None)
+    """A plain joint, the drive of one, or BUS:NODE (ops/targets.py decides what a name means);
+    a differential pair, its Σ/Δ joints and its motors are refused here."""
+    t = targets.resolve_one(cfg, text)
+    if t.pair is not None:
+        raise UsageError(f"'{text}' moves the differential pair '{t.pair.name}': jogging Σ/Δ joints is not "
+                         "supported here", hint="jog a plain joint or its drive")
+    if len(t.drives) != 1:
+        raise UsageError(f"'{text}' is moved by {len(t.drives)} drives ({', '.join(t.drive_names)}); name one")
+    plain = [j for j in t.joints if j.role is JointRole.PLAIN]
+    return JogTarget(text, t.drives[0], plain[0] if len(plain) == 1 else None)
 
 
 def check_request(target: JogTarget, req: JogRequest) -> None:
