@@ -33,14 +33,14 @@ CASES = [
     ("jog-dry-run-delta-torque", [*F, "jog", "roll", "--torque", "800mA", "--for", "0.5"], 0),
     ("jog-dry-run-sigma-json", [*F, "--json", "jog", "pitch", "--to", "0.1"], 0),
     # refusals
-    ("jog-refuse-normal-range", [*F, "jog", "pitch", "--to", "170deg", "--apply"], 1),
-    ("jog-refuse-normal-range-plain", [*F, "jog", "j2", "--to", "1780counts", "--apply"], 1),
+    ("jog-refuse-normal-range", [*F, "jog", "pitch", "--to", "170deg", "--apply"], 2),
+    ("jog-refuse-normal-range-plain", [*F, "jog", "j2", "--to", "1780counts", "--apply"], 2),
     ("jog-refuse-uncalibrated-pair", [*F, "jog", "roll", "--by", "1deg", "--apply"], 1),
     ("jog-refuse-uncalibrated-plain", [*F, "jog", "j1", "--to", "1deg", "--apply"], 1),
     ("jog-refuse-torque-without-for", [*F, "jog", "pitch", "--torque", "1", "--apply"], 2),
     ("jog-refuse-velocity-without-for", [*F, "jog", "roll", "--velocity", "0.1", "--apply"], 2),
-    ("jog-refuse-speed", [*F, "jog", "pitch", "--velocity", "9000counts", "--for", "1", "--apply"], 1),
-    ("jog-refuse-current", [*F, "jog", "roll", "--torque", "3.5A", "--for", "1", "--apply"], 1),
+    ("jog-refuse-speed", [*F, "jog", "pitch", "--velocity", "9000counts", "--for", "1", "--apply"], 2),
+    ("jog-refuse-current", [*F, "jog", "roll", "--torque", "3.5A", "--for", "1", "--apply"], 2),
     ("jog-refuse-unit", [*F, "jog", "j2", "--to", "10furlong"], 2),
     ("jog-refuse-half-count", [*F, "jog", "pitch", "--by", "2.5counts"], 2),
 ]

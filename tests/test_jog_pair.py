@@ -19,6 +19,7 @@ from sherpa_cli.errors import SafetyError, UsageError
 from sherpa_cli.ops import joint_jog
 from sherpa_cli.ops.joint_jog import JogRequest, resolve_axis
 from sherpa_cli.ops.session import ArmSession, DriveRef
+from sherpa_cli.sim.arm import SimArm
 
 CONFIG = Path(__file__).resolve().parent / "data" / "jog-fast-arm.yaml"
 
@@ -55,7 +56,7 @@ def motors_off(session):
 @pytest.mark.parametrize("name, to, other", [("pitch", "1000counts", "roll"), ("roll", "-601counts", "pitch"),
                                              ("pitch", "-1201counts", "roll")])
 def test_position_jog_of_a_pair_joint_ends_where_asked_and_the_other_holds(cfg, name, to, other):
-    with ArmSession.open(cfg, sim=True) as s:
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
         calibrate(s, "left", "right")
         r = jog(s, name, mode="position", to=to)
         target = int(to.removesuffix("counts"))
@@ -67,7 +68,7 @@ def test_position_jog_of_a_pair_joint_ends_where_asked_and_the_other_holds(cfg, 
 
 
 def test_position_jog_of_a_pair_joint_with_by_and_degrees(cfg):
-    with ArmSession.open(cfg, sim=True) as s:
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
         calibrate(s, "left", "right")
         first = jog(s, "roll", mode="position", to="300counts")
         second = jog(s, "pitch", mode="position", by="30deg")  # 30° of cpr 6000 = 500 counts
@@ -79,7 +80,7 @@ def test_position_jog_of_a_pair_joint_with_by_and_degrees(cfg):
 @pytest.mark.parametrize("name, velocity, other, sign", [("pitch", "3000counts", "roll", 1),
                                                          ("roll", "-2000counts/s", "pitch", -1)])
 def test_velocity_jog_of_a_pair_joint_moves_only_that_joint(cfg, name, velocity, other, sign):
-    with ArmSession.open(cfg, sim=True) as s:
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
         r = jog(s, name, mode="velocity", velocity=velocity, duration=0.2)
         assert r.ok
         assert sign * r.joints_end[name] > 200  # moved the asked way
@@ -90,7 +91,7 @@ def test_velocity_jog_of_a_pair_joint_moves_only_that_joint(cfg, name, velocity,
 
 @pytest.mark.parametrize("name, other", [("pitch", "roll"), ("roll", "pitch")])
 def test_torque_jog_of_a_pair_joint_moves_only_that_joint(cfg, name, other):
-    with ArmSession.open(cfg, sim=True) as s:
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
         r = jog(s, name, mode="torque", torque="0.2A", duration=0.2)
         assert r.ok and r.joints_end[name] > 20
         assert abs(r.joints_end[other] - r.joints_start[other]) <= 1
@@ -105,7 +106,7 @@ def test_torque_jog_of_a_pair_joint_moves_only_that_joint(cfg, name, other):
     ("roll", "torque", {"torque": "-2A"}),
 ])
 def test_leaving_the_full_range_stops_and_comes_back_to_the_normal_range(cfg, name, mode, kw):
-    with ArmSession.open(cfg, sim=True) as s:
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
         r = jog(s, name, mode=mode, duration=3.0, **kw)
         assert not r.ok and r.outcome == "limit"
         (b,) = r.breaches
@@ -120,7 +121,7 @@ def test_leaving_the_full_range_stops_and_comes_back_to_the_normal_range(cfg, na
 
 
 def test_torque_without_for_is_refused_before_anything_moves(cfg):
-    with ArmSession.open(cfg, sim=True) as s:
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
         with pytest.raises(UsageError, match="needs --for"):
             jog(s, "pitch", mode="torque", torque="1A")
         with s.sim.lock:
@@ -128,24 +129,24 @@ def test_torque_without_for_is_refused_before_anything_moves(cfg):
 
 
 def test_refusals_outside_the_normal_range_and_uncalibrated(cfg):
-    with ArmSession.open(cfg, sim=True) as s:
-        with pytest.raises(SafetyError, match=r"target 2850 counts is outside the joint's normal range \[-2800, 2800\]"):
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
+        with pytest.raises(UsageError, match=r"target 2850 counts is outside the joint's normal range \[-2800, 2800\]"):
             jog(s, "pitch", mode="position", to="2850counts")
         with pytest.raises(SafetyError, match=r"not homed since power-up \(left UI\[3\]=0, right UI\[3\]=0\)"):
             jog(s, "roll", mode="position", to="10counts")
         r = jog(s, "roll", mode="position", to="10counts", uncalibrated=True)
         assert r.ok and abs(r.end - 10) <= 1
-        with pytest.raises(SafetyError, match="above the joint's speed limit 8000"):
+        with pytest.raises(UsageError, match="above the joint's speed limit 8000"):
             jog(s, "pitch", mode="velocity", velocity="9000counts", duration=0.1)
-        with pytest.raises(SafetyError, match="above the configured continuous limit 3 A"):
+        with pytest.raises(UsageError, match="above the configured continuous limit 3 A"):
             jog(s, "roll", mode="torque", torque="3.5", duration=0.1)
 
 
 def test_a_pair_motor_alone_is_checked_in_joint_space(cfg):
-    with ArmSession.open(cfg, sim=True) as s:
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
         calibrate(s, "left", "right")
         # right alone to 1950: Σ 1950 is fine, Δ -1950 is past roll's normal edge -1900
-        with pytest.raises(SafetyError, match=r"puts joint roll at -1950 counts, outside its normal range"):
+        with pytest.raises(UsageError, match=r"puts joint roll at -1950 counts, outside its normal range"):
             jog(s, "right", mode="position", to="1950counts")
         r = jog(s, "right", mode="position", to="400counts")
         assert r.joints_end == {"pitch": 400, "roll": -400}
@@ -160,7 +161,7 @@ def test_plain_jog_past_the_full_range_is_stopped_and_brought_back(cfg, req):
     from sherpa_cli.ops.jog import JogRequest as PlainRequest, resolve_jog_target, run_jog
     from sherpa_cli.ops.motion import MotionSettings
 
-    with ArmSession.open(cfg, sim=True) as s:
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
         r = run_jog(s, resolve_jog_target(cfg, "j1"), PlainRequest(**req), settings=MotionSettings.from_config(cfg))
         assert r.breach is not None and r.breach.joint == "j1"
         edge = 1900 if r.breach.side == "high" else -1900
@@ -175,9 +176,9 @@ def test_plain_position_refusals_before_anything_is_armed(cfg):
     from sherpa_cli.ops.motion import MotionSettings
 
     settings = MotionSettings.from_config(cfg)
-    with ArmSession.open(cfg, sim=True) as s:
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
         target = resolve_jog_target(cfg, "j1")
-        with pytest.raises(SafetyError, match=r"target 7540 counts is outside the joint's normal range \[-1900, 1900\]"):
+        with pytest.raises(UsageError, match=r"target 7540 counts is outside the joint's normal range \[-1900, 1900\]"):
             run_jog(s, target, PlainRequest(mode="position", to=11.844), settings=settings)
         with pytest.raises(SafetyError, match=r"not homed since power-up \(yaw UI\[3\]=0\)"):
             run_jog(s, target, PlainRequest(mode="position", to=0.5), settings=settings)
@@ -192,7 +193,7 @@ def test_a_motor_that_trips_during_a_pair_jog_ends_it_with_the_reason(cfg):
     import threading
     import time
 
-    with ArmSession.open(cfg, sim=True) as s:
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
         left = s.sim.drives["left"]
 
         def trip() -> None:

@@ -15,6 +15,7 @@ from sherpa_cli.errors import UsageError
 from sherpa_cli.ops.jog import JogRequest, check_request, resolve_jog_target, run_jog
 from sherpa_cli.ops.motion import MotionSettings
 from sherpa_cli.ops.session import ArmSession
+from sherpa_cli.sim.arm import SimArm
 
 from test_motion_guard import ARMED, CONFIG, RESTORED
 
@@ -37,7 +38,7 @@ def cfg(tmp_path):
 def jog(cfg, name, **req):
     target = resolve_jog_target(cfg, name)
     progress = []
-    with ArmSession.open(cfg, sim=True) as s:
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
         result = run_jog(s, target, JogRequest(**req), settings=MotionSettings.from_config(cfg),
                          on_progress=progress.append)
         drive = s.sim.drives[target.ref.name]

@@ -19,6 +19,7 @@ from sherpa_cli.config import load_config
 from sherpa_cli.errors import SafetyError
 from sherpa_cli.ops.motion import MotionGuard, MotionSettings, MotionStopped
 from sherpa_cli.ops.session import ArmSession, resolve_target
+from sherpa_cli.sim.arm import SimArm
 
 CONFIG = """\
 name: guard-test
@@ -90,7 +91,7 @@ def assert_stopped_and_restored(session, name="drive1", *, switched_on=True):
 
 def test_position_move_ends_at_target_then_stops_and_restores(cfg):
     settings = MotionSettings.from_config(cfg)
-    with ArmSession.open(cfg, sim=True) as s:
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
         ref = resolve_target(cfg, "drive1")
         events = []
         with MotionGuard(s, [ref], settings=settings, on_event=events.append) as g:
@@ -110,7 +111,7 @@ def test_position_move_ends_at_target_then_stops_and_restores(cfg):
 
 
 def test_exception_in_the_body_stops_and_restores(cfg):
-    with ArmSession.open(cfg, sim=True) as s:
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
         ref = resolve_target(cfg, "drive1")
         with pytest.raises(RuntimeError, match="boom"):
             with MotionGuard(s, [ref], settings=MotionSettings.from_config(cfg)) as g:
@@ -127,7 +128,7 @@ def test_exception_in_the_body_stops_and_restores(cfg):
 
 
 def test_keyboard_interrupt_stops_and_restores(cfg):
-    with ArmSession.open(cfg, sim=True) as s:
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
         ref = resolve_target(cfg, "drive1")
         with pytest.raises(KeyboardInterrupt):
             with MotionGuard(s, [ref], settings=MotionSettings.from_config(cfg)) as g:
@@ -144,7 +145,7 @@ def test_keyboard_interrupt_stops_and_restores(cfg):
 
 @pytest.mark.parametrize("signum", [signal.SIGTERM, signal.SIGHUP])
 def test_signal_to_the_process_stops_and_restores(cfg, signum):
-    with ArmSession.open(cfg, sim=True) as s:
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
         ref = resolve_target(cfg, "drive1")
         with pytest.raises(MotionStopped, match=signal.Signals(signum).name):
             with MotionGuard(s, [ref], settings=MotionSettings.from_config(cfg)) as g:
@@ -165,7 +166,7 @@ def test_signal_to_the_process_stops_and_restores(cfg, signum):
 
 
 def test_a_drive_in_fault_is_refused_with_the_decoded_reason(cfg):
-    with ArmSession.open(cfg, sim=True) as s:
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
         with s.sim.lock:
             sim_drive(s, "drive2")._mf = 0x400000  # latched: a position limit trip
         refs = [resolve_target(cfg, "drive1"), resolve_target(cfg, "drive2")]
@@ -179,7 +180,7 @@ def test_a_drive_in_fault_is_refused_with_the_decoded_reason(cfg):
 
 
 def test_unit_mode_changes_only_when_needed_with_the_motor_off_first(cfg):
-    with ArmSession.open(cfg, sim=True) as s:
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
         ref = resolve_target(cfg, "drive1")
         with MotionGuard(s, [ref], settings=MotionSettings.from_config(cfg)) as g:
             g.enable(ref, 5)  # UM is 5 already: no UM write
@@ -196,7 +197,7 @@ def test_unit_mode_changes_only_when_needed_with_the_motor_off_first(cfg):
 
 
 def test_keep_leaves_the_dead_man_and_unit_mode(cfg):
-    with ArmSession.open(cfg, sim=True) as s:
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
         ref = resolve_target(cfg, "drive1")
         with MotionGuard(s, [ref], settings=MotionSettings.from_config(cfg), keep=True) as g:
             g.enable(ref, 2)
@@ -210,7 +211,7 @@ def test_st_refused_in_speed_mode_falls_back_to_jv0_bg(cfg, monkeypatch):
     import dataclasses
 
     cfg = dataclasses.replace(cfg, sim={"drive1": SimDriveConfig(st_refused_in_speed_mode=True)})
-    with ArmSession.open(cfg, sim=True) as s:
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
         ref = resolve_target(cfg, "drive1")
         with MotionGuard(s, [ref], settings=MotionSettings.from_config(cfg)) as g:
             g.enable(ref, 2)
@@ -226,7 +227,7 @@ def test_a_hung_command_stops_the_heartbeat_and_the_drive_stops_itself(cfg):
     import dataclasses
 
     settings = dataclasses.replace(MotionSettings.from_config(cfg), liveness_timeout=0.2, request_bound=0.01)
-    with ArmSession.open(cfg, sim=True) as s:
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
         ref = resolve_target(cfg, "drive1")
         with MotionGuard(s, [ref], settings=settings) as g:
             g.enable(ref, 5)
@@ -258,7 +259,7 @@ def test_guard_in_a_worker_thread_leaves_signals_alone(cfg):
 
     def work():
         try:
-            with ArmSession.open(cfg, sim=True) as s:
+            with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
                 ref = resolve_target(cfg, "drive1")
                 with MotionGuard(s, [ref], settings=MotionSettings.from_config(cfg)) as g:
                     g.enable(ref, 5)
@@ -270,3 +271,43 @@ def test_guard_in_a_worker_thread_leaves_signals_alone(cfg):
     t.start()
     t.join(20)
     assert errors == []
+
+
+# -- the motion: config section ----------------------------------------------------------------------
+
+def test_motion_settings_defaults_and_heartbeat_period():
+    from sherpa_cli.config import load_config as load
+
+    arm = load(Path(__file__).resolve().parent.parent / "configs" / "sherpa-arm.yaml")
+    s = MotionSettings.from_config(arm)
+    assert (s.host_node_id, s.consumer_time_ms, s.loss_action, s.comm_error_behaviour) == (126, 500, 2, 2)
+    assert s.heartbeat_period == 0.125 and s.consumer_entry == 0x7E01F4
+    assert s.poll_interval == 0.01 and s.request_bound == pytest.approx(0.2)
+
+
+@pytest.mark.parametrize("motion,message", [
+    ("{host_node_id: 5}", "host_node_id 5 is the node id of drive 'drive1'"),
+    ("{host_node_id: 0}", "host_node_id 0 out of range 1..127"),
+    ("{consumer_time_ms: 70000}", "consumer_time_ms 70000 must be 1..65535"),
+    ("{consumer_time_ms: 200, heartbeat_period_ms: 150}", "at most half of consumer_time_ms"),
+    ("{loss_action: 4}", "loss_action 4 must be 0..3"),
+    ("{stop_method: brake}", "stop_method 'brake': expected one of auto, st, jv0"),
+    ("{velocity_unit_mode: 3}", "velocity_unit_mode 3"),
+    ("{standstill_timeout: 0}", "standstill_timeout 0.0 s must be > 0"),
+    ("{hostid: 3}", "hostid"),
+])
+def test_motion_config_errors_name_the_key(tmp_path, motion, message):
+    from sherpa_cli.errors import ConfigError
+
+    path = tmp_path / "arm.yaml"
+    path.write_text(CONFIG.replace("motion: {consumer_time_ms: 300}", f"motion: {motion}"), encoding="utf-8")
+    with pytest.raises(ConfigError) as info:
+        load_config(path)
+    assert message in str(info.value) and "arm.yaml:3" in str(info.value)
+
+
+def test_motion_config_round_trips_through_convert(tmp_path, cfg):
+    from sherpa_cli.config import dump_native, load_config_text
+
+    again = load_config_text(dump_native(cfg), "again.yaml")
+    assert again.motion == cfg.motion and again.motion.consumer_time_ms == 300

@@ -9,6 +9,7 @@ from typing import Optional
 import typer
 
 from sherpa_cli.cli.context import state
+from sherpa_cli.cli.options import ApplyMotion
 from sherpa_cli.errors import UsageError
 
 
@@ -42,7 +43,7 @@ def jog(
                                            "jog runs."),
     uncalibrated: bool = typer.Option(False, "--uncalibrated", help="Allow a position move of a joint that has no "
                                       "absolute encoder and was not homed since power-up."),
-    apply: bool = typer.Option(False, "--apply", help="Move the motor; without it, only show what would be sent."),
+    apply: ApplyMotion = False,
 ) -> None:
     """Move one joint: to/by a position, at a velocity, or with a torque.
 

@@ -2,20 +2,14 @@
 
 from __future__ import annotations
 
-from typing import List, Optional
-
 import typer
 
 from sherpa_cli.cli.context import state
+from sherpa_cli.cli.options import Targets
 from sherpa_cli.errors import SafetyError
 
 
-def stop(
-    ctx: typer.Context,
-    targets: Optional[List[str]] = typer.Argument(None, metavar="[TARGET]...",
-                                                  help="Drives or joints (a pair or Σ/Δ joint means both motors); "
-                                                  "default: every drive of the config."),
-) -> None:
+def stop(ctx: typer.Context, targets: Targets = None) -> None:
     """Stop the motors now: ST (JV=0 + BG where ST is refused), wait for standstill, MO=0.
 
     No confirmation and no --apply: this is the emergency stop of the tool, for a second
@@ -27,13 +21,13 @@ def stop(
       sherpa stop
       sherpa stop elbow_pitch wrist_3
     """
-    from sherpa_cli.ops.monitor import resolve_targets
     from sherpa_cli.ops.motion import MotionSettings
     from sherpa_cli.ops.stop import stop_drives
+    from sherpa_cli.ops.targets import drive_refs
 
     st = state(ctx)
     cfg = st.load_config()
-    refs = resolve_targets(cfg, targets or [])
+    refs = drive_refs(cfg, targets)  # a pair or Σ/Δ joint means both motors; none: every drive
     buses = sorted({r.bus for r in refs}, key=list(cfg.buses).index)
     settings = MotionSettings.from_config(cfg, buses)
     with st.session(buses=buses) as session:

@@ -22,7 +22,8 @@ from sherpa_cli.elmo.faults import decode_sr, describe_mf
 from sherpa_cli.errors import SafetyError, UsageError
 from sherpa_cli.joints.units import counts_to_rad, rad_per_s_to_counts_per_s, rad_to_counts
 from sherpa_cli.ops.motion import UM_POSITION, UM_TORQUE, GuardReport, MotionGuard, MotionSettings
-from sherpa_cli.ops.session import DriveRef, resolve_target
+from sherpa_cli.ops import targets
+from sherpa_cli.ops.targets import DriveRef
 
 MODES = ("position", "velocity", "torque")
 
@@ -101,13 +102,16 @@ class JogResult:
 
 
 def resolve_jog_target(cfg: ArmConfig, text: str) -> JogTarget:
-    """A plain joint, a drive, or BUS:NODE; a Σ/Δ joint is refused (pairs move through wave/jog's path)."""
-    joint = cfg.joints.get(text)
-    if joint is not None and joint.role is not JointRole.PLAIN:
-        raise UsageError(f"'{text}' is a joint of the differential pair '{joint.pair}': "
-                         "jogging Σ/Δ joints is not supported here", hint="jog a plain joint or one drive")
-    ref = resolve_target(cfg, text)
-    return JogTarget(text, ref, cfg.joint_of_drive(ref.name) if ref.config is not None else None)
+    """A plain joint, the drive of one, or BUS:NODE (ops/targets.py decides what a name means);
+    a differential pair, its Σ/Δ joints and its motors are refused here."""
+    t = targets.resolve_one(cfg, text)
+    if t.pair is not None:
+        raise UsageError(f"'{text}' moves the differential pair '{t.pair.name}': jogging Σ/Δ joints is not "
+                         "supported here", hint="jog a plain joint or its drive")
+    if len(t.drives) != 1:
+        raise UsageError(f"'{text}' is moved by {len(t.drives)} drives ({', '.join(t.drive_names)}); name one")
+    plain = [j for j in t.joints if j.role is JointRole.PLAIN]
+    return JogTarget(text, t.drives[0], plain[0] if len(plain) == 1 else None)
 
 
 def check_request(target: JogTarget, req: JogRequest) -> None:
@@ -132,7 +136,7 @@ def check_request(target: JogTarget, req: JogRequest) -> None:
         if req.to is not None and joint is not None and target.cpr is not None:
             goal, (lo, hi) = _counts_to(target, req.to), joint.normal_range
             if not lo <= goal <= hi:  # --by is checked once PX is known (_precheck)
-                raise SafetyError(f"{joint.name}: target {goal} counts is outside the joint's normal range "
+                raise UsageError(f"{joint.name}: target {goal} counts is outside the joint's normal range "
                                   f"[{lo}, {hi}]", hint="jog moves a joint only inside its normal range")
     elif req.mode == "velocity":
         assert req.velocity is not None
@@ -211,7 +215,7 @@ def _precheck(session: Any, target: JogTarget, req: JogRequest) -> Any:
     goal = _counts_to(target, req.to) if req.to is not None else start + _counts_to(target, req.by)
     lo, hi = joint.normal_range
     if not lo <= goal <= hi:
-        raise SafetyError(f"{joint.name}: target {goal} counts is outside the joint's normal range [{lo}, {hi}]",
+        raise UsageError(f"{joint.name}: target {goal} counts is outside the joint's normal range [{lo}, {hi}]",
                           hint="jog moves a joint only inside its normal range")
     cal = calibration.read_calibration(session.cfg, joint, lambda name: c)
     if not cal.calibrated and not req.uncalibrated:

@@ -134,7 +134,7 @@ def _check_speed(axis: Axis, speed: int, what: str) -> None:
     if speed == 0:
         raise UsageError(f"{what} must not be 0")
     if axis.vel_limit is not None and abs(speed) > axis.vel_limit:
-        raise SafetyError(f"{axis.name}: {what} {abs(speed)} counts/s is above the joint's speed limit "
+        raise UsageError(f"{axis.name}: {what} {abs(speed)} counts/s is above the joint's speed limit "
                           f"{axis.vel_limit} counts/s", hint="ask for less, or raise velocity.limit in the config")
 
 
@@ -167,7 +167,7 @@ def plan(cfg: ArmConfig, axis: Axis, request: JogRequest, motors: Mapping[str, i
     currents = _motor_currents(axis, amps)
     worst = max(abs(c) for c in currents.values())
     if axis.current_limit is not None and worst > axis.current_limit:
-        raise SafetyError(f"{axis.name}: --torque {amps:g} A puts {worst:g} A on a motor, above the configured "
+        raise UsageError(f"{axis.name}: --torque {amps:g} A puts {worst:g} A on a motor, above the configured "
                           f"continuous limit {axis.current_limit:g} A")
     return JogPlan(axis, "torque", start, current=amps, duration=request.duration, motor_currents=currents)
 
@@ -197,7 +197,7 @@ def _plan_position(cfg: ArmConfig, axis: Axis, request: JogRequest, motors: Mapp
     else:
         target = start + units.parse_position(request.by or "", axis.cpr, what="--by")
     if axis.normal is not None and not axis.normal[0] <= target <= axis.normal[1]:
-        raise SafetyError(f"{axis.name}: target {target} counts is outside the joint's normal range "
+        raise UsageError(f"{axis.name}: target {target} counts is outside the joint's normal range "
                           f"{_fmt_range(axis.normal)}", hint="jog moves a joint only inside its normal range")
     targets = _motor_targets(axis, target, motors)
     if axis.kind == "motor":
@@ -205,7 +205,7 @@ def _plan_position(cfg: ArmConfig, axis: Axis, request: JogRequest, motors: Mapp
         for j in axis.watched:
             p = j.position(after)
             if not j.normal[0] <= p <= j.normal[1]:
-                raise SafetyError(f"{axis.name}: moving this motor to {target} puts joint {j.name} at {p} counts, "
+                raise UsageError(f"{axis.name}: moving this motor to {target} puts joint {j.name} at {p} counts, "
                                   f"outside its normal range {_fmt_range(j.normal)}")
     if request.velocity is not None:
         speed = abs(units.parse_velocity(request.velocity, axis.cpr, what="--velocity"))

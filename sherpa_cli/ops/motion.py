@@ -42,6 +42,8 @@ CONSUMER = (0x1016, 1)  # u32: host id << 16 | time ms
 COMM_ERROR = (0x1029, 1)  # u8
 LOSS_ACTION = (0x6007, 0)  # i16
 _SIZES = {CONSUMER: "<I", COMM_ERROR: "<B", LOSS_ACTION: "<h"}
+_OBJECT_NAMES = {CONSUMER: "consumer heartbeat time", COMM_ERROR: "error behaviour",
+                 LOSS_ACTION: "abort connection option code"}
 UM_TORQUE, UM_SPEED, UM_POSITION = 1, 2, 5
 MS_PROFILER_ACTIVE = 2
 
@@ -388,33 +390,15 @@ class MotionGuard:
                               hint=f"find the cause first; MO=1 clears MF: `sherpa cmd {ref.name} MO=1 MO=0 --apply`")
         self._event(f"{client.label}: MO={d.mo} UM={d.um} SR=0x{sr & 0xFFFFFFFF:08X} MF=0x{mf & 0xFFFFFFFF:08X}")
 
-    def _network(self, ref: Any) -> Any:
-        return self.session.links[ref.bus].network
-
     def _sdo_read(self, d: _Drive, key: tuple[int, int]) -> int:
-        from canopen.sdo.exceptions import SdoError
-
-        from sherpa_cli.ops.sdo import sdo_error_text, sdo_upload
-
-        try:
-            raw = sdo_upload(self._network(d.ref), d.ref.node, *key)
-        except SdoError as exc:
-            raise CommunicationError(f"{d.client.label}: {sdo_error_text(f'0x{key[0]:04X}:{key[1]}', exc)}",
-                                     hint="the drive must support the heartbeat consumer (0x1016) for the dead-man") from exc
+        """An SDO upload through the session's client of the drive (SdoError names drive and object)."""
+        raw = self.session.sdo(d.ref).upload(*key, name=_OBJECT_NAMES[key])
         fmt = _SIZES[key]
         raw = (bytes(raw) + bytes(4))[:struct.calcsize(fmt)]
         return struct.unpack(fmt, raw)[0]
 
     def _sdo_write(self, d: _Drive, key: tuple[int, int], value: int) -> None:
-        from canopen.sdo.exceptions import SdoError
-
-        from sherpa_cli.ops.sdo import sdo_download, sdo_error_text
-
-        try:
-            sdo_download(self._network(d.ref), d.ref.node, key[0], key[1], struct.pack(_SIZES[key], value))
-        except SdoError as exc:
-            raise CommunicationError(
-                f"{d.client.label}: writing {sdo_error_text(f'0x{key[0]:04X}:{key[1]}', exc)}") from exc
+        self.session.sdo(d.ref).download(key[0], key[1], struct.pack(_SIZES[key], value), name=_OBJECT_NAMES[key])
 
     def _arm(self, d: _Drive) -> None:
         """Dead-man on: loss action and error behaviour first, the consumer entry last (it starts the watch)."""
@@ -439,7 +423,7 @@ class MotionGuard:
 
     def _start_heartbeat(self) -> None:
         buses = sorted({ref.bus for ref in self.refs})
-        networks = [self._network_for_bus(b) for b in buses]
+        networks = [self.session.links[b].network for b in buses]
         frame_id = HEARTBEAT_BASE + self.settings.host_node_id
         period = self.settings.heartbeat_period
         main = threading.main_thread()
@@ -467,9 +451,6 @@ class MotionGuard:
 
         self._hb_thread = threading.Thread(target=loop, name="sherpa-deadman", daemon=True)
         self._hb_thread.start()
-
-    def _network_for_bus(self, bus: str) -> Any:
-        return self.session.links[bus].network
 
     def _stop_heartbeat(self) -> None:
         self._hb_stop.set()

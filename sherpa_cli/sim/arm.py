@@ -15,6 +15,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import threading
+import uuid
 from typing import Any, Callable, Mapping
 
 from sherpa_cli.config.model import ArmConfig, JointConfig, PairConfig, SwitchConfig, SwitchKind
@@ -152,9 +153,9 @@ class SimArm:
                  tick_s: float = 0.002, bus_factory: Callable[..., Any] | None = None,
                  event_log: str | None = None) -> None:
         """``endpoints``: bus name -> keyword arguments for ``can.Bus`` (interface, channel);
-        ``bus_factory`` opens them instead of ``can.Bus`` (the session's lean virtual bus);
-        ``event_log``: a file that gets one JSON line per motor on/off and dead-man event (appended,
-        flushed at once), so another process can tell when a motor went off."""
+        ``bus_factory`` opens them instead of ``can.Bus``; ``event_log``: a file that gets one JSON
+        line per motor on/off and dead-man event (appended, flushed at once), so another process can
+        tell when a motor went off."""
         self.cfg = cfg
         self.endpoints = dict(endpoints)
         self.bus_factory = bus_factory
@@ -189,6 +190,12 @@ class SimArm:
         self.errors: list[BaseException] = []
         self.event_log = event_log
         self._event_file: Any = None
+
+    @classmethod
+    def in_process(cls, cfg: ArmConfig) -> "SimArm":
+        """The arm ``--sim`` hands to the session: fresh virtual channels, built by :meth:`for_session`."""
+        token = uuid.uuid4().hex[:8]  # virtual channels are process-wide: keep sessions apart
+        return cls.for_session(cfg, {name: f"sherpa-sim-{token}-{name}" for name in cfg.buses})
 
     @classmethod
     def for_session(cls, cfg: ArmConfig, channels: Mapping[str, str]) -> "SimArm":
