@@ -214,10 +214,13 @@ def test_a_motor_that_trips_during_a_pair_jog_ends_it_with_the_reason(cfg):
         assert motors_off(s)
 
 
-def test_plain_joints_are_not_pair_axes(cfg):
-    with pytest.raises(UsageError, match="plain joint"):
-        resolve_axis(cfg, "j1")
-    with pytest.raises(UsageError, match="not a motor of a differential pair"):
-        resolve_axis(cfg, "yaw")
-    with pytest.raises(UsageError, match="unknown joint or drive 'pich'"):
+def test_what_a_pair_jog_takes(cfg):
+    for name in ("j1", "yaw"):
+        with pytest.raises(UsageError, match="not a joint or motor of a differential pair"):
+            resolve_axis(cfg, name)
+    with pytest.raises(UsageError, match="is a differential pair: name the joint to move"):
+        resolve_axis(cfg, "diff")
+    with pytest.raises(UsageError, match="unknown target 'pich'"):
         resolve_axis(cfg, "pich")
+    assert (resolve_axis(cfg, "can0:11").kind, resolve_axis(cfg, "can0:11").drives) == ("motor", ("right",))
+    assert resolve_axis(cfg, "roll").kind == "delta"

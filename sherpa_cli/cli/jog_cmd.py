@@ -184,13 +184,10 @@ def _current(text: str | None, option: str) -> float | None:
 
 
 def _is_pair_axis(cfg, name: str) -> bool:
-    """A Σ/Δ joint, or one motor of a pair: jogged through ops/joint_jog.py."""
-    from sherpa_cli.config.model import JointRole
+    """A Σ/Δ joint, a pair, or one motor of a pair: jogged through ops/joint_jog.py."""
+    from sherpa_cli.ops import targets
 
-    joint = cfg.joints.get(name)
-    if joint is not None:
-        return joint.role is not JointRole.PLAIN
-    return name in cfg.drives and cfg.joint_of_drive(name) is None and cfg.pair_of_drive(name) is not None
+    return targets.resolve_one(cfg, name).pair is not None
 
 
 def _jog_pair(st, cfg, name: str, mode: str, to, by, velocity, torque, duration, uncalibrated: bool,

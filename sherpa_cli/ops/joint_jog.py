@@ -71,27 +71,28 @@ class Axis:
 
 
 def resolve_axis(cfg: ArmConfig, name: str) -> Axis:
-    """The axis behind a Σ/Δ joint or a pair drive of the config (plain joints: ops/jog.py)."""
-    joint = cfg.joints.get(name)
-    if joint is None and name in cfg.drives:
-        pair = cfg.pair_of_drive(name)
-        if pair is None or cfg.joint_of_drive(name) is not None:
-            raise UsageError(f"drive {name} is not a motor of a differential pair; jog it through its plain joint")
-        sigma, delta = cfg.joints[pair.sigma], cfg.joints[pair.delta]
-        cur = pair.current.continuous if pair.current is not None else None
+    """The axis behind a Σ/Δ joint, or one motor of a pair (by drive name or BUS:NODE); ops/targets.py
+    decides what the name means. Plain joints go through ops/jog.py; a whole pair is refused."""
+    from sherpa_cli.ops import targets
+
+    t = targets.resolve_one(cfg, name)
+    pair = t.pair
+    if pair is None:
+        raise UsageError(f"'{name}' is not a joint or motor of a differential pair; a plain joint is jogged "
+                         "through ops/jog.py")
+    if t.kind is targets.TargetKind.PAIR:
+        raise UsageError(f"'{name}' is a differential pair: name the joint to move ({pair.sigma} or {pair.delta}) "
+                         f"or one motor ({pair.drive_a} or {pair.drive_b})")
+    sigma, delta = cfg.joints[pair.sigma], cfg.joints[pair.delta]
+    cur = pair.current.continuous if pair.current is not None else None
+    if t.kind is not targets.TargetKind.JOINT:  # a drive name or BUS:NODE: one motor of the pair
+        (ref,) = t.drives
         # one motor at v moves Σ and Δ at v each: the slower joint limit bounds it
         limits = [v for v in (sigma.vel_limit, delta.vel_limit) if v is not None]
-        return Axis(name, "motor", sigma.cpr, (name,), None, None, min(limits) if limits else None, cur,
-                    tuple(limit_watch.joints_moved_by(cfg, [name])), (sigma, delta), pair)
-    if joint is None:
-        from sherpa_cli.joints.limits import _unknown  # the one "did you mean" wording
-
-        raise _unknown("joint or drive", name, [*cfg.joints, *cfg.drives])
-    if joint.role is JointRole.PLAIN:
-        raise UsageError(f"{name} is a plain joint; it is jogged through ops/jog.py")
-    watched = tuple(limit_watch.joints_moved_by(cfg, calibration.joint_drives(cfg, joint)))
-    pair = cfg.pairs[joint.pair]  # type: ignore[index]
-    cur = pair.current.continuous if pair.current is not None else None
+        return Axis(ref.name, "motor", sigma.cpr, (ref.name,), None, None, min(limits) if limits else None, cur,
+                    tuple(limit_watch.joints_moved_by(cfg, [ref.name])), (sigma, delta), pair)
+    (joint,) = t.joints
+    watched = tuple(limit_watch.joints_moved_by(cfg, (pair.drive_a, pair.drive_b)))
     return Axis(joint.name, joint.role.value, joint.cpr, (pair.drive_a, pair.drive_b), joint.normal_range,
                 joint.full_range, joint.vel_limit, cur, watched, (joint,), pair)
 
