@@ -12,7 +12,8 @@ import yaml
 
 from sherpa_cli.config import load_config
 from sherpa_cli.config.model import SimDriveConfig
-from sherpa_cli.ops.monitor import Monitor, resolve_targets
+from sherpa_cli.ops.monitor import Monitor
+from sherpa_cli.ops.targets import drive_refs as resolve_targets
 from sherpa_cli.ops.session import ArmSession
 from sherpa_cli.sim.arm import SimArm
 

@@ -452,7 +452,7 @@ def test_ctrl_c_in_the_waiting_thread_stops_drives_at_a_safe_point(state_home, c
 
 def test_an_unknown_name_is_refused_before_any_bus_is_opened(cli, cfg3):
     r = cli("--config", EXAMPLE3, "--sim", "program-limits", "drive9")
-    assert r.exit_code == 2 and "unknown joint, pair or drive 'drive9'" in r.stderr
+    assert r.exit_code == 2 and "unknown target 'drive9'" in r.stderr
 
 
 # --------------------------------------------------------------------------- CLI

@@ -226,7 +226,8 @@ def test_sdo_timeout_comes_from_the_config(tmp_path):
     import dataclasses
 
     from sherpa_cli.config import load_config
-    from sherpa_cli.ops.scan import sdo_upload
+    from sherpa_cli.errors import SdoError
+    from sherpa_cli.ops.sdo import sdo_upload
     from sherpa_cli.ops.session import ArmSession
 
     cfg = load_config("configs/appendix-c/example1.yaml")
@@ -235,8 +236,6 @@ def test_sdo_timeout_comes_from_the_config(tmp_path):
         network = next(iter(session.links.values())).network
         assert network.sdo_timeout == 0.05
         import time
-
-        from canopen.sdo.exceptions import SdoError
 
         t0 = time.monotonic()
         with pytest.raises(SdoError):

@@ -10,59 +10,19 @@ arm's endpoints, starts it and stops it.
 
 from __future__ import annotations
 
-import difflib
 from contextlib import contextmanager
-from dataclasses import dataclass
 from typing import Any, Iterable, Iterator, Mapping, Protocol
 
 from sherpa_cli.bus.busmap import BusTarget, apply_bus_map
 from sherpa_cli.bus.links import BusLink, close_links, open_links
-from sherpa_cli.config.model import ArmConfig, DriveConfig
+from sherpa_cli.config.model import ArmConfig
 from sherpa_cli.errors import UsageError
+# What a name means is decided in ops/targets.py (DriveRef lives there); ``resolve_target`` is
+# its one-drive policy under the name older callers import.
+from sherpa_cli.ops.targets import DriveRef
+from sherpa_cli.ops.targets import single_drive as resolve_target
 
-
-@dataclass(frozen=True)
-class DriveRef:
-    """A drive addressed by the user: configured (``config`` set) or ad hoc as BUS:NODE."""
-
-    name: str
-    bus: str
-    node: int
-    config: DriveConfig | None = None
-
-    @property
-    def address(self) -> str:
-        return f"{self.bus}:{self.node}"
-
-
-def resolve_target(cfg: ArmConfig, text: str) -> DriveRef:
-    """A drive from a drive name, a plain joint name, or ``BUS:NODE``."""
-    if text in cfg.drives:
-        d = cfg.drives[text]
-        return DriveRef(d.name, d.bus, d.node, d)
-    joint = cfg.joints.get(text)
-    if joint is not None and joint.drive:
-        d = cfg.drives[joint.drive]
-        return DriveRef(d.name, d.bus, d.node, d)
-    pair = cfg.pairs.get(text) or (cfg.pairs.get(joint.pair) if joint is not None and joint.pair else None)
-    if pair is not None:
-        raise UsageError(f"'{text}' is moved by two drives ({pair.drive_a}, {pair.drive_b}); name one of them")
-    bus, sep, node_text = text.partition(":")
-    if sep:
-        if bus not in cfg.buses:
-            raise UsageError(f"target '{text}': no bus '{bus}' in the config",
-                             hint=f"configured buses: {', '.join(cfg.buses)}")
-        if not node_text.isdigit() or not 1 <= int(node_text) <= 127:
-            raise UsageError(f"target '{text}': node id must be 1..127")
-        node = int(node_text)
-        for d in cfg.drives.values():
-            if d.bus == bus and d.node == node:
-                return DriveRef(d.name, d.bus, d.node, d)
-        return DriveRef(text, bus, node, None)
-    names = list(cfg.drives) + list(cfg.joints) + list(cfg.pairs)
-    close = difflib.get_close_matches(text, names, n=3)
-    raise UsageError(f"unknown target '{text}': not a drive, joint or BUS:NODE of the config",
-                     hint=f"did you mean {' or '.join(close)}?" if close else "see `sherpa config check` for the names")
+__all__ = ["ArmSession", "DriveRef", "resolve_target"]
 
 
 class InProcessArm(Protocol):
@@ -84,6 +44,7 @@ class ArmSession:
         self.links = links
         self.sim = sim  # the injected in-process arm with --sim, for tests and fault injection
         self._clients: dict[tuple[str, int], Any] = {}
+        self._sdo: dict[tuple[str, int], Any] = {}
 
     @classmethod
     @contextmanager
@@ -126,3 +87,16 @@ class ArmSession:
                                  timeout=p.reply_timeout, retries=p.retries, settings=settings)
             self._clients[key] = client
         return client
+
+    def sdo(self, ref: DriveRef):
+        """The SDO client of a drive (ops/sdo.py DriveSdo), one per drive for the whole session."""
+        from sherpa_cli.ops.sdo import DriveSdo
+
+        sdo = self._sdo.get(ref.key)
+        if sdo is None:
+            if ref.bus not in self.links:
+                raise UsageError(f"{ref.name}: bus {ref.bus} is not open in this session")
+            sdo = DriveSdo(self.links[ref.bus].network, ref.node, label=f"{ref.name} (node {ref.node})",
+                           timeout=self.cfg.protocol.sdo_timeout)
+            self._sdo[ref.key] = sdo
+        return sdo
