@@ -106,3 +106,40 @@ def test_fake_step_seconds_must_be_a_number(cli, tmp_path, monkeypatch):
     monkeypatch.setenv("SHERPA_FAKE_STEP_SECONDS", "soon")
     r = cli("--sim", "commission")
     assert r.exit_code == 2 and "SHERPA_FAKE_STEP_SECONDS" in r.stderr and "Traceback" not in r.stderr
+
+
+class _Terminal(__import__("io").StringIO):
+    def isatty(self) -> bool:
+        return True
+
+
+def _run_at_terminal(monkeypatch, args, answer):
+    import io
+    from contextlib import redirect_stderr, redirect_stdout
+
+    from sherpa_cli.cli.app import run
+
+    monkeypatch.setattr("sys.stdin", _Terminal(answer))
+    out, err = io.StringIO(), io.StringIO()
+    with redirect_stdout(out), redirect_stderr(err):
+        code = run(list(args))
+    return code, out.getvalue(), err.getvalue()
+
+
+def test_the_save_question_goes_to_the_terminal_and_lists_the_drives(cli, monkeypatch, tmp_path):
+    cli("--version")  # the cli fixture's environment: repo root, fixed width, own state dir
+    code, out, err = _run_at_terminal(monkeypatch, ["--config", EXAMPLE3, "--sim", "commission", "--apply",
+                                                    "--set", f"backup={tmp_path / 'b.yaml'}"], "n\n")
+    assert code == 1
+    question = "Save the verified limits to flash (SV) on every drive that changed? (would save: drive1, drive2)"
+    assert f"{question} [y/N]" in err, err
+    assert "Save the verified" not in out  # `| tee log` shows results; the question stays on the terminal
+    assert "[5/8] confirm-save  declined (answer: no)" in out
+
+
+def test_program_limits_save_question_goes_to_stderr(cli, monkeypatch):
+    cli("--version")
+    code, out, err = _run_at_terminal(monkeypatch, ["--config", EXAMPLE3, "--sim", "program-limits", "--apply",
+                                                    "--save"], "n\n")
+    assert "Write and save to flash (SV): drive1, drive2? [y/N]" in err
+    assert "[y/N]" not in out and code != 0

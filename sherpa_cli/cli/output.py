@@ -97,7 +97,11 @@ class Output:
             return True
         if self.json_mode or not sys.stdin.isatty():
             raise SafetyError(refusal or f"{question} -- refusing: not an interactive terminal", hint=hint)
-        answer = input(f"{question} [y/N] ").strip().lower()
+        # the question goes to the terminal (stderr), so `sherpa ... | tee log` still shows it
+        err = self._console(stderr=True)
+        err.print(f"{question} [y/N] ", markup=False, end="", soft_wrap=True)
+        err.file.flush()
+        answer = sys.stdin.readline().strip().lower()
         return answer in ("y", "yes")
 
 

@@ -180,6 +180,7 @@ def execute(st: AppState, recipe_path: Path, *, apply: bool, yes: bool, start: O
             live.start()
 
     def on_end(result) -> None:
+        done.append(result)
         if live is not None:
             live.stop()
         if st.json_mode:
@@ -223,10 +224,12 @@ def execute(st: AppState, recipe_path: Path, *, apply: bool, yes: bool, start: O
         else:
             out.line(f"{INDENT}-> {result.status.upper()}: {'; '.join(result.failures) or result.status}")
 
+    done: list = []
+
     def confirm(question: str) -> bool:
         if yes:
             return True
-        return st.out.confirm(question)
+        return st.out.confirm(_with_drives(question, done))
 
     with context.shared_session(st):
         rep = run_recipe(recipe, _invoker(st), apply=apply, confirm=confirm, start_at=start_at,
@@ -249,6 +252,19 @@ def execute(st: AppState, recipe_path: Path, *, apply: bool, yes: bool, start: O
         if path is not None:
             out.info(f"{kind} report written to {path}")
     return rep
+
+
+def _with_drives(question: str, done: list) -> str:
+    """A save question names the drives it is about: those the last `program-limits --apply` step wrote
+    or left unsaved (from its --json output)."""
+    for result in reversed(done):
+        doc = result.json
+        if isinstance(doc, dict) and doc.get("command") == "program-limits" and doc.get("apply"):
+            drives = [d["drive"] for d in doc.get("drives", [])
+                      if d.get("save_due") or (d.get("outcome") or {}).get("written")]
+            listed = ", ".join(drives) if drives else "none (no drive changed)"
+            return f"{question} (would save: {listed})"
+    return question
 
 
 def _spinner(text: str):
