@@ -9,13 +9,17 @@ from __future__ import annotations
 import difflib
 import uuid
 from contextlib import contextmanager
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any, Iterable, Iterator
 
 from sherpa_cli.bus.busmap import BusTarget, apply_bus_map
 from sherpa_cli.bus.links import BusLink, close_links, open_links
 from sherpa_cli.config.model import ArmConfig, DriveConfig
 from sherpa_cli.errors import UsageError
+
+
+SIM_TIMEOUT_HINT = ("the simulated arm answered too slowly (a busy machine?): raise `sim: reply_timeout` in "
+                    "the config; or a fault in its `sim:` section silenced the drive")
 
 
 @dataclass(frozen=True)
@@ -82,6 +86,8 @@ class ArmSession:
             token = uuid.uuid4().hex[:8]  # virtual channels are process-wide: keep sessions apart
             targets = {name: BusTarget("virtual", f"sherpa-sim-{token}-{name}") for name in cfg.buses}
             wire_cfg = apply_bus_map(cfg, targets)
+            # the simulator shares this process on a possibly loaded machine: its patient reply timeout
+            wire_cfg = replace(wire_cfg, protocol=replace(wire_cfg.protocol, reply_timeout=cfg.sim_reply_timeout))
             from sherpa_cli.bus.virtual import open_can_bus
             from sherpa_cli.sim.arm import SimArm
 
@@ -113,7 +119,8 @@ class ArmSession:
                 raise UsageError(f"{ref.name}: bus {ref.bus} is not open in this session")
             p = self.cfg.protocol
             settings = ClientSettings(expect_set_echo=p.set_echo, query_long=p.query_long,
-                                      mo_confirm_timeout=p.mo_confirm_timeout, sv_blackout=p.sv_blackout)
+                                      mo_confirm_timeout=p.mo_confirm_timeout, sv_blackout=p.sv_blackout,
+                                      **({"timeout_hint": SIM_TIMEOUT_HINT} if self.sim is not None else {}))
             client = DriveClient(NetworkTransport(self.links[ref.bus].network), ref.node, name=ref.name,
                                  timeout=p.reply_timeout, retries=p.retries, settings=settings)
             self._clients[key] = client
