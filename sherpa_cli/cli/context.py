@@ -27,15 +27,17 @@ class AppState:
     sim: bool = False
     bus_map: list[str] = field(default_factory=list)
     bus_map_from_env: bool = False
+    config_looked: tuple[str, ...] = ()  # where the default config was looked for (no --config)
     _config: "ArmConfig | None" = field(default=None, repr=False)
 
     @classmethod
     def create(cls, *, config_path: Path, config_given: bool, json_mode: bool, debug: bool,
                no_color: bool, sim: bool = False, bus_map: list[str] | None = None,
-               bus_map_from_env: bool = False) -> "AppState":
+               bus_map_from_env: bool = False, config_looked: tuple[str, ...] = ()) -> "AppState":
         return cls(config_path=config_path, config_given=config_given, json_mode=json_mode,
                    debug=debug, out=Output.create(json_mode=json_mode, no_color=no_color),
-                   sim=sim, bus_map=list(bus_map or []), bus_map_from_env=bus_map_from_env)
+                   sim=sim, bus_map=list(bus_map or []), bus_map_from_env=bus_map_from_env,
+                   config_looked=config_looked)
 
     @contextmanager
     def session(self, buses: Iterable[str] | None = None) -> Iterator["ArmSession"]:
@@ -69,7 +71,14 @@ class AppState:
             return load_config(path)
         if self._config is None:
             shared = _shared_for(self)
-            self._config = shared.config if shared is not None else load_config(self.config_path)
+            if shared is not None:
+                self._config = shared.config
+            else:
+                if not self.config_given and self.config_looked and not self.config_path.is_file():
+                    raise UsageError("no arm config found; looked at " + ", ".join(self.config_looked),
+                                      hint="pass --config FILE, set $SHERPA_CONFIG, or put sherpa-arm.yaml in "
+                                      "the user config directory")
+                self._config = load_config(self.config_path)
         return self._config
 
 
