@@ -143,3 +143,26 @@ def test_program_limits_save_question_goes_to_stderr(cli, monkeypatch):
                                                     "--save"], "n\n")
     assert "Write and save to flash (SV): drive1, drive2? [y/N]" in err
     assert "[y/N]" not in out and code != 0
+
+
+def test_progress_only_on_a_terminal_and_never_with_json(monkeypatch):
+    from sherpa_cli.cli.context import AppState
+    from sherpa_cli.cli.recipe_cmd import _progress
+
+    def app_state(json_mode: bool) -> AppState:
+        return AppState.create(config_path=ROOT_CONFIG, config_given=True, json_mode=json_mode, debug=False,
+                               no_color=True)
+
+    class Tty(__import__("io").StringIO):
+        def isatty(self) -> bool:
+            return True
+
+    monkeypatch.setattr("sys.stderr", __import__("io").StringIO())
+    assert _progress(app_state(False)) is None  # stderr is not a terminal: silent
+    monkeypatch.setattr("sys.stderr", Tty())
+    assert _progress(app_state(True)) is None  # --json: silent
+    live = _progress(app_state(False))
+    assert live is not None and live.console.file is not None
+
+
+ROOT_CONFIG = __import__("pathlib").Path("configs/sherpa-arm.yaml")

@@ -122,10 +122,12 @@ class _Warnings:
             subject, sep, message = text.rpartition(": ")
             groups.setdefault(message if sep else text, []).append((subject if sep else "", n))
         for message, items in groups.items():
+            counts = {n for _, n in items}
             times = sum(n for _, n in items)
-            count = "" if times == 1 else f" ({times} times)"
+            count = "" if times == 1 else f" ({counts.pop()} times each)" if len(counts) == 1 and len(items) > 1 \
+                else f" ({times} times)"
             subjects = [s for s, _ in items if s]
-            out.warn(f"{'; '.join(subjects)}: {message}{count}" if subjects else f"{message}{count}")
+            out.warn(f"{message}{count}: {'; '.join(subjects)}" if subjects else f"{message}{count}")
 
 
 def _progress(st: AppState):
