@@ -68,7 +68,7 @@ def example(name: str, extra: str = FAST):
 def sim_session(cfg):
     # these tests time the protocol itself: the real-bus reply timeout, not --sim's patient one
     cfg = dataclasses.replace(cfg, sim_reply_timeout=cfg.protocol.reply_timeout)
-    with ArmSession.open(cfg, sim=True) as session:
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as session:
         yield session
         assert session.sim.errors == [], "a simulator pump thread died"
 

@@ -2,11 +2,11 @@
 
 from __future__ import annotations
 
-from typing import List, Optional
 
 import typer
 
 from sherpa_cli.cli.context import state
+from sherpa_cli.cli.options import Targets
 from sherpa_cli.cli.output import fmt_value
 
 app = typer.Typer(no_args_is_help=True, help="Drive limits derived from the config (seed Appendix C).")
@@ -39,8 +39,7 @@ def _il_meaning(value: int, il_codes) -> str:
 
 @app.command("show")
 def show(ctx: typer.Context,
-         names: Optional[List[str]] = typer.Argument(None, metavar="[JOINT|DRIVE|PAIR]...",
-                                                     help="What to show; default: every drive."),
+         names: Targets = None,
          software: bool = typer.Option(False, "--software", help="The software side instead (Tables C.1/C.2): "
                                        "cpr, pos_min/max, pos_margin, cal_sw_*, cal_pos, *_dd per joint.")) -> None:
     """Show the parameters Appendix C derives for each drive (nothing is sent to a drive).
@@ -51,13 +50,14 @@ def show(ctx: typer.Context,
       sherpa --config configs/appendix-c/example3.yaml limits show --software
     """
     from sherpa_cli.joints.limits import derive_checked
+    from sherpa_cli.ops.targets import drive_names
 
     st = state(ctx)
     cfg = st.load_config()
     if software:
-        _show_software(st, cfg, names or [])
+        _show_software(st, cfg, list(names or []))
         return
-    derived, warnings = derive_checked(cfg, names or None)
+    derived, warnings = derive_checked(cfg, drive_names(cfg, names))
     for w in warnings:
         st.out.warn(w)
     if st.json_mode:
@@ -73,7 +73,7 @@ def show(ctx: typer.Context,
         st.out.table(f"{d.drive} ({d.bus}:{d.node}) - {moves}", ["param", "value", "meaning"], rows, right=(1,))
 
 
-def _show_software(st, cfg, names: List[str]) -> None:
+def _show_software(st, cfg, names: list[str]) -> None:
     """Tables C.1/C.2: the ROS parameters per plain joint and per differential pair."""
     from sherpa_cli.config.software import DESCRIPTIONS, software_params
     from sherpa_cli.errors import UsageError
