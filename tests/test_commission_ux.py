@@ -166,3 +166,13 @@ def test_progress_only_on_a_terminal_and_never_with_json(monkeypatch):
 
 
 ROOT_CONFIG = __import__("pathlib").Path("configs/sherpa-arm.yaml")
+
+
+@pytest.mark.golden
+@pytest.mark.realbus
+def test_commission_whole_arm_dry_run_golden(arm_cli, golden, tmp_path):
+    # the dry run on a fresh arm: one line per step, the plan per drive, exit 0
+    r = arm_cli("commission", "--set", f"backup={tmp_path / 'b.yaml'}")
+    golden("commission-arm-dry-run.txt", r.transcript().replace(str(tmp_path), "<tmp>"))
+    assert r.exit_code == 0, r.stdout
+    assert len((r.stdout + r.stderr).splitlines()) <= 60
