@@ -131,6 +131,7 @@ def test_tables_at_80_columns_golden(cli, golden, monkeypatch, name, args):
 
 
 @pytest.mark.golden
+@pytest.mark.realbus
 @pytest.mark.parametrize("name,args", [
     ("monitor-once-80", ["monitor", "--once"]),
     ("identify-sim-80", ["identify", "elbow_1a"]),
