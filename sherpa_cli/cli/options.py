@@ -35,6 +35,9 @@ ApplyRaw = Annotated[bool, typer.Option(
     "--apply", help="Send sets and execute commands; without it they are only shown as the frame that would be "
     "sent (queries are always sent).")]
 
+ApplyMotion = Annotated[bool, typer.Option(
+    "--apply", help="Move the motor; without it only show what would be sent (nothing is written).")]
+
 # -- recipes (recipe run, commission) -------------------------------------------------------------
 
 ApplyRecipe = Annotated[bool, typer.Option(

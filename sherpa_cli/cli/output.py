@@ -79,6 +79,16 @@ class Output:
     def info(self, text: str) -> None:
         self._console(stderr=True).print(text, markup=False, soft_wrap=True)
 
+    def progress(self, text: str | None) -> None:
+        """A live status line on stderr, rewritten in place; only on a terminal and never with --json.
+        ``None`` ends it (clears the line)."""
+        if self.json_mode or not sys.stderr.isatty():
+            return
+        sys.stderr.write("\r\x1b[2K" + (text or ""))
+        if text is None:
+            sys.stderr.write("\r")
+        sys.stderr.flush()
+
     def warn(self, text: str) -> None:
         self._console(stderr=True).print(f"warning: {text}", style="yellow", markup=False, soft_wrap=True)
 
