@@ -31,6 +31,8 @@ def dump_native(cfg: ArmConfig) -> str:
         sim["drives"] = {name: _drop_default(dataclasses.asdict(f), SimDriveConfig()) for name, f in cfg.sim.items()}
     if cfg.sim_extra_nodes:
         sim["extra_nodes"] = [dataclasses.asdict(e) for e in cfg.sim_extra_nodes]
+    if cfg.sim_reply_timeout != ArmConfig.sim_reply_timeout:
+        sim["reply_timeout"] = cfg.sim_reply_timeout
     if sim:
         sections.append({"sim": sim})
     sections.append({"buses": {b.name: _bus(b) for b in cfg.buses.values()}})

@@ -260,6 +260,9 @@ class ArmConfig:
     motion: MotionConfig = field(default_factory=MotionConfig)
     sim: Mapping[str, SimDriveConfig] = field(default_factory=dict)  # drive name -> simulated faults
     sim_extra_nodes: tuple[SimExtraNode, ...] = ()  # `sim: extra_nodes:`, only the simulator reads it
+    # `sim: reply_timeout:` s to wait for one interpreter reply with --sim (instead of protocol.reply_timeout):
+    # the in-process simulator shares a possibly loaded machine, so it is given patient timeouts
+    sim_reply_timeout: float = 1.0
     source: str | None = None  # file the config came from
     warnings: tuple[str, ...] = ()  # non-fatal findings of validation, shown by `config check`
 

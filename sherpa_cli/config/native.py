@@ -95,13 +95,16 @@ def parse_motion(top: Section, locs: Locs) -> MotionConfig:
 
 SIM_DRIVE_KEYS = [f.name for f in dataclasses.fields(SimDriveConfig)]
 SIM_EXTRA_KEYS = [f.name for f in dataclasses.fields(SimExtraNode)]
+SIM_KEYS = ["drives", "extra_nodes", "reply_timeout"]
 
 
 def parse_sim(top: Section, locs: Locs) -> tuple[dict[str, SimDriveConfig], tuple[SimExtraNode, ...]]:
     """The ``sim:`` section: per-drive faults and extra nodes on the buses."""
-    sec = top.section("sim", ["drives", "extra_nodes"], what="a mapping with 'drives' and/or 'extra_nodes'")
+    sec = top.section("sim", SIM_KEYS,
+                      what="a mapping with 'drives', 'extra_nodes' and/or 'reply_timeout'")
     if sec is None:
         return {}, ()
+    register(locs, ("sim",), sec)
     drives: dict[str, SimDriveConfig] = {}
     if sec.get("drives") is not None:
         for dname, dnode in named_items(sec.req("drives"), "drive"):
@@ -124,6 +127,12 @@ def parse_sim(top: Section, locs: Locs) -> tuple[dict[str, SimDriveConfig], tupl
     return drives, tuple(extras)
 
 
+def parse_sim_reply_timeout(top: Section) -> float:
+    """``sim: reply_timeout:`` (the interpreter reply timeout with --sim); parse_sim checked the section."""
+    sec = top.section("sim", SIM_KEYS)
+    return ArmConfig.sim_reply_timeout if sec is None else sec.num("reply_timeout", ArmConfig.sim_reply_timeout)
+
+
 def load_native(root: YNode, filename: str) -> tuple[ArmConfig, Locs, list[str]]:
     """Shape and types only; the caller runs validate() on the result."""
     locs = Locs(filename)
@@ -139,6 +148,7 @@ def load_native(root: YNode, filename: str) -> tuple[ArmConfig, Locs, list[str]]
     protocol = parse_protocol(top, locs)
     motion = parse_motion(top, locs)
     sim, sim_extra_nodes = parse_sim(top, locs)
+    sim_reply_timeout = parse_sim_reply_timeout(top)
     catalog = parse_catalog(top.get("catalog"), locs)
 
     buses: dict[str, BusConfig] = {}
@@ -207,6 +217,7 @@ def load_native(root: YNode, filename: str) -> tuple[ArmConfig, Locs, list[str]]
 
     cfg = ArmConfig(name=name, buses=buses, drives=drives, joints=joints, pairs=pairs, catalog=catalog,
                     il_codes=il, protocol=protocol, motion=motion, sim=sim, sim_extra_nodes=sim_extra_nodes,
+                    sim_reply_timeout=sim_reply_timeout,
                     source=filename)
     return cfg, locs, []
 

@@ -131,6 +131,9 @@ def _check_motion(cfg: ArmConfig, locs: Locs, r: _Report) -> None:
 
 
 def _check_sim(cfg: ArmConfig, locs: Locs, r: _Report) -> None:
+    t = cfg.sim_reply_timeout
+    if not (isinstance(t, (int, float)) and 0 < t <= 60):
+        r.error(locs.get("sim", "reply_timeout"), f"sim reply_timeout {t} s must be > 0 and at most 60")
     for name, faults in cfg.sim.items():
         if name not in cfg.drives:
             close = difflib.get_close_matches(name, list(cfg.drives), n=1)
