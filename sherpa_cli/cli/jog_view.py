@@ -117,12 +117,13 @@ class JogView(App):
             text.append(f"\n    mode {st.mode:<8}  step {self.increment(name):g} {UNITS[st.mode]:<8}  ")
             if st.mode != "position":
                 text.append(f"set {self.setpoint[name]:g} {UNITS[st.mode]}  ")
-            text.append(f"now {st.command}  ")
+            text.append(f"now {st.command}")
+            text.append("\n    ")
             text.append("calibrated" if st.calibrated else "NOT calibrated",
                         style="green" if st.calibrated else "yellow")
-            text.append(f"  range full [{j.full_range[0]}, {j.full_range[1]}] "
-                        f"normal [{j.normal_range[0]}, {j.normal_range[1]}]")
-            text.append("\n    faults: " + ("; ".join(st.faults) if st.faults else "none"),
+            text.append(f"  full [{j.full_range[0]}, {j.full_range[1]}] "
+                        f"normal [{j.normal_range[0]}, {j.normal_range[1]}]  ")
+            text.append("faults (SR/MF): " + ("; ".join(st.faults) if st.faults else "none"),
                         style="bold red" if st.faults else "")
             if st.note:
                 text.append(f"\n    {st.note}", style="yellow")

@@ -404,8 +404,8 @@ class LiveJog:
                 self._client(d).execute("BG")
         self.running[name] = _Running(mode, dict(motors), self.clock() + self.keepalive)
         letters = "TC" if mode == "torque" else "JV"
-        st.command = " ".join(f"{letters}={v:g}" if isinstance(v, float) else f"{letters}={v}"
-                              for v in motors.values())
+        parts = [f"{letters}={v:g}" if isinstance(v, float) else f"{letters}={v}" for v in motors.values()]
+        st.command = parts[0] if len(parts) == 1 else ", ".join(f"{d} {p}" for d, p in zip(motors, parts))
         st.note = ""
         return f"{name}: {st.command}"
 
