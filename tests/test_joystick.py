@@ -169,3 +169,11 @@ def test_a_real_uinput_virtual_joystick_drives_the_joint(cfg):  # pragma: no cov
                 run_joystick(live, cfg, jcfg, src, duration=0.5)
             assert px(s, "yaw") - start > 100
             assert motors_on(s) == set()
+
+
+def test_the_joystick_section_survives_config_convert(cfg, tmp_path):
+    from sherpa_cli.config.dump import dump_native
+
+    p = tmp_path / "converted.yaml"
+    p.write_text(dump_native(cfg))
+    assert load_config(p).joystick == cfg.joystick
