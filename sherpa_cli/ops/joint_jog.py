@@ -335,10 +335,12 @@ def prepare(session: Any, axis: Axis, request: JogRequest) -> tuple[JogPlan, dic
 
 def run(session: Any, axis: Axis, request: JogRequest, *, guard_factory: Callable[..., Any] | None = None,
         clock: Callable[[], float] = time.monotonic, sleep: Callable[[float], None] = time.sleep,
-        on_event: Callable[[str], None] | None = None) -> JogResult:
+        on_event: Callable[[str], None] | None = None,
+        on_progress: Callable[[Mapping[str, int]], None] | None = None) -> JogResult:
     """Plan, then run the jog inside the motion guard with the limit watch; the guard stops every
     motor on the way out. A breach stops the jog at once and brings the joint back (position mode)
-    to the nearest edge of its normal range; the result says so (``ok`` False)."""
+    to the nearest edge of its normal range; the result says so (``ok`` False). ``on_progress``
+    gets the watched joints' positions (counts) at every sample."""
     from sherpa_cli.ops.motion import MotionGuard, MotionSettings
 
     cfg = session.cfg
@@ -354,7 +356,8 @@ def run(session: Any, axis: Axis, request: JogRequest, *, guard_factory: Callabl
                        joint_cpr={j.name: cfg.joints[j.name].cpr for j in axis.watched})
     guard = factory(session, refs, settings=settings, clock=clock, sleep=sleep, on_event=on_event)
     try:
-        final = _run_guarded(guard, session, cfg, axis, p, by_name, settings, joints_start, result, clock, sleep)
+        final = _run_guarded(guard, session, cfg, axis, p, by_name, settings, joints_start, result, clock, sleep,
+                             on_progress)
     except BaseException as exc:
         exc.motion_report = guard.report  # type: ignore[attr-defined]  # the CLI shows how it stopped
         raise
@@ -369,7 +372,8 @@ def run(session: Any, axis: Axis, request: JogRequest, *, guard_factory: Callabl
 
 def _run_guarded(guard: Any, session: Any, cfg: ArmConfig, axis: Axis, p: JogPlan, by_name: Mapping[str, Any],
                  settings: Any, joints_start: Mapping[str, int], result: "JogResult",
-                 clock: Callable[[], float], sleep: Callable[[float], None]) -> dict[str, int]:
+                 clock: Callable[[], float], sleep: Callable[[float], None],
+                 on_progress: Callable[[Mapping[str, int]], None] | None = None) -> dict[str, int]:
     with guard:
         clients = {d: guard.client(by_name[d]) for d in axis.drives}
 
@@ -389,6 +393,8 @@ def _run_guarded(guard: Any, session: Any, cfg: ArmConfig, axis: Axis, p: JogPla
             # (`sherpa stop` from another terminal), so the jog ends with the reason, not a timeout
             motors = {d: int(guard.query(by_name[d], "PX")) for d in clients}
             motors.update((d, int(c.get("PX"))) for d, c in others.items())
+            if on_progress is not None:
+                on_progress({j.name: j.position(motors) for j in axis.watched})
             return {d: motors[d] for d in axis.sensed}
 
         um = UM_TORQUE if p.mode == "torque" else (settings.velocity_unit_mode if p.mode == "velocity"
