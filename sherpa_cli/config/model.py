@@ -191,6 +191,7 @@ class ProtocolConfig:
     mo_confirm_timeout: float = 3.0  # s to wait for MO to read back after MO=0/1
     sv_blackout: float = 0.5  # s the drive's CAN is deaf after SV ("a few hundred ms")
     sdo_timeout: float = 0.3  # s to wait for one SDO answer (canopen's default); also scan's listening time
+    boot_timeout: float = 2.0  # s to wait for a drive's boot-up after NMT reset node (Elmo gives no boot time)
 
 
 @dataclass(frozen=True)

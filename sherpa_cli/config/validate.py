@@ -85,6 +85,8 @@ def _check_protocol(cfg: ArmConfig, locs: Locs, r: _Report) -> None:
         r.error(locs.get("protocol", "reply_timeout"), f"reply_timeout {p.reply_timeout} s must be > 0")
     if not 0 < p.sdo_timeout <= 60:
         r.error(locs.get("protocol", "sdo_timeout"), f"sdo_timeout {p.sdo_timeout} s must be > 0 and <= 60")
+    if not 0 < p.boot_timeout <= 60:
+        r.error(locs.get("protocol", "boot_timeout"), f"boot_timeout {p.boot_timeout} s must be > 0 and <= 60")
     if p.retries < 0:
         r.error(locs.get("protocol", "retries"), f"retries {p.retries} is negative; expected 0 or more")
     for key in ("mo_settle", "mo_confirm_timeout", "sv_blackout"):
