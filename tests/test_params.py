@@ -300,7 +300,7 @@ def test_dump_to_file_equals_stdout_and_header_is_exact(cli, dump_date, tmp_path
 def test_saved_value_persists_and_diff_shows_exactly_it(cli):
     # AC=1500 is what the config derives for elbow_1a: after SV it is the one derived value the
     # factory drive already matches, so every other derived parameter (factory value) differs.
-    assert cli("--sim", "cmd", "elbow_1a", "AC=1500", "SV", "--apply").exit_code == 0
+    assert cli("--sim", "cmd", "elbow_1a", "AC=1500", "SV", "--apply", "--raw-save").exit_code == 0
     result = cli("--sim", "--json", "params", "diff", "config", "live", "-t", "elbow_pitch")
     assert result.exit_code == 1
     report = json.loads(result.stdout)

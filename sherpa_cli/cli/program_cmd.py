@@ -359,8 +359,7 @@ def _outcome_line(p: Any, o: Any, save: bool, proof: Any = None) -> str:
             return f"{o.drive}: nothing to change, nothing written"
         if proof is not None and proof.holds:
             return f"{o.drive}: nothing to change: RAM and flash hold the targets (flash proven by reset), no SV"
-        return (f"{o.drive}: nothing to change: RAM holds the targets; flash NOT proven (it may hold other "
-                f"values: --verify-flash resets the drive and reads flash back), no SV sent")
+        return f"{o.drive}: nothing to change: RAM holds the targets; flash NOT proven (--verify-flash), no SV sent"
     if o.status == pr.PROGRAMMED:
         return f"{o.drive}: {off}{n} written and verified, not saved"
     if o.status == pr.SAVED and not n:
