@@ -110,10 +110,10 @@ def test_stale_flash_is_proven_different_then_saved_and_proven(cli, powered_arm,
     r = cli(*BASE, "program-limits", "--apply", "--save", "--verify-flash", "--yes")
     assert r.exit_code == 0, r.transcript()
     assert "no SV needed" not in r.stdout
-    assert "drive1: flash differs in 17 of 17" in r.stdout and "drive2: flash differs in 17 of 17" in r.stdout
+    assert "drive1: flash differs in 17 of 19" in r.stdout and "drive2: flash differs in 17 of 19" in r.stdout
     after = r.stdout.split("flash proof after SV:")[1]
-    assert "drive1: flash holds the targets (17 read back)" in after
-    assert "drive2: flash holds the targets (17 read back)" in after
+    assert "drive1: flash holds the targets (19 read back)" in after
+    assert "drive2: flash holds the targets (19 read back)" in after
     arm = powered_arm[-1]
     assert flash_holds_targets(arm)
     for drive in arm.drives.values():
@@ -147,7 +147,7 @@ def test_only_the_drive_whose_flash_differs_is_saved(cli, powered_arm):
     r = cli(*BASE, "program-limits", "--apply", "--save", "--verify-flash", "--yes")
     assert r.exit_code == 0, r.transcript()
     assert "drive1: flash holds the targets" in r.stdout
-    assert "drive2: flash differs in 1 of 17: AC is 777, target 500" in r.stdout
+    assert "drive2: flash differs in 1 of 19: AC is 777, target 500" in r.stdout
     arm = powered_arm[-1]
     assert executes(arm.drives["drive1"], "SV") == 0 and executes(arm.drives["drive2"], "SV") == 1
     assert resets(arm.drives["drive1"]) == 1 and resets(arm.drives["drive2"]) == 2

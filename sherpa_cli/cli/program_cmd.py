@@ -55,7 +55,7 @@ def program_limits(
       sherpa program-limits --apply --save --yes
       sherpa program-limits --apply --save --verify-flash --yes
     """
-    from sherpa_cli.joints.limits import derive_checked
+    from sherpa_cli.joints.limits import derive_checked, left_as_they_are
     from sherpa_cli.ops.program import DriveTarget
 
     st = state(ctx)
@@ -65,7 +65,7 @@ def program_limits(
     targets = [DriveTarget(d.drive, d.bus, d.node, d.params) for d in derived]
     run_program(st, "program-limits", targets, warnings, apply=apply, save=save, yes=yes, motor_off=motor_off,
                 need_serial=save, allow_disabled=False, title=lambda drive: drive_moves(cfg, drive),
-                verify_flash=verify_flash)
+                verify_flash=verify_flash, note=left_as_they_are(derived))
 
 
 def params_restore(
@@ -127,7 +127,7 @@ def _check_options(apply: bool, save: bool) -> None:
 def run_program(st: Any, command: str, targets: Sequence[Any], warnings: Sequence[str], *, apply: bool,
                 save: bool, yes: bool, motor_off: bool, need_serial: bool, allow_disabled: bool,
                 title: Callable[[str], str], where: Callable[[str], Any] | None = None,
-                source: Path | None = None, verify_flash: bool = False) -> None:
+                source: Path | None = None, verify_flash: bool = False, note: str | None = None) -> None:
     """Check, plan, show; with ``apply`` write/verify/save and report. Raises the error to exit with.
 
     Callers run :func:`_check_options` first, before they read files or derive targets, so a
@@ -156,6 +156,9 @@ def run_program(st: Any, command: str, targets: Sequence[Any], warnings: Sequenc
             plans = program.mark_save_due(plans, ledger)  # a flash proof supersedes the ledger's guess
         if not st.json_mode:
             _render_plan_text(st, plans, title)  # the technician sees the plan before any question
+            if note:
+                st.out.line(f"note: {note}")
+                st.out.line("")
             if verify_flash:
                 st.out.line(_reset_note(plans, apply))
                 st.out.line("")

@@ -173,6 +173,9 @@ class ILCodes:
 
     stop: int = 21
     home: int = 5
+    # an input no switch of the config uses: "ignore (no drive function)", active low -- the MBARI
+    # table's 4, which [ELMOCAN] writes to switch limit inputs off (elmo-protocol.md, IL[N])
+    unused: int = 4
 
 
 @dataclass(frozen=True)

@@ -124,7 +124,7 @@ def _check_sim(cfg: ArmConfig, locs: Locs, r: _Report) -> None:
 
 
 def _check_il_codes(cfg: ArmConfig, locs: Locs, r: _Report) -> None:
-    for key in ("stop", "home"):
+    for key in ("stop", "home", "unused"):
         value = getattr(cfg.il_codes, key)
         if value < 0:
             r.error(locs.get("il_codes", key), f"IL code {value} is negative; expected a value >= 0")
@@ -132,6 +132,11 @@ def _check_il_codes(cfg: ArmConfig, locs: Locs, r: _Report) -> None:
         r.error(locs.get("il_codes", "home"),
                 f"il_codes.stop and il_codes.home are both {cfg.il_codes.stop}; a stop switch and a home switch "
                 "need different input logic")
+    for key in ("stop", "home"):
+        if cfg.il_codes.unused == getattr(cfg.il_codes, key):
+            r.error(locs.get("il_codes", "unused"),
+                    f"il_codes.unused and il_codes.{key} are both {cfg.il_codes.unused}; an input without a switch "
+                    f"must not get a switch's input logic")
 
 
 def _check_catalog(cfg: ArmConfig, locs: Locs, r: _Report) -> None:
