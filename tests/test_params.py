@@ -12,7 +12,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from sherpa_cli.config import load_config
-from sherpa_cli.errors import CommunicationError, ConfigError
+from sherpa_cli.errors import CommunicationError, ConfigError, UsageError
 from sherpa_cli.joints.limits import derive_drive_params
 from sherpa_cli.ops import params_diff as pd
 from sherpa_cli.ops.params_file import (IDENTITY_KEYS, DriveDump, ParamDump, dump_from_text, dump_to_text,
@@ -94,8 +94,8 @@ def test_write_is_atomic(tmp_path, monkeypatch):
     def crash(fd):
         raise OSError("disk full")
 
-    monkeypatch.setattr("sherpa_cli.paths.os.fsync", crash)
-    with pytest.raises(OSError):
+    monkeypatch.setattr("sherpa_cli.output_files.os.fsync", crash)
+    with pytest.raises(UsageError, match="disk full; nothing was written"):
         write_dump(target, _dump())
     assert target.read_text() == "old contents\n"
     assert [p.name for p in tmp_path.iterdir()] == ["arm.yaml"]  # no temporary file left behind

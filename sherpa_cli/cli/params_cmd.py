@@ -22,7 +22,8 @@ def dump_params(
     ctx: typer.Context,
     targets: Optional[List[str]] = typer.Argument(None, metavar="[TARGET]...", help=TARGETS_HELP),
     output: Optional[Path] = typer.Option(None, "--output", "-o", metavar="FILE",
-                                          help="Write the YAML dump to FILE (atomically) instead of stdout."),
+                                          help="Write the YAML dump to FILE (atomically; a symlink's target; a "
+                                          "FIFO or device in place) instead of stdout; - is stdout."),
 ) -> None:
     """Read the parameters commissioning touches, plus identity, into YAML that diffs cleanly in git.
 
@@ -43,10 +44,11 @@ def dump_params(
     st = state(ctx)
     cfg = st.load_config()
     drives = resolve_drive_names(cfg, targets)
-    if output is not None and output.is_dir():
-        from sherpa_cli.errors import UsageError
+    from sherpa_cli.output_files import check_output_path, is_stdout
 
-        raise UsageError(f"--output {output}: is a directory, expected a file name")
+    if is_stdout(output):
+        output = None  # `-o -` is the default: the YAML on stdout
+    check_output_path(output, "--output", "the dump")  # a directory is refused before the drives are read
     buses = sorted({cfg.drives[d].bus for d in drives})
     with st.session(buses=buses) as session:
         dump = read_dump_params(session, drives)
@@ -54,13 +56,7 @@ def dump_params(
         for key, why in d.unreadable.items():
             st.out.warn(f"{d.name}: {key} unreadable ({why})")
     if output is not None:
-        try:
-            write_dump(output, dump)
-        except OSError as exc:
-            from sherpa_cli.errors import UsageError
-
-            raise UsageError(f"--output {output}: cannot write the dump: {exc.strerror or exc}; nothing was written",
-                             hint="choose a writable file name") from None
+        write_dump(output, dump, "--output")
     if st.json_mode:
         st.out.json({"file": str(output) if output is not None else None, "meta": dump.meta,
                      "drives": {name: drive_block(d) for name, d in dump.drives.items()}})
