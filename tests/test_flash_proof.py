@@ -224,3 +224,69 @@ def test_json_carries_both_proofs(cli, powered_arm):
     assert d1["flash_proof"]["status"] == "differs" and len(d1["flash_proof"]["differences"]) == 17
     assert d1["flash_proof_after_save"]["status"] == "holds"
     assert d1["outcome"]["status"] == "saved"
+
+
+# --------------------------------------------------------------------------- the client's reset
+
+
+class _BootTransport:
+    """Records frames; answers NMT reset node with a boot-up only when ``boots``."""
+
+    def __init__(self, boots: bool) -> None:
+        self.boots = boots
+        self.sent: list[tuple[int, bytes]] = []
+        self.callbacks: dict[int, list] = {}
+
+    def subscribe(self, can_id, callback) -> None:
+        self.callbacks.setdefault(can_id, []).append(callback)
+
+    def send(self, can_id, data) -> None:
+        self.sent.append((can_id, bytes(data)))
+        if can_id == 0 and data[0] == NMT_RESET_NODE and self.boots:
+            for cb in self.callbacks.get(0x700 + data[1], []):
+                cb(0x700 + data[1], b"\x7f", 0.0)  # a heartbeat is not a boot-up
+                cb(0x700 + data[1], b"\x00", 0.0)
+
+
+class _FakeClock:
+    def __init__(self) -> None:
+        self.t = 0.0
+
+    def now(self) -> float:
+        return self.t
+
+    def sleep(self, s: float) -> None:
+        self.t += s
+
+
+def test_reset_node_waits_for_the_boot_up_then_starts_the_node():
+    from sherpa_cli.elmo.client import DriveClient
+
+    transport, clock = _BootTransport(boots=True), _FakeClock()
+    client = DriveClient(transport, 5, name="d5", clock=clock.now, sleep=clock.sleep)
+    client.reset_node(2.0)
+    assert transport.sent == [(0, bytes([0x81, 5])), (0, bytes([0x01, 5]))]
+    assert clock.t == 0.0, "the boot-up ended the wait at once"
+
+
+def test_reset_node_without_boot_up_times_out_on_the_injected_clock():
+    from sherpa_cli.elmo.client import DriveClient
+    from sherpa_cli.errors import DriveTimeoutError
+
+    transport, clock = _BootTransport(boots=False), _FakeClock()
+    client = DriveClient(transport, 5, name="d5", clock=clock.now, sleep=clock.sleep)
+    with pytest.raises(DriveTimeoutError, match=r"d5 \(node 5\): no boot-up within 2 s after NMT reset node"):
+        client.reset_node(2.0)
+    assert transport.sent == [(0, bytes([0x81, 5]))], "not started after a failed reset"
+    assert 2.0 <= clock.t < 2.1
+
+
+def test_boot_timeout_is_a_checked_protocol_setting(tmp_path):
+    from sherpa_cli.errors import ConfigError
+
+    path = tmp_path / "arm.yaml"
+    path.write_text((ROOT / EXAMPLE3).read_text() + "\nprotocol: {boot_timeout: 0}\n")
+    with pytest.raises(ConfigError, match=r"protocol.boot_timeout: boot_timeout 0(\.0)? s must be > 0 and <= 60"):
+        load_config(path)
+    path.write_text((ROOT / EXAMPLE3).read_text() + "\nprotocol: {boot_timeout: 5}\n")
+    assert load_config(path).protocol.boot_timeout == 5
