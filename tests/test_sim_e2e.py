@@ -64,7 +64,7 @@ def example(name: str, extra: str = FAST):
 
 @contextmanager
 def sim_session(cfg):
-    with ArmSession.open(cfg, sim=True) as session:
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as session:
         yield session
         assert session.sim.errors == [], "a simulator pump thread died"
 

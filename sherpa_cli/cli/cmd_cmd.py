@@ -7,6 +7,7 @@ from typing import List
 import typer
 
 from sherpa_cli.cli.context import state
+from sherpa_cli.cli.options import ApplyRaw, RawSave
 from sherpa_cli.cli.output import fmt_value
 
 
@@ -15,10 +16,8 @@ def cmd(
     target: str = typer.Argument(..., metavar="TARGET", help="Drive or joint name from the config, or BUS:NODE."),
     exprs: List[str] = typer.Argument(..., metavar="EXPR...",
                                       help='Elmo commands: PX (query), "LL[3]" (query), AC=150000 (set), BG (execute).'),
-    apply: bool = typer.Option(False, "--apply", help="Send sets and execute commands; without it they are "
-                               "only shown as the frame that would be sent (queries are always sent)."),
-    raw_save: bool = typer.Option(False, "--raw-save", help="Allow one SV (save RAM to flash) with --apply; it is "
-                                  "counted in the save ledger. Without it SV is refused."),
+    apply: ApplyRaw = False,
+    raw_save: RawSave = False,
 ) -> None:
     """Send raw two-letter Elmo commands to one drive and show the answers, decoded where possible.
 
@@ -38,11 +37,11 @@ def cmd(
     """
     from sherpa_cli.errors import SherpaError
     from sherpa_cli.ops.raw import check_raw_save, parse_all, run_raw
-    from sherpa_cli.ops.session import resolve_target
+    from sherpa_cli.ops.targets import single_drive
 
     st = state(ctx)
     cfg = st.load_config()
-    ref = resolve_target(cfg, target)
+    ref = single_drive(cfg, target)
     parse_all(exprs)  # a typo must not reach the bus, not even the NMT start
     saving = check_raw_save(exprs, apply=apply, raw_save=raw_save)  # before anything is sent
     done: list = []

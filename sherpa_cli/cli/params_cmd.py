@@ -12,15 +12,13 @@ from typing import List, Optional
 import typer
 
 from sherpa_cli.cli.context import state
+from sherpa_cli.cli.options import Targets
 
 app = typer.Typer(no_args_is_help=True, help="Drive parameter sets: compare dumps, the drives and the config.")
 
-TARGETS_HELP = "Drive, joint or pair names, or BUS:NODE; default: every configured drive."
-
-
 def dump_params(
     ctx: typer.Context,
-    targets: Optional[List[str]] = typer.Argument(None, metavar="[TARGET]...", help=TARGETS_HELP),
+    targets: Targets = None,
     output: Optional[Path] = typer.Option(None, "--output", "-o", metavar="FILE",
                                           help="Write the YAML dump to FILE (atomically; a symlink's target; a "
                                           "FIFO or device in place) instead of stdout; - is stdout."),
@@ -39,13 +37,12 @@ def dump_params(
     """
     from sherpa_cli.ops.params_file import drive_block, dump_to_text, write_dump
     from sherpa_cli.ops.params_read import dump_params as read_dump_params
-    from sherpa_cli.ops.params_read import resolve_drive_names
+    from sherpa_cli.ops.targets import drive_names
+    from sherpa_cli.output_files import check_output_path, is_stdout
 
     st = state(ctx)
     cfg = st.load_config()
-    drives = resolve_drive_names(cfg, targets)
-    from sherpa_cli.output_files import check_output_path, is_stdout
-
+    drives = drive_names(cfg, targets)
     if is_stdout(output):
         output = None  # `-o -` is the default: the YAML on stdout
     check_output_path(output, "--output", "the dump")  # a directory is refused before the drives are read
@@ -88,7 +85,7 @@ def diff(
     """
     from sherpa_cli.errors import ExitCode
     from sherpa_cli.ops import params_diff as pd
-    from sherpa_cli.ops.params_read import resolve_drive_names
+    from sherpa_cli.ops.targets import drive_names
 
     st = state(ctx)
     cfg = st.load_config()
@@ -100,7 +97,7 @@ def diff(
             files[spec], w = pd.file_side(Path(spec), cfg)
             warnings.extend(w)
     if targets:
-        drives = resolve_drive_names(cfg, targets)
+        drives = drive_names(cfg, targets)
     elif files:
         drives = pd.drives_of(list(files.values()), cfg)
     else:
