@@ -9,7 +9,7 @@ from typing import Callable, Optional
 import typer
 
 from sherpa_cli.cli.context import state
-from sherpa_cli.cli.options import Targets
+from sherpa_cli.cli.options import ApplyHeartbeat, Targets
 from sherpa_cli.errors import ExitCode, UsageError
 
 # Seconds between polls in the live view; the CLI's sleep goes through here so tests can stop it.
@@ -27,7 +27,7 @@ def monitor(
         help="With --apply: set the drives' producer heartbeat (0x1017) to MS while monitoring (RAM only, the "
         "old value is written back at exit). Without --apply it is a dry run: shown, not written. Default: "
         "only listen to the heartbeat the drives already send."),
-    apply: bool = typer.Option(False, "--apply", help="Let --heartbeat write 0x1017 (a write to the drives)."),
+    apply: ApplyHeartbeat = False,
 ) -> None:
     """Show every drive: NMT state and heartbeat, MO, UM, position in joint units, SR and MF decoded,
     and the last EMCY with its Elmo text.

@@ -9,6 +9,7 @@ from typing import Iterator, List, Optional
 import typer
 
 from sherpa_cli.cli.context import state
+from sherpa_cli.cli.options import ApplyReset
 from sherpa_cli.errors import ExitCode, UsageError
 
 
@@ -19,8 +20,7 @@ def scan(
     reset: bool = typer.Option(False, "--reset", help="With --apply: first send NMT reset communication to "
                                "every node (unsaved RAM of the drives is lost) and collect their boot-ups. "
                                "Nothing is NMT-started. Without --apply the reset is a dry run: shown, not sent."),
-    apply: bool = typer.Option(False, "--apply", help="Let --reset send the NMT reset (it changes the drives' "
-                               "state)."),
+    apply: ApplyReset = False,
 ) -> None:
     """Probe node ids 1..127 on every bus and compare what answers with the config.
 
