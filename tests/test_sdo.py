@@ -7,13 +7,13 @@ from typing import Callable
 
 import pytest
 
-from sherpa_cli.sim.arm import SimArm
 from sherpa_cli.config import load_config
 from sherpa_cli.errors import CommunicationError, ExitCode, SdoError
 from sherpa_cli.ops.canopen_names import abort_text, nmt_text
 from sherpa_cli.ops.sdo import DriveSdo, sdo_download, sdo_upload
 from sherpa_cli.ops.session import ArmSession
 from sherpa_cli.ops.targets import drive_ref
+from sherpa_cli.sim.arm import SimArm
 
 EXAMPLE1 = "configs/appendix-c/example1.yaml"
 

@@ -162,7 +162,8 @@ def encode_request(request: Request, long: bool = False) -> bytes:
 def _split(data: object, lengths: tuple[int, ...], what: str) -> tuple[str, int, bytes]:
     if not isinstance(data, (bytes, bytearray, memoryview)):
         raise CodecError(f"{what} must be bytes, got {type(data).__name__}")
-    data = bytes(data)
+    if type(data) is not bytes:
+        data = bytes(data)
     if len(data) not in lengths:
         allowed = " or ".join(str(n) for n in lengths)
         raise CodecError(f"{what} must be {allowed} bytes, got {len(data)}: {data.hex(' ')}")
@@ -178,12 +179,12 @@ def _split(data: object, lengths: tuple[int, ...], what: str) -> tuple[str, int,
     return letters, word, data[4:]
 
 
-def _unpack_value(payload: bytes, is_float: bool, what: str) -> int | float:
+def _unpack_value(payload: bytes, is_float: bool, letters: str, index: int) -> int | float:
     if not is_float:
         return INT32.unpack(payload)[0]
     value = FLOAT32.unpack(payload)[0]
     if not math.isfinite(value):
-        raise CodecError(f"{what}: float value bytes {payload.hex(' ')} are not a finite number")
+        raise CodecError(f"{_what(letters, index)}: float value bytes {payload.hex(' ')} are not a finite number")
     return value
 
 
@@ -194,7 +195,7 @@ def decode_reply(data: bytes) -> Reply:
     if word & FLAG_ERROR:
         # The guide: "byte 4 contains the Elmo error code".
         return Reply(letters, index, None, is_float, error_code=payload[0])
-    return Reply(letters, index, _unpack_value(payload, is_float, _what(letters, index)), is_float)
+    return Reply(letters, index, _unpack_value(payload, is_float, letters, index), is_float)
 
 
 # -- drive (simulator) side ----------------------------------------------------------------------
@@ -212,7 +213,7 @@ def decode_request(data: bytes) -> Request:
     if len(data) == 4 or word & FLAG_QUERY:
         kind: Kind = "execute" if is_execute and not word & FLAG_QUERY else "query"
         return Request(kind, letters, index, None, is_float)
-    value = _unpack_value(payload, is_float, _what(letters, index))
+    value = _unpack_value(payload, is_float, letters, index)
     return Request("execute" if is_execute else "set", letters, index, value, is_float)
 
 
