@@ -16,6 +16,7 @@ from pathlib import Path
 import pytest
 
 from sherpa_cli.config import load_config
+from sherpa_cli.elmo import codec
 from sherpa_cli.joints.limits import derive_checked
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -290,3 +291,29 @@ def test_boot_timeout_is_a_checked_protocol_setting(tmp_path):
         load_config(path)
     path.write_text((ROOT / EXAMPLE3).read_text() + "\nprotocol: {boot_timeout: 5}\n")
     assert load_config(path).protocol.boot_timeout == 5
+
+
+def test_a_drive_that_does_not_boot_stops_everything_before_any_write(cli, powered_arm, tmp_path, monkeypatch):
+    from sherpa_cli.sim.arm import SimArm
+
+    config = tmp_path / "example3-slow-boot.yaml"
+    config.write_text((ROOT / EXAMPLE3).read_text() + "\nprotocol: {boot_timeout: 0.2}\n")
+    carrying = SimArm.for_session.__func__  # powered_arm's hook
+
+    def silent_reset(cls, cfg, channels, **kwargs):
+        arm = carrying(cls, cfg, channels, **kwargs)
+        drive = arm.drives["drive2"]
+        nmt = drive._nmt
+        drive._nmt = lambda cs: None if cs == NMT_RESET_NODE else nmt(cs)  # never reboots, never boots up
+        return arm
+
+    monkeypatch.setattr(SimArm, "for_session", classmethod(silent_reset))
+    r = cli("--config", str(config), "--sim", "program-limits", "--apply", "--save", "--verify-flash", "--yes")
+    assert r.exit_code == 3, r.transcript()  # a drive that did not answer: bus/communication
+    assert "drive2: flash not proven: drive2 (node 2): no boot-up within 0.2 s after NMT reset node" in r.stderr
+    assert "drive2: flash NOT proven: drive2 (node 2): no boot-up" in r.stdout
+    arm = powered_arm[-1]
+    for drive in arm.drives.values():
+        assert executes(drive, "SV") == 0
+        sets = [codec.decode_request(bytes(d)) for _, can_id, d in drive.received if can_id == 0x300 + drive.node]
+        assert [q for q in sets if q.kind == "set"] == [], "nothing written after the failed proof"
