@@ -148,7 +148,7 @@ def test_only_the_drive_whose_flash_differs_is_saved(cli, powered_arm):
     r = cli(*BASE, "program-limits", "--apply", "--save", "--verify-flash", "--yes")
     assert r.exit_code == 0, r.transcript()
     assert "drive1: flash holds the targets" in r.stdout
-    assert "drive2: flash differs in 1 of 19: AC is 777, target 500" in r.stdout
+    assert "drive2: flash differs in 1 of 19: AC = 777 (target 500)" in r.stdout
     arm = powered_arm[-1]
     assert executes(arm.drives["drive1"], "SV") == 0 and executes(arm.drives["drive2"], "SV") == 1
     assert resets(arm.drives["drive1"]) == 1 and resets(arm.drives["drive2"]) == 2
@@ -166,8 +166,9 @@ def test_proof_without_save_reports_the_difference_and_exits_1(cli, powered_arm)
 def test_verify_flash_dry_run_resets_nothing_and_says_what_a_reset_clears(cli, powered_arm):
     r = cli(*BASE, "program-limits", "--verify-flash")
     assert r.exit_code == 0, r.transcript()
-    assert "would reset drive1, drive2 (NMT reset node)" in r.stdout
-    assert "position counter restarts and any homing (calibration) mark is cleared" in r.stdout
+    text = " ".join(r.stdout.split())  # the note is wrapped at 80 columns
+    assert "would reset drive1, drive2 (NMT reset node)" in text
+    assert "restarts the position counter and clears any homing (calibration) mark" in text
     assert "dry run: nothing was written; no drive was reset" in r.stdout
     for drive in powered_arm[-1].drives.values():
         assert resets(drive) == 0
@@ -210,7 +211,7 @@ def test_params_restore_verify_flash(cli, powered_arm, tmp_path, monkeypatch):
     assert write.exit_code == 0, write.transcript()
     r = cli(*BASE, "params", "restore", str(dump), "--apply", "--save", "--verify-flash", "--yes")
     assert r.exit_code == 0, r.transcript()
-    assert "drive1: flash differs in 1 of" in r.stdout and "AC is 777, target 500" in r.stdout
+    assert "drive1: flash differs in 1 of" in r.stdout and "AC = 777 (target 500)" in r.stdout
     assert "drive2: flash holds the targets" in r.stdout
     assert powered_arm[-1].drives["drive1"].flash["AC"] == 500
 
@@ -317,3 +318,14 @@ def test_a_drive_that_does_not_boot_stops_everything_before_any_write(cli, power
         assert executes(drive, "SV") == 0
         sets = [codec.decode_request(bytes(d)) for _, can_id, d in drive.received if can_id == 0x300 + drive.node]
         assert [q for q in sets if q.kind == "set"] == [], "nothing written after the failed proof"
+
+
+@pytest.mark.golden
+def test_verify_flash_golden(cli, golden, powered_arm):
+    dry = cli(*BASE, "program-limits", "drive1", "--verify-flash")
+    golden("program-limits-example3-verify-flash-dry-run.txt", dry.transcript())
+    saved = cli(*BASE, "program-limits", "--apply", "--save", "--verify-flash", "--yes")
+    golden("program-limits-example3-verify-flash-save.txt", saved.transcript())
+    again = cli(*BASE, "program-limits", "--apply", "--save", "--verify-flash", "--yes")
+    golden("program-limits-example3-verify-flash-again.txt", again.transcript())
+    assert (dry.exit_code, saved.exit_code, again.exit_code) == (0, 0, 0)

@@ -204,12 +204,16 @@ def run_program(st: Any, command: str, targets: Sequence[Any], warnings: Sequenc
 
 
 def _reset_note(plans: Sequence[Any], apply: bool) -> str:
+    import textwrap
+
     names = ", ".join(p.drive for p in plans)
-    what = "resets" if apply else "would reset"
-    done = "" if apply else " -- dry run: no drive is reset without --apply"
-    return (f"--verify-flash {what} {names} (NMT reset node) to read back what flash holds: unsaved RAM is "
-            f"lost, the position counter restarts and any homing (calibration) mark is cleared; home the "
-            f"joints again afterwards{done}")
+    what, read = ("resets", "reads") if apply else ("would reset", "read")
+    text = (f"--verify-flash {what} {names} (NMT reset node) and {read} back what flash holds. A reset "
+            f"loses unsaved RAM, restarts the position counter and clears any homing (calibration) mark: "
+            f"home the joints afterwards.")
+    if not apply:
+        text += " Dry run: no drive is reset without --apply."
+    return textwrap.fill(text, width=80, subsequent_indent="  ", break_on_hyphens=False, break_long_words=False)
 
 
 def _confirm_save(st: Any, drives: Sequence[str], *, proof: bool = False) -> None:
@@ -319,7 +323,7 @@ def _plan_line(p: Any) -> str:
     return text
 
 
-PROOF_SHOWN = 3  # differences named per drive in the text (--json has them all)
+PROOF_SHOWN = 2  # differences named per drive in the text (--json has them all)
 
 
 def _proof_line(p: Any) -> str:
@@ -330,8 +334,8 @@ def _proof_line(p: Any) -> str:
         return f"{p.drive}: flash holds the targets ({p.checked} read back){off}"
     if p.status == pr.DIFFERS:
         shown = list(p.differences.items())[:PROOF_SHOWN]
-        diffs = "; ".join(f"{k} is {fmt_value(f)}, target {fmt_value(t)}" for k, (f, t) in shown)
-        more = f"; and {len(p.differences) - len(shown)} more" if len(p.differences) > len(shown) else ""
+        diffs = ", ".join(f"{k} = {fmt_value(f)} (target {fmt_value(t)})" for k, (f, t) in shown)
+        more = f", {len(p.differences) - len(shown)} more" if len(p.differences) > len(shown) else ""
         return f"{p.drive}: flash differs in {len(p.differences)} of {p.checked}: {diffs}{more}{off}"
     if p.status == pr.NOT_STARTED:
         return f"{p.drive}: not reset (stopped before its turn)"
