@@ -91,7 +91,7 @@ class JogView(App):
 
     def on_mount(self) -> None:
         self.title = "sherpa jog --interactive"
-        self.render_state()
+        self.tick()  # a sign of life for the guard's dead-man as soon as the view is up
         self.set_interval(self.tick_period, self.tick)
 
     @property

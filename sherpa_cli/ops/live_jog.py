@@ -199,10 +199,14 @@ class LiveJog:
         if a.kind == "plain":
             motor_targets = {a.drives[0]: goal}
         else:
-            ja = joint_jog.Axis(a.name, a.kind, a.cpr, a.drives, a.joint.normal_range, a.joint.full_range,
-                                a.vel_limit, a.current_limit,
-                                tuple(limit_watch.joints_moved_by(self.cfg, a.drives)), (a.joint,))
-            motor_targets = joint_jog._motor_targets(ja, goal, now)
+            # the other joint of the pair holds; on a parity clash it gives way by one count (joint_jog)
+            pair = self.cfg.pairs[a.joint.pair]  # type: ignore[index]
+            held = self.cfg.joints[pair.delta if a.kind == "sigma" else pair.sigma]
+            ma, mb = (now[d] for d in a.drives)
+            s_now, d_now = ma + mb, ma - mb
+            s2, d2 = (diffpair.hold_other(goal, d_now, "sigma", held.normal_range) if a.kind == "sigma"
+                      else diffpair.hold_other(s_now, goal, "delta", held.normal_range))
+            motor_targets = dict(zip(a.drives, diffpair.to_motors(s2, d2)))
         speed = max(1, (a.vel_limit or 400) // 2)
         distance = max(abs(t - now[d]) for d, t in motor_targets.items())
         duration = distance / speed if distance else 0.0
@@ -277,7 +281,7 @@ class LiveJog:
         drives = [d for d in a.drives if d not in self.dead]
         if run is not None and drives:
             self.guard.check()
-            joint_jog._stop_now({d: self._client(d) for d in drives}, run.mode)
+            joint_jog.stop_now({d: self._client(d) for d in drives}, run.mode)
         self.state[name].command = "-"
 
     def stop_all(self) -> None:
@@ -453,12 +457,12 @@ class LiveJog:
         modes = {run.mode for run in self.running.values()}
         self.running.clear()
         live = {d: self._client(d) for d in self.drives if d not in self.dead}
-        joint_jog._stop_now(live, "torque" if "torque" in modes else "position")
-        joint_jog._wait_standstill(live, self.guard, self.settings, self.clock, self.sleep)
+        joint_jog.stop_now(live, "torque" if "torque" in modes else "position")
+        joint_jog.wait_standstill(live, self.guard, self.settings, self.clock, self.sleep)
         watched = [a.watched for a in self.axes.values()]
         back = limit_watch.recovery_targets(watched, self._sample(self.drives), breaches)
         speed = max(1, min((a.vel_limit or 400) for a in self.axes.values()) // 2)
-        joint_jog._move_to(self.guard, self.refs, live, {d: t for d, t in back.items() if d in live}, speed,
+        joint_jog.move_to(self.guard, self.refs, live, {d: t for d, t in back.items() if d in live}, speed,
                            self.settings, self.clock, self.sleep, "the move back into the normal range")
         for b in breaches:
             text = (f"limit: {b.joint} left its full range [{b.full[0]}, {b.full[1]}] on the {b.side} side: "
