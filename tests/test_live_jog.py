@@ -105,3 +105,18 @@ def test_the_full_range_watch_stops_everything_and_brings_the_joint_back(cfg):
             assert any(m.startswith("limit: j1 left its full range") for m in live.messages)
             assert state["j1"].counts == cfg.joints["j1"].normal_range[1] and not live.running
         assert motors_off(s)
+
+
+def test_torque_runs_until_the_keepalive_and_is_refused_above_the_continuous_limit(cfg):
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
+        with LiveJog(s, resolve_axes(cfg, ["j1"]), keepalive=0.4) as live:
+            assert "above the continuous limit" in live.set_torque("j1", 2.5)  # j1: 2.0 A continuous
+            assert live.running == {}
+            live.set_mode("j1", "torque")
+            assert live.set_torque("j1", -0.5).startswith("j1: TC=-0.5")
+            state = run_for(live, 0.8)
+            assert "j1" not in live.running and state["j1"].command == "-"
+            assert state["j1"].counts < -20  # the current moved it backwards
+        assert motors_off(s)
+        kinds = [d.stopped_by for d in live.report.drives]
+        assert kinds and all(k != "not stopped" for k in kinds)

@@ -126,6 +126,8 @@ class LiveJog:
             drives += [d for d in a.drives if d not in drives]
         self.drives = tuple(drives)
         self.refs = {d: targets.drive_ref(self.cfg, d) for d in drives}
+        # every joint these motors move (a Σ joint alone still moves Δ): the watch covers them all
+        self.watched = limit_watch.joints_moved_by(self.cfg, drives)
         self.settings = settings or MotionSettings.from_config(self.cfg, {r.bus for r in self.refs.values()})
         self.keepalive = keepalive
         self.tick_period = tick_period  # how often the caller ticks (the edge hold looks this far ahead)
@@ -320,7 +322,7 @@ class LiveJog:
                     if d in self.dead:
                         st.faults.append(f"{d}: {self.dead[d]}")
         self._edge_hold(motors)
-        breaches = limit_watch.check([a.watched for a in self.axes.values()], motors)
+        breaches = limit_watch.check(self.watched, motors)
         if breaches:
             self._recover(motors, breaches)
             motors = self._sample(self.drives)
@@ -459,8 +461,7 @@ class LiveJog:
         live = {d: self._client(d) for d in self.drives if d not in self.dead}
         joint_jog.stop_now(live, "torque" if "torque" in modes else "position")
         joint_jog.wait_standstill(live, self.guard, self.settings, self.clock, self.sleep)
-        watched = [a.watched for a in self.axes.values()]
-        back = limit_watch.recovery_targets(watched, self._sample(self.drives), breaches)
+        back = limit_watch.recovery_targets(self.watched, self._sample(self.drives), breaches)
         speed = max(1, min((a.vel_limit or 400) for a in self.axes.values()) // 2)
         joint_jog.move_to(self.guard, self.refs, live, {d: t for d, t in back.items() if d in live}, speed,
                            self.settings, self.clock, self.sleep, "the move back into the normal range")
