@@ -87,6 +87,11 @@ class DriveTimeoutError(CommunicationError, TimeoutError):
     """A drive did not answer in time; names the drive and what was asked."""
 
 
+class ProtocolError(CommunicationError):
+    """A device answered, but with a frame the protocol does not allow (wrong length, NaN/Inf,
+    bad command byte); the message names the drive and the frame in hex (exit 3)."""
+
+
 class DriveRefusedError(SherpaError):
     """A drive answered with an Elmo error code (exit 4)."""
 

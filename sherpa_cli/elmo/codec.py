@@ -186,7 +186,8 @@ def _encode_set_checked(letters: str, index: int, value: int | float) -> bytes:
 
 
 def encode_query(letters: str, index: int = 0, long: bool = False) -> bytes:
-    """Query frame: 4 bytes, or 8 bytes with the query bit when ``long``."""
+    """Query frame: 4 bytes, or 8 bytes with the query bit (and, for a float parameter, the
+    float bit: [IG] 9-3 wants the type in every frame) when ``long``."""
     try:
         frame = _QUERIES.get((letters, index, long)) if type(index) is int else None
     except TypeError:  # unhashable junk: the checked path names what is wrong
@@ -197,7 +198,9 @@ def encode_query(letters: str, index: int = 0, long: bool = False) -> bytes:
     if spec.access == "x":
         raise CodecError(f"{letters} is an execute command and cannot be queried")
     if long:
-        frame = FRAME.pack(letters.encode("ascii"), _header_word(index, flag6=True), bytes(4))
+        # [IG] 9-3: the type bit is always set to the parameter's type, in queries too
+        frame = FRAME.pack(letters.encode("ascii"),
+                           _header_word(index, is_float=spec.value_type == "float", flag6=True), bytes(4))
     else:
         frame = HEADER.pack(letters.encode("ascii"), index)
     _remember(_QUERIES, (letters, index, long), frame)
