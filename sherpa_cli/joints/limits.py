@@ -349,6 +349,32 @@ def derive_checked(cfg: ArmConfig, names: Sequence[str] | None = None) -> tuple[
     return derived, warnings
 
 
+def config_findings(cfg: ArmConfig) -> list:
+    """Everything :func:`derive_checked` would refuse or warn about for the whole arm, as findings.
+
+    ``sherpa config check`` reports these, so a config passes the check exactly when
+    program-limits will not refuse it for the same reason: a set the derivation cannot build
+    (a ConfigError), an inconsistent set (``validate_params``), a current beyond the ratings.
+    """
+    from sherpa_cli.joints.currents import Finding, check_currents, validate_params
+
+    findings = list(check_currents(cfg))
+    for drive in cfg.drives:
+        try:
+            dp, _ = _derive(cfg, drive)
+        except ConfigError as exc:
+            findings.append(Finding("error", f"drive {drive}: {exc.problem}", exc.location, drive))
+            continue
+        findings.extend(f for f in validate_params(dp, where=_owner_where(cfg, drive)) if f.level == "error")
+    seen: set[str] = set()
+    unique = []
+    for f in findings:  # a pair's problem is found once per motor
+        if f.message not in seen:
+            seen.add(f.message)
+            unique.append(f)
+    return unique
+
+
 def _owner_where(cfg: ArmConfig, drive: str) -> Location | None:
     joint = cfg.joint_of_drive(drive)
     if joint is not None:

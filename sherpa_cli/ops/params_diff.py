@@ -153,9 +153,9 @@ def file_side(path: Path, cfg: ArmConfig) -> tuple[Side, list[str]]:
 
 
 def _drive_line(path: Path, name: str) -> int | None:
-    from sherpa_cli.config.yamlnodes import parse_yaml
+    from sherpa_cli.config.yamlnodes import parse_yaml, read_input
 
-    root = parse_yaml(Path(path).read_text(encoding="utf-8"), str(path))
+    root = parse_yaml(read_input(path), str(path))
     node = root.value.get("drives")
     child = node.value.get(name) if node is not None and node.kind == "map" else None
     return child.key_line if child is not None else None

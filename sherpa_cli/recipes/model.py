@@ -9,7 +9,7 @@ from pathlib import Path
 from typing import Any
 
 from sherpa_cli.config.yamlnodes import (NAME_RE, Section, YNode, as_int, as_map, as_seq, as_str, describe,
-                                         parse_yaml, plain)
+                                         parse_yaml, plain, read_input)
 from sherpa_cli.errors import ConfigError, Location
 
 ON_FAILURE = ("stop", "continue")
@@ -87,7 +87,7 @@ class Recipe:
 def load_recipe(path: Path, overrides: dict[str, str] | None = None) -> Recipe:
     """Read and check a recipe; ``overrides`` (``--set KEY=VALUE``) replace its ``vars``."""
     try:
-        text = Path(path).read_text(encoding="utf-8")
+        text = read_input(path)
     except FileNotFoundError:
         raise ConfigError("recipe file not found", Location(str(path))) from None
     except IsADirectoryError:
