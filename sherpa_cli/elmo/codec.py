@@ -419,6 +419,8 @@ def _parse_index(spec: CommandSpec, raw_index: str | None, text: str) -> int:
 
 
 def _parse_int(raw: str, what: str) -> int | float:
+    if len(raw) > 40:  # int32 needs 11 characters; Python refuses int('9' * 5000) with ValueError
+        raise CodecError(f"{what}: {raw[:20]}... ({len(raw)} characters) is not an int32 value")
     if _INT_TEXT.fullmatch(raw):
         sign = -1 if raw.startswith("-") else 1
         body = raw.lstrip("+-")
@@ -431,6 +433,8 @@ def _parse_int(raw: str, what: str) -> int | float:
 
 
 def _parse_float(raw: str, what: str) -> float:
+    if len(raw) > 64:
+        raise CodecError(f"{what}: {raw[:20]}... ({len(raw)} characters) is not a float32 value")
     try:
         value = float(raw)
     except ValueError:
