@@ -137,3 +137,63 @@ def test_unwritable_sim_state_fails_with_one_message_and_keeps_the_old_file(tmp_
         assert [p.name for p in good.parent.iterdir() if p.name.startswith(".sim.json.")] == []
     finally:
         good.parent.chmod(0o700)
+
+
+# -- every number has a range (item 5) ------------------------------------------------------------
+
+EXAMPLE1 = (ROOT / "configs/appendix-c/example1.yaml").read_text()
+
+
+@pytest.mark.parametrize("old, new, path, phrase", [
+    ("velocity: {limit: 100, trip: 150}", "velocity: {limit: 100, trip: .inf}", "joints.joint1.velocity.trip",
+     "expected an integer"),
+    ("current: {continuous: 3.0, peak: 12.0, peak_time: 2}", "current: {continuous: .nan, peak: 12.0, peak_time: 2}",
+     "joints.joint1.current.continuous", "is not a finite number"),
+    ("current: {continuous: 3.0, peak: 12.0, peak_time: 2}", "current: {continuous: 3.0, peak: 12.0, peak_time: 61}",
+     "joints.joint1.current.peak_time", "expected 0..60 s (PL[2])"),
+    ("current: {continuous: 3.0, peak: 12.0, peak_time: 2}", "current: {continuous: 3.0, peak: .inf, peak_time: 2}",
+     "joints.joint1.current.peak", "is not a finite number"),
+    ("range: {min: -220, max: 220, margin: 30, overshoot: 20}",
+     "range: {min: -220, max: 2147483648, margin: 30, overshoot: 20}", "joints.joint1.range.max", "32-bit integer"),
+    ("range: {min: -220, max: 220, margin: 30, overshoot: 20}",
+     "range: {min: -220, max: 2147483640, margin: 30, overshoot: 20}", "joints.joint1.range.overshoot",
+     "does not fit the drive's 32-bit"),
+    ("acceleration: {accel: 500, decel: 500}", "acceleration: {accel: 500, decel: 4294967296}",
+     "joints.joint1.acceleration.decel", "expected 1..2147483647"),
+    ("cpr: 600", "cpr: 99999999999", "joints.joint1.cpr", "expected 1..2147483647"),
+    ("bitrate: 1000000}", "bitrate: 2000000}", "buses.can0.bitrate", "expected 1..1000000 bit/s"),
+])
+def test_out_of_range_numbers_are_refused_with_file_line_and_key(old, new, path, phrase):
+    assert old in EXAMPLE1
+    with pytest.raises(ConfigError) as info:
+        load_config_text(EXAMPLE1.replace(old, new), "ex1.yaml")
+    assert info.value.location.path == path, str(info.value)
+    assert info.value.location.line is not None and phrase in str(info.value)
+
+
+@pytest.mark.parametrize("extra, path, phrase", [
+    ("protocol: {reply_timeout: .inf}\n", "protocol.reply_timeout", "expected 0..60 s"),
+    ("protocol: {mo_settle: .nan}\n", "protocol.mo_settle", "is not a finite number"),
+    ("protocol: {sv_blackout: 1000000000.0}\n", "protocol.sv_blackout", "expected 0..60 s"),
+    ("protocol: {sdo_timeout: .nan}\n", "protocol.sdo_timeout", "must be > 0"),
+    ("protocol: {retries: 1000000}\n", "protocol.retries", "expected 0..100"),
+    ("il_codes: {stop: 24, home: 5}\n", "il_codes.stop", "expected 0..23"),
+    ("sim: {drives: {drive1: {heartbeat_ms: 70000}}}\n", "sim.drives.drive1.heartbeat_ms", "u16"),
+    ("sim: {drives: {drive1: {reply_latency: .inf}}}\n", "sim.drives.drive1.reply_latency", "expected 0..60 s"),
+    ("sim: {drives: {drive1: {die_at: .nan}}}\n", "sim.drives.drive1.die_at", "is not a finite number"),
+    ("catalog: {peak_fraction: .nan}\n", "catalog.peak_fraction", "must be above 0"),
+])
+def test_out_of_range_settings_are_refused(extra, path, phrase):
+    with pytest.raises(ConfigError) as info:
+        load_config_text(EXAMPLE1 + extra, "ex1.yaml")
+    assert info.value.location.path == path, str(info.value)
+    assert phrase in str(info.value)
+
+
+def test_config_check_fails_where_program_limits_would_refuse(cli, tmp_path):
+    bad = tmp_path / "ex1.yaml"
+    bad.write_text(EXAMPLE1.replace("peak_time: 2}", "peak_time: 1.5}"))
+    check = cli("config", "check", str(bad))
+    assert check.exit_code == 1 and "PL[2]" in check.stdout, check.transcript()
+    plan = cli("--config", str(bad), "--sim", "program-limits")
+    assert plan.exit_code != 0 and "Traceback" not in plan.stderr
