@@ -364,7 +364,7 @@ BAD_WORDS = ["", " ", "-", "--", "nosuch", "joint1x", "can0:0", "can0:128", "can
              "\u0394", "--bogus", "-x", "1e400", "nan", "-1", "0", "99999999999999999999999", "../../etc/passwd",
              "joint1:1", "=", "PX[", "AC==1", "[3]"]
 BAD_EXPR = ["QQ", "px", "PX[", "LL[99999]", "LL[-1]", "AC=1e40", "AC=nan", "CL[1]=inf", "AC=" + "9" * 5000,
-            "AC=0x", "MO=2=3", "LL", "BG=1", "SR=5", "AC= ", "AC=1.5", "UM=abc", "\u00c4C=1", "AC\x00", "LL[3.0]"]
+            "AC=0x", "LL[" + "9" * 5000 + "]", "MO=2=3", "LL", "BG=1", "SR=5", "AC= ", "AC=1.5", "UM=abc", "\u00c4C=1", "AC\x00", "LL[3.0]"]
 BAD_FILES = ["/nonexistent/x.yaml", "/dev/null", "/dev/zero", "/", "configs", "README.md", "recipes/backup.yaml"]
 
 

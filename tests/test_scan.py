@@ -12,6 +12,7 @@ import yaml
 from sherpa_cli.config import load_config
 from sherpa_cli.ops.scan import NODE_IDS, BusProber, ScanSettings, decode_device_type, scan
 from sherpa_cli.ops.session import ArmSession
+from sherpa_cli.sim.arm import SimArm
 
 ROOT = Path(__file__).resolve().parent.parent
 ARM = ROOT / "configs" / "sherpa-arm.yaml"
@@ -118,7 +119,7 @@ def test_extra_node_on_unknown_bus_is_a_config_error(cli, tmp_path, monkeypatch)
 def test_scan_writes_nothing_and_reads_only_identity(tmp_path, monkeypatch):
     monkeypatch.setenv("XDG_STATE_HOME", str(tmp_path))
     cfg = load_config(ARM)
-    with ArmSession.open(cfg, sim=True) as session:
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as session:
         report = scan(session)
         drives = session.sim.drives.values()
         frames = [(can_id, data) for d in drives for _, can_id, data in d.received]
@@ -225,19 +226,28 @@ def test_sdo_timeout_comes_from_the_config(tmp_path):
     import dataclasses
 
     from sherpa_cli.config import load_config
-    from sherpa_cli.ops.scan import sdo_upload
+    from sherpa_cli.errors import SdoError
+    from sherpa_cli.ops.sdo import sdo_upload
     from sherpa_cli.ops.session import ArmSession
 
     cfg = load_config("configs/appendix-c/example1.yaml")
     cfg = dataclasses.replace(cfg, protocol=dataclasses.replace(cfg.protocol, sdo_timeout=0.05))
-    with ArmSession.open(cfg, sim=True) as session:
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as session:
         network = next(iter(session.links.values())).network
         assert network.sdo_timeout == 0.05
         import time
-
-        from canopen.sdo.exceptions import SdoError
 
         t0 = time.monotonic()
         with pytest.raises(SdoError):
             sdo_upload(network, 99, 0x1000, 0)  # nobody at node 99: one timeout (+ canopen's one retry)
         assert time.monotonic() - t0 < 0.3 * 2, "canopen's 0.3 s default was used"
+
+
+def test_a_device_on_the_host_heartbeat_id_is_warned_about(cli, tmp_path, monkeypatch):
+    # motion.host_node_id (126) is the tool's heartbeat COB-ID 0x77E: a device there defeats the dead-man
+    _faulty_config(tmp_path, monkeypatch, {"extra_nodes": [{"bus": "can2", "node": 126}]})
+    result = cli("--sim", "scan", "--bus", "can2")
+    assert result.exit_code == 1
+    assert "warning: bus can2: a device answers on node 126, the tool's heartbeat id" in result.stderr
+    clean = cli("--sim", "scan", "--bus", "can1")
+    assert "heartbeat id" not in clean.stderr

@@ -76,13 +76,25 @@ def _device(n) -> str:
     """Vendor (Elmo by name, others as their 0x1018:1 id) and 0x1008, in one column to fit 100 columns."""
     if n.vendor is None and n.device_name is None:
         return "-"
-    from sherpa_cli.ops.scan import ELMO_VENDOR_ID
+    from sherpa_cli.ops.canopen_names import ELMO_VENDOR_ID
 
     vendor = n.vendor if n.vendor_id in (None, ELMO_VENDOR_ID) else f"vendor {n.vendor}"
     return " ".join(part for part in (vendor, n.device_name) if part)
 
 
+def _warn_host_id(st, report) -> None:
+    """A device on the tool's heartbeat id would feed the drives' dead-man consumers (docs/motion.md)."""
+    host = st.load_config().motion.host_node_id
+    for bus in report.buses:
+        for n in bus.nodes:
+            if n.node == host and n.answer_s is not None:
+                st.out.warn(f"bus {bus.bus}: a device answers on node {host}, the tool's heartbeat id "
+                            "(motion.host_node_id): its heartbeat would keep the drives' dead-man from "
+                            "tripping; set motion.host_node_id to an id no device uses")
+
+
 def _render(st, report) -> None:
+    _warn_host_id(st, report)
     if st.json_mode:
         st.out.json(report.as_json())
         return
