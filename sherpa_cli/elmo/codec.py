@@ -291,8 +291,10 @@ def _parse_index(spec: CommandSpec, raw_index: str | None, text: str) -> int:
                              hint=f"write e.g. {spec.letters}[{spec.index_min}]")
         return 0
     raw_index = raw_index.strip()
-    if not (raw_index.isascii() and raw_index.isdigit()) or len(raw_index) > 6:  # 14 bits: at most 5 digits
+    if not (raw_index.isascii() and raw_index.isdigit()):
         raise CodecError(f"bad index {raw_index!r} in {text.strip()!r}: must be a decimal number")
+    if len(raw_index) > 6:  # 14 bits need at most 5 digits; int() refuses thousands of them
+        raise CodecError(f"bad index {raw_index[:10]}... ({len(raw_index)} digits): out of range 0..{INDEX_MAX}")
     return spec.check_index(int(raw_index))
 
 
