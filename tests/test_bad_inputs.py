@@ -80,6 +80,31 @@ def bounded(fn: Callable[[], Any]) -> tuple[Any, BaseException | None, bool]:
     return box.get("result"), exc, False
 
 
+def judge(tally: Tally, kind: str, what: str, load: Callable[[], Any], *, must_fail: bool = False,
+          after: Callable[[Any], None] | None = None) -> None:
+    """Count one input: ``load`` may refuse it with a SherpaError; anything else escaping is a
+    traceback. ``after(result)`` checks what was accepted; ``must_fail`` inputs must be refused."""
+    from sherpa_cli.errors import SherpaError
+
+    def attempt() -> str:
+        try:
+            result = load()
+        except SherpaError:
+            return "refused"
+        if after is not None:
+            after(result)
+        return "accepted"
+
+    tally.case(kind)
+    outcome, exc, hung = bounded(attempt)
+    if hung:
+        tally.fail(kind, what, "hang")
+    elif exc is not None:
+        tally.fail(kind, what, exc.__dict__.get("_tb_text", repr(exc)))
+    elif must_fail and outcome != "refused":
+        tally.fail(kind, what, "clearly bad input was accepted")
+
+
 # ---------------------------------------------------------------------------------------------
 # hostile values
 
@@ -191,7 +216,6 @@ def _config_consistent(cfg: Any) -> str | None:
 
 def config_cases(rng: random.Random, tally: Tally) -> None:
     from sherpa_cli.config import load_config_text
-    from sherpa_cli.errors import SherpaError
 
     for rel in NATIVE + ROSPARAM:
         text = (ROOT / rel).read_text()
@@ -216,29 +240,14 @@ def config_cases(rng: random.Random, tally: Tally) -> None:
         for _ in range(n_text):  # text damage
             plans.append((f"{rel} text mutation", text_mutation(rng, text), False))
         for what, body, must_fail in plans:
-            tally.case("config")
-
-            def attempt(body: str = body) -> str | None:
-                try:
-                    cfg = load_config_text(body, "fuzz.yaml")
-                except SherpaError:
-                    return "refused"
-                return _config_consistent(cfg) or "accepted"
-
-            result, exc, hung = bounded(attempt)
-            if hung:
-                tally.fail("config", what, "hang")
-            elif exc is not None:
-                tally.fail("config", what, exc.__dict__.get("_tb_text", repr(exc)))
-            elif must_fail and result != "refused":
-                tally.fail("config", what, "a non-finite number was accepted")
+            judge(tally, "config", what, lambda body=body: load_config_text(body, "fuzz.yaml"), must_fail=must_fail,
+                  after=_config_consistent)
 
 
 # ---------------------------------------------------------------------------------------------
 # recipes and dumps
 
 def recipe_cases(rng: random.Random, tally: Tally, tmp: Path) -> None:
-    from sherpa_cli.errors import SherpaError
     from sherpa_cli.recipes import load_recipe
 
     cases: list[tuple[str, str, bool]] = []
@@ -271,29 +280,17 @@ def recipe_cases(rng: random.Random, tally: Tally, tmp: Path) -> None:
     for body in clearly_bad:
         cases.append((f"clearly bad recipe {body!r}", body, True))
     for i, (what, body, must_fail) in enumerate(cases):
-        tally.case("recipe")
         path = tmp / f"recipe-{i}.yaml"
         path.write_text(body, encoding="utf-8", errors="surrogateescape")
         if must_fail:
+            tally.case("recipe")
             check_cli(tally, "recipe", ["recipe", "check", str(path)], must_fail=True)
             continue
 
-        def attempt(path: Path = path) -> str:
-            try:
-                load_recipe(path)
-            except SherpaError:
-                return "refused"
-            return "accepted"
-
-        _, exc, hung = bounded(attempt)
-        if hung:
-            tally.fail("recipe", what, "hang")
-        elif exc is not None:
-            tally.fail("recipe", what, exc.__dict__.get("_tb_text", repr(exc)))
+        judge(tally, "recipe", what, lambda path=path: load_recipe(path))
 
 
 def dump_cases(rng: random.Random, tally: Tally, tmp: Path) -> None:
-    from sherpa_cli.errors import SherpaError
     from sherpa_cli.ops.params_file import dump_from_text
 
     good = tmp / "good-dump.yaml"
@@ -311,20 +308,7 @@ def dump_cases(rng: random.Random, tally: Tally, tmp: Path) -> None:
     for _ in range(30):
         cases.append(("dump text mutation", text_mutation(rng, DUMP)))
     for what, body in cases:
-        tally.case("dump")
-
-        def attempt(body: str = body) -> str:
-            try:
-                dump_from_text(body, "fuzz-dump.yaml")
-            except SherpaError:
-                return "refused"
-            return "accepted"
-
-        _, exc, hung = bounded(attempt)
-        if hung:
-            tally.fail("dump", what, "hang")
-        elif exc is not None:
-            tally.fail("dump", what, exc.__dict__.get("_tb_text", repr(exc)))
+        judge(tally, "dump", what, lambda body=body: dump_from_text(body, "fuzz-dump.yaml"))
 
 
 # ---------------------------------------------------------------------------------------------
