@@ -104,7 +104,7 @@ def test_damaged_ledger_is_reported_with_path_and_way_out_before_any_write(cli, 
     ("[" * 100_000 + "]" * 100_000, "nested too deeply"),
 ])
 def test_damaged_sim_state_is_reported_with_path_and_way_out(cli, state, content, problem):
-    assert cli("--sim", "cmd", "shoulder_1a", "AC=150000", "SV", "--apply").exit_code == 0
+    assert cli("--sim", "cmd", "shoulder_1a", "AC=150000", "SV", "--apply", "--raw-save").exit_code == 0
     (path,) = (state / "sim").glob("*.json")
     path.write_text(content)
     result = cli("--sim", "cmd", "shoulder_1a", "AC")
