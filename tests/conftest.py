@@ -10,8 +10,12 @@ that leaves a python-can virtual channel open or a thread running fails.
 
 from __future__ import annotations
 
+import dataclasses
 import io
+import os
 import shlex
+import subprocess
+import sys
 import threading
 import time
 from collections.abc import Callable, Iterator
@@ -20,6 +24,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import pytest
+from arm_harness import ArmProcess, TestBus, parse_test_bus
 
 pytest_plugins = ["pytester"]  # tests/test_state_files.py runs the isolation fixtures on leaky tests
 
@@ -39,8 +44,6 @@ LEAK_GRACE_S = 5.0  # a thread that is ending (joined with a timeout elsewhere) 
 
 
 def _with_test_windows(cfg):
-    import dataclasses
-
     return dataclasses.replace(cfg, protocol=dataclasses.replace(cfg.protocol, **TEST_PROTOCOL_WINDOWS))
 
 
@@ -184,13 +187,6 @@ def golden(request: pytest.FixtureRequest):
 # socketcan:IF,IF,IF; see arm_harness.py and docs/testing.md). Tests marked `realbus` use
 # `arm_cli`; their golden transcripts name the logical command (`sherpa --sim ...`), so the same
 # file must match on every transport.
-
-import dataclasses
-import os
-import subprocess
-import sys
-
-from arm_harness import ArmProcess, TestBus, parse_test_bus
 
 ARM_CONFIG = "configs/sherpa-arm.yaml"
 # global options arm_cli supplies itself: a test giving them would test another arm than the bus's

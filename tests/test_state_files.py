@@ -18,7 +18,6 @@ import threading
 from pathlib import Path
 
 import platformdirs
-import pytest
 
 from sherpa_cli.config import load_config
 from sherpa_cli.ops.save_ledger import SaveLedger

@@ -57,7 +57,7 @@ def show(ctx: typer.Context,
         moves = drive_moves(cfg, d.drive)
         rows = []
         for key, value in d.params.items():
-            text = _il_meaning(value, cfg.il_codes) if key.startswith("IL[") else MEANING.get(key, "")
+            text = _il_meaning(int(value), cfg.il_codes) if key.startswith("IL[") else MEANING.get(key, "")
             rows.append([key, fmt_value(value), text])
         st.out.table(f"{d.drive} ({d.bus}:{d.node}) - {moves}", ["param", "value", "meaning"], rows, right=(1,))
 

@@ -50,7 +50,7 @@ class Reply(NamedTuple):
     """
 
     letters: str
-    index: int
+    index: int  # type: ignore[assignment]  # the field shadows tuple.index, as intended
     value: int | float | None
     is_float: bool
     error_code: int | None = None
@@ -338,7 +338,7 @@ def encode_reply(letters: str, index: int, value: int | float | None, is_float: 
         if header is not None:
             if kind is int and not is_float:
                 return _PACK_INT(header, value)
-            if kind is float and is_float and value - value == 0.0:
+            if kind is float and is_float and value - value == 0.0:  # type: ignore[operator]  # kind says: a float
                 return _PACK_FLOAT(header, value)
     except (struct.error, OverflowError, TypeError):
         pass  # out of range or unhashable: the checked path says what is wrong
@@ -447,7 +447,7 @@ def _load_compiled() -> object | None:
     if os.environ.get("SHERPA_PURE_CODEC", "") not in ("", "0"):
         return None
     try:
-        from sherpa_cli.elmo import _codec_c
+        from sherpa_cli.elmo import _codec_c  # type: ignore[attr-defined]  # built only with a C compiler
     except ImportError:  # built without a C compiler, or for another interpreter
         return None
     _codec_c.bind(_INT_SETS, _FLOAT_SETS, _INT_REPLIES, _FLOAT_REPLIES, Reply, pure_encode_set, pure_decode_reply)

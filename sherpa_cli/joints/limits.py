@@ -183,7 +183,7 @@ def _switch_code(cfg: ArmConfig, sw: SwitchConfig) -> int:
 
 def _il_params(cfg: ArmConfig, drive: str) -> dict[str, int]:
     dmodel = cfg.drives[drive].model
-    inputs = cfg.catalog.drives[dmodel].inputs if dmodel in cfg.catalog.drives else None
+    inputs = cfg.catalog.drives[dmodel].inputs if dmodel is not None and dmodel in cfg.catalog.drives else None
     found: dict[int, tuple[int, SwitchConfig, str]] = {}
     for joint in cfg.joints.values():
         default = _joint_drives(cfg, joint)
@@ -207,7 +207,7 @@ def _il_params(cfg: ArmConfig, drive: str) -> dict[str, int]:
 
 
 def _ordered(values: Mapping[str, ParamValue | None]) -> dict[str, ParamValue]:
-    return {k: values[k] for k in PARAM_ORDER if values.get(k) is not None}
+    return {k: v for k in PARAM_ORDER if (v := values.get(k)) is not None}
 
 
 def _pair_joints(cfg: ArmConfig, pair: PairConfig) -> tuple[JointConfig, JointConfig]:
@@ -366,8 +366,8 @@ def _find_pair(cfg: ArmConfig, pair: str | PairConfig) -> PairConfig:
         return pair
     if pair in cfg.pairs:
         return cfg.pairs[pair]
-    if pair in cfg.joints and cfg.joints[pair].pair in cfg.pairs:
-        return cfg.pairs[cfg.joints[pair].pair]
+    if pair in cfg.joints and (joint_pair := cfg.joints[pair].pair) is not None and joint_pair in cfg.pairs:
+        return cfg.pairs[joint_pair]
     if pair in cfg.drives and cfg.pair_of_drive(pair) is not None:
         return cfg.pair_of_drive(pair)  # type: ignore[return-value]
     raise _unknown("differential pair", pair, cfg.pairs)
@@ -472,14 +472,14 @@ def software_limits(cfg: ArmConfig, name: str) -> dict[str, int | str]:
     if name in cfg.joints:
         joint = cfg.joints[name]
         if joint.role is not JointRole.PLAIN:
-            if joint.pair not in cfg.pairs:
+            if joint.pair is None or joint.pair not in cfg.pairs:
                 raise ConfigError(f"joint {joint.name} is a {joint.role.value} joint without a pair", joint.where)
             return _pair_software(cfg, cfg.pairs[joint.pair])
         return _plain_software(joint)
     if name in cfg.drives:
-        joint = cfg.joint_of_drive(name)
-        if joint is not None:
-            return _plain_software(joint)
+        plain = cfg.joint_of_drive(name)
+        if plain is not None:
+            return _plain_software(plain)
         pair = cfg.pair_of_drive(name)
         if pair is not None:
             return _pair_software(cfg, pair)

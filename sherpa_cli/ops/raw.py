@@ -7,11 +7,14 @@ BG, ST, SV) is only shown as the frame it would send unless ``apply`` is true.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any, Sequence
+from typing import TYPE_CHECKING, Any, Sequence
 
 from sherpa_cli.elmo import codec, faults
 from sherpa_cli.elmo.commands import param_key
 from sherpa_cli.errors import SherpaError
+
+if TYPE_CHECKING:
+    from sherpa_cli.elmo.client import DriveClient
 
 RPDO2_BASE = 0x300
 
@@ -65,7 +68,7 @@ def decode_value(letters: str, value: int | float | None) -> list[str]:
     return []
 
 
-def run_raw(client: Any, node: int, exprs: Sequence[str], *, apply: bool, query_long: bool = False,
+def run_raw(client: DriveClient, node: int, exprs: Sequence[str], *, apply: bool, query_long: bool = False,
             results: list[RawResult] | None = None) -> list[RawResult]:
     """Run the expressions in order on one drive; stop at the first error (it propagates).
 
@@ -81,6 +84,7 @@ def run_raw(client: Any, node: int, exprs: Sequence[str], *, apply: bool, query_
             result.decoded = decode_value(request.letters, result.value)
         elif apply:
             if request.kind == "set":
+                assert request.value is not None  # a set request carries its value
                 client.set(request.letters, request.index, request.value)
             else:
                 client.execute(request.letters, request.index)
