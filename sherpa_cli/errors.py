@@ -87,6 +87,26 @@ class DriveTimeoutError(CommunicationError, TimeoutError):
     """A drive did not answer in time; names the drive and what was asked."""
 
 
+class SdoError(CommunicationError):
+    """An SDO transfer failed (exit 3): ``reason`` is "timeout", "abort" (``abort_code`` set),
+    "malformed" (an answer that is not a valid SDO reply) or "bus" (the request could not be sent).
+
+    ``detail`` is the message without the drive's label, for a note in a row that names the drive.
+    """
+
+    def __init__(self, message: str, *, detail: str, reason: str, drive: str | None = None,
+                 node: int | None = None, index: int | None = None, sub: int | None = None,
+                 abort_code: int | None = None, hint: str | None = None) -> None:
+        super().__init__(message, hint=hint)
+        self.detail = detail
+        self.reason = reason
+        self.drive = drive
+        self.node = node
+        self.index = index
+        self.sub = sub
+        self.abort_code = abort_code
+
+
 class DriveRefusedError(SherpaError):
     """A drive answered with an Elmo error code (exit 4)."""
 

@@ -122,19 +122,25 @@ class CliResult:
 
 @pytest.fixture
 def cli_windows(monkeypatch: pytest.MonkeyPatch) -> Callable[[bool], None]:
-    """``cli_windows(short)``: whether the sessions the cli fixture's commands open use
-    TEST_PROTOCOL_WINDOWS (the default) or the windows of the config as written (a simulator in
-    another process has those). What a command prints from its config stays as written."""
+    """``cli_windows(short)``: whether the in-process simulated arm the cli fixture's commands
+    build (SimArm.in_process) and their sessions (ArmSession.open) use TEST_PROTOCOL_WINDOWS
+    (the default) or the windows of the config as written (a simulator in another process has
+    those). Both sides get the same windows; what a command prints from its config stays as written."""
     from sherpa_cli.ops.session import ArmSession
+    from sherpa_cli.sim.arm import SimArm
 
-    written = ArmSession.__dict__["open"]  # the classmethod itself
-    original = ArmSession.open
+    written = {cls: cls.__dict__[name] for cls, name in ((ArmSession, "open"), (SimArm, "in_process"))}
+    open_session, in_process = ArmSession.open, SimArm.in_process
 
     def open_short(cfg, *args, **kwargs):
-        return original(_with_test_windows(cfg), *args, **kwargs)
+        return open_session(_with_test_windows(cfg), *args, **kwargs)
+
+    def in_process_short(cfg):
+        return in_process(_with_test_windows(cfg))
 
     def choose(short: bool) -> None:
-        monkeypatch.setattr(ArmSession, "open", staticmethod(open_short) if short else written)
+        monkeypatch.setattr(ArmSession, "open", staticmethod(open_short) if short else written[ArmSession])
+        monkeypatch.setattr(SimArm, "in_process", staticmethod(in_process_short) if short else written[SimArm])
 
     return choose
 

@@ -12,6 +12,7 @@ from sherpa_cli.bus.parallel import run_concurrently
 from sherpa_cli.config import load_config
 from sherpa_cli.errors import CommunicationError, UsageError
 from sherpa_cli.ops.session import ArmSession, resolve_target
+from sherpa_cli.sim.arm import SimArm
 
 
 def test_bus_map_parses_several_forms():
@@ -81,7 +82,7 @@ def test_paced_network_keeps_the_send_gap():
 def test_a_joint_stops_at_its_hard_stop(tmp_path, monkeypatch):
     monkeypatch.setenv("XDG_STATE_HOME", str(tmp_path))
     cfg = load_config("configs/appendix-c/example1.yaml")
-    with ArmSession.open(cfg, sim=True) as session:
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as session:
         client = session.client(resolve_target(cfg, "drive1"))
         client.nmt_start()
         client.set("IL", 3, 4)  # switches off: only the mechanics stop the joint now

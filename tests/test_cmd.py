@@ -9,6 +9,7 @@ import pytest
 from sherpa_cli.config import load_config
 from sherpa_cli.ops.raw import run_raw
 from sherpa_cli.ops.session import ArmSession, resolve_target
+from sherpa_cli.sim.arm import SimArm
 
 # Meaningful on a real bus: run through arm_cli, so also over python-can-remote and vcan.
 ARM_CASES = [
@@ -70,7 +71,7 @@ def test_dry_run_sends_no_set_and_no_execute(tmp_path, monkeypatch):
     monkeypatch.setenv("XDG_STATE_HOME", str(tmp_path))
     cfg = load_config("configs/sherpa-arm.yaml")
     ref = resolve_target(cfg, "shoulder_1a")
-    with ArmSession.open(cfg, sim=True, buses=["can0"]) as session:
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg), buses=["can0"]) as session:
         client = session.client(ref)
         client.nmt_start()
         results = run_raw(client, ref.node, ["AC=150000", "PX", "BG", "SV", "LL[3]=-5"], apply=False)

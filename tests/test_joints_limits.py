@@ -17,7 +17,7 @@ from sherpa_cli.config.model import (ArmConfig, BusConfig, CurrentLimits, DriveC
 from sherpa_cli.errors import ConfigError, Location, UsageError
 from sherpa_cli.joints.currents import Finding, check_currents, validate_params
 from sherpa_cli.joints.limits import (PARAM_ORDER, DriveParams, derive_all, derive_checked,
-                                      derive_drive_params, explain_pair, resolve_drives,
+                                      derive_drive_params, explain_pair,
                                       software_limits)
 
 
@@ -200,7 +200,7 @@ def test_pair_speed_accel_and_current_rule():
 
 def test_half_configured_pair_speed_is_left_out_with_a_warning():
     cfg = example3(sigma_kw=dict(vel_limit=1000))
-    derived, warnings = derive_checked(cfg, ["wrist"])
+    derived, warnings = derive_checked(cfg, ["wa", "wb"])
     assert all("VL[2]" not in d.params for d in derived)
     assert any("vel_limit" in w and "roll" in w for w in warnings)
 
@@ -222,7 +222,7 @@ def test_explain_pair():
     assert ex.motor_speed_limit == 75 and ex.motor_speed_trip is None
     assert "floor((220 + 160)/2)" in ex.rule and "necessary, not sufficient" in ex.rule
     assert ex.as_dict()["motor_a_full"] == [-190, 190]
-    assert explain_pair(example3(), "pitch").pair == "wrist"
+    assert explain_pair(example3(), example3().pairs["wrist"]).pair == "wrist"
     with pytest.raises(UsageError) as info:
         explain_pair(example3(), "wirst")
     assert "wrist" in (info.value.hint or "")
@@ -255,13 +255,14 @@ def test_resolve_names():
                joint("roll", None, role=JointRole.DELTA, pair="wrist", full=(-160, 160))],
               [PairConfig("wrist", "wa", "wb", "pitch", "roll")],
               [drive("d1", 10), drive("wa", 20), drive("wb", 30)])
-    assert resolve_drives(cfg) == ["d1", "wa", "wb"]
-    assert resolve_drives(cfg, ["roll", "elbow", "wa"]) == ["wa", "wb", "d1"]
-    assert [d.drive for d in derive_all(cfg, ["wrist"])] == ["wa", "wb"]
+    # joint and pair names are resolved by sherpa_cli.ops.targets (tests/test_targets.py)
+    assert [d.drive for d in derive_all(cfg, ["wb", "wa", "wb"])] == ["wb", "wa"]
     assert [d.drive for d in derive_all(cfg)] == ["d1", "wa", "wb"]
     with pytest.raises(UsageError) as info:
-        derive_all(cfg, ["elbw"])
-    assert "elbw" in info.value.message and "elbow" in (info.value.hint or "")
+        derive_all(cfg, ["d2"])
+    assert "d2" in info.value.message and "d1" in (info.value.hint or "")
+    with pytest.raises(UsageError, match="unknown drive 'wrist'"):
+        derive_all(cfg, ["wrist"])
     with pytest.raises(UsageError):
         derive_drive_params(cfg, "nope")
     with pytest.raises(UsageError):

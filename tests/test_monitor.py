@@ -12,8 +12,10 @@ import yaml
 
 from sherpa_cli.config import load_config
 from sherpa_cli.config.model import SimDriveConfig
-from sherpa_cli.ops.monitor import Monitor, resolve_targets
+from sherpa_cli.ops.monitor import Monitor
+from sherpa_cli.ops.targets import drive_refs as resolve_targets
 from sherpa_cli.ops.session import ArmSession
+from sherpa_cli.sim.arm import SimArm
 
 ROOT = Path(__file__).resolve().parent.parent
 ARM = ROOT / "configs" / "sherpa-arm.yaml"
@@ -119,7 +121,7 @@ def _open(tmp_path, monkeypatch, **faults):
     monkeypatch.setenv("XDG_STATE_HOME", str(tmp_path))
     cfg = load_config(ARM)
     cfg = dataclasses.replace(cfg, sim={name: SimDriveConfig(**f) for name, f in faults.items()})
-    return cfg, ArmSession.open(cfg, sim=True, buses=["can1"])
+    return cfg, ArmSession.open(cfg, sim=SimArm.in_process(cfg), buses=["can1"])
 
 
 def _until(condition, timeout=5.0):

@@ -19,6 +19,7 @@ from sherpa_cli.ops.params_file import (IDENTITY_KEYS, DriveDump, ParamDump, dum
                                         read_dump, write_dump)
 from sherpa_cli.ops.params_read import dump_meta, dump_params, read_live
 from sherpa_cli.ops.session import ArmSession
+from sherpa_cli.sim.arm import SimArm
 
 ARM = "configs/sherpa-arm.yaml"
 DATE = "2024-05-02T10:00:00Z"
@@ -195,7 +196,7 @@ COMMISSIONED = ["shoulder_1b", "shoulder_2a", "shoulder_2b", "elbow_1a"]  # swit
 def test_commissioned_drives_match_the_config_and_one_change_shows_as_one(tmp_path, monkeypatch):
     monkeypatch.setenv("XDG_STATE_HOME", str(tmp_path / "state"))
     cfg = load_config(ARM)
-    with ArmSession.open(cfg, sim=True) as session:
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as session:
         from sherpa_cli.elmo.commands import parse_param_key
         from sherpa_cli.ops.params_read import ref_of
 
@@ -228,7 +229,7 @@ def test_commissioned_drives_match_the_config_and_one_change_shows_as_one(tmp_pa
 def test_a_drive_dying_half_way_names_itself(tmp_path, monkeypatch):
     monkeypatch.setenv("XDG_STATE_HOME", str(tmp_path / "state"))
     cfg = load_config(ARM)
-    with ArmSession.open(cfg, sim=True, buses=["can1"]) as session:
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg), buses=["can1"]) as session:
         def progress(drive, what):
             if (drive, what) == ("elbow_1b", "LL[3]"):
                 with session.sim.lock:

@@ -20,6 +20,7 @@ from sherpa_cli.ops import program
 from sherpa_cli.ops.program import DriveTarget, write_order
 from sherpa_cli.ops.save_ledger import SaveLedger, save_warning
 from sherpa_cli.ops.session import ArmSession, DriveRef
+from sherpa_cli.sim.arm import SimArm
 
 ROOT = Path(__file__).resolve().parent.parent
 EXAMPLE3 = "configs/appendix-c/example3.yaml"
@@ -165,7 +166,7 @@ def test_save_ledger_counts_per_serial_and_warns(tmp_path):
 # --------------------------------------------------------------------------- on the simulated arm
 
 def test_dry_run_sends_no_write(state_home, cfg3):
-    with ArmSession.open(cfg3, sim=True) as session:
+    with ArmSession.open(cfg3, sim=SimArm.in_process(cfg3)) as session:
         plans = program.read_plans(session, targets_of(cfg3), need_serial=True)
         drives = session.sim.drives
         assert all(p.ok and len(p.changes) == 17 for p in plans)
@@ -177,7 +178,7 @@ def test_dry_run_sends_no_write(state_home, cfg3):
 
 def test_apply_writes_exactly_the_changed_values_in_a_consistent_order(state_home, cfg3):
     targets = targets_of(cfg3)
-    with ArmSession.open(cfg3, sim=True) as session:
+    with ArmSession.open(cfg3, sim=SimArm.in_process(cfg3)) as session:
         c1 = client(session, "drive1")
         c1.nmt_start()
         c1.set("AC", 0, 500)  # already right: must not be written again
@@ -206,11 +207,11 @@ def test_apply_writes_exactly_the_changed_values_in_a_consistent_order(state_hom
 
 def test_second_apply_save_on_a_programmed_arm_writes_nothing_and_sends_no_sv(state_home, cfg3):
     targets = targets_of(cfg3)
-    with ArmSession.open(cfg3, sim=True) as session:
+    with ArmSession.open(cfg3, sim=SimArm.in_process(cfg3)) as session:
         plans = program.read_plans(session, targets, need_serial=True)
         first = program.apply_plans(session, plans, save=True, ledger=SaveLedger())
         assert [o.status for o in first.outcomes] == ["saved", "saved"]
-    with ArmSession.open(cfg3, sim=True) as session:  # a new power cycle: only flash survived
+    with ArmSession.open(cfg3, sim=SimArm.in_process(cfg3)) as session:  # a new power cycle: only flash survived
         mark = {n: len(d.received) for n, d in session.sim.drives.items()}
         plans = program.read_plans(session, targets, need_serial=True)
         assert all(p.changes == [] for p in plans)
@@ -227,7 +228,7 @@ def test_apply_then_save_in_a_later_run_saves_what_ram_holds(state_home, cfg3):
     # change, yet flash holds the old values. The ledger makes the second run send SV, once.
     targets = targets_of(cfg3)
     ledger = SaveLedger()
-    with ArmSession.open(cfg3, sim=True) as session:
+    with ArmSession.open(cfg3, sim=SimArm.in_process(cfg3)) as session:
         plans = program.read_plans(session, targets, need_serial=True)
         applied = program.apply_plans(session, plans, save=False, ledger=ledger)
         assert [o.status for o in applied.outcomes] == ["programmed", "programmed"]
@@ -251,7 +252,7 @@ def test_apply_then_save_in_a_later_run_saves_what_ram_holds(state_home, cfg3):
         result = program.apply_plans(session, third, save=True, ledger=ledger)
         assert [o.status for o in result.outcomes] == ["unchanged", "unchanged"]
         assert all(d.save_count == 1 for d in session.sim.drives.values())
-    with ArmSession.open(cfg3, sim=True) as session:  # power cycle: the saved values are in flash
+    with ArmSession.open(cfg3, sim=SimArm.in_process(cfg3)) as session:  # power cycle: the saved values are in flash
         plans = program.read_plans(session, targets)
         assert all(p.changes == [] for p in plans)
 
@@ -266,7 +267,7 @@ def test_an_adapter_error_on_one_drive_keeps_the_other_drives_report(state_home,
     import can
 
     targets = targets_of(cfg3)
-    with ArmSession.open(cfg3, sim=True) as session:
+    with ArmSession.open(cfg3, sim=SimArm.in_process(cfg3)) as session:
         plans = program.read_plans(session, targets, need_serial=True)
         bad = program._client(session, targets[1])
         real_set = bad.set
@@ -287,7 +288,7 @@ def test_an_adapter_error_on_one_drive_keeps_the_other_drives_report(state_home,
 
 def test_read_back_mismatch_stops_that_drive_without_sv(state_home, cfg3):
     targets = targets_of(cfg3)
-    with ArmSession.open(cfg3, sim=True) as session:
+    with ArmSession.open(cfg3, sim=SimArm.in_process(cfg3)) as session:
         _skew(session, "drive2", "LL[3]", 1)
         plans = program.read_plans(session, targets, need_serial=True)
         result = program.apply_plans(session, plans, save=True, ledger=SaveLedger())
@@ -305,7 +306,7 @@ def test_read_back_mismatch_stops_that_drive_without_sv(state_home, cfg3):
 
 def test_sv_only_after_verification_and_values_survive_an_nmt_reset(state_home, cfg3):
     targets = targets_of(cfg3)
-    with ArmSession.open(cfg3, sim=True) as session:
+    with ArmSession.open(cfg3, sim=SimArm.in_process(cfg3)) as session:
         plans = program.read_plans(session, targets, need_serial=True)
         result = program.apply_plans(session, plans, save=True, ledger=SaveLedger())
         assert result.ok
@@ -328,7 +329,7 @@ def test_sv_only_after_verification_and_values_survive_an_nmt_reset(state_home, 
 
 
 def test_without_save_an_nmt_reset_loses_the_values(state_home, cfg3):
-    with ArmSession.open(cfg3, sim=True) as session:
+    with ArmSession.open(cfg3, sim=SimArm.in_process(cfg3)) as session:
         plans = program.read_plans(session, targets_of(cfg3, ["drive1"]))
         assert program.apply_plans(session, plans).ok
         c1 = client(session, "drive1")
@@ -340,7 +341,7 @@ def test_without_save_an_nmt_reset_loses_the_values(state_home, cfg3):
 
 def test_motor_on_is_refused_without_motor_off(state_home, cfg3):
     targets = targets_of(cfg3)
-    with ArmSession.open(cfg3, sim=True) as session:
+    with ArmSession.open(cfg3, sim=SimArm.in_process(cfg3)) as session:
         c1 = client(session, "drive1")
         c1.nmt_start()
         c1.motor_on()
@@ -373,7 +374,7 @@ def test_sv_without_an_answer_after_it_is_reported_as_sent_and_counted(state_hom
 
     monkeypatch.setattr(DriveClient, "save", save_then_silence)
     targets = targets_of(cfg3)
-    with ArmSession.open(cfg3, sim=True) as session:
+    with ArmSession.open(cfg3, sim=SimArm.in_process(cfg3)) as session:
         plans = program.read_plans(session, targets, need_serial=True)
         ledger = SaveLedger()
         result = program.apply_plans(session, plans, save=True, ledger=ledger)
@@ -391,12 +392,12 @@ def test_a_ledger_that_cannot_be_written_does_not_hide_the_saves(state_home, cfg
     blocker.write_text("x")
     ledger = SaveLedger(blocker / "save-ledger.json")  # its directory cannot be created
     targets = targets_of(cfg3)
-    with ArmSession.open(cfg3, sim=True) as session:
+    with ArmSession.open(cfg3, sim=SimArm.in_process(cfg3)) as session:
         plans = program.read_plans(session, targets, need_serial=True)
         result = program.apply_plans(session, plans, ledger=ledger)
         assert result.ok and all(o.status == "programmed" for o in result.outcomes)
         assert all("save ledger" in o.save_warning and "not updated" in o.save_warning for o in result.outcomes)
-    with ArmSession.open(cfg3, sim=True) as session:  # a new power-up: RAM holds the old values again
+    with ArmSession.open(cfg3, sim=SimArm.in_process(cfg3)) as session:  # a new power-up: RAM holds the old values again
         plans = program.read_plans(session, targets, need_serial=True)
         result = program.apply_plans(session, plans, save=True, ledger=ledger)
         assert result.ok and all(o.status == "saved" and o.saved for o in result.outcomes)
@@ -414,7 +415,7 @@ def test_interrupt_from_progress_callback_leaves_no_drive_saved(state_home, cfg3
             if len(seen) == 5:
                 raise KeyboardInterrupt
 
-    with ArmSession.open(cfg3, sim=True) as session:
+    with ArmSession.open(cfg3, sim=SimArm.in_process(cfg3)) as session:
         plans = program.read_plans(session, targets, need_serial=True)
         result = program.apply_plans(session, plans, save=True, ledger=SaveLedger(), on_event=on_event)
         assert result.interrupted and not result.ok
@@ -437,7 +438,7 @@ def test_ctrl_c_in_the_waiting_thread_stops_drives_at_a_safe_point(state_home, c
             # what Ctrl-C does: SIGINT to the main thread, which is waiting for the drives
             signal.pthread_kill(threading.main_thread().ident, signal.SIGINT)
 
-    with ArmSession.open(cfg3, sim=True) as session:
+    with ArmSession.open(cfg3, sim=SimArm.in_process(cfg3)) as session:
         plans = program.read_plans(session, targets, need_serial=True)
         result = program.apply_plans(session, plans, save=True, ledger=SaveLedger(), on_event=on_event)
         assert result.interrupted
@@ -451,7 +452,7 @@ def test_ctrl_c_in_the_waiting_thread_stops_drives_at_a_safe_point(state_home, c
 
 def test_an_unknown_name_is_refused_before_any_bus_is_opened(cli, cfg3):
     r = cli("--config", EXAMPLE3, "--sim", "program-limits", "drive9")
-    assert r.exit_code == 2 and "unknown joint, pair or drive 'drive9'" in r.stderr
+    assert r.exit_code == 2 and "unknown target 'drive9'" in r.stderr
 
 
 # --------------------------------------------------------------------------- CLI

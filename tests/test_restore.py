@@ -15,6 +15,7 @@ from sherpa_cli.ops.params_file import read_dump, write_dump
 from sherpa_cli.ops.restore import restore_targets
 from sherpa_cli.ops.session import ArmSession
 from sherpa_cli.elmo import codec
+from sherpa_cli.sim.arm import SimArm
 
 ROOT = Path(__file__).resolve().parent.parent
 EXAMPLE3 = "configs/appendix-c/example3.yaml"
@@ -149,7 +150,7 @@ def sdo_downloads(drive) -> list[bytes]:
 
 def test_restore_writes_only_changes_never_identity_and_the_mode_first(state_home, tmp_path, monkeypatch):
     cfg = load_config(ROOT / EXAMPLE3)
-    with ArmSession.open(cfg, sim=True) as session:
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as session:
         serials = {n: d.serial for n, d in session.sim.drives.items()}
     from sherpa_cli.ops.params_file import DriveDump, ParamDump
 
@@ -162,7 +163,7 @@ def test_restore_writes_only_changes_never_identity_and_the_mode_first(state_hom
     targets, warnings = restore_targets(cfg, read_dump(path), path)
     assert dict(targets[0].skipped) == {"MC": "read-only", "PX": "position counter; restoring it would shift "
                                         "the joint's position"}
-    with ArmSession.open(cfg, sim=True) as session:
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as session:
         plans = program.read_plans(session, targets, need_serial=True)
         program.check_apply(plans, motor_off=False)
         result = program.apply_plans(session, plans)

@@ -12,6 +12,7 @@ import yaml
 from sherpa_cli.config import load_config
 from sherpa_cli.ops.scan import NODE_IDS, BusProber, ScanSettings, decode_device_type, scan
 from sherpa_cli.ops.session import ArmSession
+from sherpa_cli.sim.arm import SimArm
 
 ROOT = Path(__file__).resolve().parent.parent
 ARM = ROOT / "configs" / "sherpa-arm.yaml"
@@ -118,7 +119,7 @@ def test_extra_node_on_unknown_bus_is_a_config_error(cli, tmp_path, monkeypatch)
 def test_scan_writes_nothing_and_reads_only_identity(tmp_path, monkeypatch):
     monkeypatch.setenv("XDG_STATE_HOME", str(tmp_path))
     cfg = load_config(ARM)
-    with ArmSession.open(cfg, sim=True) as session:
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as session:
         report = scan(session)
         drives = session.sim.drives.values()
         frames = [(can_id, data) for d in drives for _, can_id, data in d.received]
@@ -225,17 +226,16 @@ def test_sdo_timeout_comes_from_the_config(tmp_path):
     import dataclasses
 
     from sherpa_cli.config import load_config
-    from sherpa_cli.ops.scan import sdo_upload
+    from sherpa_cli.errors import SdoError
+    from sherpa_cli.ops.sdo import sdo_upload
     from sherpa_cli.ops.session import ArmSession
 
     cfg = load_config("configs/appendix-c/example1.yaml")
     cfg = dataclasses.replace(cfg, protocol=dataclasses.replace(cfg.protocol, sdo_timeout=0.05))
-    with ArmSession.open(cfg, sim=True) as session:
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as session:
         network = next(iter(session.links.values())).network
         assert network.sdo_timeout == 0.05
         import time
-
-        from canopen.sdo.exceptions import SdoError
 
         t0 = time.monotonic()
         with pytest.raises(SdoError):

@@ -16,6 +16,7 @@ from __future__ import annotations
 import json
 import threading
 import time
+import uuid
 from contextlib import contextmanager
 from pathlib import Path
 
@@ -67,12 +68,13 @@ def example(name: str, extra: str = FAST):
 @contextmanager
 def sim_session(cfg, clock: ManualClock | None = None):
     """The session's simulated arm; with ``clock`` its drives live in that clock's time, not real time."""
-    factory = None
-    if clock is not None:
-        def factory(cfg, channels):
-            return SimArm(cfg, {bus: {"interface": "virtual", "channel": ch} for bus, ch in channels.items()},
-                          clock=clock)
-    with ArmSession.open(cfg, sim=True, sim_factory=factory) as session:
+    if clock is None:
+        arm = SimArm.in_process(cfg)
+    else:
+        token = uuid.uuid4().hex[:8]  # virtual channels are process-wide
+        arm = SimArm(cfg, {bus: {"interface": "virtual", "channel": f"e2e-{token}-{bus}"} for bus in cfg.buses},
+                     clock=clock)
+    with ArmSession.open(cfg, sim=arm) as session:
         yield session
         assert session.sim.errors == [], "a simulator pump thread died"
 

@@ -189,6 +189,7 @@ def test_the_isolation_fixtures_catch_leaks_and_user_state(pytester):
 def test_cli_sessions_on_the_simulated_arm_use_the_short_protocol_windows(cli, monkeypatch):
     from conftest import TEST_PROTOCOL_WINDOWS
 
+    from sherpa_cli.ops.session import ArmSession
     from sherpa_cli.sim.arm import SimArm
 
     seen = []
@@ -199,8 +200,16 @@ def test_cli_sessions_on_the_simulated_arm_use_the_short_protocol_windows(cli, m
         return factory(cls, cfg, channels)
 
     monkeypatch.setattr(SimArm, "for_session", classmethod(capture))
+    init = ArmSession.__init__  # the simulated arm and the session (its clients) must agree
+
+    def session_init(self, cfg, *args, **kwargs):
+        seen.append(cfg.protocol)
+        init(self, cfg, *args, **kwargs)
+
+    monkeypatch.setattr(ArmSession, "__init__", session_init)
     result = cli("--sim", "cmd", "elbow_1a", "PX")
     assert result.exit_code == 0, result.transcript()
-    assert [(p.mo_settle, p.sv_blackout) for p in seen] == [tuple(TEST_PROTOCOL_WINDOWS.values())]
+    windows = tuple(TEST_PROTOCOL_WINDOWS.values())
+    assert [(p.mo_settle, p.sv_blackout) for p in seen] == [windows, windows]
     # what a command prints from the config stays as written
     assert "sv_blackout" not in cli("config", "convert", "configs/seed-d1.yaml").stdout  # defaults: not written

@@ -3,8 +3,7 @@
 This is how a second terminal reaches ``sherpa sim --serve`` (``remote`` interface), how a
 developer uses kernel ``vcan`` (``socketcan:vcan0``), and how ``--sim`` maps every bus to an
 in-process ``virtual`` channel. The result is a plain python-can configuration: no bus
-type is special-cased anywhere else (``virtual`` only gets a leaner class with the same
-delivery rules, bus/virtual.py).
+type is special-cased anywhere else.
 """
 
 from __future__ import annotations

@@ -26,9 +26,11 @@ def _paced_network_class():
         frame of this tool goes through it.
         """
 
-        #: canopen's receive thread wakes this often to see whether it must stop; its default
-        #: 1 s made every command wait up to a second when it closed its buses
-        NOTIFIER_CYCLE = 0.1
+        #: canopen's receive thread wakes this often to see whether it must stop (canopen's
+        #: documented class attribute; its default is 1 s). Closing a session waits for it once
+        #: for all buses together (close_links), so a short cycle makes closing cost milliseconds;
+        #: an idle wake-up is one empty queue/socket read.
+        NOTIFIER_CYCLE = 0.02
         #: seconds between two frames sent by this tool on the bus (config: send_interval_us)
         gap: float = 0.0
         #: attempts when the kernel's socket buffer is full (ENOBUFS, python-can issue #2004)
@@ -91,12 +93,10 @@ class BusLink:
 def open_bus(cfg: BusConfig) -> Any:
     import can
 
-    from sherpa_cli.bus.virtual import open_can_bus
-
     kwargs = bus_kwargs(cfg)
     where = f"bus {cfg.name} ({kwargs.get('interface', 'python-can config')}:{kwargs.get('channel', '-')})"
     try:
-        return open_can_bus(**kwargs)
+        return can.Bus(**kwargs)
     except (can.CanError, OSError, ValueError, ImportError, TypeError) as exc:
         raise CommunicationError(f"{where}: cannot open: {exc}",
                                  hint="check the adapter is plugged in and up (ip link), or use --sim") from exc
@@ -124,6 +124,21 @@ def open_links(cfg: ArmConfig, names: Iterable[str] | None = None) -> dict[str, 
 
 
 def close_links(links: Mapping[str, BusLink]) -> None:
+    """Close every bus; the receive threads of all buses wind down together.
+
+    First every network's notifier is told to stop without waiting (``Notifier.stop(timeout=0)``:
+    it flags its threads and joins none), so each receive thread ends at its next wake-up, all
+    at the same time; then each network disconnects (its own ``notifier.stop`` now finds the
+    thread ending or gone) and shuts its bus down. One receive cycle for the session, not one
+    per bus in turn.
+    """
+    for link in links.values():
+        notifier = getattr(link.network, "notifier", None)
+        if notifier is not None:
+            try:
+                notifier.stop(timeout=0)
+            except Exception:  # closing must not hide the error that made us close
+                pass
     for link in links.values():
         try:
             link.network.disconnect()

@@ -7,6 +7,7 @@ from typing import List
 import typer
 
 from sherpa_cli.cli.context import state
+from sherpa_cli.cli.options import ApplyRaw
 from sherpa_cli.cli.output import fmt_value
 
 
@@ -15,8 +16,7 @@ def cmd(
     target: str = typer.Argument(..., metavar="TARGET", help="Drive or joint name from the config, or BUS:NODE."),
     exprs: List[str] = typer.Argument(..., metavar="EXPR...",
                                       help='Elmo commands: PX (query), "LL[3]" (query), AC=150000 (set), BG (execute).'),
-    apply: bool = typer.Option(False, "--apply", help="Send sets and execute commands; without it they are "
-                               "only shown as the frame that would be sent (queries are always sent)."),
+    apply: ApplyRaw = False,
 ) -> None:
     """Send raw two-letter Elmo commands to one drive and show the answers, decoded where possible.
 
@@ -30,11 +30,11 @@ def cmd(
     """
     from sherpa_cli.errors import SherpaError
     from sherpa_cli.ops.raw import parse_all, run_raw
-    from sherpa_cli.ops.session import resolve_target
+    from sherpa_cli.ops.targets import single_drive
 
     st = state(ctx)
     cfg = st.load_config()
-    ref = resolve_target(cfg, target)
+    ref = single_drive(cfg, target)
     parse_all(exprs)  # a typo must not reach the bus, not even the NMT start
     done: list = []
     error: SherpaError | None = None

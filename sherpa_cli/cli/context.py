@@ -50,7 +50,12 @@ class AppState:
                              "to the in-process simulator")
         if mapping and not self.sim:
             cfg = apply_bus_map(cfg, mapping)
-        with ArmSession.open(cfg, sim=self.sim, buses=buses) as session:
+        arm = None
+        if self.sim:
+            from sherpa_cli.sim.arm import SimArm
+
+            arm = SimArm.in_process(cfg)  # injected: ops never import the simulator
+        with ArmSession.open(cfg, sim=arm, buses=buses) as session:
             yield session
 
     def load_config(self, path: Path | None = None) -> "ArmConfig":

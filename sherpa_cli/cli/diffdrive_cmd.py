@@ -18,9 +18,11 @@ PairArg = typer.Argument(..., metavar="PAIR", help="Pair name, or its Σ/Δ join
 def limits(ctx: typer.Context, pair: str = PairArg) -> None:
     """Show a pair's Σ/Δ ranges and the motor ranges derived from them, with the rule used."""
     from sherpa_cli.joints.limits import explain_pair
+    from sherpa_cli.ops.targets import pair_of
 
     st = state(ctx)
-    ex = explain_pair(st.load_config(), pair)
+    cfg = st.load_config()
+    ex = explain_pair(cfg, pair_of(cfg, pair))
     if st.json_mode:
         st.out.json(ex.as_dict())
         return
@@ -70,10 +72,11 @@ def convert(
     """
     from sherpa_cli.joints import diffpair, units
     from sherpa_cli.joints.limits import explain_pair
+    from sherpa_cli.ops.targets import pair_of
 
     st = state(ctx)
     cfg = st.load_config()
-    ex = explain_pair(cfg, pair)
+    ex = explain_pair(cfg, pair_of(cfg, pair))
     if unit not in ("counts", "rad"):
         raise UsageError(f"--unit: '{unit}' is not a unit here; expected 'counts' or 'rad'")
     joint_given = sigma is not None or delta is not None

@@ -2,17 +2,16 @@
 
 from __future__ import annotations
 
-from typing import List, Optional
 
 import typer
 
 from sherpa_cli.cli.context import state
+from sherpa_cli.cli.options import Targets
 from sherpa_cli.cli.output import fmt_value
 
 def identify(
     ctx: typer.Context,
-    targets: Optional[List[str]] = typer.Argument(
-        None, metavar="[TARGET]...", help="Drive, joint or pair names, or BUS:NODE; default: every configured drive."),
+    targets: Targets = None,
 ) -> None:
     """Read who each drive is (SDO 0x1000, 0x1008, 0x1009, 0x100A, 0x1018) and its state (MO, UM, SR, MF, PX).
 
@@ -28,11 +27,11 @@ def identify(
     """
     from sherpa_cli.errors import ExitCode
     from sherpa_cli.ops.identify import identify as run_identify
-    from sherpa_cli.ops.params_read import resolve_drive_names
+    from sherpa_cli.ops.targets import drive_names
 
     st = state(ctx)
     cfg = st.load_config()
-    drives = resolve_drive_names(cfg, targets)
+    drives = drive_names(cfg, targets)
     buses = sorted({cfg.drives[d].bus for d in drives})
     with st.session(buses=buses) as session:
         report = run_identify(session, drives)
@@ -53,7 +52,7 @@ def _hex(value, width: int = 8) -> str:
 
 def _render(st, report) -> None:
     from sherpa_cli.elmo import faults
-    from sherpa_cli.ops.scan import VENDORS
+    from sherpa_cli.ops.canopen_names import VENDORS
 
     if st.json_mode:
         st.out.json(report.as_json())

@@ -2,11 +2,11 @@
 
 from __future__ import annotations
 
-from typing import List, Optional
 
 import typer
 
 from sherpa_cli.cli.context import state
+from sherpa_cli.cli.options import Targets
 from sherpa_cli.cli.output import fmt_value
 
 app = typer.Typer(no_args_is_help=True, help="Drive limits derived from the config (seed Appendix C).")
@@ -39,14 +39,14 @@ def _il_meaning(value: int, il_codes) -> str:
 
 @app.command("show")
 def show(ctx: typer.Context,
-         names: Optional[List[str]] = typer.Argument(None, metavar="[JOINT|DRIVE|PAIR]...",
-                                                     help="What to show; default: every drive.")) -> None:
+         names: Targets = None) -> None:
     """Show the parameters Appendix C derives for each drive (nothing is sent to a drive)."""
     from sherpa_cli.joints.limits import derive_checked
+    from sherpa_cli.ops.targets import drive_names
 
     st = state(ctx)
     cfg = st.load_config()
-    derived, warnings = derive_checked(cfg, names or None)
+    derived, warnings = derive_checked(cfg, drive_names(cfg, names))
     for w in warnings:
         st.out.warn(w)
     if st.json_mode:

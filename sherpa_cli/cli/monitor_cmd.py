@@ -4,11 +4,12 @@ from __future__ import annotations
 
 import sys
 import time
-from typing import Callable, List, Optional
+from typing import Callable, Optional
 
 import typer
 
 from sherpa_cli.cli.context import state
+from sherpa_cli.cli.options import Targets
 from sherpa_cli.errors import ExitCode, UsageError
 
 # Seconds between polls in the live view; the CLI's sleep goes through here so tests can stop it.
@@ -18,8 +19,7 @@ MAX_INTERVAL = 3600.0  # s between polls of the live view
 
 def monitor(
     ctx: typer.Context,
-    targets: Optional[List[str]] = typer.Argument(None, metavar="[TARGET ...]",
-                                                  help="Drive, joint, pair or BUS:NODE. Default: every drive."),
+    targets: Targets = None,
     once: bool = typer.Option(False, "--once", help="Print one snapshot and exit (no ages or times in it)."),
     interval: float = typer.Option(0.5, "--interval", metavar="S", help="Seconds between polls in the live view."),
     heartbeat: Optional[int] = typer.Option(
@@ -43,7 +43,8 @@ def monitor(
       sherpa monitor shoulder_diff elbow_pitch --interval 0.2
       sherpa --json monitor --once
     """
-    from sherpa_cli.ops.monitor import Monitor, resolve_targets
+    from sherpa_cli.ops.monitor import Monitor
+    from sherpa_cli.ops.targets import drive_refs
 
     st = state(ctx)
     if st.json_mode and not once:
@@ -51,7 +52,7 @@ def monitor(
     if not 0 < interval <= MAX_INTERVAL:  # also refuses nan and inf (time.sleep(inf) overflows)
         raise UsageError(f"--interval {interval}: expected a number of seconds > 0 and <= {MAX_INTERVAL:g}")
     cfg = st.load_config()
-    refs = resolve_targets(cfg, targets or [])
+    refs = drive_refs(cfg, targets)
     buses = list(dict.fromkeys(ref.bus for ref in refs))
     with st.session(buses=buses) as session, Monitor(session, refs, heartbeat_ms=heartbeat) as mon:
         if once:

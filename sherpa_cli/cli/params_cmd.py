@@ -12,15 +12,13 @@ from typing import List, Optional
 import typer
 
 from sherpa_cli.cli.context import state
+from sherpa_cli.cli.options import Targets
 
 app = typer.Typer(no_args_is_help=True, help="Drive parameter sets: compare dumps, the drives and the config.")
 
-TARGETS_HELP = "Drive, joint or pair names, or BUS:NODE; default: every configured drive."
-
-
 def dump_params(
     ctx: typer.Context,
-    targets: Optional[List[str]] = typer.Argument(None, metavar="[TARGET]...", help=TARGETS_HELP),
+    targets: Targets = None,
     output: Optional[Path] = typer.Option(None, "--output", "-o", metavar="FILE",
                                           help="Write the YAML dump to FILE (atomically) instead of stdout."),
 ) -> None:
@@ -38,11 +36,11 @@ def dump_params(
     """
     from sherpa_cli.ops.params_file import drive_block, dump_to_text, write_dump
     from sherpa_cli.ops.params_read import dump_params as read_dump_params
-    from sherpa_cli.ops.params_read import resolve_drive_names
+    from sherpa_cli.ops.targets import drive_names
 
     st = state(ctx)
     cfg = st.load_config()
-    drives = resolve_drive_names(cfg, targets)
+    drives = drive_names(cfg, targets)
     if output is not None and output.is_dir():
         from sherpa_cli.errors import UsageError
 
@@ -92,7 +90,7 @@ def diff(
     """
     from sherpa_cli.errors import ExitCode
     from sherpa_cli.ops import params_diff as pd
-    from sherpa_cli.ops.params_read import resolve_drive_names
+    from sherpa_cli.ops.targets import drive_names
 
     st = state(ctx)
     cfg = st.load_config()
@@ -104,7 +102,7 @@ def diff(
             files[spec], w = pd.file_side(Path(spec), cfg)
             warnings.extend(w)
     if targets:
-        drives = resolve_drive_names(cfg, targets)
+        drives = drive_names(cfg, targets)
     elif files:
         drives = pd.drives_of(list(files.values()), cfg)
     else:

@@ -3,26 +3,22 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any, Callable, List, Optional, Sequence
+from typing import Any, Callable, Sequence
 
 import typer
 
 from sherpa_cli.cli.context import state
 from sherpa_cli.cli.limits_cmd import drive_moves
+from sherpa_cli.cli.options import Apply, MotorOff, Save, Targets, Yes
 from sherpa_cli.cli.output import fmt_value
 
 def program_limits(
     ctx: typer.Context,
-    names: Optional[List[str]] = typer.Argument(None, metavar="[JOINT|PAIR|DRIVE]...",
-                                                help="What to program; default: every drive."),
-    apply: bool = typer.Option(False, "--apply", help="Write the changes; without it nothing is written "
-                               "(not one set, not one SDO download)."),
-    save: bool = typer.Option(False, "--save", help="With --apply: SV once per drive that changed, only "
-                              "after every write of it was read back, then read everything back again."),
-    yes: bool = typer.Option(False, "--yes", "-y", help="Do not ask before saving (needed when stdin is "
-                             "not a terminal: without it --save refuses before writing anything)."),
-    motor_off: bool = typer.Option(False, "--motor-off", help="Switch off (MO=0) a drive whose motor is on "
-                                   "instead of refusing it. Limits, UM and IL need the motor off."),
+    names: Targets = None,
+    apply: Apply = False,
+    save: Save = False,
+    yes: Yes = False,
+    motor_off: MotorOff = False,
 ) -> None:
     """Program the Appendix C limits (as `limits show` derives them) into the drives.
 
@@ -47,12 +43,13 @@ def program_limits(
       sherpa program-limits --apply --save --yes
     """
     from sherpa_cli.joints.limits import derive_checked
+    from sherpa_cli.ops.targets import drive_names
     from sherpa_cli.ops.program import DriveTarget
 
     st = state(ctx)
     cfg = st.load_config()
     _check_options(apply, save)
-    derived, warnings = derive_checked(cfg, names or None)
+    derived, warnings = derive_checked(cfg, drive_names(cfg, names))
     targets = [DriveTarget(d.drive, d.bus, d.node, d.params) for d in derived]
     run_program(st, "program-limits", targets, warnings, apply=apply, save=save, yes=yes, motor_off=motor_off,
                 need_serial=save, allow_disabled=False, title=lambda drive: drive_moves(cfg, drive))
@@ -61,13 +58,10 @@ def program_limits(
 def params_restore(
     ctx: typer.Context,
     file: Path = typer.Argument(..., metavar="FILE", help="A file written by `sherpa dump-params`."),
-    apply: bool = typer.Option(False, "--apply", help="Write the changes; without it nothing is written."),
-    save: bool = typer.Option(False, "--save", help="With --apply: SV once per drive that changed, after "
-                              "every write of it was read back."),
-    yes: bool = typer.Option(False, "--yes", "-y", help="Do not ask before saving (needed when stdin is "
-                             "not a terminal)."),
-    motor_off: bool = typer.Option(False, "--motor-off", help="Switch off a drive whose motor is on instead "
-                                   "of refusing it."),
+    apply: Apply = False,
+    save: Save = False,
+    yes: Yes = False,
+    motor_off: MotorOff = False,
     other_serial: bool = typer.Option(False, "--other-serial", help="Allow a dump whose serial number "
                                       "(0x1018:4) differs from the drive's, or that has none."),
 ) -> None:

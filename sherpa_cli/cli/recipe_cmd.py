@@ -6,12 +6,14 @@ import io
 import sys
 from contextlib import redirect_stderr, redirect_stdout
 from pathlib import Path
-from typing import List, Optional, Sequence
+from typing import Optional, Sequence
 
 import typer
 
 from sherpa_cli.cli import context
 from sherpa_cli.cli.context import AppState, state
+from sherpa_cli.cli.options import (ApplyCommission, ApplyRecipe, FromStep, Junit, Quiet, Report, SetVars,
+                                    YesRecipe)
 from sherpa_cli.errors import UsageError
 
 app = typer.Typer(no_args_is_help=True, help="Run commissioning recipes (YAML lists of sherpa steps; docs/recipes.md).")
@@ -146,14 +148,13 @@ def execute(st: AppState, recipe_path: Path, *, apply: bool, yes: bool, start: O
 def run_cmd(
     ctx: typer.Context,
     file: Path = typer.Argument(..., metavar="FILE", help="The recipe (YAML)."),
-    apply: bool = typer.Option(False, "--apply", help="Let writing steps write. Without it every step that "
-                               "has --apply/--save runs as a dry run."),
-    yes: bool = typer.Option(False, "--yes", "-y", help="Answer every confirm step with yes."),
-    start: Optional[str] = typer.Option(None, "--from", metavar="STEP", help="Start at this step (name or number)."),
-    report: Optional[Path] = typer.Option(None, "--report", metavar="FILE.json", help="Write a JSON report."),
-    junit: Optional[Path] = typer.Option(None, "--junit", metavar="FILE.xml", help="Write a JUnit XML report."),
-    sets: Optional[List[str]] = typer.Option(None, "--set", metavar="KEY=VALUE", help="Set a recipe variable."),
-    quiet: bool = typer.Option(False, "--quiet", "-q", help="Show a step's output only when it fails."),
+    apply: ApplyRecipe = False,
+    yes: YesRecipe = False,
+    start: FromStep = None,
+    report: Report = None,
+    junit: Junit = None,
+    sets: SetVars = None,
+    quiet: Quiet = False,
 ) -> None:
     """Run a recipe's steps in order, stop at the first failure, and report.
 
@@ -175,7 +176,7 @@ def run_cmd(
 
 @app.command("check")
 def check_cmd(ctx: typer.Context, file: Path = typer.Argument(..., metavar="FILE"),
-              sets: Optional[List[str]] = typer.Option(None, "--set", metavar="KEY=VALUE")) -> None:
+              sets: SetVars = None) -> None:
     """Validate a recipe and list its steps (nothing is run)."""
     from sherpa_cli.recipes import load_recipe
 
@@ -196,14 +197,13 @@ def check_cmd(ctx: typer.Context, file: Path = typer.Argument(..., metavar="FILE
 
 def commission(
     ctx: typer.Context,
-    apply: bool = typer.Option(False, "--apply", help="Program and save the drives (default: dry run)."),
-    yes: bool = typer.Option(False, "--yes", "-y", help="Answer every confirmation with yes."),
-    start: Optional[str] = typer.Option(None, "--from", metavar="STEP", help="Start at this step."),
-    report: Optional[Path] = typer.Option(None, "--report", metavar="FILE.json", help="Write a JSON report."),
-    junit: Optional[Path] = typer.Option(None, "--junit", metavar="FILE.xml", help="Write a JUnit XML report."),
-    quiet: bool = typer.Option(False, "--quiet", "-q", help="Show a step's output only when it fails."),
-    sets: Optional[List[str]] = typer.Option(None, "--set", metavar="KEY=VALUE",
-                                             help="Set a recipe variable, e.g. backup=FILE (where dump-params writes)."),
+    apply: ApplyCommission = False,
+    yes: YesRecipe = False,
+    start: FromStep = None,
+    report: Report = None,
+    junit: Junit = None,
+    quiet: Quiet = False,
+    sets: SetVars = None,
 ) -> None:
     """Commission the arm: run recipes/commission-arm.yaml (scan, identify, plan, program, save, back up, diff).
 

@@ -7,7 +7,6 @@ flag bits (0x8000 float, 0x4000 query in a request / error in a reply).
 from __future__ import annotations
 
 import math
-import os
 import re
 import struct
 from dataclasses import dataclass
@@ -46,7 +45,7 @@ class Reply(NamedTuple):
     """A decoded TPDO2 reply; ``error_code`` is set when the drive refused the command.
 
     A NamedTuple rather than a frozen dataclass: one is built per received frame, and
-    tuple construction is several times cheaper (benchmark ``codec``).
+    tuple construction is several times cheaper.
     """
 
     letters: str
@@ -120,60 +119,8 @@ def _spec_at(letters: str, index: int) -> CommandSpec:
 
 # -- host side: encode requests, decode replies ---------------------------------------------------
 
-# The fast paths below answer from caches of what the checked paths already validated, keyed by
-# (letters, index) or by the frame's first four bytes read as one u32; anything not cached, or not
-# plainly in range, takes the checked path, so errors and bytes are exactly the checked ones.
-_PACK_INT = struct.Struct("<4si").pack
-_PACK_FLOAT = struct.Struct("<4sf").pack
-_UNPACK_HEAD_INT = struct.Struct("<Ii").unpack
-_UNPACK_FLOAT_AT_4 = struct.Struct("<4xf").unpack
-_new_reply = tuple.__new__
-_CACHE_LIMIT = 4096  # entries per cache; frames from a bus may carry any letters and index
-_INT_SETS: dict[tuple[str, int], bytes] = {}  # (letters, index) -> header of an int set
-_FLOAT_SETS: dict[tuple[str, int], bytes] = {}
-_QUERIES: dict[tuple[str, int, bool], bytes] = {}  # (letters, index, long) -> whole frame
-_EXECUTES: dict[tuple[str, int], bytes] = {}
-_INT_REPLIES: dict[int, tuple[str, int]] = {}  # u32 header of a success reply -> (letters, index)
-_FLOAT_REPLIES: dict[int, tuple[str, int]] = {}
-_FRAME_TYPES = (bytes, bytearray, memoryview)
-
-
-def _remember(cache: dict, key: object, value: object) -> None:
-    if len(cache) < _CACHE_LIMIT:
-        try:
-            cache[key] = value
-        except TypeError:
-            pass  # an unhashable stand-in (long=[1]) gets its answer, just not a cache entry
-
-
-def _clear_caches() -> None:
-    """Forget everything the fast paths learnt (tests compare cold and warm answers)."""
-    for cache in (_INT_SETS, _FLOAT_SETS, _QUERIES, _EXECUTES, _INT_REPLIES, _FLOAT_REPLIES, _SHORT_REQUESTS,
-                  _REPLY_HEADERS):
-        cache.clear()
-
-
 def encode_set(letters: str, index: int, value: int | float) -> bytes:
     """8-byte set frame; the type bit and the value's type come from the command table."""
-    kind = type(value)
-    try:
-        if type(index) is int:  # True and 1.0 equal 1 as dict keys: they must not find index 1's entry
-            if kind is int:
-                header = _INT_SETS.get((letters, index))
-                if header is not None:
-                    return _PACK_INT(header, value)
-            elif kind is float:
-                header = _FLOAT_SETS.get((letters, index))
-                if header is not None and value - value == 0.0:  # finite (inf - inf and nan - nan are nan)
-                    return _PACK_FLOAT(header, value)
-    except (struct.error, OverflowError, TypeError):
-        pass  # out of range or unhashable: the checked path says what is wrong
-    frame = _encode_set_checked(letters, index, value)
-    _remember(_FLOAT_SETS if frame[3] & 0x80 else _INT_SETS, (letters, index), frame[:4])
-    return frame
-
-
-def _encode_set_checked(letters: str, index: int, value: int | float) -> bytes:
     spec = _spec_at(letters, index)
     what = _what(letters, index)
     if spec.access == "ro":
@@ -187,37 +134,20 @@ def _encode_set_checked(letters: str, index: int, value: int | float) -> bytes:
 
 def encode_query(letters: str, index: int = 0, long: bool = False) -> bytes:
     """Query frame: 4 bytes, or 8 bytes with the query bit when ``long``."""
-    try:
-        frame = _QUERIES.get((letters, index, long)) if type(index) is int else None
-    except TypeError:  # unhashable junk: the checked path names what is wrong
-        frame = None
-    if frame is not None:
-        return frame
     spec = _spec_at(letters, index)
     if spec.access == "x":
         raise CodecError(f"{letters} is an execute command and cannot be queried")
     if long:
-        frame = FRAME.pack(letters.encode("ascii"), _header_word(index, flag6=True), bytes(4))
-    else:
-        frame = HEADER.pack(letters.encode("ascii"), index)
-    _remember(_QUERIES, (letters, index, long), frame)
-    return frame
+        return FRAME.pack(letters.encode("ascii"), _header_word(index, flag6=True), bytes(4))
+    return HEADER.pack(letters.encode("ascii"), index)
 
 
 def encode_execute(letters: str, index: int = 0) -> bytes:
     """4-byte execute frame (BG, ST, SV, ...)."""
-    try:
-        frame = _EXECUTES.get((letters, index)) if type(index) is int else None
-    except TypeError:
-        frame = None
-    if frame is not None:
-        return frame
     spec = _spec_at(letters, index)
     if spec.access != "x":
         raise CodecError(f"{letters} is not an execute command", hint=f"query it as {letters} or set {letters}=...")
-    frame = HEADER.pack(letters.encode("ascii"), index)
-    _remember(_EXECUTES, (letters, index), frame)
-    return frame
+    return HEADER.pack(letters.encode("ascii"), index)
 
 
 def encode_request(request: Request, long: bool = False) -> bytes:
@@ -232,7 +162,8 @@ def encode_request(request: Request, long: bool = False) -> bytes:
 def _split(data: object, lengths: tuple[int, ...], what: str) -> tuple[str, int, bytes]:
     if not isinstance(data, (bytes, bytearray, memoryview)):
         raise CodecError(f"{what} must be bytes, got {type(data).__name__}")
-    data = bytes(data)
+    if type(data) is not bytes:
+        data = bytes(data)
     if len(data) not in lengths:
         allowed = " or ".join(str(n) for n in lengths)
         raise CodecError(f"{what} must be {allowed} bytes, got {len(data)}: {data.hex(' ')}")
@@ -248,50 +179,26 @@ def _split(data: object, lengths: tuple[int, ...], what: str) -> tuple[str, int,
     return letters, word, data[4:]
 
 
-def _unpack_value(payload: bytes, is_float: bool, what: str) -> int | float:
+def _unpack_value(payload: bytes, is_float: bool, letters: str, index: int) -> int | float:
     if not is_float:
         return INT32.unpack(payload)[0]
     value = FLOAT32.unpack(payload)[0]
     if not math.isfinite(value):
-        raise CodecError(f"{what}: float value bytes {payload.hex(' ')} are not a finite number")
+        raise CodecError(f"{_what(letters, index)}: float value bytes {payload.hex(' ')} are not a finite number")
     return value
 
 
 def decode_reply(data: bytes) -> Reply:
     """Decode an 8-byte TPDO2 reply. Letters need not be in the table."""
-    if type(data) in _FRAME_TYPES:
-        try:
-            head, ival = _UNPACK_HEAD_INT(data)
-        except (struct.error, TypeError, ValueError, BufferError):
-            return _decode_reply_checked(data)  # not 8 bytes: the checked path says so
-        known = _INT_REPLIES.get(head)
-        if known is not None:
-            return _new_reply(Reply, (known[0], known[1], ival, False, None))
-        known = _FLOAT_REPLIES.get(head)
-        if known is not None:
-            value = _UNPACK_FLOAT_AT_4(data)[0]
-            if value - value == 0.0:  # finite
-                return _new_reply(Reply, (known[0], known[1], value, True, None))
-        reply = _decode_reply_checked(data)
-        if reply.error_code is None:
-            _remember(_FLOAT_REPLIES if reply.is_float else _INT_REPLIES, head, (reply.letters, reply.index))
-        return reply
-    return _decode_reply_checked(data)
-
-
-def _decode_reply_checked(data: bytes) -> Reply:
     letters, word, payload = _split(data, (8,), "reply frame")
     index, is_float = word & INDEX_MASK, bool(word & FLAG_FLOAT)
     if word & FLAG_ERROR:
         # The guide: "byte 4 contains the Elmo error code".
         return Reply(letters, index, None, is_float, error_code=payload[0])
-    return Reply(letters, index, _unpack_value(payload, is_float, _what(letters, index)), is_float)
+    return Reply(letters, index, _unpack_value(payload, is_float, letters, index), is_float)
 
 
 # -- drive (simulator) side ----------------------------------------------------------------------
-
-_SHORT_REQUESTS: dict[bytes, Request] = {}  # 4-byte frames (queries, executes): no value, so one Request each
-
 
 def decode_request(data: bytes) -> Request:
     """Decode a 4- or 8-byte RPDO2 frame.
@@ -299,16 +206,6 @@ def decode_request(data: bytes) -> Request:
     Letters must be upper-case ASCII but need not be in the table, so a simulator can answer
     unknown commands and bad indexes with an error reply (EC 2 / EC 3) instead of failing.
     """
-    if type(data) is bytes and len(data) == 4:
-        request = _SHORT_REQUESTS.get(data)
-        if request is None:
-            request = _decode_request_checked(data)
-            _remember(_SHORT_REQUESTS, data, request)
-        return request
-    return _decode_request_checked(data)
-
-
-def _decode_request_checked(data: bytes) -> Request:
     letters, word, payload = _split(data, (4, 8), "request frame")
     index, is_float = word & INDEX_MASK, bool(word & FLAG_FLOAT)
     spec = _known(letters)
@@ -316,7 +213,7 @@ def _decode_request_checked(data: bytes) -> Request:
     if len(data) == 4 or word & FLAG_QUERY:
         kind: Kind = "execute" if is_execute and not word & FLAG_QUERY else "query"
         return Request(kind, letters, index, None, is_float)
-    value = _unpack_value(payload, is_float, _what(letters, index))
+    value = _unpack_value(payload, is_float, letters, index)
     return Request("execute" if is_execute else "set", letters, index, value, is_float)
 
 
@@ -327,27 +224,8 @@ def _known(letters: str) -> CommandSpec | None:
         return None
 
 
-_REPLY_HEADERS: dict[tuple[str, int, bool], bytes] = {}  # (letters, index, float?) -> checked header
-
-
 def encode_reply(letters: str, index: int, value: int | float | None, is_float: bool) -> bytes:
     """8-byte success reply; ``value=None`` gives the all-zero data of an execute reply."""
-    kind = type(value)
-    try:
-        header = _REPLY_HEADERS.get((letters, index, is_float)) if type(index) is int else None
-        if header is not None:
-            if kind is int and not is_float:
-                return _PACK_INT(header, value)
-            if kind is float and is_float and value - value == 0.0:  # type: ignore[operator]  # kind says: a float
-                return _PACK_FLOAT(header, value)
-    except (struct.error, OverflowError, TypeError):
-        pass  # out of range or unhashable: the checked path says what is wrong
-    frame = _encode_reply_checked(letters, index, value, is_float)
-    _remember(_REPLY_HEADERS, (letters, index, is_float), frame[:4])
-    return frame
-
-
-def _encode_reply_checked(letters: str, index: int, value: int | float | None, is_float: bool) -> bytes:
     check_letters(letters)
     _check_raw_index(letters, index)
     return FRAME.pack(letters.encode("ascii"), _header_word(index, is_float=is_float),
@@ -435,28 +313,3 @@ def _parse_float(raw: str, what: str) -> float:
     if not math.isfinite(value):
         raise CodecError(f"{what}: value {raw!r} is not a finite number")
     return value
-
-
-# -- compiled front doors -------------------------------------------------------------------------
-
-pure_encode_set, pure_decode_reply = encode_set, decode_reply
-
-
-def _load_compiled() -> object | None:
-    """The C module bound to this module's caches, or None (not built, or SHERPA_PURE_CODEC set)."""
-    if os.environ.get("SHERPA_PURE_CODEC", "") not in ("", "0"):
-        return None
-    try:
-        from sherpa_cli.elmo import _codec_c  # type: ignore[attr-defined]  # built only with a C compiler
-    except ImportError:  # built without a C compiler, or for another interpreter
-        return None
-    _codec_c.bind(_INT_SETS, _FLOAT_SETS, _INT_REPLIES, _FLOAT_REPLIES, Reply, pure_encode_set, pure_decode_reply)
-    return _codec_c
-
-
-_compiled = _load_compiled()
-#: "compiled" when encode_set and decode_reply are the C front doors of _codec_c.c, else "pure Python".
-IMPLEMENTATION = "compiled" if _compiled is not None else "pure Python"
-if _compiled is not None:
-    encode_set = _compiled.encode_set  # type: ignore[attr-defined]  # noqa: F811
-    decode_reply = _compiled.decode_reply  # type: ignore[attr-defined]  # noqa: F811

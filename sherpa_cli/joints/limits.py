@@ -123,28 +123,14 @@ def _joint_drives(cfg: ArmConfig, joint: JointConfig) -> tuple[str, ...]:
     return _pair_drives(pair) if pair is not None else ()
 
 
-def resolve_drives(cfg: ArmConfig, names: Sequence[str] | None = None) -> list[str]:
-    """Drive names for joint, pair or drive names, in the order asked, without repeats.
-
-    ``None`` or empty means every drive of the config. A Σ/Δ joint or a pair gives both
-    drives of the pair, since neither motor can be limited without the other.
-    """
-    if not names:
+def _check_drives(cfg: ArmConfig, drives: Sequence[str] | None) -> list[str]:
+    """Configured drive names, each once; ``None`` or empty means every drive of the config."""
+    if not drives:
         return list(cfg.drives)
-    out: list[str] = []
-    for name in names:
-        if name in cfg.drives:
-            found: tuple[str, ...] = (name,)
-        elif name in cfg.pairs:
-            found = _pair_drives(cfg.pairs[name])
-        elif name in cfg.joints:
-            found = _joint_drives(cfg, cfg.joints[name])
-        else:
-            raise _unknown("joint, pair or drive", name, [*cfg.joints, *cfg.pairs, *cfg.drives])
-        for d in found:
-            if d not in out:
-                out.append(d)
-    return out
+    for d in drives:
+        if d not in cfg.drives:
+            raise _unknown("drive", d, cfg.drives)
+    return list(dict.fromkeys(drives))
 
 
 # --------------------------------------------------------------------------- helpers
@@ -315,12 +301,12 @@ def derive_drive_params(cfg: ArmConfig, drive: str) -> DriveParams:
     return _derive(cfg, drive)[0]
 
 
-def derive_all(cfg: ArmConfig, names: Sequence[str] | None = None) -> list[DriveParams]:
-    """Parameter sets for the drives behind ``names`` (joints, pairs or drives; None = all)."""
-    return [_derive(cfg, d)[0] for d in resolve_drives(cfg, names)]
+def derive_all(cfg: ArmConfig, drives: Sequence[str] | None = None) -> list[DriveParams]:
+    """Parameter sets for the named drives (None = all; names come from :mod:`sherpa_cli.ops.targets`)."""
+    return [_derive(cfg, d)[0] for d in _check_drives(cfg, drives)]
 
 
-def derive_checked(cfg: ArmConfig, names: Sequence[str] | None = None) -> tuple[list[DriveParams], list[str]]:
+def derive_checked(cfg: ArmConfig, drives: Sequence[str] | None = None) -> tuple[list[DriveParams], list[str]]:
     """:func:`derive_all` plus every check a set must pass before it may be written.
 
     Returns the sets and the warnings (text). The first error -- an inconsistent set
@@ -330,7 +316,7 @@ def derive_checked(cfg: ArmConfig, names: Sequence[str] | None = None) -> tuple[
     """
     from sherpa_cli.joints.currents import check_currents, validate_params
 
-    drives = resolve_drives(cfg, names)
+    drives = _check_drives(cfg, drives)
     derived: list[DriveParams] = []
     warnings: list[str] = []
     findings = []
@@ -364,12 +350,8 @@ def _owner_where(cfg: ArmConfig, drive: str) -> Location | None:
 def _find_pair(cfg: ArmConfig, pair: str | PairConfig) -> PairConfig:
     if isinstance(pair, PairConfig):
         return pair
-    if pair in cfg.pairs:
+    if pair in cfg.pairs:  # a pair's name; what other names mean is sherpa_cli.ops.targets' business
         return cfg.pairs[pair]
-    if pair in cfg.joints and (joint_pair := cfg.joints[pair].pair) is not None and joint_pair in cfg.pairs:
-        return cfg.pairs[joint_pair]
-    if pair in cfg.drives and cfg.pair_of_drive(pair) is not None:
-        return cfg.pair_of_drive(pair)  # type: ignore[return-value]
     raise _unknown("differential pair", pair, cfg.pairs)
 
 

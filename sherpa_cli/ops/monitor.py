@@ -26,12 +26,10 @@ from typing import TYPE_CHECKING, Any, Callable, Iterable, Sequence
 from sherpa_cli.bus.parallel import run_concurrently
 from sherpa_cli.config.model import ArmConfig
 from sherpa_cli.elmo.faults import Emcy, Fault, decode_error_field, decode_mf, sr_problems
-from sherpa_cli.errors import CommunicationError, SherpaError, UsageError
-from sherpa_cli.joints.limits import resolve_drives
+from sherpa_cli.errors import SdoError, SherpaError, UsageError
 from sherpa_cli.ops.identify import JointPosition, joint_positions, row_joint
-from sherpa_cli.ops.scan import NMT_STATES, nmt_text
-from sherpa_cli.ops.sdo import sdo_download, sdo_error_text, sdo_upload
-from sherpa_cli.ops.session import DriveRef, resolve_target
+from sherpa_cli.ops.canopen_names import NMT_STATES, nmt_text
+from sherpa_cli.ops.targets import DriveRef
 
 if TYPE_CHECKING:
     from sherpa_cli.ops.session import ArmSession
@@ -41,19 +39,6 @@ POLLED = ("MO", "UM", "PX", "SR", "MF")
 PRODUCER_HEARTBEAT = (0x1017, 0)
 ERROR_FIELD = (0x1003, 1)
 NO_ANSWER = "no answer"
-
-
-def resolve_targets(cfg: ArmConfig, texts: Sequence[str]) -> list[DriveRef]:
-    """Drives to watch: every configured drive by default; a pair or Σ/Δ joint name means both motors."""
-    if not texts:
-        texts = list(cfg.drives)
-    refs: dict[tuple[str, int], DriveRef] = {}
-    for text in texts:
-        # a joint without drives falls through to resolve_target, which says what is wrong with it
-        names = resolve_drives(cfg, [text]) if text in cfg.joints or text in cfg.pairs else []
-        for ref in [resolve_target(cfg, n) for n in names] or [resolve_target(cfg, text)]:
-            refs.setdefault((ref.bus, ref.node), ref)
-    return list(refs.values())
 
 
 @dataclass
@@ -223,18 +208,18 @@ class Monitor:
     def _start_drive(self, w: _Watch) -> None:
         client = self.session.client(w.ref)
         client.nmt_start()
-        network = self.session.links[w.ref.bus].network
+        sdo = self.session.sdo(w.ref)
         try:
-            w.heartbeat_ms = int.from_bytes(_upload(network, w.ref.node, *PRODUCER_HEARTBEAT)[:2], "little")
-        except SherpaError as exc:
-            w.problem = f"0x1017: {exc}"
+            w.heartbeat_ms = int.from_bytes(sdo.upload(*PRODUCER_HEARTBEAT)[:2], "little")
+        except SdoError as exc:
+            w.problem = exc.detail  # the row already names the drive
             return  # no SDO answer: nothing else to ask at start; polling tells the rest
         if self.heartbeat_ms is not None and w.heartbeat_ms != self.heartbeat_ms:
-            _download(network, w.ref.node, *PRODUCER_HEARTBEAT, self.heartbeat_ms.to_bytes(2, "little"))
+            sdo.download(*PRODUCER_HEARTBEAT, self.heartbeat_ms.to_bytes(2, "little"))
             w.heartbeat_set_from, w.heartbeat_ms = w.heartbeat_ms, self.heartbeat_ms
         try:
-            stored = int.from_bytes(_upload(network, w.ref.node, *ERROR_FIELD)[:4], "little")
-        except SherpaError:
+            stored = int.from_bytes(sdo.upload(*ERROR_FIELD)[:4], "little")
+        except SdoError:
             stored = 0  # no stored error, or the object is absent: nothing to show
         if stored:
             with self._lock:
@@ -242,10 +227,9 @@ class Monitor:
                     w.emcy = decode_error_field(stored)
 
     def _restore_heartbeat(self, w: _Watch) -> None:
-        network = self.session.links[w.ref.bus].network
         assert w.heartbeat_set_from is not None  # only drives whose 0x1017 was replaced get here
         try:
-            _download(network, w.ref.node, *PRODUCER_HEARTBEAT, w.heartbeat_set_from.to_bytes(2, "little"))
+            self.session.sdo(w.ref).download(*PRODUCER_HEARTBEAT, w.heartbeat_set_from.to_bytes(2, "little"))
             w.heartbeat_set_from = None
         except SherpaError:
             pass  # the drive went away; its next power-up restores 0x1017 from flash anyway
@@ -324,24 +308,3 @@ class Monitor:
 
 def _int(value: Any) -> int | None:
     return value if isinstance(value, int) and not isinstance(value, bool) else None
-
-
-# -- SDO without an object dictionary ---------------------------------------------------------------
-
-def _upload(network: Any, node: int, index: int, sub: int) -> bytes:
-    """One SDO upload; a timeout or abort becomes a CommunicationError naming the object."""
-    from canopen.sdo.exceptions import SdoError
-
-    try:
-        return sdo_upload(network, node, index, sub)
-    except SdoError as exc:
-        raise CommunicationError(f"node {node}: {sdo_error_text(f'0x{index:04X}:{sub}', exc)}") from exc
-
-
-def _download(network: Any, node: int, index: int, sub: int, data: bytes) -> None:
-    from canopen.sdo.exceptions import SdoError
-
-    try:
-        sdo_download(network, node, index, sub, data)
-    except SdoError as exc:
-        raise CommunicationError(f"node {node}: writing {sdo_error_text(f'0x{index:04X}:{sub}', exc)}") from exc

@@ -17,8 +17,8 @@ from typing import TYPE_CHECKING, Any, Callable, Iterable, Mapping, Sequence
 from sherpa_cli import __version__
 from sherpa_cli.bus.parallel import Outcome, run_concurrently
 from sherpa_cli.config.model import ArmConfig
-from sherpa_cli.errors import CommunicationError, DriveRefusedError, SherpaError, UsageError
-from sherpa_cli.joints.limits import PARAM_ORDER, resolve_drives
+from sherpa_cli.errors import DriveRefusedError, SherpaError
+from sherpa_cli.joints.limits import PARAM_ORDER
 from sherpa_cli.ops.params_file import DriveDump, ParamDump
 
 if TYPE_CHECKING:
@@ -42,26 +42,6 @@ DUMP_DATE_ENV = "SHERPA_DUMP_DATE"  # fixed date for the dump header (golden tes
 Progress = Callable[[str, str], None]  # (drive, what is being read)
 
 
-def resolve_drive_names(cfg: ArmConfig, names: Sequence[str] | None) -> list[str]:
-    """Configured drive names for drive/joint/pair names or BUS:NODE; default every drive."""
-    if not names:
-        return list(cfg.drives)
-    from sherpa_cli.ops.session import resolve_target
-
-    out: list[str] = []
-    for name in names:
-        if ":" in name and name not in cfg.drives:
-            ref = resolve_target(cfg, name)
-            if ref.config is None:
-                raise UsageError(f"target '{name}': no configured drive at {ref.address}",
-                                 hint="identify and dump-params read configured drives only")
-            found = [ref.name]
-        else:
-            found = resolve_drives(cfg, [name])
-        out.extend(d for d in found if d not in out)
-    return out
-
-
 def params_to_read(cfg: ArmConfig, drive: str) -> list[str]:
     """What commissioning touches: UM, every Appendix C parameter, IL[1..inputs], CA[18]."""
     model = cfg.drives[drive].model
@@ -69,32 +49,26 @@ def params_to_read(cfg: ArmConfig, drive: str) -> list[str]:
     return ["UM", *PARAM_ORDER, *(f"IL[{n}]" for n in range(1, inputs + 1)), "CA[18]"]
 
 
-def _label(cfg: ArmConfig, drive: str) -> str:
-    return f"{drive} (node {cfg.drives[drive].node})"
+def read_identity(sdo: Any) -> tuple[dict[str, Any], dict[str, str]]:
+    """Identity objects over the drive's SDO client: (values, why a field is None).
 
+    An abort leaves that field None with the reason; any other failure (no answer, a
+    malformed answer) raises the SdoError.
+    """
+    from sherpa_cli.errors import SdoError
+    from sherpa_cli.ops.canopen_names import decode_text
 
-def read_identity(network: Any, cfg: ArmConfig, drive: str) -> tuple[dict[str, Any], dict[str, str]]:
-    """Identity objects over SDO: (values, why a field is None). Silence raises CommunicationError."""
-    from canopen.sdo.exceptions import SdoAbortedError, SdoError
-
-    from sherpa_cli.ops.scan import decode_text
-    from sherpa_cli.ops.sdo import sdo_error_text, sdo_upload
-
-    node = cfg.drives[drive].node
     values: dict[str, Any] = {}
     notes: dict[str, str] = {}
     for key, index, sub, kind in IDENTITY_OBJECTS:
-        what = f"0x{index:04X}" + (f":{sub}" if index == 0x1018 else "")
         try:
-            data = sdo_upload(network, node, index, sub)
-        except SdoAbortedError as exc:
-            values[key] = None
-            notes[key] = sdo_error_text(what, exc)
-            continue
+            data = sdo.upload(index, sub)
         except SdoError as exc:
-            raise CommunicationError(f"{_label(cfg, drive)}: no answer to the SDO upload of {what} ({exc})",
-                                     hint="check that the drive is powered and on this bus with this node id") \
-                from None
+            if exc.reason != "abort":
+                raise
+            values[key] = None
+            notes[key] = exc.detail
+            continue
         values[key] = decode_text(data) if kind == "str" else int.from_bytes(data[:4], "little")
     return values, notes
 
@@ -148,10 +122,9 @@ def per_bus(session: ArmSession, drives: Sequence[str], work: Callable[[str], An
 
 
 def ref_of(cfg: ArmConfig, drive: str):
-    from sherpa_cli.ops.session import DriveRef
+    from sherpa_cli.ops.targets import drive_ref
 
-    d = cfg.drives[drive]
-    return DriveRef(d.name, d.bus, d.node, d)
+    return drive_ref(cfg, drive)
 
 
 def open_drive(session: ArmSession, drive: str, progress: Progress | None = None) -> tuple[DriveClient, dict[str, Any], dict[str, str]]:
@@ -161,7 +134,7 @@ def open_drive(session: ArmSession, drive: str, progress: Progress | None = None
     client.nmt_start()  # the binary interpreter answers only in Operational
     if progress:
         progress(drive, "identity")
-    identity, notes = read_identity(session.links[cfg.drives[drive].bus].network, cfg, drive)
+    identity, notes = read_identity(session.sdo(ref_of(cfg, drive)))
     return client, identity, notes
 
 

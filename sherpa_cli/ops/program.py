@@ -320,16 +320,12 @@ def _client(session: ArmSession, t: DriveTarget) -> DriveClient:
 
 
 def read_serial(session: ArmSession, t: DriveTarget) -> int:
-    """0x1018:4 over SDO (the drive's serial number); CommunicationError names the drive."""
-    from sherpa_cli.errors import CommunicationError
-    from sherpa_cli.ops.scan import sdo_error_text, sdo_upload
+    """0x1018:4 over SDO (the drive's serial number); an SdoError names the drive."""
+    from sherpa_cli.ops.session import DriveRef
 
-    try:
-        data = sdo_upload(session.links[t.bus].network, t.node, 0x1018, 4)
-    except Exception as exc:  # canopen raises its own SdoError family
-        raise CommunicationError(f"{t.drive} (node {t.node}): serial number: "
-                                 f"{sdo_error_text('0x1018:4', exc)}") from exc
-    return int.from_bytes(bytes(data)[:4], "little")
+    data = session.sdo(DriveRef(t.drive, t.bus, t.node, session.cfg.drives.get(t.drive))).upload(
+        0x1018, 4, name="serial number")
+    return int.from_bytes(data[:4], "little")
 
 
 def _read_plan(session: ArmSession, t: DriveTarget, need_serial: bool, on_event: Progress | None) -> DrivePlan:

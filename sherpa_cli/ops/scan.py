@@ -21,8 +21,9 @@ from typing import TYPE_CHECKING, Any, Callable, Iterable, Mapping
 
 from sherpa_cli.bus.parallel import run_concurrently
 from sherpa_cli.config.model import ArmConfig
-from sherpa_cli.errors import SherpaError
-from sherpa_cli.ops.sdo import sdo_error_text, sdo_upload  # noqa: F401 - program.py and tests import them from here
+from sherpa_cli.errors import SdoError, SherpaError
+from sherpa_cli.ops.canopen_names import VENDORS, decode_text, nmt_text
+from sherpa_cli.ops.sdo import DriveSdo
 
 if TYPE_CHECKING:
     from sherpa_cli.ops.session import ArmSession
@@ -32,9 +33,6 @@ SDO_TX, SDO_RX, HEARTBEAT = 0x580, 0x600, 0x700
 NMT_COB_ID, NMT_RESET_COMMUNICATION = 0x000, 0x82
 UPLOAD_DEVICE_TYPE = bytes([0x40, 0x00, 0x10, 0x00, 0, 0, 0, 0])
 SDO_ABORT = 0x80
-ELMO_VENDOR_ID = 0x9A
-VENDORS = {ELMO_VENDOR_ID: "Elmo"}
-NMT_STATES = {0x00: "boot-up", 0x04: "stopped", 0x05: "operational", 0x7F: "pre-op"}
 
 EXPECTED = "expected"
 MISSING = "missing"
@@ -282,24 +280,21 @@ def decode_device_type(frame: bytes) -> tuple[int | None, str | None]:
 
 # -- identity -------------------------------------------------------------------------------------
 
-def decode_text(data: bytes) -> str:
-    # VISIBLE_STRING; some firmware pads with NULs
-    return data.split(b"\0", 1)[0].decode("latin-1").strip()
-
-
 def _read_identity(network: Any, node: int) -> tuple[int | None, str | None, list[str]]:
-    from canopen.sdo.exceptions import SdoError
-
     vendor_id = name = None
     notes: list[str] = []
+    sdo = DriveSdo(network, node)
     try:
-        vendor_id = int.from_bytes(sdo_upload(network, node, 0x1018, 1)[:4], "little")
-    except SdoError as exc:
-        notes.append(sdo_error_text("0x1018:1", exc))
-    try:
-        name = decode_text(sdo_upload(network, node, 0x1008, 0))
-    except SdoError as exc:
-        notes.append(sdo_error_text("0x1008", exc))
+        try:
+            vendor_id = int.from_bytes(sdo.upload(0x1018, 1)[:4], "little")
+        except SdoError as exc:
+            notes.append(exc.detail)
+        try:
+            name = decode_text(sdo.upload(0x1008, 0))
+        except SdoError as exc:
+            notes.append(exc.detail)
+    finally:
+        sdo.close()
     return vendor_id, name, notes
 
 
@@ -311,12 +306,6 @@ def _joint_label(cfg: ArmConfig, drive: str) -> str | None:
         return joint.name
     pair = cfg.pair_of_drive(drive)
     return pair.name if pair is not None else None
-
-
-def nmt_text(state: int) -> str:
-    """An NMT state byte of a boot-up or heartbeat frame, as text."""
-    # a boot-up leaves the node pre-operational (elmo-protocol.md 3.2)
-    return NMT_STATES[0x7F] if state == 0x00 else NMT_STATES.get(state, f"0x{state:02X}")
 
 
 def _nmt_text(states: list[int]) -> str | None:

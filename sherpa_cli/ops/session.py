@@ -1,65 +1,41 @@
 """A session with the arm: its buses open, drive clients on demand, and (with --sim) the simulated arm.
 
 Commands open one session, do their work through it and close it; every exit path closes
-the buses and, for the in-process simulator, saves the simulated drives' flash.
+the buses and stops the in-process simulated arm (which saves its drives' flash).
+
+The simulated arm is injected: the CLI (cli/context.py) builds it and hands it over, so
+this module never imports the simulator package (sim/); the session only wires its buses to the
+arm's endpoints, starts it and stops it.
 """
 
 from __future__ import annotations
 
-import difflib
-import uuid
 from contextlib import contextmanager
-from dataclasses import dataclass
-from typing import Any, Iterable, Iterator
+from typing import Any, Iterable, Iterator, Mapping, Protocol
 
 from sherpa_cli.bus.busmap import BusTarget, apply_bus_map
 from sherpa_cli.bus.links import BusLink, close_links, open_links
-from sherpa_cli.config.model import ArmConfig, DriveConfig
+from sherpa_cli.config.model import ArmConfig
 from sherpa_cli.errors import UsageError
+# What a name means is decided in ops/targets.py (DriveRef lives there); ``resolve_target`` is
+# its one-drive policy under the name older callers import.
+from sherpa_cli.ops.targets import DriveRef
+from sherpa_cli.ops.targets import single_drive as resolve_target
+
+__all__ = ["ArmSession", "DriveRef", "resolve_target"]
 
 
-@dataclass(frozen=True)
-class DriveRef:
-    """A drive addressed by the user: configured (``config`` set) or ad hoc as BUS:NODE."""
-
-    name: str
-    bus: str
-    node: int
-    config: DriveConfig | None = None
+class InProcessArm(Protocol):
+    """What the session needs of an injected simulated arm (sim/arm.py's ``SimArm``)."""
 
     @property
-    def address(self) -> str:
-        return f"{self.bus}:{self.node}"
+    def endpoints(self) -> Mapping[str, Mapping[str, Any]]:
+        """bus name -> ``can.Bus`` keyword arguments of the arm's end of that bus (interface, channel)"""
+        ...
 
+    def start(self) -> Any: ...
 
-def resolve_target(cfg: ArmConfig, text: str) -> DriveRef:
-    """A drive from a drive name, a plain joint name, or ``BUS:NODE``."""
-    if text in cfg.drives:
-        d = cfg.drives[text]
-        return DriveRef(d.name, d.bus, d.node, d)
-    joint = cfg.joints.get(text)
-    if joint is not None and joint.drive:
-        d = cfg.drives[joint.drive]
-        return DriveRef(d.name, d.bus, d.node, d)
-    pair = cfg.pairs.get(text) or (cfg.pairs.get(joint.pair) if joint is not None and joint.pair else None)
-    if pair is not None:
-        raise UsageError(f"'{text}' is moved by two drives ({pair.drive_a}, {pair.drive_b}); name one of them")
-    bus, sep, node_text = text.partition(":")
-    if sep:
-        if bus not in cfg.buses:
-            raise UsageError(f"target '{text}': no bus '{bus}' in the config",
-                             hint=f"configured buses: {', '.join(cfg.buses)}")
-        if not node_text.isdigit() or not 1 <= int(node_text) <= 127:
-            raise UsageError(f"target '{text}': node id must be 1..127")
-        node = int(node_text)
-        for d in cfg.drives.values():
-            if d.bus == bus and d.node == node:
-                return DriveRef(d.name, d.bus, d.node, d)
-        return DriveRef(text, bus, node, None)
-    names = list(cfg.drives) + list(cfg.joints) + list(cfg.pairs)
-    close = difflib.get_close_matches(text, names, n=3)
-    raise UsageError(f"unknown target '{text}': not a drive, joint or BUS:NODE of the config",
-                     hint=f"did you mean {' or '.join(close)}?" if close else "see `sherpa config check` for the names")
+    def stop(self) -> None: ...
 
 
 class ArmSession:
@@ -68,38 +44,33 @@ class ArmSession:
     def __init__(self, cfg: ArmConfig, links: dict[str, BusLink], sim: Any = None) -> None:
         self.cfg = cfg
         self.links = links
-        self.sim = sim  # the in-process SimArm with --sim, for tests and fault injection
+        self.sim = sim  # the injected in-process arm with --sim, for tests and fault injection
         self._clients: dict[tuple[str, int], Any] = {}
+        self._sdo: dict[tuple[str, int], Any] = {}
 
     @classmethod
     @contextmanager
-    def open(cls, cfg: ArmConfig, *, sim: bool = False, buses: Iterable[str] | None = None,
-             sim_factory: Any = None) -> Iterator["ArmSession"]:
-        """Open the buses (default: all); with ``sim`` start the simulated arm on virtual channels first."""
-        arm = None
+    def open(cls, cfg: ArmConfig, *, sim: InProcessArm | None = None,
+             buses: Iterable[str] | None = None) -> Iterator["ArmSession"]:
+        """Open the buses (default: all). With ``sim`` (a simulated arm built by the caller, not
+        started), start it first and point every configured bus at its endpoint; stop it last."""
+        if sim is not None and not hasattr(sim, "endpoints"):
+            raise TypeError("ArmSession.open(sim=...) takes the simulated arm itself, e.g. "
+                            "SimArm.in_process(cfg) from sim/arm.py, not a flag")
         wire_cfg = cfg
-        if sim:
-            token = uuid.uuid4().hex[:8]  # virtual channels are process-wide: keep sessions apart
-            targets = {name: BusTarget("virtual", f"sherpa-sim-{token}-{name}") for name in cfg.buses}
-            wire_cfg = apply_bus_map(cfg, targets)
-            from sherpa_cli.bus.virtual import open_can_bus
-            from sherpa_cli.sim.arm import SimArm
-
-            if sim_factory is None:
-                sim_factory = SimArm.for_session
-            arm = sim_factory(cfg, {name: t.channel for name, t in targets.items()})
-            if isinstance(arm, SimArm) and arm.bus_factory is None:
-                arm.bus_factory = open_can_bus  # the virtual interface without its per-frame deep copy
-            arm.start()
+        if sim is not None:
+            wire_cfg = apply_bus_map(cfg, {name: BusTarget(str(kw["interface"]), str(kw["channel"]))
+                                           for name, kw in sim.endpoints.items() if name in cfg.buses})
+            sim.start()
         try:
             links = open_links(wire_cfg, buses)
             try:
-                yield cls(wire_cfg, links, arm)
+                yield cls(wire_cfg, links, sim)
             finally:
                 close_links(links)
         finally:
-            if arm is not None:
-                arm.stop()
+            if sim is not None:
+                sim.stop()
 
     def client(self, ref: DriveRef):
         """The DriveClient of a drive (one per drive: it owns the drive's one-request-at-a-time lock)."""
@@ -118,3 +89,16 @@ class ArmSession:
                                  timeout=p.reply_timeout, retries=p.retries, settings=settings)
             self._clients[key] = client
         return client
+
+    def sdo(self, ref: DriveRef):
+        """The SDO client of a drive (ops/sdo.py DriveSdo), one per drive for the whole session."""
+        from sherpa_cli.ops.sdo import DriveSdo
+
+        sdo = self._sdo.get(ref.key)
+        if sdo is None:
+            if ref.bus not in self.links:
+                raise UsageError(f"{ref.name}: bus {ref.bus} is not open in this session")
+            sdo = DriveSdo(self.links[ref.bus].network, ref.node, label=f"{ref.name} (node {ref.node})",
+                           timeout=self.cfg.protocol.sdo_timeout)
+            self._sdo[ref.key] = sdo
+        return sdo

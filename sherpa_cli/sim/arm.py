@@ -15,6 +15,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import threading
+import uuid
 from typing import Any, Callable, Mapping
 
 from sherpa_cli.config.model import ArmConfig, JointConfig, PairConfig, SwitchConfig, SwitchKind
@@ -150,7 +151,7 @@ class SimArm:
                  settings: Mapping[str, SimSettings] | None = None, persist: bool = False,
                  tick_s: float = 0.002, bus_factory: Callable[..., Any] | None = None) -> None:
         """``endpoints``: bus name -> keyword arguments for ``can.Bus`` (interface, channel);
-        ``bus_factory`` opens them instead of ``can.Bus`` (the session's lean virtual bus)."""
+        ``bus_factory`` opens them instead of ``can.Bus``."""
         self.cfg = cfg
         self.endpoints = dict(endpoints)
         self.bus_factory = bus_factory
@@ -182,6 +183,12 @@ class SimArm:
         self._buses: dict[str, Any] = {}
         self._sdo: dict[str, Any] = {}
         self.errors: list[BaseException] = []
+
+    @classmethod
+    def in_process(cls, cfg: ArmConfig) -> "SimArm":
+        """The arm ``--sim`` hands to the session: fresh virtual channels, built by :meth:`for_session`."""
+        token = uuid.uuid4().hex[:8]  # virtual channels are process-wide: keep sessions apart
+        return cls.for_session(cfg, {name: f"sherpa-sim-{token}-{name}" for name in cfg.buses})
 
     @classmethod
     def for_session(cls, cfg: ArmConfig, channels: Mapping[str, str]) -> "SimArm":

@@ -1,0 +1,51 @@
+"""Options and arguments several commands share, declared once (typer ``Annotated`` aliases).
+
+A command takes one as ``apply: Apply = False``. Where a flag means something else in a
+command (``cmd --apply`` sends raw commands, ``recipe run --apply`` lets writing steps write)
+its own alias is here too, so every spelling of a flag and its help live in one place.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated, List, Optional
+
+import typer
+
+# -- which drives ---------------------------------------------------------------------------------
+
+TARGETS_HELP = "Drive, joint or pair names, or BUS:NODE; default: every configured drive."
+Targets = Annotated[Optional[List[str]], typer.Argument(metavar="[TARGET]...", help=TARGETS_HELP)]
+
+# -- writing to drives (program-limits, params restore) -------------------------------------------
+
+Apply = Annotated[bool, typer.Option(
+    "--apply", help="Write the changes; without it nothing is written (not one set, not one SDO download).")]
+Save = Annotated[bool, typer.Option(
+    "--save", help="With --apply: SV once per drive that changed, only after every write of it was read back, "
+    "then read everything back again.")]
+Yes = Annotated[bool, typer.Option(
+    "--yes", "-y", help="Do not ask before saving (needed when stdin is not a terminal: without it --save "
+    "refuses before writing anything).")]
+MotorOff = Annotated[bool, typer.Option(
+    "--motor-off", help="Switch off (MO=0) a drive whose motor is on instead of refusing it. Limits, UM and IL "
+    "need the motor off.")]
+
+ApplyRaw = Annotated[bool, typer.Option(
+    "--apply", help="Send sets and execute commands; without it they are only shown as the frame that would be "
+    "sent (queries are always sent).")]
+
+# -- recipes (recipe run, commission) -------------------------------------------------------------
+
+ApplyRecipe = Annotated[bool, typer.Option(
+    "--apply", help="Let writing steps write. Without it every step that has --apply/--save runs as a dry run.")]
+ApplyCommission = Annotated[bool, typer.Option("--apply", help="Program and save the drives (default: dry run).")]
+YesRecipe = Annotated[bool, typer.Option("--yes", "-y", help="Answer every confirm step with yes.")]
+FromStep = Annotated[Optional[str], typer.Option(
+    "--from", metavar="STEP", help="Start at this step (name or number).")]
+Report = Annotated[Optional[Path], typer.Option("--report", metavar="FILE.json", help="Write a JSON report.")]
+Junit = Annotated[Optional[Path], typer.Option("--junit", metavar="FILE.xml", help="Write a JUnit XML report.")]
+Quiet = Annotated[bool, typer.Option("--quiet", "-q", help="Show a step's output only when it fails.")]
+SetVars = Annotated[Optional[List[str]], typer.Option(
+    "--set", metavar="KEY=VALUE", help="Set a recipe variable (repeat), e.g. backup=FILE (where dump-params "
+    "writes in the commissioning recipe).")]

@@ -1,0 +1,148 @@
+"""ops/sdo.py: every SDO failure is one SdoError naming drive and object; one client per drive per session."""
+
+from __future__ import annotations
+
+import struct
+from typing import Callable
+
+import pytest
+
+from sherpa_cli.config import load_config
+from sherpa_cli.errors import CommunicationError, ExitCode, SdoError
+from sherpa_cli.ops.canopen_names import abort_text, nmt_text
+from sherpa_cli.ops.sdo import DriveSdo, sdo_download, sdo_upload
+from sherpa_cli.ops.session import ArmSession
+from sherpa_cli.ops.targets import drive_ref
+from sherpa_cli.sim.arm import SimArm
+
+EXAMPLE1 = "configs/appendix-c/example1.yaml"
+
+
+class ScriptedNetwork:
+    """What canopen's SDO client needs of a network; each request is answered by ``answer`` at once."""
+
+    def __init__(self, answer: Callable[[int, bytes], bytes | None] | None = None,
+                 fail: BaseException | None = None, sdo_timeout: float = 0.01) -> None:
+        self.answer = answer
+        self.fail = fail
+        self.sdo_timeout = sdo_timeout
+        self.subscribers: dict[int, list[Callable]] = {}
+        self.sent: list[tuple[int, bytes]] = []
+
+    def subscribe(self, can_id: int, callback: Callable) -> None:
+        self.subscribers.setdefault(can_id, []).append(callback)
+
+    def unsubscribe(self, can_id: int, callback: Callable | None = None) -> None:
+        callbacks = self.subscribers.get(can_id, [])
+        if callback in callbacks:
+            callbacks.remove(callback)
+
+    def send_message(self, can_id: int, data: bytes, remote: bool = False) -> None:
+        if self.fail is not None:
+            raise self.fail
+        self.sent.append((can_id, bytes(data)))
+        if self.answer is None or not 0x600 < can_id < 0x680 or data[0] == 0x80:
+            return  # nobody answers; a client's abort gets no answer either
+        reply = self.answer(can_id, bytes(data))
+        if reply is not None:
+            for callback in list(self.subscribers.get(can_id - 0x600 + 0x580, [])):
+                callback(can_id - 0x600 + 0x580, reply, 0.0)
+
+
+def expedited(data: bytes, index: int = 0x1018, sub: int = 4) -> Callable[[int, bytes], bytes]:
+    n = 4 - len(data)
+    return lambda can_id, req: bytes([0x43 | n << 2]) + struct.pack("<HB", index, sub) + data.ljust(4, b"\0")
+
+
+def test_upload_through_a_scripted_network():
+    net = ScriptedNetwork(expedited(bytes.fromhex("28 01 00 5A")))
+    sdo = DriveSdo(net, 10, label="drive1 (node 10)")
+    assert sdo.upload(0x1018, 4) == bytes.fromhex("28 01 00 5A")
+    assert net.sent == [(0x60A, bytes.fromhex("40 18 10 04 00 00 00 00"))]
+    assert sdo.timeout == 0.01  # the network's protocol.sdo_timeout
+    sdo.close()
+    assert all(not callbacks for callbacks in net.subscribers.values())
+
+
+def test_timeout():
+    sdo = DriveSdo(ScriptedNetwork(), 10, label="drive1 (node 10)")
+    with pytest.raises(SdoError) as info:
+        sdo.upload(0x1000, 0)
+    e = info.value
+    assert isinstance(e, CommunicationError) and e.exit_code == ExitCode.BUS
+    assert str(e) == "drive1 (node 10): no answer to the SDO upload of 0x1000 within 0.01 s"
+    assert e.detail == "no answer to the SDO upload of 0x1000 within 0.01 s"
+    assert (e.reason, e.node, e.index, e.sub, e.abort_code) == ("timeout", 10, 0x1000, 0, None)
+    assert e.hint == "check that the drive is powered and on this bus with this node id"
+
+
+def test_abort_names_the_code_and_its_text():
+    abort = lambda can_id, req: bytes([0x80]) + req[1:4] + struct.pack("<I", 0x06020000)  # noqa: E731
+    with pytest.raises(SdoError) as info:
+        sdo_upload(ScriptedNetwork(abort), 10, 0x2000, 3, label="drive1 (node 10)")
+    e = info.value
+    assert str(e) == ("drive1 (node 10): SDO upload of 0x2000:3 aborted with 0x06020000 "
+                      "(object does not exist in the object dictionary)")
+    assert (e.reason, e.abort_code) == ("abort", 0x06020000)
+    with pytest.raises(SdoError, match=r"SDO download of 0x1017 aborted with 0x06010002 \(attempt to write a "
+                                       r"read-only object\)"):
+        abort_ro = lambda can_id, req: bytes([0x80]) + req[1:4] + struct.pack("<I", 0x06010002)  # noqa: E731
+        sdo_download(ScriptedNetwork(abort_ro), 10, 0x1017, 0, b"\x64\x00")
+    assert abort_text(0x12345678) == "unknown abort code"
+
+
+@pytest.mark.parametrize("reply, why", [
+    (bytes.fromhex("43 18"), "too short"),  # 2 bytes: not even command and index
+    (bytes.fromhex("60 18 10 04 00 00 00 00"), "Unexpected response 0x60"),  # a download's answer
+    (bytes.fromhex("43 18 10 05 01 02 03 04"), "Node returned a value for 0x1018:05 instead"),
+    (bytes.fromhex("43 18 10 04 01 02"), "2 data byte(s) where the answer announces 4"),  # expedited, cut short
+])
+def test_malformed_answers(reply, why):
+    with pytest.raises(SdoError) as info:
+        DriveSdo(ScriptedNetwork(lambda can_id, req: reply), 10).upload(0x1018, 4, name="serial number")
+    e = info.value
+    assert e.reason == "malformed" and e.abort_code is None
+    assert str(e).startswith("node 10: SDO upload of 0x1018:4 (serial number): malformed answer (")
+    assert why in str(e)
+
+
+def test_a_request_that_cannot_be_sent():
+    import can
+
+    with pytest.raises(SdoError) as info:
+        sdo_upload(ScriptedNetwork(fail=can.CanOperationError("Transmit buffer full")), 10, 0x1000)
+    assert info.value.reason == "bus" and "could not be sent (Transmit buffer full)" in str(info.value)
+
+
+def test_nmt_names():
+    assert [nmt_text(s) for s in (0x00, 0x04, 0x05, 0x7F, 0x11)] == ["pre-op", "stopped", "operational", "pre-op",
+                                                                     "0x11"]
+
+
+# --------------------------------------------------------------------------- against the simulated arm
+
+def test_one_client_per_drive_for_the_session():
+    cfg = load_config(EXAMPLE1)
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as session:
+        ref = drive_ref(cfg, next(iter(cfg.drives)))
+        sdo = session.sdo(ref)
+        assert session.sdo(ref) is sdo
+        assert sdo.timeout == cfg.protocol.sdo_timeout
+        assert sdo.upload(0x1008).rstrip(b"\0").startswith(b"Whistle")
+        sdo.download(0x1017, 0, (250).to_bytes(2, "little"))
+        assert int.from_bytes(sdo.upload(0x1017), "little") == 250
+        with pytest.raises(SdoError) as info:
+            sdo.upload(0x2FFF, 0)  # the simulated drive has no such object
+        assert info.value.reason == "abort" and info.value.abort_code == 0x06020000
+        assert str(info.value).startswith(f"{ref.name} (node {ref.node}): SDO upload of 0x2FFF aborted with")
+        assert sdo.upload(0x1008)  # the client still works after an abort
+
+
+def test_identify_and_dump_read_identity_through_the_session_clients():
+    from sherpa_cli.ops.params_read import read_live
+
+    cfg = load_config(EXAMPLE1)
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as session:
+        live = read_live(session, list(cfg.drives))
+        assert set(session._sdo) == {(d.bus, d.node) for d in cfg.drives.values()}
+        assert all(d.identity["serial"] for d in live.values())
