@@ -32,11 +32,14 @@ ROOT = Path(__file__).resolve().parent.parent
 GOLDEN = Path(__file__).resolve().parent / "golden"
 WIDTH = 100
 
-# The protocol windows (config `protocol:` section) of every config the CLI loads in a test:
-# the simulated drives are deaf for these (SV: SIM_SV_SHARE of it) and the client waits them out,
-# so the real-arm defaults (0.5 s each) would only make the suite slow. Tests of the windows
-# themselves load their configs directly (tests/test_sim_e2e.py), not through the CLI.
-TEST_PROTOCOL_WINDOWS = {"mo_settle": 0.02, "sv_blackout": 0.05}
+# The protocol windows (config `protocol:` section) of the in-process simulated arm and the
+# sessions of commands run through the cli fixture: the simulated drives are deaf for these and
+# the client waits them out, so the real-arm defaults (0.5 s each) would only make the suite slow.
+# MO settle can be tiny (the client polls MO until it reads back). The simulated drive is deaf
+# for SIM_SV_SHARE (0.6) of sv_blackout counted from when it handles SV, the client waits all of
+# it from when it sent SV: 0.2 s leaves 80 ms for a loaded machine's scheduling, plus a retry.
+# Tests of the windows themselves load their configs directly (tests/test_sim_e2e.py).
+TEST_PROTOCOL_WINDOWS = {"mo_settle": 0.02, "sv_blackout": 0.2}
 
 # Threads that outlive a test on purpose; none so far (name them here, with the reason).
 KNOWN_GLOBAL_THREADS: frozenset[str] = frozenset()
