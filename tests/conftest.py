@@ -93,12 +93,21 @@ def _leaks(channels_before: dict[object, int], threads_before: set[threading.Thr
             + [f"thread {t.name!r} ({'daemon' if t.daemon else 'non-daemon'})" for t in threads])
 
 
+LEAK_BASELINE = pytest.StashKey[tuple[dict[object, int], set[threading.Thread]]]()
+
+
+def _leak_baseline(item: pytest.Item) -> None:
+    """What a test may leave behind: what exists now. Taken before the test's fixtures, and again
+    after the session's simulator harness (re)started its own threads for the test."""
+    item.stash[LEAK_BASELINE] = (_open_virtual_buses(), set(threading.enumerate()))
+
+
 @pytest.fixture(autouse=True)
-def _no_leftovers() -> Iterator[None]:
+def _no_leftovers(request: pytest.FixtureRequest) -> Iterator[None]:
     """Fail a test that leaves a python-can virtual bus open or a thread running."""
-    channels_before = _open_virtual_buses()
-    threads_before = set(threading.enumerate())
+    _leak_baseline(request.node)
     yield
+    channels_before, threads_before = request.node.stash[LEAK_BASELINE]
     deadline = time.monotonic() + LEAK_GRACE_S
     while (left := _leaks(channels_before, threads_before)) and time.monotonic() < deadline:
         time.sleep(0.01)  # a thread that was told to stop may still be on its way out
@@ -254,7 +263,7 @@ def _check_arm_args(args: tuple[str, ...]) -> None:
 
 
 @pytest.fixture
-def arm_cli(cli, cli_windows, arm_process):
+def arm_cli(request, cli, cli_windows, arm_process):
     """``arm_cli(*args)``: `sherpa ARGS` against the simulated arm on the selected transport.
 
     Every test starts with factory flash, every command with a power-cycled arm, as with
@@ -265,6 +274,7 @@ def arm_cli(cli, cli_windows, arm_process):
     if arm_process is not None:
         cli_windows(False)
         arm_process.new_test()
+        _leak_baseline(request.node)  # a restarted simulator's threads are the session's
 
     def invoke(*args: str, stdin: str = "") -> CliResult:
         _check_arm_args(args)
@@ -299,7 +309,7 @@ def arm_golden(arm_cli, golden):
 
 
 @pytest.fixture
-def arm_console(arm_process, tmp_path):
+def arm_console(request, arm_process, tmp_path):
     """``arm_console(*args)``: like arm_cli, but the installed `sherpa` console script in a process
     of its own, as a technician runs it (slow in the QEMU guest: use for a few tests only)."""
     script = Path(sys.executable).parent / "sherpa"
@@ -308,6 +318,7 @@ def arm_console(arm_process, tmp_path):
     env.update(COLUMNS=str(WIDTH), LINES="50", NO_COLOR="1", TERM="dumb", XDG_STATE_HOME=str(tmp_path / "state"))
     if arm_process is not None:
         arm_process.new_test()
+        _leak_baseline(request.node)  # a restarted simulator's threads are the session's
 
     def invoke(*args: str, stdin: str = "") -> CliResult:
         _check_arm_args(args)
