@@ -147,8 +147,8 @@ def cli_windows(monkeypatch: pytest.MonkeyPatch) -> Callable[[bool], None]:
     def open_short(cfg, *args, **kwargs):
         return open_session(_with_test_windows(cfg), *args, **kwargs)
 
-    def in_process_short(cfg):
-        return in_process(_with_test_windows(cfg))
+    def in_process_short(cfg, *args, **kwargs):
+        return in_process(_with_test_windows(cfg), *args, **kwargs)
 
     def choose(short: bool) -> None:
         monkeypatch.setattr(ArmSession, "open", staticmethod(open_short) if short else written[ArmSession])
@@ -170,6 +170,7 @@ def cli(monkeypatch: pytest.MonkeyPatch, tmp_path: Path, cli_windows):
     monkeypatch.setenv("TERM", "dumb")
     monkeypatch.delenv("SHERPA_CONFIG", raising=False)
     monkeypatch.setenv("XDG_STATE_HOME", str(tmp_path / "state"))
+    monkeypatch.setenv("XDG_CONFIG_HOME", str(tmp_path / "config"))  # no user config: ./configs is the default
     cli_windows(True)
 
     def invoke(*args: str, stdin: str = "") -> CliResult:
@@ -315,7 +316,8 @@ def arm_console(request, arm_process, tmp_path):
     script = Path(sys.executable).parent / "sherpa"
     assert script.exists(), f"no console script {script}: install the project (pip install -e .)"
     env = {k: v for k, v in os.environ.items() if k not in ("SHERPA_CONFIG", "SHERPA_BUS_MAP")}
-    env.update(COLUMNS=str(WIDTH), LINES="50", NO_COLOR="1", TERM="dumb", XDG_STATE_HOME=str(tmp_path / "state"))
+    env.update(COLUMNS=str(WIDTH), LINES="50", NO_COLOR="1", TERM="dumb", XDG_STATE_HOME=str(tmp_path / "state"),
+               XDG_CONFIG_HOME=str(tmp_path / "config"))
     if arm_process is not None:
         arm_process.new_test()
         _leak_baseline(request.node)  # a restarted simulator's threads are the session's

@@ -13,6 +13,7 @@ Two test-side settings:
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import threading
 import time
@@ -68,6 +69,8 @@ def example(name: str, extra: str = FAST):
 @contextmanager
 def sim_session(cfg, clock: ManualClock | None = None):
     """The session's simulated arm; with ``clock`` its drives live in that clock's time, not real time."""
+    # these tests time the protocol itself: the real-bus reply timeout, not --sim's patient one
+    cfg = dataclasses.replace(cfg, sim_reply_timeout=cfg.protocol.reply_timeout)
     if clock is None:
         arm = SimArm.in_process(cfg)
     else:

@@ -83,7 +83,11 @@ def run_raw(client: DriveClient, node: int, exprs: Sequence[str], *, apply: bool
             result.sent = True
             result.decoded = decode_value(request.letters, result.value)
         elif apply:
-            if request.kind == "set":
+            if request.kind == "set" and request.letters == "MO" and request.value in (0, 1):
+                # the confirmed motor switch: MO=1/0, then MO polled until it reads back (the drive is
+                # deaf while it settles, so a PA or BG right after a bare MO=1 would go unanswered)
+                client.motor_on() if request.value == 1 else client.motor_off()
+            elif request.kind == "set":
                 assert request.value is not None  # a set request carries its value
                 client.set(request.letters, request.index, request.value)
             else:
