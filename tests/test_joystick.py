@@ -14,7 +14,7 @@ import canopen
 import pytest
 
 from sherpa_cli.config import load_config
-from sherpa_cli.config.model import JoystickConfig, JoystickMap
+from sherpa_cli.config.model import JoystickMap
 from sherpa_cli.errors import ConfigError, UsageError
 from sherpa_cli.ops import joystick
 from sherpa_cli.ops.joystick import ScriptedSource, deadzone, run_joystick

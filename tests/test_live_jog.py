@@ -41,10 +41,13 @@ def motors_off(session):
         return all(not d.motor_on for d in session.sim.drives.values())
 
 
-def run_for(live, seconds, every=0.03):
+def run_for(live, seconds, every=0.03, until=None):
+    """Tick for ``seconds`` (or, with ``until``, until it holds: at most ``seconds``)."""
     end = time.monotonic() + seconds
     while time.monotonic() < end:
         live.tick()
+        if until is not None and until():
+            break
         time.sleep(every)
     return live.tick()
 
@@ -101,7 +104,7 @@ def test_the_full_range_watch_stops_everything_and_brings_the_joint_back(cfg):
             live.cfg = cfg.__class__(**{**cfg.__dict__, "joints": {**cfg.joints, "j1": cfg.joints["j1"].__class__(
                 **{**cfg.joints["j1"].__dict__, "decel": None})}})  # no stopping distance: the edge hold is late
             live.set_velocity("j1", 8000)
-            state = run_for(live, 0.8)
+            state = run_for(live, 5.0, until=lambda: bool(live.messages))
             assert any(m.startswith("limit: j1 left its full range") for m in live.messages)
             assert state["j1"].counts == cfg.joints["j1"].normal_range[1] and not live.running
         assert motors_off(s)

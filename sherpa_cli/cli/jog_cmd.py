@@ -88,7 +88,7 @@ def jog(
     if len(joints or []) != 1:
         raise UsageError("name one JOINT to jog" + (f" (got {len(joints)})" if joints else ""),
                          hint="sherpa jog JOINT --to/--by/--velocity/--torque ...; several joints: --interactive")
-    joint = joints[0]
+    joint = (joints or [""])[0]
     cfg = st.load_config()
     given = [name for name, value in (("--to", to), ("--by", by), ("--velocity", velocity), ("--torque", torque))
              if value is not None]

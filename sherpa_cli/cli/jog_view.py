@@ -220,8 +220,8 @@ class JogView(App):
             self.message = "calibrate: not available yet (sherpa home)"
             self.render_state()
             return
-        name = self.current
-        self._do(lambda: self.calibrate_joint(name))
+        name, calibrate = self.current, self.calibrate_joint
+        self._do(lambda: calibrate(name))
 
     async def action_quit(self) -> None:
         self.exit()

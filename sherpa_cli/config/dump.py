@@ -27,13 +27,13 @@ def dump_native(cfg: ArmConfig) -> str:
     if cfg.motion != MotionConfig():
         sections.append({"motion": dataclasses.asdict(cfg.motion)})
     if cfg.joystick != JoystickConfig():
-        j = cfg.joystick
+        joy = cfg.joystick
         base = JoystickMap()
         maps = [{k: v for k, v in dataclasses.asdict(m).items() if v is not None and (v != getattr(base, k) or
                                                                                         k in ("mode", "sensitivity"))}
-                for m in j.axes]
-        sections.append({"joystick": _drop_none({"device": j.device, "rate_hz": j.rate_hz, "deadzone": j.deadzone,
-                                                 "deadman": j.deadman, "axes": maps})})
+                for m in joy.axes]
+        sections.append({"joystick": _drop_none({"device": joy.device, "rate_hz": joy.rate_hz,
+                                                 "deadzone": joy.deadzone, "deadman": joy.deadman, "axes": maps})})
     sim: dict[str, Any] = {}
     if cfg.sim:
         sim["drives"] = {name: _drop_default(dataclasses.asdict(f), SimDriveConfig()) for name, f in cfg.sim.items()}

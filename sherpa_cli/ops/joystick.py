@@ -65,7 +65,7 @@ def _evdev() -> Any:
     if not sys.platform.startswith("linux"):
         raise UsageError(f"the joystick needs Linux (evdev); this is {sys.platform}")
     try:
-        import evdev  # type: ignore[import-not-found]
+        import evdev
     except ImportError:
         raise UsageError("the joystick needs the python package 'evdev', which is not installed",
                          hint="pip install evdev (Linux only)") from None

@@ -330,8 +330,8 @@ class LiveJog:
             st = self.state[name]
             st.counts = a.position(motors)
             st.rad = counts_to_rad(st.counts, a.cpr)
-            run = self.running.get(name)
-            if run is not None and run.mode == "position" and all(
+            now_running = self.running.get(name)
+            if now_running is not None and now_running.mode == "position" and all(
                     int(self._client(d).get("MS")) == 0 for d in a.drives if d not in self.dead):
                 self.running.pop(name, None)
                 st.command = "-"
@@ -426,7 +426,7 @@ class LiveJog:
                 continue
             rate = float(motors.get(j.drive_a, 0)) + (j.sign * float(motors.get(j.drive_b, 0))
                                                        if j.drive_b is not None else 0.0)
-            p = j.position(pos)
+            p = float(j.position(pos))
             if mode == "velocity":
                 decel = self.cfg.joints[j.name].decel
                 p += rate * self.tick_period + (rate * abs(rate) / (2 * decel) if decel else 0.0)
