@@ -17,6 +17,7 @@ CASES = [
     ("jog-joystick-with-joint", [*J, "jog", "--joystick", "j1"], 2),
     ("jog-interactive-with-values", [*F, "jog", "--interactive", "--velocity", "1"], 2),
     ("jog-interactive-and-joystick", [*F, "jog", "--interactive", "--joystick"], 2),
+    ("jog-interactive-no-terminal", [*F, "jog", "--interactive", "j1", "--apply"], 2),
     ("jog-no-joint", [*F, "jog", "--to", "1"], 2),
     ("jog-two-joints", [*F, "jog", "j1", "j2", "--to", "1"], 2),
 ]
@@ -59,6 +60,7 @@ def test_interactive_view_through_the_command_leaves_every_motor_off(cli, monkey
                 seen["on"] = [n for n, d in self.session.sim.drives.items() if d.motor_on]
 
     monkeypatch.setattr(JogView, "run", headless)
+    monkeypatch.setattr("sherpa_cli.cli.jog_live_cmd.have_terminal", lambda: True)
     monkeypatch.setattr(live_jog.LiveJog, "__exit__", record)
     result = cli(*F, "jog", "--interactive", "j2", "--apply")
     assert result.exit_code == 0, result.transcript()

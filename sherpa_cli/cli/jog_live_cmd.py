@@ -4,6 +4,7 @@ the limits of `jog`), the joystick loop ops/joystick.py, the view cli/jog_view.p
 
 from __future__ import annotations
 
+import sys
 from typing import Any, Sequence
 
 import typer
@@ -35,6 +36,11 @@ def _calibrate_hook(st: Any, session: Any) -> Any:
     return None
 
 
+def have_terminal() -> bool:
+    """The view needs a terminal on both ends (the tests replace this to run it headless)."""
+    return sys.stdin.isatty() and sys.stdout.isatty()
+
+
 def _buses(cfg: Any, axes: Sequence[Any]) -> list[str]:
     return sorted({cfg.drives[d].bus for a in axes for d in a.drives})
 
@@ -56,6 +62,9 @@ def interactive(st: Any, names: Sequence[str], *, apply: bool, uncalibrated: boo
                     f"(drives {', '.join(sorted({d for a in axes for d in a.drives}))}) inside the motion guard")
         st.out.line("nothing sent; add --apply to move")
         return
+    if not have_terminal():
+        raise UsageError("--interactive needs a terminal (stdin and stdout)",
+                         hint="run it in an interactive shell (ssh -t for a remote one)")
     from sherpa_cli.cli.jog_view import JogView
 
     with st.session(buses=_buses(cfg, axes)) as session:
