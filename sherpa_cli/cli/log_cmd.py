@@ -1,0 +1,160 @@
+"""`sherpa log ...`: capture raw traffic, decode captures, plot recordings (docs/log.md)."""
+
+from __future__ import annotations
+
+import threading
+from pathlib import Path
+from typing import List, Optional
+
+import typer
+
+from sherpa_cli.cli.context import state
+from sherpa_cli.errors import UsageError
+
+app = typer.Typer(help="Record, capture, decode and plot CAN traffic and joint motion (docs/log.md).",
+                  no_args_is_help=True)
+
+
+def _names(st) -> tuple[list[str], dict[tuple[str, int], str]]:
+    """Bus names in config order and (bus, node) -> drive name, when a config is there to say."""
+    if not st.config_given and not st.config_path.exists():
+        return [], {}
+    cfg = st.load_config()
+    return list(cfg.buses), {(d.bus, d.node): d.name for d in cfg.drives.values()}
+
+
+@app.command("decode")
+def decode(
+    ctx: typer.Context,
+    file: Path = typer.Argument(..., metavar="FILE", help="A capture: .log/.txt (candump -L), .asc, .blf, .csv, "
+                                ".trc, .mf4 (with asammdf)."),
+    bus: Optional[List[str]] = typer.Option(None, "--bus", metavar="BUS", help="Only frames of this bus (repeat)."),
+    node: Optional[List[int]] = typer.Option(None, "--node", metavar="ID", help="Only frames of this node (repeat)."),
+    kind: Optional[List[str]] = typer.Option(
+        None, "--kind", metavar="KIND",
+        help="Only frames of this kind (repeat): nmt, sync, emcy, heartbeat, sdo, interp, pdo, other."),
+) -> None:
+    """Print what each frame of a capture means: NMT, SYNC, heartbeat, EMCY with the Elmo text, SDO
+    requests and responses with object names and values (segmented transfers joined), interpreter
+    requests and replies with command names, values and error texts, and PDOs by their mapping
+    when the capture contains the SDO writes that set it.
+
+    Times are seconds from the capture's first frame. Formats that keep only a channel number
+    (asc, blf, trc) name the bus by its position in the config (0 = first bus).
+
+    \b
+    Examples:
+      sherpa log decode run.log
+      sherpa log decode run.asc --node 40 --kind interp
+      sherpa --json log decode run.blf --kind emcy
+    """
+    from sherpa_cli.ops.candecode import KINDS, FrameDecoder
+    from sherpa_cli.ops.capture import read_frames
+
+    st = state(ctx)
+    for k in kind or []:
+        if k not in KINDS:
+            raise UsageError(f"--kind {k}: expected one of {', '.join(KINDS)}")
+    bus_names, nodes = _names(st)
+    decoder = FrameDecoder(nodes)
+    wanted_bus, wanted_node, wanted_kind = set(bus or []), set(node or []), set(kind or [])
+    rows = []
+    t0 = None
+    # Every frame goes through the decoder (segments and PDO mappings need the whole story);
+    # the filters only choose what is shown.
+    for item in decoder.decode_all(read_frames(file, bus_names)):
+        if t0 is None:
+            t0 = item.frame.timestamp
+        if wanted_bus and item.frame.bus not in wanted_bus:
+            continue
+        if wanted_node and item.node not in wanted_node:
+            continue
+        if wanted_kind and item.kind not in wanted_kind:
+            continue
+        rows.append(item)
+    if st.json_mode:
+        st.out.json({"file": str(file), "frames": [r.as_json(t0 or 0.0) for r in rows]})
+        return
+    width = max((len(r.frame.bus) for r in rows), default=4)
+    for r in rows:
+        st.out.line(f"{r.frame.timestamp - (t0 or 0.0):11.6f}  {r.frame.bus:<{width}}  {r.frame.raw():<20}  "
+                    f"{r.kind:<9}  {r.text}")
+    if not rows:
+        st.out.info("no frames matched")
+
+
+@app.command("capture")
+def capture(
+    ctx: typer.Context,
+    output: Path = typer.Option(..., "--output", "-o", metavar="FILE",
+                                help="Where to write: .log (candump, channel per line), .asc, .blf, .csv, .trc, "
+                                ".mf4 (with asammdf)."),
+    bus: Optional[List[str]] = typer.Option(None, "--bus", metavar="BUS",
+                                            help="Capture only this configured bus (repeat); default: every bus."),
+    duration: Optional[float] = typer.Option(None, "--for", metavar="S", help="Stop after S seconds (default: Ctrl-C)."),
+) -> None:
+    """Capture every frame of the configured buses into one file until Ctrl-C (or --for),
+    then print the frame count per bus, frames lost (adapter or queue overruns) and bus load.
+
+    Only listens: nothing is sent. Ctrl-C ends the capture without losing buffered frames.
+
+    \b
+    Examples:
+      sherpa log capture -o run.log
+      sherpa log capture -o can1.asc --bus can1 --for 10
+    """
+    from sherpa_cli.bus.busmap import apply_bus_map, parse_bus_map
+    from sherpa_cli.bus.links import open_bus
+    from sherpa_cli.ops.capture import capture as run_capture
+    from sherpa_cli.ops.capture import check_output
+
+    st = state(ctx)
+    if st.sim:
+        raise UsageError("log capture listens to real buses; --sim has no traffic of its own to capture",
+                         hint="run `sherpa sim --serve` and capture with --bus-map")
+    if duration is not None and not 0 < duration <= 86400:
+        raise UsageError(f"--for {duration}: expected seconds > 0 and <= 86400")
+    check_output(output)
+    cfg = st.load_config()
+    mapping = parse_bus_map(st.bus_map)
+    if mapping:
+        cfg = apply_bus_map(cfg, mapping)
+    names = list(bus or cfg.buses)
+    for name in names:
+        if name not in cfg.buses:
+            raise UsageError(f"--bus {name}: not a configured bus (configured: {', '.join(cfg.buses)})")
+    opened = {}
+    stop = threading.Event()
+    timer = None
+    try:
+        for name in names:
+            opened[name] = open_bus(cfg.buses[name])
+        if duration is not None:
+            timer = threading.Timer(duration, stop.set)
+            timer.daemon = True
+            timer.start()
+        st.out.info(f"capturing {', '.join(names)} into {output} (Ctrl-C to stop)")
+        result = run_capture(opened, output, list(cfg.buses), stop=stop,
+                             bitrates={n: cfg.buses[n].bitrate for n in names})
+    finally:
+        if timer is not None:
+            timer.cancel()
+        for b in opened.values():
+            b.shutdown()
+    _render_capture(st, result)
+
+
+def _render_capture(st, result) -> None:
+    if st.json_mode:
+        st.out.json({"file": str(result.path), "seconds": round(result.seconds, 3), "frames": result.frames,
+                     "lost": result.lost,
+                     "buses": [{"bus": c.bus, "frames": c.frames, "error_frames": c.errors, "lost": c.overruns,
+                                "load": None if result.load(c.bus) is None else round(result.load(c.bus), 4)}
+                               for c in result.counts.values()]})
+        return
+    rows = []
+    for c in result.counts.values():
+        load = result.load(c.bus)
+        rows.append([c.bus, c.frames, c.errors, c.overruns, "-" if load is None else f"{100 * load:.1f} %"])
+    st.out.table(f"{result.path}: {result.frames} frames in {result.seconds:.1f} s, {result.lost} lost",
+                 ["bus", "frames", "error frames", "lost", "load"], rows, right=(1, 2, 3, 4))
