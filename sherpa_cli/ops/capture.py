@@ -170,7 +170,13 @@ def capture(buses: dict[str, Any], path: Path, bus_names: Sequence[str], *,
     finally:
         for notifier in notifiers:
             notifier.stop()
-        _drain(readers, writer, result, suffix, bus_names, wait=0.0, on_frame=on_frame)
+        _drain(readers, writer, result, suffix, bus_names, wait=0.0, on_frame=None)
+        # what the notifiers had not yet taken off the buses: read and write it here
+        for name, bus in buses.items():
+            msg = bus.recv(timeout=0.0)
+            while msg is not None:
+                _write(msg, name, writer, result, suffix, bus_names)
+                msg = bus.recv(timeout=0.0)
         result.seconds = clock() - start
         writer.stop()
     return result
@@ -180,22 +186,26 @@ def _drain(readers, writer, result: CaptureResult, suffix: str, bus_names: Seque
            on_frame: Callable[[], None] | None) -> bool:
     got = False
     for name, reader in readers.items():
-        count = result.counts[name]
         msg = reader.get_message(timeout=0.0)
         while msg is not None:
             got = True
-            if msg.is_error_frame:
-                count.errors += 1
-                # SocketCAN reports controller/queue overruns in error frame data byte 1
-                if len(msg.data) > 1 and msg.data[1] & 0x03:
-                    count.overruns += 1
-            count.frames += 1
-            count.bits += frame_bits(msg.dlc, msg.is_extended_id)
-            msg.channel = channel_for(suffix, name, bus_names)
-            writer.on_message_received(msg)
+            _write(msg, name, writer, result, suffix, bus_names)
             if on_frame is not None:
                 on_frame()
             msg = reader.get_message(timeout=0.0)
     if not got and wait:
         time.sleep(wait)
     return got
+
+
+def _write(msg, name: str, writer, result: CaptureResult, suffix: str, bus_names: Sequence[str]) -> None:
+    count = result.counts[name]
+    if msg.is_error_frame:
+        count.errors += 1
+        # SocketCAN reports controller/queue overruns in error frame data byte 1
+        if len(msg.data) > 1 and msg.data[1] & 0x03:
+            count.overruns += 1
+    count.frames += 1
+    count.bits += frame_bits(msg.dlc, msg.is_extended_id)
+    msg.channel = channel_for(suffix, name, bus_names)
+    writer.on_message_received(msg)
