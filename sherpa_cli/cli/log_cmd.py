@@ -158,3 +158,82 @@ def _render_capture(st, result) -> None:
         rows.append([c.bus, c.frames, c.errors, c.overruns, "-" if load is None else f"{100 * load:.1f} %"])
     st.out.table(f"{result.path}: {result.frames} frames in {result.seconds:.1f} s, {result.lost} lost",
                  ["bus", "frames", "error frames", "lost", "load"], rows, right=(1, 2, 3, 4))
+
+
+@app.command("plot")
+def plot(
+    ctx: typer.Context,
+    file: Path = typer.Argument(..., metavar="FILE.csv", help="A recording of `log record` or `log step`."),
+    output: Path = typer.Option(..., "--output", "-o", metavar="FILE.png", help="Where to write the PNG."),
+    joint: Optional[List[str]] = typer.Option(None, "--joint", metavar="JOINT",
+                                              help="Plot this joint (repeat); default: every joint in the file."),
+    signal: str = typer.Option("pos", "--signal", metavar="pos|vel|cur",
+                               help="The signal whose step metrics are computed."),
+    step_at: float = typer.Option(0.0, "--step-at", metavar="S", help="Time of the step's command in the file."),
+    target: Optional[float] = typer.Option(None, "--target", metavar="X",
+                                           help="The commanded value (rad, rad/s or A), for the steady-state error."),
+) -> None:
+    """Plot position and velocity (and current) over time into a PNG, with step metrics (dead time,
+    rise time 10-90 %, overshoot, settling time to 2 %, steady-state error) printed and drawn.
+
+    Needs matplotlib (pip install 'sherpa-cli[plot]').
+
+    \b
+    Examples:
+      sherpa log plot run.csv -o run.png
+      sherpa log plot step/recording.csv -o elbow.png --joint elbow_pitch --signal vel --target 0.1
+    """
+    from sherpa_cli.ops.plot import MISSING, MISSING_HINT, have_matplotlib, plot_recording
+    from sherpa_cli.ops.recording import SIGNALS, read_csv
+
+    st = state(ctx)
+    if signal not in SIGNALS:
+        raise UsageError(f"--signal {signal}: expected one of {', '.join(SIGNALS)}")
+    if output.suffix.lower() != ".png":
+        raise UsageError(f"-o {output}: expected a .png file")
+    if not have_matplotlib():
+        raise UsageError(MISSING, hint=MISSING_HINT)
+    rec = read_csv(file)
+    joints = list(joint or rec.joints())
+    for j in joints:
+        if j not in rec.joints():
+            raise UsageError(f"--joint {j}: not in {file} (it has {', '.join(rec.joints()) or 'no joints'})")
+    metrics = _metrics(rec, joints, signal, step_at, target)
+    plot_recording(rec, joints, output, metrics=metrics, title=file.name)
+    render_metrics(st, metrics, extra={"png": str(output)})
+
+
+def _metrics(rec, joints, signal, step_at, target):
+    from sherpa_cli.ops.step_metrics import step_metrics
+
+    out = {}
+    for j in joints:
+        series = rec.series(j, signal)
+        if series is None or len(series[0]) < 2:
+            continue
+        try:
+            out[(j, signal)] = step_metrics(series[0], series[1], t_step=step_at, target=target)
+        except ValueError as exc:
+            raise UsageError(f"{j} {signal}: {exc}") from None
+    return out
+
+
+def _ms(seconds) -> str:
+    return "-" if seconds is None else f"{1000 * seconds:.1f} ms"
+
+
+def render_metrics(st, metrics, extra=None) -> None:
+    from sherpa_cli.ops.recording import SIGNALS, UNITS
+
+    if st.json_mode:
+        st.out.json({**(extra or {}), "metrics": [{"joint": j, "signal": s, **m.as_json()}
+                                                  for (j, s), m in metrics.items()]})
+        return
+    for (j, s), m in metrics.items():
+        unit = UNITS[SIGNALS[s]]
+        settle = _ms(m.settling_time) + ("" if m.settled else " (not settled at the end)")
+        sse = "" if m.steady_state_error is None else f", steady-state error {m.steady_state_error:.4f} {unit}"
+        st.out.line(f"{j} {s}: {m.initial:.4f} -> {m.final:.4f} {unit}; dead time {_ms(m.dead_time)}, "
+                    f"rise (10-90 %) {_ms(m.rise_time)}, overshoot {m.overshoot:.1f} %, settling (2 %) {settle}{sse}")
+    for key, value in (extra or {}).items():
+        st.out.line(f"{key}: {value}")
