@@ -25,6 +25,7 @@ from sherpa_cli.sim.drive import SimDrive
 from sherpa_cli.sim.settings import SimSettings
 
 NMT_ID = 0x000
+SYNC_ID = 0x080
 SDO_RX = 0x600
 HOME_SWITCH_HALF_WIDTH = 2  # counts either side of a home switch's position where it reads pressed
 SIM_SV_SHARE = 0.6  # the simulated drive is deaf for this share of protocol.sv_blackout (the tool's bound)
@@ -317,8 +318,8 @@ class SimArm:
     def _dispatch(self, can_id: int, data: bytes, on_bus: Mapping[str, SimDrive],
                   by_node: Mapping[int, list[str]]) -> list[str]:
         """Hand a frame to the drive(s) it concerns; returns their names."""
-        if can_id == NMT_ID or 0x700 <= can_id <= 0x77F:
-            targets = list(on_bus)  # NMT broadcast / host heartbeats: every drive decides for itself
+        if can_id in (NMT_ID, SYNC_ID) or 0x700 <= can_id <= 0x77F:
+            targets = list(on_bus)  # NMT broadcast / SYNC / host heartbeats: every drive decides for itself
         else:
             targets = by_node.get(can_id & 0x7F, [])
         for name in targets:
