@@ -133,3 +133,30 @@ def test_budget_matches_the_design_note_and_refuses_too_fast():
     assert six.fits and six.max_rate >= 1000
     (fast,) = bus_budget(cfg, can0, 2000, current=False)
     assert not fast.fits and fast.max_rate == six.max_rate
+
+
+@pytest.mark.golden
+def test_cli_refuses_a_rate_the_bus_cannot_carry(cli, golden, tmp_path):
+    result = cli("--sim", "log", "record", "--rate", "2000", "--for", "1", "-o", str(tmp_path / "r.csv"))
+    assert result.exit_code == 2 and not (tmp_path / "r.csv").exists()
+    golden("log-record-too-fast.txt", result.transcript().replace(str(tmp_path), "TMP"))
+
+
+def test_cli_records_on_the_simulated_arm(cli, tmp_path):
+    from sherpa_cli.ops.recording import read_csv
+
+    out = tmp_path / "r.csv"
+    result = cli("--sim", "log", "record", "elbow_1a", "--rate", "50", "--for", "0.3", "-o", str(out))
+    assert result.exit_code == 0, result.stderr
+    assert "bus can1: 1 drive(s) at 50 Hz with current" in result.stderr
+    rec = read_csv(out)
+    assert "elbow_1a.px" in rec.columns and len(rec.times) >= 2
+    poll = cli("--sim", "log", "record", "elbow_1a", "--poll", "--for", "0.2", "-o", str(tmp_path / "p.csv"))
+    assert poll.exit_code == 0, poll.stderr
+    assert len(read_csv(tmp_path / "p.csv").times) >= 2
+
+
+def test_cli_record_bad_input(cli, tmp_path):
+    assert "only .csv" in cli("--sim", "log", "record", "--for", "1", "-o", str(tmp_path / "r.parquet")).stderr
+    assert cli("--sim", "log", "record", "--for", "0", "-o", str(tmp_path / "r.csv")).exit_code == 2
+    assert "nose" in cli("--sim", "log", "record", "nose", "--for", "1", "-o", str(tmp_path / "r.csv")).stderr

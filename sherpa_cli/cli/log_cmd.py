@@ -237,3 +237,98 @@ def render_metrics(st, metrics, extra=None) -> None:
                     f"rise (10-90 %) {_ms(m.rise_time)}, overshoot {m.overshoot:.1f} %, settling (2 %) {settle}{sse}")
     for key, value in (extra or {}).items():
         st.out.line(f"{key}: {value}")
+
+
+# Seconds to wait while recording; tests replace it (the recorder's SYNC runs on its own).
+import time as _time  # noqa: E402
+
+sleep = _time.sleep
+MAX_RECORD_S = 3600.0
+
+
+@app.command("record")
+def record(
+    ctx: typer.Context,
+    targets: Optional[List[str]] = typer.Argument(
+        None, metavar="[TARGET]...", help="Joints, pairs or drives to record; default: every configured drive."),
+    rate: float = typer.Option(100.0, "--rate", metavar="HZ", help="Samples per second (SYNC rate)."),
+    duration: float = typer.Option(..., "--for", metavar="S", help="How long to record, in seconds."),
+    output: Path = typer.Option(..., "--output", "-o", metavar="FILE.csv", help="Where to write the samples."),
+    current: Optional[bool] = typer.Option(
+        None, "--current/--no-current",
+        help="Also sample the motor current (a second TPDO every 2nd SYNC). Default: when the bus budget allows."),
+    poll: bool = typer.Option(False, "--poll", help="Sample through the interpreter (PX, VX, IQ queries) every "
+                              "bus's poll_interval_ms (the seed's scheduler_interval) instead of TPDOs: "
+                              "changes nothing on the drives, but slow and jittery."),
+) -> None:
+    """Record position and velocity (and current) of joints, in joint units (rad, rad/s, A; Σ/Δ for
+    pairs) plus the motor counts, with one timestamp per sample, into a CSV file.
+
+    Sampling uses TPDOs sent on SYNC: TPDO1 maps position and velocity (0x6064, 0x6069), TPDO3 the
+    current, transmission type 1 (every SYNC). SYNC comes from the kernel where the interface has
+    one (SocketCAN), else from a thread. The bus load is computed and printed before anything is
+    sent; a rate the bus cannot carry is refused, naming the highest rate it can.
+
+    The PDO changes are RAM only: the old settings are read first and written back on every exit
+    path (end, error, Ctrl-C); nothing is ever saved (no SV).
+
+    \b
+    Examples:
+      sherpa log record elbow_pitch --rate 1000 --for 5 -o elbow.csv
+      sherpa log record shoulder_diff --rate 500 --for 10 --current -o pair.csv
+      sherpa log record --poll --for 5 -o slow.csv
+    """
+    from sherpa_cli.ops.record import MAX_LOAD, Poller, Recorder, bus_budget, check_budget
+    from sherpa_cli.ops.recording import write_csv
+    from sherpa_cli.ops.targets import drive_refs
+
+    st = state(ctx)
+    if not 0 < duration <= MAX_RECORD_S:
+        raise UsageError(f"--for {duration}: expected seconds > 0 and <= {MAX_RECORD_S:g}")
+    if not (0 < rate <= 10000):
+        raise UsageError(f"--rate {rate}: expected Hz > 0 and <= 10000")
+    if output.suffix.lower() != ".csv":
+        raise UsageError(f"-o {output}: only .csv is written", hint="name the file run.csv")
+    if not output.parent.exists():
+        raise UsageError(f"-o {output}: directory {output.parent} does not exist")
+    cfg = st.load_config()
+    refs = drive_refs(cfg, targets, configured_only=True)
+    if not poll:
+        if current is None:
+            current = all(b.fits for b in bus_budget(cfg, refs, rate, current=True))
+        budget = bus_budget(cfg, refs, rate, current=current)
+        for b in budget:
+            st.out.info(f"bus {b.bus}: {b.drives} drive(s) at {rate:g} Hz"
+                        f"{' with current' if b.current else ''}: {100 * b.load:.1f} % of "
+                        f"{b.bitrate / 1e6:g} Mbit/s{' (assumed)' if b.bitrate_assumed else ''} "
+                        f"(limit {100 * MAX_LOAD:.0f} %, highest rate {b.max_rate} Hz)")
+        check_budget(budget)
+    buses = list(dict.fromkeys(r.bus for r in refs))
+    interrupted = False
+    with st.session(buses=buses) as session:
+        sampler = Poller(session, refs, current=bool(current)) if poll else Recorder(session, refs, rate,
+                                                                                    current=bool(current))
+        with sampler:
+            try:
+                sleep(duration)
+            except KeyboardInterrupt:
+                interrupted = True
+        rec = sampler.recording(cfg) if poll else sampler.recording()
+        counts = sampler.counts()
+        expected = None if poll else sampler.expected()
+    write_csv(rec, output)
+    _render_record(st, output, counts, expected, len(rec.times))
+    if interrupted:
+        st.out.warn("interrupted: the samples up to Ctrl-C are written; the drives' PDO settings are restored")
+        raise typer.Exit(130)
+
+
+def _render_record(st, output, counts, expected, rows) -> None:
+    if st.json_mode:
+        st.out.json({"file": str(output), "rows": rows, "expected": expected,
+                     "drives": [{"drive": n, "samples": c} for n, c in counts.items()]})
+        return
+    for name, c in counts.items():
+        share = "" if not expected else f" of {expected} ({100 * c / expected:.2f} %)"
+        st.out.line(f"{name}: {c} samples{share}")
+    st.out.line(f"wrote {output} ({rows} rows)")
