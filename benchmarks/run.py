@@ -402,6 +402,93 @@ def bench_program(rounds: int = 3) -> Result:
                   f"pacing on (send_interval_us {', '.join(map(str, gaps))})")
 
 
+DEADMAN_JOINTS = (("elbow_pitch", "elbow_1a"), ("wrist_1", "wrist_1a"), ("wrist_3", "wrist_3a"))
+
+
+def bench_deadman(rounds: int = 3) -> Result:
+    """SIGKILL a `sherpa jog --velocity` in its own process; time until the drive's heartbeat consumer
+    switched the motor off (the simulator's event log) / the configured consumer time.
+
+    The simulated arm runs as `sherpa sim --serve` (python-can-remote on 127.0.0.1) in another
+    process; each round jogs another plain joint, so no round meets a drive the last one tripped.
+    Judged: the worst round. The ratio cannot go below (consumer - heartbeat period) / consumer
+    (0.75 with the defaults): the drive counts from the last heartbeat it heard.
+    """
+    import os
+    import signal
+    import tempfile
+
+    from sherpa_cli.config import load_config
+
+    consumer = load_config(ROOT / "configs" / "sherpa-arm.yaml").motion.consumer_time_ms / 1000
+    ratios = []
+    with tempfile.TemporaryDirectory() as tmp:
+        env = dict(os.environ, XDG_STATE_HOME=tmp, NO_COLOR="1")
+        env.pop("SHERPA_BUS_MAP", None)
+        log = Path(tmp) / "events.jsonl"
+        sim, bus_map = _serve_sim(env, log)
+        try:
+            for joint, drive in DEADMAN_JOINTS[:rounds]:
+                since = time.monotonic()
+                jog = subprocess.Popen([sys.executable, "-m", "sherpa_cli", "--bus-map", bus_map, "jog", joint,
+                                        "--velocity", "0.2", "--apply"], cwd=ROOT, env=env,
+                                       stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+                try:
+                    _wait_event(log, drive, "BG:", since, 60)
+                    time.sleep(0.2)
+                    t_kill = time.monotonic()
+                    os.kill(jog.pid, signal.SIGKILL)
+                finally:
+                    jog.kill()
+                    jog.wait(30)
+                off = _wait_event(log, drive, "motor off", t_kill, 10 * consumer)
+                ratios.append((off - t_kill) / consumer)
+        finally:
+            sim.send_signal(signal.SIGINT)
+            try:
+                sim.wait(30)
+            except subprocess.TimeoutExpired:
+                sim.kill()
+    goal = "<= 1.5"
+    worst = max(ratios)
+    return Result("deadman", round(worst * consumer * 1000, 1), "ms", round(worst, 2), goal, _judge(worst, goal),
+                  f"SIGKILL of `jog --velocity` to motor off (simulator's event log), worst of {len(ratios)} "
+                  f"rounds ({', '.join(f'{r:.2f}' for r in ratios)}); ratio to the consumer time "
+                  f"{consumer * 1000:.0f} ms; sim served over python-can-remote on 127.0.0.1")
+
+
+def _serve_sim(env: dict, log: Path) -> tuple[subprocess.Popen, str]:
+    import socket
+
+    with socket.socket() as probe:  # a free base port; the next two are nearly always free too
+        probe.bind(("127.0.0.1", 0))
+        port = probe.getsockname()[1]
+    port = min(port, 65000)
+    sim = subprocess.Popen([sys.executable, "-m", "sherpa_cli", "sim", "--serve", f"127.0.0.1:{port}",
+                            "--duration", "300", "--event-log", str(log)], cwd=ROOT, env=env,
+                           stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    for line in sim.stdout:
+        if "export SHERPA_BUS_MAP=" in line:
+            # keep draining, so a full pipe never blocks the simulator
+            import threading
+
+            threading.Thread(target=lambda: [None for _ in sim.stdout], daemon=True).start()
+            return sim, line.split("=", 1)[1].strip()
+    raise RuntimeError("the simulator did not start")
+
+
+def _wait_event(log: Path, drive: str, prefix: str, after: float, timeout: float) -> float:
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if log.exists():
+            for line in log.read_text(encoding="utf-8").splitlines():
+                e = json.loads(line)
+                if e["drive"] == drive and e["t"] >= after and e["event"].startswith(prefix):
+                    return e["t"]
+        time.sleep(0.01)
+    raise RuntimeError(f"no '{prefix}' event of {drive} within {timeout} s")
+
+
 def program_workers() -> int:
     from sherpa_cli.ops.program import MAX_DRIVE_WORKERS
 
@@ -415,6 +502,7 @@ BENCHMARKS: dict[str, Callable[[], Result]] = {
     "commission": bench_commission,
     "program": bench_program,
     "startup": bench_startup,
+    "deadman": bench_deadman,
 }
 
 

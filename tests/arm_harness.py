@@ -104,6 +104,7 @@ class ArmProcess:
         self.fresh = False  # True: no command has run since the last start or power cycle
         self.proc: subprocess.Popen | None = None
         self.bus_map = ""
+        self.event_log: Path | None = None
         self.output: list[str] = []
         self._buses: list[Any] = []
         self._notifier: Any = None
@@ -136,8 +137,11 @@ class ArmProcess:
             bus_map = ",".join(f"can{i}=socketcan:{ch}" for i, ch in enumerate(self.test_bus.channels))
             args, marker = ["--bus-map", bus_map, "sim"], "drives answering on"
         self.output = []
+        # the simulator's record of motor on/off and heartbeat-loss events (tests/test_motion_crossprocess.py)
+        self.event_log = self.work_dir / f"events-{self.starts}.jsonl"
         self.proc = subprocess.Popen(
-            [sys.executable, "-m", "sherpa_cli", "--config", self.config, *args, "--duration", "7200"],
+            [sys.executable, "-m", "sherpa_cli", "--config", self.config, *args, "--duration", "7200",
+             "--event-log", str(self.event_log)],
             cwd=self.root, env=env, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
             text=True)
         # A thread drains the pipe: selecting on it while readline() buffers ahead loses lines,

@@ -49,6 +49,7 @@ def cli(monkeypatch: pytest.MonkeyPatch, tmp_path: Path):
     monkeypatch.setenv("TERM", "dumb")
     monkeypatch.delenv("SHERPA_CONFIG", raising=False)
     monkeypatch.setenv("XDG_STATE_HOME", str(tmp_path / "state"))
+    monkeypatch.setenv("XDG_CONFIG_HOME", str(tmp_path / "config"))  # no user config: ./configs is the default
 
     def invoke(*args: str, stdin: str = "") -> CliResult:
         out, err = io.StringIO(), io.StringIO()
@@ -197,7 +198,8 @@ def arm_console(arm_process, tmp_path):
     script = Path(sys.executable).parent / "sherpa"
     assert script.exists(), f"no console script {script}: install the project (pip install -e .)"
     env = {k: v for k, v in os.environ.items() if k not in ("SHERPA_CONFIG", "SHERPA_BUS_MAP")}
-    env.update(COLUMNS=str(WIDTH), LINES="50", NO_COLOR="1", TERM="dumb", XDG_STATE_HOME=str(tmp_path / "state"))
+    env.update(COLUMNS=str(WIDTH), LINES="50", NO_COLOR="1", TERM="dumb", XDG_STATE_HOME=str(tmp_path / "state"),
+               XDG_CONFIG_HOME=str(tmp_path / "config"))
     if arm_process is not None:
         arm_process.new_test()
 

@@ -78,3 +78,14 @@ def test_dry_run_sends_no_set_and_no_execute(tmp_path, monkeypatch):
         frames = [data for _, can_id, data in session.sim.drives["shoulder_1a"].received if can_id == 0x30A]
     assert [r.sent for r in results] == [False, True, False, False, False]
     assert frames == [bytes.fromhex("50580000")], "only the PX query reached the drive"
+
+
+@pytest.mark.realbus
+def test_mo1_then_a_move_in_one_cmd_goes_through_the_confirmed_motor_switch(arm_cli):
+    # MO=1 makes the drive deaf while it settles (protocol.mo_settle, 0.5 s on the arm): a PA sent
+    # right after a bare MO=1 would get no answer. The confirmed switch polls MO until it reads 1.
+    result = arm_cli("--json", "cmd", "elbow_1a", "MO=1", "PA=300", "BG", "--apply")
+    assert result.exit_code == 0, result.transcript()
+    assert [r["sent"] for r in json.loads(result.stdout)["results"]] == [True, True, True]
+    dry = arm_cli("cmd", "elbow_1a", "MO=1", "PA=300", "BG")  # the dry-run rule stays
+    assert dry.exit_code == 0 and "not sent (dry run)" in dry.stdout and "3 command(s) not sent" in dry.stdout

@@ -26,13 +26,13 @@ def _env(tmp_path) -> dict[str, str]:
     return env
 
 
-def _start_sim(tmp_path):
+def _start_sim(tmp_path, *extra: str):
     try:
         port = free_base_port(3)
     except RuntimeError:
         pytest.skip("no three consecutive free ports on 127.0.0.1")
     proc = subprocess.Popen(
-        [sys.executable, "-m", "sherpa_cli", "sim", "--serve", f"127.0.0.1:{port}", "--duration", "60"],
+        [sys.executable, "-m", "sherpa_cli", "sim", "--serve", f"127.0.0.1:{port}", "--duration", "60", *extra],
         cwd=ROOT, env=_env(tmp_path), stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
         stderr=subprocess.STDOUT, text=True)
     # A thread drains the pipe: select() on it while readline() buffers ahead loses lines.

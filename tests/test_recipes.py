@@ -73,10 +73,37 @@ def test_dry_run_strips_write_flags_and_skips_write_expectations(tmp_path):
     r = load_recipe(write(tmp_path, BASIC))
     fake = FakeSherpa()
     rep = run_recipe(r, fake, apply=False, confirm=lambda q: True)
-    assert fake.calls == [["cmd", "shoulder_1a", "PX"], ["program-limits", "shoulder_1a"],
+    # a step with JSON expectations runs with --json in a dry run too (its plan is machine-read)
+    assert fake.calls == [["cmd", "shoulder_1a", "PX"], ["--json", "program-limits", "shoulder_1a"],
                           ["params", "diff", "config", "live"]]
-    assert [x.status for x in rep.results] == ["passed"] * 4
+    # the confirm step is not asked in a dry run: nothing is written, so nothing needs confirming
+    assert [x.status for x in rep.results] == ["passed", "skipped", "passed", "passed"]
     assert rep.results[2].dry_run and rep.exit_code == 0
+
+
+def test_dry_run_skip_steps_and_confirm_steps_that_ask_anyway(tmp_path):
+    text = """\
+steps:
+  - {name: look, run: cmd shoulder_1a PX}
+  - {name: ask, confirm: "Press the switch", dry_run: run}
+  - {name: program, run: program-limits --apply}
+  - {name: verify, run: params diff config live, dry_run: skip}
+"""
+    r = load_recipe(write(tmp_path, text))
+    fake = FakeSherpa()
+    asked = []
+    rep = run_recipe(r, fake, apply=False, confirm=lambda q: asked.append(q) or True)
+    assert asked == ["Press the switch"]
+    assert fake.calls == [["cmd", "shoulder_1a", "PX"], ["program-limits"]]
+    assert [x.status for x in rep.results] == ["passed", "passed", "passed", "skipped"]
+    assert rep.results[3].failures == ["dry run: nothing was written"] and rep.exit_code == 0
+    rep = run_recipe(r, FakeSherpa(), apply=True, confirm=lambda q: True)
+    assert [x.status for x in rep.results] == ["passed"] * 4
+
+
+def test_dry_run_key_is_checked(tmp_path):
+    with pytest.raises(ConfigError, match="dry_run must be one of run, skip"):
+        load_recipe(write(tmp_path, "steps:\n  - {run: scan, dry_run: maybe}\n"))
 
 
 def test_apply_runs_write_flags_and_checks_json(tmp_path):
@@ -157,7 +184,8 @@ def test_reports(tmp_path):
     assert data["outcome"] == "failed" and data["counts"]["failed"] == 1
     assert data["steps"][3]["command"] == ["sherpa", "params", "diff", "config", "live"]
     suite = ET.fromstring(report_junit(rep)).find("testsuite")
-    assert (suite.get("tests"), suite.get("failures"), suite.get("skipped")) == ("4", "1", "0")
+    # the confirm step is skipped in a dry run
+    assert (suite.get("tests"), suite.get("failures"), suite.get("skipped")) == ("4", "1", "1")
     failed = [c for c in suite.iter("testcase") if c.find("failure") is not None]
     assert [c.get("name") for c in failed] == ["04-diff"]
     assert failed[0].find("failure").get("message") == "exit code 2, expected 0 or 1"
@@ -211,12 +239,16 @@ def test_cli_bad_recipe_exit_2_no_traceback(cli, tmp_path):
 
 def test_cli_confirm_without_terminal_declines(cli, tmp_path):
     path = write(tmp_path, "steps:\n  - confirm: Go?\n  - run: limits show elbow_pitch\n")
-    r = cli("recipe", "run", str(path))
+    r = cli("recipe", "run", str(path), "--apply")  # a dry run asks nothing
     assert r.exit_code == 1
-    assert "-> declined (answer: no answer)" in r.stdout
-    assert "not run: step 2" in r.stdout
-    r = cli("recipe", "run", str(path), "--yes")
-    assert r.exit_code == 0 and "-> passed (exit 0)" in r.stdout
+    assert "[1/2] step-1  declined (answer: no answer)" in r.stdout
+    assert "[2/2] step-2  skipped (step 1 (step-1) declined)" in r.stdout
+    r = cli("recipe", "run", str(path), "--apply", "--verbose")
+    assert r.exit_code == 1 and "-> declined (answer: no answer)" in r.stdout
+    r = cli("recipe", "run", str(path), "--apply", "--yes")
+    assert r.exit_code == 0 and "[2/2] step-2  passed" in r.stdout
+    r = cli("recipe", "run", str(path))
+    assert r.exit_code == 0 and "[1/2] step-1  skipped (dry run: nothing to confirm)" in r.stdout
 
 
 def test_cli_unreadable_recipe_and_unwritable_reports_exit_2_no_traceback(cli, tmp_path):

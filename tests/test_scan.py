@@ -241,3 +241,13 @@ def test_sdo_timeout_comes_from_the_config(tmp_path):
         with pytest.raises(SdoError):
             sdo_upload(network, 99, 0x1000, 0)  # nobody at node 99: one timeout (+ canopen's one retry)
         assert time.monotonic() - t0 < 0.3 * 2, "canopen's 0.3 s default was used"
+
+
+def test_a_device_on_the_host_heartbeat_id_is_warned_about(cli, tmp_path, monkeypatch):
+    # motion.host_node_id (126) is the tool's heartbeat COB-ID 0x77E: a device there defeats the dead-man
+    _faulty_config(tmp_path, monkeypatch, {"extra_nodes": [{"bus": "can2", "node": 126}]})
+    result = cli("--sim", "scan", "--bus", "can2")
+    assert result.exit_code == 1
+    assert "warning: bus can2: a device answers on node 126, the tool's heartbeat id" in result.stderr
+    clean = cli("--sim", "scan", "--bus", "can1")
+    assert "heartbeat id" not in clean.stderr

@@ -316,15 +316,32 @@ def test_leaving_hl3_trips_with_mf_and_emcy(clock):
     assert query(drive, "MF") == 0 and query(drive, "MO") == 1
 
 
-def test_speed_outside_hl2_trips_in_torque_mode(clock):
+def test_speed_outside_hl2_trips_in_speed_mode(clock):
     drive = new_drive(clock)
-    assign(drive, "UM", 0, 1)
+    assign(drive, "UM", 0, 2)
     assign(drive, "HL", 2, 5000)
-    assign(drive, "TC", 0, 2.0)  # 2 A * 10000 cnt/s^2/A: HL[2] passed after 0.25 s
+    assign(drive, "JV", 0, 8000)
     motor_on(drive, clock)
+    reply(drive, encode_execute("BG"))
+    run(drive, clock, 1.0)
     frames = drive.pop_frames()
     assert frames == [(EMCY, hx("81 84 01 00 00 00 00 00"))]
     assert query(drive, "MF") == 0x20000 and query(drive, "MO") == 0
+
+
+def test_no_speed_or_position_limit_acts_in_torque_mode(clock):
+    # seed C.1.1/C.1.2: "The position limits do not work in torque mode", "no velocity limit at all"
+    drive = new_drive(clock)
+    assign(drive, "UM", 0, 1)
+    assign(drive, "HL", 2, 5000)
+    assign(drive, "LL", 3, -1000)
+    assign(drive, "HL", 3, 1000)
+    assign(drive, "TC", 0, 2.0)  # 2 A * 10000 cnt/s^2/A: HL[2] passed after 0.25 s, HL[3] after ~0.32 s
+    motor_on(drive, clock)
+    run(drive, clock, 1.0)
+    assert drive.pop_frames() == []
+    assert query(drive, "MF") == 0 and query(drive, "MO") == 1
+    assert query(drive, "PX") > 5000 and query(drive, "VX") > 5000
 
 
 def test_iq_reads_tc_in_torque_mode(clock):

@@ -12,6 +12,8 @@ Two test-side settings:
 
 from __future__ import annotations
 
+import dataclasses
+
 import json
 import threading
 import time
@@ -64,6 +66,8 @@ def example(name: str, extra: str = FAST):
 
 @contextmanager
 def sim_session(cfg):
+    # these tests time the protocol itself: the real-bus reply timeout, not --sim's patient one
+    cfg = dataclasses.replace(cfg, sim_reply_timeout=cfg.protocol.reply_timeout)
     with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as session:
         yield session
         assert session.sim.errors == [], "a simulator pump thread died"

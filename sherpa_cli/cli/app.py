@@ -19,6 +19,7 @@ from sherpa_cli.cli.context import AppState
 from sherpa_cli.errors import ExitCode, SherpaError
 
 DEFAULT_CONFIG = Path("configs/sherpa-arm.yaml")
+CONFIG_NAME = "sherpa-arm.yaml"
 
 app = typer.Typer(
     name="sherpa",
@@ -26,7 +27,7 @@ app = typer.Typer(
     "Exit codes: 0 ok, 1 problem found, 2 usage/config error, 3 bus error, "
     "4 drive refused, 130 interrupted (docs/exit-codes.md).",
     no_args_is_help=True,
-    add_completion=False,
+    add_completion=True,  # --install-completion / --show-completion (typer's; issue 11 item 14)
     rich_markup_mode=None,  # plain click help: rich's help formatter doubles start-up time
     pretty_exceptions_enable=False,
     context_settings={"help_option_names": ["-h", "--help"]},
@@ -39,9 +40,26 @@ def _version_callback(value: bool) -> None:
         raise typer.Exit()
 
 
-def default_config_path() -> Path:
+def config_candidates() -> list[tuple[Path, str]]:
+    """Where the default config is looked for, in order: $SHERPA_CONFIG (when set, the only place),
+    the user config directory (platformdirs), then ./configs/sherpa-arm.yaml."""
     env = os.environ.get("SHERPA_CONFIG")
-    return Path(env) if env else DEFAULT_CONFIG
+    if env:
+        return [(Path(env), "$SHERPA_CONFIG")]
+    from platformdirs import user_config_dir
+
+    return [(Path(user_config_dir("sherpa-cli")) / CONFIG_NAME, "the user config directory"),
+            (DEFAULT_CONFIG, "the working directory")]
+
+
+def default_config_path() -> tuple[Path, tuple[str, ...]]:
+    """The first candidate that exists (else the last), and every place looked at, for the error."""
+    candidates = config_candidates()
+    looked = tuple(f"{path} ({why})" for path, why in candidates)
+    for path, _ in candidates:
+        if path.is_file():
+            return path, looked
+    return candidates[-1][0], looked
 
 
 @app.callback()
@@ -49,8 +67,8 @@ def root(
     ctx: typer.Context,
     config: Optional[Path] = typer.Option(
         None, "--config", "-c", metavar="FILE",
-        help="Arm configuration (native YAML or the seed's rosparam format). "
-        "Default: $SHERPA_CONFIG, else configs/sherpa-arm.yaml.",
+        help="Arm configuration (native YAML or the seed's rosparam format). Default: $SHERPA_CONFIG, "
+        "else sherpa-arm.yaml in the user config directory, else ./configs/sherpa-arm.yaml.",
     ),
     json_out: bool = typer.Option(False, "--json", help="Print results as JSON on stdout."),
     debug: bool = typer.Option(False, "--debug", help="Show tracebacks for errors."),
@@ -64,9 +82,11 @@ def root(
     version: bool = typer.Option(False, "--version", callback=_version_callback, is_eager=True,
                                  help="Print the version and exit."),
 ) -> None:
+    config_path, looked = (config, ()) if config is not None else default_config_path()
     ctx.obj = context.CURRENT = AppState.create(
-        config_path=config if config is not None else default_config_path(),
+        config_path=config_path,
         config_given=config is not None,
+        config_looked=looked,
         json_mode=json_out,
         debug=debug,
         no_color=no_color,
@@ -78,13 +98,15 @@ def root(
 
 def _register() -> None:
     # In the order a technician meets them at the arm: find, look, back up, program, commission.
-    from sherpa_cli.cli import (cmd_cmd, config_cmd, diffdrive_cmd, identify_cmd, limits_cmd, monitor_cmd,
-                                params_cmd, program_cmd, recipe_cmd, scan_cmd, sim_cmd)
+    from sherpa_cli.cli import (cmd_cmd, config_cmd, diffdrive_cmd, identify_cmd, jog_cmd, limits_cmd, monitor_cmd,
+                                params_cmd, program_cmd, recipe_cmd, scan_cmd, sim_cmd, stop_cmd)
 
     app.command("scan")(scan_cmd.scan)
     app.command("identify")(identify_cmd.identify)
     app.command("monitor")(monitor_cmd.monitor)
     app.command("cmd")(cmd_cmd.cmd)
+    app.command("jog")(jog_cmd.jog)
+    app.command("stop")(stop_cmd.stop)
     app.command("dump-params")(params_cmd.dump_params)
     app.command("program-limits")(program_cmd.program_limits)
     app.command("commission")(recipe_cmd.commission)
@@ -123,6 +145,8 @@ def run(argv: Sequence[str] | None = None) -> int:
         return int(ExitCode.INTERRUPTED)
     except typer.Exit as exc:
         return int(exc.exit_code)
+    except SystemExit as exc:  # shell completion (_SHERPA_COMPLETE, --show-completion) ends with sys.exit
+        return exc.code if isinstance(exc.code, int) else int(ExitCode.OK if exc.code is None else ExitCode.USAGE)
     except typer.TyperException as exc:
         # usage errors: the parser's own message already names the option or argument
         show = getattr(exc, "show", None)

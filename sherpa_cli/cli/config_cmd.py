@@ -48,7 +48,7 @@ def _render(out, s: dict) -> None:
               right=(3, 4, 5, 6))
     out.table("Drives", ["drive", "bus:node", "model", "motor", "moves"],
               [[d["name"], f"{d['bus']}:{d['node']}", d["model"] or "?", d["motor"] or "-", d["moves"] or "-"]
-               for d in s["drives"]])
+               for d in s["drives"]], drop=(3, 2))
     out.table("Joints (counts)", ["joint", "moved by", "cpr", "full range", "normal range", "overshoot range"],
               [[j["name"], j["drive"] or f"{j['pair']} ({j['role']})", j["cpr"], _rng(j["full_range"]),
                 _rng(j["normal_range"]), _rng(j["overshoot_range"])]
@@ -75,12 +75,37 @@ def _rng(r: list[int]) -> str:
 
 @app.command("convert")
 def convert(ctx: typer.Context, file: Path = typer.Argument(..., metavar="FILE",
-                                                            help="Config to convert (e.g. the seed's rosparam file).")) -> None:
-    """Print a config (typically the seed's rosparam format) as native sherpa YAML."""
+                                                            help="Config to convert (e.g. the seed's rosparam file)."),
+            to: str = typer.Option("native", "--to", metavar="native|rosparam",
+                                   help="native: sherpa's YAML (default); rosparam: the seed's Appendix D.1 format.")
+            ) -> None:
+    """Print a config in another format: native sherpa YAML, or the seed's rosparam format (Appendix D.1).
+
+    \b
+    Examples:
+      sherpa config convert configs/seed-d1.yaml                      # D.1 -> native
+      sherpa config convert --to rosparam configs/sherpa-arm.yaml     # native -> D.1 (what it cannot hold: warnings)
+    """
     from sherpa_cli.config import dump_native
+    from sherpa_cli.errors import UsageError
 
     st = state(ctx)
+    if to not in ("native", "rosparam"):
+        raise UsageError(f"--to {to}: expected native or rosparam")
     cfg = st.load_config(file)
+    if to == "rosparam":
+        from sherpa_cli.config.software import dump_rosparam
+
+        text, lost = dump_rosparam(cfg)
+        if st.json_mode:
+            import yaml
+
+            st.out.json(yaml.safe_load(text))
+        else:
+            st.out.raw(text)
+        for w in lost:
+            st.out.warn(w)
+        return
     text = dump_native(cfg)
     if st.json_mode:
         import yaml

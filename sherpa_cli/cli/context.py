@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from contextlib import contextmanager
+from contextlib import ExitStack, contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Iterable, Iterator
@@ -27,15 +27,17 @@ class AppState:
     sim: bool = False
     bus_map: list[str] = field(default_factory=list)
     bus_map_from_env: bool = False
+    config_looked: tuple[str, ...] = ()  # where the default config was looked for (no --config)
     _config: "ArmConfig | None" = field(default=None, repr=False)
 
     @classmethod
     def create(cls, *, config_path: Path, config_given: bool, json_mode: bool, debug: bool,
                no_color: bool, sim: bool = False, bus_map: list[str] | None = None,
-               bus_map_from_env: bool = False) -> "AppState":
+               bus_map_from_env: bool = False, config_looked: tuple[str, ...] = ()) -> "AppState":
         return cls(config_path=config_path, config_given=config_given, json_mode=json_mode,
                    debug=debug, out=Output.create(json_mode=json_mode, no_color=no_color),
-                   sim=sim, bus_map=list(bus_map or []), bus_map_from_env=bus_map_from_env)
+                   sim=sim, bus_map=list(bus_map or []), bus_map_from_env=bus_map_from_env,
+                   config_looked=config_looked)
 
     @contextmanager
     def session(self, buses: Iterable[str] | None = None) -> Iterator["ArmSession"]:
@@ -43,6 +45,14 @@ class AppState:
         from sherpa_cli.bus.busmap import apply_bus_map, parse_bus_map
         from sherpa_cli.ops.session import ArmSession
 
+        shared = _shared_for(self)
+        if shared is not None:
+            # a recipe step: the recipe's one session, opened (all buses) at the first step that needs it
+            if shared.session is None:
+                shared.session = shared.stack.enter_context(shared.owner.session())
+                shared.opens += 1
+            yield shared.session
+            return
         cfg = self.load_config()
         mapping = parse_bus_map(self.bus_map)
         if mapping and self.sim and not self.bus_map_from_env:
@@ -65,8 +75,62 @@ class AppState:
         if path is not None:
             return load_config(path)
         if self._config is None:
-            self._config = load_config(self.config_path)
+            shared = _shared_for(self)
+            if shared is not None:
+                self._config = shared.config
+            else:
+                if not self.config_given and self.config_looked and not self.config_path.is_file():
+                    raise UsageError("no arm config found; looked at " + ", ".join(self.config_looked),
+                                      hint="pass --config FILE, set $SHERPA_CONFIG, or put sherpa-arm.yaml in "
+                                      "the user config directory")
+                self._config = load_config(self.config_path)
         return self._config
+
+
+@dataclass
+class SharedSession:
+    """What a recipe's steps share: the config loaded once and the buses opened once (issue 10 item 4).
+
+    ``owner`` is the recipe command's own state; a step whose global options are the owner's
+    (the runner passes them) uses its config and session instead of loading and opening again.
+    """
+
+    owner: AppState
+    config: "ArmConfig"
+    stack: ExitStack = field(default_factory=ExitStack)
+    session: "ArmSession | None" = None
+    opens: int = 0  # sessions opened for the recipe (0 or 1; tests count them)
+
+    def close(self) -> None:
+        self.stack.close()
+        self.session = None
+
+
+# Set by the recipe runner while it runs a recipe's steps in this process.
+SHARED: "SharedSession | None" = None
+
+
+def _shared_for(st: AppState) -> "SharedSession | None":
+    shared = SHARED
+    if shared is None or shared.owner is st:
+        return None
+    o = shared.owner
+    same = (st.config_path == o.config_path and st.sim == o.sim and ",".join(st.bus_map) == ",".join(o.bus_map))
+    return shared if same else None
+
+
+@contextmanager
+def shared_session(owner: AppState) -> Iterator[SharedSession]:
+    """Share ``owner``'s config and (lazily opened) session with every command run inside."""
+    global SHARED
+    outer = SHARED
+    shared = SharedSession(owner, owner.load_config())
+    SHARED = shared
+    try:
+        yield shared
+    finally:
+        SHARED = outer
+        shared.close()
 
 
 # The state of the invocation under way, so the error boundary can report through its sink.

@@ -39,13 +39,24 @@ def _il_meaning(value: int, il_codes) -> str:
 
 @app.command("show")
 def show(ctx: typer.Context,
-         names: Targets = None) -> None:
-    """Show the parameters Appendix C derives for each drive (nothing is sent to a drive)."""
+         names: Targets = None,
+         software: bool = typer.Option(False, "--software", help="The software side instead (Tables C.1/C.2): "
+                                       "cpr, pos_min/max, pos_margin, cal_sw_*, cal_pos, *_dd per joint.")) -> None:
+    """Show the parameters Appendix C derives for each drive (nothing is sent to a drive).
+
+    \b
+    Examples:
+      sherpa limits show shoulder_pitch
+      sherpa --config configs/appendix-c/example3.yaml limits show --software
+    """
     from sherpa_cli.joints.limits import derive_checked
     from sherpa_cli.ops.targets import drive_names
 
     st = state(ctx)
     cfg = st.load_config()
+    if software:
+        _show_software(st, cfg, list(names or []))
+        return
     derived, warnings = derive_checked(cfg, drive_names(cfg, names))
     for w in warnings:
         st.out.warn(w)
@@ -60,6 +71,33 @@ def show(ctx: typer.Context,
             text = _il_meaning(value, cfg.il_codes) if key.startswith("IL[") else MEANING.get(key, "")
             rows.append([key, fmt_value(value), text])
         st.out.table(f"{d.drive} ({d.bus}:{d.node}) - {moves}", ["param", "value", "meaning"], rows, right=(1,))
+
+
+def _show_software(st, cfg, names: list[str]) -> None:
+    """Tables C.1/C.2: the ROS parameters per plain joint and per differential pair."""
+    from sherpa_cli.config.software import DESCRIPTIONS, software_params
+    from sherpa_cli.errors import UsageError
+
+    entries = software_params(cfg)
+    if names:
+        known = {n for e in entries for n in (*e.joints, *e.drives, e.title.split()[1])}
+        unknown = [n for n in names if n not in known]
+        if unknown:
+            raise UsageError(f"unknown joint, drive or pair: {', '.join(unknown)}",
+                             hint="see `sherpa config check` for the names")
+        entries = [e for e in entries if {*e.joints, *e.drives, e.title.split()[1]} & set(names)]
+    if st.json_mode:
+        st.out.json({"joints": [{"title": e.title, "joints": list(e.joints), "drives": list(e.drives),
+                                 "params": {k: v for k, v in e.params.items() if k != "ext_pos_input_dd"},
+                                 "warnings": e.warnings} for e in entries]})
+        return
+    for e in entries:
+        rows = [[key, fmt_value(e.params[key]), DESCRIPTIONS[key]] for key in DESCRIPTIONS if key in e.params]
+        st.out.table(f"{e.title} - drive{'s' if len(e.drives) > 1 else ''} {', '.join(e.drives)}", ["param", "value", "description"], rows,
+                     right=(1,))
+    for e in entries:
+        for w in e.warnings:
+            st.out.warn(w)
 
 
 def drive_moves(cfg, drive: str) -> str:

@@ -148,7 +148,7 @@ def _renderables(rows, cfg, *, ages: bool) -> tuple[list, list[str]]:
                 "-" if r.mf is None else (f"0x{r.mf & 0xFFFFFFFF:08X}" if r.mf else "ok"),
                 f"0x{r.emcy.code:04X}" if r.emcy is not None else "-"])
         out.append(make_table(f"bus {bus}", ["node", "drive", "NMT", "heartbeat", "MO", "UM", "rad",
-                                             "SR", "MF", "EMCY"], table_rows, right=(0, 6)))
+                                             "SR", "MF", "EMCY"], table_rows, right=(0, 6), drop=(5, 3, 9)))
     notes = []
     for r in rows:
         who = f"{r.drive} ({r.address})"

@@ -35,6 +35,9 @@ ApplyRaw = Annotated[bool, typer.Option(
     "--apply", help="Send sets and execute commands; without it they are only shown as the frame that would be "
     "sent (queries are always sent).")]
 
+ApplyMotion = Annotated[bool, typer.Option(
+    "--apply", help="Move the motor; without it only show what would be sent (nothing is written).")]
+
 # -- recipes (recipe run, commission) -------------------------------------------------------------
 
 ApplyRecipe = Annotated[bool, typer.Option(
@@ -45,7 +48,10 @@ FromStep = Annotated[Optional[str], typer.Option(
     "--from", metavar="STEP", help="Start at this step (name or number).")]
 Report = Annotated[Optional[Path], typer.Option("--report", metavar="FILE.json", help="Write a JSON report.")]
 Junit = Annotated[Optional[Path], typer.Option("--junit", metavar="FILE.xml", help="Write a JUnit XML report.")]
-Quiet = Annotated[bool, typer.Option("--quiet", "-q", help="Show a step's output only when it fails.")]
+# one line per step is the default now (issue 11 item 10); --quiet stays accepted for old scripts
+Quiet = Annotated[bool, typer.Option("--quiet", "-q", hidden=True, help="The default now: one line per step.")]
+Verbose = Annotated[bool, typer.Option("--verbose", "-v", help="Show every step's command and output (default: "
+                                       "one line per step; the output is in the --report file).")]
 SetVars = Annotated[Optional[List[str]], typer.Option(
     "--set", metavar="KEY=VALUE", help="Set a recipe variable (repeat), e.g. backup=FILE (where dump-params "
     "writes in the commissioning recipe).")]

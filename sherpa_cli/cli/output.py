@@ -71,12 +71,23 @@ class Output:
         sys.stdout.flush()
 
     def table(self, title: str | None, columns: Sequence[str], rows: Iterable[Sequence[Any]],
-              *, right: Iterable[int] = ()) -> None:
-        self.result(make_table(title, columns, rows, right=right))
+              *, right: Iterable[int] = (), drop: Sequence[int] | None = None) -> None:
+        self.result(make_table(title, columns, rows, right=right, drop=drop,
+                               width=self._console(stderr=False).width))
 
     # diagnostics (stderr)
     def info(self, text: str) -> None:
         self._console(stderr=True).print(text, markup=False, soft_wrap=True)
+
+    def progress(self, text: str | None) -> None:
+        """A live status line on stderr, rewritten in place; only on a terminal and never with --json.
+        ``None`` ends it (clears the line)."""
+        if self.json_mode or not sys.stderr.isatty():
+            return
+        sys.stderr.write("\r\x1b[2K" + (text or ""))
+        if text is None:
+            sys.stderr.write("\r")
+        sys.stderr.flush()
 
     def warn(self, text: str) -> None:
         self._console(stderr=True).print(f"warning: {text}", style="yellow", markup=False, soft_wrap=True)
@@ -97,25 +108,64 @@ class Output:
             return True
         if self.json_mode or not sys.stdin.isatty():
             raise SafetyError(refusal or f"{question} -- refusing: not an interactive terminal", hint=hint)
-        answer = input(f"{question} [y/N] ").strip().lower()
+        # the question goes to the terminal (stderr), so `sherpa ... | tee log` still shows it
+        err = self._console(stderr=True)
+        err.print(f"{question} [y/N] ", markup=False, end="", soft_wrap=True)
+        err.file.flush()
+        answer = sys.stdin.readline().strip().lower()
         return answer in ("y", "yes")
 
 
 def make_table(title: str | None, columns: Sequence[str], rows: Iterable[Sequence[Any]],
-               *, right: Iterable[int] = ()):
+               *, right: Iterable[int] = (), drop: Sequence[int] | None = None, width: int | None = None):
+    """A table that stays readable at ``width`` columns (default: the terminal's).
+
+    No word is broken mid-name: cells wrap only between words, and when even that does not fit,
+    whole columns are left out in ``drop`` order (default: from the last column; never the
+    first), and the title says which.
+    """
     from rich import box
     from rich.table import Table
 
+    texts = [["" if v is None else str(v) for v in row] for row in rows]
+    if width is None:
+        from rich.console import Console
+
+        width = Console().width
+    keep = fit_columns(columns, texts, width, drop)
+    left_out = [columns[i] for i in range(len(columns)) if i not in keep]
+    if left_out and title is not None:
+        title = f"{title} (not shown: {', '.join(left_out)}; wider terminal or --json)"
     table = Table(title=title, box=box.SIMPLE_HEAD, title_justify="left", pad_edge=False)
     right_cols = set(right)
-    for i, name in enumerate(columns):
+    for i in keep:
         # a technician must see the whole name or number:
         # fold, never truncate; the first column (the name) stays on one line
-        table.add_column(name, justify="right" if i in right_cols else "left", overflow="fold",
+        table.add_column(columns[i], justify="right" if i in right_cols else "left", overflow="fold",
                          no_wrap=(i == 0))
-    for row in rows:
-        table.add_row(*("" if v is None else str(v) for v in row))
+    for row in texts:
+        table.add_row(*(row[i] for i in keep))
     return table
+
+
+def fit_columns(columns: Sequence[str], rows: Sequence[Sequence[str]], width: int,
+                drop: Sequence[int] | None = None) -> list[int]:
+    """The columns to show so that no word (header or cell) must be broken to fit ``width``."""
+
+    def longest_word(i: int) -> int:
+        cells = [columns[i], *(row[i] for row in rows)]
+        return max((len(w) for c in cells for w in c.split()), default=0)
+
+    minimum = {i: (max(len(columns[i]), *(len(row[i]) for row in rows)) if i == 0 else longest_word(i))
+               for i in range(len(columns))}
+    keep = list(range(len(columns)))
+    order = [i for i in (drop if drop is not None else reversed(range(1, len(columns)))) if i != 0]
+    for i in [*order, *(j for j in reversed(range(1, len(columns))) if j not in order)]:
+        # padding, divider, padding between columns and one edge each side (box.SIMPLE_HEAD, pad_edge=False)
+        if sum(minimum[k] for k in keep) + 3 * (len(keep) - 1) + 2 <= width or len(keep) == 1:
+            break
+        keep.remove(i)
+    return keep
 
 
 def fmt_value(value: Any) -> str:

@@ -13,7 +13,7 @@ import typer
 from sherpa_cli.cli import context
 from sherpa_cli.cli.context import AppState, state
 from sherpa_cli.cli.options import (ApplyCommission, ApplyRecipe, FromStep, Junit, Quiet, Report, SetVars,
-                                    YesRecipe)
+                                    Verbose, YesRecipe)
 from sherpa_cli.errors import UsageError
 
 app = typer.Typer(no_args_is_help=True, help="Run commissioning recipes (YAML lists of sherpa steps; docs/recipes.md).")
@@ -76,9 +76,80 @@ def _indent(text: str) -> list[str]:
     return [INDENT + line if line.strip() else "" for line in text.rstrip("\n").split("\n")] if text.strip() else []
 
 
+def step_clock():
+    """The runner's clock: real time, or with $SHERPA_FAKE_STEP_SECONDS (tests, docs/testing.md) a fake
+    one under which every step lasts exactly that long, so durations in golden files are stable."""
+    import os
+    import time
+
+    fixed = os.environ.get("SHERPA_FAKE_STEP_SECONDS")
+    if not fixed:
+        return time.monotonic
+    try:
+        seconds = float(fixed)
+    except ValueError:
+        raise UsageError(f"$SHERPA_FAKE_STEP_SECONDS={fixed!r}: expected a number of seconds") from None
+    import itertools
+
+    readings = itertools.count()
+    # the runner reads the clock once before and once after a step: every step lasts `seconds`
+    return lambda: (next(readings) + 1) // 2 * seconds
+
+
+def _duration(seconds: float) -> str:
+    return f"{seconds:.1f} s" if seconds < 60 else f"{int(seconds // 60)} min {seconds % 60:02.0f} s"
+
+
+class _Warnings:
+    """Warnings the steps printed, each shown once with how often it came (issue 11 item 10)."""
+
+    def __init__(self) -> None:
+        self.counts: dict[str, int] = {}
+
+    def take(self, stderr: str) -> list[str]:
+        """Record the step's warnings; the rest of its stderr (errors, hints, notes) is returned."""
+        rest = []
+        for line in stderr.splitlines():
+            if line.startswith("warning: "):
+                text = line[len("warning: "):]
+                self.counts[text] = self.counts.get(text, 0) + 1
+            elif line.strip():
+                rest.append(line)
+        return rest
+
+    def show(self, out) -> None:
+        # "SUBJECT: MESSAGE" warnings with the same message are one line naming every subject
+        groups: dict[str, list[tuple[str, int]]] = {}
+        for text, n in self.counts.items():
+            subject, sep, message = text.rpartition(": ")
+            groups.setdefault(message if sep else text, []).append((subject if sep else "", n))
+        for message, items in groups.items():
+            counts = {n for _, n in items}
+            times = sum(n for _, n in items)
+            count = "" if times == 1 else f" ({counts.pop()} times each)" if len(counts) == 1 and len(items) > 1 \
+                else f" ({times} times)"
+            subjects = [s for s, _ in items if s]
+            out.warn(f"{message}{count}: {'; '.join(subjects)}" if subjects else f"{message}{count}")
+
+
+def _progress(st: AppState):
+    """A spinner on stderr while a step runs: only on a terminal, never with --json (issue 11 item 13)."""
+    if st.json_mode or not sys.stderr.isatty():
+        return None
+    from rich.live import Live
+    from rich.spinner import Spinner
+
+    return Live(Spinner("dots", text=""), console=st.out._console(stderr=True), transient=True,
+                redirect_stdout=False, redirect_stderr=False, refresh_per_second=8)
+
+
 def execute(st: AppState, recipe_path: Path, *, apply: bool, yes: bool, start: Optional[str],
-            report: Optional[Path], junit: Optional[Path], sets: Sequence[str] | None, quiet: bool):
-    """Run a recipe with live step output; returns the RecipeReport (its exit_code ends the command)."""
+            report: Optional[Path], junit: Optional[Path], sets: Sequence[str] | None, verbose: bool):
+    """Run a recipe in one session (config loaded and buses opened once); returns the RecipeReport.
+
+    By default one line per step (name, outcome, duration); ``verbose`` also shows every step's
+    command and output. The full output of every step is in the JSON report either way.
+    """
     from sherpa_cli.recipes import load_recipe
     from sherpa_cli.recipes.report import check_report_paths, write_reports
     from sherpa_cli.recipes.runner import FAILED, PASSED, SKIPPED, run_recipe
@@ -86,62 +157,128 @@ def execute(st: AppState, recipe_path: Path, *, apply: bool, yes: bool, start: O
     recipe = load_recipe(_shown_path(recipe_path), _parse_sets(sets))
     check_report_paths(report, junit)
     start_at = recipe.find_step(start) if start else None
+    clock = step_clock()
     st.load_config()  # a bad config is reported once, before the first step
     out = st.out
     total = len(recipe.steps)
+    width = max(len(s.name) for s in recipe.steps)
+    numw = len(f"{total}/{total}")
+    warnings = _Warnings()
     if not st.json_mode:
         mode = "applying writes" if apply else "dry run (writing steps show their plan; --apply to write)"
         out.line(f"recipe {recipe.name}: {total} steps from {recipe.path}; {mode}")
-        if recipe.description:
+        if verbose and recipe.description:
             out.line(recipe.description.strip())
+    live = _progress(st)
 
     def on_start(step, dry: bool) -> None:
         if st.json_mode:
             return
         what = f"confirm: {step.confirm}" if step.kind == "confirm" else step.command_text() if not dry \
             else "sherpa " + " ".join(step.dry_argv()) + "   (dry run)"
-        out.line("")
-        out.line(f"[{step.number}/{total}] {step.name}: {what}")
+        if verbose:
+            out.line("")
+            out.line(f"[{step.number}/{total}] {step.name}: {what}")
+        elif live is not None and step.kind == "run":
+            live.update(_spinner(f"[{step.number}/{total}] {step.name}: {what}"))
+            live.start()
 
     def on_end(result) -> None:
+        done.append(result)
+        if live is not None:
+            live.stop()
         if st.json_mode:
             return
-        if result.step.kind == "run" and (not quiet or result.status != PASSED):
-            for line in _indent(result.stdout) + _indent(result.stderr):
+        rest = warnings.take(result.stderr)
+        if verbose:
+            _verbose_end(result, rest)
+            return
+        n = f"{result.step.number}/{total}"
+        if result.status == SKIPPED:
+            outcome = f"skipped ({'; '.join(result.failures)})"
+        elif result.step.kind == "confirm":
+            outcome = f"{result.status} (answer: {result.answer})"
+        elif result.status == PASSED:
+            outcome = f"passed{' (dry run)' if result.dry_run else ''}"
+        else:
+            outcome = result.status.upper()
+        dur = "" if result.step.kind == "confirm" or result.status == SKIPPED else _duration(result.duration_s)
+        out.line(f"[{n:>{numw}}] {result.step.name:<{width}}  {outcome:<18} {dur}".rstrip())
+        if not result.ok:
+            if result.failures and result.status != SKIPPED:
+                out.line(f"{INDENT}{'; '.join(result.failures)}")
+            for line in rest[-10:]:
+                out.line(INDENT + line)
+
+    def _verbose_end(result, rest: list[str]) -> None:
+        if result.step.kind == "run":
+            lines = _indent(result.stdout) if not _is_json(result.stdout) else \
+                [f"{INDENT}(JSON output, {len(result.stdout.splitlines())} lines: in the --report file)"]
+            for line in lines + [INDENT + r for r in rest]:
                 out.line(line)
-        if result.step.kind == "confirm":
+        if result.status == SKIPPED:
+            out.line("")
+            out.line(f"[{result.step.number}/{total}] {result.step.name}")
+            out.line(f"{INDENT}-> skipped ({'; '.join(result.failures)})")
+        elif result.step.kind == "confirm":
             out.line(f"{INDENT}-> {result.status} (answer: {result.answer})")
         elif result.status == PASSED:
-            out.line(f"{INDENT}-> passed (exit {result.exit_code}{', dry run' if result.dry_run else ''})")
+            out.line(f"{INDENT}-> passed (exit {result.exit_code}{', dry run' if result.dry_run else ''}, "
+                     f"{_duration(result.duration_s)})")
         else:
             out.line(f"{INDENT}-> {result.status.upper()}: {'; '.join(result.failures) or result.status}")
+
+    done: list = []
 
     def confirm(question: str) -> bool:
         if yes:
             return True
-        return st.out.confirm(question)
+        return st.out.confirm(_with_drives(question, done))
 
-    rep = run_recipe(recipe, _invoker(st), apply=apply, confirm=confirm, start_at=start_at,
-                     on_start=on_start, on_end=on_end)
+    with context.shared_session(st):
+        rep = run_recipe(recipe, _invoker(st), apply=apply, confirm=confirm, start_at=start_at,
+                         on_start=on_start, on_end=on_end, clock=clock)
     write_reports(rep, report, junit)
     if st.json_mode:
         out.json(rep.as_json())
         return rep
-    out.line("")
+    if verbose:
+        out.line("")
     counts = ", ".join(f"{rep.count(s)} {s}" for s in ("passed", "failed", "declined", "skipped", "interrupted")
                        if rep.count(s))
-    out.line(f"recipe {recipe.name}: {rep.outcome.upper()} ({counts})")
-    for r in rep.results:
-        if r.status == SKIPPED and start_at is None:
-            out.line(f"  not run: step {r.step.number} {r.step.name} ({'; '.join(r.failures)})")
+    out.line(f"recipe {recipe.name}: {rep.outcome.upper()} ({counts}; {_duration(sum(r.duration_s for r in rep.results))})")
     if rep.outcome == FAILED:
         first = next(r for r in rep.results if not r.ok)
         out.line(f"  first failure: step {first.step.number} {first.step.name}: {'; '.join(first.failures)}")
         out.line(f"  resume with: --from {first.step.name}")
+    warnings.show(out)
     for path, kind in ((report, "JSON"), (junit, "JUnit")):
         if path is not None:
             out.info(f"{kind} report written to {path}")
     return rep
+
+
+def _with_drives(question: str, done: list) -> str:
+    """A save question names the drives it is about: those the last `program-limits --apply` step wrote
+    or left unsaved (from its --json output)."""
+    for result in reversed(done):
+        doc = result.json
+        if isinstance(doc, dict) and doc.get("command") == "program-limits" and doc.get("apply"):
+            drives = [d["drive"] for d in doc.get("drives", [])
+                      if d.get("save_due") or (d.get("outcome") or {}).get("written")]
+            listed = ", ".join(drives) if drives else "none (no drive changed)"
+            return f"{question} (would save: {listed})"
+    return question
+
+
+def _spinner(text: str):
+    from rich.spinner import Spinner
+
+    return Spinner("dots", text=text)
+
+
+def _is_json(text: str) -> bool:
+    return text.lstrip().startswith(("{", "["))
 
 
 @app.command("run")
@@ -154,12 +291,14 @@ def run_cmd(
     report: Report = None,
     junit: Junit = None,
     sets: SetVars = None,
+    verbose: Verbose = False,
     quiet: Quiet = False,
 ) -> None:
     """Run a recipe's steps in order, stop at the first failure, and report.
 
-    Each step is a sherpa command run with this invocation's --config/--sim/--bus-map. With
-    --sim each step meets a freshly powered-up simulated arm: only what SV saved survives.
+    Each step is a sherpa command run with this invocation's --config/--sim/--bus-map, all in
+    one session: the config is loaded and the buses are opened once. With --sim the steps
+    share one simulated arm, as on a real arm: RAM survives between steps.
     Exit code: 0 every step passed, 1 a step failed or was declined, 2 bad recipe, 130 Ctrl-C.
 
     \b
@@ -169,7 +308,8 @@ def run_cmd(
       sherpa recipe run recipes/backup.yaml --set out=arm-2026-11-22.yaml
     """
     st = state(ctx)
-    rep = execute(st, file, apply=apply, yes=yes, start=start, report=report, junit=junit, sets=sets, quiet=quiet)
+    rep = execute(st, file, apply=apply, yes=yes, start=start, report=report, junit=junit, sets=sets,
+                  verbose=verbose and not quiet)
     if rep.exit_code:
         raise typer.Exit(rep.exit_code)
 
@@ -202,6 +342,7 @@ def commission(
     start: FromStep = None,
     report: Report = None,
     junit: Junit = None,
+    verbose: Verbose = False,
     quiet: Quiet = False,
     sets: SetVars = None,
 ) -> None:
@@ -214,7 +355,7 @@ def commission(
     """
     st = state(ctx)
     rep = execute(st, COMMISSION_RECIPE, apply=apply, yes=yes, start=start, report=report, junit=junit,
-                  sets=sets, quiet=quiet)
+                  sets=sets, verbose=verbose and not quiet)
     if not st.json_mode:
         _commission_summary(st, rep)
     if rep.exit_code:
@@ -222,15 +363,29 @@ def commission(
 
 
 def _commission_summary(st: AppState, rep) -> None:
-    """Per drive: did the save step leave it programmed, verified and saved (from its --json output)."""
+    """Per drive: what the save step left (programmed, verified, saved), or in a dry run what it would do."""
     save = rep.result_of("save")
     verify = rep.result_of("verify")
-    if save is None or not isinstance(save.json, dict) or not rep.apply:
-        st.out.line("no drive was written: this was a dry run (add --apply)" if not rep.apply
-                    else "the save step did not run: no per-drive result")
+    if save is None or not isinstance(save.json, dict):
+        st.out.line("the save step did not run: no per-drive result")
         return
     rows = []
     complete = True
+    if not rep.apply:
+        for d in save.json.get("drives", []):
+            params = d.get("params", [])
+            changes = sum(1 for p in params if p.get("changes"))
+            problems = d.get("problems") or []
+            complete &= not problems
+            rows.append([d["drive"], f"{d['bus']}:{d['node']}", f"{changes} of {len(params)}",
+                         "yes" if changes or d.get("save_due") else "no", "; ".join(problems) or "none"])
+        st.out.table("commissioning plan (dry run)", ["drive", "bus:node", "would write", "would save", "problems"],
+                     rows)
+        if complete:
+            st.out.line(f"dry run: nothing was written ({len(rows)} drives); add --apply to program and save")
+        else:
+            st.out.line("dry run: some drives have problems (see the table); nothing was written")
+        return
     for d in save.json.get("drives", []):
         o = d.get("outcome") or {}
         status = o.get("status")

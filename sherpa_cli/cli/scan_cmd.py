@@ -82,7 +82,19 @@ def _device(n) -> str:
     return " ".join(part for part in (vendor, n.device_name) if part)
 
 
+def _warn_host_id(st, report) -> None:
+    """A device on the tool's heartbeat id would feed the drives' dead-man consumers (docs/motion.md)."""
+    host = st.load_config().motion.host_node_id
+    for bus in report.buses:
+        for n in bus.nodes:
+            if n.node == host and n.answer_s is not None:
+                st.out.warn(f"bus {bus.bus}: a device answers on node {host}, the tool's heartbeat id "
+                            "(motion.host_node_id): its heartbeat would keep the drives' dead-man from "
+                            "tripping; set motion.host_node_id to an id no device uses")
+
+
 def _render(st, report) -> None:
+    _warn_host_id(st, report)
     if st.json_mode:
         st.out.json(report.as_json())
         return

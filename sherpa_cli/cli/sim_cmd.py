@@ -29,6 +29,9 @@ def sim(
                                      help="Forget what the simulated drives saved (SV): factory flash."),
     duration: Optional[float] = typer.Option(None, "--duration", metavar="SECONDS",
                                              help="Stop by itself after this long (default: until Ctrl-C)."),
+    event_log: Optional[str] = typer.Option(None, "--event-log", metavar="FILE",
+                                            help="Append one JSON line per motor on/off and heartbeat-loss event "
+                                            "(drive, node, t = time.monotonic(), wall = time.time(), event)."),
 ) -> None:
     """Run the simulated arm until Ctrl-C, as drives on a bus would be.
 
@@ -66,7 +69,7 @@ def sim(
     if serve:
         host, port = serving.parse_host_port(serve)
         serving.check_bind_address(host, allow_remote)
-        served = serving.serve(cfg, host, port)
+        served = serving.serve(cfg, host, port, event_log=event_log)
         bus_map = ",".join(f"{bus}={target}" for bus, target in served.bus_map.items())
         lines = [
             f"simulated arm '{cfg.name}': {len(cfg.drives)} drives on {len(cfg.buses)} buses, "
@@ -82,7 +85,7 @@ def sim(
     elif mapping:
         mapped = apply_bus_map(cfg, mapping)
         endpoints = {name: bus_kwargs(mapped.buses[name]) for name in mapping}
-        arm = serving.run_on_buses(cfg, endpoints)
+        arm = serving.run_on_buses(cfg, endpoints, event_log=event_log)
         lines = [f"simulated arm '{cfg.name}': drives answering on "
                  + ", ".join(f"{b}={t}" for b, t in mapping.items()),
                  f"flash (SV) persists in {sim_state.state_path(cfg)}; Ctrl-C stops the simulator"]

@@ -15,7 +15,7 @@ import yaml
 
 from sherpa_cli.config.catalog import builtin_catalog
 from sherpa_cli.config.model import (ArmConfig, BusConfig, CurrentLimits, ILCodes, JointConfig, JointRole,
-                                     ProtocolConfig, SimDriveConfig)
+                                     MotionConfig, ProtocolConfig, SimDriveConfig)
 
 
 def dump_native(cfg: ArmConfig) -> str:
@@ -24,11 +24,15 @@ def dump_native(cfg: ArmConfig) -> str:
         sections.append({"il_codes": {"stop": cfg.il_codes.stop, "home": cfg.il_codes.home}})
     if cfg.protocol != ProtocolConfig():
         sections.append({"protocol": dataclasses.asdict(cfg.protocol)})
+    if cfg.motion != MotionConfig():
+        sections.append({"motion": dataclasses.asdict(cfg.motion)})
     sim: dict[str, Any] = {}
     if cfg.sim:
         sim["drives"] = {name: _drop_default(dataclasses.asdict(f), SimDriveConfig()) for name, f in cfg.sim.items()}
     if cfg.sim_extra_nodes:
         sim["extra_nodes"] = [dataclasses.asdict(e) for e in cfg.sim_extra_nodes]
+    if cfg.sim_reply_timeout != ArmConfig.sim_reply_timeout:
+        sim["reply_timeout"] = cfg.sim_reply_timeout
     if sim:
         sections.append({"sim": sim})
     sections.append({"buses": {b.name: _bus(b) for b in cfg.buses.values()}})

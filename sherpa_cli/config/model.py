@@ -193,6 +193,32 @@ class ProtocolConfig:
     sdo_timeout: float = 0.3  # s to wait for one SDO answer (canopen's default); also scan's listening time
 
 
+STOP_METHODS = ("auto", "st", "jv0")
+
+
+@dataclass(frozen=True)
+class MotionConfig:
+    """The motion guard's settings (docs/motion.md): dead-man heartbeat, stop, standstill.
+
+    The host's heartbeat id must be a node id no drive uses; 127 is avoided because it is the
+    node id of an unconfigured Elmo drive in the guide's defaults (RPDO2 0x37F).
+    """
+
+    host_node_id: int = 126  # the tool's heartbeat COB-ID is 0x700 + this
+    consumer_time_ms: int = 500  # 0x1016:1 time: the drive stops this long after the last host heartbeat
+    heartbeat_period_ms: int = 0  # host heartbeat period; 0 = a quarter of consumer_time_ms
+    loss_action: int = 2  # 0x6007 on heartbeat loss (MF bit 11 names 2; 3 quick stop is UNCONFIRMED)
+    comm_error_behaviour: int = 2  # 0x1029:1 (0 pre-operational, 1 no change, 2 stopped) [COB]
+    stop_method: str = "auto"  # auto: ST, JV=0 + BG where ST is refused; st; jv0
+    standstill_timeout: float = 2.0  # s to wait for VX = 0 after a stop
+    liveness_timeout: float = 1.0  # s the command may go without a sign of life before the heartbeat stops
+    velocity_unit_mode: int = 5  # velocity jogs: 5 (JV + BG in position mode) or 2 (speed mode)
+
+    @property
+    def heartbeat_period_s(self) -> float:
+        return (self.heartbeat_period_ms or self.consumer_time_ms / 4) / 1000
+
+
 @dataclass(frozen=True)
 class SimDriveConfig:
     """How one simulated drive differs from a healthy one (faults and mismatch); only the simulator reads it."""
@@ -206,6 +232,7 @@ class SimDriveConfig:
     heartbeat_ms: int = 0  # 0x1017 producer heartbeat at power-up
     seed: int = 0  # random seed of drop_probability, so a failing run replays
     limit_trip_at: float | None = None  # s after start: trips as if past LL[3]/HL[3] (MF, EMCY 0x8680)
+    st_refused_in_speed_mode: bool = False  # ST answers EC 60 in UM=2, as [BLISS] says some firmware does
 
 
 @dataclass(frozen=True)
@@ -228,8 +255,12 @@ class ArmConfig:
     catalog: Catalog
     il_codes: ILCodes = field(default_factory=ILCodes)
     protocol: ProtocolConfig = field(default_factory=ProtocolConfig)
+    motion: MotionConfig = field(default_factory=MotionConfig)
     sim: Mapping[str, SimDriveConfig] = field(default_factory=dict)  # drive name -> simulated faults
     sim_extra_nodes: tuple[SimExtraNode, ...] = ()  # `sim: extra_nodes:`, only the simulator reads it
+    # `sim: reply_timeout:` s to wait for one interpreter reply with --sim (instead of protocol.reply_timeout):
+    # the in-process simulator shares a possibly loaded machine, so it is given patient timeouts
+    sim_reply_timeout: float = 1.0
     source: str | None = None  # file the config came from
     warnings: tuple[str, ...] = ()  # non-fatal findings of validation, shown by `config check`
 

@@ -13,13 +13,13 @@ from pathlib import PurePath
 
 from sherpa_cli.config.catalog import builtin_catalog
 from sherpa_cli.config.model import (AbsEncoderConfig, ArmConfig, BusConfig, Catalog, CurrentLimits, DriveConfig,
-                                     DriveModel, ILCodes, ProtocolConfig, SimDriveConfig, SimExtraNode, JointConfig, JointRole, MotorModel, PairConfig,
+                                     DriveModel, ILCodes, MotionConfig, ProtocolConfig, SimDriveConfig, SimExtraNode, JointConfig, JointRole, MotorModel, PairConfig,
                                      SwitchConfig, SwitchKind)
 from sherpa_cli.config.yamlnodes import (Locs, Section, YNode, as_int, as_map, as_name, as_seq, as_str, named_items,
                                          plain, suggest)
 from sherpa_cli.errors import ConfigError
 
-TOP_KEYS = ["name", "il_codes", "protocol", "sim", "buses", "drives", "joints", "pairs", "catalog"]
+TOP_KEYS = ["name", "il_codes", "protocol", "motion", "sim", "buses", "drives", "joints", "pairs", "catalog"]
 IL_KEYS = ["stop", "home"]
 BUS_KEYS = ["interface", "channel", "bitrate", "send_interval_us", "poll_interval_ms", "options"]
 DRIVE_KEYS = ["bus", "node", "model", "motor"]
@@ -79,24 +79,40 @@ def parse_protocol(top: Section, locs: Locs) -> ProtocolConfig:
     )
 
 
+MOTION_KEYS = [f.name for f in dataclasses.fields(MotionConfig)]
+
+
+def parse_motion(top: Section, locs: Locs) -> MotionConfig:
+    sec = top.section("motion", MOTION_KEYS, what="a mapping of motion guard settings")
+    if sec is None:
+        return MotionConfig()
+    register(locs, ("motion",), sec)
+    d = MotionConfig()
+    return MotionConfig(**{f.name: (sec.str if f.type == "str" else sec.num if f.type == "float" else sec.int)(
+        f.name, getattr(d, f.name)) for f in dataclasses.fields(MotionConfig)})
+
+
 SIM_DRIVE_KEYS = [f.name for f in dataclasses.fields(SimDriveConfig)]
 SIM_EXTRA_KEYS = [f.name for f in dataclasses.fields(SimExtraNode)]
+SIM_KEYS = ["drives", "extra_nodes", "reply_timeout"]
 
 
 def parse_sim(top: Section, locs: Locs) -> tuple[dict[str, SimDriveConfig], tuple[SimExtraNode, ...]]:
     """The ``sim:`` section: per-drive faults and extra nodes on the buses."""
-    sec = top.section("sim", ["drives", "extra_nodes"], what="a mapping with 'drives' and/or 'extra_nodes'")
+    sec = top.section("sim", SIM_KEYS,
+                      what="a mapping with 'drives', 'extra_nodes' and/or 'reply_timeout'")
     if sec is None:
         return {}, ()
+    register(locs, ("sim",), sec)
     drives: dict[str, SimDriveConfig] = {}
     if sec.get("drives") is not None:
         for dname, dnode in named_items(sec.req("drives"), "drive"):
             d = Section(dnode, SIM_DRIVE_KEYS, what="a mapping of simulated faults")
             register(locs, ("sim", "drives", dname), d)
             locs.put(("sim", "drives", dname), dnode.loc)
-            # every field is a number; the int ones (heartbeat_ms, seed) must be whole
+            # every field is a number (the int ones, heartbeat_ms and seed, whole) or a bool
             drives[dname] = SimDriveConfig(**{
-                f.name: (d.int if f.type == "int" else d.num)(f.name, f.default)
+                f.name: (d.int if f.type == "int" else d.bool if f.type == "bool" else d.num)(f.name, f.default)
                 for f in dataclasses.fields(SimDriveConfig)})
     extras = []
     if sec.get("extra_nodes") is not None:
@@ -108,6 +124,12 @@ def parse_sim(top: Section, locs: Locs) -> tuple[dict[str, SimDriveConfig], tupl
                                        vendor_id=e.int("vendor_id", base.vendor_id),
                                        device_name=e.str("device_name", base.device_name)))
     return drives, tuple(extras)
+
+
+def parse_sim_reply_timeout(top: Section) -> float:
+    """``sim: reply_timeout:`` (the interpreter reply timeout with --sim); parse_sim checked the section."""
+    sec = top.section("sim", SIM_KEYS)
+    return ArmConfig.sim_reply_timeout if sec is None else sec.num("reply_timeout", ArmConfig.sim_reply_timeout)
 
 
 def load_native(root: YNode, filename: str) -> tuple[ArmConfig, Locs, list[str]]:
@@ -123,7 +145,9 @@ def load_native(root: YNode, filename: str) -> tuple[ArmConfig, Locs, list[str]]
         il = ILCodes(stop=il_sec.int("stop", il.stop), home=il_sec.int("home", il.home))
 
     protocol = parse_protocol(top, locs)
+    motion = parse_motion(top, locs)
     sim, sim_extra_nodes = parse_sim(top, locs)
+    sim_reply_timeout = parse_sim_reply_timeout(top)
     catalog = parse_catalog(top.get("catalog"), locs)
 
     buses: dict[str, BusConfig] = {}
@@ -191,7 +215,8 @@ def load_native(root: YNode, filename: str) -> tuple[ArmConfig, Locs, list[str]]
                                       delta=names[1], current=current, where=sec.node.loc)
 
     cfg = ArmConfig(name=name, buses=buses, drives=drives, joints=joints, pairs=pairs, catalog=catalog,
-                    il_codes=il, protocol=protocol, sim=sim, sim_extra_nodes=sim_extra_nodes,
+                    il_codes=il, protocol=protocol, motion=motion, sim=sim, sim_extra_nodes=sim_extra_nodes,
+                    sim_reply_timeout=sim_reply_timeout,
                     source=filename)
     return cfg, locs, []
 

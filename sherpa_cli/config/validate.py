@@ -66,6 +66,7 @@ def validate(cfg: ArmConfig, locs: Locs, warnings: list[str] | None = None, *,
     r.warnings.extend(warnings or [])
     _check_il_codes(cfg, locs, r)
     _check_protocol(cfg, locs, r)
+    _check_motion(cfg, locs, r)
     _check_sim(cfg, locs, r)
     _check_catalog(cfg, locs, r)
     _check_buses(cfg, locs, r)
@@ -92,7 +93,44 @@ def _check_protocol(cfg: ArmConfig, locs: Locs, r: _Report) -> None:
             r.error(locs.get("protocol", key), f"{key} {getattr(p, key)} s is negative; expected >= 0")
 
 
+def _check_motion(cfg: ArmConfig, locs: Locs, r: _Report) -> None:
+    m = cfg.motion
+    where = lambda key: locs.get("motion", key)  # noqa: E731
+    if not 1 <= m.host_node_id <= 127:
+        r.error(where("host_node_id"), f"host_node_id {m.host_node_id} out of range 1..127")
+    else:
+        for d in cfg.drives.values():
+            if d.node == m.host_node_id:
+                r.error(where("host_node_id"), f"host_node_id {m.host_node_id} is the node id of drive "
+                        f"'{d.name}' ({d.bus}); the tool's heartbeat needs an id no drive uses")
+                break
+    if not 1 <= m.consumer_time_ms <= 0xFFFF:
+        r.error(where("consumer_time_ms"), f"consumer_time_ms {m.consumer_time_ms} must be 1..65535 (0x1016:1 is 16 bits)")
+    elif not 0 <= m.heartbeat_period_ms <= m.consumer_time_ms / 2:
+        r.error(where("heartbeat_period_ms"), f"heartbeat_period_ms {m.heartbeat_period_ms} must be 0 (a quarter "
+                f"of consumer_time_ms) or at most half of consumer_time_ms ({m.consumer_time_ms})")
+    if not 0 <= m.loss_action <= 3:
+        r.error(where("loss_action"), f"loss_action {m.loss_action} must be 0..3 (0x6007)")
+    elif m.loss_action == 0:
+        r.warn(where("loss_action"), "loss_action 0: a drive keeps moving when the tool's heartbeat stops")
+    if not 0 <= m.comm_error_behaviour <= 2:
+        r.error(where("comm_error_behaviour"), f"comm_error_behaviour {m.comm_error_behaviour} must be 0..2 (0x1029:1)")
+    from sherpa_cli.config.model import STOP_METHODS
+
+    if m.stop_method not in STOP_METHODS:
+        r.error(where("stop_method"), f"stop_method '{m.stop_method}': expected one of {', '.join(STOP_METHODS)}")
+    for key in ("standstill_timeout", "liveness_timeout"):
+        if not getattr(m, key) > 0:
+            r.error(where(key), f"{key} {getattr(m, key)} s must be > 0")
+    if m.velocity_unit_mode not in (2, 5):
+        r.error(where("velocity_unit_mode"), f"velocity_unit_mode {m.velocity_unit_mode}: expected 5 (jog in "
+                "position mode) or 2 (speed mode)")
+
+
 def _check_sim(cfg: ArmConfig, locs: Locs, r: _Report) -> None:
+    t = cfg.sim_reply_timeout
+    if not (isinstance(t, (int, float)) and 0 < t <= 60):
+        r.error(locs.get("sim", "reply_timeout"), f"sim reply_timeout {t} s must be > 0 and at most 60")
     for name, faults in cfg.sim.items():
         if name not in cfg.drives:
             close = difflib.get_close_matches(name, list(cfg.drives), n=1)

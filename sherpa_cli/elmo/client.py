@@ -47,6 +47,7 @@ class ClientSettings:
     mo_confirm_timeout: float = 3.0  # s to wait for MO to read back after MO=0/1
     mo_poll_interval: float = 0.01  # s between MO polls
     sv_blackout: float = 0.5  # s of silence after SV before the drive is asked anything
+    timeout_hint: str = _TIMEOUT_HINT  # what a timeout tells the user to check (the simulator has its own)
 
     def __post_init__(self) -> None:
         for name in ("mo_confirm_timeout", "mo_poll_interval", "sv_blackout"):
@@ -251,7 +252,7 @@ class DriveClient:
                 self._sleep(self.settings.mo_poll_interval)
             if last is None:
                 raise DriveTimeoutError(f"{self.label}: {what} not confirmed: no answer to MO within {timeout:g} s",
-                                        hint=_TIMEOUT_HINT)
+                                        hint=self.settings.timeout_hint)
             raise CommunicationError(f"{self.label}: {what} not confirmed: MO still reads {last} after {timeout:g} s",
                                      hint="read MF and EC for the reason")
 
@@ -286,7 +287,7 @@ class DriveClient:
         if reply is None:
             tries = f" ({attempts} attempts)" if attempts > 1 else ""
             raise DriveTimeoutError(f"{self.label}: no answer to {what} within {self.timeout:g} s{tries}",
-                                    hint=_TIMEOUT_HINT)
+                                    hint=self.settings.timeout_hint)
         return reply
 
     def _exchange(self, frame: bytes, letters: str, index: int, *, attempts: int,

@@ -80,7 +80,11 @@ def run_raw(client: Any, node: int, exprs: Sequence[str], *, apply: bool, query_
             result.sent = True
             result.decoded = decode_value(request.letters, result.value)
         elif apply:
-            if request.kind == "set":
+            if request.kind == "set" and request.letters == "MO" and request.value in (0, 1):
+                # the confirmed motor switch: MO=1/0, then MO polled until it reads back (the drive is
+                # deaf while it settles, so a PA or BG right after a bare MO=1 would go unanswered)
+                client.motor_on() if request.value == 1 else client.motor_off()
+            elif request.kind == "set":
                 client.set(request.letters, request.index, request.value)
             else:
                 client.execute(request.letters, request.index)

@@ -11,6 +11,7 @@ arm's endpoints, starts it and stops it.
 from __future__ import annotations
 
 from contextlib import contextmanager
+from dataclasses import replace
 from typing import Any, Iterable, Iterator, Mapping, Protocol
 
 from sherpa_cli.bus.busmap import BusTarget, apply_bus_map
@@ -23,6 +24,9 @@ from sherpa_cli.ops.targets import DriveRef
 from sherpa_cli.ops.targets import single_drive as resolve_target
 
 __all__ = ["ArmSession", "DriveRef", "resolve_target"]
+
+SIM_TIMEOUT_HINT = ("the simulated arm answered too slowly (a busy machine?): raise `sim: reply_timeout` in "
+                    "the config; or a fault in its `sim:` section silenced the drive")
 
 
 class InProcessArm(Protocol):
@@ -59,6 +63,8 @@ class ArmSession:
         if sim is not None:
             wire_cfg = apply_bus_map(cfg, {name: BusTarget(str(kw["interface"]), str(kw["channel"]))
                                            for name, kw in sim.endpoints.items() if name in cfg.buses})
+            # the simulator shares this process on a possibly loaded machine: its patient reply timeout
+            wire_cfg = replace(wire_cfg, protocol=replace(wire_cfg.protocol, reply_timeout=cfg.sim_reply_timeout))
             sim.start()
         try:
             links = open_links(wire_cfg, buses)
@@ -82,7 +88,8 @@ class ArmSession:
                 raise UsageError(f"{ref.name}: bus {ref.bus} is not open in this session")
             p = self.cfg.protocol
             settings = ClientSettings(expect_set_echo=p.set_echo, query_long=p.query_long,
-                                      mo_confirm_timeout=p.mo_confirm_timeout, sv_blackout=p.sv_blackout)
+                                      mo_confirm_timeout=p.mo_confirm_timeout, sv_blackout=p.sv_blackout,
+                                      **({"timeout_hint": SIM_TIMEOUT_HINT} if self.sim is not None else {}))
             client = DriveClient(NetworkTransport(self.links[ref.bus].network), ref.node, name=ref.name,
                                  timeout=p.reply_timeout, retries=p.retries, settings=settings)
             self._clients[key] = client

@@ -13,6 +13,10 @@ from sherpa_cli.config.yamlnodes import (NAME_RE, Section, YNode, as_int, as_map
 from sherpa_cli.errors import ConfigError, Location
 
 ON_FAILURE = ("stop", "continue")
+# What a step does in a recipe dry run (no --apply): `run` it (a writing step as its own dry run)
+# or `skip` it (a check of what the writes left, which cannot hold when nothing was written).
+# Confirm steps default to skip: a dry run writes nothing, so there is nothing to confirm.
+DRY_RUN = ("run", "skip")
 # Flags that make a step write to drives: without `recipe run --apply` they are removed, so the
 # step runs as the command's own dry run (design.md: every write is a dry run unless --apply).
 # `scan --reset` is no write, but it resets every node (unsaved RAM is lost): not in a dry run either.
@@ -49,10 +53,15 @@ class Step:
     expect: Expect = Expect()
     on_failure: str = "stop"
     line: int | None = None
+    dry_run: str | None = None  # run | skip; None: skip for confirm steps, run for the others
 
     @property
     def kind(self) -> str:
         return "confirm" if self.confirm is not None else "run"
+
+    @property
+    def skip_in_dry_run(self) -> bool:
+        return (self.dry_run or ("skip" if self.kind == "confirm" else "run")) == "skip"
 
     @property
     def writes(self) -> bool:
@@ -203,7 +212,7 @@ def _expect(node: YNode | None) -> Expect:
 
 
 def _step(node: YNode, number: int, default_failure: str, variables: dict[str, str]) -> Step:
-    sec = Section(node, ["name", "run", "confirm", "expect", "on_failure"], what="a step mapping")
+    sec = Section(node, ["name", "run", "confirm", "expect", "on_failure", "dry_run"], what="a step mapping")
     run, confirm = sec.get("run"), sec.get("confirm")
     if (run is None) == (confirm is None):
         raise node.error("a step needs exactly one of 'run' (a sherpa command) or 'confirm' (a question)")
@@ -216,10 +225,15 @@ def _step(node: YNode, number: int, default_failure: str, variables: dict[str, s
     else:
         name = f"step-{number}"
     on_failure = _on_failure(sec.get("on_failure"), default_failure)
+    dry_run: str | None = None
+    if (dnode := sec.get("dry_run")) is not None:
+        dry_run = as_str(dnode)
+        if dry_run not in DRY_RUN:
+            raise dnode.error(f"dry_run must be one of {', '.join(DRY_RUN)}, got {dry_run!r}")
     if confirm is not None:
         if sec.get("expect") is not None:
             raise sec.get("expect").error("a confirm step has no result to expect things of")
         return Step(number, name, confirm=_substitute(as_str(confirm), variables, confirm),
-                    on_failure=on_failure, line=node.line)
+                    on_failure=on_failure, line=node.line, dry_run=dry_run)
     return Step(number, name, argv=_argv(run, variables), expect=_expect(sec.get("expect")),
-                on_failure=on_failure, line=node.line)
+                on_failure=on_failure, line=node.line, dry_run=dry_run)

@@ -101,9 +101,19 @@ def run_recipe(recipe: Recipe, invoke: Invoke, *, apply: bool, confirm: Callable
     for step in recipe.steps:
         if start_at is not None and step.number < start_at.number:
             results.append(StepResult(step, SKIPPED, failures=[f"before --from {start_at.name}"]))
+            if on_end:
+                on_end(results[-1])
             continue
         if stopped is not None:
             results.append(StepResult(step, SKIPPED, failures=[stopped]))
+            if on_end:
+                on_end(results[-1])
+            continue
+        if not apply and step.skip_in_dry_run:
+            reason = "dry run: nothing to confirm" if step.kind == "confirm" else "dry run: nothing was written"
+            results.append(StepResult(step, SKIPPED, dry_run=True, failures=[reason]))
+            if on_end:
+                on_end(results[-1])
             continue
         dry = step.writes and not apply
         if on_start:
@@ -136,7 +146,8 @@ def _confirm(step: Step, confirm: Callable[[str], bool]) -> StepResult:
 
 def _run(step: Step, invoke: Invoke, dry: bool) -> StepResult:
     argv = step.dry_argv() if dry else step.argv
-    wants_json = bool(step.expect.json) and not dry
+    # a step with JSON expectations runs with --json in a dry run too: its plan is then machine-read
+    wants_json = bool(step.expect.json)
     ran = invoke((["--json"] if wants_json else []) + list(argv))
     result = StepResult(step, PASSED, tuple(argv), dry, ran.exit_code, ran.stdout, ran.stderr)
     if ran.exit_code == ExitCode.INTERRUPTED:
@@ -155,6 +166,11 @@ def _check(expect: Expect, ran: CommandRun, dry: bool, result: StepResult) -> li
         failures.append(f"exit code {ran.exit_code}, expected {wanted}")
     if dry:
         # A dry run of a writing step shows the plan; what the step expects of the writes cannot hold yet.
+        if expect.json:
+            try:
+                result.json = json.loads(ran.stdout)
+            except ValueError:
+                pass
         return failures
     for text in expect.stdout_contains:
         if text not in ran.stdout:

@@ -50,7 +50,8 @@ def settings_for(cfg: ArmConfig, drive: str, **overrides: Any) -> SimSettings:
         base.update(reply_latency_s=faults.reply_latency, sdo_latency_s=faults.sdo_latency,
                     drop_probability=faults.drop_probability,
                     die_at=faults.die_at, reboot_at=faults.reboot_at, heartbeat_ms=faults.heartbeat_ms,
-                    seed=faults.seed, limit_trip_at=faults.limit_trip_at)
+                    seed=faults.seed, limit_trip_at=faults.limit_trip_at,
+                    st_refused_in_speed_mode=faults.st_refused_in_speed_mode)
     base.update(overrides)
     return SimSettings(**base)
 
@@ -150,9 +151,12 @@ class SimArm:
     def __init__(self, cfg: ArmConfig, endpoints: Mapping[str, Mapping[str, Any]], *,
                  clock: Clock | None = None, flash: Mapping[str, sim_state.DriveFlash] | None = None,
                  settings: Mapping[str, SimSettings] | None = None, persist: bool = False,
-                 tick_s: float = 0.002, bus_factory: Callable[..., Any] | None = None) -> None:
+                 tick_s: float = 0.002, bus_factory: Callable[..., Any] | None = None,
+                 event_log: str | None = None) -> None:
         """``endpoints``: bus name -> keyword arguments for ``can.Bus`` (interface, channel);
-        ``bus_factory`` opens them instead of ``can.Bus``."""
+        ``bus_factory`` opens them instead of ``can.Bus``; ``event_log``: a file that gets one JSON
+        line per motor on/off and dead-man event (appended, flushed at once), so another process can
+        tell when a motor went off."""
         self.cfg = cfg
         self.endpoints = dict(endpoints)
         self.bus_factory = bus_factory
@@ -169,7 +173,8 @@ class SimArm:
                 settings=(settings or {}).get(name) or settings_for(cfg, name),
                 serial=saved.serial, flash=saved.flash, save_count=saved.save_count,
                 speed_gain=cfg.sim[name].speed_gain if name in cfg.sim else 1.0,
-                on_step=lambda drive, name=name: self._mechanics.update(name))
+                on_step=lambda drive, name=name: self._mechanics.update(name),
+                on_event=lambda drive, t, text, name=name: self._log_event(name, drive.node, t, text))
         self._mechanics = _Mechanics(cfg, self.drives)
         # `sim: extra_nodes:` -- devices the config does not name (a stray node, a duplicate id):
         # on their bus like any drive, but outside the arm's mechanics and never saved.
@@ -184,6 +189,8 @@ class SimArm:
         self._buses: dict[str, Any] = {}
         self._sdo: dict[str, Any] = {}
         self.errors: list[BaseException] = []
+        self.event_log = event_log
+        self._event_file: Any = None
 
     @classmethod
     def in_process(cls, cfg: ArmConfig) -> "SimArm":
@@ -196,6 +203,20 @@ class SimArm:
         """The in-process arm of ``--sim``: virtual channels, flash kept in the state directory."""
         return cls(cfg, {bus: {"interface": "virtual", "channel": ch} for bus, ch in channels.items()},
                    persist=True)
+
+    def _log_event(self, name: str, node: int, t: float, text: str) -> None:
+        """One JSON line per event: ``t`` is the drive's clock (time.monotonic() for a RealClock,
+        the same scale in every process of this machine), ``wall`` is time.time()."""
+        if self.event_log is None:
+            return
+        import json
+        import time
+
+        if self._event_file is None:
+            self._event_file = open(self.event_log, "a", encoding="utf-8")
+        self._event_file.write(json.dumps({"drive": name, "node": node, "t": t, "wall": time.time(),
+                                           "event": text}) + "\n")
+        self._event_file.flush()
 
     def drive_by_node(self, bus: str, node: int) -> SimDrive | None:
         for name, d in self.cfg.drives.items():
@@ -246,6 +267,9 @@ class SimArm:
             t.join(timeout=2)
         self._threads.clear()
         self._close_buses()
+        if self._event_file is not None:
+            self._event_file.close()
+            self._event_file = None
         if self.persist:
             self.save_state()
 

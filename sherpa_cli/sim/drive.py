@@ -65,7 +65,8 @@ class SimDrive:
 
     def __init__(self, node: int, *, clock: Clock, settings: SimSettings | None = None, serial: int = 1,
                  flash: Mapping[str, Value] | None = None, save_count: int = 0, speed_gain: float = 1.0,
-                 position: int = 0, on_step: Callable[[SimDrive], None] | None = None) -> None:
+                 position: int = 0, on_step: Callable[[SimDrive], None] | None = None,
+                 on_event: Callable[[SimDrive, float, str], None] | None = None) -> None:
         if isinstance(node, bool) or not isinstance(node, int) or not 1 <= node <= 127:
             raise ValueError(f"node id must be 1..127, got {node!r}")
         if not speed_gain > 0:
@@ -76,6 +77,9 @@ class SimDrive:
         self.serial = serial
         self.speed_gain = float(speed_gain)
         self.on_step = on_step
+        # motor on/off and dead-man events with the drive's time: (t, text); also handed to on_event
+        self.on_event = on_event
+        self.events: list[tuple[float, str]] = FrameRecord()
         self.flash: dict[str, Value] = parse_flash(flash)
         self.save_count = save_count  # restored by the caller along with flash
         self.received: list[tuple[float, int, bytes]] = FrameRecord()  # every frame addressed to this drive
@@ -233,8 +237,8 @@ class SimDrive:
                 if skewed == key:
                     value = type(value)(value + amount)
             self.ram[key] = value
-            if key in ("PA", "PR"):
-                self._target_kind = key
+            if key in ("PA", "PR", "JV"):
+                self._target_kind = key  # what the next BG starts in UM=5: a move or a jog
             elif key == "TC" and self._motor_on and self.ram["UM"] == 1:
                 self._apply_torque()
 
@@ -245,6 +249,8 @@ class SimDrive:
                 raise Refused(interpreter.EC_MOTOR_MUST_BE_ON)
             self._begin()
         elif letters == "ST":
+            if self.settings.st_refused_in_speed_mode and self.ram["UM"] == 2:
+                raise Refused(interpreter.EC_NOT_IN_THIS_UM)  # [BLISS]: "cannot be executed in speed mode"
             if self._motor_on:
                 self.motor.stop(self.ram["SD"] * self.speed_gain)
         elif letters in ("SV", "LD"):
@@ -258,6 +264,8 @@ class SimDrive:
     def _boot(self) -> None:
         """Power-up and NMT reset: RAM from flash, motor off, Pre-operational, boot-up frame."""
         self.boots += 1
+        if getattr(self, "_motor_on", False):
+            self._record("motor off: reset")
         self.last_error = 0
         self._load_ram()
         self._error_field = 0  # 0x1003:1, the one stored error of a SimplIQ; a boot clears it
@@ -270,6 +278,7 @@ class SimDrive:
         self._mf = 0
         self._error_register = 0
         self._limit_stop = False
+        self._quick_stop = False
         self._target_kind = "PA"
         self._nmt_state = PRE_OPERATIONAL
         self._hb_last: float | None = None
@@ -317,8 +326,17 @@ class SimDrive:
     def _heartbeat_lost(self) -> None:
         self._hb_last = None  # re-armed by the host's next heartbeat
         self._emcy(EMCY_HEARTBEAT, ERR_REG_COMMUNICATION)
-        if self._od.values[(0x6007, 0)] and self._motor_on:
-            self._shut_down(MF_HEARTBEAT)
+        action = self._od.values[(0x6007, 0)]
+        self._record(f"heartbeat lost (0x6007={action})")
+        if self._motor_on:
+            # 0x6007 ([IG] 3.5; DS402 meanings, Elmo's own UNCONFIRMED): 0 nothing, 1 fault and
+            # 2 disable voltage -> motor off at once (MF bit 11), 3 quick stop -> decelerate with SD,
+            # then motor off (MF bit 11)
+            if action in (1, 2):
+                self._shut_down(MF_HEARTBEAT, f"heartbeat lost, 0x6007={action}")
+            elif action == 3:
+                self.motor.stop(self.ram["SD"] * self.speed_gain)
+                self._quick_stop = True
         action = self._od.values[(0x1029, 1)]
         if action == 0 and self._nmt_state == OPERATIONAL:
             self._nmt_state = PRE_OPERATIONAL
@@ -350,6 +368,8 @@ class SimDrive:
         if self._dead:
             return
         if self._die_due is not None and t >= self._die_due:
+            if self._motor_on:
+                self._record("motor off: the drive died")
             self._dead = True
             self._motor_on = False
             self.motor.off()
@@ -362,7 +382,7 @@ class SimDrive:
             self._boot()
         if self._trip_due is not None and t >= self._trip_due:
             self._trip_due = None
-            self._shut_down(MF_POSITION_LIMIT)
+            self._shut_down(MF_POSITION_LIMIT, "position limit (injected trip)")
             self._emcy(EMCY_POSITION_LIMIT, ERR_REG_GENERIC)
         if self._hb_last is not None:
             timeout = self._consumer()[1]
@@ -458,6 +478,8 @@ class SimDrive:
         if on == self._motor_on:
             return  # [MBARI] re-sends MO=1 while polling: a repeat must not disturb a motion
         self._limit_stop = False
+        self._quick_stop = False
+        self._record("motor on: MO=1" if on else "motor off: MO=0")
         if not on:
             self._motor_on = False
             self.motor.off()
@@ -475,8 +497,15 @@ class SimDrive:
     def _begin(self) -> None:
         um, r, g = self.ram["UM"], self.ram, self.speed_gain
         self._limit_stop = False
+        kind = "JV" if um == 2 else self._target_kind if um == 5 else None
+        self._record(f"BG: UM={um}" + (f", {kind}={r[kind]}" if kind else ""))
         if um == 2:
             jv = min(max(r["JV"], r["VL[2]"]), r["VH[2]"])
+            self.motor.jog(jv * g, r["AC"] * g, r["DC"] * g)
+        elif um == 5 and self._target_kind == "JV":
+            # a jog in position mode: the speed command is clipped like UM=2's; VL[3]/VH[3] still
+            # hold the position reference, so the jog stops at them (SR bit 28)
+            jv = min(max(r["JV"], r["VL[2]"]), r["VH[2]"]) if r["VL[2]"] < 0 < r["VH[2]"] else r["JV"]
             self.motor.jog(jv * g, r["AC"] * g, r["DC"] * g)
         elif um == 5:
             if self._target_kind == "PR":
@@ -495,31 +524,45 @@ class SimDrive:
         m = self.motor
         if self._motor_on:
             heading = m.intended_direction()
-            moving = heading and m.mode in ("velocity", "position")
+            moving = heading and m.mode in ("velocity", "position", "torque")
             if moving and heading in self.inputs.blocked(self._il, self.settings.stop_code):
+                # stop switches act in every mode, torque included (seed C.1.1)
                 m.stop(self.ram["SD"] * self.speed_gain)
                 self._limit_stop = True
             m.step(dt)
+            if self._quick_stop and m.v == 0 and m.mode in ("idle", "stop"):
+                self._shut_down(MF_HEARTBEAT, "heartbeat lost, 0x6007=3 (quick stop done)")
+                return
             self._check_limits()
         if self.on_step is not None:
             self.on_step(self)
 
     def _check_limits(self) -> None:
         r = self.ram
+        if r["UM"] == 1:
+            return  # seed C.1.1/C.1.2: neither position nor velocity limits act in torque mode
         lo, hi = r["LL[3]"], r["HL[3]"]
         if (lo or hi) and not lo <= self.px <= hi:  # LL=HL=0 switches the check off
-            self._shut_down(MF_POSITION_LIMIT)
+            self._shut_down(MF_POSITION_LIMIT, "position limit (LL[3]/HL[3])")
             self._emcy(EMCY_POSITION_LIMIT, ERR_REG_GENERIC)
             return
         lo, hi = r["LL[2]"], r["HL[2]"]
         if (lo or hi) and not lo <= self.motor.v <= hi:
-            self._shut_down(MF_SPEED_LIMIT)
+            self._shut_down(MF_SPEED_LIMIT, "speed limit (LL[2]/HL[2])")
             self._emcy(EMCY_SPEED_LIMIT, ERR_REG_GENERIC)
 
-    def _shut_down(self, mf_bit: int) -> None:
+    def _shut_down(self, mf_bit: int, why: str) -> None:
+        if self._motor_on:
+            self._record(f"motor off: {why}")
         self._motor_on = False
+        self._quick_stop = False
         self.motor.off()
         self._mf |= mf_bit
+
+    def _record(self, text: str) -> None:
+        self.events.append((self._t, text))
+        if self.on_event is not None:
+            self.on_event(self, self._t, text)
 
     # -- status registers -----------------------------------------------------------------------
 

@@ -16,6 +16,7 @@ if TYPE_CHECKING:
 
 EC_BAD_COMMAND = 2
 EC_BAD_INDEX = 3
+EC_NOT_IN_THIS_UM = 12  # "command not available in this unit mode" ([BLISS])
 EC_SYNTAX = 19  # a query of an execute command (BG with the query bit): nothing to read
 EC_OUT_OF_RANGE = 21
 EC_CANNOT_ASSIGN = 23  # a set of a read-only command

@@ -128,7 +128,7 @@ def motion_status(motor: Motor, unit_mode: int, motor_on: bool) -> int:
     if unit_mode == 2:
         at_speed = motor.mode == "velocity" and motor.v == motor.v_target
         return 2 if motor.mode in ("velocity", "stop") and not at_speed else 1
-    if motor.mode in ("position", "stop"):
+    if motor.mode in ("position", "stop", "velocity"):  # velocity: a jog in UM=5 keeps the profiler busy
         return 2
     return 0 if motor.at_target else 1
 

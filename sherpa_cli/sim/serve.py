@@ -49,7 +49,7 @@ class Served:
 
 
 def serve(cfg: ArmConfig, host: str, port: int, *, persist: bool = True,
-          arm_factory: Callable[..., SimArm] | None = None) -> Served:
+          arm_factory: Callable[..., SimArm] | None = None, event_log: str | None = None) -> Served:
     """Start the arm on private virtual channels and one python-can-remote server per bus.
 
     Bus i of the config is served on ``port + i``; a server forces its own virtual channel,
@@ -59,8 +59,9 @@ def serve(cfg: ArmConfig, host: str, port: int, *, persist: bool = True,
 
     token = f"{socket.gethostname()}-{port}"
     channels = {bus: f"sherpa-serve-{token}-{bus}" for bus in cfg.buses}
+    extra = {"event_log": event_log} if event_log is not None else {}
     arm = (arm_factory or SimArm)(cfg, {b: {"interface": "virtual", "channel": c} for b, c in channels.items()},
-                                  persist=persist)
+                                  persist=persist, **extra)
     arm.start()
     servers: list[Any] = []
     bus_map: dict[str, str] = {}
@@ -87,6 +88,7 @@ def _url_host(host: str) -> str:
     return f"[{host}]" if ":" in host else host
 
 
-def run_on_buses(cfg: ArmConfig, endpoints: Mapping[str, Mapping[str, Any]], *, persist: bool = True) -> SimArm:
+def run_on_buses(cfg: ArmConfig, endpoints: Mapping[str, Mapping[str, Any]], *, persist: bool = True,
+                 event_log: str | None = None) -> SimArm:
     """The arm on real python-can interfaces (kernel vcan), as another machine would see drives."""
-    return SimArm(cfg, endpoints, persist=persist).start()
+    return SimArm(cfg, endpoints, persist=persist, event_log=event_log).start()

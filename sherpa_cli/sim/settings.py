@@ -62,6 +62,9 @@ class SimSettings:
     # At limit_trip_at the drive trips as if its feedback had left LL[3]..HL[3] (a bumped joint,
     # a noisy encoder): MO=0, MF 0x400000, EMCY 0x8680 -- a fault a monitor must show decoded.
     limit_trip_at: float | None = None
+    # [BLISS]: ST "cannot be executed in speed control mode" on some firmware; True: ST in UM=2
+    # answers EC 12 and a tool must stop with JV=0 + BG (elmo-protocol.md 2.1, UNCONFIRMED).
+    st_refused_in_speed_mode: bool = False
 
     def __post_init__(self) -> None:
         for name in ("mo_settle_s", "sv_blackout_s", "reply_latency_s", "sdo_latency_s"):

@@ -1,0 +1,46 @@
+"""`sherpa stop [TARGET...]`: stop every (or the named) drive now; no confirmation, no --apply."""
+
+from __future__ import annotations
+
+import typer
+
+from sherpa_cli.cli.context import state
+from sherpa_cli.cli.options import Targets
+from sherpa_cli.errors import SafetyError
+
+
+def stop(ctx: typer.Context, targets: Targets = None) -> None:
+    """Stop the motors now: ST (JV=0 + BG where ST is refused), wait for standstill, MO=0.
+
+    No confirmation and no --apply: this is the emergency stop of the tool, for a second
+    terminal while another command moves the arm. A drive whose motor is off gets no write.
+    Exit 1 if a drive could not be confirmed stopped (no answer, no standstill).
+
+    \b
+    Examples:
+      sherpa stop
+      sherpa stop elbow_pitch wrist_3
+    """
+    from sherpa_cli.ops.motion import MotionSettings
+    from sherpa_cli.ops.stop import stop_drives
+    from sherpa_cli.ops.targets import drive_refs
+
+    st = state(ctx)
+    cfg = st.load_config()
+    refs = drive_refs(cfg, targets)  # a pair or Σ/Δ joint means both motors; none: every drive
+    buses = sorted({r.bus for r in refs}, key=list(cfg.buses).index)
+    settings = MotionSettings.from_config(cfg, buses)
+    with st.session(buses=buses) as session:
+        results = stop_drives(session, refs, settings)
+    if st.json_mode:
+        st.out.json({"drives": [r.as_json() for r in results]})
+    else:
+        rows = []
+        for r in results:
+            state_text = "motor off" if r.motor_off or r.stopped_by == "motor was off" else "MOTOR ON?"
+            rows.append([r.drive, r.address, r.stopped_by, state_text, "; ".join(r.problems)])
+        st.out.table("stop", ["drive", "address", "stopped by", "now", "problem"], rows)
+    bad = [r for r in results if not r.ok]
+    if bad:
+        raise SafetyError(f"{len(bad)} drive(s) not confirmed stopped: {', '.join(r.drive for r in bad)}",
+                          hint="check them with `sherpa monitor --once`; cut the motor power if they still move")

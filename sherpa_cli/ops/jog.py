@@ -1,0 +1,258 @@
+"""`sherpa jog`: move one plain joint (or the drive of one) inside the motion guard (docs/motion.md).
+
+- position: UM=5, PA=target, BG, wait for MS=0 (``--to`` absolute, ``--by`` relative to PX now)
+- velocity: JV=v, BG in UM=5 (a jog) or UM=2 (``motion.velocity_unit_mode``), for T s or until Ctrl-C
+- torque: UM=1, TC=A for T s (T required); no position or speed limit of the drive acts in torque
+  mode (seed C.1.1/C.1.2), so the current must sit within the joint's configured limits
+
+Only what the motion needs is written (UM only if it differs, then PA/JV/TC and BG), all in RAM.
+The guard stops the motor on every way out; its report says how. Values come in joint units (rad,
+rad/s, A) and are converted with the joint's cpr.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+from typing import Any, Callable
+
+from sherpa_cli.config.model import ArmConfig, JointConfig, JointRole
+from sherpa_cli.elmo.faults import decode_sr, describe_mf
+from sherpa_cli.errors import SafetyError, UsageError
+from sherpa_cli.joints.units import counts_to_rad, rad_per_s_to_counts_per_s, rad_to_counts
+from sherpa_cli.ops.motion import UM_POSITION, UM_TORQUE, GuardReport, MotionGuard, MotionSettings
+from sherpa_cli.ops import targets
+from sherpa_cli.ops.targets import DriveRef
+
+MODES = ("position", "velocity", "torque")
+
+
+@dataclass(frozen=True)
+class JogTarget:
+    """What a name given to `jog` moves: one drive, and the plain joint it drives (if any)."""
+
+    name: str  # as the user gave it
+    ref: DriveRef
+    joint: JointConfig | None
+
+    @property
+    def cpr(self) -> int | None:
+        return self.joint.cpr if self.joint is not None else None
+
+
+@dataclass(frozen=True)
+class JogRequest:
+    mode: str  # position | velocity | torque
+    to: float | None = None  # rad, absolute
+    by: float | None = None  # rad, relative to the position at the start
+    velocity: float | None = None  # rad/s
+    torque: float | None = None  # A
+    duration: float | None = None  # s; velocity: None = until Ctrl-C; torque: required
+
+
+@dataclass
+class JogProgress:
+    elapsed: float
+    counts: int
+    rad: float | None
+
+
+@dataclass
+class JogResult:
+    target: str
+    drive: str
+    address: str
+    mode: str
+    start_counts: int
+    end_counts: int | None
+    target_counts: int | None  # position moves
+    command: str  # what was commanded, e.g. "PA=286", "JV=573", "TC=0.5"
+    duration: float  # s from BG until the guard had stopped the motor
+    ended_by: str  # "target reached", "time up", "Ctrl-C"
+    cpr: int | None
+    stop: GuardReport = field(default_factory=GuardReport)
+
+    @property
+    def error_counts(self) -> int | None:
+        if self.target_counts is None or self.end_counts is None:
+            return None
+        return self.end_counts - self.target_counts
+
+    def rad(self, counts: int | None) -> float | None:
+        return None if counts is None or self.cpr is None else counts_to_rad(counts, self.cpr)
+
+    def as_json(self) -> dict[str, Any]:
+        return {"target": self.target, "drive": self.drive, "address": self.address, "mode": self.mode,
+                "command": self.command, "ended_by": self.ended_by,
+                "start": {"counts": self.start_counts, "rad": self.rad(self.start_counts)},
+                "end": {"counts": self.end_counts, "rad": self.rad(self.end_counts)},
+                "target_position": None if self.target_counts is None else
+                {"counts": self.target_counts, "rad": self.rad(self.target_counts)},
+                "error": None if self.error_counts is None else
+                {"counts": self.error_counts, "rad": self.rad(self.error_counts)},
+                "duration_s": round(self.duration, 3), "stop": self.stop.as_json()}
+
+
+def resolve_jog_target(cfg: ArmConfig, text: str) -> JogTarget:
+    """A plain joint, the drive of one, or BUS:NODE (ops/targets.py decides what a name means);
+    a differential pair, its Σ/Δ joints and its motors are refused here."""
+    t = targets.resolve_one(cfg, text)
+    if t.pair is not None:
+        raise UsageError(f"'{text}' moves the differential pair '{t.pair.name}': jogging Σ/Δ joints is not "
+                         "supported here", hint="jog a plain joint or its drive")
+    if len(t.drives) != 1:
+        raise UsageError(f"'{text}' is moved by {len(t.drives)} drives ({', '.join(t.drive_names)}); name one")
+    plain = [j for j in t.joints if j.role is JointRole.PLAIN]
+    return JogTarget(text, t.drives[0], plain[0] if len(plain) == 1 else None)
+
+
+def check_request(target: JogTarget, req: JogRequest) -> None:
+    """Refuse what must not reach a drive, before the bus is even opened."""
+    if req.mode not in MODES:
+        raise UsageError(f"jog mode '{req.mode}': expected one of {', '.join(MODES)}")
+    for what, value in (("--to", req.to), ("--by", req.by), ("--velocity", req.velocity),
+                        ("--torque", req.torque), ("--for", req.duration)):
+        if value is not None and not math.isfinite(value):
+            raise UsageError(f"{what} {value}: expected a finite number")
+    if req.duration is not None and not req.duration > 0:
+        raise UsageError(f"--for {req.duration}: expected a time > 0 s")
+    if target.cpr is None and req.mode != "torque":
+        raise UsageError(f"{target.name}: no plain joint of the config is driven by {target.ref.name}, so there is "
+                         "no cpr to convert rad into counts", hint="name the joint, or a drive that moves a plain joint")
+    joint = target.joint
+    if req.mode == "position":
+        if (req.to is None) == (req.by is None):
+            raise UsageError("a position jog needs exactly one of --to or --by")
+        if req.duration is not None:
+            raise UsageError("--for applies to --velocity and --torque jogs; a position move ends at its target")
+    elif req.mode == "velocity":
+        assert req.velocity is not None
+        if joint is not None and joint.vel_limit is not None:
+            counts = abs(rad_per_s_to_counts_per_s(req.velocity, joint.cpr))
+            if counts > joint.vel_limit:
+                limit = counts_to_rad(joint.vel_limit, joint.cpr)
+                raise UsageError(f"--velocity {req.velocity} rad/s ({counts} counts/s) is above {joint.name}'s "
+                                 f"velocity limit {limit:.4f} rad/s ({joint.vel_limit} counts/s)")
+    elif req.mode == "torque":
+        assert req.torque is not None
+        if req.duration is None:
+            raise UsageError("a torque jog needs --for SECONDS: no position or speed limit of the drive acts in "
+                             "torque mode, so it must end by itself")
+        current = joint.current if joint is not None else None
+        if current is None:
+            raise UsageError(f"{target.name}: no current limits configured for it, so no torque can be checked",
+                             hint="give the joint `current: {continuous: A, peak: A, peak_time: s}`")
+        if abs(req.torque) > current.continuous:
+            raise UsageError(f"--torque {req.torque} A is beyond {joint.name}'s continuous current limit "
+                             f"{current.continuous} A (config current.continuous)")
+
+
+def _counts_to(target: JogTarget, rad: float) -> int:
+    assert target.cpr is not None
+    return rad_to_counts(rad, target.cpr)
+
+
+def run_jog(session: Any, target: JogTarget, req: JogRequest, *, settings: MotionSettings,
+            clock: Callable[[], float] = time.monotonic, sleep: Callable[[float], None] = time.sleep,
+            on_progress: Callable[[JogProgress], None] | None = None,
+            on_event: Callable[[str], None] | None = None, keep: bool = False) -> JogResult:
+    """Move as asked inside a MotionGuard and return where it ended; every exit path stops the motor."""
+    check_request(target, req)
+    ref = target.ref
+    guard = MotionGuard(session, [ref], settings=settings, clock=clock, sleep=sleep, keep=keep, on_event=on_event)
+    state: dict[str, Any] = {"start": None, "t0": None, "t_end": None, "target": None, "command": "",
+                             "ended_by": ""}
+    interrupted = False
+    try:
+        with guard:
+            try:
+                _move(guard, target, req, settings, state, clock, sleep, on_progress)
+            finally:
+                state["t_end"] = clock()  # the motion's time, without the guard's stop and switch-off
+    except KeyboardInterrupt as exc:
+        if not (req.mode == "velocity" and req.duration is None and state["t0"] is not None):
+            exc.motion_report = guard.report  # type: ignore[attr-defined]  # the CLI shows how it stopped
+            raise
+        interrupted = True  # Ctrl-C is how an open-ended velocity jog is meant to end
+    except BaseException as exc:
+        exc.motion_report = guard.report  # type: ignore[attr-defined]
+        raise
+    (stopped,) = guard.report.drives
+    return JogResult(target=target.name, drive=ref.name, address=ref.address, mode=req.mode,
+                     start_counts=state["start"], end_counts=stopped.position, target_counts=state["target"],
+                     command=state["command"],
+                     duration=state["t_end"] - state["t0"] if state["t0"] is not None else 0.0,
+                     ended_by="Ctrl-C" if interrupted else state["ended_by"], cpr=target.cpr, stop=guard.report)
+
+
+def _move(guard: MotionGuard, target: JogTarget, req: JogRequest, settings: MotionSettings, state: dict[str, Any],
+          clock: Callable[[], float], sleep: Callable[[float], None],
+          on_progress: Callable[[JogProgress], None] | None) -> None:
+    ref = target.ref
+    c = guard.client(ref)
+    start = int(c.get("PX"))
+    state["start"] = start
+    watch = lambda done, limit: _watch(guard, c, target, clock, sleep, settings, state, on_progress,  # noqa: E731
+                                       done=done, limit=limit)
+    if req.mode == "position":
+        goal = _counts_to(target, req.to) if req.to is not None else start + _counts_to(target, req.by)
+        state["target"] = goal
+        guard.enable(ref, UM_POSITION)
+        bound = _move_bound(c, abs(goal - start))
+        c.set("PA", 0, goal)
+        state["command"] = f"PA={goal}"
+        state["t0"] = clock()
+        c.execute("BG")
+        watch(lambda sr: sr.motion_status == 0, bound)
+        state["ended_by"] = "target reached"
+    elif req.mode == "velocity":
+        v = rad_per_s_to_counts_per_s(req.velocity, target.cpr)
+        guard.enable(ref, settings.velocity_unit_mode)
+        c.set("JV", 0, v)
+        state["command"] = f"JV={v}"
+        state["t0"] = clock()
+        c.execute("BG")
+        watch(None, req.duration)
+        state["ended_by"] = "time up"
+    else:
+        guard.enable(ref, UM_TORQUE)  # TC=0 before MO=1: no old torque command is applied
+        c.set("TC", 0, float(req.torque))
+        state["command"] = f"TC={req.torque:g}"
+        state["t0"] = clock()
+        watch(None, req.duration)
+        state["ended_by"] = "time up"
+
+
+def _move_bound(c: Any, distance: int) -> float:
+    """A generous bound for a PTP move: twice the profile's time at SP, AC and DC, plus 2 s."""
+    sp = max(abs(int(c.get("SP"))), 1)
+    ac = max(abs(int(c.get("AC"))), 1)
+    dc = max(abs(int(c.get("DC"))), 1)
+    return 2 * (distance / sp + sp / ac + sp / dc) + 2.0
+
+
+def _watch(guard: MotionGuard, c: Any, target: JogTarget, clock: Callable[[], float], sleep: Callable[[float], None],
+           settings: MotionSettings, state: dict[str, Any], on_progress: Callable[[JogProgress], None] | None,
+           *, done: Callable[[Any], bool] | None, limit: float | None) -> None:
+    """Poll PX and SR until ``done(sr)`` or ``limit`` s (a time-up for velocity/torque, a failure for a move)."""
+    t0 = state["t0"]
+    while True:
+        guard.check()
+        px = int(guard.query(target.ref, "PX"))
+        sr = decode_sr(int(guard.query(target.ref, "SR")))
+        elapsed = clock() - t0
+        if on_progress is not None:
+            on_progress(JogProgress(elapsed, px, counts_to_rad(px, target.cpr) if target.cpr else None))
+        if not sr.motor_on:
+            mf = int(guard.query(target.ref, "MF"))
+            why = "; ".join(describe_mf(mf)) if mf else "MO=0 from elsewhere (sherpa stop, another tool)"
+            raise SafetyError(f"{c.label}: the motor was switched off during the jog: {why}")
+        if done is not None and done(sr):
+            return
+        if limit is not None and elapsed >= limit:
+            if done is not None:
+                raise SafetyError(f"{c.label}: the move did not reach its target within {limit:.1f} s "
+                                  f"(at {px} counts)", hint="check SP/AC/DC and what blocks the joint (SR, IP)")
+            return
+        sleep(settings.poll_interval if limit is None else min(settings.poll_interval, max(limit - elapsed, 0.0)))

@@ -1,0 +1,558 @@
+"""The motion guard: the one place every command that moves a motor runs inside (docs/motion.md).
+
+``with MotionGuard(session, refs, settings=...) as guard:``
+
+- on entry: NMT start, read MO, UM, SR and MF of every drive and refuse a drive in fault with the
+  decoded reason; arm the dead-man (heartbeat consumer 0x1016:1, 0x1029:1, 0x6007 in RAM) and start
+  the host heartbeat from this process's own thread; SIGTERM and SIGHUP become a stop.
+- the body moves the motors through :meth:`MotionGuard.enable` and :meth:`MotionGuard.client`, and
+  calls :meth:`MotionGuard.check` in its loops (a sign of life for the heartbeat thread, and the
+  place a signal or a failed heartbeat turns into an exception).
+- on every exit (normal end, error, Ctrl-C, SIGTERM, SIGHUP): stop every drive (ST, or JV=0 + BG
+  where ST is refused), wait for standstill (bounded), MO=0 where the guard switched the motor on,
+  put back UM and the dead-man objects it changed, stop the heartbeat. :attr:`MotionGuard.report`
+  names every drive, how it was stopped and what was restored.
+
+Why the heartbeat comes from a Python thread and not ``send_periodic``: on SocketCAN python-can's
+periodic task is the kernel's broadcast manager, which keeps sending after this process hangs or
+is killed -- the drive would never notice. The thread sends only while the command shows signs of
+life (:meth:`check`) and the main thread runs; SIGKILL ends it with the process, and the drive's own
+consumer switches the motor off ``consumer_time_ms`` later.
+"""
+
+from __future__ import annotations
+
+import logging
+import signal
+import struct
+import threading
+import time
+from dataclasses import dataclass, field
+from typing import Any, Callable, Iterable, Sequence
+
+from sherpa_cli.elmo.faults import describe_mf, sr_problems
+from sherpa_cli.errors import (CommunicationError, DriveRefusedError, ExitCode, SafetyError, SherpaError,
+                               UsageError)
+
+log = logging.getLogger(__name__)
+
+HEARTBEAT_BASE = 0x700
+NMT_OPERATIONAL = 0x05
+CONSUMER = (0x1016, 1)  # u32: host id << 16 | time ms
+COMM_ERROR = (0x1029, 1)  # u8
+LOSS_ACTION = (0x6007, 0)  # i16
+_SIZES = {CONSUMER: "<I", COMM_ERROR: "<B", LOSS_ACTION: "<h"}
+_OBJECT_NAMES = {CONSUMER: "consumer heartbeat time", COMM_ERROR: "error behaviour",
+                 LOSS_ACTION: "abort connection option code"}
+UM_TORQUE, UM_SPEED, UM_POSITION = 1, 2, 5
+MS_PROFILER_ACTIVE = 2
+
+
+@dataclass(frozen=True)
+class MotionSettings:
+    """What the guard needs to know; :meth:`from_config` reads the config's ``motion:`` section."""
+
+    host_node_id: int = 126
+    consumer_time_ms: int = 500
+    heartbeat_period_ms: int = 0  # 0: a quarter of consumer_time_ms
+    loss_action: int = 2
+    comm_error_behaviour: int = 2
+    stop_method: str = "auto"  # auto | st | jv0
+    standstill_timeout: float = 2.0
+    liveness_timeout: float = 1.0
+    velocity_unit_mode: int = 5
+    poll_interval: float = 0.01  # s between polls while waiting (the bus's poll_interval_ms)
+    request_bound: float = 0.2  # s one interpreter request can take at worst (timeout x attempts)
+
+    @property
+    def heartbeat_period(self) -> float:
+        return (self.heartbeat_period_ms or self.consumer_time_ms / 4) / 1000
+
+    @property
+    def consumer_entry(self) -> int:
+        return (self.host_node_id & 0x7F) << 16 | (self.consumer_time_ms & 0xFFFF)
+
+    @classmethod
+    def from_config(cls, cfg: Any, buses: Iterable[str] | None = None) -> "MotionSettings":
+        m, p = cfg.motion, cfg.protocol
+        names = list(buses) if buses is not None else list(cfg.buses)
+        poll_ms = min((cfg.buses[b].poll_interval_ms for b in names if b in cfg.buses), default=10)
+        return cls(host_node_id=m.host_node_id, consumer_time_ms=m.consumer_time_ms,
+                   heartbeat_period_ms=m.heartbeat_period_ms, loss_action=m.loss_action,
+                   comm_error_behaviour=m.comm_error_behaviour, stop_method=m.stop_method,
+                   standstill_timeout=m.standstill_timeout, liveness_timeout=m.liveness_timeout,
+                   velocity_unit_mode=m.velocity_unit_mode, poll_interval=poll_ms / 1000,
+                   request_bound=p.reply_timeout * (1 + p.retries))
+
+
+class MotionStopped(SherpaError):
+    """A stop was requested by a signal (SIGTERM, SIGHUP) while motion ran; exit 130 like Ctrl-C."""
+
+    exit_code = ExitCode.INTERRUPTED
+
+
+class DeadManError(CommunicationError):
+    """The host heartbeat could not be sent; the drives stop on their own (exit 3)."""
+
+
+@dataclass
+class DriveStop:
+    """What the guard did to one drive on the way out."""
+
+    drive: str
+    address: str
+    stopped_by: str = "-"  # "ST", "JV=0 + BG", "TC=0 + ST", "motor was off", "not stopped"
+    standstill: bool | None = None  # None: not checked (motor off)
+    motor_off: bool = False  # the guard switched the motor off (it had switched it on)
+    position: int | None = None  # PX once stopped (None: could not be read)
+    restored: list[str] = field(default_factory=list)
+    kept: list[str] = field(default_factory=list)
+    problems: list[str] = field(default_factory=list)
+
+    def line(self) -> str:
+        parts = [f"{self.drive} ({self.address}): stopped by {self.stopped_by}"]
+        if self.standstill is False:
+            parts.append("NOT at standstill")
+        if self.motor_off:
+            parts.append("motor off")
+        if self.restored:
+            parts.append("restored " + ", ".join(self.restored))
+        if self.kept:
+            parts.append("kept " + ", ".join(self.kept))
+        text = "; ".join(parts)
+        if self.problems:
+            text += " -- " + "; ".join(self.problems)
+        return text
+
+    def as_json(self) -> dict[str, Any]:
+        return {"drive": self.drive, "address": self.address, "stopped_by": self.stopped_by,
+                "standstill": self.standstill, "motor_off": self.motor_off, "position": self.position,
+                "restored": list(self.restored),
+                "kept": list(self.kept), "problems": list(self.problems)}
+
+
+@dataclass
+class GuardReport:
+    drives: list[DriveStop] = field(default_factory=list)
+    reason: str = "end"  # end | error | interrupted | SIGTERM | SIGHUP
+
+    @property
+    def ok(self) -> bool:
+        return all(not d.problems for d in self.drives)
+
+    def lines(self) -> list[str]:
+        return [d.line() for d in self.drives]
+
+    def as_json(self) -> dict[str, Any]:
+        return {"reason": self.reason, "drives": [d.as_json() for d in self.drives]}
+
+
+@dataclass
+class _Drive:
+    """The guard's record of one drive: what it found and what it changed."""
+
+    ref: Any
+    client: Any
+    mo: int = 0
+    um: int = 0
+    switched_on: bool = False
+    um_changed_from: int | None = None
+    od_before: dict[tuple[int, int], int] = field(default_factory=dict)  # the dead-man objects it wrote
+
+
+def _drive_label(ref: Any) -> str:
+    return f"{ref.name} ({ref.bus}:{ref.node})"
+
+
+def fault_reason(mf: int, sr: int) -> str | None:
+    """Why a drive must not move, decoded; None when MF and SR show no fault."""
+    reasons = describe_mf(mf) if mf else []
+    for fault in sr_problems(sr):
+        if fault.code == 1 << 6 and mf:  # "motor failure latched": MF already says which
+            continue
+        if fault.code == 1 << 28:  # stopped by a limit: a state, not a fault (moving away is allowed)
+            continue
+        reasons.append(fault.line())
+    return "; ".join(reasons) if reasons else None
+
+
+def stop_drive(client: Any, *, unit_mode: int | None, method: str = "auto", standstill_timeout: float = 2.0,
+               poll_interval: float = 0.01, clock: Callable[[], float] = time.monotonic,
+               sleep: Callable[[float], None] = time.sleep) -> tuple[str, bool | None, list[str]]:
+    """Stop one drive's motion: ST (JV=0 + BG where ST is refused), TC=0 first in torque mode; then
+    wait for VX = 0 (bounded). Returns (how, standstill reached or None if the motor is off, problems)."""
+    problems: list[str] = []
+    # patient: a drive that was just switched on or off is deaf while it settles (protocol.mo_settle)
+    if not _ask_patiently(client, "MO", clock, sleep, client.settings.mo_confirm_timeout, poll_interval):
+        return "motor was off", None, problems
+    how = []
+    if unit_mode == UM_TORQUE:
+        try:
+            client.set("TC", 0, 0.0)
+            how.append("TC=0")
+        except SherpaError as exc:
+            problems.append(f"TC=0: {exc}")
+    use_jv = method == "jv0"
+    if not use_jv:
+        try:
+            client.execute("ST")
+            how.append("ST")
+        except DriveRefusedError as exc:
+            if method == "st" or unit_mode == UM_TORQUE:
+                problems.append(f"ST refused: {exc}")
+            else:
+                log.info("%s: ST refused (%s); stopping with JV=0 + BG", client.label, exc)
+                use_jv = True
+    if use_jv:
+        client.set("JV", 0, 0)
+        client.execute("BG")
+        how.append("JV=0 + BG")
+    deadline = clock() + standstill_timeout
+    while True:
+        if not client.get("MO"):
+            return " + ".join(how) or "-", None, problems  # switched off meanwhile (a trip): no motion left
+        if client.get("VX") == 0:
+            return " + ".join(how) or "-", True, problems
+        if clock() >= deadline:
+            problems.append(f"not at standstill {standstill_timeout:g} s after the stop")
+            return " + ".join(how) or "-", False, problems
+        sleep(poll_interval)
+
+
+def _ask_patiently(client: Any, letters: str, clock: Callable[[], float], sleep: Callable[[float], None],
+                   patience: float, poll_interval: float) -> int | float:
+    """Query until the drive answers or ``patience`` s have passed (then the timeout propagates)."""
+    from sherpa_cli.errors import DriveTimeoutError
+
+    deadline = clock() + patience
+    while True:
+        try:
+            return client.get(letters)
+        except DriveTimeoutError:
+            if clock() >= deadline:
+                raise
+            sleep(poll_interval)
+
+
+class MotionGuard:
+    """Context manager around anything that moves motors (see the module docstring)."""
+
+    def __init__(self, session: Any, refs: Sequence[Any], *, settings: MotionSettings,
+                 clock: Callable[[], float] = time.monotonic, sleep: Callable[[float], None] = time.sleep,
+                 keep: bool = False, on_event: Callable[[str], None] | None = None) -> None:
+        seen: set[tuple[str, int]] = set()
+        self.refs = []
+        for ref in refs:
+            if (ref.bus, ref.node) not in seen:
+                seen.add((ref.bus, ref.node))
+                self.refs.append(ref)
+        for ref in self.refs:
+            if ref.node == settings.host_node_id:
+                raise UsageError(f"{_drive_label(ref)}: its node id is the host heartbeat id "
+                                 f"(motion.host_node_id {settings.host_node_id}); choose another host id")
+        self.session = session
+        self.settings = settings
+        self.keep = keep
+        self._clock = clock
+        self._sleep = sleep
+        self._on_event = on_event
+        self._drives: dict[tuple[str, int], _Drive] = {}
+        self.report = GuardReport()
+        # dead-man loop
+        self._hb_stop = threading.Event()
+        self._hb_thread: threading.Thread | None = None
+        self._hb_error: BaseException | None = None
+        self._hb_given_up: str | None = None
+        self._alive_until = time.monotonic() + settings.liveness_timeout
+        self._alive_lock = threading.Lock()
+        self.heartbeats_sent = 0
+        # signals
+        self._signal: str | None = None
+        self._exiting = False
+        self._old_handlers: dict[int, Any] = {}
+
+    # -- public API -------------------------------------------------------------------------------
+
+    def __enter__(self) -> "MotionGuard":
+        self._install_signals()
+        try:
+            self._pulse(extra=self._setup_bound())
+            for ref in self.refs:
+                self._inspect(ref)
+            self._start_heartbeat()
+            for d in self._drives.values():
+                self._arm(d)
+            self._pulse()
+        except BaseException:
+            self._exit_all(reason="error")
+            self._restore_signals()
+            raise
+        return self
+
+    def __exit__(self, exc_type: Any, exc: Any, tb: Any) -> bool:
+        if self._signal is not None:
+            reason = self._signal
+        elif exc_type is None:
+            reason = "end"
+        elif issubclass(exc_type, KeyboardInterrupt):
+            reason = "interrupted"
+        else:
+            reason = "error"
+        try:
+            self._exit_all(reason=reason)
+        finally:
+            self._restore_signals()
+        problems = [f"{d.drive}: {p}" for d in self.report.drives for p in d.problems]
+        if exc_type is None and problems:
+            raise SafetyError("the stop after the motion did not go cleanly: " + "; ".join(problems),
+                              hint="check the drives with `sherpa monitor --once`; `sherpa stop` stops them all")
+        return False
+
+    def client(self, ref: Any) -> Any:
+        return self._drive(ref).client
+
+    def enable(self, ref: Any, unit_mode: int) -> None:
+        """UM=unit_mode only if needed (with MO=0 first), then MO=1 confirmed by reading MO back."""
+        self.check()
+        d = self._drive(ref)
+        c = d.client
+        bound = c.settings.mo_confirm_timeout + 2 * self.settings.request_bound
+        if d.um != unit_mode:
+            if d.mo:
+                self._pulse(extra=bound)
+                self._event(f"{c.label}: MO=0 to change UM {d.um} -> {unit_mode}")
+                c.motor_off()
+                d.mo = 0
+            c.set("UM", 0, unit_mode)
+            if d.um_changed_from is None:
+                d.um_changed_from = d.um
+            d.um = unit_mode
+        if not d.mo:
+            if unit_mode == UM_TORQUE and c.get("TC") != 0:
+                c.set("TC", 0, 0.0)  # MO=1 in UM=1 applies TC at once: never an old torque command
+            self._pulse(extra=bound)
+            d.switched_on = True  # before the request: a lost confirmation must still end in MO=0
+            c.motor_on()
+            d.mo = 1
+            self._event(f"{c.label}: motor on (UM={unit_mode})")
+        self._pulse()
+
+    def check(self) -> None:
+        """A sign of life for the heartbeat thread; raises if a signal asked to stop or the dead-man failed."""
+        if self._signal is not None:
+            raise MotionStopped(f"{self._signal} received: motion stopped")
+        if self._hb_error is not None:
+            raise DeadManError(f"host heartbeat failed: {self._hb_error}",
+                               hint="the drives stop on their own within the consumer time")
+        if self._hb_given_up is not None:
+            raise DeadManError(f"host heartbeat stopped: {self._hb_given_up}")
+        self._pulse()
+
+    def query(self, ref: Any, letters: str, index: int = 0) -> int | float:
+        """A query that waits out a drive deaf for its MO settle window (another host switched the motor:
+        `sherpa stop`), up to protocol.mo_confirm_timeout, keeping the dead-man fed meanwhile."""
+        c = self._drive(ref).client
+        patience = c.settings.mo_confirm_timeout
+        self._pulse(extra=patience + self.settings.request_bound)
+        try:
+            if index:
+                return c.get(letters, index)
+            return _ask_patiently(c, letters, self._clock, self._sleep, patience, self.settings.poll_interval)
+        finally:
+            self._pulse()
+
+    def unit_mode(self, ref: Any) -> int:
+        return self._drive(ref).um
+
+    # -- entry ------------------------------------------------------------------------------------
+
+    def _drive(self, ref: Any) -> _Drive:
+        d = self._drives.get((ref.bus, ref.node))
+        if d is None:
+            raise UsageError(f"{_drive_label(ref)} is not guarded by this motion guard")
+        return d
+
+    def _setup_bound(self) -> float:
+        return 12 * self.settings.request_bound * max(1, len(self.refs)) + 3.0
+
+    def _inspect(self, ref: Any) -> None:
+        client = self.session.client(ref)
+        client.nmt_start()
+        d = _Drive(ref, client)
+        self._drives[(ref.bus, ref.node)] = d
+        d.mo = int(client.get("MO"))
+        d.um = int(client.get("UM"))
+        sr = int(client.get("SR"))
+        mf = int(client.get("MF"))
+        reason = fault_reason(mf, sr)
+        if reason is not None:
+            raise SafetyError(f"{client.label}: in fault, refusing to move it: {reason}",
+                              hint=f"find the cause first; MO=1 clears MF: `sherpa cmd {ref.name} MO=1 MO=0 --apply`")
+        self._event(f"{client.label}: MO={d.mo} UM={d.um} SR=0x{sr & 0xFFFFFFFF:08X} MF=0x{mf & 0xFFFFFFFF:08X}")
+
+    def _sdo_read(self, d: _Drive, key: tuple[int, int]) -> int:
+        """An SDO upload through the session's client of the drive (SdoError names drive and object)."""
+        raw = self.session.sdo(d.ref).upload(*key, name=_OBJECT_NAMES[key])
+        fmt = _SIZES[key]
+        raw = (bytes(raw) + bytes(4))[:struct.calcsize(fmt)]
+        return struct.unpack(fmt, raw)[0]
+
+    def _sdo_write(self, d: _Drive, key: tuple[int, int], value: int) -> None:
+        self.session.sdo(d.ref).download(key[0], key[1], struct.pack(_SIZES[key], value), name=_OBJECT_NAMES[key])
+
+    def _arm(self, d: _Drive) -> None:
+        """Dead-man on: loss action and error behaviour first, the consumer entry last (it starts the watch)."""
+        s = self.settings
+        for key, value in ((LOSS_ACTION, s.loss_action), (COMM_ERROR, s.comm_error_behaviour),
+                           (CONSUMER, s.consumer_entry)):
+            before = self._sdo_read(d, key)
+            if before == value:
+                continue
+            d.od_before[key] = before  # recorded first: a write that fails half-way is still put back
+            self._sdo_write(d, key, value)
+        self._event(f"{d.client.label}: dead-man armed: host {s.host_node_id}, {s.consumer_time_ms} ms, "
+                    f"0x6007={s.loss_action}")
+
+    # -- dead-man heartbeat -----------------------------------------------------------------------
+
+    def _pulse(self, extra: float = 0.0) -> None:
+        allowance = max(self.settings.liveness_timeout, 3 * self.settings.request_bound) + extra
+        with self._alive_lock:
+            self._alive_until = max(self._alive_until, time.monotonic() + allowance) if extra else \
+                time.monotonic() + allowance
+
+    def _start_heartbeat(self) -> None:
+        buses = sorted({ref.bus for ref in self.refs})
+        networks = [self.session.links[b].network for b in buses]
+        frame_id = HEARTBEAT_BASE + self.settings.host_node_id
+        period = self.settings.heartbeat_period
+        main = threading.main_thread()
+
+        def loop() -> None:
+            while True:
+                with self._alive_lock:
+                    alive_until = self._alive_until
+                if not main.is_alive():
+                    self._hb_given_up = "the command's main thread ended"
+                    return
+                if time.monotonic() > alive_until:
+                    self._hb_given_up = "the command showed no sign of life (hung?)"
+                    log.warning("motion guard: %s; heartbeat stopped, drives stop on their own", self._hb_given_up)
+                    return
+                try:
+                    for network in networks:
+                        network.send_message(frame_id, bytes([NMT_OPERATIONAL]))
+                    self.heartbeats_sent += 1
+                except BaseException as exc:  # a dead bus: the drives' consumers will stop them
+                    self._hb_error = exc
+                    return
+                if self._hb_stop.wait(period):
+                    return
+
+        self._hb_thread = threading.Thread(target=loop, name="sherpa-deadman", daemon=True)
+        self._hb_thread.start()
+
+    def _stop_heartbeat(self) -> None:
+        self._hb_stop.set()
+        if self._hb_thread is not None:
+            self._hb_thread.join(timeout=5)
+
+    # -- exit -------------------------------------------------------------------------------------
+
+    def _exit_all(self, reason: str) -> None:
+        self._exiting = True
+        self.report.reason = reason
+        self._pulse(extra=self._exit_bound())
+        for d in self._drives.values():
+            self.report.drives.append(self._exit_drive(d))
+        self._stop_heartbeat()
+
+    def _exit_bound(self) -> float:
+        per = self.settings.standstill_timeout + 12 * self.settings.request_bound + 2 * 3.0
+        return per * max(1, len(self._drives))
+
+    def _exit_drive(self, d: _Drive) -> DriveStop:
+        c, s = d.client, self.settings
+        r = DriveStop(d.ref.name, f"{d.ref.bus}:{d.ref.node}")
+        try:
+            # a drive whose consumer tripped went to NMT Stopped (0x1029:1 = 2) and its interpreter is
+            # deaf until started again; starting it moves nothing
+            c.nmt_start()
+            how, standstill, problems = stop_drive(c, unit_mode=d.um, method=s.stop_method,
+                                                   standstill_timeout=s.standstill_timeout,
+                                                   poll_interval=s.poll_interval, clock=self._clock,
+                                                   sleep=self._sleep)
+            r.stopped_by, r.standstill = how, standstill
+            r.problems.extend(problems)
+        except SherpaError as exc:
+            r.stopped_by = "not stopped"
+            r.problems.append(f"stop: {exc}")
+        if d.switched_on:
+            try:
+                c.motor_off()
+                r.motor_off = True
+            except SherpaError as exc:
+                r.problems.append(f"MO=0: {exc}")
+        try:
+            r.position = int(c.get("PX"))
+        except SherpaError as exc:
+            r.problems.append(f"PX: {exc}")
+        if d.um_changed_from is not None:
+            if self.keep:
+                r.kept.append(f"UM={d.um}")
+            elif r.motor_off or not d.switched_on:
+                try:
+                    c.set("UM", 0, d.um_changed_from)
+                    r.restored.append(f"UM={d.um_changed_from}")
+                except SherpaError as exc:
+                    r.problems.append(f"UM={d.um_changed_from}: {exc}")
+        # the consumer entry first: once it is back, the heartbeat may stop without a trip
+        for key in (CONSUMER, COMM_ERROR, LOSS_ACTION):
+            if key not in d.od_before:
+                continue
+            name = f"0x{key[0]:04X}:{key[1]}"
+            if self.keep:
+                r.kept.append(name)
+                continue
+            try:
+                self._sdo_write(d, key, d.od_before[key])
+                r.restored.append(name)
+            except SherpaError as exc:
+                r.problems.append(f"restore {name}: {exc}")
+        self._event(r.line())
+        return r
+
+    # -- signals ----------------------------------------------------------------------------------
+
+    def _install_signals(self) -> None:
+        if threading.current_thread() is not threading.main_thread():
+            return  # handlers live in the main thread only; a worker's guard relies on check()
+        for signum in (signal.SIGTERM, getattr(signal, "SIGHUP", None), signal.SIGINT):
+            if signum is None:
+                continue
+            self._old_handlers[signum] = signal.getsignal(signum)
+            signal.signal(signum, self._on_signal)
+
+    def _restore_signals(self) -> None:
+        for signum, handler in self._old_handlers.items():
+            try:
+                signal.signal(signum, handler)
+            except (TypeError, ValueError):
+                pass
+        self._old_handlers.clear()
+
+    def _on_signal(self, signum: int, frame: Any) -> None:
+        name = signal.Signals(signum).name
+        if self._exiting:
+            # already stopping: a second Ctrl-C or SIGTERM must not cut the stop sequence short
+            self._event(f"{name} received while stopping: still stopping")
+            return
+        if signum == signal.SIGINT:
+            raise KeyboardInterrupt
+        self._signal = name
+        raise MotionStopped(f"{name} received: motion stopped")
+
+    def _event(self, text: str) -> None:
+        log.info("%s", text)
+        if self._on_event is not None:
+            self._on_event(text)

@@ -1,0 +1,155 @@
+"""`sherpa jog` of a plain joint on the simulated arm: position, velocity and torque, refusals, the CLI."""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+from pathlib import Path
+
+import canopen
+import pytest
+
+from sherpa_cli.config import load_config
+from sherpa_cli.errors import UsageError
+from sherpa_cli.ops.jog import JogRequest, check_request, resolve_jog_target, run_jog
+from sherpa_cli.ops.motion import MotionSettings
+from sherpa_cli.ops.session import ArmSession
+from sherpa_cli.sim.arm import SimArm
+
+from test_motion_guard import ARMED, CONFIG, RESTORED
+
+CPR = 4000
+
+
+@pytest.fixture(autouse=True)
+def _isolated(monkeypatch: pytest.MonkeyPatch, tmp_path: Path):
+    monkeypatch.setenv("XDG_STATE_HOME", str(tmp_path / "state"))
+    monkeypatch.setattr(canopen.Network, "NOTIFIER_CYCLE", 0.02)
+
+
+@pytest.fixture
+def cfg(tmp_path):
+    path = tmp_path / "arm.yaml"
+    path.write_text(CONFIG, encoding="utf-8")
+    return load_config(path)
+
+
+def jog(cfg, name, **req):
+    target = resolve_jog_target(cfg, name)
+    progress = []
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
+        result = run_jog(s, target, JogRequest(**req), settings=MotionSettings.from_config(cfg),
+                         on_progress=progress.append)
+        drive = s.sim.drives[target.ref.name]
+        with s.sim.lock:
+            sim = {"px": drive.px, "on": drive.motor_on, "v": drive.motor.v,
+                   "writes": [(i, sub, v) for _, i, sub, v in drive.od_writes],
+                   "um": drive.ram["UM"], "tc": drive.ram["TC"]}
+        assert s.sim.errors == []
+    return result, sim, progress
+
+
+def test_position_jog_to_ends_at_the_target(cfg):
+    result, sim, progress = jog(cfg, "j1", mode="position", to=1.0)
+    goal = round(1.0 * CPR / (2 * math.pi))  # 637
+    assert result.target_counts == goal and result.command == f"PA={goal}"
+    assert abs(result.end_counts - goal) <= 1 and result.error_counts == result.end_counts - goal
+    assert sim["px"] == result.end_counts and not sim["on"] and sim["v"] == 0
+    assert sim["writes"] == ARMED + RESTORED
+    assert result.ended_by == "target reached" and progress
+    (stop,) = result.stop.drives
+    assert stop.stopped_by == "ST" and stop.motor_off and stop.standstill
+
+
+def test_position_jog_by_is_relative(cfg):
+    result, sim, _ = jog(cfg, "drive1", mode="position", by=-0.5)
+    assert result.start_counts == 0 and result.target_counts == -318
+    assert abs(result.end_counts + 318) <= 1
+
+
+def test_velocity_jog_for_a_time_stops_where_it_says(cfg):
+    t0 = time.monotonic()
+    result, sim, progress = jog(cfg, "j1", mode="velocity", velocity=2.0, duration=0.3)
+    assert time.monotonic() - t0 < 5
+    v = round(2.0 * CPR / (2 * math.pi))
+    assert result.command == f"JV={v}" and result.ended_by == "time up"
+    assert 0.3 <= result.duration < 2
+    # it moved about v * 0.3 s, and the result names exactly where the motor stands
+    assert v * 0.2 < result.end_counts < v * 1.0, result.end_counts
+    assert sim["px"] == result.end_counts and not sim["on"] and sim["v"] == 0
+    assert sim["um"] == 5  # velocity_unit_mode 5: JV + BG in position mode, UM untouched
+    assert [p.counts for p in progress] == sorted(p.counts for p in progress)
+
+
+def test_torque_jog_for_a_time_stops_and_restores_the_unit_mode(cfg):
+    result, sim, _ = jog(cfg, "j1", mode="torque", torque=0.5, duration=0.2)
+    assert result.command == "TC=0.5" and result.end_counts > 0
+    assert sim["px"] == result.end_counts and not sim["on"] and sim["v"] == 0
+    assert sim["um"] == 5 and sim["tc"] == 0.0
+    (stop,) = result.stop.drives
+    assert stop.stopped_by == "TC=0 + ST" and "UM=5" in stop.restored
+
+
+@pytest.mark.parametrize("req,match", [
+    (dict(mode="torque", torque=0.5), "needs --for"),
+    (dict(mode="torque", torque=2.5, duration=1), "continuous current limit 2.0 A"),
+    (dict(mode="velocity", velocity=20.0), "above j1's velocity limit"),
+    (dict(mode="position", to=1.0, by=1.0), "exactly one of --to or --by"),
+    (dict(mode="position", to=1.0, duration=1.0), "--for applies to"),
+    (dict(mode="velocity", velocity=1.0, duration=0.0), "--for 0.0"),
+    (dict(mode="position", to=float("nan")), "finite"),
+])
+def test_refusals_before_the_bus(cfg, req, match):
+    with pytest.raises(UsageError, match=match):
+        check_request(resolve_jog_target(cfg, "j1"), JogRequest(**req))
+
+
+def test_a_drive_without_a_plain_joint_needs_counts(cfg):
+    with pytest.raises(UsageError, match="no cpr"):
+        check_request(resolve_jog_target(cfg, "drive2"), JogRequest(mode="position", to=1.0))
+
+
+# -- the command ---------------------------------------------------------------------------------
+
+def test_cli_torque_without_for_is_refused(cli):
+    result = cli("--sim", "jog", "elbow_pitch", "--torque", "0.5", "--apply")
+    assert result.exit_code == 2, result.transcript()
+    assert "needs --for" in result.stderr and "Traceback" not in result.stderr
+
+
+def test_cli_needs_exactly_one_motion(cli):
+    result = cli("--sim", "jog", "elbow_pitch", "--to", "0.1", "--velocity", "0.1", "--apply")
+    assert result.exit_code == 2 and "exactly one of" in result.stderr
+
+
+def test_cli_dry_run_moves_nothing(cli):
+    result = cli("--sim", "jog", "elbow_pitch", "--to", "0.1")
+    assert result.exit_code == 0, result.transcript()
+    assert "dry run" in result.stdout and "--apply" in result.stdout
+
+
+def test_cli_sigma_joint_is_not_jogged_here(cli):
+    result = cli("--sim", "jog", "shoulder_pitch", "--to", "0.1", "--apply")
+    assert result.exit_code == 2 and "differential pair" in result.stderr
+
+
+@pytest.mark.realbus
+def test_cli_position_jog_on_the_arm(arm_cli):
+    result = arm_cli("--json", "jog", "elbow_pitch", "--to", "0.5", "--apply")
+    assert result.exit_code == 0, result.transcript()
+    data = json.loads(result.stdout)
+    goal = round(0.5 * 3600 / (2 * math.pi))
+    assert data["target_position"]["counts"] == goal
+    assert abs(data["error"]["counts"]) <= 1 and data["ended_by"] == "target reached"
+    assert data["stop"]["drives"][0]["motor_off"] is True
+    assert result.stderr == ""  # no live position with --json
+
+
+def test_cli_velocity_jog_final_line(cli):
+    result = cli("--sim", "jog", "elbow_pitch", "--velocity", "0.2", "--for", "0.2", "--apply")
+    assert result.exit_code == 0, result.transcript()
+    *stops, last = result.stdout.splitlines()
+    assert last.startswith("elbow_pitch (elbow_1a, can1:40): stopped at ") and "time up" in last
+    assert stops == ["stop: elbow_1a (can1:40): stopped by ST; motor off; restored 0x1016:1, 0x1029:1, 0x6007:0"]
+    assert "\r" not in result.stderr  # not a terminal: no live line

@@ -1,0 +1,152 @@
+"""The dead-man and the stop paths across processes: `sherpa jog --velocity` in a subprocess, the
+simulated arm in another (python-can-remote on 127.0.0.1, or the realbus harness's simulator on
+SHERPA_TEST_BUS), and a signal or a second `sherpa stop` from the test.
+
+The simulator's event log (`sherpa sim --event-log`) says when each motor went on and off, on
+time.monotonic()'s scale, which every process of this machine shares.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import pytest
+
+from conftest import ROOT
+from test_cross_process import _env, _start_sim, _stop
+
+pytestmark = [pytest.mark.realbus, pytest.mark.crossprocess]
+
+DRIVE, NODE, JOINT = "elbow_1a", 40, "elbow_pitch"
+CONSUMER_S = 0.5  # motion.consumer_time_ms of the bundled arm config
+START_TIMEOUT = 120.0  # s for the jog to switch the motor on (Python start-up in the QEMU guest is slow)
+EXIT_TIMEOUT = 60.0
+
+
+@dataclass
+class Arm:
+    config: str
+    bus_map: str
+    event_log: Path
+
+    def events(self, drive: str = DRIVE) -> list[dict]:
+        if not self.event_log.exists():
+            return []
+        lines = self.event_log.read_text(encoding="utf-8").splitlines()
+        return [e for e in (json.loads(line) for line in lines if line.strip()) if e["drive"] == drive]
+
+    def wait_event(self, predicate, timeout: float, after: float = float("-inf")) -> dict:
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            for e in self.events():
+                if e["t"] >= after and predicate(e["event"]):
+                    return e
+            time.sleep(0.02)
+        raise AssertionError(f"no such event within {timeout} s; events: {self.events()}")
+
+
+@pytest.fixture
+def arm(arm_process, tmp_path):
+    """The simulated arm in another process: the realbus harness's, or (SHERPA_TEST_BUS=virtual) our own
+    `sherpa sim --serve` with an event log."""
+    if arm_process is not None:
+        arm_process.new_test()
+        arm_process.before_command()
+        yield Arm(arm_process.config, arm_process.bus_map, arm_process.event_log)
+        return
+    log = tmp_path / "events.jsonl"
+    proc = bus_map = None
+    output = ""
+    for _ in range(3):
+        proc, bus_map, output = _start_sim(tmp_path, "--event-log", str(log))
+        if proc is not None:
+            break
+    assert proc is not None, f"sim did not start:\n{output}"
+    try:
+        yield Arm("configs/sherpa-arm.yaml", bus_map, log)
+    finally:
+        _stop(proc)
+
+
+def sherpa(arm: Arm, tmp_path, *args: str, **kwargs) -> subprocess.Popen:
+    return subprocess.Popen([sys.executable, "-m", "sherpa_cli", "--config", arm.config, "--bus-map", arm.bus_map,
+                             *args], cwd=ROOT, env=_env(tmp_path), stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True, **kwargs)
+
+
+def start_jog(arm: Arm, tmp_path) -> tuple[subprocess.Popen, float]:
+    """`sherpa jog --velocity` until Ctrl-C, in its own process; returns once the motor is on and moving
+    (the simulator logged the BG that started the jog)."""
+    since = time.monotonic()
+    proc = sherpa(arm, tmp_path, "jog", JOINT, "--velocity", "0.3", "--apply")
+    try:
+        on = arm.wait_event(lambda text: text.startswith("motor on"), START_TIMEOUT, after=since)
+        arm.wait_event(lambda text: text.startswith("BG: UM=5, JV="), START_TIMEOUT, after=on["t"])
+    except AssertionError:
+        proc.kill()
+        out, err = proc.communicate(timeout=EXIT_TIMEOUT)
+        raise AssertionError(f"the jog did not switch the motor on:\n{out}\n{err}") from None
+    time.sleep(0.2)  # well into the motion
+    return proc, on["t"]
+
+
+def finish(proc: subprocess.Popen) -> tuple[int, str, str]:
+    try:
+        out, err = proc.communicate(timeout=EXIT_TIMEOUT)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        out, err = proc.communicate(timeout=EXIT_TIMEOUT)
+        raise AssertionError(f"the jog did not end by itself:\n{out}\n{err}") from None
+    return proc.returncode, out, err
+
+
+def motor_offs(arm: Arm, after: float) -> list[dict]:
+    """Motor-off events since ``after`` (the simulator's record)."""
+    return [e for e in arm.events() if e["t"] >= after and e["event"].startswith("motor off")]
+
+
+@pytest.mark.parametrize("signum,exit_code", [(signal.SIGINT, 0), (signal.SIGTERM, 130)])
+def test_a_signal_to_a_velocity_jog_stops_the_motor_and_switches_it_off(arm, tmp_path, signum, exit_code):
+    proc, t_on = start_jog(arm, tmp_path)
+    proc.send_signal(signum)
+    code, out, err = finish(proc)
+    assert code == exit_code, f"{out}\n{err}"
+    assert "Traceback" not in err
+    offs = motor_offs(arm, t_on)
+    assert [e["event"] for e in offs] == ["motor off: MO=0"], arm.events()  # the guard's MO=0, not a trip
+    assert not any("heartbeat lost" in e["event"] for e in arm.events() if e["t"] >= t_on)  # put back in time
+    if signum == signal.SIGINT:  # Ctrl-C is how an open-ended velocity jog ends: a normal result
+        assert f"{JOINT} ({DRIVE}, can1:{NODE}): stopped at" in out and "Ctrl-C" in out
+    else:
+        assert "SIGTERM received" in err and f"stop: {DRIVE} (can1:{NODE}): stopped by ST; motor off" in err
+
+
+def test_sigkill_leaves_the_drive_to_stop_itself_within_the_consumer_time(arm, tmp_path):
+    proc, t_on = start_jog(arm, tmp_path)
+    t_kill = time.monotonic()
+    os.kill(proc.pid, signal.SIGKILL)
+    finish(proc)
+    off = arm.wait_event(lambda text: text.startswith("motor off"), 10 * CONSUMER_S, after=t_on)
+    assert off["event"] == "motor off: heartbeat lost, 0x6007=2", arm.events()
+    ratio = (off["t"] - t_kill) / CONSUMER_S
+    assert 0 < ratio <= 1.5, f"motor off {off['t'] - t_kill:.3f} s after SIGKILL (consumer time {CONSUMER_S} s)"
+
+
+def test_sherpa_stop_from_a_second_process_stops_a_running_jog(arm, tmp_path):
+    proc, t_on = start_jog(arm, tmp_path)
+    stopper = sherpa(arm, tmp_path, "stop", JOINT)
+    s_code, s_out, s_err = finish(stopper)
+    assert s_code == 0, f"{s_out}\n{s_err}"
+    code, out, err = finish(proc)  # the jog sees the motor switched off and ends
+    assert code == 1, f"{out}\n{err}"
+    assert "the motor was switched off during the jog" in err
+    offs = motor_offs(arm, t_on)
+    assert offs and offs[0]["event"] == "motor off: MO=0", arm.events()
+    assert not any("heartbeat lost" in e["event"] for e in arm.events() if e["t"] >= t_on)

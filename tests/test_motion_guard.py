@@ -1,0 +1,313 @@
+"""The motion guard on the simulated arm (in-process, python-can virtual, real threads and time).
+
+Every exit path must stop the motor, switch it off when the guard switched it on, and put back
+the dead-man objects (checked in the simulated drive's od_writes and received frames).
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import threading
+import time
+from pathlib import Path
+
+import canopen
+import pytest
+
+from sherpa_cli.config import load_config
+from sherpa_cli.errors import SafetyError
+from sherpa_cli.ops.motion import MotionGuard, MotionSettings, MotionStopped
+from sherpa_cli.ops.session import ArmSession, resolve_target
+from sherpa_cli.sim.arm import SimArm
+
+CONFIG = """\
+name: guard-test
+protocol: {mo_settle: 0.05, sv_blackout: 0.2}
+motion: {consumer_time_ms: 300}
+buses:
+  can0: {interface: socketcan, channel: can0}
+drives:
+  drive1: {bus: can0, node: 5, model: whistle-10/60}
+  drive2: {bus: can0, node: 6, model: whistle-10/60}
+joints:
+  j1:
+    drive: drive1
+    cpr: 4000
+    range: {min: -20000, max: 20000, margin: 100, overshoot: 100}
+    velocity: {limit: 8000, trip: 12000}
+    acceleration: {accel: 40000, decel: 40000}
+    current: {continuous: 2.0, peak: 6.0, peak_time: 1}
+"""
+HOST = 126
+CONSUMER_ENTRY = HOST << 16 | 300
+ARMED = [(0x6007, 0, 2), (0x1029, 1, 2), (0x1016, 1, CONSUMER_ENTRY)]
+RESTORED = [(0x1016, 1, 0), (0x1029, 1, 0), (0x6007, 0, 1)]
+
+
+@pytest.fixture(autouse=True)
+def _isolated(monkeypatch: pytest.MonkeyPatch, tmp_path: Path):
+    monkeypatch.setenv("XDG_STATE_HOME", str(tmp_path / "state"))
+    monkeypatch.setattr(canopen.Network, "NOTIFIER_CYCLE", 0.02)
+
+
+@pytest.fixture
+def cfg(tmp_path):
+    path = tmp_path / "arm.yaml"
+    path.write_text(CONFIG, encoding="utf-8")
+    return load_config(path)
+
+
+def writes(session, name):
+    with session.sim.lock:
+        return [(i, s, v) for _, i, s, v in session.sim.drives[name].od_writes]
+
+
+def sim_drive(session, name):
+    return session.sim.drives[name]
+
+
+def move(guard, ref, target):
+    guard.enable(ref, 5)
+    c = guard.client(ref)
+    c.set("PA", 0, target)
+    c.execute("BG")
+    deadline = time.monotonic() + 5
+    while c.get("MS") != 0:
+        guard.check()
+        assert time.monotonic() < deadline
+        time.sleep(0.01)
+    return c.get("PX")
+
+
+def assert_stopped_and_restored(session, name="drive1", *, switched_on=True):
+    d = sim_drive(session, name)
+    assert not d.motor_on
+    assert writes(session, name) == ARMED + RESTORED
+    texts = [t for _, t in d.events]
+    if switched_on:
+        assert texts[-1] == "motor off: MO=0", texts
+
+
+def test_position_move_ends_at_target_then_stops_and_restores(cfg):
+    settings = MotionSettings.from_config(cfg)
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
+        ref = resolve_target(cfg, "drive1")
+        events = []
+        with MotionGuard(s, [ref], settings=settings, on_event=events.append) as g:
+            px = move(g, ref, 2500)
+            sent = g.heartbeats_sent
+        assert px == 2500
+        assert sent >= 1
+        (r,) = g.report.drives
+        assert (r.drive, r.stopped_by, r.standstill, r.motor_off) == ("drive1", "ST", True, True)
+        assert r.restored == ["0x1016:1", "0x1029:1", "0x6007:0"] and not r.problems
+        assert g.report.reason == "end"
+        assert_stopped_and_restored(s)
+        # the host heartbeat: COB 0x700 + 126, one byte 0x05 (operational)
+        hb = [data for _, can_id, data in sim_drive(s, "drive1").received if can_id == 0x700 + HOST]
+        assert hb and set(hb) == {b"\x05"}
+        assert s.sim.errors == []
+
+
+def test_exception_in_the_body_stops_and_restores(cfg):
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
+        ref = resolve_target(cfg, "drive1")
+        with pytest.raises(RuntimeError, match="boom"):
+            with MotionGuard(s, [ref], settings=MotionSettings.from_config(cfg)) as g:
+                g.enable(ref, 5)
+                c = g.client(ref)
+                c.set("JV", 0, 4000)
+                c.execute("BG")
+                time.sleep(0.1)
+                raise RuntimeError("boom")
+        assert g.report.reason == "error"
+        (r,) = g.report.drives
+        assert r.stopped_by == "ST" and r.standstill and r.motor_off
+        assert_stopped_and_restored(s)
+
+
+def test_keyboard_interrupt_stops_and_restores(cfg):
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
+        ref = resolve_target(cfg, "drive1")
+        with pytest.raises(KeyboardInterrupt):
+            with MotionGuard(s, [ref], settings=MotionSettings.from_config(cfg)) as g:
+                g.enable(ref, 5)
+                c = g.client(ref)
+                c.set("JV", 0, -4000)
+                c.execute("BG")
+                time.sleep(0.1)
+                raise KeyboardInterrupt
+        assert g.report.reason == "interrupted"
+        assert g.report.drives[0].motor_off
+        assert_stopped_and_restored(s)
+
+
+@pytest.mark.parametrize("signum", [signal.SIGTERM, signal.SIGHUP])
+def test_signal_to_the_process_stops_and_restores(cfg, signum):
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
+        ref = resolve_target(cfg, "drive1")
+        with pytest.raises(MotionStopped, match=signal.Signals(signum).name):
+            with MotionGuard(s, [ref], settings=MotionSettings.from_config(cfg)) as g:
+                g.enable(ref, 5)
+                c = g.client(ref)
+                c.set("JV", 0, 4000)
+                c.execute("BG")
+                os.kill(os.getpid(), signum)  # delivered to this (the main) thread
+                deadline = time.monotonic() + 5
+                while time.monotonic() < deadline:
+                    g.check()
+                    time.sleep(0.01)
+        assert g.report.reason == signal.Signals(signum).name
+        assert g.report.drives[0].stopped_by == "ST" and g.report.drives[0].motor_off
+        assert_stopped_and_restored(s)
+    # the handlers are put back: the default SIGTERM/SIGHUP handling again
+    assert signal.getsignal(signum) is signal.SIG_DFL
+
+
+def test_a_drive_in_fault_is_refused_with_the_decoded_reason(cfg):
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
+        with s.sim.lock:
+            sim_drive(s, "drive2")._mf = 0x400000  # latched: a position limit trip
+        refs = [resolve_target(cfg, "drive1"), resolve_target(cfg, "drive2")]
+        with pytest.raises(SafetyError) as info:
+            with MotionGuard(s, refs, settings=MotionSettings.from_config(cfg)):
+                pytest.fail("the body must not run")
+        assert "drive2 (node 6): in fault" in str(info.value)
+        assert "position limit exceeded (LL[3]/HL[3])" in str(info.value)
+        assert writes(s, "drive1") == [] and writes(s, "drive2") == []  # the dead-man was never armed
+        assert not sim_drive(s, "drive1").motor_on
+
+
+def test_unit_mode_changes_only_when_needed_with_the_motor_off_first(cfg):
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
+        ref = resolve_target(cfg, "drive1")
+        with MotionGuard(s, [ref], settings=MotionSettings.from_config(cfg)) as g:
+            g.enable(ref, 5)  # UM is 5 already: no UM write
+            g.enable(ref, 1)  # MO=0, UM=1, MO=1
+            g.client(ref).set("TC", 0, 0.5)
+            time.sleep(0.05)
+        frames = [data for _, can_id, data in sim_drive(s, "drive1").received if can_id == 0x305 and len(data) == 8
+                  and not data[3] & 0x40]
+        sets = [(d[:2].decode(), int.from_bytes(d[4:], "little", signed=True)) for d in frames
+                if d[:2] in (b"MO", b"UM")]
+        assert sets == [("MO", 1), ("MO", 0), ("UM", 1), ("MO", 1), ("MO", 0), ("UM", 5)]
+        (r,) = g.report.drives
+        assert r.stopped_by == "TC=0 + ST" and "UM=5" in r.restored
+
+
+def test_keep_leaves_the_dead_man_and_unit_mode(cfg):
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
+        ref = resolve_target(cfg, "drive1")
+        with MotionGuard(s, [ref], settings=MotionSettings.from_config(cfg), keep=True) as g:
+            g.enable(ref, 2)
+        (r,) = g.report.drives
+        assert r.kept == ["UM=2", "0x1016:1", "0x1029:1", "0x6007:0"] and r.restored == []
+        assert writes(s, "drive1") == ARMED
+
+
+def test_st_refused_in_speed_mode_falls_back_to_jv0_bg(cfg, monkeypatch):
+    from sherpa_cli.config.model import SimDriveConfig
+    import dataclasses
+
+    cfg = dataclasses.replace(cfg, sim={"drive1": SimDriveConfig(st_refused_in_speed_mode=True)})
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
+        ref = resolve_target(cfg, "drive1")
+        with MotionGuard(s, [ref], settings=MotionSettings.from_config(cfg)) as g:
+            g.enable(ref, 2)
+            c = g.client(ref)
+            c.set("JV", 0, 4000)
+            c.execute("BG")
+            time.sleep(0.1)
+        (r,) = g.report.drives
+        assert r.stopped_by == "JV=0 + BG" and r.standstill and r.motor_off and not r.problems
+
+
+def test_a_hung_command_stops_the_heartbeat_and_the_drive_stops_itself(cfg):
+    import dataclasses
+
+    settings = dataclasses.replace(MotionSettings.from_config(cfg), liveness_timeout=0.2, request_bound=0.01)
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
+        ref = resolve_target(cfg, "drive1")
+        with MotionGuard(s, [ref], settings=settings) as g:
+            g.enable(ref, 5)
+            c = g.client(ref)
+            c.set("JV", 0, 2000)
+            c.execute("BG")
+            t0 = time.monotonic()
+            while sim_drive(s, "drive1").motor_on:  # "hung": no check() for longer than the allowance
+                assert time.monotonic() - t0 < 3
+                time.sleep(0.01)
+            with pytest.raises(Exception, match="no sign of life"):
+                g.check()
+        d = sim_drive(s, "drive1")
+        assert any("heartbeat lost (0x6007=2)" in t for _, t in d.events)
+        assert d.mf & 0x800
+        assert g.report.drives[0].stopped_by == "motor was off"
+
+
+def test_host_id_of_a_drive_is_refused(cfg):
+    import dataclasses
+
+    settings = dataclasses.replace(MotionSettings.from_config(cfg), host_node_id=5)
+    with pytest.raises(Exception, match="host heartbeat id"):
+        MotionGuard(None, [resolve_target(cfg, "drive1")], settings=settings)
+
+
+def test_guard_in_a_worker_thread_leaves_signals_alone(cfg):
+    errors = []
+
+    def work():
+        try:
+            with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
+                ref = resolve_target(cfg, "drive1")
+                with MotionGuard(s, [ref], settings=MotionSettings.from_config(cfg)) as g:
+                    g.enable(ref, 5)
+                assert g.report.drives[0].motor_off
+        except BaseException as exc:  # pragma: no cover - shown by the assert below
+            errors.append(exc)
+
+    t = threading.Thread(target=work)
+    t.start()
+    t.join(20)
+    assert errors == []
+
+
+# -- the motion: config section ----------------------------------------------------------------------
+
+def test_motion_settings_defaults_and_heartbeat_period():
+    from sherpa_cli.config import load_config as load
+
+    arm = load(Path(__file__).resolve().parent.parent / "configs" / "sherpa-arm.yaml")
+    s = MotionSettings.from_config(arm)
+    assert (s.host_node_id, s.consumer_time_ms, s.loss_action, s.comm_error_behaviour) == (126, 500, 2, 2)
+    assert s.heartbeat_period == 0.125 and s.consumer_entry == 0x7E01F4
+    assert s.poll_interval == 0.01 and s.request_bound == pytest.approx(0.2)
+
+
+@pytest.mark.parametrize("motion,message", [
+    ("{host_node_id: 5}", "host_node_id 5 is the node id of drive 'drive1'"),
+    ("{host_node_id: 0}", "host_node_id 0 out of range 1..127"),
+    ("{consumer_time_ms: 70000}", "consumer_time_ms 70000 must be 1..65535"),
+    ("{consumer_time_ms: 200, heartbeat_period_ms: 150}", "at most half of consumer_time_ms"),
+    ("{loss_action: 4}", "loss_action 4 must be 0..3"),
+    ("{stop_method: brake}", "stop_method 'brake': expected one of auto, st, jv0"),
+    ("{velocity_unit_mode: 3}", "velocity_unit_mode 3"),
+    ("{standstill_timeout: 0}", "standstill_timeout 0.0 s must be > 0"),
+    ("{hostid: 3}", "hostid"),
+])
+def test_motion_config_errors_name_the_key(tmp_path, motion, message):
+    from sherpa_cli.errors import ConfigError
+
+    path = tmp_path / "arm.yaml"
+    path.write_text(CONFIG.replace("motion: {consumer_time_ms: 300}", f"motion: {motion}"), encoding="utf-8")
+    with pytest.raises(ConfigError) as info:
+        load_config(path)
+    assert message in str(info.value) and "arm.yaml:3" in str(info.value)
+
+
+def test_motion_config_round_trips_through_convert(tmp_path, cfg):
+    from sherpa_cli.config import dump_native, load_config_text
+
+    again = load_config_text(dump_native(cfg), "again.yaml")
+    assert again.motion == cfg.motion and again.motion.consumer_time_ms == 300

@@ -1,0 +1,67 @@
+"""`sherpa stop`: every (or the named) drive stopped and switched off, no confirmation, buses at once."""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from pathlib import Path
+
+import canopen
+import pytest
+
+from sherpa_cli.config import load_config
+from sherpa_cli.config.model import SimDriveConfig
+from sherpa_cli.ops.targets import drive_refs
+from sherpa_cli.ops.motion import MotionSettings
+from sherpa_cli.ops.session import ArmSession, resolve_target
+from sherpa_cli.ops.stop import stop_drives
+from sherpa_cli.sim.arm import SimArm
+
+ARM = Path(__file__).resolve().parent.parent / "configs" / "sherpa-arm.yaml"
+
+
+@pytest.mark.golden
+@pytest.mark.realbus
+def test_stop_everything_golden(arm_golden):
+    arm_golden("stop-all", ["stop"], exit_code=0)
+
+
+def test_stop_stops_moving_drives_and_leaves_the_others_alone(tmp_path, monkeypatch):
+    monkeypatch.setenv("XDG_STATE_HOME", str(tmp_path))
+    monkeypatch.setattr(canopen.Network, "NOTIFIER_CYCLE", 0.02)
+    cfg = load_config(ARM)
+    # wrist_2a's firmware refuses ST in speed mode: stopped with JV=0 + BG instead
+    cfg = dataclasses.replace(cfg, sim={"wrist_2a": SimDriveConfig(st_refused_in_speed_mode=True)})
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg), buses=["can1", "can2"]) as s:
+        for name, um in (("elbow_1a", 5), ("wrist_2a", 2)):
+            c = s.client(resolve_target(cfg, name))
+            c.nmt_start()
+            c.set("UM", 0, um)
+            c.motor_on()
+            c.set("JV", 0, 300)
+            c.execute("BG")
+        time.sleep(0.1)
+        refs = drive_refs(cfg, ["elbow_pitch", "wrist_2", "wrist_3"])
+        results = stop_drives(s, refs, MotionSettings.from_config(cfg))
+        states = {n: (s.sim.drives[n].motor_on, s.sim.drives[n].motor.v) for n in ("elbow_1a", "wrist_2a")}
+        wrist_3a_sets = [d for _, cid, d in s.sim.drives["wrist_3a"].received if cid == 0x300 + 70 and len(d) == 8]
+    by = {r.drive: r for r in results}
+    assert (by["elbow_1a"].stopped_by, by["elbow_1a"].standstill, by["elbow_1a"].motor_off) == ("ST", True, True)
+    assert (by["wrist_2a"].stopped_by, by["wrist_2a"].motor_off) == ("JV=0 + BG", True)
+    assert (by["wrist_3a"].stopped_by, by["wrist_3a"].motor_off) == ("motor was off", False)
+    assert states == {"elbow_1a": (False, 0.0), "wrist_2a": (False, 0.0)}
+    assert wrist_3a_sets == []  # a motor that is off gets no write
+    assert all(r.ok for r in results)
+
+
+def test_a_silent_drive_makes_stop_exit_1(cli, tmp_path, monkeypatch):
+    import yaml
+
+    data = yaml.safe_load(ARM.read_text())
+    data["sim"] = {"drives": {"elbow_1b": {"die_at": 0.0}}}
+    path = tmp_path / "arm.yaml"
+    path.write_text(yaml.safe_dump(data, sort_keys=False))
+    result = cli("--sim", "--config", str(path), "stop", "elbow_1a", "elbow_1b")
+    assert result.exit_code == 1, result.transcript()
+    assert "1 drive(s) not confirmed stopped: elbow_1b" in result.stderr
+    assert "elbow_1a" in result.stdout and "motor off" in result.stdout
