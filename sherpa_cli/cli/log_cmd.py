@@ -332,3 +332,79 @@ def _render_record(st, output, counts, expected, rows) -> None:
         share = "" if not expected else f" of {expected} ({100 * c / expected:.2f} %)"
         st.out.line(f"{name}: {c} samples{share}")
     st.out.line(f"wrote {output} ({rows} rows)")
+
+
+@app.command("step")
+def step(
+    ctx: typer.Context,
+    joint: str = typer.Argument(..., metavar="JOINT", help="A plain joint (or the drive of one)."),
+    position: Optional[float] = typer.Option(None, "--position", metavar="X",
+                                             help="A position step of X rad from where the joint stands."),
+    velocity: Optional[float] = typer.Option(None, "--velocity", metavar="V", help="A velocity step to V rad/s."),
+    torque: Optional[float] = typer.Option(None, "--torque", metavar="A", help="A torque (current) step to A amperes."),
+    duration: float = typer.Option(2.0, "--for", metavar="S",
+                                   help="Record at most S seconds after the command (position and velocity steps "
+                                   "end earlier once settled; velocity and torque stop the motor at S)."),
+    rate: float = typer.Option(1000.0, "--rate", metavar="HZ", help="Samples per second."),
+    output: Path = typer.Option(..., "--output", "-o", metavar="DIR",
+                                help="Directory for recording.csv, step.png and metrics.json (created)."),
+) -> None:
+    """The seed's Section 9 step experiment in one command: start recording, command the step at
+    t = 0 through the motion guard, record until settled (or --for), stop the motor, and write
+    the recording (CSV), the plot (PNG, with matplotlib) and the step metrics (JSON).
+
+    t = 0 is when the step was asked for: if the drive must first switch its unit mode or its
+    motor on (MO/UM switch, seed Fig. 9.1), that time shows in the dead time and on its own as
+    "switch". The motion guard stops the motor on every exit path; the recording's PDO changes
+    are RAM only and restored.
+
+    \b
+    Examples:
+      sherpa log step elbow_pitch --position 1 -o steps/pos
+      sherpa log step elbow_pitch --velocity 0.1 --for 1 -o steps/vel
+      sherpa log step elbow_pitch --torque 1 --for 0.3 -o steps/torque
+    """
+    import json
+
+    from sherpa_cli.ops.jog import resolve_jog_target
+    from sherpa_cli.ops.motion import MotionSettings
+    from sherpa_cli.ops.plot import have_matplotlib, plot_recording
+    from sherpa_cli.ops.recording import write_csv
+    from sherpa_cli.ops.step import run_step
+
+    st = state(ctx)
+    given = [(m, v) for m, v in (("position", position), ("velocity", velocity), ("torque", torque)) if v is not None]
+    if len(given) != 1:
+        raise UsageError("give exactly one of --position X, --velocity V or --torque A")
+    mode, value = given[0]
+    if not (0 < rate <= 10000):
+        raise UsageError(f"--rate {rate}: expected Hz > 0 and <= 10000")
+    if output.exists() and not output.is_dir():
+        raise UsageError(f"-o {output}: exists and is not a directory")
+    cfg = st.load_config()
+    target = resolve_jog_target(cfg, joint)
+    settings = MotionSettings.from_config(cfg, [target.ref.bus])
+    output.mkdir(parents=True, exist_ok=True)
+    with st.session(buses=[target.ref.bus]) as session:
+        result = run_step(session, target, mode, value, duration=duration, rate=rate, settings=settings)
+    write_csv(result.recording, output / "recording.csv")
+    (output / "metrics.json").write_text(json.dumps(result.as_json(), indent=2) + "\n", encoding="utf-8")
+    files = {"csv": str(output / "recording.csv"), "metrics": str(output / "metrics.json")}
+    if have_matplotlib():
+        plot_recording(result.recording, [result.joint], output / "step.png",
+                       metrics={(result.joint, result.signal): result.metrics},
+                       title=f"{result.joint}: {result.command} (switch {1000 * result.switch_s:.0f} ms)")
+        files["png"] = str(output / "step.png")
+    else:
+        st.out.warn("no PNG: matplotlib is not installed (pip install 'sherpa-cli[plot]')")
+    if st.json_mode:
+        st.out.json({**result.as_json(), "files": files})
+        return
+    st.out.line(f"{result.joint} ({result.drive}): {mode} step {value:g} -> {result.command}; "
+                f"MO/UM switch {1000 * result.switch_s:.0f} ms; {result.ended_by}; "
+                f"{result.samples} of {result.expected} samples")
+    render_metrics(st, {(result.joint, result.signal): result.metrics})
+    for line in result.stop.lines():
+        st.out.line(line)
+    for key, path in files.items():
+        st.out.line(f"{key}: {path}")

@@ -157,6 +157,10 @@ class Recorder:
     def _now(self) -> float:
         return self.clock() if self.clock is not None else time.time()
 
+    def now(self) -> float:
+        """The recorder's time (its clock, else wall time like the frames' timestamps)."""
+        return self._now()
+
     def _finish(self, quiet: bool = False) -> None:
         for sync in self._syncs:
             try:

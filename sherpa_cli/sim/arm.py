@@ -51,7 +51,10 @@ def settings_for(cfg: ArmConfig, drive: str, **overrides: Any) -> SimSettings:
                     drop_probability=faults.drop_probability,
                     die_at=faults.die_at, reboot_at=faults.reboot_at, heartbeat_ms=faults.heartbeat_ms,
                     seed=faults.seed, limit_trip_at=faults.limit_trip_at,
-                    st_refused_in_speed_mode=faults.st_refused_in_speed_mode)
+                    st_refused_in_speed_mode=faults.st_refused_in_speed_mode,
+                    servo_bandwidth_hz=faults.servo_bandwidth, servo_damping=faults.servo_damping,
+                    servo_current_limit=faults.servo_current_limit,
+                    supply_current_limit=faults.supply_current_limit)
     base.update(overrides)
     return SimSettings(**base)
 

@@ -24,6 +24,7 @@ from sherpa_cli.sim.motor import Motor, motion_status
 from sherpa_cli.sim.od import OdValue, build_od, flash_key
 from sherpa_cli.sim.pdo import SYNC_ID, TpdoTable, is_pdo_object
 from sherpa_cli.sim.params import Value, factory_ram, is_persistent, parse_flash, wrap_int32
+from sherpa_cli.sim.servo import ServoMotor
 from sherpa_cli.sim.settings import SimSettings
 
 Frame = tuple[int, bytes]
@@ -39,6 +40,16 @@ ERR_REG_GENERIC, ERR_REG_COMMUNICATION = 0x01, 0x11  # 0x1001 values from the 0x
 EMCY_FRAME = struct.Struct("<HBBHH")
 
 SR_MO, SR_MF, SR_UM_SHIFT, SR_MS_SHIFT, SR_LIMIT_STOP = 1 << 4, 1 << 6, 7, 14, 1 << 28
+
+
+def _make_motor(settings: SimSettings, position: int) -> Motor:
+    """The kinematic motor, or with ``servo_bandwidth_hz`` the servo-loop model (sim/servo.py)."""
+    if settings.servo_bandwidth_hz <= 0:
+        return Motor(counts=position)
+    return ServoMotor(counts=position, wn=2 * math.pi * settings.servo_bandwidth_hz, zeta=settings.servo_damping,
+                      torque_accel_per_amp=settings.torque_accel,
+                      current_limit=settings.servo_current_limit or settings.max_current,
+                      supply_limit=settings.supply_current_limit, supply_speed=settings.supply_speed)
 
 
 class FrameRecord(list):
@@ -86,7 +97,7 @@ class SimDrive:
         self.lost: list[tuple[float, int, bytes]] = FrameRecord()  # the subset that never reached its software
         self.od_writes: list[tuple[float, int, int, int]] = []  # SDO writes, for "dry run wrote nothing"
         self.boots = 0
-        self.motor = Motor(counts=int(position))
+        self.motor = _make_motor(self.settings, int(position))
         self._outbox: list[Frame] = []
         self._replies: list[tuple[float, int, Frame]] = []  # heap: (release time, seq, frame)
         self._seq = itertools.count()
@@ -572,6 +583,8 @@ class SimDrive:
     def _iq(self) -> float:
         if not self._motor_on:
             return 0.0
+        if isinstance(self.motor, ServoMotor):
+            return self.motor.current
         if self.ram["UM"] == 1:
             return self.ram["TC"]
         return self.motor.a / self.settings.torque_accel
