@@ -118,3 +118,23 @@ def test_cli_step_writes_csv_png_and_metrics(cli, tmp_path):
     assert bad.exit_code == 2 and "continuous current limit" in bad.stderr
     both = cli("--sim", "log", "step", "elbow_pitch", "--torque", "1", "--position", "1", "-o", str(out))
     assert both.exit_code == 2 and "exactly one" in both.stderr
+
+
+def test_the_config_sim_section_turns_the_servo_model_on(tmp_path):
+    import yaml
+
+    from sherpa_cli.sim.drive import SimDrive
+    from sherpa_cli.sim.clock import ManualClock
+
+    doc = yaml.safe_load((ROOT / "configs/sherpa-arm.yaml").read_text(encoding="utf-8"))
+    doc.setdefault("sim", {}).setdefault("drives", {})["elbow_1a"] = {"servo_bandwidth": 8,
+                                                                     "supply_current_limit": 1.0}
+    path = tmp_path / "servo.yaml"
+    path.write_text(yaml.safe_dump(doc, allow_unicode=True), encoding="utf-8")
+    cfg = load_config(path)
+    settings = settings_for(cfg, "elbow_1a")
+    assert settings.servo_bandwidth_hz == 8 and settings.supply_current_limit == 1.0
+    motor = SimDrive(40, clock=ManualClock(), settings=settings).motor
+    assert isinstance(motor, ServoMotor) and motor.supply_limit == 1.0
+    assert not isinstance(SimDrive(41, clock=ManualClock(), settings=settings_for(cfg, "elbow_1b")).motor,
+                          ServoMotor)

@@ -42,6 +42,7 @@ VELOCITY_ENTRY = 0x60690020  # 0x6069:0, 32 bits
 CURRENT_ENTRY = 0x60780010  # 0x6078:0, 16 bits
 CURRENT_SCALE_A = 0.001  # A per unit of 0x6078
 CURRENT_DIVIDER = 2  # current on every 2nd SYNC
+RESTORE_ATTEMPTS = 30  # SDO tries per object when putting the PDO settings back (a backlog may delay answers)
 
 
 # -- the bus budget ---------------------------------------------------------------------------------
@@ -180,10 +181,14 @@ class Recorder:
         for d in self._drives.values():
             sdo = self.session.sdo(d.ref)
             for index, sub, size, value in reversed(d.saved):
-                try:
-                    sdo.download(index, sub, value.to_bytes(size, "little"))
-                except SherpaError as exc:
-                    failures.append(exc)
+                # patient: right after a fast recording the drive may still be working off a backlog
+                for attempt in range(RESTORE_ATTEMPTS):
+                    try:
+                        sdo.download(index, sub, value.to_bytes(size, "little"))
+                        break
+                    except SherpaError as exc:
+                        if attempt == RESTORE_ATTEMPTS - 1:
+                            failures.append(exc)
             d.saved.clear()
         if failures and not quiet:
             raise failures[0]
