@@ -9,6 +9,7 @@ from typing import List, Optional
 import typer
 
 from sherpa_cli.cli.context import state
+from sherpa_cli.cli.options import Targets
 from sherpa_cli.errors import UsageError
 
 app = typer.Typer(help="Record, capture, decode and plot CAN traffic and joint motion (docs/log.md).",
@@ -249,8 +250,7 @@ MAX_RECORD_S = 3600.0
 @app.command("record")
 def record(
     ctx: typer.Context,
-    targets: Optional[List[str]] = typer.Argument(
-        None, metavar="[TARGET]...", help="Joints, pairs or drives to record; default: every configured drive."),
+    targets: Targets = None,
     rate: float = typer.Option(100.0, "--rate", metavar="HZ", help="Samples per second (SYNC rate)."),
     duration: float = typer.Option(..., "--for", metavar="S", help="How long to record, in seconds."),
     output: Path = typer.Option(..., "--output", "-o", metavar="FILE.csv", help="Where to write the samples."),
