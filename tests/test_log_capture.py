@@ -132,3 +132,15 @@ def test_cli_capture_refuses_unknown_format_and_bus(cli, tmp_path):
     assert bad.exit_code == 2 and "unknown capture format .pcap" in bad.stderr
     bus = cli("--bus-map", "can0=virtual:q", "log", "capture", "-o", str(tmp_path / "x.log"), "--bus", "can9")
     assert bus.exit_code == 2 and "--bus can9" in bus.stderr
+
+
+def test_overrun_error_frames_count_as_lost(tmp_path):
+    _, listen, send = _buses()
+    try:
+        send["can0"].send(can.Message(arbitration_id=0x4, data=bytes([0, 0x01, 0, 0, 0, 0, 0, 0]),
+                                      is_error_frame=True, is_extended_id=False))
+        send["can0"].send(can.Message(arbitration_id=0x70A, data=b"\x05", is_extended_id=False))
+        result = capture(listen, tmp_path / "c.log", BUSES, stop=threading.Event(), frame_limit=2)
+    finally:
+        _close(listen, send)
+    assert result.counts["can0"].errors == 1 and result.lost == 1 and result.frames == 2

@@ -202,8 +202,8 @@ def _write(msg, name: str, writer, result: CaptureResult, suffix: str, bus_names
     count = result.counts[name]
     if msg.is_error_frame:
         count.errors += 1
-        # SocketCAN reports controller/queue overruns in error frame data byte 1
-        if len(msg.data) > 1 and msg.data[1] & 0x03:
+        # SocketCAN: class CAN_ERR_CRTL (0x4 in the id), data byte 1 = RX/TX overflow (0x01/0x02)
+        if msg.arbitration_id & 0x4 and len(msg.data) > 1 and msg.data[1] & 0x03:
             count.overruns += 1
     count.frames += 1
     count.bits += frame_bits(msg.dlc, msg.is_extended_id)
