@@ -33,8 +33,29 @@ def write_atomic(path: Path, text: str) -> None:
         raise
 
 
+MAX_STATE_BYTES = 16 * 1024 * 1024  # a state file holds counts and a few flash images
+
+
 def read_json(path: Path, default: Any) -> Any:
+    """The file's JSON, ``default`` if it does not exist; ValueError says what is wrong with it
+    (not JSON, not UTF-8, too large, nested too deeply), OSError that it cannot be read."""
     try:
-        return json.loads(path.read_text(encoding="utf-8"))
-    except FileNotFoundError:
+        with open(path, "rb") as handle:
+            data = handle.read(MAX_STATE_BYTES + 1)
+    except (FileNotFoundError, NotADirectoryError):  # a parent that is a file: no such file either
         return default
+    if len(data) > MAX_STATE_BYTES:
+        raise ValueError(f"larger than {MAX_STATE_BYTES // (1024 * 1024)} MiB")
+    try:
+        return json.loads(data.decode("utf-8"))
+    except RecursionError:
+        raise ValueError("nested too deeply") from None
+
+
+STATE_DIR_HINT = "check that the state directory ($XDG_STATE_HOME/sherpa-cli, default ~/.local/state/sherpa-cli) " \
+                 "is a writable directory and the disk is not full"
+
+
+def move_aside_hint(path: Path, consequence: str) -> str:
+    """The way out of a damaged state file: keep it for a look, let the tool start a new one."""
+    return f"move it aside (mv '{path}' '{path}.damaged') and run again; {consequence}"

@@ -16,7 +16,8 @@ import threading
 from dataclasses import dataclass
 from pathlib import Path
 
-from sherpa_cli.paths import read_json, state_dir, write_atomic
+from sherpa_cli.errors import ConfigError, Location
+from sherpa_cli.paths import STATE_DIR_HINT, move_aside_hint, read_json, state_dir, write_atomic
 
 FORMAT = 1
 FILE_NAME = "save-ledger.json"
@@ -59,10 +60,19 @@ class SaveLedger:
         with self._lock:
             return int(self._load().get(_key(serial), {}).get("saves", 0))
 
+    def check(self) -> None:
+        """Raise ConfigError (path, what is wrong, how out) if the ledger file is damaged."""
+        with self._lock:
+            self._load()
+
     def record(self, serial: int, drive: str) -> SaveRecord:
         """Count one save of the drive with this serial (call it only after the drive accepted SV)."""
         with self._lock:
-            drives = self._load()
+            try:
+                drives = self._load()
+            except ConfigError as exc:
+                # the save happened: report it, and leave the damaged file for a look
+                return SaveRecord(serial, 1, f"save not counted: {exc}; {exc.hint}")
             entry = drives.setdefault(_key(serial), {"saves": 0})
             entry["saves"] = int(entry.get("saves", 0)) + 1
             entry["last_name"] = drive
@@ -81,7 +91,10 @@ class SaveLedger:
     def mark_unsaved(self, serial: int, drive: str) -> str | None:
         """Remember the drive as written but not saved; a warning if the ledger cannot be written."""
         with self._lock:
-            drives = self._load()
+            try:
+                drives = self._load()
+            except ConfigError as exc:
+                return f"{drive} not marked as unsaved: {exc}; {exc.hint}"
             entry = drives.setdefault(_key(serial), {"saves": 0})
             entry["unsaved"] = True
             entry["last_name"] = drive
@@ -101,14 +114,33 @@ class SaveLedger:
         return None
 
     def _load(self) -> dict[str, dict]:
+        """The entries; a damaged file raises ConfigError naming it and the way out (never a
+        silent restart from zero, which would hide the counts and the unsaved marks)."""
         try:
             data = read_json(self.path, {})
-        except (ValueError, OSError):
-            # A damaged ledger must not block commissioning; it restarts from zero (counts only warn).
+        except OSError as exc:
+            raise ConfigError(f"save ledger cannot be read: {exc.strerror or exc}", Location(str(self.path)),
+                              hint=STATE_DIR_HINT) from None
+        except ValueError as exc:
+            raise self._damaged(f"is not a valid ledger ({exc})") from None
+        if data == {}:
             return {}
-        if not isinstance(data, dict) or data.get("format") != FORMAT or not isinstance(data.get("drives"), dict):
-            return {}
-        return {k: dict(v) for k, v in data["drives"].items() if isinstance(v, dict)}
+        if not isinstance(data, dict) or not isinstance(data.get("drives"), dict):
+            raise self._damaged("is not a save ledger (expected {\"format\": 1, \"drives\": {...}})")
+        if data.get("format") != FORMAT:
+            raise self._damaged(f"has format {data.get('format')!r}; this version reads format {FORMAT}")
+        drives = {}
+        for key, entry in data["drives"].items():
+            saves = entry.get("saves", 0) if isinstance(entry, dict) else None
+            if isinstance(saves, bool) or not isinstance(saves, int) or saves < 0:
+                raise self._damaged(f"entry {key!r} is damaged (expected {{\"saves\": count, ...}}, got "
+                                    f"{json.dumps(entry)[:60]})")
+            drives[key] = dict(entry)
+        return drives
+
+    def _damaged(self, problem: str) -> ConfigError:
+        return ConfigError(f"save ledger {problem}", Location(str(self.path)),
+                           hint=move_aside_hint(self.path, "the save counts then restart from zero"))
 
 
 def _key(serial: int) -> str:
