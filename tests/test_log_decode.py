@@ -152,3 +152,14 @@ def test_read_frames_maps_channel_numbers_to_config_buses(tmp_path):
     path = tmp_path / "c.asc"
     write_capture(path)
     assert {f.bus for f in read_frames(path, BUSES)} == {"can0", "can1", "can2"}
+
+
+@pytest.mark.parametrize("suffix", [".blf", ".asc", ".csv", ".trc"])
+def test_a_damaged_capture_is_one_clear_message(cli, tmp_path, suffix):
+    path = tmp_path / f"damaged{suffix}"
+    path.write_bytes(bytes(range(256)) * 2)
+    result = cli("log", "decode", str(path))
+    assert result.exit_code in (0, 2), result.stderr
+    assert "Traceback" not in result.stderr
+    if result.exit_code == 2:
+        assert str(path) in result.stderr

@@ -137,3 +137,15 @@ def test_plot_without_matplotlib_is_one_clear_message(cli, tmp_path, monkeypatch
     monkeypatch.setattr("sherpa_cli.ops.plot.have_matplotlib", lambda: False)
     result = cli("log", "plot", str(tmp_path / "run.csv"), "-o", str(tmp_path / "x.png"))
     assert result.exit_code == 2 and "needs matplotlib" in result.stderr and "sherpa-cli[plot]" in result.stderr
+
+
+def test_plot_and_step_refuse_non_finite_numbers(cli, tmp_path):
+    _recording(tmp_path / "run.csv")
+    garbage = tmp_path / "g.csv"
+    garbage.write_bytes(bytes(range(128, 256)))
+    assert "not a sherpa recording" in cli("log", "plot", str(garbage), "-o", str(tmp_path / "x.png")).stderr
+    for opt in ("--target", "--step-at"):
+        r = cli("log", "plot", str(tmp_path / "run.csv"), "-o", str(tmp_path / "x.png"), opt, "nan")
+        assert r.exit_code == 2 and f"{opt} nan" in r.stderr
+    r = cli("--sim", "log", "step", "elbow_pitch", "--position", "inf", "-o", str(tmp_path / "s"))
+    assert r.exit_code == 2 and "--position inf" in r.stderr

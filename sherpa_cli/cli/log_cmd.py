@@ -190,6 +190,11 @@ def plot(
     st = state(ctx)
     if signal not in SIGNALS:
         raise UsageError(f"--signal {signal}: expected one of {', '.join(SIGNALS)}")
+    import math
+
+    for what, number in (("--step-at", step_at), ("--target", target)):
+        if number is not None and not math.isfinite(number):
+            raise UsageError(f"{what} {number}: expected a finite number")
     if output.suffix.lower() != ".png":
         raise UsageError(f"-o {output}: expected a .png file")
     if not have_matplotlib():
@@ -377,6 +382,12 @@ def step(
     if len(given) != 1:
         raise UsageError("give exactly one of --position X, --velocity V or --torque A")
     mode, value = given[0]
+    import math
+
+    if not math.isfinite(value):
+        raise UsageError(f"--{mode} {value}: expected a finite number")
+    if not (math.isfinite(duration) and 0 < duration <= MAX_RECORD_S):
+        raise UsageError(f"--for {duration}: expected seconds > 0 and <= {MAX_RECORD_S:g}")
     if not (0 < rate <= 10000):
         raise UsageError(f"--rate {rate}: expected Hz > 0 and <= 10000")
     if output.exists() and not output.is_dir():

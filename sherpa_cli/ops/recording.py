@@ -53,6 +53,13 @@ def write_csv(rec: Recording, path: Path) -> None:
 def read_csv(path: Path) -> Recording:
     if not path.is_file():
         raise UsageError(f"{path}: no such recording")
+    try:
+        return _read_csv(path)
+    except (UnicodeDecodeError, csv.Error) as exc:
+        raise UsageError(f"{path}: not a sherpa recording ({exc})") from None
+
+
+def _read_csv(path: Path) -> Recording:
     with path.open(newline="", encoding="utf-8") as fh:
         reader = csv.reader(fh)
         header = next(reader, None)
@@ -67,6 +74,8 @@ def read_csv(path: Path) -> Recording:
                 rec.times.append(float(row[0]))
                 for name, cell in zip(header[1:], row[1:]):
                     rec.columns[name].append(float(cell) if cell else math.nan)
+                if not math.isfinite(rec.times[-1]):
+                    raise ValueError(f"time {row[0]!r} is not a finite number")
             except ValueError as exc:
                 raise UsageError(f"{path}:{number}: {exc}") from None
     if len(rec.times) < 2:
