@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from typing import Optional
+from typing import Any, Optional
 
 import typer
 
@@ -106,7 +106,7 @@ def convert(
         s_counts, d_counts = diffpair.to_joints(m_a, m_b)
     inside_joints = diffpair.inside_joint_limits(m_a, m_b, ex.sigma_full, ex.delta_full)
     box = diffpair.motor_box(ex.sigma_full, ex.delta_full)
-    result = {
+    result: dict[str, Any] = {
         "pair": ex.pair,
         "sigma": {"joint": ex.sigma, "counts": s_counts, "rad": round(units.counts_to_rad(s_counts, s_cpr), 6)},
         "delta": {"joint": ex.delta, "counts": d_counts, "rad": round(units.counts_to_rad(d_counts, d_cpr), 6)},

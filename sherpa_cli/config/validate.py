@@ -17,7 +17,7 @@ from sherpa_cli.config.yamlnodes import Locs, suggest
 from sherpa_cli.errors import ConfigError, Location
 
 MAX_NODE_ID = 127
-DEFAULT_INPUTS = DriveModel.__dataclass_fields__["inputs"].default
+DEFAULT_INPUTS: int = DriveModel.__dataclass_fields__["inputs"].default  # type: ignore[assignment]
 
 
 def _line(loc: Location) -> str:
@@ -325,9 +325,9 @@ def _check_usage(cfg: ArmConfig, locs: Locs, r: _Report) -> None:
             r.warn(locs.get("pair", p.name), f"pair '{p.name}' has no current limits; CL/PL stay as on the drives")
         else:
             _check_current(p.current, ("pair", p.name), locs, r)
-    for d in cfg.drives.values():
-        if d.name not in user:
-            r.warn(locs.get("drive", d.name), f"drive '{d.name}' moves no joint or pair")
+    for drive in cfg.drives.values():
+        if drive.name not in user:
+            r.warn(locs.get("drive", drive.name), f"drive '{drive.name}' moves no joint or pair")
 
 
 def _check_current(cur, prefix: tuple[str, ...], locs: Locs, r: _Report) -> None:

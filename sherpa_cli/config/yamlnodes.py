@@ -12,6 +12,7 @@ report; the event replay that names the key at a syntax error uses the pure load
 
 from __future__ import annotations
 
+import builtins
 import difflib
 import re
 from pathlib import Path
@@ -383,12 +384,14 @@ class Section:
         node = self.get(key)
         return default if node is None else as_bool(node)
 
-    def str(self, key: str, default: Any = None, *, required: bool = False) -> Any:
+    # past here `str` and `bool` name the accessors above: annotations spell out builtins
+    def str(self, key: builtins.str, default: Any = None, *, required: builtins.bool = False) -> Any:
         node = self.req(key) if required else self.get(key)
         return default if node is None else as_str(node)
 
-    def section(self, key: str, allowed: Iterable[str], *, required: bool = False,
-                what: str = "a mapping", aliases: dict[str, str] | None = None) -> "Section | None":
+    def section(self, key: builtins.str, allowed: Iterable[builtins.str], *, required: builtins.bool = False,
+                what: builtins.str = "a mapping",
+                aliases: dict[builtins.str, builtins.str] | None = None) -> "Section | None":
         node = self.req(key) if required else self.get(key)
         return None if node is None else Section(node, allowed, what=what, aliases=aliases)
 

@@ -49,7 +49,7 @@ class Reply(NamedTuple):
     """
 
     letters: str
-    index: int
+    index: int  # type: ignore[assignment]  # the field shadows tuple.index, as intended
     value: int | float | None
     is_float: bool
     error_code: int | None = None

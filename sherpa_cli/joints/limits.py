@@ -189,7 +189,7 @@ def left_as_they_are(derived: Sequence[DriveParams]) -> str | None:
 
 def _il_params(cfg: ArmConfig, drive: str, *, clear_unused: bool = True) -> dict[str, int]:
     dmodel = cfg.drives[drive].model
-    inputs = cfg.catalog.drives[dmodel].inputs if dmodel in cfg.catalog.drives else None
+    inputs = cfg.catalog.drives[dmodel].inputs if dmodel is not None and dmodel in cfg.catalog.drives else None
     found: dict[int, tuple[int, SwitchConfig, str]] = {}
     for joint in cfg.joints.values():
         default = _joint_drives(cfg, joint)
@@ -218,7 +218,7 @@ def _il_params(cfg: ArmConfig, drive: str, *, clear_unused: bool = True) -> dict
 
 
 def _ordered(values: Mapping[str, ParamValue | None]) -> dict[str, ParamValue]:
-    return {k: values[k] for k in PARAM_ORDER if values.get(k) is not None}
+    return {k: v for k in PARAM_ORDER if (v := values.get(k)) is not None}
 
 
 def _pair_joints(cfg: ArmConfig, pair: PairConfig) -> tuple[JointConfig, JointConfig]:
@@ -506,14 +506,14 @@ def software_limits(cfg: ArmConfig, name: str) -> dict[str, int | str]:
     if name in cfg.joints:
         joint = cfg.joints[name]
         if joint.role is not JointRole.PLAIN:
-            if joint.pair not in cfg.pairs:
+            if joint.pair is None or joint.pair not in cfg.pairs:
                 raise ConfigError(f"joint {joint.name} is a {joint.role.value} joint without a pair", joint.where)
             return _pair_software(cfg, cfg.pairs[joint.pair])
         return _plain_software(joint)
     if name in cfg.drives:
-        joint = cfg.joint_of_drive(name)
-        if joint is not None:
-            return _plain_software(joint)
+        plain = cfg.joint_of_drive(name)
+        if plain is not None:
+            return _plain_software(plain)
         pair = cfg.pair_of_drive(name)
         if pair is not None:
             return _pair_software(cfg, pair)

@@ -246,9 +246,10 @@ def _step(node: YNode, number: int, default_failure: str, variables: dict[str, s
         if dry_run not in DRY_RUN:
             raise dnode.error(f"dry_run must be one of {', '.join(DRY_RUN)}, got {dry_run!r}")
     if confirm is not None:
-        if sec.get("expect") is not None:
-            raise sec.get("expect").error("a confirm step has no result to expect things of")
+        if (expect := sec.get("expect")) is not None:
+            raise expect.error("a confirm step has no result to expect things of")
         return Step(number, name, confirm=_substitute(as_str(confirm), variables, confirm),
                     on_failure=on_failure, line=node.line, dry_run=dry_run)
+    assert run is not None  # exactly one of run and confirm (checked above)
     return Step(number, name, argv=_argv(run, variables), expect=_expect(sec.get("expect")),
                 on_failure=on_failure, line=node.line, dry_run=dry_run)

@@ -1,7 +1,9 @@
 """What a simulated drive keeps across power cycles: its flash (what SV saved) and its save count.
 
 ``--sim`` behaves like a real arm that is power-cycled between commands: RAM is new each
-run, flash persists in one JSON file per arm under the user's state directory.
+run, flash persists in one JSON file per arm under the user's state directory. Two simulators
+of the same arm (two commands at once) merge their saves under a file lock: neither loses the
+other's SV.
 """
 
 from __future__ import annotations
@@ -14,7 +16,7 @@ from typing import Any
 
 from sherpa_cli.config.model import ArmConfig
 from sherpa_cli.errors import ConfigError, Location, SherpaError
-from sherpa_cli.paths import STATE_DIR_HINT, move_aside_hint, read_json, state_dir, write_atomic
+from sherpa_cli.paths import STATE_DIR_HINT, file_lock, move_aside_hint, read_json, state_dir, write_atomic
 
 FORMAT = 1
 
@@ -116,11 +118,31 @@ def save(cfg: ArmConfig, drives: dict[str, DriveFlash], path: Path | None = None
     return target
 
 
+def save_changes(cfg: ArmConfig, before: dict[str, DriveFlash], after: dict[str, DriveFlash],
+                 path: Path | None = None) -> Path:
+    """Store what changed between ``before`` (as loaded) and ``after``, merged with the file as it
+    is now: another simulator of this arm may have saved meanwhile. A drive this one saved gets
+    its flash and the other's saves added to its count; the others keep what the file holds."""
+    target = path or state_path(cfg)
+    with file_lock(target):
+        current = load(cfg, target)
+        for name, now in after.items():
+            then = before.get(name)
+            if then is not None and now.flash == then.flash and now.save_count == then.save_count:
+                continue
+            added = now.save_count - (then.save_count if then is not None else 0)
+            base = current.get(name)
+            count = (base.save_count if base is not None else 0) + max(added, 0)
+            current[name] = DriveFlash(serial=now.serial, flash=dict(now.flash), save_count=count)
+        return save(cfg, current, target)
+
+
 def reset(cfg: ArmConfig, path: Path | None = None) -> bool:
     """Factory state for the arm: removes its state file; True if there was one."""
     target = path or state_path(cfg)
-    try:
-        target.unlink()
-        return True
-    except FileNotFoundError:
-        return False
+    with file_lock(target):
+        try:
+            target.unlink()
+            return True
+        except FileNotFoundError:
+            return False
