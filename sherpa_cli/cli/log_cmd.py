@@ -309,23 +309,32 @@ def record(
                         f"(limit {100 * MAX_LOAD:.0f} %, highest rate {b.max_rate} Hz)")
         check_budget(budget)
     buses = list(dict.fromkeys(r.bus for r in refs))
-    interrupted = False
+    expected: int | None = None
     with st.session(buses=buses) as session:
-        sampler = Poller(session, refs, current=bool(current)) if poll else Recorder(session, refs, rate,
-                                                                                    current=bool(current))
-        with sampler:
-            try:
-                sleep(duration)
-            except KeyboardInterrupt:
-                interrupted = True
-        rec = sampler.recording(cfg) if poll else sampler.recording()
-        counts = sampler.counts()
-        expected = None if poll else sampler.expected()
+        if poll:
+            poller = Poller(session, refs, current=bool(current))
+            with poller:
+                interrupted = _wait_for(duration)
+            rec, counts = poller.recording(cfg), poller.counts()
+        else:
+            recorder = Recorder(session, refs, rate, current=bool(current))
+            with recorder:
+                interrupted = _wait_for(duration)
+            rec, counts, expected = recorder.recording(), recorder.counts(), recorder.expected()
     write_csv(rec, output)
     _render_record(st, output, counts, expected, len(rec.times))
     if interrupted:
         st.out.warn("interrupted: the samples up to Ctrl-C are written; the drives' PDO settings are restored")
         raise typer.Exit(130)
+
+
+def _wait_for(duration: float) -> bool:
+    """Sleep while sampling; True when Ctrl-C ended it early."""
+    try:
+        sleep(duration)
+    except KeyboardInterrupt:
+        return True
+    return False
 
 
 def _render_record(st, output, counts, expected, rows) -> None:

@@ -246,19 +246,19 @@ class FrameDecoder:
                            f"{transfer.size if transfer.size is not None else '?'} bytes)",
                            {"sdo": "write", "index": index, "sub": sub})
         if ccs == 0:  # download segment
-            transfer = self._sdo.get(key)
+            download = self._sdo.get(key)
             n = 7 - ((data[0] >> 1) & 0x07)
             last = data[0] & 0x01
-            if transfer is None or transfer.upload:
-                return Decoded(frame, "sdo", node, f"{who} SDO download segment outside a transfer")
-            transfer.data += data[1:1 + n]
+            if download is None or download.upload:
+                return Decoded(frame, "sdo", node, f"{who} SDO download segment outside a download")
+            download.data += data[1:1 + n]
             if not last:
-                return Decoded(frame, "sdo", node, f"{who} SDO write segment ({len(transfer.data)} bytes so far)")
-            text, value = _value_text(transfer.index, transfer.sub, bytes(transfer.data))
+                return Decoded(frame, "sdo", node, f"{who} SDO write segment ({len(download.data)} bytes so far)")
+            text, value = _value_text(download.index, download.sub, bytes(download.data))
             self._sdo.pop(key, None)
-            return Decoded(frame, "sdo", node, f"{who} SDO write 0x{transfer.index:04X}:{transfer.sub}"
-                           f"{_named(transfer.index, transfer.sub)} = {text} (last segment)",
-                           {"sdo": "write", "index": transfer.index, "sub": transfer.sub, "value": value})
+            return Decoded(frame, "sdo", node, f"{who} SDO write 0x{download.index:04X}:{download.sub}"
+                           f"{_named(download.index, download.sub)} = {text} (last segment)",
+                           {"sdo": "write", "index": download.index, "sub": download.sub, "value": value})
         if ccs == 3:
             return Decoded(frame, "sdo", node, f"{who} SDO read segment request")
         if ccs == 4:
@@ -289,18 +289,18 @@ class FrameDecoder:
             return Decoded(frame, "sdo", node, f"{who} SDO write 0x{index:04X}:{sub}{_named(index, sub)} done",
                            {"sdo": "written", "index": index, "sub": sub})
         if scs == 0:  # upload segment
-            transfer = self._sdo.get(key)
-            if transfer is None or not transfer.upload:
-                return Decoded(frame, "sdo", node, f"{who} SDO upload segment outside a transfer")
+            upload = self._sdo.get(key)
+            if upload is None or not upload.upload:
+                return Decoded(frame, "sdo", node, f"{who} SDO upload segment outside a upload")
             n = 7 - ((data[0] >> 1) & 0x07)
-            transfer.data += data[1:1 + n]
+            upload.data += data[1:1 + n]
             if not data[0] & 0x01:
-                return Decoded(frame, "sdo", node, f"{who} SDO segment ({len(transfer.data)} bytes so far)")
+                return Decoded(frame, "sdo", node, f"{who} SDO segment ({len(upload.data)} bytes so far)")
             self._sdo.pop(key, None)
-            text, value = _value_text(transfer.index, transfer.sub, bytes(transfer.data))
-            return Decoded(frame, "sdo", node, f"{who} SDO 0x{transfer.index:04X}:{transfer.sub}"
-                           f"{_named(transfer.index, transfer.sub)} = {text} (last segment)",
-                           {"sdo": "value", "index": transfer.index, "sub": transfer.sub, "value": value})
+            text, value = _value_text(upload.index, upload.sub, bytes(upload.data))
+            return Decoded(frame, "sdo", node, f"{who} SDO 0x{upload.index:04X}:{upload.sub}"
+                           f"{_named(upload.index, upload.sub)} = {text} (last segment)",
+                           {"sdo": "value", "index": upload.index, "sub": upload.sub, "value": value})
         if scs == 1:
             return Decoded(frame, "sdo", node, f"{who} SDO write segment confirmed")
         if scs == 4:

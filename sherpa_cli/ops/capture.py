@@ -76,10 +76,10 @@ def _bus_name(channel: Any, bus_names: Sequence[str]) -> str:
 
 
 def _need_asammdf(path: Path) -> None:
-    try:
-        import asammdf  # noqa: F401
-    except ImportError:
-        raise UsageError(f"{path}: .mf4 needs the asammdf package", hint="pip install asammdf") from None
+    import importlib.util
+
+    if importlib.util.find_spec("asammdf") is None:
+        raise UsageError(f"{path}: .mf4 needs the asammdf package", hint="pip install asammdf")
 
 
 def channel_for(suffix: str, bus: str, bus_names: Sequence[str]) -> Any:

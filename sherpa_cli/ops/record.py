@@ -383,7 +383,7 @@ class Poller:
     def recording(self, cfg: ArmConfig, *, t_zero: float | None = None) -> Recording:
         """One row per poll round of a bus: a drive's values at its own poll time (its cells of
         other drives' rows are empty)."""
-        zero = self.t0 if t_zero is None else t_zero
+        zero = t_zero if t_zero is not None else (self.t0 or 0.0)
         rec = Recording(times=[row[0] - zero for row in self.rows])
         nan = math.nan
         for r in self.refs:
@@ -391,7 +391,7 @@ class Poller:
             rec.columns[f"{r.name}.px"] = [float(m[2]) if m else nan for m in mine]
             rec.columns[f"{r.name}.vx"] = [float(m[3]) if m else nan for m in mine]
             if self.current:
-                rec.columns[f"{r.name}.iq_a"] = [m[4] if m else nan for m in mine]
+                rec.columns[f"{r.name}.iq_a"] = [m[4] if m and m[4] is not None else nan for m in mine]
         for joint in cfg.joints.values():
             if joint.drive is not None and f"{joint.drive}.px" in rec.columns:
                 rec.columns[f"{joint.name}.pos_rad"] = [counts_to_rad(v, joint.cpr) if v == v else nan
