@@ -77,6 +77,7 @@ def parse_protocol(top: Section, locs: Locs) -> ProtocolConfig:
         sv_blackout=sec.num("sv_blackout", d.sv_blackout),
         sdo_timeout=sec.num("sdo_timeout", d.sdo_timeout),
         boot_timeout=sec.num("boot_timeout", d.boot_timeout),
+        calibration_flag=sec.int("calibration_flag", d.calibration_flag),
     )
 
 
