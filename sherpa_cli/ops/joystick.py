@@ -68,7 +68,7 @@ def _evdev() -> Any:
         import evdev
     except ImportError:
         raise UsageError("the joystick needs the python package 'evdev', which is not installed",
-                         hint="pip install evdev (Linux only)") from None
+                         hint="pip install 'sherpa-cli[joystick]' (or pip install evdev; Linux only)") from None
     return evdev
 
 
