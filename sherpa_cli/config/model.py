@@ -195,6 +195,26 @@ class ProtocolConfig:
     calibration_flag: int = 3
 
 
+@dataclass(frozen=True)
+class HomingConfig:
+    """`sherpa home` (docs/home.md): the drive's HM[] codes and the search shape.
+
+    The HM[3] event codes and the HM[4]/HM[5] values differ between public sources
+    (motion-and-recording.md §2, UNCONFIRMED), so each is a named setting with the notes' value
+    as default; the simulator plays whatever the config says.
+    """
+
+    event_immediate: int = 0  # HM[3]: home event at once ([KX2])
+    event_input_base: int = 8  # HM[3] = base + n: event on digital input n ([COB]: 9 = input 1)
+    after_stop: int = 0  # HM[4]: stop the motion at the event ([MBARI])
+    after_nothing: int = 2  # HM[4]: let the motion go on
+    px_absolute: int = 0  # HM[5]: PX = HM[2] at the event
+    px_none: int = 2  # HM[5]: PX is left alone (the pair's Δ search only stops at its edge)
+    slow_divisor: int = 4  # the re-approach runs at cal_speed / this
+    backoff: int = 0  # counts to back off the switch before the re-approach; 0 = the joint's margin (at least 10)
+    search_margin: int = 0  # the bounded search goes the full range plus this; 0 = the joint's margin
+
+
 STOP_METHODS = ("auto", "st", "jv0")
 
 
@@ -238,6 +258,14 @@ class SimDriveConfig:
 
 
 @dataclass(frozen=True)
+class SimWiring:
+    """`sim: wiring:` a drive's input wiring faults, for `home --check-wiring` (only the simulator reads it)."""
+
+    swap: tuple[tuple[int, int], ...] = ()  # pairs of inputs whose wires are swapped
+    invert: tuple[int, ...] = ()  # inputs whose switch is wired inverted (active while released)
+
+
+@dataclass(frozen=True)
 class SimExtraNode:
     """A node the simulator puts on a bus although the config names no drive there (a stray device)."""
 
@@ -258,8 +286,12 @@ class ArmConfig:
     il_codes: ILCodes = field(default_factory=ILCodes)
     protocol: ProtocolConfig = field(default_factory=ProtocolConfig)
     motion: MotionConfig = field(default_factory=MotionConfig)
+    homing: HomingConfig = field(default_factory=HomingConfig)
     sim: Mapping[str, SimDriveConfig] = field(default_factory=dict)  # drive name -> simulated faults
     sim_extra_nodes: tuple[SimExtraNode, ...] = ()  # `sim: extra_nodes:`, only the simulator reads it
+    # `sim: power_up:` joint name -> the joint's real position (counts) at power-up, while PX reads 0
+    sim_power_up: Mapping[str, int] = field(default_factory=dict)
+    sim_wiring: Mapping[str, SimWiring] = field(default_factory=dict)  # `sim: wiring:` drive name -> faults
     # `sim: reply_timeout:` s to wait for one interpreter reply with --sim (instead of protocol.reply_timeout):
     # the in-process simulator shares a possibly loaded machine, so it is given patient timeouts
     sim_reply_timeout: float = 1.0
