@@ -175,9 +175,12 @@ def _pair_unit(cfg: ArmConfig, pair_name: str) -> HomeUnit | str:
             return f"{joint.name}'s switch (input {sw.input}) must be wired to both drives of the pair"
         pos = cal_position(joint, d) if sw.kind is SwitchKind.STOP else (
             joint.cal_pos if joint.cal_pos is not None else sw.position)
-        moves.append(HomeMove(joint.name, "search", d, abs(joint.cal_speed), _search_distance(cfg, joint)))
+        speed, back = abs(joint.cal_speed), _backoff(cfg, joint)
+        moves.append(HomeMove(joint.name, "search", d, speed, _search_distance(cfg, joint)))
+        moves.append(HomeMove(joint.name, "back off", -d, speed, back))
+        moves.append(HomeMove(joint.name, "slow re-approach", d, _slow(cfg, speed), 2 * back + 2))
         if joint is s:
-            moves.append(HomeMove(joint.name, "back off", -d, abs(joint.cal_speed), _backoff(cfg, joint)))
+            moves.append(HomeMove(joint.name, "back off", -d, speed, back))
         used.append(f"input {sw.input}: {joint.name} switch, {joint.name} = {pos} at its edge")
     for joint in (s, dl):
         moves.append(HomeMove(joint.name, "return", -_sign(joint.cal_speed or 1), abs(joint.cal_speed or 1),
@@ -395,11 +398,15 @@ class _Runner:
                 lo, hi = joint.normal_range
                 if measure_range:
                     far = search
-                    self.start_pr(guard, refs, {name: -d * far}, {name: speed})
-                    self.wait(guard, refs, distance=far, speed=speed, homing=False, what=f"{joint.name}: the measure")
                     other = _stop_switch(joint, -d)
                     assert other is not None
-                    if not int(c.get("IP")) >> (15 + other.input) & 1:  # raw pins from IP bit 16
+                    # the far switch's edge stops the move (HM[4] = stop); PX stays as homed (HM[5] = none)
+                    self.arm_homing(c, event=self.input_event(other), value=0, after=self.h.after_stop,
+                                    update=self.h.px_none)
+                    self.start_pr(guard, refs, {name: -d * far}, {name: speed})
+                    if not self.wait(guard, refs, distance=far, speed=speed, homing=True,
+                                     what=f"{joint.name}: the measure"):
+                        c.set("HM", 1, 0)
                         raise SafetyError(f"{joint.name}: the {'high' if d < 0 else 'low'} end switch (input "
                                           f"{other.input}) never triggered: stopped at the bound ({far} counts)")
                     res.measured_travel = abs(int(c.get("PX")) - pos)
@@ -420,43 +427,61 @@ class _Runner:
         a, b = pair.drive_a, pair.drive_b
         refs = {a: drive_ref(cfg, a), b: drive_ref(cfg, b)}
         res = UnitResult(unit.name, unit.kind, unit.drives)
+        ds, dd = _sign(s.cal_speed or 1), _sign(dl.cal_speed or 1)
+        sw_s = _stop_switch(s, ds) or _home_switch(s)
+        sw_d = _stop_switch(dl, dd) or _home_switch(dl)
+        assert sw_s is not None and sw_d is not None
+        cal_s = cal_position(s, ds) if sw_s.kind is SwitchKind.STOP else (
+            s.cal_pos if s.cal_pos is not None else sw_s.position)
+        cal_d = cal_position(dl, dd) if sw_d.kind is SwitchKind.STOP else (
+            dl.cal_pos if dl.cal_pos is not None else sw_d.position)
         with MotionGuard(self.session, list(refs.values()), settings=self.settings, clock=self.clock,
                          sleep=self.sleep) as guard:
             ca, cb = guard.client(refs[a]), guard.client(refs[b])
+            # motor a / b move along a joint: Σ = a + b (both the same way), Δ = a - b (opposite ways)
+            signs = {s.name: (1, 1), dl.name: (1, -1)}
 
-            def search(joint: JointConfig, sw: SwitchConfig, update: int, signs: tuple[int, int]) -> None:
-                d, speed = _sign(joint.cal_speed or 1), abs(joint.cal_speed or 1)
-                dist = _search_distance(cfg, joint)
+            def search(joint: JointConfig, sw: SwitchConfig, update: int, d: int, speed: int, dist: int,
+                       what: str) -> None:
+                """Both motors along ``joint`` until its switch's edge stops them (HM[4] = stop on each)."""
                 for c in (ca, cb):
                     self.arm_homing(c, event=self.input_event(sw), value=0, after=self.h.after_stop, update=update)
-                half = (dist + 1) // 2
-                self.start_pr(guard, refs, {a: signs[0] * d * half, b: signs[1] * d * half},
-                              {a: max(1, speed // 2), b: max(1, speed // 2)})
-                if not self.wait(guard, refs, distance=half, speed=max(1, speed // 2), homing=True,
-                                 what=f"{joint.name}: the search"):
+                half, motor_speed = (dist + 1) // 2, max(1, speed // 2)
+                sa, sb = signs[joint.name]
+                self.start_pr(guard, refs, {a: sa * d * half, b: sb * d * half}, {a: motor_speed, b: motor_speed})
+                if not self.wait(guard, refs, distance=half, speed=motor_speed, homing=True,
+                                 what=f"{joint.name}: {what}"):
                     for c in (ca, cb):
                         c.set("HM", 1, 0)
-                    raise SafetyError(f"{joint.name}: the switch on input {sw.input} never triggered on both drives: "
-                                      f"stopped at the search bound ({dist} counts at {speed} counts/s)",
+                    raise SafetyError(f"{joint.name}: the switch on input {sw.input} never triggered on both drives "
+                                      f"during {what}: stopped at the bound ({dist} counts at {speed} counts/s)",
                                       hint=f"check the switch and its wiring (`sherpa home --check-wiring {joint.name}`)")
 
-            ds, dd = _sign(s.cal_speed or 1), _sign(dl.cal_speed or 1)
-            sw_s = _stop_switch(s, ds) or _home_switch(s)
-            sw_d = _stop_switch(dl, dd) or _home_switch(dl)
-            assert sw_s is not None and sw_d is not None
-            cal_s = cal_position(s, ds) if sw_s.kind is SwitchKind.STOP else (s.cal_pos if s.cal_pos is not None else sw_s.position)
-            cal_d = cal_position(dl, dd) if sw_d.kind is SwitchKind.STOP else (dl.cal_pos if dl.cal_pos is not None else sw_d.position)
-            # 1. Σ toward its switch: both counters 0 at the edge, so Σ = PX_a + PX_b + cal_s from now on
-            search(s, sw_s, self.h.px_absolute, (1, 1))
-            # 2. back off Σ (Δ held), so the Σ switch no longer blocks the Δ search
-            pa, pb = int(ca.get("PX")), int(cb.get("PX"))
-            step = -ds * _backoff(cfg, s) - (pa + pb)
-            self.move_to(guard, refs, {a: pa + step // 2, b: pb + step - step // 2}, abs(s.cal_speed or 1) // 2,
-                         f"{s.name}: the back-off")
-            # 3. Δ toward its switch (motors opposite, Σ nominally held); the edge only stops both, the
-            #    counters stay in the Σ reference, so Σ is exact whatever the start skew let it drift
-            search(dl, sw_d, self.h.px_none, (1, -1))
-            # 4. both counters from (Σ, Δ) through the pair transform, by an immediate home event each
+            def back_off(joint: JointConfig, d: int) -> None:
+                """Move ``joint`` away from its switch by the backoff (the other joint holds)."""
+                step = -d * _backoff(cfg, joint)
+                pa, pb = int(ca.get("PX")), int(cb.get("PX"))
+                sa, sb = signs[joint.name]
+                half = step // 2 if step > 0 else -((-step) // 2)
+                self.move_to(guard, refs, {a: pa + sa * half, b: pb + sb * half},
+                             max(1, abs(joint.cal_speed or 1) // 2), f"{joint.name}: the back-off")
+
+            def find(joint: JointConfig, sw: SwitchConfig, d: int, final_update: int) -> None:
+                """Fast search, back off, slow re-approach: the slow edge is the one that counts (both
+                drives see it within a fraction of a count)."""
+                speed = abs(joint.cal_speed or 1)
+                search(joint, sw, self.h.px_none, d, speed, _search_distance(cfg, joint), "the search")
+                back_off(joint, d)
+                b2 = 2 * _backoff(cfg, joint)
+                search(joint, sw, final_update, d, _slow(cfg, speed), b2 + 2, "the slow re-approach")
+
+            # 1. Σ: at its slow edge both counters := 0, so Σ = PX_a + PX_b + cal_s from now on
+            find(s, sw_s, ds, self.h.px_absolute)
+            back_off(s, ds)  # so the Σ switch no longer blocks the Δ search
+            # 2. Δ (Σ nominally held): its edge only stops both; the counters stay in the Σ reference,
+            #    so Σ stays exact whatever the start skew of the two motors let it drift
+            find(dl, sw_d, dd, self.h.px_none)
+            # 3. both counters from (Σ, Δ) through the pair transform, by an immediate home event each
             sigma_now = int(ca.get("PX")) + int(cb.get("PX")) + cal_s
             xa = (sigma_now + cal_d) // 2
             for c, v in ((ca, xa), (cb, sigma_now - xa)):
@@ -464,13 +489,11 @@ class _Runner:
                 if int(c.get("PX")) != v:
                     raise SafetyError(f"{c.label}: the immediate home event did not set PX (wanted {v})")
             res.set_to = {s.name: cal_s, dl.name: cal_d}
-            # 5. back into both normal ranges
+            # 4. back into both normal ranges
             pa, pb = int(ca.get("PX")), int(cb.get("PX"))
-            sig, dlt = pa + pb, pa - pb
             slo, shi = s.normal_range
             dlo, dhi = dl.normal_range
-            sig2 = min(max(sig, slo), shi)
-            dlt2 = min(max(dlt, dlo), dhi)
+            sig2, dlt2 = min(max(pa + pb, slo), shi), min(max(pa - pb, dlo), dhi)
             if (sig2 + dlt2) % 2:
                 dlt2 += 1 if dlt2 < dhi else -1
             speed = min(abs(s.cal_speed or 1), abs(dl.cal_speed or 1))
@@ -502,4 +525,134 @@ def run_home(session: Any, plan: HomePlan, *, settings: MotionSettings | None = 
         report.units.append(result)
         if on_unit is not None:
             on_unit(result)
+    return report
+
+
+# -- the wiring check (`home --check-wiring`) ----------------------------------------------------------
+
+IP_PIN_SHIFT = 16
+PINS = 10  # IP bits 16..25: the raw input pins
+
+
+@dataclass(frozen=True)
+class WiringPrompt:
+    """What the technician is asked to do: ``action`` is "press" or "release"."""
+
+    action: str
+    joint: str
+    switch: str  # "input 3 (low end switch)"
+    input: int
+    drives: tuple[str, ...]
+
+
+@dataclass
+class WiringFinding:
+    joint: str
+    switch: str
+    drive: str
+    input: int
+    verdict: str  # "ok", "no change", "wrong input", "inverted", "wrong input, inverted"
+    seen_input: int | None = None
+
+    @property
+    def ok(self) -> bool:
+        return self.verdict == "ok"
+
+    def line(self) -> str:
+        where = f"{self.joint} {self.switch} on {self.drive}"
+        if self.verdict == "ok":
+            return f"ok: {where}: input {self.input} goes active when pressed"
+        if self.verdict == "no change":
+            return f"FAULT: {where}: no input changed when it was pressed (broken wire, switch or supply)"
+        if self.verdict == "inverted":
+            return (f"FAULT: {where}: input {self.input} is active while released and goes inactive when "
+                    "pressed (inverted: normally-closed contact or polarity)")
+        pol = ", and inverted" if "inverted" in self.verdict else ""
+        return f"FAULT: {where}: pressing it changes input {self.seen_input}, not input {self.input} (wrong input{pol})"
+
+    def as_dict(self) -> dict[str, Any]:
+        return {"joint": self.joint, "switch": self.switch, "drive": self.drive, "input": self.input,
+                "verdict": self.verdict, "seen_input": self.seen_input}
+
+
+@dataclass
+class WiringReport:
+    joint: str
+    live: dict[str, dict[int, bool]] = field(default_factory=dict)  # drive -> configured input -> active
+    findings: list[WiringFinding] = field(default_factory=list)
+
+    @property
+    def ok(self) -> bool:
+        return all(f.ok for f in self.findings)
+
+    def as_dict(self) -> dict[str, Any]:
+        return {"joint": self.joint, "ok": self.ok,
+                "live": {d: {str(n): v for n, v in pins.items()} for d, pins in self.live.items()},
+                "findings": [f.as_dict() for f in self.findings]}
+
+
+def _switch_label(sw: SwitchConfig) -> str:
+    what = "home switch" if sw.kind is SwitchKind.HOME else f"{sw.side or ''} end switch".strip()
+    return f"input {sw.input} ({what})"
+
+
+def wiring_plan(cfg: ArmConfig, name: str) -> list[tuple[JointConfig, SwitchConfig, tuple[str, ...]]]:
+    """Each switch of the joint (or of both joints of a pair) and the drives it is wired to."""
+    from sherpa_cli.ops import targets
+
+    t = targets.resolve_one(cfg, name)
+    if not t.joints:
+        raise UsageError(f"{name}: no joint (the wiring check takes a joint, a pair or the drive of a joint)")
+    out = []
+    for joint in t.joints:
+        drives = calibration.joint_drives(cfg, joint)
+        for sw in joint.switches:
+            out.append((joint, sw, tuple(sw.drives) or drives))
+    if not out:
+        raise UsageError(f"{name}: no switches configured, nothing to check",
+                         hint="switches: [{input: N, kind: home|stop, ...}] in the joint's config")
+    return out
+
+
+def _pins(c: Any) -> dict[int, bool]:
+    ip = int(c.get("IP"))
+    return {n: bool(ip >> (IP_PIN_SHIFT + n - 1) & 1) for n in range(1, PINS + 1)}
+
+
+def check_wiring(session: Any, name: str, ask: Callable[[WiringPrompt], None],
+                 on_live: Callable[[dict[str, dict[int, bool]]], None] | None = None) -> WiringReport:
+    """Before any motion: the live state of the configured inputs, then for each switch ask the
+    technician to press it (``ask`` returns once it is held) and to let go, reading IP each time.
+    Writes nothing to the drives."""
+    cfg = session.cfg
+    plan = wiring_plan(cfg, name)
+    report = WiringReport(name)
+    clients = {}
+    for _, _, drives in plan:
+        for d in drives:
+            if d not in clients:
+                clients[d] = session.client(drive_ref(cfg, d))
+                clients[d].nmt_start()
+    for d, c in clients.items():
+        pins = _pins(c)
+        report.live[d] = {sw.input: pins[sw.input] for _, sw, drives in plan if d in drives}
+    if on_live is not None:
+        on_live(report.live)
+    for joint, sw, drives in plan:
+        label = _switch_label(sw)
+        before = {d: _pins(clients[d]) for d in drives}
+        ask(WiringPrompt("press", joint.name, label, sw.input, drives))
+        held = {d: _pins(clients[d]) for d in drives}
+        ask(WiringPrompt("release", joint.name, label, sw.input, drives))
+        for d in drives:
+            changed = [n for n in range(1, PINS + 1) if held[d][n] != before[d][n]]
+            if sw.input in changed:
+                verdict = "inverted" if before[d][sw.input] else "ok"
+                seen = sw.input
+            elif changed:
+                seen = changed[0]
+                verdict = "wrong input, inverted" if before[d][seen] else "wrong input"
+            else:
+                verdict, seen = "no change", None
+            report.findings.append(WiringFinding(joint.name, label, d, sw.input, verdict, seen))
     return report
