@@ -61,7 +61,8 @@ def test_plan_picks_the_kind_from_the_config():
     cfg = load_config(ARM)
     plan = home.plan_home(cfg)
     assert [(u.name, u.kind) for u in plan.units] == [("yaw", "home_switch"), ("stiff", "end_switches"),
-                                                      ("twist", "abs_encoder"), ("diff", "pair")]
+                                                      ("twist", "abs_encoder"), ("elbow", "abs_encoder"),
+                                                      ("diff", "pair")]
     yaw = plan.units[0]
     # bounded search toward the switch at cal_speed: the full range plus the margin, never open-ended
     assert yaw.moves[0] == home.HomeMove("yaw", "search", 1, 1000, 800 + 20)
@@ -244,3 +245,53 @@ def test_wiring_check_reports_a_switch_that_changes_nothing():
         report = home.check_wiring(s, "stiff", lambda p: None)  # nobody presses: a broken wire looks the same
     assert [(f.input, f.verdict) for f in report.findings] == [(3, "no change"), (4, "no change")]
     assert "no input changed" in report.findings[0].line()
+
+
+# -- a second device type: the CANopen absolute encoder (CiA 406) -------------------------------------
+
+def test_device_registry_matches_the_config_types():
+    from sherpa_cli.config.model import DEVICE_TYPES
+    from sherpa_cli.devices import REGISTRY, CanOpenEncoder, device_class
+
+    assert tuple(REGISTRY) == DEVICE_TYPES and device_class("canopen-encoder") is CanOpenEncoder
+    assert CanOpenEncoder.position_from_tpdo(bytes.fromhex("60fdffff")) == -672
+    with pytest.raises(UsageError, match="unknown device type 'resolver'"):
+        device_class("resolver")
+
+
+def test_encoder_joint_is_homed_from_0x6004_by_sdo_with_no_motion_command():
+    cfg = load_config(ARM)
+    plan = home.plan_home(cfg, ["elbow"])
+    assert plan.units[0].devices == ("elbow_encoder",) and plan.units[0].moves == ()
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
+        (u,) = home.run_home(s, plan).units
+        # the encoder reads the joint's real position (-444) minus the configured offset (100)
+        assert u.encoder == {"elbow_encoder": -544} and px(s, "elbow_drive") == -444
+        with s.sim.lock:
+            frames = [bytes(f) for _, i, f in s.sim.drives["elbow_drive"].received if 0x300 < i < 0x380]
+        assert not [f for f in frames if len(f) == 8 and not f[3] & 0x40 and f[:2] in MOTION_LETTERS]
+
+
+def test_encoder_config_errors(tmp_path):
+    from sherpa_cli.errors import ConfigError
+
+    with pytest.raises(ConfigError, match="unknown type 'resolver'"):
+        variant(tmp_path, ("{type: canopen-encoder, bus: can0, node: 45}", "{type: resolver, bus: can0, node: 45}"))
+    with pytest.raises(ConfigError, match="node can0:40 is already drive elbow_drive"):
+        variant(tmp_path, ("{type: canopen-encoder, bus: can0, node: 45}", "{type: canopen-encoder, bus: can0, node: 40}"))
+    with pytest.raises(ConfigError, match="'can0:46' names no configured device"):
+        variant(tmp_path, ('source: "can0:45"', 'source: "can0:46"'))
+
+
+def test_scan_and_identify_show_the_encoder(cli):
+    scan = cli("--config", str(ARM), "--sim", "scan")
+    assert scan.exit_code == 0, scan.transcript()
+    row = next(line for line in scan.stdout.splitlines() if line.strip().startswith("45 "))
+    assert "0x00010196" in row and "elbow_encoder" in row and "elbow" in row and "expected" in row
+    ident = cli("--config", str(ARM), "--sim", "--json", "identify", "elbow_encoder")
+    assert ident.exit_code == 0, ident.transcript()
+    import json
+
+    (dev,) = json.loads(ident.stdout)["devices"]
+    assert dev["type"] == "canopen-encoder" and dev["position"] == -544 and dev["joint_position"] == -444
+    assert dev["device_type"] == 0x00010196

@@ -22,6 +22,8 @@ CASES = [
     ("home-report-end-switches", [*ARM, "home", "stiff", "--yes"], 0, ""),
     ("home-report-pair", [*ARM, "home", "diff", "--yes"], 0, ""),
     ("home-report-abs-encoder", [*ARM, "home", "twist"], 0, ""),
+    ("home-report-canopen-encoder", [*ARM, "home", "elbow"], 0, ""),
+    ("identify-canopen-encoder", [*ARM, "identify", "can0:45"], 0, ""),
     ("home-wiring-swapped", [*WIRING, "home", "--check-wiring", "stiff"], 1, "\n" * 4),
     ("home-wiring-inverted", [*WIRING, "home", "--check-wiring", "yaw"], 1, "\n" * 2),
     ("home-wiring-ok-pair", [*ARM, "home", "--check-wiring", "pitch"], 0, "\n" * 4),

@@ -69,7 +69,8 @@ def home(
         if not st.out.confirm("move these joints now?", refusal="home moves joints: refusing without a terminal",
                               hint="pass --yes to home in scripts, or --dry-run to see the plan"):
             raise SafetyError("not confirmed: nothing moved")
-    buses = sorted({cfg.drives[d].bus for u in plan.units for d in u.drives})
+    buses = sorted({cfg.drives[d].bus for u in plan.units for d in u.drives}
+                   | {cfg.devices[d].bus for u in plan.units for d in u.devices})
 
     def done(unit) -> None:
         if not st.json_mode:

@@ -46,6 +46,9 @@ def dump_native(cfg: ArmConfig) -> str:
     sections.append({"drives": {d.name: _drop_none({"bus": d.bus, "node": d.node, "model": d.model,
                                                     "motor": d.motor})
                                 for d in cfg.drives.values()}})
+    if cfg.devices:
+        sections.append({"devices": {d.name: {"type": d.type, "bus": d.bus, "node": d.node}
+                                     for d in cfg.devices.values()}})
     plain = {j.name: {"drive": j.drive, **_joint_body(j)} for j in cfg.joints.values() if j.role is JointRole.PLAIN}
     for name, j in ((j.name, j) for j in cfg.joints.values() if j.role is JointRole.PLAIN):
         if j.current is not None:

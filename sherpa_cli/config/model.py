@@ -87,6 +87,27 @@ class DriveConfig:
     where: Location = field(default_factory=Location, compare=False)
 
 
+# The seed's dev_type selected device-specific code; here a device type names a class in the
+# registry of sherpa_cli/devices (the way python-can maps interface names to bus classes).
+# "elmo" is every entry of `drives:`; `devices:` holds the other types.
+DEVICE_TYPES = ("elmo", "canopen-encoder")
+
+
+@dataclass(frozen=True)
+class DeviceConfig:
+    """A CAN device that is not a drive (`devices:`), e.g. a CANopen absolute encoder (CiA 406)."""
+
+    name: str
+    type: str  # a key of DEVICE_TYPES other than "elmo"
+    bus: str
+    node: int
+    where: Location = field(default_factory=Location, compare=False)
+
+    @property
+    def address(self) -> str:
+        return f"{self.bus}:{self.node}"
+
+
 @dataclass(frozen=True)
 class CurrentLimits:
     continuous: float  # A -> CL[1]
@@ -283,6 +304,7 @@ class ArmConfig:
     joints: Mapping[str, JointConfig]
     pairs: Mapping[str, PairConfig]
     catalog: Catalog
+    devices: Mapping[str, DeviceConfig] = field(default_factory=dict)  # `devices:` (not drives)
     il_codes: ILCodes = field(default_factory=ILCodes)
     protocol: ProtocolConfig = field(default_factory=ProtocolConfig)
     motion: MotionConfig = field(default_factory=MotionConfig)
@@ -304,6 +326,12 @@ class ArmConfig:
             if joint.drive == drive:
                 return joint
         return None
+
+    def device_by_source(self, source: str) -> DeviceConfig | None:
+        """The device an ``abs_encoder.source`` names: its name or BUS:NODE."""
+        if source in self.devices:
+            return self.devices[source]
+        return next((d for d in self.devices.values() if d.address == source), None)
 
     def pair_of_drive(self, drive: str) -> PairConfig | None:
         for pair in self.pairs.values():

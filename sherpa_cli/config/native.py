@@ -12,17 +12,18 @@ import dataclasses
 from pathlib import PurePath
 
 from sherpa_cli.config.catalog import builtin_catalog
-from sherpa_cli.config.model import (AbsEncoderConfig, ArmConfig, BusConfig, Catalog, CurrentLimits, DriveConfig,
+from sherpa_cli.config.model import (AbsEncoderConfig, ArmConfig, BusConfig, Catalog, CurrentLimits, DeviceConfig, DriveConfig,
                                      DriveModel, HomingConfig, ILCodes, MotionConfig, ProtocolConfig, SimDriveConfig, SimExtraNode, SimWiring, JointConfig, JointRole, MotorModel, PairConfig,
                                      SwitchConfig, SwitchKind)
 from sherpa_cli.config.yamlnodes import (Locs, Section, YNode, as_int, as_map, as_name, as_seq, as_str, named_items,
                                          plain, suggest)
 from sherpa_cli.errors import ConfigError
 
-TOP_KEYS = ["name", "il_codes", "protocol", "motion", "homing", "sim", "buses", "drives", "joints", "pairs", "catalog"]
+TOP_KEYS = ["name", "il_codes", "protocol", "motion", "homing", "sim", "buses", "drives", "devices", "joints", "pairs", "catalog"]
 IL_KEYS = ["stop", "home"]
 BUS_KEYS = ["interface", "channel", "bitrate", "send_interval_us", "poll_interval_ms", "options"]
 DRIVE_KEYS = ["bus", "node", "model", "motor"]
+DEVICE_KEYS = ["type", "bus", "node"]
 JOINT_BODY_KEYS = ["cpr", "range", "velocity", "acceleration", "switches", "calibration", "abs_encoder"]
 JOINT_KEYS = ["drive", *JOINT_BODY_KEYS, "current"]
 PAIR_JOINT_KEYS = ["name", *JOINT_BODY_KEYS]
@@ -213,6 +214,14 @@ def load_native(root: YNode, filename: str) -> tuple[ArmConfig, Locs, list[str]]
             model=catalog_key(model) if model is not None else None,
             motor=catalog_key(motor) if motor is not None else None, where=sec.node.loc)
 
+    devices: dict[str, DeviceConfig] = {}
+    if top.get("devices") is not None:
+        for dname, dnode in named_items(top.req("devices"), "device"):
+            sec = Section(dnode, DEVICE_KEYS, what="a device mapping like {type: canopen-encoder, bus: can1, node: 45}")
+            register(locs, ("device", dname), sec)
+            devices[dname] = DeviceConfig(name=dname, type=as_str(sec.req("type")), bus=as_str(sec.req("bus")),
+                                          node=as_int(sec.req("node")), where=sec.node.loc)
+
     joints: dict[str, JointConfig] = {}
     joints_node = top.get("joints")
     if joints_node is not None:
@@ -253,7 +262,7 @@ def load_native(root: YNode, filename: str) -> tuple[ArmConfig, Locs, list[str]]
             pairs[pname] = PairConfig(name=pname, drive_a=pair_drives[0], drive_b=pair_drives[1], sigma=names[0],
                                       delta=names[1], current=current, where=sec.node.loc)
 
-    cfg = ArmConfig(name=name, buses=buses, drives=drives, joints=joints, pairs=pairs, catalog=catalog,
+    cfg = ArmConfig(name=name, buses=buses, drives=drives, joints=joints, pairs=pairs, catalog=catalog, devices=devices,
                     il_codes=il, protocol=protocol, motion=motion, sim=sim, sim_extra_nodes=sim_extra_nodes,
                     sim_reply_timeout=sim_reply_timeout, homing=homing, sim_power_up=sim_power_up,
                     sim_wiring=sim_wiring,

@@ -10,9 +10,10 @@ Four kinds, chosen from the config:
 - ``end_switches``: the stop switch on the side ``cal_speed`` points to (Example 1); PX = ``cal_pos``
   (else that end of the range) at its edge; back into the normal range. ``measure_range`` also
   drives to the other end switch and reports the measured travel.
-- ``pair``: a differential pair (Example 3), both motors together through the pair transform: Σ
-  toward its switch (both PX := 0 at the edge: the Σ reference), back off, Δ toward its switch
-  with Σ held; at the Δ edge both counters are set so that (PX_a + PX_b, PX_a - PX_b) = (Σ, Δ).
+- ``pair``: a differential pair (Example 3), both motors together through the pair transform. Σ:
+  fast search, back off, slow re-approach with both PX := 0 at its edge (the Σ reference); back off;
+  Δ (Σ held): fast search, back off, slow re-approach that only stops at the edge; then both
+  counters are set by an immediate home event so that (PX_a + PX_b, PX_a - PX_b) = (Σ, Δ).
 - ``abs_encoder``: no motion: read the encoder, set PX from it by an immediate home event.
 
 After success each drive gets the calibration mark (ops/calibration.mark_calibrated). Every motion
@@ -65,10 +66,14 @@ class HomeUnit:
     drives: tuple[str, ...]
     moves: tuple[HomeMove, ...]
     switches: tuple[str, ...]  # "input 1 (home at 0)" per switch used, for the plan
+    devices: tuple[str, ...] = ()  # other devices it reads (a CANopen encoder of `devices:`)
 
     def as_dict(self) -> dict[str, Any]:
-        return {"name": self.name, "kind": self.kind, "joints": list(self.joints), "drives": list(self.drives),
-                "switches": list(self.switches), "moves": [m.as_dict() for m in self.moves]}
+        out = {"name": self.name, "kind": self.kind, "joints": list(self.joints), "drives": list(self.drives),
+               "switches": list(self.switches), "moves": [m.as_dict() for m in self.moves]}
+        if self.devices:
+            out["devices"] = list(self.devices)
+        return out
 
 
 @dataclass(frozen=True)
@@ -124,8 +129,16 @@ def _home_switch(joint: JointConfig) -> SwitchConfig | None:
 def _plain_unit(cfg: ArmConfig, joint: JointConfig, measure_range: bool) -> HomeUnit | str:
     assert joint.drive is not None
     if joint.abs_encoder is not None:
+        enc = joint.abs_encoder
+        if enc.source.upper() == "DRIVE:PY":
+            return HomeUnit(joint.name, "abs_encoder", (joint.name,), (joint.drive,), (),
+                            (f"encoder {enc.source} (offset {enc.offset})",))
+        dev = cfg.device_by_source(enc.source)
+        if dev is None:
+            return f"abs_encoder source '{enc.source}' is neither drive:PY nor a configured device"
         return HomeUnit(joint.name, "abs_encoder", (joint.name,), (joint.drive,), (),
-                        (f"encoder {joint.abs_encoder.source} (offset {joint.abs_encoder.offset})",))
+                        (f"encoder {dev.name} ({dev.type} {dev.address}, 0x6004 by SDO, offset {enc.offset})",),
+                        (dev.name,))
     if not joint.cal_speed:
         return "no calibration speed (calibration: {speed: ...})"
     d = _sign(joint.cal_speed)
@@ -337,18 +350,27 @@ class _Runner:
             joint = self.cfg.joints[jname]
             assert joint.abs_encoder is not None
             src = joint.abs_encoder.source
-            if src.upper() != "DRIVE:PY":
-                raise UsageError(f"{jname}: abs_encoder source '{src}' is not supported here (only drive:PY)")
             c = self.session.client(drive_ref(self.cfg, dname))
             self.check_fault(c)
-            raw = int(c.get("PY"))
+            if src.upper() == "DRIVE:PY":
+                raw = int(c.get("PY"))
+                read_from = dname
+            else:
+                from sherpa_cli.devices import device_class
+                from sherpa_cli.ops.targets import DriveRef
+
+                dev = self.cfg.device_by_source(src)
+                if dev is None:
+                    raise UsageError(f"{jname}: abs_encoder source '{src}' names no configured device")
+                raw = int(device_class(dev.type)(self.session.sdo(DriveRef(dev.name, dev.bus, dev.node))).position())
+                read_from = dev.name
             value = raw + joint.abs_encoder.offset
             self.arm_homing(c, event=self.h.event_immediate, value=value, after=self.h.after_nothing)
             px = int(c.get("PX"))
             if px != value or int(c.get("HM", 1)) != 0:
                 raise SafetyError(f"{c.label}: the immediate home event did not set PX (PX={px}, wanted {value})")
             calibration.mark_calibrated(self.cfg, c)
-            res.encoder[dname], res.set_to[jname], res.positions[jname] = raw, value, px
+            res.encoder[read_from], res.set_to[jname], res.positions[jname] = raw, value, px
         return res
 
     def plain(self, unit: HomeUnit, measure_range: bool) -> UnitResult:

@@ -30,6 +30,8 @@ SDO_RX = 0x600
 # position within one model step also presses it for that step (a fast pass is never missed), so the
 # switch's edge -- where homing sets PX -- is at its configured position to within a count
 HOME_SWITCH_HALF_WIDTH = 0
+ENCODER_VENDOR = 0x0000_0145  # made up: a CiA 406 encoder maker (the sim's, not a real vendor id)
+ENCODER_DEVICE_TYPE = 0x0001_0196  # 0x1000: CiA 406 (0x196), single-turn absolute rotary encoder
 SIM_SV_SHARE = 0.6  # the simulated drive is deaf for this share of protocol.sv_blackout (the tool's bound)
 
 
@@ -215,6 +217,15 @@ class SimArm:
                 e.node, clock=self.clock, serial=0x7E000000 + i,
                 settings=SimSettings(vendor_id=e.vendor_id, device_name=e.device_name)))
             for i, e in enumerate(cfg.sim_extra_nodes)}
+        # `devices:` of other types (sherpa_cli/devices): a CANopen encoder answers NMT and SDO (identity,
+        # 0x1000 = CiA 406, 0x6004 = its joint's real position minus the joint's abs_encoder offset)
+        for dev in cfg.devices.values():
+            if dev.type == "canopen-encoder":
+                self.extras[dev.name] = (dev.bus, SimDrive(
+                    dev.node, clock=self.clock, serial=0x7E100000 + dev.node,
+                    settings=SimSettings(vendor_id=ENCODER_VENDOR, device_name="CANopen encoder", inputs=1),
+                    od_live={(0x1000, 0): lambda: ENCODER_DEVICE_TYPE,
+                             (0x6004, 0): self._encoder_reading(dev.name)}))
         self.lock = threading.RLock()  # held by the pumps while they touch drives; tests take it too
         self._stop = threading.Event()
         self._threads: list[threading.Thread] = []
@@ -249,6 +260,22 @@ class SimArm:
         self._event_file.write(json.dumps({"drive": name, "node": node, "t": t, "wall": time.time(),
                                            "event": text}) + "\n")
         self._event_file.flush()
+
+    def _encoder_reading(self, device: str) -> Callable[[], int]:
+        """What encoder ``device`` reads: the real position of the joint whose abs_encoder names it."""
+        cfg = self.cfg
+        for joint in cfg.joints.values():
+            enc = joint.abs_encoder
+            if enc is None or cfg.device_by_source(enc.source) is not cfg.devices[device]:
+                continue
+            if joint.drive is not None:
+                d = self.drives[joint.drive]
+                return lambda d=d, off=enc.offset: round(d.position) - off
+            pair = cfg.pairs[joint.pair]  # type: ignore[index]
+            a, b = self.drives[pair.drive_a], self.drives[pair.drive_b]
+            sign = 1 if joint.name == pair.sigma else -1
+            return lambda a=a, b=b, s=sign, off=enc.offset: round(a.position + s * b.position) - off
+        return lambda: 0  # an encoder no joint uses reads 0
 
     def press_switch(self, drive: str, switch_input: int, pressed: bool | None) -> None:
         """A technician holds (True), lets go of (False) or leaves (None) the switch wired to

@@ -65,7 +65,8 @@ class SimDrive:
     def __init__(self, node: int, *, clock: Clock, settings: SimSettings | None = None, serial: int = 1,
                  flash: Mapping[str, Value] | None = None, save_count: int = 0, speed_gain: float = 1.0,
                  position: int = 0, on_step: Callable[[SimDrive], None] | None = None,
-                 on_event: Callable[[SimDrive, float, str], None] | None = None) -> None:
+                 on_event: Callable[[SimDrive, float, str], None] | None = None,
+                 od_live: Mapping[tuple[int, int], Callable[[], OdValue]] | None = None) -> None:
         if isinstance(node, bool) or not isinstance(node, int) or not 1 <= node <= 127:
             raise ValueError(f"node id must be 1..127, got {node!r}")
         if not speed_gain > 0:
@@ -99,6 +100,7 @@ class SimDrive:
         self._reboot_due = after_start(self.settings.reboot_at)
         self._trip_due = after_start(self.settings.limit_trip_at)
         self.inputs = Inputs(self.settings.inputs)
+        self._od_live = dict(od_live or {})  # extra live objects: another device type's profile (sim/arm.py)
         self._boot()
 
     # -- public API --------------------------------------------------------------------------
@@ -262,7 +264,8 @@ class SimDrive:
         self._load_ram()
         self._error_field = 0  # 0x1003:1, the one stored error of a SimplIQ; a boot clears it
         live = {(0x1001, 0): lambda: self._error_register, (0x1002, 0): lambda: self._sr() & 0xFFFFFFFF,
-                (0x1003, 0): lambda: int(self._error_field != 0), (0x1003, 1): lambda: self._error_field}
+                (0x1003, 0): lambda: int(self._error_field != 0), (0x1003, 1): lambda: self._error_field,
+                **self._od_live}
         self._od = build_od(self.settings, self.serial, self.flash, live)
         self._motor_on = False
         self.motor.off()
