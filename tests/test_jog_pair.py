@@ -224,3 +224,12 @@ def test_what_a_pair_jog_takes(cfg):
         resolve_axis(cfg, "pich")
     assert (resolve_axis(cfg, "can0:11").kind, resolve_axis(cfg, "can0:11").drives) == ("motor", ("right",))
     assert resolve_axis(cfg, "roll").kind == "delta"
+
+
+def test_progress_reports_both_pair_joints(cfg):
+    seen = []
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
+        joint_jog.run(s, resolve_axis(cfg, "pitch"), JogRequest(mode="velocity", velocity="2000counts",
+                                                                duration=0.2), on_progress=seen.append)
+    assert seen and all(set(p) == {"pitch", "roll"} for p in seen)
+    assert seen[-1]["pitch"] > seen[0]["pitch"]

@@ -48,3 +48,16 @@ def test_a_flag_instead_of_an_arm_is_refused_by_name():
     with pytest.raises(TypeError, match="takes the simulated arm itself"):
         with ArmSession.open(cfg, sim=True):
             pass
+
+
+def test_a_factory_builds_the_arm_on_fresh_channels():
+    cfg = load_config(ROOT / "configs/appendix-c/example3.yaml")
+    seen = []
+
+    def factory(cfg, channels):
+        seen.append(dict(channels))
+        return SimArm(cfg, {bus: {"interface": "virtual", "channel": ch} for bus, ch in channels.items()})
+
+    first, second = SimArm.in_process(cfg, factory), SimArm.in_process(cfg, factory)
+    assert isinstance(first, SimArm) and list(seen[0]) == list(cfg.buses)
+    assert seen[0] != seen[1], "every arm gets channels of its own"

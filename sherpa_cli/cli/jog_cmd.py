@@ -206,15 +206,21 @@ def _jog_pair(st, cfg, name: str, mode: str, to, by, velocity, torque, duration,
         _pair_dry_run(st, axis, req, offline)
         return
     buses = sorted({cfg.drives[d].bus for d in axis.sensed})
+
+    def progress(joints) -> None:  # a live line on a terminal only (Output.progress)
+        st.out.progress("  ".join(f"{j}: {p} counts" for j, p in joints.items()))
+
     with st.session(buses=buses) as session:
         try:
-            result = joint_jog.run(session, axis, req)
+            result = joint_jog.run(session, axis, req, on_progress=progress)
         except BaseException as exc:
+            st.out.progress(None)
             report = getattr(exc, "motion_report", None)
             if report is not None and not st.json_mode:
                 for line in report.lines():
                     st.out.info(f"stop: {line}")
             raise
+    st.out.progress(None)
     _render_pair(st, result)
     if not result.ok:
         raise typer.Exit(1)

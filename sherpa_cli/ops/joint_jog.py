@@ -8,14 +8,14 @@ What a jog means per kind of axis (joints/diffpair.py for the transform):
   value). Position: ``m_a = (Σ'+Δ)/2``, ``m_b = (Σ'-Δ)/2`` (when Σ' and Δ differ in parity, Δ gives
   way by one count); speed: both motors at vΣ/2; current: both motors at IΣ.
 - Δ joint: likewise with Σ holding; speed ±vΔ/2, current ±IΔ.
-- one motor of a pair (the drive's name): that motor alone, in motor counts; it moves Σ and Δ
+- one motor of a pair (its drive name or BUS:NODE): that motor alone, in motor counts; it moves Σ and Δ
   together, so the target must keep both inside their normal ranges.
 
 Position moves use equal-duration profiles: each motor's SP is its share of the distance, so
 both motors start and arrive together and the held joint does not drift (seed Fig. 9.10/9.11).
 
-Everything that can be refused is refused before the guard arms anything: an unknown or ad hoc
-target, a position outside the joint's NORMAL range, a speed above the joint's limit, a current
+Everything that can be refused is refused before the guard arms anything: a name that is not a
+pair joint or pair motor, a position outside the joint's NORMAL range, a speed above the joint's limit, a current
 above the configured continuous limit, a velocity or torque jog without a time limit, and a
 position move of a joint that is not calibrated (ops/calibration.py) unless ``uncalibrated``.
 """
@@ -27,7 +27,7 @@ import time
 from dataclasses import dataclass, field
 from typing import Any, Callable, Mapping
 
-from sherpa_cli.config.model import ArmConfig, JointConfig, JointRole, PairConfig
+from sherpa_cli.config.model import ArmConfig, JointConfig, PairConfig
 from sherpa_cli.elmo.faults import decode_sr, describe_mf
 from sherpa_cli.errors import SafetyError, UsageError
 from sherpa_cli.joints import diffpair, units
@@ -335,10 +335,12 @@ def prepare(session: Any, axis: Axis, request: JogRequest) -> tuple[JogPlan, dic
 
 def run(session: Any, axis: Axis, request: JogRequest, *, guard_factory: Callable[..., Any] | None = None,
         clock: Callable[[], float] = time.monotonic, sleep: Callable[[float], None] = time.sleep,
-        on_event: Callable[[str], None] | None = None) -> JogResult:
+        on_event: Callable[[str], None] | None = None,
+        on_progress: Callable[[Mapping[str, int]], None] | None = None) -> JogResult:
     """Plan, then run the jog inside the motion guard with the limit watch; the guard stops every
     motor on the way out. A breach stops the jog at once and brings the joint back (position mode)
-    to the nearest edge of its normal range; the result says so (``ok`` False)."""
+    to the nearest edge of its normal range; the result says so (``ok`` False). ``on_progress``
+    gets the watched joints' positions (counts) at every sample."""
     from sherpa_cli.ops.motion import MotionGuard, MotionSettings
 
     cfg = session.cfg
@@ -354,7 +356,8 @@ def run(session: Any, axis: Axis, request: JogRequest, *, guard_factory: Callabl
                        joint_cpr={j.name: cfg.joints[j.name].cpr for j in axis.watched})
     guard = factory(session, refs, settings=settings, clock=clock, sleep=sleep, on_event=on_event)
     try:
-        final = _run_guarded(guard, session, cfg, axis, p, by_name, settings, joints_start, result, clock, sleep)
+        final = _run_guarded(guard, session, cfg, axis, p, by_name, settings, joints_start, result, clock, sleep,
+                             on_progress)
     except BaseException as exc:
         exc.motion_report = guard.report  # type: ignore[attr-defined]  # the CLI shows how it stopped
         raise
@@ -369,7 +372,8 @@ def run(session: Any, axis: Axis, request: JogRequest, *, guard_factory: Callabl
 
 def _run_guarded(guard: Any, session: Any, cfg: ArmConfig, axis: Axis, p: JogPlan, by_name: Mapping[str, Any],
                  settings: Any, joints_start: Mapping[str, int], result: "JogResult",
-                 clock: Callable[[], float], sleep: Callable[[float], None]) -> dict[str, int]:
+                 clock: Callable[[], float], sleep: Callable[[float], None],
+                 on_progress: Callable[[Mapping[str, int]], None] | None = None) -> dict[str, int]:
     with guard:
         clients = {d: guard.client(by_name[d]) for d in axis.drives}
 
@@ -389,6 +393,8 @@ def _run_guarded(guard: Any, session: Any, cfg: ArmConfig, axis: Axis, p: JogPla
             # (`sherpa stop` from another terminal), so the jog ends with the reason, not a timeout
             motors = {d: int(guard.query(by_name[d], "PX")) for d in clients}
             motors.update((d, int(c.get("PX"))) for d, c in others.items())
+            if on_progress is not None:
+                on_progress({j.name: j.position(motors) for j in axis.watched})
             return {d: motors[d] for d in axis.sensed}
 
         um = UM_TORQUE if p.mode == "torque" else (settings.velocity_unit_mode if p.mode == "velocity"
@@ -431,17 +437,17 @@ def _run_guarded(guard: Any, session: Any, cfg: ArmConfig, axis: Axis, p: JogPla
         if watched.outcome == "breach":
             result.outcome = "limit"
             result.breaches = list(watched.breaches)
-            _stop_now(clients, p.mode)
-            _wait_standstill(clients, guard, settings, clock, sleep)
+            stop_now(clients, p.mode)
+            wait_standstill(clients, guard, settings, clock, sleep)
             back = limit_watch.recovery_targets(axis.watched, sample(), watched.breaches, hold=held)
-            _move_to(guard, by_name, clients, back, _slow(axis), settings, clock, sleep,
+            move_to(guard, by_name, clients, back, _slow(axis), settings, clock, sleep,
                      "the move back into the normal range")
             final = sample()
             result.recovered_to = {j.name: j.position(final) for j in axis.watched}
         else:
             if p.mode != "position":
-                _stop_now(clients, p.mode)
-                _wait_standstill(clients, guard, settings, clock, sleep)
+                stop_now(clients, p.mode)
+                wait_standstill(clients, guard, settings, clock, sleep)
             final = sample()
             if held and p.mode != "position":
                 # start and stop skew between the two motors shifts the held joint a little (seed
@@ -450,7 +456,7 @@ def _run_guarded(guard: Any, session: Any, cfg: ArmConfig, axis: Axis, p: JogPla
     return final
 
 
-def _stop_now(clients: Mapping[str, Any], mode: str) -> None:
+def stop_now(clients: Mapping[str, Any], mode: str) -> None:
     """Stop every motor of the jog at once; nothing queued is sent after this."""
     for c in clients.values():
         if mode == "torque":
@@ -476,12 +482,12 @@ def _restore_held(guard: Any, by_name: Mapping[str, Any], clients: Mapping[str, 
         s2, d2 = diffpair.hold_other(value, d, "sigma")
     targets = dict(zip(axis.drives, diffpair.to_motors(s2, d2)))
     result.held_correction = {name: {"from": (d if axis.kind == "sigma" else s), "to": value}}
-    _move_to(guard, by_name, clients, targets, _slow(axis), settings, clock, sleep,
+    move_to(guard, by_name, clients, targets, _slow(axis), settings, clock, sleep,
              f"the correction of the held joint {name}")
     return {**now, **{dr: int(c.get("PX")) for dr, c in clients.items()}}
 
 
-def _move_to(guard: Any, by_name: Mapping[str, Any], clients: Mapping[str, Any], targets: Mapping[str, int],
+def move_to(guard: Any, by_name: Mapping[str, Any], clients: Mapping[str, Any], targets: Mapping[str, int],
              speed: int, settings: Any, clock: Callable[[], float], sleep: Callable[[float], None],
              what: str) -> None:
     """Position mode (UM=5; the guard cycles MO if the mode changes), every motor of ``targets`` to
@@ -506,7 +512,7 @@ def _move_to(guard: Any, by_name: Mapping[str, Any], clients: Mapping[str, Any],
         sleep(settings.poll_interval)
 
 
-def _wait_standstill(clients: Mapping[str, Any], guard: Any, settings: Any, clock: Callable[[], float],
+def wait_standstill(clients: Mapping[str, Any], guard: Any, settings: Any, clock: Callable[[], float],
                      sleep: Callable[[float], None]) -> None:
     deadline = clock() + settings.standstill_timeout
     while clock() < deadline:

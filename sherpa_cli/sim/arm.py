@@ -236,10 +236,12 @@ class SimArm:
         self._event_file: Any = None
 
     @classmethod
-    def in_process(cls, cfg: ArmConfig) -> "SimArm":
-        """The arm ``--sim`` hands to the session: fresh virtual channels, built by :meth:`for_session`."""
+    def in_process(cls, cfg: ArmConfig,
+                   factory: Callable[[ArmConfig, Mapping[str, str]], "SimArm"] | None = None) -> "SimArm":
+        """The arm ``--sim`` hands to the session: fresh virtual channels (bus -> channel name),
+        built by ``factory(cfg, channels)``, by default :meth:`for_session`."""
         token = uuid.uuid4().hex[:8]  # virtual channels are process-wide: keep sessions apart
-        return cls.for_session(cfg, {name: f"sherpa-sim-{token}-{name}" for name in cfg.buses})
+        return (factory or cls.for_session)(cfg, {name: f"sherpa-sim-{token}-{name}" for name in cfg.buses})
 
     @classmethod
     def for_session(cls, cfg: ArmConfig, channels: Mapping[str, str]) -> "SimArm":
