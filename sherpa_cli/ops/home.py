@@ -332,7 +332,7 @@ class _Runner:
         from sherpa_cli.ops import joint_jog
 
         clients = {n: guard.client(r) for n, r in refs.items() if n in targets}
-        joint_jog._move_to(guard, refs, clients, targets, max(1, speed), self.settings, self.clock, self.sleep, what)
+        joint_jog.move_to(guard, refs, clients, targets, max(1, speed), self.settings, self.clock, self.sleep, what)
 
     # kinds ------------------------------------------------------------------------------------
     def check_fault(self, c: Any) -> None:
