@@ -8,6 +8,7 @@ from typing import List, Optional
 import typer
 
 from sherpa_cli.cli.context import state
+from sherpa_cli.cli.options import YesMotion
 from sherpa_cli.errors import SafetyError, UsageError
 
 KIND_TEXT = {"home_switch": "home switch", "end_switches": "end switches", "pair": "differential pair",
@@ -18,7 +19,7 @@ def home(
     ctx: typer.Context,
     joints: Optional[List[str]] = typer.Argument(None, metavar="[JOINT]...", help="Joints, pairs (or a Σ/Δ joint: "
                                                  "its pair) or drives; default: every joint that can be homed."),
-    yes: bool = typer.Option(False, "--yes", "-y", help="Do not ask before moving (needed without a terminal)."),
+    yes: YesMotion = False,
     dry_run: bool = typer.Option(False, "--dry-run", help="Only show the plan; nothing is sent."),
     measure_range: bool = typer.Option(False, "--measure-range", help="End-switch joints: also drive to the other "
                                        "end switch and report the measured travel against the configured range."),
