@@ -154,8 +154,9 @@ def parse_sim_homing(top: Section) -> tuple[dict[str, int], dict[str, SimWiring]
     if sec.get("wiring") is not None:
         for dname, dnode in named_items(sec.req("wiring"), "drive"):
             w = Section(dnode, ["swap", "invert"], what="a mapping {swap: [[3, 4]], invert: [3]}")
+            swap_node = w.get("swap")
             swap = tuple(tuple(as_int(x) for x in as_seq(p, "a pair of inputs like [3, 4]"))
-                         for p in as_seq(w.get("swap"), "a list of input pairs")) if w.get("swap") is not None else ()
+                         for p in as_seq(swap_node, "a list of input pairs")) if swap_node is not None else ()
             for p in swap:
                 if len(p) != 2:
                     raise w.req("swap").error("each swap entry is two input numbers, like [3, 4]")

@@ -147,17 +147,17 @@ def _plain_unit(cfg: ArmConfig, joint: JointConfig, measure_range: bool) -> Home
     if home is not None:
         pos = joint.cal_pos if joint.cal_pos is not None else home.position
         b = _backoff(cfg, joint)
-        moves = (HomeMove(joint.name, "search", d, speed, _search_distance(cfg, joint)),
+        steps = (HomeMove(joint.name, "search", d, speed, _search_distance(cfg, joint)),
                  HomeMove(joint.name, "back off", -d, speed, b),
                  HomeMove(joint.name, "slow re-approach", d, _slow(cfg, speed), 2 * b),
                  HomeMove(joint.name, "return", -d, speed, b))
-        return HomeUnit(joint.name, "home_switch", (joint.name,), (joint.drive,), moves,
+        return HomeUnit(joint.name, "home_switch", (joint.name,), (joint.drive,), steps,
                         (f"input {home.input}: home switch, PX = {pos} at its edge",))
     sw = _stop_switch(joint, d)
     if sw is None:
         return f"no home switch and no {'low' if d < 0 else 'high'} end switch (the side calibration.speed points to)"
     pos = cal_position(joint, d)
-    moves = [HomeMove(joint.name, "search", d, speed, _search_distance(cfg, joint))]
+    moves: list[HomeMove] = [HomeMove(joint.name, "search", d, speed, _search_distance(cfg, joint))]
     used = [f"input {sw.input}: {'low' if d < 0 else 'high'} end switch, PX = {pos} at its edge"]
     if measure_range:
         other = _stop_switch(joint, -d)
