@@ -379,10 +379,15 @@ class SimArm:
         for n, drive in on_bus.items():
             by_node.setdefault(drive.node, []).append(n)  # two entries: a duplicate node id
         next_tick = 0.0
+        last_tick = self.clock.now()
         try:
             while not self._stop.is_set():
                 msg = bus.recv(timeout=self.tick_s)
                 with self.lock:
+                    # running motors: every drive of the bus up to (almost) now together first
+                    stepped_to = self.clock.now()
+                    self._lockstep(on_bus, last_tick, stepped_to)
+                    last_tick = stepped_to
                     # a frame advances only the drives it reached (their replies go out now);
                     # every drive advances at least once per tick_s (motion, heartbeats, latency)
                     touched: list[str] = []
@@ -405,6 +410,21 @@ class SimArm:
         except BaseException as exc:  # a dead pump must be visible to tests and to `sim --serve`
             if not self._stop.is_set():
                 self.errors.append(exc)
+
+    @staticmethod
+    def _lockstep(on_bus: Mapping[str, SimDrive], since: float, now: float) -> None:
+        """While a motor runs, advance the bus's drives together, one model step at a time, so the
+        mechanics (a pair's Σ/Δ switches, its joint-space hard stops) see both motors at the same
+        instant even when this pump runs late; each drive's own tick() then reaches ``now``."""
+        drives = list(on_bus.values())
+        if not any(d.motor_on for d in drives):
+            return
+        step = min(d.settings.model_step_s for d in drives)
+        t = since + step
+        while t < now:
+            for d in drives:
+                d.advance_to(t)
+            t += step
 
     def _dispatch(self, can_id: int, data: bytes, on_bus: Mapping[str, SimDrive],
                   by_node: Mapping[int, list[str]]) -> list[str]:
