@@ -149,7 +149,7 @@ def test_long_float_query_from_the_tool_is_the_typed_form():
 # -- a stock canopen client against `sherpa sim --serve` ------------------------------------------
 
 @pytest.mark.crossprocess
-def test_stock_canopen_client_gets_no_sdo_answer_from_a_stopped_node(served_sim):
+def test_stock_canopen_client_gets_no_sdo_answer_from_a_stopped_node(served_sim):  # noqa: F811 (pytest fixture)
     import canopen
     from canopen.sdo.exceptions import SdoCommunicationError
 

@@ -515,17 +515,17 @@ def _check_bounds(cfg: ArmConfig, locs: Locs, r: _Report) -> None:
         within(getattr(cfg.il_codes, key), 0, IL_CODE_MAX, locs.get("il_codes", key), f"IL code {key}",
                " (the drive's input logic table)")
 
-    for name, f in cfg.sim.items():
-        at = lambda k: locs.get("sim", "drives", name, k)  # noqa: E731
-        within(f.reply_latency, 0.0, WAIT_MAX, at("reply_latency"), "reply_latency", " s")
-        within(f.sdo_latency, 0.0, WAIT_MAX, at("sdo_latency"), "sdo_latency", " s")
+    for name, sim_drive in cfg.sim.items():
+        at_sim = lambda k: locs.get("sim", "drives", name, k)  # noqa: E731
+        within(sim_drive.reply_latency, 0.0, WAIT_MAX, at_sim("reply_latency"), "reply_latency", " s")
+        within(sim_drive.sdo_latency, 0.0, WAIT_MAX, at_sim("sdo_latency"), "sdo_latency", " s")
         for key in ("die_at", "reboot_at", "limit_trip_at"):
-            within(getattr(f, key), 0.0, SIM_TIME_MAX, at(key), key, " s")
-        within(f.speed_gain, 0.0, SPEED_GAIN_MAX, at("speed_gain"), "speed_gain")
-        within(f.heartbeat_ms, 0, 0xFFFF, at("heartbeat_ms"), "heartbeat_ms", " ms (0x1017 is u16)")
-        within(f.seed, 0, 2**32 - 1, at("seed"), "seed")
-        if _bad_number(f.drop_probability):
-            r.error(at("drop_probability"), f"drop_probability {f.drop_probability} is not a finite number")
+            within(getattr(sim_drive, key), 0.0, SIM_TIME_MAX, at_sim(key), key, " s")
+        within(sim_drive.speed_gain, 0.0, SPEED_GAIN_MAX, at_sim("speed_gain"), "speed_gain")
+        within(sim_drive.heartbeat_ms, 0, 0xFFFF, at_sim("heartbeat_ms"), "heartbeat_ms", " ms (0x1017 is u16)")
+        within(sim_drive.seed, 0, 2**32 - 1, at_sim("seed"), "seed")
+        if _bad_number(sim_drive.drop_probability):
+            r.error(at_sim("drop_probability"), f"drop_probability {sim_drive.drop_probability} is not a finite number")
 
     for b in cfg.buses.values():
         within(b.bitrate, 1, BITRATE_MAX, locs.get("bus", b.name, "bitrate"), "bitrate", " bit/s")
@@ -544,19 +544,20 @@ def _check_bounds(cfg: ArmConfig, locs: Locs, r: _Report) -> None:
         for key, entry in table.items():
             if ("catalog", kind, key) not in locs.table:
                 continue
-            for f in fields:
-                bad = _bad_number(getattr(entry, f))
+            for field_name in fields:
+                bad = _bad_number(getattr(entry, field_name))
                 if bad:
-                    r.error(locs.get("catalog", kind, key, f), f"{f} of '{key}' {bad}")
+                    r.error(locs.get("catalog", kind, key, field_name), f"{field_name} of '{key}' {bad}")
 
     for owner, cur in [(("joint", j.name), j.current) for j in cfg.joints.values()] + \
             [(("pair", p.name), p.current) for p in cfg.pairs.values()]:
         if cur is None:
             continue
-        for f in ("continuous", "peak"):
-            bad = _bad_number(getattr(cur, f))
+        for field_name in ("continuous", "peak"):
+            bad = _bad_number(getattr(cur, field_name))
             if bad:
-                r.error(locs.get(*owner, "current", f), f"current {f} {getattr(cur, f)} {bad}")
+                r.error(locs.get(*owner, "current", field_name),
+                        f"current {field_name} {getattr(cur, field_name)} {bad}")
         within(cur.peak_time, 0.0, PEAK_TIME_MAX, locs.get(*owner, "current", "peak_time"), "current peak_time",
                " s (PL[2])")
 

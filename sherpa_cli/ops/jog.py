@@ -213,7 +213,11 @@ def _precheck(session: Any, target: JogTarget, req: JogRequest) -> Any:
     c = session.client(target.ref)
     c.nmt_start()
     start = int(c.get("PX"))
-    goal = _counts_to(target, req.to) if req.to is not None else start + _counts_to(target, req.by)
+    if req.to is not None:
+        goal = _counts_to(target, req.to)
+    else:
+        assert req.by is not None  # check_request: exactly one of --to and --by
+        goal = start + _counts_to(target, req.by)
     lo, hi = joint.normal_range
     if not lo <= goal <= hi:
         raise UsageError(f"{joint.name}: target {goal} counts is outside the joint's normal range [{lo}, {hi}]",
