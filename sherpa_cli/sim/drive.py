@@ -550,7 +550,8 @@ class SimDrive:
         s, r = self.settings, self.ram
         update, value = int(r.get("HM[5]", 0)), int(r.get("HM[2]", 0))
         if update == s.hm_px_absolute:
-            self._px_offset = value - self.motor.counts
+            # the event's position is the nearest count (an encoder edge), not the floor of the motor's
+            self._px_offset = value - round(self.motor.position)
         elif update == s.hm_px_absolute + 1:  # relative: the event's position moves by HM[2]
             self._px_offset += value
         if int(r.get("HM[4]", 0)) == s.hm_after_stop and self._motor_on:
