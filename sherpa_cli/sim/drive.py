@@ -542,16 +542,17 @@ class SimDrive:
         level = self.inputs.pin(int(self.ram.get("HM[3]", 0)) - self.settings.hm_event_input_base)
         if level and not self._hm_pin:
             self._hm_pin = None
-            self._home_event()
+            self._home_event(edge=True)
         else:
             self._hm_pin = level
 
-    def _home_event(self) -> None:
+    def _home_event(self, edge: bool = False) -> None:
         s, r = self.settings, self.ram
         update, value = int(r.get("HM[5]", 0)), int(r.get("HM[2]", 0))
         if update == s.hm_px_absolute:
-            # the event's position is the nearest count (an encoder edge), not the floor of the motor's
-            self._px_offset = value - round(self.motor.position)
+            # an input edge (the motor moving) is taken at the nearest count of the motor's position,
+            # not its floor; an immediate event sets PX itself to the value (it reads back as written)
+            self._px_offset = value - (round(self.motor.position) if edge else self.motor.counts)
         elif update == s.hm_px_absolute + 1:  # relative: the event's position moves by HM[2]
             self._px_offset += value
         if int(r.get("HM[4]", 0)) == s.hm_after_stop and self._motor_on:
