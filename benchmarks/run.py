@@ -457,6 +457,64 @@ def bench_deadman(rounds: int = 3) -> Result:
                   f"{consumer * 1000:.0f} ms; sim served over python-can-remote on 127.0.0.1")
 
 
+# where the joints stand at power-up: the middle of their ranges (the sim default), away from every switch
+HOME_POWER_UP = {"shoulder_pitch": 0, "shoulder_roll": 0, "elbow_stiffness": 0}
+
+
+def bench_home() -> Result:
+    """`home` of the shoulder pair and the elbow (its stiffness joint: end switches; elbow_pitch has an
+    absolute encoder, homed without motion) on the simulated sherpa-arm, in process, real time.
+    Ratio: wall time of run_home / the time the motors were actually moving (sampled every 2 ms from
+    the simulator; searches, back-offs and re-approaches run at cal_speed and cal_speed / 4), so
+    the overhead -- guard set-up, MO settle, polling, the stops -- is what is judged. Goal <= 1.3."""
+    import os
+    import tempfile
+    import threading
+
+    import yaml
+
+    from sherpa_cli.config import load_config
+    from sherpa_cli.ops.home import plan_home, run_home
+    from sherpa_cli.ops.session import ArmSession
+    from sherpa_cli.sim.arm import SimArm
+
+    with tempfile.TemporaryDirectory() as tmp:
+        os.environ["XDG_STATE_HOME"] = tmp
+        text = (ROOT / "configs" / "sherpa-arm.yaml").read_text(encoding="utf-8")
+        path = Path(tmp) / "arm.yaml"
+        path.write_text(text + "\n" + yaml.safe_dump({"sim": {"power_up": HOME_POWER_UP}}), encoding="utf-8")
+        cfg = load_config(path)
+        plan = plan_home(cfg, ["shoulder_diff", "elbow_pitch", "elbow_stiffness"])
+        with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as session:
+            arm = session.sim
+            moving = [0.0]
+            stop = threading.Event()
+
+            def sample() -> None:
+                last = time.monotonic()
+                while not stop.is_set():
+                    time.sleep(0.002)
+                    now = time.monotonic()
+                    with arm.lock:
+                        busy = any(arm.drives[d].motor.v != 0 for u in plan.units for d in u.drives)
+                    if busy:
+                        moving[0] += now - last
+                    last = now
+
+            sampler = threading.Thread(target=sample, daemon=True)
+            sampler.start()
+            t0 = time.monotonic()
+            run_home(session, plan)
+            wall = time.monotonic() - t0
+            stop.set()
+            sampler.join()
+    goal = "<= 1.3"
+    ratio = wall / moving[0]
+    return Result("home", round(wall, 2), "s", round(ratio, 2), goal, _judge(ratio, goal),
+                  f"run_home of shoulder_diff, elbow_pitch, elbow_stiffness: {wall:.1f} s wall, motors moving "
+                  f"{moving[0]:.1f} s (simulator, in process, real time)")
+
+
 def _serve_sim(env: dict, log: Path) -> tuple[subprocess.Popen, str]:
     import socket
 
@@ -619,6 +677,7 @@ BENCHMARKS: dict[str, Callable[[], Result]] = {
     "program": bench_program,
     "startup": bench_startup,
     "deadman": bench_deadman,
+    "home": bench_home,
     "record": bench_record,
     "capture": bench_capture,
 }

@@ -98,7 +98,7 @@ def root(
 
 def _register() -> None:
     # In the order a technician meets them at the arm: find, look, back up, program, commission.
-    from sherpa_cli.cli import (cmd_cmd, config_cmd, diffdrive_cmd, identify_cmd, jog_cmd, limits_cmd, monitor_cmd,
+    from sherpa_cli.cli import (cmd_cmd, config_cmd, diffdrive_cmd, home_cmd, identify_cmd, jog_cmd, limits_cmd, monitor_cmd,
                                 params_cmd, program_cmd, recipe_cmd, scan_cmd, sim_cmd, stop_cmd)
 
     app.command("scan")(scan_cmd.scan)
@@ -107,6 +107,7 @@ def _register() -> None:
     app.command("cmd")(cmd_cmd.cmd)
     app.command("jog")(jog_cmd.jog)
     app.command("stop")(stop_cmd.stop)
+    app.command("home")(home_cmd.home)
     app.command("dump-params")(params_cmd.dump_params)
     app.command("program-limits")(program_cmd.program_limits)
     app.command("commission")(recipe_cmd.commission)

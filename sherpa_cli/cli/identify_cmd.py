@@ -29,13 +29,27 @@ def identify(
     from sherpa_cli.ops.identify import identify as run_identify
     from sherpa_cli.ops.targets import drive_names
 
+    from sherpa_cli.ops.identify import identify_devices
+
     st = state(ctx)
     cfg = st.load_config()
-    drives = drive_names(cfg, targets)
-    buses = sorted({cfg.drives[d].bus for d in drives})
+    # `devices:` (a CANopen encoder, ...) by name or BUS:NODE; the rest resolve as drives
+    devices = [d.name for d in cfg.devices.values()] if not targets else \
+        [cfg.device_by_source(t).name for t in targets if cfg.device_by_source(t) is not None]  # type: ignore[union-attr]
+    rest = [t for t in targets or [] if cfg.device_by_source(t) is None]
+    drives = drive_names(cfg, rest) if rest or not targets else []
+    buses = sorted({cfg.drives[d].bus for d in drives} | {cfg.devices[d].bus for d in devices})
     with st.session(buses=buses) as session:
         report = run_identify(session, drives)
-    _render(st, report)
+        found = identify_devices(session, devices) if devices else []
+    if st.json_mode and found:
+        st.out.json({**report.as_json(), "devices": [d.as_json() for d in found]})
+    else:
+        if drives or not found:
+            _render(st, report)
+        _render_devices(st, found)
+    if any(d.error for d in found) and not report.errors:
+        raise typer.Exit(int(ExitCode.PROBLEM))
     if report.errors:
         first = report.errors[0]
         if len(report.errors) > 1 and hasattr(first, "hint"):
@@ -44,6 +58,22 @@ def identify(
         raise first
     if report.findings:
         raise typer.Exit(int(ExitCode.PROBLEM))
+
+
+def _render_devices(st, found) -> None:
+    if st.json_mode:
+        return
+    for d in found:
+        title = f"{d.device} ({d.bus}:{d.node}) - {d.type}"
+        if d.error:
+            st.out.table(title, ["field", "value", "meaning"], [["error", "not read", d.error]])
+            continue
+        rows = [["device type", _hex(d.device_type), f"CiA {d.device_type & 0xFFFF}" if d.device_type else ""],
+                ["vendor id", _hex(d.vendor_id), ""], ["device name", d.name or "-", "0x1008"]]
+        if d.position is not None:
+            meaning = f"{d.joint} = {d.joint_position} with its offset" if d.joint else "no joint uses it"
+            rows.append(["position", str(d.position), f"0x6004; {meaning}"])
+        st.out.table(title, ["field", "value", "meaning"], rows)
 
 
 def _hex(value, width: int = 8) -> str:

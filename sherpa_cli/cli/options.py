@@ -49,6 +49,9 @@ VerifyFlash = Annotated[bool, typer.Option(
 
 ApplyMotion = Annotated[bool, typer.Option(
     "--apply", help="Move the motor; without it only show what would be sent (nothing is written).")]
+YesMotion = Annotated[bool, typer.Option(
+    "--yes", "-y", help="Do not ask before moving (needed when stdin is not a terminal: without it `home` refuses "
+    "before anything moves).")]
 
 # -- recipes (recipe run, commission) -------------------------------------------------------------
 

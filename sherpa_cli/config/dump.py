@@ -14,7 +14,7 @@ from typing import Any
 import yaml
 
 from sherpa_cli.config.catalog import builtin_catalog
-from sherpa_cli.config.model import (ArmConfig, BusConfig, CurrentLimits, ILCodes, JointConfig, JointRole,
+from sherpa_cli.config.model import (ArmConfig, BusConfig, CurrentLimits, HomingConfig, ILCodes, JointConfig, JointRole,
                                      JoystickConfig, JoystickMap, MotionConfig, ProtocolConfig, SimDriveConfig)
 
 
@@ -26,6 +26,8 @@ def dump_native(cfg: ArmConfig) -> str:
         sections.append({"protocol": dataclasses.asdict(cfg.protocol)})
     if cfg.motion != MotionConfig():
         sections.append({"motion": dataclasses.asdict(cfg.motion)})
+    if cfg.homing != HomingConfig():
+        sections.append({"homing": dataclasses.asdict(cfg.homing)})
     if cfg.joystick != JoystickConfig():
         joy = cfg.joystick
         base = JoystickMap()
@@ -41,12 +43,20 @@ def dump_native(cfg: ArmConfig) -> str:
         sim["extra_nodes"] = [dataclasses.asdict(e) for e in cfg.sim_extra_nodes]
     if cfg.sim_reply_timeout != ArmConfig.sim_reply_timeout:
         sim["reply_timeout"] = cfg.sim_reply_timeout
+    if cfg.sim_power_up:
+        sim["power_up"] = dict(cfg.sim_power_up)
+    if cfg.sim_wiring:
+        sim["wiring"] = {name: _drop_none({"swap": [list(p) for p in w.swap] or None, "invert": list(w.invert) or None})
+                         for name, w in cfg.sim_wiring.items()}
     if sim:
         sections.append({"sim": sim})
     sections.append({"buses": {b.name: _bus(b) for b in cfg.buses.values()}})
     sections.append({"drives": {d.name: _drop_none({"bus": d.bus, "node": d.node, "model": d.model,
                                                     "motor": d.motor})
                                 for d in cfg.drives.values()}})
+    if cfg.devices:
+        sections.append({"devices": {d.name: {"type": d.type, "bus": d.bus, "node": d.node}
+                                     for d in cfg.devices.values()}})
     plain = {j.name: {"drive": j.drive, **_joint_body(j)} for j in cfg.joints.values() if j.role is JointRole.PLAIN}
     for name, j in ((j.name, j) for j in cfg.joints.values() if j.role is JointRole.PLAIN):
         if j.current is not None:

@@ -87,6 +87,27 @@ class DriveConfig:
     where: Location = field(default_factory=Location, compare=False)
 
 
+# The seed's dev_type selected device-specific code; here a device type names a class in the
+# registry of sherpa_cli/devices (the way python-can maps interface names to bus classes).
+# "elmo" is every entry of `drives:`; `devices:` holds the other types.
+DEVICE_TYPES = ("elmo", "canopen-encoder")
+
+
+@dataclass(frozen=True)
+class DeviceConfig:
+    """A CAN device that is not a drive (`devices:`), e.g. a CANopen absolute encoder (CiA 406)."""
+
+    name: str
+    type: str  # a key of DEVICE_TYPES other than "elmo"
+    bus: str
+    node: int
+    where: Location = field(default_factory=Location, compare=False)
+
+    @property
+    def address(self) -> str:
+        return f"{self.bus}:{self.node}"
+
+
 @dataclass(frozen=True)
 class CurrentLimits:
     continuous: float  # A -> CL[1]
@@ -199,6 +220,26 @@ class ProtocolConfig:
     calibration_flag: int = 3
 
 
+@dataclass(frozen=True)
+class HomingConfig:
+    """`sherpa home` (docs/home.md): the drive's HM[] codes and the search shape.
+
+    The HM[3] event codes and the HM[4]/HM[5] values differ between public sources
+    (motion-and-recording.md §2, UNCONFIRMED), so each is a named setting with the notes' value
+    as default; the simulator plays whatever the config says.
+    """
+
+    event_immediate: int = 0  # HM[3]: home event at once ([KX2])
+    event_input_base: int = 8  # HM[3] = base + n: event on digital input n ([COB]: 9 = input 1)
+    after_stop: int = 0  # HM[4]: stop the motion at the event ([MBARI])
+    after_nothing: int = 2  # HM[4]: let the motion go on
+    px_absolute: int = 0  # HM[5]: PX = HM[2] at the event
+    px_none: int = 2  # HM[5]: PX is left alone (the pair's Δ search only stops at its edge)
+    slow_divisor: int = 4  # the re-approach runs at cal_speed / this
+    backoff: int = 0  # counts to back off the switch before the re-approach; 0 = the joint's margin (at least 10)
+    search_margin: int = 0  # the bounded search goes the full range plus this; 0 = the joint's margin
+
+
 STOP_METHODS = ("auto", "st", "jv0")
 
 
@@ -283,6 +324,14 @@ class SimDriveConfig:
 
 
 @dataclass(frozen=True)
+class SimWiring:
+    """`sim: wiring:` a drive's input wiring faults, for `home --check-wiring` (only the simulator reads it)."""
+
+    swap: tuple[tuple[int, int], ...] = ()  # pairs of inputs whose wires are swapped
+    invert: tuple[int, ...] = ()  # inputs whose switch is wired inverted (active while released)
+
+
+@dataclass(frozen=True)
 class SimExtraNode:
     """A node the simulator puts on a bus although the config names no drive there (a stray device)."""
 
@@ -300,12 +349,17 @@ class ArmConfig:
     joints: Mapping[str, JointConfig]
     pairs: Mapping[str, PairConfig]
     catalog: Catalog
+    devices: Mapping[str, DeviceConfig] = field(default_factory=dict)  # `devices:` (not drives)
     il_codes: ILCodes = field(default_factory=ILCodes)
     protocol: ProtocolConfig = field(default_factory=ProtocolConfig)
     motion: MotionConfig = field(default_factory=MotionConfig)
     joystick: JoystickConfig = field(default_factory=JoystickConfig)
+    homing: HomingConfig = field(default_factory=HomingConfig)
     sim: Mapping[str, SimDriveConfig] = field(default_factory=dict)  # drive name -> simulated faults
     sim_extra_nodes: tuple[SimExtraNode, ...] = ()  # `sim: extra_nodes:`, only the simulator reads it
+    # `sim: power_up:` joint name -> the joint's real position (counts) at power-up, while PX reads 0
+    sim_power_up: Mapping[str, int] = field(default_factory=dict)
+    sim_wiring: Mapping[str, SimWiring] = field(default_factory=dict)  # `sim: wiring:` drive name -> faults
     # `sim: reply_timeout:` s to wait for one interpreter reply with --sim (instead of protocol.reply_timeout):
     # the in-process simulator shares a possibly loaded machine, so it is given patient timeouts
     sim_reply_timeout: float = 1.0
@@ -318,6 +372,12 @@ class ArmConfig:
             if joint.drive == drive:
                 return joint
         return None
+
+    def device_by_source(self, source: str) -> DeviceConfig | None:
+        """The device an ``abs_encoder.source`` names: its name or BUS:NODE."""
+        if source in self.devices:
+            return self.devices[source]
+        return next((d for d in self.devices.values() if d.address == source), None)
 
     def pair_of_drive(self, drive: str) -> PairConfig | None:
         for pair in self.pairs.values():

@@ -12,17 +12,19 @@ import dataclasses
 from pathlib import PurePath
 
 from sherpa_cli.config.catalog import builtin_catalog
-from sherpa_cli.config.model import (AbsEncoderConfig, ArmConfig, BusConfig, Catalog, CurrentLimits, DriveConfig,
-                                     DriveModel, ILCodes, JoystickConfig, JoystickMap, MotionConfig, ProtocolConfig, SimDriveConfig, SimExtraNode, JointConfig, JointRole, MotorModel, PairConfig,
+from sherpa_cli.config.model import (AbsEncoderConfig, ArmConfig, BusConfig, Catalog, CurrentLimits, DeviceConfig, DriveConfig,
+                                     DriveModel, HomingConfig, ILCodes, JoystickConfig, JoystickMap, MotionConfig, ProtocolConfig, SimDriveConfig, SimExtraNode, SimWiring, JointConfig, JointRole, MotorModel, PairConfig,
                                      SwitchConfig, SwitchKind)
 from sherpa_cli.config.yamlnodes import (Locs, Section, YNode, as_int, as_map, as_name, as_seq, as_str, named_items,
                                          plain, suggest)
 from sherpa_cli.errors import ConfigError
 
-TOP_KEYS = ["name", "il_codes", "protocol", "motion", "joystick", "sim", "buses", "drives", "joints", "pairs", "catalog"]
+TOP_KEYS = ["name", "il_codes", "protocol", "motion", "homing", "joystick", "sim", "buses", "drives", "devices", "joints",
+            "pairs", "catalog"]
 IL_KEYS = ["stop", "home", "unused"]
 BUS_KEYS = ["interface", "channel", "bitrate", "send_interval_us", "poll_interval_ms", "options"]
 DRIVE_KEYS = ["bus", "node", "model", "motor"]
+DEVICE_KEYS = ["type", "bus", "node"]
 JOINT_BODY_KEYS = ["cpr", "range", "velocity", "acceleration", "switches", "calibration", "abs_encoder"]
 JOINT_KEYS = ["drive", *JOINT_BODY_KEYS, "current"]
 PAIR_JOINT_KEYS = ["name", *JOINT_BODY_KEYS]
@@ -123,7 +125,7 @@ def parse_joystick(top: Section, locs: Locs) -> JoystickConfig:
 
 SIM_DRIVE_KEYS = [f.name for f in dataclasses.fields(SimDriveConfig)]
 SIM_EXTRA_KEYS = [f.name for f in dataclasses.fields(SimExtraNode)]
-SIM_KEYS = ["drives", "extra_nodes", "reply_timeout"]
+SIM_KEYS = ["drives", "extra_nodes", "reply_timeout", "power_up", "wiring"]
 
 
 def parse_sim(top: Section, locs: Locs) -> tuple[dict[str, SimDriveConfig], tuple[SimExtraNode, ...]]:
@@ -155,6 +157,43 @@ def parse_sim(top: Section, locs: Locs) -> tuple[dict[str, SimDriveConfig], tupl
     return drives, tuple(extras)
 
 
+HOMING_KEYS = [f.name for f in dataclasses.fields(HomingConfig)]
+
+
+def parse_homing(top: Section, locs: Locs) -> HomingConfig:
+    sec = top.section("homing", HOMING_KEYS, what="a mapping of homing settings (HM[] codes, backoff, ...)")
+    if sec is None:
+        return HomingConfig()
+    register(locs, ("homing",), sec)
+    d = HomingConfig()
+    return HomingConfig(**{f.name: sec.int(f.name, getattr(d, f.name)) for f in dataclasses.fields(HomingConfig)})
+
+
+def parse_sim_homing(top: Section) -> tuple[dict[str, int], dict[str, SimWiring]]:
+    """``sim: power_up:`` {joint: counts} and ``sim: wiring:`` {drive: {swap: [[3, 4]], invert: [3]}}."""
+    sec = top.section("sim", SIM_KEYS)
+    if sec is None:
+        return {}, {}
+    power_up: dict[str, int] = {}
+    if sec.get("power_up") is not None:
+        for jname, jnode in named_items(sec.req("power_up"), "joint"):
+            power_up[jname] = as_int(jnode)
+    wiring: dict[str, SimWiring] = {}
+    if sec.get("wiring") is not None:
+        for dname, dnode in named_items(sec.req("wiring"), "drive"):
+            w = Section(dnode, ["swap", "invert"], what="a mapping {swap: [[3, 4]], invert: [3]}")
+            swap_node = w.get("swap")
+            swap = tuple(tuple(as_int(x) for x in as_seq(p, "a pair of inputs like [3, 4]"))
+                         for p in as_seq(swap_node, "a list of input pairs")) if swap_node is not None else ()
+            for p in swap:
+                if len(p) != 2:
+                    raise w.req("swap").error("each swap entry is two input numbers, like [3, 4]")
+            invert = tuple(as_int(x) for x in as_seq(w.req("invert"), "a list of inputs")) \
+                if w.get("invert") is not None else ()
+            wiring[dname] = SimWiring(swap=swap, invert=invert)  # type: ignore[arg-type]
+    return power_up, wiring
+
+
 def parse_sim_reply_timeout(top: Section) -> float:
     """``sim: reply_timeout:`` (the interpreter reply timeout with --sim); parse_sim checked the section."""
     sec = top.section("sim", SIM_KEYS)
@@ -177,7 +216,9 @@ def load_native(root: YNode, filename: str) -> tuple[ArmConfig, Locs, list[str]]
     protocol = parse_protocol(top, locs)
     motion = parse_motion(top, locs)
     joystick = parse_joystick(top, locs)
+    homing = parse_homing(top, locs)
     sim, sim_extra_nodes = parse_sim(top, locs)
+    sim_power_up, sim_wiring = parse_sim_homing(top)
     sim_reply_timeout = parse_sim_reply_timeout(top)
     catalog = parse_catalog(top.get("catalog"), locs)
 
@@ -204,6 +245,14 @@ def load_native(root: YNode, filename: str) -> tuple[ArmConfig, Locs, list[str]]
             name=dname, bus=as_str(sec.req("bus")), node=as_int(sec.req("node")),
             model=catalog_key(model) if model is not None else None,
             motor=catalog_key(motor) if motor is not None else None, where=sec.node.loc)
+
+    devices: dict[str, DeviceConfig] = {}
+    if top.get("devices") is not None:
+        for dname, dnode in named_items(top.req("devices"), "device"):
+            sec = Section(dnode, DEVICE_KEYS, what="a device mapping like {type: canopen-encoder, bus: can1, node: 45}")
+            register(locs, ("device", dname), sec)
+            devices[dname] = DeviceConfig(name=dname, type=as_str(sec.req("type")), bus=as_str(sec.req("bus")),
+                                          node=as_int(sec.req("node")), where=sec.node.loc)
 
     joints: dict[str, JointConfig] = {}
     joints_node = top.get("joints")
@@ -245,9 +294,10 @@ def load_native(root: YNode, filename: str) -> tuple[ArmConfig, Locs, list[str]]
             pairs[pname] = PairConfig(name=pname, drive_a=pair_drives[0], drive_b=pair_drives[1], sigma=names[0],
                                       delta=names[1], current=current, where=sec.node.loc)
 
-    cfg = ArmConfig(name=name, buses=buses, drives=drives, joints=joints, pairs=pairs, catalog=catalog,
-                    il_codes=il, protocol=protocol, motion=motion, joystick=joystick, sim=sim, sim_extra_nodes=sim_extra_nodes,
-                    sim_reply_timeout=sim_reply_timeout,
+    cfg = ArmConfig(name=name, buses=buses, drives=drives, joints=joints, pairs=pairs, catalog=catalog, devices=devices,
+                    il_codes=il, protocol=protocol, motion=motion, joystick=joystick, sim=sim,
+                    sim_extra_nodes=sim_extra_nodes, sim_reply_timeout=sim_reply_timeout, homing=homing,
+                    sim_power_up=sim_power_up, sim_wiring=sim_wiring,
                     source=filename)
     return cfg, locs, []
 

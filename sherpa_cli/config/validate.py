@@ -78,6 +78,7 @@ def validate(cfg: ArmConfig, locs: Locs, warnings: list[str] | None = None, *,
     _check_catalog(cfg, locs, r)
     _check_buses(cfg, locs, r)
     _check_drives(cfg, locs, r)
+    _check_devices(cfg, locs, r)
     _check_names(cfg, locs, r)
     _check_usage(cfg, locs, r)
     for joint in cfg.joints.values():
@@ -171,6 +172,37 @@ def _check_sim(cfg: ArmConfig, locs: Locs, r: _Report) -> None:
             r.error(locs.get(*where, "node"), f"node id {extra.node} out of range 1..127")
         if not 0 <= extra.vendor_id <= 0xFFFFFFFF:
             r.error(locs.get(*where, "vendor_id"), f"vendor_id {extra.vendor_id} does not fit 32 bits")
+
+
+def _check_devices(cfg: ArmConfig, locs: Locs, r: _Report) -> None:
+    from sherpa_cli.config.model import DEVICE_TYPES
+
+    taken = {(d.bus, d.node): f"drive {d.name}" for d in cfg.drives.values()}
+    for dev in cfg.devices.values():
+        where = ("device", dev.name)
+        if dev.type not in DEVICE_TYPES or dev.type == "elmo":
+            others = [t for t in DEVICE_TYPES if t != "elmo"]
+            r.error(locs.get(*where, "type"), f"device {dev.name}: unknown type '{dev.type}'; known: "
+                    f"{', '.join(others)} (Elmo drives go under drives:)")
+        if dev.bus not in cfg.buses:
+            r.error(locs.get(*where, "bus"), f"device {dev.name} on unknown bus '{dev.bus}'; "
+                    f"configured buses: {', '.join(cfg.buses)}")
+        if not 1 <= dev.node <= 127:
+            r.error(locs.get(*where, "node"), f"device {dev.name}: node id {dev.node} out of range 1..127")
+        other = taken.get((dev.bus, dev.node))
+        if other is not None:
+            r.error(locs.get(*where, "node"), f"device {dev.name}: node {dev.bus}:{dev.node} is already {other}")
+        taken[(dev.bus, dev.node)] = f"device {dev.name}"
+    for joint in cfg.joints.values():
+        enc = joint.abs_encoder
+        if enc is None or enc.source.lower().startswith("drive:"):
+            continue
+        import re
+
+        if cfg.device_by_source(enc.source) is None and re.fullmatch(r"[\w-]+:\d+", enc.source):
+            r.error(locs.get("joint", joint.name, "abs_encoder", "source"),
+                    f"{joint.name}: abs_encoder source '{enc.source}' names no configured device "
+                    f"(devices: {', '.join(cfg.devices) or 'none'})")
 
 
 def _check_il_codes(cfg: ArmConfig, locs: Locs, r: _Report) -> None:

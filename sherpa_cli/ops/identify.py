@@ -176,3 +176,54 @@ def find_mismatches(cfg: ArmConfig, read: Sequence[DriveIdentity]) -> dict[str, 
                     text = f"{what} {shown}: the {model} drives disagree, no {what} is in the majority"
                 out.setdefault(m.drive, []).append(text)
     return out
+
+
+# -- other device types (`devices:`, sherpa_cli/devices) -------------------------------------------
+
+@dataclass(frozen=True)
+class DeviceIdentity:
+    device: str
+    type: str
+    bus: str
+    node: int
+    device_type: int | None = None  # 0x1000
+    vendor_id: int | None = None  # 0x1018:1
+    name: str | None = None  # 0x1008
+    position: int | None = None  # CiA 406 0x6004 (encoders)
+    joint: str | None = None  # the joint whose abs_encoder it is
+    joint_position: int | None = None  # position + that joint's abs_encoder offset
+    error: str | None = None
+
+    def as_json(self) -> dict[str, Any]:
+        return {"device": self.device, "type": self.type, "bus": self.bus, "node": self.node,
+                "device_type": self.device_type, "vendor_id": self.vendor_id, "name": self.name,
+                "position": self.position, "joint": self.joint, "joint_position": self.joint_position,
+                "error": self.error}
+
+
+def identify_devices(session: Any, names: Sequence[str]) -> list[DeviceIdentity]:
+    """Identity by SDO (0x1000, 0x1018:1, 0x1008) and, for an encoder, its position (0x6004)."""
+    from sherpa_cli.devices import CanOpenEncoder, device_class
+    from sherpa_cli.errors import SdoError
+    from sherpa_cli.ops.targets import DriveRef
+
+    cfg: ArmConfig = session.cfg
+    out = []
+    for name in names:
+        dev = cfg.devices[name]
+        sdo = session.sdo(DriveRef(dev.name, dev.bus, dev.node))
+        joint = next((j for j in cfg.joints.values()
+                      if j.abs_encoder is not None and cfg.device_by_source(j.abs_encoder.source) is dev), None)
+        try:
+            device_type = int.from_bytes(sdo.upload(0x1000, 0)[:4], "little")
+            vendor = int.from_bytes(sdo.upload(0x1018, 1)[:4], "little")
+            text = bytes(sdo.upload(0x1008, 0)).decode("latin-1").rstrip("\x00")
+            impl = device_class(dev.type)(sdo)
+            pos = impl.position() if isinstance(impl, CanOpenEncoder) else None
+        except SdoError as exc:
+            out.append(DeviceIdentity(dev.name, dev.type, dev.bus, dev.node, error=str(exc)))
+            continue
+        jpos = pos + joint.abs_encoder.offset if joint is not None and pos is not None else None  # type: ignore[union-attr]
+        out.append(DeviceIdentity(dev.name, dev.type, dev.bus, dev.node, device_type, vendor, text, pos,
+                                  joint.name if joint is not None else None, jpos))
+    return out

@@ -301,6 +301,10 @@ def _read_identity(network: Any, node: int) -> tuple[int | None, str | None, lis
 # -- putting it together --------------------------------------------------------------------------
 
 def _joint_label(cfg: ArmConfig, drive: str) -> str | None:
+    if drive in cfg.devices:  # a device: the joint whose absolute encoder it is
+        dev = cfg.devices[drive]
+        return next((j.name for j in cfg.joints.values()
+                     if j.abs_encoder is not None and cfg.device_by_source(j.abs_encoder.source) is dev), None)
     joint = cfg.joint_of_drive(drive)
     if joint is not None:
         return joint.name
@@ -316,6 +320,7 @@ def scan_bus(cfg: ArmConfig, bus: str, network: Any, settings: ScanSettings = Sc
              reset: bool = False, progress: Callable[[str, int, int], None] | None = None) -> BusScan:
     """Probe one bus, then read the identity of every node that answered; verdicts per node id."""
     configured = {d.node: d.name for d in cfg.drives.values() if d.bus == bus}
+    configured.update({d.node: d.name for d in cfg.devices.values() if d.bus == bus})  # encoders, ...
     prober = BusProber(network, configured, settings, progress=progress)
     heard = prober.run(reset=reset)
 

@@ -27,7 +27,12 @@ from sherpa_cli.sim.settings import SimSettings
 NMT_ID = 0x000
 SYNC_ID = 0x080
 SDO_RX = 0x600
-HOME_SWITCH_HALF_WIDTH = 2  # counts either side of a home switch's position where it reads pressed
+# counts either side of a home switch's position where it reads pressed; a joint that crosses the
+# position within one model step also presses it for that step (a fast pass is never missed), so the
+# switch's edge -- where homing sets PX -- is at its configured position to within a count
+HOME_SWITCH_HALF_WIDTH = 0
+ENCODER_VENDOR = 0x0000_0145  # made up: a CiA 406 encoder maker (the sim's, not a real vendor id)
+ENCODER_DEVICE_TYPE = 0x0001_0196  # 0x1000: CiA 406 (0x196), single-turn absolute rotary encoder
 SIM_SV_SHARE = 0.6  # the simulated drive is deaf for this share of protocol.sv_blackout (the tool's bound)
 
 
@@ -44,7 +49,12 @@ def settings_for(cfg: ArmConfig, drive: str, **overrides: Any) -> SimSettings:
         max_current=model.current_peak if model else 20.0,
         stop_code=cfg.il_codes.stop,
         device_name=_device_name(d.model),
+        hm_event_immediate=cfg.homing.event_immediate, hm_event_input_base=cfg.homing.event_input_base,
+        hm_after_stop=cfg.homing.after_stop, hm_px_absolute=cfg.homing.px_absolute,
     )
+    joint = cfg.joint_of_drive(drive)
+    if joint is not None and joint.abs_encoder is not None and joint.abs_encoder.source.upper() == "DRIVE:PY":
+        base["py_offset"] = -joint.abs_encoder.offset  # encoder + offset = joint position
     faults = cfg.sim.get(drive)
     if faults is not None:
         base.update(reply_latency_s=faults.reply_latency, sdo_latency_s=faults.sdo_latency,
@@ -57,6 +67,23 @@ def settings_for(cfg: ArmConfig, drive: str, **overrides: Any) -> SimSettings:
                     supply_current_limit=faults.supply_current_limit)
     base.update(overrides)
     return SimSettings(**base)
+
+
+def power_up_positions(cfg: ArmConfig) -> dict[str, int]:
+    """Each drive's real motor position at power-up (counts) from `sim: power_up:` (joint -> position);
+    PX reads 0 there all the same. A pair's motors follow from its Σ and Δ: a = (Σ+Δ)/2, b = (Σ-Δ)/2."""
+    out: dict[str, int] = {}
+    for name, pos in cfg.sim_power_up.items():
+        joint = cfg.joints.get(name)
+        if joint is not None and joint.drive is not None:
+            out[joint.drive] = int(pos)
+    for pair in cfg.pairs.values():
+        s, d = cfg.sim_power_up.get(pair.sigma), cfg.sim_power_up.get(pair.delta)
+        if s is None and d is None:
+            continue
+        s, d = s or 0, d or 0
+        out[pair.drive_a], out[pair.drive_b] = (s + d) // 2, s - (s + d) // 2
+    return out
 
 
 def _device_name(model: str | None) -> str:
@@ -75,6 +102,7 @@ class _Mechanics:
         # per drive: (switch, joint position function, +1/-1 = the switch is at the joint's high/low
         # side (0 for home switches), motor direction that leads into it)
         self.wiring: dict[str, list[tuple[SwitchConfig, Callable[[], float], int, int]]] = {n: [] for n in drives}
+        self._last: dict[tuple[str, int], float] = {}  # home switches: the joint position at the last update
         for joint in cfg.joints.values():
             self._wire(joint)
         # the hard stops at each joint's overshoot range, per drive that can run into them
@@ -116,10 +144,13 @@ class _Mechanics:
         drive = self.drives[drive_name]
         for check in self.hard_stops[drive_name]:
             check()
-        for sw, position, side, direction in self.wiring[drive_name]:
+        for i, (sw, position, side, direction) in enumerate(self.wiring[drive_name]):
             pos = position()
             if side == 0:
-                active = abs(pos - sw.position) <= HOME_SWITCH_HALF_WIDTH
+                key = (drive_name, i)
+                before = self._last.get(key, pos)
+                self._last[key] = pos
+                active = abs(pos - sw.position) <= HOME_SWITCH_HALF_WIDTH or (before - sw.position) * (pos - sw.position) < 0
             elif side > 0:
                 active = pos >= sw.position
             else:
@@ -169,16 +200,20 @@ class SimArm:
         self.flash = dict(flash) if flash is not None else sim_state.load(cfg) if persist else {
             name: sim_state.DriveFlash(sim_state.default_serial(cfg, name)) for name in cfg.drives}
         self.drives: dict[str, SimDrive] = {}
+        start = power_up_positions(cfg)
         for name, d in cfg.drives.items():
             saved = self.flash[name]
             self.drives[name] = SimDrive(
                 d.node, clock=self.clock,
                 settings=(settings or {}).get(name) or settings_for(cfg, name),
                 serial=saved.serial, flash=saved.flash, save_count=saved.save_count,
-                speed_gain=cfg.sim[name].speed_gain if name in cfg.sim else 1.0,
+                speed_gain=cfg.sim[name].speed_gain if name in cfg.sim else 1.0, position=start.get(name, 0),
                 on_step=lambda drive, name=name: self._mechanics.update(name),
                 on_event=lambda drive, t, text, name=name: self._log_event(name, drive.node, t, text))
         self._mechanics = _Mechanics(cfg, self.drives)
+        for name, w in cfg.sim_wiring.items():
+            if name in self.drives:
+                self.drives[name].inputs.wiring_faults(w.swap, w.invert)
         # `sim: extra_nodes:` -- devices the config does not name (a stray node, a duplicate id):
         # on their bus like any drive, but outside the arm's mechanics and never saved.
         self.extras: dict[str, tuple[str, SimDrive]] = {
@@ -186,6 +221,15 @@ class SimArm:
                 e.node, clock=self.clock, serial=0x7E000000 + i,
                 settings=SimSettings(vendor_id=e.vendor_id, device_name=e.device_name)))
             for i, e in enumerate(cfg.sim_extra_nodes)}
+        # `devices:` of other types (sherpa_cli/devices): a CANopen encoder answers NMT and SDO (identity,
+        # 0x1000 = CiA 406, 0x6004 = its joint's real position minus the joint's abs_encoder offset)
+        for dev in cfg.devices.values():
+            if dev.type == "canopen-encoder":
+                self.extras[dev.name] = (dev.bus, SimDrive(
+                    dev.node, clock=self.clock, serial=0x7E100000 + dev.node,
+                    settings=SimSettings(vendor_id=ENCODER_VENDOR, device_name="CANopen encoder", inputs=1),
+                    od_live={(0x1000, 0): lambda: ENCODER_DEVICE_TYPE,
+                             (0x6004, 0): self._encoder_reading(dev.name)}))
         self.lock = threading.RLock()  # held by the pumps while they touch drives; tests take it too
         self._stop = threading.Event()
         self._threads: list[threading.Thread] = []
@@ -222,6 +266,28 @@ class SimArm:
         self._event_file.write(json.dumps({"drive": name, "node": node, "t": t, "wall": time.time(),
                                            "event": text}) + "\n")
         self._event_file.flush()
+
+    def _encoder_reading(self, device: str) -> Callable[[], int]:
+        """What encoder ``device`` reads: the real position of the joint whose abs_encoder names it."""
+        cfg = self.cfg
+        for joint in cfg.joints.values():
+            enc = joint.abs_encoder
+            if enc is None or cfg.device_by_source(enc.source) is not cfg.devices[device]:
+                continue
+            if joint.drive is not None:
+                d = self.drives[joint.drive]
+                return lambda d=d, off=enc.offset: round(d.position) - off
+            pair = cfg.pairs[joint.pair]  # type: ignore[index]
+            a, b = self.drives[pair.drive_a], self.drives[pair.drive_b]
+            sign = 1 if joint.name == pair.sigma else -1
+            return lambda a=a, b=b, s=sign, off=enc.offset: round(a.position + s * b.position) - off
+        return lambda: 0  # an encoder no joint uses reads 0
+
+    def press_switch(self, drive: str, switch_input: int, pressed: bool | None) -> None:
+        """A technician holds (True), lets go of (False) or leaves (None) the switch wired to
+        ``switch_input`` of ``drive``; a swapped or inverted wire (`sim: wiring:`) shows on the pin."""
+        with self.lock:
+            self.drives[drive].inputs.press(switch_input, pressed)
 
     def drive_by_node(self, bus: str, node: int) -> SimDrive | None:
         for name, d in self.cfg.drives.items():
@@ -317,10 +383,15 @@ class SimArm:
         for n, drive in on_bus.items():
             by_node.setdefault(drive.node, []).append(n)  # two entries: a duplicate node id
         next_tick = 0.0
+        last_tick = self.clock.now()
         try:
             while not self._stop.is_set():
                 msg = bus.recv(timeout=self.tick_s)
                 with self.lock:
+                    # running motors: every drive of the bus up to (almost) now together first
+                    stepped_to = self.clock.now()
+                    self._lockstep(on_bus, last_tick, stepped_to)
+                    last_tick = stepped_to
                     # a frame advances only the drives it reached (their replies go out now);
                     # every drive advances at least once per tick_s (motion, heartbeats, latency)
                     touched: list[str] = []
@@ -343,6 +414,21 @@ class SimArm:
         except BaseException as exc:  # a dead pump must be visible to tests and to `sim --serve`
             if not self._stop.is_set():
                 self.errors.append(exc)
+
+    @staticmethod
+    def _lockstep(on_bus: Mapping[str, SimDrive], since: float, now: float) -> None:
+        """While a motor runs, advance the bus's drives together, one model step at a time, so the
+        mechanics (a pair's Σ/Δ switches, its joint-space hard stops) see both motors at the same
+        instant even when this pump runs late; each drive's own tick() then reaches ``now``."""
+        drives = list(on_bus.values())
+        if not any(d.motor_on for d in drives):
+            return
+        step = min(d.settings.model_step_s for d in drives)
+        t = since + step
+        while t < now:
+            for d in drives:
+                d.advance_to(t)
+            t += step
 
     def _dispatch(self, can_id: int, data: bytes, on_bus: Mapping[str, SimDrive],
                   by_node: Mapping[int, list[str]]) -> list[str]:

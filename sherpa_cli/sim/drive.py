@@ -77,7 +77,8 @@ class SimDrive:
     def __init__(self, node: int, *, clock: Clock, settings: SimSettings | None = None, serial: int = 1,
                  flash: Mapping[str, Value] | None = None, save_count: int = 0, speed_gain: float = 1.0,
                  position: int = 0, on_step: Callable[[SimDrive], None] | None = None,
-                 on_event: Callable[[SimDrive, float, str], None] | None = None) -> None:
+                 on_event: Callable[[SimDrive, float, str], None] | None = None,
+                 od_live: Mapping[tuple[int, int], Callable[[], OdValue]] | None = None) -> None:
         if isinstance(node, bool) or not isinstance(node, int) or not 1 <= node <= 127:
             raise ValueError(f"node id must be 1..127, got {node!r}")
         if not speed_gain > 0:
@@ -111,6 +112,7 @@ class SimDrive:
         self._reboot_due = after_start(self.settings.reboot_at)
         self._trip_due = after_start(self.settings.limit_trip_at)
         self.inputs = Inputs(self.settings.inputs)
+        self._od_live = dict(od_live or {})  # extra live objects: another device type's profile (sim/arm.py)
         self.tpdo = TpdoTable(node)
         self.syncs = 0  # SYNC frames this drive answered (Operational)
         self._boot()
@@ -247,6 +249,9 @@ class SimDrive:
             self._set_motor(bool(value))
         elif key == "PX":
             self._px_offset = int(value) - self.motor.counts
+        elif key == "HM[1]":
+            self.ram[key] = int(value)
+            self._arm_homing(bool(value))
         else:
             for skewed, amount in self.settings.store_skew:
                 if skewed == key:
@@ -285,7 +290,8 @@ class SimDrive:
         self._load_ram()
         self._error_field = 0  # 0x1003:1, the one stored error of a SimplIQ; a boot clears it
         live = {(0x1001, 0): lambda: self._error_register, (0x1002, 0): lambda: self._sr() & 0xFFFFFFFF,
-                (0x1003, 0): lambda: int(self._error_field != 0), (0x1003, 1): lambda: self._error_field}
+                (0x1003, 0): lambda: int(self._error_field != 0), (0x1003, 1): lambda: self._error_field,
+                **self._od_live}
         self._od = build_od(self.settings, self.serial, self.flash, live)
         self._motor_on = False
         self.motor.off()
@@ -294,6 +300,7 @@ class SimDrive:
         self._error_register = 0
         self._limit_stop = False
         self._quick_stop = False
+        self._hm_pin: bool | None = None  # armed homing on an input: the pin's level when last seen
         self._target_kind = "PA"
         self._nmt_state = PRE_OPERATIONAL
         self._hb_last: float | None = None
@@ -481,6 +488,8 @@ class SimDrive:
             "VX": lambda: wrap_int32(round(self.motor.v)),
             "VY": lambda: 0, "PE": lambda: 0, "VE": lambda: 0, "DV[1]": lambda: 0,
             "DV[2]": lambda: wrap_int32(round(self.motor.v)), "DV[3]": lambda: self.px, "MS": self._ms,
+            # the auxiliary (absolute) encoder: the motor's real position plus its mounting offset
+            "PY": lambda: wrap_int32(round(self.motor.position) + self.settings.py_offset),
             "IQ": self._iq, "ID": lambda: 0.0, "MC": lambda: self.settings.max_current, "LC": lambda: 0,
             "IP": self._ip, "SR": self._sr, "MF": lambda: self._mf, "EC": lambda: self.last_error,
             **{f"IB[{n}]": (lambda n=n: self._ip() >> n & 1) for n in range(32)},
@@ -551,6 +560,46 @@ class SimDrive:
             self._check_limits()
         if self.on_step is not None:
             self.on_step(self)
+        self._check_homing()
+
+    # -- homing (HM[], motion-and-recording.md §2; codes from the config's homing: table) ----------
+
+    def _arm_homing(self, on: bool) -> None:
+        self._hm_pin = None
+        if not on:
+            return
+        s, event = self.settings, int(self.ram.get("HM[3]", 0))
+        if event == s.hm_event_immediate:
+            self._home_event()
+            return
+        n = event - s.hm_event_input_base
+        if 1 <= n <= s.inputs:
+            self._hm_pin = self.inputs.pin(n)  # the event is the next inactive -> active edge
+        # other events (index pulse, ...) are not modelled: the homing stays armed and never fires
+
+    def _check_homing(self) -> None:
+        if self._hm_pin is None:
+            return
+        level = self.inputs.pin(int(self.ram.get("HM[3]", 0)) - self.settings.hm_event_input_base)
+        if level and not self._hm_pin:
+            self._hm_pin = None
+            self._home_event(edge=True)
+        else:
+            self._hm_pin = level
+
+    def _home_event(self, edge: bool = False) -> None:
+        s, r = self.settings, self.ram
+        update, value = int(r.get("HM[5]", 0)), int(r.get("HM[2]", 0))
+        if update == s.hm_px_absolute:
+            # an input edge (the motor moving) is taken at the nearest count of the motor's position,
+            # not its floor; an immediate event sets PX itself to the value (it reads back as written)
+            self._px_offset = value - (round(self.motor.position) if edge else self.motor.counts)
+        elif update == s.hm_px_absolute + 1:  # relative: the event's position moves by HM[2]
+            self._px_offset += value
+        if int(r.get("HM[4]", 0)) == s.hm_after_stop and self._motor_on:
+            self.motor.stop(r["SD"] * self.speed_gain)
+        r["HM[1]"] = 0
+        self._record(f"home event: PX={self.px}")
 
     def _check_limits(self) -> None:
         r = self.ram

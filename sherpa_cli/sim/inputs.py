@@ -17,8 +17,30 @@ _RLS, _FLS = 4, 5
 
 
 class Inputs:
+    """``set`` is what the mechanics do to switch ``n`` (its wire); ``press`` is a technician holding
+    it (``home --check-wiring``); ``swap``/``invert`` are wiring faults between switch and pin."""
+
     def __init__(self, count: int) -> None:
         self._state: dict[int, tuple[bool, int]] = {n: (False, 0) for n in range(1, count + 1)}
+        self._pressed: dict[int, bool] = {}
+        self._pin_of: dict[int, int] = {}
+        self._inverted: set[int] = set()
+
+    def wiring_faults(self, swap: tuple[tuple[int, int], ...] = (), invert: tuple[int, ...] = ()) -> None:
+        for a, b in swap:
+            self._pin_of[a], self._pin_of[b] = b, a
+        self._inverted = set(invert)
+
+    def press(self, n: int, pressed: bool | None) -> None:
+        """A hand on switch ``n``: True pressed, False released, None: back to the mechanics."""
+        if pressed is None:
+            self._pressed.pop(n, None)
+        else:
+            self._pressed[n] = bool(pressed)
+
+    def pin(self, n: int) -> bool:
+        """The level the drive reads on input ``n`` (1-based)."""
+        return any(p == n for p, _ in self._active())
 
     def set(self, n: int, active: bool, direction: int = 0) -> None:
         if n not in self._state:
@@ -28,7 +50,14 @@ class Inputs:
         self._state[n] = (bool(active), direction)
 
     def _active(self) -> list[tuple[int, int]]:
-        return [(n, direction) for n, (active, direction) in self._state.items() if active]
+        if not (self._pressed or self._pin_of or self._inverted):
+            return [(n, direction) for n, (active, direction) in self._state.items() if active]
+        out = []
+        for n, (active, direction) in self._state.items():
+            active = self._pressed.get(n, active) != (n in self._inverted)
+            if active:
+                out.append((self._pin_of.get(n, n), direction))
+        return out
 
     def ip(self, il: Callable[[int], int]) -> int:
         """IP: raw pins from bit 16, the per-input flags of inputs 1..6, and function flags."""

@@ -65,6 +65,13 @@ class SimSettings:
     # [BLISS]: ST "cannot be executed in speed control mode" on some firmware; True: ST in UM=2
     # answers EC 12 and a tool must stop with JV=0 + BG (elmo-protocol.md 2.1, UNCONFIRMED).
     st_refused_in_speed_mode: bool = False
+    # HM[] homing codes (motion-and-recording.md §2, UNCONFIRMED): the sim plays the config's homing: table
+    hm_event_immediate: int = 0
+    hm_event_input_base: int = 8
+    hm_after_stop: int = 0
+    hm_px_absolute: int = 0
+    # PY (an absolute encoder on the auxiliary input) reads the motor's real position plus this
+    py_offset: int = 0
     # Servo-loop motor model (sim/servo.py; `log step`): servo_bandwidth_hz > 0 makes the motor
     # follow the profile through a second-order position loop (natural frequency, damping) whose
     # current is limited to servo_current_limit A (None: max_current) and, with
