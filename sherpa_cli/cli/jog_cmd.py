@@ -1,4 +1,5 @@
-"""`sherpa jog JOINT`: move one plain joint inside the motion guard (ops/jog.py does the work)."""
+"""`sherpa jog JOINT`: move one joint inside the motion guard (ops/jog.py does the work for a plain
+joint, ops/joint_jog.py for a Σ/Δ joint or one motor of a pair)."""
 
 from __future__ import annotations
 
@@ -27,19 +28,30 @@ def parse_number(text: str | None, option: str) -> float | None:
 
 def jog(
     ctx: typer.Context,
-    joint: str = typer.Argument(..., metavar="JOINT", help="A plain joint, or a drive that moves one (or BUS:NODE)."),
-    to: Optional[str] = typer.Option(None, "--to", metavar="RAD", help="Move to this joint position (rad)."),
-    by: Optional[str] = typer.Option(None, "--by", metavar="RAD", help="Move by this much from where it is (rad)."),
-    velocity: Optional[str] = typer.Option(None, "--velocity", metavar="RAD/S",
-                                           help="Run at this speed (rad/s) for --for seconds, or until Ctrl-C."),
+    joint: str = typer.Argument(..., metavar="JOINT", help="A plain joint, a Σ or Δ joint of a pair, or a drive (or BUS:NODE)."),
+    to: Optional[str] = typer.Option(None, "--to", metavar="POS", help="Move to this joint position: rad, or "
+                                     "with a unit: 10deg, 200counts. Only inside the joint's normal range."),
+    by: Optional[str] = typer.Option(None, "--by", metavar="POS", help="Move by this much from where it is "
+                                     "(rad, deg or counts)."),
+    velocity: Optional[str] = typer.Option(None, "--velocity", metavar="SPEED",
+                                           help="Run at this speed (rad/s, or 5deg/s, 300counts/s) for --for "
+                                           "seconds, or until Ctrl-C (a pair joint needs --for)."),
     torque: Optional[str] = typer.Option(None, "--torque", metavar="A",
-                                         help="Apply this current (A) for --for seconds (required); within the "
-                                         "joint's continuous current limit."),
+                                         help="Apply this motor current (A, or 800mA) for --for seconds (required); "
+                                         "within the joint's continuous current limit."),
     duration: Optional[str] = typer.Option(None, "--for", metavar="SECONDS", help="How long a velocity or torque "
                                            "jog runs."),
+    uncalibrated: bool = typer.Option(False, "--uncalibrated", help="Allow a position move of a joint that has no "
+                                      "absolute encoder and was not homed since power-up."),
     apply: ApplyMotion = False,
 ) -> None:
-    """Move one plain joint: to/by a position, at a velocity, or with a torque.
+    """Move one joint: to/by a position, at a velocity, or with a torque.
+
+    JOINT is a plain joint, the Σ or Δ joint of a differential pair (both motors move through
+    the pair's inverse transform and the other joint holds), or a drive. A joint that leaves
+    its full range is stopped and brought back to the nearest edge of its normal range
+    (exit 1). Position moves of a joint that is not calibrated are refused unless
+    --uncalibrated (docs/motion.md).
 
     The motion runs inside the motion guard: the drive's fault state is checked first, the
     dead-man (heartbeat consumer) is armed, and every way out -- the end, an error, Ctrl-C,
@@ -53,6 +65,8 @@ def jog(
       sherpa jog wrist_3 --by -0.1 --apply
       sherpa jog elbow_pitch --velocity 0.2 --for 2 --apply
       sherpa jog wrist_1 --torque 0.5 --for 1 --apply
+      sherpa jog shoulder_pitch --by 10deg --apply
+      sherpa jog shoulder_roll --velocity 5deg/s --for 2 --apply
     """
     from sherpa_cli.ops.jog import JogRequest, check_request, resolve_jog_target, run_jog
     from sherpa_cli.ops.motion import MotionSettings
@@ -65,10 +79,14 @@ def jog(
         raise UsageError("give exactly one of --to, --by, --velocity or --torque"
                          + (f" (got {', '.join(given)})" if given else ""))
     mode = "position" if to is not None or by is not None else "velocity" if velocity is not None else "torque"
-    req = JogRequest(mode=mode, to=parse_number(to, "--to"), by=parse_number(by, "--by"),
-                     velocity=parse_number(velocity, "--velocity"), torque=parse_number(torque, "--torque"),
-                     duration=parse_number(duration, "--for"))
+    if _is_pair_axis(cfg, joint):
+        _jog_pair(st, cfg, joint, mode, to, by, velocity, torque, parse_number(duration, "--for"), uncalibrated, apply)
+        return
     target = resolve_jog_target(cfg, joint)
+    req = JogRequest(mode=mode, to=_angle(to, "--to", target.cpr), by=_angle(by, "--by", target.cpr),
+                     velocity=_angle(velocity, "--velocity", target.cpr, speed=True),
+                     torque=_current(torque, "--torque"), duration=parse_number(duration, "--for"),
+                     uncalibrated=uncalibrated)
     check_request(target, req)
     if not apply:
         _dry_run(st, target, req, cfg)
@@ -92,6 +110,8 @@ def jog(
             raise
     st.out.progress(None)
     _render(st, name, result)
+    if result.breach is not None:
+        raise typer.Exit(1)
 
 
 def _dry_run(st, target, req, cfg) -> None:
@@ -121,13 +141,158 @@ def _render(st, name: str, result) -> None:
         return
     for line in result.stop.lines():
         st.out.line(f"stop: {line}")
+    b = result.breach
+    if b is not None:
+        st.out.line(f"limit: {b.joint} left its full range [{b.full[0]}, {b.full[1]}] on the {b.side} side: "
+                    f"stopped, nothing more sent, brought back to {result.recovered_to} counts "
+                    f"(normal range edge {b.back_to})")
     where = result.end_counts
     rad = result.rad(where)
     at = (f"{rad:+.4f} rad ({where} counts)" if rad is not None else f"{where} counts") if where is not None \
         else "an unknown position (PX unreadable)"
-    text = f"{name} ({result.drive}, {result.address}): stopped at {at} after {result.duration:.2f} s, {result.ended_by}"
+    # no duration in the text: it varies from run to run (it is in --json as duration_s)
+    text = f"{name} ({result.drive}, {result.address}): stopped at {at}, {result.ended_by}"
     err = result.error_counts
     if err is not None:
         err_rad = result.rad(err)
         text += f"; error to target {err:+d} counts" + (f" ({err_rad:+.4f} rad)" if err_rad is not None else "")
+    st.out.line(text)
+
+
+# -- units and differential pairs (wave/jog) ------------------------------------------------------
+
+def _angle(text: str | None, option: str, cpr: int | None, *, speed: bool = False) -> float | None:
+    """rad (rad/s) for ops.jog from "0.5", "10deg", "200counts" ("5deg/s", "300counts/s")."""
+    from sherpa_cli.joints import units
+
+    if text is None:
+        return None
+    q = units.parse_angle(text, what=option, velocity=speed)
+    if q.unit == "rad":
+        return q.value
+    if q.unit == "deg":
+        return units.deg_to_rad(q.value)
+    if cpr is None:
+        raise UsageError(f"{option} {text}: counts need a joint's cpr; name the joint")
+    return units.counts_to_rad(q.value, cpr)  # converted back exactly: counts -> rad -> counts is exact
+
+
+def _current(text: str | None, option: str) -> float | None:
+    from sherpa_cli.joints import units
+
+    return None if text is None else units.parse_current(text, what=option)
+
+
+def _is_pair_axis(cfg, name: str) -> bool:
+    """A Σ/Δ joint, a pair, or one motor of a pair: jogged through ops/joint_jog.py."""
+    from sherpa_cli.ops import targets
+
+    return targets.resolve_one(cfg, name).pair is not None
+
+
+def _jog_pair(st, cfg, name: str, mode: str, to, by, velocity, torque, duration, uncalibrated: bool,
+              apply: bool) -> None:
+    from sherpa_cli.ops import joint_jog
+
+    axis = joint_jog.resolve_axis(cfg, name)
+    req = joint_jog.JogRequest(mode=mode, to=to, by=by, velocity=velocity, torque=torque, duration=duration,
+                               uncalibrated=uncalibrated)
+    if mode == "velocity" and duration is None:
+        raise UsageError(f"a velocity jog of {name} needs --for SECONDS: a pair jog ends by itself, so the "
+                         "other joint of the pair can be put back where it was",
+                         hint=f"e.g. sherpa jog {name} --velocity {velocity} --for 1 --apply")
+    offline = joint_jog.check_offline(cfg, axis, req)
+    if not apply:
+        _pair_dry_run(st, axis, req, offline)
+        return
+    buses = sorted({cfg.drives[d].bus for d in axis.sensed})
+
+    def progress(joints) -> None:  # a live line on a terminal only (Output.progress)
+        st.out.progress("  ".join(f"{j}: {p} counts" for j, p in joints.items()))
+
+    with st.session(buses=buses) as session:
+        try:
+            result = joint_jog.run(session, axis, req, on_progress=progress)
+        except BaseException as exc:
+            st.out.progress(None)
+            report = getattr(exc, "motion_report", None)
+            if report is not None and not st.json_mode:
+                for line in report.lines():
+                    st.out.info(f"stop: {line}")
+            raise
+    st.out.progress(None)
+    _render_pair(st, result)
+    if not result.ok:
+        raise typer.Exit(1)
+
+
+def _axis_label(axis) -> str:
+    if axis.kind == "motor":
+        return f"{axis.name} (one motor of pair {axis.pair.name}; moves {axis.pair.sigma} and {axis.pair.delta})"
+    sign = "Σ" if axis.kind == "sigma" else "Δ"
+    other = axis.pair.delta if axis.kind == "sigma" else axis.pair.sigma
+    return f"{axis.name} ({sign} of pair {axis.pair.name}: {axis.pair.drive_a}, {axis.pair.drive_b}; {other} holds)"
+
+
+def _pos(counts: int, cpr: int) -> str:
+    from sherpa_cli.joints.units import counts_to_rad
+
+    return f"{counts_to_rad(counts, cpr):+.4f} rad ({counts} counts)"
+
+
+def _pair_dry_run(st, axis, req, plan) -> None:
+    a_b = ", ".join(axis.drives)
+    if req.mode == "position":
+        if plan is not None and axis.kind in ("sigma", "delta"):
+            what = (f"{axis.name} to {plan.target} counts at {plan.speed} counts/s "
+                    f"(PA of {a_b} from (Σ+Δ)/2 and (Σ-Δ)/2 with the other joint at its present value)")
+        elif plan is not None:
+            what = f"{axis.name} to {plan.target} counts at {plan.speed} counts/s"
+        else:
+            what = f"{axis.name} {'to ' + req.to if req.to is not None else 'by ' + str(req.by)} " \
+                   f"(PA from the present positions)"
+        cmds = "UM=5, SP, PA, BG"
+    elif req.mode == "velocity":
+        what = f"{axis.name} at {plan.speed} counts/s for {req.duration:g} s"
+        cmds = ", ".join(f"{d} JV={v}" for d, v in plan.motor_speeds.items()) + ", BG"
+    else:
+        what = f"{axis.name} with {plan.current:g} A for {req.duration:g} s"
+        cmds = "UM=1, " + ", ".join(f"{d} TC={v:g}" for d, v in plan.motor_currents.items())
+    if st.json_mode:
+        st.out.json({"target": axis.name, "kind": axis.kind, "drives": list(axis.drives), "mode": req.mode,
+                     "applied": False, "plan": f"{what}: {cmds}"})
+        return
+    st.out.line(f"dry run: would jog {_axis_label(axis)}")
+    st.out.line(f"  {what}: {cmds}, then stop and switch off")
+    st.out.line("nothing sent; add --apply to move")
+
+
+def _render_pair(st, r) -> None:
+    if st.json_mode:
+        st.out.json(r.as_dict())
+        return
+    for line in r.guard_lines:
+        st.out.line(f"stop: {line}")
+    cmds = "; ".join(f"{d} " + " ".join(f"{k}={v:g}" if isinstance(v, float) else f"{k}={v}" for k, v in c.items())
+                     for d, c in r.motor_commands.items())
+    if cmds:
+        st.out.line(f"sent: {cmds}")
+    for b in r.breaches:
+        st.out.line(f"limit: {b.joint} left its full range [{b.full[0]}, {b.full[1]}] on the {b.side} side: "
+                    f"stopped, nothing more sent, brought back to {r.recovered_to.get(b.joint)} counts "
+                    f"(normal range edge {b.back_to})")
+    for joint, fix in r.held_correction.items():
+        st.out.line(f"held: {joint} was put back from {fix['from']} to {fix['to']} counts "
+                    "(start/stop skew between the motors)")
+    if r.mode == "position" and r.ok:
+        how = "target reached" if r.target is not None and abs(r.end - r.target) <= 1 else \
+            f"{r.end - (r.target or 0):+d} counts from the target"
+    elif r.ok:
+        how = f"after {r.duration:g} s" if r.duration is not None else "stopped"
+    else:
+        how = "the jog was stopped by the joint-limit watch"
+    others = [f"{j} at {_pos(p, r.joint_cpr[j])}" for j, p in r.joints_end.items() if j != r.axis]
+    text = f"{r.axis}: at {_pos(r.end, r.cpr)}, {how}"
+    if others:
+        text += "; " + ", ".join(others)
     st.out.line(text)

@@ -88,6 +88,9 @@ def _check_protocol(cfg: ArmConfig, locs: Locs, r: _Report) -> None:
         r.error(locs.get("protocol", "sdo_timeout"), f"sdo_timeout {p.sdo_timeout} s must be > 0 and <= 60")
     if p.retries < 0:
         r.error(locs.get("protocol", "retries"), f"retries {p.retries} is negative; expected 0 or more")
+    if not 1 <= p.calibration_flag <= 24:
+        r.error(locs.get("protocol", "calibration_flag"),
+                f"calibration_flag {p.calibration_flag} must be a UI index 1..24")
     for key in ("mo_settle", "mo_confirm_timeout", "sv_blackout"):
         if getattr(p, key) < 0:
             r.error(locs.get("protocol", key), f"{key} {getattr(p, key)} s is negative; expected >= 0")

@@ -181,6 +181,8 @@ _TABLE: tuple[CommandSpec, ...] = (
     _cmd("WS", "int", "ro", "drive status words (WS[30] hardware version)", index=(1, 100)),
     _cmd("HM", "int", "rw", "homing: 1 arm, 2 value, 3 event, 4 action, 5 PX update, 6 output", index=(1, 6)),
     _cmd("RM", "int", "rw", "reference mode"),
+    _cmd("UI", "int", "rw", "user integers (RAM; whether SV saves them is UNCONFIRMED); "
+         "UI[protocol.calibration_flag] marks a drive homed since power-up", index=(1, 24)),
     _cmd("ET", "int", "rw", "ECAM table entries", index=(1, 1024)),
 )
 

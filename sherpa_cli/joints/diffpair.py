@@ -145,3 +145,50 @@ def inside_joint_limits(m_a: int, m_b: int, sigma_range: Range, delta_range: Ran
     s_lo, s_hi = _range(sigma_range, "Σ range")
     d_lo, d_hi = _range(delta_range, "Δ range")
     return s_lo <= s <= s_hi and d_lo <= d <= d_hi
+
+
+# --------------------------------------------------------------------------- moving one joint of a pair
+
+def motor_velocities(sigma_rate: int, delta_rate: int) -> tuple[int, int]:
+    """Joint speeds (counts/s of Σ and Δ) -> motor speeds: the inverse transform per second,
+    ``v_a = (vΣ + vΔ)/2``, ``v_b = (vΣ - vΔ)/2``, each rounded half away from zero.
+
+    A Σ jog (vΔ = 0) runs both motors at vΣ/2; a Δ jog runs them at +vΔ/2 and -vΔ/2. With an
+    odd joint speed both halves round away from zero, so the held joint still reads 0 and the
+    moving joint runs one count/s faster than asked (reported as such).
+    """
+    s, d = _int(sigma_rate, "Σ speed"), _int(delta_rate, "Δ speed")
+    return _half_away(s + d), _half_away(s - d)
+
+
+def _half_away(n: int) -> int:
+    return (n + 1) // 2 if n >= 0 else -((-n + 1) // 2)
+
+
+def motor_currents(sigma_current: float, delta_current: float) -> tuple[float, float]:
+    """Joint torques (as motor current, A) -> motor currents: ``I_a = IΣ + IΔ``, ``I_b = IΣ - IΔ``.
+
+    This is the transpose of the position map (virtual work: the power of the two motors
+    ``I_a·v_a + I_b·v_b`` equals ``IΣ·vΣ + IΔ·vΔ`` when ``IΣ = (I_a + I_b)/2``, ``IΔ = (I_a - I_b)/2``).
+    A Σ torque of I drives both motors with I (both accelerate alike, Δ stays); a Δ torque of I
+    drives motor a with +I and motor b with -I (Σ stays).
+    """
+    return sigma_current + delta_current, sigma_current - delta_current
+
+
+def hold_other(sigma: int, delta: int, moving: str, held_range: Range | None = None) -> tuple[int, int]:
+    """(Σ, Δ) for a move of one joint while the other holds: the moving joint's value is kept
+    exactly; when the pair has no whole motor position (mixed parity) the held joint gives way
+    by one count, inside ``held_range`` when given, else toward zero.
+    """
+    s, d = _int(sigma, "Σ position"), _int(delta, "Δ position")
+    if moving not in ("sigma", "delta"):
+        raise ValueError(f"moving must be 'sigma' or 'delta', got {moving!r}")
+    if (s - d) % 2 == 0:
+        return s, d
+    held = d if moving == "sigma" else s
+    candidates = sorted((held - 1, held + 1), key=lambda v: (abs(v), v))
+    if held_range is not None:
+        lo, hi = _range(held_range, "held joint range")
+        candidates.sort(key=lambda v: not lo <= v <= hi)  # stable: toward zero among the inside ones
+    return (s, candidates[0]) if moving == "sigma" else (candidates[0], d)

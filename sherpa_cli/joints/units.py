@@ -13,6 +13,8 @@ scaling, so a value that is a tie only in exact arithmetic may round either way.
 from __future__ import annotations
 
 import math
+import re
+from dataclasses import dataclass
 from numbers import Integral, Real
 
 from sherpa_cli.errors import UsageError
@@ -95,3 +97,101 @@ def amps_to_milliamps(amps: float) -> float:
 
 def milliamps_to_amps(milliamps: float) -> float:
     return _finite(milliamps, "current (mA)") / 1000.0
+
+
+# --------------------------------------------------------------------------- typed quantities
+#
+# What a technician types after --to / --by / --velocity / --torque: a number with an optional
+# unit suffix, no space needed ("10deg", "-0.5", "200counts", "5deg/s", "1.5A", "800mA").
+# Positions and velocities default to rad (rad/s), currents to A. Velocities may carry "/s"
+# ("5deg/s" = "5deg"); a position must not. A count is whole: "200.5counts" is refused rather
+# than rounded, because the technician then meant something else.
+
+ANGLE_UNITS = {"rad": "rad", "deg": "deg", "counts": "counts", "count": "counts", "cnt": "counts"}
+CURRENT_UNITS = {"a": "A", "ma": "mA"}
+
+_QUANTITY = re.compile(r"\s*([+-]?(?:\d+(?:\.\d*)?|\.\d+)(?:[eE][+-]?\d+)?)\s*([A-Za-z]*(?:/s)?)\s*")
+
+
+@dataclass(frozen=True)
+class Quantity:
+    """A number as typed plus its canonical unit (``rad``, ``deg``, ``counts``, ``A``, ``mA``)."""
+
+    value: float
+    unit: str
+    per_second: bool = False
+
+    def __str__(self) -> str:
+        number = f"{self.value:g}"
+        return f"{number}{self.unit}{'/s' if self.per_second else ''}"
+
+
+def _split(text: object, what: str, examples: str) -> tuple[float, str, bool]:
+    if not isinstance(text, str):
+        raise UsageError(f"{what}: expected text like {examples}, got {text!r}")
+    m = _QUANTITY.fullmatch(text)
+    if m is None:
+        raise UsageError(f"{what}: cannot read {text!r} as a number with an optional unit",
+                         hint=f"write e.g. {examples}")
+    value = float(m.group(1))
+    if not math.isfinite(value):
+        raise UsageError(f"{what}: {text!r} is too large")
+    suffix = m.group(2)
+    per_second = suffix.endswith("/s")
+    return value, suffix[:-2] if per_second else suffix, per_second
+
+
+def parse_angle(text: str, *, what: str = "position", velocity: bool = False) -> Quantity:
+    """``"10deg"`` -> Quantity(10.0, "deg"); no suffix means rad (rad/s with ``velocity``).
+
+    A velocity may end in ``/s``; a position may not. Counts must be whole.
+    """
+    examples = "0.5, 10deg/s, 300counts/s" if velocity else "0.5, 10deg, 200counts"
+    value, unit, per_second = _split(text, what, examples)
+    if per_second and not velocity:
+        raise UsageError(f"{what}: {text!r} is a speed; a position takes rad, deg or counts",
+                         hint=f"write e.g. {examples}")
+    canon = ANGLE_UNITS.get(unit.lower() if unit else "rad")
+    if canon is None:
+        raise UsageError(f"{what}: unknown unit {unit!r} in {text!r}; use rad (the default), deg or counts"
+                         + ("" if not velocity else " (per second, '/s' optional)"),
+                         hint=f"write e.g. {examples}")
+    if canon == "counts" and not value.is_integer():
+        raise UsageError(f"{what}: {text!r} is not a whole number of counts")
+    return Quantity(value, canon, velocity)
+
+
+def angle_to_counts(q: Quantity, cpr: int) -> int:
+    """A parsed angle (or angular speed) in whole counts (counts/s) of a joint with ``cpr``."""
+    if q.unit == "counts":
+        return int(q.value)
+    if q.unit == "deg":
+        return deg_to_counts(q.value, cpr)
+    if q.unit == "rad":
+        return rad_to_counts(q.value, cpr)
+    raise UsageError(f"{q} is not an angle")
+
+
+def parse_position(text: str, cpr: int, *, what: str = "position") -> int:
+    """Joint position (or distance) in counts from ``"0.5"`` (rad), ``"10deg"``, ``"200counts"``."""
+    return angle_to_counts(parse_angle(text, what=what), cpr)
+
+
+def parse_velocity(text: str, cpr: int, *, what: str = "velocity") -> int:
+    """Joint speed in counts/s from ``"0.5"`` (rad/s), ``"10deg"``/``"10deg/s"``, ``"300counts/s"``."""
+    return angle_to_counts(parse_angle(text, what=what, velocity=True), cpr)
+
+
+def parse_current(text: str, *, what: str = "torque") -> float:
+    """Motor current in A from ``"1.5"`` / ``"1.5A"`` / ``"1500mA"``."""
+    value, unit, per_second = _split(text, what, "1.5, 1.5A, 800mA")
+    canon = CURRENT_UNITS.get(unit.lower() if unit else "a")
+    if canon is None or per_second:
+        raise UsageError(f"{what}: unknown unit {unit + ('/s' if per_second else '')!r} in {text!r}; "
+                         f"use A (the default) or mA", hint="write e.g. 1.5, 1.5A, 800mA")
+    return milliamps_to_amps(value) if canon == "mA" else value
+
+
+def describe_counts(counts: int, cpr: int) -> str:
+    """``"0.5236 rad (30 deg, 500 counts)"``: how results show a joint position."""
+    return f"{counts_to_rad(counts, cpr):.4f} rad ({counts_to_deg(counts, cpr):.2f} deg, {counts} counts)"

@@ -49,6 +49,7 @@ class JogRequest:
     velocity: float | None = None  # rad/s
     torque: float | None = None  # A
     duration: float | None = None  # s; velocity: None = until Ctrl-C; torque: required
+    uncalibrated: bool = False  # allow a position move of a joint not homed since power-up (wave/jog)
 
 
 @dataclass
@@ -72,6 +73,9 @@ class JogResult:
     ended_by: str  # "target reached", "time up", "Ctrl-C"
     cpr: int | None
     stop: GuardReport = field(default_factory=GuardReport)
+    breach: Any = None  # limit_watch.Breach when the joint left its full range (the jog then failed)
+    recovered_to: int | None = None  # where the limit recovery brought the joint (counts)
+    calibration: Any = None  # calibration.Calibration of a position move
 
     @property
     def error_counts(self) -> int | None:
@@ -91,7 +95,10 @@ class JogResult:
                 {"counts": self.target_counts, "rad": self.rad(self.target_counts)},
                 "error": None if self.error_counts is None else
                 {"counts": self.error_counts, "rad": self.rad(self.error_counts)},
-                "duration_s": round(self.duration, 3), "stop": self.stop.as_json()}
+                "duration_s": round(self.duration, 3), "stop": self.stop.as_json(),
+                "ok": self.breach is None,
+                "limit": None if self.breach is None else {**self.breach.as_dict(), "recovered_to": self.recovered_to},
+                "calibration": None if self.calibration is None else self.calibration.as_dict()}
 
 
 def resolve_jog_target(cfg: ArmConfig, text: str) -> JogTarget:
@@ -126,6 +133,11 @@ def check_request(target: JogTarget, req: JogRequest) -> None:
             raise UsageError("a position jog needs exactly one of --to or --by")
         if req.duration is not None:
             raise UsageError("--for applies to --velocity and --torque jogs; a position move ends at its target")
+        if req.to is not None and joint is not None and target.cpr is not None:
+            goal, (lo, hi) = _counts_to(target, req.to), joint.normal_range
+            if not lo <= goal <= hi:  # --by is checked once PX is known (_precheck)
+                raise UsageError(f"{joint.name}: target {goal} counts is outside the joint's normal range "
+                                  f"[{lo}, {hi}]", hint="jog moves a joint only inside its normal range")
     elif req.mode == "velocity":
         assert req.velocity is not None
         if joint is not None and joint.vel_limit is not None:
@@ -160,6 +172,7 @@ def run_jog(session: Any, target: JogTarget, req: JogRequest, *, settings: Motio
     """Move as asked inside a MotionGuard and return where it ended; every exit path stops the motor."""
     check_request(target, req)
     ref = target.ref
+    cal = _precheck(session, target, req)
     guard = MotionGuard(session, [ref], settings=settings, clock=clock, sleep=sleep, keep=keep, on_event=on_event)
     state: dict[str, Any] = {"start": None, "t0": None, "t_end": None, "target": None, "command": "",
                              "ended_by": ""}
@@ -183,7 +196,33 @@ def run_jog(session: Any, target: JogTarget, req: JogRequest, *, settings: Motio
                      start_counts=state["start"], end_counts=stopped.position, target_counts=state["target"],
                      command=state["command"],
                      duration=state["t_end"] - state["t0"] if state["t0"] is not None else 0.0,
-                     ended_by="Ctrl-C" if interrupted else state["ended_by"], cpr=target.cpr, stop=guard.report)
+                     ended_by="Ctrl-C" if interrupted else state["ended_by"], cpr=target.cpr, stop=guard.report,
+                     breach=state.get("breach"), recovered_to=state.get("recovered_to"), calibration=cal)
+
+
+def _precheck(session: Any, target: JogTarget, req: JogRequest) -> Any:
+    """Before anything is armed (wave/jog, docs/motion.md): a position move must stay inside the
+    joint's NORMAL range and needs a calibrated joint (or ``uncalibrated``). Reads PX and the
+    calibration flag; writes nothing. Returns the calibration found (None for other modes)."""
+    joint = target.joint
+    if joint is None or req.mode != "position":
+        return None
+    from sherpa_cli.ops import calibration
+
+    c = session.client(target.ref)
+    c.nmt_start()
+    start = int(c.get("PX"))
+    goal = _counts_to(target, req.to) if req.to is not None else start + _counts_to(target, req.by)
+    lo, hi = joint.normal_range
+    if not lo <= goal <= hi:
+        raise UsageError(f"{joint.name}: target {goal} counts is outside the joint's normal range [{lo}, {hi}]",
+                          hint="jog moves a joint only inside its normal range")
+    cal = calibration.read_calibration(session.cfg, joint, lambda name: c)
+    if not cal.calibrated and not req.uncalibrated:
+        raise SafetyError(f"{joint.name}: refusing a position move: joint {joint.name} is {cal.reason}",
+                          hint="home it first, or pass --uncalibrated to move by the counter as it is "
+                               "(positions are then relative to where the joint stood at power-up)")
+    return cal
 
 
 def _move(guard: MotionGuard, target: JogTarget, req: JogRequest, settings: MotionSettings, state: dict[str, Any],
@@ -205,7 +244,7 @@ def _move(guard: MotionGuard, target: JogTarget, req: JogRequest, settings: Moti
         state["t0"] = clock()
         c.execute("BG")
         watch(lambda sr: sr.motion_status == 0, bound)
-        state["ended_by"] = "target reached"
+        state["ended_by"] = state["ended_by"] or "target reached"
     elif req.mode == "velocity":
         v = rad_per_s_to_counts_per_s(req.velocity, target.cpr)
         guard.enable(ref, settings.velocity_unit_mode)
@@ -214,14 +253,14 @@ def _move(guard: MotionGuard, target: JogTarget, req: JogRequest, settings: Moti
         state["t0"] = clock()
         c.execute("BG")
         watch(None, req.duration)
-        state["ended_by"] = "time up"
+        state["ended_by"] = state["ended_by"] or "time up"
     else:
         guard.enable(ref, UM_TORQUE)  # TC=0 before MO=1: no old torque command is applied
         c.set("TC", 0, float(req.torque))
         state["command"] = f"TC={req.torque:g}"
         state["t0"] = clock()
         watch(None, req.duration)
-        state["ended_by"] = "time up"
+        state["ended_by"] = state["ended_by"] or "time up"
 
 
 def _move_bound(c: Any, distance: int) -> float:
@@ -244,6 +283,8 @@ def _watch(guard: MotionGuard, c: Any, target: JogTarget, clock: Callable[[], fl
         elapsed = clock() - t0
         if on_progress is not None:
             on_progress(JogProgress(elapsed, px, counts_to_rad(px, target.cpr) if target.cpr else None))
+        if target.joint is not None and _limit_breach(guard, c, target, px, settings, clock, sleep, state):
+            return
         if not sr.motor_on:
             mf = int(guard.query(target.ref, "MF"))
             why = "; ".join(describe_mf(mf)) if mf else "MO=0 from elsewhere (sherpa stop, another tool)"
@@ -256,3 +297,28 @@ def _watch(guard: MotionGuard, c: Any, target: JogTarget, clock: Callable[[], fl
                                   f"(at {px} counts)", hint="check SP/AC/DC and what blocks the joint (SR, IP)")
             return
         sleep(settings.poll_interval if limit is None else min(settings.poll_interval, max(limit - elapsed, 0.0)))
+
+
+def _limit_breach(guard: MotionGuard, c: Any, target: JogTarget, px: int, settings: MotionSettings,
+                  clock: Callable[[], float], sleep: Callable[[float], None], state: dict[str, Any]) -> bool:
+    """The joint-limit watch (seed 6.1, ops/limit_watch.py): past the full range, stop at once, send
+    nothing more of the jog, and move the joint back (position mode) to the nearest normal edge."""
+    from sherpa_cli.ops import joint_jog, limit_watch
+
+    joint = target.joint
+    assert joint is not None
+    watched = [limit_watch.WatchedJoint(joint.name, joint.full_range, joint.normal_range, target.ref.name)]
+    breaches = limit_watch.check(watched, {target.ref.name: px})
+    if not breaches:
+        return False
+    clients = {target.ref.name: c}
+    joint_jog._stop_now(clients, "torque" if guard.unit_mode(target.ref) == UM_TORQUE else "position")
+    joint_jog._wait_standstill(clients, guard, settings, clock, sleep)
+    back = limit_watch.recovery_targets(watched, {target.ref.name: int(c.get("PX"))}, breaches)
+    speed = max(1, (joint.vel_limit or 200) // 2)
+    joint_jog._move_to(guard, {target.ref.name: target.ref}, clients, back, speed, settings, clock, sleep,
+                       f"{joint.name}: the move back into the normal range")
+    state["breach"] = breaches[0]
+    state["recovered_to"] = int(c.get("PX"))
+    state["ended_by"] = f"left its full range, brought back to {breaches[0].back_to} counts"
+    return True

@@ -1,0 +1,77 @@
+"""Is a joint calibrated (its drive's position counter means the joint's position)?
+
+A joint with an absolute encoder (``abs_encoder`` in the config) always is. Any other joint's
+motor counter (PX) starts at 0 at power-up, wherever the joint stands, so it is calibrated only
+after homing since that power-up. Homing marks each drive it calibrated by writing 1 to
+``UI[protocol.calibration_flag]`` (default UI[3]; the homed flag of [KX2]-style tools). UI is a
+RAM variable: a reset or power cycle clears it, which is exactly when the calibration is lost.
+Whether SV copies UI to flash is UNCONFIRMED for the Whistle; sherpa never saves right after
+homing, and a drive that saved UI=1 would look homed after a reboot, so the index is a setting.
+
+A Σ or Δ joint depends on both motors of its pair: it is calibrated when both drives carry the
+mark (or when both joints of the pair have an absolute encoder).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any, Callable, Mapping
+
+from sherpa_cli.config.model import ArmConfig, JointConfig, JointRole
+
+CALIBRATED = 1
+
+
+@dataclass(frozen=True)
+class Calibration:
+    joint: str
+    calibrated: bool
+    reason: str  # "absolute encoder", "homed since power-up (UI[3]=1)", "not homed since power-up: ..."
+
+    def as_dict(self) -> dict[str, object]:
+        return {"joint": self.joint, "calibrated": self.calibrated, "reason": self.reason}
+
+
+def absolute(cfg: ArmConfig, joint: JointConfig) -> bool:
+    """True when the joint's position needs no homing (absolute encoder on it, or on both pair joints)."""
+    if joint.role is JointRole.PLAIN:
+        return joint.abs_encoder is not None
+    pair = cfg.pairs[joint.pair]  # type: ignore[index]
+    return all(cfg.joints[n].abs_encoder is not None for n in (pair.sigma, pair.delta))
+
+
+def joint_drives(cfg: ArmConfig, joint: JointConfig) -> tuple[str, ...]:
+    if joint.role is JointRole.PLAIN:
+        return (joint.drive,) if joint.drive else ()
+    pair = cfg.pairs[joint.pair]  # type: ignore[index]
+    return (pair.drive_a, pair.drive_b)
+
+
+def flag_key(cfg: ArmConfig) -> str:
+    return f"UI[{cfg.protocol.calibration_flag}]"
+
+
+def judge(cfg: ArmConfig, joint: JointConfig, flags: Mapping[str, int]) -> Calibration:
+    """The decision on values already read: ``flags`` maps each drive of the joint to its UI flag."""
+    if absolute(cfg, joint):
+        return Calibration(joint.name, True, "absolute encoder")
+    key = flag_key(cfg)
+    missing = [d for d in joint_drives(cfg, joint) if flags.get(d) != CALIBRATED]
+    if missing:
+        shown = ", ".join(f"{d} {key}={flags.get(d, '?')}" for d in missing)
+        return Calibration(joint.name, False, f"not homed since power-up ({shown})")
+    return Calibration(joint.name, True, f"homed since power-up ({key}={CALIBRATED})")
+
+
+def read_calibration(cfg: ArmConfig, joint: JointConfig, client_of: Callable[[str], Any]) -> Calibration:
+    """Read the flag from each drive of the joint (nothing is read for an absolute joint)."""
+    if absolute(cfg, joint):
+        return judge(cfg, joint, {})
+    index = cfg.protocol.calibration_flag
+    flags = {d: int(client_of(d).get("UI", index)) for d in joint_drives(cfg, joint)}
+    return judge(cfg, joint, flags)
+
+
+def mark_calibrated(cfg: ArmConfig, client: Any) -> None:
+    """For `home`: the drive's position counter now means the joint position, until its next reset."""
+    client.set("UI", cfg.protocol.calibration_flag, CALIBRATED)

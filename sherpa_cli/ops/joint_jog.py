@@ -1,0 +1,522 @@
+"""Jogging the Σ or Δ joint of a differential pair, or one motor of a pair, inside the motion guard,
+with the joint-limit watch (docs/motion.md). Plain joints go through ops/jog.py, which uses the same
+watch (ops/limit_watch.py), normal-range and calibration checks.
+
+What a jog means per kind of axis (joints/diffpair.py for the transform):
+
+- Σ joint: both motors move through the inverse transform; Δ holds (its target is its current
+  value). Position: ``m_a = (Σ'+Δ)/2``, ``m_b = (Σ'-Δ)/2`` (when Σ' and Δ differ in parity, Δ gives
+  way by one count); speed: both motors at vΣ/2; current: both motors at IΣ.
+- Δ joint: likewise with Σ holding; speed ±vΔ/2, current ±IΔ.
+- one motor of a pair (the drive's name): that motor alone, in motor counts; it moves Σ and Δ
+  together, so the target must keep both inside their normal ranges.
+
+Position moves use equal-duration profiles: each motor's SP is its share of the distance, so
+both motors start and arrive together and the held joint does not drift (seed Fig. 9.10/9.11).
+
+Everything that can be refused is refused before the guard arms anything: an unknown or ad hoc
+target, a position outside the joint's NORMAL range, a speed above the joint's limit, a current
+above the configured continuous limit, a velocity or torque jog without a time limit, and a
+position move of a joint that is not calibrated (ops/calibration.py) unless ``uncalibrated``.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+from typing import Any, Callable, Mapping
+
+from sherpa_cli.config.model import ArmConfig, JointConfig, JointRole, PairConfig
+from sherpa_cli.elmo.faults import decode_sr, describe_mf
+from sherpa_cli.errors import SafetyError, UsageError
+from sherpa_cli.joints import diffpair, units
+from sherpa_cli.ops import calibration, limit_watch
+from sherpa_cli.ops.limit_watch import Breach, WatchedJoint
+
+Range = tuple[int, int]
+UM_TORQUE, UM_POSITION = 1, 5
+MODES = ("position", "velocity", "torque")
+
+
+@dataclass(frozen=True)
+class Axis:
+    """What a jog moves, with the limits that apply to it."""
+
+    name: str  # as the user named it
+    kind: str  # sigma | delta | motor
+    cpr: int
+    drives: tuple[str, ...]  # one drive, or (drive_a, drive_b) of a pair
+    normal: Range | None  # of the moved joint (None for a motor: both pair joints are checked)
+    full: Range | None
+    vel_limit: int | None  # counts/s of the moved joint
+    current_limit: float | None  # A per motor (the configured continuous limit)
+    watched: tuple[WatchedJoint, ...]
+    joints: tuple[JointConfig, ...]  # the joints whose calibration matters
+    pair: PairConfig | None = None
+
+    @property
+    def sensed(self) -> tuple[str, ...]:
+        """Every drive whose position the watch needs (a pair motor alone: both motors of the pair)."""
+        out = list(self.drives)
+        for j in self.watched:
+            out += [d for d in j.drives if d not in out]
+        return tuple(out)
+
+    def position(self, motors: Mapping[str, int]) -> int:
+        if self.kind == "motor":
+            return motors[self.drives[0]]
+        a, b = (motors[d] for d in self.drives)
+        return a + b if self.kind == "sigma" else a - b
+
+
+def resolve_axis(cfg: ArmConfig, name: str) -> Axis:
+    """The axis behind a Σ/Δ joint, or one motor of a pair (by drive name or BUS:NODE); ops/targets.py
+    decides what the name means. Plain joints go through ops/jog.py; a whole pair is refused."""
+    from sherpa_cli.ops import targets
+
+    t = targets.resolve_one(cfg, name)
+    pair = t.pair
+    if pair is None:
+        raise UsageError(f"'{name}' is not a joint or motor of a differential pair; a plain joint is jogged "
+                         "through ops/jog.py")
+    if t.kind is targets.TargetKind.PAIR:
+        raise UsageError(f"'{name}' is a differential pair: name the joint to move ({pair.sigma} or {pair.delta}) "
+                         f"or one motor ({pair.drive_a} or {pair.drive_b})")
+    sigma, delta = cfg.joints[pair.sigma], cfg.joints[pair.delta]
+    cur = pair.current.continuous if pair.current is not None else None
+    if t.kind is not targets.TargetKind.JOINT:  # a drive name or BUS:NODE: one motor of the pair
+        (ref,) = t.drives
+        # one motor at v moves Σ and Δ at v each: the slower joint limit bounds it
+        limits = [v for v in (sigma.vel_limit, delta.vel_limit) if v is not None]
+        return Axis(ref.name, "motor", sigma.cpr, (ref.name,), None, None, min(limits) if limits else None, cur,
+                    tuple(limit_watch.joints_moved_by(cfg, [ref.name])), (sigma, delta), pair)
+    (joint,) = t.joints
+    watched = tuple(limit_watch.joints_moved_by(cfg, (pair.drive_a, pair.drive_b)))
+    return Axis(joint.name, joint.role.value, joint.cpr, (pair.drive_a, pair.drive_b), joint.normal_range,
+                joint.full_range, joint.vel_limit, cur, watched, (joint,), pair)
+
+
+@dataclass(frozen=True)
+class JogRequest:
+    """A jog as the technician typed it (values still text: their units need the joint's cpr)."""
+
+    mode: str  # position | velocity | torque
+    to: str | None = None
+    by: str | None = None
+    velocity: str | None = None  # position: the speed of the move; velocity: the jog speed
+    torque: str | None = None
+    duration: float | None = None  # --for, s
+    uncalibrated: bool = False
+
+
+@dataclass(frozen=True)
+class JogPlan:
+    """Motor commands for one jog (pure result of :func:`plan`)."""
+
+    axis: Axis
+    mode: str
+    start: int  # axis position at the start (counts)
+    target: int | None = None  # position moves: where the axis ends
+    speed: int | None = None  # counts/s of the axis
+    current: float | None = None  # A
+    duration: float | None = None
+    motor_targets: Mapping[str, int] = field(default_factory=dict)
+    motor_speeds: Mapping[str, int] = field(default_factory=dict)  # SP (position) or JV (velocity)
+    motor_currents: Mapping[str, float] = field(default_factory=dict)
+    timeout: float | None = None  # position moves: the bound on arriving
+
+
+def _fmt_range(r: Range) -> str:
+    return f"[{r[0]}, {r[1]}]"
+
+
+def _check_speed(axis: Axis, speed: int, what: str) -> None:
+    if speed == 0:
+        raise UsageError(f"{what} must not be 0")
+    if axis.vel_limit is not None and abs(speed) > axis.vel_limit:
+        raise UsageError(f"{axis.name}: {what} {abs(speed)} counts/s is above the joint's speed limit "
+                          f"{axis.vel_limit} counts/s", hint="ask for less, or raise velocity.limit in the config")
+
+
+def plan(cfg: ArmConfig, axis: Axis, request: JogRequest, motors: Mapping[str, int]) -> JogPlan:
+    """Motor commands for ``request`` from the motors' present positions; refuses what is unsafe."""
+    if request.mode not in MODES:
+        raise UsageError(f"unknown jog mode {request.mode!r}")
+    start = axis.position(motors)
+    if request.mode == "position":
+        return _plan_position(cfg, axis, request, motors, start)
+    if request.duration is None:
+        raise UsageError(f"a {request.mode} jog needs --for SECONDS: it must end by itself"
+                         + (" (in torque mode no drive limit acts; the time limit is the last guard)"
+                            if request.mode == "torque" else ""),
+                         hint=f"e.g. sherpa jog {axis.name} --{request.mode} ... --for 1")
+    if not (math.isfinite(request.duration) and request.duration > 0):
+        raise UsageError(f"--for must be a positive number of seconds, got {request.duration!r}")
+    if request.mode == "velocity":
+        if request.velocity is None:
+            raise UsageError("a velocity jog needs --velocity")
+        v = units.parse_velocity(request.velocity, axis.cpr, what="--velocity")
+        _check_speed(axis, v, "--velocity")
+        return JogPlan(axis, "velocity", start, speed=v, duration=request.duration,
+                       motor_speeds=_motor_speeds(axis, v))
+    if request.torque is None:
+        raise UsageError("a torque jog needs --torque")
+    amps = units.parse_current(request.torque, what="--torque")
+    if amps == 0:
+        raise UsageError("--torque must not be 0")
+    currents = _motor_currents(axis, amps)
+    worst = max(abs(c) for c in currents.values())
+    if axis.current_limit is not None and worst > axis.current_limit:
+        raise UsageError(f"{axis.name}: --torque {amps:g} A puts {worst:g} A on a motor, above the configured "
+                          f"continuous limit {axis.current_limit:g} A")
+    return JogPlan(axis, "torque", start, current=amps, duration=request.duration, motor_currents=currents)
+
+
+def _motor_speeds(axis: Axis, v: int) -> dict[str, int]:
+    if axis.kind == "motor":
+        return {axis.drives[0]: v}
+    a, b = diffpair.motor_velocities(v, 0) if axis.kind == "sigma" else diffpair.motor_velocities(0, v)
+    return dict(zip(axis.drives, (a, b)))
+
+
+def _motor_currents(axis: Axis, amps: float) -> dict[str, float]:
+    if axis.kind == "motor":
+        return {axis.drives[0]: amps}
+    a, b = diffpair.motor_currents(amps, 0.0) if axis.kind == "sigma" else diffpair.motor_currents(0.0, amps)
+    return dict(zip(axis.drives, (a, b)))
+
+
+def _plan_position(cfg: ArmConfig, axis: Axis, request: JogRequest, motors: Mapping[str, int],
+                   start: int) -> JogPlan:
+    if (request.to is None) == (request.by is None):
+        raise UsageError("a position jog needs exactly one of --to and --by")
+    if request.duration is not None:
+        raise UsageError("--for applies to --velocity and --torque jogs; a position move ends at its target")
+    if request.to is not None:
+        target = units.parse_position(request.to, axis.cpr, what="--to")
+    else:
+        target = start + units.parse_position(request.by or "", axis.cpr, what="--by")
+    if axis.normal is not None and not axis.normal[0] <= target <= axis.normal[1]:
+        raise UsageError(f"{axis.name}: target {target} counts is outside the joint's normal range "
+                          f"{_fmt_range(axis.normal)}", hint="jog moves a joint only inside its normal range")
+    targets = _motor_targets(axis, target, motors)
+    if axis.kind == "motor":
+        after = {**motors, **targets}
+        for j in axis.watched:
+            p = j.position(after)
+            if not j.normal[0] <= p <= j.normal[1]:
+                raise UsageError(f"{axis.name}: moving this motor to {target} puts joint {j.name} at {p} counts, "
+                                  f"outside its normal range {_fmt_range(j.normal)}")
+    if request.velocity is not None:
+        speed = abs(units.parse_velocity(request.velocity, axis.cpr, what="--velocity"))
+        _check_speed(axis, speed, "--velocity")
+    elif axis.vel_limit is not None:
+        speed = axis.vel_limit
+    else:
+        raise UsageError(f"{axis.name} has no velocity.limit in the config: give --velocity for the move")
+    distance = abs(target - start)
+    duration = distance / speed if distance else 0.0
+    sp = {d: (max(1, math.ceil(abs(t - motors[d]) / duration)) if duration else speed)
+          for d, t in targets.items()}
+    timeout = 2 * duration + 5.0  # ramps and settling; arriving later means something is wrong
+    return JogPlan(axis, "position", start, target=target, speed=speed, motor_targets=targets, motor_speeds=sp,
+                   timeout=timeout)
+
+
+def _motor_targets(axis: Axis, target: int, motors: Mapping[str, int]) -> dict[str, int]:
+    if axis.kind == "motor":
+        return {axis.drives[0]: target}
+    a, b = axis.drives
+    s, d = motors[a] + motors[b], motors[a] - motors[b]
+    held = next((j for j in axis.watched if j.name != axis.name and j.drive_b is not None), None)
+    if axis.kind == "sigma":
+        s2, d2 = diffpair.hold_other(target, d, "sigma", held.normal if held else None)
+    else:
+        s2, d2 = diffpair.hold_other(s, target, "delta", held.normal if held else None)
+    return dict(zip(axis.drives, diffpair.to_motors(s2, d2)))
+
+
+def check_offline(cfg: ArmConfig, axis: Axis, request: JogRequest) -> JogPlan | None:
+    """Every refusal that needs no bus (a dry run's checks): the whole plan for velocity and torque
+    jogs (they do not depend on where the motors stand), the values and the --to range for a move."""
+    zero = {d: 0 for d in axis.sensed}
+    if request.mode != "position":
+        return plan(cfg, axis, request, zero)
+    if request.to is not None and request.by is None:
+        return plan(cfg, axis, request, zero) if axis.kind != "motor" else None
+    if request.by is not None and request.to is None:
+        units.parse_position(request.by, axis.cpr, what="--by")
+        if request.velocity is not None:
+            _check_speed(axis, abs(units.parse_velocity(request.velocity, axis.cpr, what="--velocity")), "--velocity")
+        return None
+    raise UsageError("a position jog needs exactly one of --to and --by")
+
+
+# --------------------------------------------------------------------------- running it
+
+@dataclass
+class JogResult:
+    axis: str
+    kind: str
+    mode: str
+    drives: tuple[str, ...]
+    cpr: int
+    start: int
+    end: int
+    target: int | None = None
+    speed: int | None = None
+    current: float | None = None
+    duration: float | None = None
+    joints_start: dict[str, int] = field(default_factory=dict)
+    joints_end: dict[str, int] = field(default_factory=dict)
+    motors_start: dict[str, int] = field(default_factory=dict)
+    motors_end: dict[str, int] = field(default_factory=dict)
+    motor_commands: dict[str, Any] = field(default_factory=dict)
+    calibration: list[calibration.Calibration] = field(default_factory=list)
+    breaches: list[Breach] = field(default_factory=list)
+    recovered_to: dict[str, int] = field(default_factory=dict)  # joint positions after the recovery
+    outcome: str = "done"  # done | limit
+    held_correction: dict[str, Any] = field(default_factory=dict)  # the held pair joint put back
+    guard_lines: list[str] = field(default_factory=list)
+    stop: dict[str, Any] = field(default_factory=dict)  # the guard's report (GuardReport.as_json)
+    joint_cpr: dict[str, int] = field(default_factory=dict)  # cpr of each watched joint
+
+    @property
+    def ok(self) -> bool:
+        return not self.breaches
+
+    def as_dict(self) -> dict[str, Any]:
+        return {
+            "axis": self.axis, "kind": self.kind, "mode": self.mode, "drives": list(self.drives),
+            "ok": self.ok, "outcome": self.outcome, "start": self.start, "end": self.end,
+            "target": self.target, "speed": self.speed, "current": self.current, "for_s": self.duration,
+            "joints_start": dict(self.joints_start), "joints_end": dict(self.joints_end),
+            "motors_start": dict(self.motors_start), "motors_end": dict(self.motors_end),
+            "motor_commands": dict(self.motor_commands),
+            "calibration": [c.as_dict() for c in self.calibration],
+            "limit": [b.as_dict() for b in self.breaches], "recovered_to": dict(self.recovered_to),
+            "held_correction": dict(self.held_correction), "stop": dict(self.stop),
+        }
+
+
+def _refs(cfg: ArmConfig, drives: tuple[str, ...]):
+    from sherpa_cli.ops.session import DriveRef
+
+    return [DriveRef(d, cfg.drives[d].bus, cfg.drives[d].node, cfg.drives[d]) for d in drives]
+
+
+def prepare(session: Any, axis: Axis, request: JogRequest) -> tuple[JogPlan, dict[str, int], list]:
+    """Read positions (and calibration), then plan; nothing is written to a drive here but NMT start."""
+    cfg = session.cfg
+    refs = _refs(cfg, axis.sensed)
+    clients = {r.name: session.client(r) for r in refs}
+    for c in clients.values():
+        c.nmt_start()
+    motors = {d: int(c.get("PX")) for d, c in clients.items()}
+    p = plan(cfg, axis, request, motors)
+    cals: list[calibration.Calibration] = []
+    if request.mode == "position":
+        seen = set()
+        for joint in axis.joints:
+            key = calibration.joint_drives(cfg, joint)
+            if key in seen:
+                continue
+            seen.add(key)
+            cals.append(calibration.read_calibration(cfg, joint, lambda d: clients[d]))
+        missing = [c for c in cals if not c.calibrated]
+        if missing and not request.uncalibrated:
+            c = missing[0]
+            raise SafetyError(f"{axis.name}: refusing a position move: joint {c.joint} is {c.reason}",
+                              hint="home it first, or pass --uncalibrated to move by the counter as it is "
+                                   "(positions are then relative to where the joint stood at power-up)")
+    return p, motors, cals
+
+
+def run(session: Any, axis: Axis, request: JogRequest, *, guard_factory: Callable[..., Any] | None = None,
+        clock: Callable[[], float] = time.monotonic, sleep: Callable[[float], None] = time.sleep,
+        on_event: Callable[[str], None] | None = None,
+        on_progress: Callable[[Mapping[str, int]], None] | None = None) -> JogResult:
+    """Plan, then run the jog inside the motion guard with the limit watch; the guard stops every
+    motor on the way out. A breach stops the jog at once and brings the joint back (position mode)
+    to the nearest edge of its normal range; the result says so (``ok`` False). ``on_progress``
+    gets the watched joints' positions (counts) at every sample."""
+    from sherpa_cli.ops.motion import MotionGuard, MotionSettings
+
+    cfg = session.cfg
+    p, motors, cals = prepare(session, axis, request)
+    refs = _refs(cfg, axis.drives)
+    by_name = {r.name: r for r in refs}
+    settings = MotionSettings.from_config(cfg, {r.bus for r in refs})
+    factory = guard_factory or MotionGuard
+    joints_start = {j.name: j.position(motors) for j in axis.watched}
+    result = JogResult(axis.name, axis.kind, p.mode, axis.drives, axis.cpr, p.start, p.start, target=p.target,
+                       speed=p.speed, current=p.current, duration=p.duration, joints_start=joints_start,
+                       motors_start=dict(motors), calibration=cals,
+                       joint_cpr={j.name: cfg.joints[j.name].cpr for j in axis.watched})
+    guard = factory(session, refs, settings=settings, clock=clock, sleep=sleep, on_event=on_event)
+    try:
+        final = _run_guarded(guard, session, cfg, axis, p, by_name, settings, joints_start, result, clock, sleep,
+                             on_progress)
+    except BaseException as exc:
+        exc.motion_report = guard.report  # type: ignore[attr-defined]  # the CLI shows how it stopped
+        raise
+    # the guard stopped every motor (ST, MO=0) and put back what it changed
+    result.motors_end = final
+    result.joints_end = {j.name: j.position(final) for j in axis.watched}
+    result.end = axis.position(final)
+    result.guard_lines = guard.report.lines()
+    result.stop = guard.report.as_json()
+    return result
+
+
+def _run_guarded(guard: Any, session: Any, cfg: ArmConfig, axis: Axis, p: JogPlan, by_name: Mapping[str, Any],
+                 settings: Any, joints_start: Mapping[str, int], result: "JogResult",
+                 clock: Callable[[], float], sleep: Callable[[float], None],
+                 on_progress: Callable[[Mapping[str, int]], None] | None = None) -> dict[str, int]:
+    with guard:
+        clients = {d: guard.client(by_name[d]) for d in axis.drives}
+
+        def check_drives() -> None:
+            """The guard's sign of life, and every moving motor still on (a trip ends the jog)."""
+            guard.check()
+            for d, c in clients.items():
+                sr = decode_sr(int(guard.query(by_name[d], "SR")))
+                if not sr.motor_on:
+                    mf = int(guard.query(by_name[d], "MF"))
+                    why = "; ".join(describe_mf(mf)) if mf else "MO=0 from elsewhere (sherpa stop, another tool)"
+                    raise SafetyError(f"{c.label}: the motor was switched off during the jog: {why}")
+        others = {r.name: session.client(r) for r in _refs(cfg, axis.sensed) if r.name not in clients}
+
+        def sample() -> dict[str, int]:
+            # guarded drives through guard.query: it waits out a drive deaf in its MO settle window
+            # (`sherpa stop` from another terminal), so the jog ends with the reason, not a timeout
+            motors = {d: int(guard.query(by_name[d], "PX")) for d in clients}
+            motors.update((d, int(c.get("PX"))) for d, c in others.items())
+            if on_progress is not None:
+                on_progress({j.name: j.position(motors) for j in axis.watched})
+            return {d: motors[d] for d in axis.sensed}
+
+        um = UM_TORQUE if p.mode == "torque" else (settings.velocity_unit_mode if p.mode == "velocity"
+                                                   else UM_POSITION)
+        for d in axis.drives:
+            guard.enable(by_name[d], um)
+        if p.mode == "position":
+            for d, c in clients.items():
+                c.set("SP", 0, p.motor_speeds[d])
+                c.set("PA", 0, p.motor_targets[d])
+            result.motor_commands = {d: {"PA": p.motor_targets[d], "SP": p.motor_speeds[d]} for d in axis.drives}
+            for c in clients.values():
+                c.execute("BG")
+            watched = limit_watch.watch(
+                axis.watched, sample, clock=clock, sleep=sleep, interval=settings.poll_interval,
+                finished=lambda m: all(int(c.get("MS")) == 0 for c in clients.values()), duration=p.timeout,
+                check_drives=check_drives)
+            if watched.outcome == "elapsed":
+                raise SafetyError(f"{axis.name}: did not reach {p.target} within {p.timeout:g} s "
+                                  f"(stopped at {axis.position(watched.motors)})",
+                                  hint="check the drives with `sherpa monitor --once`")
+        elif p.mode == "velocity":
+            for d, c in clients.items():
+                c.set("JV", 0, p.motor_speeds[d])
+            result.motor_commands = {d: {"JV": p.motor_speeds[d]} for d in axis.drives}
+            for c in clients.values():
+                c.execute("BG")
+            watched = limit_watch.watch(axis.watched, sample, clock=clock, sleep=sleep,
+                                        interval=settings.poll_interval, duration=p.duration,
+                                        check_drives=check_drives)
+        else:
+            result.motor_commands = {d: {"TC": p.motor_currents[d]} for d in axis.drives}
+            for d, c in clients.items():
+                c.set("TC", 0, p.motor_currents[d])
+            watched = limit_watch.watch(axis.watched, sample, clock=clock, sleep=sleep,
+                                        interval=settings.poll_interval, duration=p.duration,
+                                        check_drives=check_drives)
+        held = {j.name: joints_start[j.name] for j in axis.watched
+                if axis.kind in ("sigma", "delta") and j.name != axis.name and j.drive_b is not None}
+        if watched.outcome == "breach":
+            result.outcome = "limit"
+            result.breaches = list(watched.breaches)
+            _stop_now(clients, p.mode)
+            _wait_standstill(clients, guard, settings, clock, sleep)
+            back = limit_watch.recovery_targets(axis.watched, sample(), watched.breaches, hold=held)
+            _move_to(guard, by_name, clients, back, _slow(axis), settings, clock, sleep,
+                     "the move back into the normal range")
+            final = sample()
+            result.recovered_to = {j.name: j.position(final) for j in axis.watched}
+        else:
+            if p.mode != "position":
+                _stop_now(clients, p.mode)
+                _wait_standstill(clients, guard, settings, clock, sleep)
+            final = sample()
+            if held and p.mode != "position":
+                # start and stop skew between the two motors shifts the held joint a little (seed
+                # Fig. 9.10/9.11): put it back, keeping the moved joint where it ended
+                final = _restore_held(guard, by_name, clients, axis, final, held, settings, clock, sleep, result)
+    return final
+
+
+def _stop_now(clients: Mapping[str, Any], mode: str) -> None:
+    """Stop every motor of the jog at once; nothing queued is sent after this."""
+    for c in clients.values():
+        if mode == "torque":
+            c.set("TC", 0, 0.0)
+        c.execute("ST")
+
+
+def _slow(axis: Axis) -> int:
+    return max(1, (axis.vel_limit or 200) // 2)
+
+
+def _restore_held(guard: Any, by_name: Mapping[str, Any], clients: Mapping[str, Any], axis: Axis,
+                  now: dict[str, int], held: Mapping[str, int], settings: Any, clock: Callable[[], float],
+                  sleep: Callable[[float], None], result: "JogResult") -> dict[str, int]:
+    (name, value), = held.items()
+    a, b = axis.drives
+    s, d = now[a] + now[b], now[a] - now[b]
+    if (d if axis.kind == "sigma" else s) == value:
+        return now
+    if axis.kind == "sigma":
+        s2, d2 = diffpair.hold_other(s, value, "delta")
+    else:
+        s2, d2 = diffpair.hold_other(value, d, "sigma")
+    targets = dict(zip(axis.drives, diffpair.to_motors(s2, d2)))
+    result.held_correction = {name: {"from": (d if axis.kind == "sigma" else s), "to": value}}
+    _move_to(guard, by_name, clients, targets, _slow(axis), settings, clock, sleep,
+             f"the correction of the held joint {name}")
+    return {**now, **{dr: int(c.get("PX")) for dr, c in clients.items()}}
+
+
+def _move_to(guard: Any, by_name: Mapping[str, Any], clients: Mapping[str, Any], targets: Mapping[str, int],
+             speed: int, settings: Any, clock: Callable[[], float], sleep: Callable[[float], None],
+             what: str) -> None:
+    """Position mode (UM=5; the guard cycles MO if the mode changes), every motor of ``targets`` to
+    its target with equal-duration profiles, bounded in time."""
+    if not targets:
+        return
+    now = {d: int(clients[d].get("PX")) for d in targets}
+    longest = max(abs(t - now[d]) for d, t in targets.items())
+    duration = longest / speed if longest else 0.0
+    for d, t in targets.items():
+        guard.enable(by_name[d], UM_POSITION)
+        c = clients[d]
+        c.set("SP", 0, max(1, math.ceil(abs(t - now[d]) / duration)) if duration else speed)
+        c.set("PA", 0, t)
+    for d in targets:
+        clients[d].execute("BG")
+    deadline = clock() + 2 * duration + 5.0
+    while not all(int(clients[d].get("MS")) == 0 for d in targets):
+        guard.check()
+        if clock() >= deadline:
+            raise SafetyError(f"{what} did not finish in time", hint="check the joint; `sherpa stop` stops every drive")
+        sleep(settings.poll_interval)
+
+
+def _wait_standstill(clients: Mapping[str, Any], guard: Any, settings: Any, clock: Callable[[], float],
+                     sleep: Callable[[float], None]) -> None:
+    deadline = clock() + settings.standstill_timeout
+    while clock() < deadline:
+        guard.check()
+        if all(int(c.get("VX")) == 0 or not int(c.get("MO")) for c in clients.values()):
+            return
+        sleep(settings.poll_interval)

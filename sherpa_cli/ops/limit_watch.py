@@ -1,0 +1,210 @@
+"""Joint-limit watch (seed section 6.1): the tool's own guard on joint positions during motion.
+
+While a command moves a joint the tool samples the motor positions. When a joint leaves its
+FULL range the command stops at once, nothing queued is sent, and the joint is moved back
+(position mode) to the nearest edge of its NORMAL range. For a differential pair the check and
+the way back are in joint space (Σ = m_a + m_b, Δ = m_a - m_b), since the drives' own limits
+only see one motor each (the motor box is necessary, not sufficient: joints/diffpair.py).
+
+In torque mode the drive's position and speed limits do not act (seed C.1.1, C.1.2), so this
+watch is the only protection there; torque commands therefore also carry a time limit.
+
+This module holds the pure decision logic on samples (:func:`check`, :func:`recovery_targets`)
+and a small polling loop (:func:`watch`) whose I/O, time and stop conditions are injected.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Callable, Iterable, Mapping, Sequence
+
+from sherpa_cli.config.model import ArmConfig, JointConfig, JointRole
+from sherpa_cli.joints.diffpair import Range, is_reachable, to_motors
+
+Motors = Mapping[str, int]  # drive name -> motor position (counts, PX)
+
+
+@dataclass(frozen=True)
+class WatchedJoint:
+    """A joint as a function of motor positions: ``m[drive_a] + sign * m[drive_b]`` (plain: ``m[drive_a]``)."""
+
+    name: str
+    full: Range
+    normal: Range
+    drive_a: str
+    drive_b: str | None = None  # the second motor of a Σ/Δ joint
+    sign: int = 1  # +1 Σ, -1 Δ
+
+    @classmethod
+    def of(cls, cfg: ArmConfig, joint: JointConfig) -> "WatchedJoint":
+        if joint.role is JointRole.PLAIN:
+            assert joint.drive is not None
+            return cls(joint.name, joint.full_range, joint.normal_range, joint.drive)
+        pair = cfg.pairs[joint.pair]  # type: ignore[index]
+        return cls(joint.name, joint.full_range, joint.normal_range, pair.drive_a, pair.drive_b,
+                   1 if joint.role is JointRole.SIGMA else -1)
+
+    @property
+    def drives(self) -> tuple[str, ...]:
+        return (self.drive_a,) if self.drive_b is None else (self.drive_a, self.drive_b)
+
+    def position(self, motors: Motors) -> int:
+        p = motors[self.drive_a]
+        return p if self.drive_b is None else p + self.sign * motors[self.drive_b]
+
+
+def joints_moved_by(cfg: ArmConfig, drives: Iterable[str]) -> list[WatchedJoint]:
+    """Every joint the given drives move (a pair drive moves both Σ and Δ), in config order."""
+    wanted = set(drives)
+    out: list[WatchedJoint] = []
+    for joint in cfg.joints.values():
+        if joint.role is JointRole.PLAIN:
+            moved = joint.drive in wanted
+        else:
+            pair = cfg.pairs.get(joint.pair) if joint.pair else None
+            moved = pair is not None and bool(wanted & {pair.drive_a, pair.drive_b})
+        if moved:
+            out.append(WatchedJoint.of(cfg, joint))
+    return out
+
+
+def _clamp(x: int, r: Range) -> int:
+    return min(max(x, r[0]), r[1])
+
+
+@dataclass(frozen=True)
+class Breach:
+    """A joint found outside its full range, and where the recovery takes it."""
+
+    joint: str
+    position: int
+    full: Range
+    normal: Range
+
+    @property
+    def side(self) -> str:
+        return "low" if self.position < self.full[0] else "high"
+
+    @property
+    def back_to(self) -> int:
+        """The nearest edge of the normal range."""
+        return _clamp(self.position, self.normal)
+
+    def describe(self) -> str:
+        return (f"joint {self.joint} at {self.position} counts left its full range "
+                f"[{self.full[0]}, {self.full[1]}] on the {self.side} side")
+
+    def as_dict(self) -> dict[str, object]:
+        return {"joint": self.joint, "position": self.position, "full_range": list(self.full),
+                "side": self.side, "back_to": self.back_to}
+
+
+def check(joints: Sequence[WatchedJoint], motors: Motors) -> list[Breach]:
+    """The joints outside their full range (inclusive bounds are inside)."""
+    out = []
+    for j in joints:
+        p = j.position(motors)
+        if not j.full[0] <= p <= j.full[1]:
+            out.append(Breach(j.name, p, j.full, j.normal))
+    return out
+
+
+def recovery_targets(joints: Sequence[WatchedJoint], motors: Motors, breaches: Sequence[Breach],
+                     hold: Mapping[str, int] | None = None) -> dict[str, int]:
+    """Motor targets (counts) that bring every breached joint to the nearest edge of its normal range.
+
+    A plain joint is its motor. For a pair both joints are clamped into their normal ranges
+    (a joint already inside stays where it is) and mapped back through the inverse transform;
+    when Σ and Δ differ in parity (no whole motor position) the joint that did not breach gives
+    way by one count, toward the inside of its normal range. ``hold`` gives a pair joint that did
+    not breach the value to keep instead of where it stands (a jog's held joint: its value before
+    the jog, which start and stop skew between the two motors may have shifted by a few counts).
+    Only drives that must move are returned.
+    """
+    hold = hold or {}
+    breached = {b.joint for b in breaches}
+    targets: dict[str, int] = {}
+    pairs: dict[tuple[str, str], dict[int, WatchedJoint]] = {}
+    for j in joints:
+        if j.drive_b is None:
+            if j.name in breached:
+                targets[j.drive_a] = _clamp(j.position(motors), j.normal)
+        else:
+            pairs.setdefault((j.drive_a, j.drive_b), {})[j.sign] = j
+    for (a, b), members in pairs.items():
+        if not breached & {m.name for m in members.values()}:
+            continue
+        m_a, m_b = motors[a], motors[b]
+        s, d = m_a + m_b, m_a - m_b
+        sig, dlt = members.get(1), members.get(-1)
+        if sig is not None and sig.name not in breached and sig.name in hold:
+            s = hold[sig.name]
+        if dlt is not None and dlt.name not in breached and dlt.name in hold:
+            d = hold[dlt.name]
+        s2 = _clamp(s, sig.normal) if sig is not None else s
+        d2 = _clamp(d, dlt.normal) if dlt is not None else d
+        if not is_reachable(s2, d2):
+            s2, d2 = _give_way(s2, d2, sig, dlt, breached)
+        targets[a], targets[b] = to_motors(s2, d2)
+    return targets
+
+
+def _give_way(s: int, d: int, sig: WatchedJoint | None, dlt: WatchedJoint | None,
+              breached: set[str]) -> tuple[int, int]:
+    """Move one joint by one count so Σ and Δ share parity: the joint that did not breach gives
+    way (Δ when only Σ breached, else Σ), to the side inside its normal range, toward its middle."""
+    move_delta = sig is not None and sig.name in breached and not (dlt is not None and dlt.name in breached)
+    moving, value = (dlt, d) if move_delta else (sig, s)
+    candidates = [value - 1, value + 1]
+    if moving is not None:
+        lo, hi = moving.normal
+        candidates.sort(key=lambda v: (not lo <= v <= hi, abs(2 * v - lo - hi)))
+    return (s, candidates[0]) if move_delta else (candidates[0], d)
+
+
+@dataclass(frozen=True)
+class WatchResult:
+    """How a watched motion ended.
+
+    ``outcome``: ``finished`` (the motion's own end), ``elapsed`` (its time, --for, is over),
+    ``breach`` (a joint left its full range: the caller must stop and recover).
+    """
+
+    outcome: str
+    motors: Mapping[str, int]  # the last sample
+    breaches: tuple[Breach, ...] = ()
+    samples: int = 0
+    elapsed: float = 0.0
+    joints: Mapping[str, int] = field(default_factory=dict)  # joint positions at the last sample
+
+
+def watch(joints: Sequence[WatchedJoint], sample: Callable[[], Motors], *,
+          clock: Callable[[], float], sleep: Callable[[float], None], interval: float,
+          finished: Callable[[Motors], bool] | None = None, duration: float | None = None,
+          check_drives: Callable[[], None] | None = None) -> WatchResult:
+    """Sample the motors every ``interval`` s until the motion finishes, ``duration`` s pass, or a
+    joint leaves its full range (checked first on every sample, so a breach always wins).
+
+    ``check_drives`` (the motion guard's fault check) runs after every sample and may raise.
+    ``finished`` or ``duration`` must be given: the loop never runs open-ended.
+    """
+    if finished is None and duration is None:
+        raise ValueError("watch needs finished or duration: a watch must end")
+    start = clock()
+    n = 0
+    while True:
+        motors = dict(sample())
+        n += 1
+        elapsed = clock() - start
+        positions = {j.name: j.position(motors) for j in joints}
+        breaches = check(joints, motors)
+        if breaches:
+            return WatchResult("breach", motors, tuple(breaches), n, elapsed, positions)
+        if check_drives is not None:
+            check_drives()
+        if finished is not None and finished(motors):
+            return WatchResult("finished", motors, (), n, elapsed, positions)
+        if duration is not None and elapsed >= duration:
+            return WatchResult("elapsed", motors, (), n, elapsed, positions)
+        wait = interval if duration is None else min(interval, max(duration - elapsed, 0.0))
+        sleep(wait if wait > 0 else interval)
