@@ -50,7 +50,8 @@ def settings_for(cfg: ArmConfig, drive: str, **overrides: Any) -> SimSettings:
                     drop_probability=faults.drop_probability,
                     die_at=faults.die_at, reboot_at=faults.reboot_at, heartbeat_ms=faults.heartbeat_ms,
                     seed=faults.seed, limit_trip_at=faults.limit_trip_at,
-                    st_refused_in_speed_mode=faults.st_refused_in_speed_mode)
+                    st_refused_in_speed_mode=faults.st_refused_in_speed_mode,
+                    start_skew_s=faults.start_skew)
     base.update(overrides)
     return SimSettings(**base)
 
@@ -347,6 +348,9 @@ class SimArm:
             targets = list(on_bus)  # NMT broadcast / host heartbeats: every drive decides for itself
         else:
             targets = by_node.get(can_id & 0x7F, [])
+            if 0x301 <= can_id <= 0x37F:  # RPDO2 of a group id (0x2040): every drive of the group
+                targets = targets + [n for n, d in on_bus.items()
+                                     if d.group_id == can_id - 0x300 and n not in targets]
         for name in targets:
             arrived = on_bus[name].receive(can_id, data)
             if arrived and SDO_RX + 1 <= can_id <= SDO_RX + 0x7F:

@@ -150,6 +150,12 @@ class SimDrive:
             self._nmt(data[0])
         elif can_id == RPDO2_BASE + self.node:
             self._interpreter_frame(data)
+        elif can_id == RPDO2_BASE + self.group_id:
+            self._via_group = True  # one frame reaches every drive of the group at once: no start skew
+            try:
+                self._interpreter_frame(data)
+            finally:
+                self._via_group = False
         elif can_id == HEARTBEAT_BASE + self._consumer()[0]:
             self._hb_last = t
         return True
@@ -184,6 +190,11 @@ class SimDrive:
     @property
     def nmt_state(self) -> int:
         return self._nmt_state
+
+    @property
+    def group_id(self) -> int:
+        """Object 0x2040 ([IG] 13-10): 0 = no group; binary interpreter frames to 0x300 + id reach this drive."""
+        return self._od.values[(0x2040, 0)]
 
     @property
     def dead(self) -> bool:
@@ -236,10 +247,15 @@ class SimDrive:
         if letters == "BG":
             if not self._motor_on:
                 raise Refused(interpreter.EC_MOTOR_MUST_BE_ON)
-            self._begin()
+            skew = self.settings.start_skew_s
+            if skew > 0 and not self._via_group:
+                self._begin_due = self._t + skew  # a separately received BG starts late (seed Fig. 9.10)
+            else:
+                self._begin()
         elif letters == "ST":
             if self.settings.st_refused_in_speed_mode and self.ram["UM"] == 2:
                 raise Refused(interpreter.EC_NOT_IN_THIS_UM)  # [BLISS]: "cannot be executed in speed mode"
+            self._begin_due = None
             if self._motor_on:
                 self.motor.stop(self.ram["SD"] * self.speed_gain)
         elif letters in ("SV", "LD"):
@@ -269,6 +285,8 @@ class SimDrive:
         self._limit_stop = False
         self._quick_stop = False
         self._target_kind = "PA"
+        self._begin_due: float | None = None
+        self._via_group = False
         self._nmt_state = PRE_OPERATIONAL
         self._hb_last: float | None = None
         self._settle_until = self._blackout_until = -math.inf
@@ -325,6 +343,8 @@ class SimDrive:
             times.append(self._reboot_due)
         if self._trip_due is not None:
             times.append(self._trip_due)
+        if self._begin_due is not None:
+            times.append(self._begin_due)
         if self._hb_last is not None:  # checked first: _consumer() is a lookup on every step
             timeout = self._consumer()[1]
             if timeout:
@@ -352,6 +372,10 @@ class SimDrive:
         if self._reboot_due is not None and t >= self._reboot_due:
             self._reboot_due = None
             self._boot()
+        if self._begin_due is not None and t >= self._begin_due:
+            self._begin_due = None
+            if self._motor_on:
+                self._begin()
         if self._trip_due is not None and t >= self._trip_due:
             self._trip_due = None
             self._shut_down(MF_POSITION_LIMIT, "position limit (injected trip)")
@@ -375,6 +399,8 @@ class SimDrive:
         if can_id == NMT:
             return len(data) == 2 and data[1] in (0, self.node)
         if can_id in (RPDO2_BASE + self.node, SDO_RX_BASE + self.node):
+            return True
+        if self.group_id and can_id == RPDO2_BASE + self.group_id:
             return True
         host, timeout = self._consumer()
         return bool(timeout) and can_id == HEARTBEAT_BASE + host
@@ -452,6 +478,7 @@ class SimDrive:
         self._record("motor on: MO=1" if on else "motor off: MO=0")
         if not on:
             self._motor_on = False
+            self._begin_due = None
             self.motor.off()
             return
         self._motor_on = True
@@ -526,6 +553,7 @@ class SimDrive:
             self._record(f"motor off: {why}")
         self._motor_on = False
         self._quick_stop = False
+        self._begin_due = None
         self.motor.off()
         self._mf |= mf_bit
 

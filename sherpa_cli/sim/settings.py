@@ -65,9 +65,14 @@ class SimSettings:
     # [BLISS]: ST "cannot be executed in speed control mode" on some firmware; True: ST in UM=2
     # answers EC 12 and a tool must stop with JV=0 + BG (elmo-protocol.md 2.1, UNCONFIRMED).
     st_refused_in_speed_mode: bool = False
+    # A differential pair's start skew (seed Fig. 9.10/9.11): a BG received on the drive's own
+    # RPDO2 starts its motion this many seconds late (host latency between two separately sent
+    # begin commands). A BG sent to the drive's group id (0x2040) or executed at SYNC starts at
+    # once on every drive of the group.
+    start_skew_s: float = 0.0
 
     def __post_init__(self) -> None:
-        for name in ("mo_settle_s", "sv_blackout_s", "reply_latency_s", "sdo_latency_s"):
+        for name in ("mo_settle_s", "sv_blackout_s", "reply_latency_s", "sdo_latency_s", "start_skew_s"):
             if getattr(self, name) < 0:
                 raise ValueError(f"SimSettings.{name} must be >= 0")
         if not 0.0 <= self.drop_probability <= 1.0:
