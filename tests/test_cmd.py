@@ -62,7 +62,7 @@ def test_apply_then_a_new_invocation_sees_the_power_cycled_drive(cli):
     cli("--sim", "cmd", "shoulder_1a", "AC=150000", "--apply")
     again = json.loads(cli("--sim", "--json", "cmd", "shoulder_1a", "AC").stdout)
     assert again["results"][0]["value"] == 100000  # not saved: RAM is new after the power cycle
-    cli("--sim", "cmd", "shoulder_1a", "AC=150000", "SV", "--apply")
+    cli("--sim", "cmd", "shoulder_1a", "AC=150000", "SV", "--apply", "--raw-save")
     saved = json.loads(cli("--sim", "--json", "cmd", "shoulder_1a", "AC").stdout)
     assert saved["results"][0]["value"] == 150000
 

@@ -41,11 +41,11 @@ def test_commission_example3_applies_saves_and_the_numbers_arrive(cli, golden, t
     assert r.exit_code == 0, r.stderr
     assert "every drive is programmed, verified and saved (2 drives)" in r.stdout
     data = json.loads(report.read_text())
-    assert data["outcome"] == "passed" and data["counts"]["passed"] == 8
+    assert data["outcome"] == "passed" and data["counts"]["passed"] == 9
     save = next(s for s in data["steps"] if s["name"] == "save")
     assert save["dry_run"] is False and save["command"][-3:] == ["--apply", "--save", "--yes"]
     suite = ET.parse(junit).getroot().find("testsuite")
-    assert (suite.get("tests"), suite.get("failures")) == ("8", "0")
+    assert (suite.get("tests"), suite.get("failures")) == ("9", "0")
     # the backup holds the Appendix C numbers
     dumped = yaml.safe_load(backup.read_text())["drives"]
     for drive in ("drive1", "drive2"):
@@ -89,9 +89,9 @@ def test_commission_dry_run_writes_nothing(cli, golden, tmp_path, monkeypatch):
     golden("commission-example3-dry-run.txt", normalized(r, tmp_path))
     # nothing is wrong: the dry run shows its plan, asks nothing and does not verify what it did not write
     assert r.exit_code == 0, r.stdout
-    assert "[5/8] confirm-save  skipped (dry run: nothing to confirm)" in r.stdout
-    assert "[6/8] save          passed (dry run)" in r.stdout
-    assert "[8/8] verify        skipped (dry run: nothing was written)" in r.stdout
+    assert "[5/9] confirm-save  skipped (dry run: nothing to confirm)" in r.stdout
+    assert "[6/9] save          passed (dry run)" in r.stdout
+    assert "[8/9] verify        skipped (dry run: nothing was written)" in r.stdout
     assert "dry run: nothing was written (2 drives)" in r.stdout
     r = cli("--config", EXAMPLE3, "--sim", "--json", "cmd", "drive1", "LL[3]")
     assert json.loads(r.stdout)["results"][0]["value"] != -205
@@ -118,7 +118,7 @@ def test_commission_stops_at_a_missing_drive_and_says_where_to_resume(cli, tmp_p
     r = cli("--config", str(cfg), "--sim", "commission", "--apply", "--yes",
             "--set", f"backup={tmp_path / 'b.yaml'}")
     assert r.exit_code == 1
-    assert "[1/8] scan          FAILED" in r.stdout and "exit code 1, expected 0" in r.stdout
+    assert "[1/9] scan          FAILED" in r.stdout and "exit code 1, expected 0" in r.stdout
     assert "resume with: --from scan" in r.stdout
     assert "commissioning is NOT complete" in r.stdout or "the save step did not run" in r.stdout
 
@@ -132,7 +132,7 @@ def test_after_commissioning_one_changed_value_is_the_only_difference(cli, tmp_p
     assert r.exit_code == 0, r.stdout
     r = cli("--config", EXAMPLE3, "--sim", "--json", "params", "diff", "config", "live")
     assert r.exit_code == 0, r.stdout
-    r = cli("--config", EXAMPLE3, "--sim", "cmd", "drive2", "AC=777", "SV", "--apply")
+    r = cli("--config", EXAMPLE3, "--sim", "cmd", "drive2", "AC=777", "SV", "--apply", "--raw-save")
     assert r.exit_code == 0, r.stderr
     r = cli("--config", EXAMPLE3, "--sim", "--json", "params", "diff", "config", "live")
     assert r.exit_code == 1

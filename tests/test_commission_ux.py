@@ -86,7 +86,7 @@ def test_readme_junit_dry_run_is_green_on_a_fresh_arm(cli, tmp_path):
 def test_verbose_shows_the_steps_output(cli, tmp_path):
     r = cli("--config", EXAMPLE3, "--sim", "commission", "--verbose", "--set", f"backup={tmp_path / 'b.yaml'}")
     assert r.exit_code == 0, r.stdout
-    assert "[3/8] plan: sherpa program-limits" in r.stdout
+    assert "[3/9] plan: sherpa program-limits" in r.stdout
     assert "    -> passed (exit 0, 0.5 s)" in r.stdout
     assert "(JSON output," in r.stdout  # the save step's JSON is not dumped on the terminal
     assert not any(line.strip().startswith('"drives"') for line in r.stdout.splitlines())
@@ -134,7 +134,7 @@ def test_the_save_question_goes_to_the_terminal_and_lists_the_drives(cli, monkey
     question = "Save the verified limits to flash (SV) on every drive that changed? (would save: drive1, drive2)"
     assert f"{question} [y/N]" in err, err
     assert "Save the verified" not in out  # `| tee log` shows results; the question stays on the terminal
-    assert "[5/8] confirm-save  declined (answer: no)" in out
+    assert "[5/9] confirm-save  declined (answer: no)" in out
 
 
 def test_program_limits_save_question_goes_to_stderr(cli, monkeypatch):

@@ -113,7 +113,8 @@ def test_cmd_in_another_process_talks_to_the_served_sim(served_sim, tmp_path):
 def test_sigterm_stops_the_served_sim_and_keeps_what_sv_saved(served_sim, tmp_path):
     # A service manager stops `sherpa sim` with SIGTERM: the saved flash must survive that too.
     proc, bus_map = served_sim
-    saved = _sherpa(tmp_path, "--bus-map", bus_map, "cmd", "shoulder_1a", "AC=123456", "SV", "--apply")
+    saved = _sherpa(tmp_path, "--bus-map", bus_map, "cmd", "shoulder_1a", "AC=123456", "SV", "--apply",
+                    "--raw-save")
     assert saved.returncode == 0, saved.stderr
     proc.send_signal(signal.SIGTERM)
     assert proc.wait(timeout=20) == 0
@@ -133,7 +134,7 @@ def test_sim_needs_somewhere_to_run(cli):
 
 
 def test_reset_state(cli):
-    cli("--sim", "cmd", "shoulder_1a", "AC=150000", "SV", "--apply")
+    cli("--sim", "cmd", "shoulder_1a", "AC=150000", "SV", "--apply", "--raw-save")
     assert json.loads(cli("--sim", "--json", "cmd", "shoulder_1a", "AC").stdout)["results"][0]["value"] == 150000
     result = cli("sim", "--reset-state")
     assert result.exit_code == 0 and "factory flash" in result.stdout

@@ -75,9 +75,11 @@ def example3(sigma_kw=None, delta_kw=None, pair_kw=None, drives=None) -> ArmConf
 
 def test_seed_example_1():
     dp = derive_drive_params(example1(), "d1")
+    # IL[3] = IL[4] = 21 as the seed says; every other input "no function" (il_codes.unused)
     assert dp == DriveParams("d1", "can0", 10, {"LL[3]": -240, "HL[3]": 240, "VL[3]": -220, "VH[3]": 220,
-                                                "IL[3]": 21, "IL[4]": 21})
-    assert list(dp.params) == ["LL[3]", "HL[3]", "VL[3]", "VH[3]", "IL[3]", "IL[4]"]
+                                                "IL[1]": 4, "IL[2]": 4, "IL[3]": 21, "IL[4]": 21, "IL[5]": 4,
+                                                "IL[6]": 4})
+    assert list(dp.params) == ["LL[3]", "HL[3]", "VL[3]", "VH[3]", *(f"IL[{n}]" for n in range(1, 7))]
     assert software_limits(example1(), "elbow") == {"cpr": 600, "pos_min": -220, "pos_max": 220,
                                                     "pos_margin": 30, "cal_sw_L": 3, "cal_sw_H": 4}
 
@@ -85,7 +87,8 @@ def test_seed_example_1():
 def test_seed_example_2():
     cfg = example2()
     assert dict(derive_drive_params(cfg, "d1").params) == {"LL[3]": -240, "HL[3]": 240, "VL[3]": -220,
-                                                            "VH[3]": 220, "IL[1]": 5}
+                                                            "VH[3]": 220, "IL[1]": 5, "IL[2]": 4, "IL[3]": 4,
+                                                            "IL[4]": 4, "IL[5]": 4, "IL[6]": 4}
     sw = software_limits(cfg, "elbow")
     assert sw["cal_sw_L"] == 1 and sw["cal_pos"] == 20 and "cal_sw_H" not in sw
 
@@ -95,7 +98,7 @@ def test_seed_example_3():
     for name in ("wa", "wb"):
         assert dict(derive_drive_params(cfg, name).params) == {
             "LL[3]": -205, "HL[3]": 205, "VL[3]": -190, "VH[3]": 190,
-            "IL[1]": 21, "IL[2]": 21, "IL[3]": 21, "IL[4]": 21}
+            "IL[1]": 21, "IL[2]": 21, "IL[3]": 21, "IL[4]": 21, "IL[5]": 4, "IL[6]": 4}
     assert software_limits(cfg, "wrist") == {
         "cpr": 600, "pos_min": -220, "pos_max": 220, "pos_margin": 30,
         "pos_min_dd": -160, "pos_max_dd": 160, "pos_margin_dd": 10, "cal_pos": -220,
@@ -114,7 +117,7 @@ def test_plain_joint_full_set_in_order():
     cur = CurrentLimits(continuous=3.0, peak=6.5, peak_time=2.0, where=loc("joints.elbow.current"))
     cfg = example1(vel_limit=1000, vel_trip=1200, accel=5000, decel=6000, current=cur)
     dp = derive_drive_params(cfg, "d1")
-    assert list(dp.params) == [*PARAM_ORDER, "IL[3]", "IL[4]"]
+    assert list(dp.params) == [*PARAM_ORDER, *(f"IL[{n}]" for n in range(1, 7))]
     p = dp.params
     assert (p["LL[2]"], p["HL[2]"], p["VL[2]"], p["VH[2]"]) == (-1200, 1200, -1000, 1000)
     assert (p["AC"], p["DC"]) == (5000, 6000)
@@ -139,8 +142,8 @@ def test_fractional_peak_time_names_the_config_location():
 def test_switch_wired_to_other_drives_only():
     s = stop(2, -225, drives=("d2",))
     cfg = arm([joint("elbow", switches=(s,))], drives=[drive("d1", 10), drive("d2", 11)])
-    assert "IL[2]" not in derive_drive_params(cfg, "d1").params
-    assert derive_drive_params(cfg, "d2").params == {"IL[2]": 21}
+    assert derive_drive_params(cfg, "d1").params["IL[2]"] == 4  # the switch is not d1's: no function
+    assert derive_drive_params(cfg, "d2").params == {"IL[2]": 21}  # d2 moves no joint: only its switch
 
 
 def test_one_input_with_two_functions_is_a_config_error():
@@ -209,7 +212,7 @@ def test_pair_switch_wired_to_one_drive():
     cfg = example3()
     cfg = dataclasses.replace(cfg, joints={**cfg.joints, "roll": dataclasses.replace(
         cfg.joints["roll"], switches=(stop(3, -165, "low", drives=("wb",)), stop(4, 165, "high", drives=("wb",))))})
-    assert "IL[3]" not in derive_drive_params(cfg, "wa").params
+    assert derive_drive_params(cfg, "wa").params["IL[3]"] == 4
     assert derive_drive_params(cfg, "wb").params["IL[4]"] == 21
 
 

@@ -33,7 +33,7 @@ def test_every_command_meets_a_power_cycled_arm_and_flash_persists_within_a_test
     assert _ac(arm_cli) == 100000  # factory flash, even if an earlier test saved
     assert arm_cli("cmd", "shoulder_1a", "AC=120000", "--apply").exit_code == 0
     assert _ac(arm_cli) == 100000, "RAM survived between two commands: the arm was not power-cycled"
-    assert arm_cli("cmd", "shoulder_1a", "AC=150000", "SV", "--apply").exit_code == 0
+    assert arm_cli("cmd", "shoulder_1a", "AC=150000", "SV", "--apply", "--raw-save").exit_code == 0
     assert _ac(arm_cli) == 150000, "what SV saved is gone after a power cycle"
 
 

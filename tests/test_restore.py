@@ -72,7 +72,8 @@ def test_restore_plan_apply_save_and_the_values_survive(cli, golden, factory_dum
     before, after = read_dump(factory_dump), read_dump(again)
     assert {n: d.params for n, d in after.drives.items()} == {n: d.params for n, d in before.drives.items()}
     nothing = cli(*BASE, "params", "restore", str(factory_dump), "--apply", "--save", "--yes")
-    assert "drive1: nothing to change, nothing written, no SV needed" in nothing.stdout
+    assert "drive1: nothing to change: RAM holds the targets; flash NOT proven" in nothing.stdout
+    assert "no SV needed" not in nothing.stdout
 
 
 @pytest.mark.golden

@@ -21,7 +21,8 @@ ARM = ROOT / "configs" / "sherpa-arm.yaml"
 ARM_CASES = [
     ("scan-sim", ["scan"]),
     ("scan-sim-json", ["--json", "scan"]),
-    ("scan-sim-reset-one-bus", ["scan", "--bus", "can1", "--reset"]),
+    ("scan-sim-reset-one-bus", ["scan", "--bus", "can1", "--reset", "--apply"]),
+    ("scan-sim-reset-dry-run", ["scan", "--bus", "can1", "--reset"]),
 ]
 
 

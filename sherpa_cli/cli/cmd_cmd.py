@@ -7,7 +7,7 @@ from typing import List
 import typer
 
 from sherpa_cli.cli.context import state
-from sherpa_cli.cli.options import ApplyRaw
+from sherpa_cli.cli.options import ApplyRaw, RawSave
 from sherpa_cli.cli.output import fmt_value
 
 
@@ -17,6 +17,7 @@ def cmd(
     exprs: List[str] = typer.Argument(..., metavar="EXPR...",
                                       help='Elmo commands: PX (query), "LL[3]" (query), AC=150000 (set), BG (execute).'),
     apply: ApplyRaw = False,
+    raw_save: RawSave = False,
 ) -> None:
     """Send raw two-letter Elmo commands to one drive and show the answers, decoded where possible.
 
@@ -27,28 +28,57 @@ def cmd(
     Examples:
       sherpa cmd shoulder_1a PX "LL[3]" MF SR
       sherpa cmd can0:10 AC=150000 --apply
+      sherpa cmd can0:10 SV --apply --raw-save    # one flash write, counted in the save ledger
+
+    \b
+    SV writes the drive's flash (it endures about 100,000 saves): it is refused unless
+    --apply and --raw-save are given, at most one SV per invocation, and each one is
+    counted per drive serial number in the save ledger (as program-limits --save).
     """
     from sherpa_cli.errors import SherpaError
-    from sherpa_cli.ops.raw import parse_all, run_raw
+    from sherpa_cli.ops.raw import check_raw_save, parse_all, run_raw
     from sherpa_cli.ops.targets import single_drive
 
     st = state(ctx)
     cfg = st.load_config()
     ref = single_drive(cfg, target)
     parse_all(exprs)  # a typo must not reach the bus, not even the NMT start
+    saving = check_raw_save(exprs, apply=apply, raw_save=raw_save)  # before anything is sent
     done: list = []
     error: SherpaError | None = None
+    warnings: list[str] = []
     with st.session(buses=[ref.bus]) as session:
         client = session.client(ref)
         try:
+            on_save = _ledger_counter(session, ref, warnings) if saving else None
             client.nmt_start()
-            run_raw(client, ref.node, exprs, apply=apply, query_long=cfg.protocol.query_long, results=done)
+            run_raw(client, ref.node, exprs, apply=apply, query_long=cfg.protocol.query_long, results=done,
+                    on_save=on_save)
         except SherpaError as exc:
             error = exc
     if done or error is None:
         _render(st, ref, apply, done)
+    for w in warnings:
+        st.out.warn(w)
     if error is not None:
         raise error
+
+
+def _ledger_counter(session, ref, warnings: list):
+    """The serial number is read before SV goes out (a save that cannot be counted is not sent)."""
+    from sherpa_cli.ops.program import DriveTarget, read_serial
+    from sherpa_cli.ops.save_ledger import SaveLedger
+
+    serial = read_serial(session, DriveTarget(ref.name, ref.bus, ref.node, {}))
+    ledger = SaveLedger()
+
+    def counted(result) -> None:
+        record = ledger.record(serial, ref.name)
+        result.decoded = [f"saved (save {record.count} of this drive by this tool)"]
+        if record.warning:
+            warnings.append(record.warning)
+
+    return counted
 
 
 REGISTERS = ("SR", "MF", "IP")
@@ -67,10 +97,12 @@ def _render(st, ref, apply: bool, done: list) -> None:
                 value = f"0x{r.value & 0xFFFFFFFF:08X}"  # bit fields read best in hex
             rows.append([r.text, value, "; ".join(r.decoded)])
         elif r.sent:
-            rows.append([r.text, "ok", "sent"])
+            rows.append([r.text, "ok", "; ".join(r.decoded) or "sent"])
         else:
             rows.append([r.text, "-", f"not sent (dry run): 0x{r.cob_id:03X}  {r.frame.hex(' ').upper()}"])
     st.out.table(f"{ref.name} ({ref.address})", ["command", "value", "meaning"], rows, right=(1,))
+    if any(r.text == "SV" and not r.sent for r in done):
+        st.out.line("SV also needs --raw-save (one flash write, counted in the save ledger)")
     unsent = sum(1 for r in done if not r.sent)
     if unsent:
         st.out.line(f"dry run: {unsent} command(s) not sent; add --apply to send them")

@@ -34,6 +34,8 @@ def _il_meaning(value: int, il_codes) -> str:
         return "input logic: stop switch"
     if value == il_codes.home:
         return "input logic: home switch"
+    if value == il_codes.unused:
+        return "input logic: no function (no switch)"
     return "input logic"
 
 
@@ -49,7 +51,7 @@ def show(ctx: typer.Context,
       sherpa limits show shoulder_pitch
       sherpa --config configs/appendix-c/example3.yaml limits show --software
     """
-    from sherpa_cli.joints.limits import derive_checked
+    from sherpa_cli.joints.limits import derive_checked, left_as_they_are
     from sherpa_cli.ops.targets import drive_names
 
     st = state(ctx)
@@ -60,9 +62,13 @@ def show(ctx: typer.Context,
     derived, warnings = derive_checked(cfg, drive_names(cfg, names))
     for w in warnings:
         st.out.warn(w)
+    note = left_as_they_are(derived)
     if st.json_mode:
-        st.out.json({"drives": [{"drive": d.drive, "bus": d.bus, "node": d.node, "params": dict(d.params)}
-                                for d in derived]})
+        body = {"drives": [{"drive": d.drive, "bus": d.bus, "node": d.node, "params": dict(d.params)}
+                           for d in derived]}
+        if note:
+            body["note"] = note
+        st.out.json(body)
         return
     for d in derived:
         moves = drive_moves(cfg, d.drive)
@@ -71,6 +77,8 @@ def show(ctx: typer.Context,
             text = _il_meaning(value, cfg.il_codes) if key.startswith("IL[") else MEANING.get(key, "")
             rows.append([key, fmt_value(value), text])
         st.out.table(f"{d.drive} ({d.bus}:{d.node}) - {moves}", ["param", "value", "meaning"], rows, right=(1,))
+    if note:
+        st.out.line(f"note: {note}")
 
 
 def _show_software(st, cfg, names: list[str]) -> None:

@@ -9,7 +9,7 @@ from typing import Callable, Optional
 import typer
 
 from sherpa_cli.cli.context import state
-from sherpa_cli.cli.options import Targets
+from sherpa_cli.cli.options import ApplyHeartbeat, Targets
 from sherpa_cli.errors import ExitCode, UsageError
 
 # Seconds between polls in the live view; the CLI's sleep goes through here so tests can stop it.
@@ -24,15 +24,17 @@ def monitor(
     interval: float = typer.Option(0.5, "--interval", metavar="S", help="Seconds between polls in the live view."),
     heartbeat: Optional[int] = typer.Option(
         None, "--heartbeat", metavar="MS",
-        help="Set the drives' producer heartbeat (0x1017) to MS while monitoring (RAM only, the old value is "
-        "written back at exit). Default: only listen to the heartbeat the drives already send."),
+        help="With --apply: set the drives' producer heartbeat (0x1017) to MS while monitoring (RAM only, the "
+        "old value is written back at exit). Without --apply it is a dry run: shown, not written. Default: "
+        "only listen to the heartbeat the drives already send."),
+    apply: ApplyHeartbeat = False,
 ) -> None:
     """Show every drive: NMT state and heartbeat, MO, UM, position in joint units, SR and MF decoded,
     and the last EMCY with its Elmo text.
 
     Each drive is NMT-started (the binary interpreter answers only when Operational) and then only
     queried: MO, UM, PX, SR, MF, plus SDO reads of 0x1017 and 0x1003:1 (the last stored error).
-    Nothing else is written unless --heartbeat is given. Drives on different buses are polled at
+    Nothing else is written unless --heartbeat and --apply are given. Drives on different buses are polled at
     the same time; a drive that stops answering shows "no answer", never its old values.
     Ctrl-C ends the live view with exit code 0. --once exits 1 when a drive does not answer or
     has a motor failure latched (MF not 0).
@@ -42,6 +44,7 @@ def monitor(
       sherpa monitor
       sherpa monitor shoulder_diff elbow_pitch --interval 0.2
       sherpa --json monitor --once
+      sherpa monitor --heartbeat 200 --apply
     """
     from sherpa_cli.ops.monitor import Monitor
     from sherpa_cli.ops.targets import drive_refs
@@ -54,6 +57,13 @@ def monitor(
     cfg = st.load_config()
     refs = drive_refs(cfg, targets)
     buses = list(dict.fromkeys(ref.bus for ref in refs))
+    if heartbeat is not None and not 0 < heartbeat <= 0xFFFF:
+        raise UsageError(f"--heartbeat {heartbeat}: expected 1..65535 ms (0x1017 is 16 bits)")
+    if heartbeat is not None and not apply:
+        # setting 0x1017 is a write: a dry run says what it would do and only listens
+        st.out.warn(f"dry run: --heartbeat {heartbeat} would set the producer heartbeat (0x1017) of "
+                    f"{len(refs)} drive(s) to {heartbeat} ms in RAM; nothing is written (add --apply)")
+        heartbeat = None
     with st.session(buses=buses) as session, Monitor(session, refs, heartbeat_ms=heartbeat) as mon:
         if once:
             mon.poll()

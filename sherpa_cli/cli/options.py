@@ -34,6 +34,18 @@ MotorOff = Annotated[bool, typer.Option(
 ApplyRaw = Annotated[bool, typer.Option(
     "--apply", help="Send sets and execute commands; without it they are only shown as the frame that would be "
     "sent (queries are always sent).")]
+RawSave = Annotated[bool, typer.Option(
+    "--raw-save", help="Allow one SV (save RAM to flash) with --apply; it is counted in the save ledger. Without "
+    "it SV is refused.")]
+ApplyHeartbeat = Annotated[bool, typer.Option(
+    "--apply", help="Let --heartbeat write 0x1017 (a write to the drives); without it --heartbeat is a dry run.")]
+ApplyReset = Annotated[bool, typer.Option(
+    "--apply", help="Let --reset send the NMT reset (it changes the drives' state); without it --reset is a dry "
+    "run.")]
+VerifyFlash = Annotated[bool, typer.Option(
+    "--verify-flash", help="With --apply: prove flash -- reset each drive (NMT reset node; motor off), wait for its "
+    "boot-up and read every target back. The reset clears the position counter and any homing mark. With --save "
+    "only drives whose flash differs are written and saved, then proven again.")]
 
 ApplyMotion = Annotated[bool, typer.Option(
     "--apply", help="Move the motor; without it only show what would be sent (nothing is written).")]

@@ -20,7 +20,8 @@ def dump_params(
     ctx: typer.Context,
     targets: Targets = None,
     output: Optional[Path] = typer.Option(None, "--output", "-o", metavar="FILE",
-                                          help="Write the YAML dump to FILE (atomically) instead of stdout."),
+                                          help="Write the YAML dump to FILE (atomically; a symlink's target; a "
+                                          "FIFO or device in place) instead of stdout; - is stdout."),
 ) -> None:
     """Read the parameters commissioning touches, plus identity, into YAML that diffs cleanly in git.
 
@@ -37,14 +38,14 @@ def dump_params(
     from sherpa_cli.ops.params_file import drive_block, dump_to_text, write_dump
     from sherpa_cli.ops.params_read import dump_params as read_dump_params
     from sherpa_cli.ops.targets import drive_names
+    from sherpa_cli.output_files import check_output_path, is_stdout
 
     st = state(ctx)
     cfg = st.load_config()
     drives = drive_names(cfg, targets)
-    if output is not None and output.is_dir():
-        from sherpa_cli.errors import UsageError
-
-        raise UsageError(f"--output {output}: is a directory, expected a file name")
+    if is_stdout(output):
+        output = None  # `-o -` is the default: the YAML on stdout
+    check_output_path(output, "--output", "the dump")  # a directory is refused before the drives are read
     buses = sorted({cfg.drives[d].bus for d in drives})
     with st.session(buses=buses) as session:
         dump = read_dump_params(session, drives)
@@ -52,13 +53,7 @@ def dump_params(
         for key, why in d.unreadable.items():
             st.out.warn(f"{d.name}: {key} unreadable ({why})")
     if output is not None:
-        try:
-            write_dump(output, dump)
-        except OSError as exc:
-            from sherpa_cli.errors import UsageError
-
-            raise UsageError(f"--output {output}: cannot write the dump: {exc.strerror or exc}; nothing was written",
-                             hint="choose a writable file name") from None
+        write_dump(output, dump, "--output")
     if st.json_mode:
         st.out.json({"file": str(output) if output is not None else None, "meta": dump.meta,
                      "drives": {name: drive_block(d) for name, d in dump.drives.items()}})

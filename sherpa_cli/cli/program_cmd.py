@@ -9,7 +9,7 @@ import typer
 
 from sherpa_cli.cli.context import state
 from sherpa_cli.cli.limits_cmd import drive_moves
-from sherpa_cli.cli.options import Apply, MotorOff, Save, Targets, Yes
+from sherpa_cli.cli.options import Apply, MotorOff, Save, Targets, VerifyFlash, Yes
 from sherpa_cli.cli.output import fmt_value
 
 def program_limits(
@@ -19,6 +19,7 @@ def program_limits(
     save: Save = False,
     yes: Yes = False,
     motor_off: MotorOff = False,
+    verify_flash: VerifyFlash = False,
 ) -> None:
     """Program the Appendix C limits (as `limits show` derives them) into the drives.
 
@@ -36,13 +37,17 @@ def program_limits(
     with a warning every 100 saves of a drive and on every save above 1,000
     (the flash endures about 100,000 saves).
 
+    The ledger cannot know what other machines, `cmd --apply` or a deleted ledger did:
+    --verify-flash proves what flash holds by resetting each drive and reading it back.
+
     \b
     Examples:
       sherpa program-limits                      # plan only
       sherpa program-limits elbow_pitch --apply
       sherpa program-limits --apply --save --yes
+      sherpa program-limits --apply --save --verify-flash --yes
     """
-    from sherpa_cli.joints.limits import derive_checked
+    from sherpa_cli.joints.limits import derive_checked, left_as_they_are
     from sherpa_cli.ops.targets import drive_names
     from sherpa_cli.ops.program import DriveTarget
 
@@ -52,7 +57,8 @@ def program_limits(
     derived, warnings = derive_checked(cfg, drive_names(cfg, names))
     targets = [DriveTarget(d.drive, d.bus, d.node, d.params) for d in derived]
     run_program(st, "program-limits", targets, warnings, apply=apply, save=save, yes=yes, motor_off=motor_off,
-                need_serial=save, allow_disabled=False, title=lambda drive: drive_moves(cfg, drive))
+                need_serial=save, allow_disabled=False, title=lambda drive: drive_moves(cfg, drive),
+                verify_flash=verify_flash, note=left_as_they_are(derived))
 
 
 def params_restore(
@@ -64,6 +70,7 @@ def params_restore(
     motor_off: MotorOff = False,
     other_serial: bool = typer.Option(False, "--other-serial", help="Allow a dump whose serial number "
                                       "(0x1018:4) differs from the drive's, or that has none."),
+    verify_flash: VerifyFlash = False,
 ) -> None:
     """Write a parameter dump back into the drives (plan, apply, verify, save as program-limits).
 
@@ -76,6 +83,7 @@ def params_restore(
     Examples:
       sherpa params restore arm-2024-05.yaml
       sherpa params restore arm-2024-05.yaml --apply --save --yes
+      sherpa params restore arm-2024-05.yaml --apply --save --verify-flash --yes
     """
     from sherpa_cli.ops.params_file import read_dump
     from sherpa_cli.ops.restore import restore_targets
@@ -89,7 +97,7 @@ def params_restore(
 
     run_program(st, "params restore", targets, warnings, apply=apply, save=save, yes=yes, motor_off=motor_off,
                 need_serial=True, allow_disabled=True, title=lambda drive: drive_moves(cfg, drive), source=file,
-                where=lambda drive: Location(str(file), None, f"drives.{drive}.params"))
+                where=lambda drive: Location(str(file), None, f"drives.{drive}.params"), verify_flash=verify_flash)
 
 
 def _check_options(apply: bool, save: bool) -> None:
@@ -105,11 +113,15 @@ def _check_options(apply: bool, save: bool) -> None:
 def run_program(st: Any, command: str, targets: Sequence[Any], warnings: Sequence[str], *, apply: bool,
                 save: bool, yes: bool, motor_off: bool, need_serial: bool, allow_disabled: bool,
                 title: Callable[[str], str], where: Callable[[str], Any] | None = None,
-                source: Path | None = None) -> None:
+                source: Path | None = None, verify_flash: bool = False, note: str | None = None) -> None:
     """Check, plan, show; with ``apply`` write/verify/save and report. Raises the error to exit with.
 
     Callers run :func:`_check_options` first, before they read files or derive targets, so a
     bad option combination is reported ahead of any other problem.
+
+    ``verify_flash`` (with ``apply``): every drive is reset first (NMT reset node), so RAM is
+    what flash holds; the plan is read again from there, so only drives whose flash differs are
+    written (and with ``save`` saved, then proven again).
     """
     from sherpa_cli.ops import program
     from sherpa_cli.ops.save_ledger import SaveLedger
@@ -120,30 +132,63 @@ def run_program(st: Any, command: str, targets: Sequence[Any], warnings: Sequenc
     st.out.assume_yes = st.out.assume_yes or yes
     buses = sorted({t.bus for t in targets})
     result = None
+    proofs: list = []
+    after: list = []
     with st.session(buses=buses) as session:
         # apply needs the serial too: the ledger remembers drives written but not saved
         plans = program.read_plans(session, targets, need_serial=need_serial or apply)
         ledger = SaveLedger() if apply else None
-        if save and ledger is not None:
-            plans = program.mark_save_due(plans, ledger)
+        if save and ledger is not None and not verify_flash:
+            plans = program.mark_save_due(plans, ledger)  # a flash proof supersedes the ledger's guess
         if not st.json_mode:
             _render_plan_text(st, plans, title)  # the technician sees the plan before any question
+            if note:
+                st.out.line(f"note: {note}")
+                st.out.line("")
+            if verify_flash:
+                st.out.line(_reset_note(plans, apply))
+                st.out.line("")
         if not apply:
-            _render(st, command, plans, None, apply=False, save=False, source=source)
+            _render(st, command, plans, None, apply=False, save=False, source=source, verify_flash=verify_flash)
             err = program.plan_error(plans)
             if err is not None:
                 raise err
             return
         try:
-            program.check_apply(plans, motor_off=motor_off)
-            to_save = [p.drive for p in plans if p.needs_save]
-            if save and to_save:
-                _confirm_save(st, to_save)
+            if verify_flash:
+                program.check_proof(plans, motor_off=motor_off)
+                if save:
+                    _confirm_save(st, [p.drive for p in plans], proof=True)
+            else:
+                program.check_apply(plans, motor_off=motor_off)
+                to_save = [p.drive for p in plans if p.needs_save]
+                if save and to_save:
+                    _confirm_save(st, to_save)
         except Exception:
-            _render(st, command, plans, None, apply=True, save=save, source=source)
+            _render(st, command, plans, None, apply=True, save=save, source=source, verify_flash=verify_flash)
             raise
+        if verify_flash:
+            proofs = program.prove_flash(session, plans, boot_timeout=session.cfg.protocol.boot_timeout)
+            problem = program.proof_problem(proofs)
+            if problem is not None and any(p.status == program.PROOF_FAILED for p in proofs):
+                _render(st, command, plans, None, apply=True, save=save, source=source, verify_flash=True,
+                        proofs=proofs)
+                raise problem  # flash unknown somewhere: nothing is written after an error
+            # RAM now holds what flash holds: plan again from there
+            plans = program.read_plans(session, targets, need_serial=True)
+            try:
+                program.check_apply(plans, motor_off=False)
+            except Exception:
+                _render(st, command, plans, None, apply=True, save=save, source=source, verify_flash=True,
+                        proofs=proofs)
+                raise
         result = program.apply_plans(session, plans, save=save, ledger=ledger)
-    _render(st, command, plans, result, apply=True, save=save, source=source)
+        if verify_flash and save and not result.interrupted:
+            saved = [p for p, o in zip(plans, result.outcomes) if o.status == program.SAVED]
+            if saved:
+                after = program.prove_flash(session, saved, boot_timeout=session.cfg.protocol.boot_timeout)
+    _render(st, command, plans, result, apply=True, save=save, source=source, verify_flash=verify_flash,
+            proofs=proofs, after=after)
     for o in result.outcomes:
         if o.save_warning:
             st.out.warn(o.save_warning)
@@ -152,26 +197,51 @@ def run_program(st: Any, command: str, targets: Sequence[Any], warnings: Sequenc
     problem = program.exit_problem(result)
     if problem is not None:
         raise problem
+    if verify_flash:
+        problem = program.proof_problem(after, after_save=True) if save else program.proof_problem(proofs)
+        if problem is not None:
+            raise problem
 
 
-def _confirm_save(st: Any, drives: Sequence[str]) -> None:
+def _reset_note(plans: Sequence[Any], apply: bool) -> str:
+    import textwrap
+
+    names = ", ".join(p.drive for p in plans)
+    what, read = ("resets", "reads") if apply else ("would reset", "read")
+    text = (f"--verify-flash {what} {names} (NMT reset node) and {read} back what flash holds. A reset "
+            f"loses unsaved RAM, restarts the position counter and clears any homing (calibration) mark: "
+            f"home the joints afterwards.")
+    if not apply:
+        text += " Dry run: no drive is reset without --apply."
+    return textwrap.fill(text, width=80, subsequent_indent="  ", break_on_hyphens=False, break_long_words=False)
+
+
+def _confirm_save(st: Any, drives: Sequence[str], *, proof: bool = False) -> None:
     """Ask before anything is written; refuse at once when nobody can answer (no tty, --json)."""
     from sherpa_cli.errors import SafetyError
 
     listed = ", ".join(drives)
-    refusal = (f"--save would write and save {listed}, and there is no terminal to confirm it; "
-               f"nothing was written")
-    if not st.out.confirm(f"Write and save to flash (SV): {listed}?", refusal=refusal,
-                          hint="add --yes to confirm in scripts"):
+    if proof:
+        refusal = (f"--save --verify-flash would reset {listed} and write and save those whose flash differs, "
+                   f"and there is no terminal to confirm it; no drive was reset, nothing was written")
+        question = f"Reset {listed} to prove flash, then write and save (SV) those whose flash differs?"
+    else:
+        refusal = (f"--save would write and save {listed}, and there is no terminal to confirm it; "
+                   f"nothing was written")
+        question = f"Write and save to flash (SV): {listed}?"
+    if not st.out.confirm(question, refusal=refusal, hint="add --yes to confirm in scripts"):
         raise SafetyError("save not confirmed; nothing was written")
 
 
 # --------------------------------------------------------------------------- rendering
 
 def _render(st: Any, command: str, plans: Sequence[Any], result: Any, *, apply: bool, save: bool,
-            source: Path | None) -> None:
+            source: Path | None, verify_flash: bool = False, proofs: Sequence[Any] = (),
+            after: Sequence[Any] = ()) -> None:
     """JSON: plan and outcome in one document. Text: what follows the plan (already shown)."""
     outcomes = {o.drive: o for o in result.outcomes} if result is not None else {}
+    proof_of = {p.drive: p for p in proofs}
+    after_of = {p.drive: p for p in after}
     if st.json_mode:
         body: dict[str, Any] = {"command": command}
         if source is not None:
@@ -179,12 +249,26 @@ def _render(st: Any, command: str, plans: Sequence[Any], result: Any, *, apply: 
         body.update({"apply": apply, "save": save, "dry_run": not apply,
                      "drives": [_plan_json(p, outcomes.get(p.drive)) for p in plans],
                      "interrupted": bool(result is not None and result.interrupted)})
+        if verify_flash:
+            body["verify_flash"] = True
+            for d in body["drives"]:
+                first, second = proof_of.get(d["drive"]), after_of.get(d["drive"])
+                d["flash_proof"] = first.as_json() if first is not None else None
+                d["flash_proof_after_save"] = second.as_json() if second is not None else None
         st.out.json(body)
         return
+    if proofs:
+        st.out.line("flash proof (NMT reset node, every target read back):")
+        for p in proofs:
+            st.out.line("  " + _proof_line(p))
     if result is not None:
         st.out.line("result:")
         for p in plans:
-            st.out.line("  " + _outcome_line(p, outcomes[p.drive], save))
+            st.out.line("  " + _outcome_line(p, outcomes[p.drive], save, proof_of.get(p.drive)))
+        if after:
+            st.out.line("flash proof after SV:")
+            for p in after:
+                st.out.line("  " + _proof_line(p))
         if result.interrupted:
             st.out.line("interrupted: drives not saved above keep their old values in flash; "
                         "a power cycle brings them back")
@@ -195,11 +279,12 @@ def _render(st: Any, command: str, plans: Sequence[Any], result: Any, *, apply: 
     if not apply:
         changes = sum(len(p.changes) for p in plans if p.ok)
         drives = sum(1 for p in plans if p.ok and p.changes)
+        reset = "; no drive was reset" if verify_flash else ""
         if changes:
-            st.out.line(f"dry run: nothing was written; {changes} change(s) on {drives} drive(s) "
+            st.out.line(f"dry run: nothing was written{reset}; {changes} change(s) on {drives} drive(s) "
                         f"-- add --apply to write them")
         else:
-            st.out.line("dry run: nothing was written; nothing to change")
+            st.out.line(f"dry run: nothing was written{reset}; nothing to change")
 
 
 def _render_plan_text(st: Any, plans: Sequence[Any], title: Callable[[str], str]) -> None:
@@ -238,13 +323,36 @@ def _plan_line(p: Any) -> str:
     return text
 
 
-def _outcome_line(p: Any, o: Any, save: bool) -> str:
+PROOF_SHOWN = 2  # differences named per drive in the text (--json has them all)
+
+
+def _proof_line(p: Any) -> str:
+    from sherpa_cli.ops import program as pr
+
+    off = " (motor switched off, --motor-off)" if p.motor_switched_off else ""
+    if p.status == pr.HOLDS:
+        return f"{p.drive}: flash holds the targets ({p.checked} read back){off}"
+    if p.status == pr.DIFFERS:
+        shown = list(p.differences.items())[:PROOF_SHOWN]
+        diffs = ", ".join(f"{k} = {fmt_value(f)} (target {fmt_value(t)})" for k, (f, t) in shown)
+        more = f", {len(p.differences) - len(shown)} more" if len(p.differences) > len(shown) else ""
+        return f"{p.drive}: flash differs in {len(p.differences)} of {p.checked}: {diffs}{more}{off}"
+    if p.status == pr.NOT_STARTED:
+        return f"{p.drive}: not reset (stopped before its turn)"
+    return f"{p.drive}: flash NOT proven: {p.error}{off}"
+
+
+def _outcome_line(p: Any, o: Any, save: bool, proof: Any = None) -> str:
     from sherpa_cli.ops import program as pr
 
     n = len(p.changes)
     off = "motor switched off (--motor-off); " if o.motor_switched_off else ""
     if o.status == pr.UNCHANGED:
-        return f"{o.drive}: nothing to change, nothing written" + (", no SV needed" if save else "")
+        if not save:
+            return f"{o.drive}: nothing to change, nothing written"
+        if proof is not None and proof.holds:
+            return f"{o.drive}: nothing to change: RAM and flash hold the targets (flash proven by reset), no SV"
+        return f"{o.drive}: nothing to change: RAM holds the targets; flash NOT proven (--verify-flash), no SV sent"
     if o.status == pr.PROGRAMMED:
         return f"{o.drive}: {off}{n} written and verified, not saved"
     if o.status == pr.SAVED and not n:

@@ -9,6 +9,7 @@ from typing import Iterator, List, Optional
 import typer
 
 from sherpa_cli.cli.context import state
+from sherpa_cli.cli.options import ApplyReset
 from sherpa_cli.errors import ExitCode, UsageError
 
 
@@ -16,9 +17,10 @@ def scan(
     ctx: typer.Context,
     buses: Optional[List[str]] = typer.Option(None, "--bus", metavar="BUS",
                                               help="Scan only this bus (repeat for several). Default: every bus."),
-    reset: bool = typer.Option(False, "--reset", help="First send NMT reset communication to every node "
-                               "(unsaved RAM of the drives is lost) and collect their boot-ups. "
-                               "Nothing is NMT-started."),
+    reset: bool = typer.Option(False, "--reset", help="With --apply: first send NMT reset communication to "
+                               "every node (unsaved RAM of the drives is lost) and collect their boot-ups. "
+                               "Nothing is NMT-started. Without --apply the reset is a dry run: shown, not sent."),
+    apply: ApplyReset = False,
 ) -> None:
     """Probe node ids 1..127 on every bus and compare what answers with the config.
 
@@ -30,7 +32,7 @@ def scan(
     \b
     Examples:
       sherpa scan
-      sherpa scan --bus can1 --reset
+      sherpa scan --bus can1 --reset --apply
     """
     from sherpa_cli.ops.scan import scan as run_scan
 
@@ -40,6 +42,11 @@ def scan(
     unknown = [b for b in selected if b not in cfg.buses]
     if unknown:
         raise UsageError(f"no bus '{unknown[0]}' in the config", hint=f"configured buses: {', '.join(cfg.buses)}")
+    if reset and not apply:
+        # a reset throws away the drives' unsaved RAM: a write, so a dry run unless --apply
+        st.out.warn(f"dry run: --reset would send NMT reset communication to every node of "
+                    f"{', '.join(selected)} (unsaved RAM is lost); not sent (add --apply)")
+        reset = False
     with st.session(buses=selected) as session, _progress(st, selected) as progress:
         report = run_scan(session, selected, reset=reset, progress=progress)
     _render(st, report)

@@ -21,7 +21,7 @@ from sherpa_cli.config.model import (ArmConfig, BusConfig, CurrentLimits, ILCode
 def dump_native(cfg: ArmConfig) -> str:
     sections: list[dict[str, Any]] = [{"name": cfg.name}]
     if cfg.il_codes != ILCodes():
-        sections.append({"il_codes": {"stop": cfg.il_codes.stop, "home": cfg.il_codes.home}})
+        sections.append({"il_codes": dataclasses.asdict(cfg.il_codes)})
     if cfg.protocol != ProtocolConfig():
         sections.append({"protocol": dataclasses.asdict(cfg.protocol)})
     if cfg.motion != MotionConfig():

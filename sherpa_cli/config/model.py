@@ -173,6 +173,9 @@ class ILCodes:
 
     stop: int = 21
     home: int = 5
+    # an input no switch of the config uses: "ignore (no drive function)", active low -- the MBARI
+    # table's 4, which [ELMOCAN] writes to switch limit inputs off (elmo-protocol.md, IL[N])
+    unused: int = 4
 
 
 @dataclass(frozen=True)
@@ -193,6 +196,7 @@ class ProtocolConfig:
     sdo_timeout: float = 0.3  # s to wait for one SDO answer (canopen's default); also scan's listening time
     # UI[n] that `home` sets to 1 once a joint is homed; RAM only, so a reset clears it (docs/motion.md)
     calibration_flag: int = 3
+    boot_timeout: float = 2.0  # s to wait for a drive's boot-up after NMT reset node (Elmo gives no boot time)
 
 
 STOP_METHODS = ("auto", "st", "jv0")

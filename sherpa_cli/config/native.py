@@ -20,7 +20,7 @@ from sherpa_cli.config.yamlnodes import (Locs, Section, YNode, as_int, as_map, a
 from sherpa_cli.errors import ConfigError
 
 TOP_KEYS = ["name", "il_codes", "protocol", "motion", "sim", "buses", "drives", "joints", "pairs", "catalog"]
-IL_KEYS = ["stop", "home"]
+IL_KEYS = ["stop", "home", "unused"]
 BUS_KEYS = ["interface", "channel", "bitrate", "send_interval_us", "poll_interval_ms", "options"]
 DRIVE_KEYS = ["bus", "node", "model", "motor"]
 JOINT_BODY_KEYS = ["cpr", "range", "velocity", "acceleration", "switches", "calibration", "abs_encoder"]
@@ -77,6 +77,7 @@ def parse_protocol(top: Section, locs: Locs) -> ProtocolConfig:
         sv_blackout=sec.num("sv_blackout", d.sv_blackout),
         sdo_timeout=sec.num("sdo_timeout", d.sdo_timeout),
         calibration_flag=sec.int("calibration_flag", d.calibration_flag),
+        boot_timeout=sec.num("boot_timeout", d.boot_timeout),
     )
 
 
@@ -143,7 +144,8 @@ def load_native(root: YNode, filename: str) -> tuple[ArmConfig, Locs, list[str]]
     il_sec = top.section("il_codes", IL_KEYS)
     if il_sec is not None:
         register(locs, ("il_codes",), il_sec)
-        il = ILCodes(stop=il_sec.int("stop", il.stop), home=il_sec.int("home", il.home))
+        il = ILCodes(stop=il_sec.int("stop", il.stop), home=il_sec.int("home", il.home),
+                     unused=il_sec.int("unused", il.unused))
 
     protocol = parse_protocol(top, locs)
     motion = parse_motion(top, locs)

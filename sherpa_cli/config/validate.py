@@ -86,6 +86,8 @@ def _check_protocol(cfg: ArmConfig, locs: Locs, r: _Report) -> None:
         r.error(locs.get("protocol", "reply_timeout"), f"reply_timeout {p.reply_timeout} s must be > 0")
     if not 0 < p.sdo_timeout <= 60:
         r.error(locs.get("protocol", "sdo_timeout"), f"sdo_timeout {p.sdo_timeout} s must be > 0 and <= 60")
+    if not 0 < p.boot_timeout <= 60:
+        r.error(locs.get("protocol", "boot_timeout"), f"boot_timeout {p.boot_timeout} s must be > 0 and <= 60")
     if p.retries < 0:
         r.error(locs.get("protocol", "retries"), f"retries {p.retries} is negative; expected 0 or more")
     if not 1 <= p.calibration_flag <= 24:
@@ -163,7 +165,7 @@ def _check_sim(cfg: ArmConfig, locs: Locs, r: _Report) -> None:
 
 
 def _check_il_codes(cfg: ArmConfig, locs: Locs, r: _Report) -> None:
-    for key in ("stop", "home"):
+    for key in ("stop", "home", "unused"):
         value = getattr(cfg.il_codes, key)
         if value < 0:
             r.error(locs.get("il_codes", key), f"IL code {value} is negative; expected a value >= 0")
@@ -171,6 +173,11 @@ def _check_il_codes(cfg: ArmConfig, locs: Locs, r: _Report) -> None:
         r.error(locs.get("il_codes", "home"),
                 f"il_codes.stop and il_codes.home are both {cfg.il_codes.stop}; a stop switch and a home switch "
                 "need different input logic")
+    for key in ("stop", "home"):
+        if cfg.il_codes.unused == getattr(cfg.il_codes, key):
+            r.error(locs.get("il_codes", "unused"),
+                    f"il_codes.unused and il_codes.{key} are both {cfg.il_codes.unused}; an input without a switch "
+                    f"must not get a switch's input logic")
 
 
 def _check_catalog(cfg: ArmConfig, locs: Locs, r: _Report) -> None:

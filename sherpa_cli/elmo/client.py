@@ -32,7 +32,9 @@ TPDO2_BASE = 0x280
 EMCY_BASE = 0x080
 NMT_COB_ID = 0x000
 NMT_START = 0x01
+NMT_RESET_NODE = 0x81
 NMT_RESET_COMMUNICATION = 0x82
+BOOTUP_BASE = 0x700  # boot-up (byte 0 = 0x00) and heartbeat
 EMCY_RPDO_ERROR = 0x6300  # "RPDO-mapped object returned an interpretation error" (0x2F21 bit 8)
 
 _TIMEOUT_HINT = "check that the drive is powered, on this bus with this node id, and NMT-started"
@@ -120,6 +122,8 @@ class DriveClient:
         self._emcy_callbacks: list[Callable[[Emcy], None]] = []
         self._last_emcy: Emcy | None = None
         self._emcy_count = 0
+        self._boots = 0  # boot-ups heard since reset_node first listened
+        self._boot_listening = False
         transport.subscribe(TPDO2_BASE + node, self._on_reply)
         transport.subscribe(EMCY_BASE + node, self._on_emcy)
 
@@ -264,6 +268,38 @@ class DriveClient:
 
     def nmt_reset_communication(self) -> None:
         self._nmt(NMT_RESET_COMMUNICATION)
+
+    def reset_node(self, boot_timeout: float) -> None:
+        """NMT reset node, wait for the drive's boot-up, then NMT start it again.
+
+        The drive reloads RAM from flash (elmo-protocol.md 3.2): what it holds afterwards is what
+        its flash holds. Its position counter starts again and the motor is off. Raises
+        DriveTimeoutError when no boot-up (0x700+node, byte 0 = 0x00) comes within ``boot_timeout``.
+        """
+        with self._state:
+            if not self._boot_listening:
+                self._boot_listening = True
+                self.transport.subscribe(BOOTUP_BASE + self.node, self._on_boot)
+        with self._lock:
+            with self._state:
+                seen = self._boots
+            self.transport.send(NMT_COB_ID, bytes([NMT_RESET_NODE, self.node]))
+            deadline = self._clock() + boot_timeout
+            while True:
+                with self._state:
+                    if self._boots > seen:
+                        break
+                if self._clock() >= deadline:
+                    raise DriveTimeoutError(f"{self.label}: no boot-up within {boot_timeout:g} s after NMT reset node",
+                                            hint="check the drive's power and CAN wiring; protocol.boot_timeout "
+                                            "sets the wait")
+                self._sleep(0.005)
+            self.transport.send(NMT_COB_ID, bytes([NMT_START, self.node]))
+
+    def _on_boot(self, can_id: int, data: bytes, timestamp: float) -> None:
+        if len(data) >= 1 and data[0] == 0x00:  # boot-up; heartbeats carry the NMT state instead
+            with self._state:
+                self._boots += 1
 
     def _nmt(self, command: int) -> None:
         # Under the drive lock so NMT never lands inside an SV blackout or between a request and its reply.

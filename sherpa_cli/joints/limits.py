@@ -8,7 +8,9 @@ Plain joint (C.1, C.2):
     LL[2] / HL[2] = -vel_trip  / +vel_trip    (trip, a safeguard above the limit)
     AC, DC        = accel, decel (counts/s^2)
     CL[1], PL[1], PL[2] = continuous A, peak A, peak duration s (whole seconds)
-    IL[n]         = il_codes.stop / il_codes.home for each switch on input n
+    IL[n]         = il_codes.stop / il_codes.home for each switch on input n, and
+                    il_codes.unused for every other input 1..inputs of the drive's model (6 if
+                    unknown), so a switch the config no longer names leaves no function behind
 
 Differential pair (C.3): each motor gets the integer motor box of the Σ/Δ rectangle
 (see :mod:`sherpa_cli.joints.diffpair`), from the full ranges for VL[3]/VH[3] and from the
@@ -167,7 +169,25 @@ def _switch_code(cfg: ArmConfig, sw: SwitchConfig) -> int:
     return cfg.il_codes.stop if sw.kind is SwitchKind.STOP else cfg.il_codes.home
 
 
-def _il_params(cfg: ArmConfig, drive: str) -> dict[str, int]:
+DEFAULT_INPUTS = 6  # a Whistle's digital inputs when the config names no model (as dump-params reads)
+
+# Drive parameters only joints with speed / acceleration limits derive; without them the drive keeps its own.
+SPEED_KEYS = ("VL[2]", "VH[2]", "LL[2]", "HL[2]", "AC", "DC")
+
+
+def left_as_they_are(derived: Sequence[DriveParams]) -> str | None:
+    """One note naming the speed/acceleration parameters no derived set programs (e.g. a D.1 config), or None."""
+    missing = [k for k in SPEED_KEYS if any(k not in d.params for d in derived)]
+    if not derived or not missing:
+        return None
+    which = [d.drive for d in derived if any(k not in d.params for k in missing)]
+    names = {"VL[2]": "VL/VH[2]", "VH[2]": "VL/VH[2]", "LL[2]": "LL/HL[2]", "HL[2]": "LL/HL[2]"}
+    shown = ", ".join(dict.fromkeys(names.get(k, k) for k in missing))
+    drives = "" if len(which) == len(derived) else f" of {', '.join(which)}"
+    return f"no speed/acceleration limits configured: {shown}{drives} stay as the drives have them"
+
+
+def _il_params(cfg: ArmConfig, drive: str, *, clear_unused: bool = True) -> dict[str, int]:
     dmodel = cfg.drives[drive].model
     inputs = cfg.catalog.drives[dmodel].inputs if dmodel in cfg.catalog.drives else None
     found: dict[int, tuple[int, SwitchConfig, str]] = {}
@@ -189,7 +209,12 @@ def _il_params(cfg: ArmConfig, drive: str) -> dict[str, int]:
                     f"{other_joint} (at {other.where}) and a {sw.kind.value} switch of joint "
                     f"{joint.name}; one input has one function (IL[{n}])", sw.where)
             found.setdefault(n, (code, sw, joint.name))
-    return {f"IL[{n}]": found[n][0] for n in sorted(found)}
+    # Every input the config does not assign gets "no function": moving a switch (Example 1's
+    # wiring to Example 2's) must not leave the old stop switch on its input.
+    if not clear_unused:
+        return {f"IL[{n}]": found[n][0] for n in sorted(found)}
+    count = max([inputs if inputs is not None else DEFAULT_INPUTS, *found])
+    return {f"IL[{n}]": found[n][0] if n in found else cfg.il_codes.unused for n in range(1, count + 1)}
 
 
 def _ordered(values: Mapping[str, ParamValue | None]) -> dict[str, ParamValue]:
@@ -292,7 +317,8 @@ def _derive(cfg: ArmConfig, drive: str) -> tuple[DriveParams, list[str]]:
         values = {}
         warnings.append(f"drive {drive} moves no joint; no limits are derived for it")
     params: dict[str, ParamValue] = _ordered(values)
-    params.update(_il_params(cfg, drive))
+    # a drive that moves no joint gets only the switches wired to it; its other inputs are left alone
+    params.update(_il_params(cfg, drive, clear_unused=joint is not None or pair is not None))
     return DriveParams(drive=drive, bus=dcfg.bus, node=dcfg.node, params=params), warnings
 
 

@@ -2,8 +2,8 @@
 
 A side is a dump file, ``live`` (read from the drives now) or ``config`` (what Appendix C
 derives, as ``sherpa limits show`` prints it). The config side covers only the parameters
-it derives: UM, CA[18] or an IL[n] without a switch are outside it and never count as
-missing. Floats compare within float32 precision, because CL/PL come back from the drive
+it derives: UM and CA[18] are outside it and never count as missing; IL[1..n] are all in it
+(an input without a switch should hold il_codes.unused). Floats compare within float32 precision, because CL/PL come back from the drive
 as float32 (2.3 reads back as 2.2999999523...). docs/params.md has the rules.
 """
 

@@ -18,7 +18,6 @@ import yaml
 
 from sherpa_cli.config.yamlnodes import NAME_RE, Section, YNode, as_int, as_map, describe, parse_yaml
 from sherpa_cli.errors import CodecError, ConfigError, Location
-from sherpa_cli.paths import write_atomic
 
 ParamValue = int | float
 
@@ -94,9 +93,13 @@ def dump_to_text(dump: ParamDump) -> str:
     return "".join(parts)
 
 
-def write_dump(path: Path, dump: ParamDump) -> None:
-    """Atomic: a crash leaves the old file or none, never half a file."""
-    write_atomic(Path(path), dump_to_text(dump))
+def write_dump(path: Path, dump: ParamDump, option: str = "--output") -> None:
+    """By the output-file rules (sherpa_cli/output_files.py): ``-`` is stdout, a regular file is replaced
+    atomically (a crash leaves the old file or none, never half a file), a symlink's target is
+    written, a FIFO or device in place; a directory is refused (UsageError naming ``option``)."""
+    from sherpa_cli.output_files import write_output
+
+    write_output(path, dump_to_text(dump), option, what="the dump")
 
 
 # --------------------------------------------------------------------------- reading

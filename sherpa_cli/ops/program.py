@@ -525,6 +525,126 @@ def apply_plans(session: Any, plans: Sequence[DrivePlan], *, save: bool = False,
     return ApplyResult(result, interrupted=stop.is_set())
 
 
+# --------------------------------------------------------------------------- flash proof
+
+# The local save ledger only knows what this tool did from this state directory. Whether a
+# drive's flash holds the targets is proven by the drive itself: NMT reset node makes it
+# reload RAM from flash (elmo-protocol.md 3.2), so every target read back after the boot-up
+# is what its flash holds. A reset is a write (it drops unsaved RAM, zeroes the position
+# counter and loses any homing mark), so callers do it only with --apply and with the motor off.
+
+HOLDS = "holds"  # every target reads back from flash
+DIFFERS = "differs"  # flash holds other values (``differences``)
+PROOF_FAILED = "failed"  # the reset or a read failed: flash state unknown
+
+
+@dataclass
+class FlashProof:
+    drive: str
+    bus: str
+    node: int
+    status: str = NOT_STARTED
+    differences: dict[str, tuple[ParamValue | None, ParamValue]] = field(default_factory=dict)  # key -> (flash, target)
+    checked: int = 0  # targets read back after the reset
+    motor_switched_off: bool = False
+    error: str | None = None
+    exit_code: int | None = None  # of the error behind a failed proof (3: a drive did not answer)
+
+    @property
+    def holds(self) -> bool:
+        return self.status == HOLDS
+
+    def as_json(self) -> dict[str, Any]:
+        return {"status": self.status, "checked": self.checked, "motor_switched_off": self.motor_switched_off,
+                "differences": {k: {"flash": f, "target": t} for k, (f, t) in self.differences.items()},
+                "error": self.error}
+
+
+def check_proof(plans: Sequence[DrivePlan], *, motor_off: bool) -> None:
+    """Refuse before any reset: a drive that cannot be planned, or a motor that is on (without motor_off)."""
+    err = plan_error(plans, suffix="; no drive was reset, nothing was written",
+                     hint="fix what the plan shows, then run again")
+    if err is not None:
+        raise err
+    on = [p.drive for p in plans if p.motor_on]
+    if on and not motor_off:
+        raise SafetyError(f"motor is on: {', '.join(on)}; --verify-flash resets the drive (NMT reset node), which "
+                          f"needs the motor off; no drive was reset, nothing was written",
+                          hint="stop the motion and switch the motor off, or add --motor-off")
+
+
+def _prove_drive(session: Any, plan: DrivePlan, *, boot_timeout: float, stop: threading.Event) -> FlashProof:
+    t = plan.target
+    proof = FlashProof(t.drive, t.bus, t.node)
+    if stop.is_set():
+        return proof
+    targets = {k: drive_value(k, v) for k, v in t.params.items()}
+    try:
+        client = _client(session, t)
+        if plan.motor_on:
+            client.motor_off()  # check_proof allowed it (--motor-off)
+            proof.motor_switched_off = True
+        client.reset_node(boot_timeout)
+        for key, target in targets.items():
+            letters, index = parse_param_key(key)
+            held = client.get(letters, index)
+            proof.checked += 1
+            if held != target:
+                proof.differences[key] = (held, target)
+    except KeyboardInterrupt:
+        stop.set()
+        proof.status, proof.error = PROOF_FAILED, "interrupted"
+        return proof
+    except SherpaError as exc:
+        proof.status, proof.error, proof.exit_code = PROOF_FAILED, exc.message, int(exc.exit_code)
+        return proof
+    except Exception as exc:  # e.g. can.CanError: keep every drive's report
+        proof.status, proof.error = PROOF_FAILED, f"{type(exc).__name__}: {exc}"
+        return proof
+    proof.status = DIFFERS if proof.differences else HOLDS
+    return proof
+
+
+def prove_flash(session: Any, plans: Sequence[DrivePlan], *, boot_timeout: float,
+                stop: threading.Event | None = None, max_workers: int = MAX_DRIVE_WORKERS) -> list[FlashProof]:
+    """Reset every planned drive, wait for its boot-up and read every target back (call check_proof first)."""
+    stop = stop or threading.Event()
+    jobs = {p.drive: (lambda p=p: _prove_drive(session, p, boot_timeout=boot_timeout, stop=stop)) for p in plans}
+    outcomes = run_concurrently(jobs, max_workers=max(1, max_workers), on_interrupt=stop.set)
+    proofs = []
+    for p in plans:
+        o = outcomes[p.drive]
+        if o.error is not None:
+            if not isinstance(o.error, SherpaError):
+                raise o.error
+            t = p.target
+            proofs.append(FlashProof(t.drive, t.bus, t.node, status=PROOF_FAILED, error=o.error.message))
+        else:
+            proofs.append(o.value)
+    if stop.is_set():
+        raise KeyboardInterrupt
+    return proofs
+
+
+def proof_problem(proofs: Sequence[FlashProof], *, after_save: bool = False) -> SherpaError | None:
+    """The error to end with when a proof failed or flash differs (exit 1; 3 when a drive did not answer)."""
+    failed = [p for p in proofs if p.status == PROOF_FAILED]
+    if failed:
+        more = f" (and {len(failed) - 1} more drive(s))" if len(failed) > 1 else ""
+        err = SafetyError(f"{failed[0].drive}: flash not proven: {failed[0].error}{more}")
+        if failed[0].exit_code is not None:
+            err.exit_code = failed[0].exit_code
+        return err
+    differs = [p for p in proofs if p.status == DIFFERS]
+    if differs:
+        names = ", ".join(p.drive for p in differs)
+        if after_save:
+            return SafetyError(f"flash of {names} still differs from the targets after SV")
+        return SafetyError(f"flash of {names} differs from the targets",
+                           hint="run with --apply --save --verify-flash to write and save them")
+    return None
+
+
 def exit_problem(result: ApplyResult) -> SherpaError | None:
     """The error the command ends with (exit 1), or None when every drive is fine."""
     bad = [o for o in result.outcomes if o.status == FAILED]
@@ -539,4 +659,4 @@ def exit_problem(result: ApplyResult) -> SherpaError | None:
 
 __all__ = ["DriveTarget", "DrivePlan", "ParamPlan", "DriveOutcome", "ApplyResult", "Event", "check_targets",
            "read_plans", "plan_error", "check_apply", "apply_plans", "write_order", "related_keys", "drive_value",
-           "exit_problem", "param_key"]
+           "exit_problem", "param_key", "FlashProof", "check_proof", "prove_flash", "proof_problem"]

@@ -2,6 +2,11 @@
 
 Queries are sent; anything that changes the drive (a set, or an execute command such as
 BG, ST, SV) is only shown as the frame it would send unless ``apply`` is true.
+
+``SV`` writes the drive's flash (about 100,000 saves in its life), so it obeys the save rules
+here too (:func:`check_raw_save`): only with ``apply`` and the explicit ``raw_save``, at most
+one per invocation, sent through the client's save (never resent, the blackout waited out)
+and counted in the save ledger under the drive's serial number.
 """
 
 from __future__ import annotations
@@ -11,7 +16,7 @@ from typing import Any, Sequence
 
 from sherpa_cli.elmo import codec, faults
 from sherpa_cli.elmo.commands import param_key
-from sherpa_cli.errors import SherpaError
+from sherpa_cli.errors import DriveRefusedError, SafetyError, SherpaError, UsageError
 
 RPDO2_BASE = 0x300
 
@@ -41,6 +46,28 @@ def parse_all(exprs: Sequence[str], query_long: bool = False) -> list[tuple[code
     return parsed
 
 
+def save_count(exprs: Sequence[str]) -> int:
+    """How many SV the expressions ask for (parsed; bad words raise as in :func:`parse_all`)."""
+    return sum(1 for request, _ in parse_all(exprs) if request.kind == "execute" and request.letters == "SV")
+
+
+def check_raw_save(exprs: Sequence[str], *, apply: bool, raw_save: bool) -> bool:
+    """Refuse SV outside the save rules before anything is sent; True when one SV is to be sent.
+
+    Two SV in one invocation are refused (a flash write is never repeated by accident); one SV
+    needs ``apply`` and the explicit ``raw_save``. Without ``apply`` it is shown (dry run).
+    """
+    count = save_count(exprs)
+    if count > 1:
+        raise UsageError(f"{count} SV in one command: SV writes the drive's flash, at most one per invocation; "
+                         "nothing was sent", hint="send one SV, after the values were read back")
+    if count and apply and not raw_save:
+        raise SafetyError("SV (save to flash) is refused without --raw-save; nothing was sent",
+                          hint="add --raw-save to save the drive's RAM to flash (counted in the save ledger), "
+                          "or use `sherpa program-limits --apply --save`")
+    return bool(count and apply)
+
+
 def expr_text(request: codec.Request) -> str:
     key = param_key(request.letters, request.index)
     if request.kind == "set":
@@ -66,10 +93,13 @@ def decode_value(letters: str, value: int | float | None) -> list[str]:
 
 
 def run_raw(client: Any, node: int, exprs: Sequence[str], *, apply: bool, query_long: bool = False,
-            results: list[RawResult] | None = None) -> list[RawResult]:
+            results: list[RawResult] | None = None, on_save: Any = None) -> list[RawResult]:
     """Run the expressions in order on one drive; stop at the first error (it propagates).
 
     ``results`` collects what was done before an error, so the caller can still show it.
+    SV goes through ``client.save()`` (sent once, blackout waited out); ``on_save(result)`` is
+    called once the drive accepted it (the caller counts it in the save ledger). Callers
+    check :func:`check_raw_save` first.
     """
     done = results if results is not None else []
     for request, frame in parse_all(exprs, query_long):
@@ -86,6 +116,18 @@ def run_raw(client: Any, node: int, exprs: Sequence[str], *, apply: bool, query_
                 client.motor_on() if request.value == 1 else client.motor_off()
             elif request.kind == "set":
                 client.set(request.letters, request.index, request.value)
+            elif request.letters == "SV":
+                try:
+                    client.save()
+                except DriveRefusedError:
+                    raise  # the drive answered SV with an error: nothing was saved, nothing to count
+                except SherpaError:
+                    # no answer after the blackout: the flash may well have been written -- count it
+                    if on_save is not None:
+                        on_save(result)
+                    raise
+                if on_save is not None:
+                    on_save(result)
             else:
                 client.execute(request.letters, request.index)
             result.sent = True

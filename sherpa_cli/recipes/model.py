@@ -19,8 +19,11 @@ ON_FAILURE = ("stop", "continue")
 DRY_RUN = ("run", "skip")
 # Flags that make a step write to drives: without `recipe run --apply` they are removed, so the
 # step runs as the command's own dry run (design.md: every write is a dry run unless --apply).
-# `scan --reset` is no write, but it resets every node (unsaved RAM is lost): not in a dry run either.
-WRITE_FLAGS = ("--apply", "--save", "--motor-off", "--yes", "-y", "--reset")
+# `scan --reset`, `--verify-flash` (NMT reset node) and `monitor --heartbeat MS` (0x1017 := MS) change
+# the drives' state too: not in a dry run either (the commands themselves also need --apply for them).
+WRITE_FLAGS = ("--apply", "--save", "--motor-off", "--yes", "-y", "--reset", "--verify-flash", "--raw-save")
+# Write options that take a value (the value goes with them): `--heartbeat MS` or `--heartbeat=MS`.
+WRITE_OPTIONS = ("--heartbeat",)
 # Global options are the recipe runner's business (it passes its own --config/--sim/--bus-map);
 # a step that set them would run against another arm than the one the operator chose.
 GLOBAL_OPTIONS = ("--config", "-c", "--sim", "--bus-map", "--json", "--debug", "--no-color", "--version")
@@ -65,10 +68,22 @@ class Step:
 
     @property
     def writes(self) -> bool:
-        return any(a in WRITE_FLAGS for a in self.argv)
+        return any(a in WRITE_FLAGS or a.split("=", 1)[0] in WRITE_OPTIONS for a in self.argv)
 
     def dry_argv(self) -> tuple[str, ...]:
-        return tuple(a for a in self.argv if a not in WRITE_FLAGS)
+        out: list[str] = []
+        skip_value = False
+        for a in self.argv:
+            if skip_value:
+                skip_value = False
+                continue
+            if a in WRITE_OPTIONS:
+                skip_value = True  # the option's value goes with it
+                continue
+            if a in WRITE_FLAGS or a.split("=", 1)[0] in WRITE_OPTIONS:
+                continue
+            out.append(a)
+        return tuple(out)
 
     def command_text(self) -> str:
         return "sherpa " + shlex.join(self.argv) if self.argv else ""

@@ -6,7 +6,6 @@ import json
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
-from sherpa_cli.paths import write_atomic
 from sherpa_cli.recipes.runner import DECLINED, FAILED, INTERRUPTED, SKIPPED, RecipeReport
 
 
@@ -42,23 +41,26 @@ def report_junit(report: RecipeReport) -> str:
 
 
 def check_report_paths(json_path: Path | None, junit_path: Path | None) -> None:
-    """Refuse report paths that cannot be files before any step runs (UsageError)."""
+    """Refuse report paths that cannot take a report before any step runs (UsageError)."""
     from sherpa_cli.errors import UsageError
+    from sherpa_cli.output_files import check_output_path, is_stdout
 
+    if is_stdout(json_path) and is_stdout(junit_path):
+        raise UsageError("--report - and --junit -: only one report can go to stdout",
+                         hint="write the other one to a file")
     for option, path in (("--report", json_path), ("--junit", junit_path)):
-        if path is not None and Path(path).is_dir():
-            raise UsageError(f"{option} {path}: is a directory, expected a file name")
+        check_output_path(path, option, "the report")
 
 
 def write_reports(report: RecipeReport, json_path: Path | None, junit_path: Path | None) -> None:
     """Write the reports; an unwritable path is a UsageError naming the option and the file."""
     from sherpa_cli.errors import UsageError
+    from sherpa_cli.output_files import write_output
 
     for option, path, render in (("--report", json_path, report_json), ("--junit", junit_path, report_junit)):
         if path is None:
             continue
         try:
-            write_atomic(path, render(report))
-        except OSError as exc:
-            raise UsageError(f"{option} {path}: cannot write the report: {exc.strerror or exc}",
-                             hint=f"the recipe itself ended: {report.outcome}") from None
+            write_output(path, render(report), option, what="the report")
+        except UsageError as exc:
+            raise UsageError(exc.message, hint=f"the recipe itself ended: {report.outcome}") from None

@@ -1,0 +1,109 @@
+"""Every file the tool writes for the user (`dump-params -o`, `--report`, `--junit`, ...) goes through here.
+
+Rules (issue 11, item 4), the same for every writer:
+
+- ``-`` means standard output.
+- A symlink is followed: its target is what gets written (atomically replaced), the link stays.
+- A regular file (or a new name) is written atomically: a temporary file in the same directory,
+  fsync, rename -- a crash or an error never leaves half a file, and an existing file keeps its
+  permission bits.
+- An existing path that is not a regular file is never replaced by one: a FIFO, a character
+  device (``/dev/null``, a terminal) or a block device is written in place; a directory or a
+  socket is refused with a message naming the option and the path.
+
+Errors are :class:`~sherpa_cli.errors.UsageError` (exit 2) naming the option and the path.
+"""
+
+from __future__ import annotations
+
+import os
+import stat
+import tempfile
+from pathlib import Path
+from typing import Callable
+
+from sherpa_cli.errors import UsageError
+
+STDOUT = "-"
+
+
+def is_stdout(path: str | os.PathLike[str] | None) -> bool:
+    return path is not None and os.fspath(path) == STDOUT
+
+
+def _target(path: str | os.PathLike[str]) -> Path:
+    """The path a write lands on: a symlink (chain) resolved to its final target, which may not exist yet."""
+    return Path(os.path.realpath(os.fspath(path)))
+
+
+def check_output_path(path: str | os.PathLike[str] | None, option: str, what: str = "the file") -> None:
+    """Refuse, before any work is done, a path that can never take the output (UsageError)."""
+    if path is None or is_stdout(path):
+        return
+    target = _target(path)
+    try:
+        mode = os.stat(target).st_mode
+    except FileNotFoundError:
+        return  # a new file (its directory is created when written)
+    except OSError as exc:
+        raise UsageError(f"{option} {path}: cannot write {what}: {exc.strerror or exc}",
+                         hint="choose a writable file name") from None
+    if stat.S_ISDIR(mode):
+        raise UsageError(f"{option} {path}: is a directory, expected a file name",
+                         hint=f"name a file, e.g. {option} {Path(path) / 'out'}")
+    if stat.S_ISSOCK(mode):
+        raise UsageError(f"{option} {path}: is a socket, expected a file name")
+
+
+def write_output(path: str | os.PathLike[str], text: str, option: str, *, what: str = "the file",
+                 stdout: Callable[[str], None] | None = None) -> str:
+    """Write ``text`` to ``path`` by the rules above; returns how it was written ("stdout", "in place",
+    "atomically"). ``stdout`` writes to standard output (default: ``sys.stdout``)."""
+    if is_stdout(path):
+        if stdout is None:
+            import sys
+
+            sys.stdout.write(text)
+            sys.stdout.flush()
+        else:
+            stdout(text)
+        return "stdout"
+    check_output_path(path, option, what)
+    target = _target(path)
+    try:
+        try:
+            mode = os.stat(target).st_mode
+        except FileNotFoundError:
+            mode = None
+        if mode is not None and not stat.S_ISREG(mode):
+            # FIFO or device: never replaced by a regular file, written where it is
+            with open(target, "w", encoding="utf-8") as handle:
+                handle.write(text)
+            return "in place"
+        _replace_atomically(target, text, None if mode is None else stat.S_IMODE(mode))
+        return "atomically"
+    except OSError as exc:
+        raise UsageError(f"{option} {path}: cannot write {what}: {exc.strerror or exc}; nothing was written",
+                         hint="choose a writable file name") from None
+
+
+def _replace_atomically(target: Path, text: str, mode: int | None) -> None:
+    target.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", dir=target.parent)
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8") as handle:
+            handle.write(text)
+            handle.flush()
+            os.fsync(handle.fileno())
+        if mode is None:  # a new file: what open() would give it (0666 less the umask), not mkstemp's 0600
+            umask = os.umask(0)
+            os.umask(umask)
+            mode = 0o666 & ~umask
+        os.chmod(tmp, mode)
+        os.replace(tmp, target)
+    except BaseException:
+        try:
+            os.unlink(tmp)
+        except FileNotFoundError:
+            pass
+        raise
