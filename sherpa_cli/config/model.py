@@ -194,9 +194,9 @@ class ProtocolConfig:
     mo_confirm_timeout: float = 3.0  # s to wait for MO to read back after MO=0/1
     sv_blackout: float = 0.5  # s the drive's CAN is deaf after SV ("a few hundred ms")
     sdo_timeout: float = 0.3  # s to wait for one SDO answer (canopen's default); also scan's listening time
+    boot_timeout: float = 2.0  # s to wait for a drive's boot-up after NMT reset node (Elmo gives no boot time)
     # UI[n] that `home` sets to 1 once a joint is homed; RAM only, so a reset clears it (docs/motion.md)
     calibration_flag: int = 3
-    boot_timeout: float = 2.0  # s to wait for a drive's boot-up after NMT reset node (Elmo gives no boot time)
 
 
 STOP_METHODS = ("auto", "st", "jv0")

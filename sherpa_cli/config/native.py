@@ -76,8 +76,8 @@ def parse_protocol(top: Section, locs: Locs) -> ProtocolConfig:
         mo_confirm_timeout=sec.num("mo_confirm_timeout", d.mo_confirm_timeout),
         sv_blackout=sec.num("sv_blackout", d.sv_blackout),
         sdo_timeout=sec.num("sdo_timeout", d.sdo_timeout),
-        calibration_flag=sec.int("calibration_flag", d.calibration_flag),
         boot_timeout=sec.num("boot_timeout", d.boot_timeout),
+        calibration_flag=sec.int("calibration_flag", d.calibration_flag),
     )
 
 

@@ -312,11 +312,11 @@ def _limit_breach(guard: MotionGuard, c: Any, target: JogTarget, px: int, settin
     if not breaches:
         return False
     clients = {target.ref.name: c}
-    joint_jog._stop_now(clients, "torque" if guard.unit_mode(target.ref) == UM_TORQUE else "position")
-    joint_jog._wait_standstill(clients, guard, settings, clock, sleep)
+    joint_jog.stop_now(clients, "torque" if guard.unit_mode(target.ref) == UM_TORQUE else "position")
+    joint_jog.wait_standstill(clients, guard, settings, clock, sleep)
     back = limit_watch.recovery_targets(watched, {target.ref.name: int(c.get("PX"))}, breaches)
     speed = max(1, (joint.vel_limit or 200) // 2)
-    joint_jog._move_to(guard, {target.ref.name: target.ref}, clients, back, speed, settings, clock, sleep,
+    joint_jog.move_to(guard, {target.ref.name: target.ref}, clients, back, speed, settings, clock, sleep,
                        f"{joint.name}: the move back into the normal range")
     state["breach"] = breaches[0]
     state["recovered_to"] = int(c.get("PX"))

@@ -8,14 +8,14 @@ What a jog means per kind of axis (joints/diffpair.py for the transform):
   value). Position: ``m_a = (Σ'+Δ)/2``, ``m_b = (Σ'-Δ)/2`` (when Σ' and Δ differ in parity, Δ gives
   way by one count); speed: both motors at vΣ/2; current: both motors at IΣ.
 - Δ joint: likewise with Σ holding; speed ±vΔ/2, current ±IΔ.
-- one motor of a pair (the drive's name): that motor alone, in motor counts; it moves Σ and Δ
+- one motor of a pair (its drive name or BUS:NODE): that motor alone, in motor counts; it moves Σ and Δ
   together, so the target must keep both inside their normal ranges.
 
 Position moves use equal-duration profiles: each motor's SP is its share of the distance, so
 both motors start and arrive together and the held joint does not drift (seed Fig. 9.10/9.11).
 
-Everything that can be refused is refused before the guard arms anything: an unknown or ad hoc
-target, a position outside the joint's NORMAL range, a speed above the joint's limit, a current
+Everything that can be refused is refused before the guard arms anything: a name that is not a
+pair joint or pair motor, a position outside the joint's NORMAL range, a speed above the joint's limit, a current
 above the configured continuous limit, a velocity or torque jog without a time limit, and a
 position move of a joint that is not calibrated (ops/calibration.py) unless ``uncalibrated``.
 """
@@ -27,7 +27,7 @@ import time
 from dataclasses import dataclass, field
 from typing import Any, Callable, Mapping
 
-from sherpa_cli.config.model import ArmConfig, JointConfig, JointRole, PairConfig
+from sherpa_cli.config.model import ArmConfig, JointConfig, PairConfig
 from sherpa_cli.elmo.faults import decode_sr, describe_mf
 from sherpa_cli.errors import SafetyError, UsageError
 from sherpa_cli.joints import diffpair, units
@@ -437,17 +437,17 @@ def _run_guarded(guard: Any, session: Any, cfg: ArmConfig, axis: Axis, p: JogPla
         if watched.outcome == "breach":
             result.outcome = "limit"
             result.breaches = list(watched.breaches)
-            _stop_now(clients, p.mode)
-            _wait_standstill(clients, guard, settings, clock, sleep)
+            stop_now(clients, p.mode)
+            wait_standstill(clients, guard, settings, clock, sleep)
             back = limit_watch.recovery_targets(axis.watched, sample(), watched.breaches, hold=held)
-            _move_to(guard, by_name, clients, back, _slow(axis), settings, clock, sleep,
+            move_to(guard, by_name, clients, back, _slow(axis), settings, clock, sleep,
                      "the move back into the normal range")
             final = sample()
             result.recovered_to = {j.name: j.position(final) for j in axis.watched}
         else:
             if p.mode != "position":
-                _stop_now(clients, p.mode)
-                _wait_standstill(clients, guard, settings, clock, sleep)
+                stop_now(clients, p.mode)
+                wait_standstill(clients, guard, settings, clock, sleep)
             final = sample()
             if held and p.mode != "position":
                 # start and stop skew between the two motors shifts the held joint a little (seed
@@ -456,7 +456,7 @@ def _run_guarded(guard: Any, session: Any, cfg: ArmConfig, axis: Axis, p: JogPla
     return final
 
 
-def _stop_now(clients: Mapping[str, Any], mode: str) -> None:
+def stop_now(clients: Mapping[str, Any], mode: str) -> None:
     """Stop every motor of the jog at once; nothing queued is sent after this."""
     for c in clients.values():
         if mode == "torque":
@@ -482,12 +482,12 @@ def _restore_held(guard: Any, by_name: Mapping[str, Any], clients: Mapping[str, 
         s2, d2 = diffpair.hold_other(value, d, "sigma")
     targets = dict(zip(axis.drives, diffpair.to_motors(s2, d2)))
     result.held_correction = {name: {"from": (d if axis.kind == "sigma" else s), "to": value}}
-    _move_to(guard, by_name, clients, targets, _slow(axis), settings, clock, sleep,
+    move_to(guard, by_name, clients, targets, _slow(axis), settings, clock, sleep,
              f"the correction of the held joint {name}")
     return {**now, **{dr: int(c.get("PX")) for dr, c in clients.items()}}
 
 
-def _move_to(guard: Any, by_name: Mapping[str, Any], clients: Mapping[str, Any], targets: Mapping[str, int],
+def move_to(guard: Any, by_name: Mapping[str, Any], clients: Mapping[str, Any], targets: Mapping[str, int],
              speed: int, settings: Any, clock: Callable[[], float], sleep: Callable[[float], None],
              what: str) -> None:
     """Position mode (UM=5; the guard cycles MO if the mode changes), every motor of ``targets`` to
@@ -512,7 +512,7 @@ def _move_to(guard: Any, by_name: Mapping[str, Any], clients: Mapping[str, Any],
         sleep(settings.poll_interval)
 
 
-def _wait_standstill(clients: Mapping[str, Any], guard: Any, settings: Any, clock: Callable[[], float],
+def wait_standstill(clients: Mapping[str, Any], guard: Any, settings: Any, clock: Callable[[], float],
                      sleep: Callable[[float], None]) -> None:
     deadline = clock() + settings.standstill_timeout
     while clock() < deadline:
