@@ -427,7 +427,7 @@ def run_move(session: Any, pair: PairConfig, request: MoveRequest, *, guard_fact
              trace_factory: Callable[[tuple[str, str]], Any] = PolledTrace) -> MoveResult:
     """Plan, then move both motors inside the motion guard with the limit watch, recording both."""
     from sherpa_cli.elmo.faults import decode_sr, describe_mf
-    from sherpa_cli.ops.joint_jog import _move_to, _slow, _stop_now, _wait_standstill
+    from sherpa_cli.ops.joint_jog import move_to, stop_now, wait_standstill
     from sherpa_cli.ops.motion import MotionGuard, MotionSettings
 
     cfg = session.cfg
@@ -503,11 +503,11 @@ def run_move(session: Any, pair: PairConfig, request: MoveRequest, *, guard_fact
                 if w.outcome == "breach":
                     result.outcome = "limit"
                     result.breaches = list(w.breaches)
-                    _stop_now(clients, "position")
-                    _wait_standstill(clients, guard, settings, clock, sleep)
+                    stop_now(clients, "position")
+                    wait_standstill(clients, guard, settings, clock, sleep)
                     now = {d: int(clients[d].get("PX")) for d in drives}
                     back = limit_watch.recovery_targets(watched, now, w.breaches, hold={})
-                    _move_to(guard, by_name, clients, back, _slow_pair(sj, dj), settings, clock, sleep,
+                    move_to(guard, by_name, clients, back, _slow_pair(sj, dj), settings, clock, sleep,
                              "the move back into the normal range")
                 elif w.outcome == "elapsed":
                     raise SafetyError(f"{pair.name}: did not reach Σ={p.target[0]}, Δ={p.target[1]} within "
