@@ -194,3 +194,49 @@ def test_uncalibrated_pair_is_refused_before_anything_moves():
             assert all(not d.motor_on and not d.od_writes for d in s.sim.drives.values())
         r = diffdrive.run_move(s, cfg.pairs["diff"], MoveRequest(sigma="100counts", uncalibrated=True))
         assert abs(r.end[0] - 100) <= 1
+
+
+def test_jog_of_a_pair_joint_starts_both_motors_with_one_group_bg():
+    from sherpa_cli.ops import joint_jog
+
+    cfg = load_config(FAST)
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
+        r = joint_jog.run(s, joint_jog.resolve_axis(cfg, "pitch"),
+                          joint_jog.JogRequest(mode="position", to="300counts", uncalibrated=True))
+        assert abs(r.end - 300) <= 1
+        with s.sim.lock:
+            left, right = s.sim.drives["left"], s.sim.drives["right"]
+            group_bg = [f[1:] for f in left.received if f[1] == 0x300 + 125]
+            own_bg = [f for f in left.received if f[1] == 0x30A and f[2] == encode_execute("BG")]
+            assert group_bg == [(0x300 + 125, encode_execute("BG"))]
+            assert group_bg == [f[1:] for f in right.received if f[1] == 0x300 + 125]
+            assert not own_bg  # the move's begin went to the group only
+            assert left.group_id == right.group_id == 0  # put back (RAM)
+            writes = [w for w in left.od_writes if w[1] == 0x2040]
+            assert [w[3] for w in writes] == [125, 0]
+
+
+def test_pair_start_sequential_setting_sends_two_bg(tmp_path):
+    text = FAST.read_text().replace("motion: {consumer_time_ms: 1000}",
+                                    "motion: {consumer_time_ms: 1000, pair_start: sequential}")
+    path = tmp_path / "seq.yaml"
+    path.write_text(text)
+    cfg = load_config(path)
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
+        r = diffdrive.run_move(s, cfg.pairs["diff"], MoveRequest(delta="100counts", uncalibrated=True))
+        assert r.mode == "sequential" and abs(r.end[1] - 100) <= 1
+        with s.sim.lock:
+            assert not s.sim.drives["left"].od_writes or all(w[1] != 0x2040 for w in s.sim.drives["left"].od_writes)
+            assert any(f[1] == 0x30A and f[2] == encode_execute("BG") for f in s.sim.drives["left"].received)
+
+
+def test_bad_pair_settings_are_refused(tmp_path):
+    from sherpa_cli.errors import ConfigError
+
+    for setting in ("pair_start: together", "pair_group_id: 126"):
+        text = FAST.read_text().replace("motion: {consumer_time_ms: 1000}",
+                                        "motion: {consumer_time_ms: 1000, " + setting + "}")
+        path = tmp_path / "bad.yaml"
+        path.write_text(text)
+        with pytest.raises(ConfigError, match="pair_"):
+            diffdrive.pair_settings(load_config(path))
