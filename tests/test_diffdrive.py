@@ -240,3 +240,16 @@ def test_bad_pair_settings_are_refused(tmp_path):
         path.write_text(text)
         with pytest.raises(ConfigError, match="pair_"):
             diffdrive.pair_settings(load_config(path))
+
+
+def test_sim_lag_makes_px_trail_the_profile_and_settle_on_target():
+    clock = ManualClock()
+    slow, fast = _drive(clock, 10, lag_s=0.02), _drive(clock, 11)
+    for d in (slow, fast):
+        d.receive(0x300 + d.node, encode_execute("BG"))
+    clock.advance(0.1)
+    slow.tick(), fast.tick()
+    assert 0 < slow.px < fast.px - 5  # behind while moving
+    clock.advance(1.0)
+    slow.tick(), fast.tick()
+    assert slow.px == fast.px == 500

@@ -248,6 +248,7 @@ class SimDriveConfig:
     limit_trip_at: float | None = None  # s after start: trips as if past LL[3]/HL[3] (MF, EMCY 0x8680)
     st_refused_in_speed_mode: bool = False  # ST answers EC 60 in UM=2, as [BLISS] says some firmware does
     start_skew: float = 0.0  # s a separately received BG starts late (a group BG does not; seed Fig. 9.10)
+    lag: float = 0.0  # s time constant of the servo loop (bandwidth mismatch of a pair); 0 = perfect
 
 
 @dataclass(frozen=True)

@@ -51,7 +51,7 @@ def settings_for(cfg: ArmConfig, drive: str, **overrides: Any) -> SimSettings:
                     die_at=faults.die_at, reboot_at=faults.reboot_at, heartbeat_ms=faults.heartbeat_ms,
                     seed=faults.seed, limit_trip_at=faults.limit_trip_at,
                     st_refused_in_speed_mode=faults.st_refused_in_speed_mode,
-                    start_skew_s=faults.start_skew)
+                    start_skew_s=faults.start_skew, lag_s=faults.lag)
     base.update(overrides)
     return SimSettings(**base)
 

@@ -86,6 +86,7 @@ class SimDrive:
         self.od_writes: list[tuple[float, int, int, int]] = []  # SDO writes, for "dry run wrote nothing"
         self.boots = 0
         self.motor = Motor(counts=int(position))
+        self._lagged = float(position)  # where the motor really is with settings.lag_s (else the profile)
         self._outbox: list[Frame] = []
         self._replies: list[tuple[float, int, Frame]] = []  # heap: (release time, seq, frame)
         self._seq = itertools.count()
@@ -207,10 +208,12 @@ class SimDrive:
     @property
     def position(self) -> float:
         """Physical motor position in counts (not PX), for arm mechanics."""
-        return self.motor.position
+        return self._lagged if self.settings.lag_s > 0 else self.motor.position
 
     @property
     def px(self) -> int:
+        if self.settings.lag_s > 0:
+            return wrap_int32(math.floor(self._lagged + 0.5) + self._px_offset)
         return wrap_int32(self.motor.counts + self._px_offset)
 
     @property
@@ -527,12 +530,21 @@ class SimDrive:
                 m.stop(self.ram["SD"] * self.speed_gain)
                 self._limit_stop = True
             m.step(dt)
+            self._follow(dt)
             if self._quick_stop and m.v == 0 and m.mode in ("idle", "stop"):
                 self._shut_down(MF_HEARTBEAT, "heartbeat lost, 0x6007=3 (quick stop done)")
                 return
             self._check_limits()
+        else:
+            self._lagged = self.motor.position  # a motor that is off stands where it is
         if self.on_step is not None:
             self.on_step(self)
+
+    def _follow(self, dt: float) -> None:
+        """The servo loop's bandwidth: the real position follows the profile with time constant lag_s."""
+        tau = self.settings.lag_s
+        if tau > 0:
+            self._lagged += (self.motor.position - self._lagged) * (1.0 - math.exp(-dt / tau))
 
     def _check_limits(self) -> None:
         r = self.ram

@@ -70,9 +70,13 @@ class SimSettings:
     # begin commands). A BG sent to the drive's group id (0x2040) or executed at SYNC starts at
     # once on every drive of the group.
     start_skew_s: float = 0.0
+    # Bandwidth of the servo loop: the motor follows its profile through a first-order lag with
+    # this time constant (s); 0 = a perfect loop (the motor is the profile). A pair whose motors
+    # differ here drifts apart while accelerating (seed Fig. 9.10/9.11).
+    lag_s: float = 0.0
 
     def __post_init__(self) -> None:
-        for name in ("mo_settle_s", "sv_blackout_s", "reply_latency_s", "sdo_latency_s", "start_skew_s"):
+        for name in ("mo_settle_s", "sv_blackout_s", "reply_latency_s", "sdo_latency_s", "start_skew_s", "lag_s"):
             if getattr(self, name) < 0:
                 raise ValueError(f"SimSettings.{name} must be >= 0")
         if not 0.0 <= self.drop_probability <= 1.0:
