@@ -253,3 +253,20 @@ def test_sim_lag_makes_px_trail_the_profile_and_settle_on_target():
     clock.advance(1.0)
     slow.tick(), fast.tick()
     assert slow.px == fast.px == 500
+
+
+def test_a_naive_move_whose_held_joint_leaves_its_full_range_is_stopped_and_brought_back(tmp_path):
+    # Δ's normal range ends 20 counts inside its full range: the naive Σ move's coupling crosses it
+    text = MISMATCHED.read_text().replace("range: {min: -2000, max: 2000, margin: 100, overshoot: 400}",
+                                          "range: {min: -2000, max: 2000, margin: 20, overshoot: 400}")
+    path = tmp_path / "tight.yaml"
+    path.write_text(text)
+    cfg = load_config(path)
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
+        first = diffdrive.run_move(s, cfg.pairs["diff"], MoveRequest(delta="1980counts"))
+        assert first.ok and first.end[1] == 1980
+        r = diffdrive.run_move(s, cfg.pairs["diff"], MoveRequest(sigma="-1", naive=True))
+        assert not r.ok and r.outcome == "limit" and r.breaches[0].joint == "roll"
+        assert -1980 <= r.end[1] <= 1980  # back inside the normal range
+        with s.sim.lock:
+            assert all(not d.motor_on for d in s.sim.drives.values())
