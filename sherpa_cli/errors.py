@@ -87,6 +87,11 @@ class DriveTimeoutError(CommunicationError, TimeoutError):
     """A drive did not answer in time; names the drive and what was asked."""
 
 
+class ProtocolError(CommunicationError):
+    """A device answered, but with a frame the protocol does not allow (wrong length, NaN/Inf,
+    bad command byte); the message names the drive and the frame in hex (exit 3)."""
+
+
 class SdoError(CommunicationError):
     """An SDO transfer failed (exit 3): ``reason`` is "timeout", "abort" (``abort_code`` set),
     "malformed" (an answer that is not a valid SDO reply) or "bus" (the request could not be sent).

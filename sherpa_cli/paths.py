@@ -1,4 +1,9 @@
-"""Where sherpa-cli keeps state between runs (XDG base directory spec)."""
+"""Where sherpa-cli keeps state between runs, and the lock that keeps two commands' updates apart.
+
+The directory is platformdirs' user state directory: ``$XDG_STATE_HOME/sherpa-cli`` (default
+``~/.local/state/sherpa-cli``) on Linux, ``~/Library/Application Support/sherpa-cli`` on macOS,
+``%LOCALAPPDATA%\\sherpa-cli`` on Windows.
+"""
 
 from __future__ import annotations
 
@@ -8,11 +13,27 @@ import tempfile
 from pathlib import Path
 from typing import Any
 
+import filelock
+import platformdirs
+
+APP_NAME = "sherpa-cli"
+LOCK_TIMEOUT = 10.0  # s a command waits for another one's update of a state file
+
+
 
 def state_dir() -> Path:
-    """``$XDG_STATE_HOME/sherpa-cli``, default ``~/.local/state/sherpa-cli``."""
-    base = os.environ.get("XDG_STATE_HOME") or os.path.join(os.path.expanduser("~"), ".local", "state")
-    return Path(base) / "sherpa-cli"
+    """The user's state directory for sherpa-cli (on Linux ``$XDG_STATE_HOME/sherpa-cli``)."""
+    return Path(platformdirs.user_state_dir(APP_NAME, appauthor=False))
+
+
+def file_lock(path: Path, timeout: float = LOCK_TIMEOUT) -> filelock.BaseFileLock:
+    """An inter-process lock for a read-modify-write of ``path`` (held in ``<path>.lock``).
+
+    Use it as a context manager; it raises ``filelock.Timeout`` (a ``TimeoutError``, so an
+    ``OSError``) when another command holds it for longer than ``timeout`` seconds.
+    """
+    path.parent.mkdir(parents=True, exist_ok=True)
+    return filelock.FileLock(str(path) + ".lock", timeout=timeout)
 
 
 def write_atomic(path: Path, text: str) -> None:
@@ -33,8 +54,29 @@ def write_atomic(path: Path, text: str) -> None:
         raise
 
 
+MAX_STATE_BYTES = 16 * 1024 * 1024  # a state file holds counts and a few flash images
+
+
 def read_json(path: Path, default: Any) -> Any:
+    """The file's JSON, ``default`` if it does not exist; ValueError says what is wrong with it
+    (not JSON, not UTF-8, too large, nested too deeply), OSError that it cannot be read."""
     try:
-        return json.loads(path.read_text(encoding="utf-8"))
-    except FileNotFoundError:
+        with open(path, "rb") as handle:
+            data = handle.read(MAX_STATE_BYTES + 1)
+    except (FileNotFoundError, NotADirectoryError):  # a parent that is a file: no such file either
         return default
+    if len(data) > MAX_STATE_BYTES:
+        raise ValueError(f"larger than {MAX_STATE_BYTES // (1024 * 1024)} MiB")
+    try:
+        return json.loads(data.decode("utf-8"))
+    except RecursionError:
+        raise ValueError("nested too deeply") from None
+
+
+STATE_DIR_HINT = "check that the state directory ($XDG_STATE_HOME/sherpa-cli, default ~/.local/state/sherpa-cli) " \
+                 "is a writable directory and the disk is not full"
+
+
+def move_aside_hint(path: Path, consequence: str) -> str:
+    """The way out of a damaged state file: keep it for a look, let the tool start a new one."""
+    return f"move it aside (mv '{path}' '{path}.damaged') and run again; {consequence}"

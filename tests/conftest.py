@@ -2,22 +2,117 @@
 
 Golden files hold a command's whole output (exit code, stdout, stderr) at a fixed width with
 no colour. They are regenerated only with ``pytest --update-golden``; review the git diff.
+
+Every test is isolated (autouse fixtures below): it gets a state directory of its own, the
+user's state directory is a sentinel that must stay empty for the whole session, and a test
+that leaves a python-can virtual channel open or a thread running fails.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import io
+import os
 import shlex
-from collections.abc import Callable
+import subprocess
+import sys
+import threading
+import time
+from collections.abc import Callable, Iterator
 from contextlib import redirect_stderr, redirect_stdout
 from dataclasses import dataclass
 from pathlib import Path
 
 import pytest
+from arm_harness import ArmProcess, TestBus, parse_test_bus
+
+pytest_plugins = ["pytester"]  # tests/test_state_files.py runs the isolation fixtures on leaky tests
 
 ROOT = Path(__file__).resolve().parent.parent
 GOLDEN = Path(__file__).resolve().parent / "golden"
 WIDTH = 100
+
+# The protocol windows (config `protocol:` section) of the in-process simulated arm and the
+# sessions of commands run through the cli fixture: the simulated drives are deaf for these and
+# the client waits them out, so the real-arm defaults (0.5 s each) would only make the suite slow.
+# MO settle can be tiny (the client polls MO until it reads back). The simulated drive is deaf
+# for SIM_SV_SHARE (0.6) of sv_blackout counted from when it handles SV, the client waits all of
+# it from when it sent SV: 0.2 s leaves 80 ms for a loaded machine's scheduling, plus a retry.
+# Tests of the windows themselves load their configs directly (tests/test_sim_e2e.py).
+TEST_PROTOCOL_WINDOWS = {"mo_settle": 0.02, "sv_blackout": 0.2}
+
+# Threads that outlive a test on purpose; none so far (name them here, with the reason).
+KNOWN_GLOBAL_THREADS: frozenset[str] = frozenset()
+LEAK_GRACE_S = 5.0  # a thread that is ending (joined with a timeout elsewhere) gets this long
+
+
+def _with_test_windows(cfg):
+    return dataclasses.replace(cfg, protocol=dataclasses.replace(cfg.protocol, **TEST_PROTOCOL_WINDOWS))
+
+
+# -- isolation -----------------------------------------------------------------------------------
+
+@pytest.fixture(scope="session", autouse=True)
+def _user_state_sentinel(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Path]:
+    """The user's state directory for the whole session: a sentinel that must stay empty.
+
+    Each test gets its own directory (``_isolated_state``); anything that still reaches this one
+    (a session fixture, a test that undoes the isolation) wrote into the user's real state.
+    """
+    sentinel = tmp_path_factory.mktemp("user-state-sentinel")
+    patch = pytest.MonkeyPatch()
+    patch.setenv("XDG_STATE_HOME", str(sentinel))
+    try:
+        yield sentinel
+    finally:
+        patch.undo()
+    left = sorted(str(p.relative_to(sentinel)) for p in sentinel.rglob("*"))
+    if left:
+        pytest.fail(f"the suite wrote into the user's state directory: {', '.join(left)}", pytrace=False)
+
+
+@pytest.fixture(autouse=True)
+def _isolated_state(monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
+    """A state directory (save ledger, simulated flash) of the test's own."""
+    monkeypatch.setenv("XDG_STATE_HOME", str(tmp_path / "state"))
+
+
+def _open_virtual_buses() -> dict[object, int]:
+    from can.interfaces import virtual
+
+    with virtual.channels_lock:
+        return {channel: len(queues) for channel, queues in virtual.channels.items()}
+
+
+def _leaks(channels_before: dict[object, int], threads_before: set[threading.Thread]) -> list[str]:
+    channels = {ch: n - channels_before.get(ch, 0) for ch, n in _open_virtual_buses().items()}
+    threads = [t for t in threading.enumerate()
+               if t not in threads_before and t.is_alive() and t.name not in KNOWN_GLOBAL_THREADS]
+    return ([f"python-can virtual channel {ch!r} ({n} bus{'es' if n > 1 else ''} not shut down)"
+             for ch, n in channels.items() if n > 0]
+            + [f"thread {t.name!r} ({'daemon' if t.daemon else 'non-daemon'})" for t in threads])
+
+
+LEAK_BASELINE = pytest.StashKey[tuple[dict[object, int], set[threading.Thread]]]()
+
+
+def _leak_baseline(item: pytest.Item) -> None:
+    """What a test may leave behind: what exists now. Taken before the test's fixtures, and again
+    after the session's simulator harness (re)started its own threads for the test."""
+    item.stash[LEAK_BASELINE] = (_open_virtual_buses(), set(threading.enumerate()))
+
+
+@pytest.fixture(autouse=True)
+def _no_leftovers(request: pytest.FixtureRequest) -> Iterator[None]:
+    """Fail a test that leaves a python-can virtual bus open or a thread running."""
+    _leak_baseline(request.node)
+    yield
+    channels_before, threads_before = request.node.stash[LEAK_BASELINE]
+    deadline = time.monotonic() + LEAK_GRACE_S
+    while (left := _leaks(channels_before, threads_before)) and time.monotonic() < deadline:
+        time.sleep(0.01)  # a thread that was told to stop may still be on its way out
+    if left:
+        pytest.fail("the test left behind: " + "; ".join(left), pytrace=False)
 
 
 def pytest_addoption(parser: pytest.Parser) -> None:
@@ -38,8 +133,34 @@ class CliResult:
 
 
 @pytest.fixture
-def cli(monkeypatch: pytest.MonkeyPatch, tmp_path: Path):
-    """Run ``sherpa ARGS`` in-process from the repo root, fixed width, no colour."""
+def cli_windows(monkeypatch: pytest.MonkeyPatch) -> Callable[[bool], None]:
+    """``cli_windows(short)``: whether the in-process simulated arm the cli fixture's commands
+    build (SimArm.in_process) and their sessions (ArmSession.open) use TEST_PROTOCOL_WINDOWS
+    (the default) or the windows of the config as written (a simulator in another process has
+    those). Both sides get the same windows; what a command prints from its config stays as written."""
+    from sherpa_cli.ops.session import ArmSession
+    from sherpa_cli.sim.arm import SimArm
+
+    written = {cls: cls.__dict__[name] for cls, name in ((ArmSession, "open"), (SimArm, "in_process"))}
+    open_session, in_process = ArmSession.open, SimArm.in_process
+
+    def open_short(cfg, *args, **kwargs):
+        return open_session(_with_test_windows(cfg), *args, **kwargs)
+
+    def in_process_short(cfg, *args, **kwargs):
+        return in_process(_with_test_windows(cfg), *args, **kwargs)
+
+    def choose(short: bool) -> None:
+        monkeypatch.setattr(ArmSession, "open", staticmethod(open_short) if short else written[ArmSession])
+        monkeypatch.setattr(SimArm, "in_process", staticmethod(in_process_short) if short else written[SimArm])
+
+    return choose
+
+
+@pytest.fixture
+def cli(monkeypatch: pytest.MonkeyPatch, tmp_path: Path, cli_windows):
+    """Run ``sherpa ARGS`` in-process from the repo root, fixed width, no colour; the configs it
+    loads get short protocol windows (TEST_PROTOCOL_WINDOWS)."""
     from sherpa_cli.cli.app import run
 
     monkeypatch.chdir(ROOT)
@@ -50,6 +171,7 @@ def cli(monkeypatch: pytest.MonkeyPatch, tmp_path: Path):
     monkeypatch.delenv("SHERPA_CONFIG", raising=False)
     monkeypatch.setenv("XDG_STATE_HOME", str(tmp_path / "state"))
     monkeypatch.setenv("XDG_CONFIG_HOME", str(tmp_path / "config"))  # no user config: ./configs is the default
+    cli_windows(True)
 
     def invoke(*args: str, stdin: str = "") -> CliResult:
         out, err = io.StringIO(), io.StringIO()
@@ -84,13 +206,6 @@ def golden(request: pytest.FixtureRequest):
 # socketcan:IF,IF,IF; see arm_harness.py and docs/testing.md). Tests marked `realbus` use
 # `arm_cli`; their golden transcripts name the logical command (`sherpa --sim ...`), so the same
 # file must match on every transport.
-
-import dataclasses
-import os
-import subprocess
-import sys
-
-from arm_harness import ArmProcess, TestBus, parse_test_bus
 
 ARM_CONFIG = "configs/sherpa-arm.yaml"
 # global options arm_cli supplies itself: a test giving them would test another arm than the bus's
@@ -149,15 +264,18 @@ def _check_arm_args(args: tuple[str, ...]) -> None:
 
 
 @pytest.fixture
-def arm_cli(cli, arm_process):
+def arm_cli(request, cli, cli_windows, arm_process):
     """``arm_cli(*args)``: `sherpa ARGS` against the simulated arm on the selected transport.
 
     Every test starts with factory flash, every command with a power-cycled arm, as with
     `--sim`. The transcript shows the logical command (``--sim``), so golden files are the
-    same whatever the transport.
+    same whatever the transport. A simulator in another process keeps its config's protocol
+    windows (a slow guest needs them), so the commands use those too.
     """
     if arm_process is not None:
+        cli_windows(False)
         arm_process.new_test()
+        _leak_baseline(request.node)  # a restarted simulator's threads are the session's
 
     def invoke(*args: str, stdin: str = "") -> CliResult:
         _check_arm_args(args)
@@ -192,7 +310,7 @@ def arm_golden(arm_cli, golden):
 
 
 @pytest.fixture
-def arm_console(arm_process, tmp_path):
+def arm_console(request, arm_process, tmp_path):
     """``arm_console(*args)``: like arm_cli, but the installed `sherpa` console script in a process
     of its own, as a technician runs it (slow in the QEMU guest: use for a few tests only)."""
     script = Path(sys.executable).parent / "sherpa"
@@ -202,6 +320,7 @@ def arm_console(arm_process, tmp_path):
                XDG_CONFIG_HOME=str(tmp_path / "config"))
     if arm_process is not None:
         arm_process.new_test()
+        _leak_baseline(request.node)  # a restarted simulator's threads are the session's
 
     def invoke(*args: str, stdin: str = "") -> CliResult:
         _check_arm_args(args)

@@ -16,7 +16,7 @@ from sherpa_cli.elmo.client import ClientSettings, DriveClient
 from sherpa_cli.elmo.codec import decode_request, encode_reply
 from sherpa_cli.elmo.faults import Emcy
 from sherpa_cli.elmo.transport import FakeTransport, NetworkTransport, parse_transcript
-from sherpa_cli.errors import CommunicationError, DriveRefusedError, DriveTimeoutError
+from sherpa_cli.errors import CommunicationError, DriveRefusedError, DriveTimeoutError, ProtocolError
 
 NODE = 10
 TX, RX, EMCY = 0x30A, 0x28A, 0x08A
@@ -88,10 +88,55 @@ def test_reply_for_other_letters_or_index_is_ignored():
         ("tx", TX, "4C 4C 03 00"),
         ("rx", RX, "50 58 00 00 07 00 00 00"),  # PX = 7: other letters
         ("rx", RX, "4C 4C 02 00 09 00 00 00"),  # LL[2] = 9: other index
-        ("rx", RX, "4C 4C 03 00"),  # DLC 4: malformed, dropped
+        ("rx", RX, "50 58 00 00"),  # DLC 4 of other letters: malformed and not ours, dropped
         ("rx", RX, "4C 4C 03 00 10 FF FF FF"),  # LL[3] = -240: the answer
     ])
     assert client.get("LL", 3) == -240
+    bus.done()
+
+
+@pytest.mark.parametrize("reply, problem", [
+    ("4C 4C 03 00", "must be 8 bytes, got 4"),  # the right header, the wrong length
+    ("4C", "must be 8 bytes, got 1"),  # too short to carry any header: it can only be the answer
+    ("4C 4C 03 00 10 FF FF FF 00", "must be 8 bytes, got 9"),
+    ("43 4C 01 80 00 00 C0 7F", "not a finite number"),  # CL[1] = NaN
+    ("43 4C 01 80 00 00 80 7F", "not a finite number"),  # CL[1] = +Inf
+    ("FF FE 03 00 00 00 00 00", "not ASCII"),
+])
+def test_malformed_reply_fails_the_request_naming_drive_and_frame(reply, problem):
+    letters, index = ("CL", 1) if reply.startswith("43 4C") else ("LL", 3)
+    query = "43 4C 01 00" if letters == "CL" else "4C 4C 03 00"
+    client, bus, _ = drive([("tx", TX, query), ("rx", RX, reply)], timeout=5.0)
+    started = time.monotonic()
+    with pytest.raises(ProtocolError) as info:
+        client.get(letters, index)
+    assert time.monotonic() - started < 2.0  # failed at once, not after the timeout
+    text = str(info.value)
+    assert text.startswith(f"shoulder_1a (node 10): malformed reply to {letters}[{index}]: TPDO2 0x28A")
+    assert reply in text and problem in text and "no answer" not in text
+    assert info.value.exit_code == 3
+    bus.done()
+
+
+def test_malformed_reply_fails_a_set_and_the_next_request_works():
+    client, bus, _ = drive([
+        ("tx", TX, "43 4C 01 80 00 00 80 3F"),
+        ("rx", RX, "43 4C 01 80 00 00 C0 7F"),  # the echo carries NaN
+        ("tx", TX, "41 43 00 00"),
+        ("rx", RX, "41 43 00 00 F0 49 02 00"),
+    ], timeout=5.0)
+    with pytest.raises(ProtocolError, match="malformed reply to CL\\[1\\]"):
+        client.set("CL", 1, 1.0)
+    assert client.get("AC") == 150000
+    bus.done()
+
+
+def test_long_query_of_a_float_parameter_carries_the_float_bit():
+    client, bus, _ = drive([
+        ("tx", TX, "43 4C 01 C0 00 00 00 00"),  # [IG] 9-3: the type bit in every frame
+        ("rx", RX, "43 4C 01 80 00 00 80 3F"),
+    ], query_long=True)
+    assert client.get("CL", 1) == 1.0
     bus.done()
 
 

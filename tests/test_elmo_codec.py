@@ -39,6 +39,9 @@ def test_query_vectors():
     assert encode_query("AC", long=True) == hx("41 43 00 40 00 00 00 00")
     assert encode_query("MO") == hx("4D 4F 00 00")
     assert encode_query("ET", 992, long=True) == hx("45 54 E0 43 00 00 00 00")
+    # float parameters: the query bit and the float bit (byte 3 = 0x80 | 0x40)
+    assert encode_query("CL", 1, long=True) == hx("43 4C 01 C0 00 00 00 00")
+    assert encode_query("CL", 1) == hx("43 4C 01 00")
 
 
 def test_execute_vectors():
@@ -324,7 +327,9 @@ def test_query_round_trip(key, long):
     letters, index = key
     frame = encode_query(letters, index, long=long)
     assert len(frame) == (8 if long else 4)
-    assert decode_request(frame) == Request("query", letters, index, None, False)
+    # a long query carries the parameter's type bit ([IG] 9-3); the short form has no room for it
+    is_float = long and lookup(letters).at(index).value_type == "float"
+    assert decode_request(frame) == Request("query", letters, index, None, is_float)
 
 
 @given(LETTERS, INDEX, st.one_of(INT32.map(lambda v: (v, False)),

@@ -1,7 +1,8 @@
 """End to end: DriveClients of an ArmSession talking to the simulated arm on python-can ``virtual`` buses.
 
 Real threads and real time: the SimArm pumps each bus in its own thread, the session's canopen
-Network receives in its notifier thread. Configs are small and use a short MO settle window and
+Network receives in its notifier thread. A test whose assertions depend on how far the drives
+move between two host requests runs them on a ManualClock instead (``sim_session(cfg, clock)``). Configs are small and use a short MO settle window and
 SV blackout so every test stays well under 2 s; every wait is bounded by a deadline.
 
 Two test-side settings:
@@ -13,10 +14,10 @@ Two test-side settings:
 from __future__ import annotations
 
 import dataclasses
-
 import json
 import threading
 import time
+import uuid
 from contextlib import contextmanager
 from pathlib import Path
 
@@ -30,6 +31,7 @@ from sherpa_cli.errors import DriveRefusedError, DriveTimeoutError
 from sherpa_cli.ops.session import ArmSession, resolve_target
 from sherpa_cli.sim import state as sim_state
 from sherpa_cli.sim.arm import SimArm
+from sherpa_cli.sim.clock import ManualClock
 
 ROOT = Path(__file__).resolve().parent.parent
 EXAMPLES = ROOT / "configs" / "appendix-c"
@@ -65,10 +67,17 @@ def example(name: str, extra: str = FAST):
 
 
 @contextmanager
-def sim_session(cfg):
+def sim_session(cfg, clock: ManualClock | None = None):
+    """The session's simulated arm; with ``clock`` its drives live in that clock's time, not real time."""
     # these tests time the protocol itself: the real-bus reply timeout, not --sim's patient one
     cfg = dataclasses.replace(cfg, sim_reply_timeout=cfg.protocol.reply_timeout)
-    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as session:
+    if clock is None:
+        arm = SimArm.in_process(cfg)
+    else:
+        token = uuid.uuid4().hex[:8]  # virtual channels are process-wide
+        arm = SimArm(cfg, {bus: {"interface": "virtual", "channel": f"e2e-{token}-{bus}"} for bus in cfg.buses},
+                     clock=clock)
+    with ArmSession.open(cfg, sim=arm) as session:
         yield session
         assert session.sim.errors == [], "a simulator pump thread died"
 
@@ -311,8 +320,16 @@ def test_pair_sigma_move_with_speed_mismatch_transiently_moves_delta(tmp_path, g
     # Seed Fig. 9.10: motor b runs 5 % fast; a Σ-only move (both PR by the same amount) makes Δ
     # drift while moving, and Δ comes back when both reach their targets. gain 1.0 is the control.
     # Σ goes -200 -> +200, inside the Σ end stops at ±240 (overshoot range).
-    cfg = example("example3.yaml", FAST + f"sim:\n  drives:\n    drive2: {{speed_gain: {gain}}}\n")
-    with sim_session(cfg) as s:
+    # Simulated time is a ManualClock only this test moves: both BGs reach the drives at the same
+    # simulated instant and Δ is sampled every 2 ms of simulated time, however loaded the machine
+    # is (in real time the gap between the two BGs made Δ depend on the scheduler). With time
+    # standing still while the host talks, MO settles at once (mo_settle 0) and a reply may take
+    # as long as the machine needs (reply_timeout 2 s; every reply comes, so no test waits that long).
+    step_s = 0.002
+    cfg = example("example3.yaml", "protocol: {mo_settle: 0, reply_timeout: 2.0}\n"
+                  f"sim:\n  drives:\n    drive2: {{speed_gain: {gain}}}\n")
+    clock = ManualClock()
+    with sim_session(cfg, clock) as s:
         a, b = client(s, "drive1"), client(s, "drive2")
         for c in (a, b):
             c.nmt_start()
@@ -327,20 +344,22 @@ def test_pair_sigma_move_with_speed_mismatch_transiently_moves_delta(tmp_path, g
             a.execute("BG")
             b.execute("BG")
             deltas: list[float] = []
-
-            def done() -> bool:
-                deltas.append(pair_positions(s)[1])
-                with s.sim.lock:
-                    return all(s.sim.drives[n].motor.at_target for n in ("drive1", "drive2"))
-
-            wait_until(done, 1.0, "both motors to reach their targets", interval=0.002)
-            return deltas
+            for _ in range(int(2.0 / step_s)):  # both targets are ~0.4 s of simulated time away
+                clock.advance(step_s)
+                with s.sim.lock:  # the pumps tick the drives too, to the same instant: no double step
+                    drives = [s.sim.drives[n] for n in ("drive1", "drive2")]
+                    for drive in drives:
+                        drive.tick()
+                    deltas.append(pair_positions(s)[1])
+                    if all(drive.motor.at_target for drive in drives):
+                        return deltas
+            raise AssertionError(f"both motors did not reach their targets in 2 s of simulated time: {deltas[-5:]}")
 
         move(-100)
         assert pair_positions(s) == (-200, 0)
         deltas = move(200)  # Σ -200 -> +200, Δ commanded to stay 0
         if gain == 1.0:
-            assert max(abs(d) for d in deltas) <= 3, deltas
+            assert max(abs(d) for d in deltas) == 0, deltas  # the same instant, the same profile
         else:
             assert min(deltas) <= -4, min(deltas)  # b (faster) ahead: Δ = a - b went negative (~ -7)
             assert max(abs(d) for d in deltas) < 30, deltas

@@ -58,6 +58,6 @@ def test_a_factory_builds_the_arm_on_fresh_channels():
         seen.append(dict(channels))
         return SimArm(cfg, {bus: {"interface": "virtual", "channel": ch} for bus, ch in channels.items()})
 
-    first, second = SimArm.in_process(cfg, factory), SimArm.in_process(cfg, factory)
+    first, _second = SimArm.in_process(cfg, factory), SimArm.in_process(cfg, factory)
     assert isinstance(first, SimArm) and list(seen[0]) == list(cfg.buses)
     assert seen[0] != seen[1], "every arm gets channels of its own"

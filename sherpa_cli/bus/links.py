@@ -13,7 +13,6 @@ from sherpa_cli.errors import CommunicationError
 
 if TYPE_CHECKING:
     import can
-    import canopen
 
 
 def _paced_network_class():
@@ -68,6 +67,7 @@ def _paced_network_class():
                 if getattr(exc, "error_code", None) != errno.ENOBUFS or attempt == self.send_attempts:
                     raise CommunicationError(f"sending 0x{msg.arbitration_id:03X} failed: {exc}") from exc
                 self.sleep(0.001 * attempt)
+                assert self.bus is not None  # checked by send_message
                 try:
                     self.bus.send(msg)
                     return

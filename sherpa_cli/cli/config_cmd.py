@@ -20,14 +20,15 @@ def check(ctx: typer.Context, file: Optional[Path] = FileArg) -> None:
     """Validate a config and print its buses, drives, joints, pairs and warnings.
 
     Exit 0 when valid (warnings allowed), 1 when the current limits break the catalog
-    ratings, 2 when the file is invalid.
+    ratings or a derived drive parameter set would be refused by program-limits, 2 when
+    the file is invalid.
     """
     from sherpa_cli.config.summary import summarize
-    from sherpa_cli.joints.currents import check_currents
+    from sherpa_cli.joints.limits import config_findings
 
     st = state(ctx)
     cfg = st.load_config(file)
-    findings = check_currents(cfg)
+    findings = config_findings(cfg)  # what program-limits would refuse, so a passing check means it will not
     summary = summarize(cfg, findings)
     if st.json_mode:
         st.out.json(summary)

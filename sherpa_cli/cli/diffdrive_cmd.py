@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from typing import Optional
+from typing import Any, Optional
 
 import typer
 
@@ -80,6 +80,8 @@ def convert(
     ex = explain_pair(cfg, pair_of(cfg, pair))
     if unit not in ("counts", "rad"):
         raise UsageError(f"--unit: '{unit}' is not a unit here; expected 'counts' or 'rad'")
+    for option, value in (("--sigma", sigma), ("--delta", delta), ("--motor-a", motor_a), ("--motor-b", motor_b)):
+        _finite(value, option, unit if option in ("--sigma", "--delta") else "counts")
     joint_given = sigma is not None or delta is not None
     motor_given = motor_a is not None or motor_b is not None
     if joint_given == motor_given:
@@ -105,7 +107,7 @@ def convert(
         s_counts, d_counts = diffpair.to_joints(m_a, m_b)
     inside_joints = diffpair.inside_joint_limits(m_a, m_b, ex.sigma_full, ex.delta_full)
     box = diffpair.motor_box(ex.sigma_full, ex.delta_full)
-    result = {
+    result: dict[str, Any] = {
         "pair": ex.pair,
         "sigma": {"joint": ex.sigma, "counts": s_counts, "rad": round(units.counts_to_rad(s_counts, s_cpr), 6)},
         "delta": {"joint": ex.delta, "counts": d_counts, "rad": round(units.counts_to_rad(d_counts, d_cpr), 6)},
@@ -125,6 +127,22 @@ def convert(
     ], right=(2, 3))
     if not inside_joints:
         st.out.warn(f"outside the full ranges of {ex.sigma} {_rng(ex.sigma_full)} / {ex.delta} {_rng(ex.delta_full)}")
+
+
+POSITION_LIMIT = 2**31  # counts: a drive position is a 32-bit integer
+
+
+def _finite(value: float | None, option: str, unit: str) -> None:
+    """NaN, infinity and positions no drive can hold are refused before any arithmetic."""
+    import math
+
+    if value is None:
+        return
+    if not math.isfinite(value):
+        raise UsageError(f"{option}: {value} is not a finite number")
+    limit = POSITION_LIMIT if unit == "counts" else 2 * math.pi * POSITION_LIMIT  # cpr >= 1
+    if abs(value) > limit:
+        raise UsageError(f"{option}: {value:g} {unit} is outside the drive's 32-bit position range")
 
 
 def _whole(value: float, option: str) -> int:

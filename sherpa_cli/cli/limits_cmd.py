@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from typing import Any
 
 import typer
 
@@ -64,7 +65,7 @@ def show(ctx: typer.Context,
         st.out.warn(w)
     note = left_as_they_are(derived)
     if st.json_mode:
-        body = {"drives": [{"drive": d.drive, "bus": d.bus, "node": d.node, "params": dict(d.params)}
+        body: dict[str, Any] = {"drives": [{"drive": d.drive, "bus": d.bus, "node": d.node, "params": dict(d.params)}
                            for d in derived]}
         if note:
             body["note"] = note
@@ -74,7 +75,7 @@ def show(ctx: typer.Context,
         moves = drive_moves(cfg, d.drive)
         rows = []
         for key, value in d.params.items():
-            text = _il_meaning(value, cfg.il_codes) if key.startswith("IL[") else MEANING.get(key, "")
+            text = _il_meaning(int(value), cfg.il_codes) if key.startswith("IL[") else MEANING.get(key, "")
             rows.append([key, fmt_value(value), text])
         st.out.table(f"{d.drive} ({d.bus}:{d.node}) - {moves}", ["param", "value", "meaning"], rows, right=(1,))
     if note:

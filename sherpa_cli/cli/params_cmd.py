@@ -114,8 +114,8 @@ def diff(
             live = read_live(session, drives)
         sides[pd.LIVE] = pd.dump_side(pd.LIVE, ParamDump(meta={}, drives=live), kind="live")
     report = pd.diff_sides(sides[a], sides[b], drives, warnings)
-    for w in report.warnings:
-        st.out.warn(w)
+    for warning in report.warnings:
+        st.out.warn(warning)
     if st.json_mode:
         st.out.json(report.as_json())
     else:

@@ -138,6 +138,8 @@ def run_program(st: Any, command: str, targets: Sequence[Any], warnings: Sequenc
         # apply needs the serial too: the ledger remembers drives written but not saved
         plans = program.read_plans(session, targets, need_serial=need_serial or apply)
         ledger = SaveLedger() if apply else None
+        if ledger is not None:
+            ledger.check()  # a damaged ledger is reported before anything is written
         if save and ledger is not None and not verify_flash:
             plans = program.mark_save_due(plans, ledger)  # a flash proof supersedes the ledger's guess
         if not st.json_mode:

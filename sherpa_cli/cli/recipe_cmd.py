@@ -12,6 +12,7 @@ import typer
 
 from sherpa_cli.cli import context
 from sherpa_cli.cli.context import AppState, state
+from sherpa_cli.cli.step_check import check_step_commands
 from sherpa_cli.cli.options import (ApplyCommission, ApplyRecipe, FromStep, Junit, Quiet, Report, SetVars,
                                     Verbose, YesRecipe)
 from sherpa_cli.errors import UsageError
@@ -155,6 +156,7 @@ def execute(st: AppState, recipe_path: Path, *, apply: bool, yes: bool, start: O
     from sherpa_cli.recipes.runner import FAILED, PASSED, SKIPPED, run_recipe
 
     recipe = load_recipe(_shown_path(recipe_path), _parse_sets(sets))
+    check_step_commands(recipe)  # a step the CLI cannot parse stops the recipe before step 1
     check_report_paths(report, junit)
     start_at = recipe.find_step(start) if start else None
     clock = step_clock()
@@ -322,6 +324,7 @@ def check_cmd(ctx: typer.Context, file: Path = typer.Argument(..., metavar="FILE
 
     st = state(ctx)
     recipe = load_recipe(file, _parse_sets(sets))
+    check_step_commands(recipe)
     if st.json_mode:
         st.out.json({"recipe": recipe.name, "file": recipe.path, "vars": recipe.variables,
                      "steps": [{"number": s.number, "name": s.name, "kind": s.kind,

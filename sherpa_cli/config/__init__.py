@@ -16,9 +16,11 @@ __all__ = ["load_config", "load_config_text", "dump_native", "ArmConfig", "Confi
 
 
 def load_config(path: str | Path) -> ArmConfig:
+    from sherpa_cli.config.yamlnodes import read_input
+
     p = Path(path)
     try:
-        text = p.read_text(encoding="utf-8")
+        text = read_input(p)
     except FileNotFoundError:
         raise ConfigError("config file not found", Location(str(p)),
                           hint="give one with --config FILE or $SHERPA_CONFIG") from None

@@ -335,8 +335,8 @@ def parse_catalog(node: YNode | None, locs: Locs) -> Catalog:
             key = catalog_key(raw)
             esec = Section(child, MOTOR_MODEL_KEYS, what="a motor mapping (voltage, current_cont, ...)")
             register(locs, ("catalog", "motors", key), esec)
-            old = motors.get(key)
-            motors[key] = MotorModel(key, **{k: _entry_num(esec, k, old) for k in MOTOR_MODEL_KEYS})
+            old_motor = motors.get(key)
+            motors[key] = MotorModel(key, **{k: _entry_num(esec, k, old_motor) for k in MOTOR_MODEL_KEYS})
     fraction = sec.num("peak_fraction", base.peak_fraction)
     return Catalog(drives=drives, motors=motors, peak_fraction=fraction)
 

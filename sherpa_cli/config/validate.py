@@ -8,6 +8,7 @@ raised, so fixing errors top to bottom works; the hint says how many more were f
 from __future__ import annotations
 
 import difflib
+import math
 
 from dataclasses import replace
 
@@ -16,7 +17,7 @@ from sherpa_cli.config.yamlnodes import Locs, suggest
 from sherpa_cli.errors import ConfigError, Location
 
 MAX_NODE_ID = 127
-DEFAULT_INPUTS = DriveModel.__dataclass_fields__["inputs"].default
+DEFAULT_INPUTS: int = DriveModel.__dataclass_fields__["inputs"].default  # type: ignore[assignment]
 
 
 def _line(loc: Location) -> str:
@@ -46,7 +47,11 @@ class _Report:
     def raise_first(self) -> None:
         if not self.errors:
             return
-        ordered = sorted(self.errors, key=lambda e: (e.location.line is None, e.location.line or 0))
+        # one problem per place: the bounds checks run last and add nothing where a check already spoke
+        unique: dict[Location, ConfigError] = {}
+        for e in self.errors:
+            unique.setdefault(e.location, e)
+        ordered = sorted(unique.values(), key=lambda e: (e.location.line is None, e.location.line or 0))
         first = ordered[0]
         if len(ordered) > 1:
             more = f"{len(ordered) - 1} more problem(s) found in this file after this one"
@@ -76,6 +81,7 @@ def validate(cfg: ArmConfig, locs: Locs, warnings: list[str] | None = None, *,
     for joint in cfg.joints.values():
         _check_joint(cfg, joint, locs, r)
     _check_switch_inputs(cfg, locs, r)
+    _check_bounds(cfg, locs, r)
     r.raise_first()
     return replace(cfg, warnings=tuple(r.warnings))
 
@@ -322,9 +328,9 @@ def _check_usage(cfg: ArmConfig, locs: Locs, r: _Report) -> None:
             r.warn(locs.get("pair", p.name), f"pair '{p.name}' has no current limits; CL/PL stay as on the drives")
         else:
             _check_current(p.current, ("pair", p.name), locs, r)
-    for d in cfg.drives.values():
-        if d.name not in user:
-            r.warn(locs.get("drive", d.name), f"drive '{d.name}' moves no joint or pair")
+    for drive in cfg.drives.values():
+        if drive.name not in user:
+            r.warn(locs.get("drive", drive.name), f"drive '{drive.name}' moves no joint or pair")
 
 
 def _check_current(cur, prefix: tuple[str, ...], locs: Locs, r: _Report) -> None:
@@ -427,3 +433,122 @@ def _check_switch_inputs(cfg: ArmConfig, locs: Locs, r: _Report) -> None:
                                   "one input can carry one switch")
                 else:
                     taken[key] = (f"a switch of joint '{j.name}'", iloc)
+
+
+# --- number bounds ---------------------------------------------------------------------------
+# Every number the config takes is bounded here, so `config check` passes exactly when no later
+# step refuses a value for its size: the codec (int32 / float32), the drive's ranges as the
+# simulator models them (IL 0..23, PL[2] 0..60 s), the OD (0x1017 u16), and waits that must end.
+
+INT32_MIN, INT32_MAX = -(2**31), 2**31 - 1
+IL_CODE_MAX = 23  # the IL function table (elmo-protocol.md 2.4) ends at 22/23 (abort)
+PEAK_TIME_MAX = 60  # s; PL[2] range of the simulated drive (the Whistle's own maximum is UNCONFIRMED)
+WAIT_MAX = 60.0  # s; a protocol wait or simulated latency beyond a minute is a typo, not a bus
+MO_CONFIRM_MAX = 600.0  # s
+RETRIES_MAX = 100
+BITRATE_MAX = 1_000_000  # bit/s: classical CAN (the Whistle's CAN port)
+SEND_INTERVAL_MAX = 1_000_000  # µs
+POLL_INTERVAL_MAX = 60_000  # ms
+SIM_TIME_MAX = 1e6  # s after start for simulated faults
+SPEED_GAIN_MAX = 1000.0
+
+
+def _bad_number(value: object) -> str | None:
+    """Why a number is unusable anywhere (NaN, infinite), else None."""
+    if isinstance(value, float) and not math.isfinite(value):
+        return "is not a finite number"
+    return None
+
+
+def _check_bounds(cfg: ArmConfig, locs: Locs, r: _Report) -> None:
+    def within(value: object, lo: float, hi: float, loc: Location, what: str, unit: str = "") -> None:
+        if value is None or isinstance(value, bool):
+            return
+        bad = _bad_number(value)
+        if bad is None and lo <= value <= hi:  # type: ignore[operator]
+            return
+        shown = f"{lo:g}..{hi:g}" if isinstance(lo, float) or isinstance(hi, float) else f"{lo}..{hi}"
+        r.error(loc, f"{what} {value} {bad or 'is out of range'}; expected {shown}{unit}")
+
+    p = cfg.protocol
+    for key in ("reply_timeout", "mo_settle", "sv_blackout"):
+        within(getattr(p, key), 0.0, WAIT_MAX, locs.get("protocol", key), key, " s")
+    within(p.mo_confirm_timeout, 0.0, MO_CONFIRM_MAX, locs.get("protocol", "mo_confirm_timeout"),
+           "mo_confirm_timeout", " s")
+    within(p.retries, 0, RETRIES_MAX, locs.get("protocol", "retries"), "retries")
+    if _bad_number(p.sdo_timeout):
+        r.error(locs.get("protocol", "sdo_timeout"), f"sdo_timeout {p.sdo_timeout} is not a finite number")
+
+    for key in ("stop", "home"):
+        within(getattr(cfg.il_codes, key), 0, IL_CODE_MAX, locs.get("il_codes", key), f"IL code {key}",
+               " (the drive's input logic table)")
+
+    for name, sim_drive in cfg.sim.items():
+        at_sim = lambda k: locs.get("sim", "drives", name, k)  # noqa: E731
+        within(sim_drive.reply_latency, 0.0, WAIT_MAX, at_sim("reply_latency"), "reply_latency", " s")
+        within(sim_drive.sdo_latency, 0.0, WAIT_MAX, at_sim("sdo_latency"), "sdo_latency", " s")
+        for key in ("die_at", "reboot_at", "limit_trip_at"):
+            within(getattr(sim_drive, key), 0.0, SIM_TIME_MAX, at_sim(key), key, " s")
+        within(sim_drive.speed_gain, 0.0, SPEED_GAIN_MAX, at_sim("speed_gain"), "speed_gain")
+        within(sim_drive.heartbeat_ms, 0, 0xFFFF, at_sim("heartbeat_ms"), "heartbeat_ms", " ms (0x1017 is u16)")
+        within(sim_drive.seed, 0, 2**32 - 1, at_sim("seed"), "seed")
+        if _bad_number(sim_drive.drop_probability):
+            r.error(at_sim("drop_probability"), f"drop_probability {sim_drive.drop_probability} is not a finite number")
+
+    for b in cfg.buses.values():
+        within(b.bitrate, 1, BITRATE_MAX, locs.get("bus", b.name, "bitrate"), "bitrate", " bit/s")
+        within(b.send_interval_us, 0, SEND_INTERVAL_MAX, locs.get("bus", b.name, "send_interval_us"),
+               "send_interval_us", " µs")
+        within(b.poll_interval_ms, 1, POLL_INTERVAL_MAX, locs.get("bus", b.name, "poll_interval_ms"),
+               "poll_interval_ms", " ms")
+
+    cat = cfg.catalog
+    if _bad_number(cat.peak_fraction):
+        r.error(locs.get("catalog", "peak_fraction"), f"peak_fraction {cat.peak_fraction} is not a finite number")
+    for kind, table, fields in (("drives", cat.drives, ("nominal_voltage", "max_voltage", "current_cont",
+                                                          "current_peak")),
+                                ("motors", cat.motors, ("voltage", "current_cont", "power", "current_peak",
+                                                        "peak_power"))):
+        for key, entry in table.items():
+            if ("catalog", kind, key) not in locs.table:
+                continue
+            for field_name in fields:
+                bad = _bad_number(getattr(entry, field_name))
+                if bad:
+                    r.error(locs.get("catalog", kind, key, field_name), f"{field_name} of '{key}' {bad}")
+
+    for owner, cur in [(("joint", j.name), j.current) for j in cfg.joints.values()] + \
+            [(("pair", p.name), p.current) for p in cfg.pairs.values()]:
+        if cur is None:
+            continue
+        for field_name in ("continuous", "peak"):
+            bad = _bad_number(getattr(cur, field_name))
+            if bad:
+                r.error(locs.get(*owner, "current", field_name),
+                        f"current {field_name} {getattr(cur, field_name)} {bad}")
+        within(cur.peak_time, 0.0, PEAK_TIME_MAX, locs.get(*owner, "current", "peak_time"), "current peak_time",
+               " s (PL[2])")
+
+    for j in cfg.joints.values():
+        at = lambda *k: locs.get("joint", j.name, *k)  # noqa: E731
+        drive_value = lambda v, loc, what: within(v, INT32_MIN, INT32_MAX, loc, what,  # noqa: E731
+                                                  " (a drive value is a 32-bit integer)")
+        within(j.cpr, 1, INT32_MAX, at("cpr"), "cpr")
+        drive_value(j.pos_min, at("range", "min"), "range min")
+        drive_value(j.pos_max, at("range", "max"), "range max")
+        within(j.margin, 0, INT32_MAX, at("range", "margin"), "margin")
+        within(j.overshoot, 0, INT32_MAX, at("range", "overshoot"), "overshoot")
+        lo, hi = j.overshoot_range
+        if lo < INT32_MIN or hi > INT32_MAX:
+            r.error(at("range", "overshoot"), f"overshoot range {lo}..{hi} does not fit the drive's 32-bit "
+                                              f"LL[3]/HL[3] ({INT32_MIN}..{INT32_MAX})")
+        for key, sub, value in (("velocity", "limit", j.vel_limit), ("velocity", "trip", j.vel_trip),
+                                ("acceleration", "accel", j.accel), ("acceleration", "decel", j.decel)):
+            within(value, 1, INT32_MAX, at(key, sub), f"{key} {sub}")
+        if j.cal_speed is not None:
+            within(j.cal_speed, -INT32_MAX, INT32_MAX, at("calibration", "speed"), "calibration speed")
+        drive_value(j.cal_pos, at("calibration", "position"), "calibration position")
+        if j.abs_encoder is not None:
+            drive_value(j.abs_encoder.offset, at("abs_encoder", "offset"), "abs_encoder offset")
+        for i, sw in enumerate(j.switches):
+            drive_value(sw.position, locs.get("joint", j.name, "switches", str(i), "position"), "switch position")

@@ -12,8 +12,10 @@ report; the event replay that names the key at a syntax error uses the pure load
 
 from __future__ import annotations
 
+import builtins
 import difflib
 import re
+from pathlib import Path
 from dataclasses import dataclass, field
 from typing import Any, Iterable, Iterator
 
@@ -97,8 +99,88 @@ def compose(text: str) -> yaml.Node | None:
     return yaml.compose(text, Loader=yaml.SafeLoader)
 
 
+# Limits of every YAML input (configs, recipes, parameter dumps), so a hostile or broken file
+# gets one message instead of a memory blow-up, a RecursionError or a minute of parsing.
+MAX_INPUT_BYTES = 1024 * 1024  # the whole arm's config is ~5 KB, a 14-drive dump ~20 KB
+MAX_DEPTH = 32  # nesting of mappings and lists; the native schema needs 6
+MAX_NODES = 50_000  # values after expanding aliases (&a / *a, merge keys): no "billion laughs"
+MAX_NUMBER_CHARS = 40  # int32 needs 11 characters; Python refuses int('9' * 5000) with ValueError
+
+_NUMBER_TAGS = ("tag:yaml.org,2002:int", "tag:yaml.org,2002:float")
+
+
+def read_input(path: str | Path, limit: int = MAX_INPUT_BYTES) -> str:
+    """A text input file read as UTF-8, at most ``limit`` bytes (ConfigError beyond).
+
+    Raises what ``Path.read_text`` raises (FileNotFoundError, IsADirectoryError, other OSError,
+    UnicodeDecodeError), so callers keep their own wording for those; a device such as
+    /dev/zero is cut off at the limit instead of read for ever.
+    """
+    with open(path, "rb") as handle:
+        data = handle.read(limit + 1)
+    if len(data) > limit:
+        raise ConfigError(f"file is larger than {limit // 1024} KiB, the limit for an input file",
+                          Location(str(path)), hint="is this the file you meant?")
+    return data.decode("utf-8")
+
+
+def check_limits(text: str, filename: str) -> None:
+    """Refuse too large, too deep or too widely expanding YAML before it is composed.
+
+    One pass over the parser's events (the parser is iterative; PyYAML's composer recurses and
+    would hit Python's recursion limit on deep nesting): the depth of open collections, the
+    expanded size of every anchor, and the expanded size of the whole document.
+    """
+    if len(text) > MAX_INPUT_BYTES:
+        raise ConfigError(f"text is larger than {MAX_INPUT_BYTES // 1024} KiB, the limit for an input file",
+                          Location(filename))
+    stack: list[list[Any]] = []  # [expanded size so far, anchor]
+    anchors: dict[str, int] = {}
+    total = 0
+
+    def add(size: int, line: int) -> None:
+        nonlocal total
+        if stack:
+            stack[-1][0] += size
+        else:
+            total += size
+        if total + sum(s for s, _ in stack) > MAX_NODES:
+            raise ConfigError(f"the document expands to more than {MAX_NODES:,} values (aliases?)",
+                              Location(filename, line), hint="write the values out instead of repeating aliases")
+
+    try:
+        for ev in yaml.parse(text, Loader=FAST_LOADER or yaml.SafeLoader):
+            line = ev.start_mark.line + 1 if ev.start_mark is not None else None
+            if isinstance(ev, (MappingStartEvent, SequenceStartEvent)):
+                if len(stack) >= MAX_DEPTH:
+                    raise ConfigError(f"nesting deeper than {MAX_DEPTH} levels", Location(filename, line),
+                                      hint="a configuration, recipe or dump is a few levels deep")
+                stack.append([1, ev.anchor])
+            elif isinstance(ev, (MappingEndEvent, SequenceEndEvent)):
+                size, anchor = stack.pop()
+                if anchor is not None:
+                    anchors[anchor] = size
+                add(size, line or 0)
+            elif isinstance(ev, ScalarEvent):
+                if ev.anchor is not None:
+                    anchors[ev.anchor] = 1
+                add(1, line or 0)
+            elif isinstance(ev, AliasEvent):
+                if ev.anchor not in anchors:
+                    if any(a == ev.anchor for _, a in stack):
+                        raise ConfigError(f"alias *{ev.anchor} refers to a value that contains it (recursive alias)",
+                                          Location(filename, line))
+                    continue  # an undefined alias: the composer reports it with its position
+                add(anchors[ev.anchor], line or 0)
+    except ConfigError:
+        raise
+    except Exception:  # noqa: BLE001 - syntax errors (libyaml's included) are reported by parse_yaml
+        return
+
+
 def parse_yaml(text: str, filename: str) -> YNode:
     """Parse one YAML document; syntax errors become ConfigError with line and enclosing key path."""
+    check_limits(text, filename)
     try:
         root = compose(text)
     except yaml.MarkedYAMLError as exc:
@@ -142,7 +224,14 @@ def _convert(node: yaml.Node, path: str, filename: str, key_line: int | None,
             if not isinstance(knode, ScalarNode):
                 raise ConfigError("a mapping key must be a plain name, not a list or mapping",
                                   Location(filename, kline, path or None))
-            key = ctor.construct_object(knode, deep=True)
+            if knode.tag in _NUMBER_TAGS and len(knode.value) > MAX_NUMBER_CHARS:
+                raise ConfigError(f"key {knode.value[:20]}... is a number of {len(knode.value)} characters",
+                                  Location(filename, kline, path or None))
+            try:
+                key = ctor.construct_object(knode, deep=True)
+            except (ValueError, OverflowError, yaml.YAMLError) as exc:
+                raise ConfigError(f"invalid key {knode.value[:40]!r}: {getattr(exc, 'problem', None) or exc}",
+                                  Location(filename, kline, path or None)) from None
             if key is None or isinstance(key, (bool, float)):
                 raise ConfigError(f"invalid key {knode.value!r}; keys must be names or numbers",
                                   Location(filename, kline, path or None),
@@ -157,8 +246,14 @@ def _convert(node: yaml.Node, path: str, filename: str, key_line: int | None,
     if isinstance(node, SequenceNode):
         seq = [_convert(v, join_path(path, i), filename, None, ctor, depth + 1) for i, v in enumerate(node.value)]
         return YNode(seq, "seq", line, path, filename, key_line)
+    if node.tag in _NUMBER_TAGS and len(node.value) > MAX_NUMBER_CHARS:
+        raise ConfigError(f"number {node.value[:20]}... has {len(node.value)} characters; a number here has at "
+                          f"most {MAX_NUMBER_CHARS}", Location(filename, key_line or line, path or None))
     try:
         value = ctor.construct_object(node, deep=True)
+    except (ValueError, OverflowError) as exc:
+        raise ConfigError(f"invalid value {node.value[:40]!r}: {exc}",
+                          Location(filename, key_line or line, path or None)) from None
     except yaml.YAMLError as exc:
         raise ConfigError(f"invalid value {node.value!r}: {getattr(exc, 'problem', exc)}",
                           Location(filename, key_line or line, path or None)) from None
@@ -289,12 +384,14 @@ class Section:
         node = self.get(key)
         return default if node is None else as_bool(node)
 
-    def str(self, key: str, default: Any = None, *, required: bool = False) -> Any:
+    # past here `str` and `bool` name the accessors above: annotations spell out builtins
+    def str(self, key: builtins.str, default: Any = None, *, required: builtins.bool = False) -> Any:
         node = self.req(key) if required else self.get(key)
         return default if node is None else as_str(node)
 
-    def section(self, key: str, allowed: Iterable[str], *, required: bool = False,
-                what: str = "a mapping", aliases: dict[str, str] | None = None) -> "Section | None":
+    def section(self, key: builtins.str, allowed: Iterable[builtins.str], *, required: builtins.bool = False,
+                what: builtins.str = "a mapping",
+                aliases: dict[builtins.str, builtins.str] | None = None) -> "Section | None":
         node = self.req(key) if required else self.get(key)
         return None if node is None else Section(node, allowed, what=what, aliases=aliases)
 

@@ -23,7 +23,7 @@ from sherpa_cli.elmo.codec import Reply
 from sherpa_cli.elmo.commands import COMMANDS
 from sherpa_cli.elmo.faults import Emcy, decode_emcy, ec_text
 from sherpa_cli.elmo.transport import Transport
-from sherpa_cli.errors import CodecError, CommunicationError, DriveRefusedError, DriveTimeoutError
+from sherpa_cli.errors import CodecError, CommunicationError, DriveRefusedError, DriveTimeoutError, ProtocolError
 
 log = logging.getLogger(__name__)
 
@@ -66,7 +66,7 @@ class _Pending:
     every wait builds a Condition waiter), and every interpreter round trip makes one.
     """
 
-    __slots__ = ("letters", "index", "arrived", "reply")
+    __slots__ = ("letters", "index", "arrived", "reply", "error")
 
     def __init__(self, letters: str, index: int) -> None:
         self.letters = letters
@@ -74,12 +74,24 @@ class _Pending:
         self.arrived = threading.Lock()
         self.arrived.acquire()
         self.reply: Reply | None = None
+        self.error: ProtocolError | None = None  # the drive answered with a frame we cannot read
 
 
 @functools.lru_cache(maxsize=1024)
 def _key(letters: str, index: int) -> str:
     spec = COMMANDS.get(letters)
     return f"{letters}[{index}]" if index or (spec is not None and spec.is_array) else letters
+
+
+def _answers(data: bytes, letters: str, index: int) -> bool:
+    """Whether a frame's header is (letters, index), or unreadable so that it may be."""
+    try:
+        head = data[:2].decode("ascii")
+    except UnicodeDecodeError:
+        return True
+    if not head.isalpha() or not head.isupper():
+        return True
+    return head == letters and (data[2] | data[3] << 8) & codec.INDEX_MASK == index
 
 
 def _request_text(request: codec.Request) -> str:
@@ -344,6 +356,8 @@ class DriveClient:
                 if frame:  # an empty frame only waits (for a reply already on its way)
                     self.transport.send(RPDO2_BASE + self.node, frame)
                 if pending.arrived.acquire(timeout=self.timeout):
+                    if pending.error is not None:
+                        raise pending.error
                     return pending.reply
                 log.debug("%s: no reply to %s (attempt %d of %d)", self.label, frame.hex(" "), attempt + 1, attempts)
             return None
@@ -355,15 +369,39 @@ class DriveClient:
         try:
             reply = codec.decode_reply(data)
         except CodecError as exc:
-            log.warning("%s: ignoring malformed TPDO2 frame: %s", self.label, exc)
+            self._on_malformed(can_id, bytes(data), exc)
             return
         with self._state:
             pending = self._pending
-            if pending is None or pending.reply is not None or reply.letters != pending.letters \
-                    or reply.index != pending.index:
+            if pending is None or pending.reply is not None or pending.error is not None \
+                    or reply.letters != pending.letters or reply.index != pending.index:
                 log.debug("%s: ignoring unrequested reply %s", self.label, bytes(data).hex(" "))
                 return
             pending.reply = reply
+            pending.arrived.release()
+
+    def _on_malformed(self, can_id: int, data: bytes, exc: CodecError) -> None:
+        """A TPDO2 frame that is no valid reply (wrong length, NaN/Inf, non-ASCII letters).
+
+        If it answers the pending request -- its letters and index match, or it is too short or
+        garbled to carry any -- that request fails with a ProtocolError naming the drive and the
+        frame: the drive did answer, so a timeout ("no answer") would send the technician to the
+        wrong problem. A readable header for another command is someone else's stale reply.
+        """
+        with self._state:
+            pending = self._pending
+            if pending is None or pending.reply is not None or pending.error is not None:
+                log.warning("%s: ignoring malformed TPDO2 frame %s: %s", self.label, data.hex(" "), exc)
+                return
+            if len(data) >= 4 and not _answers(data, pending.letters, pending.index):
+                log.debug("%s: ignoring malformed unrequested reply %s", self.label, data.hex(" "))
+                return
+            what = _key(pending.letters, pending.index)
+            pending.error = ProtocolError(
+                f"{self.label}: malformed reply to {what}: TPDO2 0x{can_id:03X} [{len(data)}] "
+                f"{data.hex(' ').upper() or '(no data)'}: {exc.message}",
+                hint="a drive or another device on this bus sends frames the binary interpreter does not "
+                     "define; check the node id and the drive's firmware")
             pending.arrived.release()
 
     def _on_emcy(self, can_id: int, data: bytes, timestamp: float) -> None:

@@ -49,7 +49,7 @@ class Reply(NamedTuple):
     """
 
     letters: str
-    index: int
+    index: int  # type: ignore[assignment]  # the field shadows tuple.index, as intended
     value: int | float | None
     is_float: bool
     error_code: int | None = None
@@ -133,12 +133,15 @@ def encode_set(letters: str, index: int, value: int | float) -> bytes:
 
 
 def encode_query(letters: str, index: int = 0, long: bool = False) -> bytes:
-    """Query frame: 4 bytes, or 8 bytes with the query bit when ``long``."""
+    """Query frame: 4 bytes, or 8 bytes with the query bit (and, for a float parameter, the
+    float bit: [IG] 9-3 wants the type in every frame) when ``long``."""
     spec = _spec_at(letters, index)
     if spec.access == "x":
         raise CodecError(f"{letters} is an execute command and cannot be queried")
     if long:
-        return FRAME.pack(letters.encode("ascii"), _header_word(index, flag6=True), bytes(4))
+        # [IG] 9-3: the type bit is always set to the parameter's type, in queries too
+        return FRAME.pack(letters.encode("ascii"),
+                          _header_word(index, is_float=spec.value_type == "float", flag6=True), bytes(4))
     return HEADER.pack(letters.encode("ascii"), index)
 
 
@@ -290,10 +293,14 @@ def _parse_index(spec: CommandSpec, raw_index: str | None, text: str) -> int:
     raw_index = raw_index.strip()
     if not (raw_index.isascii() and raw_index.isdigit()):
         raise CodecError(f"bad index {raw_index!r} in {text.strip()!r}: must be a decimal number")
+    if len(raw_index) > 6:  # 14 bits need at most 5 digits; int() refuses thousands of them
+        raise CodecError(f"bad index {raw_index[:10]}... ({len(raw_index)} digits): out of range 0..{INDEX_MAX}")
     return spec.check_index(int(raw_index))
 
 
 def _parse_int(raw: str, what: str) -> int | float:
+    if len(raw) > 40:  # int32 needs 11 characters; Python refuses int('9' * 5000) with ValueError
+        raise CodecError(f"{what}: {raw[:20]}... ({len(raw)} characters) is not an int32 value")
     if _INT_TEXT.fullmatch(raw):
         sign = -1 if raw.startswith("-") else 1
         body = raw.lstrip("+-")
@@ -306,6 +313,8 @@ def _parse_int(raw: str, what: str) -> int | float:
 
 
 def _parse_float(raw: str, what: str) -> float:
+    if len(raw) > 64:
+        raise CodecError(f"{what}: {raw[:20]}... ({len(raw)} characters) is not a float32 value")
     try:
         value = float(raw)
     except ValueError:

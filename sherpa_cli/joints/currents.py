@@ -121,7 +121,7 @@ def validate_params(params: "DriveParams | Mapping[str, float]", *, drive: str |
     "position" / "speed") turns the latter into warnings and skips the order checks that
     involve the disabled trip.
     """
-    if hasattr(params, "params"):
+    if not isinstance(params, Mapping):  # a DriveParams
         drive = drive or params.drive
         values: Mapping[str, float] = params.params
     else:

@@ -189,7 +189,7 @@ def left_as_they_are(derived: Sequence[DriveParams]) -> str | None:
 
 def _il_params(cfg: ArmConfig, drive: str, *, clear_unused: bool = True) -> dict[str, int]:
     dmodel = cfg.drives[drive].model
-    inputs = cfg.catalog.drives[dmodel].inputs if dmodel in cfg.catalog.drives else None
+    inputs = cfg.catalog.drives[dmodel].inputs if dmodel is not None and dmodel in cfg.catalog.drives else None
     found: dict[int, tuple[int, SwitchConfig, str]] = {}
     for joint in cfg.joints.values():
         default = _joint_drives(cfg, joint)
@@ -218,7 +218,7 @@ def _il_params(cfg: ArmConfig, drive: str, *, clear_unused: bool = True) -> dict
 
 
 def _ordered(values: Mapping[str, ParamValue | None]) -> dict[str, ParamValue]:
-    return {k: values[k] for k in PARAM_ORDER if values.get(k) is not None}
+    return {k: v for k in PARAM_ORDER if (v := values.get(k)) is not None}
 
 
 def _pair_joints(cfg: ArmConfig, pair: PairConfig) -> tuple[JointConfig, JointConfig]:
@@ -361,6 +361,32 @@ def derive_checked(cfg: ArmConfig, drives: Sequence[str] | None = None) -> tuple
     return derived, warnings
 
 
+def config_findings(cfg: ArmConfig) -> list:
+    """Everything :func:`derive_checked` would refuse or warn about for the whole arm, as findings.
+
+    ``sherpa config check`` reports these, so a config passes the check exactly when
+    program-limits will not refuse it for the same reason: a set the derivation cannot build
+    (a ConfigError), an inconsistent set (``validate_params``), a current beyond the ratings.
+    """
+    from sherpa_cli.joints.currents import Finding, check_currents, validate_params
+
+    findings = list(check_currents(cfg))
+    for drive in cfg.drives:
+        try:
+            dp, _ = _derive(cfg, drive)
+        except ConfigError as exc:
+            findings.append(Finding("error", f"drive {drive}: {exc.problem}", exc.location, drive))
+            continue
+        findings.extend(f for f in validate_params(dp, where=_owner_where(cfg, drive)) if f.level == "error")
+    seen: set[str] = set()
+    unique = []
+    for f in findings:  # a pair's problem is found once per motor
+        if f.message not in seen:
+            seen.add(f.message)
+            unique.append(f)
+    return unique
+
+
 def _owner_where(cfg: ArmConfig, drive: str) -> Location | None:
     joint = cfg.joint_of_drive(drive)
     if joint is not None:
@@ -480,14 +506,14 @@ def software_limits(cfg: ArmConfig, name: str) -> dict[str, int | str]:
     if name in cfg.joints:
         joint = cfg.joints[name]
         if joint.role is not JointRole.PLAIN:
-            if joint.pair not in cfg.pairs:
+            if joint.pair is None or joint.pair not in cfg.pairs:
                 raise ConfigError(f"joint {joint.name} is a {joint.role.value} joint without a pair", joint.where)
             return _pair_software(cfg, cfg.pairs[joint.pair])
         return _plain_software(joint)
     if name in cfg.drives:
-        joint = cfg.joint_of_drive(name)
-        if joint is not None:
-            return _plain_software(joint)
+        plain = cfg.joint_of_drive(name)
+        if plain is not None:
+            return _plain_software(plain)
         pair = cfg.pair_of_drive(name)
         if pair is not None:
             return _pair_software(cfg, pair)

@@ -11,12 +11,15 @@ from __future__ import annotations
 
 from collections import Counter
 from dataclasses import dataclass, field
-from typing import Any, Sequence
+from typing import TYPE_CHECKING, Any, Sequence
 
 from sherpa_cli.config.model import ArmConfig
 from sherpa_cli.joints.diffpair import to_joints
 from sherpa_cli.joints.units import counts_to_rad
 from sherpa_cli.ops.params_read import Progress, open_drive, per_bus
+
+if TYPE_CHECKING:
+    from sherpa_cli.ops.session import ArmSession
 
 STATE_KEYS = ("MO", "UM", "SR", "MF", "PX")
 
@@ -52,10 +55,10 @@ class DriveIdentity:
 
         state: dict[str, Any] = dict(self.state)
         decoded = {}
-        if isinstance(self.state.get("SR"), int):
-            decoded["SR"] = faults.describe_sr(self.state["SR"])
-        if isinstance(self.state.get("MF"), int):
-            decoded["MF"] = faults.describe_mf(self.state["MF"])
+        if isinstance(sr := self.state.get("SR"), int):
+            decoded["SR"] = faults.describe_sr(sr)
+        if isinstance(mf := self.state.get("MF"), int):
+            decoded["MF"] = faults.describe_mf(mf)
         return {"drive": self.drive, "bus": self.bus, "node": self.node, "model": self.model,
                 "identity": self.identity, "identity_unreadable": self.identity_notes, "state": state,
                 "decoded": decoded, "joint_position": self.joint.as_json() if self.joint else None,
@@ -77,7 +80,7 @@ class IdentifyReport:
                 "failed": [d.drive for d in self.drives if d.error]}
 
 
-def _read_one(session: Any, drive: str, progress: Progress | None) -> DriveIdentity:
+def _read_one(session: ArmSession, drive: str, progress: Progress | None) -> DriveIdentity:
     d = session.cfg.drives[drive]
     client, identity, notes = open_drive(session, drive, progress)
     state: dict[str, int | float] = {}
@@ -88,7 +91,7 @@ def _read_one(session: Any, drive: str, progress: Progress | None) -> DriveIdent
     return DriveIdentity(drive, d.bus, d.node, d.model, identity, notes, state)
 
 
-def identify(session: Any, drives: Sequence[str], progress: Progress | None = None) -> IdentifyReport:
+def identify(session: ArmSession, drives: Sequence[str], progress: Progress | None = None) -> IdentifyReport:
     cfg: ArmConfig = session.cfg
     outcomes = per_bus(session, drives, lambda name: _read_one(session, name, progress))
     read: list[DriveIdentity] = []
@@ -98,9 +101,10 @@ def identify(session: Any, drives: Sequence[str], progress: Progress | None = No
             read.append(o.value)
         else:
             d = cfg.drives[name]
+            assert o.error is not None
             read.append(DriveIdentity(name, d.bus, d.node, d.model, error=str(o.error)))
             errors.append(o.error)
-    positions = joint_positions(cfg, {r.drive: r.state["PX"] for r in read if isinstance(r.state.get("PX"), int)})
+    positions = joint_positions(cfg, {r.drive: int(r.state["PX"]) for r in read if isinstance(r.state.get("PX"), int)})
     findings = find_mismatches(cfg, read)
     out = tuple(DriveIdentity(r.drive, r.bus, r.node, r.model, r.identity, r.identity_notes, r.state,
                               positions.get(r.drive), r.error, tuple(findings.get(r.drive, ())))

@@ -155,6 +155,7 @@ def check_request(target: JogTarget, req: JogRequest) -> None:
         if current is None:
             raise UsageError(f"{target.name}: no current limits configured for it, so no torque can be checked",
                              hint="give the joint `current: {continuous: A, peak: A, peak_time: s}`")
+        assert joint is not None and req.torque is not None  # current came from the joint; torque mode has one
         if abs(req.torque) > current.continuous:
             raise UsageError(f"--torque {req.torque} A is beyond {joint.name}'s continuous current limit "
                              f"{current.continuous} A (config current.continuous)")
@@ -212,7 +213,11 @@ def _precheck(session: Any, target: JogTarget, req: JogRequest) -> Any:
     c = session.client(target.ref)
     c.nmt_start()
     start = int(c.get("PX"))
-    goal = _counts_to(target, req.to) if req.to is not None else start + _counts_to(target, req.by)
+    if req.to is not None:
+        goal = _counts_to(target, req.to)
+    else:
+        assert req.by is not None  # check_request: exactly one of --to and --by
+        goal = start + _counts_to(target, req.by)
     lo, hi = joint.normal_range
     if not lo <= goal <= hi:
         raise UsageError(f"{joint.name}: target {goal} counts is outside the joint's normal range [{lo}, {hi}]",
@@ -235,7 +240,7 @@ def _move(guard: MotionGuard, target: JogTarget, req: JogRequest, settings: Moti
     watch = lambda done, limit: _watch(guard, c, target, clock, sleep, settings, state, on_progress,  # noqa: E731
                                        done=done, limit=limit)
     if req.mode == "position":
-        goal = _counts_to(target, req.to) if req.to is not None else start + _counts_to(target, req.by)
+        goal = _counts_to(target, req.to) if req.to is not None else start + _counts_to(target, req.by)  # type: ignore[arg-type]  # --to or --by
         state["target"] = goal
         guard.enable(ref, UM_POSITION)
         bound = _move_bound(c, abs(goal - start))
@@ -246,6 +251,7 @@ def _move(guard: MotionGuard, target: JogTarget, req: JogRequest, settings: Moti
         watch(lambda sr: sr.motion_status == 0, bound)
         state["ended_by"] = state["ended_by"] or "target reached"
     elif req.mode == "velocity":
+        assert req.velocity is not None and target.cpr is not None  # checked when the request was made
         v = rad_per_s_to_counts_per_s(req.velocity, target.cpr)
         guard.enable(ref, settings.velocity_unit_mode)
         c.set("JV", 0, v)
@@ -256,6 +262,7 @@ def _move(guard: MotionGuard, target: JogTarget, req: JogRequest, settings: Moti
         state["ended_by"] = state["ended_by"] or "time up"
     else:
         guard.enable(ref, UM_TORQUE)  # TC=0 before MO=1: no old torque command is applied
+        assert req.torque is not None
         c.set("TC", 0, float(req.torque))
         state["command"] = f"TC={req.torque:g}"
         state["t0"] = clock()

@@ -21,7 +21,7 @@ from __future__ import annotations
 import threading
 import time
 from dataclasses import dataclass, field
-from typing import Any, Callable, Iterable, Sequence
+from typing import TYPE_CHECKING, Any, Callable, Iterable, Sequence
 
 from sherpa_cli.bus.parallel import run_concurrently
 from sherpa_cli.config.model import ArmConfig
@@ -30,6 +30,9 @@ from sherpa_cli.errors import SdoError, SherpaError, UsageError
 from sherpa_cli.ops.identify import JointPosition, joint_positions, row_joint
 from sherpa_cli.ops.canopen_names import NMT_STATES, nmt_text
 from sherpa_cli.ops.targets import DriveRef
+
+if TYPE_CHECKING:
+    from sherpa_cli.ops.session import ArmSession
 
 HEARTBEAT_BASE = 0x700
 POLLED = ("MO", "UM", "PX", "SR", "MF")
@@ -114,7 +117,7 @@ class DriveStatus:
 class Monitor:
     """Watches drives of an open session; use as a context manager (close writes 0x1017 back)."""
 
-    def __init__(self, session: Any, refs: Iterable[DriveRef], *, heartbeat_ms: int | None = None,
+    def __init__(self, session: ArmSession, refs: Iterable[DriveRef], *, heartbeat_ms: int | None = None,
                  clock: Callable[[], float] = time.monotonic) -> None:
         if heartbeat_ms is not None and not 0 < heartbeat_ms <= 0xFFFF:
             raise UsageError(f"--heartbeat {heartbeat_ms}: expected 1..65535 ms (0x1017 is 16 bits)")
@@ -172,7 +175,7 @@ class Monitor:
         if not producing:
             return
         # 1.5 periods, but never under 0.5 s: on a loaded host a beat can be a little late
-        deadline = self.clock() + min(limit_s, max(0.5, 1.5 * max(w.heartbeat_ms for w in producing) / 1000))
+        deadline = self.clock() + min(limit_s, max(0.5, 1.5 * max(w.heartbeat_ms or 0 for w in producing) / 1000))
         while self.clock() < deadline:
             with self._lock:
                 if all(w.heartbeat_at is not None for w in producing):
@@ -193,7 +196,10 @@ class Monitor:
             by_bus.setdefault(w.ref.bus, []).append(w)
 
         def run(ws: list[_Watch]) -> Callable[[], None]:
-            return lambda: [job(w) for w in ws]
+            def each() -> None:
+                for w in ws:
+                    job(w)
+            return each
 
         for outcome in run_concurrently({bus: run(ws) for bus, ws in by_bus.items()}).values():
             if outcome.error is not None:
@@ -221,6 +227,7 @@ class Monitor:
                     w.emcy = decode_error_field(stored)
 
     def _restore_heartbeat(self, w: _Watch) -> None:
+        assert w.heartbeat_set_from is not None  # only drives whose 0x1017 was replaced get here
         try:
             self.session.sdo(w.ref).download(*PRODUCER_HEARTBEAT, w.heartbeat_set_from.to_bytes(2, "little"))
             w.heartbeat_set_from = None
@@ -266,7 +273,7 @@ class Monitor:
     # -- snapshot ---------------------------------------------------------------------------------
 
     def _joint_positions(self) -> dict[str, JointPosition]:
-        return joint_positions(self.cfg, {w.ref.name: w.values["PX"] for w in self.watches
+        return joint_positions(self.cfg, {w.ref.name: int(w.values["PX"]) for w in self.watches
                                           if w.answering and isinstance(w.values.get("PX"), int)})
 
     def _status(self, w: _Watch, now: float, positions: dict[str, JointPosition]) -> DriveStatus:

@@ -28,7 +28,7 @@ import struct
 import threading
 import time
 from dataclasses import dataclass, field
-from typing import Any, Callable, Iterable, Sequence
+from typing import Any, Callable, Iterable, Literal, Sequence
 
 from sherpa_cli.elmo.faults import describe_mf, sr_problems
 from sherpa_cli.errors import (CommunicationError, DriveRefusedError, ExitCode, SafetyError, SherpaError,
@@ -289,7 +289,7 @@ class MotionGuard:
             raise
         return self
 
-    def __exit__(self, exc_type: Any, exc: Any, tb: Any) -> bool:
+    def __exit__(self, exc_type: Any, exc: Any, tb: Any) -> Literal[False]:
         if self._signal is not None:
             reason = self._signal
         elif exc_type is None:

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from enum import StrEnum
 from pathlib import Path
 from typing import Any, Sequence
 
@@ -25,10 +26,17 @@ CONFIG = "config"
 REL_TOL = 1e-6
 ABS_TOL = 1e-9
 
-SAME = "same"
-DIFFERS = "differs"
-ONLY_A = "only in A"
-ONLY_B = "only in B"
+
+class DiffStatus(StrEnum):
+    """How one parameter compares (a str: JSON shows the words)."""
+
+    SAME = "same"
+    DIFFERS = "differs"
+    ONLY_A = "only in A"
+    ONLY_B = "only in B"
+
+
+SAME, DIFFERS, ONLY_A, ONLY_B = DiffStatus.SAME, DiffStatus.DIFFERS, DiffStatus.ONLY_A, DiffStatus.ONLY_B
 
 
 @dataclass(frozen=True)
@@ -54,7 +62,7 @@ class ParamRow:
     key: str
     a: int | float | None
     b: int | float | None
-    status: str  # SAME / DIFFERS / ONLY_A / ONLY_B
+    status: DiffStatus
     a_note: str | None = None  # why a is missing: "unreadable: error 21 ..."
     b_note: str | None = None
 
@@ -153,9 +161,9 @@ def file_side(path: Path, cfg: ArmConfig) -> tuple[Side, list[str]]:
 
 
 def _drive_line(path: Path, name: str) -> int | None:
-    from sherpa_cli.config.yamlnodes import parse_yaml
+    from sherpa_cli.config.yamlnodes import parse_yaml, read_input
 
-    root = parse_yaml(Path(path).read_text(encoding="utf-8"), str(path))
+    root = parse_yaml(read_input(path), str(path))
     node = root.value.get("drives")
     child = node.value.get(name) if node is not None and node.kind == "map" else None
     return child.key_line if child is not None else None

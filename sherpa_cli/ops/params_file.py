@@ -16,7 +16,7 @@ from typing import Any
 
 import yaml
 
-from sherpa_cli.config.yamlnodes import NAME_RE, Section, YNode, as_int, as_map, describe, parse_yaml
+from sherpa_cli.config.yamlnodes import NAME_RE, Section, YNode, as_int, as_map, describe, parse_yaml, read_input
 from sherpa_cli.errors import CodecError, ConfigError, Location
 
 ParamValue = int | float
@@ -108,7 +108,7 @@ def read_dump(path: Path) -> ParamDump:
     """Read a dump file; anything wrong is a ConfigError naming file, line and key path."""
     path = Path(path)
     try:
-        text = path.read_text(encoding="utf-8")
+        text = read_input(path)
     except FileNotFoundError:
         raise ConfigError("dump file not found", Location(str(path))) from None
     except IsADirectoryError:

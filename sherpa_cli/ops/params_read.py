@@ -12,14 +12,18 @@ import hashlib
 import os
 from datetime import datetime, timezone
 from pathlib import Path
-from typing import Any, Callable, Iterable, Mapping, Sequence
+from typing import TYPE_CHECKING, Any, Callable, Iterable, Mapping, Sequence
 
 from sherpa_cli import __version__
 from sherpa_cli.bus.parallel import Outcome, run_concurrently
 from sherpa_cli.config.model import ArmConfig
-from sherpa_cli.errors import DriveRefusedError
+from sherpa_cli.errors import DriveRefusedError, SherpaError
 from sherpa_cli.joints.limits import PARAM_ORDER
 from sherpa_cli.ops.params_file import DriveDump, ParamDump
+
+if TYPE_CHECKING:
+    from sherpa_cli.elmo.client import DriveClient
+    from sherpa_cli.ops.session import ArmSession
 
 # 0x1018 sub 1-4 and the strings of 0x1008/9/A (CiA 301), in IDENTITY_KEYS order.
 IDENTITY_OBJECTS: tuple[tuple[str, int, int, str], ...] = (
@@ -41,7 +45,7 @@ Progress = Callable[[str, str], None]  # (drive, what is being read)
 def params_to_read(cfg: ArmConfig, drive: str) -> list[str]:
     """What commissioning touches: UM, every Appendix C parameter, IL[1..inputs], CA[18]."""
     model = cfg.drives[drive].model
-    inputs = cfg.catalog.drives[model].inputs if model in cfg.catalog.drives else DEFAULT_INPUTS
+    inputs = cfg.catalog.drives[model].inputs if model is not None and model in cfg.catalog.drives else DEFAULT_INPUTS
     return ["UM", *PARAM_ORDER, *(f"IL[{n}]" for n in range(1, inputs + 1)), "CA[18]"]
 
 
@@ -69,7 +73,7 @@ def read_identity(sdo: Any) -> tuple[dict[str, Any], dict[str, str]]:
     return values, notes
 
 
-def read_params(client: Any, keys: Iterable[str], progress: Progress | None = None,
+def read_params(client: DriveClient, keys: Iterable[str], progress: Progress | None = None,
                 drive: str = "") -> tuple[dict[str, int | float], dict[str, str]]:
     """(values, unreadable): a refused parameter is unreadable, a silent drive raises."""
     from sherpa_cli.elmo.commands import parse_param_key
@@ -88,7 +92,7 @@ def read_params(client: Any, keys: Iterable[str], progress: Progress | None = No
     return values, unreadable
 
 
-def per_bus(session: Any, drives: Sequence[str], work: Callable[[str], Any]) -> dict[str, Outcome[str]]:
+def per_bus(session: ArmSession, drives: Sequence[str], work: Callable[[str], Any]) -> dict[str, Outcome[str]]:
     """``work(drive)`` for every drive: buses concurrently, drives of a bus in config order.
 
     Outcomes come back in the order of ``drives`` whatever finished first.
@@ -111,7 +115,7 @@ def per_bus(session: Any, drives: Sequence[str], work: Callable[[str], Any]) -> 
 
     results: dict[str, Outcome[str]] = {}
     for bus, outcome in run_concurrently({bus: bus_job(names) for bus, names in by_bus.items()}).items():
-        if not outcome.ok:
+        if outcome.error is not None:
             raise outcome.error  # only KeyboardInterrupt and the like escape bus_job
         results.update(outcome.value)
     return {d: results[d] for d in drives}
@@ -123,7 +127,7 @@ def ref_of(cfg: ArmConfig, drive: str):
     return drive_ref(cfg, drive)
 
 
-def open_drive(session: Any, drive: str, progress: Progress | None = None) -> tuple[Any, dict[str, Any], list[str]]:
+def open_drive(session: ArmSession, drive: str, progress: Progress | None = None) -> tuple[DriveClient, dict[str, Any], dict[str, str]]:
     """NMT-start a configured drive and read its identity: (client, identity, notes)."""
     cfg: ArmConfig = session.cfg
     client = session.client(ref_of(cfg, drive))
@@ -134,7 +138,7 @@ def open_drive(session: Any, drive: str, progress: Progress | None = None) -> tu
     return client, identity, notes
 
 
-def read_drive_dump(session: Any, drive: str, progress: Progress | None = None) -> DriveDump:
+def read_drive_dump(session: ArmSession, drive: str, progress: Progress | None = None) -> DriveDump:
     cfg: ArmConfig = session.cfg
     d = cfg.drives[drive]
     client, identity, _ = open_drive(session, drive, progress)
@@ -142,13 +146,14 @@ def read_drive_dump(session: Any, drive: str, progress: Progress | None = None) 
     return DriveDump(name=drive, bus=d.bus, node=d.node, identity=identity, params=params, unreadable=unreadable)
 
 
-def read_live(session: Any, drives: Sequence[str], progress: Progress | None = None) -> dict[str, DriveDump]:
+def read_live(session: ArmSession, drives: Sequence[str], progress: Progress | None = None) -> dict[str, DriveDump]:
     """Every drive's dump; the first failed drive (in config order) raises, naming itself."""
     outcomes = per_bus(session, drives, lambda name: read_drive_dump(session, name, progress))
     failed = [o for o in outcomes.values() if not o.ok]
     if failed:
         first = failed[0].error
-        if len(failed) > 1 and hasattr(first, "hint"):
+        assert first is not None
+        if len(failed) > 1 and isinstance(first, SherpaError):
             others = ", ".join(o.key for o in failed[1:])
             first.hint = (first.hint + "; " if first.hint else "") + f"also failed: {others}"
         raise first
@@ -175,6 +180,6 @@ def dump_meta(cfg: ArmConfig, now: Callable[[], datetime] | None = None,
             "config_sha256": config_hash, "date": date}
 
 
-def dump_params(session: Any, drives: Sequence[str], progress: Progress | None = None,
+def dump_params(session: ArmSession, drives: Sequence[str], progress: Progress | None = None,
                 now: Callable[[], datetime] | None = None) -> ParamDump:
     return ParamDump(meta=dump_meta(session.cfg, now), drives=read_live(session, drives, progress))

@@ -25,13 +25,19 @@ from __future__ import annotations
 import threading
 import time
 from dataclasses import dataclass, field
+from enum import StrEnum
 from types import MappingProxyType
-from typing import Any, Callable, Iterable, Iterator, Mapping, Sequence
+from typing import TYPE_CHECKING, Any, Callable, Iterable, Iterator, Mapping, Sequence
 
 from sherpa_cli.bus.parallel import run_concurrently
 from sherpa_cli.elmo import codec
 from sherpa_cli.elmo.commands import COMMANDS, format_value, param_key, parse_param_key
 from sherpa_cli.errors import CodecError, ConfigError, DriveRefusedError, Location, SafetyError, SherpaError
+
+if TYPE_CHECKING:
+    from sherpa_cli.elmo.client import DriveClient
+    from sherpa_cli.ops.save_ledger import SaveLedger
+    from sherpa_cli.ops.session import ArmSession
 
 ParamValue = int | float
 
@@ -122,14 +128,21 @@ class DrivePlan:
         return bool(self.changes) or self.save_due
 
 
-# Outcome states of one drive, in the words the report uses.
-UNCHANGED = "unchanged"  # nothing to write
-PROGRAMMED = "programmed"  # every change written and verified, not saved
-SAVED = "saved"  # ... and saved to flash, values read back after SV
-FAILED = "failed"  # an error or mismatch stopped it
-INTERRUPTED = "interrupted"  # stopped by Ctrl-C between two writes
-NOT_STARTED = "not started"  # Ctrl-C came before its turn
-SKIPPED = "skipped"  # not written because of a problem found while planning
+class OutcomeStatus(StrEnum):
+    """Outcome states of one drive, in the words the report uses (a str: JSON shows the word)."""
+
+    UNCHANGED = "unchanged"  # nothing to write
+    PROGRAMMED = "programmed"  # every change written and verified, not saved
+    SAVED = "saved"  # ... and saved to flash, values read back after SV
+    FAILED = "failed"  # an error or mismatch stopped it
+    INTERRUPTED = "interrupted"  # stopped by Ctrl-C between two writes
+    NOT_STARTED = "not started"  # Ctrl-C came before its turn
+    SKIPPED = "skipped"  # not written because of a problem found while planning
+
+
+UNCHANGED, PROGRAMMED, SAVED = OutcomeStatus.UNCHANGED, OutcomeStatus.PROGRAMMED, OutcomeStatus.SAVED
+FAILED, INTERRUPTED = OutcomeStatus.FAILED, OutcomeStatus.INTERRUPTED
+NOT_STARTED, SKIPPED = OutcomeStatus.NOT_STARTED, OutcomeStatus.SKIPPED
 
 
 @dataclass
@@ -137,7 +150,7 @@ class DriveOutcome:
     drive: str
     bus: str
     node: int
-    status: str = NOT_STARTED
+    status: OutcomeStatus = NOT_STARTED
     motor_switched_off: bool = False
     written: list[str] = field(default_factory=list)
     verified: list[str] = field(default_factory=list)
@@ -299,14 +312,14 @@ def _broken_ids(values: Mapping[str, ParamValue | None], key: str) -> list[int]:
 
 # --------------------------------------------------------------------------- plan (reads only)
 
-def _client(session: Any, t: DriveTarget) -> Any:
+def _client(session: ArmSession, t: DriveTarget) -> DriveClient:
     from sherpa_cli.ops.session import DriveRef
 
     cfg_drive = session.cfg.drives.get(t.drive)
     return session.client(DriveRef(t.drive, t.bus, t.node, cfg_drive))
 
 
-def read_serial(session: Any, t: DriveTarget) -> int:
+def read_serial(session: ArmSession, t: DriveTarget) -> int:
     """0x1018:4 over SDO (the drive's serial number); an SdoError names the drive."""
     from sherpa_cli.ops.session import DriveRef
 
@@ -315,7 +328,7 @@ def read_serial(session: Any, t: DriveTarget) -> int:
     return int.from_bytes(data[:4], "little")
 
 
-def _read_plan(session: Any, t: DriveTarget, need_serial: bool, on_event: Progress | None) -> DrivePlan:
+def _read_plan(session: ArmSession, t: DriveTarget, need_serial: bool, on_event: Progress | None) -> DrivePlan:
     start = time.perf_counter()
     targets = {k: drive_value(k, v) for k, v in t.params.items()}
     extra = related_keys(targets)
@@ -357,7 +370,7 @@ def _read_plan(session: Any, t: DriveTarget, need_serial: bool, on_event: Progre
                      elapsed=time.perf_counter() - start)
 
 
-def read_plans(session: Any, targets: Sequence[DriveTarget], *, need_serial: bool = False,
+def read_plans(session: ArmSession, targets: Sequence[DriveTarget], *, need_serial: bool = False,
                on_event: Progress | None = None, max_workers: int = MAX_DRIVE_WORKERS) -> list[DrivePlan]:
     """Read every drive's present values (concurrently; nothing is written) and plan the writes."""
     jobs = {t.drive: (lambda t=t: _read_plan(session, t, need_serial, on_event)) for t in targets}
@@ -374,7 +387,7 @@ def read_plans(session: Any, targets: Sequence[DriveTarget], *, need_serial: boo
     return plans
 
 
-def mark_save_due(plans: Sequence[DrivePlan], ledger: Any) -> list[DrivePlan]:
+def mark_save_due(plans: Sequence[DrivePlan], ledger: SaveLedger) -> list[DrivePlan]:
     """Plans of drives an earlier --apply without --save left unsaved, marked ``save_due``."""
     from dataclasses import replace
 
@@ -409,7 +422,7 @@ def check_apply(plans: Sequence[DrivePlan], *, motor_off: bool) -> None:
                           hint="stop the motion and switch the motor off, or add --motor-off")
 
 
-def _apply_drive(session: Any, plan: DrivePlan, *, save: bool, ledger: Any, stop: threading.Event,
+def _apply_drive(session: ArmSession, plan: DrivePlan, *, save: bool, ledger: SaveLedger | None, stop: threading.Event,
                  on_event: Progress | None) -> DriveOutcome:
     t = plan.target
     out = DriveOutcome(t.drive, t.bus, t.node)
@@ -500,7 +513,7 @@ def _apply_drive(session: Any, plan: DrivePlan, *, save: bool, ledger: Any, stop
         out.elapsed = time.perf_counter() - start
 
 
-def apply_plans(session: Any, plans: Sequence[DrivePlan], *, save: bool = False, ledger: Any = None,
+def apply_plans(session: ArmSession, plans: Sequence[DrivePlan], *, save: bool = False, ledger: SaveLedger | None = None,
                 on_event: Progress | None = None, stop: threading.Event | None = None,
                 max_workers: int = MAX_DRIVE_WORKERS) -> ApplyResult:
     """Write, verify and (``save``) save every planned drive; call :func:`check_apply` first.
@@ -633,7 +646,7 @@ def proof_problem(proofs: Sequence[FlashProof], *, after_save: bool = False) -> 
         more = f" (and {len(failed) - 1} more drive(s))" if len(failed) > 1 else ""
         err = SafetyError(f"{failed[0].drive}: flash not proven: {failed[0].error}{more}")
         if failed[0].exit_code is not None:
-            err.exit_code = failed[0].exit_code
+            err.exit_code = failed[0].exit_code  # type: ignore[assignment]  # an ExitCode's value
         return err
     differs = [p for p in proofs if p.status == DIFFERS]
     if differs:

@@ -12,11 +12,14 @@ and counted in the save ledger under the drive's serial number.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any, Sequence
+from typing import TYPE_CHECKING, Any, Sequence
 
 from sherpa_cli.elmo import codec, faults
 from sherpa_cli.elmo.commands import param_key
 from sherpa_cli.errors import DriveRefusedError, SafetyError, SherpaError, UsageError
+
+if TYPE_CHECKING:
+    from sherpa_cli.elmo.client import DriveClient
 
 RPDO2_BASE = 0x300
 
@@ -92,7 +95,7 @@ def decode_value(letters: str, value: int | float | None) -> list[str]:
     return []
 
 
-def run_raw(client: Any, node: int, exprs: Sequence[str], *, apply: bool, query_long: bool = False,
+def run_raw(client: DriveClient, node: int, exprs: Sequence[str], *, apply: bool, query_long: bool = False,
             results: list[RawResult] | None = None, on_save: Any = None) -> list[RawResult]:
     """Run the expressions in order on one drive; stop at the first error (it propagates).
 
@@ -115,6 +118,7 @@ def run_raw(client: Any, node: int, exprs: Sequence[str], *, apply: bool, query_
                 # deaf while it settles, so a PA or BG right after a bare MO=1 would go unanswered)
                 client.motor_on() if request.value == 1 else client.motor_off()
             elif request.kind == "set":
+                assert request.value is not None  # a set request carries its value
                 client.set(request.letters, request.index, request.value)
             elif request.letters == "SV":
                 try:

@@ -17,13 +17,16 @@ import struct
 import threading
 import time
 from dataclasses import dataclass, field
-from typing import Any, Callable, Iterable, Mapping
+from typing import TYPE_CHECKING, Any, Callable, Iterable, Mapping
 
 from sherpa_cli.bus.parallel import run_concurrently
 from sherpa_cli.config.model import ArmConfig
 from sherpa_cli.errors import SdoError, SherpaError
 from sherpa_cli.ops.canopen_names import VENDORS, decode_text, nmt_text
 from sherpa_cli.ops.sdo import DriveSdo
+
+if TYPE_CHECKING:
+    from sherpa_cli.ops.session import ArmSession
 
 NODE_IDS = range(1, 128)
 SDO_TX, SDO_RX, HEARTBEAT = 0x580, 0x600, 0x700
@@ -371,7 +374,7 @@ def scan_bus(cfg: ArmConfig, bus: str, network: Any, settings: ScanSettings = Sc
     return BusScan(bus, findings, None, median, threshold)
 
 
-def scan(session: Any, buses: Iterable[str] | None = None, settings: ScanSettings | None = None, *,
+def scan(session: ArmSession, buses: Iterable[str] | None = None, settings: ScanSettings | None = None, *,
          reset: bool = False, progress: Callable[[str, str, int, int], None] | None = None) -> ScanReport:
     """Scan the named buses of an open session (default: all it has open), all at once."""
     cfg: ArmConfig = session.cfg
@@ -390,6 +393,7 @@ def scan(session: Any, buses: Iterable[str] | None = None, settings: ScanSetting
         if outcome.ok:
             result.append(outcome.value)
         else:
+            assert outcome.error is not None
             if not isinstance(outcome.error, Exception):
                 raise outcome.error  # KeyboardInterrupt and friends end the command
             result.append(BusScan(bus, error=outcome.error))

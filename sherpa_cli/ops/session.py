@@ -32,8 +32,10 @@ SIM_TIMEOUT_HINT = ("the simulated arm answered too slowly (a busy machine?): ra
 class InProcessArm(Protocol):
     """What the session needs of an injected simulated arm (sim/arm.py's ``SimArm``)."""
 
-    #: bus name -> ``can.Bus`` keyword arguments of the arm's end of that bus (interface, channel)
-    endpoints: Mapping[str, Mapping[str, Any]]
+    @property
+    def endpoints(self) -> Mapping[str, Mapping[str, Any]]:
+        """bus name -> ``can.Bus`` keyword arguments of the arm's end of that bus (interface, channel)"""
+        ...
 
     def start(self) -> Any: ...
 
@@ -89,7 +91,7 @@ class ArmSession:
             p = self.cfg.protocol
             settings = ClientSettings(expect_set_echo=p.set_echo, query_long=p.query_long,
                                       mo_confirm_timeout=p.mo_confirm_timeout, sv_blackout=p.sv_blackout,
-                                      **({"timeout_hint": SIM_TIMEOUT_HINT} if self.sim is not None else {}))
+                                      **({"timeout_hint": SIM_TIMEOUT_HINT} if self.sim is not None else {}))  # type: ignore[arg-type]
             client = DriveClient(NetworkTransport(self.links[ref.bus].network), ref.node, name=ref.name,
                                  timeout=p.reply_timeout, retries=p.retries, settings=settings)
             self._clients[key] = client

@@ -9,7 +9,7 @@ from pathlib import Path
 from typing import Any
 
 from sherpa_cli.config.yamlnodes import (NAME_RE, Section, YNode, as_int, as_map, as_seq, as_str, describe,
-                                         parse_yaml, plain)
+                                         parse_yaml, plain, read_input)
 from sherpa_cli.errors import ConfigError, Location
 
 ON_FAILURE = ("stop", "continue")
@@ -111,7 +111,7 @@ class Recipe:
 def load_recipe(path: Path, overrides: dict[str, str] | None = None) -> Recipe:
     """Read and check a recipe; ``overrides`` (``--set KEY=VALUE``) replace its ``vars``."""
     try:
-        text = Path(path).read_text(encoding="utf-8")
+        text = read_input(path)
     except FileNotFoundError:
         raise ConfigError("recipe file not found", Location(str(path))) from None
     except IsADirectoryError:
@@ -246,9 +246,10 @@ def _step(node: YNode, number: int, default_failure: str, variables: dict[str, s
         if dry_run not in DRY_RUN:
             raise dnode.error(f"dry_run must be one of {', '.join(DRY_RUN)}, got {dry_run!r}")
     if confirm is not None:
-        if sec.get("expect") is not None:
-            raise sec.get("expect").error("a confirm step has no result to expect things of")
+        if (expect := sec.get("expect")) is not None:
+            raise expect.error("a confirm step has no result to expect things of")
         return Step(number, name, confirm=_substitute(as_str(confirm), variables, confirm),
                     on_failure=on_failure, line=node.line, dry_run=dry_run)
+    assert run is not None  # exactly one of run and confirm (checked above)
     return Step(number, name, argv=_argv(run, variables), expect=_expect(sec.get("expect")),
                 on_failure=on_failure, line=node.line, dry_run=dry_run)

@@ -9,12 +9,25 @@ from __future__ import annotations
 import json
 import time
 from dataclasses import dataclass, field
+from enum import StrEnum
 from typing import Any, Callable, Sequence
 
 from sherpa_cli.errors import ExitCode, SherpaError
 from sherpa_cli.recipes.model import Expect, Recipe, Step
 
-PASSED, FAILED, SKIPPED, DECLINED, INTERRUPTED = "passed", "failed", "skipped", "declined", "interrupted"
+
+class StepStatus(StrEnum):
+    """What became of one recipe step (a str: the JSON and JUnit reports show the word)."""
+
+    PASSED = "passed"
+    FAILED = "failed"
+    SKIPPED = "skipped"
+    DECLINED = "declined"
+    INTERRUPTED = "interrupted"
+
+
+PASSED, FAILED, SKIPPED = StepStatus.PASSED, StepStatus.FAILED, StepStatus.SKIPPED
+DECLINED, INTERRUPTED = StepStatus.DECLINED, StepStatus.INTERRUPTED
 
 
 @dataclass(frozen=True)
@@ -32,7 +45,7 @@ Invoke = Callable[[Sequence[str]], CommandRun]
 @dataclass
 class StepResult:
     step: Step
-    status: str
+    status: StepStatus
     argv: tuple[str, ...] = ()  # what actually ran (global options excluded)
     dry_run: bool = False
     exit_code: int | None = None
@@ -69,7 +82,7 @@ class RecipeReport:
     results: list[StepResult]
 
     @property
-    def outcome(self) -> str:
+    def outcome(self) -> StepStatus:
         if any(r.status == INTERRUPTED for r in self.results):
             return INTERRUPTED
         return PASSED if all(r.ok for r in self.results) else FAILED

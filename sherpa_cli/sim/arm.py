@@ -277,10 +277,10 @@ class SimArm:
 
     def save_state(self) -> None:
         with self.lock:
-            for name, drive in self.drives.items():
-                self.flash[name] = dataclasses.replace(self.flash[name], flash=dict(drive.flash),
-                                                       save_count=drive.save_count)
-        sim_state.save(self.cfg, self.flash)
+            now = {name: dataclasses.replace(self.flash[name], flash=dict(drive.flash), save_count=drive.save_count)
+                   for name, drive in self.drives.items()}
+        sim_state.save_changes(self.cfg, self.flash, now)  # merged with another simulator's saves
+        self.flash = now
 
     def __enter__(self) -> "SimArm":
         return self.start()

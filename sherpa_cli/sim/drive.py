@@ -135,8 +135,9 @@ class SimDrive:
         """A frame from the bus; frames for other nodes are ignored and not recorded.
 
         Returns True if the frame reached the drive's software (False: not addressed to it,
-        or lost to SV blackout, bus drop or a dead drive), so a bus loop hands an SDO request
-        (0x600+node, recorded here but not served) to the SDO server only when this is True.
+        lost to SV blackout, bus drop or a dead drive, or an SDO request to a node in NMT
+        Stopped), so a bus loop hands an SDO request (0x600+node, recorded here but not served)
+        to the SDO server only when this is True.
         """
         data = bytes(data)
         self.advance_to(self.clock.now())
@@ -149,6 +150,9 @@ class SimDrive:
             return False
         if can_id == NMT:
             self._nmt(data[0])
+        elif can_id == SDO_RX_BASE + self.node:
+            # CiA 301: a Stopped node serves only NMT and error control (its heartbeat goes on)
+            return self._nmt_state != STOPPED
         elif can_id == RPDO2_BASE + self.node:
             self._interpreter_frame(data)
         elif can_id == RPDO2_BASE + self.group_id:

@@ -7,6 +7,7 @@ the single CPU of a real drive would.
 
 from __future__ import annotations
 
+import struct
 from typing import Any, Callable
 
 import canopen
@@ -88,13 +89,33 @@ class NetworkShim:
         pass
 
 
+# client command specifiers (byte 0 bits 7..5 of a request), CiA 301 7.2.4.3
+CCS_DOWNLOAD_SEGMENT, CCS_DOWNLOAD, CCS_UPLOAD, CCS_UPLOAD_SEGMENT, CCS_ABORT, CCS_BLOCK_UPLOAD, \
+    CCS_BLOCK_DOWNLOAD = 0, 1, 2, 3, 4, 5, 6
+ABORT_COMMAND = 0x05040001  # "client/server command specifier not valid or unknown"
+ABORT_GENERAL = 0x08000000
+SDO_TX_BASE = 0x580
+
+
 class SdoServer:
-    """Answers SDO requests (0x600+node) from a simulated drive's od_read/od_write."""
+    """Answers SDO requests (0x600+node) from a simulated drive's od_read/od_write.
+
+    canopen's LocalNode does the framing; in front of it this class keeps the CiA 301 rules
+    LocalNode leaves open: it knows whether a segmented transfer is in progress, so after an
+    abort (sent or received) or a finished transfer a stray segment request is aborted instead
+    of continuing the old one; block transfers, which the drive does not offer, are aborted
+    (LocalNode would answer a block upload with a plain upload response); frames that are
+    not 8 bytes long are not SDO requests and get no answer.
+    """
 
     def __init__(self, node: int, drive: Any, send: Callable[[int, bytes], None]) -> None:
         self.node = node
         self.drive = drive
-        self.shim = NetworkShim(send)
+        self._out = send
+        self._sent: list[bytes] = []
+        self._transfer: str | None = None  # "upload" / "download" while a segmented transfer runs
+        self._where = (0, 0)  # index, sub-index of the last initiated transfer
+        self.shim = NetworkShim(self._send)
         self.local = canopen.LocalNode(node, build_object_dictionary())
         self.local.add_read_callback(self._read)
         self.local.add_write_callback(self._write)
@@ -117,6 +138,46 @@ class SdoServer:
         except ODError as exc:
             raise SdoAbortedError(exc.abort_code) from None
 
+    def _send(self, can_id: int, data: bytes) -> None:
+        self._sent.append(bytes(data))
+        self._out(can_id, data)
+
+    def _abort(self, index: int, sub: int, code: int) -> None:
+        self._transfer = None
+        self._send(SDO_TX_BASE + self.node, struct.pack("<BHBL", 0x80, index, sub, code))
+
     def receive(self, can_id: int, data: bytes, timestamp: float = 0.0) -> None:
-        for callback in self.shim.subscribers.get(can_id, ()):
-            callback(can_id, bytearray(data), timestamp)
+        data = bytes(data)
+        if len(data) != 8:
+            return  # CiA 301: every SDO frame has 8 data bytes
+        ccs = data[0] >> 5
+        index, sub = struct.unpack_from("<HB", data, 1)
+        if ccs == CCS_ABORT:
+            self._transfer = None  # the client gave up: the next request starts afresh
+            return
+        if ccs in (CCS_BLOCK_UPLOAD, CCS_BLOCK_DOWNLOAD, 7):  # 7: no such command
+            self._abort(index, sub, ABORT_COMMAND)
+            return
+        if (ccs == CCS_UPLOAD_SEGMENT and self._transfer != "upload") or \
+                (ccs == CCS_DOWNLOAD_SEGMENT and self._transfer != "download"):
+            self._abort(*self._where, ABORT_COMMAND)  # a segment of no transfer in progress
+            return
+        if ccs in (CCS_UPLOAD, CCS_DOWNLOAD):
+            self._where = (index, sub)
+        self._sent.clear()
+        try:
+            for callback in self.shim.subscribers.get(can_id, ()):
+                callback(can_id, bytearray(data), timestamp)
+        except Exception:  # LocalNode failed on a frame it should have aborted: abort it here
+            self._abort(*self._where, ABORT_GENERAL)
+            return
+        last = self._sent[-1] if self._sent else None
+        if last is None or last[0] == 0x80:
+            self._transfer = None
+        elif ccs == CCS_UPLOAD:
+            self._transfer = None if last[0] & 0x02 else "upload"  # expedited: done in one frame
+        elif ccs == CCS_DOWNLOAD:
+            self._transfer = None if data[0] & 0x02 else "download"
+        elif ccs in (CCS_UPLOAD_SEGMENT, CCS_DOWNLOAD_SEGMENT) and (last if ccs == CCS_UPLOAD_SEGMENT
+                                                                    else data)[0] & 0x01:
+            self._transfer = None  # the last segment

@@ -15,7 +15,7 @@ from sherpa_cli.sim.arm import SimArm
 
 def parse_host_port(text: str) -> tuple[str, int]:
     host, sep, port_text = text.rpartition(":")
-    if not sep or not host or not port_text.isdigit() or not 0 <= int(port_text) <= 65535:
+    if not sep or not host or not port_text.isdigit() or len(port_text) > 5 or not 0 <= int(port_text) <= 65535:
         raise UsageError(f"--serve: '{text}' is not HOST:PORT", hint="e.g. --serve 127.0.0.1:54701")
     return host.strip("[]"), int(port_text)
 

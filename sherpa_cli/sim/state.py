@@ -1,7 +1,9 @@
 """What a simulated drive keeps across power cycles: its flash (what SV saved) and its save count.
 
 ``--sim`` behaves like a real arm that is power-cycled between commands: RAM is new each
-run, flash persists in one JSON file per arm under the user's state directory.
+run, flash persists in one JSON file per arm under the user's state directory. Two simulators
+of the same arm (two commands at once) merge their saves under a file lock: neither loses the
+other's SV.
 """
 
 from __future__ import annotations
@@ -13,7 +15,8 @@ from pathlib import Path
 from typing import Any
 
 from sherpa_cli.config.model import ArmConfig
-from sherpa_cli.paths import read_json, state_dir, write_atomic
+from sherpa_cli.errors import ConfigError, Location, SherpaError
+from sherpa_cli.paths import STATE_DIR_HINT, file_lock, move_aside_hint, read_json, state_dir, write_atomic
 
 FORMAT = 1
 
@@ -44,32 +47,102 @@ def default_serial(cfg: ArmConfig, drive: str) -> int:
 
 
 def load(cfg: ArmConfig, path: Path | None = None) -> dict[str, DriveFlash]:
-    """Flash per drive; drives not in the file start at factory state."""
-    data: dict[str, Any] = read_json(path or state_path(cfg), {})
+    """Flash per drive; drives not in the file start at factory state.
+
+    A damaged file (not JSON, wrong shape, a value no drive could hold) raises ConfigError
+    naming the file and the way out, before any simulated drive is built from it.
+    """
+    target = path or state_path(cfg)
+
+    def damaged(problem: str) -> ConfigError:
+        return ConfigError(f"simulator state {problem}", Location(str(target)),
+                           hint=move_aside_hint(target, "or reset it with `sherpa sim --reset-state` "
+                                                        "(the simulated drives then start with factory flash)"))
+
+    try:
+        data: Any = read_json(target, {})
+    except OSError as exc:
+        raise SherpaError(f"{target}: cannot read the simulator state: {exc.strerror or exc}",
+                          hint=STATE_DIR_HINT) from None
+    except ValueError as exc:
+        raise damaged(f"is damaged ({exc})") from None
+    if not isinstance(data, dict) or (data and not isinstance(data.get("drives", {}), dict)):
+        raise damaged("is not a simulator state file (expected {\"format\": 1, \"drives\": {...}})")
     drives = data.get("drives", {}) if data.get("format") == FORMAT else {}
     result = {}
     for name in cfg.drives:
         saved = drives.get(name, {})
-        result[name] = DriveFlash(serial=int(saved.get("serial", default_serial(cfg, name))),
-                                  flash=dict(saved.get("flash", {})),
-                                  save_count=int(saved.get("save_count", 0)))
+        try:
+            result[name] = _drive_flash(saved, default_serial(cfg, name))
+        except (TypeError, ValueError) as exc:
+            raise damaged(f"is damaged: drive {name}: {exc}") from None
     return result
 
 
+def _drive_flash(saved: Any, serial: int) -> DriveFlash:
+    from sherpa_cli.sim.od import ODError, check_value
+    from sherpa_cli.sim.params import parse_flash
+
+    if not isinstance(saved, dict):
+        raise ValueError(f"expected a mapping, got {json.dumps(saved)[:40]}")
+    serial = saved.get("serial", serial)
+    count = saved.get("save_count", 0)
+    flash = saved.get("flash", {})
+    for key, value, hi in (("serial", serial, 0xFFFFFFFF), ("save_count", count, 10**9)):
+        if isinstance(value, bool) or not isinstance(value, int) or not 0 <= value <= hi:
+            raise ValueError(f"{key} {json.dumps(value)[:40]} is not an integer 0..{hi}")
+    if not isinstance(flash, dict):
+        raise ValueError("flash is not a mapping")
+    parse_flash(flash)  # interpreter keys: ValueError naming the key
+    for key, value in flash.items():
+        if isinstance(key, str) and key.startswith("0x"):
+            try:
+                index, sub = (int(part, 16) if i == 0 else int(part) for i, part in enumerate(key.split(":")))
+                check_value(index, sub, value)
+            except (ValueError, ODError) as exc:
+                raise ValueError(f"flash key {key!r}: {exc}") from None
+    return DriveFlash(serial=serial, flash=dict(flash), save_count=count)
+
+
 def save(cfg: ArmConfig, drives: dict[str, DriveFlash], path: Path | None = None) -> Path:
+    """Write the arm's flash atomically; SherpaError (one message) if the state directory is unwritable."""
     target = path or state_path(cfg)
     body = {"format": FORMAT, "arm": cfg.name,
             "drives": {name: {"serial": d.serial, "save_count": d.save_count, "flash": d.flash}
                        for name, d in sorted(drives.items())}}
-    write_atomic(target, json.dumps(body, indent=1, sort_keys=True) + "\n")
+    try:
+        write_atomic(target, json.dumps(body, indent=1, sort_keys=True) + "\n")
+    except OSError as exc:
+        raise SherpaError(f"{target}: cannot save the simulated drives' flash: {exc.strerror or exc}",
+                          hint=f"the file is unchanged; {STATE_DIR_HINT}") from None
     return target
+
+
+def save_changes(cfg: ArmConfig, before: dict[str, DriveFlash], after: dict[str, DriveFlash],
+                 path: Path | None = None) -> Path:
+    """Store what changed between ``before`` (as loaded) and ``after``, merged with the file as it
+    is now: another simulator of this arm may have saved meanwhile. A drive this one saved gets
+    its flash and the other's saves added to its count; the others keep what the file holds."""
+    target = path or state_path(cfg)
+    with file_lock(target):
+        current = load(cfg, target)
+        for name, now in after.items():
+            then = before.get(name)
+            if then is not None and now.flash == then.flash and now.save_count == then.save_count:
+                continue
+            added = now.save_count - (then.save_count if then is not None else 0)
+            base = current.get(name)
+            count = (base.save_count if base is not None else 0) + max(added, 0)
+            current[name] = DriveFlash(serial=now.serial, flash=dict(now.flash), save_count=count)
+        return save(cfg, current, target)
 
 
 def reset(cfg: ArmConfig, path: Path | None = None) -> bool:
     """Factory state for the arm: removes its state file; True if there was one."""
     target = path or state_path(cfg)
-    try:
-        target.unlink()
-        return True
-    except FileNotFoundError:
-        return False
+    with file_lock(target):
+        try:
+            target.unlink()
+            return True
+        except FileNotFoundError:
+            return False

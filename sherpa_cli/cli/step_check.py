@@ -1,0 +1,59 @@
+"""Check every `run:` step of a recipe against the CLI before anything runs.
+
+A recipe is checked by the same parser that will run its steps: the command must exist and
+its options and arguments must parse (names of drives and joints are the config's business
+and are checked when the step runs). So `sherpa recipe check` fails on a step kind or option
+that does not exist, and `recipe run` / `commission` refuse such a recipe before step 1
+instead of writing to drives up to the bad step.
+"""
+
+from __future__ import annotations
+
+import functools
+import io
+from contextlib import redirect_stderr, redirect_stdout
+from typing import Any
+
+from sherpa_cli.errors import ConfigError, Location
+
+
+@functools.lru_cache(maxsize=1)
+def _root() -> Any:
+    import typer.main
+
+    from sherpa_cli.cli.app import app
+
+    return typer.main.get_command(app)
+
+
+def check_step_commands(recipe: Any) -> None:
+    """Raise ConfigError (file, line, step) for the first run step the CLI would refuse to parse."""
+    import typer
+    from typer.core import TyperGroup
+
+    for step in recipe.steps:
+        if step.kind != "run":
+            continue
+        where = Location(recipe.path, step.line, f"steps[{step.number - 1}].run")
+
+        def refuse(problem: str) -> ConfigError:
+            return ConfigError(f"step {step.number} '{step.name}': {problem}", where,
+                               hint="run the command with --help to see what it takes")
+
+        cmd, args, words = _root(), list(step.argv), ["sherpa"]
+        while isinstance(cmd, TyperGroup):
+            if not args or args[0].startswith("-"):
+                raise refuse(f"missing command after '{' '.join(words)}'")
+            sub = cmd.get_command(typer.Context(cmd), args[0])
+            if sub is None:
+                known = ", ".join(sorted(cmd.list_commands(typer.Context(cmd))))
+                raise refuse(f"no such command '{' '.join([*words, args[0]])}' (commands: {known})")
+            words.append(args.pop(0))
+            cmd = sub
+        try:
+            with redirect_stdout(io.StringIO()), redirect_stderr(io.StringIO()):
+                cmd.make_context(" ".join(words), args)  # parses, never runs
+        except typer.Exit:
+            continue  # --help: harmless, it prints and ends the step
+        except typer.TyperException as exc:
+            raise refuse(exc.format_message()) from None
