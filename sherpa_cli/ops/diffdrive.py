@@ -32,6 +32,7 @@ UM_POSITION = 5
 GROUP_INDEX = 0x2040
 RPDO2_BASE = 0x300
 PAIR_START_METHODS = ("group", "sequential")
+SETTLE_S = 0.3  # s a finished move may take for PX to reach the target (servo lag) before it is reported
 
 
 # --------------------------------------------------------------------------- planning (pure)
@@ -513,6 +514,14 @@ def run_move(session: Any, pair: PairConfig, request: MoveRequest, *, guard_fact
                     raise SafetyError(f"{pair.name}: did not reach Σ={p.target[0]}, Δ={p.target[1]} within "
                                       f"{p.timeout:g} s", hint="check the drives with `sherpa monitor --once`")
                 final = {d: int(clients[d].get("PX")) for d in drives}
+                if w.outcome == "finished":
+                    # the profile is done (MS=0); the motor may still be settling onto it (servo lag):
+                    # wait a bounded moment for PX to reach the target, as a TR window would
+                    settle_end = clock() + SETTLE_S
+                    while final != dict(p.motor_targets) and clock() < settle_end:
+                        guard.check()
+                        sleep(settings.poll_interval)
+                        final = {d: int(clients[d].get("PX")) for d in drives}
                 trace.add(clock() - t0, final)
     except BaseException as exc:
         exc.motion_report = guard.report  # type: ignore[attr-defined]
