@@ -246,6 +246,11 @@ class SimDriveConfig:
     heartbeat_ms: int = 0  # 0x1017 producer heartbeat at power-up
     seed: int = 0  # random seed of drop_probability, so a failing run replays
     limit_trip_at: float | None = None  # s after start: trips as if past LL[3]/HL[3] (MF, EMCY 0x8680)
+    # servo-loop motor model (sim/servo.py, docs/log.md); servo_bandwidth 0 = the kinematic model
+    servo_bandwidth: float = 0.0  # Hz, natural frequency of the position loop
+    servo_damping: float = 0.5
+    servo_current_limit: float | None = None  # A; None: the drive model's peak current
+    supply_current_limit: float | None = None  # A the supply can give (the seed's 1 A supply)
     st_refused_in_speed_mode: bool = False  # ST answers EC 60 in UM=2, as [BLISS] says some firmware does
     start_skew: float = 0.0  # s a separately received BG starts late (a group BG does not; seed Fig. 9.10)
     lag: float = 0.0  # s time constant of the servo loop (bandwidth mismatch of a pair); 0 = perfect
