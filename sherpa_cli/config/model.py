@@ -233,6 +233,42 @@ class MotionConfig:
         return (self.heartbeat_period_ms or self.consumer_time_ms / 4) / 1000
 
 
+JOYSTICK_MODES = ("velocity", "torque")
+JOYSTICK_MIXES = ("xy", "sigma_delta")
+
+
+@dataclass(frozen=True)
+class JoystickMap:
+    """One joystick mapping (docs/config.md `joystick:`): an axis to a joint, or two axes to a pair.
+
+    A joint: full deflection of ``axis`` = ``sensitivity`` x the joint's velocity limit (velocity)
+    or continuous current (torque). A pair: ``mix: xy`` drives motor a with X+Y and motor b with
+    X-Y (the seed's XY+/XY-; each motor's full scale is the smaller joint speed limit), ``mix:
+    sigma_delta`` drives the Σ joint with X and the Δ joint with Y.
+    """
+
+    joint: str | None = None
+    axis: str | None = None  # evdev code name, e.g. ABS_Z
+    pair: str | None = None
+    x: str | None = None
+    y: str | None = None
+    mix: str = "xy"
+    mode: str = "velocity"
+    sensitivity: float = 0.5
+    invert: bool = False
+
+
+@dataclass(frozen=True)
+class JoystickConfig:
+    """`sherpa jog --joystick` (docs/jog.md): device, send rate, deadzone, the dead-man button, the maps."""
+
+    device: str | None = None  # /dev/input/eventN; None: the first joystick found
+    rate_hz: float = 25.0  # commands per second while the dead-man is held (20..50)
+    deadzone: float = 0.1  # fraction of full deflection around the centre read as 0
+    deadman: str = "BTN_TRIGGER"  # the button that must be held; release stops at once
+    axes: tuple[JoystickMap, ...] = ()
+
+
 @dataclass(frozen=True)
 class SimDriveConfig:
     """How one simulated drive differs from a healthy one (faults and mismatch); only the simulator reads it."""
@@ -277,6 +313,7 @@ class ArmConfig:
     il_codes: ILCodes = field(default_factory=ILCodes)
     protocol: ProtocolConfig = field(default_factory=ProtocolConfig)
     motion: MotionConfig = field(default_factory=MotionConfig)
+    joystick: JoystickConfig = field(default_factory=JoystickConfig)
     sim: Mapping[str, SimDriveConfig] = field(default_factory=dict)  # drive name -> simulated faults
     sim_extra_nodes: tuple[SimExtraNode, ...] = ()  # `sim: extra_nodes:`, only the simulator reads it
     # `sim: reply_timeout:` s to wait for one interpreter reply with --sim (instead of protocol.reply_timeout):
