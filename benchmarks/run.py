@@ -515,6 +515,57 @@ def bench_home() -> Result:
                   f"{moving[0]:.1f} s (simulator, in process, real time)")
 
 
+COUPLING_CONFIG = ROOT / "tests/data/diffdrive-arm.yaml"
+
+
+def _coupling_peaks(req_kw: dict, modes: dict[str, dict], rounds: int) -> dict[str, float]:
+    """Median held-joint peak excursion (counts) of each mode's move on the mismatched simulated pair."""
+    from sherpa_cli.config import load_config
+    from sherpa_cli.ops import diffdrive
+    from sherpa_cli.ops.session import ArmSession
+    from sherpa_cli.sim.arm import SimArm
+
+    cfg = load_config(COUPLING_CONFIG)
+    out = {}
+    for name, kw in modes.items():
+        peaks = []
+        for _ in range(rounds):
+            with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
+                r = diffdrive.run_move(s, cfg.pairs["diff"], diffdrive.MoveRequest(**req_kw, **kw))
+            peaks.append(r.coupling.held_peak)
+        out[name] = statistics.median(peaks)
+    return out
+
+
+def bench_coupling(rounds: int = 3) -> Result:
+    """Peak Δ excursion during a 1 rad Σ move on the simulated mismatched pair (motor b 10 % faster,
+    motor a's separately received BG 40 ms late): the best of the tool's modes (group start, group
+    start + --feedback) / --naive, medians of ``rounds``. Also the Σ excursion of a 1 rad Δ move."""
+    import tempfile as _tf
+
+    modes = {"naive": {"naive": True}, "group": {}, "feedback": {"feedback": True}}
+    with _tf.TemporaryDirectory(prefix="sherpa-bench-coupling-") as state:
+        old = os.environ.get("XDG_STATE_HOME")
+        os.environ["XDG_STATE_HOME"] = state
+        try:
+            sig = _coupling_peaks({"sigma": "1"}, modes, rounds)
+            dlt = _coupling_peaks({"delta": "1"}, modes, rounds)
+        finally:
+            if old is None:
+                os.environ.pop("XDG_STATE_HOME", None)
+            else:
+                os.environ["XDG_STATE_HOME"] = old
+    best = min(sig["group"], sig["feedback"])
+    ratio = best / sig["naive"] if sig["naive"] else 0.0
+    best_d = min(dlt["group"], dlt["feedback"])
+    ratio_d = best_d / dlt["naive"] if dlt["naive"] else 0.0
+    goal = "<= 0.1"
+    return Result("coupling", round(best, 1), "counts", round(ratio, 3), goal, _judge(ratio, goal),
+                  f"Σ move: held Δ peak naive {sig['naive']:.0f}, group {sig['group']:.0f}, feedback "
+                  f"{sig['feedback']:.0f} counts; Δ move: held Σ peak naive {dlt['naive']:.0f}, group "
+                  f"{dlt['group']:.0f}, feedback {dlt['feedback']:.0f} counts (ratio {ratio_d:.3f})")
+
+
 def _serve_sim(env: dict, log: Path) -> tuple[subprocess.Popen, str]:
     import socket
 
@@ -678,6 +729,7 @@ BENCHMARKS: dict[str, Callable[[], Result]] = {
     "startup": bench_startup,
     "deadman": bench_deadman,
     "home": bench_home,
+    "coupling": bench_coupling,
     "record": bench_record,
     "capture": bench_capture,
 }

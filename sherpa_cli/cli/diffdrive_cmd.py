@@ -7,6 +7,7 @@ from typing import Any, Optional
 import typer
 
 from sherpa_cli.cli.context import state
+from sherpa_cli.cli.options import ApplyMotion
 from sherpa_cli.errors import UsageError
 
 app = typer.Typer(no_args_is_help=True, help="Differential pairs: Σ = m_a + m_b, Δ = m_a - m_b.")
@@ -148,3 +149,117 @@ def _whole(value: float, option: str) -> int:
     if value != int(value):
         raise UsageError(f"{option}: {value} is not a whole number of counts (use --unit rad for radians)")
     return int(value)
+
+
+@app.command("move")
+def move(
+    ctx: typer.Context,
+    pair: str = PairArg,
+    sigma: Optional[str] = typer.Option(None, "--sigma", metavar="POS", help="Σ joint target: rad, or 10deg, "
+                                        "200counts. Left out: Σ holds."),
+    delta: Optional[str] = typer.Option(None, "--delta", metavar="POS", help="Δ joint target (same units). "
+                                        "Left out: Δ holds."),
+    relative: bool = typer.Option(False, "--relative", help="--sigma/--delta are offsets from where the joints are."),
+    velocity: Optional[str] = typer.Option(None, "--velocity", metavar="SPEED", help="Speed of the joint that moves "
+                                           "farthest (rad/s, deg/s, counts/s); default: the joints' speed limits."),
+    feedback: bool = typer.Option(False, "--feedback", help="Correct the lagging motor every cycle from the "
+                                  "measured Σ/Δ error (bounded, inside the guard)."),
+    naive: bool = typer.Option(False, "--naive", help="The seed's way, for comparison: two separate BG and "
+                               "unscaled profiles."),
+    plot: Optional[str] = typer.Option(None, "--plot", metavar="FILE.png", help="Draw both joints during the move."),
+    uncalibrated: bool = typer.Option(False, "--uncalibrated", help="Allow the move although the pair was not "
+                                      "homed since power-up (positions relative to power-up)."),
+    apply: ApplyMotion = False,
+) -> None:
+    """Move the Σ and Δ joints of a pair together, both motors starting at once, and measure the coupling.
+
+    Both motors get profiles of equal duration (SP/AC/DC scaled by each motor's share of the
+    distance) and start on one frame (motion.pair_start: a group id in 0x2040, RAM only, put
+    back afterwards). Every move records both motors and reports how far the joint that should
+    hold moved, and how far both left the straight Σ/Δ path (docs/diffdrive.md).
+    """
+    from sherpa_cli.ops import diffdrive
+    from sherpa_cli.ops.targets import pair_of
+
+    st = state(ctx)
+    cfg = st.load_config()
+    p = pair_of(cfg, pair)
+    req = diffdrive.MoveRequest(sigma=sigma, delta=delta, relative=relative, velocity=velocity, naive=naive,
+                                feedback=feedback, uncalibrated=uncalibrated)
+    if naive and feedback:
+        raise UsageError("--naive and --feedback do not go together: --naive is the seed's way, for comparison")
+    method, _ = diffdrive.pair_settings(cfg)
+    if plot is not None and not plot.lower().endswith(".png"):
+        raise UsageError(f"--plot {plot}: expected a .png file name")
+    # the values, and absolute targets against the normal ranges, are checked without the bus (a held
+    # joint is taken at 0 here; the real check with the present positions follows on the bus)
+    diffdrive.plan_move(cfg, p, req, {p.drive_a: 0, p.drive_b: 0})
+    mode = "naive" if naive else method
+    if not apply:
+        what = ", ".join(f"{n} {'by' if relative else 'to'} {v}" for n, v in ((p.sigma, sigma), (p.delta, delta))
+                         if v is not None)
+        held = [n for n, v in ((p.sigma, sigma), (p.delta, delta)) if v is None]
+        start = {"group": f"one BG to group id {cfg.motion.pair_group_id} (0x2040, RAM, put back after)",
+                 "sequential": "two BG back to back", "naive": "two BG back to back, unscaled profiles"}[mode]
+        if st.json_mode:
+            st.out.json({"pair": p.name, "applied": False, "move": what, "holds": held, "start": mode,
+                         "feedback": feedback})
+            return
+        st.out.line(f"dry run: would move pair {p.name} ({p.drive_a}, {p.drive_b}): {what}"
+                    + (f"; {held[0]} holds" if held else ""))
+        st.out.line(f"  UM=5, SP/AC/DC of equal duration, PA, {start}"
+                    + ("; --feedback corrects SP every cycle" if feedback else "") + ", then stop and switch off")
+        st.out.line("nothing sent; add --apply to move")
+        return
+    with st.session(buses=sorted({cfg.drives[d].bus for d in (p.drive_a, p.drive_b)})) as session:
+        try:
+            result = diffdrive.run_move(session, p, req)
+        except BaseException as exc:
+            report = getattr(exc, "motion_report", None)
+            if report is not None and not st.json_mode:
+                for line in report.lines():
+                    st.out.info(f"stop: {line}")
+            raise
+    if plot is not None:
+        diffdrive.plot(result, plot)
+    _render_move(st, result, plot)
+    if not result.ok:
+        raise typer.Exit(1)
+
+
+def _render_move(st, r, plot: str | None) -> None:
+    from sherpa_cli.joints.units import counts_to_rad
+
+    if st.json_mode:
+        d = r.as_dict()
+        if plot is not None:
+            d["plot"] = plot
+        st.out.json(d)
+        return
+    for line in r.guard_lines:
+        st.out.line(f"stop: {line}")
+    cmds = "; ".join(f"{d} " + " ".join(f"{k}={v}" for k, v in c.items()) for d, c in r.motor_commands.items())
+    if cmds:
+        st.out.line(f"sent: {cmds}")
+    mode = {"group": "common start (group BG)", "sequential": "two BG back to back",
+            "naive": "naive (two BG, unscaled profiles)"}[r.mode] + (", feedback" if r.feedback else "")
+    st.out.line(f"pair {r.pair}: {mode}")
+    for b in r.breaches:
+        st.out.line(f"limit: {b.joint} left its full range [{b.full[0]}, {b.full[1]}] on the {b.side} side: "
+                    f"stopped, nothing more sent, brought back into its normal range")
+    rows = []
+    for i, (name, cpr) in enumerate(((f"Σ {r.sigma}", r.sigma_cpr), (f"Δ {r.delta}", r.delta_cpr))):
+        rows.append([name, r.start[i], r.target[i], r.end[i], f"{r.end[i] - r.target[i]:+d}",
+                     f"{counts_to_rad(r.end[i], cpr):+.4f}"])
+    st.out.table(None, ["joint", "start", "target", "end", "error", "end (rad)"], rows, right=(1, 2, 3, 4, 5))
+    c = r.coupling
+    if c is not None:
+        if c.held is not None:
+            cpr = c.held_cpr
+            st.out.line(f"coupling: {c.held} (held) moved up to {c.held_peak:.0f} counts "
+                        f"({counts_to_rad(c.held_peak, cpr):.4f} rad, {c.fraction(c.held_peak):.1%} of the move)")
+        st.out.line(f"off the straight Σ/Δ path: Σ up to {c.peak_sigma:.0f} counts "
+                    f"({counts_to_rad(c.peak_sigma, c.sigma_cpr):.4f} rad), Δ up to {c.peak_delta:.0f} counts "
+                    f"({counts_to_rad(c.peak_delta, c.delta_cpr):.4f} rad)")
+    if plot is not None:
+        st.out.line(f"plot: {plot}")

@@ -260,6 +260,14 @@ class MotionConfig:
     standstill_timeout: float = 2.0  # s to wait for VX = 0 after a stop
     liveness_timeout: float = 1.0  # s the command may go without a sign of life before the heartbeat stops
     velocity_unit_mode: int = 5  # velocity jogs: 5 (JV + BG in position mode) or 2 (speed mode)
+    # differential pairs (docs/diffdrive.md): how both motors start together. "group": one BG to the
+    # group id pair_group_id written to 0x2040 of both drives (RAM, restored afterwards; that it acts
+    # without an NMT reset communication is UNCONFIRMED); "sequential":
+    # two BG back to back (no common start, for drives without 0x2040)
+    pair_start: str = "group"
+    pair_group_id: int = 125  # a 7-bit id no device on the pair's bus uses (126 is the host heartbeat)
+    feedback_gain: float = 8.0  # --feedback: SP correction per unit of progress difference between the motors
+    feedback_limit: float = 0.5  # --feedback: the correction never changes a motor's SP by more than this share
 
     @property
     def heartbeat_period_s(self) -> float:
@@ -321,6 +329,8 @@ class SimDriveConfig:
     servo_current_limit: float | None = None  # A; None: the drive model's peak current
     supply_current_limit: float | None = None  # A the supply can give (the seed's 1 A supply)
     st_refused_in_speed_mode: bool = False  # ST answers EC 60 in UM=2, as [BLISS] says some firmware does
+    start_skew: float = 0.0  # s a separately received BG starts late (a group BG does not; seed Fig. 9.10)
+    lag: float = 0.0  # s time constant of the servo loop (bandwidth mismatch of a pair); 0 = perfect
 
 
 @dataclass(frozen=True)

@@ -22,6 +22,7 @@ position move of a joint that is not calibrated (ops/calibration.py) unless ``un
 
 from __future__ import annotations
 
+import contextlib
 import math
 import time
 from dataclasses import dataclass, field
@@ -374,8 +375,14 @@ def _run_guarded(guard: Any, session: Any, cfg: ArmConfig, axis: Axis, p: JogPla
                  settings: Any, joints_start: Mapping[str, int], result: "JogResult",
                  clock: Callable[[], float], sleep: Callable[[float], None],
                  on_progress: Callable[[Mapping[str, int]], None] | None = None) -> dict[str, int]:
-    with guard:
+    from sherpa_cli.ops import diffdrive
+
+    with guard, contextlib.ExitStack() as stack:
         clients = {d: guard.client(by_name[d]) for d in axis.drives}
+        # a Σ/Δ joint starts both motors together, as `diffdrive move` does (motion.pair_start)
+        method = diffdrive.pair_settings(cfg)[0] if axis.kind in ("sigma", "delta") else "sequential"
+        start = stack.enter_context(diffdrive.CommonStart(session, [by_name[d] for d in axis.drives], clients,
+                                                          method, cfg.motion.pair_group_id))
 
         def check_drives() -> None:
             """The guard's sign of life, and every moving motor still on (a trip ends the jog)."""
@@ -406,8 +413,7 @@ def _run_guarded(guard: Any, session: Any, cfg: ArmConfig, axis: Axis, p: JogPla
                 c.set("SP", 0, p.motor_speeds[d])
                 c.set("PA", 0, p.motor_targets[d])
             result.motor_commands = {d: {"PA": p.motor_targets[d], "SP": p.motor_speeds[d]} for d in axis.drives}
-            for c in clients.values():
-                c.execute("BG")
+            start.begin()
             watched = limit_watch.watch(
                 axis.watched, sample, clock=clock, sleep=sleep, interval=settings.poll_interval,
                 finished=lambda m: all(int(c.get("MS")) == 0 for c in clients.values()), duration=p.timeout,
@@ -420,8 +426,7 @@ def _run_guarded(guard: Any, session: Any, cfg: ArmConfig, axis: Axis, p: JogPla
             for d, c in clients.items():
                 c.set("JV", 0, p.motor_speeds[d])
             result.motor_commands = {d: {"JV": p.motor_speeds[d]} for d in axis.drives}
-            for c in clients.values():
-                c.execute("BG")
+            start.begin()
             watched = limit_watch.watch(axis.watched, sample, clock=clock, sleep=sleep,
                                         interval=settings.poll_interval, duration=p.duration,
                                         check_drives=check_drives)

@@ -62,6 +62,7 @@ def settings_for(cfg: ArmConfig, drive: str, **overrides: Any) -> SimSettings:
                     die_at=faults.die_at, reboot_at=faults.reboot_at, heartbeat_ms=faults.heartbeat_ms,
                     seed=faults.seed, limit_trip_at=faults.limit_trip_at,
                     st_refused_in_speed_mode=faults.st_refused_in_speed_mode,
+                    start_skew_s=faults.start_skew, lag_s=faults.lag,
                     servo_bandwidth_hz=faults.servo_bandwidth, servo_damping=faults.servo_damping,
                     servo_current_limit=faults.servo_current_limit,
                     supply_current_limit=faults.supply_current_limit)
@@ -437,6 +438,9 @@ class SimArm:
             targets = list(on_bus)  # NMT broadcast / SYNC / host heartbeats: every drive decides for itself
         else:
             targets = by_node.get(can_id & 0x7F, [])
+            if 0x301 <= can_id <= 0x37F:  # RPDO2 of a group id (0x2040): every drive of the group
+                targets = targets + [n for n, d in on_bus.items()
+                                     if d.group_id == can_id - 0x300 and n not in targets]
         for name in targets:
             arrived = on_bus[name].receive(can_id, data)
             if arrived and SDO_RX + 1 <= can_id <= SDO_RX + 0x7F:

@@ -99,6 +99,7 @@ class SimDrive:
         self.od_writes: list[tuple[float, int, int, int]] = []  # SDO writes, for "dry run wrote nothing"
         self.boots = 0
         self.motor = _make_motor(self.settings, int(position))
+        self._lagged = float(position)  # where the motor really is with settings.lag_s (else the profile)
         self._outbox: list[Frame] = []
         self._replies: list[tuple[float, int, Frame]] = []  # heap: (release time, seq, frame)
         self._seq = itertools.count()
@@ -172,6 +173,12 @@ class SimDrive:
             return self._nmt_state != STOPPED
         elif can_id == RPDO2_BASE + self.node:
             self._interpreter_frame(data)
+        elif can_id == RPDO2_BASE + self.group_id:
+            self._via_group = True  # one frame reaches every drive of the group at once: no start skew
+            try:
+                self._interpreter_frame(data)
+            finally:
+                self._via_group = False
         elif can_id == HEARTBEAT_BASE + self._consumer()[0]:
             self._hb_last = t
         return True
@@ -214,6 +221,11 @@ class SimDrive:
         return self._nmt_state
 
     @property
+    def group_id(self) -> int:
+        """Object 0x2040 ([IG] 13-10): 0 = no group; binary interpreter frames to 0x300 + id reach this drive."""
+        return self._od.values[(0x2040, 0)]
+
+    @property
     def dead(self) -> bool:
         return self._dead
 
@@ -224,10 +236,12 @@ class SimDrive:
     @property
     def position(self) -> float:
         """Physical motor position in counts (not PX), for arm mechanics."""
-        return self.motor.position
+        return self._lagged if self.settings.lag_s > 0 else self.motor.position
 
     @property
     def px(self) -> int:
+        if self.settings.lag_s > 0:
+            return wrap_int32(math.floor(self._lagged + 0.5) + self._px_offset)
         return wrap_int32(self.motor.counts + self._px_offset)
 
     @property
@@ -267,10 +281,15 @@ class SimDrive:
         if letters == "BG":
             if not self._motor_on:
                 raise Refused(interpreter.EC_MOTOR_MUST_BE_ON)
-            self._begin()
+            skew = self.settings.start_skew_s
+            if skew > 0 and not self._via_group:
+                self._begin_due = self._t + skew  # a separately received BG starts late (seed Fig. 9.10)
+            else:
+                self._begin()
         elif letters == "ST":
             if self.settings.st_refused_in_speed_mode and self.ram["UM"] == 2:
                 raise Refused(interpreter.EC_NOT_IN_THIS_UM)  # [BLISS]: "cannot be executed in speed mode"
+            self._begin_due = None
             if self._motor_on:
                 self.motor.stop(self.ram["SD"] * self.speed_gain)
         elif letters in ("SV", "LD"):
@@ -302,6 +321,8 @@ class SimDrive:
         self._quick_stop = False
         self._hm_pin: bool | None = None  # armed homing on an input: the pin's level when last seen
         self._target_kind = "PA"
+        self._begin_due: float | None = None
+        self._via_group = False
         self._nmt_state = PRE_OPERATIONAL
         self._hb_last: float | None = None
         self._settle_until = self._blackout_until = -math.inf
@@ -375,6 +396,8 @@ class SimDrive:
             times.append(self._reboot_due)
         if self._trip_due is not None:
             times.append(self._trip_due)
+        if self._begin_due is not None:
+            times.append(self._begin_due)
         if self._hb_last is not None:  # checked first: _consumer() is a lookup on every step
             timeout = self._consumer()[1]
             if timeout:
@@ -402,6 +425,10 @@ class SimDrive:
         if self._reboot_due is not None and t >= self._reboot_due:
             self._reboot_due = None
             self._boot()
+        if self._begin_due is not None and t >= self._begin_due:
+            self._begin_due = None
+            if self._motor_on:
+                self._begin()
         if self._trip_due is not None and t >= self._trip_due:
             self._trip_due = None
             self._shut_down(MF_POSITION_LIMIT, "position limit (injected trip)")
@@ -427,6 +454,8 @@ class SimDrive:
         if can_id == SYNC_ID:
             return True
         if can_id in (RPDO2_BASE + self.node, SDO_RX_BASE + self.node):
+            return True
+        if self.group_id and can_id == RPDO2_BASE + self.group_id:
             return True
         host, timeout = self._consumer()
         return bool(timeout) and can_id == HEARTBEAT_BASE + host
@@ -506,6 +535,7 @@ class SimDrive:
         self._record("motor on: MO=1" if on else "motor off: MO=0")
         if not on:
             self._motor_on = False
+            self._begin_due = None
             self.motor.off()
             return
         self._motor_on = True
@@ -554,10 +584,13 @@ class SimDrive:
                 m.stop(self.ram["SD"] * self.speed_gain)
                 self._limit_stop = True
             m.step(dt)
+            self._follow(dt)
             if self._quick_stop and m.v == 0 and m.mode in ("idle", "stop"):
                 self._shut_down(MF_HEARTBEAT, "heartbeat lost, 0x6007=3 (quick stop done)")
                 return
             self._check_limits()
+        else:
+            self._lagged = self.motor.position  # a motor that is off stands where it is
         if self.on_step is not None:
             self.on_step(self)
         self._check_homing()
@@ -601,6 +634,12 @@ class SimDrive:
         r["HM[1]"] = 0
         self._record(f"home event: PX={self.px}")
 
+    def _follow(self, dt: float) -> None:
+        """The servo loop's bandwidth: the real position follows the profile with time constant lag_s."""
+        tau = self.settings.lag_s
+        if tau > 0:
+            self._lagged += (self.motor.position - self._lagged) * (1.0 - math.exp(-dt / tau))
+
     def _check_limits(self) -> None:
         r = self.ram
         if r["UM"] == 1:
@@ -620,6 +659,7 @@ class SimDrive:
             self._record(f"motor off: {why}")
         self._motor_on = False
         self._quick_stop = False
+        self._begin_due = None
         self.motor.off()
         self._mf |= mf_bit
 

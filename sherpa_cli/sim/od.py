@@ -47,6 +47,7 @@ WRITABLE: Mapping[tuple[int, int], Entry] = {
     (0x1017, 0): Entry(True, 0, 0xFFFF),
     (0x1029, 1): Entry(True, 0, 2),
     (0x6007, 0): Entry(True, 0, 3),
+    (0x2040, 0): Entry(True, 0, 127),  # group id ([IG] 13-10): 0 none; a frame to 0x300+id reaches the group
 }
 
 

@@ -33,6 +33,7 @@ _OBJECTS: list[tuple[int, int | None, str, int, str]] = [
     (0x1029, 1, "Communication error behaviour", od.UNSIGNED8, "rw"),
     (0x6007, None, "Abort connection option code", od.INTEGER16, "rw"),
     (0x6004, None, "Position value", od.INTEGER32, "ro"),  # CiA 406: only a simulated encoder has it
+    (0x2040, None, "Group ID", od.UNSIGNED8, "rw"),
 ]
 _RECORD_NAMES = {0x1003: "Pre-defined error field", 0x1016: "Consumer heartbeat time", 0x1018: "Identity object", 0x1029: "Error behaviour"}
 

@@ -72,6 +72,15 @@ class SimSettings:
     hm_px_absolute: int = 0
     # PY (an absolute encoder on the auxiliary input) reads the motor's real position plus this
     py_offset: int = 0
+    # A differential pair's start skew (seed Fig. 9.10/9.11): a BG received on the drive's own
+    # RPDO2 starts its motion this many seconds late (host latency between two separately sent
+    # begin commands). A BG sent to the drive's group id (0x2040) or executed at SYNC starts at
+    # once on every drive of the group.
+    start_skew_s: float = 0.0
+    # Bandwidth of the servo loop: the motor follows its profile through a first-order lag with
+    # this time constant (s); 0 = a perfect loop (the motor is the profile). A pair whose motors
+    # differ here drifts apart while accelerating (seed Fig. 9.10/9.11).
+    lag_s: float = 0.0
     # Servo-loop motor model (sim/servo.py; `log step`): servo_bandwidth_hz > 0 makes the motor
     # follow the profile through a second-order position loop (natural frequency, damping) whose
     # current is limited to servo_current_limit A (None: max_current) and, with
@@ -85,7 +94,7 @@ class SimSettings:
     supply_speed: float = 100000.0  # cnt/s at which the supply current equals the motor current
 
     def __post_init__(self) -> None:
-        for name in ("mo_settle_s", "sv_blackout_s", "reply_latency_s", "sdo_latency_s"):
+        for name in ("mo_settle_s", "sv_blackout_s", "reply_latency_s", "sdo_latency_s", "start_skew_s", "lag_s"):
             if getattr(self, name) < 0:
                 raise ValueError(f"SimSettings.{name} must be >= 0")
         if not 0.0 <= self.drop_probability <= 1.0:

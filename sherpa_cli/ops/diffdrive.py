@@ -1,0 +1,573 @@
+"""`sherpa diffdrive move`: drive a differential pair as two joints, both motors starting together
+(docs/diffdrive.md).
+
+Pure parts (no bus): :func:`plan_move` (targets from Σ/Δ, refusals, equal-duration profiles),
+:func:`profiles` and :func:`measure_coupling`. The running part, :func:`run_move`, works inside the
+motion guard with the joint-limit watch and the calibration check of the motion core; the common
+start is :func:`common_begin` (also used by `jog` of a Σ/Δ joint, ops/joint_jog.py).
+
+Common start (``motion.pair_start``): ``group`` writes the group id ``motion.pair_group_id`` to
+object 0x2040 of both drives (RAM only; the old values are put back on every exit path) and sends
+one BG to that id, which both drives execute on the same frame; ``sequential`` sends two BG back to
+back. ``--naive`` is the seed's way: two BG and unscaled profiles, kept for comparison.
+
+Recording: until the ops-level recorder of `sherpa log` is on main, the move records both motors
+by polling PX through the interpreter in the guard's loop (:class:`PolledTrace`); anything with
+``add(t, motors)`` and ``samples`` can take its place (``trace_factory``).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+from typing import Any, Callable, Mapping, Sequence
+
+from sherpa_cli.config.model import ArmConfig, PairConfig
+from sherpa_cli.errors import ConfigError, SafetyError, UsageError
+from sherpa_cli.joints import diffpair, units
+from sherpa_cli.ops import calibration, limit_watch
+
+UM_POSITION = 5
+GROUP_INDEX = 0x2040
+RPDO2_BASE = 0x300
+PAIR_START_METHODS = ("group", "sequential")
+SETTLE_S = 0.3  # s a finished move may take for PX to reach the target (servo lag) before it is reported
+
+
+# --------------------------------------------------------------------------- planning (pure)
+
+@dataclass(frozen=True)
+class MoveRequest:
+    """A move as typed: Σ and Δ still text (their units need each joint's cpr); None = hold."""
+
+    sigma: str | None = None
+    delta: str | None = None
+    relative: bool = False
+    velocity: str | None = None  # the speed of the faster joint; default: the joints' limits
+    naive: bool = False
+    feedback: bool = False
+    uncalibrated: bool = False
+
+
+@dataclass(frozen=True)
+class Profile:
+    """SP, AC, DC of one motor (counts/s, counts/s²)."""
+
+    sp: int
+    ac: int
+    dc: int
+
+    def as_dict(self) -> dict[str, int]:
+        return {"SP": self.sp, "AC": self.ac, "DC": self.dc}
+
+
+@dataclass(frozen=True)
+class MovePlan:
+    pair: PairConfig
+    start: tuple[int, int]  # (Σ, Δ) counts
+    target: tuple[int, int]
+    motors_start: Mapping[str, int]
+    motor_targets: Mapping[str, int]
+    profiles: Mapping[str, Profile]
+    duration: float  # s, the cruise-speed estimate (ramps add to it)
+    timeout: float
+    naive: bool = False
+
+    @property
+    def distance(self) -> tuple[int, int]:
+        return self.target[0] - self.start[0], self.target[1] - self.start[1]
+
+
+def _range_text(r: tuple[int, int]) -> str:
+    return f"[{r[0]}, {r[1]}]"
+
+
+def pair_settings(cfg: ArmConfig) -> tuple[str, int]:
+    """(pair_start, pair_group_id) from ``motion:``, checked."""
+    m = cfg.motion
+    if m.pair_start not in PAIR_START_METHODS:
+        raise ConfigError(f"motion.pair_start: '{m.pair_start}' is not one of {', '.join(PAIR_START_METHODS)}")
+    if not 1 <= m.pair_group_id <= 127 or m.pair_group_id == m.host_node_id:
+        raise ConfigError(f"motion.pair_group_id: {m.pair_group_id} must be 1..127 and not the host id "
+                          f"{m.host_node_id}")
+    return m.pair_start, m.pair_group_id
+
+
+def profiles(distances: Mapping[str, int], speed: int, accel: int, decel: int, *,
+             scaled: bool = True) -> dict[str, Profile]:
+    """Equal-duration profiles: the motor with the longest distance gets ``speed``/``accel``/``decel``,
+    every other motor the same scaled by its share of that distance, so all start, accelerate and
+    arrive together. ``scaled=False`` (the naive way): the same values for every motor."""
+    longest = max((abs(d) for d in distances.values()), default=0)
+    out = {}
+    for name, d in distances.items():
+        share = abs(d) / longest if scaled and longest else 1.0
+        out[name] = Profile(max(1, round(speed * share)), max(1, round(accel * share)), max(1, round(decel * share)))
+    return out
+
+
+def _value(text: str, cpr: int, what: str) -> int:
+    return units.parse_position(text, cpr, what=what)
+
+
+def plan_move(cfg: ArmConfig, pair: PairConfig, request: MoveRequest, motors: Mapping[str, int], *,
+              accel: int | None = None, decel: int | None = None) -> MovePlan:
+    """Motor targets and profiles for ``request`` from the motors' present positions; refuses a
+    target outside either joint's normal range or the motor box. ``accel``/``decel``: motor
+    counts/s² when the joints' config has none (the drives' present AC/DC)."""
+    if request.sigma is None and request.delta is None:
+        raise UsageError("diffdrive move: give --sigma, --delta or both (a joint left out holds)")
+    sj, dj = cfg.joints[pair.sigma], cfg.joints[pair.delta]
+    a, b = pair.drive_a, pair.drive_b
+    s0, d0 = diffpair.to_joints(motors[a], motors[b])
+    s1, d1 = s0, d0
+    if request.sigma is not None:
+        v = _value(request.sigma, sj.cpr, "--sigma")
+        s1 = s0 + v if request.relative else v
+    if request.delta is not None:
+        v = _value(request.delta, dj.cpr, "--delta")
+        d1 = d0 + v if request.relative else v
+    for joint, value, opt in ((sj, s1, "--sigma"), (dj, d1, "--delta")):
+        lo, hi = joint.normal_range
+        if not lo <= value <= hi:
+            raise UsageError(f"{opt}: {joint.name} target {value} counts is outside the joint's normal range "
+                             f"{_range_text(joint.normal_range)}", hint="diffdrive move stays inside the normal ranges "
+                             f"(see `sherpa diffdrive limits {pair.name}`)")
+    if not diffpair.is_reachable(s1, d1):
+        # Σ and Δ of whole motor positions have equal parity: the held (or Δ) joint gives way one count
+        moving = "sigma" if request.sigma is not None else "delta"
+        held = dj.normal_range if moving == "sigma" else sj.normal_range
+        s1, d1 = diffpair.hold_other(s1, d1, moving, held)
+    ma, mb = diffpair.to_motors(s1, d1)
+    box = diffpair.motor_box(sj.full_range, dj.full_range)
+    if not box.contains(ma, mb):
+        raise UsageError(f"diffdrive move: motor targets {a}={ma}, {b}={mb} are outside the motor box "
+                         f"{a} {_range_text(box.a)}, {b} {_range_text(box.b)}")
+    dist = {a: ma - motors[a], b: mb - motors[b]}
+    ds, dd = abs(s1 - s0), abs(d1 - d0)
+    if request.velocity is not None:
+        cpr = sj.cpr if ds >= dd else dj.cpr
+        joint_speed = abs(units.parse_velocity(request.velocity, cpr, what="--velocity"))
+        if joint_speed == 0:
+            raise UsageError("--velocity must not be 0")
+        for joint, dist_j in ((sj, ds), (dj, dd)):
+            if dist_j and joint.vel_limit is not None and joint_speed * dist_j / max(ds, dd) > joint.vel_limit:
+                raise UsageError(f"--velocity: {joint.name} would run at {joint_speed * dist_j // max(ds, dd)} counts/s, "
+                                 f"above its speed limit {joint.vel_limit} counts/s")
+        duration = max(ds, dd) / joint_speed
+    else:
+        times = []
+        for joint, dist_j in ((sj, ds), (dj, dd)):
+            if dist_j:
+                if joint.vel_limit is None:
+                    raise UsageError(f"{joint.name} has no velocity.limit in the config: give --velocity")
+                times.append(dist_j / joint.vel_limit)
+        duration = max(times, default=0.0)
+    longest = max(abs(x) for x in dist.values())
+    speed = max(1, math.ceil(longest / duration)) if duration else 1
+    # joint accelerations bound the motors like speeds do: a motor at AC moves Σ or Δ at up to 2 AC
+    acc = [j.accel for j in (sj, dj) if j.accel]
+    dec = [j.decel for j in (sj, dj) if j.decel]
+    ac = max(1, min(acc) // 2) if acc else (accel or speed * 10)
+    dc = max(1, min(dec) // 2) if dec else (decel or speed * 10)
+    prof = profiles(dist, speed, ac, dc, scaled=not request.naive)
+    if request.naive:
+        prof = {n: Profile(speed, ac, dc) for n in dist}
+    ramps = speed / ac + speed / dc
+    return MovePlan(pair, (s0, d0), (s1, d1), dict(motors), {a: ma, b: mb}, prof, duration,
+                    timeout=2 * (duration + ramps) + 5.0, naive=request.naive)
+
+
+# --------------------------------------------------------------------------- coupling (pure)
+
+@dataclass
+class Coupling:
+    """How far the pair left the straight Σ/Δ path during a move."""
+
+    move: float  # length of the move in joint counts (Euclidean in Σ/Δ)
+    peak_sigma: float  # counts off the straight path, Σ component (peak of |.|)
+    peak_delta: float
+    held: str | None  # the joint that should have held (None: both were asked to move)
+    held_peak: float  # its peak excursion from the start, counts
+    sigma_cpr: int
+    delta_cpr: int
+    held_cpr: int = 0
+
+    def fraction(self, counts: float) -> float:
+        return counts / self.move if self.move else 0.0
+
+    def as_dict(self) -> dict[str, Any]:
+        def entry(counts: float, cpr: int) -> dict[str, float]:
+            return {"counts": round(counts, 1), "rad": round(units.counts_to_rad(counts, cpr), 6),
+                    "fraction": round(self.fraction(counts), 4)}
+        out: dict[str, Any] = {"move_counts": round(self.move, 1),
+                               "sigma_off_path": entry(self.peak_sigma, self.sigma_cpr),
+                               "delta_off_path": entry(self.peak_delta, self.delta_cpr), "held": self.held}
+        if self.held is not None:
+            out["held_excursion"] = entry(self.held_peak, self.held_cpr)
+        return out
+
+
+def measure_coupling(samples: Sequence[tuple[float, int, int]], start: tuple[int, int], target: tuple[int, int],
+                     *, sigma_name: str, delta_name: str, sigma_cpr: int, delta_cpr: int,
+                     held: str | None = None) -> Coupling:
+    """Peak deviation of (Σ, Δ) from the straight segment start → target over ``samples`` of
+    (t, m_a, m_b); and the peak excursion from its start of ``held``, the joint that should have
+    held (by default the one whose target is its start)."""
+    s0, d0 = start
+    ds, dd = target[0] - s0, target[1] - d0
+    length2 = ds * ds + dd * dd
+    peak_s = peak_d = 0.0
+    for _, ma, mb in samples:
+        s, d = ma + mb, ma - mb
+        u = ((s - s0) * ds + (d - d0) * dd) / length2 if length2 else 0.0
+        u = min(max(u, 0.0), 1.0)
+        peak_s = max(peak_s, abs(s - (s0 + u * ds)))
+        peak_d = max(peak_d, abs(d - (d0 + u * dd)))
+    if held is None:
+        held = delta_name if dd == 0 and ds != 0 else sigma_name if ds == 0 and dd != 0 else None
+    held_peak, held_cpr = 0.0, 0
+    if held is not None:
+        sig = held == sigma_name
+        held_cpr = sigma_cpr if sig else delta_cpr
+        first = s0 if sig else d0
+        held_peak = max((abs((ma + mb if sig else ma - mb) - first) for _, ma, mb in samples), default=0.0)
+    return Coupling(math.sqrt(length2), peak_s, peak_d, held, held_peak, sigma_cpr, delta_cpr, held_cpr)
+
+
+# --------------------------------------------------------------------------- recording
+
+class PolledTrace:
+    """Both motors' positions during the move, sampled by the move's own loop (PX polled through
+    the interpreter). The stand-in for the TPDO-on-SYNC recorder of `sherpa log`."""
+
+    source = "polled PX"
+
+    def __init__(self, drives: tuple[str, str]) -> None:
+        self.drives = drives
+        self.samples: list[tuple[float, int, int]] = []
+
+    def add(self, t: float, motors: Mapping[str, int]) -> None:
+        a, b = self.drives
+        self.samples.append((t, int(motors[a]), int(motors[b])))
+
+
+# --------------------------------------------------------------------------- common start
+
+class CommonStart:
+    """Starts both motors of a pair together; restores what it changed (0x2040, RAM) on close.
+
+    ``method``: ``group`` (one BG to the group id), ``sequential`` (BG, BG). Use as a context
+    manager inside the motion guard, after the motors are enabled."""
+
+    def __init__(self, session: Any, refs: Sequence[Any], clients: Mapping[str, Any], method: str,
+                 group_id: int) -> None:
+        self.session, self.refs, self.clients, self.method, self.group_id = session, list(refs), clients, method, group_id
+        self._old: dict[str, int] = {}
+        self.bus = refs[0].bus
+
+    def __enter__(self) -> "CommonStart":
+        if self.method == "group":
+            if len({r.bus for r in self.refs}) != 1:
+                raise ConfigError("motion.pair_start=group needs both drives of the pair on one bus; "
+                                  "use pair_start: sequential")
+            clash = [n for n, d in self.session.cfg.drives.items()
+                     if d.bus == self.bus and d.node == self.group_id]
+            if clash:
+                raise ConfigError(f"motion.pair_group_id {self.group_id} is the node id of {clash[0]} on bus "
+                                  f"{self.bus}: choose an id no device uses")
+            try:
+                for r in self.refs:
+                    sdo = self.session.sdo(r)
+                    old = (bytes(sdo.upload(GROUP_INDEX, 0, name="group id")) + b"\0")[0]
+                    if old != self.group_id:
+                        sdo.download(GROUP_INDEX, 0, bytes([self.group_id]), name="group id")
+                        self._old[r.name] = old
+            except BaseException:
+                self.close()
+                raise
+        return self
+
+    def begin(self, drives: Sequence[str] | None = None) -> None:
+        """BG for the named drives (default both): one group frame, or one BG per drive."""
+        names = list(drives) if drives is not None else [r.name for r in self.refs]
+        if self.method == "group" and len(names) == len(self.refs):
+            from sherpa_cli.elmo import codec
+
+            self.session.links[self.bus].network.send_message(RPDO2_BASE + self.group_id,
+                                                              codec.encode_execute("BG"))
+            return
+        for n in names:
+            self.clients[n].execute("BG")
+
+    def close(self) -> None:
+        for r in self.refs:
+            if r.name in self._old:
+                try:
+                    self.session.sdo(r).download(GROUP_INDEX, 0, bytes([self._old.pop(r.name)]), name="group id")
+                except Exception:  # the next command's start writes it again; nothing was saved
+                    pass
+
+    def __exit__(self, *exc: Any) -> None:
+        self.close()
+
+
+# --------------------------------------------------------------------------- running it
+
+@dataclass
+class MoveResult:
+    pair: str
+    sigma: str
+    delta: str
+    drives: tuple[str, str]
+    mode: str  # naive | group | sequential
+    feedback: bool
+    start: tuple[int, int]
+    target: tuple[int, int]
+    end: tuple[int, int]
+    sigma_cpr: int
+    delta_cpr: int
+    motors_start: dict[str, int] = field(default_factory=dict)
+    motors_end: dict[str, int] = field(default_factory=dict)
+    motor_commands: dict[str, Any] = field(default_factory=dict)
+    coupling: Coupling | None = None
+    samples: list[tuple[float, int, int]] = field(default_factory=list)
+    trace_source: str = ""
+    corrections: int = 0
+    calibration: list[calibration.Calibration] = field(default_factory=list)
+    breaches: list[Any] = field(default_factory=list)
+    outcome: str = "done"
+    duration: float | None = None
+    guard_lines: list[str] = field(default_factory=list)
+    stop: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def ok(self) -> bool:
+        return not self.breaches
+
+    def as_dict(self) -> dict[str, Any]:
+        def joint(i: int) -> dict[str, Any]:
+            cpr = self.sigma_cpr if i == 0 else self.delta_cpr
+            return {"start": self.start[i], "target": self.target[i], "end": self.end[i],
+                    "error": self.end[i] - self.target[i],
+                    "end_rad": round(units.counts_to_rad(self.end[i], cpr), 6)}
+        return {"pair": self.pair, "ok": self.ok, "outcome": self.outcome, "mode": self.mode,
+                "feedback": self.feedback, "drives": list(self.drives),
+                "sigma": {"joint": self.sigma, **joint(0)}, "delta": {"joint": self.delta, **joint(1)},
+                "motors_start": dict(self.motors_start), "motors_end": dict(self.motors_end),
+                "motor_commands": dict(self.motor_commands),
+                "coupling": self.coupling.as_dict() if self.coupling else None,
+                "recording": {"source": self.trace_source, "samples": len(self.samples)},
+                "feedback_corrections": self.corrections, "duration_s": self.duration,
+                "calibration": [c.as_dict() for c in self.calibration],
+                "limit": [b.as_dict() for b in self.breaches], "stop": dict(self.stop)}
+
+
+def _refs(cfg: ArmConfig, drives: Sequence[str]) -> list[Any]:
+    from sherpa_cli.ops.session import DriveRef
+
+    return [DriveRef(d, cfg.drives[d].bus, cfg.drives[d].node, cfg.drives[d]) for d in drives]
+
+
+def prepare(session: Any, pair: PairConfig, request: MoveRequest) -> tuple[MovePlan, list[calibration.Calibration]]:
+    """Read positions and calibration, then plan; nothing is written but NMT start."""
+    cfg = session.cfg
+    refs = _refs(cfg, (pair.drive_a, pair.drive_b))
+    clients = {r.name: session.client(r) for r in refs}
+    for c in clients.values():
+        c.nmt_start()
+    motors = {d: int(c.get("PX")) for d, c in clients.items()}
+    acs = [int(c.get("AC")) for c in clients.values()]
+    dcs = [int(c.get("DC")) for c in clients.values()]
+    p = plan_move(cfg, pair, request, motors, accel=min(acs) or None, decel=min(dcs) or None)
+    cal = calibration.read_calibration(cfg, cfg.joints[pair.sigma], lambda d: clients[d])
+    if not cal.calibrated and not request.uncalibrated:
+        raise SafetyError(f"{pair.name}: refusing a move: joint {cal.joint} is {cal.reason}",
+                          hint="home it first, or pass --uncalibrated to move by the counter as it is "
+                               "(positions are then relative to where the joints stood at power-up)")
+    return p, [cal]
+
+
+class Feedback:
+    """--feedback: keeps both motors at the same share of their own distance (which is the straight
+    Σ/Δ path). Each cycle the progress difference e = p_a - p_b (measured PX) gives a correction
+    c = gain·e + integral·∫e dt, bounded by ``limit``; motor a's SP/AC/DC are scaled by (1 - c) and
+    motor b's by (1 + c): the motor ahead slows, the one behind speeds up. The integral learns a
+    steady mismatch (one motor faster than the other). None when one motor does not move."""
+
+    def __init__(self, plan: MovePlan, gain: float, limit: float, integral: float | None = None) -> None:
+        self.plan, self.gain, self.limit = plan, gain, limit
+        self.integral = gain * 10 if integral is None else integral
+        self._sum = 0.0
+        self._t: float | None = None
+
+    def profiles(self, t: float, motors: Mapping[str, int]) -> dict[str, Profile] | None:
+        p = self.plan
+        a, b = p.pair.drive_a, p.pair.drive_b
+        prog = {}
+        for d in (a, b):
+            dist = p.motor_targets[d] - p.motors_start[d]
+            if dist == 0:
+                return None
+            prog[d] = (motors[d] - p.motors_start[d]) / dist
+        err = prog[a] - prog[b]
+        if self._t is not None:
+            self._sum += err * (t - self._t)
+        self._t = t
+        corr = max(-self.limit, min(self.limit, self.gain * err + self.integral * self._sum))
+
+        def scaled(pr: Profile, k: float) -> Profile:
+            return Profile(max(1, round(pr.sp * k)), max(1, round(pr.ac * k)), max(1, round(pr.dc * k)))
+        return {a: scaled(p.profiles[a], 1 - corr), b: scaled(p.profiles[b], 1 + corr)}
+
+
+def run_move(session: Any, pair: PairConfig, request: MoveRequest, *, guard_factory: Callable[..., Any] | None = None,
+             clock: Callable[[], float] = time.monotonic, sleep: Callable[[float], None] = time.sleep,
+             on_event: Callable[[str], None] | None = None,
+             trace_factory: Callable[[tuple[str, str]], Any] = PolledTrace) -> MoveResult:
+    """Plan, then move both motors inside the motion guard with the limit watch, recording both."""
+    from sherpa_cli.elmo.faults import decode_sr, describe_mf
+    from sherpa_cli.ops.joint_jog import move_to, stop_now, wait_standstill
+    from sherpa_cli.ops.motion import MotionGuard, MotionSettings
+
+    cfg = session.cfg
+    method, group_id = pair_settings(cfg)
+    if request.naive:
+        method = "sequential"
+        if request.feedback:
+            raise UsageError("--naive and --feedback do not go together: --naive is the seed's way, for comparison")
+    p, cals = prepare(session, pair, request)
+    drives = (pair.drive_a, pair.drive_b)
+    refs = _refs(cfg, drives)
+    by_name = {r.name: r for r in refs}
+    settings = MotionSettings.from_config(cfg, {r.bus for r in refs})
+    watched = tuple(limit_watch.joints_moved_by(cfg, drives))
+    sj, dj = cfg.joints[pair.sigma], cfg.joints[pair.delta]
+    result = MoveResult(pair.name, pair.sigma, pair.delta, drives, "naive" if request.naive else method,
+                        request.feedback, p.start, p.target, p.start, sj.cpr, dj.cpr,
+                        motors_start=dict(p.motors_start), calibration=cals)
+    trace = trace_factory(drives)
+    result.trace_source = getattr(trace, "source", type(trace).__name__)
+    guard = (guard_factory or MotionGuard)(session, refs, settings=settings, clock=clock, sleep=sleep,
+                                           on_event=on_event)
+    t0 = clock()
+    try:
+        with guard:
+            clients = {d: guard.client(by_name[d]) for d in drives}
+
+            def check_drives() -> None:
+                guard.check()
+                for d, c in clients.items():
+                    sr = decode_sr(int(guard.query(by_name[d], "SR")))
+                    if not sr.motor_on:
+                        mf = int(guard.query(by_name[d], "MF"))
+                        why = "; ".join(describe_mf(mf)) if mf else "MO=0 from elsewhere (sherpa stop, another tool)"
+                        raise SafetyError(f"{c.label}: the motor was switched off during the move: {why}")
+
+            start = CommonStart(session, refs, clients, method, group_id)
+            with start:
+                for d in drives:
+                    guard.enable(by_name[d], UM_POSITION)
+                for d, c in clients.items():
+                    pr = p.profiles[d]
+                    c.set("SP", 0, pr.sp)
+                    c.set("AC", 0, pr.ac)
+                    c.set("DC", 0, pr.dc)
+                    c.set("PA", 0, p.motor_targets[d])
+                result.motor_commands = {d: {"PA": p.motor_targets[d], **p.profiles[d].as_dict()} for d in drives}
+                last = dict(p.profiles)
+                fb = Feedback(p, cfg.motion.feedback_gain, cfg.motion.feedback_limit) if request.feedback else None
+
+                def sample() -> dict[str, int]:
+                    motors = {d: int(guard.query(by_name[d], "PX")) for d in drives}
+                    trace.add(clock() - t0, motors)
+                    if fb is not None:
+                        new = fb.profiles(clock() - t0, motors)
+                        near_end = any(abs(p.motor_targets[d] - motors[d]) <= 2 for d in drives)
+                        if new is not None and not near_end and new != last:
+                            for d in drives:
+                                for key, v in new[d].as_dict().items():
+                                    if v != last[d].as_dict()[key]:
+                                        clients[d].set(key, 0, v)
+                            start.begin()  # in UM=5 a BG takes the new profile on the fly
+                            last.update(new)
+                            result.corrections += 1
+                    return motors
+
+                t_begin = clock()
+                start.begin()
+                w = limit_watch.watch(watched, sample, clock=clock, sleep=sleep, interval=settings.poll_interval,
+                                      finished=lambda m: all(int(c.get("MS")) == 0 for c in clients.values()),
+                                      duration=p.timeout, check_drives=check_drives)
+                result.duration = round(clock() - t_begin, 3)
+                if w.outcome == "breach":
+                    result.outcome = "limit"
+                    result.breaches = list(w.breaches)
+                    stop_now(clients, "position")
+                    wait_standstill(clients, guard, settings, clock, sleep)
+                    now = {d: int(clients[d].get("PX")) for d in drives}
+                    back = limit_watch.recovery_targets(watched, now, w.breaches, hold={})
+                    move_to(guard, by_name, clients, back, _slow_pair(sj, dj), settings, clock, sleep,
+                             "the move back into the normal range")
+                elif w.outcome == "elapsed":
+                    raise SafetyError(f"{pair.name}: did not reach Σ={p.target[0]}, Δ={p.target[1]} within "
+                                      f"{p.timeout:g} s", hint="check the drives with `sherpa monitor --once`")
+                final = {d: int(clients[d].get("PX")) for d in drives}
+                if w.outcome == "finished":
+                    # the profile is done (MS=0); the motor may still be settling onto it (servo lag):
+                    # wait a bounded moment for PX to reach the target, as a TR window would
+                    settle_end = clock() + SETTLE_S
+                    while final != dict(p.motor_targets) and clock() < settle_end:
+                        guard.check()
+                        sleep(settings.poll_interval)
+                        final = {d: int(clients[d].get("PX")) for d in drives}
+                trace.add(clock() - t0, final)
+    except BaseException as exc:
+        exc.motion_report = guard.report  # type: ignore[attr-defined]
+        raise
+    result.motors_end = final
+    result.end = diffpair.to_joints(final[pair.drive_a], final[pair.drive_b])
+    result.samples = list(trace.samples)
+    result.coupling = measure_coupling(result.samples, p.start, p.target, sigma_name=pair.sigma,
+                                       delta_name=pair.delta, sigma_cpr=sj.cpr, delta_cpr=dj.cpr,
+                                       held=pair.delta if request.delta is None else
+                                       pair.sigma if request.sigma is None else None)
+    result.guard_lines = guard.report.lines()
+    result.stop = guard.report.as_json()
+    return result
+
+
+def _slow_pair(sj: Any, dj: Any) -> int:
+    limits = [v for v in (sj.vel_limit, dj.vel_limit) if v]
+    return max(1, (min(limits) if limits else 200) // 4)
+
+
+# --------------------------------------------------------------------------- plot
+
+def plot(result: MoveResult, path: str) -> None:
+    """Both joints over time (rad), like the seed's Figs. 9.10/9.11; matplotlib's Agg backend."""
+    try:
+        import matplotlib
+    except ImportError:
+        raise UsageError("--plot needs matplotlib, which is not installed",
+                         hint="pip install 'sherpa-cli[plot]' (or pip install matplotlib)") from None
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    t = [s[0] for s in result.samples]
+    sig = [units.counts_to_rad(s[1] + s[2], result.sigma_cpr) for s in result.samples]
+    dlt = [units.counts_to_rad(s[1] - s[2], result.delta_cpr) for s in result.samples]
+    fig, axes = plt.subplots(2, 1, sharex=True, figsize=(7, 5))
+    for ax, ys, name, i, cpr in ((axes[0], sig, f"Σ {result.sigma}", 0, result.sigma_cpr),
+                                 (axes[1], dlt, f"Δ {result.delta}", 1, result.delta_cpr)):
+        ax.plot(t, ys, label="measured")
+        ax.axhline(units.counts_to_rad(result.target[i], cpr), linestyle="--", color="grey", label="target")
+        ax.set_ylabel(f"{name} (rad)")
+        ax.grid(True)
+        ax.legend(loc="best")
+    axes[1].set_xlabel("time (s)")
+    fig.suptitle(f"diffdrive move {result.pair} ({result.mode}{', feedback' if result.feedback else ''})")
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
