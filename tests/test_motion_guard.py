@@ -311,3 +311,95 @@ def test_motion_config_round_trips_through_convert(tmp_path, cfg):
 
     again = load_config_text(dump_native(cfg), "again.yaml")
     assert again.motion == cfg.motion and again.motion.consumer_time_ms == 300
+
+
+# -- review of issue 12: the exit's safety defects ---------------------------------------------------
+
+def test_a_failed_mo0_keeps_the_dead_man_armed_and_says_so(cfg, monkeypatch):
+    from sherpa_cli.errors import CommunicationError
+
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
+        ref = resolve_target(cfg, "drive1")
+        with pytest.raises(SafetyError, match="MO=0: no reply"):
+            with MotionGuard(s, [ref], settings=MotionSettings.from_config(cfg)) as g:
+                g.enable(ref, 2)
+                c = g.client(ref)
+
+                def lost(*a, **k):
+                    raise CommunicationError("no reply")
+                monkeypatch.setattr(c, "motor_off", lost)
+                monkeypatch.setattr(c, "set", lambda *a, **k: None if a[0] != "UM" else lost())
+        (r,) = g.report.drives
+        assert not r.motor_off
+        assert r.kept == ["UM=2 (motor not confirmed off)", "0x1016:1 (stop failed)", "0x1029:1 (stop failed)",
+                          "0x6007:0 (stop failed)"] and r.restored == []
+        assert any("UM=5 not restored" in p for p in r.problems)
+        assert writes(s, "drive1") == ARMED  # nothing put back: the consumer still watches
+        assert not g._hb_thread.is_alive()
+        deadline = time.monotonic() + 5  # no heartbeat any more: the drive switches itself off
+        while sim_drive(s, "drive1").motor_on:
+            assert time.monotonic() < deadline
+            time.sleep(0.02)
+
+
+def test_an_os_error_on_one_drive_still_stops_the_other_and_the_heartbeat(cfg, monkeypatch):
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
+        refs = [resolve_target(cfg, "drive1"), resolve_target(cfg, "drive2")]
+        with pytest.raises(SafetyError, match="OSError: bus gone"):
+            with MotionGuard(s, refs, settings=MotionSettings.from_config(cfg)) as g:
+                for ref in refs:
+                    g.enable(ref, 5)
+                c1 = g.client(refs[0])
+
+                def gone(*a, **k):
+                    raise OSError("bus gone")
+                monkeypatch.setattr(c1, "execute", gone)
+                monkeypatch.setattr(c1, "motor_off", gone)
+        r1, r2 = g.report.drives
+        assert r1.stopped_by == "not stopped" and "0x1016:1 (stop failed)" in r1.kept
+        assert (r2.stopped_by, r2.motor_off, r2.problems) == ("ST", True, [])
+        assert not sim_drive(s, "drive2").motor_on and writes(s, "drive2") == ARMED + RESTORED
+        assert not g._hb_thread.is_alive()
+
+
+def test_a_hung_exit_step_lets_the_heartbeat_stop_within_that_step(cfg, monkeypatch):
+    import dataclasses
+
+    settings = dataclasses.replace(MotionSettings.from_config(cfg), liveness_timeout=0.2, request_bound=0.01)
+    seen = {}
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
+        ref = resolve_target(cfg, "drive1")
+        try:
+            with MotionGuard(s, [ref], settings=settings) as g:
+                g.enable(ref, 5)
+                c = g.client(ref)
+                real_get = c.get
+
+                def get(letters, *a):
+                    if letters == "PX" and g._exiting and "alive" not in seen:
+                        time.sleep(1.0)  # the PX read hangs (longer than one step's allowance)
+                        seen["alive"] = g._hb_thread.is_alive()
+                    return real_get(letters, *a)
+                monkeypatch.setattr(c, "get", get)
+        except SafetyError:
+            pass  # the drive tripped meanwhile: the restore may fail, that is not what this test is about
+    assert seen == {"alive": False}
+
+
+def test_the_original_unit_mode_is_recorded_before_the_um_write(cfg, monkeypatch):
+    from sherpa_cli.errors import CommunicationError
+
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
+        ref = resolve_target(cfg, "drive1")
+        with pytest.raises(CommunicationError):
+            with MotionGuard(s, [ref], settings=MotionSettings.from_config(cfg)) as g:
+                c = g.client(ref)
+                real_set = c.set
+
+                def half(letters, *a):
+                    real_set(letters, *a)
+                    if letters == "UM" and not g._exiting:
+                        raise CommunicationError("UM written, reply lost")
+                monkeypatch.setattr(c, "set", half)
+                g.enable(ref, 2)
+        assert "UM=5" in g.report.drives[0].restored
