@@ -154,3 +154,18 @@ def test_cli_velocity_jog_final_line(cli):
     assert last.startswith("elbow_pitch (elbow_1a, can1:40): stopped at ") and "time up" in last
     assert stops == ["stop: elbow_1a (can1:40): stopped by ST; motor off; restored 0x1016:1, 0x1029:1, 0x6007:0"]
     assert "\r" not in result.stderr  # not a terminal: no live line
+
+
+def test_position_jog_by_is_checked_again_with_the_px_read_after_arming(cfg, monkeypatch):
+    from sherpa_cli.ops import jog as jog_mod
+
+    real_precheck = jog_mod._precheck
+
+    def precheck_then_the_joint_moves(session, target, req):
+        cal = real_precheck(session, target, req)  # checked with PX = 0: 0 + 318 is inside
+        with session.sim.lock:
+            session.sim.drives["drive1"].motor.counts = 19800  # pushed meanwhile: 19800 + 318 is not
+        return cal
+    monkeypatch.setattr(jog_mod, "_precheck", precheck_then_the_joint_moves)
+    with pytest.raises(UsageError, match=r"j1: target 20118 counts is outside the joint's normal range"):
+        jog(cfg, "j1", mode="position", by=0.5, uncalibrated=True)

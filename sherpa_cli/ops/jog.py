@@ -241,6 +241,11 @@ def _move(guard: MotionGuard, target: JogTarget, req: JogRequest, settings: Moti
                                        done=done, limit=limit)
     if req.mode == "position":
         goal = _counts_to(target, req.to) if req.to is not None else start + _counts_to(target, req.by)  # type: ignore[arg-type]  # --to or --by
+        if target.joint is not None:  # again with this PX: the joint may have moved since _precheck
+            lo, hi = target.joint.normal_range
+            if not lo <= goal <= hi:
+                raise UsageError(f"{target.joint.name}: target {goal} counts is outside the joint's normal range "
+                                 f"[{lo}, {hi}]", hint="jog moves a joint only inside its normal range")
         state["target"] = goal
         guard.enable(ref, UM_POSITION)
         bound = _move_bound(c, abs(goal - start))
