@@ -169,3 +169,26 @@ def test_position_jog_by_is_checked_again_with_the_px_read_after_arming(cfg, mon
     monkeypatch.setattr(jog_mod, "_precheck", precheck_then_the_joint_moves)
     with pytest.raises(UsageError, match=r"j1: target 20118 counts is outside the joint's normal range"):
         jog(cfg, "j1", mode="position", by=0.5, uncalibrated=True)
+
+
+def test_velocity_jog_without_a_configured_speed_limit_is_refused(tmp_path):
+    path = tmp_path / "arm.yaml"
+    path.write_text(CONFIG.replace("    velocity: {limit: 8000, trip: 12000}\n", ""), encoding="utf-8")
+    cfg = load_config(path)
+    assert cfg.joints["j1"].vel_limit is None
+    with pytest.raises(UsageError, match=r"j1: no speed limit configured \(joints.j1.velocity.limit is missing\)"):
+        check_request(resolve_jog_target(cfg, "j1"), JogRequest(mode="velocity", velocity=0.1, duration=0.2))
+
+
+def test_pair_velocity_jog_without_a_configured_speed_limit_is_refused():
+    import dataclasses
+
+    from sherpa_cli.ops import joint_jog
+
+    from test_jog_pair import CONFIG as PAIR_CONFIG
+
+    pair_cfg = load_config(PAIR_CONFIG)
+    axis = dataclasses.replace(joint_jog.resolve_axis(pair_cfg, "pitch"), vel_limit=None)
+    with pytest.raises(UsageError, match="pitch: no speed limit configured"):
+        joint_jog.check_offline(pair_cfg, axis, joint_jog.JogRequest(mode="velocity", velocity="100counts/s",
+                                                                     duration=0.2))

@@ -140,7 +140,11 @@ def check_request(target: JogTarget, req: JogRequest) -> None:
                                   f"[{lo}, {hi}]", hint="jog moves a joint only inside its normal range")
     elif req.mode == "velocity":
         assert req.velocity is not None
-        if joint is not None and joint.vel_limit is not None:
+        if joint is None or joint.vel_limit is None:  # never an unchecked speed (seed rosparam has no limit)
+            where = f"joints.{joint.name}.velocity.limit" if joint is not None else "velocity.limit of its joint"
+            raise UsageError(f"{target.name}: no speed limit configured ({where} is missing), so a velocity jog "
+                             "cannot be checked", hint="give the joint `velocity: {limit: COUNTS_PER_S}` in the config")
+        else:
             counts = abs(rad_per_s_to_counts_per_s(req.velocity, joint.cpr))
             if counts > joint.vel_limit:
                 limit = counts_to_rad(joint.vel_limit, joint.cpr)
