@@ -192,3 +192,41 @@ def test_pair_velocity_jog_without_a_configured_speed_limit_is_refused():
     with pytest.raises(UsageError, match="pitch: no speed limit configured"):
         joint_jog.check_offline(pair_cfg, axis, joint_jog.JogRequest(mode="velocity", velocity="100counts/s",
                                                                      duration=0.2))
+
+
+def _stop_that_never_settles(monkeypatch):
+    from sherpa_cli.ops import motion
+
+    real = motion.stop_drive
+
+    def stop_drive(*a, **k):
+        how, standstill, problems = real(*a, **k)
+        return how, False, problems + ["not at standstill 2 s after the stop"]
+    monkeypatch.setattr(motion, "stop_drive", stop_drive)
+
+
+def test_ctrl_c_ending_a_velocity_jog_does_not_hide_a_failed_stop(cfg, monkeypatch):
+    from sherpa_cli.errors import SafetyError
+
+    _stop_that_never_settles(monkeypatch)
+    calls = []
+
+    def progress(p):
+        calls.append(p)
+        if len(calls) == 3:
+            raise KeyboardInterrupt  # how an open-ended velocity jog normally ends
+    target = resolve_jog_target(cfg, "j1")
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
+        with pytest.raises(SafetyError, match="drive1: not at standstill") as info:
+            run_jog(s, target, JogRequest(mode="velocity", velocity=0.5),
+                    settings=MotionSettings.from_config(cfg), on_progress=progress)
+    assert info.value.motion_report.drives[0].standstill is False
+
+
+def test_cli_json_error_carries_the_stop_report(cli, monkeypatch):
+    _stop_that_never_settles(monkeypatch)
+    result = cli("--sim", "--json", "jog", "elbow_pitch", "--velocity", "0.2", "--for", "0.2", "--apply")
+    assert result.exit_code != 0, result.transcript()
+    data = json.loads(result.stdout)
+    assert "did not go cleanly" in data["error"]
+    assert data["stop"]["drives"][0]["standstill"] is False

@@ -193,6 +193,12 @@ def run_jog(session: Any, target: JogTarget, req: JogRequest, *, settings: Motio
             exc.motion_report = guard.report  # type: ignore[attr-defined]  # the CLI shows how it stopped
             raise
         interrupted = True  # Ctrl-C is how an open-ended velocity jog is meant to end
+        if not guard.report.ok:  # ... but a stop or restore that failed is never hidden behind it
+            problems = [f"{d.drive}: {p}" for d in guard.report.drives for p in d.problems]
+            err = SafetyError("the stop after the motion did not go cleanly: " + "; ".join(problems),
+                              hint="check the drives with `sherpa monitor --once`; `sherpa stop` stops them all")
+            err.motion_report = guard.report  # type: ignore[attr-defined]
+            raise err from exc
     except BaseException as exc:
         exc.motion_report = guard.report  # type: ignore[attr-defined]
         raise
