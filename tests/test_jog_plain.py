@@ -230,3 +230,21 @@ def test_cli_json_error_carries_the_stop_report(cli, monkeypatch):
     data = json.loads(result.stdout)
     assert "did not go cleanly" in data["error"]
     assert data["stop"]["drives"][0]["standstill"] is False
+
+
+def test_the_limit_watch_stops_with_the_configured_stop_method(tmp_path):
+    path = tmp_path / "arm.yaml"
+    path.write_text(CONFIG.replace("motion: {consumer_time_ms: 300}", "motion: {consumer_time_ms: 300, stop_method: jv0}"),
+                    encoding="utf-8")
+    cfg = load_config(path)
+    target = resolve_jog_target(cfg, "j1")
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
+        drive = s.sim.drives["drive1"]
+        with s.sim.lock:
+            drive.motor.counts = 19950  # 50 counts short of the full range's end (20000)
+        result = run_jog(s, target, JogRequest(mode="velocity", velocity=0.5, duration=3.0),
+                         settings=MotionSettings.from_config(cfg))
+        with s.sim.lock:
+            executed = [d[:2].decode() for _, cid, d in drive.received if cid == 0x305 and len(d) == 4]
+    assert result.breach is not None
+    assert "ST" not in executed and "BG" in executed  # motion.stop_method jv0: JV=0 + BG, never ST

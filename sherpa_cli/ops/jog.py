@@ -325,7 +325,7 @@ def _limit_breach(guard: MotionGuard, c: Any, target: JogTarget, px: int, settin
                   clock: Callable[[], float], sleep: Callable[[float], None], state: dict[str, Any]) -> bool:
     """The joint-limit watch (seed 6.1, ops/limit_watch.py): past the full range, stop at once, send
     nothing more of the jog, and move the joint back (position mode) to the nearest normal edge."""
-    from sherpa_cli.ops import joint_jog, limit_watch
+    from sherpa_cli.ops import joint_jog, limit_watch, motion
 
     joint = target.joint
     assert joint is not None
@@ -334,8 +334,16 @@ def _limit_breach(guard: MotionGuard, c: Any, target: JogTarget, px: int, settin
     if not breaches:
         return False
     clients = {target.ref.name: c}
-    joint_jog.stop_now(clients, "torque" if guard.unit_mode(target.ref) == UM_TORQUE else "position")
-    joint_jog.wait_standstill(clients, guard, settings, clock, sleep)
+    # the configured stop (motion.stop_method: ST, or JV=0 + BG where ST must not be used), TC=0 first
+    # in torque mode, then the bounded wait for standstill
+    _how, standstill, problems = motion.stop_drive(
+        c, unit_mode=guard.unit_mode(target.ref), method=settings.stop_method,
+        standstill_timeout=settings.standstill_timeout, poll_interval=settings.poll_interval, clock=clock,
+        sleep=sleep, pulse=guard.check)
+    if problems or standstill is False:
+        raise SafetyError(f"{c.label}: the stop at the joint limit did not go cleanly: "
+                          + "; ".join(problems or ["not at standstill"]),
+                          hint="check the joint; `sherpa stop` stops every drive")
     back = limit_watch.recovery_targets(watched, {target.ref.name: int(c.get("PX"))}, breaches)
     speed = max(1, (joint.vel_limit or 200) // 2)
     joint_jog.move_to(guard, {target.ref.name: target.ref}, clients, back, speed, settings, clock, sleep,
