@@ -403,3 +403,19 @@ def test_the_original_unit_mode_is_recorded_before_the_um_write(cfg, monkeypatch
                 monkeypatch.setattr(c, "set", half)
                 g.enable(ref, 2)
         assert "UM=5" in g.report.drives[0].restored
+
+
+def test_a_leftover_consumer_entry_of_our_host_id_is_cleared_on_exit(cfg):
+    import struct
+
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
+        ref = resolve_target(cfg, "drive1")
+        s.client(ref).nmt_start()
+        s.sdo(ref).download(0x1016, 1, struct.pack("<I", HOST << 16 | 500), name="consumer")  # a killed run's
+        events = []
+        with MotionGuard(s, [ref], settings=MotionSettings.from_config(cfg), on_event=events.append) as g:
+            g.enable(ref, 5)
+        after = struct.unpack("<I", bytes(s.sdo(ref).upload(0x1016, 1, name="consumer"))[:4])[0]
+    assert after == 0
+    assert "0x1016:1" in g.report.drives[0].restored
+    assert any("left over from a run that did not exit cleanly" in e for e in events)

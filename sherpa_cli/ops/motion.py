@@ -440,6 +440,17 @@ class MotionGuard:
         for key, value in ((LOSS_ACTION, s.loss_action), (COMM_ERROR, s.comm_error_behaviour),
                            (CONSUMER, s.consumer_entry)):
             before = self._sdo_read(d, key)
+            if key == CONSUMER and before and (before >> 16) & 0x7F == s.host_node_id & 0x7F:
+                # our host id already watched: the leftover of a run that was killed before its exit.
+                # Its "before" is unknown -- disarmed (0) is put back, so it does not outlive this run
+                msg = (f"{d.client.label}: 0x1016:1 = 0x{before:08X} already watches host {s.host_node_id}: "
+                       "left over from a run that did not exit cleanly; it is cleared (0) on exit")
+                log.warning("%s", msg)
+                self._event(msg)
+                d.od_before[key] = 0
+                if before != value:
+                    self._sdo_write(d, key, value)
+                continue
             if before == value:
                 continue
             d.od_before[key] = before  # recorded first: a write that fails half-way is still put back
