@@ -419,3 +419,21 @@ def test_a_leftover_consumer_entry_of_our_host_id_is_cleared_on_exit(cfg):
     assert after == 0
     assert "0x1016:1" in g.report.drives[0].restored
     assert any("left over from a run that did not exit cleanly" in e for e in events)
+
+
+def test_a_refused_drive_at_entry_sends_no_stop_to_a_drive_the_guard_never_switched_on(cfg):
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
+        ref1 = resolve_target(cfg, "drive1")
+        c = s.client(ref1)  # another host moves drive1
+        c.nmt_start()
+        c.motor_on()
+        c.set("JV", 0, 1000)
+        c.execute("BG")
+        with s.sim.lock:
+            sim_drive(s, "drive2")._mf = 0x400000
+        with pytest.raises(SafetyError, match="drive2 .*in fault"):
+            with MotionGuard(s, [ref1, resolve_target(cfg, "drive2")], settings=MotionSettings.from_config(cfg)):
+                pytest.fail("the body must not run")
+        d1 = sim_drive(s, "drive1")
+        executed = [d[:2] for _, cid, d in d1.received if cid == 0x305 and len(d) == 4]
+        assert b"ST" not in executed and b"BG" in executed and d1.motor_on  # no ST from the refused guard

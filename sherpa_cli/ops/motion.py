@@ -307,7 +307,9 @@ class MotionGuard:
             self._exiting = True
             blocked = self._block_signals()
             try:
-                self._exit_all(reason="error")
+                # nothing was switched on yet: no stop to drives the guard never moved (another
+                # host may be moving them), only what was armed is put back
+                self._exit_all(reason="error", entering=True)
             finally:
                 try:
                     self._restore_signals()
@@ -509,13 +511,13 @@ class MotionGuard:
 
     # -- exit -------------------------------------------------------------------------------------
 
-    def _exit_all(self, reason: str) -> None:
+    def _exit_all(self, reason: str, entering: bool = False) -> None:
         self._exiting = True
         self.report.reason = reason
         try:
             for d in list(self._drives.values()):
                 try:
-                    self.report.drives.append(self._exit_drive(d))
+                    self.report.drives.append(self._exit_drive(d, stop=not entering or d.switched_on))
                 except Exception as exc:  # never one drive's failure leaves the others unstopped
                     r = DriveStop(d.ref.name, f"{d.ref.bus}:{d.ref.node}", stopped_by="not stopped")
                     r.problems.append(f"stop: {_why(exc)}")
@@ -527,10 +529,15 @@ class MotionGuard:
         """A sign of life before one exit step, bounded by that step (not by the whole exit)."""
         self._pulse(extra, exact=True)
 
-    def _exit_drive(self, d: _Drive) -> DriveStop:
+    def _exit_drive(self, d: _Drive, stop: bool = True) -> DriveStop:
         c, s = d.client, self.settings
         r = DriveStop(d.ref.name, f"{d.ref.bus}:{d.ref.node}")
         motor_confirmed_off = False
+        if not stop:
+            r.stopped_by = "not moved by this guard"
+            self._restore_dead_man(d, r, stop_failed=False)
+            self._event(r.line())
+            return r
         try:
             # a drive whose consumer tripped went to NMT Stopped (0x1029:1 = 2) and its interpreter is
             # deaf until started again; starting it moves nothing
@@ -578,6 +585,11 @@ class MotionGuard:
             else:
                 r.kept.append(f"UM={d.um} (motor not confirmed off)")
                 r.problems.append(f"UM={d.um_changed_from} not restored: the motor is not confirmed off")
+        self._restore_dead_man(d, r, stop_failed)
+        self._event(r.line())
+        return r
+
+    def _restore_dead_man(self, d: _Drive, r: DriveStop, stop_failed: bool) -> None:
         # the consumer entry first: once it is back, the heartbeat may stop without a trip
         for key in (CONSUMER, COMM_ERROR, LOSS_ACTION):
             if key not in d.od_before:
@@ -595,8 +607,6 @@ class MotionGuard:
                 r.restored.append(name)
             except Exception as exc:
                 r.problems.append(f"restore {name}: {_why(exc)}")
-        self._event(r.line())
-        return r
 
     # -- signals ----------------------------------------------------------------------------------
 
