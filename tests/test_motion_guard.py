@@ -294,6 +294,7 @@ def test_motion_settings_defaults_and_heartbeat_period():
     ("{stop_method: brake}", "stop_method 'brake': expected one of auto, st, jv0"),
     ("{velocity_unit_mode: 3}", "velocity_unit_mode 3"),
     ("{standstill_timeout: 0}", "standstill_timeout 0.0 s must be > 0"),
+    ("{standstill_velocity: -1}", "standstill_velocity -1 counts/s must be 0..1000"),
     ("{hostid: 3}", "hostid"),
 ])
 def test_motion_config_errors_name_the_key(tmp_path, motion, message):
@@ -437,3 +438,27 @@ def test_a_refused_drive_at_entry_sends_no_stop_to_a_drive_the_guard_never_switc
         d1 = sim_drive(s, "drive1")
         executed = [d[:2] for _, cid, d in d1.received if cid == 0x305 and len(d) == 4]
         assert b"ST" not in executed and b"BG" in executed and d1.motor_on  # no ST from the refused guard
+
+
+def test_standstill_allows_the_configured_velocity_noise():
+    from types import SimpleNamespace
+
+    from sherpa_cli.ops.motion import stop_drive
+
+    class Held:  # a stopped motor whose VX jitters by one count/s
+        label, settings = "held", SimpleNamespace(mo_confirm_timeout=0.1)
+
+        def get(self, letters, index=0):
+            return {"MO": 1, "VX": -1}[letters]
+
+        def execute(self, cmd):
+            pass
+
+    now = [0.0]
+
+    def sleep(dt):
+        now[0] += dt
+    how, standstill, problems = stop_drive(Held(), unit_mode=5, clock=lambda: now[0], sleep=sleep,
+                                           standstill_velocity=2)
+    assert (how, standstill, problems) == ("ST", True, [])
+    assert MotionSettings().standstill_velocity == 2

@@ -339,7 +339,7 @@ def _limit_breach(guard: MotionGuard, c: Any, target: JogTarget, px: int, settin
     _how, standstill, problems = motion.stop_drive(
         c, unit_mode=guard.unit_mode(target.ref), method=settings.stop_method,
         standstill_timeout=settings.standstill_timeout, poll_interval=settings.poll_interval, clock=clock,
-        sleep=sleep, pulse=guard.check)
+        sleep=sleep, pulse=guard.check, standstill_velocity=settings.standstill_velocity)
     if problems or standstill is False:
         raise SafetyError(f"{c.label}: the stop at the joint limit did not go cleanly: "
                           + "; ".join(problems or ["not at standstill"]),

@@ -520,6 +520,6 @@ def wait_standstill(clients: Mapping[str, Any], guard: Any, settings: Any, clock
     deadline = clock() + settings.standstill_timeout
     while clock() < deadline:
         guard.check()
-        if all(int(c.get("VX")) == 0 or not int(c.get("MO")) for c in clients.values()):
+        if all(abs(int(c.get("VX"))) <= settings.standstill_velocity or not int(c.get("MO")) for c in clients.values()):
             return
         sleep(settings.poll_interval)

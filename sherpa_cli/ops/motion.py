@@ -59,6 +59,7 @@ class MotionSettings:
     comm_error_behaviour: int = 2
     stop_method: str = "auto"  # auto | st | jv0
     standstill_timeout: float = 2.0
+    standstill_velocity: int = 2  # counts/s: |VX| at most this is standstill
     liveness_timeout: float = 1.0
     velocity_unit_mode: int = 5
     poll_interval: float = 0.01  # s between polls while waiting (the bus's poll_interval_ms)
@@ -80,7 +81,8 @@ class MotionSettings:
         return cls(host_node_id=m.host_node_id, consumer_time_ms=m.consumer_time_ms,
                    heartbeat_period_ms=m.heartbeat_period_ms, loss_action=m.loss_action,
                    comm_error_behaviour=m.comm_error_behaviour, stop_method=m.stop_method,
-                   standstill_timeout=m.standstill_timeout, liveness_timeout=m.liveness_timeout,
+                   standstill_timeout=m.standstill_timeout, standstill_velocity=m.standstill_velocity,
+                   liveness_timeout=m.liveness_timeout,
                    velocity_unit_mode=m.velocity_unit_mode, poll_interval=poll_ms / 1000,
                    request_bound=p.reply_timeout * (1 + p.retries))
 
@@ -184,9 +186,10 @@ def fault_reason(mf: int, sr: int) -> str | None:
 def stop_drive(client: Any, *, unit_mode: int | None, method: str = "auto", standstill_timeout: float = 2.0,
                poll_interval: float = 0.01, clock: Callable[[], float] = time.monotonic,
                sleep: Callable[[float], None] = time.sleep,
-               pulse: Callable[[], None] | None = None) -> tuple[str, bool | None, list[str]]:
+               pulse: Callable[[], None] | None = None,
+               standstill_velocity: int = 0) -> tuple[str, bool | None, list[str]]:
     """Stop one drive's motion: ST (JV=0 + BG where ST is refused), TC=0 first in torque mode; then
-    wait for VX = 0 (bounded). Returns (how, standstill reached or None if the motor is off, problems).
+    wait for |VX| <= ``standstill_velocity`` (bounded). Returns (how, standstill reached or None if the motor is off, problems).
 
     ``pulse`` (the motion guard's sign of life) is called before every request, so a hung request
     lets the heartbeat stop within one request's allowance."""
@@ -228,7 +231,7 @@ def stop_drive(client: Any, *, unit_mode: int | None, method: str = "auto", stan
         if not client.get("MO"):
             return " + ".join(how) or "-", None, problems  # switched off meanwhile (a trip): no motion left
         beat()
-        if client.get("VX") == 0:
+        if abs(client.get("VX")) <= standstill_velocity:
             return " + ".join(how) or "-", True, problems
         if clock() >= deadline:
             problems.append(f"not at standstill {standstill_timeout:g} s after the stop")
@@ -549,7 +552,8 @@ class MotionGuard:
             how, standstill, problems = stop_drive(c, unit_mode=d.um, method=s.stop_method,
                                                    standstill_timeout=s.standstill_timeout,
                                                    poll_interval=s.poll_interval, clock=self._clock,
-                                                   sleep=self._sleep, pulse=self._step)
+                                                   sleep=self._sleep, pulse=self._step,
+                                                   standstill_velocity=s.standstill_velocity)
             r.stopped_by, r.standstill = how, standstill
             r.problems.extend(problems)
         except Exception as exc:

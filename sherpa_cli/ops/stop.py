@@ -59,7 +59,8 @@ def stop_one(client: Any, ref: DriveRef, settings: MotionSettings, *, clock: Cal
     try:
         r.stopped_by, r.standstill, problems = stop_drive(
             client, unit_mode=um, method=settings.stop_method, standstill_timeout=settings.standstill_timeout,
-            poll_interval=settings.poll_interval, clock=clock, sleep=sleep)
+            poll_interval=settings.poll_interval, clock=clock, sleep=sleep,
+            standstill_velocity=settings.standstill_velocity)
         r.problems.extend(problems)
         motor_read_off = r.stopped_by == "motor was off"
     except Exception as exc:
