@@ -8,7 +8,8 @@
 #                             root, else /work/shared/tools/run-in-vcan-vm.sh)
 #        SHERPA_SKIP_VCAN=1   skip this stage on purpose (a machine without the runner); otherwise a
 #                             missing runner fails the stage
-#        SHERPA_VCAN_TIMEOUT  wall-clock limit of the guest run in seconds (default 570)
+#        SHERPA_VCAN_TIMEOUT  wall-clock limit of the guest run in seconds (default 1500: 42 realbus tests,
+#                             motion ones with subprocesses, in a 15-20x slower TCG guest)
 #        SHERPA_VCAN_CPUS     guest vCPUs (default 2: the simulator and the tests each get one)
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -22,7 +23,7 @@ if [ -z "$vm" ]; then
   done
   vm=${vm:-$root/../shared/tools/run-in-vcan-vm.sh}
 fi
-limit=${SHERPA_VCAN_TIMEOUT:-570}
+limit=${SHERPA_VCAN_TIMEOUT:-1500}
 cpus=${SHERPA_VCAN_CPUS:-2}
 interfaces=vcan0,vcan1,vcan2
 

@@ -495,6 +495,122 @@ def program_workers() -> int:
     return MAX_DRIVE_WORKERS
 
 
+# -- log: record and capture (issue 13) ----------------------------------------------------------
+
+def bench_record(seconds: float = 5.0, rate: float = 1000.0) -> Result:
+    """`log record`'s Recorder on the whole simulated arm (14 drives, 3 buses, in-process, wall time):
+    TPDOs on SYNC at 1 kHz for 5 s; the ratio is the worst drive's received / expected samples."""
+    from sherpa_cli.config import load_config
+    from sherpa_cli.ops.record import Recorder
+    from sherpa_cli.ops.session import ArmSession
+    from sherpa_cli.ops.targets import drive_refs
+    from sherpa_cli.sim.arm import SimArm
+
+    cfg = load_config(ARM_CONFIG)
+    arm = SimArm(cfg, {b: {"interface": "virtual", "channel": f"bench-rec-{os.getpid()}-{b}"} for b in cfg.buses},
+                 tick_s=0.002)
+    with ArmSession.open(cfg, sim=arm) as session:
+        refs = drive_refs(cfg, None)
+        rec = Recorder(session, refs, rate)
+        restore_error = ""
+        try:
+            with rec:
+                time.sleep(seconds)
+        except Exception as exc:  # the numbers still say what arrived; the note says what failed after
+            restore_error = f"; restoring the PDO settings failed: {exc}"
+        counts, expected = rec.counts(), rec.expected()
+    worst = min(counts.values()) / expected
+    return Result("record", round(worst, 4), "recv/exp", round(worst, 4), ">= 0.999", _judge(worst, ">= 0.999"),
+                  f"{len(refs)} drives at {rate:g} Hz for {seconds:g} s, SYNC from python-can send_periodic "
+                  f"(a thread on the virtual bus); expected {expected} per drive, worst {min(counts.values())}"
+                  f"{restore_error}")
+
+
+def _burst_main(frames: int) -> None:
+    """Another process: three python-can-remote servers (one per bus) and, on "go", a burst of
+    ``frames`` 8-byte frames per bus paced at the 1 Mbit/s frame rate; prints "sent N"."""
+    import can
+    from can_remote import RemoteServer
+
+    buses = []
+    ports = []
+    for i in range(3):
+        channel = f"sherpa-bench-burst-{os.getpid()}-{i}"
+        server = RemoteServer(host="127.0.0.1", port=0, interface="virtual", channel=channel)
+        threading.Thread(target=server.serve_forever, daemon=True).start()
+        ports.append(str(server.server_port))
+        buses.append(can.Bus(interface="virtual", channel=channel))
+    print(" ".join(ports), flush=True)
+    sys.stdin.readline()  # "go"
+    period = 138e-6  # one worst-case 8-byte frame at 1 Mbit/s
+
+    def send(bus, i):
+        start = time.perf_counter()
+        for n in range(frames):
+            due = start + n * period
+            ahead = due - time.perf_counter()
+            if ahead > 0.0005:
+                time.sleep(ahead - 0.0003)
+            bus.send(can.Message(arbitration_id=0x181 + i, data=n.to_bytes(8, "little"), is_extended_id=False))
+
+    threads = [threading.Thread(target=send, args=(b, i)) for i, b in enumerate(buses)]
+    t0 = time.perf_counter()
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    print(f"sent {3 * frames} {time.perf_counter() - t0:.3f}", flush=True)
+    sys.stdin.read()
+    os._exit(0)
+
+
+def bench_capture(frames: int = 3000) -> Result:
+    """`log capture` of a bounded full-load burst (8-byte frames paced at 1 Mbit/s on 3 buses) from
+    another process over python-can-remote on 127.0.0.1: frames written / frames sent (goal 1.0)."""
+    import can
+
+    from sherpa_cli.ops.capture import capture, read_frames
+
+    proc = subprocess.Popen([sys.executable, str(Path(__file__).resolve()), "--burst", str(frames)],
+                            stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True, env=_env())
+    out = Path(tempfile.mkdtemp(prefix="sherpa-bench-capture-")) / "burst.log"
+    try:
+        ports = (proc.stdout.readline() if proc.stdout else "").split()
+        if len(ports) != 3:
+            raise RuntimeError(f"the burst process did not start (exit {proc.poll()})")
+        names = ["can0", "can1", "can2"]
+        buses = {n: can.Bus(interface="remote", channel=f"127.0.0.1:{p}") for n, p in zip(names, ports)}
+        stop = threading.Event()
+        done: dict = {}
+        worker = threading.Thread(target=lambda: done.setdefault("r", capture(buses, out, names, stop=stop)))
+        worker.start()
+        time.sleep(0.5)
+        assert proc.stdin is not None and proc.stdout is not None
+        proc.stdin.write("go\n")
+        proc.stdin.flush()
+        _, sent, took = proc.stdout.readline().split()
+        deadline = time.monotonic() + 10
+        while time.monotonic() < deadline:  # until the stream has drained into the file
+            time.sleep(0.2)
+            seen = sum(1 for _ in read_frames(out, names)) if out.exists() else 0
+            if seen >= int(sent):
+                break
+        stop.set()
+        worker.join()
+        for b in buses.values():
+            b.shutdown()
+        result = done["r"]
+    finally:
+        proc.kill()
+        proc.wait()
+    written = sum(1 for _ in read_frames(out, names))
+    shutil.rmtree(out.parent, ignore_errors=True)
+    ratio = written / int(sent)
+    return Result("capture", written, "frames", round(ratio, 4), ">= 1.0", _judge(ratio, ">= 1.0"),
+                  f"{sent} sent in {float(took):.2f} s ({int(sent) / float(took):.0f} frames/s sustained over "
+                  f"3 buses, goal {3 / 138e-6:.0f}); {result.frames} captured")
+
+
 BENCHMARKS: dict[str, Callable[[], Result]] = {
     "client": bench_client,
     "sdo": bench_sdo,
@@ -503,12 +619,17 @@ BENCHMARKS: dict[str, Callable[[], Result]] = {
     "program": bench_program,
     "startup": bench_startup,
     "deadman": bench_deadman,
+    "record": bench_record,
+    "capture": bench_capture,
 }
 
 
 def main(argv: list[str] | None = None) -> int:
     if argv is None and sys.argv[1:] == ["--responder"]:  # the other process of `client` and `sdo`
         _responder_main()
+        return 0
+    if argv is None and sys.argv[1:2] == ["--burst"]:  # the other process of `capture`
+        _burst_main(int(sys.argv[2]))
         return 0
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("names", nargs="*", metavar="NAME", help=f"benchmarks to run: {', '.join(BENCHMARKS)}")

@@ -4,7 +4,7 @@ joint, ops/joint_jog.py for a Σ/Δ joint or one motor of a pair)."""
 from __future__ import annotations
 
 import math
-from typing import Any, Optional
+from typing import Any, List, Optional
 
 import typer
 
@@ -28,7 +28,9 @@ def parse_number(text: str | None, option: str) -> float | None:
 
 def jog(
     ctx: typer.Context,
-    joint: str = typer.Argument(..., metavar="JOINT", help="A plain joint, a Σ or Δ joint of a pair, or a drive (or BUS:NODE)."),
+    joints: Optional[List[str]] = typer.Argument(None, metavar="JOINT", show_default=False,
+                                                 help="A plain joint, a Σ or Δ joint of a pair, or a drive (or "
+                                                 "BUS:NODE). With --interactive: the joints to show (default all)."),
     to: Optional[str] = typer.Option(None, "--to", metavar="POS", help="Move to this joint position: rad, or "
                                      "with a unit: 10deg, 200counts. Only inside the joint's normal range."),
     by: Optional[str] = typer.Option(None, "--by", metavar="POS", help="Move by this much from where it is "
@@ -44,6 +46,14 @@ def jog(
     uncalibrated: bool = typer.Option(False, "--uncalibrated", help="Allow a position move of a joint that has no "
                                       "absolute encoder and was not homed since power-up."),
     apply: ApplyMotion = False,
+    interactive: bool = typer.Option(False, "--interactive", help="A full-screen view of the joints with keyboard "
+                                     "control (docs/jog.md)."),
+    joystick: bool = typer.Option(False, "--joystick", help="Drive the joints from a joystick as the config's "
+                                  "`joystick:` maps it; a held dead-man button (docs/jog.md)."),
+    device: Optional[str] = typer.Option(None, "--device", metavar="PATH", help="The joystick's input device "
+                                         "(default: joystick.device, else the first joystick found)."),
+    list_joysticks: bool = typer.Option(False, "--list-joysticks", help="List the joysticks (evdev) and their "
+                                        "axis and button names."),
 ) -> None:
     """Move one joint: to/by a position, at a velocity, or with a torque.
 
@@ -72,6 +82,13 @@ def jog(
     from sherpa_cli.ops.motion import MotionSettings
 
     st = state(ctx)
+    if _live(st, joints or [], interactive, joystick, device, list_joysticks, apply, uncalibrated,
+             [to, by, velocity, torque, duration]):
+        return
+    if len(joints or []) != 1:
+        raise UsageError("name one JOINT to jog" + (f" (got {len(joints)})" if joints else ""),
+                         hint="sherpa jog JOINT --to/--by/--velocity/--torque ...; several joints: --interactive")
+    joint = (joints or [""])[0]
     cfg = st.load_config()
     given = [name for name, value in (("--to", to), ("--by", by), ("--velocity", velocity), ("--torque", torque))
              if value is not None]
@@ -109,6 +126,35 @@ def jog(
     _render(st, name, result)
     if result.breach is not None:
         raise typer.Exit(1)
+
+
+def _live(st, joints, interactive: bool, joystick: bool, device, list_joysticks: bool, apply: bool,
+          uncalibrated: bool, values) -> bool:
+    """--interactive, --joystick, --list-joysticks (cli/jog_live_cmd.py); False for a plain jog."""
+    chosen = [name for name, on in (("--interactive", interactive), ("--joystick", joystick),
+                                    ("--list-joysticks", list_joysticks)) if on]
+    if not chosen:
+        if device is not None:
+            raise UsageError("--device goes with --joystick")
+        return False
+    if len(chosen) > 1:
+        raise UsageError(f"{' and '.join(chosen)} exclude each other")
+    if any(v is not None for v in values):
+        raise UsageError(f"{chosen[0]} takes no --to, --by, --velocity, --torque or --for: the keys or the "
+                         "joystick give the motion")
+    from sherpa_cli.cli import jog_live_cmd
+
+    if list_joysticks:
+        jog_live_cmd.list_joysticks(st)
+    elif interactive:
+        if device is not None:
+            raise UsageError("--device goes with --joystick")
+        jog_live_cmd.interactive(st, joints, apply=apply, uncalibrated=uncalibrated)
+    else:
+        if joints:
+            raise UsageError("--joystick drives the joints the config's `joystick:` section maps; name no JOINT")
+        jog_live_cmd.joystick(st, device, apply=apply)
+    return True
 
 
 def _dry_run(st, target, req, cfg) -> None:

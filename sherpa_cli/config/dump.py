@@ -15,7 +15,7 @@ import yaml
 
 from sherpa_cli.config.catalog import builtin_catalog
 from sherpa_cli.config.model import (ArmConfig, BusConfig, CurrentLimits, ILCodes, JointConfig, JointRole,
-                                     MotionConfig, ProtocolConfig, SimDriveConfig)
+                                     JoystickConfig, JoystickMap, MotionConfig, ProtocolConfig, SimDriveConfig)
 
 
 def dump_native(cfg: ArmConfig) -> str:
@@ -26,6 +26,14 @@ def dump_native(cfg: ArmConfig) -> str:
         sections.append({"protocol": dataclasses.asdict(cfg.protocol)})
     if cfg.motion != MotionConfig():
         sections.append({"motion": dataclasses.asdict(cfg.motion)})
+    if cfg.joystick != JoystickConfig():
+        joy = cfg.joystick
+        base = JoystickMap()
+        maps = [{k: v for k, v in dataclasses.asdict(m).items() if v is not None and (v != getattr(base, k) or
+                                                                                        k in ("mode", "sensitivity"))}
+                for m in joy.axes]
+        sections.append({"joystick": _drop_none({"device": joy.device, "rate_hz": joy.rate_hz,
+                                                 "deadzone": joy.deadzone, "deadman": joy.deadman, "axes": maps})})
     sim: dict[str, Any] = {}
     if cfg.sim:
         sim["drives"] = {name: _drop_default(dataclasses.asdict(f), SimDriveConfig()) for name, f in cfg.sim.items()}

@@ -226,6 +226,42 @@ class MotionConfig:
         return (self.heartbeat_period_ms or self.consumer_time_ms / 4) / 1000
 
 
+JOYSTICK_MODES = ("velocity", "torque")
+JOYSTICK_MIXES = ("xy", "sigma_delta")
+
+
+@dataclass(frozen=True)
+class JoystickMap:
+    """One joystick mapping (docs/config.md `joystick:`): an axis to a joint, or two axes to a pair.
+
+    A joint: full deflection of ``axis`` = ``sensitivity`` x the joint's velocity limit (velocity)
+    or continuous current (torque). A pair: ``mix: xy`` drives motor a with X+Y and motor b with
+    X-Y (the seed's XY+/XY-; each motor's full scale is the smaller joint speed limit), ``mix:
+    sigma_delta`` drives the Σ joint with X and the Δ joint with Y.
+    """
+
+    joint: str | None = None
+    axis: str | None = None  # evdev code name, e.g. ABS_Z
+    pair: str | None = None
+    x: str | None = None
+    y: str | None = None
+    mix: str = "xy"
+    mode: str = "velocity"
+    sensitivity: float = 0.5
+    invert: bool = False
+
+
+@dataclass(frozen=True)
+class JoystickConfig:
+    """`sherpa jog --joystick` (docs/jog.md): device, send rate, deadzone, the dead-man button, the maps."""
+
+    device: str | None = None  # /dev/input/eventN; None: the first joystick found
+    rate_hz: float = 25.0  # commands per second while the dead-man is held (20..50)
+    deadzone: float = 0.1  # fraction of full deflection around the centre read as 0
+    deadman: str = "BTN_TRIGGER"  # the button that must be held; release stops at once
+    axes: tuple[JoystickMap, ...] = ()
+
+
 @dataclass(frozen=True)
 class SimDriveConfig:
     """How one simulated drive differs from a healthy one (faults and mismatch); only the simulator reads it."""
@@ -239,6 +275,11 @@ class SimDriveConfig:
     heartbeat_ms: int = 0  # 0x1017 producer heartbeat at power-up
     seed: int = 0  # random seed of drop_probability, so a failing run replays
     limit_trip_at: float | None = None  # s after start: trips as if past LL[3]/HL[3] (MF, EMCY 0x8680)
+    # servo-loop motor model (sim/servo.py, docs/log.md); servo_bandwidth 0 = the kinematic model
+    servo_bandwidth: float = 0.0  # Hz, natural frequency of the position loop
+    servo_damping: float = 0.5
+    servo_current_limit: float | None = None  # A; None: the drive model's peak current
+    supply_current_limit: float | None = None  # A the supply can give (the seed's 1 A supply)
     st_refused_in_speed_mode: bool = False  # ST answers EC 60 in UM=2, as [BLISS] says some firmware does
 
 
@@ -263,6 +304,7 @@ class ArmConfig:
     il_codes: ILCodes = field(default_factory=ILCodes)
     protocol: ProtocolConfig = field(default_factory=ProtocolConfig)
     motion: MotionConfig = field(default_factory=MotionConfig)
+    joystick: JoystickConfig = field(default_factory=JoystickConfig)
     sim: Mapping[str, SimDriveConfig] = field(default_factory=dict)  # drive name -> simulated faults
     sim_extra_nodes: tuple[SimExtraNode, ...] = ()  # `sim: extra_nodes:`, only the simulator reads it
     # `sim: reply_timeout:` s to wait for one interpreter reply with --sim (instead of protocol.reply_timeout):

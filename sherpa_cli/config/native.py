@@ -13,13 +13,13 @@ from pathlib import PurePath
 
 from sherpa_cli.config.catalog import builtin_catalog
 from sherpa_cli.config.model import (AbsEncoderConfig, ArmConfig, BusConfig, Catalog, CurrentLimits, DriveConfig,
-                                     DriveModel, ILCodes, MotionConfig, ProtocolConfig, SimDriveConfig, SimExtraNode, JointConfig, JointRole, MotorModel, PairConfig,
+                                     DriveModel, ILCodes, JoystickConfig, JoystickMap, MotionConfig, ProtocolConfig, SimDriveConfig, SimExtraNode, JointConfig, JointRole, MotorModel, PairConfig,
                                      SwitchConfig, SwitchKind)
 from sherpa_cli.config.yamlnodes import (Locs, Section, YNode, as_int, as_map, as_name, as_seq, as_str, named_items,
                                          plain, suggest)
 from sherpa_cli.errors import ConfigError
 
-TOP_KEYS = ["name", "il_codes", "protocol", "motion", "sim", "buses", "drives", "joints", "pairs", "catalog"]
+TOP_KEYS = ["name", "il_codes", "protocol", "motion", "joystick", "sim", "buses", "drives", "joints", "pairs", "catalog"]
 IL_KEYS = ["stop", "home", "unused"]
 BUS_KEYS = ["interface", "channel", "bitrate", "send_interval_us", "poll_interval_ms", "options"]
 DRIVE_KEYS = ["bus", "node", "model", "motor"]
@@ -94,6 +94,33 @@ def parse_motion(top: Section, locs: Locs) -> MotionConfig:
         f.name, getattr(d, f.name)) for f in dataclasses.fields(MotionConfig)})
 
 
+JOYSTICK_KEYS = ["device", "rate_hz", "deadzone", "deadman", "axes"]
+JOYSTICK_MAP_KEYS = [f.name for f in dataclasses.fields(JoystickMap)]
+
+
+def parse_joystick(top: Section, locs: Locs) -> JoystickConfig:
+    """The ``joystick:`` section (shape and types; validate.py checks names and ranges)."""
+    sec = top.section("joystick", JOYSTICK_KEYS, what="a mapping of joystick settings (rate_hz, deadman, axes...)")
+    if sec is None:
+        return JoystickConfig()
+    register(locs, ("joystick",), sec)
+    d = JoystickConfig()
+    maps = []
+    if sec.get("axes") is not None:
+        for i, item in enumerate(as_seq(sec.req("axes"), "a list like [{axis: ABS_X, joint: elbow_pitch}]")):
+            m = Section(item, JOYSTICK_MAP_KEYS, what="a map like {axis: ABS_X, joint: elbow_pitch} or "
+                        "{pair: shoulder, x: ABS_X, y: ABS_Y, mix: xy}")
+            register(locs, ("joystick", "axes", str(i)), m)
+            locs.put(("joystick", "axes", str(i)), item.loc)
+            b = JoystickMap()
+            maps.append(JoystickMap(joint=m.str("joint"), axis=m.str("axis"), pair=m.str("pair"), x=m.str("x"),
+                                    y=m.str("y"), mix=m.str("mix", b.mix), mode=m.str("mode", b.mode),
+                                    sensitivity=m.num("sensitivity", b.sensitivity), invert=m.bool("invert", b.invert)))
+    return JoystickConfig(device=sec.str("device"), rate_hz=sec.num("rate_hz", d.rate_hz),
+                          deadzone=sec.num("deadzone", d.deadzone), deadman=sec.str("deadman", d.deadman),
+                          axes=tuple(maps))
+
+
 SIM_DRIVE_KEYS = [f.name for f in dataclasses.fields(SimDriveConfig)]
 SIM_EXTRA_KEYS = [f.name for f in dataclasses.fields(SimExtraNode)]
 SIM_KEYS = ["drives", "extra_nodes", "reply_timeout"]
@@ -149,6 +176,7 @@ def load_native(root: YNode, filename: str) -> tuple[ArmConfig, Locs, list[str]]
 
     protocol = parse_protocol(top, locs)
     motion = parse_motion(top, locs)
+    joystick = parse_joystick(top, locs)
     sim, sim_extra_nodes = parse_sim(top, locs)
     sim_reply_timeout = parse_sim_reply_timeout(top)
     catalog = parse_catalog(top.get("catalog"), locs)
@@ -218,7 +246,7 @@ def load_native(root: YNode, filename: str) -> tuple[ArmConfig, Locs, list[str]]
                                       delta=names[1], current=current, where=sec.node.loc)
 
     cfg = ArmConfig(name=name, buses=buses, drives=drives, joints=joints, pairs=pairs, catalog=catalog,
-                    il_codes=il, protocol=protocol, motion=motion, sim=sim, sim_extra_nodes=sim_extra_nodes,
+                    il_codes=il, protocol=protocol, motion=motion, joystick=joystick, sim=sim, sim_extra_nodes=sim_extra_nodes,
                     sim_reply_timeout=sim_reply_timeout,
                     source=filename)
     return cfg, locs, []

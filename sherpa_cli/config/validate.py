@@ -7,6 +7,8 @@ raised, so fixing errors top to bottom works; the hint says how many more were f
 
 from __future__ import annotations
 
+import re
+
 import difflib
 import math
 
@@ -81,6 +83,7 @@ def validate(cfg: ArmConfig, locs: Locs, warnings: list[str] | None = None, *,
     for joint in cfg.joints.values():
         _check_joint(cfg, joint, locs, r)
     _check_switch_inputs(cfg, locs, r)
+    _check_joystick(cfg, locs, r)
     _check_bounds(cfg, locs, r)
     r.raise_first()
     return replace(cfg, warnings=tuple(r.warnings))
@@ -435,6 +438,77 @@ def _check_switch_inputs(cfg: ArmConfig, locs: Locs, r: _Report) -> None:
                                   "one input can carry one switch")
                 else:
                     taken[key] = (f"a switch of joint '{j.name}'", iloc)
+
+
+_ABS_CODE = re.compile(r"^ABS_[A-Z0-9_]+$")
+_BUTTON_CODE = re.compile(r"^(BTN|KEY)_[A-Z0-9_]+$")
+
+
+def _check_joystick(cfg: ArmConfig, locs: Locs, r: _Report) -> None:
+    """`joystick:` (docs/config.md): evdev code names, rates, the joints and pairs the axes drive."""
+    from sherpa_cli.config.model import JOYSTICK_MIXES, JOYSTICK_MODES, JointRole
+
+    j = cfg.joystick
+    where = lambda *key: locs.get("joystick", *key)  # noqa: E731
+    if not 20 <= j.rate_hz <= 50:
+        r.error(where("rate_hz"), f"rate_hz {j.rate_hz:g} must be 20..50 (commands per second while the dead-man "
+                "is held)")
+    if not 0 <= j.deadzone < 1:
+        r.error(where("deadzone"), f"deadzone {j.deadzone:g} must be >= 0 and < 1 (a fraction of full deflection)")
+    if not _BUTTON_CODE.match(j.deadman):
+        r.error(where("deadman"), f"deadman '{j.deadman}': expected an evdev button name like BTN_TRIGGER or "
+                "BTN_TL (`sherpa jog --list-joysticks` shows them)")
+    used: dict[str, int] = {}
+    for i, m in enumerate(j.axes):
+        at = lambda key, i=i: locs.get("joystick", "axes", str(i), key)  # noqa: E731
+        item = locs.get("joystick", "axes", str(i))
+        if (m.joint is None) == (m.pair is None):
+            r.error(item, "a joystick map names exactly one of 'joint' (with 'axis') or 'pair' (with 'x' and 'y')")
+            continue
+        if m.mode not in JOYSTICK_MODES:
+            r.error(at("mode"), f"mode '{m.mode}': expected one of {', '.join(JOYSTICK_MODES)}")
+        if not 0 < m.sensitivity <= 1:
+            r.error(at("sensitivity"), f"sensitivity {m.sensitivity:g} must be > 0 and <= 1 (full deflection = "
+                    "this fraction of the joint's speed limit or continuous current)")
+        if m.joint is not None:
+            if m.axis is None or m.x is not None or m.y is not None:
+                r.error(item, f"joystick map of joint '{m.joint}': give 'axis' (not x/y)")
+                continue
+            joint = cfg.joints.get(m.joint)
+            if joint is None:
+                hint = suggest(m.joint, cfg.joints)
+                r.error(at("joint"), f"joint '{m.joint}' is not in the config" + (f"; did you mean '{hint}'?" if hint
+                                                                                   else ""))
+                continue
+            codes = [("axis", m.axis)]
+            if m.mode == "torque":
+                cur = joint.current if joint.role is JointRole.PLAIN else cfg.pairs[joint.pair].current  # type: ignore[index]
+                if cur is None:
+                    r.error(at("mode"), f"torque for joint '{m.joint}' needs its current limits (current.continuous)")
+            elif joint.vel_limit is None:
+                r.error(at("joint"), f"joint '{m.joint}' has no velocity.limit: the joystick's full scale is a "
+                        "fraction of it")
+        else:
+            if m.x is None or m.y is None or m.axis is not None:
+                r.error(item, f"joystick map of pair '{m.pair}': give 'x' and 'y' (not axis)")
+                continue
+            pair = cfg.pairs.get(m.pair)  # type: ignore[arg-type]
+            if pair is None:
+                r.error(at("pair"), f"pair '{m.pair}' is not in the config ({', '.join(cfg.pairs) or 'none'})")
+                continue
+            if m.mix not in JOYSTICK_MIXES:
+                r.error(at("mix"), f"mix '{m.mix}': expected xy (X+Y -> {pair.drive_a}, X-Y -> {pair.drive_b}) or "
+                        "sigma_delta (X -> Σ, Y -> Δ)")
+            if m.mode == "torque" and pair.current is None:
+                r.error(at("mode"), f"torque for pair '{m.pair}' needs its current limits (current.continuous)")
+            codes = [("x", m.x), ("y", m.y)]
+        for key, code in codes:
+            if not _ABS_CODE.match(code or ""):
+                r.error(at(key), f"{key} '{code}': expected an evdev axis name like ABS_X, ABS_RZ")
+            elif code in used:
+                r.error(at(key), f"{key} '{code}' is already used by joystick map {used[code] + 1}")
+            else:
+                used[code] = i
 
 
 # --- number bounds ---------------------------------------------------------------------------

@@ -25,6 +25,7 @@ from sherpa_cli.sim.drive import SimDrive
 from sherpa_cli.sim.settings import SimSettings
 
 NMT_ID = 0x000
+SYNC_ID = 0x080
 SDO_RX = 0x600
 HOME_SWITCH_HALF_WIDTH = 2  # counts either side of a home switch's position where it reads pressed
 SIM_SV_SHARE = 0.6  # the simulated drive is deaf for this share of protocol.sv_blackout (the tool's bound)
@@ -50,7 +51,10 @@ def settings_for(cfg: ArmConfig, drive: str, **overrides: Any) -> SimSettings:
                     drop_probability=faults.drop_probability,
                     die_at=faults.die_at, reboot_at=faults.reboot_at, heartbeat_ms=faults.heartbeat_ms,
                     seed=faults.seed, limit_trip_at=faults.limit_trip_at,
-                    st_refused_in_speed_mode=faults.st_refused_in_speed_mode)
+                    st_refused_in_speed_mode=faults.st_refused_in_speed_mode,
+                    servo_bandwidth_hz=faults.servo_bandwidth, servo_damping=faults.servo_damping,
+                    servo_current_limit=faults.servo_current_limit,
+                    supply_current_limit=faults.supply_current_limit)
     base.update(overrides)
     return SimSettings(**base)
 
@@ -343,8 +347,8 @@ class SimArm:
     def _dispatch(self, can_id: int, data: bytes, on_bus: Mapping[str, SimDrive],
                   by_node: Mapping[int, list[str]]) -> list[str]:
         """Hand a frame to the drive(s) it concerns; returns their names."""
-        if can_id == NMT_ID or 0x700 <= can_id <= 0x77F:
-            targets = list(on_bus)  # NMT broadcast / host heartbeats: every drive decides for itself
+        if can_id in (NMT_ID, SYNC_ID) or 0x700 <= can_id <= 0x77F:
+            targets = list(on_bus)  # NMT broadcast / SYNC / host heartbeats: every drive decides for itself
         else:
             targets = by_node.get(can_id & 0x7F, [])
         for name in targets:

@@ -22,7 +22,9 @@ from sherpa_cli.sim.interpreter import Refused
 from sherpa_cli.sim.inputs import Inputs
 from sherpa_cli.sim.motor import Motor, motion_status
 from sherpa_cli.sim.od import OdValue, build_od, flash_key
+from sherpa_cli.sim.pdo import SYNC_ID, TpdoTable, is_pdo_object
 from sherpa_cli.sim.params import Value, factory_ram, is_persistent, parse_flash, wrap_int32
+from sherpa_cli.sim.servo import ServoMotor
 from sherpa_cli.sim.settings import SimSettings
 
 Frame = tuple[int, bytes]
@@ -38,6 +40,16 @@ ERR_REG_GENERIC, ERR_REG_COMMUNICATION = 0x01, 0x11  # 0x1001 values from the 0x
 EMCY_FRAME = struct.Struct("<HBBHH")
 
 SR_MO, SR_MF, SR_UM_SHIFT, SR_MS_SHIFT, SR_LIMIT_STOP = 1 << 4, 1 << 6, 7, 14, 1 << 28
+
+
+def _make_motor(settings: SimSettings, position: int) -> Motor:
+    """The kinematic motor, or with ``servo_bandwidth_hz`` the servo-loop model (sim/servo.py)."""
+    if settings.servo_bandwidth_hz <= 0:
+        return Motor(counts=position)
+    return ServoMotor(counts=position, wn=2 * math.pi * settings.servo_bandwidth_hz, zeta=settings.servo_damping,
+                      torque_accel_per_amp=settings.torque_accel,
+                      current_limit=settings.servo_current_limit or settings.max_current,
+                      supply_limit=settings.supply_current_limit, supply_speed=settings.supply_speed)
 
 
 class FrameRecord(list):
@@ -85,7 +97,7 @@ class SimDrive:
         self.lost: list[tuple[float, int, bytes]] = FrameRecord()  # the subset that never reached its software
         self.od_writes: list[tuple[float, int, int, int]] = []  # SDO writes, for "dry run wrote nothing"
         self.boots = 0
-        self.motor = Motor(counts=int(position))
+        self.motor = _make_motor(self.settings, int(position))
         self._outbox: list[Frame] = []
         self._replies: list[tuple[float, int, Frame]] = []  # heap: (release time, seq, frame)
         self._seq = itertools.count()
@@ -99,6 +111,8 @@ class SimDrive:
         self._reboot_due = after_start(self.settings.reboot_at)
         self._trip_due = after_start(self.settings.limit_trip_at)
         self.inputs = Inputs(self.settings.inputs)
+        self.tpdo = TpdoTable(node)
+        self.syncs = 0  # SYNC frames this drive answered (Operational)
         self._boot()
 
     # -- public API --------------------------------------------------------------------------
@@ -149,6 +163,8 @@ class SimDrive:
             return False
         if can_id == NMT:
             self._nmt(data[0])
+        elif can_id == SYNC_ID:
+            self._sync()
         elif can_id == SDO_RX_BASE + self.node:
             # CiA 301: a Stopped node serves only NMT and error control (its heartbeat goes on)
             return self._nmt_state != STOPPED
@@ -172,11 +188,17 @@ class SimDrive:
     def od_read(self, index: int, sub: int) -> OdValue:
         """Read an object; raises od.ODError. A dead drive still answers here: an SDO server
         must check :attr:`dead` and stay silent, as the interpreter does."""
+        if is_pdo_object(index):
+            return self.tpdo.read(index, sub)
         return self._od.read(index, sub)
 
     def od_write(self, index: int, sub: int, value: int) -> None:
         """Write an object; raises od.ODError carrying the SDO abort code on refusal."""
         self.advance_to(self.clock.now())
+        if is_pdo_object(index):
+            self.tpdo.write(index, sub, value)
+            self.od_writes.append((self._t, index, sub, value))
+            return
         value = self._od.check_write(index, sub, value)
         self.od_writes.append((self._t, index, sub, value))
         self._od.values[(index, sub)] = value
@@ -279,6 +301,7 @@ class SimDrive:
         period = self._od.values[(0x1017, 0)]
         self._next_heartbeat = self._t + period / 1000 if period else math.inf
         self._replies.clear()
+        self.tpdo.reset()  # PDO settings are RAM only here
         self._send(HEARTBEAT_BASE + self.node, b"\x00")
 
     def _nmt(self, cs: int) -> None:
@@ -293,6 +316,22 @@ class SimDrive:
             # Reset communication should only reload 0x1000-0x1FFF; the sim reboots fully for
             # both, which is the stricter case for a tool (unsaved RAM is gone either way).
             self._boot()
+
+    def _sync(self) -> None:
+        """SYNC: synchronous TPDOs sample the drive now (PDOs only live in Operational)."""
+        if self._nmt_state != OPERATIONAL:
+            return
+        self.syncs += 1
+        for can_id, data in self.tpdo.on_sync(self._pdo_values()):
+            self._send(can_id, data)
+
+    def _pdo_values(self) -> dict[int, Callable[[], int]]:
+        values = self.__dict__.get("_pdo_sources")
+        if values is None:
+            velocity = lambda: wrap_int32(round(self.motor.v))  # noqa: E731
+            values = self._pdo_sources = {0x6064: lambda: self.px, 0x6069: velocity, 0x606C: velocity,
+                                          0x6078: lambda: max(-32768, min(32767, round(self._iq() * 1000)))}
+        return values
 
     def _consumer(self) -> tuple[int, float]:
         """(host node, timeout s) of the 0x1016 sub1 entry; timeout 0 = not monitoring."""
@@ -378,6 +417,8 @@ class SimDrive:
     def _addressed(self, can_id: int, data: bytes) -> bool:
         if can_id == NMT:
             return len(data) == 2 and data[1] in (0, self.node)
+        if can_id == SYNC_ID:
+            return True
         if can_id in (RPDO2_BASE + self.node, SDO_RX_BASE + self.node):
             return True
         host, timeout = self._consumer()
@@ -546,6 +587,8 @@ class SimDrive:
     def _iq(self) -> float:
         if not self._motor_on:
             return 0.0
+        if isinstance(self.motor, ServoMotor):
+            return self.motor.current
         if self.ram["UM"] == 1:
             return self.ram["TC"]
         return self.motor.a / self.settings.torque_accel

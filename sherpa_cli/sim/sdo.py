@@ -56,7 +56,30 @@ def build_object_dictionary() -> "od.ObjectDictionary":
         record.add_member(var)
     for index, record in records.items():
         record[0].default = max(k for k in record.subindices)
+    _add_pdo_objects(dictionary)
     return dictionary
+
+
+def _add_pdo_objects(dictionary: "od.ObjectDictionary") -> None:
+    """TPDO1..4 communication (0x1800..: COB-ID, transmission type) and mapping (0x1A00..: count,
+    eight entries), served from the drive's RAM (sim/pdo.py); sub 0 of a mapping is writable."""
+    for n in range(4):
+        comm = od.ODRecord(f"TPDO{n + 1} communication parameter", 0x1800 + n)
+        for sub, name, data_type, access in ((0, "Highest sub-index supported", od.UNSIGNED8, "ro"),
+                                             (1, "COB-ID", od.UNSIGNED32, "rw"),
+                                             (2, "Transmission type", od.UNSIGNED8, "rw")):
+            var = od.ODVariable(name, 0x1800 + n, sub)
+            var.data_type, var.access_type = data_type, access
+            comm.add_member(var)
+        comm[0].default = 2
+        dictionary.add_object(comm)
+        mapping = od.ODRecord(f"TPDO{n + 1} mapping parameter", 0x1A00 + n)
+        for sub in range(9):
+            var = od.ODVariable("Number of mapped objects" if sub == 0 else f"Mapped object {sub}", 0x1A00 + n, sub)
+            var.data_type = od.UNSIGNED8 if sub == 0 else od.UNSIGNED32
+            var.access_type = "rw"
+            mapping.add_member(var)
+        dictionary.add_object(mapping)
 
 
 class _Task:
@@ -124,7 +147,8 @@ class SdoServer:
 
     def _read(self, index: int, subindex: int, od: Any) -> Any:
         if subindex == 0 and isinstance(od, canopen.objectdictionary.ODVariable) and od.parent is not None \
-                and not isinstance(od.parent, canopen.objectdictionary.ObjectDictionary) and index != 0x1003:
+                and not isinstance(od.parent, canopen.objectdictionary.ObjectDictionary) and index != 0x1003 \
+                and not 0x1A00 <= index < 0x1A04:
             return od.default  # 0x1003:0 counts the stored errors: the drive's, not a constant
         try:
             return self.drive.od_read(index, subindex)

@@ -65,6 +65,17 @@ class SimSettings:
     # [BLISS]: ST "cannot be executed in speed control mode" on some firmware; True: ST in UM=2
     # answers EC 12 and a tool must stop with JV=0 + BG (elmo-protocol.md 2.1, UNCONFIRMED).
     st_refused_in_speed_mode: bool = False
+    # Servo-loop motor model (sim/servo.py; `log step`): servo_bandwidth_hz > 0 makes the motor
+    # follow the profile through a second-order position loop (natural frequency, damping) whose
+    # current is limited to servo_current_limit A (None: max_current) and, with
+    # supply_current_limit A, to what the supply can give at speed (the seed's 1 A-supply
+    # slowdown, Fig. 9.x): supply current ~ motor current x speed / supply_speed. 0 = the
+    # kinematic model (a perfect loop).
+    servo_bandwidth_hz: float = 0.0
+    servo_damping: float = 0.5
+    servo_current_limit: float | None = None
+    supply_current_limit: float | None = None
+    supply_speed: float = 100000.0  # cnt/s at which the supply current equals the motor current
 
     def __post_init__(self) -> None:
         for name in ("mo_settle_s", "sv_blackout_s", "reply_latency_s", "sdo_latency_s"):

@@ -1,0 +1,126 @@
+"""`sherpa jog --interactive [JOINT...]`, `sherpa jog --joystick`, `sherpa jog --list-joysticks`
+(docs/jog.md): parse, open the session, render. The motion is ops/live_jog.py (one motion guard,
+the limits of `jog`), the joystick loop ops/joystick.py, the view cli/jog_view.py."""
+
+from __future__ import annotations
+
+import sys
+from typing import Any, Sequence
+
+import typer
+
+from sherpa_cli.errors import UsageError
+
+
+def list_joysticks(st: Any) -> None:
+    from sherpa_cli.ops import joystick
+
+    found = joystick.list_joysticks()
+    if st.json_mode:
+        st.out.json([{"path": j.path, "name": j.name, "axes": list(j.axes), "buttons": list(j.buttons)}
+                     for j in found])
+        return
+    if not found:
+        st.out.line("no joystick found (no input device with axes under /dev/input)")
+        return
+    for j in found:
+        st.out.line(f"{j.path}: {j.name}")
+        st.out.line(f"  axes: {', '.join(j.axes) or '-'}")
+        st.out.line(f"  buttons: {', '.join(j.buttons) or '-'}")
+
+
+def _calibrate_hook(st: Any, session: Any) -> Any:
+    """The view's calibrate key. `sherpa home` (ops/home.py) is not on main yet, so there is nothing to
+    call and the view says "calibrate: not available yet (sherpa home)". Homing runs its own motion
+    guard: once it exists, the hook must leave this session's guard (stop all) before it homes."""
+    return None
+
+
+def have_terminal() -> bool:
+    """The view needs a terminal on both ends (the tests replace this to run it headless)."""
+    return sys.stdin.isatty() and sys.stdout.isatty()
+
+
+def _buses(cfg: Any, axes: Sequence[Any]) -> list[str]:
+    return sorted({cfg.drives[d].bus for a in axes for d in a.drives})
+
+
+def _stop_lines(st: Any, report: Any) -> None:
+    for line in report.lines():
+        st.out.line(f"stop: {line}")
+
+
+def interactive(st: Any, names: Sequence[str], *, apply: bool, uncalibrated: bool) -> None:
+    from sherpa_cli.ops.live_jog import LiveJog, resolve_axes
+
+    cfg = st.load_config()
+    axes = resolve_axes(cfg, names)
+    if st.json_mode:
+        raise UsageError("--interactive is a full-screen view; --json does not apply")
+    if not apply:
+        st.out.line(f"dry run: would open the interactive view on {', '.join(a.name for a in axes)} "
+                    f"(drives {', '.join(sorted({d for a in axes for d in a.drives}))}) inside the motion guard")
+        st.out.line("nothing sent; add --apply to move")
+        return
+    if not have_terminal():
+        raise UsageError("--interactive needs a terminal (stdin and stdout)",
+                         hint="run it in an interactive shell (ssh -t for a remote one)")
+    from sherpa_cli.cli.jog_view import JogView
+
+    with st.session(buses=_buses(cfg, axes)) as session:
+        live = LiveJog(session, axes, allow_uncalibrated=uncalibrated)
+        try:
+            with live:
+                app = JogView(live, calibrate=_calibrate_hook(st, session))
+                app.run()
+                if app.error is not None:
+                    raise app.error
+        except BaseException as exc:
+            report = getattr(live, "guard", None) and live.guard.report
+            if report is not None and report.drives:
+                for line in report.lines():
+                    st.out.info(f"stop: {line}")
+            raise exc
+    _stop_lines(st, live.report)
+    for text in live.messages:
+        st.out.line(text)
+
+
+def joystick(st: Any, device: str | None, *, apply: bool) -> None:
+    from sherpa_cli.ops import joystick as joy
+    from sherpa_cli.ops.live_jog import LiveJog, resolve_axes
+
+    cfg = st.load_config()
+    jcfg = cfg.joystick
+    if not jcfg.axes:
+        raise UsageError("the config maps no joystick axes: add a `joystick:` section with `axes:`",
+                         hint="docs/config.md, section joystick")
+    axes = resolve_axes(cfg, joy.joints_of(cfg, jcfg))
+    path = device or jcfg.device
+    if not apply:
+        maps = "; ".join(f"{m.axis} -> {m.joint} ({m.mode})" if m.joint else
+                         f"{m.x}/{m.y} -> pair {m.pair} ({m.mix}, {m.mode})" for m in jcfg.axes)
+        st.out.line(f"dry run: would read {path or 'the first joystick found'} at {jcfg.rate_hz:g} Hz while "
+                    f"{jcfg.deadman} is held: {maps}")
+        st.out.line("nothing sent; add --apply to move")
+        return
+    source = joy.EvdevSource(path)  # a clear message if evdev or the device is missing
+    keepalive = max(0.25, 5.0 / jcfg.rate_hz)
+    with st.session(buses=_buses(cfg, axes)) as session:
+        live = LiveJog(session, axes, keepalive=keepalive, tick_period=1.0 / jcfg.rate_hz)
+        try:
+            with live:
+                st.out.info(f"joystick {source.path}: hold {jcfg.deadman} to move; release stops; Ctrl-C ends")
+                st.out.info(live.deadman)
+                run = joy.run_joystick(live, cfg, jcfg, source, on_status=st.out.info)
+        except KeyboardInterrupt:
+            run = None
+        finally:
+            source.close()
+    _stop_lines(st, live.report)
+    if run is not None:
+        for text in run.messages:
+            st.out.line(text)
+        if run.ended_by == "the joystick is gone":
+            st.out.line("the joystick disappeared: every joint stopped")
+            raise typer.Exit(1)

@@ -1,0 +1,430 @@
+"""`sherpa log ...`: capture raw traffic, decode captures, plot recordings (docs/log.md)."""
+
+from __future__ import annotations
+
+import threading
+from pathlib import Path
+from typing import List, Optional
+
+import typer
+
+from sherpa_cli.cli.context import state
+from sherpa_cli.cli.options import Targets
+from sherpa_cli.errors import UsageError
+
+app = typer.Typer(help="Record, capture, decode and plot CAN traffic and joint motion (docs/log.md).",
+                  no_args_is_help=True)
+
+
+def _names(st) -> tuple[list[str], dict[tuple[str, int], str]]:
+    """Bus names in config order and (bus, node) -> drive name, when a config is there to say."""
+    if not st.config_given and not st.config_path.exists():
+        return [], {}
+    cfg = st.load_config()
+    return list(cfg.buses), {(d.bus, d.node): d.name for d in cfg.drives.values()}
+
+
+@app.command("decode")
+def decode(
+    ctx: typer.Context,
+    file: Path = typer.Argument(..., metavar="FILE", help="A capture: .log/.txt (candump -L), .asc, .blf, .csv, "
+                                ".trc, .mf4 (with asammdf)."),
+    bus: Optional[List[str]] = typer.Option(None, "--bus", metavar="BUS", help="Only frames of this bus (repeat)."),
+    node: Optional[List[int]] = typer.Option(None, "--node", metavar="ID", help="Only frames of this node (repeat)."),
+    kind: Optional[List[str]] = typer.Option(
+        None, "--kind", metavar="KIND",
+        help="Only frames of this kind (repeat): nmt, sync, emcy, heartbeat, sdo, interp, pdo, other."),
+) -> None:
+    """Print what each frame of a capture means: NMT, SYNC, heartbeat, EMCY with the Elmo text, SDO
+    requests and responses with object names and values (segmented transfers joined), interpreter
+    requests and replies with command names, values and error texts, and PDOs by their mapping
+    when the capture contains the SDO writes that set it.
+
+    Times are seconds from the capture's first frame. Formats that keep only a channel number
+    (asc, blf, trc) name the bus by its position in the config (0 = first bus).
+
+    \b
+    Examples:
+      sherpa log decode run.log
+      sherpa log decode run.asc --node 40 --kind interp
+      sherpa --json log decode run.blf --kind emcy
+    """
+    from sherpa_cli.ops.candecode import KINDS, FrameDecoder
+    from sherpa_cli.ops.capture import read_frames
+
+    st = state(ctx)
+    for k in kind or []:
+        if k not in KINDS:
+            raise UsageError(f"--kind {k}: expected one of {', '.join(KINDS)}")
+    bus_names, nodes = _names(st)
+    decoder = FrameDecoder(nodes)
+    wanted_bus, wanted_node, wanted_kind = set(bus or []), set(node or []), set(kind or [])
+    rows = []
+    t0 = None
+    # Every frame goes through the decoder (segments and PDO mappings need the whole story);
+    # the filters only choose what is shown.
+    for item in decoder.decode_all(read_frames(file, bus_names)):
+        if t0 is None:
+            t0 = item.frame.timestamp
+        if wanted_bus and item.frame.bus not in wanted_bus:
+            continue
+        if wanted_node and item.node not in wanted_node:
+            continue
+        if wanted_kind and item.kind not in wanted_kind:
+            continue
+        rows.append(item)
+    if st.json_mode:
+        st.out.json({"file": str(file), "frames": [r.as_json(t0 or 0.0) for r in rows]})
+        return
+    width = max((len(r.frame.bus) for r in rows), default=4)
+    for r in rows:
+        st.out.line(f"{r.frame.timestamp - (t0 or 0.0):11.6f}  {r.frame.bus:<{width}}  {r.frame.raw():<20}  "
+                    f"{r.kind:<9}  {r.text}")
+    if not rows:
+        st.out.info("no frames matched")
+
+
+@app.command("capture")
+def capture(
+    ctx: typer.Context,
+    output: Path = typer.Option(..., "--output", "-o", metavar="FILE",
+                                help="Where to write: .log (candump, channel per line), .asc, .blf, .csv, .trc, "
+                                ".mf4 (with asammdf)."),
+    bus: Optional[List[str]] = typer.Option(None, "--bus", metavar="BUS",
+                                            help="Capture only this configured bus (repeat); default: every bus."),
+    duration: Optional[float] = typer.Option(None, "--for", metavar="S", help="Stop after S seconds (default: Ctrl-C)."),
+) -> None:
+    """Capture every frame of the configured buses into one file until Ctrl-C (or --for),
+    then print the frame count per bus, frames lost (adapter or queue overruns) and bus load.
+
+    Only listens: nothing is sent. Ctrl-C ends the capture without losing buffered frames.
+
+    \b
+    Examples:
+      sherpa log capture -o run.log
+      sherpa log capture -o can1.asc --bus can1 --for 10
+    """
+    from sherpa_cli.bus.busmap import apply_bus_map, parse_bus_map
+    from sherpa_cli.bus.links import open_bus
+    from sherpa_cli.ops.capture import capture as run_capture
+    from sherpa_cli.ops.capture import check_output
+
+    st = state(ctx)
+    if st.sim:
+        raise UsageError("log capture listens to real buses; --sim has no traffic of its own to capture",
+                         hint="run `sherpa sim --serve` and capture with --bus-map")
+    if duration is not None and not 0 < duration <= 86400:
+        raise UsageError(f"--for {duration}: expected seconds > 0 and <= 86400")
+    check_output(output)
+    cfg = st.load_config()
+    mapping = parse_bus_map(st.bus_map)
+    if mapping:
+        cfg = apply_bus_map(cfg, mapping)
+    names = list(bus or cfg.buses)
+    for name in names:
+        if name not in cfg.buses:
+            raise UsageError(f"--bus {name}: not a configured bus (configured: {', '.join(cfg.buses)})")
+    opened = {}
+    stop = threading.Event()
+    timer = None
+    try:
+        for name in names:
+            opened[name] = open_bus(cfg.buses[name])
+        if duration is not None:
+            timer = threading.Timer(duration, stop.set)
+            timer.daemon = True
+            timer.start()
+        st.out.info(f"capturing {', '.join(names)} into {output} (Ctrl-C to stop)")
+        result = run_capture(opened, output, list(cfg.buses), stop=stop,
+                             bitrates={n: cfg.buses[n].bitrate for n in names})
+    finally:
+        if timer is not None:
+            timer.cancel()
+        for b in opened.values():
+            b.shutdown()
+    _render_capture(st, result)
+
+
+def _render_capture(st, result) -> None:
+    if st.json_mode:
+        st.out.json({"file": str(result.path), "seconds": round(result.seconds, 3), "frames": result.frames,
+                     "lost": result.lost,
+                     "buses": [{"bus": c.bus, "frames": c.frames, "error_frames": c.errors, "lost": c.overruns,
+                                "load": None if result.load(c.bus) is None else round(result.load(c.bus), 4)}
+                               for c in result.counts.values()]})
+        return
+    rows = []
+    for c in result.counts.values():
+        load = result.load(c.bus)
+        rows.append([c.bus, c.frames, c.errors, c.overruns, "-" if load is None else f"{100 * load:.1f} %"])
+    st.out.table(f"{result.path}: {result.frames} frames in {result.seconds:.1f} s, {result.lost} lost",
+                 ["bus", "frames", "error frames", "lost", "load"], rows, right=(1, 2, 3, 4))
+
+
+@app.command("plot")
+def plot(
+    ctx: typer.Context,
+    file: Path = typer.Argument(..., metavar="FILE.csv", help="A recording of `log record` or `log step`."),
+    output: Path = typer.Option(..., "--output", "-o", metavar="FILE.png", help="Where to write the PNG."),
+    joint: Optional[List[str]] = typer.Option(None, "--joint", metavar="JOINT",
+                                              help="Plot this joint (repeat); default: every joint in the file."),
+    signal: str = typer.Option("pos", "--signal", metavar="pos|vel|cur",
+                               help="The signal whose step metrics are computed."),
+    step_at: float = typer.Option(0.0, "--step-at", metavar="S", help="Time of the step's command in the file."),
+    target: Optional[float] = typer.Option(None, "--target", metavar="X",
+                                           help="The commanded value (rad, rad/s or A), for the steady-state error."),
+) -> None:
+    """Plot position and velocity (and current) over time into a PNG, with step metrics (dead time,
+    rise time 10-90 %, overshoot, settling time to 2 %, steady-state error) printed and drawn.
+
+    Needs matplotlib (pip install 'sherpa-cli[plot]').
+
+    \b
+    Examples:
+      sherpa log plot run.csv -o run.png
+      sherpa log plot step/recording.csv -o elbow.png --joint elbow_pitch --signal vel --target 0.1
+    """
+    from sherpa_cli.ops.plot import MISSING, MISSING_HINT, have_matplotlib, plot_recording
+    from sherpa_cli.ops.recording import SIGNALS, read_csv
+
+    st = state(ctx)
+    if signal not in SIGNALS:
+        raise UsageError(f"--signal {signal}: expected one of {', '.join(SIGNALS)}")
+    import math
+
+    for what, number in (("--step-at", step_at), ("--target", target)):
+        if number is not None and not math.isfinite(number):
+            raise UsageError(f"{what} {number}: expected a finite number")
+    if output.suffix.lower() != ".png":
+        raise UsageError(f"-o {output}: expected a .png file")
+    if not have_matplotlib():
+        raise UsageError(MISSING, hint=MISSING_HINT)
+    rec = read_csv(file)
+    joints = list(joint or rec.joints())
+    for j in joints:
+        if j not in rec.joints():
+            raise UsageError(f"--joint {j}: not in {file} (it has {', '.join(rec.joints()) or 'no joints'})")
+    metrics = _metrics(rec, joints, signal, step_at, target)
+    plot_recording(rec, joints, output, metrics=metrics, title=file.name)
+    render_metrics(st, metrics, extra={"png": str(output)})
+
+
+def _metrics(rec, joints, signal, step_at, target):
+    from sherpa_cli.ops.step_metrics import step_metrics
+
+    out = {}
+    for j in joints:
+        series = rec.series(j, signal)
+        if series is None or len(series[0]) < 2:
+            continue
+        try:
+            out[(j, signal)] = step_metrics(series[0], series[1], t_step=step_at, target=target)
+        except ValueError as exc:
+            raise UsageError(f"{j} {signal}: {exc}") from None
+    return out
+
+
+def _ms(seconds) -> str:
+    return "-" if seconds is None else f"{1000 * seconds:.1f} ms"
+
+
+def render_metrics(st, metrics, extra=None) -> None:
+    from sherpa_cli.ops.recording import SIGNALS, UNITS
+
+    if st.json_mode:
+        st.out.json({**(extra or {}), "metrics": [{"joint": j, "signal": s, **m.as_json()}
+                                                  for (j, s), m in metrics.items()]})
+        return
+    for (j, s), m in metrics.items():
+        unit = UNITS[SIGNALS[s]]
+        settle = _ms(m.settling_time) + ("" if m.settled else " (not settled at the end)")
+        sse = "" if m.steady_state_error is None else f", steady-state error {m.steady_state_error:.4f} {unit}"
+        st.out.line(f"{j} {s}: {m.initial:.4f} -> {m.final:.4f} {unit}; dead time {_ms(m.dead_time)}, "
+                    f"rise (10-90 %) {_ms(m.rise_time)}, overshoot {m.overshoot:.1f} %, settling (2 %) {settle}{sse}")
+    for key, value in (extra or {}).items():
+        st.out.line(f"{key}: {value}")
+
+
+# Seconds to wait while recording; tests replace it (the recorder's SYNC runs on its own).
+import time as _time  # noqa: E402
+
+sleep = _time.sleep
+MAX_RECORD_S = 3600.0
+
+
+@app.command("record")
+def record(
+    ctx: typer.Context,
+    targets: Targets = None,
+    rate: float = typer.Option(100.0, "--rate", metavar="HZ", help="Samples per second (SYNC rate)."),
+    duration: float = typer.Option(..., "--for", metavar="S", help="How long to record, in seconds."),
+    output: Path = typer.Option(..., "--output", "-o", metavar="FILE.csv", help="Where to write the samples."),
+    current: Optional[bool] = typer.Option(
+        None, "--current/--no-current",
+        help="Also sample the motor current (a second TPDO every 2nd SYNC). Default: when the bus budget allows."),
+    poll: bool = typer.Option(False, "--poll", help="Sample through the interpreter (PX, VX, IQ queries) every "
+                              "bus's poll_interval_ms (the seed's scheduler_interval) instead of TPDOs: "
+                              "changes nothing on the drives, but slow and jittery."),
+) -> None:
+    """Record position and velocity (and current) of joints, in joint units (rad, rad/s, A; Σ/Δ for
+    pairs) plus the motor counts, with one timestamp per sample, into a CSV file.
+
+    Sampling uses TPDOs sent on SYNC: TPDO1 maps position and velocity (0x6064, 0x6069), TPDO3 the
+    current, transmission type 1 (every SYNC). SYNC comes from the kernel where the interface has
+    one (SocketCAN), else from a thread. The bus load is computed and printed before anything is
+    sent; a rate the bus cannot carry is refused, naming the highest rate it can.
+
+    The PDO changes are RAM only: the old settings are read first and written back on every exit
+    path (end, error, Ctrl-C); nothing is ever saved (no SV).
+
+    \b
+    Examples:
+      sherpa log record elbow_pitch --rate 1000 --for 5 -o elbow.csv
+      sherpa log record shoulder_diff --rate 500 --for 10 --current -o pair.csv
+      sherpa log record --poll --for 5 -o slow.csv
+    """
+    from sherpa_cli.ops.record import MAX_LOAD, Poller, Recorder, bus_budget, check_budget
+    from sherpa_cli.ops.recording import write_csv
+    from sherpa_cli.ops.targets import drive_refs
+
+    st = state(ctx)
+    if not 0 < duration <= MAX_RECORD_S:
+        raise UsageError(f"--for {duration}: expected seconds > 0 and <= {MAX_RECORD_S:g}")
+    if not (0 < rate <= 10000):
+        raise UsageError(f"--rate {rate}: expected Hz > 0 and <= 10000")
+    if output.suffix.lower() != ".csv":
+        raise UsageError(f"-o {output}: only .csv is written", hint="name the file run.csv")
+    if not output.parent.exists():
+        raise UsageError(f"-o {output}: directory {output.parent} does not exist")
+    cfg = st.load_config()
+    refs = drive_refs(cfg, targets, configured_only=True)
+    if not poll:
+        if current is None:
+            current = all(b.fits for b in bus_budget(cfg, refs, rate, current=True))
+        budget = bus_budget(cfg, refs, rate, current=current)
+        for b in budget:
+            st.out.info(f"bus {b.bus}: {b.drives} drive(s) at {rate:g} Hz"
+                        f"{' with current' if b.current else ''}: {100 * b.load:.1f} % of "
+                        f"{b.bitrate / 1e6:g} Mbit/s{' (assumed)' if b.bitrate_assumed else ''} "
+                        f"(limit {100 * MAX_LOAD:.0f} %, highest rate {b.max_rate} Hz)")
+        check_budget(budget)
+    buses = list(dict.fromkeys(r.bus for r in refs))
+    expected: int | None = None
+    with st.session(buses=buses) as session:
+        if poll:
+            poller = Poller(session, refs, current=bool(current))
+            with poller:
+                interrupted = _wait_for(duration)
+            rec, counts = poller.recording(cfg), poller.counts()
+        else:
+            recorder = Recorder(session, refs, rate, current=bool(current))
+            with recorder:
+                interrupted = _wait_for(duration)
+            rec, counts, expected = recorder.recording(), recorder.counts(), recorder.expected()
+    write_csv(rec, output)
+    _render_record(st, output, counts, expected, len(rec.times))
+    if interrupted:
+        st.out.warn("interrupted: the samples up to Ctrl-C are written; the drives' PDO settings are restored")
+        raise typer.Exit(130)
+
+
+def _wait_for(duration: float) -> bool:
+    """Sleep while sampling; True when Ctrl-C ended it early."""
+    try:
+        sleep(duration)
+    except KeyboardInterrupt:
+        return True
+    return False
+
+
+def _render_record(st, output, counts, expected, rows) -> None:
+    if st.json_mode:
+        st.out.json({"file": str(output), "rows": rows, "expected": expected,
+                     "drives": [{"drive": n, "samples": c} for n, c in counts.items()]})
+        return
+    for name, c in counts.items():
+        share = "" if not expected else f" of {expected} ({100 * c / expected:.2f} %)"
+        st.out.line(f"{name}: {c} samples{share}")
+    st.out.line(f"wrote {output} ({rows} rows)")
+
+
+@app.command("step")
+def step(
+    ctx: typer.Context,
+    joint: str = typer.Argument(..., metavar="JOINT", help="A plain joint (or the drive of one)."),
+    position: Optional[float] = typer.Option(None, "--position", metavar="X",
+                                             help="A position step of X rad from where the joint stands."),
+    velocity: Optional[float] = typer.Option(None, "--velocity", metavar="V", help="A velocity step to V rad/s."),
+    torque: Optional[float] = typer.Option(None, "--torque", metavar="A", help="A torque (current) step to A amperes."),
+    duration: float = typer.Option(2.0, "--for", metavar="S",
+                                   help="Record at most S seconds after the command (position and velocity steps "
+                                   "end earlier once settled; velocity and torque stop the motor at S)."),
+    rate: float = typer.Option(1000.0, "--rate", metavar="HZ", help="Samples per second."),
+    output: Path = typer.Option(..., "--output", "-o", metavar="DIR",
+                                help="Directory for recording.csv, step.png and metrics.json (created)."),
+) -> None:
+    """The seed's Section 9 step experiment in one command: start recording, command the step at
+    t = 0 through the motion guard, record until settled (or --for), stop the motor, and write
+    the recording (CSV), the plot (PNG, with matplotlib) and the step metrics (JSON).
+
+    t = 0 is when the step was asked for: if the drive must first switch its unit mode or its
+    motor on (MO/UM switch, seed Fig. 9.1), that time shows in the dead time and on its own as
+    "switch". The motion guard stops the motor on every exit path; the recording's PDO changes
+    are RAM only and restored.
+
+    \b
+    Examples:
+      sherpa log step elbow_pitch --position 1 -o steps/pos
+      sherpa log step elbow_pitch --velocity 0.1 --for 1 -o steps/vel
+      sherpa log step elbow_pitch --torque 1 --for 0.3 -o steps/torque
+    """
+    import json
+
+    from sherpa_cli.ops.jog import resolve_jog_target
+    from sherpa_cli.ops.motion import MotionSettings
+    from sherpa_cli.ops.plot import have_matplotlib, plot_recording
+    from sherpa_cli.ops.recording import write_csv
+    from sherpa_cli.ops.step import run_step
+
+    st = state(ctx)
+    given = [(m, v) for m, v in (("position", position), ("velocity", velocity), ("torque", torque)) if v is not None]
+    if len(given) != 1:
+        raise UsageError("give exactly one of --position X, --velocity V or --torque A")
+    mode, value = given[0]
+    import math
+
+    if not math.isfinite(value):
+        raise UsageError(f"--{mode} {value}: expected a finite number")
+    if not (math.isfinite(duration) and 0 < duration <= MAX_RECORD_S):
+        raise UsageError(f"--for {duration}: expected seconds > 0 and <= {MAX_RECORD_S:g}")
+    if not (0 < rate <= 10000):
+        raise UsageError(f"--rate {rate}: expected Hz > 0 and <= 10000")
+    if output.exists() and not output.is_dir():
+        raise UsageError(f"-o {output}: exists and is not a directory")
+    cfg = st.load_config()
+    target = resolve_jog_target(cfg, joint)
+    settings = MotionSettings.from_config(cfg, [target.ref.bus])
+    output.mkdir(parents=True, exist_ok=True)
+    with st.session(buses=[target.ref.bus]) as session:
+        result = run_step(session, target, mode, value, duration=duration, rate=rate, settings=settings)
+    write_csv(result.recording, output / "recording.csv")
+    (output / "metrics.json").write_text(json.dumps(result.as_json(), indent=2) + "\n", encoding="utf-8")
+    files = {"csv": str(output / "recording.csv"), "metrics": str(output / "metrics.json")}
+    if have_matplotlib():
+        plot_recording(result.recording, [result.joint], output / "step.png",
+                       metrics={(result.joint, result.signal): result.metrics},
+                       title=f"{result.joint}: {result.command} (switch {1000 * result.switch_s:.0f} ms)")
+        files["png"] = str(output / "step.png")
+    else:
+        st.out.warn("no PNG: matplotlib is not installed (pip install 'sherpa-cli[plot]')")
+    if st.json_mode:
+        st.out.json({**result.as_json(), "files": files})
+        return
+    st.out.line(f"{result.joint} ({result.drive}): {mode} step {value:g} -> {result.command}; "
+                f"MO/UM switch {1000 * result.switch_s:.0f} ms; {result.ended_by}; "
+                f"{result.samples} of {result.expected} samples")
+    render_metrics(st, {(result.joint, result.signal): result.metrics})
+    for line in result.stop.lines():
+        st.out.line(line)
+    for key, path in files.items():
+        st.out.line(f"{key}: {path}")

@@ -1,0 +1,475 @@
+"""A live jog session: the ops layer under `sherpa jog --interactive` and `sherpa jog --joystick`
+(docs/jog.md). One motion guard (ops/motion.py) around every motor of the chosen joints, the same
+joint limits and limit watch as `sherpa jog` (ops/limit_watch.py, ops/joint_jog.py), and small
+commands a user interface calls as keys are pressed or a joystick moves:
+
+- :meth:`LiveJog.step` moves a joint by N counts (position mode, only to a target inside the
+  joint's normal range, only when the joint is calibrated unless ``allow_uncalibrated``);
+- :meth:`LiveJog.set_velocity` / :meth:`LiveJog.set_torque` run a joint at a speed or current
+  (in joint space; a Σ/Δ joint through the pair's inverse transform) **until** ``keepalive`` s
+  without a new command: no terminal sees a key release, and a joystick reader that hangs must
+  not leave a motor running, so every velocity and torque command expires by itself;
+- :meth:`LiveJog.set_motor_velocities` / :meth:`LiveJog.set_motor_currents` drive the motors of a
+  pair directly (a joystick's XY+ / XY- mapping);
+- :meth:`LiveJog.stop` / :meth:`LiveJog.stop_all` stop now;
+- :meth:`LiveJog.tick` must be called often (every 0.1 s or faster): it is the guard's sign of
+  life, samples every position, stops expired commands, holds a joint at the edge of its normal
+  range (a command driving it further out is not sent), and runs the full-range watch (a breach
+  stops everything and brings the joint back to its normal edge, like `jog`).
+
+Leaving the ``with`` block (``q``, Ctrl-C, an error) leaves the guard: every motor stopped,
+switched off, what was changed put back.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+from typing import Any, Callable, Mapping, Sequence
+
+from sherpa_cli.config.model import ArmConfig, JointConfig, JointRole
+from sherpa_cli.elmo.faults import decode_sr, describe_mf, sr_problems
+from sherpa_cli.errors import SafetyError, UsageError
+from sherpa_cli.joints import diffpair
+from sherpa_cli.joints.units import counts_to_rad
+from sherpa_cli.ops import calibration, joint_jog, limit_watch, targets
+from sherpa_cli.ops.limit_watch import WatchedJoint
+from sherpa_cli.ops.motion import UM_POSITION, UM_TORQUE, MotionGuard, MotionSettings
+
+MODES = ("position", "velocity", "torque")
+KEEPALIVE_S = 0.5  # a velocity/torque command stops this long after the last key press
+
+
+@dataclass(frozen=True)
+class LiveAxis:
+    """One joint the session can move: a plain joint (one drive) or a Σ/Δ joint of a pair."""
+
+    name: str
+    kind: str  # plain | sigma | delta
+    joint: JointConfig
+    drives: tuple[str, ...]
+    watched: WatchedJoint
+    vel_limit: int | None  # counts/s
+    current_limit: float | None  # A per motor
+
+    @property
+    def cpr(self) -> int:
+        return self.joint.cpr
+
+    def position(self, motors: Mapping[str, int]) -> int:
+        return self.watched.position(motors)
+
+
+def resolve_axes(cfg: ArmConfig, names: Sequence[str] | None) -> list[LiveAxis]:
+    """The joints named (a pair means both its joints), or every joint of the config."""
+    chosen: list[JointConfig] = []
+    if not names:
+        chosen = list(cfg.joints.values())
+    for text in names or ():
+        t = targets.resolve_one(cfg, text)
+        joints = [j for j in t.joints if j.role is not JointRole.PLAIN or j.drive is not None]
+        if t.pair is not None and t.kind is not targets.TargetKind.JOINT:
+            joints = [cfg.joints[t.pair.sigma], cfg.joints[t.pair.delta]]
+        if not joints:
+            raise UsageError(f"'{text}' moves no configured joint", hint="name a joint, a pair or a drive of the config")
+        chosen += [j for j in joints if j not in chosen]
+    out = []
+    for j in chosen:
+        w = WatchedJoint.of(cfg, j)
+        if j.role is JointRole.PLAIN:
+            cur = j.current.continuous if j.current is not None else None
+            out.append(LiveAxis(j.name, "plain", j, w.drives, w, j.vel_limit, cur))
+        else:
+            pair = cfg.pairs[j.pair]  # type: ignore[index]
+            cur = pair.current.continuous if pair.current is not None else None
+            out.append(LiveAxis(j.name, j.role.value, j, (pair.drive_a, pair.drive_b), w, j.vel_limit, cur))
+    return out
+
+
+@dataclass
+class AxisState:
+    """What the view shows of one joint."""
+
+    name: str
+    counts: int | None = None
+    rad: float | None = None
+    mode: str = "position"
+    command: str = "-"  # what runs now: "-", "PA=...", "JV=...", "TC=..."
+    calibrated: bool = False
+    calibration: str = ""
+    faults: list[str] = field(default_factory=list)
+    note: str = ""  # the last refusal or limit message for this joint
+
+
+@dataclass
+class _Running:
+    mode: str  # velocity | torque | position
+    motors: dict[str, float]  # JV (counts/s) or TC (A) per drive; position: PA
+    until: float | None  # clock time it expires (velocity/torque)
+
+
+class LiveJog:
+    """``with LiveJog(session, axes) as live:`` -- see the module docstring."""
+
+    def __init__(self, session: Any, axes: Sequence[LiveAxis], *, settings: MotionSettings | None = None,
+                 keepalive: float = KEEPALIVE_S, allow_uncalibrated: bool = False, tick_period: float = 0.1,
+                 clock: Callable[[], float] = time.monotonic, sleep: Callable[[float], None] = time.sleep,
+                 on_event: Callable[[str], None] | None = None) -> None:
+        if not axes:
+            raise UsageError("nothing to jog: the config has no joints")
+        self.session = session
+        self.cfg: ArmConfig = session.cfg
+        self.axes = {a.name: a for a in axes}
+        drives: list[str] = []
+        for a in axes:
+            drives += [d for d in a.drives if d not in drives]
+        self.drives = tuple(drives)
+        self.refs = {d: targets.drive_ref(self.cfg, d) for d in drives}
+        # every joint these motors move (a Σ joint alone still moves Δ): the watch covers them all
+        self.watched = limit_watch.joints_moved_by(self.cfg, drives)
+        self.settings = settings or MotionSettings.from_config(self.cfg, {r.bus for r in self.refs.values()})
+        self.keepalive = keepalive
+        self.tick_period = tick_period  # how often the caller ticks (the edge hold looks this far ahead)
+        self.allow_uncalibrated = allow_uncalibrated
+        self.clock, self.sleep = clock, sleep
+        self.guard = MotionGuard(session, list(self.refs.values()), settings=self.settings, clock=clock,
+                                 sleep=sleep, on_event=on_event)
+        self.state = {a.name: AxisState(a.name) for a in axes}
+        self.motors: dict[str, int] = {}
+        self.running: dict[str, _Running] = {}  # per axis
+        self.messages: list[str] = []  # limit breaches and recoveries, oldest first
+        self.dead: dict[str, str] = {}  # drive -> why it must not be commanded again in this session
+
+    # -- context ---------------------------------------------------------------------------------
+
+    def __enter__(self) -> "LiveJog":
+        for a in self.axes.values():  # calibration first: nothing is armed if it cannot be read
+            c = calibration.read_calibration(self.cfg, a.joint, lambda d: self._raw(d))
+            self.state[a.name].calibrated = c.calibrated
+            self.state[a.name].calibration = c.reason
+        self.guard.__enter__()
+        try:
+            self.tick()
+        except BaseException:
+            self.guard.__exit__(None, None, None)
+            raise
+        return self
+
+    def __exit__(self, exc_type: Any, exc: Any, tb: Any) -> bool:
+        self.running.clear()
+        return self.guard.__exit__(exc_type, exc, tb)
+
+    @property
+    def report(self):
+        return self.guard.report
+
+    def _raw(self, drive: str) -> Any:
+        c = self.session.client(self.refs[drive])
+        c.nmt_start()
+        return c
+
+    def _client(self, drive: str) -> Any:
+        return self.guard.client(self.refs[drive])
+
+    # -- commands ----------------------------------------------------------------------------------
+
+    def set_mode(self, name: str, mode: str) -> None:
+        """The mode the next command of this joint uses; what runs is stopped first."""
+        if mode not in MODES:
+            raise UsageError(f"mode '{mode}': expected one of {', '.join(MODES)}")
+        self.stop(name)
+        self.state[name].mode = mode
+
+    def step(self, name: str, counts: int) -> str:
+        """Position mode: move the joint by ``counts`` (the other joint of a pair holds)."""
+        a = self._axis(name)
+        st = self.state[name]
+        if not (st.calibrated or self.allow_uncalibrated):
+            return self._refuse(name, f"{name} is {st.calibration}: position steps need a calibrated joint "
+                                      "(home it, or start with --uncalibrated)")
+        self.guard.check()
+        now = self._sample(a.drives + tuple(d for d in a.watched.drives if d not in a.drives))
+        start = a.position(now)
+        base = self.running[name].motors.get("target", start) if name in self.running and \
+            self.running[name].mode == "position" else start
+        goal = int(base) + int(counts)
+        lo, hi = a.joint.normal_range
+        if not lo <= goal <= hi:
+            return self._refuse(name, f"{name}: target {goal} counts is outside the normal range [{lo}, {hi}]: "
+                                      "not sent")
+        if a.kind == "plain":
+            motor_targets = {a.drives[0]: goal}
+        else:
+            # the other joint of the pair holds; on a parity clash it gives way by one count (joint_jog)
+            pair = self.cfg.pairs[a.joint.pair]  # type: ignore[index]
+            held = self.cfg.joints[pair.delta if a.kind == "sigma" else pair.sigma]
+            ma, mb = (now[d] for d in a.drives)
+            s_now, d_now = ma + mb, ma - mb
+            s2, d2 = (diffpair.hold_other(goal, d_now, "sigma", held.normal_range) if a.kind == "sigma"
+                      else diffpair.hold_other(s_now, goal, "delta", held.normal_range))
+            motor_targets = dict(zip(a.drives, diffpair.to_motors(s2, d2)))
+        speed = max(1, (a.vel_limit or 400) // 2)
+        distance = max(abs(t - now[d]) for d, t in motor_targets.items())
+        duration = distance / speed if distance else 0.0
+        self._stop_others_on(a.drives, name)
+        for d, t in motor_targets.items():
+            self._enable(d, UM_POSITION)
+            c = self._client(d)
+            c.set("SP", 0, max(1, math.ceil(abs(t - now[d]) / duration)) if duration else speed)
+            c.set("PA", 0, t)
+        for d in motor_targets:
+            self._client(d).execute("BG")
+        self.running[name] = _Running("position", {"target": goal, **motor_targets}, None)
+        st.command = f"PA -> {goal}"
+        st.note = ""
+        return f"{name}: to {goal} counts"
+
+    def set_velocity(self, name: str, counts_per_s: int) -> str:
+        """Run the joint at ``counts_per_s`` until ``keepalive`` s without a new command (0 stops)."""
+        a = self._axis(name)
+        v = int(counts_per_s)
+        if a.vel_limit is not None and abs(v) > a.vel_limit:
+            return self._refuse(name, f"{name}: {abs(v)} counts/s is above the joint's speed limit "
+                                      f"{a.vel_limit} counts/s: not sent")
+        if a.kind == "plain":
+            motors = {a.drives[0]: v}
+        else:
+            va, vb = diffpair.motor_velocities(v, 0) if a.kind == "sigma" else diffpair.motor_velocities(0, v)
+            motors = dict(zip(a.drives, (va, vb)))
+        return self._run(name, "velocity", motors)
+
+    def set_torque(self, name: str, amps: float) -> str:
+        """Apply ``amps`` (per joint; a Σ/Δ joint through the pair's transpose) until ``keepalive`` s pass."""
+        a = self._axis(name)
+        if a.kind == "plain":
+            motors = {a.drives[0]: float(amps)}
+        else:
+            ia, ib = diffpair.motor_currents(amps, 0.0) if a.kind == "sigma" else diffpair.motor_currents(0.0, amps)
+            motors = dict(zip(a.drives, (ia, ib)))
+        if a.current_limit is None:
+            return self._refuse(name, f"{name}: no current limits configured: torque not sent")
+        if max(abs(x) for x in motors.values()) > a.current_limit:
+            return self._refuse(name, f"{name}: {amps:g} A is above the continuous limit {a.current_limit:g} A: "
+                                      "not sent")
+        return self._run(name, "torque", motors)
+
+    def set_motor_velocities(self, pair_axis: str, motors: Mapping[str, int]) -> str:
+        """Both motors of a pair at the given speeds (counts/s), e.g. X+Y and X-Y of a joystick.
+        Scaled down together when a joint of the pair would exceed its speed limit."""
+        a = self._axis(pair_axis)
+        va, vb = (int(motors[d]) for d in a.drives)
+        scale = 1.0
+        for j in self._pair_axes(a):
+            jv = va + vb if j.kind == "sigma" else va - vb
+            if j.vel_limit and abs(jv) > j.vel_limit:
+                scale = min(scale, j.vel_limit / abs(jv))
+        if scale < 1.0:
+            va, vb = int(va * scale), int(vb * scale)
+        return self._run(pair_axis, "velocity", dict(zip(a.drives, (va, vb))))
+
+    def set_motor_currents(self, pair_axis: str, motors: Mapping[str, float]) -> str:
+        """Both motors of a pair at the given currents (A), each clamped to the continuous limit."""
+        a = self._axis(pair_axis)
+        lim = a.current_limit
+        if lim is None:
+            return self._refuse(pair_axis, f"{pair_axis}: no current limits configured: torque not sent")
+        out = {d: max(-lim, min(lim, float(motors[d]))) for d in a.drives}
+        return self._run(pair_axis, "torque", out)
+
+    def stop(self, name: str) -> None:
+        a = self._axis(name)
+        run = self.running.pop(name, None)
+        drives = [d for d in a.drives if d not in self.dead]
+        if run is not None and drives:
+            self.guard.check()
+            joint_jog.stop_now({d: self._client(d) for d in drives}, run.mode)
+        self.state[name].command = "-"
+
+    def stop_all(self) -> None:
+        for name in list(self.running):
+            self.stop(name)
+
+    # -- the periodic part ---------------------------------------------------------------------------
+
+    def tick(self) -> dict[str, AxisState]:
+        """Sign of life, positions, expiry, edge hold and the full-range watch; returns the joints' state."""
+        self.guard.check()
+        now = self.clock()
+        for name, run in list(self.running.items()):
+            if run.until is not None and now >= run.until:
+                self.stop(name)
+        motors = self._sample(self.drives)
+        for d in self.drives:
+            if d in self.dead:
+                continue
+            sr = int(self.guard.query(self.refs[d], "SR"))
+            s = decode_sr(sr)
+            faults = [f.line() for f in sr_problems(sr) if f.code != 1 << 28]
+            if not s.motor_on and self._commanded(d):
+                mf = int(self.guard.query(self.refs[d], "MF"))
+                why = "; ".join(describe_mf(mf)) if mf else "MO=0 from elsewhere (sherpa stop, another tool)"
+                self.dead[d] = why
+                for name in [n for n, a in self.axes.items() if d in a.drives]:
+                    self.running.pop(name, None)
+                    self.state[name].command = "-"
+                self.messages.append(f"{d}: the motor was switched off: {why}; it is not commanded again "
+                                     "in this session")
+            for name, a in self.axes.items():
+                if d in a.drives:
+                    st = self.state[name]
+                    st.faults = [x for x in st.faults if not x.startswith(d + ":")] + [f"{d}: {f}" for f in faults]
+                    if d in self.dead:
+                        st.faults.append(f"{d}: {self.dead[d]}")
+        self._edge_hold(motors)
+        breaches = limit_watch.check(self.watched, motors)
+        if breaches:
+            self._recover(motors, breaches)
+            motors = self._sample(self.drives)
+        for name, a in self.axes.items():
+            st = self.state[name]
+            st.counts = a.position(motors)
+            st.rad = counts_to_rad(st.counts, a.cpr)
+            now_running = self.running.get(name)
+            if now_running is not None and now_running.mode == "position" and all(
+                    int(self._client(d).get("MS")) == 0 for d in a.drives if d not in self.dead):
+                self.running.pop(name, None)
+                st.command = "-"
+        return self.state
+
+    @property
+    def deadman(self) -> str:
+        s = self.settings
+        return (f"dead-man: heartbeat {s.heartbeat_period * 1000:.0f} ms to every drive "
+                f"(consumer {s.consumer_time_ms} ms); keys step once per press, velocity/torque stop "
+                f"{self.keepalive:g} s after the last press")
+
+    # -- internals ---------------------------------------------------------------------------------
+
+    def _axis(self, name: str) -> LiveAxis:
+        try:
+            return self.axes[name]
+        except KeyError:
+            raise UsageError(f"'{name}' is not a joint of this session ({', '.join(self.axes)})") from None
+
+    def _pair_axes(self, a: LiveAxis) -> list[LiveAxis]:
+        out = [b for b in self.axes.values() if b.drives == a.drives]
+        if a.kind == "plain":
+            return [a]
+        if len(out) < 2:  # the other joint of the pair is not in the session: still limit it
+            for j in (self.cfg.joints[n] for n in self.cfg.joints):
+                if j.pair == a.joint.pair and j.name != a.name:
+                    out += resolve_axes(self.cfg, [j.name])
+        return out
+
+    def _refuse(self, name: str, text: str) -> str:
+        self.state[name].note = text
+        return text
+
+    def _commanded(self, drive: str) -> bool:
+        return any(drive in self.axes[n].drives for n in self.running)
+
+    def _enable(self, drive: str, um: int) -> None:
+        if drive in self.dead:
+            raise SafetyError(f"{drive}: not commanded again in this session: {self.dead[drive]}",
+                              hint="leave the view (q) and find the cause; `sherpa monitor --once`")
+        self.guard.enable(self.refs[drive], um)
+
+    def _stop_others_on(self, drives: Sequence[str], keep: str) -> None:
+        """Another joint of the same motors (Σ and Δ of one pair) stops before this one is commanded."""
+        for name, a in self.axes.items():
+            if name != keep and name in self.running and set(a.drives) & set(drives):
+                self.stop(name)
+
+    def _run(self, name: str, mode: str, motors: dict[str, Any]) -> str:
+        a = self._axis(name)
+        st = self.state[name]
+        if all(v == 0 for v in motors.values()):
+            self.stop(name)
+            return f"{name}: stopped"
+        self.guard.check()
+        blocked = self._outward(motors, mode=mode)
+        if blocked:
+            self.stop(name)
+            return self._refuse(name, blocked)
+        prev = self.running.get(name)
+        if prev is not None and prev.mode != mode:
+            self.stop(name)
+        self._stop_others_on(a.drives, name)
+        um = UM_TORQUE if mode == "torque" else self.settings.velocity_unit_mode
+        for d in motors:
+            self._enable(d, um)
+        for d, v in motors.items():
+            c = self._client(d)
+            if mode == "torque":
+                c.set("TC", 0, float(v))
+            else:
+                c.set("JV", 0, int(v))
+        if mode == "velocity":
+            for d in motors:
+                self._client(d).execute("BG")
+        self.running[name] = _Running(mode, dict(motors), self.clock() + self.keepalive)
+        letters = "TC" if mode == "torque" else "JV"
+        parts = [f"{letters}={v:g}" if isinstance(v, float) else f"{letters}={v}" for v in motors.values()]
+        st.command = parts[0] if len(parts) == 1 else ", ".join(f"{d} {p}" for d, p in zip(motors, parts))
+        st.note = ""
+        return f"{name}: {st.command}"
+
+    def _outward(self, motors: Mapping[str, Any], positions: Mapping[str, int] | None = None,
+                 mode: str = "velocity") -> str | None:
+        """A command that drives a joint at (or past) the edge of its normal range further out. In
+        velocity mode the edge is met early by the distance the joint needs to stop (its configured
+        decel) plus one tick of travel, so the stop lands inside the normal range."""
+        pos = positions if positions is not None else self.motors
+        for j in limit_watch.joints_moved_by(self.cfg, motors):
+            if any(d not in pos for d in j.drives):
+                continue
+            rate = float(motors.get(j.drive_a, 0)) + (j.sign * float(motors.get(j.drive_b, 0))
+                                                       if j.drive_b is not None else 0.0)
+            p = float(j.position(pos))
+            if mode == "velocity":
+                decel = self.cfg.joints[j.name].decel
+                p += rate * self.tick_period + (rate * abs(rate) / (2 * decel) if decel else 0.0)
+            if (rate > 0 and p >= j.normal[1]) or (rate < 0 and p <= j.normal[0]):
+                side = "high" if rate > 0 else "low"
+                return (f"{j.name} is at the {side} edge of its normal range [{j.normal[0]}, {j.normal[1]}]: "
+                        "a command further out is not sent")
+        return None
+
+    def _edge_hold(self, motors: Mapping[str, int]) -> None:
+        for name, run in list(self.running.items()):
+            if run.mode == "position":
+                continue
+            blocked = self._outward(run.motors, motors, run.mode)
+            if blocked:
+                self.stop(name)
+                self._refuse(name, blocked)
+                self.messages.append(blocked)
+
+    def _sample(self, drives: Sequence[str]) -> dict[str, int]:
+        for d in drives:
+            if d in self.refs:
+                self.motors[d] = int(self.guard.query(self.refs[d], "PX"))
+            else:
+                self.motors[d] = int(self._raw(d).get("PX"))
+        return dict(self.motors)
+
+    def _recover(self, motors: Mapping[str, int], breaches: Sequence[limit_watch.Breach]) -> None:
+        """Like `jog`: stop every motor at once, then bring the breached joints back to their normal edge."""
+        modes = {run.mode for run in self.running.values()}
+        self.running.clear()
+        live = {d: self._client(d) for d in self.drives if d not in self.dead}
+        joint_jog.stop_now(live, "torque" if "torque" in modes else "position")
+        joint_jog.wait_standstill(live, self.guard, self.settings, self.clock, self.sleep)
+        back = limit_watch.recovery_targets(self.watched, self._sample(self.drives), breaches)
+        speed = max(1, min((a.vel_limit or 400) for a in self.axes.values()) // 2)
+        joint_jog.move_to(self.guard, self.refs, live, {d: t for d, t in back.items() if d in live}, speed,
+                           self.settings, self.clock, self.sleep, "the move back into the normal range")
+        for b in breaches:
+            text = (f"limit: {b.joint} left its full range [{b.full[0]}, {b.full[1]}] on the {b.side} side: "
+                    f"stopped everything, brought back to {b.back_to} counts")
+            self.messages.append(text)
+            if b.joint in self.state:
+                self.state[b.joint].note = text
+        for st in self.state.values():
+            st.command = "-"

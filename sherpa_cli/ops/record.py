@@ -1,0 +1,401 @@
+"""Record joint motion: TPDOs sent on SYNC (or polling through the interpreter), in counts and
+joint units. The API other commands use (``diffdrive move``, ``log step``)::
+
+    with Recorder(session, refs, rate=1000) as rec:
+        ...                      # move something
+    recording = rec.recording()  # ops/recording.py: time_s + joint and motor columns
+
+What the recorder changes on the drives is RAM only and restored on every exit path, never
+saved: TPDO1 (0x1800/0x1A00) is mapped to position 0x6064 and velocity 0x6069, transmission
+type 1 (every SYNC), and with current TPDO3 (0x1802/0x1A02) to 0x6078 on every 2nd SYNC. The
+old COB-IDs, transmission types and mappings are read first and written back at the end.
+
+SYNC comes from python-can's ``send_periodic`` (the kernel's broadcast manager on SocketCAN,
+a thread elsewhere); tests inject their own (``sync_factory``) and a clock.
+"""
+
+from __future__ import annotations
+
+import math
+import struct
+import threading
+import time
+from dataclasses import dataclass, field
+from typing import Any, Callable, Iterable, Sequence
+
+from sherpa_cli.config.model import ArmConfig
+from sherpa_cli.errors import SherpaError, UsageError
+from sherpa_cli.joints.units import counts_per_s_to_rad_per_s, counts_to_rad
+from sherpa_cli.ops.capture import frame_bits
+from sherpa_cli.ops.recording import Recording
+from sherpa_cli.ops.targets import DriveRef
+
+SYNC_ID = 0x080
+MAX_LOAD = 0.90  # share of the bit rate the recording may take (worst-case stuffing counted)
+DEFAULT_BITRATE = 1_000_000  # when the config does not say
+TPDO_POS = 0  # TPDO1: PX + VX (TPDO2 is the binary interpreter's)
+TPDO_CUR = 2  # TPDO3: current
+POSITION_ENTRY = 0x60640020  # 0x6064:0, 32 bits
+VELOCITY_ENTRY = 0x60690020  # 0x6069:0, 32 bits
+# Current actual value. UNCONFIRMED for the Whistle: DS402 scales 0x6078 in per mille of the
+# rated current; the simulator sends mA. One place to change when a drive tells otherwise.
+CURRENT_ENTRY = 0x60780010  # 0x6078:0, 16 bits
+CURRENT_SCALE_A = 0.001  # A per unit of 0x6078
+CURRENT_DIVIDER = 2  # current on every 2nd SYNC
+RESTORE_ATTEMPTS = 30  # SDO tries per object when putting the PDO settings back (a backlog may delay answers)
+
+
+# -- the bus budget ---------------------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class BusBudget:
+    bus: str
+    drives: int
+    bitrate: int
+    bitrate_assumed: bool
+    bits_per_sync: float
+    rate: float
+    current: bool
+
+    @property
+    def load(self) -> float:
+        return self.bits_per_sync * self.rate / self.bitrate
+
+    @property
+    def max_rate(self) -> int:
+        return int(MAX_LOAD * self.bitrate // self.bits_per_sync)
+
+    @property
+    def fits(self) -> bool:
+        return self.load <= MAX_LOAD + 1e-12
+
+
+def bus_budget(cfg: ArmConfig, refs: Sequence[DriveRef], rate: float, *, current: bool) -> list[BusBudget]:
+    """Per bus: SYNC + one 8-byte TPDO per drive per SYNC (+ a 2-byte current TPDO every 2nd)."""
+    out = []
+    for bus in dict.fromkeys(r.bus for r in refs):
+        n = sum(1 for r in refs if r.bus == bus)
+        configured = cfg.buses[bus].bitrate if bus in cfg.buses else None
+        bits = frame_bits(0) + n * frame_bits(8) + (n * frame_bits(2) / CURRENT_DIVIDER if current else 0)
+        out.append(BusBudget(bus, n, configured or DEFAULT_BITRATE, not configured, bits, rate, current))
+    return out
+
+
+# -- SYNC -----------------------------------------------------------------------------------------
+
+class PeriodicSync:
+    """SYNC every ``period`` s through python-can's send_periodic (kernel BCM on SocketCAN)."""
+
+    def __init__(self, bus: Any, period: float) -> None:
+        import can
+
+        self.task = bus.send_periodic(can.Message(arbitration_id=SYNC_ID, data=b"", is_extended_id=False), period)
+
+    def stop(self) -> None:
+        self.task.stop()
+
+
+SyncFactory = Callable[[str, Any, float], Any]  # (bus name, python-can bus, period) -> object with stop()
+
+
+# -- the recorder ---------------------------------------------------------------------------------
+
+@dataclass
+class _Drive:
+    ref: DriveRef
+    cobs: dict[int, int] = field(default_factory=dict)  # TPDO -> COB-ID in use
+    saved: list[tuple[int, int, int, int]] = field(default_factory=list)  # (index, sub, size, value) to restore
+    pos: dict[int, tuple[int, int]] = field(default_factory=dict)  # sample -> (px, vx)
+    cur: dict[int, float] = field(default_factory=dict)  # sample -> A
+    last: dict[int, int] = field(default_factory=dict)  # TPDO -> last sample index
+
+
+class Recorder:
+    """Sample PX, VX (and current) of ``refs`` at ``rate`` Hz; a context manager."""
+
+    def __init__(self, session: Any, refs: Iterable[DriveRef], rate: float, *, current: bool = False,
+                 clock: Callable[[], float] | None = None, sync_factory: SyncFactory | None = None,
+                 enforce_budget: bool = True) -> None:
+        self.session = session
+        self.cfg: ArmConfig = session.cfg
+        self.refs = list(refs)
+        if not self.refs:
+            raise UsageError("nothing to record: no drives")
+        if not (math.isfinite(rate) and rate > 0):
+            raise UsageError(f"--rate {rate}: expected a rate in Hz > 0")
+        self.rate = float(rate)
+        self.period = 1.0 / self.rate
+        self.current = current
+        self.budget = bus_budget(self.cfg, self.refs, self.rate, current=current)
+        if enforce_budget:
+            check_budget(self.budget)
+        self.clock = clock
+        self.sync_factory = sync_factory or (lambda name, bus, period: PeriodicSync(bus, period))
+        self._drives = {r.key: _Drive(r) for r in self.refs}
+        self._subscribed: list[tuple[Any, int, Callable]] = []
+        self._syncs: list[Any] = []
+        self._lock = threading.Lock()
+        self.t0: float | None = None
+        self.t_end: float | None = None
+
+    # -- lifetime -------------------------------------------------------------------------------
+    def __enter__(self) -> "Recorder":
+        try:
+            for d in self._drives.values():
+                self._configure(d)
+            self._listen()
+            self.t0 = self._now()
+            for bus in dict.fromkeys(r.bus for r in self.refs):
+                self._syncs.append(self.sync_factory(bus, self.session.links[bus].bus, self.period))
+        except BaseException:
+            self._finish()
+            raise
+        return self
+
+    def __exit__(self, *exc: Any) -> None:
+        self._finish(quiet=exc[0] is not None)
+
+    def _now(self) -> float:
+        return self.clock() if self.clock is not None else time.time()
+
+    def now(self) -> float:
+        """The recorder's time (its clock, else wall time like the frames' timestamps)."""
+        return self._now()
+
+    def _finish(self, quiet: bool = False) -> None:
+        for sync in self._syncs:
+            try:
+                sync.stop()
+            except Exception:  # stopping must not hide why we stop
+                pass
+        self._syncs.clear()
+        if self.t0 is not None and self.t_end is None:
+            self.t_end = self._now()
+        for network, cob, callback in self._subscribed:
+            try:
+                network.unsubscribe(cob, callback)
+            except Exception:
+                pass
+        self._subscribed.clear()
+        failures = []
+        for d in self._drives.values():
+            sdo = self.session.sdo(d.ref)
+            for index, sub, size, value in reversed(d.saved):
+                # patient: right after a fast recording the drive may still be working off a backlog
+                for attempt in range(RESTORE_ATTEMPTS):
+                    try:
+                        sdo.download(index, sub, value.to_bytes(size, "little"))
+                        break
+                    except SherpaError as exc:
+                        if attempt == RESTORE_ATTEMPTS - 1:
+                            failures.append(exc)
+            d.saved.clear()
+        if failures and not quiet:
+            raise failures[0]
+
+    # -- PDO set-up (RAM only) ------------------------------------------------------------------
+    def _configure(self, d: _Drive) -> None:
+        client = self.session.client(d.ref)
+        client.nmt_start()  # PDOs only live in Operational
+        self._map(d, TPDO_POS, [POSITION_ENTRY, VELOCITY_ENTRY], 1)
+        if self.current:
+            self._map(d, TPDO_CUR, [CURRENT_ENTRY], CURRENT_DIVIDER)
+
+    def _map(self, d: _Drive, n: int, entries: list[int], ttype: int) -> None:
+        sdo = self.session.sdo(d.ref)
+        comm, mapping = 0x1800 + n, 0x1A00 + n
+
+        def read(index: int, sub: int, size: int) -> int:
+            return int.from_bytes(sdo.upload(index, sub)[:size].ljust(size, b"\0"), "little")
+
+        def write(index: int, sub: int, size: int, value: int) -> None:
+            sdo.download(index, sub, value.to_bytes(size, "little"))
+
+        old_cob, old_type, old_count = read(comm, 1, 4), read(comm, 2, 1), read(mapping, 0, 1)
+        old_entries = [read(mapping, sub, 4) for sub in range(1, len(entries) + 1)]
+        # restore in reverse: entries, count, transmission type, COB-ID last
+        d.saved.append((comm, 1, 4, old_cob))
+        write(comm, 1, 4, old_cob | 0x80000000)  # PDO off while it is changed (CiA 301)
+        d.saved.append((comm, 2, 1, old_type))
+        d.saved.append((mapping, 0, 1, old_count))
+        for sub, value in enumerate(old_entries, 1):
+            d.saved.append((mapping, sub, 4, value))
+        d.saved.append((mapping, 0, 1, 0))  # the count goes to 0 before the entries go back
+        write(mapping, 0, 1, 0)
+        for sub, entry in enumerate(entries, 1):
+            write(mapping, sub, 4, entry)
+        write(mapping, 0, 1, len(entries))
+        write(comm, 2, 1, ttype)
+        cob = (0x180 + 0x100 * n if n != 1 else 0x280) + d.ref.node
+        write(comm, 1, 4, cob)
+        d.cobs[n] = cob
+
+    # -- receiving ------------------------------------------------------------------------------
+    def _listen(self) -> None:
+        for d in self._drives.values():
+            network = self.session.links[d.ref.bus].network
+            for n, cob in d.cobs.items():
+                callback = self._callback(d, n)
+                network.subscribe(cob, callback)
+                self._subscribed.append((network, cob, callback))
+
+    def _callback(self, d: _Drive, n: int) -> Callable[[int, bytes, float], None]:
+        unpack_pos, unpack_cur = struct.Struct("<ii").unpack_from, struct.Struct("<h").unpack_from
+
+        def on_frame(can_id: int, data: bytes, timestamp: float) -> None:
+            t0 = self.t0
+            if t0 is None:
+                return
+            t = self.clock() if self.clock is not None else timestamp
+            step = self.period * (CURRENT_DIVIDER if n == TPDO_CUR else 1)
+            # the SYNC this answers: the last one at or before the frame (a reply comes within a
+            # period); frames that bunched up in a loaded receive thread take the next ones in order
+            k = math.floor((t - t0) / step + 1e-6)
+            with self._lock:
+                k = max(k, d.last.get(n, -1) + 1)
+                d.last[n] = k
+                if n == TPDO_POS and len(data) >= 8:
+                    d.pos[k] = unpack_pos(data)
+                elif n == TPDO_CUR and len(data) >= 2:
+                    value = unpack_cur(data)[0] * CURRENT_SCALE_A
+                    for j in range(CURRENT_DIVIDER):
+                        d.cur[k * CURRENT_DIVIDER + j] = value
+        return on_frame
+
+    # -- results --------------------------------------------------------------------------------
+    def counts(self) -> dict[str, int]:
+        """Samples received per drive so far."""
+        with self._lock:
+            return {d.ref.name: len(d.pos) for d in self._drives.values()}
+
+    def expected(self) -> int:
+        if self.t0 is None:
+            return 0
+        end = self.t_end if self.t_end is not None else self._now()
+        return math.floor((end - self.t0) / self.period + 1e-6) + 1
+
+    def recording(self, *, t_zero: float | None = None) -> Recording:
+        """Samples in joint units; ``t_zero`` (same clock as the recorder) becomes time 0."""
+        with self._lock:
+            keys = sorted({k for d in self._drives.values() for k in d.pos})
+            snapshot = {key: (dict(d.pos), dict(d.cur)) for key, d in self._drives.items()}
+        shift = 0.0 if t_zero is None or self.t0 is None else self.t0 - t_zero
+        rec = Recording(times=[shift + k * self.period for k in keys])
+        nan = math.nan
+        by_name = {d.ref.name: snapshot[key] for key, d in self._drives.items()}
+
+        def motor(name: str, which: int) -> list[float]:
+            pos = by_name[name][0]
+            return [float(pos[k][which]) if k in pos else nan for k in keys]
+
+        def amps(name: str) -> list[float]:
+            cur = by_name[name][1]
+            return [cur.get(k, nan) for k in keys]
+
+        for joint in self.cfg.joints.values():
+            if joint.drive is not None and joint.drive in by_name:
+                px, vx = motor(joint.drive, 0), motor(joint.drive, 1)
+                rec.columns[f"{joint.name}.pos_rad"] = [counts_to_rad(v, joint.cpr) if v == v else nan for v in px]
+                rec.columns[f"{joint.name}.vel_rad_s"] = [counts_per_s_to_rad_per_s(v, joint.cpr) if v == v else nan
+                                                          for v in vx]
+                if self.current:
+                    rec.columns[f"{joint.name}.cur_a"] = amps(joint.drive)
+            elif joint.pair is not None:
+                pair = self.cfg.pairs[joint.pair]
+                if pair.drive_a not in by_name or pair.drive_b not in by_name:
+                    continue
+                sign = 1 if joint.name == pair.sigma else -1
+                for col, which, conv in (("pos_rad", 0, counts_to_rad), ("vel_rad_s", 1, counts_per_s_to_rad_per_s)):
+                    a, b = motor(pair.drive_a, which), motor(pair.drive_b, which)
+                    rec.columns[f"{joint.name}.{col}"] = [conv(x + sign * y, joint.cpr) for x, y in zip(a, b)]
+        for ref in self.refs:
+            rec.columns[f"{ref.name}.px"] = motor(ref.name, 0)
+            rec.columns[f"{ref.name}.vx"] = motor(ref.name, 1)
+            if self.current:
+                rec.columns[f"{ref.name}.iq_a"] = amps(ref.name)
+        return rec
+
+
+def check_budget(budget: Sequence[BusBudget]) -> None:
+    for b in budget:
+        if not b.fits:
+            what = "PX+VX" + (" and current" if b.current else "")
+            raise UsageError(
+                f"--rate {b.rate:g}: {what} of {b.drives} drive(s) on bus {b.bus} needs {100 * b.load:.0f} % of "
+                f"{b.bitrate / 1e6:g} Mbit/s (at most {100 * MAX_LOAD:.0f} %); the highest rate it can carry is "
+                f"{b.max_rate} Hz", hint=f"use --rate {min(x.max_rate for x in budget)}"
+                + ("" if not b.current else " or --no-current"))
+
+
+# -- polling fallback -----------------------------------------------------------------------------
+
+class Poller:
+    """``--poll``: PX and VX (and IQ) through the binary interpreter, each bus every its
+    ``poll_interval_ms`` (the seed's ``scheduler_interval``); slower and jittery, but changes nothing."""
+
+    def __init__(self, session: Any, refs: Iterable[DriveRef], *, current: bool = False,
+                 clock: Callable[[], float] = time.monotonic, sleep: Callable[[float], None] = time.sleep) -> None:
+        self.session, self.refs, self.current = session, list(refs), current
+        self.clock, self.sleep = clock, sleep
+        self.rows: list[tuple[float, str, int, int, float | None]] = []
+        self._stop = threading.Event()
+        self._threads: list[threading.Thread] = []
+        self.t0: float | None = None
+        self.errors: list[BaseException] = []
+
+    def __enter__(self) -> "Poller":
+        self.t0 = self.clock()
+        for bus in dict.fromkeys(r.bus for r in self.refs):
+            interval = self.session.cfg.buses[bus].poll_interval_ms / 1000
+            refs = [r for r in self.refs if r.bus == bus]
+            for r in refs:
+                self.session.client(r).nmt_start()
+            t = threading.Thread(target=self._run, args=(refs, interval), daemon=True, name=f"poll-{bus}")
+            self._threads.append(t)
+            t.start()
+        return self
+
+    def _run(self, refs: list[DriveRef], interval: float) -> None:
+        try:
+            while not self._stop.is_set():
+                start = self.clock()
+                for r in refs:
+                    client = self.session.client(r)
+                    px, vx = int(client.get("PX")), int(client.get("VX"))
+                    iq = float(client.get("IQ")) if self.current else None
+                    self.rows.append((self.clock(), r.name, px, vx, iq))
+                rest = interval - (self.clock() - start)
+                if rest > 0:
+                    self.sleep(rest)
+        except BaseException as exc:
+            self.errors.append(exc)
+
+    def __exit__(self, *exc: Any) -> None:
+        self._stop.set()
+        for t in self._threads:
+            t.join(timeout=5)
+        if self.errors and exc[0] is None:
+            raise self.errors[0]
+
+    def counts(self) -> dict[str, int]:
+        return {r.name: sum(1 for row in self.rows if row[1] == r.name) for r in self.refs}
+
+    def recording(self, cfg: ArmConfig, *, t_zero: float | None = None) -> Recording:
+        """One row per poll round of a bus: a drive's values at its own poll time (its cells of
+        other drives' rows are empty)."""
+        zero = t_zero if t_zero is not None else (self.t0 or 0.0)
+        rec = Recording(times=[row[0] - zero for row in self.rows])
+        nan = math.nan
+        for r in self.refs:
+            mine = [row if row[1] == r.name else None for row in self.rows]
+            rec.columns[f"{r.name}.px"] = [float(m[2]) if m else nan for m in mine]
+            rec.columns[f"{r.name}.vx"] = [float(m[3]) if m else nan for m in mine]
+            if self.current:
+                rec.columns[f"{r.name}.iq_a"] = [m[4] if m and m[4] is not None else nan for m in mine]
+        for joint in cfg.joints.values():
+            if joint.drive is not None and f"{joint.drive}.px" in rec.columns:
+                rec.columns[f"{joint.name}.pos_rad"] = [counts_to_rad(v, joint.cpr) if v == v else nan
+                                                        for v in rec.columns[f"{joint.drive}.px"]]
+                rec.columns[f"{joint.name}.vel_rad_s"] = [counts_per_s_to_rad_per_s(v, joint.cpr) if v == v else nan
+                                                          for v in rec.columns[f"{joint.drive}.vx"]]
+        return rec

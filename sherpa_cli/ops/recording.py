@@ -1,0 +1,83 @@
+"""A recording of joint motion: one timestamp per sample, named columns, and its CSV form.
+
+Columns: ``time_s`` (s; 0 = the step's command in `log step`, else the first sample), then per
+joint ``<joint>.pos_rad``, ``<joint>.vel_rad_s`` (and ``<joint>.cur_a`` for a plain joint when
+current is sampled), then per drive the motor's ``<drive>.px`` and ``<drive>.vx`` in counts,
+counts/s (and ``<drive>.iq_a``). A sample a drive did not deliver is an empty cell.
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from sherpa_cli.errors import UsageError
+
+TIME = "time_s"
+SIGNALS = {"pos": "pos_rad", "vel": "vel_rad_s", "cur": "cur_a"}
+UNITS = {"pos_rad": "rad", "vel_rad_s": "rad/s", "cur_a": "A"}
+
+
+@dataclass
+class Recording:
+    times: list[float] = field(default_factory=list)
+    columns: dict[str, list[float]] = field(default_factory=dict)  # name -> values (nan = missing)
+
+    def joints(self) -> list[str]:
+        return list(dict.fromkeys(name.split(".", 1)[0] for name in self.columns
+                                  if name.split(".", 1)[1] in UNITS))
+
+    def series(self, joint: str, signal: str) -> tuple[list[float], list[float]] | None:
+        values = self.columns.get(f"{joint}.{SIGNALS[signal]}")
+        if values is None:
+            return None
+        pairs = [(t, v) for t, v in zip(self.times, values) if not math.isnan(v)]
+        return [p[0] for p in pairs], [p[1] for p in pairs]
+
+
+def write_csv(rec: Recording, path: Path) -> None:
+    names = list(rec.columns)
+    with path.open("w", newline="", encoding="utf-8") as fh:
+        writer = csv.writer(fh)
+        writer.writerow([TIME, *names])
+        for i, t in enumerate(rec.times):
+            row = [f"{t:.6f}"]
+            for name in names:
+                v = rec.columns[name][i]
+                row.append("" if math.isnan(v) else (f"{v:.0f}" if name.endswith((".px", ".vx")) else f"{v:.6g}"))
+            writer.writerow(row)
+
+
+def read_csv(path: Path) -> Recording:
+    if not path.is_file():
+        raise UsageError(f"{path}: no such recording")
+    try:
+        return _read_csv(path)
+    except (UnicodeDecodeError, csv.Error) as exc:
+        raise UsageError(f"{path}: not a sherpa recording ({exc})") from None
+
+
+def _read_csv(path: Path) -> Recording:
+    with path.open(newline="", encoding="utf-8") as fh:
+        reader = csv.reader(fh)
+        header = next(reader, None)
+        if not header or header[0] != TIME:
+            raise UsageError(f"{path}:1: not a sherpa recording (the first column must be {TIME})",
+                             hint="record one with `sherpa log record ... -o FILE.csv`")
+        rec = Recording(columns={name: [] for name in header[1:]})
+        for number, row in enumerate(reader, 2):
+            if len(row) != len(header):
+                raise UsageError(f"{path}:{number}: {len(row)} cells, the header has {len(header)}")
+            try:
+                rec.times.append(float(row[0]))
+                for name, cell in zip(header[1:], row[1:]):
+                    rec.columns[name].append(float(cell) if cell else math.nan)
+                if not math.isfinite(rec.times[-1]):
+                    raise ValueError(f"time {row[0]!r} is not a finite number")
+            except ValueError as exc:
+                raise UsageError(f"{path}:{number}: {exc}") from None
+    if len(rec.times) < 2:
+        raise UsageError(f"{path}: fewer than two samples")
+    return rec

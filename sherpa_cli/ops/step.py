@@ -1,0 +1,157 @@
+"""`sherpa log step`: the seed's Section 9 experiment in one call (docs/log.md).
+
+Start recording (ops/record.py), command the step at t = 0 through the motion guard
+(ops/motion.py), record until the response has settled (or the time is up), stop, and compute
+the step metrics (ops/step_metrics.py). t = 0 is the moment the command was asked for: when
+the drive first has to change its unit mode or switch its motor on (MO/UM switch, seed
+Fig. 9.1), that time is in the dead time and reported on its own as ``switch_s``.
+
+- position: a step of X rad from where the joint stands (UM=5, PA, BG; the drive's own profile)
+- velocity: JV = V rad/s, BG (UM=5 jog or UM=2, ``motion.velocity_unit_mode``)
+- torque: TC = A in UM=1 (the joint's continuous current limit applies, as in `jog`)
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+from typing import Any, Callable
+
+from sherpa_cli.errors import UsageError
+from sherpa_cli.joints.units import counts_to_rad, rad_per_s_to_counts_per_s, rad_to_counts
+from sherpa_cli.ops.jog import JogRequest, JogTarget, check_request
+from sherpa_cli.ops.motion import UM_POSITION, UM_TORQUE, GuardReport, MotionGuard, MotionSettings
+from sherpa_cli.ops.record import Recorder, bus_budget
+from sherpa_cli.ops.recording import Recording
+from sherpa_cli.ops.step_metrics import StepMetrics, step_metrics
+
+SIGNAL = {"position": "pos", "velocity": "vel", "torque": "cur"}
+PRE_S = 0.1  # s recorded before the command
+SETTLE_HOLD_S = 0.2  # s the response must stay within 2 % of the step to count as settled
+CHECK_EVERY_S = 0.05
+
+
+@dataclass
+class StepResult:
+    joint: str
+    drive: str
+    mode: str
+    value: float  # rad, rad/s or A as asked
+    target: float  # in the signal's unit (position: start + step)
+    command: str
+    switch_s: float  # s from t = 0 until the step itself was sent (MO/UM switch)
+    ended_by: str  # "settled" | "time up"
+    metrics: StepMetrics
+    recording: Recording
+    samples: int
+    expected: int
+    stop: GuardReport = field(default_factory=GuardReport)
+
+    @property
+    def signal(self) -> str:
+        return SIGNAL[self.mode]
+
+    def as_json(self) -> dict[str, Any]:
+        return {"joint": self.joint, "drive": self.drive, "mode": self.mode, "value": self.value,
+                "signal": self.signal, "target": round(self.target, 6), "command": self.command,
+                "switch_s": round(self.switch_s, 4), "ended_by": self.ended_by, "samples": self.samples,
+                "expected": self.expected, "metrics": self.metrics.as_json()}
+
+
+def run_step(session: Any, target: JogTarget, mode: str, value: float, *, duration: float, rate: float,
+             settings: MotionSettings, sleep: Callable[[float], None] = time.sleep,
+             on_event: Callable[[str], None] | None = None, recorder_kw: dict | None = None) -> StepResult:
+    if target.joint is None:
+        raise UsageError(f"{target.name}: log step needs a plain joint (its cpr converts rad to counts)")
+    req = JogRequest(mode=mode, by=value if mode == "position" else None,
+                     velocity=value if mode == "velocity" else None, torque=value if mode == "torque" else None,
+                     duration=duration if mode != "position" else None)
+    check_request(target, req)
+    if not (math.isfinite(duration) and duration > 0):
+        raise UsageError(f"--for {duration}: expected a time > 0 s")
+    ref, joint = target.ref, target.joint
+    current = all(b.fits for b in bus_budget(session.cfg, [ref], rate, current=True))
+    signal = SIGNAL[mode]
+    guard = MotionGuard(session, [ref], settings=settings, sleep=sleep, on_event=on_event)
+    state: dict[str, Any] = {}
+    with guard:
+        c = guard.client(ref)
+        start_counts = int(c.get("PX"))
+        with Recorder(session, [ref], rate, current=current, **(recorder_kw or {})) as rec:
+            _wait(guard, sleep, PRE_S)
+            t_cmd = rec.now()
+            if mode == "position":
+                goal = start_counts + rad_to_counts(value, joint.cpr)
+                guard.enable(ref, UM_POSITION)
+                c.set("PA", 0, goal)
+                state["switch"] = rec.now() - t_cmd
+                c.execute("BG")
+                state["command"], state["target"] = f"PA={goal}", counts_to_rad(goal, joint.cpr)
+            elif mode == "velocity":
+                v = rad_per_s_to_counts_per_s(value, joint.cpr)
+                guard.enable(ref, settings.velocity_unit_mode)
+                c.set("JV", 0, v)
+                state["switch"] = rec.now() - t_cmd
+                c.execute("BG")
+                state["command"], state["target"] = f"JV={v}", value
+            else:
+                guard.enable(ref, UM_TORQUE)
+                state["switch"] = rec.now() - t_cmd
+                c.set("TC", 0, float(value))
+                state["command"], state["target"] = f"TC={value:g}", value
+            # --for counts from the step itself, not from the command (a switch may come first)
+            state["ended_by"] = _until_settled(guard, rec, joint.name, signal, t_cmd, state["target"],
+                                               state["switch"] + duration, sleep, settle=mode != "torque")
+        recording = rec.recording(t_zero=t_cmd)
+        samples, expected = min(rec.counts().values()), rec.expected()
+    # position: the recorded start is the reference (PX may not have been exactly 0)
+    series = recording.series(joint.name, signal)
+    if series is None or len(series[0]) < 2:
+        raise UsageError(f"{joint.name}: no {signal} samples were recorded")
+    target_value = state["target"]
+    if mode == "position":
+        before = [v for t, v in zip(*series) if t < 0]
+        start = before[-1] if before else series[1][0]
+        target_value = start + value
+    metrics = step_metrics(series[0], series[1], t_step=0.0, target=target_value)
+    return StepResult(joint=joint.name, drive=ref.name, mode=mode, value=value, target=target_value,
+                      command=state["command"], switch_s=state["switch"], ended_by=state["ended_by"],
+                      metrics=metrics, recording=recording, samples=samples, expected=expected, stop=guard.report)
+
+
+def _wait(guard: MotionGuard, sleep: Callable[[float], None], seconds: float) -> None:
+    end = time.monotonic() + seconds
+    while True:
+        guard.check()
+        rest = end - time.monotonic()
+        if rest <= 0:
+            return
+        sleep(min(rest, CHECK_EVERY_S))
+
+
+def _until_settled(guard: MotionGuard, rec: Recorder, joint: str, signal: str, t_cmd: float, target: float,
+                   duration: float, sleep: Callable[[float], None], *, settle: bool) -> str:
+    """Record until the signal has stayed within 2 % of the step around the target for
+    SETTLE_HOLD_S (position and velocity steps), or until ``duration`` s after the command."""
+    while True:
+        guard.check()
+        elapsed = rec.now() - t_cmd
+        if elapsed >= duration:
+            return "time up"
+        if settle and elapsed > SETTLE_HOLD_S:
+            series = rec.recording(t_zero=t_cmd).series(joint, signal)
+            if series is not None and _settled(series, target):
+                return "settled"
+        sleep(CHECK_EVERY_S)
+
+
+def _settled(series: tuple[list[float], list[float]], target: float) -> bool:
+    times, values = series
+    before = [v for t, v in zip(times, values) if t < 0]
+    if not before:
+        return False
+    band = 0.02 * max(abs(target - before[-1]), 1e-9)
+    end = times[-1]
+    tail = [v for t, v in zip(times, values) if t >= end - SETTLE_HOLD_S]
+    return len(tail) > 2 and end > SETTLE_HOLD_S and all(abs(v - target) <= band for v in tail)

@@ -1,0 +1,179 @@
+"""`sherpa jog --joystick` (ops/joystick.py) with a scripted event source in place of the device,
+on the simulated arm (in-process, real time: the guard's heartbeat thread runs on the wall clock);
+and with a real uinput virtual joystick where /dev/uinput exists."""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+import sys
+import time
+from pathlib import Path
+
+import canopen
+import pytest
+
+from sherpa_cli.config import load_config
+from sherpa_cli.config.model import JoystickMap
+from sherpa_cli.errors import ConfigError, UsageError
+from sherpa_cli.ops import joystick
+from sherpa_cli.ops.joystick import ScriptedSource, deadzone, run_joystick
+from sherpa_cli.ops.live_jog import LiveJog, resolve_axes
+from sherpa_cli.ops.session import ArmSession
+from sherpa_cli.sim.arm import SimArm
+
+CONFIG = Path(__file__).resolve().parent / "data" / "jog-fast-arm.yaml"
+JOY = """
+joystick:
+  rate_hz: 25
+  deadzone: 0.1
+  deadman: BTN_TRIGGER
+  axes:
+    - {axis: ABS_Z, joint: j1, sensitivity: 0.25}
+    - {pair: diff, x: ABS_X, y: ABS_Y, mix: xy, sensitivity: 0.25}
+"""
+
+
+@pytest.fixture(autouse=True)
+def _isolated(monkeypatch: pytest.MonkeyPatch, tmp_path: Path):
+    monkeypatch.setenv("XDG_STATE_HOME", str(tmp_path / "state"))
+    monkeypatch.setattr(canopen.Network, "NOTIFIER_CYCLE", 0.02)
+
+
+@pytest.fixture
+def cfg(tmp_path):
+    p = tmp_path / "arm.yaml"
+    p.write_text(CONFIG.read_text() + JOY)
+    return load_config(p)
+
+
+def px(session, drive):
+    with session.sim.lock:
+        return session.sim.drives[drive].motor.counts
+
+
+def motors_on(session):
+    with session.sim.lock:
+        return {name for name, d in session.sim.drives.items() if d.motor_on}
+
+
+def drive(cfg, session, script, duration, jcfg=None):
+    jcfg = jcfg or cfg.joystick
+    axes = resolve_axes(cfg, joystick.joints_of(cfg, jcfg))
+    with LiveJog(session, axes, keepalive=0.3) as live:
+        src = ScriptedSource(script, time.monotonic)
+        run = run_joystick(live, cfg, jcfg, src, duration=duration)
+    return run, live
+
+
+def test_deadzone_rescales_and_holds_zero():
+    assert deadzone(0.05, 0.1) == 0.0 and deadzone(1.0, 0.1) == 1.0 and deadzone(-0.55, 0.1) == pytest.approx(-0.5)
+
+
+def test_deflection_moves_the_mapped_joint_only_while_the_deadman_is_held(cfg):
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
+        script = [(0.0, "ABS_Z", 1.0),           # deflected, dead-man not held: nothing moves
+                  (0.4, "BTN_TRIGGER", 1.0),     # held: j1 runs at 0.25 x 8000 counts/s
+                  (2.2, "BTN_TRIGGER", 0.0)]     # released: stop at once (MO=1 takes ~1 s of this)
+        start = px(s, "yaw")
+        run, live = drive(cfg, s, script, 2.6)
+        end = px(s, "yaw")
+        assert run.releases == 1 and run.commands > 0
+        assert 300 < end - start < 1.8 * 2000 + 300  # forward at 2000 counts/s for at most the 1.8 s held
+        assert motors_on(s) == set()
+        assert s.sim.errors == []
+
+
+def test_release_stops_before_the_keepalive_would(cfg):
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
+        script = [(0.0, "BTN_TRIGGER", 1.0), (0.0, "ABS_Z", -1.0), (1.5, "BTN_TRIGGER", 0.0)]
+        jcfg = dataclasses.replace(cfg.joystick, axes=cfg.joystick.axes[:1])
+        axes = resolve_axes(cfg, ["j1"])
+        with LiveJog(s, axes, keepalive=5.0) as live:  # only the release can stop it in time
+            src = ScriptedSource(script, time.monotonic)
+            run_joystick(live, cfg, jcfg, src, duration=1.55)
+            assert live.running == {}
+            a = px(s, "yaw")
+            time.sleep(0.3)
+            b = px(s, "yaw")
+            assert a < -100 and abs(b - a) < 150  # moved backwards, then stopped (decelerating only)
+        assert motors_on(s) == set()
+
+
+@pytest.mark.parametrize("x, y, moved, held", [(0.6, 0.0, "pitch", "roll"), (0.0, 0.6, "roll", "pitch")])
+def test_xy_plus_and_minus_drive_the_right_motors_of_the_pair(cfg, x, y, moved, held):
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
+        a0, b0 = px(s, "left"), px(s, "right")
+        script = [(0.0, "BTN_TRIGGER", 1.0), (0.0, "ABS_X", x), (0.0, "ABS_Y", y), (3.0, "BTN_TRIGGER", 0.0)]
+        run, live = drive(cfg, s, script, 3.3)  # MO=1 of two drives takes ~2 s of it
+        da, db = px(s, "left") - a0, px(s, "right") - b0
+        assert da > 100, run.messages  # X+Y > 0 drives motor a forward
+        if moved == "pitch":  # X only: X+Y = X-Y, both motors the same way, Δ holds
+            assert db > 100 and abs(da - db) < 0.15 * da
+        else:  # Y only: X-Y < 0, motor b backwards, Σ holds
+            assert db < -100 and abs(da + db) < 0.15 * da
+        assert motors_on(s) == set()
+
+
+def test_limits_hold_under_full_deflection(cfg):
+    jcfg = dataclasses.replace(cfg.joystick, axes=(JoystickMap(joint="j1", axis="ABS_Z", sensitivity=1.0),))
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
+        script = [(0.0, "BTN_TRIGGER", 1.0), (0.0, "ABS_Z", 1.0)]
+        run, live = drive(cfg, s, script, 2.5, jcfg)
+        j1 = cfg.joints["j1"]
+        assert px(s, "yaw") <= j1.full_range[1]
+        assert any("edge of its normal range" in m or m.startswith("limit:") for m in run.messages)
+        assert motors_on(s) == set()
+
+
+def test_joystick_config_errors_name_file_and_line(tmp_path):
+    p = tmp_path / "arm.yaml"
+    p.write_text(CONFIG.read_text() + JOY.replace("rate_hz: 25", "rate_hz: 100"))
+    with pytest.raises(ConfigError, match=r"arm.yaml:\d+: joystick.rate_hz: rate_hz 100 must be 20..50"):
+        load_config(p)
+    p.write_text(CONFIG.read_text() + JOY.replace("mix: xy", "mix: sum"))
+    with pytest.raises(ConfigError, match=r"arm.yaml:\d+: joystick.axes\[1\].mix: mix 'sum'"):
+        load_config(p)
+    p.write_text(CONFIG.read_text() + JOY.replace("x: ABS_X", "x: ABS_Z"))
+    with pytest.raises(ConfigError, match=r"x 'ABS_Z' is already used by joystick map 1"):
+        load_config(p)
+
+
+def test_missing_evdev_is_a_clear_message(monkeypatch):
+    monkeypatch.setitem(sys.modules, "evdev", None)
+    monkeypatch.setattr(sys, "platform", "linux")
+    with pytest.raises(UsageError, match="needs the python package 'evdev'"):
+        joystick.EvdevSource("/dev/input/event0")
+    monkeypatch.setattr(sys, "platform", "win32")
+    with pytest.raises(UsageError, match="needs Linux"):
+        joystick.list_joysticks()
+
+
+@pytest.mark.skipif(not os.access("/dev/uinput", os.W_OK), reason="no writable /dev/uinput on this machine")
+def test_a_real_uinput_virtual_joystick_drives_the_joint(cfg):  # pragma: no cover - needs /dev/uinput
+    evdev = pytest.importorskip("evdev")
+    e = evdev.ecodes
+    caps = {e.EV_KEY: [e.BTN_TRIGGER],
+            e.EV_ABS: [(e.ABS_Z, evdev.AbsInfo(0, -512, 511, 0, 0, 0))]}
+    with evdev.UInput(caps, name="sherpa-test-joystick") as ui:
+        time.sleep(0.3)
+        path = next(j.path for j in joystick.list_joysticks() if j.name == "sherpa-test-joystick")
+        src = joystick.EvdevSource(path)
+        with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
+            jcfg = dataclasses.replace(cfg.joystick, axes=cfg.joystick.axes[:1])
+            start = px(s, "yaw")
+            with LiveJog(s, resolve_axes(cfg, ["j1"]), keepalive=0.3) as live:
+                ui.write(e.EV_KEY, e.BTN_TRIGGER, 1)
+                ui.write(e.EV_ABS, e.ABS_Z, 511)
+                ui.syn()
+                run_joystick(live, cfg, jcfg, src, duration=0.5)
+            assert px(s, "yaw") - start > 100
+            assert motors_on(s) == set()
+
+
+def test_the_joystick_section_survives_config_convert(cfg, tmp_path):
+    from sherpa_cli.config.dump import dump_native
+
+    p = tmp_path / "converted.yaml"
+    p.write_text(dump_native(cfg))
+    assert load_config(p).joystick == cfg.joystick

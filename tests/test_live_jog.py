@@ -1,0 +1,125 @@
+"""ops/live_jog.py on the simulated arm (in-process, real time like tests/test_jog_pair.py: the
+guard's dead-man heartbeat runs on a thread in wall-clock time, so the simulated drives do too)."""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import canopen
+import pytest
+
+from sherpa_cli.config import load_config
+from sherpa_cli.ops.live_jog import LiveJog, resolve_axes
+from sherpa_cli.ops.session import ArmSession, DriveRef
+from sherpa_cli.sim.arm import SimArm
+
+CONFIG = Path(__file__).resolve().parent / "data" / "jog-fast-arm.yaml"
+
+
+@pytest.fixture(autouse=True)
+def _isolated(monkeypatch: pytest.MonkeyPatch, tmp_path: Path):
+    monkeypatch.setenv("XDG_STATE_HOME", str(tmp_path / "state"))
+    monkeypatch.setattr(canopen.Network, "NOTIFIER_CYCLE", 0.02)
+
+
+@pytest.fixture
+def cfg():
+    return load_config(CONFIG)
+
+
+def calibrate(session, *drives):
+    for name in drives:
+        d = session.cfg.drives[name]
+        c = session.client(DriveRef(name, d.bus, d.node, d))
+        c.nmt_start()
+        c.set("UI", 3, 1)
+
+
+def motors_off(session):
+    with session.sim.lock:
+        return all(not d.motor_on for d in session.sim.drives.values())
+
+
+def run_for(live, seconds, every=0.03, until=None):
+    """Tick for ``seconds`` (or, with ``until``, until it holds: at most ``seconds``)."""
+    end = time.monotonic() + seconds
+    while time.monotonic() < end:
+        live.tick()
+        if until is not None and until():
+            break
+        time.sleep(every)
+    return live.tick()
+
+
+def test_velocity_expires_without_a_new_command_and_exit_stops_everything(cfg):
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
+        with LiveJog(s, resolve_axes(cfg, ["j1"]), keepalive=0.3) as live:
+            start = live.state["j1"].counts
+            live.set_velocity("j1", 2000)
+            assert "j1" in live.running
+            state = run_for(live, 0.6)
+            assert "j1" not in live.running  # expired: no new command within keepalive
+            moved = state["j1"].counts - start
+            assert 200 < moved < 2000
+            at = run_for(live, 0.2)["j1"].counts
+            assert abs(at - state["j1"].counts) < 60  # standing
+        assert motors_off(s)
+        assert [d.stopped_by for d in live.report.drives] and s.sim.errors == []
+
+
+def test_step_refused_uncalibrated_then_moves_a_pair_joint_and_the_other_holds(cfg):
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
+        with LiveJog(s, resolve_axes(cfg, ["diff"])) as live:
+            assert set(live.axes) == {"pitch", "roll"}
+            assert "not sent" not in live.step("pitch", 300) and "calibrated" in live.state["pitch"].note
+            assert "pitch" not in live.running
+        calibrate(s, "left", "right")
+        with LiveJog(s, resolve_axes(cfg, ["pitch", "roll"])) as live:
+            roll0 = live.state["roll"].counts
+            live.step("pitch", 300)
+            state = run_for(live, 0.5)
+            assert abs(state["pitch"].counts - 300) <= 1 and abs(state["roll"].counts - roll0) <= 1
+            assert "outside the normal range" in live.step("pitch", 10_000)
+        assert motors_off(s)
+
+
+def test_a_command_further_out_than_the_normal_edge_is_not_sent(cfg):
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
+        with LiveJog(s, resolve_axes(cfg, ["j1"]), keepalive=5.0) as live:
+            live.set_velocity("j1", 4000)  # toward +1900 (normal high edge: 2000 - 100)
+            state = run_for(live, 0.6)
+            assert "j1" not in live.running and "edge" in state["j1"].note
+            hi = cfg.joints["j1"].normal_range[1]
+            assert 1000 < state["j1"].counts <= hi  # stopped early by its stopping distance, never past
+            assert "not sent" in live.set_velocity("j1", 4000)
+            assert "j1" not in live.running
+            assert live.set_velocity("j1", -1000).startswith("j1: JV=")  # inward is fine
+        assert motors_off(s)
+
+
+def test_the_full_range_watch_stops_everything_and_brings_the_joint_back(cfg):
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
+        with LiveJog(s, resolve_axes(cfg, ["j1"]), keepalive=5.0, tick_period=0.0) as live:
+            live.cfg = cfg.__class__(**{**cfg.__dict__, "joints": {**cfg.joints, "j1": cfg.joints["j1"].__class__(
+                **{**cfg.joints["j1"].__dict__, "decel": None})}})  # no stopping distance: the edge hold is late
+            live.set_velocity("j1", 8000)
+            state = run_for(live, 5.0, until=lambda: bool(live.messages))
+            assert any(m.startswith("limit: j1 left its full range") for m in live.messages)
+            assert state["j1"].counts == cfg.joints["j1"].normal_range[1] and not live.running
+        assert motors_off(s)
+
+
+def test_torque_runs_until_the_keepalive_and_is_refused_above_the_continuous_limit(cfg):
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
+        with LiveJog(s, resolve_axes(cfg, ["j1"]), keepalive=0.4) as live:
+            assert "above the continuous limit" in live.set_torque("j1", 2.5)  # j1: 2.0 A continuous
+            assert live.running == {}
+            live.set_mode("j1", "torque")
+            assert live.set_torque("j1", -0.5).startswith("j1: TC=-0.5")
+            state = run_for(live, 0.8)
+            assert "j1" not in live.running and state["j1"].command == "-"
+            assert state["j1"].counts < -20  # the current moved it backwards
+        assert motors_off(s)
+        kinds = [d.stopped_by for d in live.report.drives]
+        assert kinds and all(k != "not stopped" for k in kinds)
