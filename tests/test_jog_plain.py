@@ -154,3 +154,97 @@ def test_cli_velocity_jog_final_line(cli):
     assert last.startswith("elbow_pitch (elbow_1a, can1:40): stopped at ") and "time up" in last
     assert stops == ["stop: elbow_1a (can1:40): stopped by ST; motor off; restored 0x1016:1, 0x1029:1, 0x6007:0"]
     assert "\r" not in result.stderr  # not a terminal: no live line
+
+
+def test_position_jog_by_is_checked_again_with_the_px_read_after_arming(cfg, monkeypatch):
+    from sherpa_cli.ops import jog as jog_mod
+
+    real_precheck = jog_mod._precheck
+
+    def precheck_then_the_joint_moves(session, target, req):
+        cal = real_precheck(session, target, req)  # checked with PX = 0: 0 + 318 is inside
+        with session.sim.lock:
+            session.sim.drives["drive1"].motor.counts = 19800  # pushed meanwhile: 19800 + 318 is not
+        return cal
+    monkeypatch.setattr(jog_mod, "_precheck", precheck_then_the_joint_moves)
+    with pytest.raises(UsageError, match=r"j1: target 20118 counts is outside the joint's normal range"):
+        jog(cfg, "j1", mode="position", by=0.5, uncalibrated=True)
+
+
+def test_velocity_jog_without_a_configured_speed_limit_is_refused(tmp_path):
+    path = tmp_path / "arm.yaml"
+    path.write_text(CONFIG.replace("    velocity: {limit: 8000, trip: 12000}\n", ""), encoding="utf-8")
+    cfg = load_config(path)
+    assert cfg.joints["j1"].vel_limit is None
+    with pytest.raises(UsageError, match=r"j1: no speed limit configured \(joints.j1.velocity.limit is missing\)"):
+        check_request(resolve_jog_target(cfg, "j1"), JogRequest(mode="velocity", velocity=0.1, duration=0.2))
+
+
+def test_pair_velocity_jog_without_a_configured_speed_limit_is_refused():
+    import dataclasses
+
+    from sherpa_cli.ops import joint_jog
+
+    from test_jog_pair import CONFIG as PAIR_CONFIG
+
+    pair_cfg = load_config(PAIR_CONFIG)
+    axis = dataclasses.replace(joint_jog.resolve_axis(pair_cfg, "pitch"), vel_limit=None)
+    with pytest.raises(UsageError, match="pitch: no speed limit configured"):
+        joint_jog.check_offline(pair_cfg, axis, joint_jog.JogRequest(mode="velocity", velocity="100counts/s",
+                                                                     duration=0.2))
+
+
+def _stop_that_never_settles(monkeypatch):
+    from sherpa_cli.ops import motion
+
+    real = motion.stop_drive
+
+    def stop_drive(*a, **k):
+        how, standstill, problems = real(*a, **k)
+        return how, False, problems + ["not at standstill 2 s after the stop"]
+    monkeypatch.setattr(motion, "stop_drive", stop_drive)
+
+
+def test_ctrl_c_ending_a_velocity_jog_does_not_hide_a_failed_stop(cfg, monkeypatch):
+    from sherpa_cli.errors import SafetyError
+
+    _stop_that_never_settles(monkeypatch)
+    calls = []
+
+    def progress(p):
+        calls.append(p)
+        if len(calls) == 3:
+            raise KeyboardInterrupt  # how an open-ended velocity jog normally ends
+    target = resolve_jog_target(cfg, "j1")
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
+        with pytest.raises(SafetyError, match="drive1: not at standstill") as info:
+            run_jog(s, target, JogRequest(mode="velocity", velocity=0.5),
+                    settings=MotionSettings.from_config(cfg), on_progress=progress)
+    assert info.value.motion_report.drives[0].standstill is False
+
+
+def test_cli_json_error_carries_the_stop_report(cli, monkeypatch):
+    _stop_that_never_settles(monkeypatch)
+    result = cli("--sim", "--json", "jog", "elbow_pitch", "--velocity", "0.2", "--for", "0.2", "--apply")
+    assert result.exit_code != 0, result.transcript()
+    data = json.loads(result.stdout)
+    assert "did not go cleanly" in data["error"]
+    assert data["stop"]["drives"][0]["standstill"] is False
+
+
+def test_the_limit_watch_stops_with_the_configured_stop_method(tmp_path):
+    path = tmp_path / "arm.yaml"
+    path.write_text(CONFIG.replace("motion: {consumer_time_ms: 300}", "motion: {consumer_time_ms: 300, stop_method: jv0}"),
+                    encoding="utf-8")
+    cfg = load_config(path)
+    target = resolve_jog_target(cfg, "j1")
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
+        drive = s.sim.drives["drive1"]
+        with s.sim.lock:
+            drive.motor.counts = 19950  # 50 counts short of the full range's end (20000)
+        result = run_jog(s, target, JogRequest(mode="velocity", velocity=0.5, duration=3.0),
+                         settings=MotionSettings.from_config(cfg))
+        with s.sim.lock:
+            executed = [d[:2].decode() for _, cid, d in drive.received if cid == 0x305 and len(d) == 4]
+    assert result.breach is not None
+    assert "ST" not in executed and "BG" in executed  # motion.stop_method jv0: JV=0 + BG, never ST

@@ -65,3 +65,39 @@ def test_a_silent_drive_makes_stop_exit_1(cli, tmp_path, monkeypatch):
     assert result.exit_code == 1, result.transcript()
     assert "1 drive(s) not confirmed stopped: elbow_1b" in result.stderr
     assert "elbow_1a" in result.stdout and "motor off" in result.stdout
+
+
+@pytest.mark.parametrize("failing", ["UM", "ST", "nmt"])
+def test_a_failed_step_never_skips_mo0(tmp_path, monkeypatch, failing):
+    from sherpa_cli.errors import DriveTimeoutError
+    from sherpa_cli.ops.stop import stop_one
+
+    monkeypatch.setenv("XDG_STATE_HOME", str(tmp_path))
+    monkeypatch.setattr(canopen.Network, "NOTIFIER_CYCLE", 0.02)
+    cfg = load_config(ARM)
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg), buses=["can1"]) as s:
+        ref = resolve_target(cfg, "elbow_1a")
+        c = s.client(ref)
+        c.nmt_start()
+        c.set("UM", 0, 5)
+        c.motor_on()
+        c.set("JV", 0, 300)
+        c.execute("BG")
+        real_get, real_execute = c.get, c.execute
+
+        def timeout(*a, **k):
+            raise DriveTimeoutError(f"{failing}: no reply")
+        if failing == "UM":
+            monkeypatch.setattr(c, "get", lambda letters, *a: timeout() if letters == "UM" else real_get(letters, *a))
+        elif failing == "ST":
+            monkeypatch.setattr(c, "execute", lambda cmd: timeout() if cmd == "ST" else real_execute(cmd))
+        else:
+            monkeypatch.setattr(c, "nmt_start", timeout)
+        settings = dataclasses.replace(MotionSettings.from_config(cfg), standstill_timeout=0.3)
+        r = stop_one(c, ref, settings)
+        motor_on = s.sim.drives["elbow_1a"].motor_on
+    assert r.motor_off and not motor_on, r
+    if failing == "UM":
+        assert r.stopped_by == "TC=0 + ST"  # unreadable UM: stopped as in torque mode
+    elif failing == "ST":
+        assert r.stopped_by == "not stopped" and "stop: ST: no reply" in r.problems

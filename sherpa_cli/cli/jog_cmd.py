@@ -4,13 +4,13 @@ joint, ops/joint_jog.py for a Σ/Δ joint or one motor of a pair)."""
 from __future__ import annotations
 
 import math
-from typing import List, Optional
+from typing import Any, List, Optional
 
 import typer
 
 from sherpa_cli.cli.context import state
 from sherpa_cli.cli.options import ApplyMotion
-from sherpa_cli.errors import UsageError
+from sherpa_cli.errors import SherpaError, UsageError
 
 
 def parse_number(text: str | None, option: str) -> float | None:
@@ -120,10 +120,7 @@ def jog(
             result = run_jog(session, target, req, settings=settings, on_progress=progress)
         except BaseException as exc:
             st.out.progress(None)
-            report = getattr(exc, "motion_report", None)
-            if report is not None and not st.json_mode:
-                for line in report.lines():
-                    st.out.info(f"stop: {line}")
+            _show_stop_report(st, exc)
             raise
     st.out.progress(None)
     _render(st, name, result)
@@ -261,10 +258,7 @@ def _jog_pair(st, cfg, name: str, mode: str, to, by, velocity, torque, duration,
             result = joint_jog.run(session, axis, req, on_progress=progress)
         except BaseException as exc:
             st.out.progress(None)
-            report = getattr(exc, "motion_report", None)
-            if report is not None and not st.json_mode:
-                for line in report.lines():
-                    st.out.info(f"stop: {line}")
+            _show_stop_report(st, exc)
             raise
     st.out.progress(None)
     _render_pair(st, result)
@@ -342,3 +336,18 @@ def _render_pair(st, r) -> None:
     if others:
         text += "; " + ", ".join(others)
     st.out.line(text)
+
+
+def _show_stop_report(st: Any, exc: BaseException) -> None:
+    """How the guard stopped the motor, on an error path too: text lines, or with --json an error
+    object on stdout (``error``, ``stop``); the error message itself still goes to stderr."""
+    report = getattr(exc, "motion_report", None)
+    if report is None:
+        return
+    if st.json_mode:
+        message = str(exc) if isinstance(exc, SherpaError) else ("interrupted" if isinstance(exc, KeyboardInterrupt)
+                                                                 else f"{type(exc).__name__}: {exc}")
+        st.out.json({"error": message, "stop": report.as_json()})
+        return
+    for line in report.lines():
+        st.out.info(f"stop: {line}")

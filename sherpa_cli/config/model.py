@@ -258,6 +258,7 @@ class MotionConfig:
     comm_error_behaviour: int = 2  # 0x1029:1 (0 pre-operational, 1 no change, 2 stopped) [COB]
     stop_method: str = "auto"  # auto: ST, JV=0 + BG where ST is refused; st; jv0
     standstill_timeout: float = 2.0  # s to wait for VX = 0 after a stop
+    standstill_velocity: int = 2  # counts/s: |VX| at most this is standstill (encoder noise of a held motor)
     liveness_timeout: float = 1.0  # s the command may go without a sign of life before the heartbeat stops
     velocity_unit_mode: int = 5  # velocity jogs: 5 (JV + BG in position mode) or 2 (speed mode)
     # differential pairs (docs/diffdrive.md): how both motors start together. "group": one BG to the

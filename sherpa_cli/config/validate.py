@@ -137,6 +137,8 @@ def _check_motion(cfg: ArmConfig, locs: Locs, r: _Report) -> None:
     for key in ("standstill_timeout", "liveness_timeout"):
         if not getattr(m, key) > 0:
             r.error(where(key), f"{key} {getattr(m, key)} s must be > 0")
+    if not 0 <= m.standstill_velocity <= 1000:
+        r.error(where("standstill_velocity"), f"standstill_velocity {m.standstill_velocity} counts/s must be 0..1000")
     if m.velocity_unit_mode not in (2, 5):
         r.error(where("velocity_unit_mode"), f"velocity_unit_mode {m.velocity_unit_mode}: expected 5 (jog in "
                 "position mode) or 2 (speed mode)")

@@ -140,7 +140,11 @@ def check_request(target: JogTarget, req: JogRequest) -> None:
                                   f"[{lo}, {hi}]", hint="jog moves a joint only inside its normal range")
     elif req.mode == "velocity":
         assert req.velocity is not None
-        if joint is not None and joint.vel_limit is not None:
+        if joint is None or joint.vel_limit is None:  # never an unchecked speed (seed rosparam has no limit)
+            where = f"joints.{joint.name}.velocity.limit" if joint is not None else "velocity.limit of its joint"
+            raise UsageError(f"{target.name}: no speed limit configured ({where} is missing), so a velocity jog "
+                             "cannot be checked", hint="give the joint `velocity: {limit: COUNTS_PER_S}` in the config")
+        else:
             counts = abs(rad_per_s_to_counts_per_s(req.velocity, joint.cpr))
             if counts > joint.vel_limit:
                 limit = counts_to_rad(joint.vel_limit, joint.cpr)
@@ -189,6 +193,12 @@ def run_jog(session: Any, target: JogTarget, req: JogRequest, *, settings: Motio
             exc.motion_report = guard.report  # type: ignore[attr-defined]  # the CLI shows how it stopped
             raise
         interrupted = True  # Ctrl-C is how an open-ended velocity jog is meant to end
+        if not guard.report.ok:  # ... but a stop or restore that failed is never hidden behind it
+            problems = [f"{d.drive}: {p}" for d in guard.report.drives for p in d.problems]
+            err = SafetyError("the stop after the motion did not go cleanly: " + "; ".join(problems),
+                              hint="check the drives with `sherpa monitor --once`; `sherpa stop` stops them all")
+            err.motion_report = guard.report  # type: ignore[attr-defined]
+            raise err from exc
     except BaseException as exc:
         exc.motion_report = guard.report  # type: ignore[attr-defined]
         raise
@@ -241,6 +251,11 @@ def _move(guard: MotionGuard, target: JogTarget, req: JogRequest, settings: Moti
                                        done=done, limit=limit)
     if req.mode == "position":
         goal = _counts_to(target, req.to) if req.to is not None else start + _counts_to(target, req.by)  # type: ignore[arg-type]  # --to or --by
+        if target.joint is not None:  # again with this PX: the joint may have moved since _precheck
+            lo, hi = target.joint.normal_range
+            if not lo <= goal <= hi:
+                raise UsageError(f"{target.joint.name}: target {goal} counts is outside the joint's normal range "
+                                 f"[{lo}, {hi}]", hint="jog moves a joint only inside its normal range")
         state["target"] = goal
         guard.enable(ref, UM_POSITION)
         bound = _move_bound(c, abs(goal - start))
@@ -310,7 +325,7 @@ def _limit_breach(guard: MotionGuard, c: Any, target: JogTarget, px: int, settin
                   clock: Callable[[], float], sleep: Callable[[float], None], state: dict[str, Any]) -> bool:
     """The joint-limit watch (seed 6.1, ops/limit_watch.py): past the full range, stop at once, send
     nothing more of the jog, and move the joint back (position mode) to the nearest normal edge."""
-    from sherpa_cli.ops import joint_jog, limit_watch
+    from sherpa_cli.ops import joint_jog, limit_watch, motion
 
     joint = target.joint
     assert joint is not None
@@ -319,8 +334,16 @@ def _limit_breach(guard: MotionGuard, c: Any, target: JogTarget, px: int, settin
     if not breaches:
         return False
     clients = {target.ref.name: c}
-    joint_jog.stop_now(clients, "torque" if guard.unit_mode(target.ref) == UM_TORQUE else "position")
-    joint_jog.wait_standstill(clients, guard, settings, clock, sleep)
+    # the configured stop (motion.stop_method: ST, or JV=0 + BG where ST must not be used), TC=0 first
+    # in torque mode, then the bounded wait for standstill
+    _how, standstill, problems = motion.stop_drive(
+        c, unit_mode=guard.unit_mode(target.ref), method=settings.stop_method,
+        standstill_timeout=settings.standstill_timeout, poll_interval=settings.poll_interval, clock=clock,
+        sleep=sleep, pulse=guard.check, standstill_velocity=settings.standstill_velocity)
+    if problems or standstill is False:
+        raise SafetyError(f"{c.label}: the stop at the joint limit did not go cleanly: "
+                          + "; ".join(problems or ["not at standstill"]),
+                          hint="check the joint; `sherpa stop` stops every drive")
     back = limit_watch.recovery_targets(watched, {target.ref.name: int(c.get("PX"))}, breaches)
     speed = max(1, (joint.vel_limit or 200) // 2)
     joint_jog.move_to(guard, {target.ref.name: target.ref}, clients, back, speed, settings, clock, sleep,

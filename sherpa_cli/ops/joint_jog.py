@@ -135,7 +135,10 @@ def _fmt_range(r: Range) -> str:
 def _check_speed(axis: Axis, speed: int, what: str) -> None:
     if speed == 0:
         raise UsageError(f"{what} must not be 0")
-    if axis.vel_limit is not None and abs(speed) > axis.vel_limit:
+    if axis.vel_limit is None:  # never an unchecked speed (the seed's rosparam format has no limit)
+        raise UsageError(f"{axis.name}: no speed limit configured (velocity.limit of the joint is missing), so "
+                         f"{what} cannot be checked", hint="give the joint `velocity: {limit: COUNTS_PER_S}`")
+    if abs(speed) > axis.vel_limit:
         raise UsageError(f"{axis.name}: {what} {abs(speed)} counts/s is above the joint's speed limit "
                           f"{axis.vel_limit} counts/s", hint="ask for less, or raise velocity.limit in the config")
 
@@ -522,6 +525,6 @@ def wait_standstill(clients: Mapping[str, Any], guard: Any, settings: Any, clock
     deadline = clock() + settings.standstill_timeout
     while clock() < deadline:
         guard.check()
-        if all(int(c.get("VX")) == 0 or not int(c.get("MO")) for c in clients.values()):
+        if all(abs(int(c.get("VX"))) <= settings.standstill_velocity or not int(c.get("MO")) for c in clients.values()):
             return
         sleep(settings.poll_interval)

@@ -59,6 +59,7 @@ class MotionSettings:
     comm_error_behaviour: int = 2
     stop_method: str = "auto"  # auto | st | jv0
     standstill_timeout: float = 2.0
+    standstill_velocity: int = 2  # counts/s: |VX| at most this is standstill
     liveness_timeout: float = 1.0
     velocity_unit_mode: int = 5
     poll_interval: float = 0.01  # s between polls while waiting (the bus's poll_interval_ms)
@@ -80,7 +81,8 @@ class MotionSettings:
         return cls(host_node_id=m.host_node_id, consumer_time_ms=m.consumer_time_ms,
                    heartbeat_period_ms=m.heartbeat_period_ms, loss_action=m.loss_action,
                    comm_error_behaviour=m.comm_error_behaviour, stop_method=m.stop_method,
-                   standstill_timeout=m.standstill_timeout, liveness_timeout=m.liveness_timeout,
+                   standstill_timeout=m.standstill_timeout, standstill_velocity=m.standstill_velocity,
+                   liveness_timeout=m.liveness_timeout,
                    velocity_unit_mode=m.velocity_unit_mode, poll_interval=poll_ms / 1000,
                    request_bound=p.reply_timeout * (1 + p.retries))
 
@@ -160,6 +162,11 @@ class _Drive:
     od_before: dict[tuple[int, int], int] = field(default_factory=dict)  # the dead-man objects it wrote
 
 
+def _why(exc: BaseException) -> str:
+    """An exception for the report: a SherpaError's own message, any other with its type named."""
+    return str(exc) if isinstance(exc, SherpaError) else f"{type(exc).__name__}: {exc}"
+
+
 def _drive_label(ref: Any) -> str:
     return f"{ref.name} ({ref.bus}:{ref.node})"
 
@@ -178,16 +185,24 @@ def fault_reason(mf: int, sr: int) -> str | None:
 
 def stop_drive(client: Any, *, unit_mode: int | None, method: str = "auto", standstill_timeout: float = 2.0,
                poll_interval: float = 0.01, clock: Callable[[], float] = time.monotonic,
-               sleep: Callable[[float], None] = time.sleep) -> tuple[str, bool | None, list[str]]:
+               sleep: Callable[[float], None] = time.sleep,
+               pulse: Callable[[], None] | None = None,
+               standstill_velocity: int = 0) -> tuple[str, bool | None, list[str]]:
     """Stop one drive's motion: ST (JV=0 + BG where ST is refused), TC=0 first in torque mode; then
-    wait for VX = 0 (bounded). Returns (how, standstill reached or None if the motor is off, problems)."""
+    wait for |VX| <= ``standstill_velocity`` (bounded). Returns (how, standstill reached or None if the motor is off, problems).
+
+    ``pulse`` (the motion guard's sign of life) is called before every request, so a hung request
+    lets the heartbeat stop within one request's allowance."""
+    beat = pulse or (lambda: None)
     problems: list[str] = []
     # patient: a drive that was just switched on or off is deaf while it settles (protocol.mo_settle)
-    if not _ask_patiently(client, "MO", clock, sleep, client.settings.mo_confirm_timeout, poll_interval):
+    if not _ask_patiently(client, "MO", clock, sleep, client.settings.mo_confirm_timeout, poll_interval,
+                          on_try=beat):
         return "motor was off", None, problems
     how = []
     if unit_mode == UM_TORQUE:
         try:
+            beat()
             client.set("TC", 0, 0.0)
             how.append("TC=0")
         except SherpaError as exc:
@@ -195,6 +210,7 @@ def stop_drive(client: Any, *, unit_mode: int | None, method: str = "auto", stan
     use_jv = method == "jv0"
     if not use_jv:
         try:
+            beat()
             client.execute("ST")
             how.append("ST")
         except DriveRefusedError as exc:
@@ -204,14 +220,18 @@ def stop_drive(client: Any, *, unit_mode: int | None, method: str = "auto", stan
                 log.info("%s: ST refused (%s); stopping with JV=0 + BG", client.label, exc)
                 use_jv = True
     if use_jv:
+        beat()
         client.set("JV", 0, 0)
+        beat()
         client.execute("BG")
         how.append("JV=0 + BG")
     deadline = clock() + standstill_timeout
     while True:
+        beat()
         if not client.get("MO"):
             return " + ".join(how) or "-", None, problems  # switched off meanwhile (a trip): no motion left
-        if client.get("VX") == 0:
+        beat()
+        if abs(client.get("VX")) <= standstill_velocity:
             return " + ".join(how) or "-", True, problems
         if clock() >= deadline:
             problems.append(f"not at standstill {standstill_timeout:g} s after the stop")
@@ -220,12 +240,15 @@ def stop_drive(client: Any, *, unit_mode: int | None, method: str = "auto", stan
 
 
 def _ask_patiently(client: Any, letters: str, clock: Callable[[], float], sleep: Callable[[float], None],
-                   patience: float, poll_interval: float) -> int | float:
-    """Query until the drive answers or ``patience`` s have passed (then the timeout propagates)."""
+                   patience: float, poll_interval: float, on_try: Callable[[], None] | None = None) -> int | float:
+    """Query until the drive answers or ``patience`` s have passed (then the timeout propagates);
+    ``on_try`` is called before every attempt (the motion guard's sign of life, one request at a time)."""
     from sherpa_cli.errors import DriveTimeoutError
 
     deadline = clock() + patience
     while True:
+        if on_try is not None:
+            on_try()
         try:
             return client.get(letters)
         except DriveTimeoutError:
@@ -274,8 +297,8 @@ class MotionGuard:
     # -- public API -------------------------------------------------------------------------------
 
     def __enter__(self) -> "MotionGuard":
-        self._install_signals()
         try:
+            self._install_signals()
             self._pulse(extra=self._setup_bound())
             for ref in self.refs:
                 self._inspect(ref)
@@ -284,12 +307,23 @@ class MotionGuard:
                 self._arm(d)
             self._pulse()
         except BaseException:
-            self._exit_all(reason="error")
-            self._restore_signals()
+            self._exiting = True
+            blocked = self._block_signals()
+            try:
+                # nothing was switched on yet: no stop to drives the guard never moved (another
+                # host may be moving them), only what was armed is put back
+                self._exit_all(reason="error", entering=True)
+            finally:
+                try:
+                    self._restore_signals()
+                finally:
+                    self._unblock_signals(blocked)
             raise
         return self
 
     def __exit__(self, exc_type: Any, exc: Any, tb: Any) -> Literal[False]:
+        self._exiting = True  # first thing: a signal from now on must not cut the stop short
+        blocked = self._block_signals()
         if self._signal is not None:
             reason = self._signal
         elif exc_type is None:
@@ -301,7 +335,10 @@ class MotionGuard:
         try:
             self._exit_all(reason=reason)
         finally:
-            self._restore_signals()
+            try:
+                self._restore_signals()
+            finally:
+                self._unblock_signals(blocked)
         problems = [f"{d.drive}: {p}" for d in self.report.drives for p in d.problems]
         if exc_type is None and problems:
             raise SafetyError("the stop after the motion did not go cleanly: " + "; ".join(problems),
@@ -323,9 +360,9 @@ class MotionGuard:
                 self._event(f"{c.label}: MO=0 to change UM {d.um} -> {unit_mode}")
                 c.motor_off()
                 d.mo = 0
-            c.set("UM", 0, unit_mode)
             if d.um_changed_from is None:
-                d.um_changed_from = d.um
+                d.um_changed_from = d.um  # recorded first: a write that fails half-way is still put back
+            c.set("UM", 0, unit_mode)
             d.um = unit_mode
         if not d.mo:
             if unit_mode == UM_TORQUE and c.get("TC") != 0:
@@ -353,11 +390,13 @@ class MotionGuard:
         `sherpa stop`), up to protocol.mo_confirm_timeout, keeping the dead-man fed meanwhile."""
         c = self._drive(ref).client
         patience = c.settings.mo_confirm_timeout
-        self._pulse(extra=patience + self.settings.request_bound)
         try:
             if index:
+                self._pulse()
                 return c.get(letters, index)
-            return _ask_patiently(c, letters, self._clock, self._sleep, patience, self.settings.poll_interval)
+            # a sign of life per attempt, not one up-front extension for the whole patience
+            return _ask_patiently(c, letters, self._clock, self._sleep, patience, self.settings.poll_interval,
+                                  on_try=self._pulse)
         finally:
             self._pulse()
 
@@ -406,6 +445,17 @@ class MotionGuard:
         for key, value in ((LOSS_ACTION, s.loss_action), (COMM_ERROR, s.comm_error_behaviour),
                            (CONSUMER, s.consumer_entry)):
             before = self._sdo_read(d, key)
+            if key == CONSUMER and before and (before >> 16) & 0x7F == s.host_node_id & 0x7F:
+                # our host id already watched: the leftover of a run that was killed before its exit.
+                # Its "before" is unknown -- disarmed (0) is put back, so it does not outlive this run
+                msg = (f"{d.client.label}: 0x1016:1 = 0x{before:08X} already watches host {s.host_node_id}: "
+                       "left over from a run that did not exit cleanly; it is cleared (0) on exit")
+                log.warning("%s", msg)
+                self._event(msg)
+                d.od_before[key] = 0
+                if before != value:
+                    self._sdo_write(d, key, value)
+                continue
             if before == value:
                 continue
             d.od_before[key] = before  # recorded first: a write that fails half-way is still put back
@@ -415,9 +465,14 @@ class MotionGuard:
 
     # -- dead-man heartbeat -----------------------------------------------------------------------
 
-    def _pulse(self, extra: float = 0.0) -> None:
+    def _pulse(self, extra: float = 0.0, *, exact: bool = False) -> None:
+        """A sign of life: the heartbeat goes on for the allowance (+ ``extra`` s). ``exact``: for the
+        next step only, even if an earlier, longer extension is still running (the exit's steps)."""
         allowance = max(self.settings.liveness_timeout, 3 * self.settings.request_bound) + extra
         with self._alive_lock:
+            if exact:
+                self._alive_until = time.monotonic() + allowance
+                return
             self._alive_until = max(self._alive_until, time.monotonic() + allowance) if extra else \
                 time.monotonic() + allowance
 
@@ -459,53 +514,86 @@ class MotionGuard:
 
     # -- exit -------------------------------------------------------------------------------------
 
-    def _exit_all(self, reason: str) -> None:
+    def _exit_all(self, reason: str, entering: bool = False) -> None:
         self._exiting = True
         self.report.reason = reason
-        self._pulse(extra=self._exit_bound())
-        for d in self._drives.values():
-            self.report.drives.append(self._exit_drive(d))
-        self._stop_heartbeat()
+        try:
+            for d in list(self._drives.values()):
+                try:
+                    self.report.drives.append(self._exit_drive(d, stop=not entering or d.switched_on))
+                except Exception as exc:  # never one drive's failure leaves the others unstopped
+                    r = DriveStop(d.ref.name, f"{d.ref.bus}:{d.ref.node}", stopped_by="not stopped")
+                    r.problems.append(f"stop: {_why(exc)}")
+                    self.report.drives.append(r)
+        finally:
+            self._stop_heartbeat()
 
-    def _exit_bound(self) -> float:
-        per = self.settings.standstill_timeout + 12 * self.settings.request_bound + 2 * 3.0
-        return per * max(1, len(self._drives))
+    def _step(self, extra: float = 0.0) -> None:
+        """A sign of life before one exit step, bounded by that step (not by the whole exit)."""
+        self._pulse(extra, exact=True)
 
-    def _exit_drive(self, d: _Drive) -> DriveStop:
+    def _exit_drive(self, d: _Drive, stop: bool = True) -> DriveStop:
         c, s = d.client, self.settings
         r = DriveStop(d.ref.name, f"{d.ref.bus}:{d.ref.node}")
+        motor_confirmed_off = False
+        if not stop:
+            r.stopped_by = "not moved by this guard"
+            self._restore_dead_man(d, r, stop_failed=False)
+            self._event(r.line())
+            return r
         try:
             # a drive whose consumer tripped went to NMT Stopped (0x1029:1 = 2) and its interpreter is
             # deaf until started again; starting it moves nothing
-            c.nmt_start()
+            self._step()
+            try:
+                c.nmt_start()
+            except Exception as exc:  # an NMT frame that could not be sent: still try the stop
+                r.problems.append(f"NMT start: {_why(exc)}")
             how, standstill, problems = stop_drive(c, unit_mode=d.um, method=s.stop_method,
                                                    standstill_timeout=s.standstill_timeout,
                                                    poll_interval=s.poll_interval, clock=self._clock,
-                                                   sleep=self._sleep)
+                                                   sleep=self._sleep, pulse=self._step,
+                                                   standstill_velocity=s.standstill_velocity)
             r.stopped_by, r.standstill = how, standstill
             r.problems.extend(problems)
-        except SherpaError as exc:
+        except Exception as exc:
             r.stopped_by = "not stopped"
-            r.problems.append(f"stop: {exc}")
+            r.problems.append(f"stop: {_why(exc)}")
         if d.switched_on:
             try:
+                self._step(c.settings.mo_confirm_timeout + 2 * s.request_bound)
                 c.motor_off()
-                r.motor_off = True
-            except SherpaError as exc:
-                r.problems.append(f"MO=0: {exc}")
+                r.motor_off = motor_confirmed_off = True
+            except Exception as exc:
+                r.problems.append(f"MO=0: {_why(exc)}")
+        # the dead-man may only be switched off when nothing is left running: a motor the guard switched
+        # on must be at standstill (or already off) and MO=0 confirmed; otherwise the heartbeat stops
+        # with the consumer still armed, and the drive trips on its own
+        stop_failed = d.switched_on and not (motor_confirmed_off and r.stopped_by != "not stopped"
+                                             and r.standstill is not False)
         try:
+            self._step()
             r.position = int(c.get("PX"))
-        except SherpaError as exc:
-            r.problems.append(f"PX: {exc}")
+        except Exception as exc:
+            r.problems.append(f"PX: {_why(exc)}")
         if d.um_changed_from is not None:
             if self.keep:
                 r.kept.append(f"UM={d.um}")
             elif r.motor_off or not d.switched_on:
                 try:
+                    self._step()
                     c.set("UM", 0, d.um_changed_from)
                     r.restored.append(f"UM={d.um_changed_from}")
-                except SherpaError as exc:
-                    r.problems.append(f"UM={d.um_changed_from}: {exc}")
+                except Exception as exc:
+                    r.problems.append(f"UM={d.um_changed_from} not restored: {_why(exc)}")
+            else:
+                r.kept.append(f"UM={d.um} (motor not confirmed off)")
+                r.problems.append(f"UM={d.um_changed_from} not restored: the motor is not confirmed off")
+        self._restore_dead_man(d, r, stop_failed)
+        self._event(r.line())
+        return r
+
+    def _restore_dead_man(self, d: _Drive, r: DriveStop, stop_failed: bool) -> None:
         # the consumer entry first: once it is back, the heartbeat may stop without a trip
         for key in (CONSUMER, COMM_ERROR, LOSS_ACTION):
             if key not in d.od_before:
@@ -514,13 +602,15 @@ class MotionGuard:
             if self.keep:
                 r.kept.append(name)
                 continue
+            if stop_failed:
+                r.kept.append(f"{name} (stop failed)")
+                continue
             try:
+                self._step()
                 self._sdo_write(d, key, d.od_before[key])
                 r.restored.append(name)
-            except SherpaError as exc:
-                r.problems.append(f"restore {name}: {exc}")
-        self._event(r.line())
-        return r
+            except Exception as exc:
+                r.problems.append(f"restore {name}: {_why(exc)}")
 
     # -- signals ----------------------------------------------------------------------------------
 
@@ -532,6 +622,24 @@ class MotionGuard:
                 continue
             self._old_handlers[signum] = signal.getsignal(signum)
             signal.signal(signum, self._on_signal)
+
+    def _block_signals(self) -> bool:
+        """Hold SIGINT/SIGTERM/SIGHUP back for the exit sequence (main thread only); True if blocked."""
+        if threading.current_thread() is not threading.main_thread() or not hasattr(signal, "pthread_sigmask"):
+            return False
+        sigs = {signal.SIGINT, signal.SIGTERM}
+        if hasattr(signal, "SIGHUP"):
+            sigs.add(signal.SIGHUP)
+        signal.pthread_sigmask(signal.SIG_BLOCK, sigs)
+        return True
+
+    def _unblock_signals(self, blocked: bool) -> None:
+        if not blocked:
+            return
+        sigs = {signal.SIGINT, signal.SIGTERM}
+        if hasattr(signal, "SIGHUP"):
+            sigs.add(signal.SIGHUP)
+        signal.pthread_sigmask(signal.SIG_UNBLOCK, sigs)
 
     def _restore_signals(self) -> None:
         for signum, handler in self._old_handlers.items():

@@ -9,14 +9,16 @@ write at all.
 
 from __future__ import annotations
 
+import logging
 import time
 from dataclasses import dataclass, field
 from typing import Any, Callable, Sequence
 
 from sherpa_cli.bus.parallel import run_concurrently
-from sherpa_cli.errors import SherpaError
-from sherpa_cli.ops.motion import MotionSettings, stop_drive
+from sherpa_cli.ops.motion import UM_TORQUE, MotionSettings, _ask_patiently, _why, stop_drive
 from sherpa_cli.ops.session import DriveRef
+
+log = logging.getLogger(__name__)
 
 
 @dataclass
@@ -39,19 +41,37 @@ class StopResult:
 
 def stop_one(client: Any, ref: DriveRef, settings: MotionSettings, *, clock: Callable[[], float] = time.monotonic,
              sleep: Callable[[float], None] = time.sleep) -> StopResult:
+    """Each step on its own: a failed NMT start, UM read or ST never skips the MO=0 -- only a motor read
+    as off gets no MO=0. UM is read patiently (a drive in its MO settle window is deaf); unreadable,
+    the drive is treated as in torque mode (TC=0, then ST)."""
     r = StopResult(ref.name, ref.address)
     try:
         client.nmt_start()
-        um = int(client.get("UM"))
+    except Exception as exc:
+        r.problems.append(f"NMT start: {_why(exc)}")
+    try:
+        um = int(_ask_patiently(client, "UM", clock, sleep, client.settings.mo_confirm_timeout,
+                                settings.poll_interval))
+    except Exception as exc:
+        log.warning("%s: UM unreadable (%s); stopping as in torque mode (TC=0, then ST)", ref.name, _why(exc))
+        um = UM_TORQUE
+    motor_read_off = False
+    try:
         r.stopped_by, r.standstill, problems = stop_drive(
             client, unit_mode=um, method=settings.stop_method, standstill_timeout=settings.standstill_timeout,
-            poll_interval=settings.poll_interval, clock=clock, sleep=sleep)
+            poll_interval=settings.poll_interval, clock=clock, sleep=sleep,
+            standstill_velocity=settings.standstill_velocity)
         r.problems.extend(problems)
-        if r.stopped_by != "motor was off":
+        motor_read_off = r.stopped_by == "motor was off"
+    except Exception as exc:
+        r.stopped_by = "not stopped"
+        r.problems.append(f"stop: {_why(exc)}")
+    if not motor_read_off:
+        try:
             client.motor_off()
             r.motor_off = True
-    except SherpaError as exc:
-        r.problems.append(str(exc))
+        except Exception as exc:
+            r.problems.append(f"MO=0: {_why(exc)}")
     return r
 
 
