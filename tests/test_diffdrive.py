@@ -9,7 +9,6 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import canopen
 import pytest
 
 from sherpa_cli.config import load_config
@@ -25,12 +24,6 @@ from sherpa_cli.sim.drive import SimDrive
 DATA = Path(__file__).resolve().parent / "data"
 MISMATCHED = DATA / "diffdrive-arm.yaml"
 FAST = DATA / "jog-fast-arm.yaml"
-
-
-@pytest.fixture(autouse=True)
-def _isolated(monkeypatch: pytest.MonkeyPatch, tmp_path: Path):
-    monkeypatch.setenv("XDG_STATE_HOME", str(tmp_path / "state"))
-    monkeypatch.setattr(canopen.Network, "NOTIFIER_CYCLE", 0.02)
 
 
 @pytest.fixture

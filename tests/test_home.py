@@ -8,7 +8,6 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import canopen
 import pytest
 
 from sherpa_cli.config import load_config
@@ -21,12 +20,6 @@ ROOT = Path(__file__).resolve().parent.parent
 ARM = ROOT / "tests" / "data" / "home-arm.yaml"
 WIRING = ROOT / "tests" / "data" / "home-wiring-arm.yaml"
 MOTION_LETTERS = (b"BG", b"MO", b"PA", b"PR", b"JV", b"TC")  # sets/executes that could move a motor
-
-
-@pytest.fixture(autouse=True)
-def _isolated(monkeypatch: pytest.MonkeyPatch, tmp_path: Path):
-    monkeypatch.setenv("XDG_STATE_HOME", str(tmp_path / "state"))
-    monkeypatch.setattr(canopen.Network, "NOTIFIER_CYCLE", 0.02)
 
 
 def variant(tmp_path: Path, *replace: tuple[str, str], src: Path = ARM):

@@ -9,25 +9,18 @@ heartbeat consumers). The config below keeps every motion short (fast joints, 50
 
 from __future__ import annotations
 
-from pathlib import Path
 
-import canopen
 import pytest
 
 from sherpa_cli.config import load_config
 from sherpa_cli.errors import SafetyError, UsageError
 from sherpa_cli.ops import joint_jog
 from sherpa_cli.ops.joint_jog import JogRequest, resolve_axis
-from sherpa_cli.ops.session import ArmSession, DriveRef
+from sherpa_cli.ops.session import ArmSession
 from sherpa_cli.sim.arm import SimArm
+from motion_helpers import JOG_CONFIG, calibrate, motors_off
 
-CONFIG = Path(__file__).resolve().parent / "data" / "jog-fast-arm.yaml"
-
-
-@pytest.fixture(autouse=True)
-def _isolated(monkeypatch: pytest.MonkeyPatch, tmp_path: Path):
-    monkeypatch.setenv("XDG_STATE_HOME", str(tmp_path / "state"))
-    monkeypatch.setattr(canopen.Network, "NOTIFIER_CYCLE", 0.02)
+CONFIG = JOG_CONFIG
 
 
 @pytest.fixture
@@ -35,22 +28,8 @@ def cfg():
     return load_config(CONFIG)
 
 
-def calibrate(session, *drives):
-    """What `home` leaves behind: UI[3]=1 on each drive (RAM)."""
-    for name in drives:
-        d = session.cfg.drives[name]
-        c = session.client(DriveRef(name, d.bus, d.node, d))
-        c.nmt_start()
-        c.set("UI", 3, 1)
-
-
 def jog(session, name, **kw):
     return joint_jog.run(session, resolve_axis(session.cfg, name), JogRequest(**kw))
-
-
-def motors_off(session):
-    with session.sim.lock:
-        return all(not d.motor_on for d in session.sim.drives.values())
 
 
 @pytest.mark.parametrize("name, to, other", [("pitch", "1000counts", "roll"), ("roll", "-601counts", "pitch"),

@@ -5,9 +5,7 @@ from __future__ import annotations
 import json
 import math
 import time
-from pathlib import Path
 
-import canopen
 import pytest
 
 from sherpa_cli.config import load_config
@@ -20,12 +18,6 @@ from sherpa_cli.sim.arm import SimArm
 from test_motion_guard import ARMED, CONFIG, RESTORED
 
 CPR = 4000
-
-
-@pytest.fixture(autouse=True)
-def _isolated(monkeypatch: pytest.MonkeyPatch, tmp_path: Path):
-    monkeypatch.setenv("XDG_STATE_HOME", str(tmp_path / "state"))
-    monkeypatch.setattr(canopen.Network, "NOTIFIER_CYCLE", 0.02)
 
 
 @pytest.fixture

@@ -4,9 +4,7 @@ simulated arm (in-process, real time: the guard's heartbeat thread runs on the w
 from __future__ import annotations
 
 import asyncio
-from pathlib import Path
 
-import canopen
 import pytest
 
 from sherpa_cli.cli.jog_view import JogView, bar
@@ -14,14 +12,9 @@ from sherpa_cli.config import load_config
 from sherpa_cli.ops.live_jog import LiveJog, resolve_axes
 from sherpa_cli.ops.session import ArmSession
 from sherpa_cli.sim.arm import SimArm
+from motion_helpers import JOG_CONFIG
 
-CONFIG = Path(__file__).resolve().parent / "data" / "jog-fast-arm.yaml"
-
-
-@pytest.fixture(autouse=True)
-def _isolated(monkeypatch: pytest.MonkeyPatch, tmp_path: Path):
-    monkeypatch.setenv("XDG_STATE_HOME", str(tmp_path / "state"))
-    monkeypatch.setattr(canopen.Network, "NOTIFIER_CYCLE", 0.02)
+CONFIG = JOG_CONFIG
 
 
 @pytest.fixture

@@ -8,9 +8,7 @@ import dataclasses
 import os
 import sys
 import time
-from pathlib import Path
 
-import canopen
 import pytest
 
 from sherpa_cli.config import load_config
@@ -21,8 +19,9 @@ from sherpa_cli.ops.joystick import ScriptedSource, deadzone, run_joystick
 from sherpa_cli.ops.live_jog import LiveJog, resolve_axes
 from sherpa_cli.ops.session import ArmSession
 from sherpa_cli.sim.arm import SimArm
+from motion_helpers import JOG_CONFIG
 
-CONFIG = Path(__file__).resolve().parent / "data" / "jog-fast-arm.yaml"
+CONFIG = JOG_CONFIG
 JOY = """
 joystick:
   rate_hz: 25
@@ -32,12 +31,6 @@ joystick:
     - {axis: ABS_Z, joint: j1, sensitivity: 0.25}
     - {pair: diff, x: ABS_X, y: ABS_Y, mix: xy, sensitivity: 0.25}
 """
-
-
-@pytest.fixture(autouse=True)
-def _isolated(monkeypatch: pytest.MonkeyPatch, tmp_path: Path):
-    monkeypatch.setenv("XDG_STATE_HOME", str(tmp_path / "state"))
-    monkeypatch.setattr(canopen.Network, "NOTIFIER_CYCLE", 0.02)
 
 
 @pytest.fixture

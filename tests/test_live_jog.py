@@ -4,41 +4,21 @@ guard's dead-man heartbeat runs on a thread in wall-clock time, so the simulated
 from __future__ import annotations
 
 import time
-from pathlib import Path
 
-import canopen
 import pytest
 
 from sherpa_cli.config import load_config
 from sherpa_cli.ops.live_jog import LiveJog, resolve_axes
-from sherpa_cli.ops.session import ArmSession, DriveRef
+from sherpa_cli.ops.session import ArmSession
 from sherpa_cli.sim.arm import SimArm
+from motion_helpers import JOG_CONFIG, calibrate, motors_off
 
-CONFIG = Path(__file__).resolve().parent / "data" / "jog-fast-arm.yaml"
-
-
-@pytest.fixture(autouse=True)
-def _isolated(monkeypatch: pytest.MonkeyPatch, tmp_path: Path):
-    monkeypatch.setenv("XDG_STATE_HOME", str(tmp_path / "state"))
-    monkeypatch.setattr(canopen.Network, "NOTIFIER_CYCLE", 0.02)
+CONFIG = JOG_CONFIG
 
 
 @pytest.fixture
 def cfg():
     return load_config(CONFIG)
-
-
-def calibrate(session, *drives):
-    for name in drives:
-        d = session.cfg.drives[name]
-        c = session.client(DriveRef(name, d.bus, d.node, d))
-        c.nmt_start()
-        c.set("UI", 3, 1)
-
-
-def motors_off(session):
-    with session.sim.lock:
-        return all(not d.motor_on for d in session.sim.drives.values())
 
 
 def run_for(live, seconds, every=0.03, until=None):

@@ -12,7 +12,6 @@ import threading
 import time
 from pathlib import Path
 
-import canopen
 import pytest
 
 from sherpa_cli.config import load_config
@@ -43,12 +42,6 @@ HOST = 126
 CONSUMER_ENTRY = HOST << 16 | 300
 ARMED = [(0x6007, 0, 2), (0x1029, 1, 2), (0x1016, 1, CONSUMER_ENTRY)]
 RESTORED = [(0x1016, 1, 0), (0x1029, 1, 0), (0x6007, 0, 1)]
-
-
-@pytest.fixture(autouse=True)
-def _isolated(monkeypatch: pytest.MonkeyPatch, tmp_path: Path):
-    monkeypatch.setenv("XDG_STATE_HOME", str(tmp_path / "state"))
-    monkeypatch.setattr(canopen.Network, "NOTIFIER_CYCLE", 0.02)
 
 
 @pytest.fixture

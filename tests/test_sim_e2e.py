@@ -5,10 +5,9 @@ Network receives in its notifier thread. A test whose assertions depend on how f
 move between two host requests runs them on a ManualClock instead (``sim_session(cfg, clock)``). Configs are small and use a short MO settle window and
 SV blackout so every test stays well under 2 s; every wait is bounded by a deadline.
 
-Two test-side settings:
-- XDG_STATE_HOME points into tmp_path, so the simulated flash of one test never leaks into another.
-- canopen's notifier polls its bus every second (Network.NOTIFIER_CYCLE = 1.0), so closing a
-  session waits up to 1 s for it to notice; the tests shorten that cycle to 20 ms.
+Each test has its own state directory (conftest.py), so the simulated flash of one test never
+leaks into another; the session's networks poll their buses every 20 ms (bus/links.py), so closing
+one costs milliseconds.
 """
 
 from __future__ import annotations
@@ -46,12 +45,6 @@ drives:
 """
 FACTORY_AC, FACTORY_DC = 100_000, 100_000
 SR_LIMIT_STOP = 1 << 28
-
-
-@pytest.fixture(autouse=True)
-def _isolated(monkeypatch: pytest.MonkeyPatch, tmp_path: Path):
-    monkeypatch.setenv("XDG_STATE_HOME", str(tmp_path / "state"))
-    monkeypatch.setattr(canopen.Network, "NOTIFIER_CYCLE", 0.02)
 
 
 def write_config(tmp_path: Path, text: str, name: str = "arm.yaml"):

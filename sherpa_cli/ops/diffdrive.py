@@ -427,7 +427,6 @@ def run_move(session: Any, pair: PairConfig, request: MoveRequest, *, guard_fact
              on_event: Callable[[str], None] | None = None,
              trace_factory: Callable[[tuple[str, str]], Any] = PolledTrace) -> MoveResult:
     """Plan, then move both motors inside the motion guard with the limit watch, recording both."""
-    from sherpa_cli.elmo.faults import decode_sr, describe_mf
     from sherpa_cli.ops.joint_jog import move_to, stop_now, wait_standstill
     from sherpa_cli.ops.motion import MotionGuard, MotionSettings
 
@@ -457,13 +456,7 @@ def run_move(session: Any, pair: PairConfig, request: MoveRequest, *, guard_fact
             clients = {d: guard.client(by_name[d]) for d in drives}
 
             def check_drives() -> None:
-                guard.check()
-                for d, c in clients.items():
-                    sr = decode_sr(int(guard.query(by_name[d], "SR")))
-                    if not sr.motor_on:
-                        mf = int(guard.query(by_name[d], "MF"))
-                        why = "; ".join(describe_mf(mf)) if mf else "MO=0 from elsewhere (sherpa stop, another tool)"
-                        raise SafetyError(f"{c.label}: the motor was switched off during the move: {why}")
+                guard.check_motors_on([by_name[d] for d in clients], "the move")
 
             start = CommonStart(session, refs, clients, method, group_id)
             with start:

@@ -29,7 +29,6 @@ from dataclasses import dataclass, field
 from typing import Any, Callable, Mapping
 
 from sherpa_cli.config.model import ArmConfig, JointConfig, PairConfig
-from sherpa_cli.elmo.faults import decode_sr, describe_mf
 from sherpa_cli.errors import SafetyError, UsageError
 from sherpa_cli.joints import diffpair, units
 from sherpa_cli.ops import calibration, limit_watch
@@ -389,13 +388,7 @@ def _run_guarded(guard: Any, session: Any, cfg: ArmConfig, axis: Axis, p: JogPla
 
         def check_drives() -> None:
             """The guard's sign of life, and every moving motor still on (a trip ends the jog)."""
-            guard.check()
-            for d, c in clients.items():
-                sr = decode_sr(int(guard.query(by_name[d], "SR")))
-                if not sr.motor_on:
-                    mf = int(guard.query(by_name[d], "MF"))
-                    why = "; ".join(describe_mf(mf)) if mf else "MO=0 from elsewhere (sherpa stop, another tool)"
-                    raise SafetyError(f"{c.label}: the motor was switched off during the jog: {why}")
+            guard.check_motors_on([by_name[d] for d in clients], "the jog")
         others = {r.name: session.client(r) for r in _refs(cfg, axis.sensed) if r.name not in clients}
 
         def sample() -> dict[str, int]:

@@ -30,7 +30,7 @@ import time
 from dataclasses import dataclass, field
 from typing import Any, Callable, Iterable, Literal, Sequence
 
-from sherpa_cli.elmo.faults import describe_mf, sr_problems
+from sherpa_cli.elmo.faults import decode_sr, describe_mf, sr_problems
 from sherpa_cli.errors import (CommunicationError, DriveRefusedError, ExitCode, SafetyError, SherpaError,
                                UsageError)
 
@@ -384,6 +384,16 @@ class MotionGuard:
         if self._hb_given_up is not None:
             raise DeadManError(f"host heartbeat stopped: {self._hb_given_up}")
         self._pulse()
+
+    def check_motors_on(self, refs: Iterable[Any], during: str) -> None:
+        """:meth:`check`, then every given drive's motor still on: a trip or a `sherpa stop` from
+        another terminal ends the command with the decoded reason (``during``: "the move", "the jog")."""
+        self.check()
+        for ref in refs:
+            if not decode_sr(int(self.query(ref, "SR"))).motor_on:
+                mf = int(self.query(ref, "MF"))
+                why = "; ".join(describe_mf(mf)) if mf else "MO=0 from elsewhere (sherpa stop, another tool)"
+                raise SafetyError(f"{self._drive(ref).client.label}: the motor was switched off during {during}: {why}")
 
     def query(self, ref: Any, letters: str, index: int = 0) -> int | float:
         """A query that waits out a drive deaf for its MO settle window (another host switched the motor:
