@@ -18,11 +18,11 @@ from __future__ import annotations
 
 import os
 import stat
-import tempfile
 from pathlib import Path
 from typing import Callable
 
 from sherpa_cli.errors import UsageError
+from sherpa_cli.paths import write_atomic
 
 STDOUT = "-"
 
@@ -88,22 +88,8 @@ def write_output(path: str | os.PathLike[str], text: str, option: str, *, what: 
 
 
 def _replace_atomically(target: Path, text: str, mode: int | None) -> None:
-    target.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", dir=target.parent)
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as handle:
-            handle.write(text)
-            handle.flush()
-            os.fsync(handle.fileno())
-        if mode is None:  # a new file: what open() would give it (0666 less the umask), not mkstemp's 0600
-            umask = os.umask(0)
-            os.umask(umask)
-            mode = 0o666 & ~umask
-        os.chmod(tmp, mode)
-        os.replace(tmp, target)
-    except BaseException:
-        try:
-            os.unlink(tmp)
-        except FileNotFoundError:
-            pass
-        raise
+    if mode is None:  # a new file: what open() would give it (0666 less the umask), not mkstemp's 0600
+        umask = os.umask(0)
+        os.umask(umask)
+        mode = 0o666 & ~umask
+    write_atomic(target, text, mode)

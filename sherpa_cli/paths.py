@@ -36,8 +36,9 @@ def file_lock(path: Path, timeout: float = LOCK_TIMEOUT) -> filelock.BaseFileLoc
     return filelock.FileLock(str(path) + ".lock", timeout=timeout)
 
 
-def write_atomic(path: Path, text: str) -> None:
-    """Write via a temporary file and rename, so a crash never leaves half a file."""
+def write_atomic(path: Path, text: str, mode: int | None = None) -> None:
+    """Write via a temporary file and rename, so a crash never leaves half a file. ``mode``: the
+    permission bits to give it (an output file keeps its old ones); None leaves mkstemp's 0600."""
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
     try:
@@ -45,6 +46,8 @@ def write_atomic(path: Path, text: str) -> None:
             handle.write(text)
             handle.flush()
             os.fsync(handle.fileno())
+        if mode is not None:
+            os.chmod(tmp, mode)
         os.replace(tmp, path)
     except BaseException:
         try:

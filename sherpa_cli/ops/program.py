@@ -525,17 +525,24 @@ def apply_plans(session: ArmSession, plans: Sequence[DrivePlan], *, save: bool =
     jobs = {p.drive: (lambda p=p: _apply_drive(session, p, save=save, ledger=ledger, stop=stop,
                                                on_event=on_event)) for p in plans}
     outcomes = run_concurrently(jobs, max_workers=max(1, max_workers), on_interrupt=stop.set)
+    result = _in_plan_order(plans, outcomes, lambda t, message: DriveOutcome(t.drive, t.bus, t.node, status=FAILED,
+                                                                            error=message))
+    return ApplyResult(result, interrupted=stop.is_set())
+
+
+def _in_plan_order(plans: Sequence[DrivePlan], outcomes: Any, failed: Any) -> list[Any]:
+    """Each drive's result in plan order; a drive's SherpaError becomes ``failed(target, message)``
+    (one drive's trouble never hides the others'), anything else is a bug and raised."""
     result = []
     for p in plans:
         o = outcomes[p.drive]
         if o.error is not None:
             if not isinstance(o.error, SherpaError):
                 raise o.error
-            t = p.target
-            result.append(DriveOutcome(t.drive, t.bus, t.node, status=FAILED, error=o.error.message))
+            result.append(failed(p.target, o.error.message))
         else:
             result.append(o.value)
-    return ApplyResult(result, interrupted=stop.is_set())
+    return result
 
 
 # --------------------------------------------------------------------------- flash proof
@@ -624,16 +631,8 @@ def prove_flash(session: Any, plans: Sequence[DrivePlan], *, boot_timeout: float
     stop = stop or threading.Event()
     jobs = {p.drive: (lambda p=p: _prove_drive(session, p, boot_timeout=boot_timeout, stop=stop)) for p in plans}
     outcomes = run_concurrently(jobs, max_workers=max(1, max_workers), on_interrupt=stop.set)
-    proofs = []
-    for p in plans:
-        o = outcomes[p.drive]
-        if o.error is not None:
-            if not isinstance(o.error, SherpaError):
-                raise o.error
-            t = p.target
-            proofs.append(FlashProof(t.drive, t.bus, t.node, status=PROOF_FAILED, error=o.error.message))
-        else:
-            proofs.append(o.value)
+    proofs = _in_plan_order(plans, outcomes, lambda t, message: FlashProof(t.drive, t.bus, t.node,
+                                                                           status=PROOF_FAILED, error=message))
     if stop.is_set():
         raise KeyboardInterrupt
     return proofs
