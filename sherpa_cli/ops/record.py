@@ -42,6 +42,7 @@ VELOCITY_ENTRY = 0x60690020  # 0x6069:0, 32 bits
 CURRENT_ENTRY = 0x60780010  # 0x6078:0, 16 bits
 CURRENT_SCALE_A = 0.001  # A per unit of 0x6078
 CURRENT_DIVIDER = 2  # current on every 2nd SYNC
+DRAIN_LIMIT_S = 1.0  # longest wait for the answers to the last SYNCs after SYNC stopped
 RESTORE_ATTEMPTS = 30  # SDO tries per object when putting the PDO settings back (a backlog may delay answers)
 
 
@@ -171,6 +172,7 @@ class Recorder:
         self._syncs.clear()
         if self.t0 is not None and self.t_end is None:
             self.t_end = self._now()
+        self._drain()
         for network, cob, callback in self._subscribed:
             try:
                 network.unsubscribe(cob, callback)
@@ -192,6 +194,27 @@ class Recorder:
             d.saved.clear()
         if failures and not quiet:
             raise failures[0]
+
+    def _drain(self) -> None:
+        """Answers to the last SYNCs may still wait in a loaded receive thread: keep listening until
+        no new sample came for a few periods (bounded), so the end of a recording is not cut off."""
+        if not self._subscribed or self.clock is not None:
+            return
+        quiet_for = max(0.02, 5 * self.period)
+        deadline = time.monotonic() + DRAIN_LIMIT_S
+        last = self._received()
+        last_change = time.monotonic()
+        while time.monotonic() < deadline:
+            time.sleep(quiet_for / 4)
+            now_received = self._received()
+            if now_received != last:
+                last, last_change = now_received, time.monotonic()
+            elif time.monotonic() - last_change >= quiet_for:
+                return
+
+    def _received(self) -> int:
+        with self._lock:
+            return sum(len(d.pos) + len(d.cur) for d in self._drives.values())
 
     # -- PDO set-up (RAM only) ------------------------------------------------------------------
     def _configure(self, d: _Drive) -> None:
