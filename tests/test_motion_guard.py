@@ -455,3 +455,46 @@ def test_standstill_allows_the_configured_velocity_noise():
                                            standstill_velocity=2)
     assert (how, standstill, problems) == ("ST", True, [])
     assert MotionSettings().standstill_velocity == 2
+
+
+# -- hand-over (the interactive view's calibrate key: `home` guards the drive meanwhile) ---------------
+
+def test_release_hands_a_drive_over_stopped_and_restored_and_adopt_takes_it_back(cfg):
+    settings = MotionSettings.from_config(cfg)
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
+        r1, r2 = resolve_target(cfg, "drive1"), resolve_target(cfg, "drive2")
+        with MotionGuard(s, [r1, r2], settings=settings) as g:
+            g.enable(r1, 5)
+            (out,) = g.release([r1])
+            assert (out.stopped_by, out.motor_off) == ("ST", True)
+            assert not sim_drive(s, "drive1").motor_on
+            assert writes(s, "drive1") == ARMED + RESTORED  # put back: another guard may arm it now
+            with pytest.raises(Exception, match="not guarded by this motion guard"):
+                g.client(r1)
+            # the other drive stays guarded; another guard takes drive1 meanwhile, one at a time
+            g.keep_alive(10.0)  # the other guard's entry and motor-on confirmation give no sign of life to g
+            with MotionGuard(s, [r1], settings=settings) as other:
+                move(other, r1, 300)
+            g.check()
+            g.adopt([r1])
+            assert writes(s, "drive1") == (ARMED + RESTORED) * 2 + ARMED
+            assert move(g, r1, 600) == 600
+        assert {d.drive for d in g.report.drives} == {"drive1", "drive2"}
+        assert_stopped_and_restored(s, "drive2", switched_on=False)
+        assert writes(s, "drive1") == (ARMED + RESTORED) * 3
+        assert not sim_drive(s, "drive1").motor_on and s.sim.errors == []
+
+
+def test_a_released_drive_not_taken_back_is_in_the_report_and_adopt_refuses_a_fault(cfg):
+    settings = MotionSettings.from_config(cfg)
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
+        r1 = resolve_target(cfg, "drive1")
+        with MotionGuard(s, [r1], settings=settings) as g:
+            g.release([r1])
+            with s.sim.lock:
+                sim_drive(s, "drive1")._mf |= 1 << 12  # a latched motor failure meanwhile
+            with pytest.raises(SafetyError, match="in fault"):
+                g.adopt([r1])
+        (r,) = g.report.drives
+        assert r.drive == "drive1" and r.stopped_by == "motor was off"
+        assert writes(s, "drive1") == ARMED + RESTORED  # nothing armed on the faulted drive

@@ -29,13 +29,6 @@ def list_joysticks(st: Any) -> None:
         st.out.line(f"  buttons: {', '.join(j.buttons) or '-'}")
 
 
-def _calibrate_hook(st: Any, session: Any) -> Any:
-    """The view's calibrate key. `sherpa home` (ops/home.py) is not on main yet, so there is nothing to
-    call and the view says "calibrate: not available yet (sherpa home)". Homing runs its own motion
-    guard: once it exists, the hook must leave this session's guard (stop all) before it homes."""
-    return None
-
-
 def have_terminal() -> bool:
     """The view needs a terminal on both ends (the tests replace this to run it headless)."""
     return sys.stdin.isatty() and sys.stdout.isatty()
@@ -71,8 +64,12 @@ def interactive(st: Any, names: Sequence[str], *, apply: bool, uncalibrated: boo
         live = LiveJog(session, axes, allow_uncalibrated=uncalibrated)
         try:
             with live:
-                app = JogView(live, calibrate=_calibrate_hook(st, session))
-                app.run()
+                app = JogView(live)
+                try:
+                    app.run()
+                finally:
+                    for text in app.home_log:  # what the calibrate key did, for the terminal's record
+                        st.out.info(text)
                 if app.error is not None:
                     raise app.error
         except BaseException as exc:

@@ -8,12 +8,14 @@ velocity or torque command stops by itself ``keepalive`` s after the last press 
 
 from __future__ import annotations
 
-from typing import Any, Callable
+import threading
+from typing import Any, Callable, Sequence
 
 from rich.text import Text
 from textual.app import App, ComposeResult
 from textual.binding import Binding
 from textual.containers import Vertical
+from textual.screen import ModalScreen
 from textual.widgets import Footer, Static
 
 from sherpa_cli.errors import SherpaError
@@ -43,8 +45,67 @@ def bar(counts: int | None, full: tuple[int, int], normal: tuple[int, int], widt
     return "[" + "".join(cells) + "]"
 
 
+KIND_TEXT = {"home_switch": "home switch", "end_switches": "end switches", "pair": "differential pair",
+             "abs_encoder": "absolute encoder"}
+
+
+def plan_lines(plan: Any) -> list[str]:
+    """The home plan as `sherpa home` shows it: what moves, which way, how fast, how far at most."""
+    out = []
+    for u in plan.units:
+        out.append(f"{u.name} ({KIND_TEXT.get(u.kind, u.kind)}; drives {', '.join(u.drives)})")
+        out += [f"  uses {s}" for s in u.switches]
+        if not u.moves:
+            out.append("  no motion: reads the encoder and sets PX from it")
+        for m in u.moves:
+            way = "up" if m.direction > 0 else "down"
+            out.append(f"  {m.what}: {m.joint} {way} at {m.speed} counts/s, at most {m.max_distance} counts")
+    return out
+
+
+def report_line(report: Any) -> str:
+    """One line per homed unit, as `sherpa home` reports it."""
+    parts = []
+    for u in report.units:
+        sets = ", ".join(f"{j} = {v}" for j, v in u.set_to.items())
+        at = ", ".join(f"{j} at {v} counts" for j, v in u.positions.items())
+        text = f"{u.name}: homed ({KIND_TEXT.get(u.kind, u.kind)}): set {sets}; now {at}"
+        if u.repeat_difference is not None:
+            text += f"; repeat difference {u.repeat_difference:+d} counts"
+        parts.append(text)
+    return " | ".join(parts) or "nothing homed"
+
+
+class HomeConfirm(ModalScreen[bool]):
+    """The calibrate key's question: the home plan, Enter/y homes, Esc/n cancels."""
+
+    DEFAULT_CSS = """
+    HomeConfirm { align: center middle; }
+    #plan { width: auto; max-width: 100%; height: auto; padding: 1 2; border: thick $warning; background: $surface; }
+    """
+    BINDINGS = [
+        Binding("enter,y", "answer(True)", "home now"),
+        Binding("escape,n", "answer(False)", "cancel"),
+    ]
+
+    def __init__(self, joint: str, lines: Sequence[str]) -> None:
+        super().__init__()
+        self.joint = joint
+        self.lines = list(lines)
+
+    def compose(self) -> ComposeResult:
+        text = Text(f"calibrate {self.joint}: home it now?\n", style="bold")
+        text.append("\n".join(self.lines) + "\n\n")
+        text.append("Enter/y: home now   Esc/n: cancel   (Space aborts a running homing)", style="bold")
+        yield Static(text, id="plan")
+
+    def action_answer(self, yes: bool) -> None:
+        self.dismiss(yes)
+
+
 class JogView(App):
-    """The view; ``live`` is an entered LiveJog, ``calibrate(joint) -> str`` runs homing (or is None)."""
+    """The view; ``live`` is an entered LiveJog. ``calibrate``: the ``c`` key homes the selected joint
+    (ops/live_jog.LiveJog.calibrate, in a worker thread so Space can abort it)."""
 
     CSS = """
     #joints { height: auto; }
@@ -67,11 +128,16 @@ class JogView(App):
         Binding("ctrl+c", "quit", "quit", show=False, priority=True),
     ]
 
-    def __init__(self, live: Any, *, calibrate: Callable[[str], str] | None = None,
-                 tick_period: float = 0.1) -> None:
+    def __init__(self, live: Any, *, calibrate: bool = True, tick_period: float = 0.1) -> None:
         super().__init__()
         self.live = live
-        self.calibrate_joint = calibrate
+        self.calibrate = calibrate
+        self.homing: threading.Thread | None = None  # the calibrate key's homing, while it runs
+        self.homing_joint = ""
+        self.homing_result: Any = None  # a HomeReport or the exception homing raised
+        self.abort_homing = threading.Event()
+        self.quit_after_homing = False
+        self.home_log: list[str] = []  # what homing did: the release's stops, the report line
         self.tick_period = tick_period
         self.names = list(live.axes)
         self.selected = 0
@@ -103,6 +169,7 @@ class JogView(App):
         return INCREMENTS[mode][self.inc_index[name][mode]]
 
     def render_state(self) -> None:
+        base = self.screen_stack[0]  # the joints' screen, also under the calibrate question
         for i, name in enumerate(self.names):
             st = self.live.state[name]
             axis = self.live.axes[name]
@@ -127,15 +194,26 @@ class JogView(App):
                         style="bold red" if st.faults else "")
             if st.note:
                 text.append(f"\n    {st.note}", style="yellow")
-            self.query_one(f"#j-{name}", Static).update(text)
+            base.query_one(f"#j-{name}", Static).update(text)
         status = Text(self.live.deadman + "\n")
         last = self.live.messages[-1] if self.live.messages else ""
+        if self.homing is not None:
+            what = "aborting homing" if self.abort_homing.is_set() else "homing"
+            status.append(f"{what} {self.homing_joint} ... (Space aborts)\n", style="bold yellow")
         status.append(self.message or last, style="bold")
-        self.query_one("#status", Static).update(status)
+        base.query_one("#status", Static).update(status)
 
     # -- periodic -------------------------------------------------------------------------------
 
     def tick(self) -> None:
+        if self.homing is not None:
+            if self.homing.is_alive():  # the worker owns the bus; its waits keep the guard alive
+                self.render_state()
+                return
+            self._homing_done()
+            if self.quit_after_homing or self.error is not None:
+                self.exit()
+                return
         try:
             self.live.tick()
         except BaseException as exc:  # the guard failed (dead-man, signal): leave, the guard stops all
@@ -148,6 +226,10 @@ class JogView(App):
         self.render_state()
 
     def _do(self, fn: Callable[[], Any]) -> None:
+        if self.homing is not None:
+            self.message = f"homing {self.homing_joint} runs: wait for it, or Space to abort it"
+            self.render_state()
+            return
         try:
             out = fn()
             self.message = out if isinstance(out, str) else ""
@@ -211,19 +293,82 @@ class JogView(App):
         self._do(lambda: self.live.stop(name) or f"{name}: stopped")
 
     def action_stop_all(self) -> None:
+        if self.homing is not None:
+            self.abort_homing.set()
+            self.message = f"aborting homing {self.homing_joint} ..."
+            self.render_state()
+            return
         for name in self.names:
             self.setpoint[name] = 0.0
         self._do(lambda: self.live.stop_all() or "STOP: every joint stopped")
 
     def action_calibrate(self) -> None:
-        if self.calibrate_joint is None:
-            self.message = "calibrate: not available yet (sherpa home)"
+        if self.homing is not None:
+            self.message = f"homing {self.homing_joint} runs already"
             self.render_state()
             return
-        name, calibrate = self.current, self.calibrate_joint
-        self._do(lambda: calibrate(name))
+        if not self.calibrate:
+            self.message = "calibrate: not offered here"
+            self.render_state()
+            return
+        name = self.current
+        try:
+            plan = self.live.home_plan(name)
+        except SherpaError as exc:
+            self.message = f"calibrate: {exc}"
+            self.render_state()
+            return
+
+        def answered(yes: bool | None) -> None:
+            if yes:
+                self._start_homing(name)
+            else:
+                self.message = f"calibrate {name}: cancelled, nothing moved"
+                self.render_state()
+
+        self.push_screen(HomeConfirm(name, plan_lines(plan)), answered)
+
+    def _start_homing(self, name: str) -> None:
+        if self.homing is not None:
+            return
+        for n in self.names:
+            self.setpoint[n] = 0.0
+        self.abort_homing.clear()
+        self.homing_joint, self.homing_result = name, None
+
+        def work() -> None:
+            try:
+                self.homing_result = self.live.calibrate(name, abort=self.abort_homing.is_set,
+                                                         on_event=self.home_log.append)
+            except BaseException as exc:  # handed to the main thread in tick
+                self.homing_result = exc
+
+        self.homing = threading.Thread(target=work, name="sherpa-jog-home", daemon=True)
+        self.message = f"homing {name} ..."
+        self.homing.start()
+        self.render_state()
+
+    def _homing_done(self) -> None:
+        assert self.homing is not None
+        self.homing.join()
+        self.homing = None
+        result = self.homing_result
+        if isinstance(result, SherpaError):
+            self.message = f"calibrate {self.homing_joint}: {result}"
+        elif isinstance(result, BaseException):
+            self.error = result
+            return
+        else:
+            self.message = f"calibrate: {report_line(result)}"
+        self.home_log.append(self.message)
 
     async def action_quit(self) -> None:
+        if self.homing is not None:  # the worker's homing ends first: its guard stops its motors
+            self.abort_homing.set()
+            self.quit_after_homing = True
+            self.message = f"aborting homing {self.homing_joint}, then leaving ..."
+            self.render_state()
+            return
         self.exit()
 
 

@@ -30,7 +30,7 @@ from typing import Any, Callable, Mapping, Sequence
 
 from sherpa_cli.config.model import ArmConfig, JointConfig, JointRole
 from sherpa_cli.elmo.faults import decode_sr, describe_mf, sr_problems
-from sherpa_cli.errors import SafetyError, UsageError
+from sherpa_cli.errors import ExitCode, SafetyError, SherpaError, UsageError
 from sherpa_cli.joints import diffpair
 from sherpa_cli.joints.units import counts_to_rad
 from sherpa_cli.ops import calibration, joint_jog, limit_watch, targets
@@ -38,6 +38,13 @@ from sherpa_cli.ops.limit_watch import WatchedJoint
 from sherpa_cli.ops.motion import UM_POSITION, UM_TORQUE, MotionGuard, MotionSettings
 
 MODES = ("position", "velocity", "torque")
+
+
+class HomingAborted(SherpaError):
+    """The calibrate key's homing was aborted (Space, q, Ctrl-C in the view); its guard stopped it."""
+
+    exit_code = ExitCode.INTERRUPTED
+
 KEEPALIVE_S = 0.5  # a velocity/torque command stops this long after the last key press
 
 
@@ -140,14 +147,12 @@ class LiveJog:
         self.running: dict[str, _Running] = {}  # per axis
         self.messages: list[str] = []  # limit breaches and recoveries, oldest first
         self.dead: dict[str, str] = {}  # drive -> why it must not be commanded again in this session
+        self.unguarded: set[str] = set()  # drives the guard could not take back after homing (read raw)
 
     # -- context ---------------------------------------------------------------------------------
 
     def __enter__(self) -> "LiveJog":
-        for a in self.axes.values():  # calibration first: nothing is armed if it cannot be read
-            c = calibration.read_calibration(self.cfg, a.joint, lambda d: self._raw(d))
-            self.state[a.name].calibrated = c.calibrated
-            self.state[a.name].calibration = c.reason
+        self._read_calibration(list(self.axes.values()))  # first: nothing is armed if it cannot be read
         self.guard.__enter__()
         try:
             self.tick()
@@ -290,6 +295,87 @@ class LiveJog:
         for name in list(self.running):
             self.stop(name)
 
+    # -- calibrate (home) ----------------------------------------------------------------------------
+
+    def home_plan(self, name: str) -> Any:
+        """What the calibrate key would do for this joint: ops/home.plan_home of it (a Σ or Δ joint
+        homes its pair as one unit). A joint that cannot be homed is a UsageError saying why."""
+        from sherpa_cli.ops import home
+
+        self._axis(name)
+        plan = home.plan_home(self.cfg, [name])
+        missing = sorted({d for u in plan.units for d in u.drives} - set(self.drives))
+        if missing:
+            raise UsageError(f"{name}: homing it moves {', '.join(missing)}, not part of this session",
+                             hint="start the view with every joint of the pair")
+        return plan
+
+    def calibrate(self, name: str, *, abort: Callable[[], bool] = lambda: False,
+                  on_event: Callable[[str], None] | None = None) -> Any:
+        """Home the joint (its pair as one unit) with ops/home.run_home and take it back.
+
+        Every running command stops first (nothing ticks while homing runs). The unit's drives leave
+        this session's motion guard (stopped, motor off if it switched it on, dead-man put back):
+        `home` guards them itself, and two guards on one drive would fight over the dead-man. The
+        other drives stay guarded; homing's waits are their sign of life. ``abort()`` true ends the
+        homing at its next wait (its own guard stops the motors). Afterwards the drives are guarded
+        again (a drive in fault is refused and not commanded again) and the calibration re-read.
+        Returns the HomeReport; raises what homing raised."""
+        from sherpa_cli.ops import home
+
+        plan = self.home_plan(name)
+        drives = [d for d in self.drives if any(d in u.drives for u in plan.units)]
+        refs = [self.refs[d] for d in drives]
+        self.stop_all()
+        released = self.guard.release(refs)
+        if on_event is not None:
+            for r in released:
+                on_event(f"stop: {r.line()}")
+
+        # the other drives' dead-man goes on while homing runs: each of home's waits is a sign of life
+        # lasting one of its guard's longest steps without a wait (its entry, a motor-on confirmation)
+        s = self.settings
+        mo_confirm = max(self.session.client(r).settings.mo_confirm_timeout for r in refs)
+        allowance = 12 * s.request_bound * len(refs) + 3.0 + mo_confirm + 2 * s.request_bound
+
+        def sleep(seconds: float) -> None:
+            self.guard.keep_alive(allowance)
+            if abort():
+                raise HomingAborted(f"{name}: homing aborted: every motor of it stopped")
+            self.sleep(seconds)
+
+        try:
+            self.guard.keep_alive(allowance)
+            report = home.run_home(self.session, plan, settings=self.settings, clock=self.clock, sleep=sleep)
+        except BaseException as exc:
+            # where homing left the joint its counter means nothing (a search stopped at its bound reads
+            # outside the range): the limit watch must not "bring it back", nothing may command it
+            why = "homing aborted" if isinstance(exc, HomingAborted) else f"homing failed: {exc}"
+            for d in drives:
+                self.dead.setdefault(d, why)
+            self.messages.append(f"{', '.join(drives)}: {why}; not commanded again in this session "
+                                 "(leave with q, find the cause, home again)")
+            raise
+        finally:
+            try:
+                self.guard.adopt(refs)
+            except Exception as exc:
+                for d in drives:
+                    self.unguarded.add(d)
+                    if d not in self.dead:
+                        self.dead[d] = f"not guarded again after homing: {exc}"
+                self.messages.append(f"{', '.join(drives)}: not guarded again after homing ({exc}); "
+                                     "not commanded again in this session")
+            finally:
+                self._read_calibration([a for a in self.axes.values() if set(a.drives) & set(drives)])
+        return report
+
+    def _read_calibration(self, axes: Sequence[LiveAxis]) -> None:
+        for a in axes:
+            c = calibration.read_calibration(self.cfg, a.joint, lambda d: self._raw(d))
+            self.state[a.name].calibrated = c.calibrated
+            self.state[a.name].calibration = c.reason
+
     # -- the periodic part ---------------------------------------------------------------------------
 
     def tick(self) -> dict[str, AxisState]:
@@ -322,7 +408,9 @@ class LiveJog:
                     if d in self.dead:
                         st.faults.append(f"{d}: {self.dead[d]}")
         self._edge_hold(motors)
-        breaches = limit_watch.check(self.watched, motors)
+        # a joint of a drive not commanded again (tripped, homing failed) cannot be brought back:
+        # watching it would stop everything on every tick
+        breaches = limit_watch.check([w for w in self.watched if not set(w.drives) & set(self.dead)], motors)
         if breaches:
             self._recover(motors, breaches)
             motors = self._sample(self.drives)
@@ -448,7 +536,7 @@ class LiveJog:
 
     def _sample(self, drives: Sequence[str]) -> dict[str, int]:
         for d in drives:
-            if d in self.refs:
+            if d in self.refs and d not in self.unguarded:
                 self.motors[d] = int(self.guard.query(self.refs[d], "PX"))
             else:
                 self.motors[d] = int(self._raw(d).get("PX"))

@@ -280,6 +280,7 @@ class MotionGuard:
         self._sleep = sleep
         self._on_event = on_event
         self._drives: dict[tuple[str, int], _Drive] = {}
+        self._released: dict[tuple[str, int], DriveStop] = {}  # handed over (release) and not taken back
         self.report = GuardReport()
         # dead-man loop
         self._hb_stop = threading.Event()
@@ -385,6 +386,14 @@ class MotionGuard:
             raise DeadManError(f"host heartbeat stopped: {self._hb_given_up}")
         self._pulse()
 
+    def keep_alive(self, seconds: float) -> None:
+        """:meth:`check`, and a sign of life that lasts ``seconds`` more: for a caller that lets another
+        motion guard work on drives it released (:meth:`release`) for a step of known bound between
+        signs of life (that guard's entry, its motor-on confirmation). Bounded: if nothing comes
+        after it, the heartbeat still stops ``seconds`` later."""
+        self.check()
+        self._pulse(extra=seconds)
+
     def check_motors_on(self, refs: Iterable[Any], during: str) -> None:
         """:meth:`check`, then every given drive's motor still on: a trip or a `sherpa stop` from
         another terminal ends the command with the decoded reason (``during``: "the move", "the jog")."""
@@ -412,6 +421,56 @@ class MotionGuard:
 
     def unit_mode(self, ref: Any) -> int:
         return self._drive(ref).um
+
+    def release(self, refs: Iterable[Any]) -> list[DriveStop]:
+        """Hand drives over to another motion guard (the interactive view's calibrate key runs
+        `home`, which guards its drives itself: two guards on one drive would fight over the dead-man
+        and its restore). Each drive leaves as on exit -- stopped, its motor off if this guard switched
+        it on, UM and the dead-man objects put back -- and is no longer guarded; the others stay.
+        :meth:`adopt` takes them back. A drive whose stop did not go cleanly stays guarded and
+        SafetyError names it (nothing may take it over then)."""
+        self.check()
+        out: list[DriveStop] = []
+        bad: list[str] = []
+        for ref in refs:
+            d = self._drive(ref)
+            try:
+                r = self._exit_drive(d)
+            except Exception as exc:
+                r = DriveStop(d.ref.name, f"{d.ref.bus}:{d.ref.node}", stopped_by="not stopped")
+                r.problems.append(f"stop: {_why(exc)}")
+            out.append(r)
+            if r.problems:
+                bad += [f"{r.drive}: {p}" for p in r.problems]
+                continue
+            del self._drives[(ref.bus, ref.node)]
+            self._released[(ref.bus, ref.node)] = r
+        self._pulse()
+        if bad:
+            raise SafetyError("the stop before the hand-over did not go cleanly: " + "; ".join(bad),
+                              hint="check the drives with `sherpa monitor --once`; `sherpa stop` stops them all")
+        return out
+
+    def adopt(self, refs: Iterable[Any]) -> None:
+        """Take back drives :meth:`release` handed over: NMT start, the fault check of the entry (a
+        drive in fault is refused with the decoded reason and stays unguarded), the dead-man armed."""
+        self.check()
+        for ref in refs:
+            key = (ref.bus, ref.node)
+            if key not in self._released:
+                raise UsageError(f"{_drive_label(ref)} was not released by this motion guard")
+            try:
+                self._pulse(extra=self._setup_bound())
+                self._inspect(ref)
+                self._arm(self._drives[key])
+            except BaseException:
+                d = self._drives.pop(key, None)
+                if d is not None:  # put back what was armed; nothing was switched on. The report keeps
+                    # how the drive left this guard (release), with any problem of this put-back
+                    self._released[key].problems += self._exit_drive(d, stop=False).problems
+                raise
+            del self._released[key]
+        self._pulse()
 
     # -- entry ------------------------------------------------------------------------------------
 
@@ -535,6 +594,8 @@ class MotionGuard:
                     r = DriveStop(d.ref.name, f"{d.ref.bus}:{d.ref.node}", stopped_by="not stopped")
                     r.problems.append(f"stop: {_why(exc)}")
                     self.report.drives.append(r)
+            # drives handed over (release) and not taken back: how they left this guard
+            self.report.drives.extend(self._released.values())
         finally:
             self._stop_heartbeat()
 
