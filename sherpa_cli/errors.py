@@ -19,6 +19,7 @@ class ExitCode(IntEnum):
     USAGE = 2  # bad arguments or bad configuration
     BUS = 3  # bus or communication error (timeout, adapter missing)
     REFUSED = 4  # a drive refused a command (Elmo error reply)
+    BUSY = 5  # another sherpa command is moving the drive (its motion lock is held)
     INTERRUPTED = 130  # Ctrl-C
 
 

@@ -25,7 +25,7 @@ app = typer.Typer(
     name="sherpa",
     help="Commission and diagnose the SHERPA arm's Elmo SimplIQ Whistle drives over CAN.\n\n"
     "Exit codes: 0 ok, 1 problem found, 2 usage/config error, 3 bus error, "
-    "4 drive refused, 130 interrupted (docs/exit-codes.md).",
+    "4 drive refused, 5 drive busy (another command moves it), 130 interrupted (docs/exit-codes.md).",
     no_args_is_help=True,
     add_completion=True,  # --install-completion / --show-completion (typer's; issue 11 item 14)
     rich_markup_mode=None,  # plain click help: rich's help formatter doubles start-up time

@@ -23,6 +23,8 @@ consumer switches the motor off ``consumer_time_ms`` later.
 from __future__ import annotations
 
 import logging
+import os
+import re
 import signal
 import struct
 import threading
@@ -30,6 +32,9 @@ import time
 from dataclasses import dataclass, field
 from typing import Any, Callable, Iterable, Literal, Sequence
 
+import filelock
+
+from sherpa_cli import paths
 from sherpa_cli.elmo.faults import decode_sr, describe_mf, sr_problems
 from sherpa_cli.errors import (CommunicationError, DriveRefusedError, ExitCode, SafetyError, SherpaError,
                                UsageError)
@@ -95,6 +100,62 @@ class MotionStopped(SherpaError):
 
 class DeadManError(CommunicationError):
     """The host heartbeat could not be sent; the drives stop on their own (exit 3)."""
+
+
+class MotionLockedError(SherpaError):
+    """Another sherpa command holds the drive's motion lock: refused before anything was sent (exit 5)."""
+
+    exit_code = ExitCode.BUSY
+
+
+class DriveLock:
+    """One drive's motion lock: ``<state dir>/motion/<bus>-node<N>.lock``, an OS file lock (flock), so
+    the kernel releases it when its process ends, even by SIGKILL. The holder's pid is written beside
+    it (``.pid``) for the refusal's message. Two motion commands on one drive would disarm each other's
+    dead-man (both use the host id and put 0x1016:1 back when the first ends). `sherpa stop` takes no
+    lock: it is the emergency path."""
+
+    def __init__(self, ref: Any) -> None:
+        self.label = _drive_label(ref)
+        safe = re.sub(r"[^A-Za-z0-9_.-]", "_", str(ref.bus))
+        self.path = paths.state_dir() / "motion" / f"{safe}-node{int(ref.node)}.lock"
+        self.pid_path = self.path.with_suffix(".pid")
+        # thread_local=False: the interactive view takes it in the main thread and may hand it over
+        # (release) from its homing worker
+        self._lock = filelock.FileLock(str(self.path), timeout=0, thread_local=False)
+
+    def acquire(self) -> None:
+        try:
+            self.path.parent.mkdir(parents=True, exist_ok=True)
+            self._lock.acquire(timeout=0)
+        except filelock.Timeout:
+            pid = self.holder()
+            who = "" if pid is None else (" (this process)" if pid == os.getpid() else f" (pid {pid})")
+            raise MotionLockedError(
+                f"{self.label}: another sherpa command{who} is moving this drive: refused, nothing sent",
+                hint="wait until it ends, or stop it (`sherpa stop` needs no lock)") from None
+        except OSError as exc:
+            raise UsageError(f"{self.label}: cannot take the motion lock {self.path}: {exc}",
+                             hint=paths.STATE_DIR_HINT) from None
+        try:
+            self.pid_path.write_text(f"{os.getpid()}\n", encoding="utf-8")
+        except OSError:
+            pass  # the pid is only for a message
+
+    def release(self) -> None:
+        if not self._lock.is_locked:
+            return
+        try:
+            self.pid_path.unlink()
+        except OSError:
+            pass
+        self._lock.release(force=True)
+
+    def holder(self) -> int | None:
+        try:
+            return int(self.pid_path.read_text(encoding="utf-8").strip())
+        except (OSError, ValueError):
+            return None
 
 
 @dataclass
@@ -281,6 +342,7 @@ class MotionGuard:
         self._on_event = on_event
         self._drives: dict[tuple[str, int], _Drive] = {}
         self._released: dict[tuple[str, int], DriveStop] = {}  # handed over (release) and not taken back
+        self._locks: dict[tuple[str, int], DriveLock] = {}  # the motion locks this guard holds
         self.report = GuardReport()
         # dead-man loop
         self._hb_stop = threading.Event()
@@ -300,6 +362,8 @@ class MotionGuard:
     def __enter__(self) -> "MotionGuard":
         try:
             self._install_signals()
+            for ref in self.refs:  # first, before anything is sent: a second command refuses here
+                self._lock(ref)
             self._pulse(extra=self._setup_bound())
             for ref in self.refs:
                 self._inspect(ref)
@@ -316,6 +380,7 @@ class MotionGuard:
                 self._exit_all(reason="error", entering=True)
             finally:
                 try:
+                    self._unlock_all()
                     self._restore_signals()
                 finally:
                     self._unblock_signals(blocked)
@@ -337,6 +402,7 @@ class MotionGuard:
             self._exit_all(reason=reason)
         finally:
             try:
+                self._unlock_all()
                 self._restore_signals()
             finally:
                 self._unblock_signals(blocked)
@@ -445,6 +511,7 @@ class MotionGuard:
                 continue
             del self._drives[(ref.bus, ref.node)]
             self._released[(ref.bus, ref.node)] = r
+            self._unlock(ref)
         self._pulse()
         if bad:
             raise SafetyError("the stop before the hand-over did not go cleanly: " + "; ".join(bad),
@@ -460,14 +527,18 @@ class MotionGuard:
             if key not in self._released:
                 raise UsageError(f"{_drive_label(ref)} was not released by this motion guard")
             try:
+                self._lock(ref)
                 self._pulse(extra=self._setup_bound())
                 self._inspect(ref)
                 self._arm(self._drives[key])
             except BaseException:
                 d = self._drives.pop(key, None)
-                if d is not None:  # put back what was armed; nothing was switched on. The report keeps
-                    # how the drive left this guard (release), with any problem of this put-back
-                    self._released[key].problems += self._exit_drive(d, stop=False).problems
+                try:
+                    if d is not None:  # put back what was armed; nothing was switched on. The report
+                        # keeps how the drive left this guard (release), with any problem of this put-back
+                        self._released[key].problems += self._exit_drive(d, stop=False).problems
+                finally:
+                    self._unlock(ref)
                 raise
             del self._released[key]
         self._pulse()
@@ -479,6 +550,27 @@ class MotionGuard:
         if d is None:
             raise UsageError(f"{_drive_label(ref)} is not guarded by this motion guard")
         return d
+
+    def _lock(self, ref: Any) -> None:
+        key = (ref.bus, ref.node)
+        if key in self._locks:
+            return
+        lock = DriveLock(ref)
+        lock.acquire()
+        self._locks[key] = lock
+
+    def _unlock(self, ref: Any) -> None:
+        lock = self._locks.pop((ref.bus, ref.node), None)
+        if lock is not None:
+            lock.release()
+
+    def _unlock_all(self) -> None:
+        for lock in self._locks.values():
+            try:
+                lock.release()
+            except Exception as exc:  # never keeps the others held; the kernel frees it at exit anyway
+                log.warning("%s: motion lock not released: %s", lock.label, exc)
+        self._locks.clear()
 
     def _setup_bound(self) -> float:
         return 12 * self.settings.request_bound * max(1, len(self.refs)) + 3.0
