@@ -438,7 +438,7 @@ def _run_guarded(guard: Any, session: Any, cfg: ArmConfig, axis: Axis, p: JogPla
         if watched.outcome == "breach":
             result.outcome = "limit"
             result.breaches = list(watched.breaches)
-            stop_now(clients, p.mode)
+            stop_now(clients, p.mode, settings.stop_method)
             wait_standstill(clients, guard, settings, clock, sleep)
             back = limit_watch.recovery_targets(axis.watched, sample(), watched.breaches, hold=held)
             move_to(guard, by_name, clients, back, _slow(axis), settings, clock, sleep,
@@ -447,7 +447,7 @@ def _run_guarded(guard: Any, session: Any, cfg: ArmConfig, axis: Axis, p: JogPla
             result.recovered_to = {j.name: j.position(final) for j in axis.watched}
         else:
             if p.mode != "position":
-                stop_now(clients, p.mode)
+                stop_now(clients, p.mode, settings.stop_method)
                 wait_standstill(clients, guard, settings, clock, sleep)
             final = sample()
             if held and p.mode != "position":
@@ -457,12 +457,20 @@ def _run_guarded(guard: Any, session: Any, cfg: ArmConfig, axis: Axis, p: JogPla
     return final
 
 
-def stop_now(clients: Mapping[str, Any], mode: str) -> None:
-    """Stop every motor of the jog at once; nothing queued is sent after this."""
+def stop_now(clients: Mapping[str, Any], mode: str, method: str = "auto") -> None:
+    """Stop every motor of the jog at once (the stop frames of each, no wait in between); nothing
+    queued is sent after this. The guard's one stop path (ops/motion.send_stop): TC=0 first in torque
+    mode, then by ``method`` (motion.stop_method: auto, st, jv0). A problem (ST refused with ``st``)
+    is raised once every motor got its stop."""
+    from sherpa_cli.ops.motion import UM_TORQUE, send_stop
+
+    problems = []
     for c in clients.values():
-        if mode == "torque":
-            c.set("TC", 0, 0.0)
-        c.execute("ST")
+        _, found = send_stop(c, unit_mode=UM_TORQUE if mode == "torque" else None, method=method)
+        problems += [f"{c.label}: {p}" for p in found]
+    if problems:
+        raise SafetyError("the stop did not go cleanly: " + "; ".join(problems),
+                          hint="check the drives with `sherpa monitor --once`; `sherpa stop` stops them all")
 
 
 def _slow(axis: Axis) -> int:

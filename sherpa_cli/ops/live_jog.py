@@ -288,7 +288,7 @@ class LiveJog:
         drives = [d for d in a.drives if d not in self.dead]
         if run is not None and drives:
             self.guard.check()
-            joint_jog.stop_now({d: self._client(d) for d in drives}, run.mode)
+            joint_jog.stop_now({d: self._client(d) for d in drives}, run.mode, self.settings.stop_method)
         self.state[name].command = "-"
 
     def stop_all(self) -> None:
@@ -547,7 +547,7 @@ class LiveJog:
         modes = {run.mode for run in self.running.values()}
         self.running.clear()
         live = {d: self._client(d) for d in self.drives if d not in self.dead}
-        joint_jog.stop_now(live, "torque" if "torque" in modes else "position")
+        joint_jog.stop_now(live, "torque" if "torque" in modes else "position", self.settings.stop_method)
         joint_jog.wait_standstill(live, self.guard, self.settings, self.clock, self.sleep)
         back = limit_watch.recovery_targets(self.watched, self._sample(self.drives), breaches)
         speed = max(1, min((a.vel_limit or 400) for a in self.axes.values()) // 2)

@@ -255,11 +255,26 @@ def stop_drive(client: Any, *, unit_mode: int | None, method: str = "auto", stan
     ``pulse`` (the motion guard's sign of life) is called before every request, so a hung request
     lets the heartbeat stop within one request's allowance."""
     beat = pulse or (lambda: None)
-    problems: list[str] = []
     # patient: a drive that was just switched on or off is deaf while it settles (protocol.mo_settle)
     if not _ask_patiently(client, "MO", clock, sleep, client.settings.mo_confirm_timeout, poll_interval,
                           on_try=beat):
-        return "motor was off", None, problems
+        return "motor was off", None, []
+    how, problems = send_stop(client, unit_mode=unit_mode, method=method, pulse=beat)
+    standstill = wait_standstill(client, standstill_timeout=standstill_timeout, poll_interval=poll_interval,
+                                 clock=clock, sleep=sleep, pulse=beat, standstill_velocity=standstill_velocity)
+    if standstill is False:
+        problems.append(f"not at standstill {standstill_timeout:g} s after the stop")
+    return how, standstill, problems
+
+
+def send_stop(client: Any, *, unit_mode: int | None, method: str = "auto",
+              pulse: Callable[[], None] | None = None) -> tuple[str, list[str]]:
+    """The stop frames of one drive, the one stop path of the guard, `sherpa stop` and the jogs: in
+    torque mode TC=0 first; then by ``method`` (motion.stop_method): ``st`` ST (a refusal is a
+    problem), ``jv0`` JV=0 + BG, ``auto`` ST and JV=0 + BG where the drive refuses ST (speed mode on
+    some firmware). Does not wait; returns (how, problems)."""
+    beat = pulse or (lambda: None)
+    problems: list[str] = []
     how = []
     if unit_mode == UM_TORQUE:
         try:
@@ -286,17 +301,25 @@ def stop_drive(client: Any, *, unit_mode: int | None, method: str = "auto", stan
         beat()
         client.execute("BG")
         how.append("JV=0 + BG")
+    return " + ".join(how) or "-", problems
+
+
+def wait_standstill(client: Any, *, standstill_timeout: float = 2.0, poll_interval: float = 0.01,
+                    clock: Callable[[], float] = time.monotonic, sleep: Callable[[float], None] = time.sleep,
+                    pulse: Callable[[], None] | None = None, standstill_velocity: int = 0) -> bool | None:
+    """After :func:`send_stop`: True once |VX| <= ``standstill_velocity``, None if the motor went
+    off meanwhile (a trip: no motion left), False when ``standstill_timeout`` s passed first."""
+    beat = pulse or (lambda: None)
     deadline = clock() + standstill_timeout
     while True:
         beat()
         if not client.get("MO"):
-            return " + ".join(how) or "-", None, problems  # switched off meanwhile (a trip): no motion left
+            return None
         beat()
         if abs(client.get("VX")) <= standstill_velocity:
-            return " + ".join(how) or "-", True, problems
+            return True
         if clock() >= deadline:
-            problems.append(f"not at standstill {standstill_timeout:g} s after the stop")
-            return " + ".join(how) or "-", False, problems
+            return False
         sleep(poll_interval)
 
 
