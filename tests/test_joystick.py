@@ -77,6 +77,17 @@ def test_deflection_moves_the_mapped_joint_only_while_the_deadman_is_held(cfg):
         assert s.sim.errors == []
 
 
+def test_deflection_without_the_deadman_sends_no_motion_command(cfg):
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
+        script = [(0.0, "ABS_Z", 1.0), (0.0, "ABS_X", 1.0), (0.0, "ABS_Y", -1.0)]  # never held
+        start = {d: px(s, d) for d in ("yaw", "left", "right")}
+        run, live = drive(cfg, s, script, 0.8)
+        assert run.commands == 0
+        with s.sim.lock:  # the simulator's record: no motor switched on, no BG
+            assert all(not d.events for d in s.sim.drives.values()), {n: d.events for n, d in s.sim.drives.items()}
+        assert {d: px(s, d) for d in start} == start
+
+
 def test_release_stops_before_the_keepalive_would(cfg):
     with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
         script = [(0.0, "BTN_TRIGGER", 1.0), (0.0, "ABS_Z", -1.0), (1.5, "BTN_TRIGGER", 0.0)]
