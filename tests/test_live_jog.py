@@ -8,6 +8,7 @@ import time
 import pytest
 
 from sherpa_cli.config import load_config
+from sherpa_cli.errors import DriveRefusedError
 from sherpa_cli.ops.live_jog import LiveJog, resolve_axes
 from sherpa_cli.ops.session import ArmSession
 from sherpa_cli.sim.arm import SimArm
@@ -109,3 +110,56 @@ def test_torque_runs_until_the_keepalive_and_is_refused_above_the_continuous_lim
         assert motors_off(s)
         kinds = [d.stopped_by for d in live.report.drives]
         assert kinds and all(k != "not stopped" for k in kinds)
+
+
+def _refuse_bg(client):
+    real = client.execute
+
+    def refuse(letters, index=0):
+        if letters == "BG":
+            raise DriveRefusedError(f"{client.label}: BG refused (test)")
+        return real(letters, index)
+    client.execute = refuse
+    return real
+
+
+def _speed(session, drive):
+    with session.sim.lock:
+        return session.sim.drives[drive].motor.v
+
+
+@pytest.mark.parametrize("how", ["stop_all", "stop", "expiry"])
+def test_a_half_sent_velocity_command_is_still_stoppable(cfg, how):
+    """Review R3: the second drive's BG of a pair is refused after the first motor started: the
+    command is recorded before the first write, so stop, STOP ALL and the keepalive still stop it."""
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
+        calibrate(s, "left", "right")
+        with LiveJog(s, resolve_axes(cfg, ["pitch", "roll"]), keepalive=0.3) as live:
+            right = live._client("right")
+            real = _refuse_bg(right)
+            with pytest.raises(DriveRefusedError):
+                live.set_velocity("pitch", 2000)
+            right.execute = real
+            time.sleep(0.15)
+            assert abs(_speed(s, "left")) > 500  # the first motor did start
+            if how == "stop_all":
+                live.stop_all()  # Space in the view, a joystick dead-man release
+            elif how == "stop":
+                live.stop("pitch")  # `s` in the view
+            run_for(live, 0.5)  # expiry: the keepalive alone
+            assert abs(_speed(s, "left")) < 50 and "pitch" not in live.running
+        assert motors_off(s)
+
+
+def test_stop_all_stops_every_guarded_motor_not_only_the_recorded_commands(cfg):
+    """Review R3: STOP ALL sends a stop to every live drive of the session, so a motor running with
+    no command on record (however it came to) stops too."""
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
+        with LiveJog(s, resolve_axes(cfg, ["j1"]), keepalive=5.0) as live:
+            live.set_velocity("j1", 2000)
+            run_for(live, 0.3)
+            live.running.clear()  # the record lost (the failure R3 was about)
+            live.stop_all()
+            time.sleep(0.3)
+            assert abs(_speed(s, "yaw")) < 50
+        assert motors_off(s)

@@ -213,6 +213,8 @@ class LiveJog:
         distance = max(abs(t - now[d]) for d, t in motor_targets.items())
         duration = distance / speed if distance else 0.0
         self._stop_others_on(a.drives, name)
+        # on record before the first write: a command that fails half-way is still stopped (review R3)
+        self.running[name] = _Running("position", {"target": goal, **motor_targets}, None)
         for d, t in motor_targets.items():
             self._enable(d, UM_POSITION)
             c = self._client(d)
@@ -220,7 +222,6 @@ class LiveJog:
             c.set("PA", 0, t)
         for d in motor_targets:
             self._client(d).execute("BG")
-        self.running[name] = _Running("position", {"target": goal, **motor_targets}, None)
         st.command = f"PA -> {goal}"
         st.note = ""
         return f"{name}: to {goal} counts"
@@ -287,8 +288,17 @@ class LiveJog:
         self.state[name].command = "-"
 
     def stop_all(self) -> None:
-        for name in list(self.running):
-            self.stop(name)
+        """Stop every live drive of the session, not only the commands on record: a motor started by
+        a command that failed half-way is stopped too (review R3)."""
+        self.running.clear()
+        for name in self.state:
+            self.state[name].command = "-"
+        live = [d for d in self.drives if d not in self.dead]
+        if live:
+            self.guard.check()
+        for d in live:
+            joint_jog.stop_now({d: self._client(d)},
+                               "torque" if self.guard.unit_mode(self.refs[d]) == UM_TORQUE else "position")
 
     # -- the periodic part ---------------------------------------------------------------------------
 
@@ -397,6 +407,9 @@ class LiveJog:
             self.stop(name)
         self._stop_others_on(a.drives, name)
         um = UM_TORQUE if mode == "torque" else self.settings.velocity_unit_mode
+        # on record before the first write: a command that fails half-way still expires and is
+        # stopped by stop / stop_all (review R3)
+        self.running[name] = _Running(mode, dict(motors), self.clock() + self.keepalive)
         for d in motors:
             self._enable(d, um)
         for d, v in motors.items():
@@ -408,7 +421,7 @@ class LiveJog:
         if mode == "velocity":
             for d in motors:
                 self._client(d).execute("BG")
-        self.running[name] = _Running(mode, dict(motors), self.clock() + self.keepalive)
+        self.running[name].until = self.clock() + self.keepalive  # from the command, not from MO=1
         letters = "TC" if mode == "torque" else "JV"
         parts = [f"{letters}={v:g}" if isinstance(v, float) else f"{letters}={v}" for v in motors.values()]
         st.command = parts[0] if len(parts) == 1 else ", ".join(f"{d} {p}" for d, p in zip(motors, parts))
