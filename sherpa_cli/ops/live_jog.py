@@ -140,6 +140,8 @@ class LiveJog:
         self.running: dict[str, _Running] = {}  # per axis
         self.messages: list[str] = []  # limit breaches and recoveries, oldest first
         self.dead: dict[str, str] = {}  # drive -> why it must not be commanded again in this session
+        self.moved: set[str] = set()  # drives this session sent a motion command to (review R4)
+        self.outside: set[str] = set()  # joints found outside their full range, not by this session's motion
 
     # -- context ---------------------------------------------------------------------------------
 
@@ -215,6 +217,7 @@ class LiveJog:
         self._stop_others_on(a.drives, name)
         # on record before the first write: a command that fails half-way is still stopped (review R3)
         self.running[name] = _Running("position", {"target": goal, **motor_targets}, None)
+        self.moved.update(motor_targets)
         for d, t in motor_targets.items():
             self._enable(d, UM_POSITION)
             c = self._client(d)
@@ -332,7 +335,7 @@ class LiveJog:
                     if d in self.dead:
                         st.faults.append(f"{d}: {self.dead[d]}")
         self._edge_hold(motors)
-        breaches = limit_watch.check(self.watched, motors)
+        breaches = self._own_breaches(limit_watch.check(self.watched, motors))
         if breaches:
             self._recover(motors, breaches)
             motors = self._sample(self.drives)
@@ -410,6 +413,7 @@ class LiveJog:
         # on record before the first write: a command that fails half-way still expires and is
         # stopped by stop / stop_all (review R3)
         self.running[name] = _Running(mode, dict(motors), self.clock() + self.keepalive)
+        self.moved.update(motors)
         for d in motors:
             self._enable(d, um)
         for d, v in motors.items():
@@ -466,6 +470,27 @@ class LiveJog:
             else:
                 self.motors[d] = int(self._raw(d).get("PX"))
         return dict(self.motors)
+
+    def _own_breaches(self, breaches: Sequence[limit_watch.Breach]) -> list[limit_watch.Breach]:
+        """The breaches this session's motion made: only those are brought back (review R4). A joint
+        found outside its full range with no command of this session on its motors (uncalibrated at
+        power-up, pushed by hand) is reported once and left where it is; commands further out are
+        not sent (the edge hold), commands back inward are, and once inside it is watched as usual."""
+        self.outside &= {b.joint for b in breaches}
+        own = []
+        for b in breaches:
+            drives = next(j.drives for j in self.watched if j.name == b.joint)
+            if b.joint not in self.outside and self.moved & set(drives):
+                own.append(b)
+            elif b.joint not in self.outside:
+                self.outside.add(b.joint)
+                text = (f"limit: {b.joint} is outside its full range [{b.full[0]}, {b.full[1]}] at {b.position} "
+                        "counts, not moved there by this session: not brought back; a command further out is "
+                        "not sent")
+                self.messages.append(text)
+                if b.joint in self.state:
+                    self.state[b.joint].note = text
+        return own
 
     def _recover(self, motors: Mapping[str, int], breaches: Sequence[limit_watch.Breach]) -> None:
         """Like `jog`: stop every motor at once, then bring the breached joints back to their normal edge."""
