@@ -104,7 +104,9 @@ def joystick(st: Any, device: str | None, *, apply: bool) -> None:
                     f"{jcfg.deadman} is held: {maps}")
         st.out.line("nothing sent; add --apply to move")
         return
-    source = joy.EvdevSource(path)  # a clear message if evdev or the device is missing
+    where = f"{cfg.source}: joystick.deadman" if cfg.source else "joystick.deadman"
+    # a clear message if evdev or the device is missing, or the dead-man is not one of its buttons
+    source = joy.EvdevSource(path, jcfg.deadman, where=where)
     keepalive = max(0.25, 5.0 / jcfg.rate_hz)
     with st.session(buses=_buses(cfg, axes)) as session:
         live = LiveJog(session, axes, keepalive=keepalive, tick_period=1.0 / jcfg.rate_hz)
