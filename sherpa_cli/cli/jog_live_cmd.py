@@ -73,6 +73,8 @@ def interactive(st: Any, names: Sequence[str], *, apply: bool, uncalibrated: boo
             with live:
                 app = JogView(live, calibrate=_calibrate_hook(st, session))
                 app.run()
+                if app.error is None:  # a SIGTERM/SIGHUP that textual caught itself: still exit 130
+                    live.guard.check()
                 if app.error is not None:
                     raise app.error
         except BaseException as exc:
