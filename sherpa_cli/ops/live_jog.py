@@ -291,12 +291,13 @@ class LiveJog:
         self.state[name].command = "-"
 
     def stop_all(self) -> None:
-        """Stop every live drive of the session, not only the commands on record: a motor started by
-        a command that failed half-way is stopped too (review R3)."""
+        """Stop every live drive this session has commanded, not only the commands on record: a motor
+        started by a command that failed half-way is stopped too (review R3). A drive never commanded
+        gets nothing (whether a drive takes ST with its motor off is not confirmed)."""
         self.running.clear()
         for name in self.state:
             self.state[name].command = "-"
-        live = [d for d in self.drives if d not in self.dead]
+        live = [d for d in self.drives if d not in self.dead and d in self.moved]
         if live:
             self.guard.check()
         for d in live:
