@@ -76,6 +76,9 @@ def test_live_jog_stop_uses_the_configured_stop_method(method, refuse, um, expec
             live.stop("j1")
             assert commands(s, "yaw", mark) == expected
             assert "j1" not in live.running
+            mark = received(s, "yaw")
+            live.stop_all()  # Space: every drive the session commanded, by the same method
+            assert commands(s, "yaw", mark) == expected
         assert motors_off(s) and s.sim.errors == []
 
 
