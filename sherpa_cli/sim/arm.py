@@ -22,6 +22,7 @@ from sherpa_cli.config.model import ArmConfig, JointConfig, PairConfig, SwitchCo
 from sherpa_cli.sim import state as sim_state
 from sherpa_cli.sim.clock import Clock, RealClock
 from sherpa_cli.sim.drive import SimDrive
+from sherpa_cli.sim.encoder import SimEncoder
 from sherpa_cli.sim.settings import SimSettings
 
 NMT_ID = 0x000
@@ -257,14 +258,15 @@ class SimArm:
                 settings=SimSettings(vendor_id=e.vendor_id, device_name=e.device_name)))
             for i, e in enumerate(cfg.sim_extra_nodes)}
         # `devices:` of other types (sherpa_cli/devices): a CANopen encoder answers NMT and SDO (identity,
-        # 0x1000 = CiA 406, 0x6004 = its joint's real position minus the joint's abs_encoder offset)
+        # 0x1000 = CiA 406, 0x6004 = its joint's real position minus the joint's abs_encoder offset) and
+        # sends 0x6004 in its TPDO1 (sim/encoder.py: cyclic by 0x6200, or on SYNC)
         for dev in cfg.devices.values():
             if dev.type == "canopen-encoder":
-                self.extras[dev.name] = (dev.bus, SimDrive(
-                    dev.node, clock=self.clock, serial=0x7E100000 + dev.node,
+                reading = self._encoder_reading(dev.name)
+                self.extras[dev.name] = (dev.bus, SimEncoder(
+                    dev.node, position=reading, clock=self.clock, serial=0x7E100000 + dev.node,
                     settings=SimSettings(vendor_id=ENCODER_VENDOR, device_name="CANopen encoder", inputs=1),
-                    od_live={(0x1000, 0): lambda: ENCODER_DEVICE_TYPE,
-                             (0x6004, 0): self._encoder_reading(dev.name)}))
+                    od_live={(0x1000, 0): lambda: ENCODER_DEVICE_TYPE, (0x6004, 0): reading}))
         self.lock = threading.RLock()  # held by the pumps while they touch drives; tests take it too
         self._stop = threading.Event()
         self._threads: list[threading.Thread] = []
