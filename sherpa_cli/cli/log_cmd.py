@@ -283,6 +283,7 @@ def record(
       sherpa log record shoulder_diff --rate 500 --for 10 --current -o pair.csv
       sherpa log record --poll --for 5 -o slow.csv
     """
+    from sherpa_cli.ops import encoder
     from sherpa_cli.ops.record import MAX_LOAD, Poller, Recorder, bus_budget, check_budget
     from sherpa_cli.ops.recording import write_csv
     from sherpa_cli.ops.targets import drive_refs
@@ -297,11 +298,13 @@ def record(
     if not output.parent.exists():
         raise UsageError(f"-o {output}: directory {output.parent} does not exist")
     cfg = st.load_config()
-    refs = drive_refs(cfg, targets, configured_only=True)
+    # an encoder device stands for the joint it measures (recorded beside it: ops/encoder.py)
+    refs = drive_refs(cfg, encoder.targets_with_encoders(cfg, targets), configured_only=True)
     if not poll:
+        encoders = [t.dev for t in encoder.recorded_encoders(cfg, (r.name for r in refs))]
         if current is None:
-            current = all(b.fits for b in bus_budget(cfg, refs, rate, current=True))
-        budget = bus_budget(cfg, refs, rate, current=current)
+            current = all(b.fits for b in bus_budget(cfg, refs, rate, current=True, encoders=encoders))
+        budget = bus_budget(cfg, refs, rate, current=current, encoders=encoders)
         for b in budget:
             st.out.info(f"bus {b.bus}: {b.drives} drive(s) at {rate:g} Hz"
                         f"{' with current' if b.current else ''}: {100 * b.load:.1f} % of "

@@ -18,14 +18,15 @@ says why (``via``). ``position_from: sdo`` reads by SDO only.
 
 from __future__ import annotations
 
+import math
 import threading
 import time
 from dataclasses import dataclass, field
-from typing import Any, Callable
+from typing import Any, Callable, Iterable, Sequence
 
 from sherpa_cli.config.model import DeviceConfig
 from sherpa_cli.devices import CanOpenEncoder
-from sherpa_cli.errors import SherpaError
+from sherpa_cli.errors import SherpaError, UsageError
 from sherpa_cli.ops.targets import DriveRef
 
 NMT_ID, NMT_START = 0x000, 0x01
@@ -148,3 +149,98 @@ def _restore(sdo: Any, changed: list[tuple[int, int, int, int]]) -> None:
             first = first or exc
     if first is not None:
         raise first
+
+
+# -- recording (ops/record.py Recorder) ---------------------------------------------------------------
+
+def recorded_encoders(cfg: Any, drives: Iterable[str]) -> list["EncoderTrack"]:
+    """The CANopen encoders of the joints whose drives are all recorded (``abs_encoder.source`` names
+    a device), one track per device, in config order."""
+    recorded = set(drives)
+    tracks: dict[str, EncoderTrack] = {}
+    for joint in cfg.joints.values():
+        enc = joint.abs_encoder
+        dev = cfg.device_by_source(enc.source) if enc is not None else None
+        if dev is None or dev.type != "canopen-encoder":
+            continue
+        if joint.drive is not None:
+            mine = {joint.drive}
+        else:
+            pair = cfg.pairs[joint.pair]
+            mine = {pair.drive_a, pair.drive_b}
+        if mine <= recorded:
+            tracks.setdefault(dev.name, EncoderTrack(dev)).joints.append(joint)
+    return list(tracks.values())
+
+
+def targets_with_encoders(cfg: Any, names: Sequence[str] | None) -> list[str] | None:
+    """`log record` targets where an encoder device (name or BUS:NODE) stands for the joint it
+    measures: that joint's drives are recorded and the encoder with them."""
+    if not names:
+        return names  # type: ignore[return-value]
+    out: list[str] = []
+    for text in names:
+        dev = cfg.device_by_source(text)
+        if dev is None:
+            out.append(text)
+            continue
+        joints = [j.name for j in cfg.joints.values()
+                  if j.abs_encoder is not None and cfg.device_by_source(j.abs_encoder.source) is dev]
+        if not joints:
+            raise UsageError(f"{text}: device {dev.name} measures no joint (no abs_encoder names it), nothing "
+                             "to record it beside", hint="name it in a joint's abs_encoder.source")
+        out.extend(joints)
+    return out
+
+
+@dataclass
+class EncoderTrack:
+    """A CANopen encoder in a recording: its TPDO1 (0x6004) on every SYNC -- transmission type 1 and
+    a valid COB-ID, RAM only, put back by :meth:`restore` -- and its columns: ``<device>.pos``
+    (raw counts) and ``<joint>.ext_pos_rad`` (reading + the joint's abs_encoder offset, in rad)."""
+
+    dev: DeviceConfig
+    joints: list[Any] = field(default_factory=list)
+    cob: int | None = None
+    saved: list[tuple[int, int, int, int]] = field(default_factory=list)
+    samples: dict[int, int] = field(default_factory=dict)
+    last: int = -1
+
+    def configure(self, session: Any) -> None:
+        sdo = session.sdo(device_ref(self.dev))
+        session.links[self.dev.bus].network.send_message(NMT_ID, bytes([NMT_START, self.dev.node]))
+
+        def read(index: int, sub: int, size: int) -> int:
+            return int.from_bytes(bytes(sdo.upload(index, sub))[:size].ljust(size, b"\0"), "little")
+
+        if read(TPDO1_MAP, 0, 1) < 1 or read(TPDO1_MAP, 1, 4) != POSITION_ENTRY:
+            raise UsageError(f"{self.dev.name}: its TPDO1 does not carry the position value 0x6004 first; "
+                             "cannot record it", hint="check the encoder's 0x1A00 mapping")
+        old_cob, old_type = read(TPDO1_COMM, 1, 4), read(TPDO1_COMM, 2, 1)
+        for sub, size, old, new in ((2, 1, old_type, 1), (1, 4, old_cob, old_cob & ~COB_INVALID & 0xFFFFFFFF)):
+            if new != old:
+                self.saved.append((TPDO1_COMM, sub, size, old))
+                sdo.download(TPDO1_COMM, sub, new.to_bytes(size, "little"))
+        self.cob = old_cob & 0x7FF
+
+    def restore(self, session: Any) -> None:
+        saved, self.saved = self.saved, []
+        _restore(session.sdo(device_ref(self.dev)), saved)
+
+    def add(self, k: int, data: bytes) -> None:
+        """One TPDO1 frame answering SYNC number ``k`` (the caller holds the recorder's lock)."""
+        if len(data) >= 4:
+            k = max(k, self.last + 1)
+            self.last = k
+            self.samples[k] = CanOpenEncoder.position_from_tpdo(bytes(data))
+
+    def columns(self, keys: Sequence[int]) -> dict[str, list[float]]:
+        from sherpa_cli.joints.units import counts_to_rad
+
+        raw = [float(self.samples[k]) if k in self.samples else math.nan for k in keys]
+        out = {f"{self.dev.name}.pos": raw}
+        for joint in self.joints:
+            off = joint.abs_encoder.offset
+            out[f"{joint.name}.ext_pos_rad"] = [counts_to_rad(v + off, joint.cpr) if v == v else math.nan
+                                                for v in raw]
+        return out
