@@ -240,6 +240,22 @@ def test_jog_refuses_an_uncalibrated_position_move_and_accepts_it_after_home():
         assert result.end_counts == 100 and abs(physical(s, "yaw_drive") - 100) <= 1
 
 
+def test_a_pair_jog_is_refused_uncalibrated_and_accepted_after_homing_the_pair():
+    from sherpa_cli.ops import joint_jog
+
+    cfg = load_config(ARM)
+    axis = joint_jog.resolve_axis(cfg, "pitch")
+    req = joint_jog.JogRequest(mode="position", to="-400counts")
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
+        with pytest.raises(SafetyError, match="not homed since power-up"):
+            joint_jog.run(s, axis, req)
+        home.run_home(s, home.plan_home(cfg, ["diff"]))
+        r = joint_jog.run(s, axis, req)
+        assert r.ok and abs(r.end + 400) <= 1
+        a, b = physical(s, "pair_a"), physical(s, "pair_b")
+        assert abs((a + b) + 400) <= 2  # Σ where it was sent, in the real joint (not only in PX)
+
+
 # -- the wiring check -------------------------------------------------------------------------------
 
 def wiring(cfg, name):
