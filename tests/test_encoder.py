@@ -159,3 +159,13 @@ def test_encoder_settings_are_checked(tmp_path):
         with pytest.raises(ConfigError, match=message) as info:
             load_config(path)
         assert "arm.yaml:" in str(info.value)
+
+
+def test_encoder_settings_round_trip_through_the_dump():
+    from sherpa_cli.config import dump_native, load_config_text
+
+    cfg = with_device(load_config(ARM), tpdo_trigger="sync", cyclic_ms=25)
+    text = dump_native(cfg)
+    assert "tpdo_trigger: sync" in text and "cyclic_ms: 25" in text and "position_from" not in text
+    again = load_config_text(text, "again.yaml")
+    assert again.devices["elbow_encoder"] == cfg.devices["elbow_encoder"]

@@ -137,3 +137,23 @@ def test_cli_records_the_encoder_by_its_device_name(cli, tmp_path):
     assert values and all(v == -544 for v in values)
     assert all(math.isclose(float(r["elbow.ext_pos_rad"]), counts_to_rad(-444, 3600), abs_tol=1e-6)  # CSV digits
                for r in rows if r["elbow.ext_pos_rad"] not in ("", "nan"))
+
+
+def test_an_encoder_on_another_bus_gets_its_own_sync(tmp_path):
+    text = ARM.read_text(encoding="utf-8")
+    text = text.replace("  can0: {interface: socketcan, channel: can0}\n",
+                        "  can0: {interface: socketcan, channel: can0}\n  can1: {interface: socketcan, channel: can1}\n")
+    text = text.replace("{type: canopen-encoder, bus: can0, node: 45}", "{type: canopen-encoder, bus: can1, node: 45}")
+    text = text.replace('source: "can0:45"', 'source: "can1:45"')
+    path = tmp_path / "arm.yaml"
+    path.write_text(text, encoding="utf-8")
+    cfg = load_config(path)
+    clock = ManualClock()
+    lock = Lockstep(clock)
+    with ArmSession.open(cfg, sim=_arm(cfg, clock)) as session:
+        with Recorder(session, drive_refs(cfg, ["elbow"]), 100, clock=clock.now, sync_factory=lock.factory) as rec:
+            assert sorted(lock.buses) == ["can0", "can1"]
+            assert [b.bus for b in rec.budget] == ["can0", "can1"]
+            lock.run(rec, 5)
+    assert rec.counts() == {"elbow_drive": 5, "elbow_encoder": 5}
+    assert rec.recording().columns["elbow_encoder.pos"] == [-544.0] * 5

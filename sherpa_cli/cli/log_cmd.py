@@ -311,7 +311,8 @@ def record(
                         f"{b.bitrate / 1e6:g} Mbit/s{' (assumed)' if b.bitrate_assumed else ''} "
                         f"(limit {100 * MAX_LOAD:.0f} %, highest rate {b.max_rate} Hz)")
         check_budget(budget)
-    buses = list(dict.fromkeys(r.bus for r in refs))
+    buses = list(dict.fromkeys([*(r.bus for r in refs),  # and the buses of the joints' encoders
+                                *(t.dev.bus for t in encoder.recorded_encoders(cfg, (r.name for r in refs)))]))
     expected: int | None = None
     with st.session(buses=buses) as session:
         if poll:

@@ -155,7 +155,7 @@ class Recorder:
                 track.configure(self.session)
             self._listen()
             self.t0 = self._now()
-            for bus in dict.fromkeys(r.bus for r in self.refs):
+            for bus in dict.fromkeys([*(r.bus for r in self.refs), *(t.dev.bus for t in self.encoders)]):
                 self._syncs.append(self.sync_factory(bus, self.session.links[bus].bus, self.period))
         except BaseException:
             self._finish()
