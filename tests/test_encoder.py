@@ -91,7 +91,8 @@ def test_sdo_only_and_the_fallbacks():
         assert reading.via == "SDO" and reading.position == -544 and writes(s) == []
     dev = cfg.devices["elbow_encoder"]
     with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
-        s.sdo(encoder.device_ref(dev)).download(0x1A00, 0, b"\x00")  # TPDO1 maps nothing
+        s.sdo(encoder.device_ref(dev)).download(0x1800, 1, (0x80000000 | 0x1AD).to_bytes(4, "little"))  # PDO off,
+        s.sdo(encoder.device_ref(dev)).download(0x1A00, 0, b"\x00")  # then TPDO1 maps nothing (CiA 301 order)
         reading = encoder.read_position(s, dev)
         assert reading.via == "SDO (TPDO1 does not carry 0x6004 first)" and reading.position == -544
 
@@ -169,3 +170,17 @@ def test_encoder_settings_round_trip_through_the_dump():
     assert "tpdo_trigger: sync" in text and "cyclic_ms: 25" in text and "position_from" not in text
     again = load_config_text(text, "again.yaml")
     assert again.devices["elbow_encoder"] == cfg.devices["elbow_encoder"]
+
+
+def test_the_simulated_encoder_refuses_a_mapping_change_while_tpdo1_is_valid():
+    from sherpa_cli.sim.clock import ManualClock
+    from sherpa_cli.sim.encoder import SimEncoder
+    from sherpa_cli.sim.od import ODError
+
+    enc = SimEncoder(45, position=lambda: 0, clock=ManualClock())
+    with pytest.raises(ODError) as info:
+        enc.od_write(0x1A00, 0, 0)
+    assert info.value.abort_code == 0x08000022
+    enc.od_write(0x1800, 1, 0x80000000 | 0x1AD)
+    enc.od_write(0x1A00, 0, 0)
+    assert enc.od_read(0x1A00, 0) == 0

@@ -108,7 +108,8 @@ def test_an_encoder_that_cannot_be_recorded_refuses_and_the_drives_are_put_back(
     clock = ManualClock()
     with ArmSession.open(cfg, sim=_arm(cfg, clock)) as session:
         refs = drive_refs(cfg, ["elbow"])
-        session.sdo(encoder.device_ref(dev)).download(0x1A00, 0, b"\x00")  # TPDO1 maps nothing
+        session.sdo(encoder.device_ref(dev)).download(0x1800, 1, (0x80000000 | 0x1AD).to_bytes(4, "little"))  # PDO off,
+        session.sdo(encoder.device_ref(dev)).download(0x1A00, 0, b"\x00")  # then TPDO1 maps nothing (CiA 301 order)
         drive_sdo = session.sdo(refs[0])
         before = [bytes(drive_sdo.upload(0x1800, 2)), bytes(drive_sdo.upload(0x1A00, 0))]
         with pytest.raises(UsageError, match="elbow_encoder: its TPDO1 does not carry the position value 0x6004"):

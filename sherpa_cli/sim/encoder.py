@@ -77,6 +77,9 @@ class SimEncoder(SimDrive):
                 raise ODError(f"0x1800:2: {value} outside 0..255", ABORT_RANGE)
             self.enc_ttype, self._enc_syncs = value, 0
             self._schedule_cyclic(restart=True)
+        elif index == 0x1A00 and not self.enc_cob & 0x80000000:
+            # CiA 301: a mapping changes only while its PDO is invalid (COB-ID bit 31 set)
+            raise ODError("0x1A00: TPDO1 is valid; set bit 31 of 0x1800:1 first", 0x08000022)
         elif (index, sub) == (0x1A00, 0):
             if value not in (0, 1):
                 raise ODError(f"0x1A00:0: {value}: TPDO1 maps one object", ABORT_RANGE)
