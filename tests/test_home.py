@@ -225,6 +225,19 @@ def test_homing_is_refused_while_the_drive_is_in_fault(tmp_path):
             assert not [f for _, i, f in d.received if 0x300 < i < 0x380 and bytes(f)[:2] in (b"BG", b"PR")]
 
 
+def test_an_encoder_joint_is_refused_in_fault_before_the_encoder_is_read_or_px_set(tmp_path):
+    cfg = variant(tmp_path, ("buses:", "  drives: {elbow_drive: {limit_trip_at: 0.0}}\nbuses:"))
+    plan, ctx = homed(cfg, ["elbow"])
+    with ctx as s:
+        with pytest.raises(SafetyError, match="elbow_drive.*refusing to home: the drive is in fault"):
+            home.run_home(s, plan)
+        with s.sim.lock:
+            frames = [bytes(f) for _, i, f in s.sim.drives["elbow_drive"].received if 0x300 < i < 0x380]
+            encoder_frames = [i for _, i, _ in s.sim.extras["elbow_encoder"][1].received]
+        assert not [f for f in frames if len(f) == 8 and not f[3] & 0x40 and f[:2] == b"HM"]  # no HM[] write
+        assert not [i for i in encoder_frames if 0x600 < i < 0x680]  # the encoder was not even asked
+
+
 def test_jog_refuses_an_uncalibrated_position_move_and_accepts_it_after_home():
     from sherpa_cli.ops.jog import JogRequest, resolve_jog_target, run_jog
     from sherpa_cli.ops.motion import MotionSettings
