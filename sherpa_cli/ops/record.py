@@ -277,6 +277,7 @@ class Recorder:
                 network.subscribe(cob, callback)
                 self._subscribed.append((network, cob, callback))
         for track in self.encoders:
+            assert track.cob is not None  # configured in __enter__
             network, callback = self.session.links[track.dev.bus].network, self._encoder_callback(track)
             network.subscribe(track.cob, callback)
             self._subscribed.append((network, track.cob, callback))
