@@ -48,14 +48,11 @@ class ClientSettings:
     query_long: bool = False  # True: DLC 8 queries with the query bit instead of DLC 4
     mo_confirm_timeout: float = 3.0  # s to wait for MO to read back after MO=0/1
     mo_poll_interval: float = 0.01  # s between MO polls
-    # s the drive ignores the interpreter after MO=0/1 (protocol.mo_settle): the first MO poll waits it
-    # out instead of being lost and costing a reply timeout (0: poll at once)
-    mo_settle: float = 0.0
     sv_blackout: float = 0.5  # s of silence after SV before the drive is asked anything
     timeout_hint: str = _TIMEOUT_HINT  # what a timeout tells the user to check (the simulator has its own)
 
     def __post_init__(self) -> None:
-        for name in ("mo_confirm_timeout", "mo_poll_interval", "sv_blackout", "mo_settle"):
+        for name in ("mo_confirm_timeout", "mo_poll_interval", "sv_blackout"):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, (int, float)) or not value >= 0:
                 raise ValueError(f"ClientSettings.{name} must be a number >= 0, got {value!r}")
@@ -258,8 +255,6 @@ class DriveClient:
                 self.transport.send(RPDO2_BASE + self.node, frame)
             query = self._query_frame("MO", 0)
             deadline = self._clock() + timeout
-            if self.settings.mo_settle > 0:
-                self._sleep(min(self.settings.mo_settle, timeout))
             last: int | float | None = None
             while True:
                 # One attempt per poll: the poll loop is the retry, bounded by the deadline.

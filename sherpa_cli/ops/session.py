@@ -91,7 +91,6 @@ class ArmSession:
             p = self.cfg.protocol
             settings = ClientSettings(expect_set_echo=p.set_echo, query_long=p.query_long,
                                       mo_confirm_timeout=p.mo_confirm_timeout, sv_blackout=p.sv_blackout,
-                                      mo_settle=p.mo_settle,
                                       **({"timeout_hint": SIM_TIMEOUT_HINT} if self.sim is not None else {}))  # type: ignore[arg-type]
             client = DriveClient(NetworkTransport(self.links[ref.bus].network), ref.node, name=ref.name,
                                  timeout=p.reply_timeout, retries=p.retries, settings=settings)
