@@ -265,7 +265,7 @@ class CommonStart:
     the restore, so no motor keeps moving through the restore's SDO timeouts (review R8)."""
 
     def __init__(self, session: Any, refs: Sequence[Any], clients: Mapping[str, Any], method: str,
-                 group_id: int, stop: Callable[[], None] | None = None) -> None:
+                 group_id: int, stop: Callable[[], Sequence[str] | None] | None = None) -> None:
         self.session, self.refs, self.clients, self.method, self.group_id = session, list(refs), clients, method, group_id
         self._old: dict[str, int] = {}
         self._profiles: dict[str, dict[str, int]] = {}
