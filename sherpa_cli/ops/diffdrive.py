@@ -18,6 +18,7 @@ by polling PX through the interpreter in the guard's loop (:class:`PolledTrace`)
 
 from __future__ import annotations
 
+import functools
 import math
 import time
 from dataclasses import dataclass, field
@@ -325,11 +326,9 @@ class CommonStart:
                 self._profiles.pop(r.name, None)
                 self._old.pop(r.name, None)
             for key, value in self._profiles.pop(r.name, {}).items():
-                writes.append(lambda c=self.clients[r.name], key=key, value=value: c.set(key, 0, value))
+                writes.append(functools.partial(self.clients[r.name].set, key, 0, value))
             if r.name in self._old:
-                old = self._old.pop(r.name)
-                writes.append(lambda r=r, old=old: self.session.sdo(r).download(GROUP_INDEX, 0, bytes([old]),
-                                                                                name="group id"))
+                writes.append(functools.partial(self._put_group_id, r, self._old.pop(r.name)))
             for write in writes:
                 try:
                     write()
@@ -341,6 +340,9 @@ class CommonStart:
                     interrupted = interrupted or exc
         if interrupted is not None:
             raise interrupted
+
+    def _put_group_id(self, ref: Any, value: int) -> None:
+        self.session.sdo(ref).download(GROUP_INDEX, 0, bytes([value]), name="group id")
 
     def __exit__(self, *exc: Any) -> None:
         deaf: Sequence[str] = ()

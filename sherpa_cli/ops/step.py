@@ -91,6 +91,7 @@ def run_step(session: Any, target: JogTarget, mode: str, value: float, *, durati
     # jog's checks before anything is armed: a position goal inside the normal range, a calibrated joint
     _precheck(session, target, req)
     ref, joint = target.ref, target.joint
+    assert joint is not None  # step_request refused a target without a plain joint
     current = all(b.fits for b in bus_budget(session.cfg, [ref], rate, current=True))
     signal = SIGNAL[mode]
     guard = MotionGuard(session, [ref], settings=settings, sleep=sleep, on_event=on_event)
@@ -197,7 +198,7 @@ class _StopFirst:
     def __enter__(self) -> "_StopFirst":
         return self
 
-    def __exit__(self, exc_type: Any, exc: Any, tb: Any) -> bool:
+    def __exit__(self, exc_type: Any, exc: Any, tb: Any) -> None:
         self.state.setdefault("t_stop", self.rec.now())
         s = self.settings
         try:
@@ -209,7 +210,6 @@ class _StopFirst:
             if exc_type is None:
                 raise
             # on the way out of an error: never hide it; the guard's stop follows and reports
-        return False
 
 
 def _cut(recording: Recording, until: float) -> Recording:
