@@ -295,7 +295,7 @@ def test_an_aliased_deadman_name_is_reported_under_the_configs_name(fake_evdev):
                                         ("ABS_X", "'ABS_X' is not an evdev button name"),
                                         ("BTN_THUMB", "has no button BTN_THUMB (its buttons: BTN_JOYSTICK/BTN_TRIGGER)")])
 def test_a_deadman_the_device_cannot_report_is_refused_at_start(fake_evdev, name, says):
-    with pytest.raises(UsageError, match=re.escape(f"arm.yaml: joystick.deadman: ") + ".*" + re.escape(says)):
+    with pytest.raises(UsageError, match=re.escape("arm.yaml: joystick.deadman: ") + ".*" + re.escape(says)):
         joystick.EvdevSource("/dev/input/event7", name, where="arm.yaml: joystick.deadman")
 
 

@@ -112,8 +112,8 @@ def test_live_jog_expiry_stops_with_the_configured_method():
 
 # -- `sherpa jog` of a pair joint (ops/joint_jog.py: stop_now at the end of a velocity jog) ----------
 
-@pytest.mark.parametrize("method, stops", [("st", ["ST", "ST"]), ("jv0", ["JV=0", "JV=0"])])
-def test_pair_velocity_jog_ends_with_the_configured_stop_method(method, stops):
+@pytest.mark.parametrize("method, stop", [("st", "ST"), ("jv0", "JV=0")])
+def test_pair_velocity_jog_ends_with_the_configured_stop_method(method, stop):
     cfg = with_motion(load_config(JOG_CONFIG), stop_method=method)
     with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
         r = joint_jog.run(s, resolve_axis(cfg, "pitch"), JogRequest(mode="velocity", velocity="2000counts",
@@ -122,7 +122,8 @@ def test_pair_velocity_jog_ends_with_the_configured_stop_method(method, stops):
         for drive in ("left", "right"):
             got = commands(s, drive)
             after = got[got.index("JV=1000") + 1:]
-            # the jog's own stop (stop_now), then the guard's exit stop: both by the method (the BGs
+            # the jog's own stop (stop_now), then the guard's exit stops: all by the method (the BGs
             # between are the start, the held joint's correction and JV=0's own BG)
-            assert [c for c in after if c != "BG"] == stops, (drive, got)
+            stops = [c for c in after if c != "BG"]
+            assert len(stops) >= 2 and set(stops) == {stop}, (drive, got)
         assert motors_off(s) and s.sim.errors == []

@@ -393,6 +393,7 @@ class MotionGuard:
             self._start_heartbeat()
             for d in self._drives.values():
                 self._arm(d)
+            self._beat_now()
             self._pulse()
         except BaseException:
             self._exiting = True
@@ -660,6 +661,12 @@ class MotionGuard:
             self._alive_until = max(self._alive_until, time.monotonic() + allowance) if extra else \
                 time.monotonic() + allowance
 
+    def _beat_now(self) -> None:
+        """One heartbeat at once after arming: a drive's consumer starts watching on the first
+        heartbeat after its 0x1016 entry (CiA 301), so it must come before any MO=1, not a period later."""
+        for bus in sorted({ref.bus for ref in self.refs}):
+            self.session.links[bus].network.send_message(HEARTBEAT_BASE + self.settings.host_node_id, bytes([NMT_OPERATIONAL]))
+
     def _start_heartbeat(self) -> None:
         buses = sorted({ref.bus for ref in self.refs})
         networks = [self.session.links[b].network for b in buses]
@@ -702,6 +709,7 @@ class MotionGuard:
         self._exiting = True
         self.report.reason = reason
         try:
+            self._stop_pass(entering)
             for d in list(self._drives.values()):
                 try:
                     self.report.drives.append(self._exit_drive(d, stop=not entering or d.switched_on))
@@ -713,6 +721,25 @@ class MotionGuard:
             self.report.drives.extend(self._released.values())
         finally:
             self._stop_heartbeat()
+
+    def _stop_pass(self, entering: bool) -> None:
+        """Every drive whose motor is on gets its stop at once, without waiting for replies; the
+        careful per-drive exit (standstill, MO=0, restore) follows. Otherwise a drive that does not
+        answer would hold back the stop of the drives after it by its timeouts."""
+        method = self.settings.stop_method
+        for d in list(self._drives.values()):
+            if not d.mo or (entering and not d.switched_on):
+                continue
+            try:
+                if d.um == UM_TORQUE:
+                    d.client.send_only("TC", 0, 0.0)
+                if method == "jv0":
+                    d.client.send_only("JV", 0, 0)
+                    d.client.send_only("BG")
+                else:
+                    d.client.send_only("ST")
+            except Exception as exc:  # the per-drive exit tries again and reports
+                log.debug("motion guard: first stop pass to %s: %s", d.ref.name, exc)
 
     def _step(self, extra: float = 0.0) -> None:
         """A sign of life before one exit step, bounded by that step (not by the whole exit)."""
