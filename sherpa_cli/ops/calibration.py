@@ -75,3 +75,9 @@ def read_calibration(cfg: ArmConfig, joint: JointConfig, client_of: Callable[[st
 def mark_calibrated(cfg: ArmConfig, client: Any) -> None:
     """For `home`: the drive's position counter now means the joint position, until its next reset."""
     client.set("UI", cfg.protocol.calibration_flag, CALIBRATED)
+
+
+def clear_calibrated(cfg: ArmConfig, client: Any) -> None:
+    """For `home`, before it arms the drive's homing: a re-home that fails after it reset PX must
+    not leave the old mark on a counter that no longer means the joint."""
+    client.set("UI", cfg.protocol.calibration_flag, 0)

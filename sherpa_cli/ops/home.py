@@ -383,6 +383,7 @@ class _Runner:
         search = _search_distance(self.cfg, joint)
         with MotionGuard(self.session, [ref], settings=self.settings, clock=self.clock, sleep=self.sleep) as guard:
             c = guard.client(ref)
+            calibration.clear_calibrated(self.cfg, c)  # a re-home that fails must not leave the old mark
             if unit.kind == "home_switch":
                 sw = _home_switch(joint)
                 assert sw is not None
@@ -460,6 +461,8 @@ class _Runner:
         with MotionGuard(self.session, list(refs.values()), settings=self.settings, clock=self.clock,
                          sleep=self.sleep) as guard:
             ca, cb = guard.client(refs[a]), guard.client(refs[b])
+            for c in (ca, cb):
+                calibration.clear_calibrated(cfg, c)  # a re-home that fails must not leave the old mark
             # motor a / b move along a joint: Σ = a + b (both the same way), Δ = a - b (opposite ways)
             signs = {s.name: (1, 1), dl.name: (1, -1)}
 

@@ -1,0 +1,102 @@
+"""Safety regressions of `sherpa home` (review 2, findings R1, R2, R10) on the simulated arm
+(tests/data/home-arm.yaml):
+
+- R1: a re-home clears the calibration mark (UI[flag] = 0) on the unit's drives before it arms the
+  drive's homing, so a re-home that fails after a counter was reset leaves the joint uncalibrated
+  instead of "calibrated" with a counter that no longer means the joint;
+- R2: HM[1] (the drive's homing) is disarmed on every exit path of an armed search, Ctrl-C included,
+  so a later jog over the switch is not stopped and its PX reset by a left-over home event;
+- R10: in a pair search, once one drive's home event fired, the other's must fire within
+  ``homing.pair_edge_window_ms``, else both motors are stopped and the error names a wiring fault
+  (before: the other motor ran its whole PR alone, Σ and Δ both off their ranges).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from sherpa_cli.config import load_config
+from sherpa_cli.elmo import codec
+from sherpa_cli.errors import SafetyError
+from sherpa_cli.ops import calibration, home
+from sherpa_cli.ops.session import ArmSession
+from sherpa_cli.ops.targets import drive_ref
+from sherpa_cli.sim.arm import SimArm
+
+ROOT = Path(__file__).resolve().parent.parent
+ARM = ROOT / "tests" / "data" / "home-arm.yaml"
+
+
+def variant(tmp_path: Path, *replace: tuple[str, str]):
+    text = ARM.read_text(encoding="utf-8")
+    for old, new in replace:
+        assert old in text
+        text = text.replace(old, new, 1)
+    path = tmp_path / "arm.yaml"
+    path.write_text(text, encoding="utf-8")
+    return load_config(path)
+
+
+def motor(session, drive: str) -> tuple[float, int]:
+    """(the motor's real position, its PX) in the simulator."""
+    with session.sim.lock:
+        d = session.sim.drives[drive]
+        return d.position, d.px
+
+
+def ram(session, drive: str, key: str) -> int:
+    with session.sim.lock:
+        return int(session.sim.drives[drive].ram.get(key, 0))
+
+
+def calibrated(session, cfg, joint: str) -> bool:
+    return calibration.read_calibration(cfg, cfg.joints[joint],
+                                        lambda n: session.client(drive_ref(cfg, n))).calibrated
+
+
+# -- R1: the calibration mark ------------------------------------------------------------------------
+
+def test_a_failed_pair_rehome_leaves_no_stale_calibration_mark():
+    cfg = load_config(ARM)
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
+        home.run_home(s, home.plan_home(cfg, ["diff"]))
+        assert calibrated(s, cfg, "pitch")
+        for d in ("pair_a", "pair_b"):
+            s.sim.press_switch(d, 3, False)  # the Δ (roll) low switch stays open: the re-home fails at Δ
+        with pytest.raises(SafetyError, match="roll"):
+            home.run_home(s, home.plan_home(cfg, ["diff"]))
+        # the Σ re-approach already reset both counters (Σ reference): they no longer mean the joint,
+        # and the joint must not read calibrated
+        (a, pa), (b, pb) = motor(s, "pair_a"), motor(s, "pair_b")
+        assert abs((pa + pb) - (a + b)) > 1
+        assert not calibrated(s, cfg, "pitch") and not calibrated(s, cfg, "roll")
+        assert ram(s, "pair_a", "UI[3]") == 0 and ram(s, "pair_b", "UI[3]") == 0
+
+
+def test_a_failed_rehome_of_a_plain_joint_clears_its_mark():
+    cfg = load_config(ARM)
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
+        home.run_home(s, home.plan_home(cfg, ["stiff"]))
+        assert calibrated(s, cfg, "stiff")
+        s.sim.press_switch("stiff_drive", 3, False)  # the low end switch stays open
+        with pytest.raises(SafetyError, match="stiff"):
+            home.run_home(s, home.plan_home(cfg, ["stiff"]))
+        assert not calibrated(s, cfg, "stiff")
+
+
+def test_the_mark_is_cleared_before_the_homing_is_armed():
+    cfg = load_config(ARM)
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
+        home.run_home(s, home.plan_home(cfg, ["stiff"]))
+        with s.sim.lock:
+            before = len(s.sim.drives["stiff_drive"].received)
+        home.run_home(s, home.plan_home(cfg, ["stiff"]))
+        with s.sim.lock:
+            frames = [bytes(f) for _, i, f in s.sim.drives["stiff_drive"].received[before:] if 0x300 < i < 0x380]
+        sets = [(r.letters, r.index, r.value) for r in map(codec.decode_request, frames) if r.kind == "set"]
+        ui_clear = sets.index(("UI", 3, 0))
+        first_hm = next(i for i, (letters, _, _) in enumerate(sets) if letters == "HM")
+        assert ui_clear < first_hm
+        assert ram(s, "stiff_drive", "UI[3]") == 1  # marked again at the end of the successful re-home
