@@ -13,6 +13,7 @@
 
 from __future__ import annotations
 
+import time
 from pathlib import Path
 
 import pytest
@@ -100,3 +101,39 @@ def test_the_mark_is_cleared_before_the_homing_is_armed():
         first_hm = next(i for i, (letters, _, _) in enumerate(sets) if letters == "HM")
         assert ui_clear < first_hm
         assert ram(s, "stiff_drive", "UI[3]") == 1  # marked again at the end of the successful re-home
+
+
+# -- R2: HM[1] disarmed on every exit path ---------------------------------------------------------
+
+def test_ctrl_c_during_the_search_disarms_the_homing():
+    cfg = load_config(ARM)
+    calls = {"n": 0}
+
+    def sleep(t: float) -> None:
+        calls["n"] += 1
+        if calls["n"] == 3:  # inside the search's wait, with HM[1] armed
+            raise KeyboardInterrupt
+        time.sleep(t)
+
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
+        with pytest.raises(KeyboardInterrupt):
+            home.run_home(s, home.plan_home(cfg, ["yaw"]), sleep=sleep)
+        assert ram(s, "yaw_drive", "HM[1]") == 0, "HM[1] still armed after Ctrl-C"
+        with s.sim.lock:
+            assert not s.sim.drives["yaw_drive"].motor_on  # the guard's stop came first
+
+
+def test_an_error_during_a_pair_search_disarms_both_drives():
+    cfg = load_config(ARM)
+    calls = {"n": 0}
+
+    def sleep(t: float) -> None:
+        calls["n"] += 1
+        if calls["n"] == 3:
+            raise RuntimeError("boom (test)")
+        time.sleep(t)
+
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
+        with pytest.raises(RuntimeError, match="boom"):
+            home.run_home(s, home.plan_home(cfg, ["diff"]), sleep=sleep)
+        assert ram(s, "pair_a", "HM[1]") == 0 and ram(s, "pair_b", "HM[1]") == 0

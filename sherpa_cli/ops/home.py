@@ -25,9 +25,10 @@ runs inside the motion guard (fault check, dead-man, stop on every exit path).
 
 from __future__ import annotations
 
+import logging
 import time
 from dataclasses import dataclass, field
-from typing import Any, Callable, Sequence
+from typing import Any, Callable, Literal, Sequence
 
 from sherpa_cli.config.model import ArmConfig, JointConfig, JointRole, SwitchConfig, SwitchKind
 from sherpa_cli.errors import SafetyError, UsageError
@@ -37,6 +38,8 @@ from sherpa_cli.ops.targets import drive_ref
 
 UM_POSITION = 5
 KINDS = ("home_switch", "end_switches", "pair", "abs_encoder")
+
+log = logging.getLogger(__name__)
 
 
 # -- the plan ---------------------------------------------------------------------------------------
@@ -275,14 +278,46 @@ class HomeReport:
 
 # -- running ----------------------------------------------------------------------------------------
 
+class _Disarm:
+    """HM[1] = 0 on every drive whose homing a unit armed, on every exit path (end, error, Ctrl-C).
+    Entered before the unit's motion guard in the same ``with``, it exits after it: the motors are
+    stopped first, then the homing is put back (a restore, allowed after an error)."""
+
+    def __init__(self, runner: "_Runner") -> None:
+        self.runner = runner
+        self.armed: dict[str, Any] = {}
+
+    def __enter__(self) -> "_Disarm":
+        self.runner._armed = self.armed
+        return self
+
+    def __exit__(self, exc_type: Any, exc: Any, tb: Any) -> Literal[False]:
+        self.runner._armed = None
+        failed = []
+        for label, c in self.armed.items():
+            try:
+                c.set("HM", 1, 0)
+            except Exception as e:  # every drive gets its try
+                failed.append(f"{label}: {e}")
+        if failed and exc_type is None:
+            raise SafetyError("the drive's homing could not be disarmed (HM[1]=0): " + "; ".join(failed),
+                              hint="disarm it by hand (`sherpa cmd DRIVE HM[1]=0 --apply`) before jogging")
+        if failed:
+            log.warning("homing not disarmed (HM[1]=0): %s", "; ".join(failed))
+        return False
+
+
 class _Runner:
     def __init__(self, session: Any, cfg: ArmConfig, settings: MotionSettings, clock: Callable[[], float],
                  sleep: Callable[[float], None]) -> None:
         self.session, self.cfg, self.settings, self.clock, self.sleep = session, cfg, settings, clock, sleep
         self.h = cfg.homing
+        self._armed: dict[str, Any] | None = None  # inside a unit's _Disarm: the drives whose HM[] it armed
 
     # HM[] -------------------------------------------------------------------------------------
     def arm_homing(self, c: Any, *, event: int, value: int, after: int, update: int | None = None) -> None:
+        if self._armed is not None:
+            self._armed[c.label] = c  # before the first write: a half-done arming is disarmed too
         c.set("HM", 1, 0)
         c.set("HM", 3, event)
         c.set("HM", 4, after)
@@ -381,7 +416,8 @@ class _Runner:
         res = UnitResult(unit.name, unit.kind, unit.drives)
         d, speed = _sign(joint.cal_speed or 1), abs(joint.cal_speed or 1)
         search = _search_distance(self.cfg, joint)
-        with MotionGuard(self.session, [ref], settings=self.settings, clock=self.clock, sleep=self.sleep) as guard:
+        with _Disarm(self), MotionGuard(self.session, [ref], settings=self.settings, clock=self.clock,
+                                        sleep=self.sleep) as guard:
             c = guard.client(ref)
             calibration.clear_calibrated(self.cfg, c)  # a re-home that fails must not leave the old mark
             if unit.kind == "home_switch":
@@ -458,8 +494,8 @@ class _Runner:
             s.cal_pos if s.cal_pos is not None else sw_s.position)
         cal_d = cal_position(dl, dd) if sw_d.kind is SwitchKind.STOP else (
             dl.cal_pos if dl.cal_pos is not None else sw_d.position)
-        with MotionGuard(self.session, list(refs.values()), settings=self.settings, clock=self.clock,
-                         sleep=self.sleep) as guard:
+        with _Disarm(self), MotionGuard(self.session, list(refs.values()), settings=self.settings, clock=self.clock,
+                                        sleep=self.sleep) as guard:
             ca, cb = guard.client(refs[a]), guard.client(refs[b])
             for c in (ca, cb):
                 calibration.clear_calibrated(cfg, c)  # a re-home that fails must not leave the old mark
