@@ -20,7 +20,7 @@ import pytest
 
 from sherpa_cli.config import load_config
 from sherpa_cli.elmo import codec
-from sherpa_cli.errors import SafetyError
+from sherpa_cli.errors import ConfigError, SafetyError
 from sherpa_cli.ops import calibration, home
 from sherpa_cli.ops.session import ArmSession
 from sherpa_cli.ops.targets import drive_ref
@@ -137,3 +137,31 @@ def test_an_error_during_a_pair_search_disarms_both_drives():
         with pytest.raises(RuntimeError, match="boom"):
             home.run_home(s, home.plan_home(cfg, ["diff"]), sleep=sleep)
         assert ram(s, "pair_a", "HM[1]") == 0 and ram(s, "pair_b", "HM[1]") == 0
+
+
+# -- R10: one drive of a pair sees the edge, the other does not -------------------------------------
+
+def test_pair_search_stops_both_when_only_one_drive_sees_the_switch(tmp_path):
+    # pair_b's wire of the Σ low switch (input 1) goes to input 5: only pair_a's homing fires
+    cfg = variant(tmp_path, ("buses:", "  wiring: {pair_b: {swap: [[1, 5]]}}\n"
+                                       "homing: {pair_edge_window_ms: 50}\nbuses:"))
+    assert cfg.homing.pair_edge_window_ms == 50
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
+        (a0, _), (b0, _) = motor(s, "pair_a"), motor(s, "pair_b")
+        with pytest.raises(SafetyError, match=r"pitch: pair_a saw the switch on input 1 during the search but "
+                                              r"pair_b did not within 50 ms.*wiring fault") as info:
+            home.run_home(s, home.plan_home(cfg, ["diff"]))
+        assert "--check-wiring pitch" in (info.value.hint or "")
+        (a, _), (b, _) = motor(s, "pair_a"), motor(s, "pair_b")
+        with s.sim.lock:
+            assert not s.sim.drives["pair_a"].motor_on and not s.sim.drives["pair_b"].motor_on
+        # pair_b was stopped shortly after pair_a's edge, not at the end of its PR (545 counts; before
+        # the fix Δ drifted about 300 counts, into the hard stop): a loose bound against a loaded machine
+        assert abs((a - b) - (a0 - b0)) < 200, f"Δ drifted {(a - b) - (a0 - b0):.0f} counts"
+        assert ram(s, "pair_a", "HM[1]") == 0 and ram(s, "pair_b", "HM[1]") == 0
+
+
+def test_pair_edge_window_is_validated(tmp_path):
+    with pytest.raises(ConfigError, match="pair_edge_window_ms"):
+        variant(tmp_path, ("buses:", "homing: {pair_edge_window_ms: 0}\nbuses:"))
+    assert load_config(ARM).homing.pair_edge_window_ms == 100

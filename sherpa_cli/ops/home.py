@@ -339,14 +339,19 @@ class _Runner:
             guard.client(refs[name]).execute("BG")
 
     def wait(self, guard: MotionGuard, refs: dict[str, Any], *, distance: int, speed: int, homing: bool,
-             what: str) -> bool:
+             what: str, one_edge: Callable[[list[str], list[str]], SafetyError] | None = None) -> bool:
         """Poll until the motion ends (MS != 2 on every drive) or, with ``homing``, the home event fired
-        on every drive (HM[1] reads 0). True if the event fired. A bound in time, else an error."""
+        on every drive (HM[1] reads 0). True if the event fired. A bound in time, else an error.
+        ``one_edge`` (a pair's search): once some drive's event fired, the others' must fire within
+        ``homing.pair_edge_window_ms``, else it raises ``one_edge(fired, not_fired)`` (the guard then
+        stops every motor)."""
         bound = 2 * (distance / max(1, speed)) + 5.0
         t0 = self.clock()
+        first_edge: float | None = None
         while True:
             guard.check()
-            fired = homing and all(int(guard.query(r, "HM", 1)) == 0 for r in refs.values())
+            on = {n: int(guard.query(r, "HM", 1)) == 0 for n, r in refs.items()} if homing else {}
+            fired = homing and all(on.values())
             ms = [int(guard.query(r, "MS")) for r in refs.values()]
             for r in refs.values():
                 if not int(guard.query(r, "MO")):
@@ -358,6 +363,11 @@ class _Runner:
                 return True
             if all(m != 2 for m in ms):
                 return bool(homing and all(int(guard.query(r, "HM", 1)) == 0 for r in refs.values()))
+            if one_edge is not None and any(on.values()) and not fired:
+                if first_edge is None:
+                    first_edge = self.clock()
+                elif self.clock() - first_edge > self.h.pair_edge_window_ms / 1000:
+                    raise one_edge([n for n, v in on.items() if v], [n for n, v in on.items() if not v])
             if self.clock() - t0 > bound:
                 raise SafetyError(f"{what} did not end within {bound:.1f} s",
                                   hint="check the joint; `sherpa stop` stops every drive")
@@ -509,9 +519,17 @@ class _Runner:
                     self.arm_homing(c, event=self.input_event(sw), value=0, after=self.h.after_stop, update=update)
                 half, motor_speed = (dist + 1) // 2, max(1, speed // 2)
                 sa, sb = signs[joint.name]
+
+                def one_edge(saw: list[str], missed: list[str]) -> SafetyError:
+                    return SafetyError(
+                        f"{joint.name}: {', '.join(saw)} saw the switch on input {sw.input} during {what} but "
+                        f"{', '.join(missed)} did not within {self.h.pair_edge_window_ms} ms (homing.pair_edge_window_ms): "
+                        f"a wiring fault (a broken or swapped wire to {', '.join(missed)}); both motors stopped",
+                        hint=f"check the switch's wiring to both drives (`sherpa home --check-wiring {joint.name}`)")
+
                 self.start_pr(guard, refs, {a: sa * d * half, b: sb * d * half}, {a: motor_speed, b: motor_speed})
                 if not self.wait(guard, refs, distance=half, speed=motor_speed, homing=True,
-                                 what=f"{joint.name}: {what}"):
+                                 what=f"{joint.name}: {what}", one_edge=one_edge):
                     for c in (ca, cb):
                         c.set("HM", 1, 0)
                     raise SafetyError(f"{joint.name}: the switch on input {sw.input} never triggered on both drives "
