@@ -443,6 +443,15 @@ class _Runner:
                 assert sw is not None
                 pos = cal_position(joint, d)
             res.set_to[joint.name] = pos
+            if unit.kind == "home_switch" and _pins(c).get(sw.input):
+                # standing on the switch (a re-home ends there): a search from here sees no edge
+                off = 2 * _backoff(self.cfg, joint)
+                self.start_pr(guard, refs, {name: -d * off}, {name: speed})
+                self.wait(guard, refs, distance=off, speed=speed, homing=False, what=f"{joint.name}: off the switch")
+                if _pins(c).get(sw.input):
+                    raise SafetyError(f"{joint.name}: the switch on input {sw.input} still reads pressed after "
+                                      f"moving {off} counts off it",
+                                      hint=f"check the switch and its wiring (`sherpa home --check-wiring {joint.name}`)")
             self.arm_homing(c, event=self.input_event(sw), value=pos, after=self.h.after_stop)
             self.start_pr(guard, refs, {name: d * search}, {name: speed})
             if not self.wait(guard, refs, distance=search, speed=speed, homing=True, what=f"{joint.name}: the search"):
