@@ -241,6 +241,7 @@ class HomingConfig:
 
 
 STOP_METHODS = ("auto", "st", "jv0")
+PAIR_START_METHODS = ("group", "sequential")  # motion.pair_start (docs/diffdrive.md)
 
 
 @dataclass(frozen=True)
@@ -267,8 +268,11 @@ class MotionConfig:
     # two BG back to back (no common start, for drives without 0x2040)
     pair_start: str = "group"
     pair_group_id: int = 125  # a 7-bit id no device on the pair's bus uses (126 is the host heartbeat)
-    feedback_gain: float = 8.0  # --feedback: SP correction per unit of progress difference between the motors
+    feedback_gain: float = 16.0  # --feedback: SP correction per unit of progress difference between the motors
     feedback_limit: float = 0.5  # --feedback: the correction never changes a motor's SP by more than this share
+    # diffdrive move records both motors by TPDO on SYNC (ops/record.py) at this rate (Hz, capped to
+    # what the bus budget allows); --poll or a recorder that cannot be set up: PX polled instead
+    pair_record_rate: float = 500.0
 
     @property
     def heartbeat_period_s(self) -> float:

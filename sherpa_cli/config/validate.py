@@ -139,6 +139,12 @@ def _check_motion(cfg: ArmConfig, locs: Locs, r: _Report) -> None:
             r.error(where(key), f"{key} {getattr(m, key)} s must be > 0")
     if not 0 <= m.standstill_velocity <= 1000:
         r.error(where("standstill_velocity"), f"standstill_velocity {m.standstill_velocity} counts/s must be 0..1000")
+    from sherpa_cli.config.model import PAIR_START_METHODS
+
+    if m.pair_start not in PAIR_START_METHODS:
+        r.error(where("pair_start"), f"pair_start '{m.pair_start}': expected one of {', '.join(PAIR_START_METHODS)}")
+    if not (math.isfinite(m.pair_record_rate) and m.pair_record_rate > 0):
+        r.error(where("pair_record_rate"), f"pair_record_rate {m.pair_record_rate} Hz must be > 0")
     if m.velocity_unit_mode not in (2, 5):
         r.error(where("velocity_unit_mode"), f"velocity_unit_mode {m.velocity_unit_mode}: expected 5 (jog in "
                 "position mode) or 2 (speed mode)")

@@ -11,19 +11,21 @@ object 0x2040 of both drives (RAM only; the old values are put back on every exi
 one BG to that id, which both drives execute on the same frame; ``sequential`` sends two BG back to
 back. ``--naive`` is the seed's way: two BG and unscaled profiles, kept for comparison.
 
-Recording: until the ops-level recorder of `sherpa log` is on main, the move records both motors
-by polling PX through the interpreter in the guard's loop (:class:`PolledTrace`); anything with
-``add(t, motors)`` and ``samples`` can take its place (``trace_factory``).
+Recording: both motors are recorded by `sherpa log`'s recorder (ops/record.py: TPDO on SYNC at
+``motion.pair_record_rate``, RAM only, put back on every exit path; :class:`RecordedTrace`), whose
+newest sample also feeds the move's loop (limit watch, ``--feedback``); with ``--poll`` or when the
+recorder cannot be set up, the loop polls PX through the interpreter instead (:class:`PolledTrace`).
 """
 
 from __future__ import annotations
 
+import contextlib
 import math
 import time
 from dataclasses import dataclass, field
 from typing import Any, Callable, Mapping, Sequence
 
-from sherpa_cli.config.model import ArmConfig, PairConfig
+from sherpa_cli.config.model import PAIR_START_METHODS, ArmConfig, PairConfig
 from sherpa_cli.errors import ConfigError, SafetyError, UsageError
 from sherpa_cli.joints import diffpair, units
 from sherpa_cli.ops import calibration, limit_watch
@@ -31,7 +33,6 @@ from sherpa_cli.ops import calibration, limit_watch
 UM_POSITION = 5
 GROUP_INDEX = 0x2040
 RPDO2_BASE = 0x300
-PAIR_START_METHODS = ("group", "sequential")
 SETTLE_S = 0.3  # s a finished move may take for PX to reach the target (servo lag) before it is reported
 
 
@@ -48,6 +49,7 @@ class MoveRequest:
     naive: bool = False
     feedback: bool = False
     uncalibrated: bool = False
+    poll: bool = False  # record by polling PX instead of the recorder (TPDO on SYNC)
 
 
 @dataclass(frozen=True)
@@ -240,7 +242,7 @@ def measure_coupling(samples: Sequence[tuple[float, int, int]], start: tuple[int
 
 class PolledTrace:
     """Both motors' positions during the move, sampled by the move's own loop (PX polled through
-    the interpreter). The stand-in for the TPDO-on-SYNC recorder of `sherpa log`."""
+    the interpreter, one drive after the other): the fallback when the recorder is not used."""
 
     source = "polled PX"
 
@@ -251,6 +253,48 @@ class PolledTrace:
     def add(self, t: float, motors: Mapping[str, int]) -> None:
         a, b = self.drives
         self.samples.append((t, int(motors[a]), int(motors[b])))
+
+
+class RecordedTrace:
+    """Both motors recorded by `sherpa log`'s recorder (ops/record.py: PX and VX on TPDO1 at every
+    SYNC, RAM only, restored on every exit path). Both drives are sampled at the same SYNC, so the
+    Σ/Δ of a sample is exact (polling reads one motor a round trip after the other). The move's
+    loop reads the newest sample (:meth:`latest`) instead of polling PX."""
+
+    def __init__(self, recorder: Any, drives: tuple[str, str], rate: float, note: str = "") -> None:
+        self.recorder, self.drives, self.rate = recorder, drives, rate
+        self.source = f"TPDO on SYNC at {rate:g} Hz" + (f" ({note})" if note else "")
+        self.samples: list[tuple[float, int, int]] = []
+        self.t_zero: float | None = None  # the recorder's time of the move's begin
+
+    def add(self, t: float, motors: Mapping[str, int]) -> None:  # samples come from the recorder
+        pass
+
+    def latest(self, max_age: float) -> tuple[dict[str, int], dict[str, int]] | None:
+        """(PX, VX) of both drives at the newest SYNC both answered, if at most ``max_age`` s old."""
+        newest = self.recorder.latest()
+        if newest is None or self.recorder.now() - newest[0] > max_age:
+            return None
+        values = newest[1]
+        return {d: values[d][0] for d in self.drives}, {d: values[d][1] for d in self.drives}
+
+    def collect(self) -> None:
+        """After the recorder closed: its samples as (t from the begin, m_a, m_b)."""
+        rec = self.recorder.recording(t_zero=self.t_zero)
+        a, b = (rec.columns[f"{d}.px"] for d in self.drives)
+        self.samples = [(t, int(x), int(y)) for t, x, y in zip(rec.times, a, b) if x == x and y == y]
+
+
+def record_rate(cfg: ArmConfig, refs: Sequence[Any]) -> tuple[float, str]:
+    """``motion.pair_record_rate``, capped to what the pair's bus can carry (ops/record.py's budget)."""
+    from sherpa_cli.ops.record import bus_budget
+
+    rate = float(cfg.motion.pair_record_rate)
+    budget = bus_budget(cfg, refs, rate, current=False)
+    if all(b.fits for b in budget):
+        return rate, ""
+    cap = float(min(b.max_rate for b in budget))
+    return cap, f"capped from {rate:g} Hz by the bus budget"
 
 
 # --------------------------------------------------------------------------- common start
@@ -391,42 +435,95 @@ def prepare(session: Any, pair: PairConfig, request: MoveRequest) -> tuple[MoveP
 
 class Feedback:
     """--feedback: keeps both motors at the same share of their own distance (which is the straight
-    Σ/Δ path). Each cycle the progress difference e = p_a - p_b (measured PX) gives a correction
-    c = gain·e + integral·∫e dt, bounded by ``limit``; motor a's SP/AC/DC are scaled by (1 - c) and
-    motor b's by (1 + c): the motor ahead slows, the one behind speeds up. The integral learns a
-    steady mismatch (one motor faster than the other). None when one motor does not move."""
+    Σ/Δ path). Each cycle, from the newest recorded sample:
+
+    - e = p_a - p_b, the progress difference (p = (PX - start) / (target - start));
+    - v = (r_a - r_b) / mean(r), the relative difference of the progress rates r = VX / distance
+      (recorder samples only; while both motors run at least ``VELOCITY_FLOOR`` of their planned
+      speed): it sees one motor running faster long before the positions drift apart;
+    - c = gain·s·e + integral·∫e dt + VELOCITY_GAIN·v, bounded by ``limit``. The integral learns a
+      steady mismatch (one motor faster than the other); s = min(1, CYCLE_S / time since the last
+      cycle) and each cycle's dt capped at MAX_DT_S keep a stalled loop from over-correcting.
+
+    Only the motor ahead slows: its SP/AC/DC become k = (1 - |c|) / (1 + |c|) of its planned
+    profile (the ratio the two would have if one slowed by c and the other sped up by c), at least
+    1 - ``limit``; the other keeps its planned profile. No motor ever runs faster or accelerates
+    harder than planned, so the joints' speed and acceleration limits hold. None when one motor
+    does not move (there is nothing to keep in step)."""
+
+    VELOCITY_GAIN = 0.2
+    VELOCITY_FLOOR = 0.2  # share of the planned speed both motors need before v counts
+    CYCLE_S = 0.012  # the loop's expected period with the recorder; slower cycles get a weaker P term
+    MAX_DT_S = 0.03  # longest time step the integral takes from one cycle
 
     def __init__(self, plan: MovePlan, gain: float, limit: float, integral: float | None = None) -> None:
         self.plan, self.gain, self.limit = plan, gain, limit
-        self.integral = gain * 10 if integral is None else integral
+        self.integral = self.gain * 10 if integral is None else integral
         self._sum = 0.0
         self._t: float | None = None
 
-    def profiles(self, t: float, motors: Mapping[str, int]) -> dict[str, Profile] | None:
+    def profiles(self, t: float, motors: Mapping[str, int],
+                 velocities: Mapping[str, int] | None = None) -> dict[str, Profile] | None:
         p = self.plan
         a, b = p.pair.drive_a, p.pair.drive_b
-        prog = {}
+        prog, rate, floor = {}, {}, {}
         for d in (a, b):
             dist = p.motor_targets[d] - p.motors_start[d]
             if dist == 0:
                 return None
             prog[d] = (motors[d] - p.motors_start[d]) / dist
+            floor[d] = self.VELOCITY_FLOOR * p.profiles[d].sp / abs(dist)
+            if velocities is not None:
+                rate[d] = velocities[d] / dist
         err = prog[a] - prog[b]
+        scale = 1.0
         if self._t is not None:
-            self._sum += err * (t - self._t)
+            dt = t - self._t
+            self._sum += err * min(dt, self.MAX_DT_S)
+            if dt > self.CYCLE_S:
+                scale = self.CYCLE_S / dt
         self._t = t
-        corr = max(-self.limit, min(self.limit, self.gain * err + self.integral * self._sum))
+        # anti-windup: the integral alone never asks for more than the bound
+        bound = self.limit / self.integral if self.integral else 0.0
+        self._sum = max(-bound, min(bound, self._sum))
+        vterm = 0.0
+        if rate and all(rate[d] >= floor[d] for d in (a, b)):
+            vterm = self.VELOCITY_GAIN * (rate[a] - rate[b]) / ((rate[a] + rate[b]) / 2)
+        corr = max(-self.limit, min(self.limit, scale * self.gain * err + self.integral * self._sum + vterm))
+        k = max(1 - self.limit, (1 - abs(corr)) / (1 + abs(corr)))
 
-        def scaled(pr: Profile, k: float) -> Profile:
-            return Profile(max(1, round(pr.sp * k)), max(1, round(pr.ac * k)), max(1, round(pr.dc * k)))
-        return {a: scaled(p.profiles[a], 1 - corr), b: scaled(p.profiles[b], 1 + corr)}
+        def scaled(pr: Profile, f: float) -> Profile:
+            return Profile(max(1, round(pr.sp * f)), max(1, round(pr.ac * f)), max(1, round(pr.dc * f)))
+        return {a: scaled(p.profiles[a], k if corr > 0 else 1.0), b: scaled(p.profiles[b], k if corr < 0 else 1.0)}
+
+
+def _open_trace(stack: contextlib.ExitStack, session: Any, refs: Sequence[Any], request: MoveRequest,
+                drives: tuple[str, str], recorder_kw: Mapping[str, Any] | None) -> Any:
+    """The move's recording: the recorder of `sherpa log` (TPDO on SYNC), or PX polled by the move's
+    loop with --poll or when the recorder cannot be set up (its source says which)."""
+    if request.poll:
+        trace = PolledTrace(drives)
+        trace.source = "polled PX (--poll)"
+        return trace
+    from sherpa_cli.ops.record import Recorder
+
+    rate, note = record_rate(session.cfg, refs)
+    try:
+        rec = stack.enter_context(Recorder(session, refs, rate, enforce_budget=False, **dict(recorder_kw or {})))
+    except Exception as exc:  # the recorder put back what it changed; the move records by polling
+        trace = PolledTrace(drives)
+        trace.source = f"polled PX (the recorder could not be set up: {exc})"
+        return trace
+    return RecordedTrace(rec, drives, rate, note)
 
 
 def run_move(session: Any, pair: PairConfig, request: MoveRequest, *, guard_factory: Callable[..., Any] | None = None,
              clock: Callable[[], float] = time.monotonic, sleep: Callable[[float], None] = time.sleep,
              on_event: Callable[[str], None] | None = None,
-             trace_factory: Callable[[tuple[str, str]], Any] = PolledTrace) -> MoveResult:
-    """Plan, then move both motors inside the motion guard with the limit watch, recording both."""
+             recorder_kw: Mapping[str, Any] | None = None) -> MoveResult:
+    """Plan, then move both motors inside the motion guard with the limit watch, recording both.
+
+    ``recorder_kw`` goes to ops/record.py's Recorder (``clock``, ``sync_factory``: tests)."""
     from sherpa_cli.ops.joint_jog import move_to, stop_now, wait_standstill
     from sherpa_cli.ops.motion import MotionGuard, MotionSettings
 
@@ -446,20 +543,16 @@ def run_move(session: Any, pair: PairConfig, request: MoveRequest, *, guard_fact
     result = MoveResult(pair.name, pair.sigma, pair.delta, drives, "naive" if request.naive else method,
                         request.feedback, p.start, p.target, p.start, sj.cpr, dj.cpr,
                         motors_start=dict(p.motors_start), calibration=cals)
-    trace = trace_factory(drives)
-    result.trace_source = getattr(trace, "source", type(trace).__name__)
     guard = (guard_factory or MotionGuard)(session, refs, settings=settings, clock=clock, sleep=sleep,
                                            on_event=on_event)
-    t0 = clock()
     try:
         with guard:
             clients = {d: guard.client(by_name[d]) for d in drives}
-
-            def check_drives() -> None:
-                guard.check_motors_on([by_name[d] for d in clients], "the move")
-
             start = CommonStart(session, refs, clients, method, group_id)
-            with start:
+            with start, contextlib.ExitStack() as recording:
+                trace = _open_trace(recording, session, refs, request, drives, recorder_kw)
+                result.trace_source = trace.source
+                recorded = isinstance(trace, RecordedTrace)
                 for d in drives:
                     guard.enable(by_name[d], UM_POSITION)
                 for d, c in clients.items():
@@ -471,12 +564,30 @@ def run_move(session: Any, pair: PairConfig, request: MoveRequest, *, guard_fact
                 result.motor_commands = {d: {"PA": p.motor_targets[d], **p.profiles[d].as_dict()} for d in drives}
                 last = dict(p.profiles)
                 fb = Feedback(p, cfg.motion.feedback_gain, cfg.motion.feedback_limit) if request.feedback else None
+                # with the recorder the loop reads the newest SYNC's PX instead of polling it, so it
+                # can run at the recording's rate; the drives' status (SR, MS) is still asked at
+                # most every poll interval, as before
+                stale = max(10 / trace.rate, 0.02) if recorded else 0.0
+                interval = min(settings.poll_interval, 1 / trace.rate) if recorded and fb else settings.poll_interval
+                state: dict[str, Any] = {"status_due": 0.0, "seen": None}
+
+                def positions() -> dict[str, int]:
+                    state["velocities"] = None
+                    if recorded:
+                        got = trace.latest(stale)
+                        if got is not None:
+                            guard.check()  # the guard's sign of life (a query gives one)
+                            state["velocities"] = got[1]
+                            return got[0]
+                    return {d: int(guard.query(by_name[d], "PX")) for d in drives}
 
                 def sample() -> dict[str, int]:
-                    motors = {d: int(guard.query(by_name[d], "PX")) for d in drives}
-                    trace.add(clock() - t0, motors)
-                    if fb is not None:
-                        new = fb.profiles(clock() - t0, motors)
+                    motors = positions()
+                    now = clock() - t0
+                    trace.add(now, motors)
+                    if fb is not None and motors != state["seen"]:
+                        state["seen"] = motors
+                        new = fb.profiles(now, motors, state["velocities"])
                         near_end = any(abs(p.motor_targets[d] - motors[d]) <= 2 for d in drives)
                         if new is not None and not near_end and new != last:
                             for d in drives:
@@ -488,11 +599,33 @@ def run_move(session: Any, pair: PairConfig, request: MoveRequest, *, guard_fact
                             result.corrections += 1
                     return motors
 
-                t_begin = clock()
+                def status_due() -> bool:
+                    return clock() >= state["status_due"]
+
+                def check_drives() -> None:
+                    if status_due():
+                        guard.check_motors_on([by_name[d] for d in clients], "the move")
+                    else:
+                        guard.check()
+
+                def finished(motors: Mapping[str, int]) -> bool:
+                    if not status_due():
+                        return False
+                    vel = state["velocities"]
+                    if vel is not None and not all(motors[d] == p.motor_targets[d] and vel[d] == 0 for d in drives) \
+                            and clock() < state.get("ms_due", 0.0):
+                        state["status_due"] = clock() + settings.poll_interval
+                        return False  # the recording says not there yet: MS is asked only now and then
+                    state["ms_due"] = clock() + 5 * settings.poll_interval
+                    state["status_due"] = clock() + settings.poll_interval
+                    return all(int(c.get("MS")) == 0 for c in clients.values())
+
+                t0 = t_begin = clock()
+                if recorded:
+                    trace.t_zero = trace.recorder.now()
                 start.begin()
-                w = limit_watch.watch(watched, sample, clock=clock, sleep=sleep, interval=settings.poll_interval,
-                                      finished=lambda m: all(int(c.get("MS")) == 0 for c in clients.values()),
-                                      duration=p.timeout, check_drives=check_drives)
+                w = limit_watch.watch(watched, sample, clock=clock, sleep=sleep, interval=interval,
+                                      finished=finished, duration=p.timeout, check_drives=check_drives)
                 result.duration = round(clock() - t_begin, 3)
                 if w.outcome == "breach":
                     result.outcome = "limit"
@@ -516,6 +649,8 @@ def run_move(session: Any, pair: PairConfig, request: MoveRequest, *, guard_fact
                         sleep(settings.poll_interval)
                         final = {d: int(clients[d].get("PX")) for d in drives}
                 trace.add(clock() - t0, final)
+            if recorded:
+                trace.collect()  # the recorder has stopped and put the PDO settings back
     except BaseException as exc:
         exc.motion_report = guard.report  # type: ignore[attr-defined]
         raise

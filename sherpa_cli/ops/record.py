@@ -291,6 +291,19 @@ class Recorder:
         with self._lock:
             return {d.ref.name: len(d.pos) for d in self._drives.values()}
 
+    def latest(self) -> tuple[float, dict[str, tuple[int, int]]] | None:
+        """The newest SYNC every drive has answered: (its time on the recorder's clock, drive ->
+        (PX, VX)), or None before the first. For a loop that acts on the recording while it runs
+        (`diffdrive move --feedback`): all drives sampled at the same SYNC."""
+        with self._lock:
+            drives = list(self._drives.values())
+            newest = min(d.last.get(TPDO_POS, -1) for d in drives)
+            for k in range(newest, max(newest - 50, -1), -1):  # a lost frame: the SYNC before it
+                if all(k in d.pos for d in drives):
+                    return ((self.t0 or 0.0) + k * self.period,
+                            {d.ref.name: (int(d.pos[k][0]), int(d.pos[k][1])) for d in drives})
+        return None
+
     def expected(self) -> int:
         if self.t0 is None:
             return 0
@@ -330,7 +343,8 @@ class Recorder:
                 sign = 1 if joint.name == pair.sigma else -1
                 for col, which, conv in (("pos_rad", 0, counts_to_rad), ("vel_rad_s", 1, counts_per_s_to_rad_per_s)):
                     a, b = motor(pair.drive_a, which), motor(pair.drive_b, which)
-                    rec.columns[f"{joint.name}.{col}"] = [conv(x + sign * y, joint.cpr) for x, y in zip(a, b)]
+                    rec.columns[f"{joint.name}.{col}"] = [conv(x + sign * y, joint.cpr) if x == x and y == y else nan
+                                                          for x, y in zip(a, b)]  # a sample one drive missed
         for ref in self.refs:
             rec.columns[f"{ref.name}.px"] = motor(ref.name, 0)
             rec.columns[f"{ref.name}.vx"] = motor(ref.name, 1)
