@@ -439,3 +439,106 @@ def test_recorder_latest_is_the_newest_sync_both_drives_answered():
                     time.sleep(0.001)
             t, values = rec.latest()
     assert t == pytest.approx(rec.t0 + 0.02) and values == {"left": (0, 0), "right": (0, 0)}
+
+
+# --------------------------------------------------------------------------- pair_start: sync_rpdo
+
+def test_sim_synchronous_rpdo2_runs_the_buffered_frame_at_the_next_sync_without_skew():
+    clock = ManualClock()
+    a, b = _drive(clock, 10, start_skew_s=0.05), _drive(clock, 11)
+    assert a.od_read(0x1401, 2) == 255 and a.od_read(0x1401, 1) == 0x30A
+    for d in (a, b):
+        d.od_write(0x1401, 2, 1)
+        assert d.receive(0x300 + d.node, encode_execute("BG"))
+        d.pop_frames()
+    clock.advance(0.02)
+    a.tick(), b.tick()
+    assert a.px == b.px == 0 and not a.pop_frames()  # buffered: nothing ran, nothing answered
+    for d in (a, b):
+        d.receive(0x080, b"")
+    assert [f[0] for f in a.pop_frames()] == [0x28A]  # the BG's answer, at the SYNC
+    clock.advance(0.2)
+    a.tick(), b.tick()
+    assert a.px == b.px > 0  # both started at the SYNC: the separately received BG has no skew here
+    a.receive(0x000, bytes([0x81, 10]))  # reset node: RAM only
+    assert a.od_read(0x1401, 2) == 255
+    with pytest.raises(Exception):
+        a.od_write(0x1401, 2, 250)  # no transmission type
+
+
+def _sniff(channel):
+    import can
+
+    bus = can.Bus(interface="virtual", channel=channel, receive_own_messages=False)
+    frames = []
+
+    class Listener(can.Listener):
+        def on_message_received(self, msg):
+            if not 0x700 <= msg.arbitration_id <= 0x77F:  # heartbeats come when they come
+                frames.append(f"{msg.arbitration_id:03X} {bytes(msg.data).hex(' ')}".strip())
+    notifier = can.Notifier(bus, [Listener()])
+    return bus, notifier, frames
+
+
+def test_sync_rpdo_start_frame_transcript(tmp_path):
+    """Byte for byte: 0x1401:2 read on both drives, set to 1 (synchronous), BG to each drive
+    (buffered), one SYNC, both BG answers, 0x1401:2 back to 255. Motors on beforehand."""
+    import uuid
+
+    cfg = load_config(FAST)
+    channel = f"dd-sync-{uuid.uuid4().hex[:8]}"
+    arm = SimArm(cfg, {"can0": {"interface": "virtual", "channel": channel}})
+    with ArmSession.open(cfg, sim=arm) as s:
+        refs = diffdrive._refs(cfg, ("left", "right"))
+        clients = {r.name: s.client(r) for r in refs}
+        for c in clients.values():
+            c.nmt_start()
+            c.set("UM", 0, 5)
+            c.set("PA", 0, 100)
+            c.motor_on()
+        sniff, notifier, frames = _sniff(channel)
+        try:
+            with diffdrive.CommonStart(s, refs, clients, "sync_rpdo", 125) as start:
+                start.begin()
+            time.sleep(0.05)
+        finally:
+            notifier.stop()
+            sniff.shutdown()
+        with s.sim.lock:
+            left, right = s.sim.drives["left"], s.sim.drives["right"]
+            begins = [t for d in (left, right) for t, text in d.events if text.startswith("BG")]
+            rpdo_types = (left.od_read(0x1401, 2), right.od_read(0x1401, 2))
+        for c in clients.values():
+            c.motor_off()
+    assert frames == [
+        "60A 40 01 14 02 00 00 00 00", "58A 4f 01 14 02 ff 00 00 00",
+        "60B 40 01 14 02 00 00 00 00", "58B 4f 01 14 02 ff 00 00 00",
+        "60A 2f 01 14 02 01 00 00 00", "58A 60 01 14 02 00 00 00 00",
+        "60B 2f 01 14 02 01 00 00 00", "58B 60 01 14 02 00 00 00 00",
+        "30A 42 47 00 00", "30B 42 47 00 00", "080",
+        "28A 42 47 00 00 00 00 00 00", "28B 42 47 00 00 00 00 00 00",
+        "60A 2f 01 14 02 ff 00 00 00", "58A 60 01 14 02 00 00 00 00",
+        "60B 2f 01 14 02 ff 00 00 00", "58B 60 01 14 02 00 00 00 00",
+    ]
+    assert len(begins) == 2 and abs(begins[0] - begins[1]) < 0.002  # both at the one SYNC
+    assert rpdo_types == (255, 255)
+
+
+def test_pair_start_sync_rpdo_moves_the_mismatched_pair_and_restores_the_rpdo(tmp_path):
+    text = MISMATCHED.read_text().replace("motion: {consumer_time_ms: 1000}",
+                                          "motion: {consumer_time_ms: 1000, pair_start: sync_rpdo}")
+    path = tmp_path / "sync.yaml"
+    path.write_text(text)
+    cfg = load_config(path)
+    peaks = {}
+    for name, kw in (("sync", {}), ("feedback", {"feedback": True})):
+        with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
+            r = diffdrive.run_move(s, cfg.pairs["diff"], MoveRequest(sigma="1", **kw))
+            with s.sim.lock:
+                assert all(d.od_read(0x1401, 2) == 255 and d.save_count == 0 and not d.motor_on
+                           for d in s.sim.drives.values())
+                assert all(d.group_id == 0 for d in s.sim.drives.values())
+        assert r.mode == "sync_rpdo" and abs(r.end[0] - r.target[0]) <= 1 and abs(r.end[1] - r.target[1]) <= 1
+        peaks[name] = r.coupling.held_peak
+    # no start skew (a separately received BG would start motor a 40 ms late: ~64 counts, naive)
+    assert peaks["sync"] < 55 and peaks["feedback"] < 20, peaks

@@ -176,9 +176,10 @@ def move(
     """Move the Σ and Δ joints of a pair together, both motors starting at once, and measure the coupling.
 
     Both motors get profiles of equal duration (SP/AC/DC scaled by each motor's share of the
-    distance) and start on one frame (motion.pair_start: a group id in 0x2040, RAM only, put
-    back afterwards). Every move records both motors and reports how far the joint that should
-    hold moved, and how far both left the straight Σ/Δ path (docs/diffdrive.md).
+    distance) and start together (motion.pair_start: one BG to a group id in 0x2040, or BG to
+    both executed at one SYNC; RAM only, put back afterwards). Every move records both motors
+    (TPDO on SYNC, or --poll) and reports how far the joint that should hold moved, and how far
+    both left the straight Σ/Δ path (docs/diffdrive.md).
     """
     from sherpa_cli.ops import diffdrive
     from sherpa_cli.ops.targets import pair_of
@@ -202,6 +203,7 @@ def move(
                          if v is not None)
         held = [n for n, v in ((p.sigma, sigma), (p.delta, delta)) if v is None]
         start = {"group": f"one BG to group id {cfg.motion.pair_group_id} (0x2040, RAM, put back after)",
+                 "sync_rpdo": "BG to both buffered as synchronous RPDO2 (0x1401:2=1, RAM, put back after), one SYNC",
                  "sequential": "two BG back to back", "naive": "two BG back to back, unscaled profiles"}[mode]
         if st.json_mode:
             st.out.json({"pair": p.name, "applied": False, "move": what, "holds": held, "start": mode,
@@ -245,7 +247,8 @@ def _render_move(st, r, plot: str | None) -> None:
     cmds = "; ".join(f"{d} " + " ".join(f"{k}={v}" for k, v in c.items()) for d, c in r.motor_commands.items())
     if cmds:
         st.out.line(f"sent: {cmds}")
-    mode = {"group": "common start (group BG)", "sequential": "two BG back to back",
+    mode = {"group": "common start (group BG)", "sync_rpdo": "common start (BG at one SYNC)",
+            "sequential": "two BG back to back",
             "naive": "naive (two BG, unscaled profiles)"}[r.mode] + (", feedback" if r.feedback else "")
     st.out.line(f"pair {r.pair}: {mode}")
     for b in r.breaches:

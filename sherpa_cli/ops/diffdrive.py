@@ -8,8 +8,9 @@ start is :func:`common_begin` (also used by `jog` of a Σ/Δ joint, ops/joint_jo
 
 Common start (``motion.pair_start``): ``group`` writes the group id ``motion.pair_group_id`` to
 object 0x2040 of both drives (RAM only; the old values are put back on every exit path) and sends
-one BG to that id, which both drives execute on the same frame; ``sequential`` sends two BG back to
-back. ``--naive`` is the seed's way: two BG and unscaled profiles, kept for comparison.
+one BG to that id, which both drives execute on the same frame; ``sync_rpdo`` makes RPDO2
+synchronous (0x1401:2 = 1, RAM, for the begin only), sends BG to each drive and one SYNC at which
+both execute it; ``sequential`` sends two BG back to back. ``--naive`` is the seed's way: two BG and unscaled profiles, kept for comparison.
 
 Recording: both motors are recorded by `sherpa log`'s recorder (ops/record.py: TPDO on SYNC at
 ``motion.pair_record_rate``, RAM only, put back on every exit path; :class:`RecordedTrace`), whose
@@ -33,6 +34,11 @@ from sherpa_cli.ops import calibration, limit_watch
 UM_POSITION = 5
 GROUP_INDEX = 0x2040
 RPDO2_BASE = 0x300
+TPDO2_BASE = 0x280
+SYNC_ID = 0x080
+RPDO2_COMM = 0x1401  # RPDO2 (the binary interpreter's) communication parameter; sub 2 = transmission type
+SYNC_RPDO_TYPE = 1  # synchronous: executed at the next SYNC ([IG] 5-4)
+RPDO2_TYPE_NAME = "RPDO2 transmission type"
 SETTLE_S = 0.3  # s a finished move may take for PX to reach the target (servo lag) before it is reported
 
 
@@ -300,52 +306,127 @@ def record_rate(cfg: ArmConfig, refs: Sequence[Any]) -> tuple[float, str]:
 # --------------------------------------------------------------------------- common start
 
 class CommonStart:
-    """Starts both motors of a pair together; restores what it changed (0x2040, RAM) on close.
+    """Starts both motors of a pair together; restores what it changed (RAM) on close.
 
-    ``method``: ``group`` (one BG to the group id), ``sequential`` (BG, BG). Use as a context
-    manager inside the motion guard, after the motors are enabled."""
+    ``method`` (``motion.pair_start``): ``group`` (0x2040 = the group id on both drives, one BG to
+    the group id), ``sync_rpdo`` (for each begin RPDO2 is made synchronous on both drives, 0x1401:2
+    = 1; BG to each drive is then buffered until one SYNC the tool sends right after them, which
+    both drives execute on the same frame; the old transmission type goes back at once and the BG
+    answers are awaited), ``sequential`` (BG, BG). Use as a context manager inside the motion
+    guard, after the motors are enabled."""
 
     def __init__(self, session: Any, refs: Sequence[Any], clients: Mapping[str, Any], method: str,
                  group_id: int) -> None:
         self.session, self.refs, self.clients, self.method, self.group_id = session, list(refs), clients, method, group_id
         self._old: dict[str, int] = {}
+        self._rpdo_type: dict[str, int] = {}  # sync_rpdo: each drive's own 0x1401:2
+        self._synchronous: set[str] = set()  # drives whose RPDO2 is synchronous right now
         self.bus = refs[0].bus
 
     def __enter__(self) -> "CommonStart":
+        if self.method in ("group", "sync_rpdo") and len({r.bus for r in self.refs}) != 1:
+            raise ConfigError(f"motion.pair_start={self.method} needs both drives of the pair on one bus; "
+                              "use pair_start: sequential")
         if self.method == "group":
-            if len({r.bus for r in self.refs}) != 1:
-                raise ConfigError("motion.pair_start=group needs both drives of the pair on one bus; "
-                                  "use pair_start: sequential")
             clash = [n for n, d in self.session.cfg.drives.items()
                      if d.bus == self.bus and d.node == self.group_id]
             if clash:
                 raise ConfigError(f"motion.pair_group_id {self.group_id} is the node id of {clash[0]} on bus "
                                   f"{self.bus}: choose an id no device uses")
-            try:
-                for r in self.refs:
-                    sdo = self.session.sdo(r)
+        try:
+            for r in self.refs:
+                sdo = self.session.sdo(r)
+                if self.method == "group":
                     old = (bytes(sdo.upload(GROUP_INDEX, 0, name="group id")) + b"\0")[0]
                     if old != self.group_id:
                         sdo.download(GROUP_INDEX, 0, bytes([self.group_id]), name="group id")
                         self._old[r.name] = old
-            except BaseException:
-                self.close()
-                raise
+                elif self.method == "sync_rpdo":
+                    self._rpdo_type[r.name] = (bytes(sdo.upload(RPDO2_COMM, 2, name=RPDO2_TYPE_NAME)) + b"\0")[0]
+        except BaseException:
+            self.close()
+            raise
         return self
 
     def begin(self, drives: Sequence[str] | None = None) -> None:
-        """BG for the named drives (default both): one group frame, or one BG per drive."""
+        """BG for the named drives (default both): one group frame, two BG executed at one SYNC, or
+        one BG per drive."""
+        from sherpa_cli.elmo import codec
+
         names = list(drives) if drives is not None else [r.name for r in self.refs]
         if self.method == "group" and len(names) == len(self.refs):
-            from sherpa_cli.elmo import codec
-
             self.session.links[self.bus].network.send_message(RPDO2_BASE + self.group_id,
                                                               codec.encode_execute("BG"))
+            return
+        if self.method == "sync_rpdo" and len(names) == len(self.refs):
+            self._sync_begin()
             return
         for n in names:
             self.clients[n].execute("BG")
 
+    def _sync_begin(self) -> None:
+        import threading
+
+        from sherpa_cli.elmo import codec
+        from sherpa_cli.errors import DriveRefusedError, DriveTimeoutError
+
+        network = self.session.links[self.bus].network
+        answers: dict[str, Any] = {}
+        arrived = {r.name: threading.Event() for r in self.refs}
+        subscribed = []
+
+        def listener(name: str) -> Callable[[int, bytes, float], None]:
+            def on_reply(can_id: int, data: bytes, timestamp: float) -> None:
+                try:
+                    reply = codec.decode_reply(bytes(data))
+                except Exception:
+                    return
+                if reply.letters == "BG" and name not in answers:
+                    answers[name] = reply
+                    arrived[name].set()
+            return on_reply
+        try:
+            for r in self.refs:
+                if self._rpdo_type[r.name] != SYNC_RPDO_TYPE:
+                    self._synchronous.add(r.name)
+                    self.session.sdo(r).download(RPDO2_COMM, 2, bytes([SYNC_RPDO_TYPE]), name=RPDO2_TYPE_NAME)
+            for r in self.refs:
+                callback = listener(r.name)
+                network.subscribe(TPDO2_BASE + r.node, callback)
+                subscribed.append((TPDO2_BASE + r.node, callback))
+            for r in self.refs:  # buffered by each drive until the SYNC
+                network.send_message(RPDO2_BASE + r.node, codec.encode_execute("BG"))
+            network.send_message(SYNC_ID, b"")
+            wait = 2 * max(getattr(c, "timeout", 0.1) for c in self.clients.values())
+            for r in self.refs:
+                arrived[r.name].wait(wait)
+        finally:
+            for cob, callback in subscribed:
+                network.unsubscribe(cob, callback)
+            self._restore_rpdo(quiet=False)
+        for r in self.refs:
+            reply = answers.get(r.name)
+            if reply is None:
+                raise DriveTimeoutError(f"{r.name}: no answer to the BG executed at the SYNC within {wait:g} s",
+                                        hint="does the drive execute a synchronous RPDO2 (0x1401:2 = 1)? "
+                                             "motion.pair_start: group or sequential starts it without SYNC")
+            if not reply.ok:
+                raise DriveRefusedError(f"{r.name}: BG at the SYNC refused: {reply.error_text}", drive=r.name,
+                                        command="BG", code=reply.error_code)
+
+    def _restore_rpdo(self, quiet: bool = True) -> None:
+        for r in self.refs:
+            if r.name in self._synchronous:
+                try:
+                    self.session.sdo(r).download(RPDO2_COMM, 2, bytes([self._rpdo_type[r.name]]),
+                                                 name=RPDO2_TYPE_NAME)
+                    self._synchronous.discard(r.name)
+                except Exception:
+                    if not quiet:
+                        raise
+
     def close(self) -> None:
+        self._restore_rpdo()
         for r in self.refs:
             if r.name in self._old:
                 try:
