@@ -542,3 +542,24 @@ def test_pair_start_sync_rpdo_moves_the_mismatched_pair_and_restores_the_rpdo(tm
         peaks[name] = r.coupling.held_peak
     # no start skew (a separately received BG would start motor a 40 ms late: ~64 counts, naive)
     assert peaks["sync"] < 55 and peaks["feedback"] < 20, peaks
+
+
+def test_jog_of_a_pair_joint_with_sync_rpdo_starts_both_at_one_sync(tmp_path):
+    from sherpa_cli.ops import joint_jog
+
+    text = FAST.read_text().replace("motion: {consumer_time_ms: 1000}",
+                                    "motion: {consumer_time_ms: 1000, pair_start: sync_rpdo}")
+    path = tmp_path / "sync.yaml"
+    path.write_text(text)
+    cfg = load_config(path)
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
+        r = joint_jog.run(s, joint_jog.resolve_axis(cfg, "pitch"),
+                          joint_jog.JogRequest(mode="position", to="300counts", uncalibrated=True))
+        assert abs(r.end - 300) <= 1
+        with s.sim.lock:
+            left, right = s.sim.drives["left"], s.sim.drives["right"]
+            writes = [w[3] for w in left.od_writes if w[1] == 0x1401]
+            assert writes == [1, 255] and left.od_read(0x1401, 2) == right.od_read(0x1401, 2) == 255
+            assert not any(f[1] == 0x300 + 125 for f in left.received)  # no group frame
+            begins = [[t for t, text in d.events if text.startswith("BG")] for d in (left, right)]
+            assert len(begins[0]) == len(begins[1]) == 1 and abs(begins[0][0] - begins[1][0]) < 0.002
