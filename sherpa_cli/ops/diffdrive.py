@@ -21,13 +21,14 @@ recorder cannot be set up, the loop polls PX through the interpreter instead (:c
 from __future__ import annotations
 
 import contextlib
+import functools
 import math
 import time
 from dataclasses import dataclass, field
 from typing import Any, Callable, Mapping, Sequence
 
 from sherpa_cli.config.model import PAIR_START_METHODS, ArmConfig, PairConfig
-from sherpa_cli.errors import ConfigError, SafetyError, UsageError
+from sherpa_cli.errors import ConfigError, DriveTimeoutError, SafetyError, UsageError
 from sherpa_cli.joints import diffpair, units
 from sherpa_cli.ops import calibration, limit_watch
 
@@ -40,6 +41,7 @@ RPDO2_COMM = 0x1401  # RPDO2 (the binary interpreter's) communication parameter;
 SYNC_RPDO_TYPE = 1  # synchronous: executed at the next SYNC ([IG] 5-4)
 RPDO2_TYPE_NAME = "RPDO2 transmission type"
 SETTLE_S = 0.3  # s a finished move may take for PX to reach the target (servo lag) before it is reported
+PROFILE_KEYS = ("SP", "AC", "DC")
 
 
 # --------------------------------------------------------------------------- planning (pure)
@@ -293,10 +295,12 @@ class RecordedTrace:
 
 def record_rate(cfg: ArmConfig, refs: Sequence[Any]) -> tuple[float, str]:
     """``motion.pair_record_rate``, capped to what the pair's bus can carry (ops/record.py's budget)."""
+    from sherpa_cli.ops.encoder import recorded_encoders
     from sherpa_cli.ops.record import bus_budget
 
     rate = float(cfg.motion.pair_record_rate)
-    budget = bus_budget(cfg, refs, rate, current=False)
+    encoders = [t.dev for t in recorded_encoders(cfg, (r.name for r in refs))]  # recorded beside them
+    budget = bus_budget(cfg, refs, rate, current=False, encoders=encoders)
     if all(b.fits for b in budget):
         return rate, ""
     cap = float(min(b.max_rate for b in budget))
@@ -306,21 +310,25 @@ def record_rate(cfg: ArmConfig, refs: Sequence[Any]) -> tuple[float, str]:
 # --------------------------------------------------------------------------- common start
 
 class CommonStart:
-    """Starts both motors of a pair together; restores what it changed (RAM) on close.
+    """Starts both motors of a pair together; restores what it changed (0x2040 or 0x1401:2, and the
+    SP/AC/DC kept with :meth:`keep_profile`; RAM) on close.
 
     ``method`` (``motion.pair_start``): ``group`` (0x2040 = the group id on both drives, one BG to
     the group id), ``sync_rpdo`` (for each begin RPDO2 is made synchronous on both drives, 0x1401:2
     = 1; BG to each drive is then buffered until one SYNC the tool sends right after them, which
     both drives execute on the same frame; the old transmission type goes back at once and the BG
     answers are awaited), ``sequential`` (BG, BG). Use as a context manager inside the motion
-    guard, after the motors are enabled."""
+    guard. ``stop`` (:func:`stop_motors`) runs on the way out before the restore, so no motor keeps
+    moving through the restore's SDO timeouts (review R8)."""
 
     def __init__(self, session: Any, refs: Sequence[Any], clients: Mapping[str, Any], method: str,
-                 group_id: int) -> None:
+                 group_id: int, stop: Callable[[], Sequence[str] | None] | None = None) -> None:
         self.session, self.refs, self.clients, self.method, self.group_id = session, list(refs), clients, method, group_id
         self._old: dict[str, int] = {}
         self._rpdo_type: dict[str, int] = {}  # sync_rpdo: each drive's own 0x1401:2
         self._synchronous: set[str] = set()  # drives whose RPDO2 is synchronous right now
+        self._profiles: dict[str, dict[str, int]] = {}
+        self.stop = stop
         self.bus = refs[0].bus
 
     def __enter__(self) -> "CommonStart":
@@ -418,24 +426,87 @@ class CommonStart:
         for r in self.refs:
             if r.name in self._synchronous:
                 try:
-                    self.session.sdo(r).download(RPDO2_COMM, 2, bytes([self._rpdo_type[r.name]]),
-                                                 name=RPDO2_TYPE_NAME)
-                    self._synchronous.discard(r.name)
+                    self._put_rpdo_type(r)
                 except Exception:
                     if not quiet:
                         raise
 
-    def close(self) -> None:
-        self._restore_rpdo()
+    def _put_rpdo_type(self, ref: Any) -> None:
+        self.session.sdo(ref).download(RPDO2_COMM, 2, bytes([self._rpdo_type[ref.name]]), name=RPDO2_TYPE_NAME)
+        self._synchronous.discard(ref.name)
+
+    def keep_profile(self, drive: str) -> None:
+        """Read ``drive``'s SP/AC/DC before they are changed; :meth:`close` puts them back (review R7:
+        a scaled profile -- SP=AC=DC=1 for a motor with no share -- must not outlive the command)."""
+        if drive not in self._profiles:
+            c = self.clients[drive]
+            self._profiles[drive] = {k: int(c.get(k)) for k in PROFILE_KEYS}
+
+    def close(self, deaf: Sequence[str] = ()) -> None:
+        """Put back everything changed, drive by drive. A failure skips only that write (a drive
+        that does not answer: the rest of that drive; ``deaf``, drives that did not answer the stop:
+        all of it); a second Ctrl-C does not skip the rest of the restore, it is raised once the
+        restore is done (review R8)."""
+        interrupted: BaseException | None = None
         for r in self.refs:
+            writes: list[Callable[[], None]] = []
+            if r.name in deaf:  # each write would only wait out its timeouts before the guard's exit
+                self._profiles.pop(r.name, None)
+                self._old.pop(r.name, None)
+                self._synchronous.discard(r.name)
+            if r.name in self._synchronous:  # first: a synchronous RPDO2 would hold back the sets below
+                writes.append(functools.partial(self._put_rpdo_type, r))
+            for key, value in self._profiles.pop(r.name, {}).items():
+                writes.append(functools.partial(self.clients[r.name].set, key, 0, value))
             if r.name in self._old:
+                writes.append(functools.partial(self._put_group_id, r, self._old.pop(r.name)))
+            for write in writes:
                 try:
-                    self.session.sdo(r).download(GROUP_INDEX, 0, bytes([self._old.pop(r.name)]), name="group id")
+                    write()
+                except DriveTimeoutError:
+                    break  # it does not answer: no more waits for it (the guard's exit reports the drive)
                 except Exception:  # the next command's start writes it again; nothing was saved
                     pass
+                except BaseException as exc:  # a second Ctrl-C: finish the restore first
+                    interrupted = interrupted or exc
+        if interrupted is not None:
+            raise interrupted
+
+    def _put_group_id(self, ref: Any, value: int) -> None:
+        self.session.sdo(ref).download(GROUP_INDEX, 0, bytes([value]), name="group id")
 
     def __exit__(self, *exc: Any) -> None:
-        self.close()
+        deaf: Sequence[str] = ()
+        try:
+            if self.stop is not None:
+                deaf = self.stop() or ()  # every motor stopped before the restore (review R8)
+        finally:
+            self.close(deaf)
+
+
+def stop_motors(guard: Any, refs: Sequence[Any], settings: Any) -> Callable[[], list[str]]:
+    """The stop :class:`CommonStart` runs before its restore: the guard's stop to every motor
+    (motion.stop_drive: TC=0 in torque mode, ST or JV=0 + BG as motion.stop_method says; a motor
+    that is off gets nothing), one drive after the other, without waiting for standstill -- the
+    guard's exit then waits for it, switches off and reports. Never raises (an error of one drive
+    must not leave the next unstopped); no sign of life is asked of the guard here, since after a
+    signal its check raises at once. Returns the drives that did not answer."""
+    def stop() -> list[str]:
+        from sherpa_cli.errors import CommunicationError
+        from sherpa_cli.ops.motion import stop_drive
+
+        deaf = []
+        for r in refs:
+            try:
+                stop_drive(guard.client(r), unit_mode=guard.unit_mode(r), method=settings.stop_method,
+                           standstill_timeout=0.0, poll_interval=settings.poll_interval,
+                           standstill_velocity=settings.standstill_velocity)
+            except CommunicationError:
+                deaf.append(r.name)
+            except Exception:
+                pass
+        return deaf
+    return stop
 
 
 # --------------------------------------------------------------------------- running it
@@ -601,10 +672,13 @@ def _open_trace(stack: contextlib.ExitStack, session: Any, refs: Sequence[Any], 
 def run_move(session: Any, pair: PairConfig, request: MoveRequest, *, guard_factory: Callable[..., Any] | None = None,
              clock: Callable[[], float] = time.monotonic, sleep: Callable[[float], None] = time.sleep,
              on_event: Callable[[str], None] | None = None,
-             recorder_kw: Mapping[str, Any] | None = None) -> MoveResult:
+             recorder_kw: Mapping[str, Any] | None = None,
+             trace_factory: Callable[[tuple[str, str]], Any] | None = None) -> MoveResult:
     """Plan, then move both motors inside the motion guard with the limit watch, recording both.
 
-    ``recorder_kw`` goes to ops/record.py's Recorder (``clock``, ``sync_factory``: tests)."""
+    ``recorder_kw`` goes to ops/record.py's Recorder (``clock``, ``sync_factory``: tests);
+    ``trace_factory(drives)`` replaces the recording with anything that has ``add(t, motors)``,
+    ``samples`` and ``source`` (PX is then polled, as with --poll)."""
     from sherpa_cli.ops.joint_jog import move_to, stop_now, wait_standstill
     from sherpa_cli.ops.motion import MotionGuard, MotionSettings
 
@@ -629,14 +703,19 @@ def run_move(session: Any, pair: PairConfig, request: MoveRequest, *, guard_fact
     try:
         with guard:
             clients = {d: guard.client(by_name[d]) for d in drives}
-            start = CommonStart(session, refs, clients, method, group_id)
-            with start, contextlib.ExitStack() as recording:
-                trace = _open_trace(recording, session, refs, request, drives, recorder_kw)
-                result.trace_source = trace.source
+            start = CommonStart(session, refs, clients, method, group_id, stop=stop_motors(guard, refs, settings))
+            with contextlib.ExitStack() as stack:
+                trace = (trace_factory(drives) if trace_factory is not None else
+                         _open_trace(stack, session, refs, request, drives, recorder_kw))
+                result.trace_source = getattr(trace, "source", type(trace).__name__)
                 recorded = isinstance(trace, RecordedTrace)
+                # entered after the recorder, so it exits first: the motors stop and the RAM settings go
+                # back before the recorder puts its PDO settings back (review R8: stop before restoring)
+                stack.enter_context(start)
                 for d in drives:
                     guard.enable(by_name[d], UM_POSITION)
                 for d, c in clients.items():
+                    start.keep_profile(d)  # SP/AC/DC put back on every way out, like 0x2040 (review R7)
                     pr = p.profiles[d]
                     c.set("SP", 0, pr.sp)
                     c.set("AC", 0, pr.ac)
