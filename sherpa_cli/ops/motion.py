@@ -35,6 +35,7 @@ from sherpa_cli.errors import (CommunicationError, DriveRefusedError, ExitCode, 
                                UsageError)
 
 log = logging.getLogger(__name__)
+PROFILE_KEYS = ("SP", "AC", "DC")  # the profile a motion command may scale
 
 HEARTBEAT_BASE = 0x700
 NMT_OPERATIONAL = 0x05
@@ -159,6 +160,7 @@ class _Drive:
     um: int = 0
     switched_on: bool = False
     um_changed_from: int | None = None
+    profile_before: dict[str, int] = field(default_factory=dict)  # SP/AC/DC found at entry
     od_before: dict[tuple[int, int], int] = field(default_factory=dict)  # the dead-man objects it wrote
 
 
@@ -439,6 +441,9 @@ class MotionGuard:
             raise SafetyError(f"{client.label}: in fault, refusing to move it: {reason}",
                               hint=f"find the cause first; MO=1 clears MF: `sherpa cmd {ref.name} MO=1 MO=0 --apply`")
         self._event(f"{client.label}: MO={d.mo} UM={d.um} SR=0x{sr & 0xFFFFFFFF:08X} MF=0x{mf & 0xFFFFFFFF:08X}")
+        # motion commands scale SP/AC/DC (pair profiles, limit recovery): RAM changes put back on
+        # exit, so a later SV never flashes a jog's speed
+        d.profile_before = {key: int(client.get(key)) for key in PROFILE_KEYS}
 
     def _sdo_read(self, d: _Drive, key: tuple[int, int]) -> int:
         """An SDO upload through the session's client of the drive (SdoError names drive and object)."""
@@ -535,6 +540,7 @@ class MotionGuard:
         self._exiting = True
         self.report.reason = reason
         try:
+            self._stop_pass(entering)
             for d in list(self._drives.values()):
                 try:
                     self.report.drives.append(self._exit_drive(d, stop=not entering or d.switched_on))
@@ -544,6 +550,25 @@ class MotionGuard:
                     self.report.drives.append(r)
         finally:
             self._stop_heartbeat()
+
+    def _stop_pass(self, entering: bool) -> None:
+        """Every drive whose motor is on gets its stop at once, without waiting for replies; the
+        careful per-drive exit (standstill, MO=0, restore) follows. Otherwise a drive that does not
+        answer would hold back the stop of the drives after it by its timeouts."""
+        method = self.settings.stop_method
+        for d in list(self._drives.values()):
+            if not d.mo or (entering and not d.switched_on):
+                continue
+            try:
+                if d.um == UM_TORQUE:
+                    d.client.send_only("TC", 0, 0.0)
+                if method == "jv0":
+                    d.client.send_only("JV", 0, 0)
+                    d.client.send_only("BG")
+                else:
+                    d.client.send_only("ST")
+            except Exception as exc:  # the per-drive exit tries again and reports
+                log.debug("motion guard: first stop pass to %s: %s", d.ref.name, exc)
 
     def _step(self, extra: float = 0.0) -> None:
         """A sign of life before one exit step, bounded by that step (not by the whole exit)."""
@@ -606,9 +631,23 @@ class MotionGuard:
             else:
                 r.kept.append(f"UM={d.um} (motor not confirmed off)")
                 r.problems.append(f"UM={d.um_changed_from} not restored: the motor is not confirmed off")
+        self._restore_profile(d, r)
         self._restore_dead_man(d, r, stop_failed)
         self._event(r.line())
         return r
+
+    def _restore_profile(self, d: _Drive, r: DriveStop) -> None:
+        if self.keep or not d.profile_before or r.stopped_by == "not stopped":
+            return
+        for key, before in d.profile_before.items():
+            try:
+                self._step()
+                if int(d.client.get(key)) != before:
+                    self._step()
+                    d.client.set(key, 0, before)
+                    r.restored.append(f"{key}={before}")
+            except Exception as exc:
+                r.problems.append(f"{key}={before} not restored: {_why(exc)}")
 
     def _restore_dead_man(self, d: _Drive, r: DriveStop, stop_failed: bool) -> None:
         # the consumer entry first: once it is back, the heartbeat may stop without a trip
