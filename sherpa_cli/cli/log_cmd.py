@@ -348,6 +348,18 @@ def _render_record(st, output, counts, expected, rows) -> None:
     st.out.line(f"wrote {output} ({rows} rows)")
 
 
+def _stepped_sim(st):
+    """With --sim: the in-process arm on stepped time (sim/stepped.py), so a step's figures are the
+    simulated drive's and the same on every run and machine; else (None, None)."""
+    if not st.sim:
+        return None, None
+    from sherpa_cli.sim.arm import SimArm
+    from sherpa_cli.sim.stepped import SteppedTime
+
+    stepped = SteppedTime()
+    return stepped, lambda cfg, channels: SimArm.for_session(cfg, channels, clock=stepped.clock)
+
+
 @app.command("step")
 def step(
     ctx: typer.Context,
@@ -405,8 +417,14 @@ def step(
     target = resolve_jog_target(cfg, joint)
     settings = MotionSettings.from_config(cfg, [target.ref.bus])
     output.mkdir(parents=True, exist_ok=True)
-    with st.session(buses=[target.ref.bus]) as session:
-        result = run_step(session, target, mode, value, duration=duration, rate=rate, settings=settings)
+    stepped, sim_factory = _stepped_sim(st)
+    with st.session(buses=[target.ref.bus], sim_factory=sim_factory) as session:
+        timebase = None
+        if stepped is not None and session.sim is not None and session.sim.clock is stepped.clock:
+            session.client_overrides.update(stepped.client_overrides(cfg.protocol.reply_timeout, cfg.protocol.retries))
+            timebase = stepped
+        result = run_step(session, target, mode, value, duration=duration, rate=rate, settings=settings,
+                          timebase=timebase)
     write_csv(result.recording, output / "recording.csv")
     (output / "metrics.json").write_text(json.dumps(result.as_json(), indent=2) + "\n", encoding="utf-8")
     files = {"csv": str(output / "recording.csv"), "metrics": str(output / "metrics.json")}

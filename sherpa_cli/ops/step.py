@@ -16,7 +16,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass, field
-from typing import Any, Callable
+from typing import Any, Callable, Protocol
 
 from sherpa_cli.errors import UsageError
 from sherpa_cli.joints.units import counts_to_rad, rad_per_s_to_counts_per_s, rad_to_counts
@@ -59,9 +59,25 @@ class StepResult:
                 "expected": self.expected, "metrics": self.metrics.as_json()}
 
 
+class StepTime(Protocol):
+    """Where a step's time comes from when it is not wall time: the CLI injects the simulated
+    arm's stepped time with --sim (sim/stepped.py), so the figures do not depend on the host."""
+
+    def now(self) -> float: ...
+
+    def sleep(self, seconds: float) -> None: ...
+
+    def sync_factory(self, name: str, bus: Any, period: float) -> Any: ...
+
+    def follow(self, answered: Callable[[int], bool]) -> None: ...
+
+
 def run_step(session: Any, target: JogTarget, mode: str, value: float, *, duration: float, rate: float,
              settings: MotionSettings, sleep: Callable[[float], None] = time.sleep,
-             on_event: Callable[[str], None] | None = None, recorder_kw: dict | None = None) -> StepResult:
+             on_event: Callable[[str], None] | None = None, recorder_kw: dict | None = None,
+             timebase: StepTime | None = None) -> StepResult:
+    """``timebase``: the step's clock, waits and SYNC source (the recorder's, the motion guard's
+    and the waits here); without it wall time, ``sleep`` and ``recorder_kw``."""
     if target.joint is None:
         raise UsageError(f"{target.name}: log step needs a plain joint (its cpr converts rad to counts)")
     req = JogRequest(mode=mode, by=value if mode == "position" else None,
@@ -73,13 +89,20 @@ def run_step(session: Any, target: JogTarget, mode: str, value: float, *, durati
     ref, joint = target.ref, target.joint
     current = all(b.fits for b in bus_budget(session.cfg, [ref], rate, current=True))
     signal = SIGNAL[mode]
-    guard = MotionGuard(session, [ref], settings=settings, sleep=sleep, on_event=on_event)
+    clock: Callable[[], float] = time.monotonic
+    rec_kw = dict(recorder_kw or {})
+    if timebase is not None:
+        clock, sleep = timebase.now, timebase.sleep
+        rec_kw.update(clock=timebase.now, sync_factory=timebase.sync_factory)
+    guard = MotionGuard(session, [ref], settings=settings, clock=clock, sleep=sleep, on_event=on_event)
     state: dict[str, Any] = {}
     with guard:
         c = guard.client(ref)
         start_counts = int(c.get("PX"))
-        with Recorder(session, [ref], rate, current=current, **(recorder_kw or {})) as rec:
-            _wait(guard, sleep, PRE_S)
+        with Recorder(session, [ref], rate, current=current, **rec_kw) as rec:
+            if timebase is not None:
+                timebase.follow(rec.answered)
+            _wait(guard, clock, sleep, PRE_S)
             t_cmd = rec.now()
             if mode == "position":
                 goal = start_counts + rad_to_counts(value, joint.cpr)
@@ -120,12 +143,12 @@ def run_step(session: Any, target: JogTarget, mode: str, value: float, *, durati
                       metrics=metrics, recording=recording, samples=samples, expected=expected, stop=guard.report)
 
 
-def _wait(guard: MotionGuard, sleep: Callable[[float], None], seconds: float) -> None:
-    end = time.monotonic() + seconds
+def _wait(guard: MotionGuard, clock: Callable[[], float], sleep: Callable[[float], None], seconds: float) -> None:
+    end = clock() + seconds
     while True:
         guard.check()
-        rest = end - time.monotonic()
-        if rest <= 0:
+        rest = end - clock()
+        if rest <= 1e-9:  # a stepped clock lands on sums of periods: float dust is no time left
             return
         sleep(min(rest, CHECK_EVERY_S))
 
