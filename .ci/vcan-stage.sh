@@ -11,6 +11,7 @@
 #        SHERPA_VCAN_TIMEOUT  wall-clock limit of the guest run in seconds (default 1500: 42 realbus tests,
 #                             motion ones with subprocesses, in a 15-20x slower TCG guest)
 #        SHERPA_VCAN_CPUS     guest vCPUs (default 2: the simulator and the tests each get one)
+#        SHERPA_VCAN_FULL=1   also run test_commission_whole_arm (about 9 minutes alone in the guest)
 set -euo pipefail
 cd "$(dirname "$0")/.."
 root=$PWD
@@ -36,9 +37,11 @@ if [ ! -x "$vm" ]; then
   echo "CI: set SHERPA_VCAN_VM to run-in-vcan-vm.sh, or SHERPA_SKIP_VCAN=1 to skip this stage on purpose" >&2
   exit 1
 fi
-# test_commission_whole_arm (apply, save, flash proof by NMT reset of 14 drives) stalled in the guest
-# twice this stop while it passes in the remote stage in 6 s: deselected here until that is understood
-# (docs/testing.md); every motion test still runs on vcan.
+# test_commission_whole_arm (apply, save, flash proof by NMT reset of 14 drives) is slow in the 15-20x
+# slower guest (about 9 minutes alone; it passes in the remote stage in 6 s), so it runs here only with
+# SHERPA_VCAN_FULL=1 (docs/testing.md); every motion test runs on vcan.
+deselect=(--deselect tests/test_commission.py::test_commission_whole_arm)
+if [ "${SHERPA_VCAN_FULL:-}" = 1 ]; then deselect=(); fi
 # the guest sees this machine's files read-only, so the same interpreter and virtualenv work there
 python=$(command -v python)
 
@@ -46,7 +49,7 @@ echo "CI: realbus tests on $interfaces in a QEMU guest ($cpus vCPUs, limit ${lim
 set +e
 "$vm" -c "$cpus" -i "$interfaces" -t "$limit" -- \
   env SHERPA_TEST_BUS="socketcan:$interfaces" "$python" -m pytest -m realbus --durations=5 \
-  --deselect tests/test_commission.py::test_commission_whole_arm "$@"
+  "${deselect[@]}" "$@"
 rc=$?
 set -e
 case "$rc" in

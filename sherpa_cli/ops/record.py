@@ -236,7 +236,7 @@ class Recorder:
 
         old_cob, old_type, old_count = read(comm, 1, 4), read(comm, 2, 1), read(mapping, 0, 1)
         old_entries = [read(mapping, sub, 4) for sub in range(1, len(entries) + 1)]
-        # restore in reverse: entries, count, transmission type, COB-ID last
+        # restored in reverse: PDO off, count 0, entries, count, transmission type, COB-ID last
         d.saved.append((comm, 1, 4, old_cob))
         write(comm, 1, 4, old_cob | 0x80000000)  # PDO off while it is changed (CiA 301)
         d.saved.append((comm, 2, 1, old_type))
@@ -244,6 +244,7 @@ class Recorder:
         for sub, value in enumerate(old_entries, 1):
             d.saved.append((mapping, sub, 4, value))
         d.saved.append((mapping, 0, 1, 0))  # the count goes to 0 before the entries go back
+        d.saved.append((comm, 1, 4, old_cob | 0x80000000))  # first of all: PDO off again (CiA 301)
         write(mapping, 0, 1, 0)
         for sub, entry in enumerate(entries, 1):
             write(mapping, sub, 4, entry)

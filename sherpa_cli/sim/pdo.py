@@ -20,6 +20,7 @@ SYNC_ID = 0x080
 MAPPABLE = {(0x6064, 0, 32), (0x6069, 0, 32), (0x606C, 0, 32), (0x6078, 0, 16)}
 ABORT_NOT_MAPPABLE = 0x06040041
 ABORT_PDO_LENGTH = 0x06040042
+ABORT_DEVICE_STATE = 0x08000022  # data cannot be transferred in the present device state
 TPDO_BASES = {0: 0x180, 2: 0x380, 3: 0x480}  # TPDO number - 1 -> function code (TPDO2 is the interpreter)
 
 
@@ -69,6 +70,10 @@ class TpdoTable:
             else:
                 raise ODError(f"object 0x{index:04X}:{sub} is read-only", ABORT_NO_SUBINDEX)
             return
+        if not self.cob[n] & 0x80000000:
+            # CiA 301: a mapping changes only while its PDO is invalid (COB-ID bit 31 set)
+            raise ODError(f"0x{index:04X}:{sub}: the PDO is valid; set bit 31 of 0x{0x1800 + n:04X}:1 first",
+                          ABORT_DEVICE_STATE)
         if sub == 0:
             if not 0 <= value <= 8:
                 raise ODError(f"0x{index:04X}:0: {value} outside 0..8", ABORT_RANGE)
