@@ -363,7 +363,7 @@ def _stepped_sim(st):
 @app.command("step")
 def step(
     ctx: typer.Context,
-    joint: str = typer.Argument(..., metavar="JOINT", help="A plain joint (or the drive of one)."),
+    joint: str = typer.Argument(..., metavar="JOINT", help="A plain joint (or the drive of one); not a Σ/Δ joint."),
     position: Optional[float] = typer.Option(None, "--position", metavar="X",
                                              help="A position step of X rad from where the joint stands."),
     velocity: Optional[float] = typer.Option(None, "--velocity", metavar="V", help="A velocity step to V rad/s."),
@@ -392,11 +392,10 @@ def step(
     """
     import json
 
-    from sherpa_cli.ops.jog import resolve_jog_target
     from sherpa_cli.ops.motion import MotionSettings
     from sherpa_cli.ops.plot import have_matplotlib, plot_recording
     from sherpa_cli.ops.recording import write_csv
-    from sherpa_cli.ops.step import run_step
+    from sherpa_cli.ops.step import resolve_step_target, run_step
 
     st = state(ctx)
     given = [(m, v) for m, v in (("position", position), ("velocity", velocity), ("torque", torque)) if v is not None]
@@ -414,7 +413,7 @@ def step(
     if output.exists() and not output.is_dir():
         raise UsageError(f"-o {output}: exists and is not a directory")
     cfg = st.load_config()
-    target = resolve_jog_target(cfg, joint)
+    target = resolve_step_target(cfg, joint)
     settings = MotionSettings.from_config(cfg, [target.ref.bus])
     output.mkdir(parents=True, exist_ok=True)
     stepped, sim_factory = _stepped_sim(st)

@@ -20,7 +20,7 @@ from typing import Any, Callable, Protocol
 
 from sherpa_cli.errors import UsageError
 from sherpa_cli.joints.units import counts_to_rad, rad_per_s_to_counts_per_s, rad_to_counts
-from sherpa_cli.ops.jog import JogRequest, JogTarget, check_request
+from sherpa_cli.ops.jog import JogRequest, JogTarget, check_request, resolve_jog_target
 from sherpa_cli.ops.motion import UM_POSITION, UM_TORQUE, GuardReport, MotionGuard, MotionSettings
 from sherpa_cli.ops.record import Recorder, bus_budget
 from sherpa_cli.ops.recording import Recording
@@ -57,6 +57,22 @@ class StepResult:
                 "signal": self.signal, "target": round(self.target, 6), "command": self.command,
                 "switch_s": round(self.switch_s, 4), "ended_by": self.ended_by, "samples": self.samples,
                 "expected": self.expected, "metrics": self.metrics.as_json()}
+
+
+def resolve_step_target(cfg: Any, text: str) -> JogTarget:
+    """The joint to step: a plain joint or its drive. A differential pair (its Σ/Δ joints or its
+    motors) is refused: a Σ or Δ step moves both motors at once, which is `diffdrive move`'s."""
+    from sherpa_cli.ops.targets import resolve_one
+
+    t = resolve_one(cfg, text)
+    if t.pair is not None:
+        p = t.pair
+        what = "is the differential pair" if text == p.name else f"belongs to the differential pair '{p.name}'"
+        raise UsageError(f"{text}: log step moves the one motor of a plain joint; '{text}' {what}, whose Σ/Δ "
+                         f"steps move both motors ({p.drive_a}, {p.drive_b})",
+                         hint=f"record the pair (sherpa log record {p.sigma} {p.delta} --for S -o pair.csv) while "
+                         "`sherpa diffdrive move` moves it")
+    return resolve_jog_target(cfg, text)
 
 
 class StepTime(Protocol):
