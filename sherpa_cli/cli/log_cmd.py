@@ -275,7 +275,9 @@ def record(
     sent; a rate the bus cannot carry is refused, naming the highest rate it can.
 
     The PDO changes are RAM only: the old settings are read first and written back on every exit
-    path (end, error, Ctrl-C); nothing is ever saved (no SV).
+    path (end, error, Ctrl-C, SIGTERM, SIGHUP: exit 130); nothing is ever saved (no SV). After a
+    kill -9 they stay in the drives' RAM until the next power cycle or NMT reset; SYNC stops with
+    the process, so the drives send nothing meanwhile.
 
     \b
     Examples:
@@ -324,16 +326,34 @@ def record(
     write_csv(rec, output)
     _render_record(st, output, counts, expected, len(rec.times))
     if interrupted:
-        st.out.warn("interrupted: the samples up to Ctrl-C are written; the drives' PDO settings are restored")
+        st.out.warn("interrupted: the samples up to the interruption are written; the drives' PDO settings "
+                    "are restored")
         raise typer.Exit(130)
 
 
+class _Stopped(Exception):
+    """SIGTERM or SIGHUP during a recording: ends it like Ctrl-C, so the PDO settings go back."""
+
+
 def _wait_for(duration: float) -> bool:
-    """Sleep while sampling; True when Ctrl-C ended it early."""
+    """Sleep while sampling; True when Ctrl-C, SIGTERM or SIGHUP ended it early."""
+    import signal
+
+    def stop(signum, frame):
+        raise _Stopped(signal.Signals(signum).name)
+
+    old = {}
+    if threading.current_thread() is threading.main_thread():
+        for sig in (signal.SIGTERM, getattr(signal, "SIGHUP", None)):
+            if sig is not None:
+                old[sig] = signal.signal(sig, stop)
     try:
         sleep(duration)
-    except KeyboardInterrupt:
+    except (KeyboardInterrupt, _Stopped):
         return True
+    finally:
+        for sig, handler in old.items():
+            signal.signal(sig, handler)
     return False
 
 
