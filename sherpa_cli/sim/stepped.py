@@ -32,7 +32,9 @@ from sherpa_cli.sim.clock import ManualClock
 
 SYNC_ID = 0x080
 ANSWER_TIMEOUT_S = 5.0  # wall time to wait for the TPDOs of one SYNC (a loaded machine)
-STEPPED_REPLY_S = 0.1  # wall time a client waits for one reply from the stepped in-process arm
+STEPPED_REPLY_S = 0.3  # wall time a client waits for one reply from the stepped in-process arm (a deaf
+# poll costs this much wall time; an answerable one later than this on a loaded machine would cost
+# one more charged wait, so it is generous)
 STEPPED_RETRIES = 4  # at least this many resends (a late reply on a loaded machine; sim time stands still)
 _EPS = 1e-9
 
