@@ -28,6 +28,7 @@ import threading
 import time
 from typing import Any, Callable
 
+from sherpa_cli.errors import CommunicationError
 from sherpa_cli.sim.clock import ManualClock
 
 SYNC_ID = 0x080
@@ -122,7 +123,9 @@ class SteppedTime:
             deadline = time.monotonic() + self.answer_timeout
             while not self._answered(self._syncs):
                 if time.monotonic() > deadline:
-                    raise TimeoutError(f"simulated SYNC {self._syncs}: no answer within {self.answer_timeout:g} s")
+                    raise CommunicationError(f"simulated SYNC {self._syncs}: not every TPDO it asks for came within "
+                                             f"{self.answer_timeout:g} s", hint="a simulated drive left Operational "
+                                             "or died during the recording")
                 time.sleep(0.0002)
         return ahead
 
