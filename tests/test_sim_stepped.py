@@ -61,10 +61,16 @@ def test_an_unanswered_sync_is_a_communication_error():
         st.sleep(0.01)
 
 
-def test_client_waits_are_charged_a_reply_timeout():
+def test_a_client_wait_is_charged_a_reply_timeout_per_unheard_request():
     st = SteppedTime(pace=False)
-    options = st.client_overrides(0.1, retries=1)
+    lost = [3]  # before the client existed: not its waits
+    options = st.client_overrides(0.1, retries=1, unheard=lambda: lost[0])
     assert options["retries"] >= 4 and options["timeout"] > 0
     options["sleep"](0.01)
-    assert st.now() == pytest.approx(0.11)
+    assert st.now() == pytest.approx(0.01)
+    lost[0] = 5  # two requests went unheard (the drive settling after MO=1)
+    options["sleep"](0.01)
+    assert st.now() == pytest.approx(0.01 + 0.2 + 0.01)
+    options["sleep"](0.01)
+    assert st.now() == pytest.approx(0.23)
     assert options["clock"]() == st.now()

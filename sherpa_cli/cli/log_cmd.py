@@ -440,7 +440,10 @@ def step(
     with st.session(buses=[target.ref.bus], sim_factory=sim_factory) as session:
         timebase = None
         if stepped is not None and session.sim is not None and session.sim.clock is stepped.clock:
-            session.client_overrides.update(stepped.client_overrides(cfg.protocol.reply_timeout, cfg.protocol.retries))
+            arm = session.sim
+            unheard = lambda: sum(d.unheard for d in arm.drives.values())  # noqa: E731
+            session.client_overrides.update(stepped.client_overrides(cfg.protocol.reply_timeout, cfg.protocol.retries,
+                                                                     unheard))
             timebase = stepped
         result = run_step(session, target, mode, value, duration=duration, rate=rate, settings=settings,
                           timebase=timebase)

@@ -116,6 +116,7 @@ class SimDrive:
         self._od_live = dict(od_live or {})  # extra live objects: another device type's profile (sim/arm.py)
         self.tpdo = TpdoTable(node)
         self.syncs = 0  # SYNC frames this drive answered (Operational)
+        self.unheard = 0  # interpreter requests lost to the MO settle window (a host waits a reply timeout for each)
         self._boot()
 
     # -- public API --------------------------------------------------------------------------
@@ -476,7 +477,10 @@ class SimDrive:
 
     def _interpreter_frame(self, data: bytes) -> None:
         # PDOs only live in Operational; during the MO settle window the interpreter is deaf.
-        if self._nmt_state != OPERATIONAL or self._t + TIME_EPS < self._settle_until:
+        if self._nmt_state != OPERATIONAL:
+            return
+        if self._t + TIME_EPS < self._settle_until:
+            self.unheard += 1
             return
         reply = interpreter.handle(self, data)
         if reply is None:

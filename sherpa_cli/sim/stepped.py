@@ -15,11 +15,12 @@ Two bounds keep the rest of the protocol honest:
 - while recording, the clock stops only on SYNC instants (a wait is rounded up to whole
   periods), so the simulated drives are always stepped to the same instants.
 
-The drive clients (:meth:`client_overrides`): a drive that is deaf in its MO settle window lets
-an MO poll go unanswered, which on a real bus costs one reply timeout (``protocol.reply_timeout``)
-before the client waits its poll interval; the clients' waits are charged that much simulated
-time, while their real wait for a reply that will not come is short (``STEPPED_REPLY_S``; the
-in-process simulator answers within milliseconds, and retries cover a loaded machine).
+The drive clients (:meth:`client_overrides`) wait on this clock too. A request that a drive in
+its MO settle window does not hear costs the host one reply timeout on a real bus
+(``protocol.reply_timeout``); the simulated drives count such requests (``SimDrive.unheard``)
+and the clients' next wait is charged that much simulated time per request, while their real
+wait for a reply that will not come stays short (``STEPPED_REPLY_S``: the in-process simulator
+answers within milliseconds; retries cover a loaded machine).
 """
 
 from __future__ import annotations
@@ -58,12 +59,20 @@ class SteppedTime:
     def now(self) -> float:
         return self.clock.now()
 
-    def client_overrides(self, reply_timeout: float, retries: int) -> dict[str, Any]:
-        """DriveClient options (ArmSession.client_overrides) for clients of the stepped arm:
-        ``reply_timeout`` is the real bus's (charged per client wait, see the module docstring)."""
-        charge = max(0.0, reply_timeout)
-        return {"clock": self.now, "sleep": lambda seconds: self.sleep(seconds + charge),
-                "timeout": STEPPED_REPLY_S, "retries": max(retries, STEPPED_RETRIES)}
+    def client_overrides(self, reply_timeout: float, retries: int,
+                         unheard: Callable[[], int] = lambda: 0) -> dict[str, Any]:
+        """DriveClient options (ArmSession.client_overrides) for clients of the stepped arm.
+        ``reply_timeout``: the real bus's; ``unheard()``: requests the simulated drives did not
+        hear so far (SimArm drives' ``unheard``), each charged one ``reply_timeout``."""
+        charged = [unheard()]
+
+        def sleep(seconds: float) -> None:
+            lost = unheard()
+            extra, charged[0] = (lost - charged[0]) * max(0.0, reply_timeout), lost
+            self.sleep(seconds + extra)
+
+        return {"clock": self.now, "sleep": sleep, "timeout": STEPPED_REPLY_S,
+                "retries": max(retries, STEPPED_RETRIES)}
 
     # -- the SYNC source ------------------------------------------------------------------------
     def sync_factory(self, name: str, bus: Any, period: float) -> "_Source":
