@@ -14,6 +14,7 @@ from __future__ import annotations
 import json
 
 import pytest
+from conftest import TEST_PROTOCOL_WINDOWS
 
 from sherpa_cli.sim.arm import SimArm
 
@@ -57,7 +58,9 @@ def test_log_step_golden(cli, golden, monkeypatch, tmp_path, name, args, before)
     if name == "log-step-position-no-switch":
         assert metrics["switch_s"] == 0 and metrics["metrics"]["dead_time"] < 0.05
     elif name == "log-step-position-switch":
-        assert metrics["switch_s"] >= 0.1  # MO=0, UM 2 -> 5, MO=1: two settle windows' worth of polls
+        # MO=0, UM 2 -> 5, MO=1: at least the drive's two MO settle windows (the cli fixture's)
+        assert metrics["switch_s"] >= 2 * TEST_PROTOCOL_WINDOWS["mo_settle"] - 1e-9
+        assert metrics["metrics"]["dead_time"] > metrics["switch_s"]
 
 
 def test_the_same_step_gives_the_same_recording_twice(cli, tmp_path):
