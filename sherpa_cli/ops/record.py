@@ -216,6 +216,15 @@ class Recorder:
         with self._lock:
             return sum(len(d.pos) + len(d.cur) for d in self._drives.values())
 
+    def answered(self, syncs: int) -> bool:
+        """Whether every TPDO the first ``syncs`` SYNCs ask for has arrived (position of every
+        drive for each, current for every 2nd): a SYNC source in lockstep with a simulated clock
+        waits for this before it moves the clock on."""
+        with self._lock:
+            return all(len(d.pos) >= syncs and (not self.current
+                                                or len(d.cur) >= CURRENT_DIVIDER * (syncs // CURRENT_DIVIDER))
+                       for d in self._drives.values())
+
     # -- PDO set-up (RAM only) ------------------------------------------------------------------
     def _configure(self, d: _Drive) -> None:
         client = self.session.client(d.ref)
@@ -291,15 +300,6 @@ class Recorder:
         """Samples received per drive so far."""
         with self._lock:
             return {d.ref.name: len(d.pos) for d in self._drives.values()}
-
-    def answered(self, syncs: int) -> bool:
-        """Whether every TPDO the first ``syncs`` SYNCs ask for has arrived (position of every
-        drive for each, current for every 2nd): a SYNC source in lockstep with a simulated clock
-        waits for this before it moves the clock on."""
-        with self._lock:
-            return all(len(d.pos) >= syncs and (not self.current
-                                                or len(d.cur) >= CURRENT_DIVIDER * (syncs // CURRENT_DIVIDER))
-                       for d in self._drives.values())
 
     def expected(self) -> int:
         if self.t0 is None:
