@@ -77,3 +77,14 @@ def test_config_check_names_the_key(cli, tmp_path):
     result = cli("--config", str(path), "config", "check")
     assert result.exit_code == 2 and "Traceback" not in result.stderr
     assert f"{path}:15: sim.drives.elbow.servo_damping: servo_damping 0.0 is out of range" in result.stderr
+
+
+@pytest.mark.parametrize("key", ["lag", "start_skew"])
+def test_the_other_simulated_times_are_bounded_too(key):
+    """`lag` and `start_skew` (the pair's mismatch): a negative or endless time was taken by `config
+    check` and then refused by the simulator with a traceback."""
+    text = BASE.replace("      supply_current_limit: 1\n", f"      supply_current_limit: 1\n      {key}: -0.5\n")
+    with pytest.raises(ConfigError) as exc:
+        load_config_text(text, "cfg/servo.yaml")
+    assert str(exc.value).startswith(f"cfg/servo.yaml:18: sim.drives.elbow.{key}: {key} -0.5 is out of range")
+    load_config_text(text.replace("-0.5", "0.01"), "ok.yaml")

@@ -619,6 +619,8 @@ def _check_bounds(cfg: ArmConfig, locs: Locs, r: _Report) -> None:
         positive(sim_drive.servo_damping, SERVO_DAMPING_MAX, at_sim("servo_damping"), "servo_damping")
         for key in ("servo_current_limit", "supply_current_limit"):
             positive(getattr(sim_drive, key), SIM_CURRENT_MAX, at_sim(key), key, " A")
+        for key in ("start_skew", "lag"):  # the simulator refuses a negative time (SimSettings)
+            within(getattr(sim_drive, key), 0.0, WAIT_MAX, at_sim(key), key, " s")
         if _bad_number(sim_drive.drop_probability):
             r.error(at_sim("drop_probability"), f"drop_probability {sim_drive.drop_probability} is not a finite number")
 
