@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import threading
 import time
 
@@ -81,7 +82,9 @@ def test_paced_network_keeps_the_send_gap():
 
 def test_a_joint_stops_at_its_hard_stop(tmp_path, monkeypatch):
     monkeypatch.setenv("XDG_STATE_HOME", str(tmp_path))
-    cfg = load_config("configs/appendix-c/example1.yaml")
+    # the joint powers up where PX reads 0 (else the simulator puts it away from its switch), so PX
+    # reads the hard stop's position
+    cfg = dataclasses.replace(load_config("configs/appendix-c/example1.yaml"), sim_power_up={"joint1": 0})
     with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as session:
         client = session.client(resolve_target(cfg, "drive1"))
         client.nmt_start()

@@ -152,6 +152,52 @@ def test_absolute_encoder_offset_is_added(tmp_path):
         assert u.encoder == {"twist_drive": 271} and px(s, "twist_drive") == 321
 
 
+# -- the simulator's default power-up: away from the calibration position, PX = 0 -----------------------
+
+def test_default_power_up_is_away_from_the_switch_and_tells_a_wrong_home_from_a_right_one(tmp_path):
+    """Without `sim: power_up:` every joint without absolute feedback powers up a quarter of the way
+    from its calibration switch toward the far edge of its normal range (a pair through Σ/Δ), while
+    PX reads 0. A wrong home that only zeroes PX where the joint stands is then off by that much;
+    `home` brings every kind to within a count."""
+    from sherpa_cli.sim.arm import default_power_up, power_up_positions
+
+    cfg = variant(tmp_path, ("  power_up: {yaw: -150, stiff: 120, pitch: 200, roll: -100, twist: 321, elbow: -444}\n", ""))
+    assert not cfg.sim_power_up
+    # yaw: home switch at 0, search upward from the normal range's low edge -380: 0 + (-380 - 0) / 4
+    # stiff: low end switch at -300, search downward from the high edge 280: -300 + 580 / 4
+    # pitch, roll: low end switches at -500, from the high edge 470: -500 + 970 / 4 = -257.5 -> -257
+    assert {j: default_power_up(cfg.joints[j]) for j in ("yaw", "stiff", "pitch", "roll", "twist", "elbow")} == {
+        "yaw": -95, "stiff": -155, "pitch": -257, "roll": -257, "twist": 0, "elbow": 0}
+    start = power_up_positions(cfg)
+    assert (start["pair_a"], start["pair_b"]) == (-257, 0)  # Σ = a + b = -257, Δ = a - b = -257
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
+        assert {d: px(s, d) for d in ("yaw_drive", "stiff_drive", "pair_a", "pair_b")} == dict.fromkeys(
+            ("yaw_drive", "stiff_drive", "pair_a", "pair_b"), 0)
+        assert physical(s, "yaw_drive") == -95 and physical(s, "stiff_drive") == -155
+        # a wrong home: PX := the calibration position where the joint stands, marked calibrated --
+        # the counter is then off by the power-up distance, which a test of PX against the joint sees
+        from sherpa_cli.ops import calibration
+        from sherpa_cli.ops.targets import drive_ref
+
+        c = s.client(drive_ref(cfg, "yaw_drive"))
+        c.nmt_start()
+        for key, value in ((3, cfg.homing.event_immediate), (4, cfg.homing.after_nothing),
+                           (5, cfg.homing.px_absolute), (2, 0), (1, 1)):
+            c.set("HM", key, value)
+        calibration.mark_calibrated(cfg, c)
+        assert px(s, "yaw_drive") == 0 and abs(px(s, "yaw_drive") - physical(s, "yaw_drive")) == 95
+        # the right home of every kind: the counters mean the joints to within a count
+        report = home.run_home(s, home.plan_home(cfg, ["yaw", "stiff", "diff"]))
+        assert [u.kind for u in report.units] == ["home_switch", "end_switches", "pair"]
+        assert abs(report.units[0].repeat_difference or 0) <= 1
+        for d in ("yaw_drive", "stiff_drive"):
+            assert abs(px(s, d) - physical(s, d)) <= 1, d
+        a, b = physical(s, "pair_a"), physical(s, "pair_b")
+        pa, pb = px(s, "pair_a"), px(s, "pair_b")
+        assert abs((pa + pb) - (a + b)) <= 1 and abs((pa - pb) - (a - b)) <= 1
+        assert report.units[2].set_to == {"pitch": -500, "roll": -500}
+
+
 # -- refusals and failures --------------------------------------------------------------------------
 
 def test_a_switch_that_never_triggers_stops_at_the_bound(tmp_path):
@@ -179,6 +225,19 @@ def test_homing_is_refused_while_the_drive_is_in_fault(tmp_path):
             assert not [f for _, i, f in d.received if 0x300 < i < 0x380 and bytes(f)[:2] in (b"BG", b"PR")]
 
 
+def test_an_encoder_joint_is_refused_in_fault_before_the_encoder_is_read_or_px_set(tmp_path):
+    cfg = variant(tmp_path, ("buses:", "  drives: {elbow_drive: {limit_trip_at: 0.0}}\nbuses:"))
+    plan, ctx = homed(cfg, ["elbow"])
+    with ctx as s:
+        with pytest.raises(SafetyError, match="elbow_drive.*refusing to home: the drive is in fault"):
+            home.run_home(s, plan)
+        with s.sim.lock:
+            frames = [bytes(f) for _, i, f in s.sim.drives["elbow_drive"].received if 0x300 < i < 0x380]
+            encoder_frames = [i for _, i, _ in s.sim.extras["elbow_encoder"][1].received]
+        assert not [f for f in frames if len(f) == 8 and not f[3] & 0x40 and f[:2] == b"HM"]  # no HM[] write
+        assert not [i for i in encoder_frames if 0x600 < i < 0x680]  # the encoder was not even asked
+
+
 def test_jog_refuses_an_uncalibrated_position_move_and_accepts_it_after_home():
     from sherpa_cli.ops.jog import JogRequest, resolve_jog_target, run_jog
     from sherpa_cli.ops.motion import MotionSettings
@@ -192,6 +251,22 @@ def test_jog_refuses_an_uncalibrated_position_move_and_accepts_it_after_home():
         home.run_home(s, home.plan_home(cfg, ["yaw"]))
         result = run_jog(s, target, req, settings=MotionSettings.from_config(cfg))
         assert result.end_counts == 100 and abs(physical(s, "yaw_drive") - 100) <= 1
+
+
+def test_a_pair_jog_is_refused_uncalibrated_and_accepted_after_homing_the_pair():
+    from sherpa_cli.ops import joint_jog
+
+    cfg = load_config(ARM)
+    axis = joint_jog.resolve_axis(cfg, "pitch")
+    req = joint_jog.JogRequest(mode="position", to="-400counts")
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
+        with pytest.raises(SafetyError, match="not homed since power-up"):
+            joint_jog.run(s, axis, req)
+        home.run_home(s, home.plan_home(cfg, ["diff"]))
+        r = joint_jog.run(s, axis, req)
+        assert r.ok and abs(r.end + 400) <= 1
+        a, b = physical(s, "pair_a"), physical(s, "pair_b")
+        assert abs((a + b) + 400) <= 2  # Σ where it was sent, in the real joint (not only in PX)
 
 
 # -- the wiring check -------------------------------------------------------------------------------

@@ -67,3 +67,30 @@ def test_interactive_view_through_the_command_leaves_every_motor_off(cli, monkey
     assert abs(seen["j2"] - seen["start"] - 50) <= 1
     assert seen["on"] == []
     assert "stop: elbow (can0:6): stopped by ST; motor off" in result.stdout
+
+
+def test_sigterm_during_the_view_ends_with_the_interrupted_exit_code(cli, monkeypatch):
+    """Review note: a SIGTERM while the view runs may be caught inside textual (the app ends with
+    its own return code, no error of ours): the command still exits 130, after the guard's stop."""
+    import os
+    import signal
+
+    from sherpa_cli.cli.jog_view import JogView
+
+    original_run = JogView.run
+
+    async def auto(pilot):
+        await pilot.pause(0.2)
+        # delivered while one of textual's own handlers runs: textual catches what the guard raises
+        pilot.app.call_later(os.kill, os.getpid(), signal.SIGTERM)
+        await pilot.pause(0.5)
+
+    def headless(self, *a, **kw):
+        return original_run(self, headless=True, auto_pilot=auto, size=(120, 30))
+
+    monkeypatch.setattr(JogView, "run", headless)
+    monkeypatch.setattr("sherpa_cli.cli.jog_live_cmd.have_terminal", lambda: True)
+    result = cli(*F, "jog", "--interactive", "j2", "--apply")
+    assert result.exit_code == 130, result.transcript()
+    assert "SIGTERM" in result.stderr
+    assert "stop: elbow (can0:6):" in result.stdout + result.stderr

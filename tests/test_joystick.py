@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import dataclasses
 import os
+import re
 import sys
 import time
 
@@ -170,3 +171,138 @@ def test_the_joystick_section_survives_config_convert(cfg, tmp_path):
     p = tmp_path / "converted.yaml"
     p.write_text(dump_native(cfg))
     assert load_config(p).joystick == cfg.joystick
+
+
+def _held_then(cfg, s, duration, **scripted):
+    """j1 driven backwards with the dead-man held from 0 s; ``scripted``: what else the device does."""
+    script = [(0.0, "BTN_TRIGGER", 1.0), (0.0, "ABS_Z", -1.0)] + scripted.pop("script", [])
+    jcfg = dataclasses.replace(cfg.joystick, axes=cfg.joystick.axes[:1])
+    with LiveJog(s, resolve_axes(cfg, ["j1"]), keepalive=5.0) as live:  # only the dead-man can stop in time
+        src = ScriptedSource(script, time.monotonic, **scripted)
+        run = run_joystick(live, cfg, jcfg, src, duration=duration)
+        running = dict(live.running)
+        a = px(s, "yaw")
+        time.sleep(0.3)
+        b = px(s, "yaw")
+    return run, running, a, b
+
+
+def test_a_lost_release_event_still_stops_by_the_devices_key_state(cfg):
+    """Review R11: the release event is lost (the evdev buffer overflowed while the loop stalled):
+    every period the device's own key state is asked, and the dead-man is up."""
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
+        run, running, a, b = _held_then(cfg, s, 2.4, lost=[(1.8, "BTN_TRIGGER", 0.0)])
+        assert run.releases == 1 and running == {}
+        assert a < -100 and abs(b - a) < 150  # moved backwards, then stopped
+        assert motors_on(s) == set()
+
+
+def test_a_failed_key_state_query_counts_as_released(cfg):
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
+        run, running, a, b = _held_then(cfg, s, 2.4, keys_fail_at=1.8)
+        assert run.releases == 1 and running == {}
+        assert a < -100 and abs(b - a) < 150
+        assert motors_on(s) == set()
+
+
+def test_syn_dropped_forgets_the_stale_axis_values(cfg):
+    """Review R11: after SYN_DROPPED the axis values read before are stale (the stick's return to
+    centre was among the lost events): nothing runs on them; the dead-man state is read again."""
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
+        run, running, a, b = _held_then(cfg, s, 2.4, script=[(1.8, "SYN_DROPPED", 1.0)],
+                                        lost=[(1.8, "ABS_Z", 0.0)])
+        assert run.releases == 0 and running == {}  # still held: stopped by the centred stick
+        assert a < -100 and abs(b - a) < 150
+        assert motors_on(s) == set()
+
+
+class _FakeDevice:
+    """An evdev.InputDevice stand-in: the real ecodes, scripted events and key state."""
+
+    def __init__(self, path, keys=(288,)):
+        evdev = pytest.importorskip("evdev")
+        e = evdev.ecodes
+        self.path, self.name, self.e = path, "fake stick", e
+        self.keys = list(keys)
+        self.events: list = []
+        self.held: list[int] = []
+        self.fail = False
+        self.closed = False
+        self.info = evdev.AbsInfo(0, -512, 511, 0, 0, 0)
+
+    def capabilities(self):
+        return {self.e.EV_ABS: [(self.e.ABS_Z, self.info)], self.e.EV_KEY: self.keys}
+
+    def read(self):
+        if not self.events:
+            raise BlockingIOError
+        out, self.events = self.events, []
+        return out
+
+    def active_keys(self):
+        if self.fail:
+            raise OSError(19, "No such device")
+        return list(self.held)
+
+    def close(self):
+        self.closed = True
+
+
+@pytest.fixture
+def fake_evdev(monkeypatch):
+    evdev = pytest.importorskip("evdev")
+    made = {}
+
+    def open_device(path):
+        made["dev"] = _FakeDevice(path, made.get("keys", (evdev.ecodes.BTN_TRIGGER,)))
+        return made["dev"]
+    monkeypatch.setattr(sys, "platform", "linux")
+    monkeypatch.setattr(evdev, "InputDevice", open_device)
+    return evdev, made
+
+
+def _ev(evdev, type_, code, value):
+    return evdev.InputEvent(0, 0, type_, code, value)
+
+
+def test_an_aliased_deadman_name_is_reported_under_the_configs_name(fake_evdev):
+    """Review note: evdev knows 0x120 as BTN_JOYSTICK and BTN_TRIGGER; a dead-man named BTN_TRIGGER
+    must engage (it came out as the first alias and never matched)."""
+    evdev, made = fake_evdev
+    e = evdev.ecodes
+    src = joystick.EvdevSource("/dev/input/event7", "BTN_TRIGGER")
+    made["dev"].events = [_ev(evdev, e.EV_KEY, e.BTN_TRIGGER, 1), _ev(evdev, e.EV_SYN, e.SYN_REPORT, 0)]
+    assert src.read() == [joystick.JoyEvent("BTN_TRIGGER", 1.0)]
+    made["dev"].held = [e.BTN_TRIGGER]
+    assert "BTN_TRIGGER" in src.active_keys() and "BTN_JOYSTICK" in src.active_keys()
+    made["dev"].fail = True
+    with pytest.raises(OSError):
+        src.active_keys()
+
+
+@pytest.mark.parametrize("name, says", [("BTN_TRIGGR", "'BTN_TRIGGR' is not an evdev button name"),
+                                        ("ABS_X", "'ABS_X' is not an evdev button name"),
+                                        ("BTN_THUMB", "has no button BTN_THUMB (its buttons: BTN_JOYSTICK/BTN_TRIGGER)")])
+def test_a_deadman_the_device_cannot_report_is_refused_at_start(fake_evdev, name, says):
+    with pytest.raises(UsageError, match=re.escape("arm.yaml: joystick.deadman: ") + ".*" + re.escape(says)):
+        joystick.EvdevSource("/dev/input/event7", name, where="arm.yaml: joystick.deadman")
+
+
+def test_syn_dropped_is_reported_and_the_broken_report_skipped(fake_evdev):
+    evdev, made = fake_evdev
+    e = evdev.ecodes
+    src = joystick.EvdevSource("/dev/input/event7", "BTN_TRIGGER")
+    made["dev"].events = [_ev(evdev, e.EV_ABS, e.ABS_Z, 511), _ev(evdev, e.EV_SYN, e.SYN_DROPPED, 0),
+                          _ev(evdev, e.EV_KEY, e.BTN_TRIGGER, 1), _ev(evdev, e.EV_SYN, e.SYN_REPORT, 0),
+                          _ev(evdev, e.EV_ABS, e.ABS_Z, -512)]
+    assert src.read() == [joystick.JoyEvent("ABS_Z", 1.0), joystick.JoyEvent("SYN_DROPPED", 1.0),
+                          joystick.JoyEvent("ABS_Z", -1.0)]
+
+
+def test_an_unknown_deadman_name_ends_the_command_with_exit_2(cli, fake_evdev, tmp_path):
+    p = tmp_path / "arm.yaml"
+    p.write_text(CONFIG.read_text() + JOY.replace("deadman: BTN_TRIGGER", "deadman: BTN_TRIGGR"))
+    result = cli("--config", str(p), "--sim", "jog", "--joystick", "--device", "/dev/input/event7", "--apply")
+    assert result.exit_code == 2, result.transcript()
+    assert "Traceback" not in result.stderr
+    assert f"error: {p}: joystick.deadman: 'BTN_TRIGGR' is not an evdev button name" in result.stderr

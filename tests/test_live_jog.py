@@ -8,6 +8,7 @@ import time
 import pytest
 
 from sherpa_cli.config import load_config
+from sherpa_cli.errors import DriveRefusedError
 from sherpa_cli.ops.live_jog import LiveJog, resolve_axes
 from sherpa_cli.ops.session import ArmSession
 from sherpa_cli.sim.arm import SimArm
@@ -109,3 +110,98 @@ def test_torque_runs_until_the_keepalive_and_is_refused_above_the_continuous_lim
         assert motors_off(s)
         kinds = [d.stopped_by for d in live.report.drives]
         assert kinds and all(k != "not stopped" for k in kinds)
+
+
+def _refuse_bg(client):
+    real = client.execute
+
+    def refuse(letters, index=0):
+        if letters == "BG":
+            raise DriveRefusedError(f"{client.label}: BG refused (test)")
+        return real(letters, index)
+    client.execute = refuse
+    return real
+
+
+def _speed(session, drive):
+    with session.sim.lock:
+        return session.sim.drives[drive].motor.v
+
+
+@pytest.mark.parametrize("how", ["stop_all", "stop", "expiry"])
+def test_a_half_sent_velocity_command_is_still_stoppable(cfg, how):
+    """Review R3: the second drive's BG of a pair is refused after the first motor started: the
+    command is recorded before the first write, so stop, STOP ALL and the keepalive still stop it."""
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
+        calibrate(s, "left", "right")
+        with LiveJog(s, resolve_axes(cfg, ["pitch", "roll"]), keepalive=0.3) as live:
+            right = live._client("right")
+            real = _refuse_bg(right)
+            with pytest.raises(DriveRefusedError):
+                live.set_velocity("pitch", 2000)
+            right.execute = real
+            time.sleep(0.15)
+            assert abs(_speed(s, "left")) > 500  # the first motor did start
+            if how == "stop_all":
+                live.stop_all()  # Space in the view, a joystick dead-man release
+            elif how == "stop":
+                live.stop("pitch")  # `s` in the view
+            run_for(live, 0.5)  # expiry: the keepalive alone
+            assert abs(_speed(s, "left")) < 50 and "pitch" not in live.running
+        assert motors_off(s)
+
+
+def test_stop_all_stops_every_guarded_motor_not_only_the_recorded_commands(cfg):
+    """Review R3: STOP ALL sends a stop to every live drive of the session, so a motor running with
+    no command on record (however it came to) stops too."""
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
+        with LiveJog(s, resolve_axes(cfg, ["j1"]), keepalive=5.0) as live:
+            live.set_velocity("j1", 2000)
+            run_for(live, 0.3)
+            live.running.clear()  # the record lost (the failure R3 was about)
+            live.stop_all()
+            time.sleep(0.3)
+            assert abs(_speed(s, "yaw")) < 50
+        assert motors_off(s)
+
+
+def _shifted_range_config(tmp_path):
+    """j1 with its range [1000, 5000]: uncalibrated at power-up it reads PX=0, outside its full range."""
+    text = CONFIG.read_text().replace("range: {min: -2000, max: 2000, margin: 100, overshoot: 400}",
+                                      "range: {min: 1000, max: 5000, margin: 100, overshoot: 400}", 1)
+    p = tmp_path / "arm.yaml"
+    p.write_text(text)
+    return load_config(p)
+
+
+def _begins(session, drive):
+    with session.sim.lock:
+        return [f for _, _, f in session.sim.drives[drive].received if bytes(f)[:2] == b"BG"]
+
+
+def test_opening_a_session_moves_nothing_found_outside_its_range(tmp_path):
+    """Review R4: a joint found outside its full range when the session opens is reported, not
+    brought back (no MO=1, PA, BG nobody asked for); a command further out is not sent, one back
+    inward is, and the watch does not take over the joint while it comes back."""
+    cfg = _shifted_range_config(tmp_path)
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
+        x0 = px_of(s, "yaw")
+        with LiveJog(s, resolve_axes(cfg, ["j1"]), keepalive=0.3) as live:
+            state = run_for(live, 0.3)
+            assert not _begins(s, "yaw") and abs(px_of(s, "yaw") - x0) < 1
+            assert any("outside its full range" in m and "not brought back" in m for m in live.messages)
+            assert "outside its full range" in state["j1"].note
+            assert "not sent" in live.set_velocity("j1", -1000)  # further out
+            assert "not sent" in live.set_torque("j1", -0.5)
+            assert not _begins(s, "yaw")
+            assert live.set_velocity("j1", 1000).startswith("j1: JV=")  # back inward: a key press
+            run_for(live, 0.6)
+            assert len(_begins(s, "yaw")) == 1  # that command's BG only: no recovery move
+            assert not any(m.startswith("limit:") and "brought back to" in m for m in live.messages)
+            assert px_of(s, "yaw") > x0 + 100
+        assert motors_off(s)
+
+
+def px_of(session, drive):
+    with session.sim.lock:
+        return session.sim.drives[drive].position

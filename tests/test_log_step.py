@@ -106,7 +106,7 @@ def test_supply_limit_slows_a_step():
 def test_cli_step_writes_csv_png_and_metrics(cli, tmp_path):
     out = tmp_path / "step"
     result = cli("--sim", "log", "step", "elbow_pitch", "--torque", "0.5", "--for", "0.3", "--rate", "200",
-                 "-o", str(out))
+                 "-o", str(out), "--apply")
     assert result.exit_code == 0, result.stderr
     import json
 
@@ -138,3 +138,125 @@ def test_the_config_sim_section_turns_the_servo_model_on(tmp_path):
     assert isinstance(motor, ServoMotor) and motor.supply_limit == 1.0
     assert not isinstance(SimDrive(41, clock=ManualClock(), settings=settings_for(cfg, "elbow_1b")).motor,
                           ServoMotor)
+
+
+# -- review R5: jog's checks (normal range, calibration, the joint-limit watch) -------------------
+
+def _frames(sim, drive):
+    with sim.lock:
+        return [(t, i, bytes(f)) for t, i, f in sim.drives[drive].received]
+
+
+def test_a_position_step_outside_the_normal_range_is_refused_before_anything_is_sent(arm):
+    """R5: 3 rad = 1719 counts from 0, normal range [-1314, 1314]: refused like `jog --by`."""
+    from sherpa_cli.errors import UsageError
+
+    cfg, sim = arm
+    target = resolve_jog_target(cfg, "elbow_pitch")
+    with ArmSession.open(cfg, sim=sim, buses=["can1"]) as session:
+        with pytest.raises(UsageError, match="outside the joint's normal range"):
+            run_step(session, target, "position", 3.0, duration=0.3, rate=200,
+                     settings=MotionSettings.from_config(cfg, ["can1"]))
+    node = cfg.drives["elbow_1a"].node
+    sent = [f[:4] for t, i, f in _frames(sim, "elbow_1a") if i == 0x300 + node and len(f) == 8]  # sets
+    assert not sent, f"written before the refusal: {sent}"
+    assert not [f for t, i, f in _frames(sim, "elbow_1a") if i == 0x300 + node and f[:2] == b"BG"]
+
+
+def test_a_position_step_of_an_uncalibrated_joint_needs_the_override(arm):
+    """R5: elbow_stiffness has no absolute encoder and was not homed: refused, unless uncalibrated."""
+    from sherpa_cli.errors import SafetyError
+
+    cfg, sim = arm
+    target = resolve_jog_target(cfg, "elbow_stiffness")
+    settings = MotionSettings.from_config(cfg, ["can1"])
+    with ArmSession.open(cfg, sim=sim, buses=["can1"]) as session:
+        with pytest.raises(SafetyError, match="refusing a position move.*not"):
+            run_step(session, target, "position", 0.05, duration=0.5, rate=200, settings=settings)
+        node = cfg.drives["elbow_1b"].node
+        assert not [f for t, i, f in _frames(sim, "elbow_1b") if i == 0x300 + node and f[:2] in (b"BG", b"MO")]
+        result = run_step(session, target, "position", 0.05, duration=0.5, rate=200, settings=settings,
+                          uncalibrated=True)
+    assert result.breach is None and result.command.startswith("PA=")
+
+
+@pytest.mark.parametrize("mode, value", [("torque", 1.0), ("velocity", 0.1)])
+def test_the_limit_watch_stops_a_step_that_leaves_the_full_range(arm, mode, value):
+    """R5: elbow_pitch stands 10 counts inside its full range [-1370, 1370]; the step pushes it out:
+    stopped at once and brought back to the normal range edge 1314 -- in torque mode too, where
+    no drive limit acts."""
+    cfg, sim = arm
+    target = resolve_jog_target(cfg, "elbow_pitch")
+    with ArmSession.open(cfg, sim=sim, buses=["can1"]) as session:
+        c = session.client(target.ref)
+        c.nmt_start()
+        c.set("PX", 0, 1360)
+        result = run_step(session, target, mode, value, duration=3.0, rate=200,
+                          settings=MotionSettings.from_config(cfg, ["can1"]))
+        px = int(c.get("PX"))
+    assert result.breach is not None and result.breach.joint == "elbow_pitch" and result.breach.side == "high"
+    assert result.ended_by.startswith("left its full range")
+    assert abs(result.recovered_to - 1314) <= 5 and abs(px - 1314) <= 5
+    assert result.as_json()["ok"] is False and result.as_json()["limit"]["recovered_to"] == result.recovered_to
+    assert result.stop.drives[0].motor_off
+    # the recording ends where the watch stopped the motor: the way back is not part of the step
+    times, pos = result.recording.series("elbow_pitch", "pos")
+    assert max(pos) < 1370 / 3600 * 2 * 3.141593 + 0.05
+
+
+# -- review R6: the motor is stopped before the recording is torn down ---------------------------
+
+def _st_before_pdo_restore(sim, drive):
+    node = sim.drives[drive].node
+    rx = _frames(sim, drive)
+    bg = next(t for t, i, f in rx if i == 0x300 + node and f[:2] == b"BG")
+    st = next((t for t, i, f in rx if i == 0x300 + node and f[:2] == b"ST" and t > bg), None)
+    teardown = [t for t, i, f in rx if t > bg and i == 0x600 + node and f[0] & 0xE0 == 0x20
+                and f[1:3] in (b"\x00\x18", b"\x00\x1a")]  # SDO downloads to 0x1800 / 0x1A00
+    return st, teardown
+
+
+def test_the_motor_is_stopped_before_the_recording_is_torn_down(arm):
+    cfg, sim = arm
+    _step(cfg, sim, "velocity", 0.05, duration=0.3)
+    st, teardown = _st_before_pdo_restore(sim, "elbow_1a")
+    assert st is not None and teardown and st < teardown[0], "the PDO restore began while JV was still applied"
+
+
+def test_on_an_error_the_motor_is_stopped_before_the_recording_is_torn_down(arm):
+    """R6 on the error path: the step's wait raises (as Ctrl-C would) while JV is applied."""
+    import sherpa_cli.ops.step as step_mod
+
+    cfg, sim = arm
+    target = resolve_jog_target(cfg, "elbow_pitch")
+    node = cfg.drives["elbow_1a"].node
+    after_bg = []
+
+    def sleep(seconds):
+        import time
+
+        if after_bg or any(i == 0x300 + node and f[:2] == b"BG" for t, i, f in _frames(sim, "elbow_1a")):
+            after_bg.append(seconds)
+            if len(after_bg) == 11:  # once: JV applied, the step not settled yet (it needs 0.2 s at least)
+                raise KeyboardInterrupt
+        time.sleep(seconds)
+
+    with ArmSession.open(cfg, sim=sim, buses=["can1"]) as session:
+        with pytest.raises(KeyboardInterrupt):
+            step_mod.run_step(session, target, "velocity", 0.05, duration=2.0, rate=200,
+                              settings=MotionSettings.from_config(cfg, ["can1"]), sleep=sleep)
+    st, teardown = _st_before_pdo_restore(sim, "elbow_1a")
+    assert st is not None and teardown and st < teardown[0]
+    with sim.lock:
+        assert not sim.drives["elbow_1a"].motor_on
+
+
+def test_cli_step_without_apply_is_a_dry_run(cli, tmp_path):
+    out = tmp_path / "dry"
+    result = cli("--sim", "log", "step", "elbow_pitch", "--velocity", "0.1", "--for", "1", "-o", str(out))
+    assert result.exit_code == 0, result.stderr
+    assert "dry run: would record elbow_pitch" in result.stdout and "JV=" in result.stdout
+    assert "nothing sent; add --apply to move" in result.stdout
+    assert not out.exists()
+    far = cli("--sim", "log", "step", "elbow_pitch", "--position", "3", "-o", str(out), "--apply")
+    assert far.exit_code == 2 and "outside the joint's normal range" in far.stderr

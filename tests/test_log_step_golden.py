@@ -50,7 +50,7 @@ def test_log_step_golden(cli, golden, monkeypatch, tmp_path, name, args, before)
     if before is not None:
         _preset(monkeypatch, *before)
     out = tmp_path / "step"
-    result = cli(*ARM, "log", "step", "arm", *args, "--rate", "500", "-o", str(out))
+    result = cli(*ARM, "log", "step", "arm", *args, "--rate", "500", "-o", str(out), "--apply")
     assert "Traceback" not in result.stderr
     assert result.exit_code == 0, result.transcript()
     golden(f"{name}.txt", result.transcript().replace(str(tmp_path), "TMP"))
@@ -68,7 +68,7 @@ def test_the_same_step_gives_the_same_recording_twice(cli, tmp_path):
     runs = []
     for i in range(2):
         out = tmp_path / f"run{i}"
-        result = cli(*ARM, "log", "step", "arm", "--position", "1", "--rate", "500", "-o", str(out))
+        result = cli(*ARM, "log", "step", "arm", "--position", "1", "--rate", "500", "-o", str(out), "--apply")
         assert result.exit_code == 0, result.transcript()
         runs.append((out / "recording.csv").read_text())
     assert runs[0] == runs[1]

@@ -53,6 +53,12 @@ def write_config(tmp_path: Path, text: str, name: str = "arm.yaml"):
     return load_config(path)
 
 
+# The mechanics tests below read PX as the joint's position: the joint powers up where PX reads 0
+# (without this the simulator puts a homeable joint away from its calibration switch; docs/home.md)
+EX1_AT_ZERO = "sim:\n  power_up: {joint1: 0}\n"
+EX3_AT_ZERO = "sim:\n  power_up: {joint_sigma: 0, joint_delta: 0}\n"
+
+
 def example(name: str, extra: str = FAST):
     """An Appendix C example with extra top-level YAML (protocol, sim) appended."""
     path = EXAMPLES / name
@@ -243,7 +249,7 @@ def test_reply_latency_against_reply_timeout(tmp_path, reply_timeout, answers):
 # -- (f) stop switch of a plain joint ------------------------------------------------------------
 
 def test_stop_switch_stops_a_jog_toward_it_and_lets_it_jog_away(tmp_path):
-    cfg = example("example1.yaml")  # stop switches: input 3 at -220, input 4 at +220
+    cfg = example("example1.yaml", FAST + EX1_AT_ZERO)  # stop switches: input 3 at -220, input 4 at +220
     assert cfg.il_codes.stop == 21
     with sim_session(cfg) as s:
         c = client(s, "drive1")
@@ -282,7 +288,7 @@ def pair_positions(s: ArmSession) -> tuple[float, float]:
 
 
 def test_pair_jog_both_same_way_moves_sigma_not_delta(tmp_path):
-    cfg = example("example3.yaml")
+    cfg = example("example3.yaml", FAST + EX3_AT_ZERO)
     with sim_session(cfg) as s:
         a, b = client(s, "drive1"), client(s, "drive2")
         for c in (a, b):
@@ -320,7 +326,7 @@ def test_pair_sigma_move_with_speed_mismatch_transiently_moves_delta(tmp_path, g
     # as long as the machine needs (reply_timeout 2 s; every reply comes, so no test waits that long).
     step_s = 0.002
     cfg = example("example3.yaml", "protocol: {mo_settle: 0, reply_timeout: 2.0}\n"
-                  f"sim:\n  drives:\n    drive2: {{speed_gain: {gain}}}\n")
+                  f"sim:\n  power_up: {{joint_sigma: 0, joint_delta: 0}}\n  drives:\n    drive2: {{speed_gain: {gain}}}\n")
     clock = ManualClock()
     with sim_session(cfg, clock) as s:
         a, b = client(s, "drive1"), client(s, "drive2")

@@ -115,7 +115,8 @@ def _render_unit(st, cfg, u) -> None:
     at = ", ".join(f"{j} at {v} counts" for j, v in u.positions.items())
     text = f"{u.name}: homed ({KIND_TEXT[u.kind]}): set {sets}; now {at}"
     if u.encoder:
-        text += "; encoder read " + ", ".join(f"{d} {v}" for d, v in u.encoder.items())
+        text += "; encoder read " + ", ".join(
+            f"{d} {v}" + (f" ({u.encoder_via[d]})" if d in u.encoder_via else "") for d, v in u.encoder.items())
     if u.repeat_difference is not None:
         text += f"; repeat difference {u.repeat_difference:+d} counts"
     if u.measured_travel is not None:

@@ -73,6 +73,8 @@ def interactive(st: Any, names: Sequence[str], *, apply: bool, uncalibrated: boo
             with live:
                 app = JogView(live, calibrate=_calibrate_hook(st, session))
                 app.run()
+                if app.error is None:  # a SIGTERM/SIGHUP that textual caught itself: still exit 130
+                    live.guard.check()
                 if app.error is not None:
                     raise app.error
         except BaseException as exc:
@@ -104,7 +106,9 @@ def joystick(st: Any, device: str | None, *, apply: bool) -> None:
                     f"{jcfg.deadman} is held: {maps}")
         st.out.line("nothing sent; add --apply to move")
         return
-    source = joy.EvdevSource(path)  # a clear message if evdev or the device is missing
+    where = f"{cfg.source}: joystick.deadman" if cfg.source else "joystick.deadman"
+    # a clear message if evdev or the device is missing, or the dead-man is not one of its buttons
+    source = joy.EvdevSource(path, jcfg.deadman, where=where)
     keepalive = max(0.25, 5.0 / jcfg.rate_hz)
     with st.session(buses=_buses(cfg, axes)) as session:
         live = LiveJog(session, axes, keepalive=keepalive, tick_period=1.0 / jcfg.rate_hz)

@@ -9,7 +9,7 @@ from typing import List, Optional
 import typer
 
 from sherpa_cli.cli.context import state
-from sherpa_cli.cli.options import Targets
+from sherpa_cli.cli.options import ApplyMotion, Targets
 from sherpa_cli.errors import UsageError
 
 app = typer.Typer(help="Record, capture, decode and plot CAN traffic and joint motion (docs/log.md).",
@@ -285,6 +285,7 @@ def record(
       sherpa log record shoulder_diff --rate 500 --for 10 --current -o pair.csv
       sherpa log record --poll --for 5 -o slow.csv
     """
+    from sherpa_cli.ops import encoder
     from sherpa_cli.ops.record import MAX_LOAD, Poller, Recorder, bus_budget, check_budget
     from sherpa_cli.ops.recording import write_csv
     from sherpa_cli.ops.targets import drive_refs
@@ -299,18 +300,21 @@ def record(
     if not output.parent.exists():
         raise UsageError(f"-o {output}: directory {output.parent} does not exist")
     cfg = st.load_config()
-    refs = drive_refs(cfg, targets, configured_only=True)
+    # an encoder device stands for the joint it measures (recorded beside it: ops/encoder.py)
+    refs = drive_refs(cfg, encoder.targets_with_encoders(cfg, targets), configured_only=True)
     if not poll:
+        encoders = [t.dev for t in encoder.recorded_encoders(cfg, (r.name for r in refs))]
         if current is None:
-            current = all(b.fits for b in bus_budget(cfg, refs, rate, current=True))
-        budget = bus_budget(cfg, refs, rate, current=current)
+            current = all(b.fits for b in bus_budget(cfg, refs, rate, current=True, encoders=encoders))
+        budget = bus_budget(cfg, refs, rate, current=current, encoders=encoders)
         for b in budget:
             st.out.info(f"bus {b.bus}: {b.drives} drive(s) at {rate:g} Hz"
                         f"{' with current' if b.current else ''}: {100 * b.load:.1f} % of "
                         f"{b.bitrate / 1e6:g} Mbit/s{' (assumed)' if b.bitrate_assumed else ''} "
                         f"(limit {100 * MAX_LOAD:.0f} %, highest rate {b.max_rate} Hz)")
         check_budget(budget)
-    buses = list(dict.fromkeys(r.bus for r in refs))
+    buses = list(dict.fromkeys([*(r.bus for r in refs),  # and the buses of the joints' encoders
+                                *(t.dev.bus for t in encoder.recorded_encoders(cfg, (r.name for r in refs)))]))
     expected: int | None = None
     with st.session(buses=buses) as session:
         if poll:
@@ -394,6 +398,9 @@ def step(
     rate: float = typer.Option(1000.0, "--rate", metavar="HZ", help="Samples per second."),
     output: Path = typer.Option(..., "--output", "-o", metavar="DIR",
                                 help="Directory for recording.csv, step.png and metrics.json (created)."),
+    uncalibrated: bool = typer.Option(False, "--uncalibrated", help="Allow a position step of a joint that has no "
+                                      "absolute encoder and was not homed since power-up."),
+    apply: ApplyMotion = False,
 ) -> None:
     """The seed's Section 9 step experiment in one command: start recording, command the step at
     t = 0 through the motion guard, record until settled (or --for), stop the motor, and write
@@ -404,18 +411,22 @@ def step(
     "switch". The motion guard stops the motor on every exit path; the recording's PDO changes
     are RAM only and restored.
 
+    The checks are jog's: nothing moves without --apply; a position step must end inside the
+    joint's normal range and needs a calibrated joint (or --uncalibrated); a joint that leaves
+    its full range is stopped and brought back to the nearest edge of its normal range (exit 1).
+
     \b
     Examples:
-      sherpa log step elbow_pitch --position 1 -o steps/pos
-      sherpa log step elbow_pitch --velocity 0.1 --for 1 -o steps/vel
-      sherpa log step elbow_pitch --torque 1 --for 0.3 -o steps/torque
+      sherpa log step elbow_pitch --position 1 -o steps/pos --apply
+      sherpa log step elbow_pitch --velocity 0.1 --for 1 -o steps/vel --apply
+      sherpa log step elbow_pitch --torque 1 --for 0.3 -o steps/torque --apply
     """
     import json
 
     from sherpa_cli.ops.motion import MotionSettings
     from sherpa_cli.ops.plot import have_matplotlib, plot_recording
     from sherpa_cli.ops.recording import write_csv
-    from sherpa_cli.ops.step import resolve_step_target, run_step
+    from sherpa_cli.ops.step import resolve_step_target, run_step, step_request
 
     st = state(ctx)
     given = [(m, v) for m, v in (("position", position), ("velocity", velocity), ("torque", torque)) if v is not None]
@@ -434,6 +445,10 @@ def step(
         raise UsageError(f"-o {output}: exists and is not a directory")
     cfg = st.load_config()
     target = resolve_step_target(cfg, joint)
+    step_request(target, mode, value, duration=duration, uncalibrated=uncalibrated)
+    if not apply:
+        _step_dry_run(st, cfg, target, mode, value, duration, rate)
+        return
     settings = MotionSettings.from_config(cfg, [target.ref.bus])
     output.mkdir(parents=True, exist_ok=True)
     stepped, sim_factory = _stepped_sim(st)
@@ -446,7 +461,7 @@ def step(
                                                                      unheard))
             timebase = stepped
         result = run_step(session, target, mode, value, duration=duration, rate=rate, settings=settings,
-                          timebase=timebase)
+                          uncalibrated=uncalibrated, timebase=timebase)
     write_csv(result.recording, output / "recording.csv")
     (output / "metrics.json").write_text(json.dumps(result.as_json(), indent=2) + "\n", encoding="utf-8")
     files = {"csv": str(output / "recording.csv"), "metrics": str(output / "metrics.json")}
@@ -466,5 +481,33 @@ def step(
     render_metrics(st, {(result.joint, result.signal): result.metrics})
     for line in result.stop.lines():
         st.out.line(line)
+    if result.breach is not None:
+        b = result.breach
+        st.out.line(f"limit: {b.joint} left its full range [{b.full[0]}, {b.full[1]}] on the {b.side} side: "
+                    f"stopped, nothing more sent, brought back to {result.recovered_to} counts "
+                    f"(normal range edge {b.back_to})")
     for key, path in files.items():
         st.out.line(f"{key}: {path}")
+    if result.breach is not None:
+        raise typer.Exit(1)
+
+
+def _step_dry_run(st, cfg, target, mode: str, value: float, duration: float, rate: float) -> None:
+    """Without --apply: what the step would send; nothing is sent, no file is written."""
+    from sherpa_cli.joints.units import rad_per_s_to_counts_per_s, rad_to_counts
+
+    ref, cpr = target.ref, target.cpr
+    if mode == "position":
+        plan = f"UM=5, PA=PX{rad_to_counts(value, cpr):+d}, BG; until settled, at most {duration:g} s"
+    elif mode == "velocity":
+        plan = (f"UM={cfg.motion.velocity_unit_mode}, JV={rad_per_s_to_counts_per_s(value, cpr)}, BG; until settled, "
+                f"at most {duration:g} s")
+    else:
+        plan = f"UM=1, TC={value:g} for {duration:g} s"
+    if st.json_mode:
+        st.out.json({"joint": target.name, "drive": ref.name, "address": ref.address, "mode": mode, "value": value,
+                     "applied": False, "plan": plan, "rate": rate})
+        return
+    st.out.line(f"dry run: would record {target.name} ({ref.name}, {ref.address}) at {rate:g} Hz and step it: "
+                f"{plan}, then stop and switch off")
+    st.out.line("nothing sent; add --apply to move")

@@ -55,7 +55,7 @@ def dump_native(cfg: ArmConfig) -> str:
                                                     "motor": d.motor})
                                 for d in cfg.drives.values()}})
     if cfg.devices:
-        sections.append({"devices": {d.name: {"type": d.type, "bus": d.bus, "node": d.node}
+        sections.append({"devices": {d.name: {"type": d.type, "bus": d.bus, "node": d.node, **_device_options(d)}
                                      for d in cfg.devices.values()}})
     plain = {j.name: {"drive": j.drive, **_joint_body(j)} for j in cfg.joints.values() if j.role is JointRole.PLAIN}
     for name, j in ((j.name, j) for j in cfg.joints.values() if j.role is JointRole.PLAIN):
@@ -148,3 +148,11 @@ def _catalog_diff(cfg: ArmConfig) -> dict[str, Any]:
 
 def _drop_default(values: dict[str, Any], default: Any) -> dict[str, Any]:
     return {k: v for k, v in values.items() if v != getattr(default, k)}
+
+
+def _device_options(d: Any) -> dict[str, Any]:
+    """The encoder settings that differ from their defaults (a dump stays as short as the config)."""
+    from sherpa_cli.config.model import DeviceConfig
+
+    base = DeviceConfig(d.name, d.type, d.bus, d.node)
+    return {k: getattr(d, k) for k in ("position_from", "tpdo_trigger", "cyclic_ms") if getattr(d, k) != getattr(base, k)}

@@ -91,6 +91,8 @@ class DriveConfig:
 # registry of sherpa_cli/devices (the way python-can maps interface names to bus classes).
 # "elmo" is every entry of `drives:`; `devices:` holds the other types.
 DEVICE_TYPES = ("elmo", "canopen-encoder")
+ENCODER_POSITION_FROM = ("tpdo", "sdo")
+ENCODER_TPDO_TRIGGERS = ("cyclic", "sync")
 
 
 @dataclass(frozen=True)
@@ -101,6 +103,12 @@ class DeviceConfig:
     type: str  # a key of DEVICE_TYPES other than "elmo"
     bus: str
     node: int
+    # canopen-encoder (docs/home.md): read 0x6004 from the encoder's TPDO1 ("tpdo"; SDO is the fallback)
+    # or by SDO only ("sdo"). CiA 406 hard-wires TPDO1's event timer to the cyclic timer 0x6200 ("cyclic");
+    # that a given encoder's TPDO1 also takes transmission type 1 (on SYNC, "sync") is UNCONFIRMED.
+    position_from: str = "tpdo"
+    tpdo_trigger: str = "cyclic"
+    cyclic_ms: int = 10  # 0x6200 (ms) written to RAM while reading, when the encoder's own is 0
     where: Location = field(default_factory=Location, compare=False)
 
     @property

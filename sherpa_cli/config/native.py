@@ -24,7 +24,7 @@ TOP_KEYS = ["name", "il_codes", "protocol", "motion", "homing", "joystick", "sim
 IL_KEYS = ["stop", "home", "unused"]
 BUS_KEYS = ["interface", "channel", "bitrate", "send_interval_us", "poll_interval_ms", "options"]
 DRIVE_KEYS = ["bus", "node", "model", "motor"]
-DEVICE_KEYS = ["type", "bus", "node"]
+DEVICE_KEYS = ["type", "bus", "node", "position_from", "tpdo_trigger", "cyclic_ms"]
 JOINT_BODY_KEYS = ["cpr", "range", "velocity", "acceleration", "switches", "calibration", "abs_encoder"]
 JOINT_KEYS = ["drive", *JOINT_BODY_KEYS, "current"]
 PAIR_JOINT_KEYS = ["name", *JOINT_BODY_KEYS]
@@ -252,7 +252,10 @@ def load_native(root: YNode, filename: str) -> tuple[ArmConfig, Locs, list[str]]
             sec = Section(dnode, DEVICE_KEYS, what="a device mapping like {type: canopen-encoder, bus: can1, node: 45}")
             register(locs, ("device", dname), sec)
             devices[dname] = DeviceConfig(name=dname, type=as_str(sec.req("type")), bus=as_str(sec.req("bus")),
-                                          node=as_int(sec.req("node")), where=sec.node.loc)
+                                          node=as_int(sec.req("node")),
+                                          position_from=sec.str("position_from", "tpdo"),
+                                          tpdo_trigger=sec.str("tpdo_trigger", "cyclic"),
+                                          cyclic_ms=sec.int("cyclic_ms", 10), where=sec.node.loc)
 
     joints: dict[str, JointConfig] = {}
     joints_node = top.get("joints")

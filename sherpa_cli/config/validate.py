@@ -177,7 +177,7 @@ def _check_sim(cfg: ArmConfig, locs: Locs, r: _Report) -> None:
 
 
 def _check_devices(cfg: ArmConfig, locs: Locs, r: _Report) -> None:
-    from sherpa_cli.config.model import DEVICE_TYPES
+    from sherpa_cli.config.model import DEVICE_TYPES, ENCODER_POSITION_FROM, ENCODER_TPDO_TRIGGERS
 
     taken = {(d.bus, d.node): f"drive {d.name}" for d in cfg.drives.values()}
     for dev in cfg.devices.values():
@@ -194,6 +194,15 @@ def _check_devices(cfg: ArmConfig, locs: Locs, r: _Report) -> None:
         other = taken.get((dev.bus, dev.node))
         if other is not None:
             r.error(locs.get(*where, "node"), f"device {dev.name}: node {dev.bus}:{dev.node} is already {other}")
+        if dev.position_from not in ENCODER_POSITION_FROM:
+            r.error(locs.get(*where, "position_from"), f"device {dev.name}: position_from '{dev.position_from}'; "
+                    f"expected one of: {', '.join(ENCODER_POSITION_FROM)}")
+        if dev.tpdo_trigger not in ENCODER_TPDO_TRIGGERS:
+            r.error(locs.get(*where, "tpdo_trigger"), f"device {dev.name}: tpdo_trigger '{dev.tpdo_trigger}'; "
+                    f"expected one of: {', '.join(ENCODER_TPDO_TRIGGERS)}")
+        if not 1 <= dev.cyclic_ms <= 0xFFFF:
+            r.error(locs.get(*where, "cyclic_ms"), f"device {dev.name}: cyclic_ms {dev.cyclic_ms} out of range "
+                    "1..65535 (0x6200 is 16 bits, in ms)")
         taken[(dev.bus, dev.node)] = f"device {dev.name}"
     for joint in cfg.joints.values():
         enc = joint.abs_encoder

@@ -18,13 +18,14 @@ by polling PX through the interpreter in the guard's loop (:class:`PolledTrace`)
 
 from __future__ import annotations
 
+import functools
 import math
 import time
 from dataclasses import dataclass, field
 from typing import Any, Callable, Mapping, Sequence
 
 from sherpa_cli.config.model import ArmConfig, PairConfig
-from sherpa_cli.errors import ConfigError, SafetyError, UsageError
+from sherpa_cli.errors import ConfigError, DriveTimeoutError, SafetyError, UsageError
 from sherpa_cli.joints import diffpair, units
 from sherpa_cli.ops import calibration, limit_watch
 
@@ -33,6 +34,7 @@ GROUP_INDEX = 0x2040
 RPDO2_BASE = 0x300
 PAIR_START_METHODS = ("group", "sequential")
 SETTLE_S = 0.3  # s a finished move may take for PX to reach the target (servo lag) before it is reported
+PROFILE_KEYS = ("SP", "AC", "DC")
 
 
 # --------------------------------------------------------------------------- planning (pure)
@@ -256,15 +258,19 @@ class PolledTrace:
 # --------------------------------------------------------------------------- common start
 
 class CommonStart:
-    """Starts both motors of a pair together; restores what it changed (0x2040, RAM) on close.
+    """Starts both motors of a pair together; restores what it changed (0x2040, and the SP/AC/DC
+    kept with :meth:`keep_profile`; RAM) on close.
 
     ``method``: ``group`` (one BG to the group id), ``sequential`` (BG, BG). Use as a context
-    manager inside the motion guard, after the motors are enabled."""
+    manager inside the motion guard. ``stop`` (:func:`stop_motors`) runs on the way out before
+    the restore, so no motor keeps moving through the restore's SDO timeouts (review R8)."""
 
     def __init__(self, session: Any, refs: Sequence[Any], clients: Mapping[str, Any], method: str,
-                 group_id: int) -> None:
+                 group_id: int, stop: Callable[[], Sequence[str] | None] | None = None) -> None:
         self.session, self.refs, self.clients, self.method, self.group_id = session, list(refs), clients, method, group_id
         self._old: dict[str, int] = {}
+        self._profiles: dict[str, dict[str, int]] = {}
+        self.stop = stop
         self.bus = refs[0].bus
 
     def __enter__(self) -> "CommonStart":
@@ -301,16 +307,75 @@ class CommonStart:
         for n in names:
             self.clients[n].execute("BG")
 
-    def close(self) -> None:
+    def keep_profile(self, drive: str) -> None:
+        """Read ``drive``'s SP/AC/DC before they are changed; :meth:`close` puts them back (review R7:
+        a scaled profile -- SP=AC=DC=1 for a motor with no share -- must not outlive the command)."""
+        if drive not in self._profiles:
+            c = self.clients[drive]
+            self._profiles[drive] = {k: int(c.get(k)) for k in PROFILE_KEYS}
+
+    def close(self, deaf: Sequence[str] = ()) -> None:
+        """Put back everything changed, drive by drive. A failure skips only that write (a drive
+        that does not answer: the rest of that drive; ``deaf``, drives that did not answer the stop:
+        all of it); a second Ctrl-C does not skip the rest of the restore, it is raised once the
+        restore is done (review R8)."""
+        interrupted: BaseException | None = None
         for r in self.refs:
+            writes: list[Callable[[], None]] = []
+            if r.name in deaf:  # each write would only wait out its timeouts before the guard's exit
+                self._profiles.pop(r.name, None)
+                self._old.pop(r.name, None)
+            for key, value in self._profiles.pop(r.name, {}).items():
+                writes.append(functools.partial(self.clients[r.name].set, key, 0, value))
             if r.name in self._old:
+                writes.append(functools.partial(self._put_group_id, r, self._old.pop(r.name)))
+            for write in writes:
                 try:
-                    self.session.sdo(r).download(GROUP_INDEX, 0, bytes([self._old.pop(r.name)]), name="group id")
+                    write()
+                except DriveTimeoutError:
+                    break  # it does not answer: no more waits for it (the guard's exit reports the drive)
                 except Exception:  # the next command's start writes it again; nothing was saved
                     pass
+                except BaseException as exc:  # a second Ctrl-C: finish the restore first
+                    interrupted = interrupted or exc
+        if interrupted is not None:
+            raise interrupted
+
+    def _put_group_id(self, ref: Any, value: int) -> None:
+        self.session.sdo(ref).download(GROUP_INDEX, 0, bytes([value]), name="group id")
 
     def __exit__(self, *exc: Any) -> None:
-        self.close()
+        deaf: Sequence[str] = ()
+        try:
+            if self.stop is not None:
+                deaf = self.stop() or ()  # every motor stopped before the restore (review R8)
+        finally:
+            self.close(deaf)
+
+
+def stop_motors(guard: Any, refs: Sequence[Any], settings: Any) -> Callable[[], list[str]]:
+    """The stop :class:`CommonStart` runs before its restore: the guard's stop to every motor
+    (motion.stop_drive: TC=0 in torque mode, ST or JV=0 + BG as motion.stop_method says; a motor
+    that is off gets nothing), one drive after the other, without waiting for standstill -- the
+    guard's exit then waits for it, switches off and reports. Never raises (an error of one drive
+    must not leave the next unstopped); no sign of life is asked of the guard here, since after a
+    signal its check raises at once. Returns the drives that did not answer."""
+    def stop() -> list[str]:
+        from sherpa_cli.errors import CommunicationError
+        from sherpa_cli.ops.motion import stop_drive
+
+        deaf = []
+        for r in refs:
+            try:
+                stop_drive(guard.client(r), unit_mode=guard.unit_mode(r), method=settings.stop_method,
+                           standstill_timeout=0.0, poll_interval=settings.poll_interval,
+                           standstill_velocity=settings.standstill_velocity)
+            except CommunicationError:
+                deaf.append(r.name)
+            except Exception:
+                pass
+        return deaf
+    return stop
 
 
 # --------------------------------------------------------------------------- running it
@@ -458,11 +523,12 @@ def run_move(session: Any, pair: PairConfig, request: MoveRequest, *, guard_fact
             def check_drives() -> None:
                 guard.check_motors_on([by_name[d] for d in clients], "the move")
 
-            start = CommonStart(session, refs, clients, method, group_id)
+            start = CommonStart(session, refs, clients, method, group_id, stop=stop_motors(guard, refs, settings))
             with start:
                 for d in drives:
                     guard.enable(by_name[d], UM_POSITION)
                 for d, c in clients.items():
+                    start.keep_profile(d)  # SP/AC/DC put back on every way out, like 0x2040 (review R7)
                     pr = p.profiles[d]
                     c.set("SP", 0, pr.sp)
                     c.set("AC", 0, pr.ac)

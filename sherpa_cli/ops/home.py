@@ -137,7 +137,9 @@ def _plain_unit(cfg: ArmConfig, joint: JointConfig, measure_range: bool) -> Home
         if dev is None:
             return f"abs_encoder source '{enc.source}' is neither drive:PY nor a configured device"
         return HomeUnit(joint.name, "abs_encoder", (joint.name,), (joint.drive,), (),
-                        (f"encoder {dev.name} ({dev.type} {dev.address}, 0x6004 by SDO, offset {enc.offset})",),
+                        (f"encoder {dev.name} ({dev.type} {dev.address}, 0x6004 "
+                         f"{'by SDO' if dev.position_from == 'sdo' else 'from TPDO1, SDO as fallback'}, "
+                         f"offset {enc.offset})",),
                         (dev.name,))
     if not joint.cal_speed:
         return "no calibration speed (calibration: {speed: ...})"
@@ -248,6 +250,7 @@ class UnitResult:
     set_to: dict[str, int] = field(default_factory=dict)  # joint -> the calibration position set
     repeat_difference: int | None = None  # home_switch: counts the first pass was off at the second edge
     encoder: dict[str, int] = field(default_factory=dict)  # abs_encoder: drive -> raw encoder reading
+    encoder_via: dict[str, str] = field(default_factory=dict)  # CANopen encoder -> "TPDO1" or "SDO (why)"
     measured_travel: int | None = None  # end_switches --measure-range: counts between the switch edges
     configured_travel: int | None = None
     motion_lines: list[str] = field(default_factory=list)  # the guard's stop lines
@@ -259,6 +262,8 @@ class UnitResult:
             out["repeat_difference"] = self.repeat_difference
         if self.encoder:
             out["encoder"] = self.encoder
+        if self.encoder_via:
+            out["encoder_via"] = self.encoder_via
         if self.measured_travel is not None:
             out["measured_travel"] = self.measured_travel
             out["configured_travel"] = self.configured_travel
@@ -356,14 +361,13 @@ class _Runner:
                 raw = int(c.get("PY"))
                 read_from = dname
             else:
-                from sherpa_cli.devices import device_class
-                from sherpa_cli.ops.targets import DriveRef
+                from sherpa_cli.ops import encoder
 
                 dev = self.cfg.device_by_source(src)
                 if dev is None:
                     raise UsageError(f"{jname}: abs_encoder source '{src}' names no configured device")
-                raw = int(device_class(dev.type)(self.session.sdo(DriveRef(dev.name, dev.bus, dev.node))).position())
-                read_from = dev.name
+                reading = encoder.read_position(self.session, dev, clock=self.clock, sleep=self.sleep)
+                raw, read_from, res.encoder_via[dev.name] = reading.position, dev.name, reading.via
             value = raw + joint.abs_encoder.offset
             self.arm_homing(c, event=self.h.event_immediate, value=value, after=self.h.after_nothing)
             px = int(c.get("PX"))

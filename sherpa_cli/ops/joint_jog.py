@@ -383,8 +383,9 @@ def _run_guarded(guard: Any, session: Any, cfg: ArmConfig, axis: Axis, p: JogPla
         clients = {d: guard.client(by_name[d]) for d in axis.drives}
         # a Σ/Δ joint starts both motors together, as `diffdrive move` does (motion.pair_start)
         method = diffdrive.pair_settings(cfg)[0] if axis.kind in ("sigma", "delta") else "sequential"
-        start = stack.enter_context(diffdrive.CommonStart(session, [by_name[d] for d in axis.drives], clients,
-                                                          method, cfg.motion.pair_group_id))
+        refs = [by_name[d] for d in axis.drives]
+        start = stack.enter_context(diffdrive.CommonStart(session, refs, clients, method, cfg.motion.pair_group_id,
+                                                          stop=diffdrive.stop_motors(guard, refs, settings)))
 
         def check_drives() -> None:
             """The guard's sign of life, and every moving motor still on (a trip ends the jog)."""

@@ -12,7 +12,7 @@ LiveJog's: speed and current limits, no command further out than the normal rang
 full-range watch.
 
 The event source is injected: :class:`EvdevSource` reads a Linux input device (python-evdev, an
-optional import); tests use a scripted source with the same ``read()``.
+optional import); tests use a scripted source with the same ``read()`` and ``active_keys()``.
 """
 
 from __future__ import annotations
@@ -35,30 +35,58 @@ class JoyEvent:
     value: float
 
 
+SYN_DROPPED = "SYN_DROPPED"  # the event a source reports when the device's buffer overflowed: events were lost
+
+
 class EventSource(Protocol):
     def read(self) -> Sequence[JoyEvent] | None:
         """Events since the last call, without blocking; None when the device is gone."""
 
+    def active_keys(self) -> set[str]:
+        """The names of the buttons the device reports held now (its own state, not the events);
+        raises when it cannot be asked."""
+
 
 class ScriptedSource:
-    """Events at given times (s from the first read) on an injected clock: tests and demos."""
+    """Events at given times (s from the first read) on an injected clock: tests and demos.
 
-    def __init__(self, script: Iterable[tuple[float, str, float]], clock: Callable[[], float]) -> None:
+    ``lost``: (time, code, value) changes of the device's state that no :meth:`read` reports (events
+    lost in an overflowing buffer); :meth:`active_keys` still sees them. ``keys_fail_at``: from this
+    time on :meth:`active_keys` raises, like a device that cannot be asked."""
+
+    def __init__(self, script: Iterable[tuple[float, str, float]], clock: Callable[[], float], *,
+                 lost: Iterable[tuple[float, str, float]] = (), keys_fail_at: float | None = None) -> None:
         self.script = sorted(script, key=lambda e: e[0])
+        self.lost = sorted(lost, key=lambda e: e[0])
+        self.keys_fail_at = keys_fail_at
         self.clock = clock
         self.t0: float | None = None
         self.i = 0
 
-    def read(self) -> Sequence[JoyEvent] | None:
+    def _elapsed(self) -> float:
         now = self.clock()
         if self.t0 is None:
             self.t0 = now
+        return now - self.t0
+
+    def read(self) -> Sequence[JoyEvent] | None:
+        t = self._elapsed()
         out = []
-        while self.i < len(self.script) and self.script[self.i][0] <= now - self.t0:
+        while self.i < len(self.script) and self.script[self.i][0] <= t:
             _, code, value = self.script[self.i]
             out.append(JoyEvent(code, value))
             self.i += 1
         return out
+
+    def active_keys(self) -> set[str]:
+        t = self._elapsed()
+        if self.keys_fail_at is not None and t >= self.keys_fail_at:
+            raise OSError("the device cannot be asked (test)")
+        held: set[str] = set()
+        for _, code, value in sorted([e for e in self.script + self.lost if e[0] <= t], key=lambda e: e[0]):
+            if code.startswith(("BTN_", "KEY_")):
+                (held.add if value >= 0.5 else held.discard)(code)
+        return held
 
 
 def _evdev() -> Any:
@@ -82,7 +110,12 @@ class JoystickInfo:
 
 def _names(ecodes: Any, table: dict, code: int) -> str:
     name = table.get(code, str(code))
-    return name[0] if isinstance(name, list) else name
+    return name[0] if isinstance(name, (list, tuple)) else name  # an aliased code: a tuple (evdev >= 1.7)
+
+
+def _all_names(table: dict, code: int) -> tuple[str, ...]:
+    name = table.get(code, str(code))
+    return tuple(name) if isinstance(name, (list, tuple)) else (name,)
 
 
 def list_joysticks() -> list[JoystickInfo]:
@@ -100,17 +133,31 @@ def list_joysticks() -> list[JoystickInfo]:
             continue
         keys = caps.get(evdev.ecodes.EV_KEY, [])
         out.append(JoystickInfo(path, dev.name, tuple(_names(evdev.ecodes, evdev.ecodes.ABS, c) for c in abs_codes),
-                                tuple(_names(evdev.ecodes, evdev.ecodes.BTN | evdev.ecodes.KEY, c) for c in keys)))
+                                tuple("/".join(_all_names(evdev.ecodes.BTN | evdev.ecodes.KEY, c)) for c in keys)))
         dev.close()
     return out
 
 
 class EvdevSource:
-    """A Linux input device through python-evdev, read without blocking; axes normalized to -1..1."""
+    """A Linux input device through python-evdev, read without blocking; axes normalized to -1..1.
 
-    def __init__(self, path: str | None) -> None:
+    ``deadman``: the dead-man button's name, checked here (an evdev button name the device has)
+    and reported under that name even where evdev knows the code by several (BTN_TRIGGER is also
+    BTN_JOYSTICK); ``where`` names the setting in messages."""
+
+    def __init__(self, path: str | None, deadman: str | None = None, *, where: str = "joystick.deadman") -> None:
         evdev = _evdev()
         self.ecodes = evdev.ecodes
+        self.keys = self.ecodes.BTN | self.ecodes.KEY
+        self.chosen: dict[int, str] = {}  # key code -> the name the config uses for it
+        code = None
+        if deadman is not None:
+            code = self.ecodes.ecodes.get(deadman)
+            if not deadman.startswith(("BTN_", "KEY_")) or not isinstance(code, int):
+                raise UsageError(f"{where}: '{deadman}' is not an evdev button name",
+                                 hint="sherpa jog --list-joysticks shows the buttons of each device")
+            self.chosen[code] = deadman
+        self.dropping = False  # after SYN_DROPPED, until the next SYN_REPORT
         if path is None:
             found = list_joysticks()
             if not found:
@@ -124,26 +171,46 @@ class EvdevSource:
                              hint="sherpa jog --list-joysticks shows the devices; check permissions") from None
         self.path = path
         self.ranges = {}
-        for code, info in self.dev.capabilities().get(self.ecodes.EV_ABS, []):
-            self.ranges[code] = (info.min, info.max)
+        caps = self.dev.capabilities()
+        for c, info in caps.get(self.ecodes.EV_ABS, []):
+            self.ranges[c] = (info.min, info.max)
+        if code is not None and code not in caps.get(self.ecodes.EV_KEY, []):
+            have = ", ".join("/".join(_all_names(self.keys, c)) for c in caps.get(self.ecodes.EV_KEY, [])) or "none"
+            self.dev.close()
+            raise UsageError(f"{where}: joystick {path} has no button {deadman} (its buttons: {have})",
+                             hint="name one of its buttons in the config's joystick.deadman")
 
     def read(self) -> Sequence[JoyEvent] | None:
-        out = []
+        out: list[JoyEvent] = []
         try:
             for ev in self.dev.read():
+                if ev.type == self.ecodes.EV_SYN:
+                    if ev.code == self.ecodes.SYN_DROPPED:  # the buffer overflowed: events were lost
+                        self.dropping = True
+                        out.append(JoyEvent(SYN_DROPPED, 1.0))
+                    elif ev.code == self.ecodes.SYN_REPORT:
+                        self.dropping = False
+                    continue
+                if self.dropping:  # the rest of a broken report: the loop asks the key state instead
+                    continue
                 if ev.type == self.ecodes.EV_ABS:
                     lo, hi = self.ranges.get(ev.code, (-1, 1))
                     mid, half = (lo + hi) / 2, max((hi - lo) / 2, 1e-9)
                     out.append(JoyEvent(_names(self.ecodes, self.ecodes.ABS, ev.code),
                                         max(-1.0, min(1.0, (ev.value - mid) / half))))
                 elif ev.type == self.ecodes.EV_KEY:
-                    name = _names(self.ecodes, self.ecodes.BTN | self.ecodes.KEY, ev.code)
+                    name = self.chosen.get(ev.code) or _names(self.ecodes, self.keys, ev.code)
                     out.append(JoyEvent(name, 1.0 if ev.value else 0.0))
         except BlockingIOError:
             pass
         except OSError:
             return None  # unplugged
         return out
+
+    def active_keys(self) -> set[str]:
+        """Every name of every key the device reports held (its EVIOCGKEY state); raises OSError when
+        the device cannot be asked (the loop counts that as the dead-man released)."""
+        return {n for c in self.dev.active_keys() for n in _all_names(self.keys, c)}
 
     def close(self) -> None:
         self.dev.close()
@@ -221,6 +288,14 @@ def command(live: Any, cfg: ArmConfig, m: JoystickMap, values: dict[str, float],
     return live.set_motor_currents(pair.sigma, {pair.drive_a: ia, pair.drive_b: ib})
 
 
+def _deadman_down(source: EventSource, name: str) -> bool:
+    """Whether the device reports the dead-man held now; a query that fails counts as released."""
+    try:
+        return name in source.active_keys()
+    except Exception:
+        return False
+
+
 def run_joystick(live: Any, cfg: ArmConfig, jcfg: JoystickConfig, source: EventSource, *,
                  clock: Callable[[], float] = time.monotonic, sleep: Callable[[float], None] = time.sleep,
                  duration: float | None = None, on_status: Callable[[str], None] | None = None) -> JoystickRun:
@@ -232,6 +307,18 @@ def run_joystick(live: Any, cfg: ArmConfig, jcfg: JoystickConfig, source: EventS
     held = False
     t_end = None if duration is None else clock() + duration
     next_t = clock()
+
+    def deadman(now_held: bool) -> None:
+        nonlocal held
+        if held and not now_held:
+            live.stop_all()  # release: stop at once, before anything else
+            run.releases += 1
+            if on_status:
+                on_status("dead-man released: every joint stopped")
+        elif now_held and not held and on_status:
+            on_status("dead-man held: moving")
+        held = now_held
+
     while True:
         events = source.read()
         if events is None:
@@ -239,22 +326,19 @@ def run_joystick(live: Any, cfg: ArmConfig, jcfg: JoystickConfig, source: EventS
             run.ended_by = "the joystick is gone"
             break
         for ev in events:
-            if ev.code == jcfg.deadman:
-                now_held = ev.value >= 0.5
-                if held and not now_held:
-                    live.stop_all()  # release: stop at once, before anything else
-                    run.releases += 1
-                    if on_status:
-                        on_status("dead-man released: every joint stopped")
-                elif now_held and not held and on_status:
-                    on_status("dead-man held: moving")
-                held = now_held
+            if ev.code == SYN_DROPPED:  # events were lost: the axes read so far are stale (review R11)
+                values.clear()
+                deadman(_deadman_down(source, jcfg.deadman))
+            elif ev.code == jcfg.deadman:
+                deadman(ev.value >= 0.5)
             else:
                 values[ev.code] = ev.value
         now = clock()
         if now >= next_t:
             next_t = max(next_t + period, now)
             run.periods += 1
+            if held:  # the device's own key state each period: a release event may have been lost (R11)
+                deadman(_deadman_down(source, jcfg.deadman))
             if held:
                 for m in jcfg.axes:
                     try:

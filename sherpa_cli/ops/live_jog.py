@@ -140,6 +140,8 @@ class LiveJog:
         self.running: dict[str, _Running] = {}  # per axis
         self.messages: list[str] = []  # limit breaches and recoveries, oldest first
         self.dead: dict[str, str] = {}  # drive -> why it must not be commanded again in this session
+        self.moved: set[str] = set()  # drives this session sent a motion command to (review R4)
+        self.outside: set[str] = set()  # joints found outside their full range, not by this session's motion
 
     # -- context ---------------------------------------------------------------------------------
 
@@ -213,6 +215,9 @@ class LiveJog:
         distance = max(abs(t - now[d]) for d, t in motor_targets.items())
         duration = distance / speed if distance else 0.0
         self._stop_others_on(a.drives, name)
+        # on record before the first write: a command that fails half-way is still stopped (review R3)
+        self.running[name] = _Running("position", {"target": goal, **motor_targets}, None)
+        self.moved.update(motor_targets)
         for d, t in motor_targets.items():
             self._enable(d, UM_POSITION)
             c = self._client(d)
@@ -220,7 +225,6 @@ class LiveJog:
             c.set("PA", 0, t)
         for d in motor_targets:
             self._client(d).execute("BG")
-        self.running[name] = _Running("position", {"target": goal, **motor_targets}, None)
         st.command = f"PA -> {goal}"
         st.note = ""
         return f"{name}: to {goal} counts"
@@ -287,8 +291,18 @@ class LiveJog:
         self.state[name].command = "-"
 
     def stop_all(self) -> None:
-        for name in list(self.running):
-            self.stop(name)
+        """Stop every live drive this session has commanded, not only the commands on record: a motor
+        started by a command that failed half-way is stopped too (review R3). A drive never commanded
+        gets nothing (whether a drive takes ST with its motor off is not confirmed)."""
+        self.running.clear()
+        for name in self.state:
+            self.state[name].command = "-"
+        live = [d for d in self.drives if d not in self.dead and d in self.moved]
+        if live:
+            self.guard.check()
+        for d in live:
+            joint_jog.stop_now({d: self._client(d)},
+                               "torque" if self.guard.unit_mode(self.refs[d]) == UM_TORQUE else "position")
 
     # -- the periodic part ---------------------------------------------------------------------------
 
@@ -322,7 +336,7 @@ class LiveJog:
                     if d in self.dead:
                         st.faults.append(f"{d}: {self.dead[d]}")
         self._edge_hold(motors)
-        breaches = limit_watch.check(self.watched, motors)
+        breaches = self._own_breaches(limit_watch.check(self.watched, motors))
         if breaches:
             self._recover(motors, breaches)
             motors = self._sample(self.drives)
@@ -397,6 +411,10 @@ class LiveJog:
             self.stop(name)
         self._stop_others_on(a.drives, name)
         um = UM_TORQUE if mode == "torque" else self.settings.velocity_unit_mode
+        # on record before the first write: a command that fails half-way still expires and is
+        # stopped by stop / stop_all (review R3)
+        self.running[name] = _Running(mode, dict(motors), self.clock() + self.keepalive)
+        self.moved.update(motors)
         for d in motors:
             self._enable(d, um)
         for d, v in motors.items():
@@ -408,7 +426,7 @@ class LiveJog:
         if mode == "velocity":
             for d in motors:
                 self._client(d).execute("BG")
-        self.running[name] = _Running(mode, dict(motors), self.clock() + self.keepalive)
+        self.running[name].until = self.clock() + self.keepalive  # from the command, not from MO=1
         letters = "TC" if mode == "torque" else "JV"
         parts = [f"{letters}={v:g}" if isinstance(v, float) else f"{letters}={v}" for v in motors.values()]
         st.command = parts[0] if len(parts) == 1 else ", ".join(f"{d} {p}" for d, p in zip(motors, parts))
@@ -453,6 +471,27 @@ class LiveJog:
             else:
                 self.motors[d] = int(self._raw(d).get("PX"))
         return dict(self.motors)
+
+    def _own_breaches(self, breaches: Sequence[limit_watch.Breach]) -> list[limit_watch.Breach]:
+        """The breaches this session's motion made: only those are brought back (review R4). A joint
+        found outside its full range with no command of this session on its motors (uncalibrated at
+        power-up, pushed by hand) is reported once and left where it is; commands further out are
+        not sent (the edge hold), commands back inward are, and once inside it is watched as usual."""
+        self.outside &= {b.joint for b in breaches}
+        own = []
+        for b in breaches:
+            drives = next(j.drives for j in self.watched if j.name == b.joint)
+            if b.joint not in self.outside and self.moved & set(drives):
+                own.append(b)
+            elif b.joint not in self.outside:
+                self.outside.add(b.joint)
+                text = (f"limit: {b.joint} is outside its full range [{b.full[0]}, {b.full[1]}] at {b.position} "
+                        "counts, not moved there by this session: not brought back; a command further out is "
+                        "not sent")
+                self.messages.append(text)
+                if b.joint in self.state:
+                    self.state[b.joint].note = text
+        return own
 
     def _recover(self, motors: Mapping[str, int], breaches: Sequence[limit_watch.Breach]) -> None:
         """Like `jog`: stop every motor at once, then bring the breached joints back to their normal edge."""

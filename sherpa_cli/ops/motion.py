@@ -305,6 +305,7 @@ class MotionGuard:
             self._start_heartbeat()
             for d in self._drives.values():
                 self._arm(d)
+            self._beat_now()
             self._pulse()
         except BaseException:
             self._exiting = True
@@ -485,6 +486,12 @@ class MotionGuard:
                 return
             self._alive_until = max(self._alive_until, time.monotonic() + allowance) if extra else \
                 time.monotonic() + allowance
+
+    def _beat_now(self) -> None:
+        """One heartbeat at once after arming: a drive's consumer starts watching on the first
+        heartbeat after its 0x1016 entry (CiA 301), so it must come before any MO=1, not a period later."""
+        for bus in sorted({ref.bus for ref in self.refs}):
+            self.session.links[bus].network.send_message(HEARTBEAT_BASE + self.settings.host_node_id, bytes([NMT_OPERATIONAL]))
 
     def _start_heartbeat(self) -> None:
         buses = sorted({ref.bus for ref in self.refs})

@@ -26,6 +26,7 @@ from typing import Any, Callable, Iterable, Sequence
 from sherpa_cli.config.model import ArmConfig
 from sherpa_cli.errors import SherpaError, UsageError
 from sherpa_cli.joints.units import counts_per_s_to_rad_per_s, counts_to_rad
+from sherpa_cli.ops import encoder
 from sherpa_cli.ops.capture import frame_bits
 from sherpa_cli.ops.recording import Recording
 from sherpa_cli.ops.targets import DriveRef
@@ -71,13 +72,16 @@ class BusBudget:
         return self.load <= MAX_LOAD + 1e-12
 
 
-def bus_budget(cfg: ArmConfig, refs: Sequence[DriveRef], rate: float, *, current: bool) -> list[BusBudget]:
-    """Per bus: SYNC + one 8-byte TPDO per drive per SYNC (+ a 2-byte current TPDO every 2nd)."""
+def bus_budget(cfg: ArmConfig, refs: Sequence[DriveRef], rate: float, *, current: bool,
+               encoders: Sequence[Any] = ()) -> list[BusBudget]:
+    """Per bus: SYNC + one 8-byte TPDO per drive per SYNC (+ a 2-byte current TPDO every 2nd)
+    (+ a 4-byte TPDO per recorded encoder, ``encoders``: DeviceConfig, ops/encoder.py)."""
     out = []
-    for bus in dict.fromkeys(r.bus for r in refs):
+    for bus in dict.fromkeys([*(r.bus for r in refs), *(e.bus for e in encoders)]):
         n = sum(1 for r in refs if r.bus == bus)
         configured = cfg.buses[bus].bitrate if bus in cfg.buses else None
         bits = frame_bits(0) + n * frame_bits(8) + (n * frame_bits(2) / CURRENT_DIVIDER if current else 0)
+        bits += sum(frame_bits(4) for e in encoders if e.bus == bus)
         out.append(BusBudget(bus, n, configured or DEFAULT_BITRATE, not configured, bits, rate, current))
     return out
 
@@ -127,7 +131,10 @@ class Recorder:
         self.rate = float(rate)
         self.period = 1.0 / self.rate
         self.current = current
-        self.budget = bus_budget(self.cfg, self.refs, self.rate, current=current)
+        # CANopen encoders of the recorded joints, recorded beside them (ops/encoder.py)
+        self.encoders = encoder.recorded_encoders(self.cfg, (r.name for r in self.refs))
+        self.budget = bus_budget(self.cfg, self.refs, self.rate, current=current,
+                                 encoders=[t.dev for t in self.encoders])
         if enforce_budget:
             check_budget(self.budget)
         self.clock = clock
@@ -144,9 +151,11 @@ class Recorder:
         try:
             for d in self._drives.values():
                 self._configure(d)
+            for track in self.encoders:
+                track.configure(self.session)
             self._listen()
             self.t0 = self._now()
-            for bus in dict.fromkeys(r.bus for r in self.refs):
+            for bus in dict.fromkeys([*(r.bus for r in self.refs), *(t.dev.bus for t in self.encoders)]):
                 self._syncs.append(self.sync_factory(bus, self.session.links[bus].bus, self.period))
         except BaseException:
             self._finish()
@@ -192,6 +201,11 @@ class Recorder:
                         if attempt == RESTORE_ATTEMPTS - 1:
                             failures.append(exc)
             d.saved.clear()
+        for track in self.encoders:
+            try:
+                track.restore(self.session)
+            except SherpaError as exc:
+                failures.append(exc)
         if failures and not quiet:
             raise failures[0]
 
@@ -271,6 +285,21 @@ class Recorder:
                 callback = self._callback(d, n)
                 network.subscribe(cob, callback)
                 self._subscribed.append((network, cob, callback))
+        for track in self.encoders:
+            assert track.cob is not None  # configured in __enter__
+            network, callback = self.session.links[track.dev.bus].network, self._encoder_callback(track)
+            network.subscribe(track.cob, callback)
+            self._subscribed.append((network, track.cob, callback))
+
+    def _encoder_callback(self, track: "encoder.EncoderTrack") -> Callable[[int, bytes, float], None]:
+        def on_frame(can_id: int, data: bytes, timestamp: float) -> None:
+            t0 = self.t0
+            if t0 is None:
+                return
+            t = self.clock() if self.clock is not None else timestamp
+            with self._lock:
+                track.add(math.floor((t - t0) / self.period + 1e-6), data)
+        return on_frame
 
     def _callback(self, d: _Drive, n: int) -> Callable[[int, bytes, float], None]:
         unpack_pos, unpack_cur = struct.Struct("<ii").unpack_from, struct.Struct("<h").unpack_from
@@ -297,9 +326,10 @@ class Recorder:
 
     # -- results --------------------------------------------------------------------------------
     def counts(self) -> dict[str, int]:
-        """Samples received per drive so far."""
+        """Samples received per drive (and recorded encoder) so far."""
         with self._lock:
-            return {d.ref.name: len(d.pos) for d in self._drives.values()}
+            return {**{d.ref.name: len(d.pos) for d in self._drives.values()},
+                    **{t.dev.name: len(t.samples) for t in self.encoders}}
 
     def expected(self) -> int:
         if self.t0 is None:
@@ -346,6 +376,9 @@ class Recorder:
             rec.columns[f"{ref.name}.vx"] = motor(ref.name, 1)
             if self.current:
                 rec.columns[f"{ref.name}.iq_a"] = amps(ref.name)
+        with self._lock:
+            for track in self.encoders:
+                rec.columns.update(track.columns(keys))
         return rec
 
 

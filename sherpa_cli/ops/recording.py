@@ -3,7 +3,8 @@
 Columns: ``time_s`` (s; 0 = the step's command in `log step`, else the first sample), then per
 joint ``<joint>.pos_rad``, ``<joint>.vel_rad_s`` (and ``<joint>.cur_a`` for a plain joint when
 current is sampled), then per drive the motor's ``<drive>.px`` and ``<drive>.vx`` in counts,
-counts/s (and ``<drive>.iq_a``). A sample a drive did not deliver is an empty cell.
+counts/s (and ``<drive>.iq_a``); a joint's CANopen encoder (ops/encoder.py) adds ``<device>.pos``
+(counts) and ``<joint>.ext_pos_rad``. A sample a drive did not deliver is an empty cell.
 """
 
 from __future__ import annotations
@@ -46,7 +47,7 @@ def write_csv(rec: Recording, path: Path) -> None:
             row = [f"{t:.6f}"]
             for name in names:
                 v = rec.columns[name][i]
-                row.append("" if math.isnan(v) else (f"{v:.0f}" if name.endswith((".px", ".vx")) else f"{v:.6g}"))
+                row.append("" if math.isnan(v) else (f"{v:.0f}" if name.endswith((".px", ".vx", ".pos")) else f"{v:.6g}"))
             writer.writerow(row)
 
 

@@ -9,6 +9,13 @@ Fig. 9.1), that time is in the dead time and reported on its own as ``switch_s``
 - position: a step of X rad from where the joint stands (UM=5, PA, BG; the drive's own profile)
 - velocity: JV = V rad/s, BG (UM=5 jog or UM=2, ``motion.velocity_unit_mode``)
 - torque: TC = A in UM=1 (the joint's continuous current limit applies, as in `jog`)
+
+The checks are `jog`'s (ops/jog.py): a position goal outside the joint's normal range is refused,
+and so is a position step of a joint that is not calibrated unless ``uncalibrated``; while it waits
+for the response, the joint-limit watch (ops/limit_watch.py) stops the step and brings the joint
+back into its normal range when it leaves its full range -- in torque mode too, where no drive
+limit acts. The motor is stopped before the recording is torn down (review R6), so the drive
+never keeps its JV/TC while the recorder drains and restores its PDOs.
 """
 
 from __future__ import annotations
@@ -20,8 +27,8 @@ from typing import Any, Callable, Protocol
 
 from sherpa_cli.errors import UsageError
 from sherpa_cli.joints.units import counts_to_rad, rad_per_s_to_counts_per_s, rad_to_counts
-from sherpa_cli.ops.jog import JogRequest, JogTarget, check_request, resolve_jog_target
-from sherpa_cli.ops.motion import UM_POSITION, UM_TORQUE, GuardReport, MotionGuard, MotionSettings
+from sherpa_cli.ops.jog import JogRequest, JogTarget, _limit_breach, _precheck, check_request, resolve_jog_target
+from sherpa_cli.ops.motion import UM_POSITION, UM_TORQUE, GuardReport, MotionGuard, MotionSettings, stop_drive
 from sherpa_cli.ops.record import Recorder, bus_budget
 from sherpa_cli.ops.recording import Recording
 from sherpa_cli.ops.step_metrics import StepMetrics, step_metrics
@@ -41,12 +48,14 @@ class StepResult:
     target: float  # in the signal's unit (position: start + step)
     command: str
     switch_s: float  # s from t = 0 until the step itself was sent (MO/UM switch)
-    ended_by: str  # "settled" | "time up"
+    ended_by: str  # "settled" | "time up" | "left its full range, brought back to N counts"
     metrics: StepMetrics
     recording: Recording
     samples: int
     expected: int
     stop: GuardReport = field(default_factory=GuardReport)
+    breach: Any = None  # limit_watch.Breach when the joint left its full range (the step then failed)
+    recovered_to: int | None = None  # counts, where the limit recovery brought the joint
 
     @property
     def signal(self) -> str:
@@ -56,7 +65,8 @@ class StepResult:
         return {"joint": self.joint, "drive": self.drive, "mode": self.mode, "value": self.value,
                 "signal": self.signal, "target": round(self.target, 6), "command": self.command,
                 "switch_s": round(self.switch_s, 4), "ended_by": self.ended_by, "samples": self.samples,
-                "expected": self.expected, "metrics": self.metrics.as_json()}
+                "expected": self.expected, "metrics": self.metrics.as_json(), "ok": self.breach is None,
+                "limit": None if self.breach is None else {**self.breach.as_dict(), "recovered_to": self.recovered_to}}
 
 
 def resolve_step_target(cfg: Any, text: str) -> JogTarget:
@@ -88,21 +98,31 @@ class StepTime(Protocol):
     def follow(self, answered: Callable[[int], bool]) -> None: ...
 
 
-def run_step(session: Any, target: JogTarget, mode: str, value: float, *, duration: float, rate: float,
-             settings: MotionSettings, sleep: Callable[[float], None] = time.sleep,
-             on_event: Callable[[str], None] | None = None, recorder_kw: dict | None = None,
-             timebase: StepTime | None = None) -> StepResult:
-    """``timebase``: the step's clock, waits and SYNC source (the recorder's, the motion guard's
-    and the waits here); without it wall time, ``sleep`` and ``recorder_kw``."""
+def step_request(target: JogTarget, mode: str, value: float, *, duration: float,
+                 uncalibrated: bool = False) -> JogRequest:
+    """The step as a jog request, with every check that needs no bus (`jog`'s); a dry run's checks."""
     if target.joint is None:
         raise UsageError(f"{target.name}: log step needs a plain joint (its cpr converts rad to counts)")
     req = JogRequest(mode=mode, by=value if mode == "position" else None,
                      velocity=value if mode == "velocity" else None, torque=value if mode == "torque" else None,
-                     duration=duration if mode != "position" else None)
+                     duration=duration if mode != "position" else None, uncalibrated=uncalibrated)
     check_request(target, req)
     if not (math.isfinite(duration) and duration > 0):
         raise UsageError(f"--for {duration}: expected a time > 0 s")
+    return req
+
+
+def run_step(session: Any, target: JogTarget, mode: str, value: float, *, duration: float, rate: float,
+             settings: MotionSettings, sleep: Callable[[float], None] = time.sleep,
+             on_event: Callable[[str], None] | None = None, recorder_kw: dict | None = None,
+             uncalibrated: bool = False, timebase: StepTime | None = None) -> StepResult:
+    """``timebase``: the step's clock, waits and SYNC source (the recorder's, the motion guard's
+    and the waits here); without it wall time, ``sleep`` and ``recorder_kw``."""
+    req = step_request(target, mode, value, duration=duration, uncalibrated=uncalibrated)
+    # jog's checks before anything is armed: a position goal inside the normal range, a calibrated joint
+    _precheck(session, target, req)
     ref, joint = target.ref, target.joint
+    assert joint is not None  # step_request refused a target without a plain joint
     current = all(b.fits for b in bus_budget(session.cfg, [ref], rate, current=True))
     signal = SIGNAL[mode]
     clock: Callable[[], float] = time.monotonic
@@ -115,13 +135,18 @@ def run_step(session: Any, target: JogTarget, mode: str, value: float, *, durati
     with guard:
         c = guard.client(ref)
         start_counts = int(c.get("PX"))
-        with Recorder(session, [ref], rate, current=current, **rec_kw) as rec:
+        with Recorder(session, [ref], rate, current=current, **rec_kw) as rec, \
+                _StopFirst(guard, ref, settings, rec, state, clock, sleep):
             if timebase is not None:
                 timebase.follow(rec.answered)
             _wait(guard, clock, sleep, PRE_S)
             t_cmd = rec.now()
             if mode == "position":
                 goal = start_counts + rad_to_counts(value, joint.cpr)
+                lo, hi = joint.normal_range
+                if not lo <= goal <= hi:  # again with this PX: the joint may have moved since _precheck
+                    raise UsageError(f"{joint.name}: target {goal} counts is outside the joint's normal range "
+                                     f"[{lo}, {hi}]", hint="log step moves a joint only inside its normal range")
                 guard.enable(ref, UM_POSITION)
                 c.set("PA", 0, goal)
                 state["switch"] = rec.now() - t_cmd
@@ -141,8 +166,10 @@ def run_step(session: Any, target: JogTarget, mode: str, value: float, *, durati
                 state["command"], state["target"] = f"TC={value:g}", value
             # --for counts from the step itself, not from the command (a switch may come first)
             state["ended_by"] = _until_settled(guard, rec, joint.name, signal, t_cmd, state["target"],
-                                               state["switch"] + duration, sleep, settle=mode != "torque")
-        recording = rec.recording(t_zero=t_cmd)
+                                               state["switch"] + duration, clock, sleep, settle=mode != "torque",
+                                               jog_target=target, settings=settings, state=state)
+        # the step ends where the motor was told to stop: the stop (and a limit recovery) is not the step
+        recording = _cut(rec.recording(t_zero=t_cmd), state["t_stop"] - t_cmd)
         samples, expected = min(rec.counts().values()), rec.expected()
     # position: the recorded start is the reference (PX may not have been exactly 0)
     series = recording.series(joint.name, signal)
@@ -156,7 +183,8 @@ def run_step(session: Any, target: JogTarget, mode: str, value: float, *, durati
     metrics = step_metrics(series[0], series[1], t_step=0.0, target=target_value)
     return StepResult(joint=joint.name, drive=ref.name, mode=mode, value=value, target=target_value,
                       command=state["command"], switch_s=state["switch"], ended_by=state["ended_by"],
-                      metrics=metrics, recording=recording, samples=samples, expected=expected, stop=guard.report)
+                      metrics=metrics, recording=recording, samples=samples, expected=expected, stop=guard.report,
+                      breach=state.get("breach"), recovered_to=state.get("recovered_to"))
 
 
 def _wait(guard: MotionGuard, clock: Callable[[], float], sleep: Callable[[float], None], seconds: float) -> None:
@@ -170,19 +198,66 @@ def _wait(guard: MotionGuard, clock: Callable[[], float], sleep: Callable[[float
 
 
 def _until_settled(guard: MotionGuard, rec: Recorder, joint: str, signal: str, t_cmd: float, target: float,
-                   duration: float, sleep: Callable[[float], None], *, settle: bool) -> str:
+                   duration: float, clock: Callable[[], float], sleep: Callable[[float], None], *, settle: bool,
+                   jog_target: JogTarget,
+                   settings: MotionSettings, state: dict[str, Any]) -> str:
     """Record until the signal has stayed within 2 % of the step around the target for
-    SETTLE_HOLD_S (position and velocity steps), or until ``duration`` s after the command."""
+    SETTLE_HOLD_S (position and velocity steps), or until ``duration`` s after the command.
+    Meanwhile the joint-limit watch (jog's, every ``settings.poll_interval``): past the full range
+    the motor is stopped at once and the joint brought back to the nearest edge of its normal range."""
+    next_settle = 0.0
     while True:
         guard.check()
-        elapsed = rec.now() - t_cmd
+        now = rec.now()
+        px = int(guard.query(jog_target.ref, "PX"))
+        if _limit_breach(guard, guard.client(jog_target.ref), jog_target, px, settings, clock, sleep, state):
+            state["t_stop"] = now  # the watch stopped the motor here; the way back is not the step
+            return state["ended_by"]
+        elapsed = now - t_cmd
         if elapsed >= duration:
             return "time up"
-        if settle and elapsed > SETTLE_HOLD_S:
+        if settle and elapsed > SETTLE_HOLD_S and elapsed >= next_settle:
+            next_settle = elapsed + CHECK_EVERY_S
             series = rec.recording(t_zero=t_cmd).series(joint, signal)
             if series is not None and _settled(series, target):
                 return "settled"
-        sleep(CHECK_EVERY_S)
+        sleep(settings.poll_interval)
+
+
+class _StopFirst:
+    """Entered just inside the Recorder, so it exits first: on every way out (the end, an error,
+    Ctrl-C) the motor is stopped -- the guard's stop (TC=0 in torque mode, ST or JV=0 + BG as
+    motion.stop_method says, then standstill) -- before the Recorder drains and restores its PDOs
+    (review R6). The guard's own stop and switch-off follow as before."""
+
+    def __init__(self, guard: MotionGuard, ref: Any, settings: MotionSettings, rec: Recorder,
+                 state: dict[str, Any], clock: Callable[[], float], sleep: Callable[[float], None]) -> None:
+        self.guard, self.ref, self.settings, self.rec, self.state = guard, ref, settings, rec, state
+        self.clock, self.sleep = clock, sleep
+
+    def __enter__(self) -> "_StopFirst":
+        return self
+
+    def __exit__(self, exc_type: Any, exc: Any, tb: Any) -> None:
+        self.state.setdefault("t_stop", self.rec.now())
+        s = self.settings
+        try:
+            stop_drive(self.guard.client(self.ref), unit_mode=self.guard.unit_mode(self.ref), method=s.stop_method,
+                       standstill_timeout=s.standstill_timeout, poll_interval=s.poll_interval, clock=self.clock,
+                       sleep=self.sleep,
+                       pulse=self.guard.check if exc_type is None else None,
+                       standstill_velocity=s.standstill_velocity)
+        except Exception:
+            if exc_type is None:
+                raise
+            # on the way out of an error: never hide it; the guard's stop follows and reports
+
+
+def _cut(recording: Recording, until: float) -> Recording:
+    """The samples taken before ``until`` (s, the recording's time)."""
+    keep = [i for i, t in enumerate(recording.times) if t < until]
+    return Recording(times=[recording.times[i] for i in keep],
+                     columns={name: [values[i] for i in keep] for name, values in recording.columns.items()})
 
 
 def _settled(series: tuple[list[float], list[float]], target: float) -> bool:

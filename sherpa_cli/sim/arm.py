@@ -22,6 +22,7 @@ from sherpa_cli.config.model import ArmConfig, JointConfig, PairConfig, SwitchCo
 from sherpa_cli.sim import state as sim_state
 from sherpa_cli.sim.clock import Clock, RealClock
 from sherpa_cli.sim.drive import SimDrive
+from sherpa_cli.sim.encoder import SimEncoder
 from sherpa_cli.sim.settings import SimSettings
 
 NMT_ID = 0x000
@@ -70,19 +71,53 @@ def settings_for(cfg: ArmConfig, drive: str, **overrides: Any) -> SimSettings:
     return SimSettings(**base)
 
 
+# how far from its calibration switch a joint without absolute feedback powers up by default: this
+# share of the way from the switch to the edge of the normal range the homing search comes from
+POWER_UP_SHARE = 0.25
+
+
+def calibration_switch(joint: JointConfig) -> SwitchConfig | None:
+    """The switch ``sherpa home`` calibrates ``joint`` on (ops/home.py picks the same one): a plain
+    joint's home switch, else its stop switch on the side ``calibration.speed`` points to; a Σ/Δ
+    joint's stop switch on that side, else its home switch. None: nothing to home on."""
+    if not joint.cal_speed:
+        return None
+    side = "low" if joint.cal_speed < 0 else "high"
+    home = [sw for sw in joint.switches if sw.kind is SwitchKind.HOME]
+    stop = [sw for sw in joint.switches if sw.kind is SwitchKind.STOP
+            and (sw.side == side or (sw.side is None and (sw.position > 0) == (joint.cal_speed > 0)))]
+    order = (home + stop) if joint.drive is not None else (stop + home)
+    return order[0] if order else None
+
+
+def default_power_up(joint: JointConfig) -> int:
+    """Where a joint stands at power-up when `sim: power_up:` does not say (PX reads 0 there all the
+    same). A joint with absolute feedback (abs_encoder) or nothing to home on: 0, PX = real position.
+    Else a quarter of the way from its calibration switch toward the edge of the normal range the
+    search comes from (the search runs toward the switch), kept inside the normal range: homing has
+    something to find, and a home that just zeroes PX is told apart from a correct one."""
+    sw = calibration_switch(joint)
+    if joint.abs_encoder is not None or sw is None:
+        return 0
+    lo, hi = joint.normal_range
+    edge = lo if (joint.cal_speed or 0) > 0 else hi  # the search moves toward the switch from here
+    return min(max(int(sw.position + (edge - sw.position) * POWER_UP_SHARE), lo), hi)
+
+
 def power_up_positions(cfg: ArmConfig) -> dict[str, int]:
-    """Each drive's real motor position at power-up (counts) from `sim: power_up:` (joint -> position);
-    PX reads 0 there all the same. A pair's motors follow from its Σ and Δ: a = (Σ+Δ)/2, b = (Σ-Δ)/2."""
+    """Each drive's real motor position at power-up (counts): `sim: power_up:` (joint -> position),
+    else :func:`default_power_up`; PX reads 0 there all the same. A pair's motors follow from its Σ
+    and Δ: a = (Σ+Δ)//2, b = Σ - a (an odd Σ+Δ puts Δ one count low)."""
+    def at(joint: JointConfig) -> int:
+        given = cfg.sim_power_up.get(joint.name)
+        return int(given) if given is not None else default_power_up(joint)
+
     out: dict[str, int] = {}
-    for name, pos in cfg.sim_power_up.items():
-        joint = cfg.joints.get(name)
-        if joint is not None and joint.drive is not None:
-            out[joint.drive] = int(pos)
+    for joint in cfg.joints.values():
+        if joint.drive is not None:
+            out[joint.drive] = at(joint)
     for pair in cfg.pairs.values():
-        s, d = cfg.sim_power_up.get(pair.sigma), cfg.sim_power_up.get(pair.delta)
-        if s is None and d is None:
-            continue
-        s, d = s or 0, d or 0
+        s, d = at(cfg.joints[pair.sigma]), at(cfg.joints[pair.delta])
         out[pair.drive_a], out[pair.drive_b] = (s + d) // 2, s - (s + d) // 2
     return out
 
@@ -223,14 +258,15 @@ class SimArm:
                 settings=SimSettings(vendor_id=e.vendor_id, device_name=e.device_name)))
             for i, e in enumerate(cfg.sim_extra_nodes)}
         # `devices:` of other types (sherpa_cli/devices): a CANopen encoder answers NMT and SDO (identity,
-        # 0x1000 = CiA 406, 0x6004 = its joint's real position minus the joint's abs_encoder offset)
+        # 0x1000 = CiA 406, 0x6004 = its joint's real position minus the joint's abs_encoder offset) and
+        # sends 0x6004 in its TPDO1 (sim/encoder.py: cyclic by 0x6200, or on SYNC)
         for dev in cfg.devices.values():
             if dev.type == "canopen-encoder":
-                self.extras[dev.name] = (dev.bus, SimDrive(
-                    dev.node, clock=self.clock, serial=0x7E100000 + dev.node,
+                reading = self._encoder_reading(dev.name)
+                self.extras[dev.name] = (dev.bus, SimEncoder(
+                    dev.node, position=reading, clock=self.clock, serial=0x7E100000 + dev.node,
                     settings=SimSettings(vendor_id=ENCODER_VENDOR, device_name="CANopen encoder", inputs=1),
-                    od_live={(0x1000, 0): lambda: ENCODER_DEVICE_TYPE,
-                             (0x6004, 0): self._encoder_reading(dev.name)}))
+                    od_live={(0x1000, 0): lambda: ENCODER_DEVICE_TYPE, (0x6004, 0): reading}))
         self.lock = threading.RLock()  # held by the pumps while they touch drives; tests take it too
         self._stop = threading.Event()
         self._threads: list[threading.Thread] = []

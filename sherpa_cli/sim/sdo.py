@@ -38,10 +38,11 @@ _OBJECTS: list[tuple[int, int | None, str, int, str]] = [
 _RECORD_NAMES = {0x1003: "Pre-defined error field", 0x1016: "Consumer heartbeat time", 0x1018: "Identity object", 0x1029: "Error behaviour"}
 
 
-def build_object_dictionary() -> "od.ObjectDictionary":
+def build_object_dictionary(extra: tuple = ()) -> "od.ObjectDictionary":
+    """``extra``: more (index, sub or None, name, data type, access) of another device type (sim/encoder.py)."""
     dictionary = od.ObjectDictionary()
     records: dict[int, Any] = {}
-    for index, sub, name, data_type, access in _OBJECTS:
+    for index, sub, name, data_type, access in (*_OBJECTS, *extra):
         var = od.ODVariable(name, index, sub or 0)
         var.data_type = data_type
         var.access_type = access
@@ -140,7 +141,7 @@ class SdoServer:
         self._transfer: str | None = None  # "upload" / "download" while a segmented transfer runs
         self._where = (0, 0)  # index, sub-index of the last initiated transfer
         self.shim = NetworkShim(self._send)
-        self.local = canopen.LocalNode(node, build_object_dictionary())
+        self.local = canopen.LocalNode(node, build_object_dictionary(getattr(drive, "sdo_extra", ())))
         self.local.add_read_callback(self._read)
         self.local.add_write_callback(self._write)
         self.local.associate_network(self.shim)

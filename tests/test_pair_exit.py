@@ -1,0 +1,151 @@
+"""How `diffdrive move` and the Σ/Δ jog leave the drives (review R7, R8): the scaled SP/AC/DC are
+put back like the group id 0x2040, and every motor is stopped before CommonStart's restore (SDO,
+which can take sdo_timeout per drive that stops answering), on the end, an error and Ctrl-C; a
+second Ctrl-C during the restore does not skip the rest of it."""
+
+from __future__ import annotations
+
+import pytest
+
+from motion_helpers import JOG_CONFIG, calibrate, motors_off
+from sherpa_cli.config import load_config
+from sherpa_cli.ops import diffdrive, joint_jog
+from sherpa_cli.ops.diffdrive import CommonStart, MoveRequest
+from sherpa_cli.ops.session import ArmSession
+from sherpa_cli.ops.targets import drive_ref
+from sherpa_cli.sim.arm import SimArm
+
+PROFILE = ("SP", "AC", "DC")
+
+
+def _profile(s, name):
+    c = s.client(drive_ref(s.cfg, name))
+    c.nmt_start()
+    return {k: int(c.get(k)) for k in PROFILE}
+
+
+def _frames(s, name):
+    with s.sim.lock:
+        return [(t, i, bytes(f)) for t, i, f in s.sim.drives[name].received]
+
+
+def _stop_and_restore(s, name):
+    """(time of the last ST to ``name``, time of its 0x2040 restore download) of the last command."""
+    node = s.sim.drives[name].node
+    rx = _frames(s, name)
+    group = [t for t, i, f in rx if i == 0x600 + node and f[0] & 0xE0 == 0x20 and f[1:3] == b"\x40\x20"]
+    assert len(group) >= 2, "no 0x2040 write and restore"
+    restore = group[-1]
+    bg = max(t for t, i, f in rx if i in (0x300 + node, 0x300 + 125) and f[:2] == b"BG" and t < restore)
+    st = [t for t, i, f in rx if i == 0x300 + node and f[:2] == b"ST" and bg < t]
+    return (st[0] if st else None), restore
+
+
+def test_diffdrive_puts_back_the_profile_it_scaled():
+    """R7: Σ +200 and Δ +200: right = (Σ-Δ)/2 does not move, its share is 0 (SP=AC=DC=1)."""
+    cfg = load_config(JOG_CONFIG)
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
+        before = {d: _profile(s, d) for d in ("left", "right")}
+        r = diffdrive.run_move(s, cfg.pairs["diff"], MoveRequest(sigma="200counts", delta="200counts",
+                                                                 relative=True, uncalibrated=True))
+        assert r.motor_commands["right"]["AC"] == 1  # it was scaled
+        assert {d: _profile(s, d) for d in ("left", "right")} == before
+
+
+def test_a_sigma_jog_after_a_diffdrive_move_still_holds_delta():
+    """R7: with right's AC=DC=1 left behind, the next Σ jog ran on one motor and Δ drifted."""
+    cfg = load_config(JOG_CONFIG)
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
+        calibrate(s, "left", "right")
+        diffdrive.run_move(s, cfg.pairs["diff"], MoveRequest(sigma="200counts", delta="200counts", relative=True))
+        axis = joint_jog.resolve_axis(cfg, "pitch")
+        r = joint_jog.run(s, axis, joint_jog.JogRequest(mode="velocity", velocity="2000counts/s", duration=0.4))
+    assert abs(r.joints_end["roll"] - r.joints_start["roll"]) <= 20, (r.joints_start, r.joints_end)
+
+
+class _CtrlC:
+    """A trace that raises KeyboardInterrupt (as Ctrl-C does) at its ``at``-th sample."""
+
+    source = "test"
+
+    def __init__(self, drives, at=5):
+        self.samples, self.at = [], at
+
+    def add(self, t, motors):
+        self.samples.append(t)
+        if len(self.samples) == self.at:
+            raise KeyboardInterrupt
+
+
+def test_ctrl_c_during_a_move_stops_both_motors_before_the_restore_and_restores_the_profile():
+    """R8 and R7 on the Ctrl-C path: each motor gets its ST before its 0x2040 restore."""
+    cfg = load_config(JOG_CONFIG)
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
+        calibrate(s, "left", "right")
+        before = {d: _profile(s, d) for d in ("left", "right")}
+        with pytest.raises(KeyboardInterrupt):
+            diffdrive.run_move(s, cfg.pairs["diff"], MoveRequest(sigma="-2000counts", velocity="1000counts/s"),
+                               trace_factory=_CtrlC)
+        for d in ("left", "right"):
+            st, restore = _stop_and_restore(s, d)
+            assert st is not None and st < restore, f"{d}: 0x2040 restored before the motor was stopped"
+        assert {d: _profile(s, d) for d in ("left", "right")} == before
+        assert motors_off(s)
+
+
+def test_an_error_during_a_sigma_jog_stops_both_motors_before_the_restore():
+    """R8 in joint_jog.py: a velocity jog of Σ ends in an error (here from on_progress)."""
+    cfg = load_config(JOG_CONFIG)
+    seen = []
+
+    def progress(joints):
+        seen.append(joints)
+        if len(seen) == 5:
+            raise RuntimeError("the view went away")
+
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
+        axis = joint_jog.resolve_axis(cfg, "pitch")
+        with pytest.raises(RuntimeError):
+            joint_jog.run(s, axis, joint_jog.JogRequest(mode="velocity", velocity="1000counts/s", duration=2.0),
+                          on_progress=progress)
+        for d in ("left", "right"):
+            st, restore = _stop_and_restore(s, d)
+            assert st is not None and st < restore, f"{d}: 0x2040 restored before the motor was stopped"
+        assert motors_off(s)
+
+
+class _Sdo:
+    def __init__(self, log, name, interrupt):
+        self.log, self.name, self.interrupt = log, name, interrupt
+
+    def upload(self, index, sub, name=None):
+        return bytes([7])
+
+    def download(self, index, sub, data, name=None):
+        self.log.append((self.name, index, bytes(data)))
+        if self.interrupt and len([x for x in self.log if x[0] == self.name]) == 2:
+            raise KeyboardInterrupt  # a second Ctrl-C, during the restore
+
+
+class _Session:
+    def __init__(self, cfg, interrupt):
+        self.cfg, self.log = cfg, []
+        self._sdo = {name: _Sdo(self.log, name, name in interrupt) for name in cfg.drives}
+
+    def sdo(self, ref):
+        return self._sdo[ref.name]
+
+
+@pytest.mark.parametrize("interrupt", [("left",), ("left", "right")])
+def test_a_second_ctrl_c_during_the_restore_does_not_skip_the_rest_of_it(interrupt):
+    cfg = load_config(JOG_CONFIG)
+    session = _Session(cfg, interrupt)
+    refs = [drive_ref(cfg, "left"), drive_ref(cfg, "right")]
+    stopped = []
+    start = CommonStart(session, refs, {}, "group", 125, stop=lambda: stopped.append(len(session.log)))
+    start.__enter__()
+    assert [x[0] for x in session.log] == ["left", "right"]  # group id written to both
+    with pytest.raises(KeyboardInterrupt):
+        start.__exit__(None, None, None)
+    assert stopped == [2]  # the stop came before any restore
+    assert session.log[2:] == [("left", 0x2040, bytes([7])), ("right", 0x2040, bytes([7]))]
