@@ -12,6 +12,8 @@ import time
 
 import pytest
 
+from sherpa_cli.elmo import codec
+
 from sherpa_cli.elmo.client import ClientSettings, DriveClient
 from sherpa_cli.elmo.codec import decode_request, encode_reply
 from sherpa_cli.elmo.faults import Emcy
@@ -333,6 +335,29 @@ def test_motor_on_tolerates_silent_settle_window():
     client.motor_on()
     assert clock.sleeps == [0.01, 0.01]
     bus.done()
+
+
+def test_an_mo_poll_in_the_settle_window_waits_only_until_the_window_ends(monkeypatch):
+    # The drive is deaf for protocol.mo_settle after MO=1: a poll then must not wait out a whole
+    # reply timeout (1 s here) but only the rest of the window, so MO=1 confirms at ~mo_settle.
+    client, bus, clock = drive([("tx", TX, "4D 4F 00 00 01 00 00 00"), ("rx", RX, "4D 4F 00 00 01 00 00 00")],
+                               timeout=1.0, mo_settle=0.5)
+    waits: list[float | None] = []
+    real_exchange = client._exchange
+
+    def exchange(frame, letters, index, *, attempts, before=None, wait=None):
+        if letters == "MO" and len(frame) == 4:  # a poll: the drive is deaf until t = 0.5
+            waits.append(wait)
+            clock.now += wait if wait is not None else client.timeout
+            if clock.now < 0.5 - 1e-9:
+                return None
+            return codec.decode_reply(bytes.fromhex("4D 4F 00 00 01 00 00 00"))
+        return real_exchange(frame, letters, index, attempts=attempts, before=before)
+
+    monkeypatch.setattr(client, "_exchange", exchange)
+    client.motor_on()
+    assert waits == [pytest.approx(0.5)]  # not the 1 s reply timeout
+    assert clock.now == pytest.approx(0.5)
 
 
 def test_motor_on_not_confirmed_by_deadline():

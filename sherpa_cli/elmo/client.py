@@ -48,11 +48,12 @@ class ClientSettings:
     query_long: bool = False  # True: DLC 8 queries with the query bit instead of DLC 4
     mo_confirm_timeout: float = 3.0  # s to wait for MO to read back after MO=0/1
     mo_poll_interval: float = 0.01  # s between MO polls
+    mo_settle: float = 0.0  # s the drive may be deaf after MO=0/1: an MO poll then waits no longer than that
     sv_blackout: float = 0.5  # s of silence after SV before the drive is asked anything
     timeout_hint: str = _TIMEOUT_HINT  # what a timeout tells the user to check (the simulator has its own)
 
     def __post_init__(self) -> None:
-        for name in ("mo_confirm_timeout", "mo_poll_interval", "sv_blackout"):
+        for name in ("mo_confirm_timeout", "mo_poll_interval", "mo_settle", "sv_blackout"):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, (int, float)) or not value >= 0:
                 raise ValueError(f"ClientSettings.{name} must be a number >= 0, got {value!r}")
@@ -254,11 +255,18 @@ class DriveClient:
             else:
                 self.transport.send(RPDO2_BASE + self.node, frame)
             query = self._query_frame("MO", 0)
-            deadline = self._clock() + timeout
+            start = self._clock()
+            deadline = start + timeout
+            deaf_until = start + self.settings.mo_settle
             last: int | float | None = None
             while True:
-                # One attempt per poll: the poll loop is the retry, bounded by the deadline.
-                reply = self._exchange(query, "MO", 0, attempts=1)
+                # One attempt per poll: the poll loop is the retry, bounded by the deadline. While the
+                # drive may still be settling (deaf), a poll waits only until the window ends, not a
+                # whole reply timeout: the next poll, sent then, is the one it can hear.
+                now = self._clock()
+                wait = self.timeout if now >= deaf_until else \
+                    min(self.timeout, max(deaf_until - now, self.settings.mo_poll_interval))
+                reply = self._exchange(query, "MO", 0, attempts=1, wait=wait)
                 if reply is not None:
                     last = self._value(reply, "MO")
                     if last == value:
@@ -339,11 +347,12 @@ class DriveClient:
         return reply
 
     def _exchange(self, frame: bytes, letters: str, index: int, *, attempts: int,
-                  before: bytes | None = None) -> Reply | None:
+                  before: bytes | None = None, wait: float | None = None) -> Reply | None:
         """Send ``frame`` up to ``attempts`` times; the matching reply, or None if none came.
 
         ``before`` (sent once, first) is a frame whose only possible answer is an error reply
-        with the same (letters, index): a set while the drive does not echo sets.
+        with the same (letters, index): a set while the drive does not echo sets. ``wait``: how
+        long each attempt waits for its reply (default: the reply timeout).
         """
         pending = _Pending(letters, index)
         # Registered before sending: with a synchronous transport the reply arrives inside send().
@@ -355,7 +364,7 @@ class DriveClient:
             for attempt in range(attempts):
                 if frame:  # an empty frame only waits (for a reply already on its way)
                     self.transport.send(RPDO2_BASE + self.node, frame)
-                if pending.arrived.acquire(timeout=self.timeout):
+                if pending.arrived.acquire(timeout=self.timeout if wait is None else wait):
                     if pending.error is not None:
                         raise pending.error
                     return pending.reply

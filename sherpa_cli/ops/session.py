@@ -93,7 +93,8 @@ class ArmSession:
                 raise UsageError(f"{ref.name}: bus {ref.bus} is not open in this session")
             p = self.cfg.protocol
             settings = ClientSettings(expect_set_echo=p.set_echo, query_long=p.query_long,
-                                      mo_confirm_timeout=p.mo_confirm_timeout, sv_blackout=p.sv_blackout,
+                                      mo_confirm_timeout=p.mo_confirm_timeout, mo_settle=p.mo_settle,
+                                      sv_blackout=p.sv_blackout,
                                       **({"timeout_hint": SIM_TIMEOUT_HINT} if self.sim is not None else {}))  # type: ignore[arg-type]
             options: dict[str, Any] = {"timeout": p.reply_timeout, "retries": p.retries, **self.client_overrides}
             client = DriveClient(NetworkTransport(self.links[ref.bus].network), ref.node, name=ref.name,
