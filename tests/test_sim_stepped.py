@@ -61,16 +61,19 @@ def test_an_unanswered_sync_is_a_communication_error():
         st.sleep(0.01)
 
 
-def test_a_client_wait_is_charged_a_reply_timeout_per_unheard_request():
+def test_a_client_wait_is_charged_what_unheard_requests_cost_the_host():
     st = SteppedTime(pace=False)
-    lost = [3]  # before the client existed: not its waits
+    lost = [(3, 9.0)]  # before the client existed: not its waits
     options = st.client_overrides(0.1, retries=1, unheard=lambda: lost[0])
     assert options["retries"] >= 4 and options["timeout"] > 0
     options["sleep"](0.01)
     assert st.now() == pytest.approx(0.01)
-    lost[0] = 5  # two requests went unheard (the drive settling after MO=1)
+    lost[0] = (4, 9.02)  # one request unheard, 20 ms of the drive's settle window left: the host waited that
     options["sleep"](0.01)
-    assert st.now() == pytest.approx(0.01 + 0.2 + 0.01)
+    assert st.now() == pytest.approx(0.01 + 0.02 + 0.01)
+    lost[0] = (6, 10.02)  # two more with 1 s left: at most a reply timeout each
     options["sleep"](0.01)
-    assert st.now() == pytest.approx(0.23)
+    assert st.now() == pytest.approx(0.04 + 0.2 + 0.01)
+    options["sleep"](0.01)
+    assert st.now() == pytest.approx(0.26)
     assert options["clock"]() == st.now()

@@ -456,7 +456,8 @@ def step(
         timebase = None
         if stepped is not None and session.sim is not None and session.sim.clock is stepped.clock:
             arm = session.sim
-            unheard = lambda: sum(d.unheard for d in arm.drives.values())  # noqa: E731
+            unheard = lambda: (sum(d.unheard for d in arm.drives.values()),  # noqa: E731
+                               sum(d.unheard_s for d in arm.drives.values()))
             session.client_overrides.update(stepped.client_overrides(cfg.protocol.reply_timeout, cfg.protocol.retries,
                                                                      unheard))
             timebase = stepped

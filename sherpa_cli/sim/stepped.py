@@ -16,9 +16,10 @@ Two bounds keep the rest of the protocol honest:
   periods), so the simulated drives are always stepped to the same instants.
 
 The drive clients (:meth:`client_overrides`) wait on this clock too. A request that a drive in
-its MO settle window does not hear costs the host one reply timeout on a real bus
-(``protocol.reply_timeout``); the simulated drives count such requests (``SimDrive.unheard``)
-and the clients' next wait is charged that much simulated time per request, while their real
+its MO settle window does not hear costs the host, on a real bus, its wait for the reply: until
+the window ends (the client knows ``protocol.mo_settle``), at most one reply timeout. The
+simulated drives count such requests and the settle time each had left (``SimDrive.unheard``,
+``unheard_s``), and the clients' next wait is charged that much simulated time, while their real
 wait for a reply that will not come stays short (``STEPPED_REPLY_S``: the in-process simulator
 answers within milliseconds; retries cover a loaded machine).
 """
@@ -60,16 +61,17 @@ class SteppedTime:
         return self.clock.now()
 
     def client_overrides(self, reply_timeout: float, retries: int,
-                         unheard: Callable[[], int] = lambda: 0) -> dict[str, Any]:
+                         unheard: Callable[[], tuple[int, float]] = lambda: (0, 0.0)) -> dict[str, Any]:
         """DriveClient options (ArmSession.client_overrides) for clients of the stepped arm.
-        ``reply_timeout``: the real bus's; ``unheard()``: requests the simulated drives did not
-        hear so far (SimArm drives' ``unheard``), each charged one ``reply_timeout``."""
+        ``reply_timeout``: the real bus's; ``unheard()``: (requests the simulated drives did not
+        hear, the settle time they had left in total) so far; a wait is charged what was lost
+        since the last one, at most one ``reply_timeout`` per request."""
         charged = [unheard()]
 
         def sleep(seconds: float) -> None:
-            lost = unheard()
-            extra, charged[0] = (lost - charged[0]) * max(0.0, reply_timeout), lost
-            self.sleep(seconds + extra)
+            (n, s), (n0, s0) = unheard(), charged[0]
+            charged[0] = (n, s)
+            self.sleep(seconds + max(0.0, min(s - s0, (n - n0) * reply_timeout)))
 
         return {"clock": self.now, "sleep": sleep, "timeout": STEPPED_REPLY_S,
                 "retries": max(retries, STEPPED_RETRIES)}
