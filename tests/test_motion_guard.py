@@ -455,3 +455,46 @@ def test_standstill_allows_the_configured_velocity_noise():
                                            standstill_velocity=2)
     assert (how, standstill, problems) == ("ST", True, [])
     assert MotionSettings().standstill_velocity == 2
+
+
+def test_every_moving_drive_hears_its_stop_before_a_slow_drive_is_waited_for(cfg, monkeypatch):
+    # A first stop pass sends every moving drive its stop without waiting for replies; only then
+    # does the careful per-drive exit (standstill, MO=0, restore) begin, where a dead drive's
+    # timeouts would otherwise hold back the stop of the drives after it.
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
+        refs = [resolve_target(cfg, "drive1"), resolve_target(cfg, "drive2")]
+        order: list[str] = []
+        with MotionGuard(s, refs, settings=MotionSettings.from_config(cfg)) as g:
+            for ref in refs:
+                g.enable(ref, 2)
+                c = g.client(ref)
+                c.set("JV", 0, 2000)
+                c.execute("BG")
+            for ref in refs:
+                c = g.client(ref)
+                for name in ("send_only", "get", "execute", "motor_off"):
+                    real = getattr(c, name)
+
+                    def spy(*a, _real=real, _name=name, _drive=ref.name, **k):
+                        order.append(f"{_drive}.{_name}({a[0] if a else ''})")
+                        return _real(*a, **k)
+                    monkeypatch.setattr(c, name, spy)
+        first_exit_request = next(i for i, e in enumerate(order) if ".send_only" not in e)
+        assert order[:first_exit_request] == ["drive1.send_only(ST)", "drive2.send_only(ST)"], order
+        assert not sim_drive(s, "drive1").motor_on and not sim_drive(s, "drive2").motor_on
+        assert [r.stopped_by for r in g.report.drives] == ["ST", "ST"]
+
+
+def test_the_first_stop_pass_follows_the_stop_method_and_torque_mode(cfg, monkeypatch):
+    import dataclasses
+    settings = dataclasses.replace(MotionSettings.from_config(cfg), stop_method="jv0")
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
+        ref = resolve_target(cfg, "drive1")
+        sent: list[tuple] = []
+        with MotionGuard(s, [ref], settings=settings) as g:
+            g.enable(ref, 1)
+            c = g.client(ref)
+            real = c.send_only
+            monkeypatch.setattr(c, "send_only", lambda *a: sent.append(a) or real(*a))
+        assert sent == [("TC", 0, 0.0), ("JV", 0, 0), ("BG",)]
+        assert not sim_drive(s, "drive1").motor_on

@@ -219,6 +219,12 @@ class DriveClient:
         with self._lock:
             return self._transact(bytes(frame), req.letters, req.index, _request_text(req), attempts=attempts)
 
+    def send_only(self, letters: str, index: int = 0, value: int | float | None = None) -> None:
+        """Send one command (``value`` None: execute) without waiting for its reply: the motion
+        guard's first stop pass, so every drive hears its stop before a dead drive's timeouts."""
+        frame = codec.encode_execute(letters, index) if value is None else codec.encode_set(letters, index, value)
+        self.transport.send(RPDO2_BASE + self.node, frame)
+
     # -- composite operations ---------------------------------------------------------------------
 
     def motor_on(self) -> None:

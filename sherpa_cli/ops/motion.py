@@ -535,6 +535,7 @@ class MotionGuard:
         self._exiting = True
         self.report.reason = reason
         try:
+            self._stop_pass(entering)
             for d in list(self._drives.values()):
                 try:
                     self.report.drives.append(self._exit_drive(d, stop=not entering or d.switched_on))
@@ -544,6 +545,25 @@ class MotionGuard:
                     self.report.drives.append(r)
         finally:
             self._stop_heartbeat()
+
+    def _stop_pass(self, entering: bool) -> None:
+        """Every drive whose motor is on gets its stop at once, without waiting for replies; the
+        careful per-drive exit (standstill, MO=0, restore) follows. Otherwise a drive that does not
+        answer would hold back the stop of the drives after it by its timeouts."""
+        method = self.settings.stop_method
+        for d in list(self._drives.values()):
+            if not d.mo or (entering and not d.switched_on):
+                continue
+            try:
+                if d.um == UM_TORQUE:
+                    d.client.send_only("TC", 0, 0.0)
+                if method == "jv0":
+                    d.client.send_only("JV", 0, 0)
+                    d.client.send_only("BG")
+                else:
+                    d.client.send_only("ST")
+            except Exception as exc:  # the per-drive exit tries again and reports
+                log.debug("motion guard: first stop pass to %s: %s", d.ref.name, exc)
 
     def _step(self, extra: float = 0.0) -> None:
         """A sign of life before one exit step, bounded by that step (not by the whole exit)."""
