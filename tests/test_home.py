@@ -93,6 +93,22 @@ def test_home_switch_sets_the_calibration_position_at_the_switch_and_reports_the
         assert s.sim.errors == []
 
 
+def test_a_second_home_starting_on_the_switch_moves_off_it_first():
+    # After a home the joint stands at the switch, its input pressed: a search from there would see
+    # no edge and run to its bound. The home moves off the switch (bounded) and searches again.
+    cfg = load_config(ARM)
+    plan, ctx = homed(cfg, ["yaw"])
+    with ctx as s:
+        home.run_home(s, plan)
+        with s.sim.lock:
+            s.sim.drives["yaw_drive"]._px_offset += 37  # the counter drifted: the second home must fix it
+        (u,) = home.run_home(s, plan).units
+        assert abs(px(s, "yaw_drive") - physical(s, "yaw_drive")) <= 1
+        assert u.positions == {"yaw": 0} and abs(physical(s, "yaw_drive")) <= 1
+        assert u.repeat_difference is not None and abs(u.repeat_difference) <= 1
+        assert s.sim.errors == []
+
+
 def test_end_switches_set_the_low_end_and_measure_the_range():
     cfg = load_config(ARM)
     plan, ctx = homed(cfg, ["stiff"], measure_range=True)

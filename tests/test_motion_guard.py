@@ -498,3 +498,25 @@ def test_the_first_stop_pass_follows_the_stop_method_and_torque_mode(cfg, monkey
             monkeypatch.setattr(c, "send_only", lambda *a: sent.append(a) or real(*a))
         assert sent == [("TC", 0, 0.0), ("JV", 0, 0), ("BG",)]
         assert not sim_drive(s, "drive1").motor_on
+
+
+@pytest.mark.parametrize("keep", [False, True])
+def test_a_profile_the_motion_changed_is_put_back_on_exit_unless_kept(cfg, keep):
+    # SP/AC/DC are RAM settings a motion command scales (pair profiles, limit recovery): put back
+    # on exit so a later SV never flashes them (keep=True leaves them, like UM and the dead-man).
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
+        ref = resolve_target(cfg, "drive1")
+        s.client(ref).nmt_start()  # the interpreter answers in Operational only
+        before = {k: s.client(ref).get(k) for k in ("SP", "AC", "DC")}
+        with pytest.raises(RuntimeError):
+            with MotionGuard(s, [ref], settings=MotionSettings.from_config(cfg), keep=keep) as g:
+                g.client(ref).set("SP", 0, 1)
+                g.client(ref).set("DC", 0, before["DC"] // 2)
+                raise RuntimeError("body failed")
+        after = {k: s.client(ref).get(k) for k in ("SP", "AC", "DC")}
+        (r,) = g.report.drives
+        if keep:
+            assert after == {**before, "SP": 1, "DC": before["DC"] // 2}
+        else:
+            assert after == before
+            assert r.restored[:2] == [f"SP={before['SP']}", f"DC={before['DC']}"]

@@ -74,6 +74,7 @@ def validate(cfg: ArmConfig, locs: Locs, warnings: list[str] | None = None, *,
     _check_il_codes(cfg, locs, r)
     _check_protocol(cfg, locs, r)
     _check_motion(cfg, locs, r)
+    _check_homing(cfg, locs, r)
     _check_sim(cfg, locs, r)
     _check_catalog(cfg, locs, r)
     _check_buses(cfg, locs, r)
@@ -106,6 +107,13 @@ def _check_protocol(cfg: ArmConfig, locs: Locs, r: _Report) -> None:
     for key in ("mo_settle", "mo_confirm_timeout", "sv_blackout"):
         if getattr(p, key) < 0:
             r.error(locs.get("protocol", key), f"{key} {getattr(p, key)} s is negative; expected >= 0")
+
+
+def _check_homing(cfg: ArmConfig, locs: Locs, r: _Report) -> None:
+    w = cfg.homing.pair_edge_window_ms
+    if not 1 <= w <= 2000:
+        r.error(locs.get("homing", "pair_edge_window_ms"),
+                f"pair_edge_window_ms {w} must be 1..2000 (ms a pair's second home event may lag the first)")
 
 
 def _check_motion(cfg: ArmConfig, locs: Locs, r: _Report) -> None:

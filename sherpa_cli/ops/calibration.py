@@ -6,7 +6,8 @@ after homing since that power-up. Homing marks each drive it calibrated by writi
 ``UI[protocol.calibration_flag]`` (default UI[3]; the homed flag of [KX2]-style tools). UI is a
 RAM variable: a reset or power cycle clears it, which is exactly when the calibration is lost.
 Whether SV copies UI to flash is UNCONFIRMED for the Whistle; sherpa never saves right after
-homing, and a drive that saved UI=1 would look homed after a reboot, so the index is a setting.
+homing, and a drive that saved UI=1 would look homed after a reboot, so the index is a setting
+and the program engine's SV clears the mark first (:func:`clear_for_save`, put back after).
 
 A Σ or Δ joint depends on both motors of its pair: it is calibrated when both drives carry the
 mark (or when both joints of the pair have an absolute encoder).
@@ -75,3 +76,26 @@ def read_calibration(cfg: ArmConfig, joint: JointConfig, client_of: Callable[[st
 def mark_calibrated(cfg: ArmConfig, client: Any) -> None:
     """For `home`: the drive's position counter now means the joint position, until its next reset."""
     client.set("UI", cfg.protocol.calibration_flag, CALIBRATED)
+
+
+def clear_calibrated(cfg: ArmConfig, client: Any) -> None:
+    """For `home`, before it arms the drive's homing: a re-home that fails after it reset PX must
+    not leave the old mark on a counter that no longer means the joint."""
+    client.set("UI", cfg.protocol.calibration_flag, 0)
+
+
+def clear_for_save(cfg: ArmConfig, client: Any) -> int:
+    """Before SV: whether SV copies UI to flash is UNCONFIRMED, and a flash holding the mark would
+    make the joint look homed after a power cycle (PX = 0 wherever it stands). Clears the mark in
+    RAM if set; returns what it was, for :func:`restore_after_save`."""
+    index = cfg.protocol.calibration_flag
+    was = int(client.get("UI", index))
+    if was:
+        client.set("UI", index, 0)
+    return was
+
+
+def restore_after_save(cfg: ArmConfig, client: Any, was: int) -> None:
+    """After a confirmed SV: the mark back in RAM (SV does not touch PX, so it still holds)."""
+    if was:
+        client.set("UI", cfg.protocol.calibration_flag, was)

@@ -25,9 +25,10 @@ runs inside the motion guard (fault check, dead-man, stop on every exit path).
 
 from __future__ import annotations
 
+import logging
 import time
 from dataclasses import dataclass, field
-from typing import Any, Callable, Sequence
+from typing import Any, Callable, Literal, Sequence
 
 from sherpa_cli.config.model import ArmConfig, JointConfig, JointRole, SwitchConfig, SwitchKind
 from sherpa_cli.errors import SafetyError, UsageError
@@ -37,6 +38,8 @@ from sherpa_cli.ops.targets import drive_ref
 
 UM_POSITION = 5
 KINDS = ("home_switch", "end_switches", "pair", "abs_encoder")
+
+log = logging.getLogger(__name__)
 
 
 # -- the plan ---------------------------------------------------------------------------------------
@@ -280,14 +283,46 @@ class HomeReport:
 
 # -- running ----------------------------------------------------------------------------------------
 
+class _Disarm:
+    """HM[1] = 0 on every drive whose homing a unit armed, on every exit path (end, error, Ctrl-C).
+    Entered before the unit's motion guard in the same ``with``, it exits after it: the motors are
+    stopped first, then the homing is put back (a restore, allowed after an error)."""
+
+    def __init__(self, runner: "_Runner") -> None:
+        self.runner = runner
+        self.armed: dict[str, Any] = {}
+
+    def __enter__(self) -> "_Disarm":
+        self.runner._armed = self.armed
+        return self
+
+    def __exit__(self, exc_type: Any, exc: Any, tb: Any) -> Literal[False]:
+        self.runner._armed = None
+        failed = []
+        for label, c in self.armed.items():
+            try:
+                c.set("HM", 1, 0)
+            except Exception as e:  # every drive gets its try
+                failed.append(f"{label}: {e}")
+        if failed and exc_type is None:
+            raise SafetyError("the drive's homing could not be disarmed (HM[1]=0): " + "; ".join(failed),
+                              hint="disarm it by hand (`sherpa cmd DRIVE HM[1]=0 --apply`) before jogging")
+        if failed:
+            log.warning("homing not disarmed (HM[1]=0): %s", "; ".join(failed))
+        return False
+
+
 class _Runner:
     def __init__(self, session: Any, cfg: ArmConfig, settings: MotionSettings, clock: Callable[[], float],
                  sleep: Callable[[float], None]) -> None:
         self.session, self.cfg, self.settings, self.clock, self.sleep = session, cfg, settings, clock, sleep
         self.h = cfg.homing
+        self._armed: dict[str, Any] | None = None  # inside a unit's _Disarm: the drives whose HM[] it armed
 
     # HM[] -------------------------------------------------------------------------------------
     def arm_homing(self, c: Any, *, event: int, value: int, after: int, update: int | None = None) -> None:
+        if self._armed is not None:
+            self._armed[c.label] = c  # before the first write: a half-done arming is disarmed too
         c.set("HM", 1, 0)
         c.set("HM", 3, event)
         c.set("HM", 4, after)
@@ -309,14 +344,19 @@ class _Runner:
             guard.client(refs[name]).execute("BG")
 
     def wait(self, guard: MotionGuard, refs: dict[str, Any], *, distance: int, speed: int, homing: bool,
-             what: str) -> bool:
+             what: str, one_edge: Callable[[list[str], list[str]], SafetyError] | None = None) -> bool:
         """Poll until the motion ends (MS != 2 on every drive) or, with ``homing``, the home event fired
-        on every drive (HM[1] reads 0). True if the event fired. A bound in time, else an error."""
+        on every drive (HM[1] reads 0). True if the event fired. A bound in time, else an error.
+        ``one_edge`` (a pair's search): once some drive's event fired, the others' must fire within
+        ``homing.pair_edge_window_ms``, else it raises ``one_edge(fired, not_fired)`` (the guard then
+        stops every motor)."""
         bound = 2 * (distance / max(1, speed)) + 5.0
         t0 = self.clock()
+        first_edge: float | None = None
         while True:
             guard.check()
-            fired = homing and all(int(guard.query(r, "HM", 1)) == 0 for r in refs.values())
+            on = {n: int(guard.query(r, "HM", 1)) == 0 for n, r in refs.items()} if homing else {}
+            fired = homing and all(on.values())
             ms = [int(guard.query(r, "MS")) for r in refs.values()]
             for r in refs.values():
                 if not int(guard.query(r, "MO")):
@@ -328,6 +368,11 @@ class _Runner:
                 return True
             if all(m != 2 for m in ms):
                 return bool(homing and all(int(guard.query(r, "HM", 1)) == 0 for r in refs.values()))
+            if one_edge is not None and any(on.values()) and not fired:
+                if first_edge is None:
+                    first_edge = self.clock()
+                elif self.clock() - first_edge > self.h.pair_edge_window_ms / 1000:
+                    raise one_edge([n for n, v in on.items() if v], [n for n, v in on.items() if not v])
             if self.clock() - t0 > bound:
                 raise SafetyError(f"{what} did not end within {bound:.1f} s",
                                   hint="check the joint; `sherpa stop` stops every drive")
@@ -385,8 +430,10 @@ class _Runner:
         res = UnitResult(unit.name, unit.kind, unit.drives)
         d, speed = _sign(joint.cal_speed or 1), abs(joint.cal_speed or 1)
         search = _search_distance(self.cfg, joint)
-        with MotionGuard(self.session, [ref], settings=self.settings, clock=self.clock, sleep=self.sleep) as guard:
+        with _Disarm(self), MotionGuard(self.session, [ref], settings=self.settings, clock=self.clock,
+                                        sleep=self.sleep) as guard:
             c = guard.client(ref)
+            calibration.clear_calibrated(self.cfg, c)  # a re-home that fails must not leave the old mark
             if unit.kind == "home_switch":
                 sw = _home_switch(joint)
                 assert sw is not None
@@ -396,6 +443,15 @@ class _Runner:
                 assert sw is not None
                 pos = cal_position(joint, d)
             res.set_to[joint.name] = pos
+            if unit.kind == "home_switch" and _pins(c).get(sw.input):
+                # standing on the switch (a re-home ends there): a search from here sees no edge
+                off = 2 * _backoff(self.cfg, joint)
+                self.start_pr(guard, refs, {name: -d * off}, {name: speed})
+                self.wait(guard, refs, distance=off, speed=speed, homing=False, what=f"{joint.name}: off the switch")
+                if _pins(c).get(sw.input):
+                    raise SafetyError(f"{joint.name}: the switch on input {sw.input} still reads pressed after "
+                                      f"moving {off} counts off it",
+                                      hint=f"check the switch and its wiring (`sherpa home --check-wiring {joint.name}`)")
             self.arm_homing(c, event=self.input_event(sw), value=pos, after=self.h.after_stop)
             self.start_pr(guard, refs, {name: d * search}, {name: speed})
             if not self.wait(guard, refs, distance=search, speed=speed, homing=True, what=f"{joint.name}: the search"):
@@ -461,9 +517,11 @@ class _Runner:
             s.cal_pos if s.cal_pos is not None else sw_s.position)
         cal_d = cal_position(dl, dd) if sw_d.kind is SwitchKind.STOP else (
             dl.cal_pos if dl.cal_pos is not None else sw_d.position)
-        with MotionGuard(self.session, list(refs.values()), settings=self.settings, clock=self.clock,
-                         sleep=self.sleep) as guard:
+        with _Disarm(self), MotionGuard(self.session, list(refs.values()), settings=self.settings, clock=self.clock,
+                                        sleep=self.sleep) as guard:
             ca, cb = guard.client(refs[a]), guard.client(refs[b])
+            for c in (ca, cb):
+                calibration.clear_calibrated(cfg, c)  # a re-home that fails must not leave the old mark
             # motor a / b move along a joint: Σ = a + b (both the same way), Δ = a - b (opposite ways)
             signs = {s.name: (1, 1), dl.name: (1, -1)}
 
@@ -474,9 +532,17 @@ class _Runner:
                     self.arm_homing(c, event=self.input_event(sw), value=0, after=self.h.after_stop, update=update)
                 half, motor_speed = (dist + 1) // 2, max(1, speed // 2)
                 sa, sb = signs[joint.name]
+
+                def one_edge(saw: list[str], missed: list[str]) -> SafetyError:
+                    return SafetyError(
+                        f"{joint.name}: {', '.join(saw)} saw the switch on input {sw.input} during {what} but "
+                        f"{', '.join(missed)} did not within {self.h.pair_edge_window_ms} ms (homing.pair_edge_window_ms): "
+                        f"a wiring fault (a broken or swapped wire to {', '.join(missed)}); both motors stopped",
+                        hint=f"check the switch's wiring to both drives (`sherpa home --check-wiring {joint.name}`)")
+
                 self.start_pr(guard, refs, {a: sa * d * half, b: sb * d * half}, {a: motor_speed, b: motor_speed})
                 if not self.wait(guard, refs, distance=half, speed=motor_speed, homing=True,
-                                 what=f"{joint.name}: {what}"):
+                                 what=f"{joint.name}: {what}", one_edge=one_edge):
                     for c in (ca, cb):
                         c.set("HM", 1, 0)
                     raise SafetyError(f"{joint.name}: the switch on input {sw.input} never triggered on both drives "

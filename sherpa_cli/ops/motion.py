@@ -35,6 +35,7 @@ from sherpa_cli.errors import (CommunicationError, DriveRefusedError, ExitCode, 
                                UsageError)
 
 log = logging.getLogger(__name__)
+PROFILE_KEYS = ("SP", "AC", "DC")  # the profile a motion command may scale
 
 HEARTBEAT_BASE = 0x700
 NMT_OPERATIONAL = 0x05
@@ -159,6 +160,7 @@ class _Drive:
     um: int = 0
     switched_on: bool = False
     um_changed_from: int | None = None
+    profile_before: dict[str, int] = field(default_factory=dict)  # SP/AC/DC found at entry
     od_before: dict[tuple[int, int], int] = field(default_factory=dict)  # the dead-man objects it wrote
 
 
@@ -439,6 +441,9 @@ class MotionGuard:
             raise SafetyError(f"{client.label}: in fault, refusing to move it: {reason}",
                               hint=f"find the cause first; MO=1 clears MF: `sherpa cmd {ref.name} MO=1 MO=0 --apply`")
         self._event(f"{client.label}: MO={d.mo} UM={d.um} SR=0x{sr & 0xFFFFFFFF:08X} MF=0x{mf & 0xFFFFFFFF:08X}")
+        # motion commands scale SP/AC/DC (pair profiles, limit recovery): RAM changes put back on
+        # exit, so a later SV never flashes a jog's speed
+        d.profile_before = {key: int(client.get(key)) for key in PROFILE_KEYS}
 
     def _sdo_read(self, d: _Drive, key: tuple[int, int]) -> int:
         """An SDO upload through the session's client of the drive (SdoError names drive and object)."""
@@ -626,9 +631,23 @@ class MotionGuard:
             else:
                 r.kept.append(f"UM={d.um} (motor not confirmed off)")
                 r.problems.append(f"UM={d.um_changed_from} not restored: the motor is not confirmed off")
+        self._restore_profile(d, r)
         self._restore_dead_man(d, r, stop_failed)
         self._event(r.line())
         return r
+
+    def _restore_profile(self, d: _Drive, r: DriveStop) -> None:
+        if self.keep or not d.profile_before or r.stopped_by == "not stopped":
+            return
+        for key, before in d.profile_before.items():
+            try:
+                self._step()
+                if int(d.client.get(key)) != before:
+                    self._step()
+                    d.client.set(key, 0, before)
+                    r.restored.append(f"{key}={before}")
+            except Exception as exc:
+                r.problems.append(f"{key}={before} not restored: {_why(exc)}")
 
     def _restore_dead_man(self, d: _Drive, r: DriveStop, stop_failed: bool) -> None:
         # the consumer entry first: once it is back, the heartbeat may stop without a trip

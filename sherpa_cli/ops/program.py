@@ -33,6 +33,7 @@ from sherpa_cli.bus.parallel import run_concurrently
 from sherpa_cli.elmo import codec
 from sherpa_cli.elmo.commands import COMMANDS, format_value, param_key, parse_param_key
 from sherpa_cli.errors import CodecError, ConfigError, DriveRefusedError, Location, SafetyError, SherpaError
+from sherpa_cli.ops import calibration
 
 if TYPE_CHECKING:
     from sherpa_cli.elmo.client import DriveClient
@@ -463,6 +464,7 @@ def _apply_drive(session: ArmSession, plan: DrivePlan, *, save: bool, ledger: Sa
             return out
         if stop.is_set():
             return out  # every write verified, but an interrupted run saves nothing more
+        mark = calibration.clear_for_save(session.cfg, client)  # the homed mark never goes to flash
         out.sv_sent = True
         try:
             client.save()
@@ -474,6 +476,7 @@ def _apply_drive(session: ArmSession, plan: DrivePlan, *, save: bool, ledger: Sa
             out.error = f"SV was sent but {exc.message}; whether flash holds the new values is unknown"
         else:
             out.saved = True
+            calibration.restore_after_save(session.cfg, client, mark)
         if ledger is not None and plan.serial is not None:
             record = ledger.record(plan.serial, t.drive)
             out.save_count, out.save_warning = record.count, record.warning
