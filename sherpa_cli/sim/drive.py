@@ -117,6 +117,10 @@ class SimDrive:
         self._od_live = dict(od_live or {})  # extra live objects: another device type's profile (sim/arm.py)
         self.tpdo = TpdoTable(node)
         self.syncs = 0  # SYNC frames this drive answered (Operational)
+        # interpreter requests lost to the MO settle window, and the settle time each had left: what a
+        # host waited for them (sim/stepped.py charges it on its clock)
+        self.unheard = 0
+        self.unheard_s = 0.0
         self._boot()
 
     # -- public API --------------------------------------------------------------------------
@@ -517,7 +521,11 @@ class SimDrive:
 
     def _interpreter_frame(self, data: bytes) -> None:
         # PDOs only live in Operational; during the MO settle window the interpreter is deaf.
-        if self._nmt_state != OPERATIONAL or self._t + TIME_EPS < self._settle_until:
+        if self._nmt_state != OPERATIONAL:
+            return
+        if self._t + TIME_EPS < self._settle_until:
+            self.unheard += 1
+            self.unheard_s += self._settle_until - self._t
             return
         reply = interpreter.handle(self, data)
         if reply is None:
