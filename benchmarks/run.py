@@ -533,7 +533,8 @@ def _coupling_peaks(req_kw: dict, modes: dict[str, dict], rounds: int) -> dict[s
 def bench_coupling(rounds: int = 3) -> Result:
     """Peak Δ excursion during a 1 rad Σ move on the simulated mismatched pair (motor b 10 % faster,
     motor a's separately received BG 40 ms late): the best of the tool's modes (group start, group
-    start + --feedback) / --naive, medians of ``rounds``. Also the Σ excursion of a 1 rad Δ move."""
+    start + --feedback) / --naive, medians of ``rounds``; the same for the Σ excursion of a 1 rad Δ
+    move. The goal holds for both: the larger ratio is judged."""
     import tempfile as _tf
 
     modes = {"naive": {"naive": True}, "group": {}, "feedback": {"feedback": True}}
@@ -549,14 +550,16 @@ def bench_coupling(rounds: int = 3) -> Result:
             else:
                 os.environ["XDG_STATE_HOME"] = old
     best = min(sig["group"], sig["feedback"])
-    ratio = best / sig["naive"] if sig["naive"] else 0.0
+    ratio_s = best / sig["naive"] if sig["naive"] else 0.0
     best_d = min(dlt["group"], dlt["feedback"])
     ratio_d = best_d / dlt["naive"] if dlt["naive"] else 0.0
+    ratio = max(ratio_s, ratio_d)  # the goal holds for both moves
     goal = "<= 0.1"
     return Result("coupling", round(best, 1), "counts", round(ratio, 3), goal, _judge(ratio, goal),
                   f"Σ move: held Δ peak naive {sig['naive']:.0f}, group {sig['group']:.0f}, feedback "
-                  f"{sig['feedback']:.0f} counts; Δ move: held Σ peak naive {dlt['naive']:.0f}, group "
-                  f"{dlt['group']:.0f}, feedback {dlt['feedback']:.0f} counts (ratio {ratio_d:.3f})")
+                  f"{sig['feedback']:.0f} counts (ratio {ratio_s:.3f}); Δ move: held Σ peak naive "
+                  f"{dlt['naive']:.0f}, group {dlt['group']:.0f}, feedback {dlt['feedback']:.0f} counts "
+                  f"(ratio {ratio_d:.3f}); the ratio shown is the larger")
 
 
 def _serve_sim(env: dict, log: Path) -> tuple[subprocess.Popen, str]:

@@ -7,6 +7,7 @@ The moves run in real time like tests/test_jog_pair.py (the guard's heartbeat th
 
 from __future__ import annotations
 
+import time
 from pathlib import Path
 
 import pytest
@@ -86,11 +87,44 @@ def test_coupling_of_a_sigma_move_measures_the_held_delta():
 
 def test_feedback_slows_the_motor_ahead_within_its_bound(cfg):
     p = diffdrive.plan_move(cfg, cfg.pairs["diff"], MoveRequest(sigma="400counts"), {"left": 0, "right": 0})
+    planned = p.profiles
+    new = diffdrive.Feedback(p, gain=8.0, limit=0.5).profiles(0.0, {"left": 20, "right": 60})  # b ahead
+    # only the motor ahead slows: no motor ever runs faster than planned
+    assert new["left"] == planned["left"] and new["right"].sp < planned["right"].sp
+    # e = 0.1 - 0.3: c = 8 * -0.2 = -1.6, bounded to -0.5: k = max(1 - 0.5, 0.5 / 1.5) = 0.5
+    assert new["right"] == diffdrive.Profile(*(round(v * 0.5) for v in (planned["right"].sp, planned["right"].ac,
+                                                                         planned["right"].dc)))
+    ahead_a = diffdrive.Feedback(p, gain=8.0, limit=0.5).profiles(0.0, {"left": 11, "right": 10})
+    c = 8.0 * (11 - 10) / 200
+    assert ahead_a["right"] == planned["right"] and ahead_a["left"].sp == round(planned["left"].sp * (1 - c) / (1 + c))
+
+
+def test_feedback_velocity_term_sees_a_faster_motor_before_the_positions_drift():
+    cfg = load_config(MISMATCHED)
+    p = diffdrive.plan_move(cfg, cfg.pairs["diff"], MoveRequest(sigma="400counts"), {"left": 0, "right": 0})
     fb = diffdrive.Feedback(p, gain=8.0, limit=0.5)
-    new = fb.profiles(0.0, {"left": 20, "right": 60})  # b ahead
-    assert new["left"].sp > p.profiles["left"].sp and new["right"].sp < p.profiles["right"].sp
-    wild = diffdrive.Feedback(p, gain=1000.0, limit=0.5).profiles(0.0, {"left": 0, "right": 200})
-    assert wild["left"].sp == round(p.profiles["left"].sp * 1.5) and wild["right"].sp == round(p.profiles["right"].sp * 0.5)
+    sp = p.profiles["left"].sp
+    same = {"left": 50, "right": 50}
+    slower = fb.profiles(0.0, same, {"left": sp, "right": round(sp * 1.1)})  # b 10 % faster
+    assert slower["left"] == p.profiles["left"] and slower["right"].sp < p.profiles["right"].sp
+    # v = (1 - 1.1) / 1.05: c = 0.2 v
+    c = abs(diffdrive.Feedback.VELOCITY_GAIN * (sp - round(sp * 1.1)) / ((sp + round(sp * 1.1)) / 2))
+    assert slower["right"].sp == round(p.profiles["right"].sp * (1 - c) / (1 + c))
+    # below the velocity floor (starting, stopping) the term is off
+    creeping = diffdrive.Feedback(p, gain=8.0, limit=0.5).profiles(0.0, same, {"left": 5, "right": 10})
+    assert creeping == dict(p.profiles)
+
+
+def test_feedback_after_a_stalled_cycle_corrects_less():
+    cfg = load_config(MISMATCHED)
+    p = diffdrive.plan_move(cfg, cfg.pairs["diff"], MoveRequest(sigma="400counts"), {"left": 0, "right": 0})
+    on_time, stalled = diffdrive.Feedback(p, gain=8.0, limit=0.5), diffdrive.Feedback(p, gain=8.0, limit=0.5)
+    ahead = {"left": 100, "right": 96}
+    for fb in (on_time, stalled):
+        fb.profiles(0.0, ahead)
+    k_on = on_time.profiles(diffdrive.Feedback.CYCLE_S, ahead)["left"].sp
+    k_stalled = stalled.profiles(10 * diffdrive.Feedback.CYCLE_S, ahead)["left"].sp
+    assert k_on < k_stalled < p.profiles["left"].sp  # both slow the motor ahead, the stalled one less
 
 
 # --------------------------------------------------------------------------- simulator
@@ -266,3 +300,276 @@ def test_a_naive_move_whose_held_joint_leaves_its_full_range_is_stopped_and_brou
         assert -1990 <= r.end[1] <= 1990  # back inside the normal range
         with s.sim.lock:
             assert all(not d.motor_on for d in s.sim.drives.values())
+
+
+# --------------------------------------------------------------------------- recording (issue 15 item 2)
+
+PDO_OBJECTS = [(0x1800, 1, 4), (0x1800, 2, 1), (0x1A00, 0, 1), (0x1A00, 1, 4), (0x1A00, 2, 4)]
+
+
+def _pdo(session, cfg):
+    refs = diffdrive._refs(cfg, ("left", "right"))
+    return {r.name: [int.from_bytes(session.sdo(r).upload(i, s)[:n], "little") for i, s, n in PDO_OBJECTS]
+            for r in refs}
+
+
+class CountingSync:
+    """A SYNC source for the recorder (its sync_factory seam): the real periodic one, remembered."""
+
+    def __init__(self) -> None:
+        self.periods: list[float] = []
+
+    def factory(self, name, bus, period):
+        from sherpa_cli.ops.record import PeriodicSync
+
+        self.periods.append(period)
+        return PeriodicSync(bus, period)
+
+
+def test_the_move_records_both_motors_by_tpdo_on_sync_and_puts_the_pdo_settings_back(cfg):
+    sync = CountingSync()
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
+        before = _pdo(s, cfg)
+        r = diffdrive.run_move(s, cfg.pairs["diff"], MoveRequest(sigma="0.5"),
+                               recorder_kw={"sync_factory": sync.factory})
+        after = _pdo(s, cfg)
+        with s.sim.lock:
+            syncs = {n: d.syncs for n, d in s.sim.drives.items()}
+            saves = [d.save_count for d in s.sim.drives.values()]
+    assert r.trace_source == "TPDO on SYNC at 500 Hz" and sync.periods == [pytest.approx(1 / 500)]
+    assert after == before and saves == [0, 0]  # RAM only, put back
+    assert min(syncs.values()) > 100
+    # one sample per SYNC, both motors of the same SYNC: timestamps on the 2 ms grid from the begin
+    times = [t for t, _, _ in r.samples]
+    assert len(r.samples) > 0.5 * (times[-1] - times[0]) * 500
+    steps = {round((b - a) * 500) for a, b in zip(times, times[1:])}
+    assert 1 in steps and all(k >= 1 for k in steps)
+    assert r.samples[-1][1:] == (r.motors_end["left"], r.motors_end["right"])
+    assert abs(r.end[0] - r.target[0]) <= 1 and r.coupling.held == "roll"
+
+
+def test_poll_records_through_the_interpreter_and_changes_no_pdo(cfg):
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
+        r = diffdrive.run_move(s, cfg.pairs["diff"], MoveRequest(sigma="0.3", poll=True))
+        with s.sim.lock:
+            pdo_writes = [w for d in s.sim.drives.values() for w in d.od_writes if 0x1800 <= w[1] <= 0x1AFF]
+            syncs = [d.syncs for d in s.sim.drives.values()]
+    assert r.trace_source == "polled PX (--poll)" and len(r.samples) > 5
+    assert pdo_writes == [] and syncs == [0, 0]
+    assert abs(r.end[0] - r.target[0]) <= 1
+
+
+def test_a_recorder_that_cannot_start_falls_back_to_polling_and_restores_the_pdo(cfg):
+    def no_sync(name, bus, period):
+        raise OSError("no SYNC on this bus")
+
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
+        before = _pdo(s, cfg)
+        r = diffdrive.run_move(s, cfg.pairs["diff"], MoveRequest(delta="100counts", relative=True),
+                               recorder_kw={"sync_factory": no_sync})
+        assert _pdo(s, cfg) == before
+    assert r.trace_source == "polled PX (the recorder could not be set up: no SYNC on this bus)"
+    assert abs(r.end[1] - r.target[1]) <= 1 and len(r.samples) > 5
+
+
+def test_an_error_during_the_move_still_puts_the_pdo_settings_back(cfg):
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
+        before = _pdo(s, cfg)
+
+        class Boom(Exception):
+            pass
+
+        def sleep(seconds):
+            if s.sim.drives["left"].motor.v:  # the motors run: fail inside the move's loop
+                raise Boom()
+            time.sleep(seconds)
+
+        with pytest.raises(Boom):
+            diffdrive.run_move(s, cfg.pairs["diff"], MoveRequest(sigma="0.5"), sleep=sleep)
+        assert _pdo(s, cfg) == before
+        with s.sim.lock:
+            assert all(not d.motor_on and d.group_id == 0 for d in s.sim.drives.values())
+            for d in s.sim.drives.values():
+                # review R8: each motor got its stop before the recorder put its PDO settings back
+                st = [t for t, i, f in d.received if i == 0x300 + d.node and f[:2] == b"ST"]
+                bg = [t for t, i, f in d.received if i in (0x300 + d.node, 0x300 + 125) and f[:2] == b"BG"]
+                pdo_back = [t for t, i, _, _ in d.od_writes if i in (0x1800, 0x1A00) and t > bg[-1]]
+                assert st and pdo_back and st[0] < min(pdo_back)
+
+
+def test_the_record_rate_is_capped_to_the_bus_budget(cfg, tmp_path):
+    refs = diffdrive._refs(cfg, ("left", "right"))
+    assert diffdrive.record_rate(cfg, refs) == (500.0, "")
+    text = MISMATCHED.read_text().replace("can0: {interface: socketcan, channel: can0}",
+                                          "can0: {interface: socketcan, channel: can0, bitrate: 125000}")
+    text = text.replace("motion: {consumer_time_ms: 1000}", "motion: {consumer_time_ms: 1000, pair_record_rate: 1000}")
+    path = tmp_path / "slow.yaml"
+    path.write_text(text)
+    slow = load_config(path)
+    rate, note = diffdrive.record_rate(slow, refs)
+    assert 100 < rate < 1000 and note == "capped from 1000 Hz by the bus budget"
+
+
+def test_a_bad_record_rate_is_refused_by_the_config(tmp_path):
+    from sherpa_cli.errors import ConfigError
+
+    text = MISMATCHED.read_text().replace("motion: {consumer_time_ms: 1000}",
+                                          "motion: {consumer_time_ms: 1000, pair_record_rate: 0}")
+    path = tmp_path / "bad.yaml"
+    path.write_text(text)
+    with pytest.raises(ConfigError, match="pair_record_rate 0"):
+        load_config(path)
+
+
+def test_recorder_latest_is_the_newest_sync_both_drives_answered():
+    from sherpa_cli.ops.record import Recorder
+
+    cfg = load_config(MISMATCHED)
+    clock = ManualClock()
+    syncs = []
+    tag = __import__("uuid").uuid4().hex[:8]
+    arm = SimArm(cfg, {"can0": {"interface": "virtual", "channel": f"dd-{tag}"}}, clock=clock)
+    with ArmSession.open(cfg, sim=arm) as s:
+        refs = diffdrive._refs(cfg, ("left", "right"))
+        with Recorder(s, refs, 100, clock=clock.now, sync_factory=lambda n, bus, p: syncs.append(bus) or
+                      type("S", (), {"stop": lambda self: None})()) as rec:
+            assert rec.latest() is None
+            import can
+
+            for k in range(3):
+                if k:
+                    clock.advance(0.01)
+                syncs[0].send(can.Message(arbitration_id=0x80, data=b"", is_extended_id=False))
+                deadline = time.monotonic() + 5
+                while min(rec.counts().values()) < k + 1 and time.monotonic() < deadline:
+                    time.sleep(0.001)
+            t, values = rec.latest()
+    assert t == pytest.approx(rec.t0 + 0.02) and values == {"left": (0, 0), "right": (0, 0)}
+
+
+# --------------------------------------------------------------------------- pair_start: sync_rpdo
+
+def test_sim_synchronous_rpdo2_runs_the_buffered_frame_at_the_next_sync_without_skew():
+    clock = ManualClock()
+    a, b = _drive(clock, 10, start_skew_s=0.05), _drive(clock, 11)
+    assert a.od_read(0x1401, 2) == 255 and a.od_read(0x1401, 1) == 0x30A
+    for d in (a, b):
+        d.od_write(0x1401, 2, 1)
+        assert d.receive(0x300 + d.node, encode_execute("BG"))
+        d.pop_frames()
+    clock.advance(0.02)
+    a.tick(), b.tick()
+    assert a.px == b.px == 0 and not a.pop_frames()  # buffered: nothing ran, nothing answered
+    for d in (a, b):
+        d.receive(0x080, b"")
+    assert [f[0] for f in a.pop_frames()] == [0x28A]  # the BG's answer, at the SYNC
+    clock.advance(0.2)
+    a.tick(), b.tick()
+    assert a.px == b.px > 0  # both started at the SYNC: the separately received BG has no skew here
+    a.receive(0x000, bytes([0x81, 10]))  # reset node: RAM only
+    assert a.od_read(0x1401, 2) == 255
+    with pytest.raises(Exception):
+        a.od_write(0x1401, 2, 250)  # no transmission type
+
+
+def _sniff(channel):
+    import can
+
+    bus = can.Bus(interface="virtual", channel=channel, receive_own_messages=False)
+    frames = []
+
+    class Listener(can.Listener):
+        def on_message_received(self, msg):
+            if not 0x700 <= msg.arbitration_id <= 0x77F:  # heartbeats come when they come
+                frames.append(f"{msg.arbitration_id:03X} {bytes(msg.data).hex(' ')}".strip())
+    notifier = can.Notifier(bus, [Listener()])
+    return bus, notifier, frames
+
+
+def test_sync_rpdo_start_frame_transcript(tmp_path):
+    """Byte for byte: 0x1401:2 read on both drives, set to 1 (synchronous), BG to each drive
+    (buffered), one SYNC, both BG answers, 0x1401:2 back to 255. Motors on beforehand."""
+    import uuid
+
+    cfg = load_config(FAST)
+    channel = f"dd-sync-{uuid.uuid4().hex[:8]}"
+    arm = SimArm(cfg, {"can0": {"interface": "virtual", "channel": channel}})
+    with ArmSession.open(cfg, sim=arm) as s:
+        refs = diffdrive._refs(cfg, ("left", "right"))
+        clients = {r.name: s.client(r) for r in refs}
+        for c in clients.values():
+            c.nmt_start()
+            c.set("UM", 0, 5)
+            c.set("PA", 0, 100)
+            c.motor_on()
+        sniff, notifier, frames = _sniff(channel)
+        try:
+            with diffdrive.CommonStart(s, refs, clients, "sync_rpdo", 125) as start:
+                start.begin()
+            deadline = time.monotonic() + 5
+            while len(frames) < 17 and time.monotonic() < deadline:  # the sniffer's thread may lag
+                time.sleep(0.01)
+            time.sleep(0.05)  # and nothing more comes
+        finally:
+            notifier.stop()
+            sniff.shutdown()
+        with s.sim.lock:
+            left, right = s.sim.drives["left"], s.sim.drives["right"]
+            begins = [t for d in (left, right) for t, text in d.events if text.startswith("BG")]
+            rpdo_types = (left.od_read(0x1401, 2), right.od_read(0x1401, 2))
+        for c in clients.values():
+            c.motor_off()
+    assert frames == [
+        "60A 40 01 14 02 00 00 00 00", "58A 4f 01 14 02 ff 00 00 00",
+        "60B 40 01 14 02 00 00 00 00", "58B 4f 01 14 02 ff 00 00 00",
+        "60A 2f 01 14 02 01 00 00 00", "58A 60 01 14 02 00 00 00 00",
+        "60B 2f 01 14 02 01 00 00 00", "58B 60 01 14 02 00 00 00 00",
+        "30A 42 47 00 00", "30B 42 47 00 00", "080",
+        "28A 42 47 00 00 00 00 00 00", "28B 42 47 00 00 00 00 00 00",
+        "60A 2f 01 14 02 ff 00 00 00", "58A 60 01 14 02 00 00 00 00",
+        "60B 2f 01 14 02 ff 00 00 00", "58B 60 01 14 02 00 00 00 00",
+    ]
+    assert len(begins) == 2 and abs(begins[0] - begins[1]) < 0.02  # both at the one SYNC (sim time is wall time)
+    assert rpdo_types == (255, 255)
+
+
+def test_pair_start_sync_rpdo_moves_the_mismatched_pair_and_restores_the_rpdo(tmp_path):
+    text = MISMATCHED.read_text().replace("motion: {consumer_time_ms: 1000}",
+                                          "motion: {consumer_time_ms: 1000, pair_start: sync_rpdo}")
+    path = tmp_path / "sync.yaml"
+    path.write_text(text)
+    cfg = load_config(path)
+    peaks = {}
+    for name, kw in (("sync", {}), ("feedback", {"feedback": True})):
+        with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
+            r = diffdrive.run_move(s, cfg.pairs["diff"], MoveRequest(sigma="1", **kw))
+            with s.sim.lock:
+                assert all(d.od_read(0x1401, 2) == 255 and d.save_count == 0 and not d.motor_on
+                           for d in s.sim.drives.values())
+                assert all(d.group_id == 0 for d in s.sim.drives.values())
+        assert r.mode == "sync_rpdo" and abs(r.end[0] - r.target[0]) <= 1 and abs(r.end[1] - r.target[1]) <= 1
+        peaks[name] = r.coupling.held_peak
+    # no start skew (a separately received BG would start motor a 40 ms late: ~64 counts, naive);
+    # what the feedback makes of it is the benchmark's business (its loop runs in wall time)
+    assert peaks["sync"] < 55, peaks
+
+
+def test_jog_of_a_pair_joint_with_sync_rpdo_starts_both_at_one_sync(tmp_path):
+    from sherpa_cli.ops import joint_jog
+
+    text = FAST.read_text().replace("motion: {consumer_time_ms: 1000}",
+                                    "motion: {consumer_time_ms: 1000, pair_start: sync_rpdo}")
+    path = tmp_path / "sync.yaml"
+    path.write_text(text)
+    cfg = load_config(path)
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
+        r = joint_jog.run(s, joint_jog.resolve_axis(cfg, "pitch"),
+                          joint_jog.JogRequest(mode="position", to="300counts", uncalibrated=True))
+        assert abs(r.end - 300) <= 1
+        with s.sim.lock:
+            left, right = s.sim.drives["left"], s.sim.drives["right"]
+            writes = [w[3] for w in left.od_writes if w[1] == 0x1401]
+            assert writes == [1, 255] and left.od_read(0x1401, 2) == right.od_read(0x1401, 2) == 255
+            assert not any(f[1] == 0x300 + 125 for f in left.received)  # no group frame
+            begins = [[t for t, text in d.events if text.startswith("BG")] for d in (left, right)]
+            assert len(begins[0]) == len(begins[1]) == 1 and abs(begins[0][0] - begins[1][0]) < 0.02

@@ -1,7 +1,7 @@
 """Golden outputs of `sherpa diffdrive move`: the move report, dry runs and refusals.
 
-The report's coupling numbers depend on wall time (PX of both motors is polled in turn while they
-move), so those lines are replaced before the comparison; positions, commands and the stop lines
+The report's coupling numbers and the number of samples depend on wall time (the move runs in real
+time on the simulated arm), so those are replaced before the comparison; positions, commands and the stop lines
 are the same on every run. tests/test_diffdrive.py checks the numbers themselves.
 """
 
@@ -19,6 +19,8 @@ CASES = [
                                        "--naive", "--apply"], 0),
     ("diffdrive-move-json", [*MIS, "--json", "diffdrive", "move", "diff", "--sigma", "0.2", "--delta", "5deg",
                              "--apply"], 0),
+    ("diffdrive-move-poll-feedback", [*MIS, "diffdrive", "move", "diff", "--delta", "0.3", "--feedback", "--poll",
+                                      "--apply"], 0),
     ("diffdrive-move-dry-run", [*MIS, "diffdrive", "move", "diff", "--sigma", "1", "--feedback"], 0),
     ("diffdrive-refuse-normal-range", [*MIS, "diffdrive", "move", "diff", "--sigma", "3", "--apply"], 2),
     ("diffdrive-refuse-delta-range", [*MIS, "diffdrive", "move", "diff", "--delta", "-120deg", "--apply"], 2),
@@ -32,6 +34,7 @@ CASES = [
 
 def _stable(text: str) -> str:
     text = re.sub(r"^(coupling|off the straight).*$", r"\1: <varies>", text, flags=re.M)
+    text = re.sub(r"^(recording: .*), \d+ samples$", r"\1, <n> samples", text, flags=re.M)
     text = re.sub(r'"(duration_s|samples|feedback_corrections)": [0-9.]+', r'"\1": "<varies>"', text)
     text = re.sub(r'("(?:sigma_off_path|delta_off_path|held_excursion)": )\{[^}]*\}', r'\1"<varies>"', text)
     return text

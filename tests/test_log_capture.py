@@ -144,3 +144,18 @@ def test_overrun_error_frames_count_as_lost(tmp_path):
     finally:
         _close(listen, send)
     assert result.counts["can0"].errors == 1 and result.lost == 1 and result.frames == 2
+
+
+def test_mf4_without_asammdf_is_one_clear_message_for_capture_and_decode(tmp_path, monkeypatch):
+    import importlib.util
+
+    from sherpa_cli.errors import UsageError
+    from sherpa_cli.ops.capture import check_output
+
+    real = importlib.util.find_spec
+    monkeypatch.setattr(importlib.util, "find_spec", lambda name, *a: None if name == "asammdf" else real(name, *a))
+    with pytest.raises(UsageError, match=r"run\.mf4: \.mf4 needs the asammdf package"):
+        check_output(tmp_path / "run.mf4")
+    (tmp_path / "old.mf4").write_bytes(b"MDF     4.10    ")
+    with pytest.raises(UsageError, match=r"old\.mf4: \.mf4 needs the asammdf package"):
+        list(read_frames(tmp_path / "old.mf4"))

@@ -1,7 +1,7 @@
 """`log step` on the simulated arm with the servo-loop motor model (real time, in-process):
 position step of 1 rad with and without the MO/UM switch, velocity step of 0.1 rad/s, torque
-step of 1 A. The simulator runs on wall time here, so metrics are checked against tolerances,
-not a golden file (see docs/log.md)."""
+step of 1 A. The simulator runs on wall time here, so metrics are checked against tolerances;
+the command's golden output (`--sim` runs on stepped time) is tests/test_log_step_golden.py."""
 
 from __future__ import annotations
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 from contextlib import ExitStack, contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Iterable, Iterator
+from typing import TYPE_CHECKING, Any, Callable, Iterable, Iterator
 
 import typer
 
@@ -40,8 +40,10 @@ class AppState:
                    config_looked=config_looked)
 
     @contextmanager
-    def session(self, buses: Iterable[str] | None = None) -> Iterator["ArmSession"]:
-        """Open the arm's buses (or the simulated arm with --sim) for one command."""
+    def session(self, buses: Iterable[str] | None = None,
+                sim_factory: Callable[..., Any] | None = None) -> Iterator["ArmSession"]:
+        """Open the arm's buses (or the simulated arm with --sim) for one command; ``sim_factory``
+        builds the in-process arm instead of the default (SimArm.in_process's ``factory``)."""
         from sherpa_cli.bus.busmap import apply_bus_map, parse_bus_map
         from sherpa_cli.ops.session import ArmSession
 
@@ -64,7 +66,7 @@ class AppState:
         if self.sim:
             from sherpa_cli.sim.arm import SimArm
 
-            arm = SimArm.in_process(cfg)  # injected: ops never import the simulator
+            arm = SimArm.in_process(cfg, sim_factory)  # injected: ops never import the simulator
         with ArmSession.open(cfg, sim=arm, buses=buses) as session:
             yield session
 

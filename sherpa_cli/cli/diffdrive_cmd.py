@@ -162,11 +162,13 @@ def move(
     relative: bool = typer.Option(False, "--relative", help="--sigma/--delta are offsets from where the joints are."),
     velocity: Optional[str] = typer.Option(None, "--velocity", metavar="SPEED", help="Speed of the joint that moves "
                                            "farthest (rad/s, deg/s, counts/s); default: the joints' speed limits."),
-    feedback: bool = typer.Option(False, "--feedback", help="Correct the lagging motor every cycle from the "
-                                  "measured Σ/Δ error (bounded, inside the guard)."),
+    feedback: bool = typer.Option(False, "--feedback", help="Every cycle, slow the motor that is ahead from the "
+                                  "recorded Σ/Δ error (bounded, never faster than planned, inside the guard)."),
     naive: bool = typer.Option(False, "--naive", help="The seed's way, for comparison: two separate BG and "
                                "unscaled profiles."),
     plot: Optional[str] = typer.Option(None, "--plot", metavar="FILE.png", help="Draw both joints during the move."),
+    poll: bool = typer.Option(False, "--poll", help="Record by polling PX through the interpreter instead of "
+                              "TPDOs on SYNC (changes no PDO settings; coarser, one motor a round trip after the other)."),
     uncalibrated: bool = typer.Option(False, "--uncalibrated", help="Allow the move although the pair was not "
                                       "homed since power-up (positions relative to power-up)."),
     apply: ApplyMotion = False,
@@ -174,9 +176,10 @@ def move(
     """Move the Σ and Δ joints of a pair together, both motors starting at once, and measure the coupling.
 
     Both motors get profiles of equal duration (SP/AC/DC scaled by each motor's share of the
-    distance) and start on one frame (motion.pair_start: a group id in 0x2040, RAM only, put
-    back afterwards). Every move records both motors and reports how far the joint that should
-    hold moved, and how far both left the straight Σ/Δ path (docs/diffdrive.md).
+    distance) and start together (motion.pair_start: one BG to a group id in 0x2040, or BG to
+    both executed at one SYNC; RAM only, put back afterwards). Every move records both motors
+    (TPDO on SYNC, or --poll) and reports how far the joint that should hold moved, and how far
+    both left the straight Σ/Δ path (docs/diffdrive.md).
     """
     from sherpa_cli.ops import diffdrive
     from sherpa_cli.ops.targets import pair_of
@@ -185,7 +188,7 @@ def move(
     cfg = st.load_config()
     p = pair_of(cfg, pair)
     req = diffdrive.MoveRequest(sigma=sigma, delta=delta, relative=relative, velocity=velocity, naive=naive,
-                                feedback=feedback, uncalibrated=uncalibrated)
+                                feedback=feedback, uncalibrated=uncalibrated, poll=poll)
     if naive and feedback:
         raise UsageError("--naive and --feedback do not go together: --naive is the seed's way, for comparison")
     method, _ = diffdrive.pair_settings(cfg)
@@ -200,15 +203,18 @@ def move(
                          if v is not None)
         held = [n for n, v in ((p.sigma, sigma), (p.delta, delta)) if v is None]
         start = {"group": f"one BG to group id {cfg.motion.pair_group_id} (0x2040, RAM, put back after)",
+                 "sync_rpdo": "BG to both buffered as synchronous RPDO2 (0x1401:2=1, RAM, put back after), one SYNC",
                  "sequential": "two BG back to back", "naive": "two BG back to back, unscaled profiles"}[mode]
         if st.json_mode:
             st.out.json({"pair": p.name, "applied": False, "move": what, "holds": held, "start": mode,
-                         "feedback": feedback})
+                         "feedback": feedback, "recording": "poll" if poll else "sync"})
             return
         st.out.line(f"dry run: would move pair {p.name} ({p.drive_a}, {p.drive_b}): {what}"
                     + (f"; {held[0]} holds" if held else ""))
         st.out.line(f"  UM=5, SP/AC/DC of equal duration, PA, {start}"
-                    + ("; --feedback corrects SP every cycle" if feedback else "") + ", then stop and switch off")
+                    + ("; --feedback slows the motor ahead every cycle" if feedback else "") + ", then stop and switch off")
+        st.out.line("  records both motors: " + ("PX polled (--poll)" if poll else
+                    f"TPDO1 on SYNC at {cfg.motion.pair_record_rate:g} Hz (RAM only, put back after)"))
         st.out.line("nothing sent; add --apply to move")
         return
     with st.session(buses=sorted({cfg.drives[d].bus for d in (p.drive_a, p.drive_b)})) as session:
@@ -241,7 +247,8 @@ def _render_move(st, r, plot: str | None) -> None:
     cmds = "; ".join(f"{d} " + " ".join(f"{k}={v}" for k, v in c.items()) for d, c in r.motor_commands.items())
     if cmds:
         st.out.line(f"sent: {cmds}")
-    mode = {"group": "common start (group BG)", "sequential": "two BG back to back",
+    mode = {"group": "common start (group BG)", "sync_rpdo": "common start (BG at one SYNC)",
+            "sequential": "two BG back to back",
             "naive": "naive (two BG, unscaled profiles)"}[r.mode] + (", feedback" if r.feedback else "")
     st.out.line(f"pair {r.pair}: {mode}")
     for b in r.breaches:
@@ -261,5 +268,6 @@ def _render_move(st, r, plot: str | None) -> None:
         st.out.line(f"off the straight Σ/Δ path: Σ up to {c.peak_sigma:.0f} counts "
                     f"({counts_to_rad(c.peak_sigma, c.sigma_cpr):.4f} rad), Δ up to {c.peak_delta:.0f} counts "
                     f"({counts_to_rad(c.peak_delta, c.delta_cpr):.4f} rad)")
+    st.out.line(f"recording: {r.trace_source}, {len(r.samples)} samples")
     if plot is not None:
         st.out.line(f"plot: {plot}")

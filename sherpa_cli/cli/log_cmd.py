@@ -275,7 +275,9 @@ def record(
     sent; a rate the bus cannot carry is refused, naming the highest rate it can.
 
     The PDO changes are RAM only: the old settings are read first and written back on every exit
-    path (end, error, Ctrl-C); nothing is ever saved (no SV).
+    path (end, error, Ctrl-C, SIGTERM, SIGHUP: exit 130); nothing is ever saved (no SV). After a
+    kill -9 they stay in the drives' RAM until the next power cycle or NMT reset; SYNC stops with
+    the process, so the drives send nothing meanwhile.
 
     \b
     Examples:
@@ -328,16 +330,34 @@ def record(
     write_csv(rec, output)
     _render_record(st, output, counts, expected, len(rec.times))
     if interrupted:
-        st.out.warn("interrupted: the samples up to Ctrl-C are written; the drives' PDO settings are restored")
+        st.out.warn("interrupted: the samples up to the interruption are written; the drives' PDO settings "
+                    "are restored")
         raise typer.Exit(130)
 
 
+class _Stopped(Exception):
+    """SIGTERM or SIGHUP during a recording: ends it like Ctrl-C, so the PDO settings go back."""
+
+
 def _wait_for(duration: float) -> bool:
-    """Sleep while sampling; True when Ctrl-C ended it early."""
+    """Sleep while sampling; True when Ctrl-C, SIGTERM or SIGHUP ended it early."""
+    import signal
+
+    def stop(signum, frame):
+        raise _Stopped(signal.Signals(signum).name)
+
+    old = {}
+    if threading.current_thread() is threading.main_thread():
+        for sig in (signal.SIGTERM, getattr(signal, "SIGHUP", None)):
+            if sig is not None:
+                old[sig] = signal.signal(sig, stop)
     try:
         sleep(duration)
-    except KeyboardInterrupt:
+    except (KeyboardInterrupt, _Stopped):
         return True
+    finally:
+        for sig, handler in old.items():
+            signal.signal(sig, handler)
     return False
 
 
@@ -352,10 +372,22 @@ def _render_record(st, output, counts, expected, rows) -> None:
     st.out.line(f"wrote {output} ({rows} rows)")
 
 
+def _stepped_sim(st):
+    """With --sim: the in-process arm on stepped time (sim/stepped.py), so a step's figures are the
+    simulated drive's and the same on every run and machine; else (None, None)."""
+    if not st.sim:
+        return None, None
+    from sherpa_cli.sim.arm import SimArm
+    from sherpa_cli.sim.stepped import SteppedTime
+
+    stepped = SteppedTime()
+    return stepped, lambda cfg, channels: SimArm.for_session(cfg, channels, clock=stepped.clock)
+
+
 @app.command("step")
 def step(
     ctx: typer.Context,
-    joint: str = typer.Argument(..., metavar="JOINT", help="A plain joint (or the drive of one)."),
+    joint: str = typer.Argument(..., metavar="JOINT", help="A plain joint (or the drive of one); not a Σ/Δ joint."),
     position: Optional[float] = typer.Option(None, "--position", metavar="X",
                                              help="A position step of X rad from where the joint stands."),
     velocity: Optional[float] = typer.Option(None, "--velocity", metavar="V", help="A velocity step to V rad/s."),
@@ -391,11 +423,10 @@ def step(
     """
     import json
 
-    from sherpa_cli.ops.jog import resolve_jog_target
     from sherpa_cli.ops.motion import MotionSettings
     from sherpa_cli.ops.plot import have_matplotlib, plot_recording
     from sherpa_cli.ops.recording import write_csv
-    from sherpa_cli.ops.step import run_step, step_request
+    from sherpa_cli.ops.step import resolve_step_target, run_step, step_request
 
     st = state(ctx)
     given = [(m, v) for m, v in (("position", position), ("velocity", velocity), ("torque", torque)) if v is not None]
@@ -413,16 +444,25 @@ def step(
     if output.exists() and not output.is_dir():
         raise UsageError(f"-o {output}: exists and is not a directory")
     cfg = st.load_config()
-    target = resolve_jog_target(cfg, joint)
+    target = resolve_step_target(cfg, joint)
     step_request(target, mode, value, duration=duration, uncalibrated=uncalibrated)
     if not apply:
         _step_dry_run(st, cfg, target, mode, value, duration, rate)
         return
     settings = MotionSettings.from_config(cfg, [target.ref.bus])
     output.mkdir(parents=True, exist_ok=True)
-    with st.session(buses=[target.ref.bus]) as session:
+    stepped, sim_factory = _stepped_sim(st)
+    with st.session(buses=[target.ref.bus], sim_factory=sim_factory) as session:
+        timebase = None
+        if stepped is not None and session.sim is not None and session.sim.clock is stepped.clock:
+            arm = session.sim
+            unheard = lambda: (sum(d.unheard for d in arm.drives.values()),  # noqa: E731
+                               sum(d.unheard_s for d in arm.drives.values()))
+            session.client_overrides.update(stepped.client_overrides(cfg.protocol.reply_timeout, cfg.protocol.retries,
+                                                                     unheard))
+            timebase = stepped
         result = run_step(session, target, mode, value, duration=duration, rate=rate, settings=settings,
-                          uncalibrated=uncalibrated)
+                          uncalibrated=uncalibrated, timebase=timebase)
     write_csv(result.recording, output / "recording.csv")
     (output / "metrics.json").write_text(json.dumps(result.as_json(), indent=2) + "\n", encoding="utf-8")
     files = {"csv": str(output / "recording.csv"), "metrics": str(output / "metrics.json")}

@@ -252,6 +252,7 @@ class HomingConfig:
 
 
 STOP_METHODS = ("auto", "st", "jv0")
+PAIR_START_METHODS = ("group", "sync_rpdo", "sequential")  # motion.pair_start (docs/diffdrive.md)
 
 
 @dataclass(frozen=True)
@@ -274,12 +275,16 @@ class MotionConfig:
     velocity_unit_mode: int = 5  # velocity jogs: 5 (JV + BG in position mode) or 2 (speed mode)
     # differential pairs (docs/diffdrive.md): how both motors start together. "group": one BG to the
     # group id pair_group_id written to 0x2040 of both drives (RAM, restored afterwards; that it acts
-    # without an NMT reset communication is UNCONFIRMED); "sequential":
-    # two BG back to back (no common start, for drives without 0x2040)
+    # without an NMT reset communication is UNCONFIRMED); "sync_rpdo": BG to each drive's RPDO2 made
+    # synchronous (0x1401:2 = 1, RAM, for the begin only), executed at one SYNC the tool sends
+    # (UNCONFIRMED on the Whistle); "sequential": two BG back to back (no common start)
     pair_start: str = "group"
     pair_group_id: int = 125  # a 7-bit id no device on the pair's bus uses (126 is the host heartbeat)
-    feedback_gain: float = 8.0  # --feedback: SP correction per unit of progress difference between the motors
+    feedback_gain: float = 16.0  # --feedback: SP correction per unit of progress difference between the motors
     feedback_limit: float = 0.5  # --feedback: the correction never changes a motor's SP by more than this share
+    # diffdrive move records both motors by TPDO on SYNC (ops/record.py) at this rate (Hz, capped to
+    # what the bus budget allows); --poll or a recorder that cannot be set up: PX polled instead
+    pair_record_rate: float = 500.0
 
     @property
     def heartbeat_period_s(self) -> float:

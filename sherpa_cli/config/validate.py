@@ -147,6 +147,12 @@ def _check_motion(cfg: ArmConfig, locs: Locs, r: _Report) -> None:
             r.error(where(key), f"{key} {getattr(m, key)} s must be > 0")
     if not 0 <= m.standstill_velocity <= 1000:
         r.error(where("standstill_velocity"), f"standstill_velocity {m.standstill_velocity} counts/s must be 0..1000")
+    from sherpa_cli.config.model import PAIR_START_METHODS
+
+    if m.pair_start not in PAIR_START_METHODS:
+        r.error(where("pair_start"), f"pair_start '{m.pair_start}': expected one of {', '.join(PAIR_START_METHODS)}")
+    if not (math.isfinite(m.pair_record_rate) and m.pair_record_rate > 0):
+        r.error(where("pair_record_rate"), f"pair_record_rate {m.pair_record_rate} Hz must be > 0")
     if m.velocity_unit_mode not in (2, 5):
         r.error(where("velocity_unit_mode"), f"velocity_unit_mode {m.velocity_unit_mode}: expected 5 (jog in "
                 "position mode) or 2 (speed mode)")
@@ -576,6 +582,11 @@ SEND_INTERVAL_MAX = 1_000_000  # µs
 POLL_INTERVAL_MAX = 60_000  # ms
 SIM_TIME_MAX = 1e6  # s after start for simulated faults
 SPEED_GAIN_MAX = 1000.0
+# servo-loop motor model (sim/servo.py): its 1 ms model step integrates a loop of up to ~100 Hz
+# stably (wn * dt = 0.63); damping beyond 10 is a loop that barely moves; currents in A
+SERVO_BANDWIDTH_MAX = 100.0  # Hz
+SERVO_DAMPING_MAX = 10.0
+SIM_CURRENT_MAX = 1000.0  # A
 
 
 def _bad_number(value: object) -> str | None:
@@ -594,6 +605,15 @@ def _check_bounds(cfg: ArmConfig, locs: Locs, r: _Report) -> None:
             return
         shown = f"{lo:g}..{hi:g}" if isinstance(lo, float) or isinstance(hi, float) else f"{lo}..{hi}"
         r.error(loc, f"{what} {value} {bad or 'is out of range'}; expected {shown}{unit}")
+
+    def positive(value: object, hi: float, loc: Location, what: str, unit: str = "") -> None:
+        """None (not given) or a finite number > 0 and <= hi."""
+        if value is None or isinstance(value, bool):
+            return
+        bad = _bad_number(value)
+        if bad is None and 0 < value <= hi:  # type: ignore[operator]
+            return
+        r.error(loc, f"{what} {value} {bad or 'is out of range'}; expected > 0 and <= {hi:g}{unit}")
 
     p = cfg.protocol
     for key in ("reply_timeout", "mo_settle", "sv_blackout"):
@@ -617,6 +637,13 @@ def _check_bounds(cfg: ArmConfig, locs: Locs, r: _Report) -> None:
         within(sim_drive.speed_gain, 0.0, SPEED_GAIN_MAX, at_sim("speed_gain"), "speed_gain")
         within(sim_drive.heartbeat_ms, 0, 0xFFFF, at_sim("heartbeat_ms"), "heartbeat_ms", " ms (0x1017 is u16)")
         within(sim_drive.seed, 0, 2**32 - 1, at_sim("seed"), "seed")
+        within(sim_drive.servo_bandwidth, 0.0, SERVO_BANDWIDTH_MAX, at_sim("servo_bandwidth"), "servo_bandwidth",
+               " Hz (0 = the kinematic motor model)")
+        positive(sim_drive.servo_damping, SERVO_DAMPING_MAX, at_sim("servo_damping"), "servo_damping")
+        for key in ("servo_current_limit", "supply_current_limit"):
+            positive(getattr(sim_drive, key), SIM_CURRENT_MAX, at_sim(key), key, " A")
+        for key in ("start_skew", "lag"):  # the simulator refuses a negative time (SimSettings)
+            within(getattr(sim_drive, key), 0.0, WAIT_MAX, at_sim(key), key, " s")
         if _bad_number(sim_drive.drop_probability):
             r.error(at_sim("drop_probability"), f"drop_probability {sim_drive.drop_probability} is not a finite number")
 

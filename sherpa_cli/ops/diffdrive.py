@@ -8,23 +8,26 @@ start is :func:`common_begin` (also used by `jog` of a Σ/Δ joint, ops/joint_jo
 
 Common start (``motion.pair_start``): ``group`` writes the group id ``motion.pair_group_id`` to
 object 0x2040 of both drives (RAM only; the old values are put back on every exit path) and sends
-one BG to that id, which both drives execute on the same frame; ``sequential`` sends two BG back to
-back. ``--naive`` is the seed's way: two BG and unscaled profiles, kept for comparison.
+one BG to that id, which both drives execute on the same frame; ``sync_rpdo`` makes RPDO2
+synchronous (0x1401:2 = 1, RAM, for the begin only), sends BG to each drive and one SYNC at which
+both execute it; ``sequential`` sends two BG back to back. ``--naive`` is the seed's way: two BG and unscaled profiles, kept for comparison.
 
-Recording: until the ops-level recorder of `sherpa log` is on main, the move records both motors
-by polling PX through the interpreter in the guard's loop (:class:`PolledTrace`); anything with
-``add(t, motors)`` and ``samples`` can take its place (``trace_factory``).
+Recording: both motors are recorded by `sherpa log`'s recorder (ops/record.py: TPDO on SYNC at
+``motion.pair_record_rate``, RAM only, put back on every exit path; :class:`RecordedTrace`), whose
+newest sample also feeds the move's loop (limit watch, ``--feedback``); with ``--poll`` or when the
+recorder cannot be set up, the loop polls PX through the interpreter instead (:class:`PolledTrace`).
 """
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import math
 import time
 from dataclasses import dataclass, field
 from typing import Any, Callable, Mapping, Sequence
 
-from sherpa_cli.config.model import ArmConfig, PairConfig
+from sherpa_cli.config.model import PAIR_START_METHODS, ArmConfig, PairConfig
 from sherpa_cli.errors import ConfigError, DriveTimeoutError, SafetyError, UsageError
 from sherpa_cli.joints import diffpair, units
 from sherpa_cli.ops import calibration, limit_watch
@@ -32,7 +35,11 @@ from sherpa_cli.ops import calibration, limit_watch
 UM_POSITION = 5
 GROUP_INDEX = 0x2040
 RPDO2_BASE = 0x300
-PAIR_START_METHODS = ("group", "sequential")
+TPDO2_BASE = 0x280
+SYNC_ID = 0x080
+RPDO2_COMM = 0x1401  # RPDO2 (the binary interpreter's) communication parameter; sub 2 = transmission type
+SYNC_RPDO_TYPE = 1  # synchronous: executed at the next SYNC ([IG] 5-4)
+RPDO2_TYPE_NAME = "RPDO2 transmission type"
 SETTLE_S = 0.3  # s a finished move may take for PX to reach the target (servo lag) before it is reported
 PROFILE_KEYS = ("SP", "AC", "DC")
 
@@ -50,6 +57,7 @@ class MoveRequest:
     naive: bool = False
     feedback: bool = False
     uncalibrated: bool = False
+    poll: bool = False  # record by polling PX instead of the recorder (TPDO on SYNC)
 
 
 @dataclass(frozen=True)
@@ -242,7 +250,7 @@ def measure_coupling(samples: Sequence[tuple[float, int, int]], start: tuple[int
 
 class PolledTrace:
     """Both motors' positions during the move, sampled by the move's own loop (PX polled through
-    the interpreter). The stand-in for the TPDO-on-SYNC recorder of `sherpa log`."""
+    the interpreter, one drive after the other): the fallback when the recorder is not used."""
 
     source = "polled PX"
 
@@ -255,57 +263,177 @@ class PolledTrace:
         self.samples.append((t, int(motors[a]), int(motors[b])))
 
 
+class RecordedTrace:
+    """Both motors recorded by `sherpa log`'s recorder (ops/record.py: PX and VX on TPDO1 at every
+    SYNC, RAM only, restored on every exit path). Both drives are sampled at the same SYNC, so the
+    Σ/Δ of a sample is exact (polling reads one motor a round trip after the other). The move's
+    loop reads the newest sample (:meth:`latest`) instead of polling PX."""
+
+    def __init__(self, recorder: Any, drives: tuple[str, str], rate: float, note: str = "") -> None:
+        self.recorder, self.drives, self.rate = recorder, drives, rate
+        self.source = f"TPDO on SYNC at {rate:g} Hz" + (f" ({note})" if note else "")
+        self.samples: list[tuple[float, int, int]] = []
+        self.t_zero: float | None = None  # the recorder's time of the move's begin
+
+    def add(self, t: float, motors: Mapping[str, int]) -> None:  # samples come from the recorder
+        pass
+
+    def latest(self, max_age: float) -> tuple[dict[str, int], dict[str, int]] | None:
+        """(PX, VX) of both drives at the newest SYNC both answered, if at most ``max_age`` s old."""
+        newest = self.recorder.latest()
+        if newest is None or self.recorder.now() - newest[0] > max_age:
+            return None
+        values = newest[1]
+        return {d: values[d][0] for d in self.drives}, {d: values[d][1] for d in self.drives}
+
+    def collect(self) -> None:
+        """After the recorder closed: its samples as (t from the begin, m_a, m_b)."""
+        rec = self.recorder.recording(t_zero=self.t_zero)
+        a, b = (rec.columns[f"{d}.px"] for d in self.drives)
+        self.samples = [(t, int(x), int(y)) for t, x, y in zip(rec.times, a, b) if x == x and y == y]
+
+
+def record_rate(cfg: ArmConfig, refs: Sequence[Any]) -> tuple[float, str]:
+    """``motion.pair_record_rate``, capped to what the pair's bus can carry (ops/record.py's budget)."""
+    from sherpa_cli.ops.encoder import recorded_encoders
+    from sherpa_cli.ops.record import bus_budget
+
+    rate = float(cfg.motion.pair_record_rate)
+    encoders = [t.dev for t in recorded_encoders(cfg, (r.name for r in refs))]  # recorded beside them
+    budget = bus_budget(cfg, refs, rate, current=False, encoders=encoders)
+    if all(b.fits for b in budget):
+        return rate, ""
+    cap = float(min(b.max_rate for b in budget))
+    return cap, f"capped from {rate:g} Hz by the bus budget"
+
+
 # --------------------------------------------------------------------------- common start
 
 class CommonStart:
-    """Starts both motors of a pair together; restores what it changed (0x2040, and the SP/AC/DC
-    kept with :meth:`keep_profile`; RAM) on close.
+    """Starts both motors of a pair together; restores what it changed (0x2040 or 0x1401:2, and the
+    SP/AC/DC kept with :meth:`keep_profile`; RAM) on close.
 
-    ``method``: ``group`` (one BG to the group id), ``sequential`` (BG, BG). Use as a context
-    manager inside the motion guard. ``stop`` (:func:`stop_motors`) runs on the way out before
-    the restore, so no motor keeps moving through the restore's SDO timeouts (review R8)."""
+    ``method`` (``motion.pair_start``): ``group`` (0x2040 = the group id on both drives, one BG to
+    the group id), ``sync_rpdo`` (for each begin RPDO2 is made synchronous on both drives, 0x1401:2
+    = 1; BG to each drive is then buffered until one SYNC the tool sends right after them, which
+    both drives execute on the same frame; the old transmission type goes back at once and the BG
+    answers are awaited), ``sequential`` (BG, BG). Use as a context manager inside the motion
+    guard. ``stop`` (:func:`stop_motors`) runs on the way out before the restore, so no motor keeps
+    moving through the restore's SDO timeouts (review R8)."""
 
     def __init__(self, session: Any, refs: Sequence[Any], clients: Mapping[str, Any], method: str,
                  group_id: int, stop: Callable[[], Sequence[str] | None] | None = None) -> None:
         self.session, self.refs, self.clients, self.method, self.group_id = session, list(refs), clients, method, group_id
         self._old: dict[str, int] = {}
+        self._rpdo_type: dict[str, int] = {}  # sync_rpdo: each drive's own 0x1401:2
+        self._synchronous: set[str] = set()  # drives whose RPDO2 is synchronous right now
         self._profiles: dict[str, dict[str, int]] = {}
         self.stop = stop
         self.bus = refs[0].bus
 
     def __enter__(self) -> "CommonStart":
+        if self.method in ("group", "sync_rpdo") and len({r.bus for r in self.refs}) != 1:
+            raise ConfigError(f"motion.pair_start={self.method} needs both drives of the pair on one bus; "
+                              "use pair_start: sequential")
         if self.method == "group":
-            if len({r.bus for r in self.refs}) != 1:
-                raise ConfigError("motion.pair_start=group needs both drives of the pair on one bus; "
-                                  "use pair_start: sequential")
             clash = [n for n, d in self.session.cfg.drives.items()
                      if d.bus == self.bus and d.node == self.group_id]
             if clash:
                 raise ConfigError(f"motion.pair_group_id {self.group_id} is the node id of {clash[0]} on bus "
                                   f"{self.bus}: choose an id no device uses")
-            try:
-                for r in self.refs:
-                    sdo = self.session.sdo(r)
+        try:
+            for r in self.refs:
+                sdo = self.session.sdo(r)
+                if self.method == "group":
                     old = (bytes(sdo.upload(GROUP_INDEX, 0, name="group id")) + b"\0")[0]
                     if old != self.group_id:
                         sdo.download(GROUP_INDEX, 0, bytes([self.group_id]), name="group id")
                         self._old[r.name] = old
-            except BaseException:
-                self.close()
-                raise
+                elif self.method == "sync_rpdo":
+                    self._rpdo_type[r.name] = (bytes(sdo.upload(RPDO2_COMM, 2, name=RPDO2_TYPE_NAME)) + b"\0")[0]
+        except BaseException:
+            self.close()
+            raise
         return self
 
     def begin(self, drives: Sequence[str] | None = None) -> None:
-        """BG for the named drives (default both): one group frame, or one BG per drive."""
+        """BG for the named drives (default both): one group frame, two BG executed at one SYNC, or
+        one BG per drive."""
+        from sherpa_cli.elmo import codec
+
         names = list(drives) if drives is not None else [r.name for r in self.refs]
         if self.method == "group" and len(names) == len(self.refs):
-            from sherpa_cli.elmo import codec
-
             self.session.links[self.bus].network.send_message(RPDO2_BASE + self.group_id,
                                                               codec.encode_execute("BG"))
             return
+        if self.method == "sync_rpdo" and len(names) == len(self.refs):
+            self._sync_begin()
+            return
         for n in names:
             self.clients[n].execute("BG")
+
+    def _sync_begin(self) -> None:
+        import threading
+
+        from sherpa_cli.elmo import codec
+        from sherpa_cli.errors import DriveRefusedError, DriveTimeoutError
+
+        network = self.session.links[self.bus].network
+        answers: dict[str, Any] = {}
+        arrived = {r.name: threading.Event() for r in self.refs}
+        subscribed = []
+
+        def listener(name: str) -> Callable[[int, bytes, float], None]:
+            def on_reply(can_id: int, data: bytes, timestamp: float) -> None:
+                try:
+                    reply = codec.decode_reply(bytes(data))
+                except Exception:
+                    return
+                if reply.letters == "BG" and name not in answers:
+                    answers[name] = reply
+                    arrived[name].set()
+            return on_reply
+        try:
+            for r in self.refs:
+                if self._rpdo_type[r.name] != SYNC_RPDO_TYPE:
+                    self._synchronous.add(r.name)
+                    self.session.sdo(r).download(RPDO2_COMM, 2, bytes([SYNC_RPDO_TYPE]), name=RPDO2_TYPE_NAME)
+            for r in self.refs:
+                callback = listener(r.name)
+                network.subscribe(TPDO2_BASE + r.node, callback)
+                subscribed.append((TPDO2_BASE + r.node, callback))
+            for r in self.refs:  # buffered by each drive until the SYNC
+                network.send_message(RPDO2_BASE + r.node, codec.encode_execute("BG"))
+            network.send_message(SYNC_ID, b"")
+            wait = 2 * max(getattr(c, "timeout", 0.1) for c in self.clients.values())
+            for r in self.refs:
+                arrived[r.name].wait(wait)
+        finally:
+            for cob, callback in subscribed:
+                network.unsubscribe(cob, callback)
+            self._restore_rpdo(quiet=False)
+        for r in self.refs:
+            reply = answers.get(r.name)
+            if reply is None:
+                raise DriveTimeoutError(f"{r.name}: no answer to the BG executed at the SYNC within {wait:g} s",
+                                        hint="does the drive execute a synchronous RPDO2 (0x1401:2 = 1)? "
+                                             "motion.pair_start: group or sequential starts it without SYNC")
+            if not reply.ok:
+                raise DriveRefusedError(f"{r.name}: BG at the SYNC refused: {reply.error_text}", drive=r.name,
+                                        command="BG", code=reply.error_code)
+
+    def _restore_rpdo(self, quiet: bool = True) -> None:
+        for r in self.refs:
+            if r.name in self._synchronous:
+                try:
+                    self._put_rpdo_type(r)
+                except Exception:
+                    if not quiet:
+                        raise
+
+    def _put_rpdo_type(self, ref: Any) -> None:
+        self.session.sdo(ref).download(RPDO2_COMM, 2, bytes([self._rpdo_type[ref.name]]), name=RPDO2_TYPE_NAME)
+        self._synchronous.discard(ref.name)
 
     def keep_profile(self, drive: str) -> None:
         """Read ``drive``'s SP/AC/DC before they are changed; :meth:`close` puts them back (review R7:
@@ -325,6 +453,9 @@ class CommonStart:
             if r.name in deaf:  # each write would only wait out its timeouts before the guard's exit
                 self._profiles.pop(r.name, None)
                 self._old.pop(r.name, None)
+                self._synchronous.discard(r.name)
+            if r.name in self._synchronous:  # first: a synchronous RPDO2 would hold back the sets below
+                writes.append(functools.partial(self._put_rpdo_type, r))
             for key, value in self._profiles.pop(r.name, {}).items():
                 writes.append(functools.partial(self.clients[r.name].set, key, 0, value))
             if r.name in self._old:
@@ -456,42 +587,98 @@ def prepare(session: Any, pair: PairConfig, request: MoveRequest) -> tuple[MoveP
 
 class Feedback:
     """--feedback: keeps both motors at the same share of their own distance (which is the straight
-    Σ/Δ path). Each cycle the progress difference e = p_a - p_b (measured PX) gives a correction
-    c = gain·e + integral·∫e dt, bounded by ``limit``; motor a's SP/AC/DC are scaled by (1 - c) and
-    motor b's by (1 + c): the motor ahead slows, the one behind speeds up. The integral learns a
-    steady mismatch (one motor faster than the other). None when one motor does not move."""
+    Σ/Δ path). Each cycle, from the newest recorded sample:
+
+    - e = p_a - p_b, the progress difference (p = (PX - start) / (target - start));
+    - v = (r_a - r_b) / mean(r), the relative difference of the progress rates r = VX / distance
+      (recorder samples only; while both motors run at least ``VELOCITY_FLOOR`` of their planned
+      speed): it sees one motor running faster long before the positions drift apart;
+    - c = gain·s·e + integral·∫e dt + VELOCITY_GAIN·v, bounded by ``limit``. The integral learns a
+      steady mismatch (one motor faster than the other); s = min(1, CYCLE_S / time since the last
+      cycle) and each cycle's dt capped at MAX_DT_S keep a stalled loop from over-correcting.
+
+    Only the motor ahead slows: its SP/AC/DC become k = (1 - |c|) / (1 + |c|) of its planned
+    profile (the ratio the two would have if one slowed by c and the other sped up by c), at least
+    1 - ``limit``; the other keeps its planned profile. No motor ever runs faster or accelerates
+    harder than planned, so the joints' speed and acceleration limits hold. None when one motor
+    does not move (there is nothing to keep in step)."""
+
+    VELOCITY_GAIN = 0.2
+    VELOCITY_FLOOR = 0.2  # share of the planned speed both motors need before v counts
+    CYCLE_S = 0.012  # the loop's expected period with the recorder; slower cycles get a weaker P term
+    MAX_DT_S = 0.03  # longest time step the integral takes from one cycle
 
     def __init__(self, plan: MovePlan, gain: float, limit: float, integral: float | None = None) -> None:
         self.plan, self.gain, self.limit = plan, gain, limit
-        self.integral = gain * 10 if integral is None else integral
+        self.integral = self.gain * 10 if integral is None else integral
         self._sum = 0.0
         self._t: float | None = None
 
-    def profiles(self, t: float, motors: Mapping[str, int]) -> dict[str, Profile] | None:
+    def profiles(self, t: float, motors: Mapping[str, int],
+                 velocities: Mapping[str, int] | None = None) -> dict[str, Profile] | None:
         p = self.plan
         a, b = p.pair.drive_a, p.pair.drive_b
-        prog = {}
+        prog, rate, floor = {}, {}, {}
         for d in (a, b):
             dist = p.motor_targets[d] - p.motors_start[d]
             if dist == 0:
                 return None
             prog[d] = (motors[d] - p.motors_start[d]) / dist
+            floor[d] = self.VELOCITY_FLOOR * p.profiles[d].sp / abs(dist)
+            if velocities is not None:
+                rate[d] = velocities[d] / dist
         err = prog[a] - prog[b]
+        scale = 1.0
         if self._t is not None:
-            self._sum += err * (t - self._t)
+            dt = t - self._t
+            self._sum += err * min(dt, self.MAX_DT_S)
+            if dt > self.CYCLE_S:
+                scale = self.CYCLE_S / dt
         self._t = t
-        corr = max(-self.limit, min(self.limit, self.gain * err + self.integral * self._sum))
+        # anti-windup: the integral alone never asks for more than the bound
+        bound = self.limit / self.integral if self.integral else 0.0
+        self._sum = max(-bound, min(bound, self._sum))
+        vterm = 0.0
+        if rate and all(rate[d] >= floor[d] for d in (a, b)):
+            vterm = self.VELOCITY_GAIN * (rate[a] - rate[b]) / ((rate[a] + rate[b]) / 2)
+        corr = max(-self.limit, min(self.limit, scale * self.gain * err + self.integral * self._sum + vterm))
+        k = max(1 - self.limit, (1 - abs(corr)) / (1 + abs(corr)))
 
-        def scaled(pr: Profile, k: float) -> Profile:
-            return Profile(max(1, round(pr.sp * k)), max(1, round(pr.ac * k)), max(1, round(pr.dc * k)))
-        return {a: scaled(p.profiles[a], 1 - corr), b: scaled(p.profiles[b], 1 + corr)}
+        def scaled(pr: Profile, f: float) -> Profile:
+            return Profile(max(1, round(pr.sp * f)), max(1, round(pr.ac * f)), max(1, round(pr.dc * f)))
+        return {a: scaled(p.profiles[a], k if corr > 0 else 1.0), b: scaled(p.profiles[b], k if corr < 0 else 1.0)}
+
+
+def _open_trace(stack: contextlib.ExitStack, session: Any, refs: Sequence[Any], request: MoveRequest,
+                drives: tuple[str, str], recorder_kw: Mapping[str, Any] | None) -> Any:
+    """The move's recording: the recorder of `sherpa log` (TPDO on SYNC), or PX polled by the move's
+    loop with --poll or when the recorder cannot be set up (its source says which)."""
+    if request.poll:
+        trace = PolledTrace(drives)
+        trace.source = "polled PX (--poll)"
+        return trace
+    from sherpa_cli.ops.record import Recorder
+
+    rate, note = record_rate(session.cfg, refs)
+    try:
+        rec = stack.enter_context(Recorder(session, refs, rate, enforce_budget=False, **dict(recorder_kw or {})))
+    except Exception as exc:  # the recorder put back what it changed; the move records by polling
+        trace = PolledTrace(drives)
+        trace.source = f"polled PX (the recorder could not be set up: {exc})"
+        return trace
+    return RecordedTrace(rec, drives, rate, note)
 
 
 def run_move(session: Any, pair: PairConfig, request: MoveRequest, *, guard_factory: Callable[..., Any] | None = None,
              clock: Callable[[], float] = time.monotonic, sleep: Callable[[float], None] = time.sleep,
              on_event: Callable[[str], None] | None = None,
-             trace_factory: Callable[[tuple[str, str]], Any] = PolledTrace) -> MoveResult:
-    """Plan, then move both motors inside the motion guard with the limit watch, recording both."""
+             recorder_kw: Mapping[str, Any] | None = None,
+             trace_factory: Callable[[tuple[str, str]], Any] | None = None) -> MoveResult:
+    """Plan, then move both motors inside the motion guard with the limit watch, recording both.
+
+    ``recorder_kw`` goes to ops/record.py's Recorder (``clock``, ``sync_factory``: tests);
+    ``trace_factory(drives)`` replaces the recording with anything that has ``add(t, motors)``,
+    ``samples`` and ``source`` (PX is then polled, as with --poll)."""
     from sherpa_cli.ops.joint_jog import move_to, stop_now, wait_standstill
     from sherpa_cli.ops.motion import MotionGuard, MotionSettings
 
@@ -511,20 +698,20 @@ def run_move(session: Any, pair: PairConfig, request: MoveRequest, *, guard_fact
     result = MoveResult(pair.name, pair.sigma, pair.delta, drives, "naive" if request.naive else method,
                         request.feedback, p.start, p.target, p.start, sj.cpr, dj.cpr,
                         motors_start=dict(p.motors_start), calibration=cals)
-    trace = trace_factory(drives)
-    result.trace_source = getattr(trace, "source", type(trace).__name__)
     guard = (guard_factory or MotionGuard)(session, refs, settings=settings, clock=clock, sleep=sleep,
                                            on_event=on_event)
-    t0 = clock()
     try:
         with guard:
             clients = {d: guard.client(by_name[d]) for d in drives}
-
-            def check_drives() -> None:
-                guard.check_motors_on([by_name[d] for d in clients], "the move")
-
             start = CommonStart(session, refs, clients, method, group_id, stop=stop_motors(guard, refs, settings))
-            with start:
+            with contextlib.ExitStack() as stack:
+                trace = (trace_factory(drives) if trace_factory is not None else
+                         _open_trace(stack, session, refs, request, drives, recorder_kw))
+                result.trace_source = getattr(trace, "source", type(trace).__name__)
+                recorded = isinstance(trace, RecordedTrace)
+                # entered after the recorder, so it exits first: the motors stop and the RAM settings go
+                # back before the recorder puts its PDO settings back (review R8: stop before restoring)
+                stack.enter_context(start)
                 for d in drives:
                     guard.enable(by_name[d], UM_POSITION)
                 for d, c in clients.items():
@@ -537,12 +724,30 @@ def run_move(session: Any, pair: PairConfig, request: MoveRequest, *, guard_fact
                 result.motor_commands = {d: {"PA": p.motor_targets[d], **p.profiles[d].as_dict()} for d in drives}
                 last = dict(p.profiles)
                 fb = Feedback(p, cfg.motion.feedback_gain, cfg.motion.feedback_limit) if request.feedback else None
+                # with the recorder the loop reads the newest SYNC's PX instead of polling it, so it
+                # can run at the recording's rate; the drives' status (SR, MS) is still asked at
+                # most every poll interval, as before
+                stale = max(10 / trace.rate, 0.02) if recorded else 0.0
+                interval = min(settings.poll_interval, 1 / trace.rate) if recorded and fb else settings.poll_interval
+                state: dict[str, Any] = {"status_due": 0.0, "seen": None}
+
+                def positions() -> dict[str, int]:
+                    state["velocities"] = None
+                    if recorded:
+                        got = trace.latest(stale)
+                        if got is not None:
+                            guard.check()  # the guard's sign of life (a query gives one)
+                            state["velocities"] = got[1]
+                            return got[0]
+                    return {d: int(guard.query(by_name[d], "PX")) for d in drives}
 
                 def sample() -> dict[str, int]:
-                    motors = {d: int(guard.query(by_name[d], "PX")) for d in drives}
-                    trace.add(clock() - t0, motors)
-                    if fb is not None:
-                        new = fb.profiles(clock() - t0, motors)
+                    motors = positions()
+                    now = clock() - t0
+                    trace.add(now, motors)
+                    if fb is not None and motors != state["seen"]:
+                        state["seen"] = motors
+                        new = fb.profiles(now, motors, state["velocities"])
                         near_end = any(abs(p.motor_targets[d] - motors[d]) <= 2 for d in drives)
                         if new is not None and not near_end and new != last:
                             for d in drives:
@@ -554,11 +759,33 @@ def run_move(session: Any, pair: PairConfig, request: MoveRequest, *, guard_fact
                             result.corrections += 1
                     return motors
 
-                t_begin = clock()
+                def status_due() -> bool:
+                    return clock() >= state["status_due"]
+
+                def check_drives() -> None:
+                    if status_due():
+                        guard.check_motors_on([by_name[d] for d in clients], "the move")
+                    else:
+                        guard.check()
+
+                def finished(motors: Mapping[str, int]) -> bool:
+                    if not status_due():
+                        return False
+                    vel = state["velocities"]
+                    if vel is not None and not all(motors[d] == p.motor_targets[d] and vel[d] == 0 for d in drives) \
+                            and clock() < state.get("ms_due", 0.0):
+                        state["status_due"] = clock() + settings.poll_interval
+                        return False  # the recording says not there yet: MS is asked only now and then
+                    state["ms_due"] = clock() + 5 * settings.poll_interval
+                    state["status_due"] = clock() + settings.poll_interval
+                    return all(int(c.get("MS")) == 0 for c in clients.values())
+
+                t0 = t_begin = clock()
+                if recorded:
+                    trace.t_zero = trace.recorder.now()
                 start.begin()
-                w = limit_watch.watch(watched, sample, clock=clock, sleep=sleep, interval=settings.poll_interval,
-                                      finished=lambda m: all(int(c.get("MS")) == 0 for c in clients.values()),
-                                      duration=p.timeout, check_drives=check_drives)
+                w = limit_watch.watch(watched, sample, clock=clock, sleep=sleep, interval=interval,
+                                      finished=finished, duration=p.timeout, check_drives=check_drives)
                 result.duration = round(clock() - t_begin, 3)
                 if w.outcome == "breach":
                     result.outcome = "limit"
@@ -582,6 +809,8 @@ def run_move(session: Any, pair: PairConfig, request: MoveRequest, *, guard_fact
                         sleep(settings.poll_interval)
                         final = {d: int(clients[d].get("PX")) for d in drives}
                 trace.add(clock() - t0, final)
+            if recorded:
+                trace.collect()  # the recorder has stopped and put the PDO settings back
     except BaseException as exc:
         exc.motion_report = guard.report  # type: ignore[attr-defined]
         raise

@@ -14,8 +14,8 @@
   names every drive, how it was stopped and what was restored.
 
 Why the heartbeat comes from a Python thread and not ``send_periodic``: on SocketCAN python-can's
-periodic task is the kernel's broadcast manager, which keeps sending after this process hangs or
-is killed -- the drive would never notice. The thread sends only while the command shows signs of
+periodic task is the kernel's broadcast manager, which keeps sending while this process hangs (it
+ends only when the socket is released, at exit) -- the drive would never notice a hung tool. The thread sends only while the command shows signs of
 life (:meth:`check`) and the main thread runs; SIGKILL ends it with the process, and the drive's own
 consumer switches the motor off ``consumer_time_ms`` later.
 """

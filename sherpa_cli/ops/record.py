@@ -230,6 +230,15 @@ class Recorder:
         with self._lock:
             return sum(len(d.pos) + len(d.cur) for d in self._drives.values())
 
+    def answered(self, syncs: int) -> bool:
+        """Whether every TPDO the first ``syncs`` SYNCs ask for has arrived (position of every
+        drive for each, current for every 2nd): a SYNC source in lockstep with a simulated clock
+        waits for this before it moves the clock on."""
+        with self._lock:
+            return all(len(d.pos) >= syncs and (not self.current
+                                                or len(d.cur) >= CURRENT_DIVIDER * (syncs // CURRENT_DIVIDER))
+                       for d in self._drives.values())
+
     # -- PDO set-up (RAM only) ------------------------------------------------------------------
     def _configure(self, d: _Drive) -> None:
         client = self.session.client(d.ref)
@@ -322,6 +331,19 @@ class Recorder:
             return {**{d.ref.name: len(d.pos) for d in self._drives.values()},
                     **{t.dev.name: len(t.samples) for t in self.encoders}}
 
+    def latest(self) -> tuple[float, dict[str, tuple[int, int]]] | None:
+        """The newest SYNC every drive has answered: (its time on the recorder's clock, drive ->
+        (PX, VX)), or None before the first. For a loop that acts on the recording while it runs
+        (`diffdrive move --feedback`): all drives sampled at the same SYNC."""
+        with self._lock:
+            drives = list(self._drives.values())
+            newest = min(d.last.get(TPDO_POS, -1) for d in drives)
+            for k in range(newest, max(newest - 50, -1), -1):  # a lost frame: the SYNC before it
+                if all(k in d.pos for d in drives):
+                    return ((self.t0 or 0.0) + k * self.period,
+                            {d.ref.name: (int(d.pos[k][0]), int(d.pos[k][1])) for d in drives})
+        return None
+
     def expected(self) -> int:
         if self.t0 is None:
             return 0
@@ -361,7 +383,8 @@ class Recorder:
                 sign = 1 if joint.name == pair.sigma else -1
                 for col, which, conv in (("pos_rad", 0, counts_to_rad), ("vel_rad_s", 1, counts_per_s_to_rad_per_s)):
                     a, b = motor(pair.drive_a, which), motor(pair.drive_b, which)
-                    rec.columns[f"{joint.name}.{col}"] = [conv(x + sign * y, joint.cpr) for x, y in zip(a, b)]
+                    rec.columns[f"{joint.name}.{col}"] = [conv(x + sign * y, joint.cpr) if x == x and y == y else nan
+                                                          for x, y in zip(a, b)]  # a sample one drive missed
         for ref in self.refs:
             rec.columns[f"{ref.name}.px"] = motor(ref.name, 0)
             rec.columns[f"{ref.name}.vx"] = motor(ref.name, 1)
@@ -438,8 +461,9 @@ class Poller:
         return {r.name: sum(1 for row in self.rows if row[1] == r.name) for r in self.refs}
 
     def recording(self, cfg: ArmConfig, *, t_zero: float | None = None) -> Recording:
-        """One row per poll round of a bus: a drive's values at its own poll time (its cells of
-        other drives' rows are empty)."""
+        """One row per drive reading, at its own poll time (its cells of other drives' rows are
+        empty). A pair's Σ/Δ joint is on the row of the pair's motor read second in a round, from
+        both motors' readings of that round (one bus, read back to back), as the TPDO recorder's."""
         zero = t_zero if t_zero is not None else (self.t0 or 0.0)
         rec = Recording(times=[row[0] - zero for row in self.rows])
         nan = math.nan
@@ -455,4 +479,28 @@ class Poller:
                                                         for v in rec.columns[f"{joint.drive}.px"]]
                 rec.columns[f"{joint.name}.vel_rad_s"] = [counts_per_s_to_rad_per_s(v, joint.cpr) if v == v else nan
                                                           for v in rec.columns[f"{joint.drive}.vx"]]
+            elif joint.pair is not None:
+                pair = cfg.pairs[joint.pair]
+                if f"{pair.drive_a}.px" in rec.columns and f"{pair.drive_b}.px" in rec.columns:
+                    sign = 1 if joint.name == pair.sigma else -1
+                    rec.columns[f"{joint.name}.pos_rad"], rec.columns[f"{joint.name}.vel_rad_s"] = \
+                        self._pair_columns(pair.drive_a, pair.drive_b, sign, joint.cpr)
         return rec
+
+    def _pair_columns(self, a: str, b: str, sign: int, cpr: int) -> tuple[list[float], list[float]]:
+        """A bus's poll thread reads its drives in the same order every round, so the pair's rows
+        alternate: each second reading completes a round with the other motor's reading before it."""
+        pos, vel = [math.nan] * len(self.rows), [math.nan] * len(self.rows)
+        first: dict[str, tuple[int, int]] = {}
+        for i, (_, name, px, vx, _iq) in enumerate(self.rows):
+            if name not in (a, b):
+                continue
+            other = b if name == a else a
+            if other not in first:
+                first = {name: (px, vx)}
+                continue
+            (pa, va), (pb, vb) = ((px, vx), first[b]) if name == a else (first[a], (px, vx))
+            pos[i] = counts_to_rad(pa + sign * pb, cpr)
+            vel[i] = counts_per_s_to_rad_per_s(va + sign * vb, cpr)
+            first = {}
+        return pos, vel

@@ -51,6 +51,9 @@ class ArmSession:
         self.sim = sim  # the injected in-process arm with --sim, for tests and fault injection
         self._clients: dict[tuple[str, int], Any] = {}
         self._sdo: dict[tuple[str, int], Any] = {}
+        # DriveClient keyword arguments that win over the config's (clock, sleep, timeout, retries):
+        # `--sim log step` puts the clients' waits on its stepped time; set before the first client
+        self.client_overrides: dict[str, Any] = {}
 
     @classmethod
     @contextmanager
@@ -93,8 +96,9 @@ class ArmSession:
                                       mo_confirm_timeout=p.mo_confirm_timeout, mo_settle=p.mo_settle,
                                       sv_blackout=p.sv_blackout,
                                       **({"timeout_hint": SIM_TIMEOUT_HINT} if self.sim is not None else {}))  # type: ignore[arg-type]
+            options: dict[str, Any] = {"timeout": p.reply_timeout, "retries": p.retries, **self.client_overrides}
             client = DriveClient(NetworkTransport(self.links[ref.bus].network), ref.node, name=ref.name,
-                                 timeout=p.reply_timeout, retries=p.retries, settings=settings)
+                                 settings=settings, **options)
             self._clients[key] = client
         return client
 

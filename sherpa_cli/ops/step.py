@@ -23,11 +23,11 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass, field
-from typing import Any, Callable
+from typing import Any, Callable, Protocol
 
 from sherpa_cli.errors import UsageError
 from sherpa_cli.joints.units import counts_to_rad, rad_per_s_to_counts_per_s, rad_to_counts
-from sherpa_cli.ops.jog import JogRequest, JogTarget, _limit_breach, _precheck, check_request
+from sherpa_cli.ops.jog import JogRequest, JogTarget, _limit_breach, _precheck, check_request, resolve_jog_target
 from sherpa_cli.ops.motion import UM_POSITION, UM_TORQUE, GuardReport, MotionGuard, MotionSettings, stop_drive
 from sherpa_cli.ops.record import Recorder, bus_budget
 from sherpa_cli.ops.recording import Recording
@@ -69,6 +69,35 @@ class StepResult:
                 "limit": None if self.breach is None else {**self.breach.as_dict(), "recovered_to": self.recovered_to}}
 
 
+def resolve_step_target(cfg: Any, text: str) -> JogTarget:
+    """The joint to step: a plain joint or its drive. A differential pair (its Σ/Δ joints or its
+    motors) is refused: a Σ or Δ step moves both motors at once, which is `diffdrive move`'s."""
+    from sherpa_cli.ops.targets import resolve_one
+
+    t = resolve_one(cfg, text)
+    if t.pair is not None:
+        p = t.pair
+        what = "is the differential pair" if text == p.name else f"belongs to the differential pair '{p.name}'"
+        raise UsageError(f"{text}: log step moves the one motor of a plain joint; '{text}' {what}, whose Σ/Δ "
+                         f"steps move both motors ({p.drive_a}, {p.drive_b})",
+                         hint=f"record the pair (sherpa log record {p.sigma} {p.delta} --for S -o pair.csv) while "
+                         "`sherpa diffdrive move` moves it")
+    return resolve_jog_target(cfg, text)
+
+
+class StepTime(Protocol):
+    """Where a step's time comes from when it is not wall time: the CLI injects the simulated
+    arm's stepped time with --sim (sim/stepped.py), so the figures do not depend on the host."""
+
+    def now(self) -> float: ...
+
+    def sleep(self, seconds: float) -> None: ...
+
+    def sync_factory(self, name: str, bus: Any, period: float) -> Any: ...
+
+    def follow(self, answered: Callable[[int], bool]) -> None: ...
+
+
 def step_request(target: JogTarget, mode: str, value: float, *, duration: float,
                  uncalibrated: bool = False) -> JogRequest:
     """The step as a jog request, with every check that needs no bus (`jog`'s); a dry run's checks."""
@@ -86,7 +115,9 @@ def step_request(target: JogTarget, mode: str, value: float, *, duration: float,
 def run_step(session: Any, target: JogTarget, mode: str, value: float, *, duration: float, rate: float,
              settings: MotionSettings, sleep: Callable[[float], None] = time.sleep,
              on_event: Callable[[str], None] | None = None, recorder_kw: dict | None = None,
-             uncalibrated: bool = False) -> StepResult:
+             uncalibrated: bool = False, timebase: StepTime | None = None) -> StepResult:
+    """``timebase``: the step's clock, waits and SYNC source (the recorder's, the motion guard's
+    and the waits here); without it wall time, ``sleep`` and ``recorder_kw``."""
     req = step_request(target, mode, value, duration=duration, uncalibrated=uncalibrated)
     # jog's checks before anything is armed: a position goal inside the normal range, a calibrated joint
     _precheck(session, target, req)
@@ -94,14 +125,21 @@ def run_step(session: Any, target: JogTarget, mode: str, value: float, *, durati
     assert joint is not None  # step_request refused a target without a plain joint
     current = all(b.fits for b in bus_budget(session.cfg, [ref], rate, current=True))
     signal = SIGNAL[mode]
-    guard = MotionGuard(session, [ref], settings=settings, sleep=sleep, on_event=on_event)
+    clock: Callable[[], float] = time.monotonic
+    rec_kw = dict(recorder_kw or {})
+    if timebase is not None:
+        clock, sleep = timebase.now, timebase.sleep
+        rec_kw.update(clock=timebase.now, sync_factory=timebase.sync_factory)
+    guard = MotionGuard(session, [ref], settings=settings, clock=clock, sleep=sleep, on_event=on_event)
     state: dict[str, Any] = {}
     with guard:
         c = guard.client(ref)
         start_counts = int(c.get("PX"))
-        with Recorder(session, [ref], rate, current=current, **(recorder_kw or {})) as rec, \
-                _StopFirst(guard, ref, settings, rec, state, sleep):
-            _wait(guard, sleep, PRE_S)
+        with Recorder(session, [ref], rate, current=current, **rec_kw) as rec, \
+                _StopFirst(guard, ref, settings, rec, state, clock, sleep):
+            if timebase is not None:
+                timebase.follow(rec.answered)
+            _wait(guard, clock, sleep, PRE_S)
             t_cmd = rec.now()
             if mode == "position":
                 goal = start_counts + rad_to_counts(value, joint.cpr)
@@ -128,7 +166,7 @@ def run_step(session: Any, target: JogTarget, mode: str, value: float, *, durati
                 state["command"], state["target"] = f"TC={value:g}", value
             # --for counts from the step itself, not from the command (a switch may come first)
             state["ended_by"] = _until_settled(guard, rec, joint.name, signal, t_cmd, state["target"],
-                                               state["switch"] + duration, sleep, settle=mode != "torque",
+                                               state["switch"] + duration, clock, sleep, settle=mode != "torque",
                                                jog_target=target, settings=settings, state=state)
         # the step ends where the motor was told to stop: the stop (and a limit recovery) is not the step
         recording = _cut(rec.recording(t_zero=t_cmd), state["t_stop"] - t_cmd)
@@ -149,18 +187,19 @@ def run_step(session: Any, target: JogTarget, mode: str, value: float, *, durati
                       breach=state.get("breach"), recovered_to=state.get("recovered_to"))
 
 
-def _wait(guard: MotionGuard, sleep: Callable[[float], None], seconds: float) -> None:
-    end = time.monotonic() + seconds
+def _wait(guard: MotionGuard, clock: Callable[[], float], sleep: Callable[[float], None], seconds: float) -> None:
+    end = clock() + seconds
     while True:
         guard.check()
-        rest = end - time.monotonic()
-        if rest <= 0:
+        rest = end - clock()
+        if rest <= 1e-9:  # a stepped clock lands on sums of periods: float dust is no time left
             return
         sleep(min(rest, CHECK_EVERY_S))
 
 
 def _until_settled(guard: MotionGuard, rec: Recorder, joint: str, signal: str, t_cmd: float, target: float,
-                   duration: float, sleep: Callable[[float], None], *, settle: bool, jog_target: JogTarget,
+                   duration: float, clock: Callable[[], float], sleep: Callable[[float], None], *, settle: bool,
+                   jog_target: JogTarget,
                    settings: MotionSettings, state: dict[str, Any]) -> str:
     """Record until the signal has stayed within 2 % of the step around the target for
     SETTLE_HOLD_S (position and velocity steps), or until ``duration`` s after the command.
@@ -171,7 +210,7 @@ def _until_settled(guard: MotionGuard, rec: Recorder, joint: str, signal: str, t
         guard.check()
         now = rec.now()
         px = int(guard.query(jog_target.ref, "PX"))
-        if _limit_breach(guard, guard.client(jog_target.ref), jog_target, px, settings, time.monotonic, sleep, state):
+        if _limit_breach(guard, guard.client(jog_target.ref), jog_target, px, settings, clock, sleep, state):
             state["t_stop"] = now  # the watch stopped the motor here; the way back is not the step
             return state["ended_by"]
         elapsed = now - t_cmd
@@ -192,8 +231,9 @@ class _StopFirst:
     (review R6). The guard's own stop and switch-off follow as before."""
 
     def __init__(self, guard: MotionGuard, ref: Any, settings: MotionSettings, rec: Recorder,
-                 state: dict[str, Any], sleep: Callable[[float], None]) -> None:
-        self.guard, self.ref, self.settings, self.rec, self.state, self.sleep = guard, ref, settings, rec, state, sleep
+                 state: dict[str, Any], clock: Callable[[], float], sleep: Callable[[float], None]) -> None:
+        self.guard, self.ref, self.settings, self.rec, self.state = guard, ref, settings, rec, state
+        self.clock, self.sleep = clock, sleep
 
     def __enter__(self) -> "_StopFirst":
         return self
@@ -203,7 +243,8 @@ class _StopFirst:
         s = self.settings
         try:
             stop_drive(self.guard.client(self.ref), unit_mode=self.guard.unit_mode(self.ref), method=s.stop_method,
-                       standstill_timeout=s.standstill_timeout, poll_interval=s.poll_interval, sleep=self.sleep,
+                       standstill_timeout=s.standstill_timeout, poll_interval=s.poll_interval, clock=self.clock,
+                       sleep=self.sleep,
                        pulse=self.guard.check if exc_type is None else None,
                        standstill_velocity=s.standstill_velocity)
         except Exception:

@@ -285,10 +285,11 @@ class SimArm:
         return (factory or cls.for_session)(cfg, {name: f"sherpa-sim-{token}-{name}" for name in cfg.buses})
 
     @classmethod
-    def for_session(cls, cfg: ArmConfig, channels: Mapping[str, str]) -> "SimArm":
-        """The in-process arm of ``--sim``: virtual channels, flash kept in the state directory."""
+    def for_session(cls, cfg: ArmConfig, channels: Mapping[str, str], *, clock: Clock | None = None) -> "SimArm":
+        """The in-process arm of ``--sim``: virtual channels, flash kept in the state directory;
+        ``clock``: its time (default wall time; `log step` gives it a stepped clock)."""
         return cls(cfg, {bus: {"interface": "virtual", "channel": ch} for bus, ch in channels.items()},
-                   persist=True)
+                   persist=True, clock=clock)
 
     def _log_event(self, name: str, node: int, t: float, text: str) -> None:
         """One JSON line per event: ``t`` is the drive's clock (time.monotonic() for a RealClock,

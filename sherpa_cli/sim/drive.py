@@ -21,7 +21,7 @@ from sherpa_cli.sim.clock import Clock
 from sherpa_cli.sim.interpreter import Refused
 from sherpa_cli.sim.inputs import Inputs
 from sherpa_cli.sim.motor import Motor, motion_status
-from sherpa_cli.sim.od import OdValue, build_od, flash_key
+from sherpa_cli.sim.od import ABORT_NO_SUBINDEX, ABORT_RANGE, ABORT_READ_ONLY, ODError, OdValue, build_od, flash_key
 from sherpa_cli.sim.pdo import SYNC_ID, TpdoTable, is_pdo_object
 from sherpa_cli.sim.params import Value, factory_ram, is_persistent, parse_flash, wrap_int32
 from sherpa_cli.sim.servo import ServoMotor
@@ -31,6 +31,7 @@ Frame = tuple[int, bytes]
 TIME_EPS = 1e-9  # s; float error of summed clock steps, far below any drive timing
 
 NMT, EMCY_BASE, TPDO2_BASE, RPDO2_BASE, SDO_RX_BASE, HEARTBEAT_BASE = 0x000, 0x80, 0x280, 0x300, 0x600, 0x700
+RPDO2_COMM, RPDO_SYNC_MAX = 0x1401, 240  # transmission types 0..240: executed at the next SYNC
 NMT_START, NMT_STOP, NMT_PRE_OP, NMT_RESET_NODE, NMT_RESET_COMM = 0x01, 0x02, 0x80, 0x81, 0x82
 PRE_OPERATIONAL, OPERATIONAL, STOPPED = 0x7F, 0x05, 0x04  # heartbeat state bytes
 
@@ -116,6 +117,10 @@ class SimDrive:
         self._od_live = dict(od_live or {})  # extra live objects: another device type's profile (sim/arm.py)
         self.tpdo = TpdoTable(node)
         self.syncs = 0  # SYNC frames this drive answered (Operational)
+        # interpreter requests lost to the MO settle window, and the settle time each had left: what a
+        # host waited for them (sim/stepped.py charges it on its clock)
+        self.unheard = 0
+        self.unheard_s = 0.0
         self._boot()
 
     # -- public API --------------------------------------------------------------------------
@@ -171,6 +176,11 @@ class SimDrive:
         elif can_id == SDO_RX_BASE + self.node:
             # CiA 301: a Stopped node serves only NMT and error control (its heartbeat goes on)
             return self._nmt_state != STOPPED
+        elif self._rpdo2_type <= RPDO_SYNC_MAX and can_id in (RPDO2_BASE + self.node, RPDO2_BASE + self.group_id):
+            # a synchronous RPDO2 (0x1401:2 = 0..240) is kept until the next SYNC; a later frame
+            # overwrites it ([IG] 5-4: one buffered frame)
+            if self._nmt_state == OPERATIONAL:
+                self._rpdo2_buffer = data
         elif can_id == RPDO2_BASE + self.node:
             self._interpreter_frame(data)
         elif can_id == RPDO2_BASE + self.group_id:
@@ -199,6 +209,8 @@ class SimDrive:
         must check :attr:`dead` and stay silent, as the interpreter does."""
         if is_pdo_object(index):
             return self.tpdo.read(index, sub)
+        if index == RPDO2_COMM:
+            return self._rpdo2_read(sub)
         return self._od.read(index, sub)
 
     def od_write(self, index: int, sub: int, value: int) -> None:
@@ -206,6 +218,10 @@ class SimDrive:
         self.advance_to(self.clock.now())
         if is_pdo_object(index):
             self.tpdo.write(index, sub, value)
+            self.od_writes.append((self._t, index, sub, value))
+            return
+        if index == RPDO2_COMM:
+            self._rpdo2_write(sub, value)
             self.od_writes.append((self._t, index, sub, value))
             return
         value = self._od.check_write(index, sub, value)
@@ -330,6 +346,8 @@ class SimDrive:
         self._next_heartbeat = self._t + period / 1000 if period else math.inf
         self._replies.clear()
         self.tpdo.reset()  # PDO settings are RAM only here
+        self._rpdo2_type = 255  # 0x1401:2, RAM only: asynchronous, every frame runs when it arrives
+        self._rpdo2_buffer: bytes | None = None
         self._send(HEARTBEAT_BASE + self.node, b"\x00")
 
     def _nmt(self, cs: int) -> None:
@@ -346,10 +364,18 @@ class SimDrive:
             self._boot()
 
     def _sync(self) -> None:
-        """SYNC: synchronous TPDOs sample the drive now (PDOs only live in Operational)."""
+        """SYNC: a buffered synchronous RPDO2 runs now (every drive that has one, on the same frame:
+        no start skew), then synchronous TPDOs sample the drive (PDOs only live in Operational)."""
         if self._nmt_state != OPERATIONAL:
             return
         self.syncs += 1
+        frame, self._rpdo2_buffer = self._rpdo2_buffer, None
+        if frame is not None:
+            self._via_group = True
+            try:
+                self._interpreter_frame(frame)
+            finally:
+                self._via_group = False
         for can_id, data in self.tpdo.on_sync(self._pdo_values()):
             self._send(can_id, data)
 
@@ -360,6 +386,25 @@ class SimDrive:
             values = self._pdo_sources = {0x6064: lambda: self.px, 0x6069: velocity, 0x606C: velocity,
                                           0x6078: lambda: max(-32768, min(32767, round(self._iq() * 1000)))}
         return values
+
+    def _rpdo2_read(self, sub: int) -> int:
+        """0x1401, RPDO2 (the binary interpreter's) communication parameter: COB-ID and transmission type."""
+        if sub == 0:
+            return 2
+        if sub == 1:
+            return RPDO2_BASE + self.node
+        if sub == 2:
+            return self._rpdo2_type
+        raise ODError(f"object 0x{RPDO2_COMM:04X} has no sub-index {sub}", ABORT_NO_SUBINDEX)
+
+    def _rpdo2_write(self, sub: int, value: int) -> None:
+        if sub != 2:
+            raise ODError(f"0x{RPDO2_COMM:04X}:{sub} is read-only here", ABORT_READ_ONLY)
+        if not 0 <= value <= 255 or RPDO_SYNC_MAX < value < 254:
+            raise ODError(f"0x{RPDO2_COMM:04X}:2: {value} is no transmission type (0..240, 254, 255)", ABORT_RANGE)
+        self._rpdo2_type = value
+        if value > RPDO_SYNC_MAX:
+            self._rpdo2_buffer = None
 
     def _consumer(self) -> tuple[int, float]:
         """(host node, timeout s) of the 0x1016 sub1 entry; timeout 0 = not monitoring."""
@@ -476,7 +521,11 @@ class SimDrive:
 
     def _interpreter_frame(self, data: bytes) -> None:
         # PDOs only live in Operational; during the MO settle window the interpreter is deaf.
-        if self._nmt_state != OPERATIONAL or self._t + TIME_EPS < self._settle_until:
+        if self._nmt_state != OPERATIONAL:
+            return
+        if self._t + TIME_EPS < self._settle_until:
+            self.unheard += 1
+            self.unheard_s += self._settle_until - self._t
             return
         reply = interpreter.handle(self, data)
         if reply is None:

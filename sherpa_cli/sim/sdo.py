@@ -65,7 +65,23 @@ def build_object_dictionary(extra: tuple = ()) -> "od.ObjectDictionary":
 
 def _add_pdo_objects(dictionary: "od.ObjectDictionary") -> None:
     """TPDO1..4 communication (0x1800..: COB-ID, transmission type) and mapping (0x1A00..: count,
-    eight entries), served from the drive's RAM (sim/pdo.py); sub 0 of a mapping is writable."""
+    eight entries), served from the drive's RAM (sim/pdo.py); sub 0 of a mapping is writable. And
+    RPDO2's communication parameter (0x1401, the binary interpreter's: COB-ID, transmission type)."""
+    rpdo2 = od.ODRecord("RPDO2 communication parameter", 0x1401)
+    for sub, name, data_type, access in ((0, "Highest sub-index supported", od.UNSIGNED8, "ro"),
+                                         (1, "COB-ID", od.UNSIGNED32, "rw"),
+                                         (2, "Transmission type", od.UNSIGNED8, "rw")):
+        var = od.ODVariable(name, 0x1401, sub)
+        var.data_type, var.access_type = data_type, access
+        rpdo2.add_member(var)
+    rpdo2[0].default = 2
+    dictionary.add_object(rpdo2)
+    # canopen's LocalNode pairs every 0x14xx with its 0x16xx: the interpreter's fixed mapping, not served
+    rpdo2_map = od.ODRecord("RPDO2 mapping parameter", 0x1601)
+    count = od.ODVariable("Number of mapped objects", 0x1601, 0)
+    count.data_type, count.access_type, count.default = od.UNSIGNED8, "ro", 0
+    rpdo2_map.add_member(count)
+    dictionary.add_object(rpdo2_map)
     for n in range(4):
         comm = od.ODRecord(f"TPDO{n + 1} communication parameter", 0x1800 + n)
         for sub, name, data_type, access in ((0, "Highest sub-index supported", od.UNSIGNED8, "ro"),

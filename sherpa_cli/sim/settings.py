@@ -7,6 +7,8 @@ the seed / public sources suggest; a bench measurement should replace them when 
 
 from __future__ import annotations
 
+import math
+
 from dataclasses import dataclass
 
 
@@ -107,3 +109,11 @@ class SimSettings:
             raise ValueError("SimSettings.model_step_s must be > 0")
         if self.max_current <= 0:
             raise ValueError("SimSettings.max_current must be > 0")
+        if not (math.isfinite(self.servo_bandwidth_hz) and self.servo_bandwidth_hz >= 0):
+            raise ValueError("SimSettings.servo_bandwidth_hz must be a finite number >= 0")
+        if not (math.isfinite(self.servo_damping) and self.servo_damping > 0):
+            raise ValueError("SimSettings.servo_damping must be a finite number > 0")
+        for name in ("servo_current_limit", "supply_current_limit"):
+            value = getattr(self, name)
+            if value is not None and not (math.isfinite(value) and value > 0):
+                raise ValueError(f"SimSettings.{name} must be a finite number > 0 (or None)")

@@ -1,0 +1,150 @@
+"""Stepped time for the in-process simulated arm: `sherpa --sim log step` (docs/log.md).
+
+The arm runs on a :class:`ManualClock` that moves only when the tool waits. Every wait of the
+command (its own, the motion guard's, the drive clients' MO polls) goes through :meth:`sleep`;
+while a recording is on, the clock moves one SYNC period at a time: SYNC goes out on the bus,
+then the wait lasts until the recorder has every TPDO that SYNC asked for, and only then does
+the clock move on. So what is recorded, and every figure computed from it, depends on the
+simulated drive and the commands sent, not on how fast or loaded the host is.
+
+Two bounds keep the rest of the protocol honest:
+
+- simulated time never runs faster than wall time (each :meth:`sleep` lasts at least as long
+  on the wall): the motion guard's host heartbeat comes from a thread in wall time, and the
+  drive's heartbeat consumer counts simulated time;
+- while recording, the clock stops only on SYNC instants (a wait is rounded up to whole
+  periods), so the simulated drives are always stepped to the same instants.
+
+The drive clients (:meth:`client_overrides`) wait on this clock too. A request that a drive in
+its MO settle window does not hear costs the host, on a real bus, its wait for the reply: until
+the window ends (the client knows ``protocol.mo_settle``), at most one reply timeout. The
+simulated drives count such requests and the settle time each had left (``SimDrive.unheard``,
+``unheard_s``), and the clients' next wait is charged that much simulated time, while their real
+wait for a reply that will not come stays short (``STEPPED_REPLY_S``: the in-process simulator
+answers within milliseconds; retries cover a loaded machine).
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from typing import Any, Callable
+
+from sherpa_cli.errors import CommunicationError
+from sherpa_cli.sim.clock import ManualClock
+
+SYNC_ID = 0x080
+ANSWER_TIMEOUT_S = 5.0  # wall time to wait for the TPDOs of one SYNC (a loaded machine)
+STEPPED_REPLY_S = 0.3  # wall time a client waits for one reply from the stepped in-process arm (a deaf
+# poll costs this much wall time; an answerable one later than this on a loaded machine would cost
+# one more charged wait, so it is generous)
+STEPPED_RETRIES = 4  # at least this many resends (a late reply on a loaded machine; sim time stands still)
+_EPS = 1e-9
+
+
+class SteppedTime:
+    """``now``/``sleep`` for the tool, and a SYNC source (``sync_factory``) for its Recorder."""
+
+    def __init__(self, clock: ManualClock | None = None, *, pace: bool = True,
+                 answer_timeout: float = ANSWER_TIMEOUT_S) -> None:
+        self.clock = clock or ManualClock()
+        self.pace = pace
+        self.answer_timeout = answer_timeout
+        self._buses: dict[str, Any] = {}
+        self._period: float | None = None
+        self._t0 = 0.0
+        self._syncs = 0  # SYNCs sent since the SYNC source started
+        self._answered: Callable[[int], bool] = lambda n: True
+        self._lock = threading.Lock()  # one sleeper at a time (the command's thread)
+
+    def now(self) -> float:
+        return self.clock.now()
+
+    def client_overrides(self, reply_timeout: float, retries: int,
+                         unheard: Callable[[], tuple[int, float]] = lambda: (0, 0.0)) -> dict[str, Any]:
+        """DriveClient options (ArmSession.client_overrides) for clients of the stepped arm.
+        ``reply_timeout``: the real bus's; ``unheard()``: (requests the simulated drives did not
+        hear, the settle time they had left in total) so far; a wait is charged what was lost
+        since the last one, at most one ``reply_timeout`` per request."""
+        charged = [unheard()]
+
+        def sleep(seconds: float) -> None:
+            (n, s), (n0, s0) = unheard(), charged[0]
+            charged[0] = (n, s)
+            self.sleep(seconds + max(0.0, min(s - s0, (n - n0) * reply_timeout)))
+
+        return {"clock": self.now, "sleep": sleep, "timeout": STEPPED_REPLY_S,
+                "retries": max(retries, STEPPED_RETRIES)}
+
+    # -- the SYNC source ------------------------------------------------------------------------
+    def sync_factory(self, name: str, bus: Any, period: float) -> "_Source":
+        """Recorder's ``sync_factory``: SYNC on ``bus`` every ``period`` of simulated time; the
+        first SYNC is at the present instant (the recorder's t = 0), sent by the next sleep."""
+        if not self._buses:
+            self._t0, self._syncs, self._period = self.clock.now(), 0, period
+        elif self._period is not None and abs(period - self._period) > _EPS:
+            raise ValueError(f"SteppedTime: one SYNC period for all buses ({self._period} s, asked {period} s)")
+        self._buses[name] = bus
+        return _Source(self, name)
+
+    def follow(self, answered: Callable[[int], bool]) -> None:
+        """``answered(n)``: whether every answer to the first n SYNCs has arrived (Recorder.answered)."""
+        self._answered = answered
+
+    def _stop(self, name: str) -> None:
+        self._buses.pop(name, None)
+        if not self._buses:
+            self._period, self._answered = None, (lambda n: True)
+
+    # -- waiting --------------------------------------------------------------------------------
+    def sleep(self, seconds: float) -> None:
+        if not seconds > 0:
+            return
+        with self._lock:
+            start = time.monotonic()
+            if self._period is None:
+                self.clock.advance(seconds)
+                ahead = seconds
+            else:
+                ahead = self._sync_for(seconds)
+            if self.pace:
+                rest = ahead - (time.monotonic() - start)
+                if rest > 0:
+                    time.sleep(rest)
+
+    def _sync_for(self, seconds: float) -> float:
+        """Whole SYNC periods covering ``seconds``, each SYNC answered before the clock moves on."""
+        import can
+
+        period = self._period
+        assert period is not None
+        begin = self.clock.now()
+        end = begin + seconds
+        ahead = 0.0
+        while True:
+            due = self._t0 + self._syncs * period
+            if due > end + _EPS and self.clock.now() + _EPS >= end:
+                break
+            if due > self.clock.now():
+                ahead += due - self.clock.now()
+                self.clock.advance(due - self.clock.now())
+            for bus in list(self._buses.values()):
+                bus.send(can.Message(arbitration_id=SYNC_ID, data=b"", is_extended_id=False))
+            self._syncs += 1
+            deadline = time.monotonic() + self.answer_timeout
+            while not self._answered(self._syncs):
+                if time.monotonic() > deadline:
+                    raise CommunicationError(f"simulated SYNC {self._syncs}: not every TPDO it asks for came within "
+                                             f"{self.answer_timeout:g} s", hint="a simulated drive left Operational "
+                                             "or died during the recording")
+                time.sleep(0.0002)
+        return ahead
+
+
+class _Source:
+    def __init__(self, owner: SteppedTime, name: str) -> None:
+        self.owner, self.name = owner, name
+
+    def stop(self) -> None:
+        self.owner._stop(self.name)
+
