@@ -790,7 +790,7 @@ def run_move(session: Any, pair: PairConfig, request: MoveRequest, *, guard_fact
                 if w.outcome == "breach":
                     result.outcome = "limit"
                     result.breaches = list(w.breaches)
-                    stop_now(clients, "position")
+                    stop_now(clients, "position", settings.stop_method)
                     wait_standstill(clients, guard, settings, clock, sleep)
                     now = {d: int(clients[d].get("PX")) for d in drives}
                     back = limit_watch.recovery_targets(watched, now, w.breaches, hold={})
