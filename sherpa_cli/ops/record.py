@@ -145,6 +145,7 @@ class Recorder:
         self._lock = threading.Lock()
         self.t0: float | None = None
         self.t_end: float | None = None
+        self._sync_spans: list[list[Any]] = []  # per SYNC source: [started, stopped]
 
     # -- lifetime -------------------------------------------------------------------------------
     def __enter__(self) -> "Recorder":
@@ -156,7 +157,9 @@ class Recorder:
             self._listen()
             self.t0 = self._now()
             for bus in dict.fromkeys([*(r.bus for r in self.refs), *(t.dev.bus for t in self.encoders)]):
+                started = self._now()
                 self._syncs.append(self.sync_factory(bus, self.session.links[bus].bus, self.period))
+                self._sync_spans.append([started, None])
         except BaseException:
             self._finish()
             raise
@@ -173,11 +176,12 @@ class Recorder:
         return self._now()
 
     def _finish(self, quiet: bool = False) -> None:
-        for sync in self._syncs:
+        for sync, span in zip(self._syncs, self._sync_spans):
             try:
                 sync.stop()
             except Exception:  # stopping must not hide why we stop
                 pass
+            span[1] = self._now()
         self._syncs.clear()
         if self.t0 is not None and self.t_end is None:
             self.t_end = self._now()
@@ -345,10 +349,15 @@ class Recorder:
         return None
 
     def expected(self) -> int:
+        """SYNCs (samples per drive) the longest-running SYNC source gave the chance to send: each
+        bus's source is timed from its own start to its own stop, so starting and stopping the
+        other buses' sources is not counted as missed samples."""
         if self.t0 is None:
             return 0
-        end = self.t_end if self.t_end is not None else self._now()
-        return math.floor((end - self.t0) / self.period + 1e-6) + 1
+        now = self._now()
+        spans = [(start, now if end is None else end) for start, end in self._sync_spans] or \
+            [(self.t0, self.t_end if self.t_end is not None else now)]
+        return max(math.floor((end - start) / self.period + 1e-6) + 1 for start, end in spans)
 
     def recording(self, *, t_zero: float | None = None) -> Recording:
         """Samples in joint units; ``t_zero`` (same clock as the recorder) becomes time 0."""
