@@ -78,7 +78,7 @@ def test_velocity_step(arm):
 
 def test_torque_step_of_one_ampere(arm):
     cfg, sim = arm
-    result = _step(cfg, sim, "torque", 1.0, duration=1.0)  # room to settle on a loaded machine (wall time)
+    result = _step(cfg, sim, "torque", 1.0, duration=0.4)
     assert result.signal == "cur"
     assert result.metrics.final == pytest.approx(1.0, abs=0.01)
     assert result.ended_by == "time up"
