@@ -15,6 +15,7 @@ from sherpa_cli.ops.live_jog import LiveJog, resolve_axes
 from sherpa_cli.ops.session import ArmSession
 from sherpa_cli.sim.arm import SimArm
 from motion_helpers import JOG_CONFIG
+from tests.test_home import physical, px
 
 CONFIG = JOG_CONFIG
 
@@ -34,14 +35,6 @@ def motors_on(session):
         return {name for name, d in session.sim.drives.items() if d.motor_on}
 
 
-def physical(session, drive: str) -> float:
-    with session.sim.lock:
-        return session.sim.drives[drive].position
-
-
-def px(session, drive: str) -> int:
-    with session.sim.lock:
-        return session.sim.drives[drive].px
 
 
 def test_bar_marks_the_normal_range_and_the_position():

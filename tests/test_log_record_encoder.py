@@ -7,11 +7,9 @@ from __future__ import annotations
 
 import csv
 import math
-import time
 import uuid
 from pathlib import Path
 
-import can
 import pytest
 
 from sherpa_cli.config import load_config
@@ -23,35 +21,10 @@ from sherpa_cli.ops.session import ArmSession
 from sherpa_cli.ops.targets import drive_refs
 from sherpa_cli.sim.arm import SimArm
 from sherpa_cli.sim.clock import ManualClock
+from tests.test_log_record import Lockstep
 
 ROOT = Path(__file__).resolve().parent.parent
 ARM = ROOT / "tests" / "data" / "home-arm.yaml"
-
-
-class Lockstep:
-    """SYNC by hand in simulated time: send one, wait for every answer (drives and encoder), advance."""
-
-    def __init__(self, clock: ManualClock) -> None:
-        self.clock, self.buses = clock, {}
-
-    def factory(self, name, bus, period):
-        self.buses[name], self.period = bus, period
-        return self
-
-    def stop(self) -> None:
-        pass
-
-    def run(self, rec: Recorder, syncs: int, timeout: float = 5.0) -> None:
-        for k in range(syncs):
-            if k:
-                self.clock.advance(self.period)
-            for bus in self.buses.values():
-                bus.send(can.Message(arbitration_id=0x080, data=b"", is_extended_id=False))
-            deadline = time.monotonic() + timeout
-            while min(rec.counts().values()) < k + 1:
-                if time.monotonic() > deadline:
-                    raise AssertionError(f"SYNC {k}: samples {rec.counts()}")
-                time.sleep(0.0001)
 
 
 def _arm(cfg, clock):
