@@ -626,8 +626,8 @@ def bench_record(seconds: float = 5.0, rate: float = 1000.0) -> Result:
         counts, expected = rec.counts(), rec.expected()
     worst = min(counts.values()) / expected
     return Result("record", round(worst, 4), "recv/exp", round(worst, 4), ">= 0.999", _judge(worst, ">= 0.999"),
-                  f"{len(refs)} drives at {rate:g} Hz for {seconds:g} s, SYNC from python-can send_periodic "
-                  f"(a thread on the virtual bus); expected {expected} per drive, worst {min(counts.values())}"
+                  f"{len(refs)} drives at {rate:g} Hz for {seconds:g} s, SYNC from the tool's counted thread "
+                  f"(ThreadSync, as on any interface without the kernel BCM); expected {expected} per drive, worst {min(counts.values())}"
                   f"{restore_error}")
 
 

@@ -139,3 +139,25 @@ def _endless_stop(self: LateSync) -> None:
 
     self.thread = threading.Thread(target=forever, name="endless-tpdos", daemon=True)
     self.thread.start()
+
+
+def test_the_sync_thread_sends_every_sync_already_due_when_stopped():
+    # A SYNC thread that is behind (a busy interpreter) must not drop the SYNCs already due at the
+    # stop: those are the samples of the recording's last milliseconds.
+    import uuid as _uuid
+
+    import can as _can
+
+    from sherpa_cli.ops.record import ThreadSync
+
+    channel = f"sync-{_uuid.uuid4().hex[:8]}"
+    with _can.Bus(interface="virtual", channel=channel) as tx, _can.Bus(interface="virtual", channel=channel) as rx:
+        sync = ThreadSync(tx, 0.001)
+        sync.start -= 0.05  # 50 SYNCs behind at once, as if the thread had been starved
+        time.sleep(0.02)
+        sync.stop()
+        frames = 0
+        while rx.recv(timeout=0.05) is not None:
+            frames += 1
+    assert sync._due_total is not None and sync._due_total >= 70
+    assert sync.sent == sync._due_total == frames

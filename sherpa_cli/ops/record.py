@@ -10,8 +10,9 @@ saved: TPDO1 (0x1800/0x1A00) is mapped to position 0x6064 and velocity 0x6069, t
 type 1 (every SYNC), and with current TPDO3 (0x1802/0x1A02) to 0x6078 on every 2nd SYNC. The
 old COB-IDs, transmission types and mappings are read first and written back at the end.
 
-SYNC comes from python-can's ``send_periodic`` (the kernel's broadcast manager on SocketCAN,
-a thread elsewhere); tests inject their own (``sync_factory``) and a clock.
+SYNC comes from python-can's ``send_periodic`` on SocketCAN (the kernel's broadcast manager),
+elsewhere from a counted thread of the tool (:class:`ThreadSync`) that sends the SYNCs already due
+before it stops; tests inject their own (``sync_factory``) and a clock.
 """
 
 from __future__ import annotations
@@ -100,6 +101,63 @@ class PeriodicSync:
         self.task.stop()
 
 
+class ThreadSync:
+    """SYNC every ``period`` s from a thread of the tool, for interfaces without a kernel periodic
+    task (python-can would use a thread there too). Unlike python-can's, it counts what it sent and
+    on :meth:`stop` first sends the SYNCs already due (a thread behind on a busy interpreter would
+    otherwise drop them, and with them the samples of the recording's last milliseconds)."""
+
+    CATCH_UP_LIMIT_S = 0.2  # longest wait at stop for the SYNCs already due
+
+    def __init__(self, bus: Any, period: float) -> None:
+        import can
+
+        self.bus, self.period = bus, period
+        self.message = can.Message(arbitration_id=SYNC_ID, data=b"", is_extended_id=False)
+        self.sent = 0
+        self.start = time.perf_counter()
+        self._due_total: int | None = None  # set by stop(): send up to this many, then end
+        self._wake = threading.Event()
+        self.error: BaseException | None = None
+        self._thread = threading.Thread(target=self._run, name="sherpa-sync", daemon=True)
+        self._thread.start()
+
+    def _run(self) -> None:
+        try:
+            while True:
+                limit = self._due_total
+                if limit is not None and self.sent >= limit:
+                    return
+                ahead = self.start + self.sent * self.period - time.perf_counter()
+                if ahead > 0 and limit is None:
+                    self._wake.wait(ahead)
+                    continue
+                self.bus.send(self.message)
+                self.sent += 1
+        except BaseException as exc:  # a dead bus ends the SYNC; the recording shows the gap
+            self.error = exc
+
+    def request_stop(self) -> None:
+        """From now on send only the SYNCs already due, then end (:meth:`stop` waits for that)."""
+        if self._due_total is None:
+            self._due_total = math.floor((time.perf_counter() - self.start) / self.period + 1e-6) + 1
+            self._wake.set()
+
+    def stop(self) -> None:
+        self.request_stop()
+        self._thread.join(timeout=self.CATCH_UP_LIMIT_S)
+        if self._thread.is_alive():  # still behind after the limit: end it where it is
+            self._due_total = 0
+            self._thread.join(timeout=1.0)
+
+
+def default_sync(bus: Any, period: float) -> Any:
+    """The kernel's broadcast manager on SocketCAN, else a counted thread of the tool."""
+    if type(bus).__name__ == "SocketcanBus":
+        return PeriodicSync(bus, period)
+    return ThreadSync(bus, period)
+
+
 SyncFactory = Callable[[str, Any, float], Any]  # (bus name, python-can bus, period) -> object with stop()
 
 
@@ -138,7 +196,7 @@ class Recorder:
         if enforce_budget:
             check_budget(self.budget)
         self.clock = clock
-        self.sync_factory = sync_factory or (lambda name, bus, period: PeriodicSync(bus, period))
+        self.sync_factory = sync_factory or (lambda name, bus, period: default_sync(bus, period))
         self._drives = {r.key: _Drive(r) for r in self.refs}
         self._subscribed: list[tuple[Any, int, Callable]] = []
         self._syncs: list[Any] = []
@@ -176,12 +234,21 @@ class Recorder:
         return self._now()
 
     def _finish(self, quiet: bool = False) -> None:
+        # every source's end first (the SYNCs due until then are expected; a ThreadSync still sends
+        # them), then the stops, so one bus's catching up does not lengthen another's span
         for sync, span in zip(self._syncs, self._sync_spans):
+            span[1] = self._now()
+            request = getattr(sync, "request_stop", None)
+            if request is not None:
+                try:
+                    request()
+                except Exception:
+                    pass
+        for sync in self._syncs:
             try:
                 sync.stop()
             except Exception:  # stopping must not hide why we stop
                 pass
-            span[1] = self._now()
         self._syncs.clear()
         if self.t0 is not None and self.t_end is None:
             self.t_end = self._now()
