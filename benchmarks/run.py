@@ -280,7 +280,7 @@ def _remote_session(address: str) -> Iterator[tuple]:
     """The tool's own session (PacedNetwork, shipped pacing) on bus can0 mapped to the responder."""
     from sherpa_cli.bus.busmap import BusTarget, apply_bus_map
     from sherpa_cli.config import load_config
-    from sherpa_cli.ops.session import ArmSession, resolve_target
+    from sherpa_cli.bus.session import ArmSession, resolve_target
 
     import dataclasses
 
@@ -357,7 +357,7 @@ def _program_arm_once(cfg, workers: int) -> tuple[float, float]:
 
     from sherpa_cli.joints.limits import derive_checked
     from sherpa_cli.ops import program
-    from sherpa_cli.ops.session import ArmSession
+    from sherpa_cli.bus.session import ArmSession
     from sherpa_cli.sim.arm import SimArm
 
     derived, _ = derive_checked(cfg)
@@ -471,7 +471,7 @@ def bench_home() -> Result:
 
     from sherpa_cli.config import load_config
     from sherpa_cli.ops.home import plan_home, run_home
-    from sherpa_cli.ops.session import ArmSession
+    from sherpa_cli.bus.session import ArmSession
     from sherpa_cli.sim.arm import SimArm
 
     with tempfile.TemporaryDirectory() as tmp:
@@ -515,7 +515,7 @@ def _coupling_peaks(req_kw: dict, modes: dict[str, dict], rounds: int) -> dict[s
     """Median held-joint peak excursion (counts) of each mode's move on the mismatched simulated pair."""
     from sherpa_cli.config import load_config
     from sherpa_cli.ops import diffdrive
-    from sherpa_cli.ops.session import ArmSession
+    from sherpa_cli.bus.session import ArmSession
     from sherpa_cli.sim.arm import SimArm
 
     cfg = load_config(COUPLING_CONFIG)
@@ -606,9 +606,9 @@ def bench_record(seconds: float = 5.0, rate: float = 1000.0) -> Result:
     """`log record`'s Recorder on the whole simulated arm (14 drives, 3 buses, in-process, wall time):
     TPDOs on SYNC at 1 kHz for 5 s; the ratio is the worst drive's received / expected samples."""
     from sherpa_cli.config import load_config
-    from sherpa_cli.ops.record import Recorder
-    from sherpa_cli.ops.session import ArmSession
-    from sherpa_cli.ops.targets import drive_refs
+    from sherpa_cli.log.record import Recorder
+    from sherpa_cli.bus.session import ArmSession
+    from sherpa_cli.bus.targets import drive_refs
     from sherpa_cli.sim.arm import SimArm
 
     cfg = load_config(ARM_CONFIG)
@@ -674,7 +674,7 @@ def bench_capture(frames: int = 3000) -> Result:
     another process over python-can-remote on 127.0.0.1: frames written / frames sent (goal 1.0)."""
     import can
 
-    from sherpa_cli.ops.capture import capture, read_frames
+    from sherpa_cli.log.capture import capture, read_frames
 
     proc = subprocess.Popen([sys.executable, str(Path(__file__).resolve()), "--burst", str(frames)],
                             stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True, env=_env())

@@ -138,7 +138,7 @@ def cli_windows(monkeypatch: pytest.MonkeyPatch) -> Callable[[bool], None]:
     build (SimArm.in_process) and their sessions (ArmSession.open) use TEST_PROTOCOL_WINDOWS
     (the default) or the windows of the config as written (a simulator in another process has
     those). Both sides get the same windows; what a command prints from its config stays as written."""
-    from sherpa_cli.ops.session import ArmSession
+    from sherpa_cli.bus.session import ArmSession
     from sherpa_cli.sim.arm import SimArm
 
     written = {cls: cls.__dict__[name] for cls, name in ((ArmSession, "open"), (SimArm, "in_process"))}

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from sherpa_cli.ops.session import DriveRef
+from sherpa_cli.bus.session import DriveRef
 
 JOG_CONFIG = Path(__file__).resolve().parent / "data" / "jog-fast-arm.yaml"
 

@@ -12,7 +12,7 @@ from sherpa_cli.bus.busmap import BusTarget, apply_bus_map, bus_kwargs, parse_bu
 from sherpa_cli.bus.parallel import run_concurrently
 from sherpa_cli.config import load_config
 from sherpa_cli.errors import CommunicationError, UsageError
-from sherpa_cli.ops.session import ArmSession, resolve_target
+from sherpa_cli.bus.session import ArmSession, resolve_target
 from sherpa_cli.sim.arm import SimArm
 
 

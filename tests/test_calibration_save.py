@@ -1,4 +1,4 @@
-"""The calibration mark never reaches flash (review 2, note on ops/calibration.py): whether SV copies
+"""The calibration mark never reaches flash (review 2, note on motion/calibration.py): whether SV copies
 UI[] to flash is UNCONFIRMED for the Whistle, and a flash that held UI[flag]=1 would make a joint look
 homed after a power cycle with PX = 0 wherever it stands. The program engine (`program-limits
 --save`, `params restore --save`) clears the mark before SV and puts it back in RAM after a
@@ -16,7 +16,7 @@ from sherpa_cli.joints.limits import derive_checked
 from sherpa_cli.ops import program
 from sherpa_cli.ops.program import DriveTarget
 from sherpa_cli.ops.save_ledger import SaveLedger
-from sherpa_cli.ops.session import ArmSession, DriveRef
+from sherpa_cli.bus.session import ArmSession, DriveRef
 from sherpa_cli.sim.arm import SimArm
 
 ROOT = Path(__file__).resolve().parent.parent

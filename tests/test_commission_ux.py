@@ -20,7 +20,7 @@ def stable_durations(monkeypatch):
 @pytest.fixture
 def session_opens(monkeypatch):
     """How many times a command opened the arm's buses (ArmSession.open)."""
-    from sherpa_cli.ops.session import ArmSession
+    from sherpa_cli.bus.session import ArmSession
 
     opens: list[int] = []
     original = ArmSession.open

@@ -15,9 +15,10 @@ import pytest
 from sherpa_cli.config import load_config
 from sherpa_cli.elmo.codec import encode_execute, encode_set
 from sherpa_cli.errors import SafetyError, UsageError
+from sherpa_cli.motion import pair_start
 from sherpa_cli.ops import diffdrive
 from sherpa_cli.ops.diffdrive import MoveRequest
-from sherpa_cli.ops.session import ArmSession
+from sherpa_cli.bus.session import ArmSession
 from sherpa_cli.sim import ManualClock, SimSettings
 from sherpa_cli.sim.arm import SimArm
 from sherpa_cli.sim.drive import SimDrive
@@ -269,7 +270,7 @@ def test_bad_pair_settings_are_refused(tmp_path):
         path = tmp_path / "bad.yaml"
         path.write_text(text)
         with pytest.raises(ConfigError, match="pair_"):
-            diffdrive.pair_settings(load_config(path))
+            pair_start.pair_settings(load_config(path))
 
 
 def test_sim_lag_makes_px_trail_the_profile_and_settle_on_target():
@@ -320,7 +321,7 @@ class CountingSync:
         self.periods: list[float] = []
 
     def factory(self, name, bus, period):
-        from sherpa_cli.ops.record import PeriodicSync
+        from sherpa_cli.log.record import PeriodicSync
 
         self.periods.append(period)
         return PeriodicSync(bus, period)
@@ -422,7 +423,7 @@ def test_a_bad_record_rate_is_refused_by_the_config(tmp_path):
 
 
 def test_recorder_latest_is_the_newest_sync_both_drives_answered():
-    from sherpa_cli.ops.record import Recorder
+    from sherpa_cli.log.record import Recorder
 
     cfg = load_config(MISMATCHED)
     clock = ManualClock()
@@ -504,7 +505,7 @@ def test_sync_rpdo_start_frame_transcript(tmp_path):
             c.motor_on()
         sniff, notifier, frames = _sniff(channel)
         try:
-            with diffdrive.CommonStart(s, refs, clients, "sync_rpdo", 125) as start:
+            with pair_start.CommonStart(s, refs, clients, "sync_rpdo", 125) as start:
                 start.begin()
             deadline = time.monotonic() + 5
             while len(frames) < 17 and time.monotonic() < deadline:  # the sniffer's thread may lag

@@ -11,8 +11,8 @@ import pytest
 
 from sherpa_cli.config import load_config
 from sherpa_cli.errors import ConfigError
-from sherpa_cli.ops import encoder
-from sherpa_cli.ops.session import ArmSession
+from sherpa_cli.devices import encoder
+from sherpa_cli.bus.session import ArmSession
 from sherpa_cli.sim.arm import SimArm
 
 ROOT = Path(__file__).resolve().parent.parent

@@ -16,7 +16,7 @@ from sherpa_cli.config import load_config
 from sherpa_cli.errors import SafetyError, UsageError
 from sherpa_cli.ops import joint_jog
 from sherpa_cli.ops.joint_jog import JogRequest, resolve_axis
-from sherpa_cli.ops.session import ArmSession
+from sherpa_cli.bus.session import ArmSession
 from sherpa_cli.sim.arm import SimArm
 from motion_helpers import JOG_CONFIG, calibrate, motors_off
 
@@ -138,7 +138,7 @@ def test_a_pair_motor_alone_is_checked_in_joint_space(cfg):
                                  dict(mode="torque", torque=1.5, duration=3.0)])
 def test_plain_jog_past_the_full_range_is_stopped_and_brought_back(cfg, req):
     from sherpa_cli.ops.jog import JogRequest as PlainRequest, resolve_jog_target, run_jog
-    from sherpa_cli.ops.motion import MotionSettings
+    from sherpa_cli.motion.settings import MotionSettings
 
     with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
         r = run_jog(s, resolve_jog_target(cfg, "j1"), PlainRequest(**req), settings=MotionSettings.from_config(cfg))
@@ -152,7 +152,7 @@ def test_plain_jog_past_the_full_range_is_stopped_and_brought_back(cfg, req):
 
 def test_plain_position_refusals_before_anything_is_armed(cfg):
     from sherpa_cli.ops.jog import JogRequest as PlainRequest, resolve_jog_target, run_jog
-    from sherpa_cli.ops.motion import MotionSettings
+    from sherpa_cli.motion.settings import MotionSettings
 
     settings = MotionSettings.from_config(cfg)
     with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:

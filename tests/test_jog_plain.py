@@ -11,8 +11,8 @@ import pytest
 from sherpa_cli.config import load_config
 from sherpa_cli.errors import UsageError
 from sherpa_cli.ops.jog import JogRequest, check_request, resolve_jog_target, run_jog
-from sherpa_cli.ops.motion import MotionSettings
-from sherpa_cli.ops.session import ArmSession
+from sherpa_cli.motion.settings import MotionSettings
+from sherpa_cli.bus.session import ArmSession
 from sherpa_cli.sim.arm import SimArm
 
 from test_motion_guard import ARMED, CONFIG, RESTORED
@@ -151,14 +151,14 @@ def test_cli_velocity_jog_final_line(cli):
 def test_position_jog_by_is_checked_again_with_the_px_read_after_arming(cfg, monkeypatch):
     from sherpa_cli.ops import jog as jog_mod
 
-    real_precheck = jog_mod._precheck
+    real_precheck = jog_mod.precheck
 
     def precheck_then_the_joint_moves(session, target, req):
         cal = real_precheck(session, target, req)  # checked with PX = 0: 0 + 318 is inside
         with session.sim.lock:
             session.sim.drives["drive1"].motor.counts = 19800  # pushed meanwhile: 19800 + 318 is not
         return cal
-    monkeypatch.setattr(jog_mod, "_precheck", precheck_then_the_joint_moves)
+    monkeypatch.setattr(jog_mod, "precheck", precheck_then_the_joint_moves)
     with pytest.raises(UsageError, match=r"j1: target 20118 counts is outside the joint's normal range"):
         jog(cfg, "j1", mode="position", by=0.5, uncalibrated=True)
 
@@ -187,14 +187,15 @@ def test_pair_velocity_jog_without_a_configured_speed_limit_is_refused():
 
 
 def _stop_that_never_settles(monkeypatch):
-    from sherpa_cli.ops import motion
+    from sherpa_cli.motion import guard, stopping
 
-    real = motion.stop_drive
+    real = stopping.stop_drive
 
     def stop_drive(*a, **k):
         how, standstill, problems = real(*a, **k)
         return how, False, problems + ["not at standstill 2 s after the stop"]
-    monkeypatch.setattr(motion, "stop_drive", stop_drive)
+    monkeypatch.setattr(stopping, "stop_drive", stop_drive)  # the limit watch's stop
+    monkeypatch.setattr(guard, "stop_drive", stop_drive)  # the guard's exit stop
 
 
 def test_ctrl_c_ending_a_velocity_jog_does_not_hide_a_failed_stop(cfg, monkeypatch):

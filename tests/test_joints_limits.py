@@ -258,7 +258,7 @@ def test_resolve_names():
                joint("roll", None, role=JointRole.DELTA, pair="wrist", full=(-160, 160))],
               [PairConfig("wrist", "wa", "wb", "pitch", "roll")],
               [drive("d1", 10), drive("wa", 20), drive("wb", 30)])
-    # joint and pair names are resolved by sherpa_cli.ops.targets (tests/test_targets.py)
+    # joint and pair names are resolved by sherpa_cli.bus.targets (tests/test_targets.py)
     assert [d.drive for d in derive_all(cfg, ["wb", "wa", "wb"])] == ["wb", "wa"]
     assert [d.drive for d in derive_all(cfg)] == ["d1", "wa", "wb"]
     with pytest.raises(UsageError) as info:

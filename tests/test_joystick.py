@@ -18,7 +18,7 @@ from sherpa_cli.errors import ConfigError, UsageError
 from sherpa_cli.ops import joystick
 from sherpa_cli.ops.joystick import ScriptedSource, deadzone, run_joystick
 from sherpa_cli.ops.live_jog import LiveJog, resolve_axes
-from sherpa_cli.ops.session import ArmSession
+from sherpa_cli.bus.session import ArmSession
 from sherpa_cli.sim.arm import SimArm
 from motion_helpers import JOG_CONFIG
 

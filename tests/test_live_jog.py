@@ -10,7 +10,7 @@ import pytest
 from sherpa_cli.config import load_config
 from sherpa_cli.errors import DriveRefusedError
 from sherpa_cli.ops.live_jog import LiveJog, resolve_axes
-from sherpa_cli.ops.session import ArmSession
+from sherpa_cli.bus.session import ArmSession
 from sherpa_cli.sim.arm import SimArm
 from motion_helpers import JOG_CONFIG, calibrate, motors_off
 

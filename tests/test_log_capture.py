@@ -10,7 +10,7 @@ import uuid
 import can
 import pytest
 
-from sherpa_cli.ops.capture import capture, frame_bits, read_frames
+from sherpa_cli.log.capture import capture, frame_bits, read_frames
 from tests.test_log_decode import BUSES, known_sequence
 
 
@@ -150,7 +150,7 @@ def test_mf4_without_asammdf_is_one_clear_message_for_capture_and_decode(tmp_pat
     import importlib.util
 
     from sherpa_cli.errors import UsageError
-    from sherpa_cli.ops.capture import check_output
+    from sherpa_cli.log.capture import check_output
 
     real = importlib.util.find_spec
     monkeypatch.setattr(importlib.util, "find_spec", lambda name, *a: None if name == "asammdf" else real(name, *a))

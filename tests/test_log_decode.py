@@ -9,8 +9,8 @@ from pathlib import Path
 import pytest
 
 from sherpa_cli.elmo.codec import encode_error_reply, encode_query, encode_reply, encode_set
-from sherpa_cli.ops.candecode import Frame, FrameDecoder, parse_candump_line
-from sherpa_cli.ops.capture import channel_for, read_frames
+from sherpa_cli.log.candecode import Frame, FrameDecoder, parse_candump_line
+from sherpa_cli.log.capture import channel_for, read_frames
 
 BUSES = ["can0", "can1", "can2"]  # the bundled config's buses, in order
 T0 = 1700000000.0

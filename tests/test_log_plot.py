@@ -8,8 +8,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from sherpa_cli.ops.recording import Recording, write_csv
-from sherpa_cli.ops.step_metrics import step_metrics
+from sherpa_cli.log.recording import Recording, write_csv
+from sherpa_cli.log.step_metrics import step_metrics
 
 
 def second_order(t: float, zeta: float, wn: float) -> float:
@@ -134,7 +134,7 @@ def test_plot_refuses_bad_input(cli, tmp_path):
 
 def test_plot_without_matplotlib_is_one_clear_message(cli, tmp_path, monkeypatch):
     _recording(tmp_path / "run.csv")
-    monkeypatch.setattr("sherpa_cli.ops.plot.have_matplotlib", lambda: False)
+    monkeypatch.setattr("sherpa_cli.log.plot.have_matplotlib", lambda: False)
     result = cli("log", "plot", str(tmp_path / "run.csv"), "-o", str(tmp_path / "x.png"))
     assert result.exit_code == 2 and "needs matplotlib" in result.stderr and "sherpa-cli[plot]" in result.stderr
 

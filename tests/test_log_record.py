@@ -12,9 +12,9 @@ import can
 import pytest
 
 from sherpa_cli.config import load_config
-from sherpa_cli.ops.record import Recorder, bus_budget
-from sherpa_cli.ops.session import ArmSession
-from sherpa_cli.ops.targets import drive_refs
+from sherpa_cli.log.record import Recorder, bus_budget
+from sherpa_cli.bus.session import ArmSession
+from sherpa_cli.bus.targets import drive_refs
 from sherpa_cli.sim.arm import SimArm
 from sherpa_cli.sim.clock import ManualClock
 
@@ -143,7 +143,7 @@ def test_cli_refuses_a_rate_the_bus_cannot_carry(cli, golden, tmp_path):
 
 
 def test_cli_records_on_the_simulated_arm(cli, tmp_path):
-    from sherpa_cli.ops.recording import read_csv
+    from sherpa_cli.log.recording import read_csv
 
     out = tmp_path / "r.csv"
     result = cli("--sim", "log", "record", "elbow_1a", "--rate", "50", "--for", "0.3", "-o", str(out))

@@ -1,4 +1,4 @@
-"""The recorder's end drain (ops/record.py Recorder._drain): after SYNC stops, the answers to the
+"""The recorder's end drain (log/record.py Recorder._drain): after SYNC stops, the answers to the
 last SYNCs may still be on their way (a loaded receive thread works off a backlog); the recorder
 keeps listening until no new sample came for a few periods, bounded by DRAIN_LIMIT_S, instead of
 cutting the end of the recording off.
@@ -21,8 +21,8 @@ from types import SimpleNamespace
 import pytest
 
 from sherpa_cli.config import load_config
-from sherpa_cli.ops.record import DRAIN_LIMIT_S, Recorder
-from sherpa_cli.ops.targets import drive_refs
+from sherpa_cli.log.record import DRAIN_LIMIT_S, Recorder
+from sherpa_cli.bus.targets import drive_refs
 
 ROOT = Path(__file__).resolve().parent.parent
 RATE = 10.0
@@ -148,7 +148,7 @@ def test_the_sync_thread_sends_every_sync_already_due_when_stopped():
 
     import can as _can
 
-    from sherpa_cli.ops.record import ThreadSync
+    from sherpa_cli.log.record import ThreadSync
 
     channel = f"sync-{_uuid.uuid4().hex[:8]}"
     with _can.Bus(interface="virtual", channel=channel) as tx, _can.Bus(interface="virtual", channel=channel) as rx:

@@ -11,7 +11,7 @@ import time
 import pytest
 
 from sherpa_cli.cli import log_cmd
-from sherpa_cli.ops.recording import read_csv
+from sherpa_cli.log.recording import read_csv
 from sherpa_cli.sim.arm import SimArm
 
 

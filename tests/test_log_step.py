@@ -12,8 +12,8 @@ import pytest
 
 from sherpa_cli.config import load_config
 from sherpa_cli.ops.jog import resolve_jog_target
-from sherpa_cli.ops.motion import MotionSettings
-from sherpa_cli.ops.session import ArmSession
+from sherpa_cli.motion.settings import MotionSettings
+from sherpa_cli.bus.session import ArmSession
 from sherpa_cli.ops.step import run_step
 from sherpa_cli.sim.arm import SimArm, settings_for
 from sherpa_cli.sim.servo import ServoMotor

@@ -13,8 +13,8 @@ import yaml
 from sherpa_cli.config import load_config
 from sherpa_cli.config.model import SimDriveConfig
 from sherpa_cli.ops.monitor import Monitor
-from sherpa_cli.ops.targets import drive_refs as resolve_targets
-from sherpa_cli.ops.session import ArmSession
+from sherpa_cli.bus.targets import drive_refs as resolve_targets
+from sherpa_cli.bus.session import ArmSession
 from sherpa_cli.sim.arm import SimArm
 
 ROOT = Path(__file__).resolve().parent.parent

@@ -16,8 +16,9 @@ import pytest
 
 from sherpa_cli.config import load_config
 from sherpa_cli.errors import SafetyError
-from sherpa_cli.ops.motion import MotionGuard, MotionSettings, MotionStopped
-from sherpa_cli.ops.session import ArmSession, resolve_target
+from sherpa_cli.motion.guard import MotionGuard, MotionStopped
+from sherpa_cli.motion.settings import MotionSettings
+from sherpa_cli.bus.session import ArmSession, resolve_target
 from sherpa_cli.sim.arm import SimArm
 
 CONFIG = """\
@@ -436,7 +437,7 @@ def test_a_refused_drive_at_entry_sends_no_stop_to_a_drive_the_guard_never_switc
 def test_standstill_allows_the_configured_velocity_noise():
     from types import SimpleNamespace
 
-    from sherpa_cli.ops.motion import stop_drive
+    from sherpa_cli.motion.stopping import stop_drive
 
     class Held:  # a stopped motor whose VX jitters by one count/s
         label, settings = "held", SimpleNamespace(mo_confirm_timeout=0.1)

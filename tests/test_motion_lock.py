@@ -1,4 +1,4 @@
-"""One motion command per drive at a time (ops/motion.DriveLock, taken by MotionGuard on entry).
+"""One motion command per drive at a time (motion/lock.DriveLock, taken by MotionGuard on entry).
 
 Two motion commands on one drive would disarm each other's dead-man (both use the host id and put
 0x1016:1 back when the first ends). The second refuses before sending anything, naming the drive and
@@ -19,8 +19,10 @@ import pytest
 
 from sherpa_cli.config import load_config
 from sherpa_cli.errors import ExitCode, SafetyError
-from sherpa_cli.ops.motion import DriveLock, MotionGuard, MotionLockedError, MotionSettings
-from sherpa_cli.ops.session import ArmSession, resolve_target
+from sherpa_cli.motion.guard import MotionGuard
+from sherpa_cli.motion.lock import DriveLock, MotionLockedError
+from sherpa_cli.motion.settings import MotionSettings
+from sherpa_cli.bus.session import ArmSession, resolve_target
 from sherpa_cli.ops.stop import stop_drives
 from sherpa_cli.sim.arm import SimArm
 from test_motion_guard import CONFIG
@@ -95,8 +97,8 @@ def test_every_exit_path_releases_the_lock(cfg):
 
 HOLDER = textwrap.dedent("""
     import sys, time
-    from sherpa_cli.ops.motion import DriveLock
-    from sherpa_cli.ops.session import DriveRef
+    from sherpa_cli.motion.lock import DriveLock
+    from sherpa_cli.bus.session import DriveRef
     lock = DriveLock(DriveRef("drive1", "can0", 5, None))
     lock.acquire()
     print("held", flush=True)

@@ -10,9 +10,10 @@ import pytest
 from motion_helpers import JOG_CONFIG, calibrate, motors_off
 from sherpa_cli.config import load_config
 from sherpa_cli.ops import diffdrive, joint_jog
-from sherpa_cli.ops.diffdrive import CommonStart, MoveRequest
-from sherpa_cli.ops.session import ArmSession
-from sherpa_cli.ops.targets import drive_ref
+from sherpa_cli.motion.pair_start import CommonStart
+from sherpa_cli.ops.diffdrive import MoveRequest
+from sherpa_cli.bus.session import ArmSession
+from sherpa_cli.bus.targets import drive_ref
 from sherpa_cli.sim.arm import SimArm
 
 PROFILE = ("SP", "AC", "DC")

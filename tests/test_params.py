@@ -18,7 +18,7 @@ from sherpa_cli.ops import params_diff as pd
 from sherpa_cli.ops.params_file import (IDENTITY_KEYS, DriveDump, ParamDump, dump_from_text, dump_to_text,
                                         read_dump, write_dump)
 from sherpa_cli.ops.params_read import dump_meta, dump_params, read_live
-from sherpa_cli.ops.session import ArmSession
+from sherpa_cli.bus.session import ArmSession
 from sherpa_cli.sim.arm import SimArm
 
 ARM = "configs/sherpa-arm.yaml"

@@ -19,7 +19,7 @@ from sherpa_cli.joints.limits import derive_checked
 from sherpa_cli.ops import program
 from sherpa_cli.ops.program import DriveTarget, write_order
 from sherpa_cli.ops.save_ledger import SaveLedger, save_warning
-from sherpa_cli.ops.session import ArmSession, DriveRef
+from sherpa_cli.bus.session import ArmSession, DriveRef
 from sherpa_cli.sim.arm import SimArm
 
 ROOT = Path(__file__).resolve().parent.parent

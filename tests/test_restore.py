@@ -13,7 +13,7 @@ from sherpa_cli.errors import ConfigError, SafetyError
 from sherpa_cli.ops import program
 from sherpa_cli.ops.params_file import read_dump, write_dump
 from sherpa_cli.ops.restore import restore_targets
-from sherpa_cli.ops.session import ArmSession
+from sherpa_cli.bus.session import ArmSession
 from sherpa_cli.elmo import codec
 from sherpa_cli.sim.arm import SimArm
 

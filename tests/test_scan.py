@@ -11,7 +11,7 @@ import yaml
 
 from sherpa_cli.config import load_config
 from sherpa_cli.ops.scan import NODE_IDS, BusProber, ScanSettings, decode_device_type, scan
-from sherpa_cli.ops.session import ArmSession
+from sherpa_cli.bus.session import ArmSession
 from sherpa_cli.sim.arm import SimArm
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -228,8 +228,8 @@ def test_sdo_timeout_comes_from_the_config(tmp_path):
 
     from sherpa_cli.config import load_config
     from sherpa_cli.errors import SdoError
-    from sherpa_cli.ops.sdo import sdo_upload
-    from sherpa_cli.ops.session import ArmSession
+    from sherpa_cli.bus.sdo import sdo_upload
+    from sherpa_cli.bus.session import ArmSession
 
     cfg = load_config("configs/appendix-c/example1.yaml")
     cfg = dataclasses.replace(cfg, protocol=dataclasses.replace(cfg.protocol, sdo_timeout=0.05))

@@ -1,4 +1,4 @@
-"""ops/sdo.py: every SDO failure is one SdoError naming drive and object; one client per drive per session."""
+"""bus/sdo.py: every SDO failure is one SdoError naming drive and object; one client per drive per session."""
 
 from __future__ import annotations
 
@@ -9,10 +9,10 @@ import pytest
 
 from sherpa_cli.config import load_config
 from sherpa_cli.errors import CommunicationError, ExitCode, SdoError
-from sherpa_cli.ops.canopen_names import abort_text, nmt_text
-from sherpa_cli.ops.sdo import DriveSdo, sdo_download, sdo_upload
-from sherpa_cli.ops.session import ArmSession
-from sherpa_cli.ops.targets import drive_ref
+from sherpa_cli.bus.canopen_names import abort_text, nmt_text
+from sherpa_cli.bus.sdo import DriveSdo, sdo_download, sdo_upload
+from sherpa_cli.bus.session import ArmSession
+from sherpa_cli.bus.targets import drive_ref
 from sherpa_cli.sim.arm import SimArm
 
 EXAMPLE1 = "configs/appendix-c/example1.yaml"

@@ -9,7 +9,7 @@ import pytest
 
 from conftest import ROOT
 from sherpa_cli.config import load_config
-from sherpa_cli.ops.session import ArmSession, resolve_target
+from sherpa_cli.bus.session import ArmSession, resolve_target
 from sherpa_cli.sim.arm import SimArm
 
 

@@ -189,7 +189,7 @@ def test_the_isolation_fixtures_catch_leaks_and_user_state(pytester):
 def test_cli_sessions_on_the_simulated_arm_use_the_short_protocol_windows(cli, monkeypatch):
     from conftest import TEST_PROTOCOL_WINDOWS
 
-    from sherpa_cli.ops.session import ArmSession
+    from sherpa_cli.bus.session import ArmSession
     from sherpa_cli.sim.arm import SimArm
 
     seen = []

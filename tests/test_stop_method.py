@@ -1,6 +1,6 @@
 """motion.stop_method everywhere: the jogs' own stops (ops/joint_jog.stop_now: the pair/`jog` limit
 stop and end of a velocity/torque jog; ops/live_jog: `s`, Space, expiry, the limit watch) go the
-guard's one stop path (ops/motion.send_stop), so `st`, `jv0` and `auto` show in the frames each
+guard's one stop path (motion/stopping.send_stop), so `st`, `jv0` and `auto` show in the frames each
 simulated drive received: `st` ST only, `jv0` JV=0 + BG (no ST), `auto` ST, and JV=0 + BG where the
 firmware refuses ST in speed mode (UM=2)."""
 
@@ -17,7 +17,7 @@ from sherpa_cli.errors import SafetyError
 from sherpa_cli.ops import joint_jog
 from sherpa_cli.ops.joint_jog import JogRequest, resolve_axis
 from sherpa_cli.ops.live_jog import LiveJog, resolve_axes
-from sherpa_cli.ops.session import ArmSession
+from sherpa_cli.bus.session import ArmSession
 from sherpa_cli.sim.arm import SimArm
 from motion_helpers import JOG_CONFIG, motors_off
 

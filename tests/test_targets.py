@@ -1,4 +1,4 @@
-"""The one target policy (sherpa_cli.ops.targets): a test per kind of name, then the commands using it."""
+"""The one target policy (sherpa_cli.bus.targets): a test per kind of name, then the commands using it."""
 
 from __future__ import annotations
 
@@ -6,8 +6,8 @@ import pytest
 
 from sherpa_cli.config import load_config
 from sherpa_cli.errors import ExitCode, UsageError
-from sherpa_cli.ops import targets
-from sherpa_cli.ops.targets import TargetKind
+from sherpa_cli.bus import targets
+from sherpa_cli.bus.targets import TargetKind
 
 ARM = "configs/sherpa-arm.yaml"
 

@@ -1,4 +1,5 @@
-"""Root of the ``sherpa`` command: global options, the command list, and the error boundary.
+"""Root of the ``sherpa`` command: global options and the command list (the error boundary, `run`
+and `main`, is cli/boundary.py; they are re-exported here for the console script and the tests).
 
 Command modules are imported here, but they import the CAN stack (python-can, canopen)
 only inside the functions that need it, so ``sherpa --help`` stays fast.
@@ -7,16 +8,15 @@ only inside the functions that need it, so ``sherpa --help`` stays fast.
 from __future__ import annotations
 
 import os
-import sys
 from pathlib import Path
-from typing import List, Optional, Sequence
+from typing import List, Optional
 
 import typer
 
 from sherpa_cli import __version__
 from sherpa_cli.cli import context
+from sherpa_cli.cli.boundary import install, main, run
 from sherpa_cli.cli.context import AppState
-from sherpa_cli.errors import ExitCode, SherpaError
 
 DEFAULT_CONFIG = Path("configs/sherpa-arm.yaml")
 CONFIG_NAME = "sherpa-arm.yaml"
@@ -126,45 +126,6 @@ def _register() -> None:
 _register()
 
 
-def run(argv: Sequence[str] | None = None) -> int:
-    """Run the CLI and return its exit code; tests call this, the console script wraps it."""
-    args = list(sys.argv[1:] if argv is None else argv)
-    debug = "--debug" in args
-    context.CURRENT = None
-    try:
-        code = app(args=args, prog_name="sherpa", standalone_mode=False)
-        return int(code) if isinstance(code, int) else int(ExitCode.OK)
-    except SherpaError as exc:
-        if debug:
-            raise
-        _report(str(exc), exc.hint)
-        return int(exc.exit_code)
-    except (KeyboardInterrupt, typer.Abort):
-        if debug:
-            raise
-        _report("interrupted", None)
-        return int(ExitCode.INTERRUPTED)
-    except typer.Exit as exc:
-        return int(exc.exit_code)
-    except SystemExit as exc:  # shell completion (_SHERPA_COMPLETE, --show-completion) ends with sys.exit
-        return exc.code if isinstance(exc.code, int) else int(ExitCode.OK if exc.code is None else ExitCode.USAGE)
-    except typer.TyperException as exc:
-        # usage errors: the parser's own message already names the option or argument
-        show = getattr(exc, "show", None)
-        if show is not None:
-            show(file=sys.stderr)
-        else:
-            sys.stderr.write(f"error: {exc.format_message()}\n")
-        return int(ExitCode.USAGE)
+install(app)
 
-
-def _report(message: str, hint: str | None) -> None:
-    from sherpa_cli.cli.output import Output
-
-    state = context.CURRENT
-    out = state.out if state is not None else Output.create(no_color=True)
-    out.error(message, hint)
-
-
-def main(argv: Sequence[str] | None = None) -> None:
-    sys.exit(run(argv))
+__all__ = ["app", "main", "run"]

@@ -37,7 +37,7 @@ def cmd(
     """
     from sherpa_cli.errors import SherpaError
     from sherpa_cli.ops.raw import check_raw_save, parse_all, run_raw
-    from sherpa_cli.ops.targets import single_drive
+    from sherpa_cli.bus.targets import single_drive
 
     st = state(ctx)
     cfg = st.load_config()

@@ -14,7 +14,7 @@ from sherpa_cli.errors import UsageError
 
 if TYPE_CHECKING:
     from sherpa_cli.config.model import ArmConfig
-    from sherpa_cli.ops.session import ArmSession
+    from sherpa_cli.bus.session import ArmSession
 
 
 @dataclass
@@ -45,7 +45,7 @@ class AppState:
         """Open the arm's buses (or the simulated arm with --sim) for one command; ``sim_factory``
         builds the in-process arm instead of the default (SimArm.in_process's ``factory``)."""
         from sherpa_cli.bus.busmap import apply_bus_map, parse_bus_map
-        from sherpa_cli.ops.session import ArmSession
+        from sherpa_cli.bus.session import ArmSession
 
         shared = _shared_for(self)
         if shared is not None:

@@ -19,7 +19,7 @@ PairArg = typer.Argument(..., metavar="PAIR", help="Pair name, or its Σ/Δ join
 def limits(ctx: typer.Context, pair: str = PairArg) -> None:
     """Show a pair's Σ/Δ ranges and the motor ranges derived from them, with the rule used."""
     from sherpa_cli.joints.limits import explain_pair
-    from sherpa_cli.ops.targets import pair_of
+    from sherpa_cli.bus.targets import pair_of
 
     st = state(ctx)
     cfg = st.load_config()
@@ -73,7 +73,7 @@ def convert(
     """
     from sherpa_cli.joints import diffpair, units
     from sherpa_cli.joints.limits import explain_pair
-    from sherpa_cli.ops.targets import pair_of
+    from sherpa_cli.bus.targets import pair_of
 
     st = state(ctx)
     cfg = st.load_config()
@@ -182,7 +182,7 @@ def move(
     both left the straight Σ/Δ path (docs/diffdrive.md).
     """
     from sherpa_cli.ops import diffdrive
-    from sherpa_cli.ops.targets import pair_of
+    from sherpa_cli.bus.targets import pair_of
 
     st = state(ctx)
     cfg = st.load_config()

@@ -27,7 +27,7 @@ def identify(
     """
     from sherpa_cli.errors import ExitCode
     from sherpa_cli.ops.identify import identify as run_identify
-    from sherpa_cli.ops.targets import drive_names
+    from sherpa_cli.bus.targets import drive_names
 
     from sherpa_cli.ops.identify import identify_devices
 
@@ -82,7 +82,7 @@ def _hex(value, width: int = 8) -> str:
 
 def _render(st, report) -> None:
     from sherpa_cli.elmo import faults
-    from sherpa_cli.ops.canopen_names import VENDORS
+    from sherpa_cli.bus.canopen_names import VENDORS
 
     if st.json_mode:
         st.out.json(report.as_json())

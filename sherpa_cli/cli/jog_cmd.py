@@ -79,7 +79,7 @@ def jog(
       sherpa jog shoulder_roll --velocity 5deg/s --for 2 --apply
     """
     from sherpa_cli.ops.jog import JogRequest, check_request, resolve_jog_target, run_jog
-    from sherpa_cli.ops.motion import MotionSettings
+    from sherpa_cli.motion.settings import MotionSettings
 
     st = state(ctx)
     if _live(st, joints or [], interactive, joystick, device, list_joysticks, apply, uncalibrated,
@@ -228,7 +228,7 @@ def _current(text: str | None, option: str) -> float | None:
 
 def _is_pair_axis(cfg, name: str) -> bool:
     """A Σ/Δ joint, a pair, or one motor of a pair: jogged through ops/joint_jog.py."""
-    from sherpa_cli.ops import targets
+    from sherpa_cli.bus import targets
 
     return targets.resolve_one(cfg, name).pair is not None
 

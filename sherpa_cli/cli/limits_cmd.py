@@ -53,7 +53,7 @@ def show(ctx: typer.Context,
       sherpa --config configs/appendix-c/example3.yaml limits show --software
     """
     from sherpa_cli.joints.limits import derive_checked, left_as_they_are
-    from sherpa_cli.ops.targets import drive_names
+    from sherpa_cli.bus.targets import drive_names
 
     st = state(ctx)
     cfg = st.load_config()

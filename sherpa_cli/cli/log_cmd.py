@@ -49,8 +49,8 @@ def decode(
       sherpa log decode run.asc --node 40 --kind interp
       sherpa --json log decode run.blf --kind emcy
     """
-    from sherpa_cli.ops.candecode import KINDS, FrameDecoder
-    from sherpa_cli.ops.capture import read_frames
+    from sherpa_cli.log.candecode import KINDS, FrameDecoder
+    from sherpa_cli.log.capture import read_frames
 
     st = state(ctx)
     for k in kind or []:
@@ -106,8 +106,8 @@ def capture(
     """
     from sherpa_cli.bus.busmap import apply_bus_map, parse_bus_map
     from sherpa_cli.bus.links import open_bus
-    from sherpa_cli.ops.capture import capture as run_capture
-    from sherpa_cli.ops.capture import check_output
+    from sherpa_cli.log.capture import capture as run_capture
+    from sherpa_cli.log.capture import check_output
 
     st = state(ctx)
     if st.sim:
@@ -184,8 +184,8 @@ def plot(
       sherpa log plot run.csv -o run.png
       sherpa log plot step/recording.csv -o elbow.png --joint elbow_pitch --signal vel --target 0.1
     """
-    from sherpa_cli.ops.plot import MISSING, MISSING_HINT, have_matplotlib, plot_recording
-    from sherpa_cli.ops.recording import SIGNALS, read_csv
+    from sherpa_cli.log.plot import MISSING, MISSING_HINT, have_matplotlib, plot_recording
+    from sherpa_cli.log.recording import SIGNALS, read_csv
 
     st = state(ctx)
     if signal not in SIGNALS:
@@ -210,7 +210,7 @@ def plot(
 
 
 def _metrics(rec, joints, signal, step_at, target):
-    from sherpa_cli.ops.step_metrics import step_metrics
+    from sherpa_cli.log.step_metrics import step_metrics
 
     out = {}
     for j in joints:
@@ -229,7 +229,7 @@ def _ms(seconds) -> str:
 
 
 def render_metrics(st, metrics, extra=None) -> None:
-    from sherpa_cli.ops.recording import SIGNALS, UNITS
+    from sherpa_cli.log.recording import SIGNALS, UNITS
 
     if st.json_mode:
         st.out.json({**(extra or {}), "metrics": [{"joint": j, "signal": s, **m.as_json()}
@@ -285,10 +285,10 @@ def record(
       sherpa log record shoulder_diff --rate 500 --for 10 --current -o pair.csv
       sherpa log record --poll --for 5 -o slow.csv
     """
-    from sherpa_cli.ops import encoder
-    from sherpa_cli.ops.record import MAX_LOAD, Poller, Recorder, bus_budget, check_budget
-    from sherpa_cli.ops.recording import write_csv
-    from sherpa_cli.ops.targets import drive_refs
+    from sherpa_cli.devices import encoder
+    from sherpa_cli.log.record import MAX_LOAD, Poller, Recorder, bus_budget, check_budget
+    from sherpa_cli.log.recording import write_csv
+    from sherpa_cli.bus.targets import drive_refs
 
     st = state(ctx)
     if not 0 < duration <= MAX_RECORD_S:
@@ -300,7 +300,7 @@ def record(
     if not output.parent.exists():
         raise UsageError(f"-o {output}: directory {output.parent} does not exist")
     cfg = st.load_config()
-    # an encoder device stands for the joint it measures (recorded beside it: ops/encoder.py)
+    # an encoder device stands for the joint it measures (recorded beside it: devices/encoder.py)
     refs = drive_refs(cfg, encoder.targets_with_encoders(cfg, targets), configured_only=True)
     if not poll:
         encoders = [t.dev for t in encoder.recorded_encoders(cfg, (r.name for r in refs))]
@@ -423,9 +423,9 @@ def step(
     """
     import json
 
-    from sherpa_cli.ops.motion import MotionSettings
-    from sherpa_cli.ops.plot import have_matplotlib, plot_recording
-    from sherpa_cli.ops.recording import write_csv
+    from sherpa_cli.motion.settings import MotionSettings
+    from sherpa_cli.log.plot import have_matplotlib, plot_recording
+    from sherpa_cli.log.recording import write_csv
     from sherpa_cli.ops.step import resolve_step_target, run_step, step_request
 
     st = state(ctx)

@@ -47,7 +47,7 @@ def monitor(
       sherpa monitor --heartbeat 200 --apply
     """
     from sherpa_cli.ops.monitor import Monitor
-    from sherpa_cli.ops.targets import drive_refs
+    from sherpa_cli.bus.targets import drive_refs
 
     st = state(ctx)
     if st.json_mode and not once:

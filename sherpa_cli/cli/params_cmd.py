@@ -37,7 +37,7 @@ def dump_params(
     """
     from sherpa_cli.ops.params_file import drive_block, dump_to_text, write_dump
     from sherpa_cli.ops.params_read import dump_params as read_dump_params
-    from sherpa_cli.ops.targets import drive_names
+    from sherpa_cli.bus.targets import drive_names
     from sherpa_cli.output_files import check_output_path, is_stdout
 
     st = state(ctx)
@@ -85,7 +85,7 @@ def diff(
     """
     from sherpa_cli.errors import ExitCode
     from sherpa_cli.ops import params_diff as pd
-    from sherpa_cli.ops.targets import drive_names
+    from sherpa_cli.bus.targets import drive_names
 
     st = state(ctx)
     cfg = st.load_config()

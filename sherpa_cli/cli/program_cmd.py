@@ -48,7 +48,7 @@ def program_limits(
       sherpa program-limits --apply --save --verify-flash --yes
     """
     from sherpa_cli.joints.limits import derive_checked, left_as_they_are
-    from sherpa_cli.ops.targets import drive_names
+    from sherpa_cli.bus.targets import drive_names
     from sherpa_cli.ops.program import DriveTarget
 
     st = state(ctx)

@@ -40,7 +40,7 @@ def _invoker(st: AppState):
     Output is captured (the recipe shows it under the step) and stdin is empty, so a step
     never waits at a prompt nobody sees: questions belong in `confirm:` steps.
     """
-    from sherpa_cli.cli.app import run
+    from sherpa_cli.cli.boundary import run
     from sherpa_cli.recipes.runner import CommandRun
 
     base = ["--config", str(st.config_path), "--no-color"]

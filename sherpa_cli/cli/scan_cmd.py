@@ -83,7 +83,7 @@ def _device(n) -> str:
     """Vendor (Elmo by name, others as their 0x1018:1 id) and 0x1008, in one column to fit 100 columns."""
     if n.vendor is None and n.device_name is None:
         return "-"
-    from sherpa_cli.ops.canopen_names import ELMO_VENDOR_ID
+    from sherpa_cli.bus.canopen_names import ELMO_VENDOR_ID
 
     vendor = n.vendor if n.vendor_id in (None, ELMO_VENDOR_ID) else f"vendor {n.vendor}"
     return " ".join(part for part in (vendor, n.device_name) if part)

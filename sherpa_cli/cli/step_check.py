@@ -9,7 +9,6 @@ instead of writing to drives up to the bad step.
 
 from __future__ import annotations
 
-import functools
 import io
 from contextlib import redirect_stderr, redirect_stdout
 from typing import Any
@@ -17,13 +16,10 @@ from typing import Any
 from sherpa_cli.errors import ConfigError, Location
 
 
-@functools.lru_cache(maxsize=1)
 def _root() -> Any:
-    import typer.main
+    from sherpa_cli.cli.boundary import root_command
 
-    from sherpa_cli.cli.app import app
-
-    return typer.main.get_command(app)
+    return root_command()
 
 
 def check_step_commands(recipe: Any) -> None:

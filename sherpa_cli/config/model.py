@@ -282,7 +282,7 @@ class MotionConfig:
     pair_group_id: int = 125  # a 7-bit id no device on the pair's bus uses (126 is the host heartbeat)
     feedback_gain: float = 16.0  # --feedback: SP correction per unit of progress difference between the motors
     feedback_limit: float = 0.5  # --feedback: the correction never changes a motor's SP by more than this share
-    # diffdrive move records both motors by TPDO on SYNC (ops/record.py) at this rate (Hz, capped to
+    # diffdrive move records both motors by TPDO on SYNC (log/record.py) at this rate (Hz, capped to
     # what the bus budget allows); --poll or a recorder that cannot be set up: PX polled instead
     pair_record_rate: float = 500.0
 

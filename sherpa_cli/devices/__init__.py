@@ -3,7 +3,7 @@
 The seed's ``dev_type`` selected device-specific code (1 = Elmo was the only one). Here the
 config's type name picks a class from :data:`REGISTRY`, the way python-can maps interface names
 to bus classes; `drives:` are all "elmo", `devices:` name their type. Each class is built on the
-device's SDO client (ops/sdo.py ``DriveSdo`` or anything with ``upload(index, sub)``).
+device's SDO client (bus/sdo.py ``DriveSdo`` or anything with ``upload(index, sub)``).
 """
 
 from __future__ import annotations

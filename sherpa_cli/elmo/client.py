@@ -24,14 +24,13 @@ from sherpa_cli.elmo.commands import COMMANDS
 from sherpa_cli.elmo.faults import Emcy, decode_emcy, ec_text
 from sherpa_cli.elmo.transport import Transport
 from sherpa_cli.errors import CodecError, CommunicationError, DriveRefusedError, DriveTimeoutError, ProtocolError
+from sherpa_cli.elmo.protocol import EMCY_BASE, NMT_ID, NMT_START
 
 log = logging.getLogger(__name__)
 
 RPDO2_BASE = 0x300
 TPDO2_BASE = 0x280
-EMCY_BASE = 0x080
-NMT_COB_ID = 0x000
-NMT_START = 0x01
+NMT_COB_ID = NMT_ID
 NMT_RESET_NODE = 0x81
 NMT_RESET_COMMUNICATION = 0x82
 BOOTUP_BASE = 0x700  # boot-up (byte 0 = 0x00) and heartbeat

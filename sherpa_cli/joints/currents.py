@@ -13,13 +13,11 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Collection, Iterator, Mapping
+from typing import Collection, Iterator, Mapping
 
 from sherpa_cli.config.model import ArmConfig, CurrentLimits
 from sherpa_cli.errors import Location
-
-if TYPE_CHECKING:
-    from sherpa_cli.joints.limits import DriveParams
+from sherpa_cli.joints.params import DriveParams
 
 # Ratings are printed with two decimals; 0.75 x 25.3 is 18.974999... in binary floating
 # point, so a limit equal to the printed rating must not fail on the last bit.
@@ -109,7 +107,7 @@ def check_current_limits(cfg: ArmConfig, subject: str, drive: str, cur: CurrentL
     return out
 
 
-def validate_params(params: "DriveParams | Mapping[str, float]", *, drive: str | None = None,
+def validate_params(params: DriveParams | Mapping[str, float], *, drive: str | None = None,
                     where: Location | None = None,
                     allow_disabled: bool | Collection[str] = False) -> list[Finding]:
     """Consistency of one derived parameter set.

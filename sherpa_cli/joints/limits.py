@@ -32,35 +32,15 @@ from __future__ import annotations
 
 import difflib
 import math
-from dataclasses import dataclass, field
-from types import MappingProxyType
+from dataclasses import dataclass
 from typing import Any, Iterable, Mapping, Sequence
 
 from sherpa_cli.config.model import (ArmConfig, CurrentLimits, JointConfig, JointRole, PairConfig,
                                      SwitchConfig, SwitchKind)
 from sherpa_cli.errors import ConfigError, Location, UsageError
+from sherpa_cli.joints.currents import Finding, check_currents, validate_params
 from sherpa_cli.joints.diffpair import MotorBox, motor_box
-
-# Order in which parameters are listed (and, by default, written); IL[n] follow ascending.
-PARAM_ORDER = ("LL[2]", "HL[2]", "VL[2]", "VH[2]", "LL[3]", "HL[3]", "VL[3]", "VH[3]",
-               "AC", "DC", "CL[1]", "PL[1]", "PL[2]")
-
-ParamValue = int | float
-
-
-@dataclass(frozen=True)
-class DriveParams:
-    """The parameter set one drive should hold, in write order (``params`` is read-only)."""
-
-    drive: str
-    bus: str
-    node: int
-    params: Mapping[str, ParamValue] = field(default_factory=lambda: MappingProxyType({}))
-
-    def __post_init__(self) -> None:
-        if not isinstance(self.params, MappingProxyType):
-            object.__setattr__(self, "params", MappingProxyType(dict(self.params)))
-
+from sherpa_cli.joints.params import PARAM_ORDER, DriveParams, ParamValue
 
 @dataclass(frozen=True)
 class PairExplanation:
@@ -328,7 +308,7 @@ def derive_drive_params(cfg: ArmConfig, drive: str) -> DriveParams:
 
 
 def derive_all(cfg: ArmConfig, drives: Sequence[str] | None = None) -> list[DriveParams]:
-    """Parameter sets for the named drives (None = all; names come from :mod:`sherpa_cli.ops.targets`)."""
+    """Parameter sets for the named drives (None = all; names come from :mod:`sherpa_cli.bus.targets`)."""
     return [_derive(cfg, d)[0] for d in _check_drives(cfg, drives)]
 
 
@@ -340,7 +320,6 @@ def derive_checked(cfg: ArmConfig, drives: Sequence[str] | None = None) -> tuple
     catalog ratings -- raises ConfigError naming where to fix it, so nothing is written
     after an error was found.
     """
-    from sherpa_cli.joints.currents import check_currents, validate_params
 
     drives = _check_drives(cfg, drives)
     derived: list[DriveParams] = []
@@ -368,7 +347,6 @@ def config_findings(cfg: ArmConfig) -> list:
     program-limits will not refuse it for the same reason: a set the derivation cannot build
     (a ConfigError), an inconsistent set (``validate_params``), a current beyond the ratings.
     """
-    from sherpa_cli.joints.currents import Finding, check_currents, validate_params
 
     findings = list(check_currents(cfg))
     for drive in cfg.drives:
@@ -402,7 +380,7 @@ def _owner_where(cfg: ArmConfig, drive: str) -> Location | None:
 def _find_pair(cfg: ArmConfig, pair: str | PairConfig) -> PairConfig:
     if isinstance(pair, PairConfig):
         return pair
-    if pair in cfg.pairs:  # a pair's name; what other names mean is sherpa_cli.ops.targets' business
+    if pair in cfg.pairs:  # a pair's name; what other names mean is sherpa_cli.bus.targets' business
         return cfg.pairs[pair]
     raise _unknown("differential pair", pair, cfg.pairs)
 

@@ -12,7 +12,7 @@ one BG to that id, which both drives execute on the same frame; ``sync_rpdo`` ma
 synchronous (0x1401:2 = 1, RAM, for the begin only), sends BG to each drive and one SYNC at which
 both execute it; ``sequential`` sends two BG back to back. ``--naive`` is the seed's way: two BG and unscaled profiles, kept for comparison.
 
-Recording: both motors are recorded by `sherpa log`'s recorder (ops/record.py: TPDO on SYNC at
+Recording: both motors are recorded by `sherpa log`'s recorder (log/record.py: TPDO on SYNC at
 ``motion.pair_record_rate``, RAM only, put back on every exit path; :class:`RecordedTrace`), whose
 newest sample also feeds the move's loop (limit watch, ``--feedback``); with ``--poll`` or when the
 recorder cannot be set up, the loop polls PX through the interpreter instead (:class:`PolledTrace`).
@@ -21,27 +21,19 @@ recorder cannot be set up, the loop polls PX through the interpreter instead (:c
 from __future__ import annotations
 
 import contextlib
-import functools
 import math
 import time
 from dataclasses import dataclass, field
 from typing import Any, Callable, Mapping, Sequence
 
-from sherpa_cli.config.model import PAIR_START_METHODS, ArmConfig, PairConfig
-from sherpa_cli.errors import ConfigError, DriveTimeoutError, SafetyError, UsageError
+from sherpa_cli.config.model import ArmConfig, PairConfig
+from sherpa_cli.errors import SafetyError, UsageError
 from sherpa_cli.joints import diffpair, units
-from sherpa_cli.ops import calibration, limit_watch
+from sherpa_cli.elmo.protocol import UM_POSITION
+from sherpa_cli.motion import calibration, limit_watch
+from sherpa_cli.motion.pair_start import CommonStart, pair_settings, stop_motors
 
-UM_POSITION = 5
-GROUP_INDEX = 0x2040
-RPDO2_BASE = 0x300
-TPDO2_BASE = 0x280
-SYNC_ID = 0x080
-RPDO2_COMM = 0x1401  # RPDO2 (the binary interpreter's) communication parameter; sub 2 = transmission type
-SYNC_RPDO_TYPE = 1  # synchronous: executed at the next SYNC ([IG] 5-4)
-RPDO2_TYPE_NAME = "RPDO2 transmission type"
 SETTLE_S = 0.3  # s a finished move may take for PX to reach the target (servo lag) before it is reported
-PROFILE_KEYS = ("SP", "AC", "DC")
 
 
 # --------------------------------------------------------------------------- planning (pure)
@@ -91,17 +83,6 @@ class MovePlan:
 
 def _range_text(r: tuple[int, int]) -> str:
     return f"[{r[0]}, {r[1]}]"
-
-
-def pair_settings(cfg: ArmConfig) -> tuple[str, int]:
-    """(pair_start, pair_group_id) from ``motion:``, checked."""
-    m = cfg.motion
-    if m.pair_start not in PAIR_START_METHODS:
-        raise ConfigError(f"motion.pair_start: '{m.pair_start}' is not one of {', '.join(PAIR_START_METHODS)}")
-    if not 1 <= m.pair_group_id <= 127 or m.pair_group_id == m.host_node_id:
-        raise ConfigError(f"motion.pair_group_id: {m.pair_group_id} must be 1..127 and not the host id "
-                          f"{m.host_node_id}")
-    return m.pair_start, m.pair_group_id
 
 
 def profiles(distances: Mapping[str, int], speed: int, accel: int, decel: int, *,
@@ -264,7 +245,7 @@ class PolledTrace:
 
 
 class RecordedTrace:
-    """Both motors recorded by `sherpa log`'s recorder (ops/record.py: PX and VX on TPDO1 at every
+    """Both motors recorded by `sherpa log`'s recorder (log/record.py: PX and VX on TPDO1 at every
     SYNC, RAM only, restored on every exit path). Both drives are sampled at the same SYNC, so the
     Σ/Δ of a sample is exact (polling reads one motor a round trip after the other). The move's
     loop reads the newest sample (:meth:`latest`) instead of polling PX."""
@@ -294,9 +275,9 @@ class RecordedTrace:
 
 
 def record_rate(cfg: ArmConfig, refs: Sequence[Any]) -> tuple[float, str]:
-    """``motion.pair_record_rate``, capped to what the pair's bus can carry (ops/record.py's budget)."""
-    from sherpa_cli.ops.encoder import recorded_encoders
-    from sherpa_cli.ops.record import bus_budget
+    """``motion.pair_record_rate``, capped to what the pair's bus can carry (log/record.py's budget)."""
+    from sherpa_cli.devices.encoder import recorded_encoders
+    from sherpa_cli.log.record import bus_budget
 
     rate = float(cfg.motion.pair_record_rate)
     encoders = [t.dev for t in recorded_encoders(cfg, (r.name for r in refs))]  # recorded beside them
@@ -305,208 +286,6 @@ def record_rate(cfg: ArmConfig, refs: Sequence[Any]) -> tuple[float, str]:
         return rate, ""
     cap = float(min(b.max_rate for b in budget))
     return cap, f"capped from {rate:g} Hz by the bus budget"
-
-
-# --------------------------------------------------------------------------- common start
-
-class CommonStart:
-    """Starts both motors of a pair together; restores what it changed (0x2040 or 0x1401:2, and the
-    SP/AC/DC kept with :meth:`keep_profile`; RAM) on close.
-
-    ``method`` (``motion.pair_start``): ``group`` (0x2040 = the group id on both drives, one BG to
-    the group id), ``sync_rpdo`` (for each begin RPDO2 is made synchronous on both drives, 0x1401:2
-    = 1; BG to each drive is then buffered until one SYNC the tool sends right after them, which
-    both drives execute on the same frame; the old transmission type goes back at once and the BG
-    answers are awaited), ``sequential`` (BG, BG). Use as a context manager inside the motion
-    guard. ``stop`` (:func:`stop_motors`) runs on the way out before the restore, so no motor keeps
-    moving through the restore's SDO timeouts (review R8)."""
-
-    def __init__(self, session: Any, refs: Sequence[Any], clients: Mapping[str, Any], method: str,
-                 group_id: int, stop: Callable[[], Sequence[str] | None] | None = None) -> None:
-        self.session, self.refs, self.clients, self.method, self.group_id = session, list(refs), clients, method, group_id
-        self._old: dict[str, int] = {}
-        self._rpdo_type: dict[str, int] = {}  # sync_rpdo: each drive's own 0x1401:2
-        self._synchronous: set[str] = set()  # drives whose RPDO2 is synchronous right now
-        self._profiles: dict[str, dict[str, int]] = {}
-        self.stop = stop
-        self.bus = refs[0].bus
-
-    def __enter__(self) -> "CommonStart":
-        if self.method in ("group", "sync_rpdo") and len({r.bus for r in self.refs}) != 1:
-            raise ConfigError(f"motion.pair_start={self.method} needs both drives of the pair on one bus; "
-                              "use pair_start: sequential")
-        if self.method == "group":
-            clash = [n for n, d in self.session.cfg.drives.items()
-                     if d.bus == self.bus and d.node == self.group_id]
-            if clash:
-                raise ConfigError(f"motion.pair_group_id {self.group_id} is the node id of {clash[0]} on bus "
-                                  f"{self.bus}: choose an id no device uses")
-        try:
-            for r in self.refs:
-                sdo = self.session.sdo(r)
-                if self.method == "group":
-                    old = (bytes(sdo.upload(GROUP_INDEX, 0, name="group id")) + b"\0")[0]
-                    if old != self.group_id:
-                        sdo.download(GROUP_INDEX, 0, bytes([self.group_id]), name="group id")
-                        self._old[r.name] = old
-                elif self.method == "sync_rpdo":
-                    self._rpdo_type[r.name] = (bytes(sdo.upload(RPDO2_COMM, 2, name=RPDO2_TYPE_NAME)) + b"\0")[0]
-        except BaseException:
-            self.close()
-            raise
-        return self
-
-    def begin(self, drives: Sequence[str] | None = None) -> None:
-        """BG for the named drives (default both): one group frame, two BG executed at one SYNC, or
-        one BG per drive."""
-        from sherpa_cli.elmo import codec
-
-        names = list(drives) if drives is not None else [r.name for r in self.refs]
-        if self.method == "group" and len(names) == len(self.refs):
-            self.session.links[self.bus].network.send_message(RPDO2_BASE + self.group_id,
-                                                              codec.encode_execute("BG"))
-            return
-        if self.method == "sync_rpdo" and len(names) == len(self.refs):
-            self._sync_begin()
-            return
-        for n in names:
-            self.clients[n].execute("BG")
-
-    def _sync_begin(self) -> None:
-        import threading
-
-        from sherpa_cli.elmo import codec
-        from sherpa_cli.errors import DriveRefusedError, DriveTimeoutError
-
-        network = self.session.links[self.bus].network
-        answers: dict[str, Any] = {}
-        arrived = {r.name: threading.Event() for r in self.refs}
-        subscribed = []
-
-        def listener(name: str) -> Callable[[int, bytes, float], None]:
-            def on_reply(can_id: int, data: bytes, timestamp: float) -> None:
-                try:
-                    reply = codec.decode_reply(bytes(data))
-                except Exception:
-                    return
-                if reply.letters == "BG" and name not in answers:
-                    answers[name] = reply
-                    arrived[name].set()
-            return on_reply
-        try:
-            for r in self.refs:
-                if self._rpdo_type[r.name] != SYNC_RPDO_TYPE:
-                    self._synchronous.add(r.name)
-                    self.session.sdo(r).download(RPDO2_COMM, 2, bytes([SYNC_RPDO_TYPE]), name=RPDO2_TYPE_NAME)
-            for r in self.refs:
-                callback = listener(r.name)
-                network.subscribe(TPDO2_BASE + r.node, callback)
-                subscribed.append((TPDO2_BASE + r.node, callback))
-            for r in self.refs:  # buffered by each drive until the SYNC
-                network.send_message(RPDO2_BASE + r.node, codec.encode_execute("BG"))
-            network.send_message(SYNC_ID, b"")
-            wait = 2 * max(getattr(c, "timeout", 0.1) for c in self.clients.values())
-            for r in self.refs:
-                arrived[r.name].wait(wait)
-        finally:
-            for cob, callback in subscribed:
-                network.unsubscribe(cob, callback)
-            self._restore_rpdo(quiet=False)
-        for r in self.refs:
-            reply = answers.get(r.name)
-            if reply is None:
-                raise DriveTimeoutError(f"{r.name}: no answer to the BG executed at the SYNC within {wait:g} s",
-                                        hint="does the drive execute a synchronous RPDO2 (0x1401:2 = 1)? "
-                                             "motion.pair_start: group or sequential starts it without SYNC")
-            if not reply.ok:
-                raise DriveRefusedError(f"{r.name}: BG at the SYNC refused: {reply.error_text}", drive=r.name,
-                                        command="BG", code=reply.error_code)
-
-    def _restore_rpdo(self, quiet: bool = True) -> None:
-        for r in self.refs:
-            if r.name in self._synchronous:
-                try:
-                    self._put_rpdo_type(r)
-                except Exception:
-                    if not quiet:
-                        raise
-
-    def _put_rpdo_type(self, ref: Any) -> None:
-        self.session.sdo(ref).download(RPDO2_COMM, 2, bytes([self._rpdo_type[ref.name]]), name=RPDO2_TYPE_NAME)
-        self._synchronous.discard(ref.name)
-
-    def keep_profile(self, drive: str) -> None:
-        """Read ``drive``'s SP/AC/DC before they are changed; :meth:`close` puts them back (review R7:
-        a scaled profile -- SP=AC=DC=1 for a motor with no share -- must not outlive the command)."""
-        if drive not in self._profiles:
-            c = self.clients[drive]
-            self._profiles[drive] = {k: int(c.get(k)) for k in PROFILE_KEYS}
-
-    def close(self, deaf: Sequence[str] = ()) -> None:
-        """Put back everything changed, drive by drive. A failure skips only that write (a drive
-        that does not answer: the rest of that drive; ``deaf``, drives that did not answer the stop:
-        all of it); a second Ctrl-C does not skip the rest of the restore, it is raised once the
-        restore is done (review R8)."""
-        interrupted: BaseException | None = None
-        for r in self.refs:
-            writes: list[Callable[[], None]] = []
-            if r.name in deaf:  # each write would only wait out its timeouts before the guard's exit
-                self._profiles.pop(r.name, None)
-                self._old.pop(r.name, None)
-                self._synchronous.discard(r.name)
-            if r.name in self._synchronous:  # first: a synchronous RPDO2 would hold back the sets below
-                writes.append(functools.partial(self._put_rpdo_type, r))
-            for key, value in self._profiles.pop(r.name, {}).items():
-                writes.append(functools.partial(self.clients[r.name].set, key, 0, value))
-            if r.name in self._old:
-                writes.append(functools.partial(self._put_group_id, r, self._old.pop(r.name)))
-            for write in writes:
-                try:
-                    write()
-                except DriveTimeoutError:
-                    break  # it does not answer: no more waits for it (the guard's exit reports the drive)
-                except Exception:  # the next command's start writes it again; nothing was saved
-                    pass
-                except BaseException as exc:  # a second Ctrl-C: finish the restore first
-                    interrupted = interrupted or exc
-        if interrupted is not None:
-            raise interrupted
-
-    def _put_group_id(self, ref: Any, value: int) -> None:
-        self.session.sdo(ref).download(GROUP_INDEX, 0, bytes([value]), name="group id")
-
-    def __exit__(self, *exc: Any) -> None:
-        deaf: Sequence[str] = ()
-        try:
-            if self.stop is not None:
-                deaf = self.stop() or ()  # every motor stopped before the restore (review R8)
-        finally:
-            self.close(deaf)
-
-
-def stop_motors(guard: Any, refs: Sequence[Any], settings: Any) -> Callable[[], list[str]]:
-    """The stop :class:`CommonStart` runs before its restore: the guard's stop to every motor
-    (motion.stop_drive: TC=0 in torque mode, ST or JV=0 + BG as motion.stop_method says; a motor
-    that is off gets nothing), one drive after the other, without waiting for standstill -- the
-    guard's exit then waits for it, switches off and reports. Never raises (an error of one drive
-    must not leave the next unstopped); no sign of life is asked of the guard here, since after a
-    signal its check raises at once. Returns the drives that did not answer."""
-    def stop() -> list[str]:
-        from sherpa_cli.errors import CommunicationError
-        from sherpa_cli.ops.motion import stop_drive
-
-        deaf = []
-        for r in refs:
-            try:
-                stop_drive(guard.client(r), unit_mode=guard.unit_mode(r), method=settings.stop_method,
-                           standstill_timeout=0.0, poll_interval=settings.poll_interval,
-                           standstill_velocity=settings.standstill_velocity)
-            except CommunicationError:
-                deaf.append(r.name)
-            except Exception:
-                pass
-        return deaf
-    return stop
 
 
 # --------------------------------------------------------------------------- running it
@@ -561,7 +340,7 @@ class MoveResult:
 
 
 def _refs(cfg: ArmConfig, drives: Sequence[str]) -> list[Any]:
-    from sherpa_cli.ops.session import DriveRef
+    from sherpa_cli.bus.session import DriveRef
 
     return [DriveRef(d, cfg.drives[d].bus, cfg.drives[d].node, cfg.drives[d]) for d in drives]
 
@@ -657,7 +436,7 @@ def _open_trace(stack: contextlib.ExitStack, session: Any, refs: Sequence[Any], 
         trace = PolledTrace(drives)
         trace.source = "polled PX (--poll)"
         return trace
-    from sherpa_cli.ops.record import Recorder
+    from sherpa_cli.log.record import Recorder
 
     rate, note = record_rate(session.cfg, refs)
     try:
@@ -676,11 +455,12 @@ def run_move(session: Any, pair: PairConfig, request: MoveRequest, *, guard_fact
              trace_factory: Callable[[tuple[str, str]], Any] | None = None) -> MoveResult:
     """Plan, then move both motors inside the motion guard with the limit watch, recording both.
 
-    ``recorder_kw`` goes to ops/record.py's Recorder (``clock``, ``sync_factory``: tests);
+    ``recorder_kw`` goes to log/record.py's Recorder (``clock``, ``sync_factory``: tests);
     ``trace_factory(drives)`` replaces the recording with anything that has ``add(t, motors)``,
     ``samples`` and ``source`` (PX is then polled, as with --poll)."""
     from sherpa_cli.ops.joint_jog import move_to, stop_now, wait_standstill
-    from sherpa_cli.ops.motion import MotionGuard, MotionSettings
+    from sherpa_cli.motion.guard import MotionGuard
+    from sherpa_cli.motion.settings import MotionSettings
 
     cfg = session.cfg
     method, group_id = pair_settings(cfg)

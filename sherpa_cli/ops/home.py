@@ -16,7 +16,7 @@ Four kinds, chosen from the config:
   counters are set by an immediate home event so that (PX_a + PX_b, PX_a - PX_b) = (Σ, Δ).
 - ``abs_encoder``: no motion: read the encoder, set PX from it by an immediate home event.
 
-After success each drive gets the calibration mark (ops/calibration.mark_calibrated). Every motion
+After success each drive gets the calibration mark (motion/calibration.mark_calibrated). Every motion
 runs inside the motion guard (fault check, dead-man, stop on every exit path).
 
 ``plan_home`` needs only the config; ``run_home`` takes an open session and returns a
@@ -32,11 +32,13 @@ from typing import Any, Callable, Literal, Sequence
 
 from sherpa_cli.config.model import ArmConfig, JointConfig, JointRole, SwitchConfig, SwitchKind
 from sherpa_cli.errors import SafetyError, UsageError
-from sherpa_cli.ops import calibration
-from sherpa_cli.ops.motion import MotionGuard, MotionSettings, fault_reason
-from sherpa_cli.ops.targets import drive_ref
+from sherpa_cli.motion import calibration
+from sherpa_cli.motion.guard import MotionGuard
+from sherpa_cli.motion.settings import MotionSettings
+from sherpa_cli.motion.stopping import fault_reason
+from sherpa_cli.bus.targets import drive_ref
+from sherpa_cli.elmo.protocol import UM_POSITION
 
-UM_POSITION = 5
 KINDS = ("home_switch", "end_switches", "pair", "abs_encoder")
 
 log = logging.getLogger(__name__)
@@ -209,7 +211,7 @@ def _pair_unit(cfg: ArmConfig, pair_name: str) -> HomeUnit | str:
 def plan_home(cfg: ArmConfig, names: Sequence[str] | None = None, *, measure_range: bool = False) -> HomePlan:
     """What `home` would do. ``names``: joints, pairs, Σ/Δ joints or drives; default every joint
     that can be homed (pairs as one unit). A named joint that cannot be homed is a UsageError."""
-    from sherpa_cli.ops import targets
+    from sherpa_cli.bus import targets
 
     wanted: list[tuple[str, str]] = []  # ("joint"|"pair", name) in order
     if names:
@@ -406,7 +408,7 @@ class _Runner:
                 raw = int(c.get("PY"))
                 read_from = dname
             else:
-                from sherpa_cli.ops import encoder
+                from sherpa_cli.devices import encoder
 
                 dev = self.cfg.device_by_source(src)
                 if dev is None:
@@ -690,7 +692,7 @@ def _switch_label(sw: SwitchConfig) -> str:
 
 def wiring_plan(cfg: ArmConfig, name: str) -> list[tuple[JointConfig, SwitchConfig, tuple[str, ...]]]:
     """Each switch of the joint (or of both joints of a pair) and the drives it is wired to."""
-    from sherpa_cli.ops import targets
+    from sherpa_cli.bus import targets
 
     t = targets.resolve_one(cfg, name)
     if not t.joints:

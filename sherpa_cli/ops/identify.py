@@ -19,7 +19,7 @@ from sherpa_cli.joints.units import counts_to_rad
 from sherpa_cli.ops.params_read import Progress, open_drive, per_bus
 
 if TYPE_CHECKING:
-    from sherpa_cli.ops.session import ArmSession
+    from sherpa_cli.bus.session import ArmSession
 
 STATE_KEYS = ("MO", "UM", "SR", "MF", "PX")
 
@@ -205,7 +205,7 @@ def identify_devices(session: Any, names: Sequence[str]) -> list[DeviceIdentity]
     """Identity by SDO (0x1000, 0x1018:1, 0x1008) and, for an encoder, its position (0x6004)."""
     from sherpa_cli.devices import CanOpenEncoder, device_class
     from sherpa_cli.errors import SdoError
-    from sherpa_cli.ops.targets import DriveRef
+    from sherpa_cli.bus.targets import DriveRef
 
     cfg: ArmConfig = session.cfg
     out = []

@@ -21,9 +21,12 @@ from sherpa_cli.config.model import ArmConfig, JointConfig, JointRole
 from sherpa_cli.elmo.faults import decode_sr, describe_mf
 from sherpa_cli.errors import SafetyError, UsageError
 from sherpa_cli.joints.units import counts_to_rad, rad_per_s_to_counts_per_s, rad_to_counts
-from sherpa_cli.ops.motion import UM_POSITION, UM_TORQUE, GuardReport, MotionGuard, MotionSettings
-from sherpa_cli.ops import targets
-from sherpa_cli.ops.targets import DriveRef
+from sherpa_cli.elmo.protocol import UM_POSITION, UM_TORQUE
+from sherpa_cli.motion.guard import MotionGuard
+from sherpa_cli.motion.report import GuardReport
+from sherpa_cli.motion.settings import MotionSettings
+from sherpa_cli.bus import targets
+from sherpa_cli.bus.targets import DriveRef
 
 MODES = ("position", "velocity", "torque")
 
@@ -102,7 +105,7 @@ class JogResult:
 
 
 def resolve_jog_target(cfg: ArmConfig, text: str) -> JogTarget:
-    """A plain joint, the drive of one, or BUS:NODE (ops/targets.py decides what a name means);
+    """A plain joint, the drive of one, or BUS:NODE (bus/targets.py decides what a name means);
     a differential pair, its Σ/Δ joints and its motors are refused here."""
     t = targets.resolve_one(cfg, text)
     if t.pair is not None:
@@ -135,7 +138,7 @@ def check_request(target: JogTarget, req: JogRequest) -> None:
             raise UsageError("--for applies to --velocity and --torque jogs; a position move ends at its target")
         if req.to is not None and joint is not None and target.cpr is not None:
             goal, (lo, hi) = _counts_to(target, req.to), joint.normal_range
-            if not lo <= goal <= hi:  # --by is checked once PX is known (_precheck)
+            if not lo <= goal <= hi:  # --by is checked once PX is known (precheck)
                 raise UsageError(f"{joint.name}: target {goal} counts is outside the joint's normal range "
                                   f"[{lo}, {hi}]", hint="jog moves a joint only inside its normal range")
     elif req.mode == "velocity":
@@ -177,7 +180,7 @@ def run_jog(session: Any, target: JogTarget, req: JogRequest, *, settings: Motio
     """Move as asked inside a MotionGuard and return where it ended; every exit path stops the motor."""
     check_request(target, req)
     ref = target.ref
-    cal = _precheck(session, target, req)
+    cal = precheck(session, target, req)
     guard = MotionGuard(session, [ref], settings=settings, clock=clock, sleep=sleep, keep=keep, on_event=on_event)
     state: dict[str, Any] = {"start": None, "t0": None, "t_end": None, "target": None, "command": "",
                              "ended_by": ""}
@@ -211,14 +214,14 @@ def run_jog(session: Any, target: JogTarget, req: JogRequest, *, settings: Motio
                      breach=state.get("breach"), recovered_to=state.get("recovered_to"), calibration=cal)
 
 
-def _precheck(session: Any, target: JogTarget, req: JogRequest) -> Any:
+def precheck(session: Any, target: JogTarget, req: JogRequest) -> Any:
     """Before anything is armed (wave/jog, docs/motion.md): a position move must stay inside the
     joint's NORMAL range and needs a calibrated joint (or ``uncalibrated``). Reads PX and the
     calibration flag; writes nothing. Returns the calibration found (None for other modes)."""
     joint = target.joint
     if joint is None or req.mode != "position":
         return None
-    from sherpa_cli.ops import calibration
+    from sherpa_cli.motion import calibration
 
     c = session.client(target.ref)
     c.nmt_start()
@@ -251,7 +254,7 @@ def _move(guard: MotionGuard, target: JogTarget, req: JogRequest, settings: Moti
                                        done=done, limit=limit)
     if req.mode == "position":
         goal = _counts_to(target, req.to) if req.to is not None else start + _counts_to(target, req.by)  # type: ignore[arg-type]  # --to or --by
-        if target.joint is not None:  # again with this PX: the joint may have moved since _precheck
+        if target.joint is not None:  # again with this PX: the joint may have moved since precheck
             lo, hi = target.joint.normal_range
             if not lo <= goal <= hi:
                 raise UsageError(f"{target.joint.name}: target {goal} counts is outside the joint's normal range "
@@ -305,7 +308,7 @@ def _watch(guard: MotionGuard, c: Any, target: JogTarget, clock: Callable[[], fl
         elapsed = clock() - t0
         if on_progress is not None:
             on_progress(JogProgress(elapsed, px, counts_to_rad(px, target.cpr) if target.cpr else None))
-        if target.joint is not None and _limit_breach(guard, c, target, px, settings, clock, sleep, state):
+        if target.joint is not None and limit_breach(guard, c, target, px, settings, clock, sleep, state):
             return
         if not sr.motor_on:
             mf = int(guard.query(target.ref, "MF"))
@@ -321,11 +324,13 @@ def _watch(guard: MotionGuard, c: Any, target: JogTarget, clock: Callable[[], fl
         sleep(settings.poll_interval if limit is None else min(settings.poll_interval, max(limit - elapsed, 0.0)))
 
 
-def _limit_breach(guard: MotionGuard, c: Any, target: JogTarget, px: int, settings: MotionSettings,
+def limit_breach(guard: MotionGuard, c: Any, target: JogTarget, px: int, settings: MotionSettings,
                   clock: Callable[[], float], sleep: Callable[[float], None], state: dict[str, Any]) -> bool:
-    """The joint-limit watch (seed 6.1, ops/limit_watch.py): past the full range, stop at once, send
+    """The joint-limit watch (seed 6.1, motion/limit_watch.py): past the full range, stop at once, send
     nothing more of the jog, and move the joint back (position mode) to the nearest normal edge."""
-    from sherpa_cli.ops import joint_jog, limit_watch, motion
+    from sherpa_cli.motion import limit_watch
+    from sherpa_cli.motion import stopping
+    from sherpa_cli.ops import joint_jog
 
     joint = target.joint
     assert joint is not None
@@ -336,7 +341,7 @@ def _limit_breach(guard: MotionGuard, c: Any, target: JogTarget, px: int, settin
     clients = {target.ref.name: c}
     # the configured stop (motion.stop_method: ST, or JV=0 + BG where ST must not be used), TC=0 first
     # in torque mode, then the bounded wait for standstill
-    _how, standstill, problems = motion.stop_drive(
+    _how, standstill, problems = stopping.stop_drive(
         c, unit_mode=guard.unit_mode(target.ref), method=settings.stop_method,
         standstill_timeout=settings.standstill_timeout, poll_interval=settings.poll_interval, clock=clock,
         sleep=sleep, pulse=guard.check, standstill_velocity=settings.standstill_velocity)

@@ -1,6 +1,6 @@
 """Jogging the Σ or Δ joint of a differential pair, or one motor of a pair, inside the motion guard,
 with the joint-limit watch (docs/motion.md). Plain joints go through ops/jog.py, which uses the same
-watch (ops/limit_watch.py), normal-range and calibration checks.
+watch (motion/limit_watch.py), normal-range and calibration checks.
 
 What a jog means per kind of axis (joints/diffpair.py for the transform):
 
@@ -17,7 +17,7 @@ both motors start and arrive together and the held joint does not drift (seed Fi
 Everything that can be refused is refused before the guard arms anything: a name that is not a
 pair joint or pair motor, a position outside the joint's NORMAL range, a speed above the joint's limit, a current
 above the configured continuous limit, a velocity or torque jog without a time limit, and a
-position move of a joint that is not calibrated (ops/calibration.py) unless ``uncalibrated``.
+position move of a joint that is not calibrated (motion/calibration.py) unless ``uncalibrated``.
 """
 
 from __future__ import annotations
@@ -31,11 +31,11 @@ from typing import Any, Callable, Mapping
 from sherpa_cli.config.model import ArmConfig, JointConfig, PairConfig
 from sherpa_cli.errors import SafetyError, UsageError
 from sherpa_cli.joints import diffpair, units
-from sherpa_cli.ops import calibration, limit_watch
-from sherpa_cli.ops.limit_watch import Breach, WatchedJoint
+from sherpa_cli.motion import calibration, limit_watch
+from sherpa_cli.motion.limit_watch import Breach, WatchedJoint
+from sherpa_cli.elmo.protocol import UM_POSITION, UM_TORQUE
 
 Range = tuple[int, int]
-UM_TORQUE, UM_POSITION = 1, 5
 MODES = ("position", "velocity", "torque")
 
 
@@ -71,9 +71,9 @@ class Axis:
 
 
 def resolve_axis(cfg: ArmConfig, name: str) -> Axis:
-    """The axis behind a Σ/Δ joint, or one motor of a pair (by drive name or BUS:NODE); ops/targets.py
+    """The axis behind a Σ/Δ joint, or one motor of a pair (by drive name or BUS:NODE); bus/targets.py
     decides what the name means. Plain joints go through ops/jog.py; a whole pair is refused."""
-    from sherpa_cli.ops import targets
+    from sherpa_cli.bus import targets
 
     t = targets.resolve_one(cfg, name)
     pair = t.pair
@@ -304,7 +304,7 @@ class JogResult:
 
 
 def _refs(cfg: ArmConfig, drives: tuple[str, ...]):
-    from sherpa_cli.ops.session import DriveRef
+    from sherpa_cli.bus.session import DriveRef
 
     return [DriveRef(d, cfg.drives[d].bus, cfg.drives[d].node, cfg.drives[d]) for d in drives]
 
@@ -344,7 +344,8 @@ def run(session: Any, axis: Axis, request: JogRequest, *, guard_factory: Callabl
     motor on the way out. A breach stops the jog at once and brings the joint back (position mode)
     to the nearest edge of its normal range; the result says so (``ok`` False). ``on_progress``
     gets the watched joints' positions (counts) at every sample."""
-    from sherpa_cli.ops.motion import MotionGuard, MotionSettings
+    from sherpa_cli.motion.guard import MotionGuard
+    from sherpa_cli.motion.settings import MotionSettings
 
     cfg = session.cfg
     p, motors, cals = prepare(session, axis, request)
@@ -377,15 +378,15 @@ def _run_guarded(guard: Any, session: Any, cfg: ArmConfig, axis: Axis, p: JogPla
                  settings: Any, joints_start: Mapping[str, int], result: "JogResult",
                  clock: Callable[[], float], sleep: Callable[[float], None],
                  on_progress: Callable[[Mapping[str, int]], None] | None = None) -> dict[str, int]:
-    from sherpa_cli.ops import diffdrive
+    from sherpa_cli.motion import pair_start
 
     with guard, contextlib.ExitStack() as stack:
         clients = {d: guard.client(by_name[d]) for d in axis.drives}
         # a Σ/Δ joint starts both motors together, as `diffdrive move` does (motion.pair_start)
-        method = diffdrive.pair_settings(cfg)[0] if axis.kind in ("sigma", "delta") else "sequential"
+        method = pair_start.pair_settings(cfg)[0] if axis.kind in ("sigma", "delta") else "sequential"
         refs = [by_name[d] for d in axis.drives]
-        start = stack.enter_context(diffdrive.CommonStart(session, refs, clients, method, cfg.motion.pair_group_id,
-                                                          stop=diffdrive.stop_motors(guard, refs, settings)))
+        start = stack.enter_context(pair_start.CommonStart(session, refs, clients, method, cfg.motion.pair_group_id,
+                                                          stop=pair_start.stop_motors(guard, refs, settings)))
 
         def check_drives() -> None:
             """The guard's sign of life, and every moving motor still on (a trip ends the jog)."""
@@ -460,10 +461,11 @@ def _run_guarded(guard: Any, session: Any, cfg: ArmConfig, axis: Axis, p: JogPla
 
 def stop_now(clients: Mapping[str, Any], mode: str, method: str = "auto") -> None:
     """Stop every motor of the jog at once (the stop frames of each, no wait in between); nothing
-    queued is sent after this. The guard's one stop path (ops/motion.send_stop): TC=0 first in torque
+    queued is sent after this. The guard's one stop path (motion/stopping.send_stop): TC=0 first in torque
     mode, then by ``method`` (motion.stop_method: auto, st, jv0). A problem (ST refused with ``st``)
     is raised once every motor got its stop."""
-    from sherpa_cli.ops.motion import UM_TORQUE, send_stop
+    from sherpa_cli.elmo.protocol import UM_TORQUE
+    from sherpa_cli.motion.stopping import send_stop
 
     problems = []
     for c in clients.values():

@@ -1,6 +1,6 @@
 """A live jog session: the ops layer under `sherpa jog --interactive` and `sherpa jog --joystick`
-(docs/jog.md). One motion guard (ops/motion.py) around every motor of the chosen joints, the same
-joint limits and limit watch as `sherpa jog` (ops/limit_watch.py, ops/joint_jog.py), and small
+(docs/jog.md). One motion guard (motion/guard.py) around every motor of the chosen joints, the same
+joint limits and limit watch as `sherpa jog` (motion/limit_watch.py, ops/joint_jog.py), and small
 commands a user interface calls as keys are pressed or a joystick moves:
 
 - :meth:`LiveJog.step` moves a joint by N counts (position mode, only to a target inside the
@@ -33,9 +33,13 @@ from sherpa_cli.elmo.faults import decode_sr, describe_mf, sr_problems
 from sherpa_cli.errors import ExitCode, SafetyError, SherpaError, UsageError
 from sherpa_cli.joints import diffpair
 from sherpa_cli.joints.units import counts_to_rad
-from sherpa_cli.ops import calibration, joint_jog, limit_watch, targets
-from sherpa_cli.ops.limit_watch import WatchedJoint
-from sherpa_cli.ops.motion import UM_POSITION, UM_TORQUE, MotionGuard, MotionSettings
+from sherpa_cli.bus import targets
+from sherpa_cli.motion import calibration, limit_watch
+from sherpa_cli.ops import joint_jog
+from sherpa_cli.motion.limit_watch import WatchedJoint
+from sherpa_cli.elmo.protocol import UM_POSITION, UM_TORQUE
+from sherpa_cli.motion.guard import MotionGuard
+from sherpa_cli.motion.settings import MotionSettings
 
 MODES = ("position", "velocity", "torque")
 

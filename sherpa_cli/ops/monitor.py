@@ -28,13 +28,13 @@ from sherpa_cli.config.model import ArmConfig
 from sherpa_cli.elmo.faults import Emcy, Fault, decode_error_field, decode_mf, sr_problems
 from sherpa_cli.errors import SdoError, SherpaError, UsageError
 from sherpa_cli.ops.identify import JointPosition, joint_positions, row_joint
-from sherpa_cli.ops.canopen_names import NMT_STATES, nmt_text
-from sherpa_cli.ops.targets import DriveRef
+from sherpa_cli.bus.canopen_names import NMT_STATES, nmt_text
+from sherpa_cli.bus.targets import DriveRef
+from sherpa_cli.elmo.protocol import HEARTBEAT_BASE
 
 if TYPE_CHECKING:
-    from sherpa_cli.ops.session import ArmSession
+    from sherpa_cli.bus.session import ArmSession
 
-HEARTBEAT_BASE = 0x700
 POLLED = ("MO", "UM", "PX", "SR", "MF")
 PRODUCER_HEARTBEAT = (0x1017, 0)
 ERROR_FIELD = (0x1003, 1)

@@ -18,12 +18,12 @@ from sherpa_cli import __version__
 from sherpa_cli.bus.parallel import Outcome, run_concurrently
 from sherpa_cli.config.model import ArmConfig
 from sherpa_cli.errors import DriveRefusedError, SherpaError
-from sherpa_cli.joints.limits import PARAM_ORDER
+from sherpa_cli.joints.params import PARAM_ORDER
 from sherpa_cli.ops.params_file import DriveDump, ParamDump
 
 if TYPE_CHECKING:
     from sherpa_cli.elmo.client import DriveClient
-    from sherpa_cli.ops.session import ArmSession
+    from sherpa_cli.bus.session import ArmSession
 
 # 0x1018 sub 1-4 and the strings of 0x1008/9/A (CiA 301), in IDENTITY_KEYS order.
 IDENTITY_OBJECTS: tuple[tuple[str, int, int, str], ...] = (
@@ -56,7 +56,7 @@ def read_identity(sdo: Any) -> tuple[dict[str, Any], dict[str, str]]:
     malformed answer) raises the SdoError.
     """
     from sherpa_cli.errors import SdoError
-    from sherpa_cli.ops.canopen_names import decode_text
+    from sherpa_cli.bus.canopen_names import decode_text
 
     values: dict[str, Any] = {}
     notes: dict[str, str] = {}
@@ -122,7 +122,7 @@ def per_bus(session: ArmSession, drives: Sequence[str], work: Callable[[str], An
 
 
 def ref_of(cfg: ArmConfig, drive: str):
-    from sherpa_cli.ops.targets import drive_ref
+    from sherpa_cli.bus.targets import drive_ref
 
     return drive_ref(cfg, drive)
 

@@ -33,12 +33,12 @@ from sherpa_cli.bus.parallel import run_concurrently
 from sherpa_cli.elmo import codec
 from sherpa_cli.elmo.commands import COMMANDS, format_value, param_key, parse_param_key
 from sherpa_cli.errors import CodecError, ConfigError, DriveRefusedError, Location, SafetyError, SherpaError
-from sherpa_cli.ops import calibration
+from sherpa_cli.motion import calibration
 
 if TYPE_CHECKING:
     from sherpa_cli.elmo.client import DriveClient
     from sherpa_cli.ops.save_ledger import SaveLedger
-    from sherpa_cli.ops.session import ArmSession
+    from sherpa_cli.bus.session import ArmSession
 
 ParamValue = int | float
 
@@ -314,7 +314,7 @@ def _broken_ids(values: Mapping[str, ParamValue | None], key: str) -> list[int]:
 # --------------------------------------------------------------------------- plan (reads only)
 
 def _client(session: ArmSession, t: DriveTarget) -> DriveClient:
-    from sherpa_cli.ops.session import DriveRef
+    from sherpa_cli.bus.session import DriveRef
 
     cfg_drive = session.cfg.drives.get(t.drive)
     return session.client(DriveRef(t.drive, t.bus, t.node, cfg_drive))
@@ -322,7 +322,7 @@ def _client(session: ArmSession, t: DriveTarget) -> DriveClient:
 
 def read_serial(session: ArmSession, t: DriveTarget) -> int:
     """0x1018:4 over SDO (the drive's serial number); an SdoError names the drive."""
-    from sherpa_cli.ops.session import DriveRef
+    from sherpa_cli.bus.session import DriveRef
 
     data = session.sdo(DriveRef(t.drive, t.bus, t.node, session.cfg.drives.get(t.drive))).upload(
         0x1018, 4, name="serial number")

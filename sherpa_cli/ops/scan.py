@@ -22,15 +22,16 @@ from typing import TYPE_CHECKING, Any, Callable, Iterable, Mapping
 from sherpa_cli.bus.parallel import run_concurrently
 from sherpa_cli.config.model import ArmConfig
 from sherpa_cli.errors import SdoError, SherpaError
-from sherpa_cli.ops.canopen_names import VENDORS, decode_text, nmt_text
-from sherpa_cli.ops.sdo import DriveSdo
+from sherpa_cli.bus.canopen_names import VENDORS, decode_text, nmt_text
+from sherpa_cli.bus.sdo import DriveSdo
+from sherpa_cli.elmo.protocol import HEARTBEAT_BASE, NMT_ID, NMT_RESET_COMM, SDO_RX_BASE, SDO_TX_BASE
 
 if TYPE_CHECKING:
-    from sherpa_cli.ops.session import ArmSession
+    from sherpa_cli.bus.session import ArmSession
 
 NODE_IDS = range(1, 128)
-SDO_TX, SDO_RX, HEARTBEAT = 0x580, 0x600, 0x700
-NMT_COB_ID, NMT_RESET_COMMUNICATION = 0x000, 0x82
+SDO_TX, SDO_RX, HEARTBEAT = SDO_TX_BASE, SDO_RX_BASE, HEARTBEAT_BASE
+NMT_COB_ID, NMT_RESET_COMMUNICATION = NMT_ID, NMT_RESET_COMM
 UPLOAD_DEVICE_TYPE = bytes([0x40, 0x00, 0x10, 0x00, 0, 0, 0, 0])
 SDO_ABORT = 0x80
 

@@ -1,8 +1,8 @@
 """`sherpa log step`: the seed's Section 9 experiment in one call (docs/log.md).
 
-Start recording (ops/record.py), command the step at t = 0 through the motion guard
-(ops/motion.py), record until the response has settled (or the time is up), stop, and compute
-the step metrics (ops/step_metrics.py). t = 0 is the moment the command was asked for: when
+Start recording (log/record.py), command the step at t = 0 through the motion guard
+(motion/guard.py), record until the response has settled (or the time is up), stop, and compute
+the step metrics (log/step_metrics.py). t = 0 is the moment the command was asked for: when
 the drive first has to change its unit mode or switch its motor on (MO/UM switch, seed
 Fig. 9.1), that time is in the dead time and reported on its own as ``switch_s``.
 
@@ -12,7 +12,7 @@ Fig. 9.1), that time is in the dead time and reported on its own as ``switch_s``
 
 The checks are `jog`'s (ops/jog.py): a position goal outside the joint's normal range is refused,
 and so is a position step of a joint that is not calibrated unless ``uncalibrated``; while it waits
-for the response, the joint-limit watch (ops/limit_watch.py) stops the step and brings the joint
+for the response, the joint-limit watch (motion/limit_watch.py) stops the step and brings the joint
 back into its normal range when it leaves its full range -- in torque mode too, where no drive
 limit acts. The motor is stopped before the recording is torn down (review R6), so the drive
 never keeps its JV/TC while the recorder drains and restores its PDOs.
@@ -27,11 +27,15 @@ from typing import Any, Callable, Protocol
 
 from sherpa_cli.errors import UsageError
 from sherpa_cli.joints.units import counts_to_rad, rad_per_s_to_counts_per_s, rad_to_counts
-from sherpa_cli.ops.jog import JogRequest, JogTarget, _limit_breach, _precheck, check_request, resolve_jog_target
-from sherpa_cli.ops.motion import UM_POSITION, UM_TORQUE, GuardReport, MotionGuard, MotionSettings, stop_drive
-from sherpa_cli.ops.record import Recorder, bus_budget
-from sherpa_cli.ops.recording import Recording
-from sherpa_cli.ops.step_metrics import StepMetrics, step_metrics
+from sherpa_cli.ops.jog import JogRequest, JogTarget, limit_breach, precheck, check_request, resolve_jog_target
+from sherpa_cli.elmo.protocol import UM_POSITION, UM_TORQUE
+from sherpa_cli.motion.guard import MotionGuard
+from sherpa_cli.motion.report import GuardReport
+from sherpa_cli.motion.settings import MotionSettings
+from sherpa_cli.motion.stopping import stop_drive
+from sherpa_cli.log.record import Recorder, bus_budget
+from sherpa_cli.log.recording import Recording
+from sherpa_cli.log.step_metrics import StepMetrics, step_metrics
 
 SIGNAL = {"position": "pos", "velocity": "vel", "torque": "cur"}
 PRE_S = 0.1  # s recorded before the command
@@ -72,7 +76,7 @@ class StepResult:
 def resolve_step_target(cfg: Any, text: str) -> JogTarget:
     """The joint to step: a plain joint or its drive. A differential pair (its Σ/Δ joints or its
     motors) is refused: a Σ or Δ step moves both motors at once, which is `diffdrive move`'s."""
-    from sherpa_cli.ops.targets import resolve_one
+    from sherpa_cli.bus.targets import resolve_one
 
     t = resolve_one(cfg, text)
     if t.pair is not None:
@@ -120,7 +124,7 @@ def run_step(session: Any, target: JogTarget, mode: str, value: float, *, durati
     and the waits here); without it wall time, ``sleep`` and ``recorder_kw``."""
     req = step_request(target, mode, value, duration=duration, uncalibrated=uncalibrated)
     # jog's checks before anything is armed: a position goal inside the normal range, a calibrated joint
-    _precheck(session, target, req)
+    precheck(session, target, req)
     ref, joint = target.ref, target.joint
     assert joint is not None  # step_request refused a target without a plain joint
     current = all(b.fits for b in bus_budget(session.cfg, [ref], rate, current=True))
@@ -144,7 +148,7 @@ def run_step(session: Any, target: JogTarget, mode: str, value: float, *, durati
             if mode == "position":
                 goal = start_counts + rad_to_counts(value, joint.cpr)
                 lo, hi = joint.normal_range
-                if not lo <= goal <= hi:  # again with this PX: the joint may have moved since _precheck
+                if not lo <= goal <= hi:  # again with this PX: the joint may have moved since precheck
                     raise UsageError(f"{joint.name}: target {goal} counts is outside the joint's normal range "
                                      f"[{lo}, {hi}]", hint="log step moves a joint only inside its normal range")
                 guard.enable(ref, UM_POSITION)
@@ -210,7 +214,7 @@ def _until_settled(guard: MotionGuard, rec: Recorder, joint: str, signal: str, t
         guard.check()
         now = rec.now()
         px = int(guard.query(jog_target.ref, "PX"))
-        if _limit_breach(guard, guard.client(jog_target.ref), jog_target, px, settings, clock, sleep, state):
+        if limit_breach(guard, guard.client(jog_target.ref), jog_target, px, settings, clock, sleep, state):
             state["t_stop"] = now  # the watch stopped the motor here; the way back is not the step
             return state["ended_by"]
         elapsed = now - t_cmd

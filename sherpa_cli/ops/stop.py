@@ -15,8 +15,10 @@ from dataclasses import dataclass, field
 from typing import Any, Callable, Sequence
 
 from sherpa_cli.bus.parallel import run_concurrently
-from sherpa_cli.ops.motion import UM_TORQUE, MotionSettings, _ask_patiently, _why, stop_drive
-from sherpa_cli.ops.session import DriveRef
+from sherpa_cli.elmo.protocol import UM_TORQUE
+from sherpa_cli.motion.settings import MotionSettings
+from sherpa_cli.motion.stopping import ask_patiently, why, stop_drive
+from sherpa_cli.bus.session import DriveRef
 
 log = logging.getLogger(__name__)
 
@@ -48,12 +50,12 @@ def stop_one(client: Any, ref: DriveRef, settings: MotionSettings, *, clock: Cal
     try:
         client.nmt_start()
     except Exception as exc:
-        r.problems.append(f"NMT start: {_why(exc)}")
+        r.problems.append(f"NMT start: {why(exc)}")
     try:
-        um = int(_ask_patiently(client, "UM", clock, sleep, client.settings.mo_confirm_timeout,
+        um = int(ask_patiently(client, "UM", clock, sleep, client.settings.mo_confirm_timeout,
                                 settings.poll_interval))
     except Exception as exc:
-        log.warning("%s: UM unreadable (%s); stopping as in torque mode (TC=0, then ST)", ref.name, _why(exc))
+        log.warning("%s: UM unreadable (%s); stopping as in torque mode (TC=0, then ST)", ref.name, why(exc))
         um = UM_TORQUE
     motor_read_off = False
     try:
@@ -65,13 +67,13 @@ def stop_one(client: Any, ref: DriveRef, settings: MotionSettings, *, clock: Cal
         motor_read_off = r.stopped_by == "motor was off"
     except Exception as exc:
         r.stopped_by = "not stopped"
-        r.problems.append(f"stop: {_why(exc)}")
+        r.problems.append(f"stop: {why(exc)}")
     if not motor_read_off:
         try:
             client.motor_off()
             r.motor_off = True
         except Exception as exc:
-            r.problems.append(f"MO=0: {_why(exc)}")
+            r.problems.append(f"MO=0: {why(exc)}")
     return r
 
 

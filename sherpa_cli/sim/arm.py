@@ -24,10 +24,9 @@ from sherpa_cli.sim.clock import Clock, RealClock
 from sherpa_cli.sim.drive import SimDrive
 from sherpa_cli.sim.encoder import SimEncoder
 from sherpa_cli.sim.settings import SimSettings
+from sherpa_cli.elmo.protocol import NMT_ID, SDO_RX_BASE, SYNC_ID
 
-NMT_ID = 0x000
-SYNC_ID = 0x080
-SDO_RX = 0x600
+SDO_RX = SDO_RX_BASE
 # counts either side of a home switch's position where it reads pressed; a joint that crosses the
 # position within one model step also presses it for that step (a fast pass is never missed), so the
 # switch's edge -- where homing sets PX -- is at its configured position to within a count

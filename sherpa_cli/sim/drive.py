@@ -22,18 +22,21 @@ from sherpa_cli.sim.interpreter import Refused
 from sherpa_cli.sim.inputs import Inputs
 from sherpa_cli.sim.motor import Motor, motion_status
 from sherpa_cli.sim.od import ABORT_NO_SUBINDEX, ABORT_RANGE, ABORT_READ_ONLY, ODError, OdValue, build_od, flash_key
-from sherpa_cli.sim.pdo import SYNC_ID, TpdoTable, is_pdo_object
+from sherpa_cli.sim.pdo import TpdoTable, is_pdo_object
+from sherpa_cli.elmo.protocol import SYNC_ID
 from sherpa_cli.sim.params import Value, factory_ram, is_persistent, parse_flash, wrap_int32
 from sherpa_cli.sim.servo import ServoMotor
 from sherpa_cli.sim.settings import SimSettings
+from sherpa_cli.elmo.protocol import (EMCY_BASE, HEARTBEAT_BASE, NMT_ID, NMT_PRE_OP, NMT_RESET_COMM, NMT_RESET_NODE,
+                                      NMT_START, NMT_STOP, RPDO2_BASE, SDO_RX_BASE, TPDO2_BASE)
+from sherpa_cli.elmo.protocol import NMT_OPERATIONAL, NMT_PRE_OPERATIONAL, NMT_STOPPED
 
 Frame = tuple[int, bytes]
 TIME_EPS = 1e-9  # s; float error of summed clock steps, far below any drive timing
 
-NMT, EMCY_BASE, TPDO2_BASE, RPDO2_BASE, SDO_RX_BASE, HEARTBEAT_BASE = 0x000, 0x80, 0x280, 0x300, 0x600, 0x700
+NMT = NMT_ID
 RPDO2_COMM, RPDO_SYNC_MAX = 0x1401, 240  # transmission types 0..240: executed at the next SYNC
-NMT_START, NMT_STOP, NMT_PRE_OP, NMT_RESET_NODE, NMT_RESET_COMM = 0x01, 0x02, 0x80, 0x81, 0x82
-PRE_OPERATIONAL, OPERATIONAL, STOPPED = 0x7F, 0x05, 0x04  # heartbeat state bytes
+PRE_OPERATIONAL, OPERATIONAL, STOPPED = NMT_PRE_OPERATIONAL, NMT_OPERATIONAL, NMT_STOPPED  # heartbeat state bytes
 
 MF_HEARTBEAT, MF_SPEED_LIMIT, MF_POSITION_LIMIT = 0x800, 0x20000, 0x400000
 EMCY_HEARTBEAT, EMCY_SPEED_LIMIT, EMCY_POSITION_LIMIT = 0x8130, 0x8481, 0x8680

@@ -4,7 +4,7 @@ which answer and which Elmo error code. The drive supplies state; this module de
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Protocol
 
 from sherpa_cli.elmo.codec import decode_request, encode_error_reply, encode_reply
 from sherpa_cli.elmo.commands import COMMANDS, CommandSpec
@@ -12,7 +12,24 @@ from sherpa_cli.errors import CodecError
 from sherpa_cli.sim.params import coerce, in_range, is_float
 
 if TYPE_CHECKING:
-    from sherpa_cli.sim.drive import SimDrive
+    from sherpa_cli.sim.settings import SimSettings
+
+
+class InterpretedDrive(Protocol):
+    """What the interpreter needs of a drive (sim/drive.py's SimDrive is one); a Protocol, so the
+    interpreter does not import the drive that imports it."""
+
+    settings: SimSettings
+    last_error: int
+
+    @property
+    def motor_on(self) -> bool: ...
+
+    def read_param(self, key: str) -> int | float: ...
+
+    def write_param(self, key: str, value: int | float) -> None: ...
+
+    def execute(self, letters: str) -> None: ...
 
 EC_BAD_COMMAND = 2
 EC_BAD_INDEX = 3
@@ -30,7 +47,7 @@ class Refused(Exception):
         self.code = code
 
 
-def handle(drive: SimDrive, data: bytes) -> bytes | None:
+def handle(drive: InterpretedDrive, data: bytes) -> bytes | None:
     """The TPDO2 reply to one RPDO2 frame, or None when the drive stays silent.
 
     Frames that cannot even be decoded (bad length, lower-case or non-ASCII letters) get no
@@ -69,7 +86,7 @@ def handle(drive: SimDrive, data: bytes) -> bytes | None:
 _RESOLVED: dict[tuple[str, int], tuple[str, CommandSpec]] = {}  # every frame asks; the table never changes
 
 
-def _resolve(drive: SimDrive, letters: str, index: int) -> tuple[str, CommandSpec]:
+def _resolve(drive: InterpretedDrive, letters: str, index: int) -> tuple[str, CommandSpec]:
     """The parameter key (``"LL[3]"``) and the spec at that index; raises Refused like the drive."""
     resolved = _RESOLVED.get((letters, index))
     if resolved is None:
@@ -81,7 +98,7 @@ def _resolve(drive: SimDrive, letters: str, index: int) -> tuple[str, CommandSpe
     return resolved
 
 
-def _spec(drive: SimDrive, letters: str, index: int):
+def _spec(drive: InterpretedDrive, letters: str, index: int):
     spec = COMMANDS.get(letters)
     if spec is None:
         raise Refused(EC_BAD_COMMAND)

@@ -7,7 +7,7 @@ save them (a real drive would; the tool never saves them).
 
 Mappable objects: 0x6064 position actual value (PX, int32), 0x6069 and 0x606C velocity (VX,
 int32, counts/s), 0x6078 current actual value (IQ as int16 mA -- UNCONFIRMED: DS402 says per
-mille of the rated current; the tool's ops/record.py names the same scale).
+mille of the rated current; the tool's log/record.py names the same scale).
 """
 
 from __future__ import annotations
@@ -16,7 +16,6 @@ from typing import Callable, Mapping
 
 from sherpa_cli.sim.od import ABORT_NO_OBJECT, ABORT_NO_SUBINDEX, ABORT_RANGE, ODError
 
-SYNC_ID = 0x080
 MAPPABLE = {(0x6064, 0, 32), (0x6069, 0, 32), (0x606C, 0, 32), (0x6078, 0, 16)}
 ABORT_NOT_MAPPABLE = 0x06040041
 ABORT_PDO_LENGTH = 0x06040042

@@ -15,6 +15,7 @@ from canopen import objectdictionary as od
 from canopen.sdo.exceptions import SdoAbortedError
 
 from sherpa_cli.sim.od import ODError
+from sherpa_cli.elmo.protocol import SDO_TX_BASE
 
 # (index, sub) -> (name, data type, access); sub None = a plain variable
 _OBJECTS: list[tuple[int, int | None, str, int, str]] = [
@@ -135,7 +136,6 @@ CCS_DOWNLOAD_SEGMENT, CCS_DOWNLOAD, CCS_UPLOAD, CCS_UPLOAD_SEGMENT, CCS_ABORT, C
     CCS_BLOCK_DOWNLOAD = 0, 1, 2, 3, 4, 5, 6
 ABORT_COMMAND = 0x05040001  # "client/server command specifier not valid or unknown"
 ABORT_GENERAL = 0x08000000
-SDO_TX_BASE = 0x580
 
 
 class SdoServer:

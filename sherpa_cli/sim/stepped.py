@@ -32,8 +32,8 @@ from typing import Any, Callable
 
 from sherpa_cli.errors import CommunicationError
 from sherpa_cli.sim.clock import ManualClock
+from sherpa_cli.elmo.protocol import SYNC_ID
 
-SYNC_ID = 0x080
 ANSWER_TIMEOUT_S = 5.0  # wall time to wait for the TPDOs of one SYNC (a loaded machine)
 STEPPED_REPLY_S = 0.3  # wall time a client waits for one reply from the stepped in-process arm (a deaf
 # poll costs this much wall time; an answerable one later than this on a loaded machine would cost

@@ -6,8 +6,8 @@ from pathlib import Path
 from typing import Mapping
 
 from sherpa_cli.errors import UsageError
-from sherpa_cli.ops.recording import SIGNALS, UNITS, Recording
-from sherpa_cli.ops.step_metrics import StepMetrics
+from sherpa_cli.log.recording import SIGNALS, UNITS, Recording
+from sherpa_cli.log.step_metrics import StepMetrics
 
 MISSING = "log plot needs matplotlib, an optional extra of sherpa-cli"
 MISSING_HINT = "pip install 'sherpa-cli[plot]' (or pip install matplotlib)"

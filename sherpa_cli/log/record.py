@@ -3,7 +3,7 @@ joint units. The API other commands use (``diffdrive move``, ``log step``)::
 
     with Recorder(session, refs, rate=1000) as rec:
         ...                      # move something
-    recording = rec.recording()  # ops/recording.py: time_s + joint and motor columns
+    recording = rec.recording()  # log/recording.py: time_s + joint and motor columns
 
 What the recorder changes on the drives is RAM only and restored on every exit path, never
 saved: TPDO1 (0x1800/0x1A00) is mapped to position 0x6064 and velocity 0x6069, transmission
@@ -27,12 +27,12 @@ from typing import Any, Callable, Iterable, Sequence
 from sherpa_cli.config.model import ArmConfig
 from sherpa_cli.errors import SherpaError, UsageError
 from sherpa_cli.joints.units import counts_per_s_to_rad_per_s, counts_to_rad
-from sherpa_cli.ops import encoder
-from sherpa_cli.ops.capture import frame_bits
-from sherpa_cli.ops.recording import Recording
-from sherpa_cli.ops.targets import DriveRef
+from sherpa_cli.devices import encoder
+from sherpa_cli.log.capture import frame_bits
+from sherpa_cli.log.recording import Recording
+from sherpa_cli.bus.targets import DriveRef
+from sherpa_cli.elmo.protocol import SYNC_ID
 
-SYNC_ID = 0x080
 MAX_LOAD = 0.90  # share of the bit rate the recording may take (worst-case stuffing counted)
 DEFAULT_BITRATE = 1_000_000  # when the config does not say
 TPDO_POS = 0  # TPDO1: PX + VX (TPDO2 is the binary interpreter's)
@@ -76,7 +76,7 @@ class BusBudget:
 def bus_budget(cfg: ArmConfig, refs: Sequence[DriveRef], rate: float, *, current: bool,
                encoders: Sequence[Any] = ()) -> list[BusBudget]:
     """Per bus: SYNC + one 8-byte TPDO per drive per SYNC (+ a 2-byte current TPDO every 2nd)
-    (+ a 4-byte TPDO per recorded encoder, ``encoders``: DeviceConfig, ops/encoder.py)."""
+    (+ a 4-byte TPDO per recorded encoder, ``encoders``: DeviceConfig, devices/encoder.py)."""
     out = []
     for bus in dict.fromkeys([*(r.bus for r in refs), *(e.bus for e in encoders)]):
         n = sum(1 for r in refs if r.bus == bus)
@@ -189,7 +189,7 @@ class Recorder:
         self.rate = float(rate)
         self.period = 1.0 / self.rate
         self.current = current
-        # CANopen encoders of the recorded joints, recorded beside them (ops/encoder.py)
+        # CANopen encoders of the recorded joints, recorded beside them (devices/encoder.py)
         self.encoders = encoder.recorded_encoders(self.cfg, (r.name for r in self.refs))
         self.budget = bus_budget(self.cfg, self.refs, self.rate, current=current,
                                  encoders=[t.dev for t in self.encoders])

@@ -27,14 +27,12 @@ from typing import Any, Callable, Iterable, Sequence
 from sherpa_cli.config.model import DeviceConfig
 from sherpa_cli.devices import CanOpenEncoder
 from sherpa_cli.errors import SherpaError, UsageError
-from sherpa_cli.ops.targets import DriveRef
+from sherpa_cli.bus.targets import DriveRef
+from sherpa_cli.elmo.protocol import COB_INVALID, NMT_ID, NMT_START, SYNC_ID, TPDO_COMM, TPDO_MAP
 
-NMT_ID, NMT_START = 0x000, 0x01
-SYNC_ID = 0x080
-TPDO1_COMM, TPDO1_MAP, CYCLIC_TIMER = 0x1800, 0x1A00, 0x6200
+TPDO1_COMM, TPDO1_MAP, CYCLIC_TIMER = TPDO_COMM, TPDO_MAP, 0x6200
 POSITION_ENTRY = 0x60040020  # 0x6004:0, 32 bits
 ASYNC_TYPES = (254, 255)
-COB_INVALID = 0x80000000
 WAIT_PERIODS = 5  # cyclic: wait this many timer periods for the first frame (at least MIN_WAIT_S)
 MIN_WAIT_S = 0.3
 
@@ -151,7 +149,7 @@ def _restore(sdo: Any, changed: list[tuple[int, int, int, int]]) -> None:
         raise first
 
 
-# -- recording (ops/record.py Recorder) ---------------------------------------------------------------
+# -- recording (log/record.py Recorder) ---------------------------------------------------------------
 
 def recorded_encoders(cfg: Any, drives: Iterable[str]) -> list["EncoderTrack"]:
     """The CANopen encoders of the joints whose drives are all recorded (``abs_encoder.source`` names

@@ -1,5 +1,5 @@
 """Raw CAN captures: read any python-can log format (and can-utils ``candump -L`` text) as
-:class:`~sherpa_cli.ops.candecode.Frame`, and capture every bus of a session into one file.
+:class:`~sherpa_cli.log.candecode.Frame`, and capture every bus of a session into one file.
 
 Formats by suffix through python-can's readers and writers: ``.log`` (candump, the channel on
 every line), ``.asc``, ``.blf``, ``.csv``, ``.trc``, ``.mf4`` (when asammdf is installed).
@@ -16,7 +16,7 @@ from pathlib import Path
 from typing import Any, Callable, Iterator, Sequence
 
 from sherpa_cli.errors import UsageError
-from sherpa_cli.ops.candecode import Frame, parse_candump_line
+from sherpa_cli.log.candecode import Frame, parse_candump_line
 
 CANDUMP_SUFFIXES = (".log", ".txt", ".candump")
 WRITE_SUFFIXES = (".log", ".asc", ".blf", ".csv", ".trc", ".mf4")

@@ -17,7 +17,7 @@ from sherpa_cli.elmo.codec import decode_reply, decode_request
 from sherpa_cli.elmo.commands import format_value, lookup
 from sherpa_cli.elmo.faults import decode_emcy
 from sherpa_cli.errors import CodecError
-from sherpa_cli.ops.canopen_names import abort_text, nmt_text
+from sherpa_cli.bus.canopen_names import abort_text, nmt_text
 
 KINDS = ("nmt", "sync", "emcy", "heartbeat", "sdo", "interp", "pdo", "other")
 

@@ -1,6 +1,6 @@
 """CANopen names and texts (CiA 301): NMT states, vendor ids, SDO abort codes, VISIBLE_STRING.
 
-Pure tables for scan, identify, monitor and the SDO client (ops/sdo.py); no I/O here.
+Pure tables for scan, identify, monitor and the SDO client (bus/sdo.py); no I/O here.
 """
 
 from __future__ import annotations

@@ -18,10 +18,10 @@ from sherpa_cli.bus.busmap import BusTarget, apply_bus_map
 from sherpa_cli.bus.links import BusLink, close_links, open_links
 from sherpa_cli.config.model import ArmConfig
 from sherpa_cli.errors import UsageError
-# What a name means is decided in ops/targets.py (DriveRef lives there); ``resolve_target`` is
+# What a name means is decided in bus/targets.py (DriveRef lives there); ``resolve_target`` is
 # its one-drive policy under the name older callers import.
-from sherpa_cli.ops.targets import DriveRef
-from sherpa_cli.ops.targets import single_drive as resolve_target
+from sherpa_cli.bus.targets import DriveRef
+from sherpa_cli.bus.targets import single_drive as resolve_target
 
 __all__ = ["ArmSession", "DriveRef", "resolve_target"]
 
@@ -103,8 +103,8 @@ class ArmSession:
         return client
 
     def sdo(self, ref: DriveRef):
-        """The SDO client of a drive (ops/sdo.py DriveSdo), one per drive for the whole session."""
-        from sherpa_cli.ops.sdo import DriveSdo
+        """The SDO client of a drive (bus/sdo.py DriveSdo), one per drive for the whole session."""
+        from sherpa_cli.bus.sdo import DriveSdo
 
         sdo = self._sdo.get(ref.key)
         if sdo is None:

@@ -3,7 +3,7 @@
 Columns: ``time_s`` (s; 0 = the step's command in `log step`, else the first sample), then per
 joint ``<joint>.pos_rad``, ``<joint>.vel_rad_s`` (and ``<joint>.cur_a`` for a plain joint when
 current is sampled), then per drive the motor's ``<drive>.px`` and ``<drive>.vx`` in counts,
-counts/s (and ``<drive>.iq_a``); a joint's CANopen encoder (ops/encoder.py) adds ``<device>.pos``
+counts/s (and ``<drive>.iq_a``); a joint's CANopen encoder (devices/encoder.py) adds ``<device>.pos``
 (counts) and ``<joint>.ext_pos_rad``. A sample a drive did not deliver is an empty cell.
 """
 

@@ -7,7 +7,7 @@ request that could not be sent -- raises :class:`sherpa_cli.errors.SdoError` nam
 and the object; callers never see canopen's exceptions. ``sdo_upload`` / ``sdo_download`` do
 one transfer through a short-lived client, with the same errors.
 
-The CANopen name tables (NMT states, vendor ids, abort codes) live in ops/canopen_names.py.
+The CANopen name tables (NMT states, vendor ids, abort codes) live in bus/canopen_names.py.
 """
 
 from __future__ import annotations
@@ -19,7 +19,7 @@ import threading
 from typing import Any
 
 from sherpa_cli.errors import SdoError
-from sherpa_cli.ops.canopen_names import abort_text
+from sherpa_cli.bus.canopen_names import abort_text
 
 # canopen logs every SDO it aborts at ERROR; this tool reports each failed transfer itself (as a
 # note or an error naming the drive), so without a handler Python's last resort would print it twice.

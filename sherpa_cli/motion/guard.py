@@ -23,8 +23,6 @@ consumer switches the motor off ``consumer_time_ms`` later.
 from __future__ import annotations
 
 import logging
-import os
-import re
 import signal
 import struct
 import threading
@@ -32,65 +30,18 @@ import time
 from dataclasses import dataclass, field
 from typing import Any, Callable, Iterable, Literal, Sequence
 
-import filelock
-
-from sherpa_cli import paths
-from sherpa_cli.elmo.faults import decode_sr, describe_mf, sr_problems
-from sherpa_cli.errors import (CommunicationError, DriveRefusedError, ExitCode, SafetyError, SherpaError,
-                               UsageError)
+from sherpa_cli.elmo.faults import decode_sr, describe_mf
+from sherpa_cli.elmo.protocol import UM_TORQUE
+from sherpa_cli.errors import CommunicationError, ExitCode, SafetyError, SherpaError, UsageError
+from sherpa_cli.motion.deadman import (COMM_ERROR, CONSUMER, HEARTBEAT_BASE, LOSS_ACTION, NMT_OPERATIONAL,
+                                       OBJECT_NAMES, SIZES)
+from sherpa_cli.motion.lock import DriveLock, drive_label
+from sherpa_cli.motion.report import DriveStop, GuardReport
+from sherpa_cli.motion.settings import PROFILE_KEYS, MotionSettings
+from sherpa_cli.motion.stopping import ask_patiently, fault_reason, stop_drive, why
 
 log = logging.getLogger(__name__)
-PROFILE_KEYS = ("SP", "AC", "DC")  # the profile a motion command may scale
-
-HEARTBEAT_BASE = 0x700
-NMT_OPERATIONAL = 0x05
-CONSUMER = (0x1016, 1)  # u32: host id << 16 | time ms
-COMM_ERROR = (0x1029, 1)  # u8
-LOSS_ACTION = (0x6007, 0)  # i16
-_SIZES = {CONSUMER: "<I", COMM_ERROR: "<B", LOSS_ACTION: "<h"}
-_OBJECT_NAMES = {CONSUMER: "consumer heartbeat time", COMM_ERROR: "error behaviour",
-                 LOSS_ACTION: "abort connection option code"}
-UM_TORQUE, UM_SPEED, UM_POSITION = 1, 2, 5
 MS_PROFILER_ACTIVE = 2
-
-
-@dataclass(frozen=True)
-class MotionSettings:
-    """What the guard needs to know; :meth:`from_config` reads the config's ``motion:`` section."""
-
-    host_node_id: int = 126
-    consumer_time_ms: int = 500
-    heartbeat_period_ms: int = 0  # 0: a quarter of consumer_time_ms
-    loss_action: int = 2
-    comm_error_behaviour: int = 2
-    stop_method: str = "auto"  # auto | st | jv0
-    standstill_timeout: float = 2.0
-    standstill_velocity: int = 2  # counts/s: |VX| at most this is standstill
-    liveness_timeout: float = 1.0
-    velocity_unit_mode: int = 5
-    poll_interval: float = 0.01  # s between polls while waiting (the bus's poll_interval_ms)
-    request_bound: float = 0.2  # s one interpreter request can take at worst (timeout x attempts)
-
-    @property
-    def heartbeat_period(self) -> float:
-        return (self.heartbeat_period_ms or self.consumer_time_ms / 4) / 1000
-
-    @property
-    def consumer_entry(self) -> int:
-        return (self.host_node_id & 0x7F) << 16 | (self.consumer_time_ms & 0xFFFF)
-
-    @classmethod
-    def from_config(cls, cfg: Any, buses: Iterable[str] | None = None) -> "MotionSettings":
-        m, p = cfg.motion, cfg.protocol
-        names = list(buses) if buses is not None else list(cfg.buses)
-        poll_ms = min((cfg.buses[b].poll_interval_ms for b in names if b in cfg.buses), default=10)
-        return cls(host_node_id=m.host_node_id, consumer_time_ms=m.consumer_time_ms,
-                   heartbeat_period_ms=m.heartbeat_period_ms, loss_action=m.loss_action,
-                   comm_error_behaviour=m.comm_error_behaviour, stop_method=m.stop_method,
-                   standstill_timeout=m.standstill_timeout, standstill_velocity=m.standstill_velocity,
-                   liveness_timeout=m.liveness_timeout,
-                   velocity_unit_mode=m.velocity_unit_mode, poll_interval=poll_ms / 1000,
-                   request_bound=p.reply_timeout * (1 + p.retries))
 
 
 class MotionStopped(SherpaError):
@@ -101,114 +52,6 @@ class MotionStopped(SherpaError):
 
 class DeadManError(CommunicationError):
     """The host heartbeat could not be sent; the drives stop on their own (exit 3)."""
-
-
-class MotionLockedError(SherpaError):
-    """Another sherpa command holds the drive's motion lock: refused before anything was sent (exit 5)."""
-
-    exit_code = ExitCode.BUSY
-
-
-class DriveLock:
-    """One drive's motion lock: ``<state dir>/motion/<bus>-node<N>.lock``, an OS file lock (flock), so
-    the kernel releases it when its process ends, even by SIGKILL. The holder's pid is written beside
-    it (``.pid``) for the refusal's message. Two motion commands on one drive would disarm each other's
-    dead-man (both use the host id and put 0x1016:1 back when the first ends). `sherpa stop` takes no
-    lock: it is the emergency path."""
-
-    def __init__(self, ref: Any) -> None:
-        self.label = _drive_label(ref)
-        safe = re.sub(r"[^A-Za-z0-9_.-]", "_", str(ref.bus))
-        self.path = paths.state_dir() / "motion" / f"{safe}-node{int(ref.node)}.lock"
-        self.pid_path = self.path.with_suffix(".pid")
-        # thread_local=False: the interactive view takes it in the main thread and may hand it over
-        # (release) from its homing worker
-        self._lock = filelock.FileLock(str(self.path), timeout=0, thread_local=False)
-
-    def acquire(self) -> None:
-        try:
-            self.path.parent.mkdir(parents=True, exist_ok=True)
-            self._lock.acquire(timeout=0)
-        except filelock.Timeout:
-            pid = self.holder()
-            who = "" if pid is None else (" (this process)" if pid == os.getpid() else f" (pid {pid})")
-            raise MotionLockedError(
-                f"{self.label}: another sherpa command{who} is moving this drive: refused, nothing sent",
-                hint="wait until it ends, or stop it (`sherpa stop` needs no lock)") from None
-        except OSError as exc:
-            raise UsageError(f"{self.label}: cannot take the motion lock {self.path}: {exc}",
-                             hint=paths.STATE_DIR_HINT) from None
-        try:
-            self.pid_path.write_text(f"{os.getpid()}\n", encoding="utf-8")
-        except OSError:
-            pass  # the pid is only for a message
-
-    def release(self) -> None:
-        if not self._lock.is_locked:
-            return
-        try:
-            self.pid_path.unlink()
-        except OSError:
-            pass
-        self._lock.release(force=True)
-
-    def holder(self) -> int | None:
-        try:
-            return int(self.pid_path.read_text(encoding="utf-8").strip())
-        except (OSError, ValueError):
-            return None
-
-
-@dataclass
-class DriveStop:
-    """What the guard did to one drive on the way out."""
-
-    drive: str
-    address: str
-    stopped_by: str = "-"  # "ST", "JV=0 + BG", "TC=0 + ST", "motor was off", "not stopped"
-    standstill: bool | None = None  # None: not checked (motor off)
-    motor_off: bool = False  # the guard switched the motor off (it had switched it on)
-    position: int | None = None  # PX once stopped (None: could not be read)
-    restored: list[str] = field(default_factory=list)
-    kept: list[str] = field(default_factory=list)
-    problems: list[str] = field(default_factory=list)
-
-    def line(self) -> str:
-        parts = [f"{self.drive} ({self.address}): stopped by {self.stopped_by}"]
-        if self.standstill is False:
-            parts.append("NOT at standstill")
-        if self.motor_off:
-            parts.append("motor off")
-        if self.restored:
-            parts.append("restored " + ", ".join(self.restored))
-        if self.kept:
-            parts.append("kept " + ", ".join(self.kept))
-        text = "; ".join(parts)
-        if self.problems:
-            text += " -- " + "; ".join(self.problems)
-        return text
-
-    def as_json(self) -> dict[str, Any]:
-        return {"drive": self.drive, "address": self.address, "stopped_by": self.stopped_by,
-                "standstill": self.standstill, "motor_off": self.motor_off, "position": self.position,
-                "restored": list(self.restored),
-                "kept": list(self.kept), "problems": list(self.problems)}
-
-
-@dataclass
-class GuardReport:
-    drives: list[DriveStop] = field(default_factory=list)
-    reason: str = "end"  # end | error | interrupted | SIGTERM | SIGHUP
-
-    @property
-    def ok(self) -> bool:
-        return all(not d.problems for d in self.drives)
-
-    def lines(self) -> list[str]:
-        return [d.line() for d in self.drives]
-
-    def as_json(self) -> dict[str, Any]:
-        return {"reason": self.reason, "drives": [d.as_json() for d in self.drives]}
 
 
 @dataclass
@@ -225,124 +68,6 @@ class _Drive:
     od_before: dict[tuple[int, int], int] = field(default_factory=dict)  # the dead-man objects it wrote
 
 
-def _why(exc: BaseException) -> str:
-    """An exception for the report: a SherpaError's own message, any other with its type named."""
-    return str(exc) if isinstance(exc, SherpaError) else f"{type(exc).__name__}: {exc}"
-
-
-def _drive_label(ref: Any) -> str:
-    return f"{ref.name} ({ref.bus}:{ref.node})"
-
-
-def fault_reason(mf: int, sr: int) -> str | None:
-    """Why a drive must not move, decoded; None when MF and SR show no fault."""
-    reasons = describe_mf(mf) if mf else []
-    for fault in sr_problems(sr):
-        if fault.code == 1 << 6 and mf:  # "motor failure latched": MF already says which
-            continue
-        if fault.code == 1 << 28:  # stopped by a limit: a state, not a fault (moving away is allowed)
-            continue
-        reasons.append(fault.line())
-    return "; ".join(reasons) if reasons else None
-
-
-def stop_drive(client: Any, *, unit_mode: int | None, method: str = "auto", standstill_timeout: float = 2.0,
-               poll_interval: float = 0.01, clock: Callable[[], float] = time.monotonic,
-               sleep: Callable[[float], None] = time.sleep,
-               pulse: Callable[[], None] | None = None,
-               standstill_velocity: int = 0) -> tuple[str, bool | None, list[str]]:
-    """Stop one drive's motion: ST (JV=0 + BG where ST is refused), TC=0 first in torque mode; then
-    wait for |VX| <= ``standstill_velocity`` (bounded). Returns (how, standstill reached or None if the motor is off, problems).
-
-    ``pulse`` (the motion guard's sign of life) is called before every request, so a hung request
-    lets the heartbeat stop within one request's allowance."""
-    beat = pulse or (lambda: None)
-    # patient: a drive that was just switched on or off is deaf while it settles (protocol.mo_settle)
-    if not _ask_patiently(client, "MO", clock, sleep, client.settings.mo_confirm_timeout, poll_interval,
-                          on_try=beat):
-        return "motor was off", None, []
-    how, problems = send_stop(client, unit_mode=unit_mode, method=method, pulse=beat)
-    standstill = wait_standstill(client, standstill_timeout=standstill_timeout, poll_interval=poll_interval,
-                                 clock=clock, sleep=sleep, pulse=beat, standstill_velocity=standstill_velocity)
-    if standstill is False:
-        problems.append(f"not at standstill {standstill_timeout:g} s after the stop")
-    return how, standstill, problems
-
-
-def send_stop(client: Any, *, unit_mode: int | None, method: str = "auto",
-              pulse: Callable[[], None] | None = None) -> tuple[str, list[str]]:
-    """The stop frames of one drive, the one stop path of the guard, `sherpa stop` and the jogs: in
-    torque mode TC=0 first; then by ``method`` (motion.stop_method): ``st`` ST (a refusal is a
-    problem), ``jv0`` JV=0 + BG, ``auto`` ST and JV=0 + BG where the drive refuses ST (speed mode on
-    some firmware). Does not wait; returns (how, problems)."""
-    beat = pulse or (lambda: None)
-    problems: list[str] = []
-    how = []
-    if unit_mode == UM_TORQUE:
-        try:
-            beat()
-            client.set("TC", 0, 0.0)
-            how.append("TC=0")
-        except SherpaError as exc:
-            problems.append(f"TC=0: {exc}")
-    use_jv = method == "jv0"
-    if not use_jv:
-        try:
-            beat()
-            client.execute("ST")
-            how.append("ST")
-        except DriveRefusedError as exc:
-            if method == "st" or unit_mode == UM_TORQUE:
-                problems.append(f"ST refused: {exc}")
-            else:
-                log.info("%s: ST refused (%s); stopping with JV=0 + BG", client.label, exc)
-                use_jv = True
-    if use_jv:
-        beat()
-        client.set("JV", 0, 0)
-        beat()
-        client.execute("BG")
-        how.append("JV=0 + BG")
-    return " + ".join(how) or "-", problems
-
-
-def wait_standstill(client: Any, *, standstill_timeout: float = 2.0, poll_interval: float = 0.01,
-                    clock: Callable[[], float] = time.monotonic, sleep: Callable[[float], None] = time.sleep,
-                    pulse: Callable[[], None] | None = None, standstill_velocity: int = 0) -> bool | None:
-    """After :func:`send_stop`: True once |VX| <= ``standstill_velocity``, None if the motor went
-    off meanwhile (a trip: no motion left), False when ``standstill_timeout`` s passed first."""
-    beat = pulse or (lambda: None)
-    deadline = clock() + standstill_timeout
-    while True:
-        beat()
-        if not client.get("MO"):
-            return None
-        beat()
-        if abs(client.get("VX")) <= standstill_velocity:
-            return True
-        if clock() >= deadline:
-            return False
-        sleep(poll_interval)
-
-
-def _ask_patiently(client: Any, letters: str, clock: Callable[[], float], sleep: Callable[[float], None],
-                   patience: float, poll_interval: float, on_try: Callable[[], None] | None = None) -> int | float:
-    """Query until the drive answers or ``patience`` s have passed (then the timeout propagates);
-    ``on_try`` is called before every attempt (the motion guard's sign of life, one request at a time)."""
-    from sherpa_cli.errors import DriveTimeoutError
-
-    deadline = clock() + patience
-    while True:
-        if on_try is not None:
-            on_try()
-        try:
-            return client.get(letters)
-        except DriveTimeoutError:
-            if clock() >= deadline:
-                raise
-            sleep(poll_interval)
-
-
 class MotionGuard:
     """Context manager around anything that moves motors (see the module docstring)."""
 
@@ -357,7 +82,7 @@ class MotionGuard:
                 self.refs.append(ref)
         for ref in self.refs:
             if ref.node == settings.host_node_id:
-                raise UsageError(f"{_drive_label(ref)}: its node id is the host heartbeat id "
+                raise UsageError(f"{drive_label(ref)}: its node id is the host heartbeat id "
                                  f"(motion.host_node_id {settings.host_node_id}); choose another host id")
         self.session = session
         self.settings = settings
@@ -506,7 +231,7 @@ class MotionGuard:
                 self._pulse()
                 return c.get(letters, index)
             # a sign of life per attempt, not one up-front extension for the whole patience
-            return _ask_patiently(c, letters, self._clock, self._sleep, patience, self.settings.poll_interval,
+            return ask_patiently(c, letters, self._clock, self._sleep, patience, self.settings.poll_interval,
                                   on_try=self._pulse)
         finally:
             self._pulse()
@@ -530,7 +255,7 @@ class MotionGuard:
                 r = self._exit_drive(d)
             except Exception as exc:
                 r = DriveStop(d.ref.name, f"{d.ref.bus}:{d.ref.node}", stopped_by="not stopped")
-                r.problems.append(f"stop: {_why(exc)}")
+                r.problems.append(f"stop: {why(exc)}")
             out.append(r)
             if r.problems:
                 bad += [f"{r.drive}: {p}" for p in r.problems]
@@ -551,7 +276,7 @@ class MotionGuard:
         for ref in refs:
             key = (ref.bus, ref.node)
             if key not in self._released:
-                raise UsageError(f"{_drive_label(ref)} was not released by this motion guard")
+                raise UsageError(f"{drive_label(ref)} was not released by this motion guard")
             try:
                 self._lock(ref)
                 self._pulse(extra=self._setup_bound())
@@ -574,7 +299,7 @@ class MotionGuard:
     def _drive(self, ref: Any) -> _Drive:
         d = self._drives.get((ref.bus, ref.node))
         if d is None:
-            raise UsageError(f"{_drive_label(ref)} is not guarded by this motion guard")
+            raise UsageError(f"{drive_label(ref)} is not guarded by this motion guard")
         return d
 
     def _lock(self, ref: Any) -> None:
@@ -621,13 +346,13 @@ class MotionGuard:
 
     def _sdo_read(self, d: _Drive, key: tuple[int, int]) -> int:
         """An SDO upload through the session's client of the drive (SdoError names drive and object)."""
-        raw = self.session.sdo(d.ref).upload(*key, name=_OBJECT_NAMES[key])
-        fmt = _SIZES[key]
+        raw = self.session.sdo(d.ref).upload(*key, name=OBJECT_NAMES[key])
+        fmt = SIZES[key]
         raw = (bytes(raw) + bytes(4))[:struct.calcsize(fmt)]
         return struct.unpack(fmt, raw)[0]
 
     def _sdo_write(self, d: _Drive, key: tuple[int, int], value: int) -> None:
-        self.session.sdo(d.ref).download(key[0], key[1], struct.pack(_SIZES[key], value), name=_OBJECT_NAMES[key])
+        self.session.sdo(d.ref).download(key[0], key[1], struct.pack(SIZES[key], value), name=OBJECT_NAMES[key])
 
     def _arm(self, d: _Drive) -> None:
         """Dead-man on: loss action and error behaviour first, the consumer entry last (it starts the watch)."""
@@ -720,7 +445,7 @@ class MotionGuard:
                     self.report.drives.append(self._exit_drive(d, stop=not entering or d.switched_on))
                 except Exception as exc:  # never one drive's failure leaves the others unstopped
                     r = DriveStop(d.ref.name, f"{d.ref.bus}:{d.ref.node}", stopped_by="not stopped")
-                    r.problems.append(f"stop: {_why(exc)}")
+                    r.problems.append(f"stop: {why(exc)}")
                     self.report.drives.append(r)
             # drives handed over (release) and not taken back: how they left this guard
             self.report.drives.extend(self._released.values())
@@ -766,7 +491,7 @@ class MotionGuard:
             try:
                 c.nmt_start()
             except Exception as exc:  # an NMT frame that could not be sent: still try the stop
-                r.problems.append(f"NMT start: {_why(exc)}")
+                r.problems.append(f"NMT start: {why(exc)}")
             how, standstill, problems = stop_drive(c, unit_mode=d.um, method=s.stop_method,
                                                    standstill_timeout=s.standstill_timeout,
                                                    poll_interval=s.poll_interval, clock=self._clock,
@@ -776,14 +501,14 @@ class MotionGuard:
             r.problems.extend(problems)
         except Exception as exc:
             r.stopped_by = "not stopped"
-            r.problems.append(f"stop: {_why(exc)}")
+            r.problems.append(f"stop: {why(exc)}")
         if d.switched_on:
             try:
                 self._step(c.settings.mo_confirm_timeout + 2 * s.request_bound)
                 c.motor_off()
                 r.motor_off = motor_confirmed_off = True
             except Exception as exc:
-                r.problems.append(f"MO=0: {_why(exc)}")
+                r.problems.append(f"MO=0: {why(exc)}")
         # the dead-man may only be switched off when nothing is left running: a motor the guard switched
         # on must be at standstill (or already off) and MO=0 confirmed; otherwise the heartbeat stops
         # with the consumer still armed, and the drive trips on its own
@@ -793,7 +518,7 @@ class MotionGuard:
             self._step()
             r.position = int(c.get("PX"))
         except Exception as exc:
-            r.problems.append(f"PX: {_why(exc)}")
+            r.problems.append(f"PX: {why(exc)}")
         if d.um_changed_from is not None:
             if self.keep:
                 r.kept.append(f"UM={d.um}")
@@ -803,7 +528,7 @@ class MotionGuard:
                     c.set("UM", 0, d.um_changed_from)
                     r.restored.append(f"UM={d.um_changed_from}")
                 except Exception as exc:
-                    r.problems.append(f"UM={d.um_changed_from} not restored: {_why(exc)}")
+                    r.problems.append(f"UM={d.um_changed_from} not restored: {why(exc)}")
             else:
                 r.kept.append(f"UM={d.um} (motor not confirmed off)")
                 r.problems.append(f"UM={d.um_changed_from} not restored: the motor is not confirmed off")
@@ -823,7 +548,7 @@ class MotionGuard:
                     d.client.set(key, 0, before)
                     r.restored.append(f"{key}={before}")
             except Exception as exc:
-                r.problems.append(f"{key}={before} not restored: {_why(exc)}")
+                r.problems.append(f"{key}={before} not restored: {why(exc)}")
 
     def _restore_dead_man(self, d: _Drive, r: DriveStop, stop_failed: bool) -> None:
         # the consumer entry first: once it is back, the heartbeat may stop without a trip
@@ -842,7 +567,7 @@ class MotionGuard:
                 self._sdo_write(d, key, d.od_before[key])
                 r.restored.append(name)
             except Exception as exc:
-                r.problems.append(f"restore {name}: {_why(exc)}")
+                r.problems.append(f"restore {name}: {why(exc)}")
 
     # -- signals ----------------------------------------------------------------------------------
 

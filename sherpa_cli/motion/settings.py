@@ -1,0 +1,51 @@
+"""What the motion guard needs to know, read once from the config's ``motion:`` section."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Iterable
+
+if TYPE_CHECKING:
+    from sherpa_cli.config.model import ArmConfig
+
+PROFILE_KEYS = ("SP", "AC", "DC")  # the profile a motion command may scale
+
+
+@dataclass(frozen=True)
+class MotionSettings:
+    """What the guard needs to know; :meth:`from_config` reads the config's ``motion:`` section."""
+
+    host_node_id: int = 126
+    consumer_time_ms: int = 500
+    heartbeat_period_ms: int = 0  # 0: a quarter of consumer_time_ms
+    loss_action: int = 2
+    comm_error_behaviour: int = 2
+    stop_method: str = "auto"  # auto | st | jv0
+    standstill_timeout: float = 2.0
+    standstill_velocity: int = 2  # counts/s: |VX| at most this is standstill
+    liveness_timeout: float = 1.0
+    velocity_unit_mode: int = 5
+    poll_interval: float = 0.01  # s between polls while waiting (the bus's poll_interval_ms)
+    request_bound: float = 0.2  # s one interpreter request can take at worst (timeout x attempts)
+
+    @property
+    def heartbeat_period(self) -> float:
+        return (self.heartbeat_period_ms or self.consumer_time_ms / 4) / 1000
+
+    @property
+    def consumer_entry(self) -> int:
+        return (self.host_node_id & 0x7F) << 16 | (self.consumer_time_ms & 0xFFFF)
+
+    @classmethod
+    def from_config(cls, cfg: ArmConfig, buses: Iterable[str] | None = None) -> "MotionSettings":
+        m, p = cfg.motion, cfg.protocol
+        names = list(buses) if buses is not None else list(cfg.buses)
+        poll_ms = min((cfg.buses[b].poll_interval_ms for b in names if b in cfg.buses), default=10)
+        return cls(host_node_id=m.host_node_id, consumer_time_ms=m.consumer_time_ms,
+                   heartbeat_period_ms=m.heartbeat_period_ms, loss_action=m.loss_action,
+                   comm_error_behaviour=m.comm_error_behaviour, stop_method=m.stop_method,
+                   standstill_timeout=m.standstill_timeout, standstill_velocity=m.standstill_velocity,
+                   liveness_timeout=m.liveness_timeout,
+                   velocity_unit_mode=m.velocity_unit_mode, poll_interval=poll_ms / 1000,
+                   request_bound=p.reply_timeout * (1 + p.retries))
+

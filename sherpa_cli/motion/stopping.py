@@ -1,0 +1,129 @@
+"""The one stop path: stop frames (ST, or JV=0 + BG; TC=0 first in torque mode), the standstill
+wait, and the fault check that decides whether a drive may move at all."""
+
+from __future__ import annotations
+
+import logging
+import time
+from typing import TYPE_CHECKING, Callable
+
+from sherpa_cli.elmo.faults import describe_mf, sr_problems
+from sherpa_cli.elmo.protocol import UM_TORQUE
+from sherpa_cli.errors import DriveRefusedError, DriveTimeoutError, SherpaError
+
+if TYPE_CHECKING:
+    from sherpa_cli.elmo.client import DriveClient
+
+log = logging.getLogger(__name__)
+
+
+def why(exc: BaseException) -> str:
+    """An exception for the report: a SherpaError's own message, any other with its type named."""
+    return str(exc) if isinstance(exc, SherpaError) else f"{type(exc).__name__}: {exc}"
+
+
+def fault_reason(mf: int, sr: int) -> str | None:
+    """Why a drive must not move, decoded; None when MF and SR show no fault."""
+    reasons = describe_mf(mf) if mf else []
+    for fault in sr_problems(sr):
+        if fault.code == 1 << 6 and mf:  # "motor failure latched": MF already says which
+            continue
+        if fault.code == 1 << 28:  # stopped by a limit: a state, not a fault (moving away is allowed)
+            continue
+        reasons.append(fault.line())
+    return "; ".join(reasons) if reasons else None
+
+
+def stop_drive(client: DriveClient, *, unit_mode: int | None, method: str = "auto", standstill_timeout: float = 2.0,
+               poll_interval: float = 0.01, clock: Callable[[], float] = time.monotonic,
+               sleep: Callable[[float], None] = time.sleep,
+               pulse: Callable[[], None] | None = None,
+               standstill_velocity: int = 0) -> tuple[str, bool | None, list[str]]:
+    """Stop one drive's motion: ST (JV=0 + BG where ST is refused), TC=0 first in torque mode; then
+    wait for |VX| <= ``standstill_velocity`` (bounded). Returns (how, standstill reached or None if the motor is off, problems).
+
+    ``pulse`` (the motion guard's sign of life) is called before every request, so a hung request
+    lets the heartbeat stop within one request's allowance."""
+    beat = pulse or (lambda: None)
+    # patient: a drive that was just switched on or off is deaf while it settles (protocol.mo_settle)
+    if not ask_patiently(client, "MO", clock, sleep, client.settings.mo_confirm_timeout, poll_interval,
+                          on_try=beat):
+        return "motor was off", None, []
+    how, problems = send_stop(client, unit_mode=unit_mode, method=method, pulse=beat)
+    standstill = wait_standstill(client, standstill_timeout=standstill_timeout, poll_interval=poll_interval,
+                                 clock=clock, sleep=sleep, pulse=beat, standstill_velocity=standstill_velocity)
+    if standstill is False:
+        problems.append(f"not at standstill {standstill_timeout:g} s after the stop")
+    return how, standstill, problems
+
+
+def send_stop(client: DriveClient, *, unit_mode: int | None, method: str = "auto",
+              pulse: Callable[[], None] | None = None) -> tuple[str, list[str]]:
+    """The stop frames of one drive, the one stop path of the guard, `sherpa stop` and the jogs: in
+    torque mode TC=0 first; then by ``method`` (motion.stop_method): ``st`` ST (a refusal is a
+    problem), ``jv0`` JV=0 + BG, ``auto`` ST and JV=0 + BG where the drive refuses ST (speed mode on
+    some firmware). Does not wait; returns (how, problems)."""
+    beat = pulse or (lambda: None)
+    problems: list[str] = []
+    how = []
+    if unit_mode == UM_TORQUE:
+        try:
+            beat()
+            client.set("TC", 0, 0.0)
+            how.append("TC=0")
+        except SherpaError as exc:
+            problems.append(f"TC=0: {exc}")
+    use_jv = method == "jv0"
+    if not use_jv:
+        try:
+            beat()
+            client.execute("ST")
+            how.append("ST")
+        except DriveRefusedError as exc:
+            if method == "st" or unit_mode == UM_TORQUE:
+                problems.append(f"ST refused: {exc}")
+            else:
+                log.info("%s: ST refused (%s); stopping with JV=0 + BG", client.label, exc)
+                use_jv = True
+    if use_jv:
+        beat()
+        client.set("JV", 0, 0)
+        beat()
+        client.execute("BG")
+        how.append("JV=0 + BG")
+    return " + ".join(how) or "-", problems
+
+
+def wait_standstill(client: DriveClient, *, standstill_timeout: float = 2.0, poll_interval: float = 0.01,
+                    clock: Callable[[], float] = time.monotonic, sleep: Callable[[float], None] = time.sleep,
+                    pulse: Callable[[], None] | None = None, standstill_velocity: int = 0) -> bool | None:
+    """After :func:`send_stop`: True once |VX| <= ``standstill_velocity``, None if the motor went
+    off meanwhile (a trip: no motion left), False when ``standstill_timeout`` s passed first."""
+    beat = pulse or (lambda: None)
+    deadline = clock() + standstill_timeout
+    while True:
+        beat()
+        if not client.get("MO"):
+            return None
+        beat()
+        if abs(client.get("VX")) <= standstill_velocity:
+            return True
+        if clock() >= deadline:
+            return False
+        sleep(poll_interval)
+
+
+def ask_patiently(client: DriveClient, letters: str, clock: Callable[[], float], sleep: Callable[[float], None],
+                   patience: float, poll_interval: float, on_try: Callable[[], None] | None = None) -> int | float:
+    """Query until the drive answers or ``patience`` s have passed (then the timeout propagates);
+    ``on_try`` is called before every attempt (the motion guard's sign of life, one request at a time)."""
+    deadline = clock() + patience
+    while True:
+        if on_try is not None:
+            on_try()
+        try:
+            return client.get(letters)
+        except DriveTimeoutError:
+            if clock() >= deadline:
+                raise
+            sleep(poll_interval)
