@@ -25,9 +25,9 @@ import sys
 import tempfile
 import threading
 import time
+from collections.abc import Callable, Iterator
 from dataclasses import asdict, dataclass
 from pathlib import Path
-from typing import Callable, Iterator
 
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
@@ -278,11 +278,11 @@ def _bare_notifier_loop_cpu(address: str, pairs: int) -> float:
 @contextlib.contextmanager
 def _remote_session(address: str) -> Iterator[tuple]:
     """The tool's own session (PacedNetwork, shipped pacing) on bus can0 mapped to the responder."""
-    from sherpa_cli.bus.busmap import BusTarget, apply_bus_map
-    from sherpa_cli.config import load_config
-    from sherpa_cli.bus.session import ArmSession, resolve_target
-
     import dataclasses
+
+    from sherpa_cli.bus.busmap import BusTarget, apply_bus_map
+    from sherpa_cli.bus.session import ArmSession, resolve_target
+    from sherpa_cli.config import load_config
 
     host, _, port = address.rpartition(":")
     cfg = apply_bus_map(load_config(ARM_CONFIG), {"can0": BusTarget("remote", f"{host}:{port}")})
@@ -355,9 +355,9 @@ def _program_arm_once(cfg, workers: int) -> tuple[float, float]:
     (wall time, longest single drive's read + write time) in s."""
     import dataclasses
 
+    from sherpa_cli.bus.session import ArmSession
     from sherpa_cli.joints.limits import derive_checked
     from sherpa_cli.ops import program
-    from sherpa_cli.bus.session import ArmSession
     from sherpa_cli.sim.arm import SimArm
 
     derived, _ = derive_checked(cfg)
@@ -469,9 +469,9 @@ def bench_home() -> Result:
     import tempfile
     import threading
 
+    from sherpa_cli.bus.session import ArmSession
     from sherpa_cli.config import load_config
     from sherpa_cli.ops.home import plan_home, run_home
-    from sherpa_cli.bus.session import ArmSession
     from sherpa_cli.sim.arm import SimArm
 
     with tempfile.TemporaryDirectory() as tmp:
@@ -513,9 +513,9 @@ COUPLING_CONFIG = ROOT / "tests/data/diffdrive-arm.yaml"
 
 def _coupling_peaks(req_kw: dict, modes: dict[str, dict], rounds: int) -> dict[str, float]:
     """Median held-joint peak excursion (counts) of each mode's move on the mismatched simulated pair."""
+    from sherpa_cli.bus.session import ArmSession
     from sherpa_cli.config import load_config
     from sherpa_cli.ops import diffdrive
-    from sherpa_cli.bus.session import ArmSession
     from sherpa_cli.sim.arm import SimArm
 
     cfg = load_config(COUPLING_CONFIG)
@@ -605,10 +605,10 @@ def program_workers() -> int:
 def bench_record(seconds: float = 5.0, rate: float = 1000.0) -> Result:
     """`log record`'s Recorder on the whole simulated arm (14 drives, 3 buses, in-process, wall time):
     TPDOs on SYNC at 1 kHz for 5 s; the ratio is the worst drive's received / expected samples."""
-    from sherpa_cli.config import load_config
-    from sherpa_cli.log.record import Recorder
     from sherpa_cli.bus.session import ArmSession
     from sherpa_cli.bus.targets import drive_refs
+    from sherpa_cli.config import load_config
+    from sherpa_cli.log.record import Recorder
     from sherpa_cli.sim.arm import SimArm
 
     cfg = load_config(ARM_CONFIG)

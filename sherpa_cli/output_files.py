@@ -18,8 +18,8 @@ from __future__ import annotations
 
 import os
 import stat
+from collections.abc import Callable
 from pathlib import Path
-from typing import Callable
 
 from sherpa_cli.errors import UsageError
 from sherpa_cli.paths import write_atomic

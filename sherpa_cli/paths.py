@@ -7,6 +7,7 @@ The directory is platformdirs' user state directory: ``$XDG_STATE_HOME/sherpa-cl
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import tempfile
@@ -50,10 +51,8 @@ def write_atomic(path: Path, text: str, mode: int | None = None) -> None:
             os.chmod(tmp, mode)
         os.replace(tmp, path)
     except BaseException:
-        try:
+        with contextlib.suppress(FileNotFoundError):
             os.unlink(tmp)
-        except FileNotFoundError:
-            pass
         raise
 
 

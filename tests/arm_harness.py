@@ -78,7 +78,7 @@ class _BusWatch:
         watch = self
 
         class Listener(can.Listener):
-            def on_message_received(self, msg: "can.Message") -> None:
+            def on_message_received(self, msg: can.Message) -> None:
                 if msg.is_extended_id or msg.is_error_frame:
                     return
                 can_id, data = msg.arbitration_id, bytes(msg.data)

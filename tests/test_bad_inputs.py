@@ -29,13 +29,13 @@ import struct
 import threading
 import time
 import traceback
+from collections.abc import Callable
 from contextlib import redirect_stderr, redirect_stdout
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 import yaml
-
 from conftest import ROOT
 
 SEED = 11
@@ -120,10 +120,10 @@ def numeric_leaves(data: Any, path: tuple = ()) -> list[tuple]:
     out = []
     if isinstance(data, dict):
         for k, v in data.items():
-            out += numeric_leaves(v, path + (k,))
+            out += numeric_leaves(v, (*path, k))
     elif isinstance(data, list):
         for i, v in enumerate(data):
-            out += numeric_leaves(v, path + (i,))
+            out += numeric_leaves(v, (*path, i))
     elif isinstance(data, (int, float)) and not isinstance(data, bool):
         out.append(path)
     return out
@@ -133,10 +133,10 @@ def all_leaves(data: Any, path: tuple = ()) -> list[tuple]:
     out = [path] if path else []
     if isinstance(data, dict):
         for k, v in data.items():
-            out += all_leaves(v, path + (k,))
+            out += all_leaves(v, (*path, k))
     elif isinstance(data, list):
         for i, v in enumerate(data):
-            out += all_leaves(v, path + (i,))
+            out += all_leaves(v, (*path, i))
     return out
 
 
@@ -161,14 +161,14 @@ def text_mutation(rng: random.Random, text: str) -> str:
         return "".join(lines[:i] + lines[i + 1:])  # a line deleted
     if kind == 2 and lines:
         i = rng.randrange(len(lines))
-        return "".join(lines[: i + 1] + [lines[i]] + lines[i + 1:])  # a line twice
+        return "".join([*lines[:i + 1], lines[i], *lines[i + 1:]])  # a line twice
     if kind == 3:
         i = rng.randrange(len(text) + 1)
         return text[:i] + rng.choice(["\t", ":", "- ", "{", "]", "&a ", "*a", "!!python/object:os.system ", "\x00",
                                       "\ufeff", "'", '"', "%YAML 1.1\n", "---\n", "? ", "|", ">"]) + text[i:]
     if kind == 4 and lines:
         i = rng.randrange(len(lines))
-        return "".join(lines[:i] + ["  " * rng.randrange(1, 6) + lines[i]] + lines[i + 1:])  # indentation
+        return "".join([*lines[:i], "  " * rng.randrange(1, 6) + lines[i], *lines[i + 1:]])  # indentation
     if kind == 5:
         return text + "\nbomb: &b0 [x, x, x, x, x, x, x, x]\n" + "".join(
             f"b{i}: &b{i} [{', '.join(['*b' + str(i - 1)] * 8)}]\n" for i in range(1, 8))

@@ -10,9 +10,9 @@ import pytest
 
 from sherpa_cli.bus.busmap import BusTarget, apply_bus_map, bus_kwargs, parse_bus_map
 from sherpa_cli.bus.parallel import run_concurrently
+from sherpa_cli.bus.session import ArmSession, resolve_target
 from sherpa_cli.config import load_config
 from sherpa_cli.errors import CommunicationError, UsageError
-from sherpa_cli.bus.session import ArmSession, resolve_target
 from sherpa_cli.sim.arm import SimArm
 
 

@@ -9,8 +9,7 @@ import pytest
 
 from sherpa_cli.config import load_config
 from sherpa_cli.elmo.codec import decode_reply, encode_query, encode_set
-from sherpa_cli.motion.calibration import (CALIBRATED, absolute, flag_key, judge, mark_calibrated,
-                                        read_calibration)
+from sherpa_cli.motion.calibration import CALIBRATED, absolute, flag_key, judge, mark_calibrated, read_calibration
 from sherpa_cli.sim import ManualClock
 from sherpa_cli.sim.drive import SimDrive
 

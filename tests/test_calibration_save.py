@@ -10,13 +10,13 @@ from pathlib import Path
 
 import pytest
 
+from sherpa_cli.bus.session import ArmSession, DriveRef
 from sherpa_cli.config import load_config
 from sherpa_cli.elmo import codec
 from sherpa_cli.joints.limits import derive_checked
 from sherpa_cli.ops import program
 from sherpa_cli.ops.program import DriveTarget
 from sherpa_cli.ops.save_ledger import SaveLedger
-from sherpa_cli.bus.session import ArmSession, DriveRef
 from sherpa_cli.sim.arm import SimArm
 
 ROOT = Path(__file__).resolve().parent.parent

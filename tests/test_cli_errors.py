@@ -7,7 +7,6 @@ The config cases are the loader's own (tests/test_config_errors.py) run end to e
 from __future__ import annotations
 
 import pytest
-
 from test_config_errors import CASES, Bad, _apply
 
 

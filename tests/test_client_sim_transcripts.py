@@ -120,7 +120,7 @@ def motor_on(c: DriveClient, link: SimLink) -> None:
 # -- plain get / set -----------------------------------------------------------------------------
 
 def test_nmt_start_then_get_ac_returns_factory_value():
-    clock, drive, link, c = make(start=False)
+    _clock, _drive, link, c = make(start=False)
     c.nmt_start()
     assert c.get("AC") == 100_000  # factory AC of the simulated drive
     assert_transcript(link.take(), [
@@ -131,7 +131,7 @@ def test_nmt_start_then_get_ac_returns_factory_value():
 
 
 def test_set_ac_with_echo_then_get():
-    clock, drive, link, c = make()
+    _clock, drive, link, c = make()
     c.set("AC", 0, 150_000)
     assert c.get("AC") == 150_000
     assert_transcript(link.take(), [
@@ -144,7 +144,7 @@ def test_set_ac_with_echo_then_get():
 
 
 def test_bg_with_motor_off_is_refused_with_error_58():
-    clock, drive, link, c = make()
+    _clock, _drive, link, c = make()
     with pytest.raises(DriveRefusedError) as info:
         c.execute("BG")
     assert info.value.code == 58
@@ -156,7 +156,7 @@ def test_bg_with_motor_off_is_refused_with_error_58():
 
 
 def test_set_ll3_with_motor_on_is_refused_with_error_57():
-    clock, drive, link, c = make(sim=SimSettings(mo_settle_s=0.05))
+    _clock, drive, link, c = make(sim=SimSettings(mo_settle_s=0.05))
     motor_on(c, link)
     with pytest.raises(DriveRefusedError) as info:
         c.set("LL", 3, -240)
@@ -191,7 +191,7 @@ def test_motor_on_polls_through_the_settle_window():
 
 
 def test_motor_on_with_the_default_500ms_window():
-    clock, drive, link, c = make()
+    clock, _drive, link, c = make()
     c.motor_on()
     log = link.take()
     polls = log[2:-2]
@@ -225,7 +225,7 @@ def test_save_sv_reply_silent_blackout_then_confirming_query():
 def test_save_with_heartbeat_shows_the_drive_silent_during_its_blackout():
     # With a 100 ms heartbeat the only frames between the SV reply and the confirming query are
     # heartbeats, and none of them falls inside the drive's 300 ms blackout.
-    clock, drive, link, c = make(sim=SimSettings(heartbeat_ms=100))
+    clock, _drive, link, c = make(sim=SimSettings(heartbeat_ms=100))
     link.sleep(0.05)
     link.take()
     t0 = clock.now()
@@ -243,7 +243,7 @@ def test_save_with_heartbeat_shows_the_drive_silent_during_its_blackout():
 # -- protocol variants ---------------------------------------------------------------------------
 
 def test_long_queries():
-    clock, drive, link, c = make(client=ClientSettings(query_long=True, mo_poll_interval=POLL))
+    _clock, _drive, link, c = make(client=ClientSettings(query_long=True, mo_poll_interval=POLL))
     assert c.get("AC") == 100_000
     c.set("AC", 0, 150_000)
     assert c.get("AC") == 150_000
@@ -258,7 +258,7 @@ def test_long_queries():
 
 
 def test_long_queries_for_an_array_entry():
-    clock, drive, link, c = make(client=ClientSettings(query_long=True, mo_poll_interval=POLL))
+    _clock, _drive, link, c = make(client=ClientSettings(query_long=True, mo_poll_interval=POLL))
     assert c.get("LL", 3) == -1_000_000_000
     assert_transcript(link.take(), [
         tx(RPDO2, "4C 4C 03 40 00 00 00 00"),
@@ -267,7 +267,7 @@ def test_long_queries_for_an_array_entry():
 
 
 def test_set_echo_off_confirms_by_read_back():
-    clock, drive, link, c = make(sim=SimSettings(echo_sets=False),
+    _clock, _drive, link, c = make(sim=SimSettings(echo_sets=False),
                                  client=ClientSettings(expect_set_echo=False, mo_poll_interval=POLL))
     assert c.get("AC") == 100_000
     c.set("AC", 0, 150_000)
@@ -281,7 +281,7 @@ def test_set_echo_off_confirms_by_read_back():
 
 
 def test_set_echo_off_with_long_queries():
-    clock, drive, link, c = make(sim=SimSettings(echo_sets=False),
+    _clock, _drive, link, c = make(sim=SimSettings(echo_sets=False),
                                  client=ClientSettings(expect_set_echo=False, query_long=True,
                                                        mo_poll_interval=POLL))
     c.set("AC", 0, 150_000)
@@ -294,7 +294,7 @@ def test_set_echo_off_with_long_queries():
 
 def test_missing_echo_is_read_back_when_the_client_expects_one():
     # elmo-protocol.md 1.3: a missing echo means "unknown", so the client re-queries.
-    clock, drive, link, c = make(sim=SimSettings(echo_sets=False))
+    _clock, _drive, link, c = make(sim=SimSettings(echo_sets=False))
     c.set("AC", 0, 150_000)
     assert_transcript(link.take(), [
         tx(RPDO2, "41 43 00 00 F0 49 02 00"),  # sent once, no echo comes
@@ -304,7 +304,7 @@ def test_missing_echo_is_read_back_when_the_client_expects_one():
 
 
 def test_motor_on_with_echo_off():
-    clock, drive, link, c = make(sim=SimSettings(echo_sets=False, mo_settle_s=0.02),
+    _clock, _drive, link, c = make(sim=SimSettings(echo_sets=False, mo_settle_s=0.02),
                                  client=ClientSettings(expect_set_echo=False, mo_poll_interval=POLL))
     c.motor_on()
     mo_query = tx(RPDO2, "4D 4F 00 00")
@@ -317,7 +317,7 @@ def test_motor_on_with_echo_off():
 
 
 def test_set_echo_off_refusal_reports_the_drive_error_code():
-    clock, drive, link, c = make(sim=SimSettings(echo_sets=False, mo_settle_s=0.02),
+    _clock, _drive, link, c = make(sim=SimSettings(echo_sets=False, mo_settle_s=0.02),
                                  client=ClientSettings(expect_set_echo=False, mo_poll_interval=POLL))
     c.motor_on()
     link.take()
@@ -328,7 +328,7 @@ def test_set_echo_off_refusal_reports_the_drive_error_code():
 
 def test_set_echo_off_refusal_transcript():
     # The set and its read-back go out under one pending (LL,3): the error reply is caught.
-    clock, drive, link, c = make(sim=SimSettings(echo_sets=False, mo_settle_s=0.02),
+    _clock, _drive, link, c = make(sim=SimSettings(echo_sets=False, mo_settle_s=0.02),
                                  client=ClientSettings(expect_set_echo=False, mo_poll_interval=POLL))
     c.motor_on()
     link.take()

@@ -6,9 +6,9 @@ import json
 
 import pytest
 
+from sherpa_cli.bus.session import ArmSession, resolve_target
 from sherpa_cli.config import load_config
 from sherpa_cli.ops.raw import run_raw
-from sherpa_cli.bus.session import ArmSession, resolve_target
 from sherpa_cli.sim.arm import SimArm
 
 # Meaningful on a real bus: run through arm_cli, so also over python-can-remote and vcan.

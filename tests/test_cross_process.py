@@ -13,7 +13,6 @@ import threading
 import time
 
 import pytest
-
 from arm_harness import free_base_port
 from conftest import ROOT
 

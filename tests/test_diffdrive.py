@@ -12,13 +12,13 @@ from pathlib import Path
 
 import pytest
 
+from sherpa_cli.bus.session import ArmSession
 from sherpa_cli.config import load_config
 from sherpa_cli.elmo.codec import encode_execute, encode_set
 from sherpa_cli.errors import SafetyError, UsageError
 from sherpa_cli.motion import pair_start
 from sherpa_cli.ops import diffdrive
 from sherpa_cli.ops.diffdrive import MoveRequest
-from sherpa_cli.bus.session import ArmSession
 from sherpa_cli.sim import ManualClock, SimSettings
 from sherpa_cli.sim.arm import SimArm
 from sherpa_cli.sim.drive import SimDrive

@@ -13,7 +13,6 @@ import time
 import pytest
 
 from sherpa_cli.elmo import codec
-
 from sherpa_cli.elmo.client import ClientSettings, DriveClient
 from sherpa_cli.elmo.codec import decode_request, encode_reply
 from sherpa_cli.elmo.faults import Emcy
@@ -340,7 +339,7 @@ def test_motor_on_tolerates_silent_settle_window():
 def test_an_mo_poll_in_the_settle_window_waits_only_until_the_window_ends(monkeypatch):
     # The drive is deaf for protocol.mo_settle after MO=1: a poll then must not wait out a whole
     # reply timeout (1 s here) but only the rest of the window, so MO=1 confirms at ~mo_settle.
-    client, bus, clock = drive([("tx", TX, "4D 4F 00 00 01 00 00 00"), ("rx", RX, "4D 4F 00 00 01 00 00 00")],
+    client, _bus, clock = drive([("tx", TX, "4D 4F 00 00 01 00 00 00"), ("rx", RX, "4D 4F 00 00 01 00 00 00")],
                                timeout=1.0, mo_settle=0.5)
     waits: list[float | None] = []
     real_exchange = client._exchange
@@ -423,7 +422,7 @@ def test_emcy_decoded_to_callback_and_kept():
 # -- FakeTransport itself -------------------------------------------------------------------------
 
 def test_fake_transport_reports_both_frames_on_mismatch():
-    client, bus, _ = drive([("tx", TX, "41 43 00 40 00 00 00 00")])
+    client, _bus, _ = drive([("tx", TX, "41 43 00 40 00 00 00 00")])
     with pytest.raises(AssertionError, match=r"expected tx 0x30A 41 43 00 40 00 00 00 00, got tx 0x30A 41 43 00 00"):
         client.get("AC")
 

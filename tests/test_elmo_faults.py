@@ -8,9 +8,21 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from sherpa_cli.elmo.faults import (EC_CODES, EMCY_CODES, PVT_CODES, decode_emcy, decode_il, decode_ip,
-                                    decode_mf, decode_sr, describe_il, describe_ip, describe_mf, describe_sr,
-                                    ec_text)
+from sherpa_cli.elmo.faults import (
+    EC_CODES,
+    EMCY_CODES,
+    PVT_CODES,
+    decode_emcy,
+    decode_il,
+    decode_ip,
+    decode_mf,
+    decode_sr,
+    describe_il,
+    describe_ip,
+    describe_mf,
+    describe_sr,
+    ec_text,
+)
 from sherpa_cli.errors import CodecError
 
 

@@ -9,10 +9,10 @@ from pathlib import Path
 
 import pytest
 
-from sherpa_cli.config import load_config
-from sherpa_cli.errors import ConfigError
-from sherpa_cli.devices import encoder
 from sherpa_cli.bus.session import ArmSession
+from sherpa_cli.config import load_config
+from sherpa_cli.devices import encoder
+from sherpa_cli.errors import ConfigError
 from sherpa_cli.sim.arm import SimArm
 
 ROOT = Path(__file__).resolve().parent.parent

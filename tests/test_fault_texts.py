@@ -12,8 +12,18 @@ from pathlib import Path
 
 import pytest
 
-from sherpa_cli.elmo.faults import (EC_CODES, EMCY_CODES, EMCY_PVT, MF_BITS, PVT_CODES, decode_emcy, decode_mf,
-                                    describe_ec, describe_sr, sr_problems)
+from sherpa_cli.elmo.faults import (
+    EC_CODES,
+    EMCY_CODES,
+    EMCY_PVT,
+    MF_BITS,
+    PVT_CODES,
+    decode_emcy,
+    decode_mf,
+    describe_ec,
+    describe_sr,
+    sr_problems,
+)
 
 DOC = Path(__file__).resolve().parents[2] / "shared" / "docs" / "elmo-protocol.md"
 if not DOC.exists():

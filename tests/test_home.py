@@ -10,10 +10,10 @@ from pathlib import Path
 
 import pytest
 
+from sherpa_cli.bus.session import ArmSession
 from sherpa_cli.config import load_config
 from sherpa_cli.errors import SafetyError, UsageError
 from sherpa_cli.ops import home
-from sherpa_cli.bus.session import ArmSession
 from sherpa_cli.sim.arm import SimArm
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -192,8 +192,8 @@ def test_default_power_up_is_away_from_the_switch_and_tells_a_wrong_home_from_a_
         assert physical(s, "yaw_drive") == -95 and physical(s, "stiff_drive") == -155
         # a wrong home: PX := the calibration position where the joint stands, marked calibrated --
         # the counter is then off by the power-up distance, which a test of PX against the joint sees
-        from sherpa_cli.motion import calibration
         from sherpa_cli.bus.targets import drive_ref
+        from sherpa_cli.motion import calibration
 
         c = s.client(drive_ref(cfg, "yaw_drive"))
         c.nmt_start()
@@ -255,8 +255,8 @@ def test_an_encoder_joint_is_refused_in_fault_before_the_encoder_is_read_or_px_s
 
 
 def test_jog_refuses_an_uncalibrated_position_move_and_accepts_it_after_home():
-    from sherpa_cli.ops.jog import JogRequest, resolve_jog_target, run_jog
     from sherpa_cli.motion.settings import MotionSettings
+    from sherpa_cli.ops.jog import JogRequest, resolve_jog_target, run_jog
 
     cfg = load_config(ARM)
     target = resolve_jog_target(cfg, "yaw")

@@ -18,13 +18,13 @@ from pathlib import Path
 
 import pytest
 
+from sherpa_cli.bus.session import ArmSession
+from sherpa_cli.bus.targets import drive_ref
 from sherpa_cli.config import load_config
 from sherpa_cli.elmo import codec
 from sherpa_cli.errors import ConfigError, SafetyError
 from sherpa_cli.motion import calibration
 from sherpa_cli.ops import home
-from sherpa_cli.bus.session import ArmSession
-from sherpa_cli.bus.targets import drive_ref
 from sherpa_cli.sim.arm import SimArm
 
 ROOT = Path(__file__).resolve().parent.parent

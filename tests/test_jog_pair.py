@@ -9,16 +9,15 @@ heartbeat consumers). The config below keeps every motion short (fast joints, 50
 
 from __future__ import annotations
 
-
 import pytest
+from motion_helpers import JOG_CONFIG, calibrate, motors_off
 
+from sherpa_cli.bus.session import ArmSession
 from sherpa_cli.config import load_config
 from sherpa_cli.errors import SafetyError, UsageError
 from sherpa_cli.ops import joint_jog
 from sherpa_cli.ops.joint_jog import JogRequest, resolve_axis
-from sherpa_cli.bus.session import ArmSession
 from sherpa_cli.sim.arm import SimArm
-from motion_helpers import JOG_CONFIG, calibrate, motors_off
 
 CONFIG = JOG_CONFIG
 
@@ -137,8 +136,9 @@ def test_a_pair_motor_alone_is_checked_in_joint_space(cfg):
                                  dict(mode="velocity", velocity=-9.0),  # open-ended: the watch ends it
                                  dict(mode="torque", torque=1.5, duration=3.0)])
 def test_plain_jog_past_the_full_range_is_stopped_and_brought_back(cfg, req):
-    from sherpa_cli.ops.jog import JogRequest as PlainRequest, resolve_jog_target, run_jog
     from sherpa_cli.motion.settings import MotionSettings
+    from sherpa_cli.ops.jog import JogRequest as PlainRequest
+    from sherpa_cli.ops.jog import resolve_jog_target, run_jog
 
     with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
         r = run_jog(s, resolve_jog_target(cfg, "j1"), PlainRequest(**req), settings=MotionSettings.from_config(cfg))
@@ -151,8 +151,9 @@ def test_plain_jog_past_the_full_range_is_stopped_and_brought_back(cfg, req):
 
 
 def test_plain_position_refusals_before_anything_is_armed(cfg):
-    from sherpa_cli.ops.jog import JogRequest as PlainRequest, resolve_jog_target, run_jog
     from sherpa_cli.motion.settings import MotionSettings
+    from sherpa_cli.ops.jog import JogRequest as PlainRequest
+    from sherpa_cli.ops.jog import resolve_jog_target, run_jog
 
     settings = MotionSettings.from_config(cfg)
     with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:

@@ -7,15 +7,14 @@ import math
 import time
 
 import pytest
+from test_motion_guard import ARMED, CONFIG, RESTORED
 
+from sherpa_cli.bus.session import ArmSession
 from sherpa_cli.config import load_config
 from sherpa_cli.errors import UsageError
-from sherpa_cli.ops.jog import JogRequest, check_request, resolve_jog_target, run_jog
 from sherpa_cli.motion.settings import MotionSettings
-from sherpa_cli.bus.session import ArmSession
+from sherpa_cli.ops.jog import JogRequest, check_request, resolve_jog_target, run_jog
 from sherpa_cli.sim.arm import SimArm
-
-from test_motion_guard import ARMED, CONFIG, RESTORED
 
 CPR = 4000
 
@@ -55,7 +54,7 @@ def test_position_jog_to_ends_at_the_target(cfg):
 
 
 def test_position_jog_by_is_relative(cfg):
-    result, sim, _ = jog(cfg, "drive1", mode="position", by=-0.5, uncalibrated=True)
+    result, _sim, _ = jog(cfg, "drive1", mode="position", by=-0.5, uncalibrated=True)
     assert result.start_counts == 0 and result.target_counts == -318
     assert abs(result.end_counts + 318) <= 1
 
@@ -175,9 +174,9 @@ def test_velocity_jog_without_a_configured_speed_limit_is_refused(tmp_path):
 def test_pair_velocity_jog_without_a_configured_speed_limit_is_refused():
     import dataclasses
 
-    from sherpa_cli.ops import joint_jog
-
     from test_jog_pair import CONFIG as PAIR_CONFIG
+
+    from sherpa_cli.ops import joint_jog
 
     pair_cfg = load_config(PAIR_CONFIG)
     axis = dataclasses.replace(joint_jog.resolve_axis(pair_cfg, "pitch"), vel_limit=None)
@@ -192,8 +191,8 @@ def _stop_that_never_settles(monkeypatch):
     real = stopping.stop_drive
 
     def stop_drive(*a, **k):
-        how, standstill, problems = real(*a, **k)
-        return how, False, problems + ["not at standstill 2 s after the stop"]
+        how, _standstill, problems = real(*a, **k)
+        return how, False, [*problems, "not at standstill 2 s after the stop"]
     monkeypatch.setattr(stopping, "stop_drive", stop_drive)  # the limit watch's stop
     monkeypatch.setattr(guard, "stop_drive", stop_drive)  # the guard's exit stop
 

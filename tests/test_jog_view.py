@@ -8,13 +8,13 @@ import time
 from pathlib import Path
 
 import pytest
+from motion_helpers import JOG_CONFIG
 
+from sherpa_cli.bus.session import ArmSession
 from sherpa_cli.cli.jog_view import HomeConfirm, JogView, bar
 from sherpa_cli.config import load_config
 from sherpa_cli.ops.live_jog import LiveJog, resolve_axes
-from sherpa_cli.bus.session import ArmSession
 from sherpa_cli.sim.arm import SimArm
-from motion_helpers import JOG_CONFIG
 from tests.test_home import physical, px
 
 CONFIG = JOG_CONFIG
@@ -197,7 +197,7 @@ def test_calibrate_shows_the_plan_cancel_moves_nothing_confirm_homes_and_the_jog
         assert isinstance(seen["screen"], HomeConfirm)
         assert "search: yaw up at 1000 counts/s, at most 820 counts" in seen["plan"]
         assert "uses input 1: home switch" in seen["plan"]
-        msg, screen, running = seen["cancelled"]
+        msg, screen, _running = seen["cancelled"]
         assert msg == "calibrate yaw: cancelled, nothing moved" and screen != "HomeConfirm"
         assert seen["done"], seen["message"]
         assert seen["message"].startswith("calibrate: yaw: homed (home switch): set yaw = 0"), seen["message"]

@@ -7,8 +7,15 @@ from hypothesis import assume, given
 from hypothesis import strategies as st
 
 from sherpa_cli.errors import UsageError
-from sherpa_cli.joints.diffpair import (MotorBox, inside_joint_limits, is_reachable, motor_box,
-                                        nearest_reachable, to_joints, to_motors)
+from sherpa_cli.joints.diffpair import (
+    MotorBox,
+    inside_joint_limits,
+    is_reachable,
+    motor_box,
+    nearest_reachable,
+    to_joints,
+    to_motors,
+)
 
 ints = st.integers(min_value=-10**9, max_value=10**9)
 small = st.integers(min_value=-40, max_value=40)

@@ -12,14 +12,28 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from sherpa_cli.config.catalog import builtin_catalog
-from sherpa_cli.config.model import (ArmConfig, BusConfig, CurrentLimits, DriveConfig, JointConfig,
-                                     JointRole, PairConfig, SwitchConfig, SwitchKind)
+from sherpa_cli.config.model import (
+    ArmConfig,
+    BusConfig,
+    CurrentLimits,
+    DriveConfig,
+    JointConfig,
+    JointRole,
+    PairConfig,
+    SwitchConfig,
+    SwitchKind,
+)
 from sherpa_cli.errors import ConfigError, Location, UsageError
 from sherpa_cli.joints.currents import Finding, check_currents, validate_params
-from sherpa_cli.joints.limits import (PARAM_ORDER, DriveParams, derive_all, derive_checked,
-                                      derive_drive_params, explain_pair,
-                                      software_limits)
-
+from sherpa_cli.joints.limits import (
+    PARAM_ORDER,
+    DriveParams,
+    derive_all,
+    derive_checked,
+    derive_drive_params,
+    explain_pair,
+    software_limits,
+)
 
 # --------------------------------------------------------------------------- builders
 

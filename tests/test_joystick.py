@@ -11,16 +11,16 @@ import sys
 import time
 
 import pytest
+from motion_helpers import JOG_CONFIG
 
+from sherpa_cli.bus.session import ArmSession
 from sherpa_cli.config import load_config
 from sherpa_cli.config.model import JoystickMap
 from sherpa_cli.errors import ConfigError, UsageError
 from sherpa_cli.ops import joystick
 from sherpa_cli.ops.joystick import ScriptedSource, deadzone, run_joystick
 from sherpa_cli.ops.live_jog import LiveJog, resolve_axes
-from sherpa_cli.bus.session import ArmSession
 from sherpa_cli.sim.arm import SimArm
-from motion_helpers import JOG_CONFIG
 
 CONFIG = JOG_CONFIG
 JOY = """
@@ -70,7 +70,7 @@ def test_deflection_moves_the_mapped_joint_only_while_the_deadman_is_held(cfg):
                   (0.4, "BTN_TRIGGER", 1.0),     # held: j1 runs at 0.25 x 8000 counts/s
                   (2.2, "BTN_TRIGGER", 0.0)]     # released: stop at once (MO=1 takes ~1 s of this)
         start = px(s, "yaw")
-        run, live = drive(cfg, s, script, 2.6)
+        run, _live = drive(cfg, s, script, 2.6)
         end = px(s, "yaw")
         assert run.releases == 1 and run.commands > 0
         assert 300 < end - start < 1.8 * 2000 + 300  # forward at 2000 counts/s for at most the 1.8 s held
@@ -82,7 +82,7 @@ def test_deflection_without_the_deadman_sends_no_motion_command(cfg):
     with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
         script = [(0.0, "ABS_Z", 1.0), (0.0, "ABS_X", 1.0), (0.0, "ABS_Y", -1.0)]  # never held
         start = {d: px(s, d) for d in ("yaw", "left", "right")}
-        run, live = drive(cfg, s, script, 0.8)
+        run, _live = drive(cfg, s, script, 0.8)
         assert run.commands == 0
         with s.sim.lock:  # the simulator's record: no motor switched on, no BG
             assert all(not d.events for d in s.sim.drives.values()), {n: d.events for n, d in s.sim.drives.items()}
@@ -110,7 +110,7 @@ def test_xy_plus_and_minus_drive_the_right_motors_of_the_pair(cfg, x, y, moved, 
     with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
         a0, b0 = px(s, "left"), px(s, "right")
         script = [(0.0, "BTN_TRIGGER", 1.0), (0.0, "ABS_X", x), (0.0, "ABS_Y", y), (3.0, "BTN_TRIGGER", 0.0)]
-        run, live = drive(cfg, s, script, 3.3)  # MO=1 of two drives takes ~2 s of it
+        run, _live = drive(cfg, s, script, 3.3)  # MO=1 of two drives takes ~2 s of it
         da, db = px(s, "left") - a0, px(s, "right") - b0
         assert da > 100, run.messages  # X+Y > 0 drives motor a forward
         if moved == "pitch":  # X only: X+Y = X-Y, both motors the same way, Δ holds
@@ -124,7 +124,7 @@ def test_limits_hold_under_full_deflection(cfg):
     jcfg = dataclasses.replace(cfg.joystick, axes=(JoystickMap(joint="j1", axis="ABS_Z", sensitivity=1.0),))
     with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
         script = [(0.0, "BTN_TRIGGER", 1.0), (0.0, "ABS_Z", 1.0)]
-        run, live = drive(cfg, s, script, 2.5, jcfg)
+        run, _live = drive(cfg, s, script, 2.5, jcfg)
         j1 = cfg.joints["j1"]
         assert px(s, "yaw") <= j1.full_range[1]
         assert any("edge of its normal range" in m or m.startswith("limit:") for m in run.messages)
@@ -186,7 +186,7 @@ def test_the_joystick_section_survives_config_convert(cfg, tmp_path):
 
 def _held_then(cfg, s, duration, **scripted):
     """j1 driven backwards with the dead-man held from 0 s; ``scripted``: what else the device does."""
-    script = [(0.0, "BTN_TRIGGER", 1.0), (0.0, "ABS_Z", -1.0)] + scripted.pop("script", [])
+    script = [(0.0, "BTN_TRIGGER", 1.0), (0.0, "ABS_Z", -1.0), *scripted.pop("script", [])]
     jcfg = dataclasses.replace(cfg.joystick, axes=cfg.joystick.axes[:1])
     with LiveJog(s, resolve_axes(cfg, ["j1"]), keepalive=5.0) as live:  # only the dead-man can stop in time
         src = ScriptedSource(script, time.monotonic, **scripted)

@@ -9,8 +9,7 @@ from hypothesis import strategies as st
 
 from sherpa_cli.config import load_config
 from sherpa_cli.joints.diffpair import hold_other, motor_currents, motor_velocities, to_joints
-from sherpa_cli.motion.limit_watch import (Breach, WatchedJoint, check, joints_moved_by, recovery_targets,
-                                        watch)
+from sherpa_cli.motion.limit_watch import Breach, WatchedJoint, check, joints_moved_by, recovery_targets, watch
 from sherpa_cli.sim.clock import ManualClock
 
 ARM = "configs/sherpa-arm.yaml"

@@ -6,13 +6,13 @@ from __future__ import annotations
 import time
 
 import pytest
+from motion_helpers import JOG_CONFIG, calibrate, motors_off
 
+from sherpa_cli.bus.session import ArmSession
 from sherpa_cli.config import load_config
 from sherpa_cli.errors import DriveRefusedError
 from sherpa_cli.ops.live_jog import LiveJog, resolve_axes
-from sherpa_cli.bus.session import ArmSession
 from sherpa_cli.sim.arm import SimArm
-from motion_helpers import JOG_CONFIG, calibrate, motors_off
 
 CONFIG = JOG_CONFIG
 

@@ -15,11 +15,11 @@ from pathlib import Path
 
 import pytest
 
+from sherpa_cli.bus.session import ArmSession
+from sherpa_cli.bus.targets import drive_refs
 from sherpa_cli.config import load_config
 from sherpa_cli.log.record import Poller
 from sherpa_cli.log.recording import read_csv
-from sherpa_cli.bus.session import ArmSession
-from sherpa_cli.bus.targets import drive_refs
 from sherpa_cli.sim.arm import SimArm
 
 ROOT = Path(__file__).resolve().parent.parent

@@ -11,10 +11,10 @@ from pathlib import Path
 import can
 import pytest
 
-from sherpa_cli.config import load_config
-from sherpa_cli.log.record import Recorder, bus_budget
 from sherpa_cli.bus.session import ArmSession
 from sherpa_cli.bus.targets import drive_refs
+from sherpa_cli.config import load_config
+from sherpa_cli.log.record import Recorder, bus_budget
 from sherpa_cli.sim.arm import SimArm
 from sherpa_cli.sim.clock import ManualClock
 
@@ -103,9 +103,8 @@ def test_a_failing_setup_restores_what_it_changed(monkeypatch):
         def boom(name, bus, period):
             raise RuntimeError("no SYNC today")
 
-        with pytest.raises(RuntimeError):
-            with Recorder(session, refs, 100, clock=clock.now, sync_factory=boom):
-                pass
+        with pytest.raises(RuntimeError), Recorder(session, refs, 100, clock=clock.now, sync_factory=boom):
+            pass
         assert _read_pdo(session, refs) == before
 
 

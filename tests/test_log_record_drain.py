@@ -20,9 +20,9 @@ from types import SimpleNamespace
 
 import pytest
 
+from sherpa_cli.bus.targets import drive_refs
 from sherpa_cli.config import load_config
 from sherpa_cli.log.record import DRAIN_LIMIT_S, Recorder
-from sherpa_cli.bus.targets import drive_refs
 
 ROOT = Path(__file__).resolve().parent.parent
 RATE = 10.0
@@ -119,7 +119,7 @@ def test_answers_that_arrive_after_sync_stopped_are_kept(fake):
 
 def test_the_drain_is_bounded(fake, monkeypatch):
     """A drive that never stops answering cannot keep the recorder listening past DRAIN_LIMIT_S."""
-    session, ref, factory, sources, sdo = fake
+    session, ref, factory, _sources, _sdo = fake
     monkeypatch.setattr(LateSync, "stop", _endless_stop)
     t = time.monotonic()
     with Recorder(session, [ref], RATE, sync_factory=factory) as rec:

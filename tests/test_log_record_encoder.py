@@ -12,13 +12,13 @@ from pathlib import Path
 
 import pytest
 
-from sherpa_cli.config import load_config
-from sherpa_cli.errors import UsageError
-from sherpa_cli.joints.units import counts_to_rad
-from sherpa_cli.devices import encoder
-from sherpa_cli.log.record import Recorder, bus_budget
 from sherpa_cli.bus.session import ArmSession
 from sherpa_cli.bus.targets import drive_refs
+from sherpa_cli.config import load_config
+from sherpa_cli.devices import encoder
+from sherpa_cli.errors import UsageError
+from sherpa_cli.joints.units import counts_to_rad
+from sherpa_cli.log.record import Recorder, bus_budget
 from sherpa_cli.sim.arm import SimArm
 from sherpa_cli.sim.clock import ManualClock
 from tests.test_log_record import Lockstep

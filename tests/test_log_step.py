@@ -10,10 +10,10 @@ from pathlib import Path
 
 import pytest
 
-from sherpa_cli.config import load_config
-from sherpa_cli.ops.jog import resolve_jog_target
-from sherpa_cli.motion.settings import MotionSettings
 from sherpa_cli.bus.session import ArmSession
+from sherpa_cli.config import load_config
+from sherpa_cli.motion.settings import MotionSettings
+from sherpa_cli.ops.jog import resolve_jog_target
 from sherpa_cli.ops.step import run_step
 from sherpa_cli.sim.arm import SimArm, settings_for
 from sherpa_cli.sim.servo import ServoMotor
@@ -86,8 +86,6 @@ def test_torque_step_of_one_ampere(arm):
 
 def test_supply_limit_slows_a_step():
     """The seed's 1 A supply: the same step takes longer when the supply limits the current."""
-    from sherpa_cli.sim.motor import Motor  # noqa: F401
-
     def settle(supply):
         m = ServoMotor(wn=2 * 3.14159 * 8, zeta=0.6, torque_accel_per_amp=10000.0, current_limit=10.0,
                        supply_limit=supply, supply_speed=20000.0)
@@ -123,8 +121,8 @@ def test_cli_step_writes_csv_png_and_metrics(cli, tmp_path):
 def test_the_config_sim_section_turns_the_servo_model_on(tmp_path):
     import yaml
 
-    from sherpa_cli.sim.drive import SimDrive
     from sherpa_cli.sim.clock import ManualClock
+    from sherpa_cli.sim.drive import SimDrive
 
     doc = yaml.safe_load((ROOT / "configs/sherpa-arm.yaml").read_text(encoding="utf-8"))
     doc.setdefault("sim", {}).setdefault("drives", {})["elbow_1a"] = {"servo_bandwidth": 8,
@@ -200,7 +198,7 @@ def test_the_limit_watch_stops_a_step_that_leaves_the_full_range(arm, mode, valu
     assert result.as_json()["ok"] is False and result.as_json()["limit"]["recovered_to"] == result.recovered_to
     assert result.stop.drives[0].motor_off
     # the recording ends where the watch stopped the motor: the way back is not part of the step
-    times, pos = result.recording.series("elbow_pitch", "pos")
+    _times, pos = result.recording.series("elbow_pitch", "pos")
     assert max(pos) < 1370 / 3600 * 2 * 3.141593 + 0.05
 
 
@@ -241,10 +239,9 @@ def test_on_an_error_the_motor_is_stopped_before_the_recording_is_torn_down(arm)
                 raise KeyboardInterrupt
         time.sleep(seconds)
 
-    with ArmSession.open(cfg, sim=sim, buses=["can1"]) as session:
-        with pytest.raises(KeyboardInterrupt):
-            step_mod.run_step(session, target, "velocity", 0.05, duration=2.0, rate=200,
-                              settings=MotionSettings.from_config(cfg, ["can1"]), sleep=sleep)
+    with ArmSession.open(cfg, sim=sim, buses=["can1"]) as session, pytest.raises(KeyboardInterrupt):
+        step_mod.run_step(session, target, "velocity", 0.05, duration=2.0, rate=200,
+                          settings=MotionSettings.from_config(cfg, ["can1"]), sleep=sleep)
     st, teardown = _st_before_pdo_restore(sim, "elbow_1a")
     assert st is not None and teardown and st < teardown[0]
     with sim.lock:

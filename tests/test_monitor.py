@@ -10,11 +10,11 @@ from pathlib import Path
 import pytest
 import yaml
 
+from sherpa_cli.bus.session import ArmSession
+from sherpa_cli.bus.targets import drive_refs as resolve_targets
 from sherpa_cli.config import load_config
 from sherpa_cli.config.model import SimDriveConfig
 from sherpa_cli.ops.monitor import Monitor
-from sherpa_cli.bus.targets import drive_refs as resolve_targets
-from sherpa_cli.bus.session import ArmSession
 from sherpa_cli.sim.arm import SimArm
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -151,13 +151,12 @@ def test_a_drive_that_stops_answering_shows_no_answer_not_old_values(tmp_path, m
 
 def test_emcy_heard_while_monitoring_has_an_age(tmp_path, monkeypatch):
     cfg, opened = _open(tmp_path, monkeypatch, elbow_1a={"limit_trip_at": 0.5})
-    with opened as session:
-        with Monitor(session, resolve_targets(cfg, ["elbow_1a"])) as mon:
-            mon.poll()
-            assert mon.snapshot()[0].emcy is None
-            _until(lambda: mon.snapshot()[0].emcy is not None)
-            mon.poll()
-            (row,) = mon.snapshot()
+    with opened as session, Monitor(session, resolve_targets(cfg, ["elbow_1a"])) as mon:
+        mon.poll()
+        assert mon.snapshot()[0].emcy is None
+        _until(lambda: mon.snapshot()[0].emcy is not None)
+        mon.poll()
+        (row,) = mon.snapshot()
     assert row.emcy.code == 0x8680 and not row.emcy_before_start and row.emcy_age is not None
     assert row.mf == 0x400000
 

@@ -14,11 +14,11 @@ from pathlib import Path
 
 import pytest
 
+from sherpa_cli.bus.session import ArmSession, resolve_target
 from sherpa_cli.config import load_config
 from sherpa_cli.errors import SafetyError
 from sherpa_cli.motion.guard import MotionGuard, MotionStopped
 from sherpa_cli.motion.settings import MotionSettings
-from sherpa_cli.bus.session import ArmSession, resolve_target
 from sherpa_cli.sim.arm import SimArm
 
 CONFIG = """\
@@ -164,9 +164,8 @@ def test_a_drive_in_fault_is_refused_with_the_decoded_reason(cfg):
         with s.sim.lock:
             sim_drive(s, "drive2")._mf = 0x400000  # latched: a position limit trip
         refs = [resolve_target(cfg, "drive1"), resolve_target(cfg, "drive2")]
-        with pytest.raises(SafetyError) as info:
-            with MotionGuard(s, refs, settings=MotionSettings.from_config(cfg)):
-                pytest.fail("the body must not run")
+        with pytest.raises(SafetyError) as info, MotionGuard(s, refs, settings=MotionSettings.from_config(cfg)):
+            pytest.fail("the body must not run")
         assert "drive2 (node 6): in fault" in str(info.value)
         assert "position limit exceeded (LL[3]/HL[3])" in str(info.value)
         assert writes(s, "drive1") == [] and writes(s, "drive2") == []  # the dead-man was never armed
@@ -201,8 +200,9 @@ def test_keep_leaves_the_dead_man_and_unit_mode(cfg):
 
 
 def test_st_refused_in_speed_mode_falls_back_to_jv0_bg(cfg, monkeypatch):
-    from sherpa_cli.config.model import SimDriveConfig
     import dataclasses
+
+    from sherpa_cli.config.model import SimDriveConfig
 
     cfg = dataclasses.replace(cfg, sim={"drive1": SimDriveConfig(st_refused_in_speed_mode=True)})
     with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:

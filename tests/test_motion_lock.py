@@ -16,16 +16,16 @@ import textwrap
 import time
 
 import pytest
+from test_motion_guard import CONFIG
 
+from sherpa_cli.bus.session import ArmSession, resolve_target
 from sherpa_cli.config import load_config
 from sherpa_cli.errors import ExitCode, SafetyError
 from sherpa_cli.motion.guard import MotionGuard
 from sherpa_cli.motion.lock import DriveLock, MotionLockedError
 from sherpa_cli.motion.settings import MotionSettings
-from sherpa_cli.bus.session import ArmSession, resolve_target
 from sherpa_cli.ops.stop import stop_drives
 from sherpa_cli.sim.arm import SimArm
-from test_motion_guard import CONFIG
 
 KILL_BOUND = 10.0  # s a killed holder's lock may take to come free (the kernel frees it at exit)
 
@@ -76,18 +76,15 @@ def test_every_exit_path_releases_the_lock(cfg):
     settings = MotionSettings.from_config(cfg)
     with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
         r1 = resolve_target(cfg, "drive1")
-        with pytest.raises(RuntimeError):
-            with MotionGuard(s, [r1], settings=settings):
-                raise RuntimeError("boom")
-        with pytest.raises(KeyboardInterrupt):
-            with MotionGuard(s, [r1], settings=settings):
-                raise KeyboardInterrupt
+        with pytest.raises(RuntimeError), MotionGuard(s, [r1], settings=settings):
+            raise RuntimeError("boom")
+        with pytest.raises(KeyboardInterrupt), MotionGuard(s, [r1], settings=settings):
+            raise KeyboardInterrupt
         # a refusal at entry (drive in fault) gives the lock back too
         with s.sim.lock:
             s.sim.drives["drive1"]._mf |= 1 << 12
-        with pytest.raises(SafetyError, match="in fault"):
-            with MotionGuard(s, [r1], settings=settings):
-                pass
+        with pytest.raises(SafetyError, match="in fault"), MotionGuard(s, [r1], settings=settings):
+            pass
         lock = DriveLock(r1)
         lock.acquire()  # free after all of them
         assert lock.holder() == os.getpid()
@@ -123,7 +120,7 @@ def test_another_process_holds_it_the_refusal_names_its_pid_stop_still_works_and
             c = s.client(r1)
             c.nmt_start()
             c.motor_on()
-            (report,) = stop_drives(s, [r1], settings)
+            (_report,) = stop_drives(s, [r1], settings)
             assert not s.sim.drives["drive1"].motor_on
             # SIGKILL: no exit handler runs, the kernel releases the flock
             os.kill(holder.pid, signal.SIGKILL)

@@ -6,14 +6,14 @@ second Ctrl-C during the restore does not skip the rest of it."""
 from __future__ import annotations
 
 import pytest
-
 from motion_helpers import JOG_CONFIG, calibrate, motors_off
-from sherpa_cli.config import load_config
-from sherpa_cli.ops import diffdrive, joint_jog
-from sherpa_cli.motion.pair_start import CommonStart
-from sherpa_cli.ops.diffdrive import MoveRequest
+
 from sherpa_cli.bus.session import ArmSession
 from sherpa_cli.bus.targets import drive_ref
+from sherpa_cli.config import load_config
+from sherpa_cli.motion.pair_start import CommonStart
+from sherpa_cli.ops import diffdrive, joint_jog
+from sherpa_cli.ops.diffdrive import MoveRequest
 from sherpa_cli.sim.arm import SimArm
 
 PROFILE = ("SP", "AC", "DC")

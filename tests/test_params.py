@@ -5,20 +5,28 @@ from __future__ import annotations
 import json
 import re
 import struct
+from datetime import UTC
 from pathlib import Path
 
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from sherpa_cli.bus.session import ArmSession
 from sherpa_cli.config import load_config
 from sherpa_cli.errors import CommunicationError, ConfigError, UsageError
 from sherpa_cli.joints.limits import derive_drive_params
 from sherpa_cli.ops import params_diff as pd
-from sherpa_cli.ops.params_file import (IDENTITY_KEYS, DriveDump, ParamDump, dump_from_text, dump_to_text,
-                                        read_dump, write_dump)
+from sherpa_cli.ops.params_file import (
+    IDENTITY_KEYS,
+    DriveDump,
+    ParamDump,
+    dump_from_text,
+    dump_to_text,
+    read_dump,
+    write_dump,
+)
 from sherpa_cli.ops.params_read import dump_meta, dump_params, read_live
-from sherpa_cli.bus.session import ArmSession
 from sherpa_cli.sim.arm import SimArm
 
 ARM = "configs/sherpa-arm.yaml"
@@ -134,11 +142,11 @@ def test_missing_dump_file(tmp_path):
 
 
 def test_dump_date_comes_from_the_environment_or_the_clock():
-    from datetime import datetime, timezone
+    from datetime import datetime
 
     cfg = load_config(ARM)
     assert dump_meta(cfg, environ={"SHERPA_DUMP_DATE": DATE})["date"] == DATE
-    fixed = lambda: datetime(2024, 1, 2, 3, 4, 5, tzinfo=timezone.utc)  # noqa: E731
+    fixed = lambda: datetime(2024, 1, 2, 3, 4, 5, tzinfo=UTC)
     meta = dump_meta(cfg, fixed, environ={})
     assert meta["date"] == "2024-01-02T03:04:05Z"
     import hashlib

@@ -12,6 +12,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from sherpa_cli.bus.session import ArmSession, DriveRef
 from sherpa_cli.config import load_config
 from sherpa_cli.elmo import codec
 from sherpa_cli.errors import ConfigError, SafetyError
@@ -19,7 +20,6 @@ from sherpa_cli.joints.limits import derive_checked
 from sherpa_cli.ops import program
 from sherpa_cli.ops.program import DriveTarget, write_order
 from sherpa_cli.ops.save_ledger import SaveLedger, save_warning
-from sherpa_cli.bus.session import ArmSession, DriveRef
 from sherpa_cli.sim.arm import SimArm
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -508,7 +508,7 @@ def test_program_limits_golden(cli, golden, sim_arms, name, args):
     assert "Traceback" not in result.stderr
     golden(f"{name}.txt", result.transcript())
     arms, _ = sim_arms
-    if "--apply" not in args or "--save" in args and "--yes" not in args:
+    if "--apply" not in args or ("--save" in args and "--yes" not in args):
         for arm in arms:
             assert all(v == [] for v in _cli_sets(arm).values()), "nothing written"
 

@@ -9,7 +9,6 @@ from __future__ import annotations
 import json
 
 import pytest
-
 from arm_harness import TestBus, parse_test_bus
 
 

@@ -8,13 +8,13 @@ from pathlib import Path
 
 import pytest
 
+from sherpa_cli.bus.session import ArmSession
 from sherpa_cli.config import load_config
+from sherpa_cli.elmo import codec
 from sherpa_cli.errors import ConfigError, SafetyError
 from sherpa_cli.ops import program
 from sherpa_cli.ops.params_file import read_dump, write_dump
 from sherpa_cli.ops.restore import restore_targets
-from sherpa_cli.bus.session import ArmSession
-from sherpa_cli.elmo import codec
 from sherpa_cli.sim.arm import SimArm
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -161,7 +161,7 @@ def test_restore_writes_only_changes_never_identity_and_the_mode_first(state_hom
               for n in ("drive1", "drive2")}
     path = tmp_path / "d.yaml"
     write_dump(path, ParamDump({"tool": "test"}, drives))
-    targets, warnings = restore_targets(cfg, read_dump(path), path)
+    targets, _warnings = restore_targets(cfg, read_dump(path), path)
     assert dict(targets[0].skipped) == {"MC": "read-only", "PX": "position counter; restoring it would shift "
                                         "the joint's position"}
     with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as session:

@@ -9,9 +9,9 @@ from pathlib import Path
 import pytest
 import yaml
 
+from sherpa_cli.bus.session import ArmSession
 from sherpa_cli.config import load_config
 from sherpa_cli.ops.scan import NODE_IDS, BusProber, ScanSettings, decode_device_type, scan
-from sherpa_cli.bus.session import ArmSession
 from sherpa_cli.sim.arm import SimArm
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -226,10 +226,10 @@ def test_sdo_timeout_comes_from_the_config(tmp_path):
     # protocol.sdo_timeout reaches both the scan's listening time and every SDO read of the session
     import dataclasses
 
-    from sherpa_cli.config import load_config
-    from sherpa_cli.errors import SdoError
     from sherpa_cli.bus.sdo import sdo_upload
     from sherpa_cli.bus.session import ArmSession
+    from sherpa_cli.config import load_config
+    from sherpa_cli.errors import SdoError
 
     cfg = load_config("configs/appendix-c/example1.yaml")
     cfg = dataclasses.replace(cfg, protocol=dataclasses.replace(cfg.protocol, sdo_timeout=0.05))

@@ -3,16 +3,16 @@
 from __future__ import annotations
 
 import struct
-from typing import Callable
+from collections.abc import Callable
 
 import pytest
 
-from sherpa_cli.config import load_config
-from sherpa_cli.errors import CommunicationError, ExitCode, SdoError
 from sherpa_cli.bus.canopen_names import abort_text, nmt_text
 from sherpa_cli.bus.sdo import DriveSdo, sdo_download, sdo_upload
 from sherpa_cli.bus.session import ArmSession
 from sherpa_cli.bus.targets import drive_ref
+from sherpa_cli.config import load_config
+from sherpa_cli.errors import CommunicationError, ExitCode, SdoError
 from sherpa_cli.sim.arm import SimArm
 
 EXAMPLE1 = "configs/appendix-c/example1.yaml"

@@ -13,12 +13,12 @@ from __future__ import annotations
 import struct
 
 import pytest
+from test_cross_process import served_sim  # noqa: F401  (the fixture: `sherpa sim --serve` in a subprocess)
 
 from sherpa_cli.elmo.codec import decode_reply, encode_query
 from sherpa_cli.sim import ManualClock, SimSettings
 from sherpa_cli.sim.drive import STOPPED, SimDrive
 from sherpa_cli.sim.sdo import ABORT_COMMAND, SdoServer
-from test_cross_process import served_sim  # noqa: F401  (the fixture: `sherpa sim --serve` in a subprocess)
 
 NODE = 3
 RPDO2, TPDO2, HB = 0x300 + NODE, 0x280 + NODE, 0x700 + NODE

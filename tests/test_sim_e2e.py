@@ -24,10 +24,10 @@ import can
 import canopen
 import pytest
 
+from sherpa_cli.bus.session import ArmSession, resolve_target
 from sherpa_cli.config import load_config, load_config_text
 from sherpa_cli.elmo.client import DriveClient
 from sherpa_cli.errors import DriveRefusedError, DriveTimeoutError
-from sherpa_cli.bus.session import ArmSession, resolve_target
 from sherpa_cli.sim import state as sim_state
 from sherpa_cli.sim.arm import SimArm
 from sherpa_cli.sim.clock import ManualClock

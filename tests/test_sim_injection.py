@@ -6,10 +6,10 @@ import subprocess
 import sys
 
 import pytest
-
 from conftest import ROOT
-from sherpa_cli.config import load_config
+
 from sherpa_cli.bus.session import ArmSession, resolve_target
+from sherpa_cli.config import load_config
 from sherpa_cli.sim.arm import SimArm
 
 
@@ -45,9 +45,8 @@ def test_the_session_wires_starts_and_stops_the_arm_it_is_given():
 
 def test_a_flag_instead_of_an_arm_is_refused_by_name():
     cfg = load_config(ROOT / "configs/appendix-c/example3.yaml")
-    with pytest.raises(TypeError, match="takes the simulated arm itself"):
-        with ArmSession.open(cfg, sim=True):
-            pass
+    with pytest.raises(TypeError, match="takes the simulated arm itself"), ArmSession.open(cfg, sim=True):
+        pass
 
 
 def test_a_factory_builds_the_arm_on_fresh_channels():

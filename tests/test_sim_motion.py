@@ -4,12 +4,11 @@ the timestamped motor events, ST refused in speed mode, a jog in UM=5, motion st
 from __future__ import annotations
 
 import pytest
+from test_sim_drive import EMCY, HOST, assign, hx, motor_on, new_drive, query, reply, run
 
 from sherpa_cli.elmo.codec import encode_execute
 from sherpa_cli.sim import ManualClock, SimSettings
 from sherpa_cli.sim.interpreter import EC_NOT_IN_THIS_UM
-
-from test_sim_drive import EMCY, HOST, assign, hx, motor_on, new_drive, query, reply, run
 
 
 @pytest.fixture

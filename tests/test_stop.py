@@ -9,11 +9,11 @@ from pathlib import Path
 import canopen
 import pytest
 
+from sherpa_cli.bus.session import ArmSession, resolve_target
+from sherpa_cli.bus.targets import drive_refs
 from sherpa_cli.config import load_config
 from sherpa_cli.config.model import SimDriveConfig
-from sherpa_cli.bus.targets import drive_refs
 from sherpa_cli.motion.settings import MotionSettings
-from sherpa_cli.bus.session import ArmSession, resolve_target
 from sherpa_cli.ops.stop import stop_drives
 from sherpa_cli.sim.arm import SimArm
 

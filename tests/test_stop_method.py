@@ -10,16 +10,16 @@ import dataclasses
 import time
 
 import pytest
+from motion_helpers import JOG_CONFIG, motors_off
 
+from sherpa_cli.bus.session import ArmSession
 from sherpa_cli.config import load_config
 from sherpa_cli.config.model import SimDriveConfig
 from sherpa_cli.errors import SafetyError
 from sherpa_cli.ops import joint_jog
 from sherpa_cli.ops.joint_jog import JogRequest, resolve_axis
 from sherpa_cli.ops.live_jog import LiveJog, resolve_axes
-from sherpa_cli.bus.session import ArmSession
 from sherpa_cli.sim.arm import SimArm
-from motion_helpers import JOG_CONFIG, motors_off
 
 MOTION = {b"ST", b"BG"}
 
@@ -85,13 +85,12 @@ def test_live_jog_stop_uses_the_configured_stop_method(method, refuse, um, expec
 def test_live_jog_st_method_on_firmware_that_refuses_st_says_so():
     cfg = with_motion(load_config(JOG_CONFIG), refuse_st=("yaw",), stop_method="st", velocity_unit_mode=2)
     with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
-        with pytest.raises(SafetyError):
-            with LiveJog(s, resolve_axes(cfg, ["j1"]), keepalive=30.0) as live:
-                live.set_velocity("j1", 1000)
-                live.tick()
-                with pytest.raises(SafetyError, match="yaw.*ST refused"):
-                    live.stop("j1")
-                raise SafetyError("leave")  # the guard's exit: ST refused again, the motor switched off
+        with pytest.raises(SafetyError), LiveJog(s, resolve_axes(cfg, ["j1"]), keepalive=30.0) as live:
+            live.set_velocity("j1", 1000)
+            live.tick()
+            with pytest.raises(SafetyError, match="yaw.*ST refused"):
+                live.stop("j1")
+            raise SafetyError("leave")  # the guard's exit: ST refused again, the motor switched off
         assert motors_off(s)
 
 

@@ -4,10 +4,10 @@ from __future__ import annotations
 
 import pytest
 
-from sherpa_cli.config import load_config
-from sherpa_cli.errors import ExitCode, UsageError
 from sherpa_cli.bus import targets
 from sherpa_cli.bus.targets import TargetKind
+from sherpa_cli.config import load_config
+from sherpa_cli.errors import ExitCode, UsageError
 
 ARM = "configs/sherpa-arm.yaml"
 

@@ -9,7 +9,7 @@ type is special-cased anywhere else.
 from __future__ import annotations
 
 import dataclasses
-from typing import Iterable, Mapping
+from collections.abc import Iterable, Mapping
 
 from sherpa_cli.config.model import ArmConfig, BusConfig
 from sherpa_cli.errors import UsageError

@@ -4,8 +4,9 @@ from __future__ import annotations
 
 import errno
 import time
+from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any, Callable, Iterable, Mapping
+from typing import TYPE_CHECKING, Any
 
 from sherpa_cli.bus.busmap import bus_kwargs
 from sherpa_cli.config.model import ArmConfig, BusConfig
@@ -38,7 +39,7 @@ def _paced_network_class():
         clock: Callable[[], float] = staticmethod(time.monotonic)
         sleep: Callable[[float], None] = staticmethod(time.sleep)
 
-        def __init__(self, bus: "can.BusABC | None" = None) -> None:
+        def __init__(self, bus: can.BusABC | None = None) -> None:
             super().__init__(bus)
             self._last_send = float("-inf")
 
@@ -62,7 +63,7 @@ def _paced_network_class():
             if self.notifier is not None and self.notifier.exception is not None:
                 self.check()  # raises the receive thread's error
 
-        def _resend(self, msg: "can.Message", exc: "can.CanOperationError") -> None:
+        def _resend(self, msg: can.Message, exc: can.CanOperationError) -> None:
             for attempt in range(1, self.send_attempts + 1):
                 if getattr(exc, "error_code", None) != errno.ENOBUFS or attempt == self.send_attempts:
                     raise CommunicationError(f"sending 0x{msg.arbitration_id:03X} failed: {exc}") from exc

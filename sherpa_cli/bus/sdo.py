@@ -18,8 +18,8 @@ import struct
 import threading
 from typing import Any
 
-from sherpa_cli.errors import SdoError
 from sherpa_cli.bus.canopen_names import abort_text
+from sherpa_cli.errors import SdoError
 
 # canopen logs every SDO it aborts at ERROR; this tool reports each failed transfer itself (as a
 # note or an error naming the drive), so without a handler Python's last resort would print it twice.

@@ -10,18 +10,20 @@ arm's endpoints, starts it and stops it.
 
 from __future__ import annotations
 
+from collections.abc import Iterable, Iterator, Mapping
 from contextlib import contextmanager
 from dataclasses import replace
-from typing import Any, Iterable, Iterator, Mapping, Protocol
+from typing import Any, Protocol
 
 from sherpa_cli.bus.busmap import BusTarget, apply_bus_map
 from sherpa_cli.bus.links import BusLink, close_links, open_links
-from sherpa_cli.config.model import ArmConfig
-from sherpa_cli.errors import UsageError
+
 # What a name means is decided in bus/targets.py (DriveRef lives there); ``resolve_target`` is
 # its one-drive policy under the name older callers import.
 from sherpa_cli.bus.targets import DriveRef
 from sherpa_cli.bus.targets import single_drive as resolve_target
+from sherpa_cli.config.model import ArmConfig
+from sherpa_cli.errors import UsageError
 
 __all__ = ["ArmSession", "DriveRef", "resolve_target"]
 
@@ -58,7 +60,7 @@ class ArmSession:
     @classmethod
     @contextmanager
     def open(cls, cfg: ArmConfig, *, sim: InProcessArm | None = None,
-             buses: Iterable[str] | None = None) -> Iterator["ArmSession"]:
+             buses: Iterable[str] | None = None) -> Iterator[ArmSession]:
         """Open the buses (default: all). With ``sim`` (a simulated arm built by the caller, not
         started), start it first and point every configured bus at its endpoint; stop it last."""
         if sim is not None and not hasattr(sim, "endpoints"):

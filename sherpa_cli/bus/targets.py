@@ -18,9 +18,9 @@ names here; nothing else in the tool decides what a name means.
 from __future__ import annotations
 
 import difflib
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from enum import Enum
-from typing import Iterable, Sequence
 
 from sherpa_cli.config.model import ArmConfig, DriveConfig, JointConfig, JointRole, PairConfig
 from sherpa_cli.errors import UsageError

@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
-from typing import List, Optional
 
 import typer
 
@@ -65,7 +64,7 @@ def default_config_path() -> tuple[Path, tuple[str, ...]]:
 @app.callback()
 def root(
     ctx: typer.Context,
-    config: Optional[Path] = typer.Option(
+    config: Path | None = typer.Option(
         None, "--config", "-c", metavar="FILE",
         help="Arm configuration (native YAML or the seed's rosparam format). Default: $SHERPA_CONFIG, "
         "else sherpa-arm.yaml in the user config directory, else ./configs/sherpa-arm.yaml.",
@@ -75,7 +74,7 @@ def root(
     no_color: bool = typer.Option(False, "--no-color", help="No colour (NO_COLOR is honoured too)."),
     sim: bool = typer.Option(False, "--sim", help="Run against the simulated arm, in this process "
                              "(python-can virtual buses; the drives' flash persists in the state dir)."),
-    bus_map: Optional[List[str]] = typer.Option(
+    bus_map: list[str] | None = typer.Option(
         None, "--bus-map", metavar="BUS=INTERFACE:CHANNEL",
         help="Point configured buses elsewhere, e.g. can0=socketcan:vcan0 or can0=remote:127.0.0.1:54701 "
         "(repeat or comma-separate; default $SHERPA_BUS_MAP). `sherpa sim --serve` prints the one to use."),
@@ -98,8 +97,22 @@ def root(
 
 def _register() -> None:
     # In the order a technician meets them at the arm: find, look, back up, program, commission.
-    from sherpa_cli.cli import (cmd_cmd, config_cmd, diffdrive_cmd, home_cmd, identify_cmd, jog_cmd, limits_cmd, monitor_cmd,
-                                params_cmd, program_cmd, recipe_cmd, scan_cmd, sim_cmd, stop_cmd)
+    from sherpa_cli.cli import (
+        cmd_cmd,
+        config_cmd,
+        diffdrive_cmd,
+        home_cmd,
+        identify_cmd,
+        jog_cmd,
+        limits_cmd,
+        monitor_cmd,
+        params_cmd,
+        program_cmd,
+        recipe_cmd,
+        scan_cmd,
+        sim_cmd,
+        stop_cmd,
+    )
 
     app.command("scan")(scan_cmd.scan)
     app.command("identify")(identify_cmd.identify)

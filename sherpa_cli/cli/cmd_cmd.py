@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-from typing import List
-
 import typer
 
 from sherpa_cli.cli.context import state
@@ -14,7 +12,7 @@ from sherpa_cli.cli.output import fmt_value
 def cmd(
     ctx: typer.Context,
     target: str = typer.Argument(..., metavar="TARGET", help="Drive or joint name from the config, or BUS:NODE."),
-    exprs: List[str] = typer.Argument(..., metavar="EXPR...",
+    exprs: list[str] = typer.Argument(..., metavar="EXPR...",
                                       help='Elmo commands: PX (query), "LL[3]" (query), AC=150000 (set), BG (execute).'),
     apply: ApplyRaw = False,
     raw_save: RawSave = False,
@@ -35,9 +33,9 @@ def cmd(
     --apply and --raw-save are given, at most one SV per invocation, and each one is
     counted per drive serial number in the save ledger (as program-limits --save).
     """
+    from sherpa_cli.bus.targets import single_drive
     from sherpa_cli.errors import SherpaError
     from sherpa_cli.ops.raw import check_raw_save, parse_all, run_raw
-    from sherpa_cli.bus.targets import single_drive
 
     st = state(ctx)
     cfg = st.load_config()

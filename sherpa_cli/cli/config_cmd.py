@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Optional
 
 import typer
 
@@ -16,7 +15,7 @@ FileArg = typer.Argument(None, metavar="[FILE]", help="Config file; default: the
 
 
 @app.command("check")
-def check(ctx: typer.Context, file: Optional[Path] = FileArg) -> None:
+def check(ctx: typer.Context, file: Path | None = FileArg) -> None:
     """Validate a config and print its buses, drives, joints, pairs and warnings.
 
     Exit 0 when valid (warnings allowed), 1 when the current limits break the catalog

@@ -2,10 +2,11 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable, Iterable, Iterator
 from contextlib import ExitStack, contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Callable, Iterable, Iterator
+from typing import TYPE_CHECKING, Any
 
 import typer
 
@@ -13,8 +14,8 @@ from sherpa_cli.cli.output import Output
 from sherpa_cli.errors import UsageError
 
 if TYPE_CHECKING:
-    from sherpa_cli.config.model import ArmConfig
     from sherpa_cli.bus.session import ArmSession
+    from sherpa_cli.config.model import ArmConfig
 
 
 @dataclass
@@ -28,12 +29,12 @@ class AppState:
     bus_map: list[str] = field(default_factory=list)
     bus_map_from_env: bool = False
     config_looked: tuple[str, ...] = ()  # where the default config was looked for (no --config)
-    _config: "ArmConfig | None" = field(default=None, repr=False)
+    _config: ArmConfig | None = field(default=None, repr=False)
 
     @classmethod
     def create(cls, *, config_path: Path, config_given: bool, json_mode: bool, debug: bool,
                no_color: bool, sim: bool = False, bus_map: list[str] | None = None,
-               bus_map_from_env: bool = False, config_looked: tuple[str, ...] = ()) -> "AppState":
+               bus_map_from_env: bool = False, config_looked: tuple[str, ...] = ()) -> AppState:
         return cls(config_path=config_path, config_given=config_given, json_mode=json_mode,
                    debug=debug, out=Output.create(json_mode=json_mode, no_color=no_color),
                    sim=sim, bus_map=list(bus_map or []), bus_map_from_env=bus_map_from_env,
@@ -41,7 +42,7 @@ class AppState:
 
     @contextmanager
     def session(self, buses: Iterable[str] | None = None,
-                sim_factory: Callable[..., Any] | None = None) -> Iterator["ArmSession"]:
+                sim_factory: Callable[..., Any] | None = None) -> Iterator[ArmSession]:
         """Open the arm's buses (or the simulated arm with --sim) for one command; ``sim_factory``
         builds the in-process arm instead of the default (SimArm.in_process's ``factory``)."""
         from sherpa_cli.bus.busmap import apply_bus_map, parse_bus_map
@@ -70,7 +71,7 @@ class AppState:
         with ArmSession.open(cfg, sim=arm, buses=buses) as session:
             yield session
 
-    def load_config(self, path: Path | None = None) -> "ArmConfig":
+    def load_config(self, path: Path | None = None) -> ArmConfig:
         """The arm config (cached); a command's own FILE argument wins over --config."""
         from sherpa_cli.config import load_config
 
@@ -98,9 +99,9 @@ class SharedSession:
     """
 
     owner: AppState
-    config: "ArmConfig"
+    config: ArmConfig
     stack: ExitStack = field(default_factory=ExitStack)
-    session: "ArmSession | None" = None
+    session: ArmSession | None = None
     opens: int = 0  # sessions opened for the recipe (0 or 1; tests count them)
 
     def close(self) -> None:
@@ -109,10 +110,10 @@ class SharedSession:
 
 
 # Set by the recipe runner while it runs a recipe's steps in this process.
-SHARED: "SharedSession | None" = None
+SHARED: SharedSession | None = None
 
 
-def _shared_for(st: AppState) -> "SharedSession | None":
+def _shared_for(st: AppState) -> SharedSession | None:
     shared = SHARED
     if shared is None or shared.owner is st:
         return None
@@ -136,7 +137,7 @@ def shared_session(owner: AppState) -> Iterator[SharedSession]:
 
 
 # The state of the invocation under way, so the error boundary can report through its sink.
-CURRENT: "AppState | None" = None
+CURRENT: AppState | None = None
 
 
 def state(ctx: typer.Context) -> AppState:

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from typing import Any, Optional
+from typing import Any
 
 import typer
 
@@ -18,8 +18,8 @@ PairArg = typer.Argument(..., metavar="PAIR", help="Pair name, or its Σ/Δ join
 @app.command("limits")
 def limits(ctx: typer.Context, pair: str = PairArg) -> None:
     """Show a pair's Σ/Δ ranges and the motor ranges derived from them, with the rule used."""
-    from sherpa_cli.joints.limits import explain_pair
     from sherpa_cli.bus.targets import pair_of
+    from sherpa_cli.joints.limits import explain_pair
 
     st = state(ctx)
     cfg = st.load_config()
@@ -60,10 +60,10 @@ def _opt(v: int | None) -> str:
 def convert(
     ctx: typer.Context,
     pair: str = PairArg,
-    sigma: Optional[float] = typer.Option(None, "--sigma", help="Σ joint position."),
-    delta: Optional[float] = typer.Option(None, "--delta", help="Δ joint position."),
-    motor_a: Optional[float] = typer.Option(None, "--motor-a", help="Motor a position (counts)."),
-    motor_b: Optional[float] = typer.Option(None, "--motor-b", help="Motor b position (counts)."),
+    sigma: float | None = typer.Option(None, "--sigma", help="Σ joint position."),
+    delta: float | None = typer.Option(None, "--delta", help="Δ joint position."),
+    motor_a: float | None = typer.Option(None, "--motor-a", help="Motor a position (counts)."),
+    motor_b: float | None = typer.Option(None, "--motor-b", help="Motor b position (counts)."),
     unit: str = typer.Option("counts", "--unit", help="Unit of --sigma/--delta and of the output: counts or rad."),
 ) -> None:
     """Convert Σ/Δ joint positions to motor positions, or motor positions to Σ/Δ.
@@ -71,9 +71,9 @@ def convert(
     Give either --sigma and --delta, or --motor-a and --motor-b. Joint positions may be in
     counts or radians (--unit rad, each joint's own cpr); motor positions are always counts.
     """
+    from sherpa_cli.bus.targets import pair_of
     from sherpa_cli.joints import diffpair, units
     from sherpa_cli.joints.limits import explain_pair
-    from sherpa_cli.bus.targets import pair_of
 
     st = state(ctx)
     cfg = st.load_config()
@@ -155,18 +155,18 @@ def _whole(value: float, option: str) -> int:
 def move(
     ctx: typer.Context,
     pair: str = PairArg,
-    sigma: Optional[str] = typer.Option(None, "--sigma", metavar="POS", help="Σ joint target: rad, or 10deg, "
+    sigma: str | None = typer.Option(None, "--sigma", metavar="POS", help="Σ joint target: rad, or 10deg, "
                                         "200counts. Left out: Σ holds."),
-    delta: Optional[str] = typer.Option(None, "--delta", metavar="POS", help="Δ joint target (same units). "
+    delta: str | None = typer.Option(None, "--delta", metavar="POS", help="Δ joint target (same units). "
                                         "Left out: Δ holds."),
     relative: bool = typer.Option(False, "--relative", help="--sigma/--delta are offsets from where the joints are."),
-    velocity: Optional[str] = typer.Option(None, "--velocity", metavar="SPEED", help="Speed of the joint that moves "
+    velocity: str | None = typer.Option(None, "--velocity", metavar="SPEED", help="Speed of the joint that moves "
                                            "farthest (rad/s, deg/s, counts/s); default: the joints' speed limits."),
     feedback: bool = typer.Option(False, "--feedback", help="Every cycle, slow the motor that is ahead from the "
                                   "recorded Σ/Δ error (bounded, never faster than planned, inside the guard)."),
     naive: bool = typer.Option(False, "--naive", help="The seed's way, for comparison: two separate BG and "
                                "unscaled profiles."),
-    plot: Optional[str] = typer.Option(None, "--plot", metavar="FILE.png", help="Draw both joints during the move."),
+    plot: str | None = typer.Option(None, "--plot", metavar="FILE.png", help="Draw both joints during the move."),
     poll: bool = typer.Option(False, "--poll", help="Record by polling PX through the interpreter instead of "
                               "TPDOs on SYNC (changes no PDO settings; coarser, one motor a round trip after the other)."),
     uncalibrated: bool = typer.Option(False, "--uncalibrated", help="Allow the move although the pair was not "
@@ -181,8 +181,8 @@ def move(
     (TPDO on SYNC, or --poll) and reports how far the joint that should hold moved, and how far
     both left the straight Σ/Δ path (docs/diffdrive.md).
     """
-    from sherpa_cli.ops import diffdrive
     from sherpa_cli.bus.targets import pair_of
+    from sherpa_cli.ops import diffdrive
 
     st = state(ctx)
     cfg = st.load_config()

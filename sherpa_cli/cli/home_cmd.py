@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import sys
-from typing import List, Optional
 
 import typer
 
@@ -17,7 +16,7 @@ KIND_TEXT = {"home_switch": "home switch", "end_switches": "end switches", "pair
 
 def home(
     ctx: typer.Context,
-    joints: Optional[List[str]] = typer.Argument(None, metavar="[JOINT]...", help="Joints, pairs (or a Σ/Δ joint: "
+    joints: list[str] | None = typer.Argument(None, metavar="[JOINT]...", help="Joints, pairs (or a Σ/Δ joint: "
                                                  "its pair) or drives; default: every joint that can be homed."),
     yes: YesMotion = False,
     dry_run: bool = typer.Option(False, "--dry-run", help="Only show the plan; nothing is sent."),

@@ -2,12 +2,12 @@
 
 from __future__ import annotations
 
-
 import typer
 
 from sherpa_cli.cli.context import state
 from sherpa_cli.cli.options import Targets
 from sherpa_cli.cli.output import fmt_value
+
 
 def identify(
     ctx: typer.Context,
@@ -25,10 +25,9 @@ def identify(
       sherpa identify
       sherpa identify shoulder_diff elbow_1a --json
     """
+    from sherpa_cli.bus.targets import drive_names
     from sherpa_cli.errors import ExitCode
     from sherpa_cli.ops.identify import identify as run_identify
-    from sherpa_cli.bus.targets import drive_names
-
     from sherpa_cli.ops.identify import identify_devices
 
     st = state(ctx)
@@ -81,8 +80,8 @@ def _hex(value, width: int = 8) -> str:
 
 
 def _render(st, report) -> None:
-    from sherpa_cli.elmo import faults
     from sherpa_cli.bus.canopen_names import VENDORS
+    from sherpa_cli.elmo import faults
 
     if st.json_mode:
         st.out.json(report.as_json())

@@ -4,7 +4,7 @@ joint, ops/joint_jog.py for a Σ/Δ joint or one motor of a pair)."""
 from __future__ import annotations
 
 import math
-from typing import Any, List, Optional
+from typing import Any
 
 import typer
 
@@ -28,20 +28,20 @@ def parse_number(text: str | None, option: str) -> float | None:
 
 def jog(
     ctx: typer.Context,
-    joints: Optional[List[str]] = typer.Argument(None, metavar="JOINT", show_default=False,
+    joints: list[str] | None = typer.Argument(None, metavar="JOINT", show_default=False,
                                                  help="A plain joint, a Σ or Δ joint of a pair, or a drive (or "
                                                  "BUS:NODE). With --interactive: the joints to show (default all)."),
-    to: Optional[str] = typer.Option(None, "--to", metavar="POS", help="Move to this joint position: rad, or "
+    to: str | None = typer.Option(None, "--to", metavar="POS", help="Move to this joint position: rad, or "
                                      "with a unit: 10deg, 200counts. Only inside the joint's normal range."),
-    by: Optional[str] = typer.Option(None, "--by", metavar="POS", help="Move by this much from where it is "
+    by: str | None = typer.Option(None, "--by", metavar="POS", help="Move by this much from where it is "
                                      "(rad, deg or counts)."),
-    velocity: Optional[str] = typer.Option(None, "--velocity", metavar="SPEED",
+    velocity: str | None = typer.Option(None, "--velocity", metavar="SPEED",
                                            help="Run at this speed (rad/s, or 5deg/s, 300counts/s) for --for "
                                            "seconds, or until Ctrl-C (a pair joint needs --for)."),
-    torque: Optional[str] = typer.Option(None, "--torque", metavar="A",
+    torque: str | None = typer.Option(None, "--torque", metavar="A",
                                          help="Apply this motor current (A, or 800mA) for --for seconds (required); "
                                          "within the joint's continuous current limit."),
-    duration: Optional[str] = typer.Option(None, "--for", metavar="SECONDS", help="How long a velocity or torque "
+    duration: str | None = typer.Option(None, "--for", metavar="SECONDS", help="How long a velocity or torque "
                                            "jog runs."),
     uncalibrated: bool = typer.Option(False, "--uncalibrated", help="Allow a position move of a joint that has no "
                                       "absolute encoder and was not homed since power-up."),
@@ -50,7 +50,7 @@ def jog(
                                      "control (docs/jog.md)."),
     joystick: bool = typer.Option(False, "--joystick", help="Drive the joints from a joystick as the config's "
                                   "`joystick:` maps it; a held dead-man button (docs/jog.md)."),
-    device: Optional[str] = typer.Option(None, "--device", metavar="PATH", help="The joystick's input device "
+    device: str | None = typer.Option(None, "--device", metavar="PATH", help="The joystick's input device "
                                          "(default: joystick.device, else the first joystick found)."),
     list_joysticks: bool = typer.Option(False, "--list-joysticks", help="List the joysticks (evdev) and their "
                                         "axis and button names."),
@@ -78,8 +78,8 @@ def jog(
       sherpa jog shoulder_pitch --by 10deg --apply
       sherpa jog shoulder_roll --velocity 5deg/s --for 2 --apply
     """
-    from sherpa_cli.ops.jog import JogRequest, check_request, resolve_jog_target, run_jog
     from sherpa_cli.motion.settings import MotionSettings
+    from sherpa_cli.ops.jog import JogRequest, check_request, resolve_jog_target, run_jog
 
     st = state(ctx)
     if _live(st, joints or [], interactive, joystick, device, list_joysticks, apply, uncalibrated,

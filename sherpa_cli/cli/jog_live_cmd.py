@@ -5,7 +5,8 @@ the limits of `jog`), the joystick loop ops/joystick.py, the view cli/jog_view.p
 from __future__ import annotations
 
 import sys
-from typing import Any, Sequence
+from collections.abc import Sequence
+from typing import Any
 
 import typer
 

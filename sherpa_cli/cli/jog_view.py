@@ -9,7 +9,8 @@ velocity or torque command stops by itself ``keepalive`` s after the last press 
 from __future__ import annotations
 
 import threading
-from typing import Any, Callable, Sequence
+from collections.abc import Callable, Sequence
+from typing import Any
 
 from rich.text import Text
 from textual.app import App, ComposeResult

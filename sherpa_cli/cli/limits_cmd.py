@@ -52,8 +52,8 @@ def show(ctx: typer.Context,
       sherpa limits show shoulder_pitch
       sherpa --config configs/appendix-c/example3.yaml limits show --software
     """
-    from sherpa_cli.joints.limits import derive_checked, left_as_they_are
     from sherpa_cli.bus.targets import drive_names
+    from sherpa_cli.joints.limits import derive_checked, left_as_they_are
 
     st = state(ctx)
     cfg = st.load_config()

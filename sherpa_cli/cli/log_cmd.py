@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import threading
 from pathlib import Path
-from typing import List, Optional
 
 import typer
 
@@ -29,9 +28,9 @@ def decode(
     ctx: typer.Context,
     file: Path = typer.Argument(..., metavar="FILE", help="A capture: .log/.txt (candump -L), .asc, .blf, .csv, "
                                 ".trc, .mf4 (with asammdf)."),
-    bus: Optional[List[str]] = typer.Option(None, "--bus", metavar="BUS", help="Only frames of this bus (repeat)."),
-    node: Optional[List[int]] = typer.Option(None, "--node", metavar="ID", help="Only frames of this node (repeat)."),
-    kind: Optional[List[str]] = typer.Option(
+    bus: list[str] | None = typer.Option(None, "--bus", metavar="BUS", help="Only frames of this bus (repeat)."),
+    node: list[int] | None = typer.Option(None, "--node", metavar="ID", help="Only frames of this node (repeat)."),
+    kind: list[str] | None = typer.Option(
         None, "--kind", metavar="KIND",
         help="Only frames of this kind (repeat): nmt, sync, emcy, heartbeat, sdo, interp, pdo, other."),
 ) -> None:
@@ -90,9 +89,9 @@ def capture(
     output: Path = typer.Option(..., "--output", "-o", metavar="FILE",
                                 help="Where to write: .log (candump, channel per line), .asc, .blf, .csv, .trc, "
                                 ".mf4 (with asammdf)."),
-    bus: Optional[List[str]] = typer.Option(None, "--bus", metavar="BUS",
+    bus: list[str] | None = typer.Option(None, "--bus", metavar="BUS",
                                             help="Capture only this configured bus (repeat); default: every bus."),
-    duration: Optional[float] = typer.Option(None, "--for", metavar="S", help="Stop after S seconds (default: Ctrl-C)."),
+    duration: float | None = typer.Option(None, "--for", metavar="S", help="Stop after S seconds (default: Ctrl-C)."),
 ) -> None:
     """Capture every frame of the configured buses into one file until Ctrl-C (or --for),
     then print the frame count per bus, frames lost (adapter or queue overruns) and bus load.
@@ -166,12 +165,12 @@ def plot(
     ctx: typer.Context,
     file: Path = typer.Argument(..., metavar="FILE.csv", help="A recording of `log record` or `log step`."),
     output: Path = typer.Option(..., "--output", "-o", metavar="FILE.png", help="Where to write the PNG."),
-    joint: Optional[List[str]] = typer.Option(None, "--joint", metavar="JOINT",
+    joint: list[str] | None = typer.Option(None, "--joint", metavar="JOINT",
                                               help="Plot this joint (repeat); default: every joint in the file."),
     signal: str = typer.Option("pos", "--signal", metavar="pos|vel|cur",
                                help="The signal whose step metrics are computed."),
     step_at: float = typer.Option(0.0, "--step-at", metavar="S", help="Time of the step's command in the file."),
-    target: Optional[float] = typer.Option(None, "--target", metavar="X",
+    target: float | None = typer.Option(None, "--target", metavar="X",
                                            help="The commanded value (rad, rad/s or A), for the steady-state error."),
 ) -> None:
     """Plot position and velocity (and current) over time into a PNG, with step metrics (dead time,
@@ -259,7 +258,7 @@ def record(
     rate: float = typer.Option(100.0, "--rate", metavar="HZ", help="Samples per second (SYNC rate)."),
     duration: float = typer.Option(..., "--for", metavar="S", help="How long to record, in seconds."),
     output: Path = typer.Option(..., "--output", "-o", metavar="FILE.csv", help="Where to write the samples."),
-    current: Optional[bool] = typer.Option(
+    current: bool | None = typer.Option(
         None, "--current/--no-current",
         help="Also sample the motor current (a second TPDO every 2nd SYNC). Default: when the bus budget allows."),
     poll: bool = typer.Option(False, "--poll", help="Sample through the interpreter (PX, VX, IQ queries) every "
@@ -285,10 +284,10 @@ def record(
       sherpa log record shoulder_diff --rate 500 --for 10 --current -o pair.csv
       sherpa log record --poll --for 5 -o slow.csv
     """
+    from sherpa_cli.bus.targets import drive_refs
     from sherpa_cli.devices import encoder
     from sherpa_cli.log.record import MAX_LOAD, Poller, Recorder, bus_budget, check_budget
     from sherpa_cli.log.recording import write_csv
-    from sherpa_cli.bus.targets import drive_refs
 
     st = state(ctx)
     if not 0 < duration <= MAX_RECORD_S:
@@ -388,10 +387,10 @@ def _stepped_sim(st):
 def step(
     ctx: typer.Context,
     joint: str = typer.Argument(..., metavar="JOINT", help="A plain joint (or the drive of one); not a Σ/Δ joint."),
-    position: Optional[float] = typer.Option(None, "--position", metavar="X",
+    position: float | None = typer.Option(None, "--position", metavar="X",
                                              help="A position step of X rad from where the joint stands."),
-    velocity: Optional[float] = typer.Option(None, "--velocity", metavar="V", help="A velocity step to V rad/s."),
-    torque: Optional[float] = typer.Option(None, "--torque", metavar="A", help="A torque (current) step to A amperes."),
+    velocity: float | None = typer.Option(None, "--velocity", metavar="V", help="A velocity step to V rad/s."),
+    torque: float | None = typer.Option(None, "--torque", metavar="A", help="A torque (current) step to A amperes."),
     duration: float = typer.Option(2.0, "--for", metavar="S",
                                    help="Record at most S seconds after the command (position and velocity steps "
                                    "end earlier once settled; velocity and torque stop the motor at S)."),
@@ -423,9 +422,9 @@ def step(
     """
     import json
 
-    from sherpa_cli.motion.settings import MotionSettings
     from sherpa_cli.log.plot import have_matplotlib, plot_recording
     from sherpa_cli.log.recording import write_csv
+    from sherpa_cli.motion.settings import MotionSettings
     from sherpa_cli.ops.step import resolve_step_target, run_step, step_request
 
     st = state(ctx)

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import sys
 import time
-from typing import Callable, Optional
+from collections.abc import Callable
 
 import typer
 
@@ -22,7 +22,7 @@ def monitor(
     targets: Targets = None,
     once: bool = typer.Option(False, "--once", help="Print one snapshot and exit (no ages or times in it)."),
     interval: float = typer.Option(0.5, "--interval", metavar="S", help="Seconds between polls in the live view."),
-    heartbeat: Optional[int] = typer.Option(
+    heartbeat: int | None = typer.Option(
         None, "--heartbeat", metavar="MS",
         help="With --apply: set the drives' producer heartbeat (0x1017) to MS while monitoring (RAM only, the "
         "old value is written back at exit). Without --apply it is a dry run: shown, not written. Default: "
@@ -46,8 +46,8 @@ def monitor(
       sherpa --json monitor --once
       sherpa monitor --heartbeat 200 --apply
     """
-    from sherpa_cli.ops.monitor import Monitor
     from sherpa_cli.bus.targets import drive_refs
+    from sherpa_cli.ops.monitor import Monitor
 
     st = state(ctx)
     if st.json_mode and not once:

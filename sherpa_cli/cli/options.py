@@ -8,14 +8,14 @@ its own alias is here too, so every spelling of a flag and its help live in one 
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Annotated, List, Optional
+from typing import Annotated
 
 import typer
 
 # -- which drives ---------------------------------------------------------------------------------
 
 TARGETS_HELP = "Drive, joint or pair names, or BUS:NODE; default: every configured drive."
-Targets = Annotated[Optional[List[str]], typer.Argument(metavar="[TARGET]...", help=TARGETS_HELP)]
+Targets = Annotated[list[str] | None, typer.Argument(metavar="[TARGET]...", help=TARGETS_HELP)]
 
 # -- writing to drives (program-limits, params restore) -------------------------------------------
 
@@ -59,14 +59,14 @@ ApplyRecipe = Annotated[bool, typer.Option(
     "--apply", help="Let writing steps write. Without it every step that has --apply/--save runs as a dry run.")]
 ApplyCommission = Annotated[bool, typer.Option("--apply", help="Program and save the drives (default: dry run).")]
 YesRecipe = Annotated[bool, typer.Option("--yes", "-y", help="Answer every confirm step with yes.")]
-FromStep = Annotated[Optional[str], typer.Option(
+FromStep = Annotated[str | None, typer.Option(
     "--from", metavar="STEP", help="Start at this step (name or number).")]
-Report = Annotated[Optional[Path], typer.Option("--report", metavar="FILE.json", help="Write a JSON report.")]
-Junit = Annotated[Optional[Path], typer.Option("--junit", metavar="FILE.xml", help="Write a JUnit XML report.")]
+Report = Annotated[Path | None, typer.Option("--report", metavar="FILE.json", help="Write a JSON report.")]
+Junit = Annotated[Path | None, typer.Option("--junit", metavar="FILE.xml", help="Write a JUnit XML report.")]
 # one line per step is the default now (issue 11 item 10); --quiet stays accepted for old scripts
 Quiet = Annotated[bool, typer.Option("--quiet", "-q", hidden=True, help="The default now: one line per step.")]
 Verbose = Annotated[bool, typer.Option("--verbose", "-v", help="Show every step's command and output (default: "
                                        "one line per step; the output is in the --report file).")]
-SetVars = Annotated[Optional[List[str]], typer.Option(
+SetVars = Annotated[list[str] | None, typer.Option(
     "--set", metavar="KEY=VALUE", help="Set a recipe variable (repeat), e.g. backup=FILE (where dump-params "
     "writes in the commissioning recipe).")]

@@ -9,8 +9,9 @@ from __future__ import annotations
 import json
 import os
 import sys
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
-from typing import Any, Iterable, Sequence
+from typing import Any
 
 from sherpa_cli.errors import SafetyError, UsageError
 
@@ -29,7 +30,7 @@ class Output:
     _err: Any = field(default=None, repr=False)
 
     @classmethod
-    def create(cls, *, json_mode: bool = False, no_color: bool = False) -> "Output":
+    def create(cls, *, json_mode: bool = False, no_color: bool = False) -> Output:
         return cls(json_mode=json_mode, color=_color_allowed(no_color))
 
     def _console(self, stderr: bool):

@@ -7,7 +7,6 @@ module can add one with ``params_cmd.app.command("restore")(restore)``.
 from __future__ import annotations
 
 from pathlib import Path
-from typing import List, Optional
 
 import typer
 
@@ -19,7 +18,7 @@ app = typer.Typer(no_args_is_help=True, help="Drive parameter sets: compare dump
 def dump_params(
     ctx: typer.Context,
     targets: Targets = None,
-    output: Optional[Path] = typer.Option(None, "--output", "-o", metavar="FILE",
+    output: Path | None = typer.Option(None, "--output", "-o", metavar="FILE",
                                           help="Write the YAML dump to FILE (atomically; a symlink's target; a "
                                           "FIFO or device in place) instead of stdout; - is stdout."),
 ) -> None:
@@ -35,9 +34,9 @@ def dump_params(
       sherpa dump-params -o arm-2024-05-02.yaml
       sherpa dump-params shoulder_diff
     """
+    from sherpa_cli.bus.targets import drive_names
     from sherpa_cli.ops.params_file import drive_block, dump_to_text, write_dump
     from sherpa_cli.ops.params_read import dump_params as read_dump_params
-    from sherpa_cli.bus.targets import drive_names
     from sherpa_cli.output_files import check_output_path, is_stdout
 
     st = state(ctx)
@@ -68,7 +67,7 @@ def diff(
     ctx: typer.Context,
     a: str = typer.Argument(..., metavar="A", help="A dump file, 'live' (read the drives now) or 'config'."),
     b: str = typer.Argument("live", metavar="[B]", help="The same choices; default: live."),
-    targets: Optional[List[str]] = typer.Option(None, "--target", "-t", metavar="TARGET",
+    targets: list[str] | None = typer.Option(None, "--target", "-t", metavar="TARGET",
                                                 help="Only these drives (drive, joint, pair or BUS:NODE; repeat)."),
     only_differences: bool = typer.Option(False, "--only-differences", help="Show only the rows that differ."),
 ) -> None:
@@ -83,9 +82,9 @@ def diff(
       sherpa params diff config              # after commissioning: do the drives hold the config?
       sherpa params diff arm-a.yaml arm-b.yaml
     """
+    from sherpa_cli.bus.targets import drive_names
     from sherpa_cli.errors import ExitCode
     from sherpa_cli.ops import params_diff as pd
-    from sherpa_cli.bus.targets import drive_names
 
     st = state(ctx)
     cfg = st.load_config()

@@ -2,8 +2,9 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import Any, Callable, Sequence
+from typing import Any
 
 import typer
 
@@ -11,6 +12,7 @@ from sherpa_cli.cli.context import state
 from sherpa_cli.cli.limits_cmd import drive_moves
 from sherpa_cli.cli.options import Apply, MotorOff, Save, Targets, VerifyFlash, Yes
 from sherpa_cli.cli.output import fmt_value
+
 
 def program_limits(
     ctx: typer.Context,
@@ -47,8 +49,8 @@ def program_limits(
       sherpa program-limits --apply --save --yes
       sherpa program-limits --apply --save --verify-flash --yes
     """
-    from sherpa_cli.joints.limits import derive_checked, left_as_they_are
     from sherpa_cli.bus.targets import drive_names
+    from sherpa_cli.joints.limits import derive_checked, left_as_they_are
     from sherpa_cli.ops.program import DriveTarget
 
     st = state(ctx)

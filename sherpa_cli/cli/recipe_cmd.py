@@ -4,17 +4,26 @@ from __future__ import annotations
 
 import io
 import sys
+from collections.abc import Sequence
 from contextlib import redirect_stderr, redirect_stdout
 from pathlib import Path
-from typing import Optional, Sequence
 
 import typer
 
 from sherpa_cli.cli import context
 from sherpa_cli.cli.context import AppState, state
+from sherpa_cli.cli.options import (
+    ApplyCommission,
+    ApplyRecipe,
+    FromStep,
+    Junit,
+    Quiet,
+    Report,
+    SetVars,
+    Verbose,
+    YesRecipe,
+)
 from sherpa_cli.cli.step_check import check_step_commands
-from sherpa_cli.cli.options import (ApplyCommission, ApplyRecipe, FromStep, Junit, Quiet, Report, SetVars,
-                                    Verbose, YesRecipe)
 from sherpa_cli.errors import UsageError
 
 app = typer.Typer(no_args_is_help=True, help="Run commissioning recipes (YAML lists of sherpa steps; docs/recipes.md).")
@@ -144,8 +153,8 @@ def _progress(st: AppState):
                 redirect_stdout=False, redirect_stderr=False, refresh_per_second=8)
 
 
-def execute(st: AppState, recipe_path: Path, *, apply: bool, yes: bool, start: Optional[str],
-            report: Optional[Path], junit: Optional[Path], sets: Sequence[str] | None, verbose: bool):
+def execute(st: AppState, recipe_path: Path, *, apply: bool, yes: bool, start: str | None,
+            report: Path | None, junit: Path | None, sets: Sequence[str] | None, verbose: bool):
     """Run a recipe in one session (config loaded and buses opened once); returns the RecipeReport.
 
     By default one line per step (name, outcome, duration); ``verbose`` also shows every step's

@@ -3,8 +3,8 @@
 from __future__ import annotations
 
 import sys
+from collections.abc import Iterator
 from contextlib import contextmanager
-from typing import Iterator, List, Optional
 
 import typer
 
@@ -15,7 +15,7 @@ from sherpa_cli.errors import ExitCode, UsageError
 
 def scan(
     ctx: typer.Context,
-    buses: Optional[List[str]] = typer.Option(None, "--bus", metavar="BUS",
+    buses: list[str] | None = typer.Option(None, "--bus", metavar="BUS",
                                               help="Scan only this bus (repeat for several). Default: every bus."),
     reset: bool = typer.Option(False, "--reset", help="With --apply: first send NMT reset communication to "
                                "every node (unsaved RAM of the drives is lost) and collect their boot-ups. "

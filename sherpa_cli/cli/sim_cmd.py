@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import threading
-from typing import Optional
 
 import typer
 
@@ -20,16 +19,16 @@ def _stop_on_sigterm(stop: threading.Event) -> None:
 
 def sim(
     ctx: typer.Context,
-    serve: Optional[str] = typer.Option(
+    serve: str | None = typer.Option(
         None, "--serve", metavar="HOST:PORT",
         help="Serve each bus over python-can-remote on PORT, PORT+1, ... (bind 127.0.0.1 unless "
         "--allow-remote)."),
     allow_remote: bool = typer.Option(False, "--allow-remote", help="Allow --serve on a non-loopback address."),
     reset_state: bool = typer.Option(False, "--reset-state",
                                      help="Forget what the simulated drives saved (SV): factory flash."),
-    duration: Optional[float] = typer.Option(None, "--duration", metavar="SECONDS",
+    duration: float | None = typer.Option(None, "--duration", metavar="SECONDS",
                                              help="Stop by itself after this long (default: until Ctrl-C)."),
-    event_log: Optional[str] = typer.Option(None, "--event-log", metavar="FILE",
+    event_log: str | None = typer.Option(None, "--event-log", metavar="FILE",
                                             help="Append one JSON line per motor on/off and heartbeat-loss event "
                                             "(drive, node, t = time.monotonic(), wall = time.time(), event)."),
 ) -> None:

@@ -21,9 +21,9 @@ def stop(ctx: typer.Context, targets: Targets = None) -> None:
       sherpa stop
       sherpa stop elbow_pitch wrist_3
     """
+    from sherpa_cli.bus.targets import drive_refs
     from sherpa_cli.motion.settings import MotionSettings
     from sherpa_cli.ops.stop import stop_drives
-    from sherpa_cli.bus.targets import drive_refs
 
     st = state(ctx)
     cfg = st.load_config()

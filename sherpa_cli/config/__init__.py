@@ -12,7 +12,7 @@ from pathlib import Path
 from sherpa_cli.config.model import ArmConfig
 from sherpa_cli.errors import ConfigError, Location
 
-__all__ = ["load_config", "load_config_text", "dump_native", "ArmConfig", "ConfigError"]
+__all__ = ["ArmConfig", "ConfigError", "dump_native", "load_config", "load_config_text"]
 
 
 def load_config(path: str | Path) -> ArmConfig:

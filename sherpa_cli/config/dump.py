@@ -8,14 +8,25 @@ catalog entries that equal the built-in ones are left out.
 from __future__ import annotations
 
 import dataclasses
-
 from typing import Any
 
 import yaml
 
 from sherpa_cli.config.catalog import builtin_catalog
-from sherpa_cli.config.model import (ArmConfig, BusConfig, CurrentLimits, HomingConfig, ILCodes, JointConfig, JointRole,
-                                     JoystickConfig, JoystickMap, MotionConfig, ProtocolConfig, SimDriveConfig)
+from sherpa_cli.config.model import (
+    ArmConfig,
+    BusConfig,
+    CurrentLimits,
+    HomingConfig,
+    ILCodes,
+    JointConfig,
+    JointRole,
+    JoystickConfig,
+    JoystickMap,
+    MotionConfig,
+    ProtocolConfig,
+    SimDriveConfig,
+)
 
 
 def dump_native(cfg: ArmConfig) -> str:

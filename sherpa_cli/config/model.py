@@ -16,9 +16,10 @@ check against the catalog, can still point at the line a technician must edit.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from enum import Enum
-from typing import Any, Mapping
+from typing import Any
 
 from sherpa_cli.errors import Location
 

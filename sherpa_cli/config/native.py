@@ -8,15 +8,47 @@ the rosparam loader gets exactly the same checks.
 from __future__ import annotations
 
 import dataclasses
-
 from pathlib import PurePath
 
 from sherpa_cli.config.catalog import builtin_catalog
-from sherpa_cli.config.model import (AbsEncoderConfig, ArmConfig, BusConfig, Catalog, CurrentLimits, DeviceConfig, DriveConfig,
-                                     DriveModel, HomingConfig, ILCodes, JoystickConfig, JoystickMap, MotionConfig, ProtocolConfig, SimDriveConfig, SimExtraNode, SimWiring, JointConfig, JointRole, MotorModel, PairConfig,
-                                     SwitchConfig, SwitchKind)
-from sherpa_cli.config.yamlnodes import (Locs, Section, YNode, as_int, as_map, as_name, as_seq, as_str, named_items,
-                                         plain, suggest)
+from sherpa_cli.config.model import (
+    AbsEncoderConfig,
+    ArmConfig,
+    BusConfig,
+    Catalog,
+    CurrentLimits,
+    DeviceConfig,
+    DriveConfig,
+    DriveModel,
+    HomingConfig,
+    ILCodes,
+    JointConfig,
+    JointRole,
+    JoystickConfig,
+    JoystickMap,
+    MotionConfig,
+    MotorModel,
+    PairConfig,
+    ProtocolConfig,
+    SimDriveConfig,
+    SimExtraNode,
+    SimWiring,
+    SwitchConfig,
+    SwitchKind,
+)
+from sherpa_cli.config.yamlnodes import (
+    Locs,
+    Section,
+    YNode,
+    as_int,
+    as_map,
+    as_name,
+    as_seq,
+    as_str,
+    named_items,
+    plain,
+    suggest,
+)
 from sherpa_cli.errors import ConfigError
 
 TOP_KEYS = ["name", "il_codes", "protocol", "motion", "homing", "joystick", "sim", "buses", "drives", "devices", "joints",
@@ -57,7 +89,7 @@ def register(locs: Locs, prefix: tuple[str, ...], sec: Section) -> None:
     """Remember where the section and each of its keys are, for the checks in validate.py."""
     locs.put(prefix, sec.node.loc)
     for key, child in sec.node.value.items():
-        locs.put(prefix + (key,), child.loc)
+        locs.put((*prefix, key), child.loc)
 
 
 PROTOCOL_KEYS = [f.name for f in dataclasses.fields(ProtocolConfig)]
@@ -309,7 +341,7 @@ def parse_current(sec: Section, prefix: tuple[str, ...], locs: Locs) -> CurrentL
     csec = sec.section("current", CURRENT_KEYS, what="a mapping {continuous: A, peak: A, peak_time: s}")
     if csec is None:
         return None
-    register(locs, prefix + ("current",), csec)
+    register(locs, (*prefix, "current"), csec)
     return CurrentLimits(continuous=csec.num("continuous", required=True), peak=csec.num("peak", required=True),
                          peak_time=csec.num("peak_time", required=True), where=csec.node.loc)
 
@@ -321,7 +353,7 @@ def parse_joint_body(sec: Section, name: str, role: JointRole, drive: str | None
     rng = sec.section("range", RANGE_KEYS, required=True, what="a mapping {min, max, margin, overshoot}",
                       aliases=RANGE_ALIASES)
     assert rng is not None
-    register(locs, prefix + ("range",), rng)
+    register(locs, (*prefix, "range"), rng)
     pos_min, pos_max = rng.int("min", required=True), rng.int("max", required=True)
 
     vel = sec.section("velocity", VELOCITY_KEYS, what="a mapping {limit: counts/s, trip: counts/s}")
@@ -329,12 +361,12 @@ def parse_joint_body(sec: Section, name: str, role: JointRole, drive: str | None
     cal = sec.section("calibration", CALIBRATION_KEYS, what="a mapping {speed: counts/s, position: counts}")
     for key, sub in (("velocity", vel), ("acceleration", acc), ("calibration", cal)):
         if sub is not None:
-            register(locs, prefix + (key,), sub)
+            register(locs, (*prefix, key), sub)
 
     abs_enc = None
     asec = sec.section("abs_encoder", ABS_KEYS, what='a mapping {source: "drive:PY", offset: counts}')
     if asec is not None:
-        register(locs, prefix + ("abs_encoder",), asec)
+        register(locs, (*prefix, "abs_encoder"), asec)
         abs_enc = AbsEncoderConfig(source=asec.str("source", required=True), offset=asec.int("offset", 0),
                                    where=asec.node.loc)
 
@@ -342,9 +374,9 @@ def parse_joint_body(sec: Section, name: str, role: JointRole, drive: str | None
     snode = sec.get("switches")
     if snode is not None:
         items = as_seq(snode, "a list of switches like [{input: 3, kind: stop, side: low}]")
-        locs.put(prefix + ("switches",), snode.loc)
+        locs.put((*prefix, "switches"), snode.loc)
         for i, item in enumerate(items):
-            switches.append(parse_switch(item, prefix + ("switches", str(i)), pos_min, pos_max, locs))
+            switches.append(parse_switch(item, (*prefix, "switches", str(i)), pos_min, pos_max, locs))
 
     return JointConfig(
         name=name, role=role, drive=drive, pair=pair, cpr=cpr, pos_min=pos_min, pos_max=pos_max,

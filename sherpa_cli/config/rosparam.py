@@ -22,8 +22,17 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from sherpa_cli.config.catalog import builtin_catalog
-from sherpa_cli.config.model import (AbsEncoderConfig, ArmConfig, BusConfig, DriveConfig, JointConfig, JointRole,
-                                     PairConfig, SwitchConfig, SwitchKind)
+from sherpa_cli.config.model import (
+    AbsEncoderConfig,
+    ArmConfig,
+    BusConfig,
+    DriveConfig,
+    JointConfig,
+    JointRole,
+    PairConfig,
+    SwitchConfig,
+    SwitchKind,
+)
 from sherpa_cli.config.native import default_name
 from sherpa_cli.config.yamlnodes import Locs, Section, YNode, as_int, as_map, as_str, describe
 from sherpa_cli.errors import ConfigError, Location
@@ -235,22 +244,22 @@ def _joint(n: _Node, role: JointRole, name: str, drive: str | None, pair: str | 
     margin, kmargin = pick("pos_margin")
     prefix = ("joint", name)
     locs.put(prefix, n.sec.node.loc)
-    locs.put(prefix + ("cpr",), n.loc("cpr"))
-    locs.put(prefix + ("range",), n.loc(kmin))
-    locs.put(prefix + ("range", "min"), n.loc(kmin))
-    locs.put(prefix + ("range", "max"), n.loc(kmax))
-    locs.put(prefix + ("range", "margin"), n.loc(kmargin))
-    locs.put(prefix + ("calibration", "speed"), n.loc("cal_speed"))
+    locs.put((*prefix, "cpr"), n.loc("cpr"))
+    locs.put((*prefix, "range"), n.loc(kmin))
+    locs.put((*prefix, "range", "min"), n.loc(kmin))
+    locs.put((*prefix, "range", "max"), n.loc(kmax))
+    locs.put((*prefix, "range", "margin"), n.loc(kmargin))
+    locs.put((*prefix, "calibration", "speed"), n.loc("cal_speed"))
 
     ext_node = ext_node or n
     ext = ext_node.v["ext_pos_input"]
     if dd:
         # cal_pos is the Σ joint's (Table C.2); the Δ joint falls back to its own low end.
         cal_pos = None if ext else pos_min
-        locs.put(prefix + ("calibration", "position"), n.loc(kmin))
+        locs.put((*prefix, "calibration", "position"), n.loc(kmin))
     else:
         cal_pos = v["cal_pos"] if v["cal_pos"] is not None else (None if ext else pos_min)
-        locs.put(prefix + ("calibration", "position"), n.loc("cal_pos" if v["cal_pos"] is not None else kmin))
+        locs.put((*prefix, "calibration", "position"), n.loc("cal_pos" if v["cal_pos"] is not None else kmin))
 
     low, high = v[f"cal_sw{sfx}_L"], v[f"cal_sw{sfx}_H"]
     switches: list[SwitchConfig] = []
@@ -266,7 +275,7 @@ def _joint(n: _Node, role: JointRole, name: str, drive: str | None, pair: str | 
     for i, (inp, kind, pos, side, key) in enumerate(specs):
         loc = n.loc(key)
         for part in ((), ("input",), ("position",), ("drives",)):
-            locs.put(prefix + ("switches", str(i)) + part, loc)
+            locs.put((*prefix, "switches", str(i), *part), loc)
         switches.append(SwitchConfig(input=inp, kind=kind, position=pos, side=side, where=loc))
 
     abs_enc = AbsEncoderConfig(source=ext, offset=0, where=ext_node.loc("ext_pos_input")) if ext else None

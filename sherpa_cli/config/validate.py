@@ -7,11 +7,9 @@ raised, so fixing errors top to bottom works; the hint says how many more were f
 
 from __future__ import annotations
 
-import re
-
 import difflib
 import math
-
+import re
 from dataclasses import replace
 
 from sherpa_cli.config.model import ArmConfig, DriveModel, JointConfig, JointRole, SwitchKind

@@ -15,14 +15,21 @@ from __future__ import annotations
 import builtins
 import difflib
 import re
-from pathlib import Path
+from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, field
-from typing import Any, Iterable, Iterator
+from pathlib import Path
+from typing import Any
 
 import yaml
 from yaml.constructor import SafeConstructor
-from yaml.events import (AliasEvent, MappingEndEvent, MappingStartEvent, ScalarEvent, SequenceEndEvent,
-                         SequenceStartEvent)
+from yaml.events import (
+    AliasEvent,
+    MappingEndEvent,
+    MappingStartEvent,
+    ScalarEvent,
+    SequenceEndEvent,
+    SequenceStartEvent,
+)
 from yaml.nodes import MappingNode, ScalarNode, SequenceNode
 
 from sherpa_cli.errors import ConfigError, Location
@@ -391,7 +398,7 @@ class Section:
 
     def section(self, key: builtins.str, allowed: Iterable[builtins.str], *, required: builtins.bool = False,
                 what: builtins.str = "a mapping",
-                aliases: dict[builtins.str, builtins.str] | None = None) -> "Section | None":
+                aliases: dict[builtins.str, builtins.str] | None = None) -> Section | None:
         node = self.req(key) if required else self.get(key)
         return None if node is None else Section(node, allowed, what=what, aliases=aliases)
 

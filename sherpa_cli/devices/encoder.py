@@ -21,14 +21,15 @@ from __future__ import annotations
 import math
 import threading
 import time
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
-from typing import Any, Callable, Iterable, Sequence
+from typing import Any
 
+from sherpa_cli.bus.targets import DriveRef
 from sherpa_cli.config.model import DeviceConfig
 from sherpa_cli.devices import CanOpenEncoder
-from sherpa_cli.errors import SherpaError, UsageError
-from sherpa_cli.bus.targets import DriveRef
 from sherpa_cli.elmo.protocol import COB_INVALID, NMT_ID, NMT_START, SYNC_ID, TPDO_COMM, TPDO_MAP
+from sherpa_cli.errors import SherpaError, UsageError
 
 TPDO1_COMM, TPDO1_MAP, CYCLIC_TIMER = TPDO_COMM, TPDO_MAP, 0x6200
 POSITION_ENTRY = 0x60040020  # 0x6004:0, 32 bits
@@ -151,7 +152,7 @@ def _restore(sdo: Any, changed: list[tuple[int, int, int, int]]) -> None:
 
 # -- recording (log/record.py Recorder) ---------------------------------------------------------------
 
-def recorded_encoders(cfg: Any, drives: Iterable[str]) -> list["EncoderTrack"]:
+def recorded_encoders(cfg: Any, drives: Iterable[str]) -> list[EncoderTrack]:
     """The CANopen encoders of the joints whose drives are all recorded (``abs_encoder.source`` names
     a device), one track per device, in config order."""
     recorded = set(drives)

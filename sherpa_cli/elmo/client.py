@@ -22,9 +22,9 @@ from sherpa_cli.elmo import codec
 from sherpa_cli.elmo.codec import Reply
 from sherpa_cli.elmo.commands import COMMANDS
 from sherpa_cli.elmo.faults import Emcy, decode_emcy, ec_text
+from sherpa_cli.elmo.protocol import EMCY_BASE, NMT_ID, NMT_START
 from sherpa_cli.elmo.transport import Transport
 from sherpa_cli.errors import CodecError, CommunicationError, DriveRefusedError, DriveTimeoutError, ProtocolError
-from sherpa_cli.elmo.protocol import EMCY_BASE, NMT_ID, NMT_START
 
 log = logging.getLogger(__name__)
 
@@ -66,7 +66,7 @@ class _Pending:
     every wait builds a Condition waiter), and every interpreter round trip makes one.
     """
 
-    __slots__ = ("letters", "index", "arrived", "reply", "error")
+    __slots__ = ("arrived", "error", "index", "letters", "reply")
 
     def __init__(self, letters: str, index: int) -> None:
         self.letters = letters

@@ -12,8 +12,7 @@ import struct
 from dataclasses import dataclass
 from typing import Literal, NamedTuple
 
-from sherpa_cli.elmo.commands import (COMMANDS, INDEX_MAX, INT32_MAX, INT32_MIN, CommandSpec, check_letters,
-                                      lookup)
+from sherpa_cli.elmo.commands import COMMANDS, INDEX_MAX, INT32_MAX, INT32_MIN, CommandSpec, check_letters, lookup
 from sherpa_cli.elmo.faults import ec_text
 from sherpa_cli.errors import CodecError
 

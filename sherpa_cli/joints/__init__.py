@@ -6,4 +6,4 @@ Submodules are imported on use so that loading the package stays cheap.
 
 from __future__ import annotations
 
-__all__ = ["units", "diffpair", "limits", "currents"]
+__all__ = ["currents", "diffpair", "limits", "units"]

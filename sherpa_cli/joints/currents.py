@@ -12,8 +12,8 @@ Findings are data, not exceptions, so ``config check`` can list them all at once
 from __future__ import annotations
 
 import math
+from collections.abc import Collection, Iterator, Mapping
 from dataclasses import dataclass
-from typing import Collection, Iterator, Mapping
 
 from sherpa_cli.config.model import ArmConfig, CurrentLimits
 from sherpa_cli.errors import Location

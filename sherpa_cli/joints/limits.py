@@ -32,15 +32,24 @@ from __future__ import annotations
 
 import difflib
 import math
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any, Iterable, Mapping, Sequence
+from typing import Any
 
-from sherpa_cli.config.model import (ArmConfig, CurrentLimits, JointConfig, JointRole, PairConfig,
-                                     SwitchConfig, SwitchKind)
+from sherpa_cli.config.model import (
+    ArmConfig,
+    CurrentLimits,
+    JointConfig,
+    JointRole,
+    PairConfig,
+    SwitchConfig,
+    SwitchKind,
+)
 from sherpa_cli.errors import ConfigError, Location, UsageError
 from sherpa_cli.joints.currents import Finding, check_currents, validate_params
 from sherpa_cli.joints.diffpair import MotorBox, motor_box
 from sherpa_cli.joints.params import PARAM_ORDER, DriveParams, ParamValue
+
 
 @dataclass(frozen=True)
 class PairExplanation:

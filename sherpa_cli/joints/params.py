@@ -3,9 +3,9 @@ written in. Below both the derivation (limits.py) and the current checks (curren
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from types import MappingProxyType
-from typing import Mapping
 
 __all__ = ["PARAM_ORDER", "DriveParams", "ParamValue"]
 

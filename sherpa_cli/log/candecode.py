@@ -10,14 +10,15 @@ what cannot be decoded is shown as such.
 from __future__ import annotations
 
 import struct
+from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, field
-from typing import Any, Iterable, Iterator
+from typing import Any
 
+from sherpa_cli.bus.canopen_names import abort_text, nmt_text
 from sherpa_cli.elmo.codec import decode_reply, decode_request
 from sherpa_cli.elmo.commands import format_value, lookup
 from sherpa_cli.elmo.faults import decode_emcy
 from sherpa_cli.errors import CodecError
-from sherpa_cli.bus.canopen_names import abort_text, nmt_text
 
 KINDS = ("nmt", "sync", "emcy", "heartbeat", "sdo", "interp", "pdo", "other")
 
@@ -116,8 +117,8 @@ def _value_text(index: int, sub: int, data: bytes) -> tuple[str, Any]:
         return repr(text), text
     if len(data) <= 4:
         value = _u(data)
-        if (0x1400 <= index < 0x1600 or 0x1800 <= index < 0x1A00) and sub == 1 or \
-                (0x1600 <= index < 0x1800 or 0x1A00 <= index < 0x1C00) and sub > 0:
+        if ((0x1400 <= index < 0x1600 or 0x1800 <= index < 0x1A00) and sub == 1) or \
+                ((0x1600 <= index < 0x1800 or 0x1A00 <= index < 0x1C00) and sub > 0):
             return f"0x{value:08X}", value
         if index in (0x6064, 0x606C, 0x6069, 0x6077, 0x6078) and len(data) in (2, 4):
             signed = int.from_bytes(data, "little", signed=True)

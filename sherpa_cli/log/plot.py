@@ -2,8 +2,8 @@
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from pathlib import Path
-from typing import Mapping
 
 from sherpa_cli.errors import UsageError
 from sherpa_cli.log.recording import SIGNALS, UNITS, Recording

@@ -17,21 +17,23 @@ before it stops; tests inject their own (``sync_factory``) and a clock.
 
 from __future__ import annotations
 
+import contextlib
 import math
 import struct
 import threading
 import time
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
-from typing import Any, Callable, Iterable, Sequence
+from typing import Any
 
+from sherpa_cli.bus.targets import DriveRef
 from sherpa_cli.config.model import ArmConfig
+from sherpa_cli.devices import encoder
+from sherpa_cli.elmo.protocol import SYNC_ID
 from sherpa_cli.errors import SherpaError, UsageError
 from sherpa_cli.joints.units import counts_per_s_to_rad_per_s, counts_to_rad
-from sherpa_cli.devices import encoder
 from sherpa_cli.log.capture import frame_bits
 from sherpa_cli.log.recording import Recording
-from sherpa_cli.bus.targets import DriveRef
-from sherpa_cli.elmo.protocol import SYNC_ID
 
 MAX_LOAD = 0.90  # share of the bit rate the recording may take (worst-case stuffing counted)
 DEFAULT_BITRATE = 1_000_000  # when the config does not say
@@ -206,7 +208,7 @@ class Recorder:
         self._sync_spans: list[list[Any]] = []  # per SYNC source: [started, stopped]
 
     # -- lifetime -------------------------------------------------------------------------------
-    def __enter__(self) -> "Recorder":
+    def __enter__(self) -> Recorder:
         try:
             for d in self._drives.values():
                 self._configure(d)
@@ -240,10 +242,8 @@ class Recorder:
             span[1] = self._now()
             request = getattr(sync, "request_stop", None)
             if request is not None:
-                try:
+                with contextlib.suppress(Exception):
                     request()
-                except Exception:
-                    pass
         for sync in self._syncs:
             try:
                 sync.stop()
@@ -254,10 +254,8 @@ class Recorder:
             self.t_end = self._now()
         self._drain()
         for network, cob, callback in self._subscribed:
-            try:
+            with contextlib.suppress(Exception):
                 network.unsubscribe(cob, callback)
-            except Exception:
-                pass
         self._subscribed.clear()
         failures = []
         for d in self._drives.values():
@@ -362,7 +360,7 @@ class Recorder:
             network.subscribe(track.cob, callback)
             self._subscribed.append((network, track.cob, callback))
 
-    def _encoder_callback(self, track: "encoder.EncoderTrack") -> Callable[[int, bytes, float], None]:
+    def _encoder_callback(self, track: encoder.EncoderTrack) -> Callable[[int, bytes, float], None]:
         def on_frame(can_id: int, data: bytes, timestamp: float) -> None:
             t0 = self.t0
             if t0 is None:
@@ -499,7 +497,7 @@ class Poller:
         self.t0: float | None = None
         self.errors: list[BaseException] = []
 
-    def __enter__(self) -> "Poller":
+    def __enter__(self) -> Poller:
         self.t0 = self.clock()
         for bus in dict.fromkeys(r.bus for r in self.refs):
             interval = self.session.cfg.buses[bus].poll_interval_ms / 1000

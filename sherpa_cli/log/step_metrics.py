@@ -17,8 +17,8 @@ Crossing times are interpolated linearly between samples.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import asdict, dataclass
-from typing import Sequence
 
 
 @dataclass(frozen=True)

@@ -15,8 +15,9 @@ mark (or when both joints of the pair have an absolute encoder).
 
 from __future__ import annotations
 
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
-from typing import Any, Callable, Mapping
+from typing import Any
 
 from sherpa_cli.config.model import ArmConfig, JointConfig, JointRole
 

@@ -6,10 +6,95 @@ The consumer entry 0x1016:1 watches the host's heartbeat (``0x700 + host id``); 
 
 from __future__ import annotations
 
+import logging
+import threading
+import time
+from collections.abc import Callable, Sequence
+from typing import Protocol
+
 from sherpa_cli.elmo.protocol import COMM_ERROR, CONSUMER, HEARTBEAT_BASE, LOSS_ACTION, NMT_OPERATIONAL
 
-__all__ = ["COMM_ERROR", "CONSUMER", "HEARTBEAT_BASE", "LOSS_ACTION", "NMT_OPERATIONAL", "OBJECT_NAMES", "SIZES"]
+__all__ = ["COMM_ERROR", "CONSUMER", "HEARTBEAT_BASE", "LOSS_ACTION", "NMT_OPERATIONAL", "OBJECT_NAMES", "SIZES",
+           "HostHeartbeat"]
+
+log = logging.getLogger(__name__)
 
 SIZES = {CONSUMER: "<I", COMM_ERROR: "<B", LOSS_ACTION: "<h"}
 OBJECT_NAMES = {CONSUMER: "consumer heartbeat time", COMM_ERROR: "error behaviour",
                 LOSS_ACTION: "abort connection option code"}
+
+
+class Sender(Protocol):
+    """Where a heartbeat frame goes: a bus's canopen.Network (``send_message``)."""
+
+    def send_message(self, can_id: int, data: bytes) -> None: ...
+
+
+class HostHeartbeat:
+    """The host heartbeat (``0x700 + host id``, state Operational) from a thread of this process.
+
+    Why a Python thread and not python-can's ``send_periodic``: on SocketCAN that is the kernel's
+    broadcast manager, which keeps sending while this process hangs (until the socket is released at
+    exit) -- the drive would never notice a hung tool. This thread sends only while the command shows
+    signs of life (:meth:`pulse`) and the main thread runs; SIGKILL ends it with the process, and the
+    drive's own consumer switches the motor off ``consumer_time_ms`` later.
+    """
+
+    def __init__(self, networks: Callable[[], Sequence[Sender]], host_node_id: int, period: float,
+                 first_allowance: float) -> None:
+        self._networks = networks
+        self.frame_id = HEARTBEAT_BASE + host_node_id
+        self.period = period
+        self._stop = threading.Event()
+        self.thread: threading.Thread | None = None
+        self.error: BaseException | None = None  # the send that failed (a dead bus)
+        self.given_up: str | None = None  # why the thread stopped sending on its own
+        self._alive_until = time.monotonic() + first_allowance
+        self._alive_lock = threading.Lock()
+        self.sent = 0
+
+    def pulse(self, allowance: float, *, extend: bool = False) -> None:
+        """A sign of life: keep sending for ``allowance`` s from now; ``extend`` never shortens an
+        earlier, longer allowance."""
+        with self._alive_lock:
+            until = time.monotonic() + allowance
+            self._alive_until = max(self._alive_until, until) if extend else until
+
+    def beat_now(self) -> None:
+        """One heartbeat at once after arming: a drive's consumer starts watching on the first
+        heartbeat after its 0x1016 entry (CiA 301), so it must come before any MO=1, not a period later."""
+        for network in self._networks():
+            network.send_message(self.frame_id, bytes([NMT_OPERATIONAL]))
+
+    def start(self) -> None:
+        networks = list(self._networks())
+        main = threading.main_thread()
+
+        def loop() -> None:
+            while True:
+                with self._alive_lock:
+                    alive_until = self._alive_until
+                if not main.is_alive():
+                    self.given_up = "the command's main thread ended"
+                    return
+                if time.monotonic() > alive_until:
+                    self.given_up = "the command showed no sign of life (hung?)"
+                    log.warning("motion guard: %s; heartbeat stopped, drives stop on their own", self.given_up)
+                    return
+                try:
+                    for network in networks:
+                        network.send_message(self.frame_id, bytes([NMT_OPERATIONAL]))
+                    self.sent += 1
+                except BaseException as exc:  # a dead bus: the drives' consumers will stop them
+                    self.error = exc
+                    return
+                if self._stop.wait(self.period):
+                    return
+
+        self.thread = threading.Thread(target=loop, name="sherpa-deadman", daemon=True)
+        self.thread.start()
+
+    def stop(self) -> None:
+        self._stop.set()
+        if self.thread is not None:
+            self.thread.join(timeout=5)

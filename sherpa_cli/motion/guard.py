@@ -13,28 +13,27 @@
   put back UM and the dead-man objects it changed, stop the heartbeat. :attr:`MotionGuard.report`
   names every drive, how it was stopped and what was restored.
 
-Why the heartbeat comes from a Python thread and not ``send_periodic``: on SocketCAN python-can's
-periodic task is the kernel's broadcast manager, which keeps sending while this process hangs (it
-ends only when the socket is released, at exit) -- the drive would never notice a hung tool. The thread sends only while the command shows signs of
-life (:meth:`check`) and the main thread runs; SIGKILL ends it with the process, and the drive's own
-consumer switches the motor off ``consumer_time_ms`` later.
+The pieces live beside it: the dead-man objects and the host heartbeat thread (deadman.py, and why
+that is a thread of this process), the per-drive lock (lock.py), the stop path (stopping.py), the
+report (report.py).
 """
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import signal
 import struct
 import threading
 import time
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
-from typing import Any, Callable, Iterable, Literal, Sequence
+from typing import Any, Literal
 
 from sherpa_cli.elmo.faults import decode_sr, describe_mf
 from sherpa_cli.elmo.protocol import UM_TORQUE
 from sherpa_cli.errors import CommunicationError, ExitCode, SafetyError, SherpaError, UsageError
-from sherpa_cli.motion.deadman import (COMM_ERROR, CONSUMER, HEARTBEAT_BASE, LOSS_ACTION, NMT_OPERATIONAL,
-                                       OBJECT_NAMES, SIZES)
+from sherpa_cli.motion.deadman import COMM_ERROR, CONSUMER, LOSS_ACTION, OBJECT_NAMES, SIZES, HostHeartbeat
 from sherpa_cli.motion.lock import DriveLock, drive_label
 from sherpa_cli.motion.report import DriveStop, GuardReport
 from sherpa_cli.motion.settings import PROFILE_KEYS, MotionSettings
@@ -95,13 +94,9 @@ class MotionGuard:
         self._locks: dict[tuple[str, int], DriveLock] = {}  # the motion locks this guard holds
         self.report = GuardReport()
         # dead-man loop
-        self._hb_stop = threading.Event()
-        self._hb_thread: threading.Thread | None = None
-        self._hb_error: BaseException | None = None
-        self._hb_given_up: str | None = None
-        self._alive_until = time.monotonic() + settings.liveness_timeout
-        self._alive_lock = threading.Lock()
-        self.heartbeats_sent = 0
+        buses = sorted({ref.bus for ref in self.refs})
+        self._heartbeat = HostHeartbeat(lambda: [session.links[b].network for b in buses], settings.host_node_id,
+                                        settings.heartbeat_period, settings.liveness_timeout)
         # signals
         self._signal: str | None = None
         self._exiting = False
@@ -109,7 +104,7 @@ class MotionGuard:
 
     # -- public API -------------------------------------------------------------------------------
 
-    def __enter__(self) -> "MotionGuard":
+    def __enter__(self) -> MotionGuard:
         try:
             self._install_signals()
             for ref in self.refs:  # first, before anything is sent: a second command refuses here
@@ -196,11 +191,11 @@ class MotionGuard:
         """A sign of life for the heartbeat thread; raises if a signal asked to stop or the dead-man failed."""
         if self._signal is not None:
             raise MotionStopped(f"{self._signal} received: motion stopped")
-        if self._hb_error is not None:
-            raise DeadManError(f"host heartbeat failed: {self._hb_error}",
+        if self._heartbeat.error is not None:
+            raise DeadManError(f"host heartbeat failed: {self._heartbeat.error}",
                                hint="the drives stop on their own within the consumer time")
-        if self._hb_given_up is not None:
-            raise DeadManError(f"host heartbeat stopped: {self._hb_given_up}")
+        if self._heartbeat.given_up is not None:
+            raise DeadManError(f"host heartbeat stopped: {self._heartbeat.given_up}")
         self._pulse()
 
     def keep_alive(self, seconds: float) -> None:
@@ -378,60 +373,30 @@ class MotionGuard:
         self._event(f"{d.client.label}: dead-man armed: host {s.host_node_id}, {s.consumer_time_ms} ms, "
                     f"0x6007={s.loss_action}")
 
-    # -- dead-man heartbeat -----------------------------------------------------------------------
+    # -- dead-man heartbeat (motion/deadman.py) ----------------------------------------------------
 
     def _pulse(self, extra: float = 0.0, *, exact: bool = False) -> None:
         """A sign of life: the heartbeat goes on for the allowance (+ ``extra`` s). ``exact``: for the
         next step only, even if an earlier, longer extension is still running (the exit's steps)."""
         allowance = max(self.settings.liveness_timeout, 3 * self.settings.request_bound) + extra
-        with self._alive_lock:
-            if exact:
-                self._alive_until = time.monotonic() + allowance
-                return
-            self._alive_until = max(self._alive_until, time.monotonic() + allowance) if extra else \
-                time.monotonic() + allowance
+        self._heartbeat.pulse(allowance, extend=bool(extra) and not exact)
 
     def _beat_now(self) -> None:
-        """One heartbeat at once after arming: a drive's consumer starts watching on the first
-        heartbeat after its 0x1016 entry (CiA 301), so it must come before any MO=1, not a period later."""
-        for bus in sorted({ref.bus for ref in self.refs}):
-            self.session.links[bus].network.send_message(HEARTBEAT_BASE + self.settings.host_node_id, bytes([NMT_OPERATIONAL]))
+        self._heartbeat.beat_now()
 
     def _start_heartbeat(self) -> None:
-        buses = sorted({ref.bus for ref in self.refs})
-        networks = [self.session.links[b].network for b in buses]
-        frame_id = HEARTBEAT_BASE + self.settings.host_node_id
-        period = self.settings.heartbeat_period
-        main = threading.main_thread()
-
-        def loop() -> None:
-            while True:
-                with self._alive_lock:
-                    alive_until = self._alive_until
-                if not main.is_alive():
-                    self._hb_given_up = "the command's main thread ended"
-                    return
-                if time.monotonic() > alive_until:
-                    self._hb_given_up = "the command showed no sign of life (hung?)"
-                    log.warning("motion guard: %s; heartbeat stopped, drives stop on their own", self._hb_given_up)
-                    return
-                try:
-                    for network in networks:
-                        network.send_message(frame_id, bytes([NMT_OPERATIONAL]))
-                    self.heartbeats_sent += 1
-                except BaseException as exc:  # a dead bus: the drives' consumers will stop them
-                    self._hb_error = exc
-                    return
-                if self._hb_stop.wait(period):
-                    return
-
-        self._hb_thread = threading.Thread(target=loop, name="sherpa-deadman", daemon=True)
-        self._hb_thread.start()
+        self._heartbeat.start()
 
     def _stop_heartbeat(self) -> None:
-        self._hb_stop.set()
-        if self._hb_thread is not None:
-            self._hb_thread.join(timeout=5)
+        self._heartbeat.stop()
+
+    @property
+    def heartbeats_sent(self) -> int:
+        return self._heartbeat.sent
+
+    @property
+    def _hb_thread(self) -> threading.Thread | None:
+        return self._heartbeat.thread
 
     # -- exit -------------------------------------------------------------------------------------
 
@@ -600,10 +565,8 @@ class MotionGuard:
 
     def _restore_signals(self) -> None:
         for signum, handler in self._old_handlers.items():
-            try:
+            with contextlib.suppress(TypeError, ValueError):
                 signal.signal(signum, handler)
-            except (TypeError, ValueError):
-                pass
         self._old_handlers.clear()
 
     def _on_signal(self, signum: int, frame: Any) -> None:

@@ -15,8 +15,8 @@ and a small polling loop (:func:`watch`) whose I/O, time and stop conditions are
 
 from __future__ import annotations
 
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Callable, Iterable, Mapping, Sequence
 
 from sherpa_cli.config.model import ArmConfig, JointConfig, JointRole
 from sherpa_cli.joints.diffpair import Range, is_reachable, to_motors
@@ -36,7 +36,7 @@ class WatchedJoint:
     sign: int = 1  # +1 Σ, -1 Δ
 
     @classmethod
-    def of(cls, cfg: ArmConfig, joint: JointConfig) -> "WatchedJoint":
+    def of(cls, cfg: ArmConfig, joint: JointConfig) -> WatchedJoint:
         if joint.role is JointRole.PLAIN:
             assert joint.drive is not None
             return cls(joint.name, joint.full_range, joint.normal_range, joint.drive)

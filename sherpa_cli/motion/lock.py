@@ -3,6 +3,7 @@ process ends (even by SIGKILL)."""
 
 from __future__ import annotations
 
+import contextlib
 import os
 import re
 
@@ -60,10 +61,8 @@ class DriveLock:
     def release(self) -> None:
         if not self._lock.is_locked:
             return
-        try:
+        with contextlib.suppress(OSError):
             self.pid_path.unlink()
-        except OSError:
-            pass
         self._lock.release(force=True)
 
     def holder(self) -> int | None:

@@ -4,7 +4,8 @@ runs before its restore. Shared by `diffdrive move`, the pair jog, the live jog 
 from __future__ import annotations
 
 import functools
-from typing import TYPE_CHECKING, Any, Callable, Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
+from typing import TYPE_CHECKING, Any
 
 from sherpa_cli.config.model import PAIR_START_METHODS, ArmConfig
 from sherpa_cli.elmo.protocol import GROUP_INDEX, RPDO2_BASE, SYNC_ID, TPDO2_BASE
@@ -54,7 +55,7 @@ class CommonStart:
         self.stop = stop
         self.bus = refs[0].bus
 
-    def __enter__(self) -> "CommonStart":
+    def __enter__(self) -> CommonStart:
         if self.method in ("group", "sync_rpdo") and len({r.bus for r in self.refs}) != 1:
             raise ConfigError(f"motion.pair_start={self.method} needs both drives of the pair on one bus; "
                               "use pair_start: sequential")

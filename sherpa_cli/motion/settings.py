@@ -2,8 +2,9 @@
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Iterable
+from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
     from sherpa_cli.config.model import ArmConfig
@@ -37,7 +38,7 @@ class MotionSettings:
         return (self.host_node_id & 0x7F) << 16 | (self.consumer_time_ms & 0xFFFF)
 
     @classmethod
-    def from_config(cls, cfg: ArmConfig, buses: Iterable[str] | None = None) -> "MotionSettings":
+    def from_config(cls, cfg: ArmConfig, buses: Iterable[str] | None = None) -> MotionSettings:
         m, p = cfg.motion, cfg.protocol
         names = list(buses) if buses is not None else list(cfg.buses)
         poll_ms = min((cfg.buses[b].poll_interval_ms for b in names if b in cfg.buses), default=10)

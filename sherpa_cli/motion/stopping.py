@@ -5,7 +5,8 @@ from __future__ import annotations
 
 import logging
 import time
-from typing import TYPE_CHECKING, Callable
+from collections.abc import Callable
+from typing import TYPE_CHECKING
 
 from sherpa_cli.elmo.faults import describe_mf, sr_problems
 from sherpa_cli.elmo.protocol import UM_TORQUE

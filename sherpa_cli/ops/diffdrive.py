@@ -23,13 +23,14 @@ from __future__ import annotations
 import contextlib
 import math
 import time
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Any, Callable, Mapping, Sequence
+from typing import Any
 
 from sherpa_cli.config.model import ArmConfig, PairConfig
+from sherpa_cli.elmo.protocol import UM_POSITION
 from sherpa_cli.errors import SafetyError, UsageError
 from sherpa_cli.joints import diffpair, units
-from sherpa_cli.elmo.protocol import UM_POSITION
 from sherpa_cli.motion import calibration, limit_watch
 from sherpa_cli.motion.pair_start import CommonStart, pair_settings, stop_motors
 
@@ -458,9 +459,9 @@ def run_move(session: Any, pair: PairConfig, request: MoveRequest, *, guard_fact
     ``recorder_kw`` goes to log/record.py's Recorder (``clock``, ``sync_factory``: tests);
     ``trace_factory(drives)`` replaces the recording with anything that has ``add(t, motors)``,
     ``samples`` and ``source`` (PX is then polled, as with --poll)."""
-    from sherpa_cli.ops.joint_jog import move_to, stop_now, wait_standstill
     from sherpa_cli.motion.guard import MotionGuard
     from sherpa_cli.motion.settings import MotionSettings
+    from sherpa_cli.ops.joint_jog import move_to, stop_now, wait_standstill
 
     cfg = session.cfg
     method, group_id = pair_settings(cfg)

@@ -27,17 +27,18 @@ from __future__ import annotations
 
 import logging
 import time
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from typing import Any, Callable, Literal, Sequence
+from typing import Any, Literal
 
+from sherpa_cli.bus.targets import drive_ref
 from sherpa_cli.config.model import ArmConfig, JointConfig, JointRole, SwitchConfig, SwitchKind
+from sherpa_cli.elmo.protocol import UM_POSITION
 from sherpa_cli.errors import SafetyError, UsageError
 from sherpa_cli.motion import calibration
 from sherpa_cli.motion.guard import MotionGuard
 from sherpa_cli.motion.settings import MotionSettings
 from sherpa_cli.motion.stopping import fault_reason
-from sherpa_cli.bus.targets import drive_ref
-from sherpa_cli.elmo.protocol import UM_POSITION
 
 KINDS = ("home_switch", "end_switches", "pair", "abs_encoder")
 
@@ -290,11 +291,11 @@ class _Disarm:
     Entered before the unit's motion guard in the same ``with``, it exits after it: the motors are
     stopped first, then the homing is put back (a restore, allowed after an error)."""
 
-    def __init__(self, runner: "_Runner") -> None:
+    def __init__(self, runner: _Runner) -> None:
         self.runner = runner
         self.armed: dict[str, Any] = {}
 
-    def __enter__(self) -> "_Disarm":
+    def __enter__(self) -> _Disarm:
         self.runner._armed = self.armed
         return self
 

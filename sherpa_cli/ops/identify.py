@@ -10,8 +10,9 @@ other firmware is the classic cause of "same parameters, different behaviour").
 from __future__ import annotations
 
 from collections import Counter
+from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any, Sequence
+from typing import TYPE_CHECKING, Any
 
 from sherpa_cli.config.model import ArmConfig
 from sherpa_cli.joints.diffpair import to_joints
@@ -203,9 +204,9 @@ class DeviceIdentity:
 
 def identify_devices(session: Any, names: Sequence[str]) -> list[DeviceIdentity]:
     """Identity by SDO (0x1000, 0x1018:1, 0x1008) and, for an encoder, its position (0x6004)."""
+    from sherpa_cli.bus.targets import DriveRef
     from sherpa_cli.devices import CanOpenEncoder, device_class
     from sherpa_cli.errors import SdoError
-    from sherpa_cli.bus.targets import DriveRef
 
     cfg: ArmConfig = session.cfg
     out = []

@@ -14,19 +14,20 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any, Callable
+from typing import Any
 
+from sherpa_cli.bus import targets
+from sherpa_cli.bus.targets import DriveRef
 from sherpa_cli.config.model import ArmConfig, JointConfig, JointRole
 from sherpa_cli.elmo.faults import decode_sr, describe_mf
+from sherpa_cli.elmo.protocol import UM_POSITION, UM_TORQUE
 from sherpa_cli.errors import SafetyError, UsageError
 from sherpa_cli.joints.units import counts_to_rad, rad_per_s_to_counts_per_s, rad_to_counts
-from sherpa_cli.elmo.protocol import UM_POSITION, UM_TORQUE
 from sherpa_cli.motion.guard import MotionGuard
 from sherpa_cli.motion.report import GuardReport
 from sherpa_cli.motion.settings import MotionSettings
-from sherpa_cli.bus import targets
-from sherpa_cli.bus.targets import DriveRef
 
 MODES = ("position", "velocity", "torque")
 
@@ -328,8 +329,7 @@ def limit_breach(guard: MotionGuard, c: Any, target: JogTarget, px: int, setting
                   clock: Callable[[], float], sleep: Callable[[float], None], state: dict[str, Any]) -> bool:
     """The joint-limit watch (seed 6.1, motion/limit_watch.py): past the full range, stop at once, send
     nothing more of the jog, and move the joint back (position mode) to the nearest normal edge."""
-    from sherpa_cli.motion import limit_watch
-    from sherpa_cli.motion import stopping
+    from sherpa_cli.motion import limit_watch, stopping
     from sherpa_cli.ops import joint_jog
 
     joint = target.joint

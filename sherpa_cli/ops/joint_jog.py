@@ -25,15 +25,16 @@ from __future__ import annotations
 import contextlib
 import math
 import time
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
-from typing import Any, Callable, Mapping
+from typing import Any
 
 from sherpa_cli.config.model import ArmConfig, JointConfig, PairConfig
+from sherpa_cli.elmo.protocol import UM_POSITION, UM_TORQUE
 from sherpa_cli.errors import SafetyError, UsageError
 from sherpa_cli.joints import diffpair, units
 from sherpa_cli.motion import calibration, limit_watch
 from sherpa_cli.motion.limit_watch import Breach, WatchedJoint
-from sherpa_cli.elmo.protocol import UM_POSITION, UM_TORQUE
 
 Range = tuple[int, int]
 MODES = ("position", "velocity", "torque")
@@ -375,7 +376,7 @@ def run(session: Any, axis: Axis, request: JogRequest, *, guard_factory: Callabl
 
 
 def _run_guarded(guard: Any, session: Any, cfg: ArmConfig, axis: Axis, p: JogPlan, by_name: Mapping[str, Any],
-                 settings: Any, joints_start: Mapping[str, int], result: "JogResult",
+                 settings: Any, joints_start: Mapping[str, int], result: JogResult,
                  clock: Callable[[], float], sleep: Callable[[float], None],
                  on_progress: Callable[[Mapping[str, int]], None] | None = None) -> dict[str, int]:
     from sherpa_cli.motion import pair_start
@@ -482,7 +483,7 @@ def _slow(axis: Axis) -> int:
 
 def _restore_held(guard: Any, by_name: Mapping[str, Any], clients: Mapping[str, Any], axis: Axis,
                   now: dict[str, int], held: Mapping[str, int], settings: Any, clock: Callable[[], float],
-                  sleep: Callable[[float], None], result: "JogResult") -> dict[str, int]:
+                  sleep: Callable[[float], None], result: JogResult) -> dict[str, int]:
     (name, value), = held.items()
     a, b = axis.drives
     s, d = now[a] + now[b], now[a] - now[b]

@@ -19,8 +19,9 @@ from __future__ import annotations
 
 import sys
 import time
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
-from typing import Any, Callable, Iterable, Protocol, Sequence
+from typing import Any, Protocol
 
 from sherpa_cli.config.model import ArmConfig, JoystickConfig, JoystickMap
 from sherpa_cli.errors import SherpaError, UsageError

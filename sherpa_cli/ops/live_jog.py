@@ -25,21 +25,22 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Any, Callable, Mapping, Sequence
+from typing import Any
 
+from sherpa_cli.bus import targets
 from sherpa_cli.config.model import ArmConfig, JointConfig, JointRole
 from sherpa_cli.elmo.faults import decode_sr, describe_mf, sr_problems
+from sherpa_cli.elmo.protocol import UM_POSITION, UM_TORQUE
 from sherpa_cli.errors import ExitCode, SafetyError, SherpaError, UsageError
 from sherpa_cli.joints import diffpair
 from sherpa_cli.joints.units import counts_to_rad
-from sherpa_cli.bus import targets
 from sherpa_cli.motion import calibration, limit_watch
-from sherpa_cli.ops import joint_jog
-from sherpa_cli.motion.limit_watch import WatchedJoint
-from sherpa_cli.elmo.protocol import UM_POSITION, UM_TORQUE
 from sherpa_cli.motion.guard import MotionGuard
+from sherpa_cli.motion.limit_watch import WatchedJoint
 from sherpa_cli.motion.settings import MotionSettings
+from sherpa_cli.ops import joint_jog
 
 MODES = ("position", "velocity", "torque")
 
@@ -157,7 +158,7 @@ class LiveJog:
 
     # -- context ---------------------------------------------------------------------------------
 
-    def __enter__(self) -> "LiveJog":
+    def __enter__(self) -> LiveJog:
         self._read_calibration(list(self.axes.values()))  # first: nothing is armed if it cannot be read
         self.guard.__enter__()
         try:

@@ -20,17 +20,18 @@ from __future__ import annotations
 
 import threading
 import time
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any, Callable, Iterable, Sequence
+from typing import TYPE_CHECKING, Any
 
+from sherpa_cli.bus.canopen_names import NMT_STATES, nmt_text
 from sherpa_cli.bus.parallel import run_concurrently
+from sherpa_cli.bus.targets import DriveRef
 from sherpa_cli.config.model import ArmConfig
 from sherpa_cli.elmo.faults import Emcy, Fault, decode_error_field, decode_mf, sr_problems
+from sherpa_cli.elmo.protocol import HEARTBEAT_BASE
 from sherpa_cli.errors import SdoError, SherpaError, UsageError
 from sherpa_cli.ops.identify import JointPosition, joint_positions, row_joint
-from sherpa_cli.bus.canopen_names import NMT_STATES, nmt_text
-from sherpa_cli.bus.targets import DriveRef
-from sherpa_cli.elmo.protocol import HEARTBEAT_BASE
 
 if TYPE_CHECKING:
     from sherpa_cli.bus.session import ArmSession
@@ -131,7 +132,7 @@ class Monitor:
 
     # -- life cycle -------------------------------------------------------------------------------
 
-    def __enter__(self) -> "Monitor":
+    def __enter__(self) -> Monitor:
         try:
             self.start()
         except BaseException:

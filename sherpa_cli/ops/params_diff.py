@@ -10,10 +10,11 @@ as float32 (2.3 reads back as 2.2999999523...). docs/params.md has the rules.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from enum import StrEnum
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any
 
 from sherpa_cli.config.model import ArmConfig
 from sherpa_cli.errors import ConfigError, Location, UsageError

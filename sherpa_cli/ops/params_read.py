@@ -10,9 +10,10 @@ from __future__ import annotations
 
 import hashlib
 import os
-from datetime import datetime, timezone
+from collections.abc import Callable, Iterable, Mapping, Sequence
+from datetime import UTC, datetime
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Callable, Iterable, Mapping, Sequence
+from typing import TYPE_CHECKING, Any
 
 from sherpa_cli import __version__
 from sherpa_cli.bus.parallel import Outcome, run_concurrently
@@ -22,8 +23,8 @@ from sherpa_cli.joints.params import PARAM_ORDER
 from sherpa_cli.ops.params_file import DriveDump, ParamDump
 
 if TYPE_CHECKING:
-    from sherpa_cli.elmo.client import DriveClient
     from sherpa_cli.bus.session import ArmSession
+    from sherpa_cli.elmo.client import DriveClient
 
 # 0x1018 sub 1-4 and the strings of 0x1008/9/A (CiA 301), in IDENTITY_KEYS order.
 IDENTITY_OBJECTS: tuple[tuple[str, int, int, str], ...] = (
@@ -55,8 +56,8 @@ def read_identity(sdo: Any) -> tuple[dict[str, Any], dict[str, str]]:
     An abort leaves that field None with the reason; any other failure (no answer, a
     malformed answer) raises the SdoError.
     """
-    from sherpa_cli.errors import SdoError
     from sherpa_cli.bus.canopen_names import decode_text
+    from sherpa_cli.errors import SdoError
 
     values: dict[str, Any] = {}
     notes: dict[str, str] = {}
@@ -174,8 +175,8 @@ def dump_meta(cfg: ArmConfig, now: Callable[[], datetime] | None = None,
             config_hash = None
     date = environ.get(DUMP_DATE_ENV)
     if not date:
-        moment = now() if now is not None else datetime.now(timezone.utc)
-        date = moment.astimezone(timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ")
+        moment = now() if now is not None else datetime.now(UTC)
+        date = moment.astimezone(UTC).strftime("%Y-%m-%dT%H:%M:%SZ")
     return {"tool": "sherpa-cli", "tool_version": __version__, "config": cfg.source,
             "config_sha256": config_hash, "date": date}
 

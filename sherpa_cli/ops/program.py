@@ -24,10 +24,11 @@ from __future__ import annotations
 
 import threading
 import time
+from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from enum import StrEnum
 from types import MappingProxyType
-from typing import TYPE_CHECKING, Any, Callable, Iterable, Iterator, Mapping, Sequence
+from typing import TYPE_CHECKING, Any
 
 from sherpa_cli.bus.parallel import run_concurrently
 from sherpa_cli.elmo import codec
@@ -36,9 +37,9 @@ from sherpa_cli.errors import CodecError, ConfigError, DriveRefusedError, Locati
 from sherpa_cli.motion import calibration
 
 if TYPE_CHECKING:
+    from sherpa_cli.bus.session import ArmSession
     from sherpa_cli.elmo.client import DriveClient
     from sherpa_cli.ops.save_ledger import SaveLedger
-    from sherpa_cli.bus.session import ArmSession
 
 ParamValue = int | float
 
@@ -672,6 +673,25 @@ def exit_problem(result: ApplyResult) -> SherpaError | None:
     return None
 
 
-__all__ = ["DriveTarget", "DrivePlan", "ParamPlan", "DriveOutcome", "ApplyResult", "Event", "check_targets",
-           "read_plans", "plan_error", "check_apply", "apply_plans", "write_order", "related_keys", "drive_value",
-           "exit_problem", "param_key", "FlashProof", "check_proof", "prove_flash", "proof_problem"]
+__all__ = [
+    "ApplyResult",
+    "DriveOutcome",
+    "DrivePlan",
+    "DriveTarget",
+    "Event",
+    "FlashProof",
+    "ParamPlan",
+    "apply_plans",
+    "check_apply",
+    "check_proof",
+    "check_targets",
+    "drive_value",
+    "exit_problem",
+    "param_key",
+    "plan_error",
+    "proof_problem",
+    "prove_flash",
+    "read_plans",
+    "related_keys",
+    "write_order",
+]

@@ -11,8 +11,9 @@ and counted in the save ledger under the drive's serial number.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any, Sequence
+from typing import TYPE_CHECKING, Any
 
 from sherpa_cli.elmo import codec, faults
 from sherpa_cli.elmo.commands import param_key

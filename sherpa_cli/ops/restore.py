@@ -15,6 +15,7 @@ drive (a replaced drive, a spare set up like its twin).
 from __future__ import annotations
 
 from pathlib import Path
+
 from sherpa_cli.config.model import ArmConfig
 from sherpa_cli.elmo.commands import COMMANDS, parse_param_key
 from sherpa_cli.errors import ConfigError, Location, SafetyError

@@ -16,15 +16,16 @@ import statistics
 import struct
 import threading
 import time
+from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any, Callable, Iterable, Mapping
+from typing import TYPE_CHECKING, Any
 
-from sherpa_cli.bus.parallel import run_concurrently
-from sherpa_cli.config.model import ArmConfig
-from sherpa_cli.errors import SdoError, SherpaError
 from sherpa_cli.bus.canopen_names import VENDORS, decode_text, nmt_text
+from sherpa_cli.bus.parallel import run_concurrently
 from sherpa_cli.bus.sdo import DriveSdo
+from sherpa_cli.config.model import ArmConfig
 from sherpa_cli.elmo.protocol import HEARTBEAT_BASE, NMT_ID, NMT_RESET_COMM, SDO_RX_BASE, SDO_TX_BASE
+from sherpa_cli.errors import SdoError, SherpaError
 
 if TYPE_CHECKING:
     from sherpa_cli.bus.session import ArmSession

@@ -22,20 +22,21 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any, Callable, Protocol
+from typing import Any, Protocol
 
+from sherpa_cli.elmo.protocol import UM_POSITION, UM_TORQUE
 from sherpa_cli.errors import UsageError
 from sherpa_cli.joints.units import counts_to_rad, rad_per_s_to_counts_per_s, rad_to_counts
-from sherpa_cli.ops.jog import JogRequest, JogTarget, limit_breach, precheck, check_request, resolve_jog_target
-from sherpa_cli.elmo.protocol import UM_POSITION, UM_TORQUE
+from sherpa_cli.log.record import Recorder, bus_budget
+from sherpa_cli.log.recording import Recording
+from sherpa_cli.log.step_metrics import StepMetrics, step_metrics
 from sherpa_cli.motion.guard import MotionGuard
 from sherpa_cli.motion.report import GuardReport
 from sherpa_cli.motion.settings import MotionSettings
 from sherpa_cli.motion.stopping import stop_drive
-from sherpa_cli.log.record import Recorder, bus_budget
-from sherpa_cli.log.recording import Recording
-from sherpa_cli.log.step_metrics import StepMetrics, step_metrics
+from sherpa_cli.ops.jog import JogRequest, JogTarget, check_request, limit_breach, precheck, resolve_jog_target
 
 SIGNAL = {"position": "pos", "velocity": "vel", "torque": "cur"}
 PRE_S = 0.1  # s recorded before the command
@@ -239,7 +240,7 @@ class _StopFirst:
         self.guard, self.ref, self.settings, self.rec, self.state = guard, ref, settings, rec, state
         self.clock, self.sleep = clock, sleep
 
-    def __enter__(self) -> "_StopFirst":
+    def __enter__(self) -> _StopFirst:
         return self
 
     def __exit__(self, exc_type: Any, exc: Any, tb: Any) -> None:

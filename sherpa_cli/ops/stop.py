@@ -11,14 +11,15 @@ from __future__ import annotations
 
 import logging
 import time
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from typing import Any, Callable, Sequence
+from typing import Any
 
 from sherpa_cli.bus.parallel import run_concurrently
+from sherpa_cli.bus.session import DriveRef
 from sherpa_cli.elmo.protocol import UM_TORQUE
 from sherpa_cli.motion.settings import MotionSettings
-from sherpa_cli.motion.stopping import ask_patiently, why, stop_drive
-from sherpa_cli.bus.session import DriveRef
+from sherpa_cli.motion.stopping import ask_patiently, stop_drive, why
 
 log = logging.getLogger(__name__)
 

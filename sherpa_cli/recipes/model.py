@@ -8,8 +8,19 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from sherpa_cli.config.yamlnodes import (NAME_RE, Section, YNode, as_int, as_map, as_seq, as_str, describe,
-                                         parse_yaml, plain, read_input)
+from sherpa_cli.config.yamlnodes import (
+    NAME_RE,
+    Section,
+    YNode,
+    as_int,
+    as_map,
+    as_seq,
+    as_str,
+    describe,
+    parse_yaml,
+    plain,
+    read_input,
+)
 from sherpa_cli.errors import ConfigError, Location
 
 ON_FAILURE = ("stop", "continue")

@@ -6,11 +6,13 @@ The runner never prints. It reports through ``on_start`` / ``on_end`` callbacks 
 
 from __future__ import annotations
 
+import contextlib
 import json
 import time
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from enum import StrEnum
-from typing import Any, Callable, Sequence
+from typing import Any
 
 from sherpa_cli.errors import ExitCode, SherpaError
 from sherpa_cli.recipes.model import Expect, Recipe, Step
@@ -180,10 +182,8 @@ def _check(expect: Expect, ran: CommandRun, dry: bool, result: StepResult) -> li
     if dry:
         # A dry run of a writing step shows the plan; what the step expects of the writes cannot hold yet.
         if expect.json:
-            try:
+            with contextlib.suppress(ValueError):
                 result.json = json.loads(ran.stdout)
-            except ValueError:
-                pass
         return failures
     for text in expect.stdout_contains:
         if text not in ran.stdout:

@@ -16,15 +16,16 @@ import dataclasses
 import math
 import threading
 import uuid
-from typing import Any, Callable, Mapping
+from collections.abc import Callable, Mapping
+from typing import Any
 
 from sherpa_cli.config.model import ArmConfig, JointConfig, PairConfig, SwitchConfig, SwitchKind
+from sherpa_cli.elmo.protocol import NMT_ID, SDO_RX_BASE, SYNC_ID
 from sherpa_cli.sim import state as sim_state
 from sherpa_cli.sim.clock import Clock, RealClock
 from sherpa_cli.sim.drive import SimDrive
 from sherpa_cli.sim.encoder import SimEncoder
 from sherpa_cli.sim.settings import SimSettings
-from sherpa_cli.elmo.protocol import NMT_ID, SDO_RX_BASE, SYNC_ID
 
 SDO_RX = SDO_RX_BASE
 # counts either side of a home switch's position where it reads pressed; a joint that crosses the
@@ -277,14 +278,14 @@ class SimArm:
 
     @classmethod
     def in_process(cls, cfg: ArmConfig,
-                   factory: Callable[[ArmConfig, Mapping[str, str]], "SimArm"] | None = None) -> "SimArm":
+                   factory: Callable[[ArmConfig, Mapping[str, str]], SimArm] | None = None) -> SimArm:
         """The arm ``--sim`` hands to the session: fresh virtual channels (bus -> channel name),
         built by ``factory(cfg, channels)``, by default :meth:`for_session`."""
         token = uuid.uuid4().hex[:8]  # virtual channels are process-wide: keep sessions apart
         return (factory or cls.for_session)(cfg, {name: f"sherpa-sim-{token}-{name}" for name in cfg.buses})
 
     @classmethod
-    def for_session(cls, cfg: ArmConfig, channels: Mapping[str, str], *, clock: Clock | None = None) -> "SimArm":
+    def for_session(cls, cfg: ArmConfig, channels: Mapping[str, str], *, clock: Clock | None = None) -> SimArm:
         """The in-process arm of ``--sim``: virtual channels, flash kept in the state directory;
         ``clock``: its time (default wall time; `log step` gives it a stepped clock)."""
         return cls(cfg, {bus: {"interface": "virtual", "channel": ch} for bus, ch in channels.items()},
@@ -334,7 +335,7 @@ class SimArm:
 
     # -- running -------------------------------------------------------------------------------
 
-    def start(self) -> "SimArm":
+    def start(self) -> SimArm:
         import can
 
         from sherpa_cli.sim.sdo import SdoServer
@@ -388,7 +389,7 @@ class SimArm:
         sim_state.save_changes(self.cfg, self.flash, now)  # merged with another simulator's saves
         self.flash = now
 
-    def __enter__(self) -> "SimArm":
+    def __enter__(self) -> SimArm:
         return self.start()
 
     def __exit__(self, *exc: Any) -> None:

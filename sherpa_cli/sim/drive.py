@@ -16,20 +16,33 @@ import struct
 from collections.abc import Callable, Mapping
 
 from sherpa_cli.elmo.faults import encode_error_field
+from sherpa_cli.elmo.protocol import (
+    EMCY_BASE,
+    HEARTBEAT_BASE,
+    NMT_ID,
+    NMT_OPERATIONAL,
+    NMT_PRE_OP,
+    NMT_PRE_OPERATIONAL,
+    NMT_RESET_COMM,
+    NMT_RESET_NODE,
+    NMT_START,
+    NMT_STOP,
+    NMT_STOPPED,
+    RPDO2_BASE,
+    SDO_RX_BASE,
+    SYNC_ID,
+    TPDO2_BASE,
+)
 from sherpa_cli.sim import interpreter
 from sherpa_cli.sim.clock import Clock
-from sherpa_cli.sim.interpreter import Refused
 from sherpa_cli.sim.inputs import Inputs
+from sherpa_cli.sim.interpreter import Refused
 from sherpa_cli.sim.motor import Motor, motion_status
 from sherpa_cli.sim.od import ABORT_NO_SUBINDEX, ABORT_RANGE, ABORT_READ_ONLY, ODError, OdValue, build_od, flash_key
-from sherpa_cli.sim.pdo import TpdoTable, is_pdo_object
-from sherpa_cli.elmo.protocol import SYNC_ID
 from sherpa_cli.sim.params import Value, factory_ram, is_persistent, parse_flash, wrap_int32
+from sherpa_cli.sim.pdo import TpdoTable, is_pdo_object
 from sherpa_cli.sim.servo import ServoMotor
 from sherpa_cli.sim.settings import SimSettings
-from sherpa_cli.elmo.protocol import (EMCY_BASE, HEARTBEAT_BASE, NMT_ID, NMT_PRE_OP, NMT_RESET_COMM, NMT_RESET_NODE,
-                                      NMT_START, NMT_STOP, RPDO2_BASE, SDO_RX_BASE, TPDO2_BASE)
-from sherpa_cli.elmo.protocol import NMT_OPERATIONAL, NMT_PRE_OPERATIONAL, NMT_STOPPED
 
 Frame = tuple[int, bytes]
 TIME_EPS = 1e-9  # s; float error of summed clock steps, far below any drive timing

@@ -15,7 +15,8 @@ from __future__ import annotations
 
 import math
 import struct
-from typing import Any, Callable
+from collections.abc import Callable
+from typing import Any
 
 from sherpa_cli.sim.drive import OPERATIONAL, TIME_EPS, SimDrive
 from sherpa_cli.sim.od import ABORT_NO_SUBINDEX, ABORT_RANGE, ODError, OdValue

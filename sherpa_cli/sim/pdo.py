@@ -12,7 +12,7 @@ mille of the rated current; the tool's log/record.py names the same scale).
 
 from __future__ import annotations
 
-from typing import Callable, Mapping
+from collections.abc import Callable, Mapping
 
 from sherpa_cli.sim.od import ABORT_NO_OBJECT, ABORT_NO_SUBINDEX, ABORT_RANGE, ODError
 

@@ -8,14 +8,15 @@ the single CPU of a real drive would.
 from __future__ import annotations
 
 import struct
-from typing import Any, Callable
+from collections.abc import Callable
+from typing import Any
 
 import canopen
 from canopen import objectdictionary as od
 from canopen.sdo.exceptions import SdoAbortedError
 
-from sherpa_cli.sim.od import ODError
 from sherpa_cli.elmo.protocol import SDO_TX_BASE
+from sherpa_cli.sim.od import ODError
 
 # (index, sub) -> (name, data type, access); sub None = a plain variable
 _OBJECTS: list[tuple[int, int | None, str, int, str]] = [
@@ -39,7 +40,7 @@ _OBJECTS: list[tuple[int, int | None, str, int, str]] = [
 _RECORD_NAMES = {0x1003: "Pre-defined error field", 0x1016: "Consumer heartbeat time", 0x1018: "Identity object", 0x1029: "Error behaviour"}
 
 
-def build_object_dictionary(extra: tuple = ()) -> "od.ObjectDictionary":
+def build_object_dictionary(extra: tuple = ()) -> od.ObjectDictionary:
     """``extra``: more (index, sub or None, name, data type, access) of another device type (sim/encoder.py)."""
     dictionary = od.ObjectDictionary()
     records: dict[int, Any] = {}
@@ -64,7 +65,7 @@ def build_object_dictionary(extra: tuple = ()) -> "od.ObjectDictionary":
     return dictionary
 
 
-def _add_pdo_objects(dictionary: "od.ObjectDictionary") -> None:
+def _add_pdo_objects(dictionary: od.ObjectDictionary) -> None:
     """TPDO1..4 communication (0x1800..: COB-ID, transmission type) and mapping (0x1A00..: count,
     eight entries), served from the drive's RAM (sim/pdo.py); sub 0 of a mapping is writable. And
     RPDO2's communication parameter (0x1401, the binary interpreter's: COB-ID, transmission type)."""

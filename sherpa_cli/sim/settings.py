@@ -8,7 +8,6 @@ the seed / public sources suggest; a bench measurement should replace them when 
 from __future__ import annotations
 
 import math
-
 from dataclasses import dataclass
 
 

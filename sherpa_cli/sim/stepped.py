@@ -28,11 +28,12 @@ from __future__ import annotations
 
 import threading
 import time
-from typing import Any, Callable
+from collections.abc import Callable
+from typing import Any
 
+from sherpa_cli.elmo.protocol import SYNC_ID
 from sherpa_cli.errors import CommunicationError
 from sherpa_cli.sim.clock import ManualClock
-from sherpa_cli.elmo.protocol import SYNC_ID
 
 ANSWER_TIMEOUT_S = 5.0  # wall time to wait for the TPDOs of one SYNC (a loaded machine)
 STEPPED_REPLY_S = 0.3  # wall time a client waits for one reply from the stepped in-process arm (a deaf
@@ -77,7 +78,7 @@ class SteppedTime:
                 "retries": max(retries, STEPPED_RETRIES)}
 
     # -- the SYNC source ------------------------------------------------------------------------
-    def sync_factory(self, name: str, bus: Any, period: float) -> "_Source":
+    def sync_factory(self, name: str, bus: Any, period: float) -> _Source:
         """Recorder's ``sync_factory``: SYNC on ``bus`` every ``period`` of simulated time; the
         first SYNC is at the present instant (the recorder's t = 0), sent by the next sleep."""
         if not self._buses:
