@@ -10,15 +10,11 @@ from __future__ import annotations
 import functools
 import sys
 from collections.abc import Sequence
-from typing import TYPE_CHECKING
 
 import typer
 
 from sherpa_cli.cli import context
 from sherpa_cli.errors import ExitCode, SherpaError
-
-if TYPE_CHECKING:
-    import click
 
 _ROOT: typer.Typer | None = None
 
@@ -37,8 +33,9 @@ def _root() -> typer.Typer:
 
 
 @functools.lru_cache(maxsize=1)
-def root_command() -> click.Command:
-    """The click command tree of the root app, built once per process."""
+def root_command() -> object:
+    """The click command tree of the root app, built once per process (a click.Command of the click
+    that the installed typer uses: typer 0.29 vendors its own)."""
     import typer.main
 
     return typer.main.get_command(_root())
