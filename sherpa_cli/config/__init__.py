@@ -3,6 +3,7 @@
 ``load_config(path)`` / ``load_config_text(text, filename)`` return a validated config or
 raise ConfigError naming file, line and key path; ``dump_native(cfg)`` writes native YAML.
 The format is recognised by its content: a top-level ``ros_can_interface`` key means rosparam.
+May import errors only: everything else builds on the config.
 """
 
 from __future__ import annotations

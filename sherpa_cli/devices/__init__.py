@@ -1,9 +1,12 @@
-"""Device types: the registry from a config type name to the class that talks to it.
+"""Device types: the registry from a config type name to the class that talks to it, and reading the
+CiA 406 encoder's position (encoder.py: TPDO1 with SDO as the fallback).
 
 The seed's ``dev_type`` selected device-specific code (1 = Elmo was the only one). Here the
 config's type name picks a class from :data:`REGISTRY`, the way python-can maps interface names
 to bus classes; `drives:` are all "elmo", `devices:` name their type. Each class is built on the
 device's SDO client (bus/sdo.py ``DriveSdo`` or anything with ``upload(index, sub)``).
+
+May import bus, elmo, joints, config, errors.
 """
 
 from __future__ import annotations

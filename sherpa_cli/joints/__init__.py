@@ -1,7 +1,8 @@
-"""Pure joint math: units, differential pairs, and the drive limits of seed Appendix C.
+"""Pure joint math: units (units.py), differential pairs (diffpair.py), the drive parameter set and its
+order (params.py), the Appendix C derivation (limits.py) and current checks (currents.py, below
+limits.py: limits imports it, never the other way round).
 
-Nothing here talks to a bus or prints; the CLI and the drive writer build on it.
-Submodules are imported on use so that loading the package stays cheap.
+May import config and errors only. Nothing here talks to a bus or prints.
 """
 
 from __future__ import annotations

@@ -1,0 +1,10 @@
+"""Everything that moves a motor runs through here (docs/motion.md).
+
+guard.py (MotionGuard: fault check, dead-man, stop on every exit path), deadman.py (the consumer
+objects and the host heartbeat thread), lock.py (one motion lock per drive), stopping.py (the one stop
+path and standstill wait), report.py (what the guard did per drive), settings.py (MotionSettings),
+pair_start.py (both motors of a pair started together), limit_watch.py (joint-limit breach and
+recovery targets), calibration.py (the homed flag UI[3]).
+
+May import devices, bus, elmo, joints, config, errors, paths; never ops, log, cli or sim.
+"""
