@@ -149,3 +149,29 @@ def test_sherpa_stop_from_a_second_process_stops_a_running_jog(arm, tmp_path):
     offs = motor_offs(arm, t_on)
     assert offs and offs[0]["event"] == "motor off: MO=0", arm.events()
     assert not any("heartbeat lost" in e["event"] for e in arm.events() if e["t"] >= t_on)
+
+
+def _with_can0_unreachable(bus_map: str) -> str:
+    """The arm's bus map with can0 pointed at nothing: a closed port, or a SocketCAN interface that
+    does not exist (the adapter a technician forgot to plug in)."""
+    entries = dict(item.split("=", 1) for item in bus_map.split(","))
+    interface = entries["can0"].split(":", 1)[0]
+    entries["can0"] = "remote:127.0.0.1:1" if interface == "remote" else f"{interface}:sherpanone0"
+    return ",".join(f"{bus}={target}" for bus, target in entries.items())
+
+
+def test_sherpa_stop_with_one_bus_unreachable_still_stops_a_jog_on_another_bus(arm, tmp_path):
+    proc, t_on = start_jog(arm, tmp_path)  # the jog runs on can1
+    stopper = subprocess.Popen([sys.executable, "-m", "sherpa_cli", "--config", arm.config,
+                                "--bus-map", _with_can0_unreachable(arm.bus_map), "stop"],
+                               cwd=ROOT, env=_env(tmp_path), stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
+                               stderr=subprocess.PIPE, text=True)
+    s_code, s_out, s_err = finish(stopper)
+    assert s_code == 1, f"{s_out}\n{s_err}"  # partly stopped
+    assert "partly stopped" in s_err and "not reached (bus could not be opened)" in s_err, s_err
+    assert "Traceback" not in s_err
+    assert "NOT REACHED" in s_out and DRIVE in s_out
+    offs = motor_offs(arm, t_on)
+    assert offs and offs[0]["event"] == "motor off: MO=0", arm.events()
+    code, out, err = finish(proc)  # the jog sees its motor switched off and ends
+    assert code == 1, f"{out}\n{err}"

@@ -101,3 +101,61 @@ def test_a_failed_step_never_skips_mo0(tmp_path, monkeypatch, failing):
         assert r.stopped_by == "TC=0 + ST"  # unreadable UM: stopped as in torque mode
     elif failing == "ST":
         assert r.stopped_by == "not stopped" and "stop: ST: no reply" in r.problems
+
+
+def _can0_cannot_open(monkeypatch):
+    """A seam test of the best effort: opening bus can0 fails as a missing adapter does."""
+    from sherpa_cli.bus import links
+    from sherpa_cli.errors import CommunicationError
+
+    real = links.open_bus
+
+    def open_bus(bus_cfg):
+        if bus_cfg.name == "can0":
+            raise CommunicationError("bus can0 (socketcan:can0): cannot open: [Errno 19] No such device")
+        return real(bus_cfg)
+    monkeypatch.setattr(links, "open_bus", open_bus)
+
+
+def test_stop_with_one_bus_unreachable_still_stops_the_others(tmp_path, monkeypatch):
+    monkeypatch.setenv("XDG_STATE_HOME", str(tmp_path))
+    monkeypatch.setattr(canopen.Network, "NOTIFIER_CYCLE", 0.02)
+    _can0_cannot_open(monkeypatch)
+    cfg = load_config(ARM)
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg), best_effort=True) as s:
+        assert sorted(s.unreachable) == ["can0"] and "can0" not in s.links
+        c = s.client(resolve_target(cfg, "elbow_1a"))
+        c.nmt_start()
+        c.set("UM", 0, 5)
+        c.motor_on()
+        c.set("JV", 0, 300)
+        c.execute("BG")
+        refs = drive_refs(cfg, None)
+        results = stop_drives(s, refs, MotionSettings.from_config(cfg))
+        moving = s.sim.drives["elbow_1a"].motor_on
+    by = {r.drive: r for r in results}
+    assert moving is False
+    assert (by["elbow_1a"].stopped_by, by["elbow_1a"].motor_off) == ("ST", True)
+    on_can0 = [r for r in results if r.address.startswith("can0:")]
+    assert on_can0 and all(not r.reached and r.stopped_by == "not reached" for r in on_can0)
+    assert all("No such device" in r.problems[0] for r in on_can0)
+    assert all(r.reached and r.ok for r in results if not r.address.startswith("can0:"))
+
+
+def test_a_session_without_best_effort_still_refuses_an_unreachable_bus(tmp_path, monkeypatch):
+    from sherpa_cli.errors import CommunicationError
+
+    monkeypatch.setenv("XDG_STATE_HOME", str(tmp_path))
+    _can0_cannot_open(monkeypatch)
+    cfg = load_config(ARM)
+    with pytest.raises(CommunicationError, match="can0"), ArmSession.open(cfg, sim=SimArm.in_process(cfg)):
+        pass
+
+
+def test_cli_stop_reports_partly_stopped_naming_the_unreached_drives(cli, monkeypatch):
+    _can0_cannot_open(monkeypatch)
+    result = cli("--sim", "stop")
+    assert result.exit_code == 1, result.transcript()
+    assert "partly stopped" in result.stderr and "not reached (bus could not be opened)" in result.stderr
+    assert "NOT REACHED" in result.stdout and "motor off" in result.stdout
+    assert "Traceback" not in result.stderr

@@ -105,14 +105,25 @@ def open_bus(cfg: BusConfig) -> Any:
         raise CommunicationError(f"{where}: cannot open: {type(exc).__name__}: {exc}") from exc
 
 
-def open_links(cfg: ArmConfig, names: Iterable[str] | None = None) -> dict[str, BusLink]:
-    """Open the named buses (default: all); on failure, close what was opened and raise."""
+def open_links(cfg: ArmConfig, names: Iterable[str] | None = None, *,
+               failed: dict[str, CommunicationError] | None = None) -> dict[str, BusLink]:
+    """Open the named buses (default: all); on failure, close what was opened and raise.
+
+    With ``failed`` (best effort, `sherpa stop`): a bus that cannot be opened is recorded there
+    with its error and the others are opened anyway; only an interrupt still closes everything."""
     links: dict[str, BusLink] = {}
     network_cls = _paced_network_class()
     try:
         for name in names if names is not None else cfg.buses:
             bus_cfg = cfg.buses[name]
-            bus = open_bus(bus_cfg)
+            if failed is not None:
+                try:
+                    bus = open_bus(bus_cfg)
+                except CommunicationError as exc:
+                    failed[name] = exc
+                    continue
+            else:
+                bus = open_bus(bus_cfg)
             network = network_cls(bus)
             network.gap = bus_cfg.send_interval_us / 1e6
             network.sdo_timeout = cfg.protocol.sdo_timeout

@@ -23,7 +23,7 @@ from sherpa_cli.bus.links import BusLink, close_links, open_links
 from sherpa_cli.bus.targets import DriveRef
 from sherpa_cli.bus.targets import single_drive as resolve_target
 from sherpa_cli.config.model import ArmConfig
-from sherpa_cli.errors import UsageError
+from sherpa_cli.errors import CommunicationError, UsageError
 
 __all__ = ["ArmSession", "DriveRef", "resolve_target"]
 
@@ -47,9 +47,12 @@ class InProcessArm(Protocol):
 class ArmSession:
     """Open buses plus a DriveClient per drive; build with :meth:`open`."""
 
-    def __init__(self, cfg: ArmConfig, links: dict[str, BusLink], sim: Any = None) -> None:
+    def __init__(self, cfg: ArmConfig, links: dict[str, BusLink], sim: Any = None,
+                 unreachable: Mapping[str, CommunicationError] | None = None) -> None:
         self.cfg = cfg
         self.links = links
+        # best effort (`sherpa stop`): the buses that could not be opened, with why
+        self.unreachable: dict[str, CommunicationError] = dict(unreachable or {})
         self.sim = sim  # the injected in-process arm with --sim, for tests and fault injection
         self._clients: dict[tuple[str, int], Any] = {}
         self._sdo: dict[tuple[str, int], Any] = {}
@@ -60,9 +63,11 @@ class ArmSession:
     @classmethod
     @contextmanager
     def open(cls, cfg: ArmConfig, *, sim: InProcessArm | None = None,
-             buses: Iterable[str] | None = None) -> Iterator[ArmSession]:
+             buses: Iterable[str] | None = None, best_effort: bool = False) -> Iterator[ArmSession]:
         """Open the buses (default: all). With ``sim`` (a simulated arm built by the caller, not
-        started), start it first and point every configured bus at its endpoint; stop it last."""
+        started), start it first and point every configured bus at its endpoint; stop it last.
+        ``best_effort``: a bus that cannot be opened does not keep the others closed; it is named
+        in :attr:`unreachable` (and raises only if no bus at all could be opened)."""
         if sim is not None and not hasattr(sim, "endpoints"):
             raise TypeError("ArmSession.open(sim=...) takes the simulated arm itself, e.g. "
                             "SimArm.in_process(cfg) from sim/arm.py, not a flag")
@@ -74,9 +79,12 @@ class ArmSession:
             wire_cfg = replace(wire_cfg, protocol=replace(wire_cfg.protocol, reply_timeout=cfg.sim_reply_timeout))
             sim.start()
         try:
-            links = open_links(wire_cfg, buses)
+            failed: dict[str, CommunicationError] | None = {} if best_effort else None
+            links = open_links(wire_cfg, buses, failed=failed)
+            if failed and not links:
+                raise next(iter(failed.values()))
             try:
-                yield cls(wire_cfg, links, sim)
+                yield cls(wire_cfg, links, sim, failed)
             finally:
                 close_links(links)
         finally:

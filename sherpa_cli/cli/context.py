@@ -42,9 +42,10 @@ class AppState:
 
     @contextmanager
     def session(self, buses: Iterable[str] | None = None,
-                sim_factory: Callable[..., Any] | None = None) -> Iterator[ArmSession]:
+                sim_factory: Callable[..., Any] | None = None, best_effort: bool = False) -> Iterator[ArmSession]:
         """Open the arm's buses (or the simulated arm with --sim) for one command; ``sim_factory``
-        builds the in-process arm instead of the default (SimArm.in_process's ``factory``)."""
+        builds the in-process arm instead of the default (SimArm.in_process's ``factory``);
+        ``best_effort`` opens what can be opened (ArmSession.open)."""
         from sherpa_cli.bus.busmap import apply_bus_map, parse_bus_map
         from sherpa_cli.bus.session import ArmSession
 
@@ -68,7 +69,7 @@ class AppState:
             from sherpa_cli.sim.arm import SimArm
 
             arm = SimArm.in_process(cfg, sim_factory)  # injected: ops never import the simulator
-        with ArmSession.open(cfg, sim=arm, buses=buses) as session:
+        with ArmSession.open(cfg, sim=arm, buses=buses, best_effort=best_effort) as session:
             yield session
 
     def load_config(self, path: Path | None = None) -> ArmConfig:

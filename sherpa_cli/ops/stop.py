@@ -37,6 +37,10 @@ class StopResult:
     def ok(self) -> bool:
         return not self.problems
 
+    @property
+    def reached(self) -> bool:
+        return self.stopped_by != "not reached"
+
     def as_json(self) -> dict[str, Any]:
         return {"drive": self.drive, "address": self.address, "stopped_by": self.stopped_by,
                 "standstill": self.standstill, "motor_off": self.motor_off, "problems": list(self.problems)}
@@ -83,14 +87,19 @@ def stop_drives(session: Any, refs: Sequence[DriveRef], settings: MotionSettings
                 sleep: Callable[[float], None] = time.sleep) -> list[StopResult]:
     """Stop the drives, one bus per thread (drives of one bus one after the other); in ``refs`` order."""
     by_bus: dict[str, list[DriveRef]] = {}
+    done: dict[tuple[str, int], StopResult] = {}
+    unreachable = getattr(session, "unreachable", {})
     for ref in refs:
+        if ref.bus in unreachable:  # best effort: named, never in the way of the other buses
+            done[(ref.bus, ref.node)] = StopResult(ref.name, ref.address, stopped_by="not reached",
+                                                   problems=[f"not reached: {unreachable[ref.bus]}"])
+            continue
         by_bus.setdefault(ref.bus, []).append(ref)
 
     def job(bus_refs: list[DriveRef]) -> Callable[[], list[StopResult]]:
         return lambda: [stop_one(session.client(ref), ref, settings, clock=clock, sleep=sleep) for ref in bus_refs]
 
     outcomes = run_concurrently({bus: job(rs) for bus, rs in by_bus.items()})
-    done: dict[tuple[str, int], StopResult] = {}
     for bus, outcome in outcomes.items():
         if outcome.ok:
             for ref, result in zip(by_bus[bus], outcome.value):
