@@ -19,3 +19,10 @@ def test_help_imports_no_heavy_module():
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, check=True)
     assert out.stdout.strip().splitlines()[-1] == "[] 0", out.stdout
+
+
+def test_the_command_tree_is_built_once_per_process():
+    from sherpa_cli.cli import app as _app  # noqa: F401  (installs the root)
+    from sherpa_cli.cli.boundary import root_command
+
+    assert root_command() is root_command()
