@@ -12,12 +12,14 @@ drive which motor direction leads into it.
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
+import functools
 import math
 import threading
 import uuid
 from collections.abc import Callable, Mapping
-from typing import Any
+from typing import TYPE_CHECKING, Any, TextIO
 
 from sherpa_cli.config.model import ArmConfig, JointConfig, PairConfig, SwitchConfig, SwitchKind
 from sherpa_cli.elmo.protocol import NMT_ID, SDO_RX_BASE, SYNC_ID
@@ -26,6 +28,11 @@ from sherpa_cli.sim.clock import Clock, RealClock
 from sherpa_cli.sim.drive import SimDrive
 from sherpa_cli.sim.encoder import SimEncoder
 from sherpa_cli.sim.settings import SimSettings
+
+if TYPE_CHECKING:
+    import can  # imported where a bus is opened: the simulator's modules load without python-can
+
+    from sherpa_cli.sim.sdo import SdoServer
 
 SDO_RX = SDO_RX_BASE
 # counts either side of a home switch's position where it reads pressed; a joint that crosses the
@@ -37,12 +44,13 @@ ENCODER_DEVICE_TYPE = 0x0001_0196  # 0x1000: CiA 406 (0x196), single-turn absolu
 SIM_SV_SHARE = 0.6  # the simulated drive is deaf for this share of protocol.sv_blackout (the tool's bound)
 
 
-def settings_for(cfg: ArmConfig, drive: str, **overrides: Any) -> SimSettings:
-    """Simulator behaviour from the config: the drive plays the protocol the config describes."""
+def settings_for(cfg: ArmConfig, drive: str, **overrides: object) -> SimSettings:
+    """Simulator behaviour from the config: the drive plays the protocol the config describes;
+    ``overrides``: SimSettings fields that win over the config (SimSettings checks them)."""
     d = cfg.drives[drive]
     model = cfg.catalog.drives.get(d.model) if d.model else None
     p = cfg.protocol
-    base = dict(
+    base: dict[str, Any] = dict(  # SimSettings' fields, checked when it is made
         echo_sets=p.set_echo,
         mo_settle_s=p.mo_settle,
         sv_blackout_s=round(p.sv_blackout * SIM_SV_SHARE, 6),
@@ -122,6 +130,12 @@ def power_up_positions(cfg: ArmConfig) -> dict[str, int]:
     return out
 
 
+def _pair_of(cfg: ArmConfig, joint: JointConfig) -> PairConfig:
+    """The differential pair of a Σ/Δ joint (the loader gives every joint either a drive or a pair)."""
+    assert joint.pair is not None, f"joint {joint.name} has neither a drive nor a pair"
+    return cfg.pairs[joint.pair]
+
+
 def _device_name(model: str | None) -> str:
     if not model:
         return "Whistle"
@@ -146,27 +160,27 @@ class _Mechanics:
         for joint in cfg.joints.values():
             if joint.drive is not None:
                 self.hard_stops[joint.drive].append(
-                    lambda d=drives[joint.drive], r=joint.overshoot_range: _clamp_plain(d, r))
+                    functools.partial(_clamp_plain, drives[joint.drive], joint.overshoot_range))
         for pair in cfg.pairs.values():
             a, b = drives[pair.drive_a], drives[pair.drive_b]
-            check = (lambda a=a, b=b, s=cfg.joints[pair.sigma].overshoot_range,
-                     d=cfg.joints[pair.delta].overshoot_range: _clamp_pair(a, b, s, d))
+            check = functools.partial(_clamp_pair, a, b, cfg.joints[pair.sigma].overshoot_range,
+                                      cfg.joints[pair.delta].overshoot_range)
             self.hard_stops[pair.drive_a].append(check)
             self.hard_stops[pair.drive_b].append(check)
 
     def _wire(self, joint: JointConfig) -> None:
+        position: Callable[[], float]
         if joint.drive is not None:
-            drive = self.drives[joint.drive]
-            position: Callable[[], float] = lambda d=drive: d.position
+            position = functools.partial(_plain_position, self.drives[joint.drive])
             signs = {joint.drive: 1}
         else:
-            pair: PairConfig = self.cfg.pairs[joint.pair]
+            pair = _pair_of(self.cfg, joint)
             a, b = self.drives[pair.drive_a], self.drives[pair.drive_b]
             if joint.name == pair.sigma:
-                position = lambda a=a, b=b: a.position + b.position
+                position = functools.partial(_sigma_position, a, b)
                 signs = {pair.drive_a: 1, pair.drive_b: 1}
             else:
-                position = lambda a=a, b=b: a.position - b.position
+                position = functools.partial(_delta_position, a, b)
                 signs = {pair.drive_a: 1, pair.drive_b: -1}
         for sw in joint.switches:
             wired = sw.drives or tuple(signs)
@@ -192,6 +206,33 @@ class _Mechanics:
             else:
                 active = pos <= sw.position
             drive.set_input(sw.input, active, direction)
+
+
+def _plain_position(drive: SimDrive) -> float:
+    return drive.position
+
+
+def _sigma_position(a: SimDrive, b: SimDrive) -> float:
+    return a.position + b.position
+
+
+def _delta_position(a: SimDrive, b: SimDrive) -> float:
+    return a.position - b.position
+
+
+def _plain_reading(drive: SimDrive, offset: int) -> int:
+    """An absolute encoder on a plain joint: the motor's real position minus the encoder's offset."""
+    return round(drive.position) - offset
+
+
+def _pair_reading(a: SimDrive, b: SimDrive, sign: int, offset: int) -> int:
+    """An absolute encoder on a Σ (sign +1) or Δ (sign -1) joint, minus its offset."""
+    return round(a.position + sign * b.position) - offset
+
+
+def _send_after_sdo_latency(drive: SimDrive, can_id: int, data: bytes) -> None:
+    """An SDO answer through the drive's reply queue, so a late answer leaves on a later tick."""
+    drive.send_later(can_id, data, drive.settings.sdo_latency_s)
 
 
 def _pin(drive: SimDrive, position: float) -> None:
@@ -221,7 +262,7 @@ class SimArm:
     def __init__(self, cfg: ArmConfig, endpoints: Mapping[str, Mapping[str, Any]], *,
                  clock: Clock | None = None, flash: Mapping[str, sim_state.DriveFlash] | None = None,
                  settings: Mapping[str, SimSettings] | None = None, persist: bool = False,
-                 tick_s: float = 0.002, bus_factory: Callable[..., Any] | None = None,
+                 tick_s: float = 0.002, bus_factory: Callable[..., can.BusABC] | None = None,
                  event_log: str | None = None) -> None:
         """``endpoints``: bus name -> keyword arguments for ``can.Bus`` (interface, channel);
         ``bus_factory`` opens them instead of ``can.Bus``; ``event_log``: a file that gets one JSON
@@ -244,8 +285,8 @@ class SimArm:
                 settings=(settings or {}).get(name) or settings_for(cfg, name),
                 serial=saved.serial, flash=saved.flash, save_count=saved.save_count,
                 speed_gain=cfg.sim[name].speed_gain if name in cfg.sim else 1.0, position=start.get(name, 0),
-                on_step=lambda drive, name=name: self._mechanics.update(name),
-                on_event=lambda drive, t, text, name=name: self._log_event(name, drive.node, t, text))
+                on_step=functools.partial(self._drive_stepped, name),
+                on_event=functools.partial(self._drive_event, name))
         self._mechanics = _Mechanics(cfg, self.drives)
         for name, w in cfg.sim_wiring.items():
             if name in self.drives:
@@ -270,11 +311,19 @@ class SimArm:
         self.lock = threading.RLock()  # held by the pumps while they touch drives; tests take it too
         self._stop = threading.Event()
         self._threads: list[threading.Thread] = []
-        self._buses: dict[str, Any] = {}
-        self._sdo: dict[str, Any] = {}
+        self._buses: dict[str, can.BusABC] = {}
+        self._sdo: dict[str, SdoServer] = {}
         self.errors: list[BaseException] = []
         self.event_log = event_log
-        self._event_file: Any = None
+        self._event_file: TextIO | None = None
+
+    def _drive_stepped(self, name: str, drive: SimDrive) -> None:
+        """A drive's ``on_step``: the mechanics follow its motor."""
+        self._mechanics.update(name)
+
+    def _drive_event(self, name: str, drive: SimDrive, t: float, text: str) -> None:
+        """A drive's ``on_event``: to the event log."""
+        self._log_event(name, drive.node, t, text)
 
     @classmethod
     def in_process(cls, cfg: ArmConfig,
@@ -300,7 +349,8 @@ class SimArm:
         import time
 
         if self._event_file is None:
-            self._event_file = open(self.event_log, "a", encoding="utf-8")
+            # open until stop(): one line per event, appended as it happens
+            self._event_file = open(self.event_log, "a", encoding="utf-8")  # noqa: SIM115 - closed by stop()
         self._event_file.write(json.dumps({"drive": name, "node": node, "t": t, "wall": time.time(),
                                            "event": text}) + "\n")
         self._event_file.flush()
@@ -313,12 +363,11 @@ class SimArm:
             if enc is None or cfg.device_by_source(enc.source) is not cfg.devices[device]:
                 continue
             if joint.drive is not None:
-                d = self.drives[joint.drive]
-                return lambda d=d, off=enc.offset: round(d.position) - off
-            pair = cfg.pairs[joint.pair]  # type: ignore[index]
+                return functools.partial(_plain_reading, self.drives[joint.drive], enc.offset)
+            pair = _pair_of(cfg, joint)
             a, b = self.drives[pair.drive_a], self.drives[pair.drive_b]
             sign = 1 if joint.name == pair.sigma else -1
-            return lambda a=a, b=b, s=sign, off=enc.offset: round(a.position + s * b.position) - off
+            return functools.partial(_pair_reading, a, b, sign, enc.offset)
         return lambda: 0  # an encoder no joint uses reads 0
 
     def press_switch(self, drive: str, switch_input: int, pressed: bool | None) -> None:
@@ -351,9 +400,7 @@ class SimArm:
                 send = self._sender(self._buses[d.bus])
                 drive = self.drives[name]
                 if drive.settings.sdo_latency_s > 0:
-                    # through the drive's reply queue, so a late answer leaves on a later tick
-                    send = lambda can_id, data, drive=drive: drive.send_later(can_id, data,
-                                                                              drive.settings.sdo_latency_s)
+                    send = functools.partial(_send_after_sdo_latency, drive)
                 self._sdo[name] = SdoServer(d.node, drive, send)
         for name, (bus_name, drive) in self.extras.items():
             if bus_name in self._buses:
@@ -392,19 +439,17 @@ class SimArm:
     def __enter__(self) -> SimArm:
         return self.start()
 
-    def __exit__(self, *exc: Any) -> None:
+    def __exit__(self, *exc: object) -> None:
         self.stop()
 
     def _close_buses(self) -> None:
         for bus in self._buses.values():
-            try:
+            with contextlib.suppress(Exception):  # shutting down must not hide the error that stopped the sim
                 bus.shutdown()
-            except Exception:  # shutting down must not hide the error that stopped the sim
-                pass
         self._buses.clear()
 
     @staticmethod
-    def _sender(bus: Any) -> Callable[[int, bytes], None]:
+    def _sender(bus: can.BusABC) -> Callable[[int, bytes], None]:
         import can
 
         def send(can_id: int, data: bytes) -> None:
@@ -449,7 +494,7 @@ class SimArm:
                             send(can_id, data)
                 if powered is not None and touched is names:
                     powered.set()
-        except BaseException as exc:  # a dead pump must be visible to tests and to `sim --serve`
+        except BaseException as exc:  # noqa: BLE001 - kept in errors: a dead pump shows in tests and `sim --serve`
             if not self._stop.is_set():
                 self.errors.append(exc)
 

@@ -8,12 +8,14 @@ over :meth:`SimDrive.od_read` / :meth:`SimDrive.od_write`.
 
 from __future__ import annotations
 
+import functools
 import heapq
 import itertools
 import math
 import random
 import struct
 from collections.abc import Callable, Mapping
+from typing import TypeVar
 
 from sherpa_cli.elmo.faults import encode_error_field
 from sherpa_cli.elmo.protocol import (
@@ -38,7 +40,16 @@ from sherpa_cli.sim.clock import Clock
 from sherpa_cli.sim.inputs import Inputs
 from sherpa_cli.sim.interpreter import Refused
 from sherpa_cli.sim.motor import Motor, motion_status
-from sherpa_cli.sim.od import ABORT_NO_SUBINDEX, ABORT_RANGE, ABORT_READ_ONLY, ODError, OdValue, build_od, flash_key
+from sherpa_cli.sim.od import (
+    ABORT_NO_SUBINDEX,
+    ABORT_RANGE,
+    ABORT_READ_ONLY,
+    ObjectDictionary,
+    ODError,
+    OdValue,
+    build_od,
+    flash_key,
+)
 from sherpa_cli.sim.params import Value, factory_ram, is_persistent, parse_flash, wrap_int32
 from sherpa_cli.sim.pdo import TpdoTable, is_pdo_object
 from sherpa_cli.sim.servo import ServoMotor
@@ -69,12 +80,15 @@ def _make_motor(settings: SimSettings, position: int) -> Motor:
                       supply_limit=settings.supply_current_limit, supply_speed=settings.supply_speed)
 
 
-class FrameRecord(list):
+_T = TypeVar("_T")
+
+
+class FrameRecord(list[_T]):
     """A list that keeps only the newest ``limit`` entries, so a long-running served sim stays bounded."""
 
     limit = 100_000
 
-    def append(self, item: object) -> None:
+    def append(self, item: _T) -> None:
         super().append(item)
         if len(self) > self.limit:
             del self[: len(self) - self.limit // 2]  # trim in chunks: amortised O(1) per append
@@ -125,10 +139,9 @@ class SimDrive:
         self._dead = False
         # Fault times are seconds after this drive was made (power-up), whatever the clock's origin:
         # a RealClock reads time.monotonic(), which starts long before the simulator does.
-        after_start = lambda s: None if s is None else self._t + s  # noqa: E731
-        self._die_due = after_start(self.settings.die_at)
-        self._reboot_due = after_start(self.settings.reboot_at)
-        self._trip_due = after_start(self.settings.limit_trip_at)
+        self._die_due = self._after_start(self.settings.die_at)
+        self._reboot_due = self._after_start(self.settings.reboot_at)
+        self._trip_due = self._after_start(self.settings.limit_trip_at)
         self.inputs = Inputs(self.settings.inputs)
         self._od_live = dict(od_live or {})  # extra live objects: another device type's profile (sim/arm.py)
         self.tpdo = TpdoTable(node)
@@ -137,7 +150,34 @@ class SimDrive:
         # host waited for them (sim/stepped.py charges it on its clock)
         self.unheard = 0
         self.unheard_s = 0.0
+        self._live: dict[str, Callable[[], Value]] | None = None  # status values by key, built on first use
+        self._pdo_sources: dict[int, Callable[[], int]] | None = None  # mappable TPDO objects, the same
+        # The state below is what every boot (power-up, NMT reset, reboot_at) sets afresh: _boot() does.
+        self.last_error = 0  # EC
+        self.ram: dict[str, Value] = {}
+        self._od: ObjectDictionary  # the object dictionary: flash's writable entries, built by _boot()
+        self._error_field = 0  # 0x1003:1, the one stored error of a SimplIQ; a boot clears it
+        self._error_register = 0  # 0x1001
+        self._motor_on = False
+        self._px_offset = 0  # PX = motor counts + this
+        self._mf = 0
+        self._limit_stop = False  # SR bit 28: a motion stopped at VL[3]/VH[3] or a stop switch
+        self._quick_stop = False  # heartbeat lost with 0x6007=3: motor off once the stop is done
+        self._hm_pin: bool | None = None  # armed homing on an input: the pin's level when last seen
+        self._target_kind = "PA"  # what the next BG starts in UM=5: PA / PR (a move) or JV (a jog)
+        self._begin_due: float | None = None  # a BG's start delayed by settings.start_skew_s
+        self._via_group = False  # the frame being handled reached the drive on its group id or at SYNC
+        self._nmt_state = PRE_OPERATIONAL
+        self._hb_last: float | None = None  # the consumed heartbeat's last arrival; None: not armed
+        self._settle_until = -math.inf  # the interpreter is deaf until then (MO settle window)
+        self._blackout_until = -math.inf  # SV blackout: nothing in or out until then
+        self._next_heartbeat = math.inf
+        self._rpdo2_type = 255  # 0x1401:2
+        self._rpdo2_buffer: bytes | None = None  # a synchronous RPDO2 waiting for SYNC
         self._boot()
+
+    def _after_start(self, seconds: float | None) -> float | None:
+        return None if seconds is None else self._t + seconds
 
     # -- public API --------------------------------------------------------------------------
 
@@ -335,14 +375,15 @@ class SimDrive:
     def _boot(self) -> None:
         """Power-up and NMT reset: RAM from flash, motor off, Pre-operational, boot-up frame."""
         self.boots += 1
-        if getattr(self, "_motor_on", False):
+        if self._motor_on:
             self._record("motor off: reset")
         self.last_error = 0
         self._load_ram()
-        self._error_field = 0  # 0x1003:1, the one stored error of a SimplIQ; a boot clears it
-        live = {(0x1001, 0): lambda: self._error_register, (0x1002, 0): lambda: self._sr() & 0xFFFFFFFF,
-                (0x1003, 0): lambda: int(self._error_field != 0), (0x1003, 1): lambda: self._error_field,
-                **self._od_live}
+        self._error_field = 0
+        live: dict[tuple[int, int], Callable[[], OdValue]] = {
+            (0x1001, 0): lambda: self._error_register, (0x1002, 0): lambda: self._sr() & 0xFFFFFFFF,
+            (0x1003, 0): lambda: int(self._error_field != 0), (0x1003, 1): lambda: self._error_field,
+            **self._od_live}
         self._od = build_od(self.settings, self.serial, self.flash, live)
         self._motor_on = False
         self.motor.off()
@@ -351,19 +392,19 @@ class SimDrive:
         self._error_register = 0
         self._limit_stop = False
         self._quick_stop = False
-        self._hm_pin: bool | None = None  # armed homing on an input: the pin's level when last seen
+        self._hm_pin = None
         self._target_kind = "PA"
-        self._begin_due: float | None = None
+        self._begin_due = None
         self._via_group = False
         self._nmt_state = PRE_OPERATIONAL
-        self._hb_last: float | None = None
+        self._hb_last = None
         self._settle_until = self._blackout_until = -math.inf
         period = self._od.values[(0x1017, 0)]
         self._next_heartbeat = self._t + period / 1000 if period else math.inf
         self._replies.clear()
         self.tpdo.reset()  # PDO settings are RAM only here
         self._rpdo2_type = 255  # 0x1401:2, RAM only: asynchronous, every frame runs when it arrives
-        self._rpdo2_buffer: bytes | None = None
+        self._rpdo2_buffer = None
         self._send(HEARTBEAT_BASE + self.node, b"\x00")
 
     def _nmt(self, cs: int) -> None:
@@ -396,10 +437,9 @@ class SimDrive:
             self._send(can_id, data)
 
     def _pdo_values(self) -> dict[int, Callable[[], int]]:
-        values = self.__dict__.get("_pdo_sources")
+        values = self._pdo_sources
         if values is None:
-            velocity = lambda: wrap_int32(round(self.motor.v))  # noqa: E731
-            values = self._pdo_sources = {0x6064: lambda: self.px, 0x6069: velocity, 0x606C: velocity,
+            values = self._pdo_sources = {0x6064: lambda: self.px, 0x6069: self._vx, 0x606C: self._vx,
                                           0x6078: lambda: max(-32768, min(32767, round(self._iq() * 1000)))}
         return values
 
@@ -571,7 +611,7 @@ class SimDrive:
 
     def _live_values(self) -> dict[str, Callable[[], Value]]:
         # built once: every status query reads through it
-        live = self.__dict__.get("_live")
+        live = self._live
         if live is None:
             live = self._live = self._build_live_values()
         return live
@@ -579,14 +619,14 @@ class SimDrive:
     def _build_live_values(self) -> dict[str, Callable[[], Value]]:
         return {
             "MO": lambda: int(self._motor_on), "PX": lambda: self.px,
-            "VX": lambda: wrap_int32(round(self.motor.v)),
+            "VX": self._vx,
             "VY": lambda: 0, "PE": lambda: 0, "VE": lambda: 0, "DV[1]": lambda: 0,
-            "DV[2]": lambda: wrap_int32(round(self.motor.v)), "DV[3]": lambda: self.px, "MS": self._ms,
+            "DV[2]": self._vx, "DV[3]": lambda: self.px, "MS": self._ms,
             # the auxiliary (absolute) encoder: the motor's real position plus its mounting offset
             "PY": lambda: wrap_int32(round(self.motor.position) + self.settings.py_offset),
             "IQ": self._iq, "ID": lambda: 0.0, "MC": lambda: self.settings.max_current, "LC": lambda: 0,
             "IP": self._ip, "SR": self._sr, "MF": lambda: self._mf, "EC": lambda: self.last_error,
-            **{f"IB[{n}]": (lambda n=n: self._ip() >> n & 1) for n in range(32)},
+            **{f"IB[{n}]": functools.partial(self._ib, n) for n in range(32)},
         }
 
     # -- motion ---------------------------------------------------------------------------------
@@ -629,10 +669,10 @@ class SimDrive:
         elif um == 5:
             if self._target_kind == "PR":
                 start = self.motor.x_target if self.motor.mode == "position" else self.motor.counts
-                target = start + self._px_offset + r["PR"]
+                target = start + self._px_offset + self._int_param("PR")
             else:
-                target = r["PA"]
-            clipped = min(max(target, r["VL[3]"]), r["VH[3]"])
+                target = self._int_param("PA")
+            clipped = min(max(target, self._int_param("VL[3]")), self._int_param("VH[3]"))
             self._limit_stop = clipped != target
             if self._target_kind == "PR":
                 r["PA"], self._target_kind = target, "PA"  # a second BG must not add PR again
@@ -735,8 +775,18 @@ class SimDrive:
 
     # -- status registers -----------------------------------------------------------------------
 
+    def _int_param(self, key: str) -> int:
+        """An integer parameter's RAM value: coerce() stores every one as an int, this narrows the type."""
+        value = self.ram[key]
+        if not isinstance(value, int):
+            raise TypeError(f"RAM {key} holds {value!r}, not an integer")
+        return value
+
+    def _vx(self) -> int:
+        return wrap_int32(round(self.motor.v))
+
     def _ms(self) -> int:
-        return motion_status(self.motor, self.ram["UM"], self._motor_on)
+        return motion_status(self.motor, self._int_param("UM"), self._motor_on)
 
     def _iq(self) -> float:
         if not self._motor_on:
@@ -748,13 +798,16 @@ class SimDrive:
         return self.motor.a / self.settings.torque_accel
 
     def _il(self, n: int) -> int:
-        return self.ram[f"IL[{n}]"]
+        return self._int_param(f"IL[{n}]")
 
     def _ip(self) -> int:
         return self.inputs.ip(self._il)
 
+    def _ib(self, n: int) -> int:
+        return self._ip() >> n & 1
+
     def _sr(self) -> int:
-        sr = (self.ram["UM"] & 7) << SR_UM_SHIFT | self._ms() << SR_MS_SHIFT
+        sr = (self._int_param("UM") & 7) << SR_UM_SHIFT | self._ms() << SR_MS_SHIFT
         if self._motor_on:
             sr |= SR_MO
         if self._mf:

@@ -15,16 +15,33 @@ from __future__ import annotations
 
 import math
 import struct
-from collections.abc import Callable
-from typing import Any
+from collections.abc import Callable, Mapping
+from typing import Required, TypedDict, Unpack
 
+from sherpa_cli.sim.clock import Clock
 from sherpa_cli.sim.drive import OPERATIONAL, TIME_EPS, SimDrive
 from sherpa_cli.sim.od import ABORT_NO_SUBINDEX, ABORT_RANGE, ODError, OdValue
+from sherpa_cli.sim.params import Value
+from sherpa_cli.sim.settings import SimSettings
 
 TPDO1_BASE = 0x180
 POSITION_ENTRY = 0x60040020  # 0x6004:0, 32 bits
 CYCLIC_TIMER = 0x6200
 DEFAULT_TTYPE = 254  # asynchronous: the cyclic timer sends it (CiA 406)
+
+
+class DriveOptions(TypedDict, total=False):
+    """SimDrive's keyword arguments that an encoder passes on (its ``position`` is its own)."""
+
+    clock: Required[Clock]
+    settings: SimSettings | None
+    serial: int
+    flash: Mapping[str, Value] | None
+    save_count: int
+    speed_gain: float
+    on_step: Callable[[SimDrive], None] | None
+    on_event: Callable[[SimDrive, float, str], None] | None
+    od_live: Mapping[tuple[int, int], Callable[[], OdValue]] | None
 
 
 class SimEncoder(SimDrive):
@@ -33,11 +50,19 @@ class SimEncoder(SimDrive):
     sdo_extra = ((CYCLIC_TIMER, None, "Cyclic timer", 0x0006, "rw"),)  # UNSIGNED16, ms
 
     def __init__(self, node: int, *, position: Callable[[], int], cyclic_ms: int = 0, ttype: int = DEFAULT_TTYPE,
-                 **kwargs: Any) -> None:
+                 **kwargs: Unpack[DriveOptions]) -> None:
         self._read_position = position
         self._default_cyclic_ms = int(cyclic_ms)
         self._default_ttype = int(ttype)
         self.tpdo_frames = 0  # TPDO1 frames sent, for tests
+        # RAM, set afresh by every boot (_boot); the COB-ID once SimDrive has checked the node id
+        self.enc_cob: int  # 0x1800:1
+        self.enc_ttype = self._default_ttype  # 0x1800:2
+        self.enc_map_count = 1  # 0x1A00:0
+        self.enc_entry = POSITION_ENTRY  # 0x1A00:1
+        self.cyclic_ms = self._default_cyclic_ms  # 0x6200
+        self._enc_syncs = 0  # SYNCs counted toward the next synchronous TPDO1
+        self._next_cyclic = math.inf
         super().__init__(node, **kwargs)
 
     # -- RAM defaults at every boot --------------------------------------------------------------

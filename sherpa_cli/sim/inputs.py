@@ -6,6 +6,7 @@ The polarity half (even = active low) is not modelled: an input is simply active
 
 from __future__ import annotations
 
+import builtins
 from collections.abc import Callable
 
 IP_PIN_SHIFT = 16
@@ -68,7 +69,7 @@ class Inputs:
                 value |= 1 << (n - 1)
         return value
 
-    def blocked(self, il: Callable[[int], int], stop_code: int) -> set[int]:
+    def blocked(self, il: Callable[[int], int], stop_code: int) -> builtins.set[int]:  # here `set` is the method
         """Directions (+1, -1) in which active switches forbid motion.
 
         A stop switch blocks the side it lies on; without a side it blocks both, as a hard

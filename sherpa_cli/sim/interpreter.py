@@ -71,7 +71,8 @@ def handle(drive: InterpretedDrive, data: bytes) -> bytes | None:
             raise Refused(EC_CANNOT_ASSIGN)
         if spec.motor_off and drive.motor_on:
             raise Refused(EC_MOTOR_MUST_BE_OFF)
-        value = coerce(spec, request.value)  # type: ignore[arg-type]
+        assert request.value is not None, "decode_request gives every set frame its value"
+        value = coerce(spec, request.value)
         if value is None or not in_range(key, value, drive.settings.max_current):
             raise Refused(EC_OUT_OF_RANGE)
         drive.write_param(key, value)
@@ -98,7 +99,7 @@ def _resolve(drive: InterpretedDrive, letters: str, index: int) -> tuple[str, Co
     return resolved
 
 
-def _spec(drive: InterpretedDrive, letters: str, index: int):
+def _spec(drive: InterpretedDrive, letters: str, index: int) -> CommandSpec:
     spec = COMMANDS.get(letters)
     if spec is None:
         raise Refused(EC_BAD_COMMAND)

@@ -9,17 +9,19 @@ from __future__ import annotations
 
 import struct
 from collections.abc import Callable
-from typing import Any
+from typing import Protocol, cast
 
 import canopen
 from canopen import objectdictionary as od
 from canopen.sdo.exceptions import SdoAbortedError
 
 from sherpa_cli.elmo.protocol import SDO_TX_BASE
-from sherpa_cli.sim.od import ODError
+from sherpa_cli.sim.od import ODError, OdValue
 
-# (index, sub) -> (name, data type, access); sub None = a plain variable
-_OBJECTS: list[tuple[int, int | None, str, int, str]] = [
+ObjectSpec = tuple[int, int | None, str, int, str]  # index, sub (None: a plain variable), name, data type, access
+Callback = Callable[[int, bytearray, float], None]  # a subscriber of canopen's Network: (can_id, data, timestamp)
+
+_OBJECTS: list[ObjectSpec] = [
     (0x1000, None, "Device type", od.UNSIGNED32, "ro"),
     (0x1001, None, "Error register", od.UNSIGNED8, "ro"),
     (0x1003, 1, "Standard error field", od.UNSIGNED32, "ro"),
@@ -40,10 +42,10 @@ _OBJECTS: list[tuple[int, int | None, str, int, str]] = [
 _RECORD_NAMES = {0x1003: "Pre-defined error field", 0x1016: "Consumer heartbeat time", 0x1018: "Identity object", 0x1029: "Error behaviour"}
 
 
-def build_object_dictionary(extra: tuple = ()) -> od.ObjectDictionary:
+def build_object_dictionary(extra: tuple[ObjectSpec, ...] = ()) -> od.ObjectDictionary:
     """``extra``: more (index, sub or None, name, data type, access) of another device type (sim/encoder.py)."""
     dictionary = od.ObjectDictionary()
-    records: dict[int, Any] = {}
+    records: dict[int, od.ODRecord] = {}
     for index, sub, name, data_type, access in (*_OBJECTS, *extra):
         var = od.ODVariable(name, index, sub or 0)
         var.data_type = data_type
@@ -59,7 +61,7 @@ def build_object_dictionary(extra: tuple = ()) -> od.ObjectDictionary:
             record.add_member(count)
             dictionary.add_object(record)
         record.add_member(var)
-    for index, record in records.items():
+    for record in records.values():
         record[0].default = max(k for k in record.subindices)
     _add_pdo_objects(dictionary)
     return dictionary
@@ -113,18 +115,18 @@ class NetworkShim:
 
     def __init__(self, send: Callable[[int, bytes], None]) -> None:
         self._send = send
-        self.subscribers: dict[int, list[Callable]] = {}
+        self.subscribers: dict[int, list[Callback]] = {}
 
-    def subscribe(self, can_id: int, callback: Callable) -> None:
+    def subscribe(self, can_id: int, callback: Callback) -> None:
         self.subscribers.setdefault(can_id, []).append(callback)
 
-    def unsubscribe(self, can_id: int, callback: Callable | None = None) -> None:
+    def unsubscribe(self, can_id: int, callback: Callback | None = None) -> None:
         self.subscribers.pop(can_id, None)
 
     def send_message(self, can_id: int, data: bytes, remote: bool = False) -> None:
         self._send(can_id, bytes(data))
 
-    def send_periodic(self, *args: Any, **kwargs: Any) -> _Task:
+    def send_periodic(self, *args: object, **kwargs: object) -> _Task:
         # heartbeats are the simulated drive's own business (0x1017 goes through od_write)
         return _Task()
 
@@ -139,6 +141,15 @@ ABORT_COMMAND = 0x05040001  # "client/server command specifier not valid or unkn
 ABORT_GENERAL = 0x08000000
 
 
+class ServedDrive(Protocol):
+    """What the SDO server needs of a drive (sim/drive.py's SimDrive, sim/encoder.py's SimEncoder);
+    one may also have ``sdo_extra``, more objects for the dictionary (:func:`build_object_dictionary`)."""
+
+    def od_read(self, index: int, sub: int) -> OdValue: ...
+
+    def od_write(self, index: int, sub: int, value: int) -> None: ...
+
+
 class SdoServer:
     """Answers SDO requests (0x600+node) from a simulated drive's od_read/od_write.
 
@@ -150,7 +161,7 @@ class SdoServer:
     not 8 bytes long are not SDO requests and get no answer.
     """
 
-    def __init__(self, node: int, drive: Any, send: Callable[[int, bytes], None]) -> None:
+    def __init__(self, node: int, drive: ServedDrive, send: Callable[[int, bytes], None]) -> None:
         self.node = node
         self.drive = drive
         self._out = send
@@ -161,11 +172,13 @@ class SdoServer:
         self.local = canopen.LocalNode(node, build_object_dictionary(getattr(drive, "sdo_extra", ())))
         self.local.add_read_callback(self._read)
         self.local.add_write_callback(self._write)
-        self.local.associate_network(self.shim)
+        # the shim has what LocalNode uses of a canopen.Network (subscribe, unsubscribe, send_message,
+        # send_periodic), not the bus it would open
+        self.local.associate_network(self.shim)  # type: ignore[arg-type]  # a duck-typed Network, see above
         # NMT is the simulated drive's own state machine, not LocalNode's
         self.shim.unsubscribe(0)
 
-    def _read(self, index: int, subindex: int, od: Any) -> Any:
+    def _read(self, index: int, subindex: int, od: canopen.objectdictionary.ODVariable) -> OdValue | None:
         if subindex == 0 and isinstance(od, canopen.objectdictionary.ODVariable) and od.parent is not None \
                 and not isinstance(od.parent, canopen.objectdictionary.ObjectDictionary) and index != 0x1003 \
                 and not 0x1A00 <= index < 0x1A04:
@@ -175,9 +188,10 @@ class SdoServer:
         except ODError as exc:
             raise SdoAbortedError(exc.abort_code) from None
 
-    def _write(self, index: int, subindex: int, od: Any, data: bytes) -> None:
+    def _write(self, index: int, subindex: int, od: canopen.objectdictionary.ODVariable, data: bytes) -> None:
         try:
-            self.drive.od_write(index, subindex, od.decode_raw(data))
+            # every writable object here has an integer data type, which decode_raw gives as an int
+            self.drive.od_write(index, subindex, cast(int, od.decode_raw(data)))
         except ODError as exc:
             raise SdoAbortedError(exc.abort_code) from None
 
@@ -211,7 +225,7 @@ class SdoServer:
         try:
             for callback in self.shim.subscribers.get(can_id, ()):
                 callback(can_id, bytearray(data), timestamp)
-        except Exception:  # LocalNode failed on a frame it should have aborted: abort it here
+        except Exception:  # noqa: BLE001 - LocalNode failed on a frame it should have aborted: abort it here
             self._abort(*self._where, ABORT_GENERAL)
             return
         last = self._sent[-1] if self._sent else None

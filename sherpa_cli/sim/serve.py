@@ -7,11 +7,14 @@ import socket
 import threading
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from sherpa_cli.config.model import ArmConfig
 from sherpa_cli.errors import UsageError
 from sherpa_cli.sim.arm import SimArm
+
+if TYPE_CHECKING:
+    from http.server import HTTPServer
 
 
 def parse_host_port(text: str) -> tuple[str, int]:
@@ -39,7 +42,7 @@ def check_bind_address(host: str, allow_remote: bool) -> None:
 @dataclass
 class Served:
     arm: SimArm
-    servers: list[Any]
+    servers: list[HTTPServer]  # python-can-remote's RemoteServer is one
     bus_map: dict[str, str]  # bus -> "remote:HOST:PORT"
 
     def stop(self) -> None:
@@ -61,10 +64,11 @@ def serve(cfg: ArmConfig, host: str, port: int, *, persist: bool = True,
     token = f"{socket.gethostname()}-{port}"
     channels = {bus: f"sherpa-serve-{token}-{bus}" for bus in cfg.buses}
     extra = {"event_log": event_log} if event_log is not None else {}
-    arm = (arm_factory or SimArm)(cfg, {b: {"interface": "virtual", "channel": c} for b, c in channels.items()},
-                                  persist=persist, **extra)
+    factory: Callable[..., SimArm] = arm_factory or SimArm
+    arm = factory(cfg, {b: {"interface": "virtual", "channel": c} for b, c in channels.items()},
+                  persist=persist, **extra)
     arm.start()
-    servers: list[Any] = []
+    servers: list[HTTPServer] = []
     bus_map: dict[str, str] = {}
     try:
         for i, (bus, channel) in enumerate(channels.items()):

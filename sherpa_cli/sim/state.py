@@ -12,7 +12,6 @@ import hashlib
 import json
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
 
 from sherpa_cli.config.model import ArmConfig
 from sherpa_cli.errors import ConfigError, Location, SherpaError
@@ -60,7 +59,7 @@ def load(cfg: ArmConfig, path: Path | None = None) -> dict[str, DriveFlash]:
                                                         "(the simulated drives then start with factory flash)"))
 
     try:
-        data: Any = read_json(target, {})
+        data: object = read_json(target, {})
     except OSError as exc:
         raise SherpaError(f"{target}: cannot read the simulator state: {exc.strerror or exc}",
                           hint=STATE_DIR_HINT) from None
@@ -79,7 +78,7 @@ def load(cfg: ArmConfig, path: Path | None = None) -> dict[str, DriveFlash]:
     return result
 
 
-def _drive_flash(saved: Any, serial: int) -> DriveFlash:
+def _drive_flash(saved: object, serial: int) -> DriveFlash:
     from sherpa_cli.sim.od import ODError, check_value
     from sherpa_cli.sim.params import parse_flash
 

@@ -29,11 +29,14 @@ from __future__ import annotations
 import threading
 import time
 from collections.abc import Callable
-from typing import Any
+from typing import TYPE_CHECKING, Any, Protocol
 
 from sherpa_cli.elmo.protocol import SYNC_ID
 from sherpa_cli.errors import CommunicationError
 from sherpa_cli.sim.clock import ManualClock
+
+if TYPE_CHECKING:
+    import can  # imported where a SYNC is sent: the simulator's modules load without python-can
 
 ANSWER_TIMEOUT_S = 5.0  # wall time to wait for the TPDOs of one SYNC (a loaded machine)
 STEPPED_REPLY_S = 0.3  # wall time a client waits for one reply from the stepped in-process arm (a deaf
@@ -41,6 +44,12 @@ STEPPED_REPLY_S = 0.3  # wall time a client waits for one reply from the stepped
 # one more charged wait, so it is generous)
 STEPPED_RETRIES = 4  # at least this many resends (a late reply on a loaded machine; sim time stands still)
 _EPS = 1e-9
+
+
+class SyncBus(Protocol):
+    """What the SYNC source needs of a bus (a python-can bus is one)."""
+
+    def send(self, msg: can.Message) -> None: ...
 
 
 class SteppedTime:
@@ -51,7 +60,7 @@ class SteppedTime:
         self.clock = clock or ManualClock()
         self.pace = pace
         self.answer_timeout = answer_timeout
-        self._buses: dict[str, Any] = {}
+        self._buses: dict[str, SyncBus] = {}
         self._period: float | None = None
         self._t0 = 0.0
         self._syncs = 0  # SYNCs sent since the SYNC source started
@@ -78,7 +87,7 @@ class SteppedTime:
                 "retries": max(retries, STEPPED_RETRIES)}
 
     # -- the SYNC source ------------------------------------------------------------------------
-    def sync_factory(self, name: str, bus: Any, period: float) -> _Source:
+    def sync_factory(self, name: str, bus: SyncBus, period: float) -> _Source:
         """Recorder's ``sync_factory``: SYNC on ``bus`` every ``period`` of simulated time; the
         first SYNC is at the present instant (the recorder's t = 0), sent by the next sleep."""
         if not self._buses:
