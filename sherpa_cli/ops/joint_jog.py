@@ -336,8 +336,8 @@ def prepare(session: ArmSession, axis: Axis, request: JogRequest
             cals.append(calibration.read_calibration(cfg, joint, lambda d: clients[d]))
         missing = [c for c in cals if not c.calibrated]
         if missing and not request.uncalibrated:
-            c = missing[0]
-            raise SafetyError(f"{axis.name}: refusing a position move: joint {c.joint} is {c.reason}",
+            first = missing[0]
+            raise SafetyError(f"{axis.name}: refusing a position move: joint {first.joint} is {first.reason}",
                               hint="home it first, or pass --uncalibrated to move by the counter as it is "
                                    "(positions are then relative to where the joint stood at power-up)")
     return p, motors, cals
