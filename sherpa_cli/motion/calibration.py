@@ -17,9 +17,12 @@ from __future__ import annotations
 
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING
 
 from sherpa_cli.config.model import ArmConfig, JointConfig, JointRole
+
+if TYPE_CHECKING:
+    from sherpa_cli.elmo.client import DriveClient
 
 CALIBRATED = 1
 
@@ -65,7 +68,7 @@ def judge(cfg: ArmConfig, joint: JointConfig, flags: Mapping[str, int]) -> Calib
     return Calibration(joint.name, True, f"homed since power-up ({key}={CALIBRATED})")
 
 
-def read_calibration(cfg: ArmConfig, joint: JointConfig, client_of: Callable[[str], Any]) -> Calibration:
+def read_calibration(cfg: ArmConfig, joint: JointConfig, client_of: Callable[[str], DriveClient]) -> Calibration:
     """Read the flag from each drive of the joint (nothing is read for an absolute joint)."""
     if absolute(cfg, joint):
         return judge(cfg, joint, {})
@@ -74,18 +77,18 @@ def read_calibration(cfg: ArmConfig, joint: JointConfig, client_of: Callable[[st
     return judge(cfg, joint, flags)
 
 
-def mark_calibrated(cfg: ArmConfig, client: Any) -> None:
+def mark_calibrated(cfg: ArmConfig, client: DriveClient) -> None:
     """For `home`: the drive's position counter now means the joint position, until its next reset."""
     client.set("UI", cfg.protocol.calibration_flag, CALIBRATED)
 
 
-def clear_calibrated(cfg: ArmConfig, client: Any) -> None:
+def clear_calibrated(cfg: ArmConfig, client: DriveClient) -> None:
     """For `home`, before it arms the drive's homing: a re-home that fails after it reset PX must
     not leave the old mark on a counter that no longer means the joint."""
     client.set("UI", cfg.protocol.calibration_flag, 0)
 
 
-def clear_for_save(cfg: ArmConfig, client: Any) -> int:
+def clear_for_save(cfg: ArmConfig, client: DriveClient) -> int:
     """Before SV: whether SV copies UI to flash is UNCONFIRMED, and a flash holding the mark would
     make the joint look homed after a power cycle (PX = 0 wherever it stands). Clears the mark in
     RAM if set; returns what it was, for :func:`restore_after_save`."""
@@ -96,7 +99,7 @@ def clear_for_save(cfg: ArmConfig, client: Any) -> int:
     return was
 
 
-def restore_after_save(cfg: ArmConfig, client: Any, was: int) -> None:
+def restore_after_save(cfg: ArmConfig, client: DriveClient, was: int) -> None:
     """After a confirmed SV: the mark back in RAM (SV does not touch PX, so it still holds)."""
     if was:
         client.set("UI", cfg.protocol.calibration_flag, was)

@@ -85,7 +85,7 @@ class HostHeartbeat:
                     for network in networks:
                         network.send_message(self.frame_id, bytes([NMT_OPERATIONAL]))
                     self.sent += 1
-                except BaseException as exc:  # a dead bus: the drives' consumers will stop them
+                except BaseException as exc:  # noqa: BLE001 - a dead bus: recorded for check(); the drives' consumers will stop them
                     self.error = exc
                     return
                 if self._stop.wait(self.period):

@@ -28,7 +28,8 @@ import threading
 import time
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
-from typing import Any, Literal
+from types import FrameType, TracebackType
+from typing import TYPE_CHECKING, Any, Literal
 
 from sherpa_cli.elmo.faults import decode_sr, describe_mf
 from sherpa_cli.elmo.protocol import UM_TORQUE
@@ -38,6 +39,11 @@ from sherpa_cli.motion.lock import DriveLock, drive_label
 from sherpa_cli.motion.report import DriveStop, GuardReport
 from sherpa_cli.motion.settings import PROFILE_KEYS, MotionSettings
 from sherpa_cli.motion.stopping import ask_patiently, fault_reason, stop_drive, why
+
+if TYPE_CHECKING:
+    from sherpa_cli.bus.session import ArmSession
+    from sherpa_cli.bus.targets import DriveRef
+    from sherpa_cli.elmo.client import DriveClient
 
 log = logging.getLogger(__name__)
 MS_PROFILER_ACTIVE = 2
@@ -57,8 +63,8 @@ class DeadManError(CommunicationError):
 class _Drive:
     """The guard's record of one drive: what it found and what it changed."""
 
-    ref: Any
-    client: Any
+    ref: DriveRef
+    client: DriveClient
     mo: int = 0
     um: int = 0
     switched_on: bool = False
@@ -70,11 +76,11 @@ class _Drive:
 class MotionGuard:
     """Context manager around anything that moves motors (see the module docstring)."""
 
-    def __init__(self, session: Any, refs: Sequence[Any], *, settings: MotionSettings,
+    def __init__(self, session: ArmSession, refs: Sequence[DriveRef], *, settings: MotionSettings,
                  clock: Callable[[], float] = time.monotonic, sleep: Callable[[float], None] = time.sleep,
                  keep: bool = False, on_event: Callable[[str], None] | None = None) -> None:
         seen: set[tuple[str, int]] = set()
-        self.refs = []
+        self.refs: list[DriveRef] = []
         for ref in refs:
             if (ref.bus, ref.node) not in seen:
                 seen.add((ref.bus, ref.node))
@@ -133,7 +139,8 @@ class MotionGuard:
             raise
         return self
 
-    def __exit__(self, exc_type: Any, exc: Any, tb: Any) -> Literal[False]:
+    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
+                 tb: TracebackType | None) -> Literal[False]:
         self._exiting = True  # first thing: a signal from now on must not cut the stop short
         blocked = self._block_signals()
         if self._signal is not None:
@@ -158,10 +165,10 @@ class MotionGuard:
                               hint="check the drives with `sherpa monitor --once`; `sherpa stop` stops them all")
         return False
 
-    def client(self, ref: Any) -> Any:
+    def client(self, ref: DriveRef) -> DriveClient:
         return self._drive(ref).client
 
-    def enable(self, ref: Any, unit_mode: int) -> None:
+    def enable(self, ref: DriveRef, unit_mode: int) -> None:
         """UM=unit_mode only if needed (with MO=0 first), then MO=1 confirmed by reading MO back."""
         self.check()
         d = self._drive(ref)
@@ -206,7 +213,7 @@ class MotionGuard:
         self.check()
         self._pulse(extra=seconds)
 
-    def check_motors_on(self, refs: Iterable[Any], during: str) -> None:
+    def check_motors_on(self, refs: Iterable[DriveRef], during: str) -> None:
         """:meth:`check`, then every given drive's motor still on: a trip or a `sherpa stop` from
         another terminal ends the command with the decoded reason (``during``: "the move", "the jog")."""
         self.check()
@@ -216,7 +223,7 @@ class MotionGuard:
                 why = "; ".join(describe_mf(mf)) if mf else "MO=0 from elsewhere (sherpa stop, another tool)"
                 raise SafetyError(f"{self._drive(ref).client.label}: the motor was switched off during {during}: {why}")
 
-    def query(self, ref: Any, letters: str, index: int = 0) -> int | float:
+    def query(self, ref: DriveRef, letters: str, index: int = 0) -> int | float:
         """A query that waits out a drive deaf for its MO settle window (another host switched the motor:
         `sherpa stop`), up to protocol.mo_confirm_timeout, keeping the dead-man fed meanwhile."""
         c = self._drive(ref).client
@@ -231,10 +238,10 @@ class MotionGuard:
         finally:
             self._pulse()
 
-    def unit_mode(self, ref: Any) -> int:
+    def unit_mode(self, ref: DriveRef) -> int:
         return self._drive(ref).um
 
-    def release(self, refs: Iterable[Any]) -> list[DriveStop]:
+    def release(self, refs: Iterable[DriveRef]) -> list[DriveStop]:
         """Hand drives over to another motion guard (the interactive view's calibrate key runs
         `home`, which guards its drives itself: two guards on one drive would fight over the dead-man
         and its restore). Each drive leaves as on exit -- stopped, its motor off if this guard switched
@@ -248,7 +255,7 @@ class MotionGuard:
             d = self._drive(ref)
             try:
                 r = self._exit_drive(d)
-            except Exception as exc:
+            except Exception as exc:  # noqa: BLE001 - reported; the drive stays guarded and SafetyError names it
                 r = DriveStop(d.ref.name, f"{d.ref.bus}:{d.ref.node}", stopped_by="not stopped")
                 r.problems.append(f"stop: {why(exc)}")
             out.append(r)
@@ -264,7 +271,7 @@ class MotionGuard:
                               hint="check the drives with `sherpa monitor --once`; `sherpa stop` stops them all")
         return out
 
-    def adopt(self, refs: Iterable[Any]) -> None:
+    def adopt(self, refs: Iterable[DriveRef]) -> None:
         """Take back drives :meth:`release` handed over: NMT start, the fault check of the entry (a
         drive in fault is refused with the decoded reason and stays unguarded), the dead-man armed."""
         self.check()
@@ -291,13 +298,13 @@ class MotionGuard:
 
     # -- entry ------------------------------------------------------------------------------------
 
-    def _drive(self, ref: Any) -> _Drive:
+    def _drive(self, ref: DriveRef) -> _Drive:
         d = self._drives.get((ref.bus, ref.node))
         if d is None:
             raise UsageError(f"{drive_label(ref)} is not guarded by this motion guard")
         return d
 
-    def _lock(self, ref: Any) -> None:
+    def _lock(self, ref: DriveRef) -> None:
         key = (ref.bus, ref.node)
         if key in self._locks:
             return
@@ -305,7 +312,7 @@ class MotionGuard:
         lock.acquire()
         self._locks[key] = lock
 
-    def _unlock(self, ref: Any) -> None:
+    def _unlock(self, ref: DriveRef) -> None:
         lock = self._locks.pop((ref.bus, ref.node), None)
         if lock is not None:
             lock.release()
@@ -314,14 +321,14 @@ class MotionGuard:
         for lock in self._locks.values():
             try:
                 lock.release()
-            except Exception as exc:  # never keeps the others held; the kernel frees it at exit anyway
+            except Exception as exc:  # noqa: BLE001 - logged; never keeps the others held (the kernel frees it at exit anyway)
                 log.warning("%s: motion lock not released: %s", lock.label, exc)
         self._locks.clear()
 
     def _setup_bound(self) -> float:
         return 12 * self.settings.request_bound * max(1, len(self.refs)) + 3.0
 
-    def _inspect(self, ref: Any) -> None:
+    def _inspect(self, ref: DriveRef) -> None:
         client = self.session.client(ref)
         client.nmt_start()
         d = _Drive(ref, client)
@@ -408,7 +415,7 @@ class MotionGuard:
             for d in list(self._drives.values()):
                 try:
                     self.report.drives.append(self._exit_drive(d, stop=not entering or d.switched_on))
-                except Exception as exc:  # never one drive's failure leaves the others unstopped
+                except Exception as exc:  # noqa: BLE001 - reported; never one drive's failure leaves the others unstopped
                     r = DriveStop(d.ref.name, f"{d.ref.bus}:{d.ref.node}", stopped_by="not stopped")
                     r.problems.append(f"stop: {why(exc)}")
                     self.report.drives.append(r)
@@ -433,7 +440,7 @@ class MotionGuard:
                     d.client.send_only("BG")
                 else:
                     d.client.send_only("ST")
-            except Exception as exc:  # the per-drive exit tries again and reports
+            except Exception as exc:  # noqa: BLE001 - logged; the per-drive exit tries again and reports
                 log.debug("motion guard: first stop pass to %s: %s", d.ref.name, exc)
 
     def _step(self, extra: float = 0.0) -> None:
@@ -455,7 +462,7 @@ class MotionGuard:
             self._step()
             try:
                 c.nmt_start()
-            except Exception as exc:  # an NMT frame that could not be sent: still try the stop
+            except Exception as exc:  # noqa: BLE001 - reported; an NMT frame that could not be sent: still try the stop
                 r.problems.append(f"NMT start: {why(exc)}")
             how, standstill, problems = stop_drive(c, unit_mode=d.um, method=s.stop_method,
                                                    standstill_timeout=s.standstill_timeout,
@@ -464,7 +471,7 @@ class MotionGuard:
                                                    standstill_velocity=s.standstill_velocity)
             r.stopped_by, r.standstill = how, standstill
             r.problems.extend(problems)
-        except Exception as exc:
+        except Exception as exc:  # noqa: BLE001 - reported in the drive's stop report
             r.stopped_by = "not stopped"
             r.problems.append(f"stop: {why(exc)}")
         if d.switched_on:
@@ -472,7 +479,7 @@ class MotionGuard:
                 self._step(c.settings.mo_confirm_timeout + 2 * s.request_bound)
                 c.motor_off()
                 r.motor_off = motor_confirmed_off = True
-            except Exception as exc:
+            except Exception as exc:  # noqa: BLE001 - reported in the drive's stop report
                 r.problems.append(f"MO=0: {why(exc)}")
         # the dead-man may only be switched off when nothing is left running: a motor the guard switched
         # on must be at standstill (or already off) and MO=0 confirmed; otherwise the heartbeat stops
@@ -482,7 +489,7 @@ class MotionGuard:
         try:
             self._step()
             r.position = int(c.get("PX"))
-        except Exception as exc:
+        except Exception as exc:  # noqa: BLE001 - reported in the drive's stop report
             r.problems.append(f"PX: {why(exc)}")
         if d.um_changed_from is not None:
             if self.keep:
@@ -492,7 +499,7 @@ class MotionGuard:
                     self._step()
                     c.set("UM", 0, d.um_changed_from)
                     r.restored.append(f"UM={d.um_changed_from}")
-                except Exception as exc:
+                except Exception as exc:  # noqa: BLE001 - reported in the drive's stop report
                     r.problems.append(f"UM={d.um_changed_from} not restored: {why(exc)}")
             else:
                 r.kept.append(f"UM={d.um} (motor not confirmed off)")
@@ -512,7 +519,7 @@ class MotionGuard:
                     self._step()
                     d.client.set(key, 0, before)
                     r.restored.append(f"{key}={before}")
-            except Exception as exc:
+            except Exception as exc:  # noqa: BLE001 - reported in the drive's stop report
                 r.problems.append(f"{key}={before} not restored: {why(exc)}")
 
     def _restore_dead_man(self, d: _Drive, r: DriveStop, stop_failed: bool) -> None:
@@ -531,7 +538,7 @@ class MotionGuard:
                 self._step()
                 self._sdo_write(d, key, d.od_before[key])
                 r.restored.append(name)
-            except Exception as exc:
+            except Exception as exc:  # noqa: BLE001 - reported in the drive's stop report
                 r.problems.append(f"restore {name}: {why(exc)}")
 
     # -- signals ----------------------------------------------------------------------------------
@@ -569,7 +576,7 @@ class MotionGuard:
                 signal.signal(signum, handler)
         self._old_handlers.clear()
 
-    def _on_signal(self, signum: int, frame: Any) -> None:
+    def _on_signal(self, signum: int, frame: FrameType | None) -> None:
         name = signal.Signals(signum).name
         if self._exiting:
             # already stopping: a second Ctrl-C or SIGTERM must not cut the stop sequence short

@@ -53,10 +53,8 @@ class DriveLock:
         except OSError as exc:
             raise UsageError(f"{self.label}: cannot take the motion lock {self.path}: {exc}",
                              hint=paths.STATE_DIR_HINT) from None
-        try:
+        with contextlib.suppress(OSError):  # the pid is only for a message
             self.pid_path.write_text(f"{os.getpid()}\n", encoding="utf-8")
-        except OSError:
-            pass  # the pid is only for a message
 
     def release(self) -> None:
         if not self._lock.is_locked:

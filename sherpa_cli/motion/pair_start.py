@@ -5,15 +5,19 @@ from __future__ import annotations
 
 import functools
 from collections.abc import Callable, Mapping, Sequence
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 from sherpa_cli.config.model import PAIR_START_METHODS, ArmConfig
 from sherpa_cli.elmo.protocol import GROUP_INDEX, RPDO2_BASE, SYNC_ID, TPDO2_BASE
 from sherpa_cli.errors import ConfigError, DriveTimeoutError
-from sherpa_cli.motion.settings import PROFILE_KEYS
+from sherpa_cli.motion.settings import PROFILE_KEYS, MotionSettings
 
 if TYPE_CHECKING:
-    pass
+    from sherpa_cli.bus.session import ArmSession
+    from sherpa_cli.bus.targets import DriveRef
+    from sherpa_cli.elmo.client import DriveClient
+    from sherpa_cli.elmo.codec import Reply
+    from sherpa_cli.motion.guard import MotionGuard
 
 RPDO2_COMM = 0x1401  # RPDO2 (the binary interpreter's) communication parameter; sub 2 = transmission type
 SYNC_RPDO_TYPE = 1  # synchronous: executed at the next SYNC ([IG] 5-4)
@@ -31,8 +35,6 @@ def pair_settings(cfg: ArmConfig) -> tuple[str, int]:
     return m.pair_start, m.pair_group_id
 
 
-
-
 class CommonStart:
     """Starts both motors of a pair together; restores what it changed (0x2040 or 0x1401:2, and the
     SP/AC/DC kept with :meth:`keep_profile`; RAM) on close.
@@ -45,7 +47,7 @@ class CommonStart:
     guard. ``stop`` (:func:`stop_motors`) runs on the way out before the restore, so no motor keeps
     moving through the restore's SDO timeouts (review R8)."""
 
-    def __init__(self, session: Any, refs: Sequence[Any], clients: Mapping[str, Any], method: str,
+    def __init__(self, session: ArmSession, refs: Sequence[DriveRef], clients: Mapping[str, DriveClient], method: str,
                  group_id: int, stop: Callable[[], Sequence[str] | None] | None = None) -> None:
         self.session, self.refs, self.clients, self.method, self.group_id = session, list(refs), clients, method, group_id
         self._old: dict[str, int] = {}
@@ -103,15 +105,15 @@ class CommonStart:
         from sherpa_cli.errors import DriveRefusedError, DriveTimeoutError
 
         network = self.session.links[self.bus].network
-        answers: dict[str, Any] = {}
+        answers: dict[str, Reply] = {}
         arrived = {r.name: threading.Event() for r in self.refs}
-        subscribed = []
+        subscribed: list[tuple[int, Callable[[int, bytes, float], None]]] = []
 
         def listener(name: str) -> Callable[[int, bytes, float], None]:
             def on_reply(can_id: int, data: bytes, timestamp: float) -> None:
                 try:
                     reply = codec.decode_reply(bytes(data))
-                except Exception:
+                except Exception:  # noqa: BLE001 - on the receive thread: a frame that is no reply is not the BG's answer
                     return
                 if reply.letters == "BG" and name not in answers:
                     answers[name] = reply
@@ -155,7 +157,7 @@ class CommonStart:
                     if not quiet:
                         raise
 
-    def _put_rpdo_type(self, ref: Any) -> None:
+    def _put_rpdo_type(self, ref: DriveRef) -> None:
         self.session.sdo(ref).download(RPDO2_COMM, 2, bytes([self._rpdo_type[ref.name]]), name=RPDO2_TYPE_NAME)
         self._synchronous.discard(ref.name)
 
@@ -189,17 +191,17 @@ class CommonStart:
                     write()
                 except DriveTimeoutError:
                     break  # it does not answer: no more waits for it (the guard's exit reports the drive)
-                except Exception:  # the next command's start writes it again; nothing was saved
+                except Exception:  # noqa: BLE001 - the next command's start writes it again; nothing was saved
                     pass
-                except BaseException as exc:  # a second Ctrl-C: finish the restore first
+                except BaseException as exc:  # noqa: BLE001 - a second Ctrl-C: kept and raised once the restore is done
                     interrupted = interrupted or exc
         if interrupted is not None:
             raise interrupted
 
-    def _put_group_id(self, ref: Any, value: int) -> None:
+    def _put_group_id(self, ref: DriveRef, value: int) -> None:
         self.session.sdo(ref).download(GROUP_INDEX, 0, bytes([value]), name="group id")
 
-    def __exit__(self, *exc: Any) -> None:
+    def __exit__(self, *exc: object) -> None:
         deaf: Sequence[str] = ()
         try:
             if self.stop is not None:
@@ -208,7 +210,7 @@ class CommonStart:
             self.close(deaf)
 
 
-def stop_motors(guard: Any, refs: Sequence[Any], settings: Any) -> Callable[[], list[str]]:
+def stop_motors(guard: MotionGuard, refs: Sequence[DriveRef], settings: MotionSettings) -> Callable[[], list[str]]:
     """The stop :class:`CommonStart` runs before its restore: the guard's stop to every motor
     (motion.stop_drive: TC=0 in torque mode, ST or JV=0 + BG as motion.stop_method says; a motor
     that is off gets nothing), one drive after the other, without waiting for standstill -- the
@@ -219,7 +221,7 @@ def stop_motors(guard: Any, refs: Sequence[Any], settings: Any) -> Callable[[], 
         from sherpa_cli.errors import CommunicationError
         from sherpa_cli.motion.stopping import stop_drive
 
-        deaf = []
+        deaf: list[str] = []
         for r in refs:
             try:
                 stop_drive(guard.client(r), unit_mode=guard.unit_mode(r), method=settings.stop_method,
@@ -227,7 +229,7 @@ def stop_motors(guard: Any, refs: Sequence[Any], settings: Any) -> Callable[[], 
                            standstill_velocity=settings.standstill_velocity)
             except CommunicationError:
                 deaf.append(r.name)
-            except Exception:
+            except Exception:  # noqa: BLE001 - never raises: the guard's exit stops and reports every drive
                 pass
         return deaf
     return stop

@@ -25,14 +25,21 @@ import math
 import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any, Protocol
 
-from sherpa_cli.config.model import ArmConfig, PairConfig
+from sherpa_cli.bus.targets import DriveRef
+from sherpa_cli.config.model import ArmConfig, JointConfig, PairConfig
 from sherpa_cli.elmo.protocol import UM_POSITION
 from sherpa_cli.errors import SafetyError, UsageError
 from sherpa_cli.joints import diffpair, units
 from sherpa_cli.motion import calibration, limit_watch
 from sherpa_cli.motion.pair_start import CommonStart, pair_settings, stop_motors
+
+if TYPE_CHECKING:
+    from sherpa_cli.bus.session import ArmSession
+    from sherpa_cli.log.record import Recorder
+    from sherpa_cli.motion.guard import MotionGuard
+    from sherpa_cli.motion.limit_watch import Breach
 
 SETTLE_S = 0.3  # s a finished move may take for PX to reach the target (servo lag) before it is reported
 
@@ -230,6 +237,15 @@ def measure_coupling(samples: Sequence[tuple[float, int, int]], start: tuple[int
 
 # --------------------------------------------------------------------------- recording
 
+class Trace(Protocol):
+    """What a move records into: :class:`PolledTrace`, :class:`RecordedTrace`, or what a test's
+    ``trace_factory`` makes (``source``, when it has one, names it in the result)."""
+
+    samples: list[tuple[float, int, int]]
+
+    def add(self, t: float, motors: Mapping[str, int]) -> None: ...
+
+
 class PolledTrace:
     """Both motors' positions during the move, sampled by the move's own loop (PX polled through
     the interpreter, one drive after the other): the fallback when the recorder is not used."""
@@ -251,7 +267,7 @@ class RecordedTrace:
     Σ/Δ of a sample is exact (polling reads one motor a round trip after the other). The move's
     loop reads the newest sample (:meth:`latest`) instead of polling PX."""
 
-    def __init__(self, recorder: Any, drives: tuple[str, str], rate: float, note: str = "") -> None:
+    def __init__(self, recorder: Recorder, drives: tuple[str, str], rate: float, note: str = "") -> None:
         self.recorder, self.drives, self.rate = recorder, drives, rate
         self.source = f"TPDO on SYNC at {rate:g} Hz" + (f" ({note})" if note else "")
         self.samples: list[tuple[float, int, int]] = []
@@ -272,10 +288,10 @@ class RecordedTrace:
         """After the recorder closed: its samples as (t from the begin, m_a, m_b)."""
         rec = self.recorder.recording(t_zero=self.t_zero)
         a, b = (rec.columns[f"{d}.px"] for d in self.drives)
-        self.samples = [(t, int(x), int(y)) for t, x, y in zip(rec.times, a, b) if x == x and y == y]
+        self.samples = [(t, int(x), int(y)) for t, x, y in zip(rec.times, a, b, strict=True) if x == x and y == y]
 
 
-def record_rate(cfg: ArmConfig, refs: Sequence[Any]) -> tuple[float, str]:
+def record_rate(cfg: ArmConfig, refs: Sequence[DriveRef]) -> tuple[float, str]:
     """``motion.pair_record_rate``, capped to what the pair's bus can carry (log/record.py's budget)."""
     from sherpa_cli.devices.encoder import recorded_encoders
     from sherpa_cli.log.record import bus_budget
@@ -306,13 +322,13 @@ class MoveResult:
     delta_cpr: int
     motors_start: dict[str, int] = field(default_factory=dict)
     motors_end: dict[str, int] = field(default_factory=dict)
-    motor_commands: dict[str, Any] = field(default_factory=dict)
+    motor_commands: dict[str, dict[str, int]] = field(default_factory=dict)  # drive -> letters -> value
     coupling: Coupling | None = None
     samples: list[tuple[float, int, int]] = field(default_factory=list)
     trace_source: str = ""
     corrections: int = 0
     calibration: list[calibration.Calibration] = field(default_factory=list)
-    breaches: list[Any] = field(default_factory=list)
+    breaches: list[Breach] = field(default_factory=list)
     outcome: str = "done"
     duration: float | None = None
     guard_lines: list[str] = field(default_factory=list)
@@ -340,13 +356,11 @@ class MoveResult:
                 "limit": [b.as_dict() for b in self.breaches], "stop": dict(self.stop)}
 
 
-def _refs(cfg: ArmConfig, drives: Sequence[str]) -> list[Any]:
-    from sherpa_cli.bus.session import DriveRef
-
+def _refs(cfg: ArmConfig, drives: Sequence[str]) -> list[DriveRef]:
     return [DriveRef(d, cfg.drives[d].bus, cfg.drives[d].node, cfg.drives[d]) for d in drives]
 
 
-def prepare(session: Any, pair: PairConfig, request: MoveRequest) -> tuple[MovePlan, list[calibration.Calibration]]:
+def prepare(session: ArmSession, pair: PairConfig, request: MoveRequest) -> tuple[MovePlan, list[calibration.Calibration]]:
     """Read positions and calibration, then plan; nothing is written but NMT start."""
     cfg = session.cfg
     refs = _refs(cfg, (pair.drive_a, pair.drive_b))
@@ -429,8 +443,8 @@ class Feedback:
         return {a: scaled(p.profiles[a], k if corr > 0 else 1.0), b: scaled(p.profiles[b], k if corr < 0 else 1.0)}
 
 
-def _open_trace(stack: contextlib.ExitStack, session: Any, refs: Sequence[Any], request: MoveRequest,
-                drives: tuple[str, str], recorder_kw: Mapping[str, Any] | None) -> Any:
+def _open_trace(stack: contextlib.ExitStack, session: ArmSession, refs: Sequence[DriveRef], request: MoveRequest,
+                drives: tuple[str, str], recorder_kw: Mapping[str, Any] | None) -> PolledTrace | RecordedTrace:
     """The move's recording: the recorder of `sherpa log` (TPDO on SYNC), or PX polled by the move's
     loop with --poll or when the recorder cannot be set up (its source says which)."""
     if request.poll:
@@ -442,18 +456,20 @@ def _open_trace(stack: contextlib.ExitStack, session: Any, refs: Sequence[Any], 
     rate, note = record_rate(session.cfg, refs)
     try:
         rec = stack.enter_context(Recorder(session, refs, rate, enforce_budget=False, **dict(recorder_kw or {})))
-    except Exception as exc:  # the recorder put back what it changed; the move records by polling
+    except Exception as exc:  # noqa: BLE001 - shown in the trace's source; the move records by polling
+        # the recorder put back what it changed
         trace = PolledTrace(drives)
         trace.source = f"polled PX (the recorder could not be set up: {exc})"
         return trace
     return RecordedTrace(rec, drives, rate, note)
 
 
-def run_move(session: Any, pair: PairConfig, request: MoveRequest, *, guard_factory: Callable[..., Any] | None = None,
+def run_move(session: ArmSession, pair: PairConfig, request: MoveRequest, *,
+             guard_factory: Callable[..., MotionGuard] | None = None,
              clock: Callable[[], float] = time.monotonic, sleep: Callable[[float], None] = time.sleep,
              on_event: Callable[[str], None] | None = None,
              recorder_kw: Mapping[str, Any] | None = None,
-             trace_factory: Callable[[tuple[str, str]], Any] | None = None) -> MoveResult:
+             trace_factory: Callable[[tuple[str, str]], Trace] | None = None) -> MoveResult:
     """Plan, then move both motors inside the motion guard with the limit watch, recording both.
 
     ``recorder_kw`` goes to log/record.py's Recorder (``clock``, ``sync_factory``: tests);
@@ -486,10 +502,10 @@ def run_move(session: Any, pair: PairConfig, request: MoveRequest, *, guard_fact
             clients = {d: guard.client(by_name[d]) for d in drives}
             start = CommonStart(session, refs, clients, method, group_id, stop=stop_motors(guard, refs, settings))
             with contextlib.ExitStack() as stack:
-                trace = (trace_factory(drives) if trace_factory is not None else
-                         _open_trace(stack, session, refs, request, drives, recorder_kw))
+                trace: Trace = (trace_factory(drives) if trace_factory is not None else
+                                _open_trace(stack, session, refs, request, drives, recorder_kw))
                 result.trace_source = getattr(trace, "source", type(trace).__name__)
-                recorded = isinstance(trace, RecordedTrace)
+                recorded = trace if isinstance(trace, RecordedTrace) else None  # its newest SYNC feeds the loop
                 # entered after the recorder, so it exits first: the motors stop and the RAM settings go
                 # back before the recorder puts its PDO settings back (review R8: stop before restoring)
                 stack.enter_context(start)
@@ -508,14 +524,15 @@ def run_move(session: Any, pair: PairConfig, request: MoveRequest, *, guard_fact
                 # with the recorder the loop reads the newest SYNC's PX instead of polling it, so it
                 # can run at the recording's rate; the drives' status (SR, MS) is still asked at
                 # most every poll interval, as before
-                stale = max(10 / trace.rate, 0.02) if recorded else 0.0
-                interval = min(settings.poll_interval, 1 / trace.rate) if recorded and fb else settings.poll_interval
+                stale = max(10 / recorded.rate, 0.02) if recorded is not None else 0.0
+                interval = (min(settings.poll_interval, 1 / recorded.rate) if recorded is not None and fb
+                            else settings.poll_interval)
                 state: dict[str, Any] = {"status_due": 0.0, "seen": None}
 
                 def positions() -> dict[str, int]:
                     state["velocities"] = None
-                    if recorded:
-                        got = trace.latest(stale)
+                    if recorded is not None:
+                        got = recorded.latest(stale)
                         if got is not None:
                             guard.check()  # the guard's sign of life (a query gives one)
                             state["velocities"] = got[1]
@@ -562,8 +579,8 @@ def run_move(session: Any, pair: PairConfig, request: MoveRequest, *, guard_fact
                     return all(int(c.get("MS")) == 0 for c in clients.values())
 
                 t0 = t_begin = clock()
-                if recorded:
-                    trace.t_zero = trace.recorder.now()
+                if recorded is not None:
+                    recorded.t_zero = recorded.recorder.now()
                 start.begin()
                 w = limit_watch.watch(watched, sample, clock=clock, sleep=sleep, interval=interval,
                                       finished=finished, duration=p.timeout, check_drives=check_drives)
@@ -590,8 +607,8 @@ def run_move(session: Any, pair: PairConfig, request: MoveRequest, *, guard_fact
                         sleep(settings.poll_interval)
                         final = {d: int(clients[d].get("PX")) for d in drives}
                 trace.add(clock() - t0, final)
-            if recorded:
-                trace.collect()  # the recorder has stopped and put the PDO settings back
+            if recorded is not None:
+                recorded.collect()  # the recorder has stopped and put the PDO settings back
     except BaseException as exc:
         exc.motion_report = guard.report  # type: ignore[attr-defined]
         raise
@@ -607,7 +624,7 @@ def run_move(session: Any, pair: PairConfig, request: MoveRequest, *, guard_fact
     return result
 
 
-def _slow_pair(sj: Any, dj: Any) -> int:
+def _slow_pair(sj: JointConfig, dj: JointConfig) -> int:
     limits = [v for v in (sj.vel_limit, dj.vel_limit) if v]
     return max(1, (min(limits) if limits else 200) // 4)
 

@@ -29,9 +29,10 @@ import logging
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from typing import Any, Literal
+from types import TracebackType
+from typing import TYPE_CHECKING, Any, Literal
 
-from sherpa_cli.bus.targets import drive_ref
+from sherpa_cli.bus.targets import DriveRef, drive_ref
 from sherpa_cli.config.model import ArmConfig, JointConfig, JointRole, SwitchConfig, SwitchKind
 from sherpa_cli.elmo.protocol import UM_POSITION
 from sherpa_cli.errors import SafetyError, UsageError
@@ -39,6 +40,10 @@ from sherpa_cli.motion import calibration
 from sherpa_cli.motion.guard import MotionGuard
 from sherpa_cli.motion.settings import MotionSettings
 from sherpa_cli.motion.stopping import fault_reason
+
+if TYPE_CHECKING:
+    from sherpa_cli.bus.session import ArmSession
+    from sherpa_cli.elmo.client import DriveClient
 
 KINDS = ("home_switch", "end_switches", "pair", "abs_encoder")
 
@@ -293,19 +298,20 @@ class _Disarm:
 
     def __init__(self, runner: _Runner) -> None:
         self.runner = runner
-        self.armed: dict[str, Any] = {}
+        self.armed: dict[str, DriveClient] = {}
 
     def __enter__(self) -> _Disarm:
         self.runner._armed = self.armed
         return self
 
-    def __exit__(self, exc_type: Any, exc: Any, tb: Any) -> Literal[False]:
+    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
+                 tb: TracebackType | None) -> Literal[False]:
         self.runner._armed = None
         failed = []
         for label, c in self.armed.items():
             try:
                 c.set("HM", 1, 0)
-            except Exception as e:  # every drive gets its try
+            except Exception as e:  # noqa: BLE001 - collected: every drive gets its try; raised or logged below
                 failed.append(f"{label}: {e}")
         if failed and exc_type is None:
             raise SafetyError("the drive's homing could not be disarmed (HM[1]=0): " + "; ".join(failed),
@@ -316,14 +322,14 @@ class _Disarm:
 
 
 class _Runner:
-    def __init__(self, session: Any, cfg: ArmConfig, settings: MotionSettings, clock: Callable[[], float],
+    def __init__(self, session: ArmSession, cfg: ArmConfig, settings: MotionSettings, clock: Callable[[], float],
                  sleep: Callable[[float], None]) -> None:
         self.session, self.cfg, self.settings, self.clock, self.sleep = session, cfg, settings, clock, sleep
         self.h = cfg.homing
-        self._armed: dict[str, Any] | None = None  # inside a unit's _Disarm: the drives whose HM[] it armed
+        self._armed: dict[str, DriveClient] | None = None  # inside a unit's _Disarm: the drives whose HM[] it armed
 
     # HM[] -------------------------------------------------------------------------------------
-    def arm_homing(self, c: Any, *, event: int, value: int, after: int, update: int | None = None) -> None:
+    def arm_homing(self, c: DriveClient, *, event: int, value: int, after: int, update: int | None = None) -> None:
         if self._armed is not None:
             self._armed[c.label] = c  # before the first write: a half-done arming is disarmed too
         c.set("HM", 1, 0)
@@ -337,7 +343,7 @@ class _Runner:
         return self.h.event_input_base + sw.input
 
     # motion -----------------------------------------------------------------------------------
-    def start_pr(self, guard: MotionGuard, refs: dict[str, Any], distances: dict[str, int], speeds: dict[str, int]) -> None:
+    def start_pr(self, guard: MotionGuard, refs: dict[str, DriveRef], distances: dict[str, int], speeds: dict[str, int]) -> None:
         for name, dist in distances.items():
             guard.enable(refs[name], UM_POSITION)
             c = guard.client(refs[name])
@@ -346,7 +352,7 @@ class _Runner:
         for name in distances:
             guard.client(refs[name]).execute("BG")
 
-    def wait(self, guard: MotionGuard, refs: dict[str, Any], *, distance: int, speed: int, homing: bool,
+    def wait(self, guard: MotionGuard, refs: dict[str, DriveRef], *, distance: int, speed: int, homing: bool,
              what: str, one_edge: Callable[[list[str], list[str]], SafetyError] | None = None) -> bool:
         """Poll until the motion ends (MS != 2 on every drive) or, with ``homing``, the home event fired
         on every drive (HM[1] reads 0). True if the event fired. A bound in time, else an error.
@@ -381,14 +387,14 @@ class _Runner:
                                   hint="check the joint; `sherpa stop` stops every drive")
             self.sleep(self.settings.poll_interval)
 
-    def move_to(self, guard: MotionGuard, refs: dict[str, Any], targets: dict[str, int], speed: int, what: str) -> None:
+    def move_to(self, guard: MotionGuard, refs: dict[str, DriveRef], targets: dict[str, int], speed: int, what: str) -> None:
         from sherpa_cli.ops import joint_jog
 
         clients = {n: guard.client(r) for n, r in refs.items() if n in targets}
         joint_jog.move_to(guard, refs, clients, targets, max(1, speed), self.settings, self.clock, self.sleep, what)
 
     # kinds ------------------------------------------------------------------------------------
-    def check_fault(self, c: Any) -> None:
+    def check_fault(self, c: DriveClient) -> None:
         c.nmt_start()
         why = fault_reason(int(c.get("MF")), int(c.get("SR")))
         if why is not None:
@@ -399,7 +405,7 @@ class _Runner:
         res = UnitResult(unit.name, unit.kind, unit.drives)
         if len(unit.joints) != 1:
             raise UsageError(f"{unit.name}: homing a pair from absolute encoders on Σ and Δ is not supported yet")
-        for jname, dname in zip(unit.joints, unit.drives):
+        for jname, dname in zip(unit.joints, unit.drives, strict=True):
             joint = self.cfg.joints[jname]
             assert joint.abs_encoder is not None
             src = joint.abs_encoder.source
@@ -602,7 +608,7 @@ class _Runner:
         return res
 
 
-def run_home(session: Any, plan: HomePlan, *, settings: MotionSettings | None = None,
+def run_home(session: ArmSession, plan: HomePlan, *, settings: MotionSettings | None = None,
              clock: Callable[[], float] = time.monotonic, sleep: Callable[[float], None] = time.sleep,
              on_unit: Callable[[UnitResult], None] | None = None) -> HomeReport:
     """Home every unit of ``plan`` in order; stops at the first failure (an exception; what was
@@ -709,12 +715,12 @@ def wiring_plan(cfg: ArmConfig, name: str) -> list[tuple[JointConfig, SwitchConf
     return out
 
 
-def _pins(c: Any) -> dict[int, bool]:
+def _pins(c: DriveClient) -> dict[int, bool]:
     ip = int(c.get("IP"))
     return {n: bool(ip >> (IP_PIN_SHIFT + n - 1) & 1) for n in range(1, PINS + 1)}
 
 
-def check_wiring(session: Any, name: str, ask: Callable[[WiringPrompt], None],
+def check_wiring(session: ArmSession, name: str, ask: Callable[[WiringPrompt], None],
                  on_live: Callable[[dict[str, dict[int, bool]]], None] | None = None) -> WiringReport:
     """Before any motion: the live state of the configured inputs, then for each switch ask the
     technician to press it (``ask`` returns once it is held) and to let go, reading IP each time.
@@ -722,7 +728,7 @@ def check_wiring(session: Any, name: str, ask: Callable[[WiringPrompt], None],
     cfg = session.cfg
     plan = wiring_plan(cfg, name)
     report = WiringReport(name)
-    clients = {}
+    clients: dict[str, DriveClient] = {}
     for _, _, drives in plan:
         for d in drives:
             if d not in clients:

@@ -202,7 +202,7 @@ class DeviceIdentity:
                 "error": self.error}
 
 
-def identify_devices(session: Any, names: Sequence[str]) -> list[DeviceIdentity]:
+def identify_devices(session: ArmSession, names: Sequence[str]) -> list[DeviceIdentity]:
     """Identity by SDO (0x1000, 0x1018:1, 0x1008) and, for an encoder, its position (0x6004)."""
     from sherpa_cli.bus.targets import DriveRef
     from sherpa_cli.devices import CanOpenEncoder, device_class

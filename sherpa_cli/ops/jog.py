@@ -16,18 +16,24 @@ import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from sherpa_cli.bus import targets
 from sherpa_cli.bus.targets import DriveRef
 from sherpa_cli.config.model import ArmConfig, JointConfig, JointRole
-from sherpa_cli.elmo.faults import decode_sr, describe_mf
+from sherpa_cli.elmo.faults import StatusRegister, decode_sr, describe_mf
 from sherpa_cli.elmo.protocol import UM_POSITION, UM_TORQUE
 from sherpa_cli.errors import SafetyError, UsageError
 from sherpa_cli.joints.units import counts_to_rad, rad_per_s_to_counts_per_s, rad_to_counts
 from sherpa_cli.motion.guard import MotionGuard
 from sherpa_cli.motion.report import GuardReport
 from sherpa_cli.motion.settings import MotionSettings
+
+if TYPE_CHECKING:
+    from sherpa_cli.bus.session import ArmSession
+    from sherpa_cli.elmo.client import DriveClient
+    from sherpa_cli.motion.calibration import Calibration
+    from sherpa_cli.motion.limit_watch import Breach
 
 MODES = ("position", "velocity", "torque")
 
@@ -77,9 +83,9 @@ class JogResult:
     ended_by: str  # "target reached", "time up", "Ctrl-C"
     cpr: int | None
     stop: GuardReport = field(default_factory=GuardReport)
-    breach: Any = None  # limit_watch.Breach when the joint left its full range (the jog then failed)
+    breach: Breach | None = None  # when the joint left its full range (the jog then failed)
     recovered_to: int | None = None  # where the limit recovery brought the joint (counts)
-    calibration: Any = None  # calibration.Calibration of a position move
+    calibration: Calibration | None = None  # of a position move
 
     @property
     def error_counts(self) -> int | None:
@@ -174,7 +180,7 @@ def _counts_to(target: JogTarget, rad: float) -> int:
     return rad_to_counts(rad, target.cpr)
 
 
-def run_jog(session: Any, target: JogTarget, req: JogRequest, *, settings: MotionSettings,
+def run_jog(session: ArmSession, target: JogTarget, req: JogRequest, *, settings: MotionSettings,
             clock: Callable[[], float] = time.monotonic, sleep: Callable[[float], None] = time.sleep,
             on_progress: Callable[[JogProgress], None] | None = None,
             on_event: Callable[[str], None] | None = None, keep: bool = False) -> JogResult:
@@ -215,7 +221,7 @@ def run_jog(session: Any, target: JogTarget, req: JogRequest, *, settings: Motio
                      breach=state.get("breach"), recovered_to=state.get("recovered_to"), calibration=cal)
 
 
-def precheck(session: Any, target: JogTarget, req: JogRequest) -> Any:
+def precheck(session: ArmSession, target: JogTarget, req: JogRequest) -> Calibration | None:
     """Before anything is armed (wave/jog, docs/motion.md): a position move must stay inside the
     joint's NORMAL range and needs a calibrated joint (or ``uncalibrated``). Reads PX and the
     calibration flag; writes nothing. Returns the calibration found (None for other modes)."""
@@ -251,8 +257,10 @@ def _move(guard: MotionGuard, target: JogTarget, req: JogRequest, settings: Moti
     c = guard.client(ref)
     start = int(c.get("PX"))
     state["start"] = start
-    watch = lambda done, limit: _watch(guard, c, target, clock, sleep, settings, state, on_progress,  # noqa: E731
-                                       done=done, limit=limit)
+
+    def watch(done: Callable[[StatusRegister], bool] | None, limit: float | None) -> None:
+        _watch(guard, c, target, clock, sleep, settings, state, on_progress, done=done, limit=limit)
+
     if req.mode == "position":
         goal = _counts_to(target, req.to) if req.to is not None else start + _counts_to(target, req.by)  # type: ignore[arg-type]  # --to or --by
         if target.joint is not None:  # again with this PX: the joint may have moved since precheck
@@ -289,7 +297,7 @@ def _move(guard: MotionGuard, target: JogTarget, req: JogRequest, settings: Moti
         state["ended_by"] = state["ended_by"] or "time up"
 
 
-def _move_bound(c: Any, distance: int) -> float:
+def _move_bound(c: DriveClient, distance: int) -> float:
     """A generous bound for a PTP move: twice the profile's time at SP, AC and DC, plus 2 s."""
     sp = max(abs(int(c.get("SP"))), 1)
     ac = max(abs(int(c.get("AC"))), 1)
@@ -297,9 +305,9 @@ def _move_bound(c: Any, distance: int) -> float:
     return 2 * (distance / sp + sp / ac + sp / dc) + 2.0
 
 
-def _watch(guard: MotionGuard, c: Any, target: JogTarget, clock: Callable[[], float], sleep: Callable[[float], None],
+def _watch(guard: MotionGuard, c: DriveClient, target: JogTarget, clock: Callable[[], float], sleep: Callable[[float], None],
            settings: MotionSettings, state: dict[str, Any], on_progress: Callable[[JogProgress], None] | None,
-           *, done: Callable[[Any], bool] | None, limit: float | None) -> None:
+           *, done: Callable[[StatusRegister], bool] | None, limit: float | None) -> None:
     """Poll PX and SR until ``done(sr)`` or ``limit`` s (a time-up for velocity/torque, a failure for a move)."""
     t0 = state["t0"]
     while True:
@@ -325,7 +333,7 @@ def _watch(guard: MotionGuard, c: Any, target: JogTarget, clock: Callable[[], fl
         sleep(settings.poll_interval if limit is None else min(settings.poll_interval, max(limit - elapsed, 0.0)))
 
 
-def limit_breach(guard: MotionGuard, c: Any, target: JogTarget, px: int, settings: MotionSettings,
+def limit_breach(guard: MotionGuard, c: DriveClient, target: JogTarget, px: int, settings: MotionSettings,
                   clock: Callable[[], float], sleep: Callable[[float], None], state: dict[str, Any]) -> bool:
     """The joint-limit watch (seed 6.1, motion/limit_watch.py): past the full range, stop at once, send
     nothing more of the jog, and move the joint back (position mode) to the nearest normal edge."""

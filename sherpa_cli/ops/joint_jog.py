@@ -27,14 +27,21 @@ import math
 import time
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
+from sherpa_cli.bus.targets import DriveRef
 from sherpa_cli.config.model import ArmConfig, JointConfig, PairConfig
 from sherpa_cli.elmo.protocol import UM_POSITION, UM_TORQUE
 from sherpa_cli.errors import SafetyError, UsageError
 from sherpa_cli.joints import diffpair, units
 from sherpa_cli.motion import calibration, limit_watch
 from sherpa_cli.motion.limit_watch import Breach, WatchedJoint
+
+if TYPE_CHECKING:
+    from sherpa_cli.bus.session import ArmSession
+    from sherpa_cli.elmo.client import DriveClient
+    from sherpa_cli.motion.guard import MotionGuard
+    from sherpa_cli.motion.settings import MotionSettings
 
 Range = tuple[int, int]
 MODES = ("position", "velocity", "torque")
@@ -181,14 +188,14 @@ def _motor_speeds(axis: Axis, v: int) -> dict[str, int]:
     if axis.kind == "motor":
         return {axis.drives[0]: v}
     a, b = diffpair.motor_velocities(v, 0) if axis.kind == "sigma" else diffpair.motor_velocities(0, v)
-    return dict(zip(axis.drives, (a, b)))
+    return dict(zip(axis.drives, (a, b), strict=True))
 
 
 def _motor_currents(axis: Axis, amps: float) -> dict[str, float]:
     if axis.kind == "motor":
         return {axis.drives[0]: amps}
     a, b = diffpair.motor_currents(amps, 0.0) if axis.kind == "sigma" else diffpair.motor_currents(0.0, amps)
-    return dict(zip(axis.drives, (a, b)))
+    return dict(zip(axis.drives, (a, b), strict=True))
 
 
 def _plan_position(cfg: ArmConfig, axis: Axis, request: JogRequest, motors: Mapping[str, int],
@@ -238,7 +245,7 @@ def _motor_targets(axis: Axis, target: int, motors: Mapping[str, int]) -> dict[s
         s2, d2 = diffpair.hold_other(target, d, "sigma", held.normal if held else None)
     else:
         s2, d2 = diffpair.hold_other(s, target, "delta", held.normal if held else None)
-    return dict(zip(axis.drives, diffpair.to_motors(s2, d2)))
+    return dict(zip(axis.drives, diffpair.to_motors(s2, d2), strict=True))
 
 
 def check_offline(cfg: ArmConfig, axis: Axis, request: JogRequest) -> JogPlan | None:
@@ -276,12 +283,12 @@ class JogResult:
     joints_end: dict[str, int] = field(default_factory=dict)
     motors_start: dict[str, int] = field(default_factory=dict)
     motors_end: dict[str, int] = field(default_factory=dict)
-    motor_commands: dict[str, Any] = field(default_factory=dict)
+    motor_commands: dict[str, dict[str, int | float]] = field(default_factory=dict)  # drive -> letters -> value
     calibration: list[calibration.Calibration] = field(default_factory=list)
     breaches: list[Breach] = field(default_factory=list)
     recovered_to: dict[str, int] = field(default_factory=dict)  # joint positions after the recovery
     outcome: str = "done"  # done | limit
-    held_correction: dict[str, Any] = field(default_factory=dict)  # the held pair joint put back
+    held_correction: dict[str, dict[str, int]] = field(default_factory=dict)  # the held pair joint put back
     guard_lines: list[str] = field(default_factory=list)
     stop: dict[str, Any] = field(default_factory=dict)  # the guard's report (GuardReport.as_json)
     joint_cpr: dict[str, int] = field(default_factory=dict)  # cpr of each watched joint
@@ -304,13 +311,12 @@ class JogResult:
         }
 
 
-def _refs(cfg: ArmConfig, drives: tuple[str, ...]):
-    from sherpa_cli.bus.session import DriveRef
-
+def _refs(cfg: ArmConfig, drives: tuple[str, ...]) -> list[DriveRef]:
     return [DriveRef(d, cfg.drives[d].bus, cfg.drives[d].node, cfg.drives[d]) for d in drives]
 
 
-def prepare(session: Any, axis: Axis, request: JogRequest) -> tuple[JogPlan, dict[str, int], list]:
+def prepare(session: ArmSession, axis: Axis, request: JogRequest
+            ) -> tuple[JogPlan, dict[str, int], list[calibration.Calibration]]:
     """Read positions (and calibration), then plan; nothing is written to a drive here but NMT start."""
     cfg = session.cfg
     refs = _refs(cfg, axis.sensed)
@@ -321,7 +327,7 @@ def prepare(session: Any, axis: Axis, request: JogRequest) -> tuple[JogPlan, dic
     p = plan(cfg, axis, request, motors)
     cals: list[calibration.Calibration] = []
     if request.mode == "position":
-        seen = set()
+        seen: set[tuple[str, ...]] = set()
         for joint in axis.joints:
             key = calibration.joint_drives(cfg, joint)
             if key in seen:
@@ -330,14 +336,15 @@ def prepare(session: Any, axis: Axis, request: JogRequest) -> tuple[JogPlan, dic
             cals.append(calibration.read_calibration(cfg, joint, lambda d: clients[d]))
         missing = [c for c in cals if not c.calibrated]
         if missing and not request.uncalibrated:
-            c = missing[0]
-            raise SafetyError(f"{axis.name}: refusing a position move: joint {c.joint} is {c.reason}",
+            first = missing[0]
+            raise SafetyError(f"{axis.name}: refusing a position move: joint {first.joint} is {first.reason}",
                               hint="home it first, or pass --uncalibrated to move by the counter as it is "
                                    "(positions are then relative to where the joint stood at power-up)")
     return p, motors, cals
 
 
-def run(session: Any, axis: Axis, request: JogRequest, *, guard_factory: Callable[..., Any] | None = None,
+def run(session: ArmSession, axis: Axis, request: JogRequest, *,
+        guard_factory: Callable[..., MotionGuard] | None = None,
         clock: Callable[[], float] = time.monotonic, sleep: Callable[[float], None] = time.sleep,
         on_event: Callable[[str], None] | None = None,
         on_progress: Callable[[Mapping[str, int]], None] | None = None) -> JogResult:
@@ -375,8 +382,8 @@ def run(session: Any, axis: Axis, request: JogRequest, *, guard_factory: Callabl
     return result
 
 
-def _run_guarded(guard: Any, session: Any, cfg: ArmConfig, axis: Axis, p: JogPlan, by_name: Mapping[str, Any],
-                 settings: Any, joints_start: Mapping[str, int], result: JogResult,
+def _run_guarded(guard: MotionGuard, session: ArmSession, cfg: ArmConfig, axis: Axis, p: JogPlan,
+                 by_name: Mapping[str, DriveRef], settings: MotionSettings, joints_start: Mapping[str, int], result: JogResult,
                  clock: Callable[[], float], sleep: Callable[[float], None],
                  on_progress: Callable[[Mapping[str, int]], None] | None = None) -> dict[str, int]:
     from sherpa_cli.motion import pair_start
@@ -460,7 +467,7 @@ def _run_guarded(guard: Any, session: Any, cfg: ArmConfig, axis: Axis, p: JogPla
     return final
 
 
-def stop_now(clients: Mapping[str, Any], mode: str, method: str = "auto") -> None:
+def stop_now(clients: Mapping[str, DriveClient], mode: str, method: str = "auto") -> None:
     """Stop every motor of the jog at once (the stop frames of each, no wait in between); nothing
     queued is sent after this. The guard's one stop path (motion/stopping.send_stop): TC=0 first in torque
     mode, then by ``method`` (motion.stop_method: auto, st, jv0). A problem (ST refused with ``st``)
@@ -481,8 +488,8 @@ def _slow(axis: Axis) -> int:
     return max(1, (axis.vel_limit or 200) // 2)
 
 
-def _restore_held(guard: Any, by_name: Mapping[str, Any], clients: Mapping[str, Any], axis: Axis,
-                  now: dict[str, int], held: Mapping[str, int], settings: Any, clock: Callable[[], float],
+def _restore_held(guard: MotionGuard, by_name: Mapping[str, DriveRef], clients: Mapping[str, DriveClient],
+                  axis: Axis, now: dict[str, int], held: Mapping[str, int], settings: MotionSettings, clock: Callable[[], float],
                   sleep: Callable[[float], None], result: JogResult) -> dict[str, int]:
     (name, value), = held.items()
     a, b = axis.drives
@@ -493,15 +500,15 @@ def _restore_held(guard: Any, by_name: Mapping[str, Any], clients: Mapping[str, 
         s2, d2 = diffpair.hold_other(s, value, "delta")
     else:
         s2, d2 = diffpair.hold_other(value, d, "sigma")
-    targets = dict(zip(axis.drives, diffpair.to_motors(s2, d2)))
+    targets = dict(zip(axis.drives, diffpair.to_motors(s2, d2), strict=True))
     result.held_correction = {name: {"from": (d if axis.kind == "sigma" else s), "to": value}}
     move_to(guard, by_name, clients, targets, _slow(axis), settings, clock, sleep,
              f"the correction of the held joint {name}")
     return {**now, **{dr: int(c.get("PX")) for dr, c in clients.items()}}
 
 
-def move_to(guard: Any, by_name: Mapping[str, Any], clients: Mapping[str, Any], targets: Mapping[str, int],
-             speed: int, settings: Any, clock: Callable[[], float], sleep: Callable[[float], None],
+def move_to(guard: MotionGuard, by_name: Mapping[str, DriveRef], clients: Mapping[str, DriveClient],
+             targets: Mapping[str, int], speed: int, settings: MotionSettings, clock: Callable[[], float], sleep: Callable[[float], None],
              what: str) -> None:
     """Position mode (UM=5; the guard cycles MO if the mode changes), every motor of ``targets`` to
     its target with equal-duration profiles, bounded in time."""
@@ -525,7 +532,7 @@ def move_to(guard: Any, by_name: Mapping[str, Any], clients: Mapping[str, Any], 
         sleep(settings.poll_interval)
 
 
-def wait_standstill(clients: Mapping[str, Any], guard: Any, settings: Any, clock: Callable[[], float],
+def wait_standstill(clients: Mapping[str, DriveClient], guard: MotionGuard, settings: MotionSettings, clock: Callable[[], float],
                      sleep: Callable[[float], None]) -> None:
     deadline = clock() + settings.standstill_timeout
     while clock() < deadline:

@@ -21,11 +21,15 @@ import sys
 import time
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
-from typing import Any, Protocol
+from types import ModuleType
+from typing import TYPE_CHECKING, Protocol
 
 from sherpa_cli.config.model import ArmConfig, JoystickConfig, JoystickMap
 from sherpa_cli.errors import SherpaError, UsageError
 from sherpa_cli.joints import diffpair
+
+if TYPE_CHECKING:
+    from sherpa_cli.ops.live_jog import LiveJog
 
 
 @dataclass(frozen=True)
@@ -90,7 +94,7 @@ class ScriptedSource:
         return held
 
 
-def _evdev() -> Any:
+def _evdev() -> ModuleType:
     if not sys.platform.startswith("linux"):
         raise UsageError(f"the joystick needs Linux (evdev); this is {sys.platform}")
     try:
@@ -109,7 +113,7 @@ class JoystickInfo:
     buttons: tuple[str, ...]
 
 
-def _names(ecodes: Any, table: dict, code: int) -> str:
+def _names(ecodes: ModuleType, table: dict, code: int) -> str:
     name = table.get(code, str(code))
     return name[0] if isinstance(name, (list, tuple)) else name  # an aliased code: a tuple (evdev >= 1.7)
 
@@ -252,7 +256,7 @@ def joints_of(cfg: ArmConfig, jcfg: JoystickConfig) -> list[str]:
     return out
 
 
-def command(live: Any, cfg: ArmConfig, m: JoystickMap, values: dict[str, float], dz: float) -> str:
+def command(live: LiveJog, cfg: ArmConfig, m: JoystickMap, values: dict[str, float], dz: float) -> str:
     """Send one map's command from the axes' present values; returns what LiveJog said."""
     sign = -1.0 if m.invert else 1.0
     if m.joint is not None:
@@ -293,11 +297,11 @@ def _deadman_down(source: EventSource, name: str) -> bool:
     """Whether the device reports the dead-man held now; a query that fails counts as released."""
     try:
         return name in source.active_keys()
-    except Exception:
+    except Exception:  # noqa: BLE001 - fail-safe: whatever the failure, the dead-man counts as released
         return False
 
 
-def run_joystick(live: Any, cfg: ArmConfig, jcfg: JoystickConfig, source: EventSource, *,
+def run_joystick(live: LiveJog, cfg: ArmConfig, jcfg: JoystickConfig, source: EventSource, *,
                  clock: Callable[[], float] = time.monotonic, sleep: Callable[[float], None] = time.sleep,
                  duration: float | None = None, on_status: Callable[[str], None] | None = None) -> JoystickRun:
     """The loop: read events, and at ``rate_hz`` send each map's command while the dead-man is held.

@@ -27,7 +27,8 @@ import math
 import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Any
+from types import TracebackType
+from typing import TYPE_CHECKING
 
 from sherpa_cli.bus import targets
 from sherpa_cli.config.model import ArmConfig, JointConfig, JointRole
@@ -39,8 +40,14 @@ from sherpa_cli.joints.units import counts_to_rad
 from sherpa_cli.motion import calibration, limit_watch
 from sherpa_cli.motion.guard import MotionGuard
 from sherpa_cli.motion.limit_watch import WatchedJoint
+from sherpa_cli.motion.report import GuardReport
 from sherpa_cli.motion.settings import MotionSettings
 from sherpa_cli.ops import joint_jog
+
+if TYPE_CHECKING:
+    from sherpa_cli.bus.session import ArmSession
+    from sherpa_cli.elmo.client import DriveClient
+    from sherpa_cli.ops.home import HomePlan, HomeReport
 
 MODES = ("position", "velocity", "torque")
 
@@ -124,7 +131,7 @@ class _Running:
 class LiveJog:
     """``with LiveJog(session, axes) as live:`` -- see the module docstring."""
 
-    def __init__(self, session: Any, axes: Sequence[LiveAxis], *, settings: MotionSettings | None = None,
+    def __init__(self, session: ArmSession, axes: Sequence[LiveAxis], *, settings: MotionSettings | None = None,
                  keepalive: float = KEEPALIVE_S, allow_uncalibrated: bool = False, tick_period: float = 0.1,
                  clock: Callable[[], float] = time.monotonic, sleep: Callable[[float], None] = time.sleep,
                  on_event: Callable[[str], None] | None = None) -> None:
@@ -168,20 +175,21 @@ class LiveJog:
             raise
         return self
 
-    def __exit__(self, exc_type: Any, exc: Any, tb: Any) -> bool:
+    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
+                 tb: TracebackType | None) -> bool:
         self.running.clear()
         return self.guard.__exit__(exc_type, exc, tb)
 
     @property
-    def report(self):
+    def report(self) -> GuardReport:
         return self.guard.report
 
-    def _raw(self, drive: str) -> Any:
+    def _raw(self, drive: str) -> DriveClient:
         c = self.session.client(self.refs[drive])
         c.nmt_start()
         return c
 
-    def _client(self, drive: str) -> Any:
+    def _client(self, drive: str) -> DriveClient:
         return self.guard.client(self.refs[drive])
 
     # -- commands ----------------------------------------------------------------------------------
@@ -220,7 +228,7 @@ class LiveJog:
             s_now, d_now = ma + mb, ma - mb
             s2, d2 = (diffpair.hold_other(goal, d_now, "sigma", held.normal_range) if a.kind == "sigma"
                       else diffpair.hold_other(s_now, goal, "delta", held.normal_range))
-            motor_targets = dict(zip(a.drives, diffpair.to_motors(s2, d2)))
+            motor_targets = dict(zip(a.drives, diffpair.to_motors(s2, d2), strict=True))
         speed = max(1, (a.vel_limit or 400) // 2)
         distance = max(abs(t - now[d]) for d, t in motor_targets.items())
         duration = distance / speed if distance else 0.0
@@ -250,7 +258,7 @@ class LiveJog:
             motors = {a.drives[0]: v}
         else:
             va, vb = diffpair.motor_velocities(v, 0) if a.kind == "sigma" else diffpair.motor_velocities(0, v)
-            motors = dict(zip(a.drives, (va, vb)))
+            motors = dict(zip(a.drives, (va, vb), strict=True))
         return self._run(name, "velocity", motors)
 
     def set_torque(self, name: str, amps: float) -> str:
@@ -260,7 +268,7 @@ class LiveJog:
             motors = {a.drives[0]: float(amps)}
         else:
             ia, ib = diffpair.motor_currents(amps, 0.0) if a.kind == "sigma" else diffpair.motor_currents(0.0, amps)
-            motors = dict(zip(a.drives, (ia, ib)))
+            motors = dict(zip(a.drives, (ia, ib), strict=True))
         if a.current_limit is None:
             return self._refuse(name, f"{name}: no current limits configured: torque not sent")
         if max(abs(x) for x in motors.values()) > a.current_limit:
@@ -280,7 +288,7 @@ class LiveJog:
                 scale = min(scale, j.vel_limit / abs(jv))
         if scale < 1.0:
             va, vb = int(va * scale), int(vb * scale)
-        return self._run(pair_axis, "velocity", dict(zip(a.drives, (va, vb))))
+        return self._run(pair_axis, "velocity", dict(zip(a.drives, (va, vb), strict=True)))
 
     def set_motor_currents(self, pair_axis: str, motors: Mapping[str, float]) -> str:
         """Both motors of a pair at the given currents (A), each clamped to the continuous limit."""
@@ -317,7 +325,7 @@ class LiveJog:
 
     # -- calibrate (home) ----------------------------------------------------------------------------
 
-    def home_plan(self, name: str) -> Any:
+    def home_plan(self, name: str) -> HomePlan:
         """What the calibrate key would do for this joint: ops/home.plan_home of it (a Σ or Δ joint
         homes its pair as one unit). A joint that cannot be homed is a UsageError saying why."""
         from sherpa_cli.ops import home
@@ -331,7 +339,7 @@ class LiveJog:
         return plan
 
     def calibrate(self, name: str, *, abort: Callable[[], bool] = lambda: False,
-                  on_event: Callable[[str], None] | None = None) -> Any:
+                  on_event: Callable[[str], None] | None = None) -> HomeReport:
         """Home the joint (its pair as one unit) with ops/home.run_home and take it back.
 
         Every running command stops first (nothing ticks while homing runs). The unit's drives leave
@@ -380,7 +388,7 @@ class LiveJog:
         finally:
             try:
                 self.guard.adopt(refs)
-            except Exception as exc:
+            except Exception as exc:  # noqa: BLE001 - recorded: its drives are not commanded again in this session
                 for d in drives:
                     self.unguarded.add(d)
                     if d not in self.dead:
@@ -491,7 +499,7 @@ class LiveJog:
             if name != keep and name in self.running and set(a.drives) & set(drives):
                 self.stop(name)
 
-    def _run(self, name: str, mode: str, motors: dict[str, Any]) -> str:
+    def _run(self, name: str, mode: str, motors: Mapping[str, float]) -> str:
         a = self._axis(name)
         st = self.state[name]
         if all(v == 0 for v in motors.values()):
@@ -525,11 +533,11 @@ class LiveJog:
         self.running[name].until = self.clock() + self.keepalive  # from the command, not from MO=1
         letters = "TC" if mode == "torque" else "JV"
         parts = [f"{letters}={v:g}" if isinstance(v, float) else f"{letters}={v}" for v in motors.values()]
-        st.command = parts[0] if len(parts) == 1 else ", ".join(f"{d} {p}" for d, p in zip(motors, parts))
+        st.command = parts[0] if len(parts) == 1 else ", ".join(f"{d} {p}" for d, p in zip(motors, parts, strict=True))
         st.note = ""
         return f"{name}: {st.command}"
 
-    def _outward(self, motors: Mapping[str, Any], positions: Mapping[str, int] | None = None,
+    def _outward(self, motors: Mapping[str, float], positions: Mapping[str, int] | None = None,
                  mode: str = "velocity") -> str | None:
         """A command that drives a joint at (or past) the edge of its normal range further out. In
         velocity mode the edge is met early by the distance the joint needs to stop (its configured

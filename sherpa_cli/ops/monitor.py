@@ -18,6 +18,7 @@ Nothing here prints; the CLI renders :class:`DriveStatus` rows.
 
 from __future__ import annotations
 
+import contextlib
 import threading
 import time
 from collections.abc import Callable, Iterable, Sequence
@@ -140,7 +141,7 @@ class Monitor:
             raise
         return self
 
-    def __exit__(self, *exc: Any) -> None:
+    def __exit__(self, *exc: object) -> None:
         self.close()
 
     def start(self) -> None:
@@ -155,10 +156,8 @@ class Monitor:
 
     def close(self) -> None:
         for network, can_id, callback in self._subscriptions:
-            try:
+            with contextlib.suppress(KeyError, ValueError):  # the bus is already gone
                 network.unsubscribe(can_id, callback)
-            except (KeyError, ValueError):  # the bus is already gone
-                pass
         self._subscriptions.clear()
         restore = [w for w in self.watches if w.heartbeat_set_from is not None]
         if restore:
@@ -307,5 +306,5 @@ class Monitor:
         return NMT_STATES[0x05] if w.answering else NO_ANSWER
 
 
-def _int(value: Any) -> int | None:
+def _int(value: object) -> int | None:
     return value if isinstance(value, int) and not isinstance(value, bool) else None

@@ -75,7 +75,7 @@ def drive_block(d: DriveDump) -> dict[str, Any]:
     }
 
 
-def _yaml(data: Any) -> str:
+def _yaml(data: object) -> str:
     # width: never fold a long device name over lines, a fold would show up as a diff.
     # ASCII only: PyYAML writes some Unicode line breaks (U+0085) raw and reads them back as spaces.
     return yaml.safe_dump(data, sort_keys=False, default_flow_style=False, allow_unicode=False, width=10_000)
@@ -134,7 +134,7 @@ def dump_from_text(text: str, filename: str) -> ParamDump:
     return ParamDump(meta=meta, drives=drives)
 
 
-def _meta_value(node: YNode) -> Any:
+def _meta_value(node: YNode) -> str | int | float | bool | None:
     if node.kind != "scalar":
         raise node.error(f"expected a plain value, got {describe(node)}")
     v = node.value
@@ -172,7 +172,7 @@ def _read_drive(name: str, node: YNode) -> DriveDump:
     return DriveDump(name=name, bus=bus, node=node_id, identity=identity, params=params, unreadable=unreadable)
 
 
-def _identity_value(key: str, node: YNode) -> Any:
+def _identity_value(key: str, node: YNode) -> str | int | None:
     if node.is_null:
         return None
     v = node.value

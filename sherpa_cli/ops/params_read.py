@@ -23,7 +23,9 @@ from sherpa_cli.joints.params import PARAM_ORDER
 from sherpa_cli.ops.params_file import DriveDump, ParamDump
 
 if TYPE_CHECKING:
+    from sherpa_cli.bus.sdo import DriveSdo
     from sherpa_cli.bus.session import ArmSession
+    from sherpa_cli.bus.targets import DriveRef
     from sherpa_cli.elmo.client import DriveClient
 
 # 0x1018 sub 1-4 and the strings of 0x1008/9/A (CiA 301), in IDENTITY_KEYS order.
@@ -50,7 +52,7 @@ def params_to_read(cfg: ArmConfig, drive: str) -> list[str]:
     return ["UM", *PARAM_ORDER, *(f"IL[{n}]" for n in range(1, inputs + 1)), "CA[18]"]
 
 
-def read_identity(sdo: Any) -> tuple[dict[str, Any], dict[str, str]]:
+def read_identity(sdo: DriveSdo) -> tuple[dict[str, Any], dict[str, str]]:
     """Identity objects over the drive's SDO client: (values, why a field is None).
 
     An abort leaves that field None with the reason; any other failure (no answer, a
@@ -115,14 +117,14 @@ def per_bus(session: ArmSession, drives: Sequence[str], work: Callable[[str], An
         return run
 
     results: dict[str, Outcome[str]] = {}
-    for bus, outcome in run_concurrently({bus: bus_job(names) for bus, names in by_bus.items()}).items():
+    for outcome in run_concurrently({bus: bus_job(names) for bus, names in by_bus.items()}).values():
         if outcome.error is not None:
             raise outcome.error  # only KeyboardInterrupt and the like escape bus_job
         results.update(outcome.value)
     return {d: results[d] for d in drives}
 
 
-def ref_of(cfg: ArmConfig, drive: str):
+def ref_of(cfg: ArmConfig, drive: str) -> DriveRef:
     from sherpa_cli.bus.targets import drive_ref
 
     return drive_ref(cfg, drive)

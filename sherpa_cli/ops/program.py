@@ -28,9 +28,9 @@ from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from enum import StrEnum
 from types import MappingProxyType
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, TypeVar
 
-from sherpa_cli.bus.parallel import run_concurrently
+from sherpa_cli.bus.parallel import Outcome, run_concurrently
 from sherpa_cli.elmo import codec
 from sherpa_cli.elmo.commands import COMMANDS, format_value, param_key, parse_param_key
 from sherpa_cli.errors import CodecError, ConfigError, DriveRefusedError, Location, SafetyError, SherpaError
@@ -42,6 +42,8 @@ if TYPE_CHECKING:
     from sherpa_cli.ops.save_ledger import SaveLedger
 
 ParamValue = int | float
+
+R = TypeVar("R")  # one drive's result (DriveOutcome, FlashProof)
 
 MAX_DRIVE_WORKERS = 16  # drives programmed at once; the arm has 14
 
@@ -534,10 +536,11 @@ def apply_plans(session: ArmSession, plans: Sequence[DrivePlan], *, save: bool =
     return ApplyResult(result, interrupted=stop.is_set())
 
 
-def _in_plan_order(plans: Sequence[DrivePlan], outcomes: Any, failed: Any) -> list[Any]:
+def _in_plan_order(plans: Sequence[DrivePlan], outcomes: Mapping[str, Outcome[str]],
+                   failed: Callable[[DriveTarget, str], R]) -> list[R]:
     """Each drive's result in plan order; a drive's SherpaError becomes ``failed(target, message)``
     (one drive's trouble never hides the others'), anything else is a bug and raised."""
-    result = []
+    result: list[R] = []
     for p in plans:
         o = outcomes[p.drive]
         if o.error is not None:
@@ -597,7 +600,7 @@ def check_proof(plans: Sequence[DrivePlan], *, motor_off: bool) -> None:
                           hint="stop the motion and switch the motor off, or add --motor-off")
 
 
-def _prove_drive(session: Any, plan: DrivePlan, *, boot_timeout: float, stop: threading.Event) -> FlashProof:
+def _prove_drive(session: ArmSession, plan: DrivePlan, *, boot_timeout: float, stop: threading.Event) -> FlashProof:
     t = plan.target
     proof = FlashProof(t.drive, t.bus, t.node)
     if stop.is_set():
@@ -622,14 +625,14 @@ def _prove_drive(session: Any, plan: DrivePlan, *, boot_timeout: float, stop: th
     except SherpaError as exc:
         proof.status, proof.error, proof.exit_code = PROOF_FAILED, exc.message, int(exc.exit_code)
         return proof
-    except Exception as exc:  # e.g. can.CanError: keep every drive's report
+    except Exception as exc:  # noqa: BLE001 - e.g. can.CanError: in this drive's proof, every drive keeps its report
         proof.status, proof.error = PROOF_FAILED, f"{type(exc).__name__}: {exc}"
         return proof
     proof.status = DIFFERS if proof.differences else HOLDS
     return proof
 
 
-def prove_flash(session: Any, plans: Sequence[DrivePlan], *, boot_timeout: float,
+def prove_flash(session: ArmSession, plans: Sequence[DrivePlan], *, boot_timeout: float,
                 stop: threading.Event | None = None, max_workers: int = MAX_DRIVE_WORKERS) -> list[FlashProof]:
     """Reset every planned drive, wait for its boot-up and read every target back (call check_proof first)."""
     stop = stop or threading.Event()

@@ -11,7 +11,7 @@ and counted in the save ledger under the drive's serial number.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
@@ -97,7 +97,8 @@ def decode_value(letters: str, value: int | float | None) -> list[str]:
 
 
 def run_raw(client: DriveClient, node: int, exprs: Sequence[str], *, apply: bool, query_long: bool = False,
-            results: list[RawResult] | None = None, on_save: Any = None) -> list[RawResult]:
+            results: list[RawResult] | None = None,
+            on_save: Callable[[RawResult], None] | None = None) -> list[RawResult]:
     """Run the expressions in order on one drive; stop at the first error (it propagates).
 
     ``results`` collects what was done before an error, so the caller can still show it.

@@ -12,13 +12,14 @@ Nothing here prints; the CLI renders :class:`ScanReport`.
 
 from __future__ import annotations
 
+import contextlib
 import statistics
 import struct
 import threading
 import time
 from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Protocol
 
 from sherpa_cli.bus.canopen_names import VENDORS, decode_text, nmt_text
 from sherpa_cli.bus.parallel import run_concurrently
@@ -28,6 +29,7 @@ from sherpa_cli.elmo.protocol import HEARTBEAT_BASE, NMT_ID, NMT_RESET_COMM, SDO
 from sherpa_cli.errors import SdoError, SherpaError
 
 if TYPE_CHECKING:
+    from sherpa_cli.bus.links import BusLink
     from sherpa_cli.bus.session import ArmSession
 
 NODE_IDS = range(1, 128)
@@ -162,6 +164,20 @@ class _Heard:
     nmt: list[int] = field(default_factory=list)  # boot-up / heartbeat state bytes, in order
 
 
+FrameCallback = Callable[[int, bytearray, float], None]  # canopen.Network's: (can_id, data, timestamp)
+
+
+class Network(Protocol):
+    """What a scan needs of a bus: canopen.Network's ``subscribe``, ``unsubscribe`` and
+    ``send_message`` (tests use a fake)."""
+
+    def subscribe(self, can_id: int, callback: FrameCallback) -> None: ...
+
+    def unsubscribe(self, can_id: int, callback: FrameCallback | None = None) -> None: ...
+
+    def send_message(self, can_id: int, data: bytes) -> None: ...
+
+
 class BusProber:
     """SDO upload of 0x1000 to every node id of one bus without waiting between requests.
 
@@ -170,7 +186,7 @@ class BusProber:
     ``send_message``.
     """
 
-    def __init__(self, network: Any, configured: Iterable[int], settings: ScanSettings = ScanSettings(), *,
+    def __init__(self, network: Network, configured: Iterable[int], settings: ScanSettings = ScanSettings(), *,
                  clock: Callable[[], float] = time.monotonic, sleep: Callable[[float], None] = time.sleep,
                  progress: Callable[[str, int, int], None] | None = None) -> None:
         self.network = network
@@ -198,10 +214,8 @@ class BusProber:
             self._probe()
         finally:
             for can_id, callback in subscriptions:
-                try:
+                with contextlib.suppress(KeyError, ValueError):  # the bus went away; nothing left to unhook
                     self.network.unsubscribe(can_id, callback)
-                except (KeyError, ValueError):  # the bus went away; nothing left to unhook
-                    pass
         return self.heard
 
     def _reset(self) -> None:
@@ -247,7 +261,7 @@ class BusProber:
                 return
             self.sleep(self.settings.poll_s)
 
-    def _on_sdo(self, can_id: int, data: bytes, timestamp: float) -> None:
+    def _on_sdo(self, can_id: int, data: bytes | bytearray, timestamp: float) -> None:
         data = bytes(data)
         # Only answers to our request (0x1000:00) or aborts of it; anything else is another
         # tool's transfer and proves nothing about this scan.
@@ -258,7 +272,7 @@ class BusProber:
             self.heard[can_id - SDO_TX].answers.append((now, data))
             self._last_frame = now
 
-    def _on_nmt(self, can_id: int, data: bytes, timestamp: float) -> None:
+    def _on_nmt(self, can_id: int, data: bytes | bytearray, timestamp: float) -> None:
         if len(data) < 1 or (timestamp and timestamp > 1e9 and timestamp < self._since):
             return
         with self._lock:
@@ -282,7 +296,7 @@ def decode_device_type(frame: bytes) -> tuple[int | None, str | None]:
 
 # -- identity -------------------------------------------------------------------------------------
 
-def _read_identity(network: Any, node: int) -> tuple[int | None, str | None, list[str]]:
+def _read_identity(network: Network, node: int) -> tuple[int | None, str | None, list[str]]:
     vendor_id = name = None
     notes: list[str] = []
     sdo = DriveSdo(network, node)
@@ -318,7 +332,7 @@ def _nmt_text(states: list[int]) -> str | None:
     return nmt_text(states[-1]) if states else None
 
 
-def scan_bus(cfg: ArmConfig, bus: str, network: Any, settings: ScanSettings = ScanSettings(), *,
+def scan_bus(cfg: ArmConfig, bus: str, network: Network, settings: ScanSettings = ScanSettings(), *,
              reset: bool = False, progress: Callable[[str, int, int], None] | None = None) -> BusScan:
     """Probe one bus, then read the identity of every node that answered; verdicts per node id."""
     configured = {d.node: d.name for d in cfg.drives.values() if d.bus == bus}
@@ -388,7 +402,7 @@ def scan(session: ArmSession, buses: Iterable[str] | None = None, settings: Scan
     if settings is None:
         settings = ScanSettings(sdo_timeout=cfg.protocol.sdo_timeout)
     names = list(buses) if buses is not None else list(session.links)
-    links: Mapping[str, Any] = session.links
+    links: Mapping[str, BusLink] = session.links
 
     def job(bus: str) -> Callable[[], BusScan]:
         report = (lambda phase, done, total: progress(bus, phase, done, total)) if progress else None

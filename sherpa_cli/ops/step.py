@@ -24,8 +24,10 @@ import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any, Protocol
+from types import TracebackType
+from typing import TYPE_CHECKING, Any, Protocol
 
+from sherpa_cli.config.model import ArmConfig
 from sherpa_cli.elmo.protocol import UM_POSITION, UM_TORQUE
 from sherpa_cli.errors import UsageError
 from sherpa_cli.joints.units import counts_to_rad, rad_per_s_to_counts_per_s, rad_to_counts
@@ -37,6 +39,13 @@ from sherpa_cli.motion.report import GuardReport
 from sherpa_cli.motion.settings import MotionSettings
 from sherpa_cli.motion.stopping import stop_drive
 from sherpa_cli.ops.jog import JogRequest, JogTarget, check_request, limit_breach, precheck, resolve_jog_target
+
+if TYPE_CHECKING:
+    import can
+
+    from sherpa_cli.bus.session import ArmSession
+    from sherpa_cli.bus.targets import DriveRef
+    from sherpa_cli.motion.limit_watch import Breach
 
 SIGNAL = {"position": "pos", "velocity": "vel", "torque": "cur"}
 PRE_S = 0.1  # s recorded before the command
@@ -59,7 +68,7 @@ class StepResult:
     samples: int
     expected: int
     stop: GuardReport = field(default_factory=GuardReport)
-    breach: Any = None  # limit_watch.Breach when the joint left its full range (the step then failed)
+    breach: Breach | None = None  # when the joint left its full range (the step then failed)
     recovered_to: int | None = None  # counts, where the limit recovery brought the joint
 
     @property
@@ -74,7 +83,7 @@ class StepResult:
                 "limit": None if self.breach is None else {**self.breach.as_dict(), "recovered_to": self.recovered_to}}
 
 
-def resolve_step_target(cfg: Any, text: str) -> JogTarget:
+def resolve_step_target(cfg: ArmConfig, text: str) -> JogTarget:
     """The joint to step: a plain joint or its drive. A differential pair (its Σ/Δ joints or its
     motors) is refused: a Σ or Δ step moves both motors at once, which is `diffdrive move`'s."""
     from sherpa_cli.bus.targets import resolve_one
@@ -90,6 +99,12 @@ def resolve_step_target(cfg: Any, text: str) -> JogTarget:
     return resolve_jog_target(cfg, text)
 
 
+class SyncSource(Protocol):
+    """A SYNC source made by :meth:`StepTime.sync_factory`: the recorder stops it when it ends."""
+
+    def stop(self) -> None: ...
+
+
 class StepTime(Protocol):
     """Where a step's time comes from when it is not wall time: the CLI injects the simulated
     arm's stepped time with --sim (sim/stepped.py), so the figures do not depend on the host."""
@@ -98,7 +113,7 @@ class StepTime(Protocol):
 
     def sleep(self, seconds: float) -> None: ...
 
-    def sync_factory(self, name: str, bus: Any, period: float) -> Any: ...
+    def sync_factory(self, name: str, bus: can.BusABC, period: float) -> SyncSource: ...
 
     def follow(self, answered: Callable[[int], bool]) -> None: ...
 
@@ -117,9 +132,9 @@ def step_request(target: JogTarget, mode: str, value: float, *, duration: float,
     return req
 
 
-def run_step(session: Any, target: JogTarget, mode: str, value: float, *, duration: float, rate: float,
+def run_step(session: ArmSession, target: JogTarget, mode: str, value: float, *, duration: float, rate: float,
              settings: MotionSettings, sleep: Callable[[float], None] = time.sleep,
-             on_event: Callable[[str], None] | None = None, recorder_kw: dict | None = None,
+             on_event: Callable[[str], None] | None = None, recorder_kw: dict[str, Any] | None = None,
              uncalibrated: bool = False, timebase: StepTime | None = None) -> StepResult:
     """``timebase``: the step's clock, waits and SYNC source (the recorder's, the motion guard's
     and the waits here); without it wall time, ``sleep`` and ``recorder_kw``."""
@@ -182,7 +197,7 @@ def run_step(session: Any, target: JogTarget, mode: str, value: float, *, durati
         raise UsageError(f"{joint.name}: no {signal} samples were recorded")
     target_value = state["target"]
     if mode == "position":
-        before = [v for t, v in zip(*series) if t < 0]
+        before = [v for t, v in zip(*series, strict=True) if t < 0]
         start = before[-1] if before else series[1][0]
         target_value = start + value
     metrics = step_metrics(series[0], series[1], t_step=0.0, target=target_value)
@@ -235,7 +250,7 @@ class _StopFirst:
     motion.stop_method says, then standstill) -- before the Recorder drains and restores its PDOs
     (review R6). The guard's own stop and switch-off follow as before."""
 
-    def __init__(self, guard: MotionGuard, ref: Any, settings: MotionSettings, rec: Recorder,
+    def __init__(self, guard: MotionGuard, ref: DriveRef, settings: MotionSettings, rec: Recorder,
                  state: dict[str, Any], clock: Callable[[], float], sleep: Callable[[float], None]) -> None:
         self.guard, self.ref, self.settings, self.rec, self.state = guard, ref, settings, rec, state
         self.clock, self.sleep = clock, sleep
@@ -243,7 +258,8 @@ class _StopFirst:
     def __enter__(self) -> _StopFirst:
         return self
 
-    def __exit__(self, exc_type: Any, exc: Any, tb: Any) -> None:
+    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
+                 tb: TracebackType | None) -> None:
         self.state.setdefault("t_stop", self.rec.now())
         s = self.settings
         try:
@@ -267,10 +283,10 @@ def _cut(recording: Recording, until: float) -> Recording:
 
 def _settled(series: tuple[list[float], list[float]], target: float) -> bool:
     times, values = series
-    before = [v for t, v in zip(times, values) if t < 0]
+    before = [v for t, v in zip(times, values, strict=True) if t < 0]
     if not before:
         return False
     band = 0.02 * max(abs(target - before[-1]), 1e-9)
     end = times[-1]
-    tail = [v for t, v in zip(times, values) if t >= end - SETTLE_HOLD_S]
+    tail = [v for t, v in zip(times, values, strict=True) if t >= end - SETTLE_HOLD_S]
     return len(tail) > 2 and end > SETTLE_HOLD_S and all(abs(v - target) <= band for v in tail)

@@ -13,13 +13,17 @@ import logging
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from sherpa_cli.bus.parallel import run_concurrently
-from sherpa_cli.bus.session import DriveRef
+from sherpa_cli.bus.targets import DriveRef
 from sherpa_cli.elmo.protocol import UM_TORQUE
 from sherpa_cli.motion.settings import MotionSettings
 from sherpa_cli.motion.stopping import ask_patiently, stop_drive, why
+
+if TYPE_CHECKING:
+    from sherpa_cli.bus.session import ArmSession
+    from sherpa_cli.elmo.client import DriveClient
 
 log = logging.getLogger(__name__)
 
@@ -46,7 +50,7 @@ class StopResult:
                 "standstill": self.standstill, "motor_off": self.motor_off, "problems": list(self.problems)}
 
 
-def stop_one(client: Any, ref: DriveRef, settings: MotionSettings, *, clock: Callable[[], float] = time.monotonic,
+def stop_one(client: DriveClient, ref: DriveRef, settings: MotionSettings, *, clock: Callable[[], float] = time.monotonic,
              sleep: Callable[[float], None] = time.sleep) -> StopResult:
     """Each step on its own: a failed NMT start, UM read or ST never skips the MO=0 -- only a motor read
     as off gets no MO=0. UM is read patiently (a drive in its MO settle window is deaf); unreadable,
@@ -54,12 +58,12 @@ def stop_one(client: Any, ref: DriveRef, settings: MotionSettings, *, clock: Cal
     r = StopResult(ref.name, ref.address)
     try:
         client.nmt_start()
-    except Exception as exc:
+    except Exception as exc:  # noqa: BLE001 - reported; a failed NMT start never skips the stop
         r.problems.append(f"NMT start: {why(exc)}")
     try:
         um = int(ask_patiently(client, "UM", clock, sleep, client.settings.mo_confirm_timeout,
                                 settings.poll_interval))
-    except Exception as exc:
+    except Exception as exc:  # noqa: BLE001 - logged; an unreadable UM is stopped as in torque mode
         log.warning("%s: UM unreadable (%s); stopping as in torque mode (TC=0, then ST)", ref.name, why(exc))
         um = UM_TORQUE
     motor_read_off = False
@@ -70,19 +74,19 @@ def stop_one(client: Any, ref: DriveRef, settings: MotionSettings, *, clock: Cal
             standstill_velocity=settings.standstill_velocity)
         r.problems.extend(problems)
         motor_read_off = r.stopped_by == "motor was off"
-    except Exception as exc:
+    except Exception as exc:  # noqa: BLE001 - reported; a failed stop never skips the MO=0
         r.stopped_by = "not stopped"
         r.problems.append(f"stop: {why(exc)}")
     if not motor_read_off:
         try:
             client.motor_off()
             r.motor_off = True
-        except Exception as exc:
+        except Exception as exc:  # noqa: BLE001 - reported in the drive's result
             r.problems.append(f"MO=0: {why(exc)}")
     return r
 
 
-def stop_drives(session: Any, refs: Sequence[DriveRef], settings: MotionSettings, *,
+def stop_drives(session: ArmSession, refs: Sequence[DriveRef], settings: MotionSettings, *,
                 clock: Callable[[], float] = time.monotonic,
                 sleep: Callable[[float], None] = time.sleep) -> list[StopResult]:
     """Stop the drives, one bus per thread (drives of one bus one after the other); in ``refs`` order."""
@@ -102,7 +106,7 @@ def stop_drives(session: Any, refs: Sequence[DriveRef], settings: MotionSettings
     outcomes = run_concurrently({bus: job(rs) for bus, rs in by_bus.items()})
     for bus, outcome in outcomes.items():
         if outcome.ok:
-            for ref, result in zip(by_bus[bus], outcome.value):
+            for ref, result in zip(by_bus[bus], outcome.value, strict=True):
                 done[(ref.bus, ref.node)] = result
         else:
             for ref in by_bus[bus]:
