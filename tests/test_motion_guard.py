@@ -541,13 +541,17 @@ def test_release_hands_a_drive_over_stopped_and_restored_and_adopt_takes_it_back
             g.keep_alive(10.0)  # the other guard's entry and motor-on confirmation give no sign of life to g
             with MotionGuard(s, [r1], settings=settings) as other:
                 move(other, r1, 300)
+            # the other guard is another command: its dead-man id is its own (126 is g's), so neither
+            # heartbeat keeps the other's drives alive
+            assert other.host_id == settings.host_id_pool[0] != g.host_id == HOST
+            armed_other = [*ARMED[:2], (0x1016, 1, other.host_id << 16 | 300)]
             g.check()
             g.adopt([r1])
-            assert writes(s, "drive1") == (ARMED + RESTORED) * 2 + ARMED
+            assert writes(s, "drive1") == ARMED + RESTORED + armed_other + RESTORED + ARMED
             assert move(g, r1, 600) == 600
         assert {d.drive for d in g.report.drives} == {"drive1", "drive2"}
         assert_stopped_and_restored(s, "drive2", switched_on=False)
-        assert writes(s, "drive1") == (ARMED + RESTORED) * 3
+        assert writes(s, "drive1") == ARMED + RESTORED + armed_other + RESTORED + ARMED + RESTORED
         assert not sim_drive(s, "drive1").motor_on and s.sim.errors == []
 
 

@@ -249,6 +249,6 @@ def test_a_device_on_the_host_heartbeat_id_is_warned_about(cli, tmp_path, monkey
     _faulty_config(tmp_path, monkeypatch, {"extra_nodes": [{"bus": "can2", "node": 126}]})
     result = cli("--sim", "scan", "--bus", "can2")
     assert result.exit_code == 1
-    assert "warning: bus can2: a device answers on node 126, the tool's heartbeat id" in result.stderr
+    assert "warning: bus can2: a device answers on node 126, a heartbeat id of the tool" in result.stderr
     clean = cli("--sim", "scan", "--bus", "can1")
     assert "heartbeat id" not in clean.stderr

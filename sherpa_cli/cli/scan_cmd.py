@@ -91,13 +91,13 @@ def _device(n) -> str:
 
 def _warn_host_id(st, report) -> None:
     """A device on the tool's heartbeat id would feed the drives' dead-man consumers (docs/motion.md)."""
-    host = st.load_config().motion.host_node_id
+    hosts = st.load_config().motion.host_ids
     for bus in report.buses:
         for n in bus.nodes:
-            if n.node == host and n.answer_s is not None:
-                st.out.warn(f"bus {bus.bus}: a device answers on node {host}, the tool's heartbeat id "
-                            "(motion.host_node_id): its heartbeat would keep the drives' dead-man from "
-                            "tripping; set motion.host_node_id to an id no device uses")
+            if n.node in hosts and n.answer_s is not None:
+                st.out.warn(f"bus {bus.bus}: a device answers on node {n.node}, a heartbeat id of the tool "
+                            "(motion.host_node_id / host_id_pool): its heartbeat would keep the drives' dead-man "
+                            "from tripping; give the tool ids no device uses")
 
 
 def _render(st, report) -> None:

@@ -265,6 +265,9 @@ class MotionConfig:
     """
 
     host_node_id: int = 126  # the tool's heartbeat COB-ID is 0x700 + this
+    # more host ids for commands running at the same time: each motion command takes a free id
+    # (host_node_id first) under a lock per bus, so its drives watch its own heartbeat alone
+    host_id_pool: tuple[int, ...] = (124, 123, 122, 121)
     consumer_time_ms: int = 500  # 0x1016:1 time: the drive stops this long after the last host heartbeat
     heartbeat_period_ms: int = 0  # host heartbeat period; 0 = a quarter of consumer_time_ms
     loss_action: int = 2  # 0x6007 on heartbeat loss (MF bit 11 names 2; 3 quick stop is UNCONFIRMED)
@@ -290,6 +293,11 @@ class MotionConfig:
     @property
     def heartbeat_period_s(self) -> float:
         return (self.heartbeat_period_ms or self.consumer_time_ms / 4) / 1000
+
+    @property
+    def host_ids(self) -> tuple[int, ...]:
+        """Every id a sherpa command may send its heartbeat as, in the order they are taken."""
+        return (self.host_node_id, *(i for i in self.host_id_pool if i != self.host_node_id))
 
 
 JOYSTICK_MODES = ("velocity", "torque")

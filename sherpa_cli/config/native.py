@@ -124,8 +124,12 @@ def parse_motion(top: Section, locs: Locs) -> MotionConfig:
         return MotionConfig()
     register(locs, ("motion",), sec)
     d = MotionConfig()
-    return MotionConfig(**{f.name: (sec.str if f.type == "str" else sec.num if f.type == "float" else sec.int)(
-        f.name, getattr(d, f.name)) for f in dataclasses.fields(MotionConfig)})
+    values = {f.name: (sec.str if f.type == "str" else sec.num if f.type == "float" else sec.int)(
+        f.name, getattr(d, f.name)) for f in dataclasses.fields(MotionConfig) if f.name != "host_id_pool"}
+    pool = sec.get("host_id_pool")
+    if pool is not None:
+        values["host_id_pool"] = tuple(as_int(n) for n in as_seq(pool, "a list of node ids (1..127)"))
+    return MotionConfig(**values)
 
 
 JOYSTICK_KEYS = ["device", "rate_hz", "deadzone", "deadman", "axes"]

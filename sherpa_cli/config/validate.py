@@ -125,6 +125,19 @@ def _check_motion(cfg: ArmConfig, locs: Locs, r: _Report) -> None:
                 r.error(where("host_node_id"), f"host_node_id {m.host_node_id} is the node id of drive "
                         f"'{d.name}' ({d.bus}); the tool's heartbeat needs an id no drive uses")
                 break
+    if len(set(m.host_id_pool)) != len(m.host_id_pool):
+        r.error(where("host_id_pool"), f"host_id_pool {list(m.host_id_pool)} names an id twice")
+    if len(m.host_id_pool) > 16:
+        r.error(where("host_id_pool"), f"host_id_pool has {len(m.host_id_pool)} ids; at most 16")
+    used = {d.node: d for d in cfg.drives.values()} | {dev.node: dev for dev in cfg.devices.values()}
+    for hid in m.host_id_pool:
+        if not 1 <= hid <= 127:
+            r.error(where("host_id_pool"), f"host_id_pool: {hid} out of range 1..127")
+        elif hid in used:
+            r.error(where("host_id_pool"), f"host_id_pool: {hid} is the node id of '{used[hid].name}' "
+                    f"({used[hid].bus}); a host heartbeat needs an id no device uses")
+        elif hid == m.pair_group_id:
+            r.error(where("host_id_pool"), f"host_id_pool: {hid} is motion.pair_group_id")
     if not 1 <= m.consumer_time_ms <= 0xFFFF:
         r.error(where("consumer_time_ms"), f"consumer_time_ms {m.consumer_time_ms} must be 1..65535 (0x1016:1 is 16 bits)")
     elif not 0 <= m.heartbeat_period_ms <= m.consumer_time_ms / 2:

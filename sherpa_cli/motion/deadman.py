@@ -53,6 +53,10 @@ class HostHeartbeat:
         self._alive_lock = threading.Lock()
         self.sent = 0
 
+    def use_host(self, host_id: int) -> None:
+        """Send as ``host_id`` (the command's own dead-man id); before :meth:`start`."""
+        self.frame_id = HEARTBEAT_BASE + host_id
+
     def pulse(self, allowance: float, *, extend: bool = False) -> None:
         """A sign of life: keep sending for ``allowance`` s from now; ``extend`` never shortens an
         earlier, longer allowance."""

@@ -35,7 +35,7 @@ from sherpa_cli.elmo.faults import decode_sr, describe_mf
 from sherpa_cli.elmo.protocol import UM_TORQUE
 from sherpa_cli.errors import CommunicationError, ExitCode, SafetyError, SherpaError, UsageError
 from sherpa_cli.motion.deadman import COMM_ERROR, CONSUMER, LOSS_ACTION, OBJECT_NAMES, SIZES, HostHeartbeat
-from sherpa_cli.motion.lock import DriveLock, drive_label
+from sherpa_cli.motion.lock import DriveLock, HostIdLock, drive_label
 from sherpa_cli.motion.report import DriveStop, GuardReport
 from sherpa_cli.motion.settings import PROFILE_KEYS, MotionSettings
 from sherpa_cli.motion.stopping import ask_patiently, fault_reason, stop_drive, why
@@ -86,9 +86,10 @@ class MotionGuard:
                 seen.add((ref.bus, ref.node))
                 self.refs.append(ref)
         for ref in self.refs:
-            if ref.node == settings.host_node_id:
-                raise UsageError(f"{drive_label(ref)}: its node id is the host heartbeat id "
-                                 f"(motion.host_node_id {settings.host_node_id}); choose another host id")
+            if ref.node in settings.host_ids:
+                raise UsageError(f"{drive_label(ref)}: its node id is a host heartbeat id "
+                                 f"(motion.host_node_id / host_id_pool: {', '.join(map(str, settings.host_ids))}); "
+                                 "choose other host ids")
         self.session = session
         self.settings = settings
         self.keep = keep
@@ -103,6 +104,9 @@ class MotionGuard:
         buses = sorted({ref.bus for ref in self.refs})
         self._heartbeat = HostHeartbeat(lambda: [session.links[b].network for b in buses], settings.host_node_id,
                                         settings.heartbeat_period, settings.liveness_timeout)
+        # the dead-man id of this command alone, taken on entry (motion/lock.py HostIdLock)
+        self._host_lock = HostIdLock(buses, settings.host_ids)
+        self.host_id = settings.host_node_id
         # signals
         self._signal: str | None = None
         self._exiting = False
@@ -115,6 +119,8 @@ class MotionGuard:
             self._install_signals()
             for ref in self.refs:  # first, before anything is sent: a second command refuses here
                 self._lock(ref)
+            self.host_id = self._host_lock.acquire()  # before anything is armed: our own heartbeat id
+            self._heartbeat.use_host(self.host_id)
             self._pulse(extra=self._setup_bound())
             for ref in self.refs:
                 self._inspect(ref)
@@ -324,6 +330,10 @@ class MotionGuard:
             except Exception as exc:  # noqa: BLE001 - logged; never keeps the others held (the kernel frees it at exit anyway)
                 log.warning("%s: motion lock not released: %s", lock.label, exc)
         self._locks.clear()
+        try:
+            self._host_lock.release()
+        except Exception as exc:  # noqa: BLE001 - logged; the kernel frees it at exit anyway
+            log.warning("dead-man host id %s not released: %s", self.host_id, exc)
 
     def _setup_bound(self) -> float:
         return 12 * self.settings.request_bound * max(1, len(self.refs)) + 3.0
@@ -359,13 +369,15 @@ class MotionGuard:
     def _arm(self, d: _Drive) -> None:
         """Dead-man on: loss action and error behaviour first, the consumer entry last (it starts the watch)."""
         s = self.settings
+        pool = {i & 0x7F for i in s.host_ids}
         for key, value in ((LOSS_ACTION, s.loss_action), (COMM_ERROR, s.comm_error_behaviour),
-                           (CONSUMER, s.consumer_entry)):
+                           (CONSUMER, s.consumer_entry_for(self.host_id))):
             before = self._sdo_read(d, key)
-            if key == CONSUMER and before and (before >> 16) & 0x7F == s.host_node_id & 0x7F:
-                # our host id already watched: the leftover of a run that was killed before its exit.
-                # Its "before" is unknown -- disarmed (0) is put back, so it does not outlive this run
-                msg = (f"{d.client.label}: 0x1016:1 = 0x{before:08X} already watches host {s.host_node_id}: "
+            if key == CONSUMER and before and (before >> 16) & 0x7F in pool:
+                # a sherpa host id already watched: no other command can be moving this drive (its
+                # motion lock is ours), so it is the leftover of a run killed before its exit. Its
+                # "before" is unknown -- disarmed (0) is put back, so it does not outlive this run
+                msg = (f"{d.client.label}: 0x1016:1 = 0x{before:08X} already watches host {(before >> 16) & 0x7F}: "
                        "left over from a run that did not exit cleanly; it is cleared (0) on exit")
                 log.warning("%s", msg)
                 self._event(msg)
@@ -377,7 +389,7 @@ class MotionGuard:
                 continue
             d.od_before[key] = before  # recorded first: a write that fails half-way is still put back
             self._sdo_write(d, key, value)
-        self._event(f"{d.client.label}: dead-man armed: host {s.host_node_id}, {s.consumer_time_ms} ms, "
+        self._event(f"{d.client.label}: dead-man armed: host {self.host_id}, {s.consumer_time_ms} ms, "
                     f"0x6007={s.loss_action}")
 
     # -- dead-man heartbeat (motion/deadman.py) ----------------------------------------------------

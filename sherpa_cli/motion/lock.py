@@ -6,6 +6,8 @@ from __future__ import annotations
 import contextlib
 import os
 import re
+from collections.abc import Iterable, Sequence
+from pathlib import Path
 
 import filelock
 
@@ -68,3 +70,58 @@ class DriveLock:
             return int(self.pid_path.read_text(encoding="utf-8").strip())
         except (OSError, ValueError):
             return None
+
+
+class HostIdLock:
+    """A dead-man host id of its own for one motion command (issue 21 item 9).
+
+    Every drive a command moves watches the heartbeat ``0x700 + host id`` of that command alone: two
+    commands on one bus never share an id, so a killed or hung command's drives stop by their own
+    consumer even while another sherpa command goes on sending its heartbeat. The first id of
+    ``ids`` that is free on every bus of the command is taken, under an OS file lock per bus and id
+    in the state directory (``motion/<bus>-host<id>.lock``), released by the kernel when the process
+    ends. This coordinates the sherpa commands of one machine (one state directory); another host on
+    the bus must use ids outside the pool."""
+
+    def __init__(self, buses: Iterable[str], ids: Sequence[int]) -> None:
+        self.buses = sorted(set(buses))
+        self.ids = list(ids)
+        self.host_id: int | None = None
+        self._held: list[filelock.FileLock] = []
+
+    def _path(self, bus: str, host_id: int) -> Path:
+        safe = re.sub(r"[^A-Za-z0-9_.-]", "_", str(bus))
+        return paths.state_dir() / "motion" / f"{safe}-host{int(host_id)}.lock"
+
+    def acquire(self) -> int:
+        for host_id in self.ids:
+            taken: list[filelock.FileLock] = []
+            try:
+                for bus in self.buses:
+                    path = self._path(bus, host_id)
+                    path.parent.mkdir(parents=True, exist_ok=True)
+                    lock = filelock.FileLock(str(path), timeout=0, thread_local=False)
+                    lock.acquire(timeout=0)
+                    taken.append(lock)
+            except filelock.Timeout:
+                for lock in taken:
+                    lock.release(force=True)
+                continue
+            except OSError as exc:
+                for lock in taken:
+                    lock.release(force=True)
+                raise UsageError(f"cannot take a dead-man host id lock in {paths.state_dir() / 'motion'}: {exc}",
+                                 hint=paths.STATE_DIR_HINT) from None
+            self._held = taken
+            self.host_id = host_id
+            return host_id
+        raise MotionLockedError(
+            f"every dead-man host id ({', '.join(map(str, self.ids))}) is in use on bus "
+            f"{', '.join(self.buses)} by other sherpa commands: refused, nothing sent",
+            hint="wait until one ends, or give motion.host_id_pool more ids no device uses")
+
+    def release(self) -> None:
+        for lock in self._held:
+            lock.release(force=True)
+        self._held = []
+        self.host_id = None

@@ -29,9 +29,9 @@ def pair_settings(cfg: ArmConfig) -> tuple[str, int]:
     m = cfg.motion
     if m.pair_start not in PAIR_START_METHODS:
         raise ConfigError(f"motion.pair_start: '{m.pair_start}' is not one of {', '.join(PAIR_START_METHODS)}")
-    if not 1 <= m.pair_group_id <= 127 or m.pair_group_id == m.host_node_id:
-        raise ConfigError(f"motion.pair_group_id: {m.pair_group_id} must be 1..127 and not the host id "
-                          f"{m.host_node_id}")
+    if not 1 <= m.pair_group_id <= 127 or m.pair_group_id in m.host_ids:
+        raise ConfigError(f"motion.pair_group_id: {m.pair_group_id} must be 1..127 and not one of the host "
+                          f"ids {', '.join(map(str, m.host_ids))}")
     return m.pair_start, m.pair_group_id
 
 

@@ -17,6 +17,7 @@ class MotionSettings:
     """What the guard needs to know; :meth:`from_config` reads the config's ``motion:`` section."""
 
     host_node_id: int = 126
+    host_id_pool: tuple[int, ...] = ()  # more ids a command takes when host_node_id is in use
     consumer_time_ms: int = 500
     heartbeat_period_ms: int = 0  # 0: a quarter of consumer_time_ms
     loss_action: int = 2
@@ -34,15 +35,25 @@ class MotionSettings:
         return (self.heartbeat_period_ms or self.consumer_time_ms / 4) / 1000
 
     @property
+    def host_ids(self) -> tuple[int, ...]:
+        """The ids a command may send its heartbeat as, in the order they are taken."""
+        return (self.host_node_id, *(i for i in self.host_id_pool if i != self.host_node_id))
+
+    @property
     def consumer_entry(self) -> int:
-        return (self.host_node_id & 0x7F) << 16 | (self.consumer_time_ms & 0xFFFF)
+        return self.consumer_entry_for(self.host_node_id)
+
+    def consumer_entry_for(self, host_id: int) -> int:
+        """0x1016:1 watching ``host_id``: host id << 16 | time ms."""
+        return (host_id & 0x7F) << 16 | (self.consumer_time_ms & 0xFFFF)
 
     @classmethod
     def from_config(cls, cfg: ArmConfig, buses: Iterable[str] | None = None) -> MotionSettings:
         m, p = cfg.motion, cfg.protocol
         names = list(buses) if buses is not None else list(cfg.buses)
         poll_ms = min((cfg.buses[b].poll_interval_ms for b in names if b in cfg.buses), default=10)
-        return cls(host_node_id=m.host_node_id, consumer_time_ms=m.consumer_time_ms,
+        return cls(host_node_id=m.host_node_id, host_id_pool=tuple(m.host_id_pool),
+                   consumer_time_ms=m.consumer_time_ms,
                    heartbeat_period_ms=m.heartbeat_period_ms, loss_action=m.loss_action,
                    comm_error_behaviour=m.comm_error_behaviour, stop_method=m.stop_method,
                    standstill_timeout=m.standstill_timeout, standstill_velocity=m.standstill_velocity,

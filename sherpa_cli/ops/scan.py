@@ -44,6 +44,7 @@ UNEXPECTED = "unexpected"
 DUPLICATE = "duplicate id"
 SLOW = "answering slowly"
 NO_SDO = "no SDO answer"
+SHERPA_HOST = "sherpa host"  # only a heartbeat on a motion.host_id_pool id: a sherpa command moving drives
 # Verdicts that make `sherpa scan` exit 1: the bus is not wired or numbered as configured.
 PROBLEM_VERDICTS = frozenset({MISSING, UNEXPECTED, DUPLICATE, NO_SDO})
 
@@ -379,6 +380,9 @@ def scan_bus(cfg: ArmConfig, bus: str, network: Network, settings: ScanSettings 
             verdict = DUPLICATE
             notes.append(f"{len(h.answers)} nodes answer on id {node}; "
                          "identity not read (the answers would mix)")
+        elif drive is None and not h.answers and node in cfg.motion.host_ids:
+            verdict = SHERPA_HOST
+            notes.append("the dead-man heartbeat of a running sherpa motion command (motion.host_id_pool)")
         elif drive is None:
             verdict = UNEXPECTED
         elif not h.answers:
