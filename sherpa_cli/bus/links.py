@@ -84,14 +84,16 @@ class BusLink:
 
     name: str
     config: BusConfig
-    bus: Any  # can.BusABC
-    network: Any  # PacedNetwork (canopen.Network)
+    bus: can.BusABC
+    # a PacedNetwork (canopen.Network); Any until ops/monitor.py's subscribe callbacks take
+    # canopen's bytearray (typing it canopen.Network flags them)
+    network: Any
 
     def describe(self) -> str:
         return f"bus {self.name} ({self.config.interface or 'python-can config'}:{self.config.channel or '-'})"
 
 
-def open_bus(cfg: BusConfig) -> Any:
+def open_bus(cfg: BusConfig) -> can.BusABC:
     import can
 
     kwargs = bus_kwargs(cfg)

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import threading
 from collections.abc import Callable, Sequence
-from typing import Any
+from typing import TYPE_CHECKING
 
 from rich.text import Text
 from textual.app import App, ComposeResult
@@ -21,6 +21,10 @@ from textual.widgets import Footer, Static
 
 from sherpa_cli.errors import SherpaError
 from sherpa_cli.joints.units import counts_to_rad
+
+if TYPE_CHECKING:
+    from sherpa_cli.ops.home import HomePlan, HomeReport
+    from sherpa_cli.ops.live_jog import LiveJog
 
 # per mode: the increments a key press can use (counts, counts/s, A)
 INCREMENTS: dict[str, tuple[float, ...]] = {
@@ -50,7 +54,7 @@ KIND_TEXT = {"home_switch": "home switch", "end_switches": "end switches", "pair
              "abs_encoder": "absolute encoder"}
 
 
-def plan_lines(plan: Any) -> list[str]:
+def plan_lines(plan: HomePlan) -> list[str]:
     """The home plan as `sherpa home` shows it: what moves, which way, how fast, how far at most."""
     out = []
     for u in plan.units:
@@ -64,7 +68,7 @@ def plan_lines(plan: Any) -> list[str]:
     return out
 
 
-def report_line(report: Any) -> str:
+def report_line(report: HomeReport) -> str:
     """One line per homed unit, as `sherpa home` reports it."""
     parts = []
     for u in report.units:
@@ -129,13 +133,13 @@ class JogView(App):
         Binding("ctrl+c", "quit", "quit", show=False, priority=True),
     ]
 
-    def __init__(self, live: Any, *, calibrate: bool = True, tick_period: float = 0.1) -> None:
+    def __init__(self, live: LiveJog, *, calibrate: bool = True, tick_period: float = 0.1) -> None:
         super().__init__()
         self.live = live
         self.calibrate = calibrate
         self.homing: threading.Thread | None = None  # the calibrate key's homing, while it runs
         self.homing_joint = ""
-        self.homing_result: Any = None  # a HomeReport or the exception homing raised
+        self.homing_result: HomeReport | BaseException | None = None  # a HomeReport or the exception homing raised
         self.abort_homing = threading.Event()
         self.quit_after_homing = False
         self.home_log: list[str] = []  # what homing did: the release's stops, the report line
@@ -226,7 +230,7 @@ class JogView(App):
                 self.setpoint[name] = 0.0
         self.render_state()
 
-    def _do(self, fn: Callable[[], Any]) -> None:
+    def _do(self, fn: Callable[[], object]) -> None:
         if self.homing is not None:
             self.message = f"homing {self.homing_joint} runs: wait for it, or Space to abort it"
             self.render_state()
@@ -260,7 +264,12 @@ class JogView(App):
         modes = list(INCREMENTS)
         nxt = modes[(modes.index(self.live.state[name].mode) + 1) % len(modes)]
         self.setpoint[name] = 0.0
-        self._do(lambda: self.live.set_mode(name, nxt) or f"{name}: {nxt} mode")
+
+        def switch() -> str:
+            self.live.set_mode(name, nxt)
+            return f"{name}: {nxt} mode"
+
+        self._do(switch)
 
     def action_step(self, sign: int) -> None:
         name = self.current
@@ -291,7 +300,12 @@ class JogView(App):
     def action_stop(self) -> None:
         name = self.current
         self.setpoint[name] = 0.0
-        self._do(lambda: self.live.stop(name) or f"{name}: stopped")
+
+        def stop() -> str:
+            self.live.stop(name)
+            return f"{name}: stopped"
+
+        self._do(stop)
 
     def action_stop_all(self) -> None:
         if self.homing is not None:
@@ -301,7 +315,12 @@ class JogView(App):
             return
         for name in self.names:
             self.setpoint[name] = 0.0
-        self._do(lambda: self.live.stop_all() or "STOP: every joint stopped")
+
+        def stop_all() -> str:
+            self.live.stop_all()
+            return "STOP: every joint stopped"
+
+        self._do(stop_all)
 
     def action_calibrate(self) -> None:
         if self.homing is not None:
@@ -360,6 +379,7 @@ class JogView(App):
             self.error = result
             return
         else:
+            assert result is not None  # work() set it before its thread ended
             self.message = f"calibrate: {report_line(result)}"
         self.home_log.append(self.message)
 

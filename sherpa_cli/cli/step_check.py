@@ -11,18 +11,23 @@ from __future__ import annotations
 
 import io
 from contextlib import redirect_stderr, redirect_stdout
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from sherpa_cli.errors import ConfigError, Location
 
+if TYPE_CHECKING:
+    from sherpa_cli.recipes.model import Recipe
+
 
 def _root() -> Any:
+    # a click Command of whichever click the installed typer uses (typer >= 0.29 vendors its own;
+    # cli/boundary.py returns it as object): no one importable class names it for every typer
     from sherpa_cli.cli.boundary import root_command
 
     return root_command()
 
 
-def check_step_commands(recipe: Any) -> None:
+def check_step_commands(recipe: Recipe) -> None:
     """Raise ConfigError (file, line, step) for the first run step the CLI would refuse to parse."""
     import typer
     from typer.core import TyperGroup

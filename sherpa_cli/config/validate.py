@@ -12,7 +12,7 @@ import math
 import re
 from dataclasses import replace
 
-from sherpa_cli.config.model import ArmConfig, DriveModel, JointConfig, JointRole, SwitchKind
+from sherpa_cli.config.model import ArmConfig, CurrentLimits, DriveModel, JointConfig, JointRole, SwitchKind
 from sherpa_cli.config.yamlnodes import Locs, suggest
 from sherpa_cli.errors import ConfigError, Location
 
@@ -391,7 +391,7 @@ def _check_usage(cfg: ArmConfig, locs: Locs, r: _Report) -> None:
             r.warn(locs.get("drive", drive.name), f"drive '{drive.name}' moves no joint or pair")
 
 
-def _check_current(cur, prefix: tuple[str, ...], locs: Locs, r: _Report) -> None:
+def _check_current(cur: CurrentLimits, prefix: tuple[str, ...], locs: Locs, r: _Report) -> None:
     at = lambda f: locs.get(*prefix, "current", f)  # noqa: E731
     for f in ("continuous", "peak", "peak_time"):
         if getattr(cur, f) <= 0:

@@ -14,10 +14,13 @@ import time
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING
 
 from sherpa_cli.errors import UsageError
 from sherpa_cli.log.candecode import Frame, parse_candump_line
+
+if TYPE_CHECKING:
+    import can
 
 CANDUMP_SUFFIXES = (".log", ".txt", ".candump")
 WRITE_SUFFIXES = (".log", ".asc", ".blf", ".csv", ".trc", ".mf4")
@@ -68,7 +71,7 @@ def _read_candump(path: Path) -> Iterator[Frame]:
                 yield frame
 
 
-def _bus_name(channel: Any, bus_names: Sequence[str]) -> str:
+def _bus_name(channel: object, bus_names: Sequence[str]) -> str:
     if channel is None:
         return bus_names[0] if len(bus_names) == 1 else "-"
     if isinstance(channel, int) and 0 <= channel < len(bus_names):
@@ -83,7 +86,7 @@ def _need_asammdf(path: Path) -> None:
         raise UsageError(f"{path}: .mf4 needs the asammdf package", hint="pip install asammdf")
 
 
-def channel_for(suffix: str, bus: str, bus_names: Sequence[str]) -> Any:
+def channel_for(suffix: str, bus: str, bus_names: Sequence[str]) -> int | str:
     """What a writer of ``suffix`` gets as the channel of ``bus``."""
     if suffix in NUMBERED_CHANNELS and bus in bus_names:
         return list(bus_names).index(bus)
@@ -142,7 +145,7 @@ def frame_bits(dlc: int, extended: bool = False) -> int:
     return 47 + 8 * dlc + (34 + 8 * dlc - 1) // 4 + 3
 
 
-def capture(buses: dict[str, Any], path: Path, bus_names: Sequence[str], *,
+def capture(buses: dict[str, can.BusABC], path: Path, bus_names: Sequence[str], *,
             stop: threading.Event, clock: Callable[[], float] = time.monotonic,
             frame_limit: int | None = None, on_frame: Callable[[], None] | None = None,
             bitrates: dict[str, int | None] | None = None) -> CaptureResult:
@@ -183,7 +186,7 @@ def capture(buses: dict[str, Any], path: Path, bus_names: Sequence[str], *,
     return result
 
 
-def _drain(readers, writer, result: CaptureResult, suffix: str, bus_names: Sequence[str], *, wait: float,
+def _drain(readers: dict[str, can.BufferedReader], writer: can.Listener, result: CaptureResult, suffix: str, bus_names: Sequence[str], *, wait: float,
            on_frame: Callable[[], None] | None) -> bool:
     got = False
     for name, reader in readers.items():
@@ -199,7 +202,7 @@ def _drain(readers, writer, result: CaptureResult, suffix: str, bus_names: Seque
     return got
 
 
-def _write(msg, name: str, writer, result: CaptureResult, suffix: str, bus_names: Sequence[str]) -> None:
+def _write(msg: can.Message, name: str, writer: can.Listener, result: CaptureResult, suffix: str, bus_names: Sequence[str]) -> None:
     count = result.counts[name]
     if msg.is_error_frame:
         count.errors += 1

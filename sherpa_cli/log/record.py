@@ -24,7 +24,7 @@ import threading
 import time
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any, Protocol
 
 from sherpa_cli.bus.targets import DriveRef
 from sherpa_cli.config.model import ArmConfig
@@ -34,6 +34,11 @@ from sherpa_cli.errors import SherpaError, UsageError
 from sherpa_cli.joints.units import counts_per_s_to_rad_per_s, counts_to_rad
 from sherpa_cli.log.capture import frame_bits
 from sherpa_cli.log.recording import Recording
+
+if TYPE_CHECKING:
+    import can
+
+    from sherpa_cli.bus.session import ArmSession
 
 MAX_LOAD = 0.90  # share of the bit rate the recording may take (worst-case stuffing counted)
 DEFAULT_BITRATE = 1_000_000  # when the config does not say
@@ -94,7 +99,7 @@ def bus_budget(cfg: ArmConfig, refs: Sequence[DriveRef], rate: float, *, current
 class PeriodicSync:
     """SYNC every ``period`` s through python-can's send_periodic (kernel BCM on SocketCAN)."""
 
-    def __init__(self, bus: Any, period: float) -> None:
+    def __init__(self, bus: can.BusABC, period: float) -> None:
         import can
 
         self.task = bus.send_periodic(can.Message(arbitration_id=SYNC_ID, data=b"", is_extended_id=False), period)
@@ -111,7 +116,7 @@ class ThreadSync:
 
     CATCH_UP_LIMIT_S = 0.2  # longest wait at stop for the SYNCs already due
 
-    def __init__(self, bus: Any, period: float) -> None:
+    def __init__(self, bus: can.BusABC, period: float) -> None:
         import can
 
         self.bus, self.period = bus, period
@@ -153,14 +158,21 @@ class ThreadSync:
             self._thread.join(timeout=1.0)
 
 
-def default_sync(bus: Any, period: float) -> Any:
+class SyncSource(Protocol):
+    """A running SYNC source (PeriodicSync, ThreadSync, the simulator's stepped source): stop() ends it;
+    one with ``request_stop()`` is first told to send only the SYNCs already due."""
+
+    def stop(self) -> None: ...
+
+
+def default_sync(bus: can.BusABC, period: float) -> PeriodicSync | ThreadSync:
     """The kernel's broadcast manager on SocketCAN, else a counted thread of the tool."""
     if type(bus).__name__ == "SocketcanBus":
         return PeriodicSync(bus, period)
     return ThreadSync(bus, period)
 
 
-SyncFactory = Callable[[str, Any, float], Any]  # (bus name, python-can bus, period) -> object with stop()
+SyncFactory = Callable[[str, "can.BusABC", float], SyncSource]  # (bus name, python-can bus, period)
 
 
 # -- the recorder ---------------------------------------------------------------------------------
@@ -178,7 +190,7 @@ class _Drive:
 class Recorder:
     """Sample PX, VX (and current) of ``refs`` at ``rate`` Hz; a context manager."""
 
-    def __init__(self, session: Any, refs: Iterable[DriveRef], rate: float, *, current: bool = False,
+    def __init__(self, session: ArmSession, refs: Iterable[DriveRef], rate: float, *, current: bool = False,
                  clock: Callable[[], float] | None = None, sync_factory: SyncFactory | None = None,
                  enforce_budget: bool = True) -> None:
         self.session = session
@@ -201,7 +213,7 @@ class Recorder:
         self.sync_factory = sync_factory or (lambda name, bus, period: default_sync(bus, period))
         self._drives = {r.key: _Drive(r) for r in self.refs}
         self._subscribed: list[tuple[Any, int, Callable]] = []
-        self._syncs: list[Any] = []
+        self._syncs: list[SyncSource] = []
         self._lock = threading.Lock()
         self.t0: float | None = None
         self.t_end: float | None = None
@@ -225,7 +237,7 @@ class Recorder:
             raise
         return self
 
-    def __exit__(self, *exc: Any) -> None:
+    def __exit__(self, *exc: object) -> None:
         self._finish(quiet=exc[0] is not None)
 
     def _now(self) -> float:
@@ -487,7 +499,7 @@ class Poller:
     """``--poll``: PX and VX (and IQ) through the binary interpreter, each bus every its
     ``poll_interval_ms`` (the seed's ``scheduler_interval``); slower and jittery, but changes nothing."""
 
-    def __init__(self, session: Any, refs: Iterable[DriveRef], *, current: bool = False,
+    def __init__(self, session: ArmSession, refs: Iterable[DriveRef], *, current: bool = False,
                  clock: Callable[[], float] = time.monotonic, sleep: Callable[[float], None] = time.sleep) -> None:
         self.session, self.refs, self.current = session, list(refs), current
         self.clock, self.sleep = clock, sleep
@@ -524,7 +536,7 @@ class Poller:
         except BaseException as exc:
             self.errors.append(exc)
 
-    def __exit__(self, *exc: Any) -> None:
+    def __exit__(self, *exc: object) -> None:
         self._stop.set()
         for t in self._threads:
             t.join(timeout=5)
