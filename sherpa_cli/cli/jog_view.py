@@ -10,11 +10,11 @@ from __future__ import annotations
 
 import threading
 from collections.abc import Callable, Sequence
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, ClassVar
 
 from rich.text import Text
 from textual.app import App, ComposeResult
-from textual.binding import Binding
+from textual.binding import Binding, BindingType
 from textual.containers import Vertical
 from textual.screen import ModalScreen
 from textual.widgets import Footer, Static
@@ -88,7 +88,7 @@ class HomeConfirm(ModalScreen[bool]):
     HomeConfirm { align: center middle; }
     #plan { width: auto; max-width: 100%; height: auto; padding: 1 2; border: thick $warning; background: $surface; }
     """
-    BINDINGS = [
+    BINDINGS: ClassVar[list[BindingType]] = [
         Binding("enter,y", "answer(True)", "home now"),
         Binding("escape,n", "answer(False)", "cancel"),
     ]
@@ -117,7 +117,7 @@ class JogView(App):
     .joint { height: auto; padding: 0 1; }
     #status { dock: bottom; height: auto; padding: 0 1; background: $boost; }
     """
-    BINDINGS = [
+    BINDINGS: ClassVar[list[BindingType]] = [
         Binding("up", "select(-1)", "joint up"),
         Binding("down", "select(1)", "joint down"),
         Binding("left", "step(-1)", "step -"),
@@ -221,7 +221,7 @@ class JogView(App):
                 return
         try:
             self.live.tick()
-        except BaseException as exc:  # the guard failed (dead-man, signal): leave, the guard stops all
+        except BaseException as exc:  # noqa: BLE001  the guard failed (dead-man, signal): leave, the guard stops all
             self.error = exc
             self.exit()
             return
@@ -240,7 +240,7 @@ class JogView(App):
             self.message = out if isinstance(out, str) else ""
         except SherpaError as exc:
             self.message = f"error: {exc}"
-        except BaseException as exc:
+        except BaseException as exc:  # noqa: BLE001  re-raised by the caller of run() (app.error)
             self.error = exc
             self.exit()
             return
@@ -360,7 +360,7 @@ class JogView(App):
             try:
                 self.homing_result = self.live.calibrate(name, abort=self.abort_homing.is_set,
                                                          on_event=self.home_log.append)
-            except BaseException as exc:  # handed to the main thread in tick
+            except BaseException as exc:  # noqa: BLE001  handed to the main thread in tick
                 self.homing_result = exc
 
         self.homing = threading.Thread(target=work, name="sherpa-jog-home", daemon=True)

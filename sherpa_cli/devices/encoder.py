@@ -18,6 +18,7 @@ says why (``via``). ``position_from: sdo`` reads by SDO only.
 
 from __future__ import annotations
 
+import contextlib
 import math
 import threading
 import time
@@ -134,10 +135,8 @@ def read_position(session: ArmSession, dev: DeviceConfig, *, clock: Callable[[],
         why = f"TPDO1 set-up failed: {exc}"
     finally:
         if cob is not None:
-            try:
+            with contextlib.suppress(Exception):  # unsubscribing must not hide why we stop
                 link.network.unsubscribe(cob, listener)
-            except Exception:  # unsubscribing must not hide why we stop
-                pass
         _restore(sdo, changed)
     return EncoderReading(dev.name, int(encoder.position()), f"SDO ({why})", list(changed))
 
