@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import errno
 import time
 from collections.abc import Callable, Iterable, Mapping
@@ -138,12 +139,8 @@ def close_links(links: Mapping[str, BusLink]) -> None:
     for link in links.values():
         notifier = getattr(link.network, "notifier", None)
         if notifier is not None:
-            try:
+            with contextlib.suppress(Exception):  # closing must not hide the error that made us close
                 notifier.stop(timeout=0)
-            except Exception:  # closing must not hide the error that made us close
-                pass
     for link in links.values():
-        try:
+        with contextlib.suppress(Exception):  # closing must not hide the error that made us close
             link.network.disconnect()
-        except Exception:  # closing must not hide the error that made us close
-            pass

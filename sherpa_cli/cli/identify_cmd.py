@@ -102,8 +102,9 @@ def _render(st: AppState, report: IdentifyReport) -> None:
         notes = d.identity_notes
 
         def text(key: str, shown: str, meaning: str = "") -> list[str]:
-            return [key.replace("_", " "), shown if ident.get(key) is not None else "-",
-                    notes.get(key, meaning)]
+            # called only within this iteration: the loop variables are the current drive's
+            return [key.replace("_", " "), shown if ident.get(key) is not None else "-",  # noqa: B023
+                    notes.get(key, meaning)]  # noqa: B023
 
         vendor = ident.get("vendor_id")
         rows = [

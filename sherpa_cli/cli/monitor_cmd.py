@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import sys
 import time
 from collections.abc import Callable, Sequence
@@ -81,10 +82,9 @@ def monitor(
             if any(not r.answering or r.mf for r in rows):
                 raise typer.Exit(int(ExitCode.PROBLEM))  # a silent drive or a latched motor failure
             return
-        try:
+        # Ctrl-C is how a live view ends: exit 0 after the monitor restores 0x1017
+        with contextlib.suppress(KeyboardInterrupt):
             _live(st, mon, interval)
-        except KeyboardInterrupt:
-            pass  # Ctrl-C is how a live view ends: exit 0 after the monitor restores 0x1017
 
 
 def _live(st: AppState, mon: Monitor, interval: float) -> None:

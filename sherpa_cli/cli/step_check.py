@@ -38,7 +38,8 @@ def check_step_commands(recipe: Recipe) -> None:
         where = Location(recipe.path, step.line, f"steps[{step.number - 1}].run")
 
         def refuse(problem: str) -> ConfigError:
-            return ConfigError(f"step {step.number} '{step.name}': {problem}", where,
+            # raised within this iteration only: step and where are the current step's
+            return ConfigError(f"step {step.number} '{step.name}': {problem}", where,  # noqa: B023
                                hint="run the command with --help to see what it takes")
 
         cmd, args, words = _root(), list(step.argv), ["sherpa"]

@@ -252,7 +252,7 @@ def _check_catalog(cfg: ArmConfig, locs: Locs, r: _Report) -> None:
     for key, dm in cat.drives.items():
         if ("catalog", "drives", key) not in locs.table:
             continue
-        at = lambda f: locs.get("catalog", "drives", key, f)  # noqa: E731
+        at = lambda f: locs.get("catalog", "drives", key, f)  # noqa: E731, B023  used in this iteration only
         for f in ("nominal_voltage", "max_voltage", "current_cont", "current_peak"):
             if getattr(dm, f) <= 0:
                 r.error(at(f), f"{f} of drive model '{key}' must be positive, got {getattr(dm, f)}")
@@ -627,7 +627,7 @@ def _check_bounds(cfg: ArmConfig, locs: Locs, r: _Report) -> None:
                " (the drive's input logic table)")
 
     for name, sim_drive in cfg.sim.items():
-        at_sim = lambda k: locs.get("sim", "drives", name, k)  # noqa: E731
+        at_sim = lambda k: locs.get("sim", "drives", name, k)  # noqa: E731, B023  used in this iteration only
         within(sim_drive.reply_latency, 0.0, WAIT_MAX, at_sim("reply_latency"), "reply_latency", " s")
         within(sim_drive.sdo_latency, 0.0, WAIT_MAX, at_sim("sdo_latency"), "sdo_latency", " s")
         for key in ("die_at", "reboot_at", "limit_trip_at"):
@@ -680,7 +680,7 @@ def _check_bounds(cfg: ArmConfig, locs: Locs, r: _Report) -> None:
                " s (PL[2])")
 
     for j in cfg.joints.values():
-        at = lambda *k: locs.get("joint", j.name, *k)  # noqa: E731
+        at = lambda *k: locs.get("joint", j.name, *k)  # noqa: E731, B023  used in this iteration only
         drive_value = lambda v, loc, what: within(v, INT32_MIN, INT32_MAX, loc, what,  # noqa: E731
                                                   " (a drive value is a 32-bit integer)")
         within(j.cpr, 1, INT32_MAX, at("cpr"), "cpr")

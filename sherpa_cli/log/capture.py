@@ -41,7 +41,7 @@ def read_frames(path: Path, bus_names: Sequence[str] = ()) -> Iterator[Frame]:
 
     try:
         reader = can.LogReader(str(path))
-    except Exception as exc:  # python-can's readers raise their own parse errors (BLFParseError, ...)
+    except Exception as exc:  # noqa: BLE001  python-can's readers raise their own parse errors (BLFParseError, ...)
         raise UsageError(f"{path}: cannot read this format ({exc})",
                          hint="formats: .log/.txt (candump -L), .asc, .blf, .csv, .trc, .mf4") from None
     # python-can's TRC reader numbers channels from 1, its writer took them from 0
@@ -52,7 +52,7 @@ def read_frames(path: Path, bus_names: Sequence[str] = ()) -> Iterator[Frame]:
             yield Frame(float(msg.timestamp), _bus_name(channel, bus_names), int(msg.arbitration_id),
                         bytes(msg.data), bool(msg.is_extended_id), bool(msg.is_remote_frame),
                         bool(msg.is_error_frame))
-    except Exception as exc:  # any reader's failure on a damaged file: one message naming it
+    except Exception as exc:  # noqa: BLE001  any reader's failure on a damaged file: one message naming it
         raise UsageError(f"{path}: not a readable {suffix} capture ({type(exc).__name__}: {exc})") from None
     finally:
         stop = getattr(reader, "stop", None)

@@ -141,7 +141,7 @@ class ThreadSync:
                     continue
                 self.bus.send(self.message)
                 self.sent += 1
-        except BaseException as exc:  # a dead bus ends the SYNC; the recording shows the gap
+        except BaseException as exc:  # noqa: BLE001  a dead bus ends the SYNC; the recording shows the gap
             self.error = exc
 
     def request_stop(self) -> None:
@@ -250,17 +250,15 @@ class Recorder:
     def _finish(self, quiet: bool = False) -> None:
         # every source's end first (the SYNCs due until then are expected; a ThreadSync still sends
         # them), then the stops, so one bus's catching up does not lengthen another's span
-        for sync, span in zip(self._syncs, self._sync_spans):
+        for sync, span in zip(self._syncs, self._sync_spans, strict=True):
             span[1] = self._now()
             request = getattr(sync, "request_stop", None)
             if request is not None:
                 with contextlib.suppress(Exception):
                     request()
         for sync in self._syncs:
-            try:
+            with contextlib.suppress(Exception):  # stopping must not hide why we stop
                 sync.stop()
-            except Exception:  # stopping must not hide why we stop
-                pass
         self._syncs.clear()
         if self.t0 is not None and self.t_end is None:
             self.t_end = self._now()
@@ -470,7 +468,7 @@ class Recorder:
                 for col, which, conv in (("pos_rad", 0, counts_to_rad), ("vel_rad_s", 1, counts_per_s_to_rad_per_s)):
                     a, b = motor(pair.drive_a, which), motor(pair.drive_b, which)
                     rec.columns[f"{joint.name}.{col}"] = [conv(x + sign * y, joint.cpr) if x == x and y == y else nan
-                                                          for x, y in zip(a, b)]  # a sample one drive missed
+                                                          for x, y in zip(a, b, strict=True)]  # a sample one drive missed
         for ref in self.refs:
             rec.columns[f"{ref.name}.px"] = motor(ref.name, 0)
             rec.columns[f"{ref.name}.vx"] = motor(ref.name, 1)
@@ -533,7 +531,7 @@ class Poller:
                 rest = interval - (self.clock() - start)
                 if rest > 0:
                     self.sleep(rest)
-        except BaseException as exc:
+        except BaseException as exc:  # noqa: BLE001  raised again by __exit__ on the caller's thread
             self.errors.append(exc)
 
     def __exit__(self, *exc: object) -> None:
