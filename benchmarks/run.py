@@ -334,7 +334,8 @@ def bench_sdo(uploads: int = 1000, rounds: int = 3) -> Result:
                 sdo = session.sdo(ref)
 
                 def upload() -> None:
-                    if sdo.upload(0x1000, 0) != (1).to_bytes(4, "little"):
+                    # measured within this iteration only: sdo is this round's client
+                    if sdo.upload(0x1000, 0) != (1).to_bytes(4, "little"):  # noqa: B023
                         raise RuntimeError("sdo: unexpected upload data")
 
                 _cpu_per_op(upload, 50)  # warm-up
@@ -374,7 +375,7 @@ def _program_arm_once(cfg, workers: int) -> tuple[float, float]:
             wall = time.perf_counter() - start
     if not result.ok or any(o.status != "programmed" for o in result.outcomes):
         raise RuntimeError(f"program-limits failed: {[o.as_json() for o in result.outcomes]}")
-    return wall, max(p.elapsed + o.elapsed for p, o in zip(plans, result.outcomes))
+    return wall, max(p.elapsed + o.elapsed for p, o in zip(plans, result.outcomes, strict=True))
 
 
 def bench_program(rounds: int = 3) -> Result:
@@ -621,7 +622,7 @@ def bench_record(seconds: float = 5.0, rate: float = 1000.0) -> Result:
         try:
             with rec:
                 time.sleep(seconds)
-        except Exception as exc:  # the numbers still say what arrived; the note says what failed after
+        except Exception as exc:  # noqa: BLE001  the numbers still say what arrived; the note says what failed after
             restore_error = f"; restoring the PDO settings failed: {exc}"
         counts, expected = rec.counts(), rec.expected()
     worst = min(counts.values()) / expected
@@ -684,7 +685,7 @@ def bench_capture(frames: int = 3000) -> Result:
         if len(ports) != 3:
             raise RuntimeError(f"the burst process did not start (exit {proc.poll()})")
         names = ["can0", "can1", "can2"]
-        buses = {n: can.Bus(interface="remote", channel=f"127.0.0.1:{p}") for n, p in zip(names, ports)}
+        buses = {n: can.Bus(interface="remote", channel=f"127.0.0.1:{p}") for n, p in zip(names, ports, strict=True)}
         stop = threading.Event()
         done: dict = {}
         worker = threading.Thread(target=lambda: done.setdefault("r", capture(buses, out, names, stop=stop)))

@@ -201,7 +201,7 @@ class ArmProcess:
         self._watch = _BusWatch()
         self._buses = [can.Bus(**kw) for kw in self.bus_kwargs()]
         self._notifier = can.Notifier(self._buses, [], timeout=0.5)
-        for i, bus in enumerate(self._buses):
+        for i in range(len(self._buses)):
             self._notifier.add_listener(self._watch.listener(i))
 
     def _disconnect(self) -> None:

@@ -445,7 +445,7 @@ def frame_cases(rng: random.Random, tally: Tally) -> None:
     sdo = SdoServer(node, drive, lambda can_id, data: None)
     drive.receive(0x000, bytes([0x01, node]))
     interesting = [0x000, 0x300 + node, 0x600 + node, 0x700 + 100, 0x080 + node, 0x280 + node]
-    for i in range(260):
+    for _ in range(260):
         tally.case("frame to the drive")
         can_id = rng.choice(interesting)
         n = rng.choice([0, 1, 2, 3, 4, 5, 7, 8, 8, 8, 9, 64])
@@ -493,17 +493,18 @@ def client_frame_cases(rng: random.Random, tally: Tally) -> None:
     from sherpa_cli.errors import DriveTimeoutError, ProtocolError, SherpaError
 
     asks = [("get", "AC", 0), ("get", "CL", 1), ("get", "LL", 3), ("set", "AC", 0), ("set", "CL", 1), ("get", "PX", 0)]
-    for i in range(150):
+    for _ in range(150):
         tally.case("frame to the client")
         op, letters, index = rng.choice(asks)
         header = letters.encode() + struct.pack("<H", index | (0x8000 if letters == "CL" else 0))
+        # one of them is called at once, in this iteration: the loop variables are this round's
         bad = rng.choice([
-            lambda: header,  # DLC 4
-            lambda: header[:rng.randrange(4)],
-            lambda: header + bytes(rng.randrange(256) for _ in range(rng.choice([1, 2, 3, 5, 8]))),
-            lambda: letters.encode() + struct.pack("<H", index | 0x8000) + struct.pack("<f", rng.choice(
+            lambda: header,  # noqa: B023  DLC 4
+            lambda: header[:rng.randrange(4)],  # noqa: B023
+            lambda: header + bytes(rng.randrange(256) for _ in range(rng.choice([1, 2, 3, 5, 8]))),  # noqa: B023
+            lambda: letters.encode() + struct.pack("<H", index | 0x8000) + struct.pack("<f", rng.choice(  # noqa: B023
                 [math.nan, math.inf, -math.inf])),
-            lambda: bytes([0xFF, 0x80]) + header[2:] + bytes(4),
+            lambda: bytes([0xFF, 0x80]) + header[2:] + bytes(4),  # noqa: B023
             lambda: bytes(rng.randrange(256) for _ in range(rng.choice([1, 4, 8]))),
         ])()
         # a bad frame whose readable header names another command is someone else's: then silence

@@ -40,7 +40,7 @@ def test_open_failure_names_the_bus(tmp_path):
     bad = apply_bus_map(cfg, {"can2": BusTarget("no_such_interface", "x")})
     from sherpa_cli.bus.links import open_links
 
-    with pytest.raises(CommunicationError, match="bus can2 .*cannot open"):
+    with pytest.raises(CommunicationError, match=r"bus can2 .*cannot open"):
         open_links(bad, ["can2"])
 
 

@@ -4,6 +4,8 @@ drive of the joint since power-up (the simulated drive keeps UI in RAM: a reset 
 from __future__ import annotations
 
 import dataclasses
+import re
+from pathlib import Path
 
 import pytest
 
@@ -55,13 +57,13 @@ def test_config_reads_and_checks_calibration_flag(tmp_path):
     from sherpa_cli.config import load_config as load
     from sherpa_cli.errors import ConfigError
 
-    text = open("configs/appendix-c/example1.yaml").read()
+    text = Path("configs/appendix-c/example1.yaml").read_text()
     good = tmp_path / "good.yaml"
     good.write_text(text + "\nprotocol: {calibration_flag: 5}\n")
     assert load(good).protocol.calibration_flag == 5
     bad = tmp_path / "bad.yaml"
     bad.write_text(text + "\nprotocol: {calibration_flag: 30}\n")
-    with pytest.raises(ConfigError, match="calibration_flag 30 must be a UI index 1..24"):
+    with pytest.raises(ConfigError, match=re.escape("calibration_flag 30 must be a UI index 1..24")):
         load(bad)
 
 

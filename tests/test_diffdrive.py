@@ -7,6 +7,7 @@ The moves run in real time like tests/test_jog_pair.py (the guard's heartbeat th
 
 from __future__ import annotations
 
+import itertools
 import time
 from pathlib import Path
 
@@ -22,6 +23,7 @@ from sherpa_cli.ops.diffdrive import MoveRequest
 from sherpa_cli.sim import ManualClock, SimSettings
 from sherpa_cli.sim.arm import SimArm
 from sherpa_cli.sim.drive import SimDrive
+from sherpa_cli.sim.od import ODError
 
 DATA = Path(__file__).resolve().parent / "data"
 MISMATCHED = DATA / "diffdrive-arm.yaml"
@@ -219,7 +221,7 @@ def test_delta_move_with_relative_and_the_plot(cfg, tmp_path):
 def test_uncalibrated_pair_is_refused_before_anything_moves():
     cfg = load_config(FAST)  # no abs encoder, not homed
     with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
-        with pytest.raises(SafetyError, match="not|calibrat"):
+        with pytest.raises(SafetyError, match=r"not|calibrat"):
             diffdrive.run_move(s, cfg.pairs["diff"], MoveRequest(sigma="100counts"))
         with s.sim.lock:
             assert all(not d.motor_on and not d.od_writes for d in s.sim.drives.values())
@@ -343,7 +345,7 @@ def test_the_move_records_both_motors_by_tpdo_on_sync_and_puts_the_pdo_settings_
     # one sample per SYNC, both motors of the same SYNC: timestamps on the 2 ms grid from the begin
     times = [t for t, _, _ in r.samples]
     assert len(r.samples) > 0.5 * (times[-1] - times[0]) * 500
-    steps = {round((b - a) * 500) for a, b in zip(times, times[1:])}
+    steps = {round((b - a) * 500) for a, b in itertools.pairwise(times)}
     assert 1 in steps and all(k >= 1 for k in steps)
     assert r.samples[-1][1:] == (r.motors_end["left"], r.motors_end["right"])
     assert abs(r.end[0] - r.target[0]) <= 1 and r.coupling.held == "roll"
@@ -469,7 +471,7 @@ def test_sim_synchronous_rpdo2_runs_the_buffered_frame_at_the_next_sync_without_
     assert a.px == b.px > 0  # both started at the SYNC: the separately received BG has no skew here
     a.receive(0x000, bytes([0x81, 10]))  # reset node: RAM only
     assert a.od_read(0x1401, 2) == 255
-    with pytest.raises(Exception):
+    with pytest.raises(ODError):
         a.od_write(0x1401, 2, 250)  # no transmission type
 
 

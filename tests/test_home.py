@@ -245,7 +245,7 @@ def test_an_encoder_joint_is_refused_in_fault_before_the_encoder_is_read_or_px_s
     cfg = variant(tmp_path, ("buses:", "  drives: {elbow_drive: {limit_trip_at: 0.0}}\nbuses:"))
     plan, ctx = homed(cfg, ["elbow"])
     with ctx as s:
-        with pytest.raises(SafetyError, match="elbow_drive.*refusing to home: the drive is in fault"):
+        with pytest.raises(SafetyError, match=r"elbow_drive.*refusing to home: the drive is in fault"):
             home.run_home(s, plan)
         with s.sim.lock:
             frames = [bytes(f) for _, i, f in s.sim.drives["elbow_drive"].received if 0x300 < i < 0x380]

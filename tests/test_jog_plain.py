@@ -208,10 +208,12 @@ def test_ctrl_c_ending_a_velocity_jog_does_not_hide_a_failed_stop(cfg, monkeypat
         if len(calls) == 3:
             raise KeyboardInterrupt  # how an open-ended velocity jog normally ends
     target = resolve_jog_target(cfg, "j1")
-    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
-        with pytest.raises(SafetyError, match="drive1: not at standstill") as info:
-            run_jog(s, target, JogRequest(mode="velocity", velocity=0.5),
-                    settings=MotionSettings.from_config(cfg), on_progress=progress)
+    with (
+        ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s,
+        pytest.raises(SafetyError, match="drive1: not at standstill") as info,
+    ):
+        run_jog(s, target, JogRequest(mode="velocity", velocity=0.5),
+                settings=MotionSettings.from_config(cfg), on_progress=progress)
     assert info.value.motion_report.drives[0].standstill is False
 
 

@@ -100,7 +100,7 @@ def _recording(path):
     ts, ys = sampled(0.4, 30.0, 0.05, 1.0, 0.2, n=2000)
     rec = Recording(times=ts, columns={
         "elbow_pitch.pos_rad": ys,
-        "elbow_pitch.vel_rad_s": [0.0] + [(b - a) / (tb - ta) for a, b, ta, tb in zip(ys, ys[1:], ts, ts[1:])],
+        "elbow_pitch.vel_rad_s": [0.0] + [(b - a) / (tb - ta) for a, b, ta, tb in zip(ys, ys[1:], ts, ts[1:], strict=False)],
         "elbow_1a.px": [round(y * 10000) for y in ys], "elbow_1a.vx": [0.0] * len(ys)})
     write_csv(rec, path)
 

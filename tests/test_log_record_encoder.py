@@ -69,9 +69,11 @@ def test_a_drive_without_an_encoder_gets_no_encoder_columns():
     assert encoder.recorded_encoders(cfg, ["yaw_drive", "twist_drive"]) == []  # twist: drive:PY, not a device
     clock = ManualClock()
     lock = Lockstep(clock)
-    with ArmSession.open(cfg, sim=_arm(cfg, clock)) as session:
-        with Recorder(session, drive_refs(cfg, ["yaw"]), 100, clock=clock.now, sync_factory=lock.factory) as rec:
-            lock.run(rec, 3)
+    with (
+        ArmSession.open(cfg, sim=_arm(cfg, clock)) as session,
+        Recorder(session, drive_refs(cfg, ["yaw"]), 100, clock=clock.now, sync_factory=lock.factory) as rec,
+    ):
+        lock.run(rec, 3)
     assert not [c for c in rec.recording().columns if "ext_pos" in c or c.endswith(".pos")]
 
 
@@ -85,9 +87,11 @@ def test_an_encoder_that_cannot_be_recorded_refuses_and_the_drives_are_put_back(
         session.sdo(encoder.device_ref(dev)).download(0x1A00, 0, b"\x00")  # then TPDO1 maps nothing (CiA 301 order)
         drive_sdo = session.sdo(refs[0])
         before = [bytes(drive_sdo.upload(0x1800, 2)), bytes(drive_sdo.upload(0x1A00, 0))]
-        with pytest.raises(UsageError, match="elbow_encoder: its TPDO1 does not carry the position value 0x6004"):
-            with Recorder(session, refs, 100, clock=clock.now, sync_factory=Lockstep(clock).factory):
-                pass
+        with (
+            pytest.raises(UsageError, match="elbow_encoder: its TPDO1 does not carry the position value 0x6004"),
+            Recorder(session, refs, 100, clock=clock.now, sync_factory=Lockstep(clock).factory),
+        ):
+            pass
         assert [bytes(drive_sdo.upload(0x1800, 2)), bytes(drive_sdo.upload(0x1A00, 0))] == before
 
 
@@ -124,10 +128,12 @@ def test_an_encoder_on_another_bus_gets_its_own_sync(tmp_path):
     cfg = load_config(path)
     clock = ManualClock()
     lock = Lockstep(clock)
-    with ArmSession.open(cfg, sim=_arm(cfg, clock)) as session:
-        with Recorder(session, drive_refs(cfg, ["elbow"]), 100, clock=clock.now, sync_factory=lock.factory) as rec:
-            assert sorted(lock.buses) == ["can0", "can1"]
-            assert [b.bus for b in rec.budget] == ["can0", "can1"]
-            lock.run(rec, 5)
+    with (
+        ArmSession.open(cfg, sim=_arm(cfg, clock)) as session,
+        Recorder(session, drive_refs(cfg, ["elbow"]), 100, clock=clock.now, sync_factory=lock.factory) as rec,
+    ):
+        assert sorted(lock.buses) == ["can0", "can1"]
+        assert [b.bus for b in rec.budget] == ["can0", "can1"]
+        lock.run(rec, 5)
     assert rec.counts() == {"elbow_drive": 5, "elbow_encoder": 5}
     assert rec.recording().columns["elbow_encoder.pos"] == [-544.0] * 5

@@ -151,10 +151,12 @@ def test_a_position_step_outside_the_normal_range_is_refused_before_anything_is_
 
     cfg, sim = arm
     target = resolve_jog_target(cfg, "elbow_pitch")
-    with ArmSession.open(cfg, sim=sim, buses=["can1"]) as session:
-        with pytest.raises(UsageError, match="outside the joint's normal range"):
-            run_step(session, target, "position", 3.0, duration=0.3, rate=200,
-                     settings=MotionSettings.from_config(cfg, ["can1"]))
+    with (
+        ArmSession.open(cfg, sim=sim, buses=["can1"]) as session,
+        pytest.raises(UsageError, match="outside the joint's normal range"),
+    ):
+        run_step(session, target, "position", 3.0, duration=0.3, rate=200,
+                 settings=MotionSettings.from_config(cfg, ["can1"]))
     node = cfg.drives["elbow_1a"].node
     sent = [f[:4] for t, i, f in _frames(sim, "elbow_1a") if i == 0x300 + node and len(f) == 8]  # sets
     assert not sent, f"written before the refusal: {sent}"
@@ -169,7 +171,7 @@ def test_a_position_step_of_an_uncalibrated_joint_needs_the_override(arm):
     target = resolve_jog_target(cfg, "elbow_stiffness")
     settings = MotionSettings.from_config(cfg, ["can1"])
     with ArmSession.open(cfg, sim=sim, buses=["can1"]) as session:
-        with pytest.raises(SafetyError, match="refusing a position move.*not"):
+        with pytest.raises(SafetyError, match=r"refusing a position move.*not"):
             run_step(session, target, "position", 0.05, duration=0.5, rate=200, settings=settings)
         node = cfg.drives["elbow_1b"].node
         assert not [f for t, i, f in _frames(sim, "elbow_1b") if i == 0x300 + node and f[:2] in (b"BG", b"MO")]

@@ -107,14 +107,16 @@ def test_position_move_ends_at_target_then_stops_and_restores(cfg):
 def test_exception_in_the_body_stops_and_restores(cfg):
     with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
         ref = resolve_target(cfg, "drive1")
-        with pytest.raises(RuntimeError, match="boom"):
-            with MotionGuard(s, [ref], settings=MotionSettings.from_config(cfg)) as g:
-                g.enable(ref, 5)
-                c = g.client(ref)
-                c.set("JV", 0, 4000)
-                c.execute("BG")
-                time.sleep(0.1)
-                raise RuntimeError("boom")
+        with (
+            pytest.raises(RuntimeError, match="boom"),
+            MotionGuard(s, [ref], settings=MotionSettings.from_config(cfg)) as g,
+        ):
+            g.enable(ref, 5)
+            c = g.client(ref)
+            c.set("JV", 0, 4000)
+            c.execute("BG")
+            time.sleep(0.1)
+            raise RuntimeError("boom")
         assert g.report.reason == "error"
         (r,) = g.report.drives
         assert r.stopped_by == "ST" and r.standstill and r.motor_off
@@ -124,14 +126,13 @@ def test_exception_in_the_body_stops_and_restores(cfg):
 def test_keyboard_interrupt_stops_and_restores(cfg):
     with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
         ref = resolve_target(cfg, "drive1")
-        with pytest.raises(KeyboardInterrupt):
-            with MotionGuard(s, [ref], settings=MotionSettings.from_config(cfg)) as g:
-                g.enable(ref, 5)
-                c = g.client(ref)
-                c.set("JV", 0, -4000)
-                c.execute("BG")
-                time.sleep(0.1)
-                raise KeyboardInterrupt
+        with pytest.raises(KeyboardInterrupt), MotionGuard(s, [ref], settings=MotionSettings.from_config(cfg)) as g:
+            g.enable(ref, 5)
+            c = g.client(ref)
+            c.set("JV", 0, -4000)
+            c.execute("BG")
+            time.sleep(0.1)
+            raise KeyboardInterrupt
         assert g.report.reason == "interrupted"
         assert g.report.drives[0].motor_off
         assert_stopped_and_restored(s)
@@ -141,17 +142,19 @@ def test_keyboard_interrupt_stops_and_restores(cfg):
 def test_signal_to_the_process_stops_and_restores(cfg, signum):
     with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
         ref = resolve_target(cfg, "drive1")
-        with pytest.raises(MotionStopped, match=signal.Signals(signum).name):
-            with MotionGuard(s, [ref], settings=MotionSettings.from_config(cfg)) as g:
-                g.enable(ref, 5)
-                c = g.client(ref)
-                c.set("JV", 0, 4000)
-                c.execute("BG")
-                os.kill(os.getpid(), signum)  # delivered to this (the main) thread
-                deadline = time.monotonic() + 5
-                while time.monotonic() < deadline:
-                    g.check()
-                    time.sleep(0.01)
+        with (
+            pytest.raises(MotionStopped, match=signal.Signals(signum).name),
+            MotionGuard(s, [ref], settings=MotionSettings.from_config(cfg)) as g,
+        ):
+            g.enable(ref, 5)
+            c = g.client(ref)
+            c.set("JV", 0, 4000)
+            c.execute("BG")
+            os.kill(os.getpid(), signum)  # delivered to this (the main) thread
+            deadline = time.monotonic() + 5
+            while time.monotonic() < deadline:
+                g.check()
+                time.sleep(0.01)
         assert g.report.reason == signal.Signals(signum).name
         assert g.report.drives[0].stopped_by == "ST" and g.report.drives[0].motor_off
         assert_stopped_and_restored(s)
@@ -258,7 +261,7 @@ def test_guard_in_a_worker_thread_leaves_signals_alone(cfg):
                 with MotionGuard(s, [ref], settings=MotionSettings.from_config(cfg)) as g:
                     g.enable(ref, 5)
                 assert g.report.drives[0].motor_off
-        except BaseException as exc:  # pragma: no cover - shown by the assert below
+        except BaseException as exc:  # noqa: BLE001  # pragma: no cover - shown by the assert below
             errors.append(exc)
 
     t = threading.Thread(target=work)
@@ -315,15 +318,17 @@ def test_a_failed_mo0_keeps_the_dead_man_armed_and_says_so(cfg, monkeypatch):
 
     with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
         ref = resolve_target(cfg, "drive1")
-        with pytest.raises(SafetyError, match="MO=0: no reply"):
-            with MotionGuard(s, [ref], settings=MotionSettings.from_config(cfg)) as g:
-                g.enable(ref, 2)
-                c = g.client(ref)
+        with (
+            pytest.raises(SafetyError, match="MO=0: no reply"),
+            MotionGuard(s, [ref], settings=MotionSettings.from_config(cfg)) as g,
+        ):
+            g.enable(ref, 2)
+            c = g.client(ref)
 
-                def lost(*a, **k):
-                    raise CommunicationError("no reply")
-                monkeypatch.setattr(c, "motor_off", lost)
-                monkeypatch.setattr(c, "set", lambda *a, **k: None if a[0] != "UM" else lost())
+            def lost(*a, **k):
+                raise CommunicationError("no reply")
+            monkeypatch.setattr(c, "motor_off", lost)
+            monkeypatch.setattr(c, "set", lambda *a, **k: None if a[0] != "UM" else lost())
         (r,) = g.report.drives
         assert not r.motor_off
         assert r.kept == ["UM=2 (motor not confirmed off)", "0x1016:1 (stop failed)", "0x1029:1 (stop failed)",
@@ -340,16 +345,18 @@ def test_a_failed_mo0_keeps_the_dead_man_armed_and_says_so(cfg, monkeypatch):
 def test_an_os_error_on_one_drive_still_stops_the_other_and_the_heartbeat(cfg, monkeypatch):
     with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
         refs = [resolve_target(cfg, "drive1"), resolve_target(cfg, "drive2")]
-        with pytest.raises(SafetyError, match="OSError: bus gone"):
-            with MotionGuard(s, refs, settings=MotionSettings.from_config(cfg)) as g:
-                for ref in refs:
-                    g.enable(ref, 5)
-                c1 = g.client(refs[0])
+        with (
+            pytest.raises(SafetyError, match="OSError: bus gone"),
+            MotionGuard(s, refs, settings=MotionSettings.from_config(cfg)) as g,
+        ):
+            for ref in refs:
+                g.enable(ref, 5)
+            c1 = g.client(refs[0])
 
-                def gone(*a, **k):
-                    raise OSError("bus gone")
-                monkeypatch.setattr(c1, "execute", gone)
-                monkeypatch.setattr(c1, "motor_off", gone)
+            def gone(*a, **k):
+                raise OSError("bus gone")
+            monkeypatch.setattr(c1, "execute", gone)
+            monkeypatch.setattr(c1, "motor_off", gone)
         r1, r2 = g.report.drives
         assert r1.stopped_by == "not stopped" and "0x1016:1 (stop failed)" in r1.kept
         assert (r2.stopped_by, r2.motor_off, r2.problems) == ("ST", True, [])
@@ -386,17 +393,16 @@ def test_the_original_unit_mode_is_recorded_before_the_um_write(cfg, monkeypatch
 
     with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
         ref = resolve_target(cfg, "drive1")
-        with pytest.raises(CommunicationError):
-            with MotionGuard(s, [ref], settings=MotionSettings.from_config(cfg)) as g:
-                c = g.client(ref)
-                real_set = c.set
+        with pytest.raises(CommunicationError), MotionGuard(s, [ref], settings=MotionSettings.from_config(cfg)) as g:
+            c = g.client(ref)
+            real_set = c.set
 
-                def half(letters, *a):
-                    real_set(letters, *a)
-                    if letters == "UM" and not g._exiting:
-                        raise CommunicationError("UM written, reply lost")
-                monkeypatch.setattr(c, "set", half)
-                g.enable(ref, 2)
+            def half(letters, *a):
+                real_set(letters, *a)
+                if letters == "UM" and not g._exiting:
+                    raise CommunicationError("UM written, reply lost")
+            monkeypatch.setattr(c, "set", half)
+            g.enable(ref, 2)
         assert "UM=5" in g.report.drives[0].restored
 
 
@@ -426,9 +432,11 @@ def test_a_refused_drive_at_entry_sends_no_stop_to_a_drive_the_guard_never_switc
         c.execute("BG")
         with s.sim.lock:
             sim_drive(s, "drive2")._mf = 0x400000
-        with pytest.raises(SafetyError, match="drive2 .*in fault"):
-            with MotionGuard(s, [ref1, resolve_target(cfg, "drive2")], settings=MotionSettings.from_config(cfg)):
-                pytest.fail("the body must not run")
+        with (
+            pytest.raises(SafetyError, match=r"drive2 .*in fault"),
+            MotionGuard(s, [ref1, resolve_target(cfg, "drive2")], settings=MotionSettings.from_config(cfg)),
+        ):
+            pytest.fail("the body must not run")
         d1 = sim_drive(s, "drive1")
         executed = [d[:2] for _, cid, d in d1.received if cid == 0x305 and len(d) == 4]
         assert b"ST" not in executed and b"BG" in executed and d1.motor_on  # no ST from the refused guard
@@ -509,11 +517,13 @@ def test_a_profile_the_motion_changed_is_put_back_on_exit_unless_kept(cfg, keep)
         ref = resolve_target(cfg, "drive1")
         s.client(ref).nmt_start()  # the interpreter answers in Operational only
         before = {k: s.client(ref).get(k) for k in ("SP", "AC", "DC")}
-        with pytest.raises(RuntimeError):
-            with MotionGuard(s, [ref], settings=MotionSettings.from_config(cfg), keep=keep) as g:
-                g.client(ref).set("SP", 0, 1)
-                g.client(ref).set("DC", 0, before["DC"] // 2)
-                raise RuntimeError("body failed")
+        with (
+            pytest.raises(RuntimeError),
+            MotionGuard(s, [ref], settings=MotionSettings.from_config(cfg), keep=keep) as g,
+        ):
+            g.client(ref).set("SP", 0, 1)
+            g.client(ref).set("DC", 0, before["DC"] // 2)
+            raise RuntimeError("body failed")
         after = {k: s.client(ref).get(k) for k in ("SP", "AC", "DC")}
         (r,) = g.report.drives
         if keep:

@@ -50,10 +50,9 @@ def test_a_second_guard_on_a_drive_refuses_before_sending_anything_and_the_first
         with MotionGuard(s, [r1], settings=settings) as first:
             first.enable(r1, 5)
             before = not_heartbeats(s, "drive1"), not_heartbeats(s, "drive2")
-            with pytest.raises(MotionLockedError) as err:
-                # drive2 comes first and is free: its lock is taken, then given back on the refusal
-                with MotionGuard(s, [r2, r1], settings=settings):
-                    pytest.fail("entered")
+            # drive2 comes first and is free: its lock is taken, then given back on the refusal
+            with pytest.raises(MotionLockedError) as err, MotionGuard(s, [r2, r1], settings=settings):
+                pytest.fail("entered")
             time.sleep(0.05)
             # nothing was sent by the refused guard (no NMT, no query, no SDO): only the first's heartbeat
             assert (not_heartbeats(s, "drive1"), not_heartbeats(s, "drive2")) == before
@@ -111,10 +110,12 @@ def test_another_process_holds_it_the_refusal_names_its_pid_stop_still_works_and
         assert holder.stdout.readline().strip() == "held"
         with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
             r1 = resolve_target(cfg, "drive1")
-            with pytest.raises(MotionLockedError, match=rf"drive1 \(can0:5\): another sherpa command \(pid "
-                                                        rf"{holder.pid}\) is moving this drive"):
-                with MotionGuard(s, [r1], settings=settings):
-                    pass
+            with (
+                pytest.raises(MotionLockedError, match=rf"drive1 \(can0:5\): another sherpa command \(pid "
+                                                       rf"{holder.pid}\) is moving this drive"),
+                MotionGuard(s, [r1], settings=settings),
+            ):
+                pass
             assert s.sim.drives["drive1"].od_writes == []  # nothing written
             # `sherpa stop` is the emergency path: no lock needed
             c = s.client(r1)

@@ -64,7 +64,7 @@ def test_text_round_trips_and_is_stable():
 def test_two_dumps_differ_only_in_the_header_block():
     a = dump_to_text(_dump("2024-05-02T10:00:00Z")).splitlines()
     b = dump_to_text(_dump("2025-01-01T00:00:00Z")).splitlines()
-    changed = [i for i, (x, y) in enumerate(zip(a, b)) if x != y]
+    changed = [i for i, (x, y) in enumerate(zip(a, b, strict=True)) if x != y]
     assert len(a) == len(b) and len(changed) == 1
     assert a.index("drives:") > changed[0] > a.index("meta:")
 
@@ -137,7 +137,7 @@ def test_bad_dump_files_name_file_line_and_key(tmp_path, name, text, pattern):
 
 
 def test_missing_dump_file(tmp_path):
-    with pytest.raises(ConfigError, match="nope.yaml: dump file not found"):
+    with pytest.raises(ConfigError, match=re.escape("nope.yaml: dump file not found")):
         read_dump(tmp_path / "nope.yaml")
 
 
@@ -146,7 +146,10 @@ def test_dump_date_comes_from_the_environment_or_the_clock():
 
     cfg = load_config(ARM)
     assert dump_meta(cfg, environ={"SHERPA_DUMP_DATE": DATE})["date"] == DATE
-    fixed = lambda: datetime(2024, 1, 2, 3, 4, 5, tzinfo=UTC)
+
+    def fixed() -> datetime:
+        return datetime(2024, 1, 2, 3, 4, 5, tzinfo=UTC)
+
     meta = dump_meta(cfg, fixed, environ={})
     assert meta["date"] == "2024-01-02T03:04:05Z"
     import hashlib

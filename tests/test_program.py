@@ -116,8 +116,8 @@ chain = st.lists(st.integers(-1000, 1000), min_size=4, max_size=4, unique=True).
        pl=st.tuples(st.floats(0.5, 9), st.floats(0.5, 9)))
 def test_write_order_property_every_prefix_is_consistent(now, target, cl, pl):
     keys = ("LL[3]", "VL[3]", "VH[3]", "HL[3]")
-    n = dict(zip(keys, now))
-    t = dict(zip(keys, target))
+    n = dict(zip(keys, now, strict=True))
+    t = dict(zip(keys, target, strict=True))
     n["CL[1]"], n["PL[1]"] = min(cl), max(cl)
     t["CL[1]"], t["PL[1]"] = min(pl), max(pl)
     order = write_order(n, t)
@@ -190,7 +190,7 @@ def test_apply_writes_exactly_the_changed_values_in_a_consistent_order(state_hom
         program.check_apply(plans, motor_off=False)
         result = program.apply_plans(session, plans)
         assert result.ok and [o.status for o in result.outcomes] == ["programmed", "programmed"]
-        for t, plan in zip(targets, plans):
+        for t, plan in zip(targets, plans, strict=True):
             d = session.sim.drives[t.drive]
             written = sets(d, mark[t.drive])
             expected = {k: v for k, v in t.params.items() if t.drive != "drive1" or k not in ("AC", "IL[1]")}
@@ -352,7 +352,7 @@ def test_motor_on_is_refused_without_motor_off(state_home, cfg3):
         mark = len(d1.received)
         plans = program.read_plans(session, targets)
         assert plans[0].motor_on and not plans[1].motor_on
-        with pytest.raises(SafetyError, match="motor is on: drive1;.*nothing was written"):
+        with pytest.raises(SafetyError, match=r"motor is on: drive1;.*nothing was written"):
             program.check_apply(plans, motor_off=False)
         assert sets(d1, mark) == [] and d1.motor_on
         program.check_apply(plans, motor_off=True)
@@ -381,7 +381,7 @@ def test_sv_without_an_answer_after_it_is_reported_as_sent_and_counted(state_hom
         plans = program.read_plans(session, targets, need_serial=True)
         ledger = SaveLedger()
         result = program.apply_plans(session, plans, save=True, ledger=ledger)
-        for o, p in zip(result.outcomes, plans):
+        for o, p in zip(result.outcomes, plans, strict=True):
             assert o.status == "failed" and o.sv_sent and not o.saved
             assert o.error.startswith("SV was sent but") and "unknown" in o.error
             assert o.save_count == 1 and ledger.count(p.serial) == 1

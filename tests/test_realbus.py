@@ -56,7 +56,7 @@ def test_test_bus_values(text, expected):
 @pytest.mark.parametrize("text", ["vcan", "socketcan", "socketcan:", "socketcan:vcan0,,vcan2", "udp_multicast",
                                   "remote:127.0.0.1:5000"])
 def test_test_bus_rejects_anything_else_by_name(text):
-    with pytest.raises(ValueError, match="SHERPA_TEST_BUS=.*expected virtual, remote or socketcan:IF,IF,IF"):
+    with pytest.raises(ValueError, match=r"SHERPA_TEST_BUS=.*expected virtual, remote or socketcan:IF,IF,IF"):
         parse_test_bus(text)
 
 

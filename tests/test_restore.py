@@ -169,7 +169,7 @@ def test_restore_writes_only_changes_never_identity_and_the_mode_first(state_hom
         program.check_apply(plans, motor_off=False)
         result = program.apply_plans(session, plans)
         assert result.ok
-        for name, d in session.sim.drives.items():
+        for d in session.sim.drives.values():
             assert sets(d) == [("UM", 2), ("VL[3]", -250), ("LL[3]", -300)]
             assert sdo_downloads(d) == [] and d.od_writes == [] and executes(d) == []
             assert not [r for r in requests(d) if r.letters == "PX" and r.kind == "set"]

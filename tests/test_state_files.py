@@ -59,7 +59,7 @@ def test_ledgers_in_threads_of_their_own_lose_no_save(tmp_path):
                 record = ledger.record(SERIAL, f"drive{i}")
                 assert record.warning is None or "not updated" not in record.warning, record.warning
                 ledger.mark_unsaved(SERIAL + 1 + i, f"drive{i}")
-        except BaseException as exc:  # surfaced below, not lost in the thread
+        except BaseException as exc:  # noqa: BLE001  surfaced below, not lost in the thread
             errors.append(exc)
 
     threads = [threading.Thread(target=saver, args=(i,)) for i in range(threads_n)]
@@ -126,7 +126,7 @@ def test_simulators_in_threads_lose_no_save():
             for i in range(rounds):
                 before = sim_state.load(cfg)
                 sim_state.save_changes(cfg, before, {**before, drive: _saved(before[drive], "AC", i)})
-        except BaseException as exc:
+        except BaseException as exc:  # noqa: BLE001  surfaced below, not lost in the thread
             errors.append(exc)
 
     threads = [threading.Thread(target=simulator, args=(d,)) for d in ("drive1", "drive2", "drive1")]

@@ -88,7 +88,7 @@ def test_live_jog_st_method_on_firmware_that_refuses_st_says_so():
         with pytest.raises(SafetyError), LiveJog(s, resolve_axes(cfg, ["j1"]), keepalive=30.0) as live:
             live.set_velocity("j1", 1000)
             live.tick()
-            with pytest.raises(SafetyError, match="yaw.*ST refused"):
+            with pytest.raises(SafetyError, match=r"yaw.*ST refused"):
                 live.stop("j1")
             raise SafetyError("leave")  # the guard's exit: ST refused again, the motor switched off
         assert motors_off(s)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import errno
 import time
 from collections.abc import Callable, Iterable, Mapping
@@ -84,14 +85,16 @@ class BusLink:
 
     name: str
     config: BusConfig
-    bus: Any  # can.BusABC
-    network: Any  # PacedNetwork (canopen.Network)
+    bus: can.BusABC
+    # a PacedNetwork (canopen.Network); Any until ops/monitor.py's subscribe callbacks take
+    # canopen's bytearray (typing it canopen.Network flags them)
+    network: Any
 
     def describe(self) -> str:
         return f"bus {self.name} ({self.config.interface or 'python-can config'}:{self.config.channel or '-'})"
 
 
-def open_bus(cfg: BusConfig) -> Any:
+def open_bus(cfg: BusConfig) -> can.BusABC:
     import can
 
     kwargs = bus_kwargs(cfg)
@@ -147,12 +150,8 @@ def close_links(links: Mapping[str, BusLink]) -> None:
     for link in links.values():
         notifier = getattr(link.network, "notifier", None)
         if notifier is not None:
-            try:
+            with contextlib.suppress(Exception):  # closing must not hide the error that made us close
                 notifier.stop(timeout=0)
-            except Exception:  # closing must not hide the error that made us close
-                pass
     for link in links.values():
-        try:
+        with contextlib.suppress(Exception):  # closing must not hide the error that made us close
             link.network.disconnect()
-        except Exception:  # closing must not hide the error that made us close
-            pass

@@ -16,10 +16,13 @@ import logging
 import queue
 import struct
 import threading
-from typing import Any
+from typing import TYPE_CHECKING
 
 from sherpa_cli.bus.canopen_names import abort_text
 from sherpa_cli.errors import SdoError
+
+if TYPE_CHECKING:
+    import canopen
 
 # canopen logs every SDO it aborts at ERROR; this tool reports each failed transfer itself (as a
 # note or an error naming the drive), so without a handler Python's last resort would print it twice.
@@ -45,7 +48,7 @@ def _transfer_failures() -> tuple[type[BaseException], ...]:
 class DriveSdo:
     """One drive's SDO client: upload/download with SdoError on every failure; thread-safe per drive."""
 
-    def __init__(self, network: Any, node: int, *, label: str | None = None, timeout: float | None = None) -> None:
+    def __init__(self, network: canopen.Network, node: int, *, label: str | None = None, timeout: float | None = None) -> None:
         import canopen
 
         self.node = node
@@ -117,7 +120,7 @@ class DriveSdo:
                         index=index, sub=sub, abort_code=code, hint=hint)
 
 
-def sdo_upload(network: Any, node: int, index: int, sub: int = 0, *, label: str | None = None,
+def sdo_upload(network: canopen.Network, node: int, index: int, sub: int = 0, *, label: str | None = None,
                name: str | None = None) -> bytes:
     """One SDO upload through a client of its own (prefer ``session.sdo(ref).upload``)."""
     client = DriveSdo(network, node, label=label)
@@ -127,7 +130,7 @@ def sdo_upload(network: Any, node: int, index: int, sub: int = 0, *, label: str 
         client.close()
 
 
-def sdo_download(network: Any, node: int, index: int, sub: int, data: bytes, *, label: str | None = None,
+def sdo_download(network: canopen.Network, node: int, index: int, sub: int, data: bytes, *, label: str | None = None,
                  name: str | None = None) -> None:
     """One SDO download through a client of its own (prefer ``session.sdo(ref).download``)."""
     client = DriveSdo(network, node, label=label)

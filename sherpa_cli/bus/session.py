@@ -13,7 +13,7 @@ from __future__ import annotations
 from collections.abc import Iterable, Iterator, Mapping
 from contextlib import contextmanager
 from dataclasses import replace
-from typing import Any, Protocol
+from typing import TYPE_CHECKING, Any, Protocol
 
 from sherpa_cli.bus.busmap import BusTarget, apply_bus_map
 from sherpa_cli.bus.links import BusLink, close_links, open_links
@@ -24,6 +24,10 @@ from sherpa_cli.bus.targets import DriveRef
 from sherpa_cli.bus.targets import single_drive as resolve_target
 from sherpa_cli.config.model import ArmConfig
 from sherpa_cli.errors import CommunicationError, UsageError
+
+if TYPE_CHECKING:
+    from sherpa_cli.bus.sdo import DriveSdo
+    from sherpa_cli.elmo.client import DriveClient
 
 __all__ = ["ArmSession", "DriveRef", "resolve_target"]
 
@@ -39,7 +43,7 @@ class InProcessArm(Protocol):
         """bus name -> ``can.Bus`` keyword arguments of the arm's end of that bus (interface, channel)"""
         ...
 
-    def start(self) -> Any: ...
+    def start(self) -> object: ...
 
     def stop(self) -> None: ...
 
@@ -47,15 +51,15 @@ class InProcessArm(Protocol):
 class ArmSession:
     """Open buses plus a DriveClient per drive; build with :meth:`open`."""
 
-    def __init__(self, cfg: ArmConfig, links: dict[str, BusLink], sim: Any = None,
+    def __init__(self, cfg: ArmConfig, links: dict[str, BusLink], sim: InProcessArm | None = None,
                  unreachable: Mapping[str, CommunicationError] | None = None) -> None:
         self.cfg = cfg
         self.links = links
         # best effort (`sherpa stop`): the buses that could not be opened, with why
         self.unreachable: dict[str, CommunicationError] = dict(unreachable or {})
         self.sim = sim  # the injected in-process arm with --sim, for tests and fault injection
-        self._clients: dict[tuple[str, int], Any] = {}
-        self._sdo: dict[tuple[str, int], Any] = {}
+        self._clients: dict[tuple[str, int], DriveClient] = {}
+        self._sdo: dict[tuple[str, int], DriveSdo] = {}
         # DriveClient keyword arguments that win over the config's (clock, sleep, timeout, retries):
         # `--sim log step` puts the clients' waits on its stepped time; set before the first client
         self.client_overrides: dict[str, Any] = {}
@@ -91,7 +95,7 @@ class ArmSession:
             if sim is not None:
                 sim.stop()
 
-    def client(self, ref: DriveRef):
+    def client(self, ref: DriveRef) -> DriveClient:
         """The DriveClient of a drive (one per drive: it owns the drive's one-request-at-a-time lock)."""
         from sherpa_cli.elmo.client import ClientSettings, DriveClient
         from sherpa_cli.elmo.transport import NetworkTransport
@@ -112,7 +116,7 @@ class ArmSession:
             self._clients[key] = client
         return client
 
-    def sdo(self, ref: DriveRef):
+    def sdo(self, ref: DriveRef) -> DriveSdo:
         """The SDO client of a drive (bus/sdo.py DriveSdo), one per drive for the whole session."""
         from sherpa_cli.bus.sdo import DriveSdo
 

@@ -28,7 +28,7 @@ from sherpa_cli.errors import UsageError
 MAX_NODE = 127
 
 
-class TargetKind(str, Enum):
+class TargetKind(str, Enum):  # noqa: UP042  StrEnum would change str()/format() of a member ('drive', not 'TargetKind.DRIVE')
     DRIVE = "drive"
     JOINT = "joint"
     PAIR = "pair"

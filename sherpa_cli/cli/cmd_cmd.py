@@ -2,11 +2,19 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
+from typing import TYPE_CHECKING
+
 import typer
 
-from sherpa_cli.cli.context import state
+from sherpa_cli.cli.context import AppState, state
 from sherpa_cli.cli.options import ApplyRaw, RawSave
 from sherpa_cli.cli.output import fmt_value
+
+if TYPE_CHECKING:
+    from sherpa_cli.bus.session import ArmSession
+    from sherpa_cli.bus.targets import DriveRef
+    from sherpa_cli.ops.raw import RawResult
 
 
 def cmd(
@@ -42,7 +50,7 @@ def cmd(
     ref = single_drive(cfg, target)
     parse_all(exprs)  # a typo must not reach the bus, not even the NMT start
     saving = check_raw_save(exprs, apply=apply, raw_save=raw_save)  # before anything is sent
-    done: list = []
+    done: list[RawResult] = []
     error: SherpaError | None = None
     warnings: list[str] = []
     with st.session(buses=[ref.bus]) as session:
@@ -62,7 +70,7 @@ def cmd(
         raise error
 
 
-def _ledger_counter(session, ref, warnings: list):
+def _ledger_counter(session: ArmSession, ref: DriveRef, warnings: list[str]) -> Callable[[RawResult], None]:
     """The serial number is read before SV goes out (a save that cannot be counted is not sent)."""
     from sherpa_cli.ops.program import DriveTarget, read_serial
     from sherpa_cli.ops.save_ledger import SaveLedger
@@ -70,7 +78,7 @@ def _ledger_counter(session, ref, warnings: list):
     serial = read_serial(session, DriveTarget(ref.name, ref.bus, ref.node, {}))
     ledger = SaveLedger()
 
-    def counted(result) -> None:
+    def counted(result: RawResult) -> None:
         record = ledger.record(serial, ref.name)
         result.decoded = [f"saved (save {record.count} of this drive by this tool)"]
         if record.warning:
@@ -82,7 +90,7 @@ def _ledger_counter(session, ref, warnings: list):
 REGISTERS = ("SR", "MF", "IP")
 
 
-def _render(st, ref, apply: bool, done: list) -> None:
+def _render(st: AppState, ref: DriveRef, apply: bool, done: list[RawResult]) -> None:
     if st.json_mode:
         st.out.json({"drive": ref.name, "bus": ref.bus, "node": ref.node, "applied": apply,
                      "results": [r.as_json() for r in done]})

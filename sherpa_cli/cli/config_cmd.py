@@ -3,11 +3,15 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 import typer
 
 from sherpa_cli.cli.context import state
 from sherpa_cli.errors import ExitCode
+
+if TYPE_CHECKING:
+    from sherpa_cli.cli.output import Output
 
 app = typer.Typer(no_args_is_help=True, help="Validate and convert arm configurations.")
 
@@ -37,7 +41,7 @@ def check(ctx: typer.Context, file: Path | None = FileArg) -> None:
         raise typer.Exit(ExitCode.PROBLEM)
 
 
-def _render(out, s: dict) -> None:
+def _render(out: Output, s: dict[str, Any]) -> None:
     out.line(f"config {s['source']}: {s['name']} -- valid")
     out.line(f"  {len(s['buses'])} buses, {len(s['drives'])} drives, {len(s['joints'])} joints, "
              f"{len(s['pairs'])} differential pairs")

@@ -2,11 +2,11 @@
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator, Mapping
 from contextlib import ExitStack, contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 import typer
 
@@ -16,6 +16,7 @@ from sherpa_cli.errors import UsageError
 if TYPE_CHECKING:
     from sherpa_cli.bus.session import ArmSession
     from sherpa_cli.config.model import ArmConfig
+    from sherpa_cli.sim.arm import SimArm
 
 
 @dataclass
@@ -42,7 +43,8 @@ class AppState:
 
     @contextmanager
     def session(self, buses: Iterable[str] | None = None,
-                sim_factory: Callable[..., Any] | None = None, best_effort: bool = False) -> Iterator[ArmSession]:
+                sim_factory: Callable[[ArmConfig, Mapping[str, str]], SimArm] | None = None,
+                best_effort: bool = False) -> Iterator[ArmSession]:
         """Open the arm's buses (or the simulated arm with --sim) for one command; ``sim_factory``
         builds the in-process arm instead of the default (SimArm.in_process's ``factory``);
         ``best_effort`` opens what can be opened (ArmSession.open)."""

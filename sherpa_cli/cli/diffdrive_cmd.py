@@ -2,13 +2,16 @@
 
 from __future__ import annotations
 
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import typer
 
-from sherpa_cli.cli.context import state
+from sherpa_cli.cli.context import AppState, state
 from sherpa_cli.cli.options import ApplyMotion
 from sherpa_cli.errors import UsageError
+
+if TYPE_CHECKING:
+    from sherpa_cli.ops.diffdrive import MoveResult
 
 app = typer.Typer(no_args_is_help=True, help="Differential pairs: Σ = m_a + m_b, Δ = m_a - m_b.")
 
@@ -233,7 +236,7 @@ def move(
         raise typer.Exit(1)
 
 
-def _render_move(st, r, plot: str | None) -> None:
+def _render_move(st: AppState, r: MoveResult, plot: str | None) -> None:
     from sherpa_cli.joints.units import counts_to_rad
 
     if st.json_mode:

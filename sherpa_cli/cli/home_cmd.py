@@ -3,12 +3,17 @@
 from __future__ import annotations
 
 import sys
+from typing import TYPE_CHECKING
 
 import typer
 
-from sherpa_cli.cli.context import state
+from sherpa_cli.cli.context import AppState, state
 from sherpa_cli.cli.options import YesMotion
 from sherpa_cli.errors import SafetyError, UsageError
+
+if TYPE_CHECKING:
+    from sherpa_cli.config.model import ArmConfig
+    from sherpa_cli.ops.home import HomePlan, UnitResult, WiringPrompt
 
 KIND_TEXT = {"home_switch": "home switch", "end_switches": "end switches", "pair": "differential pair",
              "abs_encoder": "absolute encoder"}
@@ -72,7 +77,7 @@ def home(
     buses = sorted({cfg.drives[d].bus for u in plan.units for d in u.drives}
                    | {cfg.devices[d].bus for u in plan.units for d in u.devices})
 
-    def done(unit) -> None:
+    def done(unit: UnitResult) -> None:
         if not st.json_mode:
             _render_unit(st, cfg, unit)
 
@@ -92,7 +97,7 @@ def home(
                     f"(UI[{cfg.protocol.calibration_flag}]=1)")
 
 
-def _show_plan(st, cfg, plan) -> None:
+def _show_plan(st: AppState, cfg: ArmConfig, plan: HomePlan) -> None:
     st.out.line("home plan:")
     for u in plan.units:
         st.out.line(f"  {u.name} ({KIND_TEXT[u.kind]}; {', '.join(u.drives)})")
@@ -107,7 +112,7 @@ def _show_plan(st, cfg, plan) -> None:
         st.out.line(f"  skipped {joint}: {why}")
 
 
-def _render_unit(st, cfg, u) -> None:
+def _render_unit(st: AppState, cfg: ArmConfig, u: UnitResult) -> None:
     for line in u.motion_lines:
         st.out.line(f"stop: {line}")
     sets = ", ".join(f"{j} = {v}" for j, v in u.set_to.items())
@@ -118,13 +123,13 @@ def _render_unit(st, cfg, u) -> None:
             f"{d} {v}" + (f" ({u.encoder_via[d]})" if d in u.encoder_via else "") for d, v in u.encoder.items())
     if u.repeat_difference is not None:
         text += f"; repeat difference {u.repeat_difference:+d} counts"
-    if u.measured_travel is not None:
+    if u.measured_travel is not None and u.configured_travel is not None:  # set together
         text += (f"; measured travel {u.measured_travel} counts (configured {u.configured_travel}, "
                  f"{u.measured_travel - u.configured_travel:+d})")
     st.out.line(text)
 
 
-def _check_wiring(st, name: str) -> None:
+def _check_wiring(st: AppState, name: str) -> None:
     from sherpa_cli.ops import home as ops_home
 
     cfg = st.load_config()
@@ -133,7 +138,7 @@ def _check_wiring(st, name: str) -> None:
     with st.session(buses=buses) as session:
         sim = getattr(session, "sim", None) if st.sim else None
 
-        def ask(p) -> None:
+        def ask(p: WiringPrompt) -> None:
             verb = "Press and hold" if p.action == "press" else "Release"
             text = f"{verb} {p.joint} {p.switch} (wired to {', '.join(p.drives)}), then Enter"
             if sim is not None:
@@ -147,7 +152,7 @@ def _check_wiring(st, name: str) -> None:
                 raise SafetyError("no answer on stdin: the wiring check needs a technician at the arm",
                                   hint="run it on a terminal")
 
-        def live(pins) -> None:
+        def live(pins: dict[str, dict[int, bool]]) -> None:
             if st.json_mode:
                 return
             for d, state_ in pins.items():

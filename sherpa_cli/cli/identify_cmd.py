@@ -2,11 +2,17 @@
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+from typing import TYPE_CHECKING
+
 import typer
 
-from sherpa_cli.cli.context import state
+from sherpa_cli.cli.context import AppState, state
 from sherpa_cli.cli.options import Targets
 from sherpa_cli.cli.output import fmt_value
+
+if TYPE_CHECKING:
+    from sherpa_cli.ops.identify import DeviceIdentity, IdentifyReport
 
 
 def identify(
@@ -59,7 +65,7 @@ def identify(
         raise typer.Exit(int(ExitCode.PROBLEM))
 
 
-def _render_devices(st, found) -> None:
+def _render_devices(st: AppState, found: Sequence[DeviceIdentity]) -> None:
     if st.json_mode:
         return
     for d in found:
@@ -75,11 +81,12 @@ def _render_devices(st, found) -> None:
         st.out.table(title, ["field", "value", "meaning"], rows)
 
 
-def _hex(value, width: int = 8) -> str:
-    return "-" if value is None else f"0x{value & 0xFFFFFFFF:0{width}X}"
+def _hex(value: float | None, width: int = 8) -> str:
+    # register values are integers; the state dict is typed int | float as the codec decodes
+    return "-" if value is None else f"0x{int(value) & 0xFFFFFFFF:0{width}X}"
 
 
-def _render(st, report) -> None:
+def _render(st: AppState, report: IdentifyReport) -> None:
     from sherpa_cli.bus.canopen_names import VENDORS
     from sherpa_cli.elmo import faults
 
@@ -95,8 +102,9 @@ def _render(st, report) -> None:
         notes = d.identity_notes
 
         def text(key: str, shown: str, meaning: str = "") -> list[str]:
-            return [key.replace("_", " "), shown if ident.get(key) is not None else "-",
-                    notes.get(key, meaning)]
+            # called only within this iteration: the loop variables are the current drive's
+            return [key.replace("_", " "), shown if ident.get(key) is not None else "-",  # noqa: B023
+                    notes.get(key, meaning)]  # noqa: B023
 
         vendor = ident.get("vendor_id")
         rows = [
@@ -113,7 +121,7 @@ def _render(st, report) -> None:
         mo = s.get("MO")
         rows.append(["MO", fmt_value(mo), "motor on" if mo == 1 else "motor off"])
         um = s.get("UM")
-        rows.append(["UM", fmt_value(um), faults.UNIT_MODES.get(um, "unknown unit mode") if um is not None else ""])
+        rows.append(["UM", fmt_value(um), faults.UNIT_MODES.get(int(um), "unknown unit mode") if um is not None else ""])
         sr = s.get("SR")
         rows.append(["SR", _hex(sr), "; ".join(faults.describe_sr(sr)) if isinstance(sr, int) else ""])
         mf = s.get("MF")

@@ -4,13 +4,19 @@ joint, ops/joint_jog.py for a Σ/Δ joint or one motor of a pair)."""
 from __future__ import annotations
 
 import math
-from typing import Any
+from collections.abc import Mapping, Sequence
+from typing import TYPE_CHECKING
 
 import typer
 
-from sherpa_cli.cli.context import state
+from sherpa_cli.cli.context import AppState, state
 from sherpa_cli.cli.options import ApplyMotion
 from sherpa_cli.errors import SherpaError, UsageError
+
+if TYPE_CHECKING:
+    from sherpa_cli.config.model import ArmConfig
+    from sherpa_cli.ops import jog as ops_jog
+    from sherpa_cli.ops import joint_jog
 
 
 def parse_number(text: str | None, option: str) -> float | None:
@@ -111,7 +117,7 @@ def jog(
     settings = MotionSettings.from_config(cfg, [target.ref.bus])
     name = target.joint.name if target.joint is not None else target.ref.name
 
-    def progress(p) -> None:
+    def progress(p: ops_jog.JogProgress) -> None:
         rad = f"{p.rad:+.4f} rad " if p.rad is not None else ""
         st.out.progress(f"{name}: {rad}({p.counts} counts)  {p.elapsed:5.2f} s")
 
@@ -128,8 +134,8 @@ def jog(
         raise typer.Exit(1)
 
 
-def _live(st, joints, interactive: bool, joystick: bool, device, list_joysticks: bool, apply: bool,
-          uncalibrated: bool, values) -> bool:
+def _live(st: AppState, joints: list[str], interactive: bool, joystick: bool, device: str | None,
+          list_joysticks: bool, apply: bool, uncalibrated: bool, values: Sequence[str | None]) -> bool:
     """--interactive, --joystick, --list-joysticks (cli/jog_live_cmd.py); False for a plain jog."""
     chosen = [name for name, on in (("--interactive", interactive), ("--joystick", joystick),
                                     ("--list-joysticks", list_joysticks)) if on]
@@ -157,15 +163,20 @@ def _live(st, joints, interactive: bool, joystick: bool, device, list_joysticks:
     return True
 
 
-def _dry_run(st, target, req, cfg) -> None:
+def _dry_run(st: AppState, target: ops_jog.JogTarget, req: ops_jog.JogRequest, cfg: ArmConfig) -> None:
     from sherpa_cli.joints.units import rad_per_s_to_counts_per_s, rad_to_counts
 
     ref = target.ref
     cpr = target.cpr
     if req.mode == "position":
-        plan = (f"UM=5, PA={rad_to_counts(req.to, cpr)}, BG" if req.to is not None
-                else f"UM=5, PA=PX{rad_to_counts(req.by, cpr):+d}, BG")
+        assert cpr is not None  # check_request refused position and velocity jogs without a cpr
+        if req.to is not None:
+            plan = f"UM=5, PA={rad_to_counts(req.to, cpr)}, BG"
+        else:
+            assert req.by is not None  # check_request: exactly one of --to and --by
+            plan = f"UM=5, PA=PX{rad_to_counts(req.by, cpr):+d}, BG"
     elif req.mode == "velocity":
+        assert cpr is not None and req.velocity is not None  # check_request
         until = f"for {req.duration:g} s" if req.duration is not None else "until Ctrl-C"
         plan = f"UM={cfg.motion.velocity_unit_mode}, JV={rad_per_s_to_counts_per_s(req.velocity, cpr)}, BG {until}"
     else:
@@ -178,7 +189,7 @@ def _dry_run(st, target, req, cfg) -> None:
     st.out.line("nothing sent; add --apply to move")
 
 
-def _render(st, name: str, result) -> None:
+def _render(st: AppState, name: str, result: ops_jog.JogResult) -> None:
     if st.json_mode:
         st.out.json(result.as_json())
         return
@@ -226,14 +237,15 @@ def _current(text: str | None, option: str) -> float | None:
     return None if text is None else units.parse_current(text, what=option)
 
 
-def _is_pair_axis(cfg, name: str) -> bool:
+def _is_pair_axis(cfg: ArmConfig, name: str) -> bool:
     """A Σ/Δ joint, a pair, or one motor of a pair: jogged through ops/joint_jog.py."""
     from sherpa_cli.bus import targets
 
     return targets.resolve_one(cfg, name).pair is not None
 
 
-def _jog_pair(st, cfg, name: str, mode: str, to, by, velocity, torque, duration, uncalibrated: bool,
+def _jog_pair(st: AppState, cfg: ArmConfig, name: str, mode: str, to: str | None, by: str | None,
+              velocity: str | None, torque: str | None, duration: float | None, uncalibrated: bool,
               apply: bool) -> None:
     from sherpa_cli.ops import joint_jog
 
@@ -250,7 +262,7 @@ def _jog_pair(st, cfg, name: str, mode: str, to, by, velocity, torque, duration,
         return
     buses = sorted({cfg.drives[d].bus for d in axis.sensed})
 
-    def progress(joints) -> None:  # a live line on a terminal only (Output.progress)
+    def progress(joints: Mapping[str, int]) -> None:  # a live line on a terminal only (Output.progress)
         st.out.progress("  ".join(f"{j}: {p} counts" for j, p in joints.items()))
 
     with st.session(buses=buses) as session:
@@ -266,12 +278,14 @@ def _jog_pair(st, cfg, name: str, mode: str, to, by, velocity, torque, duration,
         raise typer.Exit(1)
 
 
-def _axis_label(axis) -> str:
+def _axis_label(axis: joint_jog.Axis) -> str:
+    pair = axis.pair
+    assert pair is not None  # resolve_axis: every axis is a joint or a motor of a pair
     if axis.kind == "motor":
-        return f"{axis.name} (one motor of pair {axis.pair.name}; moves {axis.pair.sigma} and {axis.pair.delta})"
+        return f"{axis.name} (one motor of pair {pair.name}; moves {pair.sigma} and {pair.delta})"
     sign = "Σ" if axis.kind == "sigma" else "Δ"
-    other = axis.pair.delta if axis.kind == "sigma" else axis.pair.sigma
-    return f"{axis.name} ({sign} of pair {axis.pair.name}: {axis.pair.drive_a}, {axis.pair.drive_b}; {other} holds)"
+    other = pair.delta if axis.kind == "sigma" else pair.sigma
+    return f"{axis.name} ({sign} of pair {pair.name}: {pair.drive_a}, {pair.drive_b}; {other} holds)"
 
 
 def _pos(counts: int, cpr: int) -> str:
@@ -280,7 +294,8 @@ def _pos(counts: int, cpr: int) -> str:
     return f"{counts_to_rad(counts, cpr):+.4f} rad ({counts} counts)"
 
 
-def _pair_dry_run(st, axis, req, plan) -> None:
+def _pair_dry_run(st: AppState, axis: joint_jog.Axis, req: joint_jog.JogRequest,
+                  plan: joint_jog.JogPlan | None) -> None:
     a_b = ", ".join(axis.drives)
     if req.mode == "position":
         if plan is not None and axis.kind in ("sigma", "delta"):
@@ -293,9 +308,11 @@ def _pair_dry_run(st, axis, req, plan) -> None:
                    f"(PA from the present positions)"
         cmds = "UM=5, SP, PA, BG"
     elif req.mode == "velocity":
+        assert plan is not None  # check_offline plans every velocity and torque jog
         what = f"{axis.name} at {plan.speed} counts/s for {req.duration:g} s"
         cmds = ", ".join(f"{d} JV={v}" for d, v in plan.motor_speeds.items()) + ", BG"
     else:
+        assert plan is not None  # check_offline plans every velocity and torque jog
         what = f"{axis.name} with {plan.current:g} A for {req.duration:g} s"
         cmds = "UM=1, " + ", ".join(f"{d} TC={v:g}" for d, v in plan.motor_currents.items())
     if st.json_mode:
@@ -307,7 +324,7 @@ def _pair_dry_run(st, axis, req, plan) -> None:
     st.out.line("nothing sent; add --apply to move")
 
 
-def _render_pair(st, r) -> None:
+def _render_pair(st: AppState, r: joint_jog.JogResult) -> None:
     if st.json_mode:
         st.out.json(r.as_dict())
         return
@@ -338,7 +355,7 @@ def _render_pair(st, r) -> None:
     st.out.line(text)
 
 
-def _show_stop_report(st: Any, exc: BaseException) -> None:
+def _show_stop_report(st: AppState, exc: BaseException) -> None:
     """How the guard stopped the motor, on an error path too: text lines, or with --json an error
     object on stdout (``error``, ``stop``); the error message itself still goes to stderr."""
     report = getattr(exc, "motion_report", None)

@@ -6,14 +6,20 @@ from __future__ import annotations
 
 import sys
 from collections.abc import Sequence
-from typing import Any
+from typing import TYPE_CHECKING
 
 import typer
 
 from sherpa_cli.errors import UsageError
 
+if TYPE_CHECKING:
+    from sherpa_cli.cli.context import AppState
+    from sherpa_cli.config.model import ArmConfig
+    from sherpa_cli.motion.report import GuardReport
+    from sherpa_cli.ops.live_jog import LiveAxis
 
-def list_joysticks(st: Any) -> None:
+
+def list_joysticks(st: AppState) -> None:
     from sherpa_cli.ops import joystick
 
     found = joystick.list_joysticks()
@@ -35,16 +41,16 @@ def have_terminal() -> bool:
     return sys.stdin.isatty() and sys.stdout.isatty()
 
 
-def _buses(cfg: Any, axes: Sequence[Any]) -> list[str]:
+def _buses(cfg: ArmConfig, axes: Sequence[LiveAxis]) -> list[str]:
     return sorted({cfg.drives[d].bus for a in axes for d in a.drives})
 
 
-def _stop_lines(st: Any, report: Any) -> None:
+def _stop_lines(st: AppState, report: GuardReport) -> None:
     for line in report.lines():
         st.out.line(f"stop: {line}")
 
 
-def interactive(st: Any, names: Sequence[str], *, apply: bool, uncalibrated: bool) -> None:
+def interactive(st: AppState, names: Sequence[str], *, apply: bool, uncalibrated: bool) -> None:
     from sherpa_cli.ops.live_jog import LiveJog, resolve_axes
 
     cfg = st.load_config()
@@ -86,7 +92,7 @@ def interactive(st: Any, names: Sequence[str], *, apply: bool, uncalibrated: boo
         st.out.line(text)
 
 
-def joystick(st: Any, device: str | None, *, apply: bool) -> None:
+def joystick(st: AppState, device: str | None, *, apply: bool) -> None:
     from sherpa_cli.ops import joystick as joy
     from sherpa_cli.ops.live_jog import LiveJog, resolve_axes
 

@@ -10,17 +10,21 @@ from __future__ import annotations
 
 import threading
 from collections.abc import Callable, Sequence
-from typing import Any
+from typing import TYPE_CHECKING, ClassVar
 
 from rich.text import Text
 from textual.app import App, ComposeResult
-from textual.binding import Binding
+from textual.binding import Binding, BindingType
 from textual.containers import Vertical
 from textual.screen import ModalScreen
 from textual.widgets import Footer, Static
 
 from sherpa_cli.errors import SherpaError
 from sherpa_cli.joints.units import counts_to_rad
+
+if TYPE_CHECKING:
+    from sherpa_cli.ops.home import HomePlan, HomeReport
+    from sherpa_cli.ops.live_jog import LiveJog
 
 # per mode: the increments a key press can use (counts, counts/s, A)
 INCREMENTS: dict[str, tuple[float, ...]] = {
@@ -50,7 +54,7 @@ KIND_TEXT = {"home_switch": "home switch", "end_switches": "end switches", "pair
              "abs_encoder": "absolute encoder"}
 
 
-def plan_lines(plan: Any) -> list[str]:
+def plan_lines(plan: HomePlan) -> list[str]:
     """The home plan as `sherpa home` shows it: what moves, which way, how fast, how far at most."""
     out = []
     for u in plan.units:
@@ -64,7 +68,7 @@ def plan_lines(plan: Any) -> list[str]:
     return out
 
 
-def report_line(report: Any) -> str:
+def report_line(report: HomeReport) -> str:
     """One line per homed unit, as `sherpa home` reports it."""
     parts = []
     for u in report.units:
@@ -84,7 +88,7 @@ class HomeConfirm(ModalScreen[bool]):
     HomeConfirm { align: center middle; }
     #plan { width: auto; max-width: 100%; height: auto; padding: 1 2; border: thick $warning; background: $surface; }
     """
-    BINDINGS = [
+    BINDINGS: ClassVar[list[BindingType]] = [
         Binding("enter,y", "answer(True)", "home now"),
         Binding("escape,n", "answer(False)", "cancel"),
     ]
@@ -113,7 +117,7 @@ class JogView(App):
     .joint { height: auto; padding: 0 1; }
     #status { dock: bottom; height: auto; padding: 0 1; background: $boost; }
     """
-    BINDINGS = [
+    BINDINGS: ClassVar[list[BindingType]] = [
         Binding("up", "select(-1)", "joint up"),
         Binding("down", "select(1)", "joint down"),
         Binding("left", "step(-1)", "step -"),
@@ -129,13 +133,13 @@ class JogView(App):
         Binding("ctrl+c", "quit", "quit", show=False, priority=True),
     ]
 
-    def __init__(self, live: Any, *, calibrate: bool = True, tick_period: float = 0.1) -> None:
+    def __init__(self, live: LiveJog, *, calibrate: bool = True, tick_period: float = 0.1) -> None:
         super().__init__()
         self.live = live
         self.calibrate = calibrate
         self.homing: threading.Thread | None = None  # the calibrate key's homing, while it runs
         self.homing_joint = ""
-        self.homing_result: Any = None  # a HomeReport or the exception homing raised
+        self.homing_result: HomeReport | BaseException | None = None  # a HomeReport or the exception homing raised
         self.abort_homing = threading.Event()
         self.quit_after_homing = False
         self.home_log: list[str] = []  # what homing did: the release's stops, the report line
@@ -217,7 +221,7 @@ class JogView(App):
                 return
         try:
             self.live.tick()
-        except BaseException as exc:  # the guard failed (dead-man, signal): leave, the guard stops all
+        except BaseException as exc:  # noqa: BLE001  the guard failed (dead-man, signal): leave, the guard stops all
             self.error = exc
             self.exit()
             return
@@ -226,7 +230,7 @@ class JogView(App):
                 self.setpoint[name] = 0.0
         self.render_state()
 
-    def _do(self, fn: Callable[[], Any]) -> None:
+    def _do(self, fn: Callable[[], object]) -> None:
         if self.homing is not None:
             self.message = f"homing {self.homing_joint} runs: wait for it, or Space to abort it"
             self.render_state()
@@ -236,7 +240,7 @@ class JogView(App):
             self.message = out if isinstance(out, str) else ""
         except SherpaError as exc:
             self.message = f"error: {exc}"
-        except BaseException as exc:
+        except BaseException as exc:  # noqa: BLE001  re-raised by the caller of run() (app.error)
             self.error = exc
             self.exit()
             return
@@ -260,7 +264,12 @@ class JogView(App):
         modes = list(INCREMENTS)
         nxt = modes[(modes.index(self.live.state[name].mode) + 1) % len(modes)]
         self.setpoint[name] = 0.0
-        self._do(lambda: self.live.set_mode(name, nxt) or f"{name}: {nxt} mode")
+
+        def switch() -> str:
+            self.live.set_mode(name, nxt)
+            return f"{name}: {nxt} mode"
+
+        self._do(switch)
 
     def action_step(self, sign: int) -> None:
         name = self.current
@@ -291,7 +300,12 @@ class JogView(App):
     def action_stop(self) -> None:
         name = self.current
         self.setpoint[name] = 0.0
-        self._do(lambda: self.live.stop(name) or f"{name}: stopped")
+
+        def stop() -> str:
+            self.live.stop(name)
+            return f"{name}: stopped"
+
+        self._do(stop)
 
     def action_stop_all(self) -> None:
         if self.homing is not None:
@@ -301,7 +315,12 @@ class JogView(App):
             return
         for name in self.names:
             self.setpoint[name] = 0.0
-        self._do(lambda: self.live.stop_all() or "STOP: every joint stopped")
+
+        def stop_all() -> str:
+            self.live.stop_all()
+            return "STOP: every joint stopped"
+
+        self._do(stop_all)
 
     def action_calibrate(self) -> None:
         if self.homing is not None:
@@ -341,7 +360,7 @@ class JogView(App):
             try:
                 self.homing_result = self.live.calibrate(name, abort=self.abort_homing.is_set,
                                                          on_event=self.home_log.append)
-            except BaseException as exc:  # handed to the main thread in tick
+            except BaseException as exc:  # noqa: BLE001  handed to the main thread in tick
                 self.homing_result = exc
 
         self.homing = threading.Thread(target=work, name="sherpa-jog-home", daemon=True)
@@ -360,6 +379,7 @@ class JogView(App):
             self.error = result
             return
         else:
+            assert result is not None  # work() set it before its thread ended
             self.message = f"calibrate: {report_line(result)}"
         self.home_log.append(self.message)
 

@@ -2,13 +2,16 @@
 
 from __future__ import annotations
 
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import typer
 
-from sherpa_cli.cli.context import state
+from sherpa_cli.cli.context import AppState, state
 from sherpa_cli.cli.options import Targets
 from sherpa_cli.cli.output import fmt_value
+
+if TYPE_CHECKING:
+    from sherpa_cli.config.model import ArmConfig, ILCodes
 
 app = typer.Typer(no_args_is_help=True, help="Drive limits derived from the config (seed Appendix C).")
 
@@ -30,7 +33,7 @@ MEANING = {
 }
 
 
-def _il_meaning(value: int, il_codes) -> str:
+def _il_meaning(value: int, il_codes: ILCodes) -> str:
     if value == il_codes.stop:
         return "input logic: stop switch"
     if value == il_codes.home:
@@ -82,7 +85,7 @@ def show(ctx: typer.Context,
         st.out.line(f"note: {note}")
 
 
-def _show_software(st, cfg, names: list[str]) -> None:
+def _show_software(st: AppState, cfg: ArmConfig, names: list[str]) -> None:
     """Tables C.1/C.2: the ROS parameters per plain joint and per differential pair."""
     from sherpa_cli.config.software import DESCRIPTIONS, software_params
     from sherpa_cli.errors import UsageError
@@ -109,7 +112,7 @@ def _show_software(st, cfg, names: list[str]) -> None:
             st.out.warn(w)
 
 
-def drive_moves(cfg, drive: str) -> str:
+def drive_moves(cfg: ArmConfig, drive: str) -> str:
     """What a drive moves, for a table or plan title: its joint, or its pair and motor."""
     joint = cfg.joint_of_drive(drive)
     if joint is not None:

@@ -3,19 +3,31 @@
 from __future__ import annotations
 
 import threading
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
+from types import FrameType
+from typing import TYPE_CHECKING, Any, NoReturn
 
 import typer
 
-from sherpa_cli.cli.context import state
+from sherpa_cli.cli.context import AppState, state
 from sherpa_cli.cli.options import ApplyMotion, Targets
 from sherpa_cli.errors import UsageError
+
+if TYPE_CHECKING:
+    from sherpa_cli.config.model import ArmConfig
+    from sherpa_cli.log.capture import CaptureResult
+    from sherpa_cli.log.recording import Recording
+    from sherpa_cli.log.step_metrics import StepMetrics
+    from sherpa_cli.ops.jog import JogTarget
+    from sherpa_cli.sim.arm import SimArm
+    from sherpa_cli.sim.stepped import SteppedTime
 
 app = typer.Typer(help="Record, capture, decode and plot CAN traffic and joint motion (docs/log.md).",
                   no_args_is_help=True)
 
 
-def _names(st) -> tuple[list[str], dict[tuple[str, int], str]]:
+def _names(st: AppState) -> tuple[list[str], dict[tuple[str, int], str]]:
     """Bus names in config order and (bus, node) -> drive name, when a config is there to say."""
     if not st.config_given and not st.config_path.exists():
         return [], {}
@@ -144,12 +156,12 @@ def capture(
     _render_capture(st, result)
 
 
-def _render_capture(st, result) -> None:
+def _render_capture(st: AppState, result: CaptureResult) -> None:
     if st.json_mode:
         st.out.json({"file": str(result.path), "seconds": round(result.seconds, 3), "frames": result.frames,
                      "lost": result.lost,
                      "buses": [{"bus": c.bus, "frames": c.frames, "error_frames": c.errors, "lost": c.overruns,
-                                "load": None if result.load(c.bus) is None else round(result.load(c.bus), 4)}
+                                "load": None if (load := result.load(c.bus)) is None else round(load, 4)}
                                for c in result.counts.values()]})
         return
     rows = []
@@ -208,7 +220,8 @@ def plot(
     render_metrics(st, metrics, extra={"png": str(output)})
 
 
-def _metrics(rec, joints, signal, step_at, target):
+def _metrics(rec: Recording, joints: Sequence[str], signal: str, step_at: float,
+             target: float | None) -> dict[tuple[str, str], StepMetrics]:
     from sherpa_cli.log.step_metrics import step_metrics
 
     out = {}
@@ -223,11 +236,12 @@ def _metrics(rec, joints, signal, step_at, target):
     return out
 
 
-def _ms(seconds) -> str:
+def _ms(seconds: float | None) -> str:
     return "-" if seconds is None else f"{1000 * seconds:.1f} ms"
 
 
-def render_metrics(st, metrics, extra=None) -> None:
+def render_metrics(st: AppState, metrics: Mapping[tuple[str, str], StepMetrics],
+                   extra: Mapping[str, Any] | None = None) -> None:
     from sherpa_cli.log.recording import SIGNALS, UNITS
 
     if st.json_mode:
@@ -342,10 +356,10 @@ def _wait_for(duration: float) -> bool:
     """Sleep while sampling; True when Ctrl-C, SIGTERM or SIGHUP ended it early."""
     import signal
 
-    def stop(signum, frame):
+    def stop(signum: int, frame: FrameType | None) -> NoReturn:
         raise _Stopped(signal.Signals(signum).name)
 
-    old = {}
+    old: dict[signal.Signals, Any] = {}
     if threading.current_thread() is threading.main_thread():
         for sig in (signal.SIGTERM, getattr(signal, "SIGHUP", None)):
             if sig is not None:
@@ -360,7 +374,7 @@ def _wait_for(duration: float) -> bool:
     return False
 
 
-def _render_record(st, output, counts, expected, rows) -> None:
+def _render_record(st: AppState, output: Path, counts: Mapping[str, int], expected: int | None, rows: int) -> None:
     if st.json_mode:
         st.out.json({"file": str(output), "rows": rows, "expected": expected,
                      "drives": [{"drive": n, "samples": c} for n, c in counts.items()]})
@@ -371,7 +385,7 @@ def _render_record(st, output, counts, expected, rows) -> None:
     st.out.line(f"wrote {output} ({rows} rows)")
 
 
-def _stepped_sim(st):
+def _stepped_sim(st: AppState) -> tuple[SteppedTime | None, Callable[[ArmConfig, Mapping[str, str]], SimArm] | None]:
     """With --sim: the in-process arm on stepped time (sim/stepped.py), so a step's figures are the
     simulated drive's and the same on every run and machine; else (None, None)."""
     if not st.sim:
@@ -453,13 +467,17 @@ def step(
     stepped, sim_factory = _stepped_sim(st)
     with st.session(buses=[target.ref.bus], sim_factory=sim_factory) as session:
         timebase = None
-        if stepped is not None and session.sim is not None and session.sim.clock is stepped.clock:
-            arm = session.sim
-            unheard = lambda: (sum(d.unheard for d in arm.drives.values()),  # noqa: E731
-                               sum(d.unheard_s for d in arm.drives.values()))
-            session.client_overrides.update(stepped.client_overrides(cfg.protocol.reply_timeout, cfg.protocol.retries,
-                                                                     unheard))
-            timebase = stepped
+        arm = session.sim
+        if stepped is not None and arm is not None:
+            from sherpa_cli.sim.arm import SimArm  # only with --sim: `arm` is the SimArm _stepped_sim built
+
+            assert isinstance(arm, SimArm)
+            if arm.clock is stepped.clock:
+                unheard = lambda: (sum(d.unheard for d in arm.drives.values()),  # noqa: E731
+                                   sum(d.unheard_s for d in arm.drives.values()))
+                session.client_overrides.update(stepped.client_overrides(cfg.protocol.reply_timeout,
+                                                                         cfg.protocol.retries, unheard))
+                timebase = stepped
         result = run_step(session, target, mode, value, duration=duration, rate=rate, settings=settings,
                           uncalibrated=uncalibrated, timebase=timebase)
     write_csv(result.recording, output / "recording.csv")
@@ -492,11 +510,12 @@ def step(
         raise typer.Exit(1)
 
 
-def _step_dry_run(st, cfg, target, mode: str, value: float, duration: float, rate: float) -> None:
+def _step_dry_run(st: AppState, cfg: ArmConfig, target: JogTarget, mode: str, value: float, duration: float, rate: float) -> None:
     """Without --apply: what the step would send; nothing is sent, no file is written."""
     from sherpa_cli.joints.units import rad_per_s_to_counts_per_s, rad_to_counts
 
     ref, cpr = target.ref, target.cpr
+    assert cpr is not None  # step_request refused a target without a joint
     if mode == "position":
         plan = f"UM=5, PA=PX{rad_to_counts(value, cpr):+d}, BG; until settled, at most {duration:g} s"
     elif mode == "velocity":

@@ -2,15 +2,24 @@
 
 from __future__ import annotations
 
+import contextlib
 import sys
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
+from typing import TYPE_CHECKING
 
 import typer
 
-from sherpa_cli.cli.context import state
+from sherpa_cli.cli.context import AppState, state
 from sherpa_cli.cli.options import ApplyHeartbeat, Targets
 from sherpa_cli.errors import ExitCode, UsageError
+
+if TYPE_CHECKING:
+    from rich.console import Group
+    from rich.table import Table
+
+    from sherpa_cli.config.model import ArmConfig
+    from sherpa_cli.ops.monitor import DriveStatus, Monitor
 
 # Seconds between polls in the live view; the CLI's sleep goes through here so tests can stop it.
 sleep: Callable[[float], None] = time.sleep
@@ -73,13 +82,12 @@ def monitor(
             if any(not r.answering or r.mf for r in rows):
                 raise typer.Exit(int(ExitCode.PROBLEM))  # a silent drive or a latched motor failure
             return
-        try:
+        # Ctrl-C is how a live view ends: exit 0 after the monitor restores 0x1017
+        with contextlib.suppress(KeyboardInterrupt):
             _live(st, mon, interval)
-        except KeyboardInterrupt:
-            pass  # Ctrl-C is how a live view ends: exit 0 after the monitor restores 0x1017
 
 
-def _live(st, mon, interval: float) -> None:
+def _live(st: AppState, mon: Monitor, interval: float) -> None:
     if not sys.stdout.isatty():
         # a log, not a screen: one full snapshot per poll
         while True:
@@ -98,21 +106,21 @@ def _live(st, mon, interval: float) -> None:
             live.update(_screen(*_renderables(mon.snapshot(), mon.cfg, ages=True)), refresh=True)
 
 
-def _render_once(st, rows) -> None:
+def _render_once(st: AppState, rows: Sequence[DriveStatus]) -> None:
     if st.json_mode:
         st.out.json({"drives": [r.as_json(ages=False) for r in rows]})
         return
     _print(st, *_renderables(rows, st.load_config(), ages=False))
 
 
-def _print(st, tables: list, notes: list[str]) -> None:
+def _print(st: AppState, tables: list[Table], notes: list[str]) -> None:
     for table in tables:
         st.out.result(table)
     for note in notes:
         st.out.line(note)
 
 
-def _screen(tables: list, notes: list[str]):
+def _screen(tables: list[Table], notes: list[str]) -> Group:
     from rich.console import Group
     from rich.text import Text
 
@@ -123,7 +131,7 @@ def _age(seconds: float | None) -> str:
     return "-" if seconds is None else f"{seconds:.1f} s ago"
 
 
-def _heartbeat(r, ages: bool) -> str:
+def _heartbeat(r: DriveStatus, ages: bool) -> str:
     if r.heartbeat_ms is None:
         return "-"  # 0x1017 could not be read
     if not r.heartbeat_ms:
@@ -133,7 +141,7 @@ def _heartbeat(r, ages: bool) -> str:
     return _age(r.heartbeat_age) if ages else f"{r.heartbeat_ms} ms"
 
 
-def _position(r, cfg) -> str:
+def _position(r: DriveStatus, cfg: ArmConfig) -> str:
     """Radians of the drive's joint; a pair's drive a shows the Σ joint, drive b the Δ joint."""
     if r.position_rad is None:
         return "-"
@@ -142,11 +150,11 @@ def _position(r, cfg) -> str:
     return f"{mark}{r.position_rad + 0.0:.4f}"  # + 0.0: no "-0.0000"
 
 
-def _renderables(rows, cfg, *, ages: bool) -> tuple[list, list[str]]:
+def _renderables(rows: Sequence[DriveStatus], cfg: ArmConfig, *, ages: bool) -> tuple[list[Table], list[str]]:
     """One table per bus, and one note per thing that needs a look (faults, EMCY, silence)."""
     from sherpa_cli.cli.output import make_table
 
-    out: list = []
+    out: list[Table] = []
     for bus in dict.fromkeys(r.bus for r in rows):
         table_rows = []
         for r in (r for r in rows if r.bus == bus):

@@ -11,9 +11,13 @@ import os
 import sys
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from sherpa_cli.errors import SafetyError, UsageError
+
+if TYPE_CHECKING:
+    from rich.console import Console
+    from rich.table import Table
 
 
 def _color_allowed(no_color_flag: bool) -> bool:
@@ -26,14 +30,14 @@ class Output:
     json_mode: bool = False
     color: bool = True
     assume_yes: bool = False
-    _out: Any = field(default=None, repr=False)
-    _err: Any = field(default=None, repr=False)
+    _out: Console | None = field(default=None, repr=False)
+    _err: Console | None = field(default=None, repr=False)
 
     @classmethod
     def create(cls, *, json_mode: bool = False, no_color: bool = False) -> Output:
         return cls(json_mode=json_mode, color=_color_allowed(no_color))
 
-    def _console(self, stderr: bool):
+    def _console(self, stderr: bool) -> Console:
         from rich.console import Console
 
         attr = "_err" if stderr else "_out"
@@ -51,7 +55,7 @@ class Output:
         return console
 
     @property
-    def console(self):
+    def console(self) -> Console:
         return self._console(stderr=False)
 
     # results (stdout)
@@ -118,7 +122,7 @@ class Output:
 
 
 def make_table(title: str | None, columns: Sequence[str], rows: Iterable[Sequence[Any]],
-               *, right: Iterable[int] = (), drop: Sequence[int] | None = None, width: int | None = None):
+               *, right: Iterable[int] = (), drop: Sequence[int] | None = None, width: int | None = None) -> Table:
     """A table that stays readable at ``width`` columns (default: the terminal's).
 
     No word is broken mid-name: cells wrap only between words, and when even that does not fit,
@@ -169,7 +173,7 @@ def fit_columns(columns: Sequence[str], rows: Sequence[Sequence[str]], width: in
     return keep
 
 
-def fmt_value(value: Any) -> str:
+def fmt_value(value: object) -> str:
     """Parameters as a technician types them (the ops layer words its messages the same way)."""
     from sherpa_cli.elmo.commands import format_value
 

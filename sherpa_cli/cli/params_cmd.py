@@ -7,11 +7,15 @@ module can add one with ``params_cmd.app.command("restore")(restore)``.
 from __future__ import annotations
 
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import typer
 
-from sherpa_cli.cli.context import state
+from sherpa_cli.cli.context import AppState, state
 from sherpa_cli.cli.options import Targets
+
+if TYPE_CHECKING:
+    from sherpa_cli.ops.params_diff import DiffReport
 
 app = typer.Typer(no_args_is_help=True, help="Drive parameter sets: compare dumps, the drives and the config.")
 
@@ -123,14 +127,14 @@ def diff(
         raise typer.Exit(int(ExitCode.PROBLEM))
 
 
-def _fmt(value, note: str | None) -> str:
+def _fmt(value: float | None, note: str | None) -> str:
     from sherpa_cli.elmo.commands import format_value
 
     # 7 digits: float32 noise (2.2999999523) reads as 2.3, a real float32 step still shows
     return note if note is not None else format_value(value, digits=7)
 
 
-def _render(st, report, only_differences: bool) -> None:
+def _render(st: AppState, report: DiffReport, only_differences: bool) -> None:
     a, b = report.a.label, report.b.label
     # labels in a legend, not in the column headers: a long file path must not widen every table
     st.out.line(f"A: {a}")

@@ -4,14 +4,18 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import typer
 
-from sherpa_cli.cli.context import state
+from sherpa_cli.cli.context import AppState, state
 from sherpa_cli.cli.limits_cmd import drive_moves
 from sherpa_cli.cli.options import Apply, MotorOff, Save, Targets, VerifyFlash, Yes
 from sherpa_cli.cli.output import fmt_value
+
+if TYPE_CHECKING:
+    from sherpa_cli.errors import Location
+    from sherpa_cli.ops.program import ApplyResult, DriveOutcome, DrivePlan, DriveTarget, FlashProof
 
 
 def program_limits(
@@ -112,9 +116,9 @@ def _check_options(apply: bool, save: bool) -> None:
 
 # --------------------------------------------------------------------------- shared front end
 
-def run_program(st: Any, command: str, targets: Sequence[Any], warnings: Sequence[str], *, apply: bool,
-                save: bool, yes: bool, motor_off: bool, need_serial: bool, allow_disabled: bool,
-                title: Callable[[str], str], where: Callable[[str], Any] | None = None,
+def run_program(st: AppState, command: str, targets: Sequence[DriveTarget], warnings: Sequence[str], *,
+                apply: bool, save: bool, yes: bool, motor_off: bool, need_serial: bool, allow_disabled: bool,
+                title: Callable[[str], str], where: Callable[[str], Location | None] | None = None,
                 source: Path | None = None, verify_flash: bool = False, note: str | None = None) -> None:
     """Check, plan, show; with ``apply`` write/verify/save and report. Raises the error to exit with.
 
@@ -134,8 +138,8 @@ def run_program(st: Any, command: str, targets: Sequence[Any], warnings: Sequenc
     st.out.assume_yes = st.out.assume_yes or yes
     buses = sorted({t.bus for t in targets})
     result = None
-    proofs: list = []
-    after: list = []
+    proofs: list[FlashProof] = []
+    after: list[FlashProof] = []
     with st.session(buses=buses) as session:
         # apply needs the serial too: the ledger remembers drives written but not saved
         plans = program.read_plans(session, targets, need_serial=need_serial or apply)
@@ -188,7 +192,7 @@ def run_program(st: Any, command: str, targets: Sequence[Any], warnings: Sequenc
                 raise
         result = program.apply_plans(session, plans, save=save, ledger=ledger)
         if verify_flash and save and not result.interrupted:
-            saved = [p for p, o in zip(plans, result.outcomes) if o.status == program.SAVED]
+            saved = [p for p, o in zip(plans, result.outcomes, strict=True) if o.status == program.SAVED]
             if saved:
                 after = program.prove_flash(session, saved, boot_timeout=session.cfg.protocol.boot_timeout)
     _render(st, command, plans, result, apply=True, save=save, source=source, verify_flash=verify_flash,
@@ -207,7 +211,7 @@ def run_program(st: Any, command: str, targets: Sequence[Any], warnings: Sequenc
             raise problem
 
 
-def _reset_note(plans: Sequence[Any], apply: bool) -> str:
+def _reset_note(plans: Sequence[DrivePlan], apply: bool) -> str:
     import textwrap
 
     names = ", ".join(p.drive for p in plans)
@@ -220,7 +224,7 @@ def _reset_note(plans: Sequence[Any], apply: bool) -> str:
     return textwrap.fill(text, width=80, subsequent_indent="  ", break_on_hyphens=False, break_long_words=False)
 
 
-def _confirm_save(st: Any, drives: Sequence[str], *, proof: bool = False) -> None:
+def _confirm_save(st: AppState, drives: Sequence[str], *, proof: bool = False) -> None:
     """Ask before anything is written; refuse at once when nobody can answer (no tty, --json)."""
     from sherpa_cli.errors import SafetyError
 
@@ -239,9 +243,9 @@ def _confirm_save(st: Any, drives: Sequence[str], *, proof: bool = False) -> Non
 
 # --------------------------------------------------------------------------- rendering
 
-def _render(st: Any, command: str, plans: Sequence[Any], result: Any, *, apply: bool, save: bool,
-            source: Path | None, verify_flash: bool = False, proofs: Sequence[Any] = (),
-            after: Sequence[Any] = ()) -> None:
+def _render(st: AppState, command: str, plans: Sequence[DrivePlan], result: ApplyResult | None, *, apply: bool,
+            save: bool, source: Path | None, verify_flash: bool = False, proofs: Sequence[FlashProof] = (),
+            after: Sequence[FlashProof] = ()) -> None:
     """JSON: plan and outcome in one document. Text: what follows the plan (already shown)."""
     outcomes = {o.drive: o for o in result.outcomes} if result is not None else {}
     proof_of = {p.drive: p for p in proofs}
@@ -263,16 +267,16 @@ def _render(st: Any, command: str, plans: Sequence[Any], result: Any, *, apply: 
         return
     if proofs:
         st.out.line("flash proof (NMT reset node, every target read back):")
-        for p in proofs:
-            st.out.line("  " + _proof_line(p))
+        for proof in proofs:
+            st.out.line("  " + _proof_line(proof))
     if result is not None:
         st.out.line("result:")
         for p in plans:
             st.out.line("  " + _outcome_line(p, outcomes[p.drive], save, proof_of.get(p.drive)))
         if after:
             st.out.line("flash proof after SV:")
-            for p in after:
-                st.out.line("  " + _proof_line(p))
+            for proof in after:
+                st.out.line("  " + _proof_line(proof))
         if result.interrupted:
             st.out.line("interrupted: drives not saved above keep their old values in flash; "
                         "a power cycle brings them back")
@@ -291,7 +295,7 @@ def _render(st: Any, command: str, plans: Sequence[Any], result: Any, *, apply: 
             st.out.line(f"dry run: nothing was written{reset}; nothing to change")
 
 
-def _render_plan_text(st: Any, plans: Sequence[Any], title: Callable[[str], str]) -> None:
+def _render_plan_text(st: AppState, plans: Sequence[DrivePlan], title: Callable[[str], str]) -> None:
     for p in plans:
         t = p.target
         head = f"{t.drive} ({t.bus}:{t.node})"
@@ -314,7 +318,7 @@ def _render_plan_text(st: Any, plans: Sequence[Any], title: Callable[[str], str]
         st.out.line("")
 
 
-def _plan_line(p: Any) -> str:
+def _plan_line(p: DrivePlan) -> str:
     if p.problems:
         return f"{p.drive}: cannot be written: " + "; ".join(p.problems)
     n, c = len(p.params), len(p.changes)
@@ -330,7 +334,7 @@ def _plan_line(p: Any) -> str:
 PROOF_SHOWN = 2  # differences named per drive in the text (--json has them all)
 
 
-def _proof_line(p: Any) -> str:
+def _proof_line(p: FlashProof) -> str:
     from sherpa_cli.ops import program as pr
 
     off = " (motor switched off, --motor-off)" if p.motor_switched_off else ""
@@ -346,7 +350,7 @@ def _proof_line(p: Any) -> str:
     return f"{p.drive}: flash NOT proven: {p.error}{off}"
 
 
-def _outcome_line(p: Any, o: Any, save: bool, proof: Any = None) -> str:
+def _outcome_line(p: DrivePlan, o: DriveOutcome, save: bool, proof: FlashProof | None = None) -> str:
     from sherpa_cli.ops import program as pr
 
     n = len(p.changes)
@@ -378,7 +382,7 @@ def _keys(keys: Sequence[str]) -> str:
     return ", ".join(keys) if keys else "none"
 
 
-def _plan_json(p: Any, o: Any) -> dict[str, Any]:
+def _plan_json(p: DrivePlan, o: DriveOutcome | None) -> dict[str, Any]:
     position = {k: i + 1 for i, k in enumerate(p.write_order)}
     params = []
     for q in p.params:

@@ -4,9 +4,10 @@ from __future__ import annotations
 
 import io
 import sys
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from contextlib import redirect_stderr, redirect_stdout
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import typer
 
@@ -26,6 +27,14 @@ from sherpa_cli.cli.options import (
 from sherpa_cli.cli.step_check import check_step_commands
 from sherpa_cli.errors import UsageError
 
+if TYPE_CHECKING:
+    from rich.live import Live
+    from rich.spinner import Spinner
+
+    from sherpa_cli.cli.output import Output
+    from sherpa_cli.recipes.model import Step
+    from sherpa_cli.recipes.runner import Invoke, RecipeReport, StepResult
+
 app = typer.Typer(no_args_is_help=True, help="Run commissioning recipes (YAML lists of sherpa steps; docs/recipes.md).")
 
 RECIPES_DIR = Path(__file__).resolve().parent.parent.parent / "recipes"
@@ -43,7 +52,7 @@ def _parse_sets(values: Sequence[str] | None) -> dict[str, str]:
     return out
 
 
-def _invoker(st: AppState):
+def _invoker(st: AppState) -> Invoke:
     """Run one sherpa command line in this process with the runner's global options.
 
     Output is captured (the recipe shows it under the step) and stdin is empty, so a step
@@ -86,7 +95,7 @@ def _indent(text: str) -> list[str]:
     return [INDENT + line if line.strip() else "" for line in text.rstrip("\n").split("\n")] if text.strip() else []
 
 
-def step_clock():
+def step_clock() -> Callable[[], float]:
     """The runner's clock: real time, or with $SHERPA_FAKE_STEP_SECONDS (tests, docs/testing.md) a fake
     one under which every step lasts exactly that long, so durations in golden files are stable."""
     import os
@@ -127,7 +136,7 @@ class _Warnings:
                 rest.append(line)
         return rest
 
-    def show(self, out) -> None:
+    def show(self, out: Output) -> None:
         # "SUBJECT: MESSAGE" warnings with the same message are one line naming every subject
         groups: dict[str, list[tuple[str, int]]] = {}
         for text, n in self.counts.items():
@@ -142,7 +151,7 @@ class _Warnings:
             out.warn(f"{message}{count}: {'; '.join(subjects)}" if subjects else f"{message}{count}")
 
 
-def _progress(st: AppState):
+def _progress(st: AppState) -> Live | None:
     """A spinner on stderr while a step runs: only on a terminal, never with --json (issue 11 item 13)."""
     if st.json_mode or not sys.stderr.isatty():
         return None
@@ -154,7 +163,7 @@ def _progress(st: AppState):
 
 
 def execute(st: AppState, recipe_path: Path, *, apply: bool, yes: bool, start: str | None,
-            report: Path | None, junit: Path | None, sets: Sequence[str] | None, verbose: bool):
+            report: Path | None, junit: Path | None, sets: Sequence[str] | None, verbose: bool) -> RecipeReport:
     """Run a recipe in one session (config loaded and buses opened once); returns the RecipeReport.
 
     By default one line per step (name, outcome, duration); ``verbose`` also shows every step's
@@ -182,7 +191,7 @@ def execute(st: AppState, recipe_path: Path, *, apply: bool, yes: bool, start: s
             out.line(recipe.description.strip())
     live = _progress(st)
 
-    def on_start(step, dry: bool) -> None:
+    def on_start(step: Step, dry: bool) -> None:
         if st.json_mode:
             return
         what = f"confirm: {step.confirm}" if step.kind == "confirm" else step.command_text() if not dry \
@@ -194,7 +203,7 @@ def execute(st: AppState, recipe_path: Path, *, apply: bool, yes: bool, start: s
             live.update(_spinner(f"[{step.number}/{total}] {step.name}: {what}"))
             live.start()
 
-    def on_end(result) -> None:
+    def on_end(result: StepResult) -> None:
         done.append(result)
         if live is not None:
             live.stop()
@@ -221,7 +230,7 @@ def execute(st: AppState, recipe_path: Path, *, apply: bool, yes: bool, start: s
             for line in rest[-10:]:
                 out.line(INDENT + line)
 
-    def _verbose_end(result, rest: list[str]) -> None:
+    def _verbose_end(result: StepResult, rest: list[str]) -> None:
         if result.step.kind == "run":
             lines = _indent(result.stdout) if not _is_json(result.stdout) else \
                 [f"{INDENT}(JSON output, {len(result.stdout.splitlines())} lines: in the --report file)"]
@@ -239,7 +248,7 @@ def execute(st: AppState, recipe_path: Path, *, apply: bool, yes: bool, start: s
         else:
             out.line(f"{INDENT}-> {result.status.upper()}: {'; '.join(result.failures) or result.status}")
 
-    done: list = []
+    done: list[StepResult] = []
 
     def confirm(question: str) -> bool:
         if yes:
@@ -269,7 +278,7 @@ def execute(st: AppState, recipe_path: Path, *, apply: bool, yes: bool, start: s
     return rep
 
 
-def _with_drives(question: str, done: list) -> str:
+def _with_drives(question: str, done: Sequence[StepResult]) -> str:
     """A save question names the drives it is about: those the last `program-limits --apply` step wrote
     or left unsaved (from its --json output)."""
     for result in reversed(done):
@@ -282,7 +291,7 @@ def _with_drives(question: str, done: list) -> str:
     return question
 
 
-def _spinner(text: str):
+def _spinner(text: str) -> Spinner:
     from rich.spinner import Spinner
 
     return Spinner("dots", text=text)
@@ -374,7 +383,7 @@ def commission(
         raise typer.Exit(rep.exit_code)
 
 
-def _commission_summary(st: AppState, rep) -> None:
+def _commission_summary(st: AppState, rep: RecipeReport) -> None:
     """Per drive: what the save step left (programmed, verified, saved), or in a dry run what it would do."""
     save = rep.result_of("save")
     verify = rep.result_of("verify")

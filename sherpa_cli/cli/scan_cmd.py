@@ -3,14 +3,18 @@
 from __future__ import annotations
 
 import sys
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
+from typing import TYPE_CHECKING
 
 import typer
 
-from sherpa_cli.cli.context import state
+from sherpa_cli.cli.context import AppState, state
 from sherpa_cli.cli.options import ApplyReset
 from sherpa_cli.errors import ExitCode, UsageError
+
+if TYPE_CHECKING:
+    from sherpa_cli.ops.scan import NodeFinding, ScanReport
 
 
 def scan(
@@ -59,7 +63,7 @@ def scan(
 
 
 @contextmanager
-def _progress(st, buses: list[str]) -> Iterator:
+def _progress(st: AppState, buses: list[str]) -> Iterator[Callable[[str, str, int, int], None] | None]:
     """A live per-bus progress line on stderr, only for a person watching a terminal."""
     if st.json_mode or not sys.stderr.isatty():
         yield None
@@ -79,7 +83,7 @@ def _progress(st, buses: list[str]) -> Iterator:
         yield update
 
 
-def _device(n) -> str:
+def _device(n: NodeFinding) -> str:
     """Vendor (Elmo by name, others as their 0x1018:1 id) and 0x1008, in one column to fit 100 columns."""
     if n.vendor is None and n.device_name is None:
         return "-"
@@ -89,7 +93,7 @@ def _device(n) -> str:
     return " ".join(part for part in (vendor, n.device_name) if part)
 
 
-def _warn_host_id(st, report) -> None:
+def _warn_host_id(st: AppState, report: ScanReport) -> None:
     """A device on the tool's heartbeat id would feed the drives' dead-man consumers (docs/motion.md)."""
     hosts = st.load_config().motion.host_ids
     for bus in report.buses:
@@ -100,7 +104,7 @@ def _warn_host_id(st, report) -> None:
                             "from tripping; give the tool ids no device uses")
 
 
-def _render(st, report) -> None:
+def _render(st: AppState, report: ScanReport) -> None:
     _warn_host_id(st, report)
     if st.json_mode:
         st.out.json(report.as_json())

@@ -11,18 +11,23 @@ from __future__ import annotations
 
 import io
 from contextlib import redirect_stderr, redirect_stdout
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from sherpa_cli.errors import ConfigError, Location
 
+if TYPE_CHECKING:
+    from sherpa_cli.recipes.model import Recipe
+
 
 def _root() -> Any:
+    # a click Command of whichever click the installed typer uses (typer >= 0.29 vendors its own;
+    # cli/boundary.py returns it as object): no one importable class names it for every typer
     from sherpa_cli.cli.boundary import root_command
 
     return root_command()
 
 
-def check_step_commands(recipe: Any) -> None:
+def check_step_commands(recipe: Recipe) -> None:
     """Raise ConfigError (file, line, step) for the first run step the CLI would refuse to parse."""
     import typer
     from typer.core import TyperGroup
@@ -33,7 +38,8 @@ def check_step_commands(recipe: Any) -> None:
         where = Location(recipe.path, step.line, f"steps[{step.number - 1}].run")
 
         def refuse(problem: str) -> ConfigError:
-            return ConfigError(f"step {step.number} '{step.name}': {problem}", where,
+            # raised within this iteration only: step and where are the current step's
+            return ConfigError(f"step {step.number} '{step.name}': {problem}", where,  # noqa: B023
                                hint="run the command with --help to see what it takes")
 
         cmd, args, words = _root(), list(step.argv), ["sherpa"]

@@ -17,6 +17,7 @@ from sherpa_cli.config.model import (
     ArmConfig,
     BusConfig,
     CurrentLimits,
+    DeviceConfig,
     HomingConfig,
     ILCodes,
     JointConfig,
@@ -157,13 +158,11 @@ def _catalog_diff(cfg: ArmConfig) -> dict[str, Any]:
     return out
 
 
-def _drop_default(values: dict[str, Any], default: Any) -> dict[str, Any]:
+def _drop_default(values: dict[str, Any], default: object) -> dict[str, Any]:
     return {k: v for k, v in values.items() if v != getattr(default, k)}
 
 
-def _device_options(d: Any) -> dict[str, Any]:
+def _device_options(d: DeviceConfig) -> dict[str, Any]:
     """The encoder settings that differ from their defaults (a dump stays as short as the config)."""
-    from sherpa_cli.config.model import DeviceConfig
-
     base = DeviceConfig(d.name, d.type, d.bus, d.node)
     return {k: getattr(d, k) for k in ("position_from", "tpdo_trigger", "cyclic_ms") if getattr(d, k) != getattr(base, k)}

@@ -24,12 +24,12 @@ from typing import Any
 from sherpa_cli.errors import Location
 
 
-class SwitchKind(str, Enum):
+class SwitchKind(str, Enum):  # noqa: UP042  StrEnum would change str()/format() of a member ('stop', not 'SwitchKind.STOP')
     STOP = "stop"  # end-detection switch: the drive stops motion toward it (IL = il_codes.stop)
     HOME = "home"  # position-detection switch used by homing (IL = il_codes.home)
 
 
-class JointRole(str, Enum):
+class JointRole(str, Enum):  # noqa: UP042  StrEnum would change str()/format() of a member ('plain', not 'JointRole.PLAIN')
     PLAIN = "plain"  # one drive, one joint
     SIGMA = "sigma"  # Σ joint of a differential pair (sum of motor positions)
     DELTA = "delta"  # Δ joint of a differential pair (difference of motor positions)

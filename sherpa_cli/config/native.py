@@ -314,7 +314,7 @@ def load_native(root: YNode, filename: str) -> tuple[ArmConfig, Locs, list[str]]
             if len(items) != 2:
                 raise dnode.error(f"a differential pair needs exactly 2 drives, got {len(items)}")
             pair_drives = [as_str(i) for i in items]
-            for i, dn in zip(items, pair_drives):
+            for i, dn in zip(items, pair_drives, strict=True):
                 locs.put(("pair", pname, "drive", dn), i.loc)
             # Σ = a + b, Δ = a - b with a = the lower node id (seed D.1.3); the sign of Δ depends on it.
             if all(d in drives for d in pair_drives):

@@ -92,7 +92,7 @@ def load_rosparam(root: YNode, filename: str) -> tuple[ArmConfig, Locs, list[str
     send = _per_interface(rci, "send_interval", interfaces, 1000)
     sched = _per_interface(rci, "scheduler_interval", interfaces, 10)
     buses: dict[str, BusConfig] = {}
-    for i, (name, item) in enumerate(zip(interfaces, iface_items)):
+    for i, (name, item) in enumerate(zip(interfaces, iface_items, strict=True)):
         if name in buses:
             raise item.error(f"interface '{name}' is listed twice in interfaces")
         locs.put(("bus", name), item.loc)

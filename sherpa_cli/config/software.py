@@ -189,7 +189,7 @@ def _moves(cfg: ArmConfig, drive: str) -> str:
     return pair.name if pair is not None else drive
 
 
-def _scalar(value: Any) -> str:
+def _scalar(value: object) -> str:
     if isinstance(value, str):
         import yaml
 

@@ -5,12 +5,13 @@ from __future__ import annotations
 from collections.abc import Iterable
 from typing import Any
 
-from sherpa_cli.config.model import ArmConfig
+from sherpa_cli.config.model import ArmConfig, JointConfig
 
 
-def _joint_drives(cfg: ArmConfig, joint) -> tuple[str, ...]:
+def _joint_drives(cfg: ArmConfig, joint: JointConfig) -> tuple[str, ...]:
     if joint.drive:
         return (joint.drive,)
+    assert joint.pair is not None  # a joint has a drive or a pair (config/validate.py)
     pair = cfg.pairs[joint.pair]
     return (pair.drive_a, pair.drive_b)
 

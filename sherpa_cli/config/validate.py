@@ -12,7 +12,7 @@ import math
 import re
 from dataclasses import replace
 
-from sherpa_cli.config.model import ArmConfig, DriveModel, JointConfig, JointRole, SwitchKind
+from sherpa_cli.config.model import ArmConfig, CurrentLimits, DriveModel, JointConfig, JointRole, SwitchKind
 from sherpa_cli.config.yamlnodes import Locs, suggest
 from sherpa_cli.errors import ConfigError, Location
 
@@ -265,7 +265,7 @@ def _check_catalog(cfg: ArmConfig, locs: Locs, r: _Report) -> None:
     for key, dm in cat.drives.items():
         if ("catalog", "drives", key) not in locs.table:
             continue
-        at = lambda f: locs.get("catalog", "drives", key, f)  # noqa: E731
+        at = lambda f: locs.get("catalog", "drives", key, f)  # noqa: E731, B023  used in this iteration only
         for f in ("nominal_voltage", "max_voltage", "current_cont", "current_peak"):
             if getattr(dm, f) <= 0:
                 r.error(at(f), f"{f} of drive model '{key}' must be positive, got {getattr(dm, f)}")
@@ -404,7 +404,7 @@ def _check_usage(cfg: ArmConfig, locs: Locs, r: _Report) -> None:
             r.warn(locs.get("drive", drive.name), f"drive '{drive.name}' moves no joint or pair")
 
 
-def _check_current(cur, prefix: tuple[str, ...], locs: Locs, r: _Report) -> None:
+def _check_current(cur: CurrentLimits, prefix: tuple[str, ...], locs: Locs, r: _Report) -> None:
     at = lambda f: locs.get(*prefix, "current", f)  # noqa: E731
     for f in ("continuous", "peak", "peak_time"):
         if getattr(cur, f) <= 0:
@@ -640,7 +640,7 @@ def _check_bounds(cfg: ArmConfig, locs: Locs, r: _Report) -> None:
                " (the drive's input logic table)")
 
     for name, sim_drive in cfg.sim.items():
-        at_sim = lambda k: locs.get("sim", "drives", name, k)  # noqa: E731
+        at_sim = lambda k: locs.get("sim", "drives", name, k)  # noqa: E731, B023  used in this iteration only
         within(sim_drive.reply_latency, 0.0, WAIT_MAX, at_sim("reply_latency"), "reply_latency", " s")
         within(sim_drive.sdo_latency, 0.0, WAIT_MAX, at_sim("sdo_latency"), "sdo_latency", " s")
         for key in ("die_at", "reboot_at", "limit_trip_at"):
@@ -693,7 +693,7 @@ def _check_bounds(cfg: ArmConfig, locs: Locs, r: _Report) -> None:
                " s (PL[2])")
 
     for j in cfg.joints.values():
-        at = lambda *k: locs.get("joint", j.name, *k)  # noqa: E731
+        at = lambda *k: locs.get("joint", j.name, *k)  # noqa: E731, B023  used in this iteration only
         drive_value = lambda v, loc, what: within(v, INT32_MIN, INT32_MAX, loc, what,  # noqa: E731
                                                   " (a drive value is a 32-bit integer)")
         within(j.cpr, 1, INT32_MAX, at("cpr"), "cpr")

@@ -12,7 +12,7 @@ May import bus, elmo, joints, config, errors.
 from __future__ import annotations
 
 import struct
-from typing import Any
+from typing import Protocol
 
 from sherpa_cli.config.model import DEVICE_TYPES
 from sherpa_cli.errors import UsageError
@@ -22,6 +22,12 @@ POSITION_VALUE = (0x6004, 0)  # CiA 406 position value, INTEGER32 (the TPDO1 def
 TPDO1_BASE = 0x180
 
 
+class SdoClient(Protocol):
+    """What a device class needs of its SDO client (bus/sdo.py ``DriveSdo``; tests pass fakes)."""
+
+    def upload(self, index: int, sub: int = 0, *, name: str | None = None) -> bytes: ...
+
+
 class ElmoDrive:
     """An Elmo SimplIQ drive: its real client is elmo/client.py (binary interpreter); listed here so
     every configured type has a class."""
@@ -29,7 +35,7 @@ class ElmoDrive:
     type = "elmo"
     profile = 402
 
-    def __init__(self, sdo: Any) -> None:
+    def __init__(self, sdo: SdoClient) -> None:
         self.sdo = sdo
 
 
@@ -39,7 +45,7 @@ class CanOpenEncoder:
     type = "canopen-encoder"
     profile = CIA406_DEVICE_PROFILE
 
-    def __init__(self, sdo: Any) -> None:
+    def __init__(self, sdo: SdoClient) -> None:
         self.sdo = sdo
 
     def position(self) -> int:

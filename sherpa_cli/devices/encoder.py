@@ -18,18 +18,23 @@ says why (``via``). ``position_from: sdo`` reads by SDO only.
 
 from __future__ import annotations
 
+import contextlib
 import math
 import threading
 import time
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING
 
 from sherpa_cli.bus.targets import DriveRef
-from sherpa_cli.config.model import DeviceConfig
+from sherpa_cli.config.model import ArmConfig, DeviceConfig, JointConfig
 from sherpa_cli.devices import CanOpenEncoder
 from sherpa_cli.elmo.protocol import COB_INVALID, NMT_ID, NMT_START, SYNC_ID, TPDO_COMM, TPDO_MAP
 from sherpa_cli.errors import SherpaError, UsageError
+
+if TYPE_CHECKING:
+    from sherpa_cli.bus.sdo import DriveSdo
+    from sherpa_cli.bus.session import ArmSession
 
 TPDO1_COMM, TPDO1_MAP, CYCLIC_TIMER = TPDO_COMM, TPDO_MAP, 0x6200
 POSITION_ENTRY = 0x60040020  # 0x6004:0, 32 bits
@@ -67,7 +72,7 @@ def device_ref(dev: DeviceConfig) -> DriveRef:
     return DriveRef(dev.name, dev.bus, dev.node)
 
 
-def read_position(session: Any, dev: DeviceConfig, *, clock: Callable[[], float] = time.monotonic,
+def read_position(session: ArmSession, dev: DeviceConfig, *, clock: Callable[[], float] = time.monotonic,
                   sleep: Callable[[float], None] = time.sleep, wait_s: float | None = None) -> EncoderReading:
     """The encoder's raw position (0x6004): from TPDO1 as the module says, else by SDO."""
     sdo = session.sdo(device_ref(dev))
@@ -130,15 +135,13 @@ def read_position(session: Any, dev: DeviceConfig, *, clock: Callable[[], float]
         why = f"TPDO1 set-up failed: {exc}"
     finally:
         if cob is not None:
-            try:
+            with contextlib.suppress(Exception):  # unsubscribing must not hide why we stop
                 link.network.unsubscribe(cob, listener)
-            except Exception:  # unsubscribing must not hide why we stop
-                pass
         _restore(sdo, changed)
     return EncoderReading(dev.name, int(encoder.position()), f"SDO ({why})", list(changed))
 
 
-def _restore(sdo: Any, changed: list[tuple[int, int, int, int]]) -> None:
+def _restore(sdo: DriveSdo, changed: list[tuple[int, int, int, int]]) -> None:
     """Every changed object back to its old value, last change first; every one is tried."""
     first: SherpaError | None = None
     for index, sub, size, old in reversed(changed):
@@ -152,7 +155,7 @@ def _restore(sdo: Any, changed: list[tuple[int, int, int, int]]) -> None:
 
 # -- recording (log/record.py Recorder) ---------------------------------------------------------------
 
-def recorded_encoders(cfg: Any, drives: Iterable[str]) -> list[EncoderTrack]:
+def recorded_encoders(cfg: ArmConfig, drives: Iterable[str]) -> list[EncoderTrack]:
     """The CANopen encoders of the joints whose drives are all recorded (``abs_encoder.source`` names
     a device), one track per device, in config order."""
     recorded = set(drives)
@@ -165,6 +168,7 @@ def recorded_encoders(cfg: Any, drives: Iterable[str]) -> list[EncoderTrack]:
         if joint.drive is not None:
             mine = {joint.drive}
         else:
+            assert joint.pair is not None  # a joint has a drive or a pair (config/validate.py)
             pair = cfg.pairs[joint.pair]
             mine = {pair.drive_a, pair.drive_b}
         if mine <= recorded:
@@ -172,7 +176,7 @@ def recorded_encoders(cfg: Any, drives: Iterable[str]) -> list[EncoderTrack]:
     return list(tracks.values())
 
 
-def targets_with_encoders(cfg: Any, names: Sequence[str] | None) -> list[str] | None:
+def targets_with_encoders(cfg: ArmConfig, names: Sequence[str] | None) -> list[str] | None:
     """`log record` targets where an encoder device (name or BUS:NODE) stands for the joint it
     measures: that joint's drives are recorded and the encoder with them."""
     if not names:
@@ -199,13 +203,13 @@ class EncoderTrack:
     (raw counts) and ``<joint>.ext_pos_rad`` (reading + the joint's abs_encoder offset, in rad)."""
 
     dev: DeviceConfig
-    joints: list[Any] = field(default_factory=list)
+    joints: list[JointConfig] = field(default_factory=list)
     cob: int | None = None
     saved: list[tuple[int, int, int, int]] = field(default_factory=list)
     samples: dict[int, int] = field(default_factory=dict)
     last: int = -1
 
-    def configure(self, session: Any) -> None:
+    def configure(self, session: ArmSession) -> None:
         sdo = session.sdo(device_ref(self.dev))
         session.links[self.dev.bus].network.send_message(NMT_ID, bytes([NMT_START, self.dev.node]))
 
@@ -222,7 +226,7 @@ class EncoderTrack:
                 sdo.download(TPDO1_COMM, sub, new.to_bytes(size, "little"))
         self.cob = old_cob & 0x7FF
 
-    def restore(self, session: Any) -> None:
+    def restore(self, session: ArmSession) -> None:
         saved, self.saved = self.saved, []
         _restore(session.sdo(device_ref(self.dev)), saved)
 
@@ -239,6 +243,7 @@ class EncoderTrack:
         raw = [float(self.samples[k]) if k in self.samples else math.nan for k in keys]
         out = {f"{self.dev.name}.pos": raw}
         for joint in self.joints:
+            assert joint.abs_encoder is not None  # recorded_encoders adds only joints with one
             off = joint.abs_encoder.offset
             out[f"{joint.name}.ext_pos_rad"] = [counts_to_rad(v + off, joint.cpr) if v == v else math.nan
                                                 for v in raw]

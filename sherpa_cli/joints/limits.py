@@ -126,7 +126,7 @@ def _check_drives(cfg: ArmConfig, drives: Sequence[str] | None) -> list[str]:
 
 # --------------------------------------------------------------------------- helpers
 
-def _as_int(value: Any, what: str, where: Location) -> int:
+def _as_int(value: object, what: str, where: Location) -> int:
     if isinstance(value, bool):
         raise ConfigError(f"{what} must be a whole number, got {value!r}", where)
     if isinstance(value, int):
@@ -136,7 +136,7 @@ def _as_int(value: Any, what: str, where: Location) -> int:
     raise ConfigError(f"{what} must be a whole number, got {value!r}", where)
 
 
-def _magnitude(value: Any, what: str, where: Location) -> int:
+def _magnitude(value: object, what: str, where: Location) -> int:
     n = _as_int(value, what, where)
     if n < 0:
         raise ConfigError(f"{what} must not be negative (it is a magnitude; the sign is applied "

@@ -14,10 +14,13 @@ import time
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING
 
 from sherpa_cli.errors import UsageError
 from sherpa_cli.log.candecode import Frame, parse_candump_line
+
+if TYPE_CHECKING:
+    import can
 
 CANDUMP_SUFFIXES = (".log", ".txt", ".candump")
 WRITE_SUFFIXES = (".log", ".asc", ".blf", ".csv", ".trc", ".mf4")
@@ -38,7 +41,7 @@ def read_frames(path: Path, bus_names: Sequence[str] = ()) -> Iterator[Frame]:
 
     try:
         reader = can.LogReader(str(path))
-    except Exception as exc:  # python-can's readers raise their own parse errors (BLFParseError, ...)
+    except Exception as exc:  # noqa: BLE001  python-can's readers raise their own parse errors (BLFParseError, ...)
         raise UsageError(f"{path}: cannot read this format ({exc})",
                          hint="formats: .log/.txt (candump -L), .asc, .blf, .csv, .trc, .mf4") from None
     # python-can's TRC reader numbers channels from 1, its writer took them from 0
@@ -49,7 +52,7 @@ def read_frames(path: Path, bus_names: Sequence[str] = ()) -> Iterator[Frame]:
             yield Frame(float(msg.timestamp), _bus_name(channel, bus_names), int(msg.arbitration_id),
                         bytes(msg.data), bool(msg.is_extended_id), bool(msg.is_remote_frame),
                         bool(msg.is_error_frame))
-    except Exception as exc:  # any reader's failure on a damaged file: one message naming it
+    except Exception as exc:  # noqa: BLE001  any reader's failure on a damaged file: one message naming it
         raise UsageError(f"{path}: not a readable {suffix} capture ({type(exc).__name__}: {exc})") from None
     finally:
         stop = getattr(reader, "stop", None)
@@ -68,7 +71,7 @@ def _read_candump(path: Path) -> Iterator[Frame]:
                 yield frame
 
 
-def _bus_name(channel: Any, bus_names: Sequence[str]) -> str:
+def _bus_name(channel: object, bus_names: Sequence[str]) -> str:
     if channel is None:
         return bus_names[0] if len(bus_names) == 1 else "-"
     if isinstance(channel, int) and 0 <= channel < len(bus_names):
@@ -83,7 +86,7 @@ def _need_asammdf(path: Path) -> None:
         raise UsageError(f"{path}: .mf4 needs the asammdf package", hint="pip install asammdf")
 
 
-def channel_for(suffix: str, bus: str, bus_names: Sequence[str]) -> Any:
+def channel_for(suffix: str, bus: str, bus_names: Sequence[str]) -> int | str:
     """What a writer of ``suffix`` gets as the channel of ``bus``."""
     if suffix in NUMBERED_CHANNELS and bus in bus_names:
         return list(bus_names).index(bus)
@@ -142,7 +145,7 @@ def frame_bits(dlc: int, extended: bool = False) -> int:
     return 47 + 8 * dlc + (34 + 8 * dlc - 1) // 4 + 3
 
 
-def capture(buses: dict[str, Any], path: Path, bus_names: Sequence[str], *,
+def capture(buses: dict[str, can.BusABC], path: Path, bus_names: Sequence[str], *,
             stop: threading.Event, clock: Callable[[], float] = time.monotonic,
             frame_limit: int | None = None, on_frame: Callable[[], None] | None = None,
             bitrates: dict[str, int | None] | None = None) -> CaptureResult:
@@ -183,7 +186,7 @@ def capture(buses: dict[str, Any], path: Path, bus_names: Sequence[str], *,
     return result
 
 
-def _drain(readers, writer, result: CaptureResult, suffix: str, bus_names: Sequence[str], *, wait: float,
+def _drain(readers: dict[str, can.BufferedReader], writer: can.Listener, result: CaptureResult, suffix: str, bus_names: Sequence[str], *, wait: float,
            on_frame: Callable[[], None] | None) -> bool:
     got = False
     for name, reader in readers.items():
@@ -199,7 +202,7 @@ def _drain(readers, writer, result: CaptureResult, suffix: str, bus_names: Seque
     return got
 
 
-def _write(msg, name: str, writer, result: CaptureResult, suffix: str, bus_names: Sequence[str]) -> None:
+def _write(msg: can.Message, name: str, writer: can.Listener, result: CaptureResult, suffix: str, bus_names: Sequence[str]) -> None:
     count = result.counts[name]
     if msg.is_error_frame:
         count.errors += 1

@@ -4,10 +4,14 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from sherpa_cli.errors import UsageError
 from sherpa_cli.log.recording import SIGNALS, UNITS, Recording
 from sherpa_cli.log.step_metrics import StepMetrics
+
+if TYPE_CHECKING:
+    from matplotlib.axes import Axes
 
 MISSING = "log plot needs matplotlib, an optional extra of sherpa-cli"
 MISSING_HINT = "pip install 'sherpa-cli[plot]' (or pip install matplotlib)"
@@ -57,7 +61,7 @@ def plot_recording(rec: Recording, joints: list[str], path: Path, *,
     fig.savefig(str(path), format="png")
 
 
-def _draw_metrics(ax, m: StepMetrics, unit: str) -> None:
+def _draw_metrics(ax: Axes, m: StepMetrics, unit: str) -> None:
     ax.axvline(0.0, color="grey", lw=0.8, ls=":", label="command")
     ax.axhline(m.final, color="green", lw=0.8, ls="--", label=f"final {m.final:.4g} {unit}")
     if m.target is not None:

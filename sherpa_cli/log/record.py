@@ -24,7 +24,7 @@ import threading
 import time
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any, Protocol
 
 from sherpa_cli.bus.targets import DriveRef
 from sherpa_cli.config.model import ArmConfig
@@ -34,6 +34,11 @@ from sherpa_cli.errors import SherpaError, UsageError
 from sherpa_cli.joints.units import counts_per_s_to_rad_per_s, counts_to_rad
 from sherpa_cli.log.capture import frame_bits
 from sherpa_cli.log.recording import Recording
+
+if TYPE_CHECKING:
+    import can
+
+    from sherpa_cli.bus.session import ArmSession
 
 MAX_LOAD = 0.90  # share of the bit rate the recording may take (worst-case stuffing counted)
 DEFAULT_BITRATE = 1_000_000  # when the config does not say
@@ -94,7 +99,7 @@ def bus_budget(cfg: ArmConfig, refs: Sequence[DriveRef], rate: float, *, current
 class PeriodicSync:
     """SYNC every ``period`` s through python-can's send_periodic (kernel BCM on SocketCAN)."""
 
-    def __init__(self, bus: Any, period: float) -> None:
+    def __init__(self, bus: can.BusABC, period: float) -> None:
         import can
 
         self.task = bus.send_periodic(can.Message(arbitration_id=SYNC_ID, data=b"", is_extended_id=False), period)
@@ -111,7 +116,7 @@ class ThreadSync:
 
     CATCH_UP_LIMIT_S = 0.2  # longest wait at stop for the SYNCs already due
 
-    def __init__(self, bus: Any, period: float) -> None:
+    def __init__(self, bus: can.BusABC, period: float) -> None:
         import can
 
         self.bus, self.period = bus, period
@@ -136,7 +141,7 @@ class ThreadSync:
                     continue
                 self.bus.send(self.message)
                 self.sent += 1
-        except BaseException as exc:  # a dead bus ends the SYNC; the recording shows the gap
+        except BaseException as exc:  # noqa: BLE001  a dead bus ends the SYNC; the recording shows the gap
             self.error = exc
 
     def request_stop(self) -> None:
@@ -153,14 +158,21 @@ class ThreadSync:
             self._thread.join(timeout=1.0)
 
 
-def default_sync(bus: Any, period: float) -> Any:
+class SyncSource(Protocol):
+    """A running SYNC source (PeriodicSync, ThreadSync, the simulator's stepped source): stop() ends it;
+    one with ``request_stop()`` is first told to send only the SYNCs already due."""
+
+    def stop(self) -> None: ...
+
+
+def default_sync(bus: can.BusABC, period: float) -> PeriodicSync | ThreadSync:
     """The kernel's broadcast manager on SocketCAN, else a counted thread of the tool."""
     if type(bus).__name__ == "SocketcanBus":
         return PeriodicSync(bus, period)
     return ThreadSync(bus, period)
 
 
-SyncFactory = Callable[[str, Any, float], Any]  # (bus name, python-can bus, period) -> object with stop()
+SyncFactory = Callable[[str, "can.BusABC", float], SyncSource]  # (bus name, python-can bus, period)
 
 
 # -- the recorder ---------------------------------------------------------------------------------
@@ -178,7 +190,7 @@ class _Drive:
 class Recorder:
     """Sample PX, VX (and current) of ``refs`` at ``rate`` Hz; a context manager."""
 
-    def __init__(self, session: Any, refs: Iterable[DriveRef], rate: float, *, current: bool = False,
+    def __init__(self, session: ArmSession, refs: Iterable[DriveRef], rate: float, *, current: bool = False,
                  clock: Callable[[], float] | None = None, sync_factory: SyncFactory | None = None,
                  enforce_budget: bool = True) -> None:
         self.session = session
@@ -201,7 +213,7 @@ class Recorder:
         self.sync_factory = sync_factory or (lambda name, bus, period: default_sync(bus, period))
         self._drives = {r.key: _Drive(r) for r in self.refs}
         self._subscribed: list[tuple[Any, int, Callable]] = []
-        self._syncs: list[Any] = []
+        self._syncs: list[SyncSource] = []
         self._lock = threading.Lock()
         self.t0: float | None = None
         self.t_end: float | None = None
@@ -225,7 +237,7 @@ class Recorder:
             raise
         return self
 
-    def __exit__(self, *exc: Any) -> None:
+    def __exit__(self, *exc: object) -> None:
         self._finish(quiet=exc[0] is not None)
 
     def _now(self) -> float:
@@ -238,17 +250,15 @@ class Recorder:
     def _finish(self, quiet: bool = False) -> None:
         # every source's end first (the SYNCs due until then are expected; a ThreadSync still sends
         # them), then the stops, so one bus's catching up does not lengthen another's span
-        for sync, span in zip(self._syncs, self._sync_spans):
+        for sync, span in zip(self._syncs, self._sync_spans, strict=True):
             span[1] = self._now()
             request = getattr(sync, "request_stop", None)
             if request is not None:
                 with contextlib.suppress(Exception):
                     request()
         for sync in self._syncs:
-            try:
+            with contextlib.suppress(Exception):  # stopping must not hide why we stop
                 sync.stop()
-            except Exception:  # stopping must not hide why we stop
-                pass
         self._syncs.clear()
         if self.t0 is not None and self.t_end is None:
             self.t_end = self._now()
@@ -458,7 +468,7 @@ class Recorder:
                 for col, which, conv in (("pos_rad", 0, counts_to_rad), ("vel_rad_s", 1, counts_per_s_to_rad_per_s)):
                     a, b = motor(pair.drive_a, which), motor(pair.drive_b, which)
                     rec.columns[f"{joint.name}.{col}"] = [conv(x + sign * y, joint.cpr) if x == x and y == y else nan
-                                                          for x, y in zip(a, b)]  # a sample one drive missed
+                                                          for x, y in zip(a, b, strict=True)]  # a sample one drive missed
         for ref in self.refs:
             rec.columns[f"{ref.name}.px"] = motor(ref.name, 0)
             rec.columns[f"{ref.name}.vx"] = motor(ref.name, 1)
@@ -487,7 +497,7 @@ class Poller:
     """``--poll``: PX and VX (and IQ) through the binary interpreter, each bus every its
     ``poll_interval_ms`` (the seed's ``scheduler_interval``); slower and jittery, but changes nothing."""
 
-    def __init__(self, session: Any, refs: Iterable[DriveRef], *, current: bool = False,
+    def __init__(self, session: ArmSession, refs: Iterable[DriveRef], *, current: bool = False,
                  clock: Callable[[], float] = time.monotonic, sleep: Callable[[float], None] = time.sleep) -> None:
         self.session, self.refs, self.current = session, list(refs), current
         self.clock, self.sleep = clock, sleep
@@ -521,10 +531,10 @@ class Poller:
                 rest = interval - (self.clock() - start)
                 if rest > 0:
                     self.sleep(rest)
-        except BaseException as exc:
+        except BaseException as exc:  # noqa: BLE001  raised again by __exit__ on the caller's thread
             self.errors.append(exc)
 
-    def __exit__(self, *exc: Any) -> None:
+    def __exit__(self, *exc: object) -> None:
         self._stop.set()
         for t in self._threads:
             t.join(timeout=5)

@@ -34,7 +34,7 @@ class Recording:
         values = self.columns.get(f"{joint}.{SIGNALS[signal]}")
         if values is None:
             return None
-        pairs = [(t, v) for t, v in zip(self.times, values) if not math.isnan(v)]
+        pairs = [(t, v) for t, v in zip(self.times, values, strict=True) if not math.isnan(v)]
         return [p[0] for p in pairs], [p[1] for p in pairs]
 
 
@@ -73,7 +73,7 @@ def _read_csv(path: Path) -> Recording:
                 raise UsageError(f"{path}:{number}: {len(row)} cells, the header has {len(header)}")
             try:
                 rec.times.append(float(row[0]))
-                for name, cell in zip(header[1:], row[1:]):
+                for name, cell in zip(header[1:], row[1:], strict=True):
                     rec.columns[name].append(float(cell) if cell else math.nan)
                 if not math.isfinite(rec.times[-1]):
                     raise ValueError(f"time {row[0]!r} is not a finite number")

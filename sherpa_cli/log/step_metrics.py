@@ -62,7 +62,7 @@ def step_metrics(t: Sequence[float], y: Sequence[float], *, t_step: float = 0.0,
         raise ValueError(f"step_metrics: no sample at or after the step (t = {t_step})")
     y0 = initial if initial is not None else y[max(first - 1, 0)] if first > 0 else y[0]
     tail_from = t[-1] - final_share * (t[-1] - t[first])
-    tail = [v for ti, v in zip(t, y) if ti >= tail_from] or [y[-1]]
+    tail = [v for ti, v in zip(t, y, strict=True) if ti >= tail_from] or [y[-1]]
     yf = sum(tail) / len(tail)
     step = yf - y0
     sse = None if target is None else target - yf

@@ -19,7 +19,7 @@ import threading
 import time
 from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any, Protocol
+from typing import TYPE_CHECKING, Any, Protocol, cast
 
 from sherpa_cli.bus.canopen_names import VENDORS, decode_text, nmt_text
 from sherpa_cli.bus.parallel import run_concurrently
@@ -29,6 +29,8 @@ from sherpa_cli.elmo.protocol import HEARTBEAT_BASE, NMT_ID, NMT_RESET_COMM, SDO
 from sherpa_cli.errors import SdoError, SherpaError
 
 if TYPE_CHECKING:
+    import canopen
+
     from sherpa_cli.bus.links import BusLink
     from sherpa_cli.bus.session import ArmSession
 
@@ -300,7 +302,10 @@ def decode_device_type(frame: bytes) -> tuple[int | None, str | None]:
 def _read_identity(network: Network, node: int) -> tuple[int | None, str | None, list[str]]:
     vendor_id = name = None
     notes: list[str] = []
-    sdo = DriveSdo(network, node)
+    # canopen's SdoClient needs the whole Network (its notifier and subscriptions), not only the
+    # three calls the probe makes: in a session it is one; a test's fake network never gets here
+    # with answers to read, since identity is read only of nodes that answered the probe
+    sdo = DriveSdo(cast("canopen.Network", network), node)
     try:
         try:
             vendor_id = int.from_bytes(sdo.upload(0x1018, 1)[:4], "little")

@@ -224,7 +224,7 @@ def _expect(node: YNode | None) -> Expect:
     exit_codes: tuple[int, ...] = (0,)
     if (e := sec.get("exit")) is not None:
         codes = [as_int(x) for x in as_seq(e)] if e.kind == "seq" else [as_int(e)]
-        for code, src in zip(codes, e.value if e.kind == "seq" else [e]):
+        for code, src in zip(codes, e.value if e.kind == "seq" else [e], strict=True):
             if not 0 <= code <= 255:
                 raise src.error(f"exit code {code} is outside 0..255")
         exit_codes = tuple(codes)
