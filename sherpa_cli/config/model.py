@@ -277,6 +277,10 @@ class MotionConfig:
     standstill_velocity: int = 2  # counts/s: |VX| at most this is standstill (encoder noise of a held motor)
     liveness_timeout: float = 1.0  # s the command may go without a sign of life before the heartbeat stops
     velocity_unit_mode: int = 5  # velocity jogs: 5 (JV + BG in position mode) or 2 (speed mode)
+    # the move back after a limit breach, in every command: this share of the slowest moved joint's
+    # velocity.limit, or recovery_fallback_speed counts/s where no joint has a limit
+    recovery_speed: float = 0.5
+    recovery_fallback_speed: int = 100
     # differential pairs (docs/diffdrive.md): how both motors start together. "group": one BG to the
     # group id pair_group_id written to 0x2040 of both drives (RAM, restored afterwards; that it acts
     # without an NMT reset communication is UNCONFIRMED); "sync_rpdo": BG to each drive's RPDO2 made

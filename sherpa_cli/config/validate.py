@@ -143,6 +143,12 @@ def _check_motion(cfg: ArmConfig, locs: Locs, r: _Report) -> None:
     elif not 0 <= m.heartbeat_period_ms <= m.consumer_time_ms / 2:
         r.error(where("heartbeat_period_ms"), f"heartbeat_period_ms {m.heartbeat_period_ms} must be 0 (a quarter "
                 f"of consumer_time_ms) or at most half of consumer_time_ms ({m.consumer_time_ms})")
+    if not 0 < m.recovery_speed <= 1:
+        r.error(where("recovery_speed"), f"recovery_speed {m.recovery_speed} must be > 0 and at most 1 "
+                "(a share of the joint's velocity.limit)")
+    if not 1 <= m.recovery_fallback_speed <= 100_000:
+        r.error(where("recovery_fallback_speed"), f"recovery_fallback_speed {m.recovery_fallback_speed} must be "
+                "1..100000 counts/s")
     if not 0 <= m.loss_action <= 3:
         r.error(where("loss_action"), f"loss_action {m.loss_action} must be 0..3 (0x6007)")
     elif m.loss_action == 0:

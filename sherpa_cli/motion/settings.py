@@ -6,6 +6,8 @@ from collections.abc import Iterable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
+from sherpa_cli.motion.stopping import recovery_speed
+
 if TYPE_CHECKING:
     from sherpa_cli.config.model import ArmConfig
 
@@ -27,6 +29,8 @@ class MotionSettings:
     standstill_velocity: int = 2  # counts/s: |VX| at most this is standstill
     liveness_timeout: float = 1.0
     velocity_unit_mode: int = 5
+    recovery_speed: float = 0.5  # share of the slowest moved joint's velocity limit
+    recovery_fallback_speed: int = 100  # counts/s where no joint has a limit
     poll_interval: float = 0.01  # s between polls while waiting (the bus's poll_interval_ms)
     request_bound: float = 0.2  # s one interpreter request can take at worst (timeout x attempts)
 
@@ -58,6 +62,11 @@ class MotionSettings:
                    comm_error_behaviour=m.comm_error_behaviour, stop_method=m.stop_method,
                    standstill_timeout=m.standstill_timeout, standstill_velocity=m.standstill_velocity,
                    liveness_timeout=m.liveness_timeout,
-                   velocity_unit_mode=m.velocity_unit_mode, poll_interval=poll_ms / 1000,
+                   velocity_unit_mode=m.velocity_unit_mode, recovery_speed=m.recovery_speed,
+                   recovery_fallback_speed=m.recovery_fallback_speed, poll_interval=poll_ms / 1000,
                    request_bound=p.reply_timeout * (1 + p.retries))
 
+
+    def recovery_speed_for(self, vel_limits: Iterable[int | None]) -> int:
+        """counts/s of the move back after a limit breach (motion/stopping.py recovery_speed)."""
+        return recovery_speed(vel_limits, self.recovery_speed, self.recovery_fallback_speed)

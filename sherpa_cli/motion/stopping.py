@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import logging
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterable, Mapping
 from typing import TYPE_CHECKING
 
 from sherpa_cli.elmo.faults import describe_mf, sr_problems
@@ -112,6 +112,39 @@ def wait_standstill(client: DriveClient, *, standstill_timeout: float = 2.0, pol
         if clock() >= deadline:
             return False
         sleep(poll_interval)
+
+
+def wait_all_standstill(clients: Mapping[str, DriveClient], *, standstill_timeout: float, poll_interval: float,
+                        standstill_velocity: int, clock: Callable[[], float] = time.monotonic,
+                        sleep: Callable[[float], None] = time.sleep,
+                        pulse: Callable[[], None] | None = None) -> list[str]:
+    """The one standstill rule for several drives at once, after their stop frames: a drive is at
+    standstill when |VX| <= ``standstill_velocity`` or its motor is off; bounded by
+    ``standstill_timeout``. Returns the names of the drives NOT at standstill when the time was up
+    (empty: all stand still). Callers never start a move (a recovery) while this is not empty."""
+    beat = pulse or (lambda: None)
+    deadline = clock() + standstill_timeout
+    moving = dict(clients)
+    while True:
+        for name, c in list(moving.items()):
+            beat()
+            if not int(c.get("MO")):
+                del moving[name]
+                continue
+            beat()
+            if abs(int(c.get("VX"))) <= standstill_velocity:
+                del moving[name]
+        if not moving or clock() >= deadline:
+            return sorted(moving)
+        sleep(poll_interval)
+
+
+def recovery_speed(vel_limits: Iterable[int | None], share: float, fallback: int) -> int:
+    """The one speed (counts/s) of the move back after a limit breach, for every command:
+    ``share`` (motion.recovery_speed) of the slowest speed limit of the joints it moves, or
+    ``fallback`` (motion.recovery_fallback_speed) where no joint has one."""
+    limits = [abs(v) for v in vel_limits if v]
+    return max(1, round((min(limits) * share) if limits else fallback))
 
 
 def ask_patiently(client: DriveClient, letters: str, clock: Callable[[], float], sleep: Callable[[float], None],

@@ -28,7 +28,7 @@ from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, Protocol
 
 from sherpa_cli.bus.targets import DriveRef
-from sherpa_cli.config.model import ArmConfig, JointConfig, PairConfig
+from sherpa_cli.config.model import ArmConfig, PairConfig
 from sherpa_cli.elmo.protocol import UM_POSITION
 from sherpa_cli.errors import SafetyError, UsageError
 from sherpa_cli.joints import diffpair, units
@@ -477,7 +477,7 @@ def run_move(session: ArmSession, pair: PairConfig, request: MoveRequest, *,
     ``samples`` and ``source`` (PX is then polled, as with --poll)."""
     from sherpa_cli.motion.guard import MotionGuard
     from sherpa_cli.motion.settings import MotionSettings
-    from sherpa_cli.ops.joint_jog import move_to, stop_now, wait_standstill
+    from sherpa_cli.ops.joint_jog import move_to, recovery_from_standstill, stop_now
 
     cfg = session.cfg
     method, group_id = pair_settings(cfg)
@@ -589,11 +589,11 @@ def run_move(session: ArmSession, pair: PairConfig, request: MoveRequest, *,
                     result.outcome = "limit"
                     result.breaches = list(w.breaches)
                     stop_now(clients, "position", settings.stop_method)
-                    wait_standstill(clients, guard, settings, clock, sleep)
+                    recovery_from_standstill(clients, guard, settings, clock, sleep, w.breaches)
                     now = {d: int(clients[d].get("PX")) for d in drives}
                     back = limit_watch.recovery_targets(watched, now, w.breaches, hold={})
-                    move_to(guard, by_name, clients, back, _slow_pair(sj, dj), settings, clock, sleep,
-                             "the move back into the normal range")
+                    move_to(guard, by_name, clients, back, settings.recovery_speed_for((sj.vel_limit, dj.vel_limit)),
+                            settings, clock, sleep, "the move back into the normal range")
                 elif w.outcome == "elapsed":
                     raise SafetyError(f"{pair.name}: did not reach Σ={p.target[0]}, Δ={p.target[1]} within "
                                       f"{p.timeout:g} s", hint="check the drives with `sherpa monitor --once`")
@@ -622,11 +622,6 @@ def run_move(session: ArmSession, pair: PairConfig, request: MoveRequest, *,
     result.guard_lines = guard.report.lines()
     result.stop = guard.report.as_json()
     return result
-
-
-def _slow_pair(sj: JointConfig, dj: JointConfig) -> int:
-    limits = [v for v in (sj.vel_limit, dj.vel_limit) if v]
-    return max(1, (min(limits) if limits else 200) // 4)
 
 
 # --------------------------------------------------------------------------- plot

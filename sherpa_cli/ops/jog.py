@@ -270,6 +270,9 @@ def _move(guard: MotionGuard, target: JogTarget, req: JogRequest, settings: Moti
                                  f"[{lo}, {hi}]", hint="jog moves a joint only inside its normal range")
         state["target"] = goal
         guard.enable(ref, UM_POSITION)
+        # the speed comes from the config, never from whatever SP the drive holds (an unprogrammed
+        # drive: 1800 counts/s); the guard puts SP back on the way out
+        c.set("SP", 0, position_speed(target, settings))
         bound = _move_bound(c, abs(goal - start))
         c.set("PA", 0, goal)
         state["command"] = f"PA={goal}"
@@ -295,6 +298,15 @@ def _move(guard: MotionGuard, target: JogTarget, req: JogRequest, settings: Moti
         state["t0"] = clock()
         watch(None, req.duration)
         state["ended_by"] = state["ended_by"] or "time up"
+
+
+def position_speed(target: JogTarget, settings: MotionSettings) -> int:
+    """counts/s of a position jog: the joint's velocity.limit, or motion.recovery_fallback_speed for a
+    joint without one (the seed's rosparam format has none)."""
+    joint = target.joint
+    if joint is not None and joint.vel_limit:
+        return abs(int(joint.vel_limit))
+    return settings.recovery_fallback_speed
 
 
 def _move_bound(c: DriveClient, distance: int) -> float:
@@ -354,11 +366,11 @@ def limit_breach(guard: MotionGuard, c: DriveClient, target: JogTarget, px: int,
         standstill_timeout=settings.standstill_timeout, poll_interval=settings.poll_interval, clock=clock,
         sleep=sleep, pulse=guard.check, standstill_velocity=settings.standstill_velocity)
     if problems or standstill is False:
-        raise SafetyError(f"{c.label}: the stop at the joint limit did not go cleanly: "
-                          + "; ".join(problems or ["not at standstill"]),
+        raise SafetyError(f"{breaches[0].describe()}; the recovery failed: the stop at the joint limit did not go "
+                          "cleanly (" + "; ".join(problems or ["not at standstill"]) + "); the move back was not started",
                           hint="check the joint; `sherpa stop` stops every drive")
     back = limit_watch.recovery_targets(watched, {target.ref.name: int(c.get("PX"))}, breaches)
-    speed = max(1, (joint.vel_limit or 200) // 2)
+    speed = settings.recovery_speed_for([joint.vel_limit])
     joint_jog.move_to(guard, {target.ref.name: target.ref}, clients, back, speed, settings, clock, sleep,
                        f"{joint.name}: the move back into the normal range")
     state["breach"] = breaches[0]

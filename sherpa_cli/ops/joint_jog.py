@@ -25,7 +25,7 @@ from __future__ import annotations
 import contextlib
 import math
 import time
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
@@ -36,6 +36,7 @@ from sherpa_cli.errors import SafetyError, UsageError
 from sherpa_cli.joints import diffpair, units
 from sherpa_cli.motion import calibration, limit_watch
 from sherpa_cli.motion.limit_watch import Breach, WatchedJoint
+from sherpa_cli.motion.stopping import wait_all_standstill
 
 if TYPE_CHECKING:
     from sherpa_cli.bus.session import ArmSession
@@ -449,22 +450,34 @@ def _run_guarded(guard: MotionGuard, session: ArmSession, cfg: ArmConfig, axis: 
             result.outcome = "limit"
             result.breaches = list(watched.breaches)
             stop_now(clients, p.mode, settings.stop_method)
-            wait_standstill(clients, guard, settings, clock, sleep)
+            recovery_from_standstill(clients, guard, settings, clock, sleep, watched.breaches)
             back = limit_watch.recovery_targets(axis.watched, sample(), watched.breaches, hold=held)
-            move_to(guard, by_name, clients, back, _slow(axis), settings, clock, sleep,
-                     "the move back into the normal range")
+            move_to(guard, by_name, clients, back, settings.recovery_speed_for([axis.vel_limit, *(j.vel_limit for j in axis.joints)]),
+                    settings, clock, sleep, "the move back into the normal range")
             final = sample()
             result.recovered_to = {j.name: j.position(final) for j in axis.watched}
         else:
             if p.mode != "position":
                 stop_now(clients, p.mode, settings.stop_method)
-                wait_standstill(clients, guard, settings, clock, sleep)
+                wait_standstill(clients, guard, settings, clock, sleep, before="the correction of the held joint")
             final = sample()
             if held and p.mode != "position":
                 # start and stop skew between the two motors shifts the held joint a little (seed
                 # Fig. 9.10/9.11): put it back, keeping the moved joint where it ended
                 final = _restore_held(guard, by_name, clients, axis, final, held, settings, clock, sleep, result)
     return final
+
+
+def recovery_from_standstill(clients: Mapping[str, DriveClient], guard: MotionGuard, settings: MotionSettings,
+                              clock: Callable[[], float], sleep: Callable[[float], None],
+                              breaches: Sequence[limit_watch.Breach]) -> None:
+    """Before a move back after a breach: standstill, or an error that says the joint left its range
+    first and then why the move back did not start (issue 21 item 7)."""
+    try:
+        wait_standstill(clients, guard, settings, clock, sleep, before="the move back into the normal range")
+    except SafetyError as exc:
+        left = "; ".join(b.describe() for b in breaches)
+        raise SafetyError(f"{left}; the recovery failed: {exc}", hint=exc.hint) from exc
 
 
 def stop_now(clients: Mapping[str, DriveClient], mode: str, method: str = "auto") -> None:
@@ -532,11 +545,13 @@ def move_to(guard: MotionGuard, by_name: Mapping[str, DriveRef], clients: Mappin
         sleep(settings.poll_interval)
 
 
-def wait_standstill(clients: Mapping[str, DriveClient], guard: MotionGuard, settings: MotionSettings, clock: Callable[[], float],
-                     sleep: Callable[[float], None]) -> None:
-    deadline = clock() + settings.standstill_timeout
-    while clock() < deadline:
-        guard.check()
-        if all(abs(int(c.get("VX"))) <= settings.standstill_velocity or not int(c.get("MO")) for c in clients.values()):
-            return
-        sleep(settings.poll_interval)
+def wait_standstill(clients: Mapping[str, DriveClient], guard: MotionGuard, settings: MotionSettings,
+                    clock: Callable[[], float], sleep: Callable[[float], None], *, before: str = "the next move") -> None:
+    """The one standstill rule (motion/stopping.wait_all_standstill), bounded; a drive still moving
+    when the time is up raises: ``before`` (a move back, a correction) is never started from motion."""
+    moving = wait_all_standstill(clients, standstill_timeout=settings.standstill_timeout,
+                                 poll_interval=settings.poll_interval, standstill_velocity=settings.standstill_velocity,
+                                 clock=clock, sleep=sleep, pulse=guard.check)
+    if moving:
+        raise SafetyError(f"{', '.join(moving)}: not at standstill {settings.standstill_timeout:g} s after the stop; "
+                          f"{before} was not started", hint="check the joint; `sherpa stop` stops every drive")

@@ -251,7 +251,10 @@ class LiveJog:
         """Run the joint at ``counts_per_s`` until ``keepalive`` s without a new command (0 stops)."""
         a = self._axis(name)
         v = int(counts_per_s)
-        if a.vel_limit is not None and abs(v) > a.vel_limit:
+        if a.vel_limit is None:  # never an unchecked speed, as on the command line (jog --velocity)
+            return self._refuse(name, f"{name}: no speed limit configured (velocity.limit), so a velocity "
+                                      "command cannot be checked: not sent")
+        if abs(v) > a.vel_limit:
             return self._refuse(name, f"{name}: {abs(v)} counts/s is above the joint's speed limit "
                                       f"{a.vel_limit} counts/s: not sent")
         if a.kind == "plain":
@@ -603,9 +606,9 @@ class LiveJog:
         self.running.clear()
         live = {d: self._client(d) for d in self.drives if d not in self.dead}
         joint_jog.stop_now(live, "torque" if "torque" in modes else "position", self.settings.stop_method)
-        joint_jog.wait_standstill(live, self.guard, self.settings, self.clock, self.sleep)
+        joint_jog.recovery_from_standstill(live, self.guard, self.settings, self.clock, self.sleep, breaches)
         back = limit_watch.recovery_targets(self.watched, self._sample(self.drives), breaches)
-        speed = max(1, min((a.vel_limit or 400) for a in self.axes.values()) // 2)
+        speed = self.settings.recovery_speed_for(a.vel_limit for a in self.axes.values())
         joint_jog.move_to(self.guard, self.refs, live, {d: t for d, t in back.items() if d in live}, speed,
                            self.settings, self.clock, self.sleep, "the move back into the normal range")
         for b in breaches:
