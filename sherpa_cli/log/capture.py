@@ -2,7 +2,8 @@
 :class:`~sherpa_cli.log.candecode.Frame`, and capture every bus of a session into one file.
 
 Formats by suffix through python-can's readers and writers: ``.log`` (candump, the channel on
-every line), ``.asc``, ``.blf``, ``.csv``, ``.trc``, ``.mf4`` (when asammdf is installed).
+every line), ``.asc``, ``.blf``, ``.csv``, ``.trc``, ``.mf4`` (when asammdf is installed), and
+``.mcap`` (one channel per bus, log/mcap_out.py; with the robotics extra).
 Formats that store a channel *number* (asc, blf, trc) get the bus's position in the config
 (0 = the first configured bus) and are read back the same way; ``.csv`` keeps no channel.
 """
@@ -20,7 +21,7 @@ from sherpa_cli.errors import UsageError
 from sherpa_cli.log.candecode import Frame, parse_candump_line
 
 CANDUMP_SUFFIXES = (".log", ".txt", ".candump")
-WRITE_SUFFIXES = (".log", ".asc", ".blf", ".csv", ".trc", ".mf4")
+WRITE_SUFFIXES = (".log", ".asc", ".blf", ".csv", ".trc", ".mf4", ".mcap")
 NUMBERED_CHANNELS = (".asc", ".blf", ".trc", ".mf4")
 
 
@@ -34,13 +35,18 @@ def read_frames(path: Path, bus_names: Sequence[str] = ()) -> Iterator[Frame]:
         return
     if suffix == ".mf4":
         _need_asammdf(path)
+    if suffix == ".mcap":
+        from sherpa_cli.log import mcap_out
+
+        yield from mcap_out.read_frames(path)
+        return
     import can
 
     try:
         reader = can.LogReader(str(path))
     except Exception as exc:  # python-can's readers raise their own parse errors (BLFParseError, ...)
         raise UsageError(f"{path}: cannot read this format ({exc})",
-                         hint="formats: .log/.txt (candump -L), .asc, .blf, .csv, .trc, .mf4") from None
+                         hint="formats: .log/.txt (candump -L), .asc, .blf, .csv, .trc, .mf4, .mcap") from None
     # python-can's TRC reader numbers channels from 1, its writer took them from 0
     shift = 1 if suffix == ".trc" else 0
     try:
@@ -94,9 +100,13 @@ def check_output(path: Path) -> str:
     suffix = path.suffix.lower()
     if suffix not in WRITE_SUFFIXES:
         raise UsageError(f"{path}: unknown capture format {suffix or '(no suffix)'}",
-                         hint="use .log (candump), .asc, .blf, .csv, .trc or .mf4")
+                         hint="use .log (candump), .asc, .blf, .csv, .trc, .mf4 or .mcap")
     if suffix == ".mf4":
         _need_asammdf(path)
+    if suffix == ".mcap":
+        from sherpa_cli.log.mcap_out import require_mcap
+
+        require_mcap(f"-o {path}")
     if not path.parent.exists():
         raise UsageError(f"{path}: directory {path.parent} does not exist")
     return suffix
@@ -158,7 +168,7 @@ def capture(buses: dict[str, Any], path: Path, bus_names: Sequence[str], *,
     readers = {name: can.BufferedReader() for name in buses}
     notifiers = [can.Notifier(bus, [readers[name]], timeout=0.05) for name, bus in buses.items()]
     start = clock()
-    writer = can.Logger(str(path))
+    writer = _open_writer(path, suffix)
     try:
         try:
             while not stop.is_set():
@@ -181,6 +191,16 @@ def capture(buses: dict[str, Any], path: Path, bus_names: Sequence[str], *,
         result.seconds = clock() - start
         writer.stop()
     return result
+
+
+def _open_writer(path: Path, suffix: str) -> Any:
+    if suffix == ".mcap":
+        from sherpa_cli.log.mcap_out import FrameWriter
+
+        return FrameWriter(path)
+    import can
+
+    return can.Logger(str(path))
 
 
 def _drain(readers, writer, result: CaptureResult, suffix: str, bus_names: Sequence[str], *, wait: float,
