@@ -181,7 +181,9 @@ class MonitorFeed:
         from sherpa_cli.log.mcap_out import DriveState
 
         ns = time.time_ns()
-        by_joint = {r.joint: r.position_rad for r in rows if r.joint is not None and r.position_rad is not None}
+        # every watched joint, in config order, null while its drive does not answer: the layout's
+        # plots address joints by their index
+        by_joint = {r.joint: r.position_rad for r in rows if r.joint is not None}
         names = [j for j in self.cfg.joints if j in by_joint]
         self.view.joint_states(names, [by_joint[j] for j in names], ns=ns)
         self.view.motor_counts([r.drive for r in rows], [r.px for r in rows], ns=ns)
