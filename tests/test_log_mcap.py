@@ -271,3 +271,42 @@ def test_record_output_bad_inputs(cli, tmp_path, args, message):
     assert result.exit_code == 2 and message in result.stderr, result.transcript()
     assert "Traceback" not in result.stderr
     assert not list(tmp_path.glob("*.*"))
+
+
+def test_emcy_and_faults_in_a_recording(tmp_path):
+    """write_recording on its own: an EMCY heard while recording goes to /rosout with its Elmo text, a
+    latched MF makes the drive's diagnostic an ERROR with the fault decoded; a joint a sample lacks is
+    NaN, a sample without any value is left out."""
+    import struct
+
+    from sherpa_cli.elmo.faults import decode_emcy
+    from sherpa_cli.log.mcap_out import DriveState, TimedEmcy, TimedStatus, write_recording
+    from sherpa_cli.log.recording import Recording
+
+    cfg = load_config(ARM)
+    rec = Recording(times=[0.0, 0.01, 0.02], columns={
+        "elbow_pitch.pos_rad": [0.0, math.nan, 0.2], "elbow_pitch.vel_rad_s": [0.0, math.nan, 1.0],
+        "wrist_1.pos_rad": [0.1, 0.1, math.nan], "wrist_1.vel_rad_s": [0.0, 0.0, math.nan],
+        "elbow_1a.px": [0.0, math.nan, 115.0], "elbow_1a.vx": [0.0, math.nan, 573.0]})
+    zero = 1_700_000_000_000_000_000
+    emcy = decode_emcy(struct.pack("<HBBHH", 0x8110, 0x11, 0, 0, 0x2A8))
+    status = [TimedStatus(zero - 1, (DriveState("elbow_1a", "can1", 40, mo=1, um=5, sr=0, mf=0x1000),)),
+              TimedStatus(zero + 30_000_000, (DriveState("elbow_1a", "can1", 40, problem="no answer"),))]
+    out = tmp_path / "r.mcap"
+    write_recording(out, rec, cfg, time_zero_ns=zero, status=status,
+                    emcy=[TimedEmcy(zero + 15_000_000, "elbow_1a", emcy)])
+    messages, _, _ = _decoded(out)
+    assert [(m[0], m[2] - zero) for m in messages] == [
+        ("/diagnostics", -1), ("/joint_states", 0), ("/sherpa/motor_counts", 0),
+        ("/joint_states", 10_000_000),  # elbow_1a's counts missed that sample: no motor message
+        ("/rosout", 15_000_000), ("/joint_states", 20_000_000), ("/sherpa/motor_counts", 20_000_000),
+        ("/diagnostics", 30_000_000)]
+    log = next(m[3] for m in messages if m[0] == "/rosout")
+    assert log.level == 40 and log.name == "elbow_1a" and log.msg.startswith("EMCY 0x8110: CAN message lost")
+    first, last = (m[3].status[0] for m in messages if m[0] == "/diagnostics")
+    assert first.level == 2 and first.message.startswith("MF: ")
+    assert any(kv.key == "MF fault" for kv in first.values)
+    assert last.level == 2 and last.message == "no answer"
+    missed = [m[3] for m in messages if m[0] == "/joint_states"][1]
+    assert list(missed.name) == ["elbow_pitch", "wrist_1"] and list(missed.effort) == []
+    assert math.isnan(missed.position[0]) and missed.position[1] == 0.1

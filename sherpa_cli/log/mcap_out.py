@@ -7,7 +7,8 @@ them without a ROS installation or extra schemas:
 
 - ``/joint_states`` sensor_msgs/JointState per sample: the recorded joints (Σ/Δ joints of a pair
   too) in config order, position rad, velocity rad/s, effort A (current; NaN for Σ/Δ joints and
-  when not sampled; empty when no current was recorded). A sample a drive missed is NaN.
+  when not sampled; empty when no current was recorded). A joint a sample lacks is NaN; a sample
+  without any joint value gets no message.
 - ``/sherpa/motor_counts`` sensor_msgs/JointState of the drives (``frame_id`` ``counts``): PX in
   counts, VX in counts/s, current in A.
 - ``/sherpa/abs_encoders`` sensor_msgs/JointState of the joints whose CANopen encoder was recorded:
