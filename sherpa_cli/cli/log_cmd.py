@@ -29,7 +29,7 @@ def _names(st) -> tuple[list[str], dict[tuple[str, int], str]]:
 def decode(
     ctx: typer.Context,
     file: Path = typer.Argument(..., metavar="FILE", help="A capture: .log/.txt (candump -L), .asc, .blf, .csv, "
-                                ".trc, .mf4 (with asammdf)."),
+                                ".trc, .mf4 (with asammdf), .mcap (robotics extra)."),
     bus: list[str] | None = typer.Option(None, "--bus", metavar="BUS", help="Only frames of this bus (repeat)."),
     node: list[int] | None = typer.Option(None, "--node", metavar="ID", help="Only frames of this node (repeat)."),
     kind: list[str] | None = typer.Option(
@@ -90,7 +90,7 @@ def capture(
     ctx: typer.Context,
     output: Path = typer.Option(..., "--output", "-o", metavar="FILE",
                                 help="Where to write: .log (candump, channel per line), .asc, .blf, .csv, .trc, "
-                                ".mf4 (with asammdf)."),
+                                ".mf4 (with asammdf), .mcap (a JSON channel per bus; robotics extra)."),
     bus: list[str] | None = typer.Option(None, "--bus", metavar="BUS",
                                             help="Capture only this configured bus (repeat); default: every bus."),
     duration: float | None = typer.Option(None, "--for", metavar="S", help="Stop after S seconds (default: Ctrl-C)."),
