@@ -12,6 +12,7 @@ import typer
 
 from sherpa_cli.cli.context import AppState, state
 from sherpa_cli.cli.options import ApplyMotion, Targets
+from sherpa_cli.cli.robotics import DEFAULT_AT, AllowRemote, Foxglove, FoxgloveAt
 from sherpa_cli.errors import UsageError
 
 if TYPE_CHECKING:
@@ -39,7 +40,7 @@ def _names(st: AppState) -> tuple[list[str], dict[tuple[str, int], str]]:
 def decode(
     ctx: typer.Context,
     file: Path = typer.Argument(..., metavar="FILE", help="A capture: .log/.txt (candump -L), .asc, .blf, .csv, "
-                                ".trc, .mf4 (with asammdf)."),
+                                ".trc, .mf4 (with asammdf), .mcap (robotics extra)."),
     bus: list[str] | None = typer.Option(None, "--bus", metavar="BUS", help="Only frames of this bus (repeat)."),
     node: list[int] | None = typer.Option(None, "--node", metavar="ID", help="Only frames of this node (repeat)."),
     kind: list[str] | None = typer.Option(
@@ -100,7 +101,7 @@ def capture(
     ctx: typer.Context,
     output: Path = typer.Option(..., "--output", "-o", metavar="FILE",
                                 help="Where to write: .log (candump, channel per line), .asc, .blf, .csv, .trc, "
-                                ".mf4 (with asammdf)."),
+                                ".mf4 (with asammdf), .mcap (a JSON channel per bus; robotics extra)."),
     bus: list[str] | None = typer.Option(None, "--bus", metavar="BUS",
                                             help="Capture only this configured bus (repeat); default: every bus."),
     duration: float | None = typer.Option(None, "--for", metavar="S", help="Stop after S seconds (default: Ctrl-C)."),
@@ -271,13 +272,18 @@ def record(
     targets: Targets = None,
     rate: float = typer.Option(100.0, "--rate", metavar="HZ", help="Samples per second (SYNC rate)."),
     duration: float = typer.Option(..., "--for", metavar="S", help="How long to record, in seconds."),
-    output: Path = typer.Option(..., "--output", "-o", metavar="FILE.csv", help="Where to write the samples."),
+    output: list[Path] = typer.Option(..., "--output", "-o", metavar="FILE",
+                                      help="Where to write the samples: .csv, or .mcap (ROS 2 JointState and more, "
+                                      "docs/log.md; robotics extra). Repeat for both from one run."),
     current: bool | None = typer.Option(
         None, "--current/--no-current",
         help="Also sample the motor current (a second TPDO every 2nd SYNC). Default: when the bus budget allows."),
     poll: bool = typer.Option(False, "--poll", help="Sample through the interpreter (PX, VX, IQ queries) every "
                               "bus's poll_interval_ms (the seed's scheduler_interval) instead of TPDOs: "
                               "changes nothing on the drives, but slow and jittery."),
+    foxglove: Foxglove = False,
+    foxglove_at: FoxgloveAt = DEFAULT_AT,
+    allow_remote: AllowRemote = False,
 ) -> None:
     """Record position and velocity (and current) of joints, in joint units (rad, rad/s, A; Σ/Δ for
     pairs) plus the motor counts, with one timestamp per sample, into a CSV file.
@@ -297,8 +303,18 @@ def record(
       sherpa log record elbow_pitch --rate 1000 --for 5 -o elbow.csv
       sherpa log record shoulder_diff --rate 500 --for 10 --current -o pair.csv
       sherpa log record --poll --for 5 -o slow.csv
+      sherpa log record --rate 500 --for 10 -o run.csv -o run.mcap --foxglove
     """
     from sherpa_cli.bus.targets import drive_refs
+    from sherpa_cli.cli.robotics import (
+        RecordExtras,
+        check_live,
+        live_view,
+        poller_sample,
+        record_outputs,
+        recorder_sample,
+        write_mcap,
+    )
     from sherpa_cli.devices import encoder
     from sherpa_cli.log.record import MAX_LOAD, Poller, Recorder, bus_budget, check_budget
     from sherpa_cli.log.recording import write_csv
@@ -308,10 +324,8 @@ def record(
         raise UsageError(f"--for {duration}: expected seconds > 0 and <= {MAX_RECORD_S:g}")
     if not (0 < rate <= 10000):
         raise UsageError(f"--rate {rate}: expected Hz > 0 and <= 10000")
-    if output.suffix.lower() != ".csv":
-        raise UsageError(f"-o {output}: only .csv is written", hint="name the file run.csv")
-    if not output.parent.exists():
-        raise UsageError(f"-o {output}: directory {output.parent} does not exist")
+    outputs = record_outputs(output)
+    check_live(foxglove, foxglove_at, allow_remote)
     cfg = st.load_config()
     # an encoder device stands for the joint it measures (recorded beside it: devices/encoder.py)
     refs = drive_refs(cfg, encoder.targets_with_encoders(cfg, targets), configured_only=True)
@@ -329,18 +343,31 @@ def record(
     buses = list(dict.fromkeys([*(r.bus for r in refs),  # and the buses of the joints' encoders
                                 *(t.dev.bus for t in encoder.recorded_encoders(cfg, (r.name for r in refs)))]))
     expected: int | None = None
-    with st.session(buses=buses) as session:
+    loads = {} if poll else {b.bus: round(b.load, 6) for b in budget}
+    with live_view(st, foxglove, foxglove_at, allow_remote) as view, st.session(buses=buses) as session:
+        extras = RecordExtras(session, refs, mcap=".mcap" in outputs, view=view, budget=loads)
+        extras.start()
         if poll:
             poller = Poller(session, refs, current=bool(current))
-            with poller:
+            zero_ns = _time.time_ns()
+            with poller, extras.feed(cfg, poller_sample(poller)):
                 interrupted = _wait_for(duration)
             rec, counts = poller.recording(cfg), poller.counts()
         else:
             recorder = Recorder(session, refs, rate, current=bool(current))
-            with recorder:
+            with recorder, extras.feed(cfg, recorder_sample(recorder)):
                 interrupted = _wait_for(duration)
             rec, counts, expected = recorder.recording(), recorder.counts(), recorder.expected()
-    write_csv(rec, output)
+            zero_ns = round((recorder.t0 or 0.0) * 1e9)
+        extras.read_status()
+    if ".csv" in outputs:
+        write_csv(rec, outputs[".csv"])
+    if ".mcap" in outputs:
+        write_mcap(outputs[".mcap"], rec, cfg, time_zero_ns=zero_ns, extras=extras, config_file=str(st.config_path),
+                   info={"command": "log record", "source": "poll" if poll else "TPDO on SYNC",
+                         "rate_hz": "" if poll else f"{rate:g}", "current": str(bool(current)).lower(),
+                         **{f"budget_load.{bus}": f"{load:g}" for bus, load in loads.items()}})
+    output = list(outputs.values())
     _render_record(st, output, counts, expected, len(rec.times))
     if interrupted:
         st.out.warn("interrupted: the samples up to the interruption are written; the drives' PDO settings "
@@ -374,15 +401,18 @@ def _wait_for(duration: float) -> bool:
     return False
 
 
-def _render_record(st: AppState, output: Path, counts: Mapping[str, int], expected: int | None, rows: int) -> None:
+def _render_record(st: AppState, outputs: Sequence[Path], counts: Mapping[str, int], expected: int | None,
+                   rows: int) -> None:
     if st.json_mode:
-        st.out.json({"file": str(output), "rows": rows, "expected": expected,
+        extra = {"files": [str(p) for p in outputs]} if len(outputs) > 1 else {}
+        st.out.json({"file": str(outputs[0]), **extra, "rows": rows, "expected": expected,
                      "drives": [{"drive": n, "samples": c} for n, c in counts.items()]})
         return
     for name, c in counts.items():
         share = "" if not expected else f" of {expected} ({100 * c / expected:.2f} %)"
         st.out.line(f"{name}: {c} samples{share}")
-    st.out.line(f"wrote {output} ({rows} rows)")
+    for output in outputs:
+        st.out.line(f"wrote {output} ({rows} rows)")
 
 
 def _stepped_sim(st: AppState) -> tuple[SteppedTime | None, Callable[[ArmConfig, Mapping[str, str]], SimArm] | None]:
@@ -409,8 +439,9 @@ def step(
                                    help="Record at most S seconds after the command (position and velocity steps "
                                    "end earlier once settled; velocity and torque stop the motor at S)."),
     rate: float = typer.Option(1000.0, "--rate", metavar="HZ", help="Samples per second."),
-    output: Path = typer.Option(..., "--output", "-o", metavar="DIR",
-                                help="Directory for recording.csv, step.png and metrics.json (created)."),
+    output: Path = typer.Option(..., "--output", "-o", metavar="DIR|FILE.mcap",
+                                help="Directory for recording.csv, step.png and metrics.json (created); or one "
+                                ".mcap file with the recording and the metrics (robotics extra)."),
     uncalibrated: bool = typer.Option(False, "--uncalibrated", help="Allow a position step of a joint that has no "
                                       "absolute encoder and was not homed since power-up."),
     apply: ApplyMotion = False,
@@ -436,6 +467,7 @@ def step(
     """
     import json
 
+    from sherpa_cli.cli.robotics import RecordExtras, record_outputs, write_mcap
     from sherpa_cli.log.plot import have_matplotlib, plot_recording
     from sherpa_cli.log.recording import write_csv
     from sherpa_cli.motion.settings import MotionSettings
@@ -454,7 +486,10 @@ def step(
         raise UsageError(f"--for {duration}: expected seconds > 0 and <= {MAX_RECORD_S:g}")
     if not (0 < rate <= 10000):
         raise UsageError(f"--rate {rate}: expected Hz > 0 and <= 10000")
-    if output.exists() and not output.is_dir():
+    to_mcap = output.suffix.lower() == ".mcap" and not output.is_dir()
+    if to_mcap:
+        record_outputs([output])  # the directory, the robotics extra
+    elif output.exists() and not output.is_dir():
         raise UsageError(f"-o {output}: exists and is not a directory")
     cfg = st.load_config()
     target = resolve_step_target(cfg, joint)
@@ -463,7 +498,8 @@ def step(
         _step_dry_run(st, cfg, target, mode, value, duration, rate)
         return
     settings = MotionSettings.from_config(cfg, [target.ref.bus])
-    output.mkdir(parents=True, exist_ok=True)
+    if not to_mcap:
+        output.mkdir(parents=True, exist_ok=True)
     stepped, sim_factory = _stepped_sim(st)
     with st.session(buses=[target.ref.bus], sim_factory=sim_factory) as session:
         timebase = None
@@ -478,8 +514,19 @@ def step(
                 session.client_overrides.update(stepped.client_overrides(cfg.protocol.reply_timeout,
                                                                          cfg.protocol.retries, unheard))
                 timebase = stepped
+        extras = RecordExtras(session, [target.ref], mcap=to_mcap, view=None)
+        extras.start()
+        zero_ns = _time.time_ns()  # t = 0 (the step's command) is placed at the wall time the step began
         result = run_step(session, target, mode, value, duration=duration, rate=rate, settings=settings,
                           uncalibrated=uncalibrated, timebase=timebase)
+        extras.read_status()
+    if to_mcap:
+        write_mcap(output, result.recording, cfg, time_zero_ns=zero_ns, extras=extras,
+                   config_file=str(st.config_path), step_metrics=result.as_json(),
+                   info={"command": "log step", "source": "TPDO on SYNC", "rate_hz": f"{rate:g}", "mode": mode,
+                         "value": f"{value:g}", "joint": result.joint})
+        _render_step(st, result, mode, value, {"mcap": str(output)})
+        return
     write_csv(result.recording, output / "recording.csv")
     (output / "metrics.json").write_text(json.dumps(result.as_json(), indent=2) + "\n", encoding="utf-8")
     files = {"csv": str(output / "recording.csv"), "metrics": str(output / "metrics.json")}
@@ -490,6 +537,10 @@ def step(
         files["png"] = str(output / "step.png")
     else:
         st.out.warn("no PNG: matplotlib is not installed (pip install 'sherpa-cli[plot]')")
+    _render_step(st, result, mode, value, files)
+
+
+def _render_step(st: Any, result: Any, mode: str, value: float, files: dict[str, str]) -> None:
     if st.json_mode:
         st.out.json({**result.as_json(), "files": files})
         return

@@ -6,12 +6,21 @@ import contextlib
 import sys
 import time
 from collections.abc import Callable, Sequence
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import typer
 
 from sherpa_cli.cli.context import AppState, state
 from sherpa_cli.cli.options import ApplyHeartbeat, Targets
+from sherpa_cli.cli.robotics import (
+    DEFAULT_AT,
+    AllowRemote,
+    Foxglove,
+    FoxgloveAt,
+    MonitorFeed,
+    check_live,
+    live_view,
+)
 from sherpa_cli.errors import ExitCode, UsageError
 
 if TYPE_CHECKING:
@@ -37,9 +46,15 @@ def monitor(
         "old value is written back at exit). Without --apply it is a dry run: shown, not written. Default: "
         "only listen to the heartbeat the drives already send."),
     apply: ApplyHeartbeat = False,
+    duration: float | None = typer.Option(None, "--for", metavar="S", help="End the live view by itself after "
+                                          "S seconds' worth of polls (S / --interval polls)."),
+    foxglove: Foxglove = False,
+    foxglove_at: FoxgloveAt = DEFAULT_AT,
+    allow_remote: AllowRemote = False,
 ) -> None:
     """Show every drive: NMT state and heartbeat, MO, UM, position in joint units, SR and MF decoded,
-    and the last EMCY with its Elmo text.
+    and the last EMCY with its Elmo text. With --foxglove the same goes live to Foxglove (joint
+    states, motor counts, drive status, bus load, each EMCY; docs/log.md).
 
     Each drive is NMT-started (the binary interpreter answers only when Operational) and then only
     queried: MO, UM, PX, SR, MF, plus SDO reads of 0x1017 and 0x1003:1 (the last stored error).
@@ -54,6 +69,7 @@ def monitor(
       sherpa monitor shoulder_diff elbow_pitch --interval 0.2
       sherpa --json monitor --once
       sherpa monitor --heartbeat 200 --apply
+      sherpa monitor --foxglove
     """
     from sherpa_cli.bus.targets import drive_refs
     from sherpa_cli.ops.monitor import Monitor
@@ -63,6 +79,11 @@ def monitor(
         raise UsageError("--json needs --once: the live view is for a terminal", hint="sherpa --json monitor --once")
     if not 0 < interval <= MAX_INTERVAL:  # also refuses nan and inf (time.sleep(inf) overflows)
         raise UsageError(f"--interval {interval}: expected a number of seconds > 0 and <= {MAX_INTERVAL:g}")
+    if duration is not None and not 0 < duration <= 86400:
+        raise UsageError(f"--for {duration}: expected seconds > 0 and <= 86400")
+    if once and (foxglove or duration is not None):
+        raise UsageError(f"{'--foxglove' if foxglove else '--for'} is for the live view, not --once")
+    check_live(foxglove, foxglove_at, allow_remote)
     cfg = st.load_config()
     refs = drive_refs(cfg, targets)
     buses = list(dict.fromkeys(ref.bus for ref in refs))
@@ -73,7 +94,8 @@ def monitor(
         st.out.warn(f"dry run: --heartbeat {heartbeat} would set the producer heartbeat (0x1017) of "
                     f"{len(refs)} drive(s) to {heartbeat} ms in RAM; nothing is written (add --apply)")
         heartbeat = None
-    with st.session(buses=buses) as session, Monitor(session, refs, heartbeat_ms=heartbeat) as mon:
+    with live_view(st, foxglove, foxglove_at, allow_remote) as view, st.session(buses=buses) as session, \
+            Monitor(session, refs, heartbeat_ms=heartbeat) as mon:
         if once:
             mon.poll()
             mon.wait_for_heartbeats()
@@ -82,28 +104,47 @@ def monitor(
             if any(not r.answering or r.mf for r in rows):
                 raise typer.Exit(int(ExitCode.PROBLEM))  # a silent drive or a latched motor failure
             return
+        after_poll = None
+        if view is not None:
+            view.listen(session.links)
+            after_poll = MonitorFeed(view, cfg).publish
+        polls = None if duration is None else max(1, round(duration / interval))
         # Ctrl-C is how a live view ends: exit 0 after the monitor restores 0x1017
         with contextlib.suppress(KeyboardInterrupt):
-            _live(st, mon, interval)
+            _live(st, mon, interval, polls=polls, after_poll=after_poll)
 
 
-def _live(st: AppState, mon: Monitor, interval: float) -> None:
+def _live(st: AppState, mon: Monitor, interval: float, *, polls: int | None = None,
+          after_poll: Callable[[list[Any]], None] | None = None) -> None:
+    """Poll every ``interval`` s until Ctrl-C, or ``polls`` times; ``after_poll(rows)`` sees each snapshot."""
+    def snapshot() -> list[Any]:
+        rows = mon.snapshot()
+        if after_poll is not None:
+            after_poll(rows)
+        return rows
+
+    done = 0
     if not sys.stdout.isatty():
         # a log, not a screen: one full snapshot per poll
         while True:
             mon.poll()
-            _print(st, *_renderables(mon.snapshot(), mon.cfg, ages=True))
+            _print(st, *_renderables(snapshot(), mon.cfg, ages=True))
             st.out.line()
+            done += 1
+            if polls is not None and done >= polls:
+                return
             sleep(interval)
     from rich.live import Live
 
     mon.poll()
-    with Live(_screen(*_renderables(mon.snapshot(), mon.cfg, ages=True)), console=st.out.console,
+    done = 1
+    with Live(_screen(*_renderables(snapshot(), mon.cfg, ages=True)), console=st.out.console,
               auto_refresh=False) as live:
-        while True:
+        while polls is None or done < polls:
             sleep(interval)
             mon.poll()
-            live.update(_screen(*_renderables(mon.snapshot(), mon.cfg, ages=True)), refresh=True)
+            done += 1
+            live.update(_screen(*_renderables(snapshot(), mon.cfg, ages=True)), refresh=True)
 
 
 def _render_once(st: AppState, rows: Sequence[DriveStatus]) -> None:

@@ -2,7 +2,8 @@
 :class:`~sherpa_cli.log.candecode.Frame`, and capture every bus of a session into one file.
 
 Formats by suffix through python-can's readers and writers: ``.log`` (candump, the channel on
-every line), ``.asc``, ``.blf``, ``.csv``, ``.trc``, ``.mf4`` (when asammdf is installed).
+every line), ``.asc``, ``.blf``, ``.csv``, ``.trc``, ``.mf4`` (when asammdf is installed), and
+``.mcap`` (one channel per bus, log/mcap_out.py; with the robotics extra).
 Formats that store a channel *number* (asc, blf, trc) get the bus's position in the config
 (0 = the first configured bus) and are read back the same way; ``.csv`` keeps no channel.
 """
@@ -14,7 +15,7 @@ import time
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Protocol
 
 from sherpa_cli.errors import UsageError
 from sherpa_cli.log.candecode import Frame, parse_candump_line
@@ -22,8 +23,18 @@ from sherpa_cli.log.candecode import Frame, parse_candump_line
 if TYPE_CHECKING:
     import can
 
+
+
+class FrameSink(Protocol):
+    """Where captured frames go: a python-can writer (can.Logger) or the MCAP FrameWriter."""
+
+    def on_message_received(self, msg: can.Message) -> None: ...
+
+    def stop(self) -> None: ...
+
+
 CANDUMP_SUFFIXES = (".log", ".txt", ".candump")
-WRITE_SUFFIXES = (".log", ".asc", ".blf", ".csv", ".trc", ".mf4")
+WRITE_SUFFIXES = (".log", ".asc", ".blf", ".csv", ".trc", ".mf4", ".mcap")
 NUMBERED_CHANNELS = (".asc", ".blf", ".trc", ".mf4")
 
 
@@ -37,13 +48,18 @@ def read_frames(path: Path, bus_names: Sequence[str] = ()) -> Iterator[Frame]:
         return
     if suffix == ".mf4":
         _need_asammdf(path)
+    if suffix == ".mcap":
+        from sherpa_cli.log import mcap_out
+
+        yield from mcap_out.read_frames(path)
+        return
     import can
 
     try:
         reader = can.LogReader(str(path))
     except Exception as exc:  # noqa: BLE001  python-can's readers raise their own parse errors (BLFParseError, ...)
         raise UsageError(f"{path}: cannot read this format ({exc})",
-                         hint="formats: .log/.txt (candump -L), .asc, .blf, .csv, .trc, .mf4") from None
+                         hint="formats: .log/.txt (candump -L), .asc, .blf, .csv, .trc, .mf4, .mcap") from None
     # python-can's TRC reader numbers channels from 1, its writer took them from 0
     shift = 1 if suffix == ".trc" else 0
     try:
@@ -97,9 +113,13 @@ def check_output(path: Path) -> str:
     suffix = path.suffix.lower()
     if suffix not in WRITE_SUFFIXES:
         raise UsageError(f"{path}: unknown capture format {suffix or '(no suffix)'}",
-                         hint="use .log (candump), .asc, .blf, .csv, .trc or .mf4")
+                         hint="use .log (candump), .asc, .blf, .csv, .trc, .mf4 or .mcap")
     if suffix == ".mf4":
         _need_asammdf(path)
+    if suffix == ".mcap":
+        from sherpa_cli.log.mcap_out import require_mcap
+
+        require_mcap(f"-o {path}")
     if not path.parent.exists():
         raise UsageError(f"{path}: directory {path.parent} does not exist")
     return suffix
@@ -161,7 +181,7 @@ def capture(buses: dict[str, can.BusABC], path: Path, bus_names: Sequence[str], 
     readers = {name: can.BufferedReader() for name in buses}
     notifiers = [can.Notifier(bus, [readers[name]], timeout=0.05) for name, bus in buses.items()]
     start = clock()
-    writer = can.Logger(str(path))
+    writer = _open_writer(path, suffix)
     try:
         try:
             while not stop.is_set():
@@ -186,7 +206,17 @@ def capture(buses: dict[str, can.BusABC], path: Path, bus_names: Sequence[str], 
     return result
 
 
-def _drain(readers: dict[str, can.BufferedReader], writer: can.Listener, result: CaptureResult, suffix: str, bus_names: Sequence[str], *, wait: float,
+def _open_writer(path: Path, suffix: str) -> FrameSink:
+    if suffix == ".mcap":
+        from sherpa_cli.log.mcap_out import FrameWriter
+
+        return FrameWriter(path)
+    import can
+
+    return can.Logger(str(path))
+
+
+def _drain(readers: dict[str, can.BufferedReader], writer: FrameSink, result: CaptureResult, suffix: str, bus_names: Sequence[str], *, wait: float,
            on_frame: Callable[[], None] | None) -> bool:
     got = False
     for name, reader in readers.items():
@@ -202,7 +232,7 @@ def _drain(readers: dict[str, can.BufferedReader], writer: can.Listener, result:
     return got
 
 
-def _write(msg: can.Message, name: str, writer: can.Listener, result: CaptureResult, suffix: str, bus_names: Sequence[str]) -> None:
+def _write(msg: can.Message, name: str, writer: FrameSink, result: CaptureResult, suffix: str, bus_names: Sequence[str]) -> None:
     count = result.counts[name]
     if msg.is_error_frame:
         count.errors += 1
