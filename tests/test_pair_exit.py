@@ -150,3 +150,50 @@ def test_a_second_ctrl_c_during_the_restore_does_not_skip_the_rest_of_it(interru
         start.__exit__(None, None, None)
     assert stopped == [2]  # the stop came before any restore
     assert session.log[2:] == [("left", 0x2040, bytes([7])), ("right", 0x2040, bytes([7]))]
+
+
+@pytest.mark.parametrize("how", ["diffdrive", "sigma_jog"])
+def test_one_pair_drive_dying_stops_the_partner_at_once_and_ends_the_command_naming_it(tmp_path, how):
+    """Issue 21 item 8: `right` dies mid-move. Its partner gets its stop after at most one request to
+    the dead drive (the request's attempts), never after the dead drive's timeouts of every exit step;
+    the command ends with an error naming the dead drive, and the dead drive costs no more requests
+    in the exit (the guard, the common start's restore and the recorder skip a silent drive)."""
+    import time
+
+    from sherpa_cli.errors import CommunicationError
+
+    cfg = load_config(JOG_CONFIG)
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
+        right = s.sim.drives["right"]
+        right_node = right.node
+
+        def sleep(seconds: float) -> None:
+            """The command's poll sleep: once both motors run (right has its BG), right dies."""
+            with s.sim.lock:
+                moving = any(f[:2] == b"BG" for _, i, f in right.received if i in (0x300 + right_node, 0x300 + 125))
+                if moving and not right.dead and right.motor_on:
+                    right.die()
+            time.sleep(seconds)
+
+        with pytest.raises(CommunicationError, match="right"):
+            if how == "diffdrive":
+                diffdrive.run_move(s, cfg.pairs["diff"], MoveRequest(sigma="2500counts", delta="0counts",
+                                                                     relative=True, uncalibrated=True), sleep=sleep)
+            else:
+                axis = joint_jog.resolve_axis(cfg, "pitch")
+                joint_jog.run(s, axis, joint_jog.JogRequest(mode="velocity", velocity="1000counts/s", duration=5.0),
+                              sleep=sleep)
+        with s.sim.lock:
+            died = [t for t, event in s.sim.drives["right"].events if event == "motor off: the drive died"]
+        assert died, "the drive did not die during the move"
+        t_dead = died[0]
+        to_right = [t for t, i, f in _frames(s, "right") if i == 0x300 + right_node and t >= t_dead]
+        left_st = [t for t, i, f in _frames(s, "left") if i == 0x300 + 10 and f[:2] == b"ST" and t >= t_dead]
+        assert left_st, "the partner was never stopped"
+        # every request to the dead drive after it died, stop frames aside: at most two requests'
+        # attempts (the settle window's patience), then it is given up -- whatever the machine's load
+        asked = [f[:2] for t, i, f in _frames(s, "right")
+                 if i == 0x300 + right_node and t >= t_dead and f[:2] not in (b"ST", b"TC", b"JV", b"BG")]
+        assert len(asked) <= 4, asked
+        assert len(to_right) <= 8, f"{len(to_right)} interpreter frames to the dead drive after it died"
+        assert motors_off(s)

@@ -135,6 +135,9 @@ class DriveClient:
         self._last_emcy: Emcy | None = None
         self._emcy_count = 0
         self._boots = 0  # boot-ups heard since reset_node first listened
+        # True after a request that got no answer at any attempt, until the next answer: the exit
+        # paths skip a silent drive instead of spending a timeout per step on it
+        self.silent = False
         self._boot_listening = False
         transport.subscribe(TPDO2_BASE + node, self._on_reply)
         transport.subscribe(EMCY_BASE + node, self._on_emcy)
@@ -273,6 +276,7 @@ class DriveClient:
                     min(self.timeout, max(deaf_until - now, self.settings.mo_poll_interval))
                 reply = self._exchange(query, "MO", 0, attempts=1, wait=wait)
                 if reply is not None:
+                    self.silent = False
                     last = self._value(reply, "MO")
                     if last == value:
                         return
@@ -280,6 +284,7 @@ class DriveClient:
                     break
                 self._sleep(self.settings.mo_poll_interval)
             if last is None:
+                self.silent = True  # not one answer for the whole confirmation time
                 raise DriveTimeoutError(f"{self.label}: {what} not confirmed: no answer to MO within {timeout:g} s",
                                         hint=self.settings.timeout_hint)
             raise CommunicationError(f"{self.label}: {what} not confirmed: MO still reads {last} after {timeout:g} s",
@@ -345,6 +350,7 @@ class DriveClient:
                   before: bytes | None = None) -> Reply:
         attempts = 1 + self.retries if attempts is None else attempts
         reply = self._exchange(frame, letters, index, attempts=attempts, before=before)
+        self.silent = reply is None
         if reply is None:
             tries = f" ({attempts} attempts)" if attempts > 1 else ""
             raise DriveTimeoutError(f"{self.label}: no answer to {what} within {self.timeout:g} s{tries}",

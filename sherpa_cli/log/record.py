@@ -30,7 +30,7 @@ from sherpa_cli.bus.targets import DriveRef
 from sherpa_cli.config.model import ArmConfig
 from sherpa_cli.devices import encoder
 from sherpa_cli.elmo.protocol import SYNC_ID
-from sherpa_cli.errors import SherpaError, UsageError
+from sherpa_cli.errors import CommunicationError, SdoError, SherpaError, UsageError
 from sherpa_cli.joints.units import counts_per_s_to_rad_per_s, counts_to_rad
 from sherpa_cli.log.capture import frame_bits
 from sherpa_cli.log.recording import Recording
@@ -53,6 +53,7 @@ CURRENT_SCALE_A = 0.001  # A per unit of 0x6078
 CURRENT_DIVIDER = 2  # current on every 2nd SYNC
 DRAIN_LIMIT_S = 1.0  # longest wait for the answers to the last SYNCs after SYNC stopped
 RESTORE_ATTEMPTS = 30  # SDO tries per object when putting the PDO settings back (a backlog may delay answers)
+RESTORE_WINDOW_S = 3.0  # ... but a drive silent this long is dead: its other objects are not tried
 
 
 # -- the bus budget ---------------------------------------------------------------------------------
@@ -267,18 +268,32 @@ class Recorder:
             with contextlib.suppress(Exception):
                 network.unsubscribe(cob, callback)
         self._subscribed.clear()
-        failures = []
+        failures: list[SherpaError] = []
         for d in self._drives.values():
             sdo = self.session.sdo(d.ref)
+            # a drive that answered nothing to its last interpreter request is not waited for here
+            deaf = self.session.client(d.ref).silent
             for index, sub, size, value in reversed(d.saved):
-                # patient: right after a fast recording the drive may still be working off a backlog
+                if deaf:
+                    failures.append(CommunicationError(f"{d.ref.name}: 0x{index:04X}:{sub} not put back: the drive "
+                                                       "did not answer (dead or silent)"))
+                    continue
+                # patient: right after a fast recording the drive may still be working off a backlog;
+                # but bounded in time per drive (RESTORE_WINDOW_S of no answer), so a dead drive costs
+                # that window once, not 30 timeouts per object (it held a command's exit for good)
+                silent_since: float | None = None
                 for attempt in range(RESTORE_ATTEMPTS):
                     try:
                         sdo.download(index, sub, value.to_bytes(size, "little"))
                         break
                     except SherpaError as exc:
-                        if attempt == RESTORE_ATTEMPTS - 1:
+                        timed_out = isinstance(exc, SdoError) and exc.reason == "timeout"
+                        now = time.monotonic()
+                        silent_since = (silent_since or now - sdo.timeout) if timed_out else None
+                        deaf = silent_since is not None and now - silent_since >= RESTORE_WINDOW_S
+                        if deaf or attempt == RESTORE_ATTEMPTS - 1:
                             failures.append(exc)
+                            break
             d.saved.clear()
         for track in self.encoders:
             try:

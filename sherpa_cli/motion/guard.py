@@ -232,8 +232,11 @@ class MotionGuard:
     def query(self, ref: DriveRef, letters: str, index: int = 0) -> int | float:
         """A query that waits out a drive deaf for its MO settle window (another host switched the motor:
         `sherpa stop`), up to protocol.mo_confirm_timeout, keeping the dead-man fed meanwhile."""
-        c = self._drive(ref).client
-        patience = c.settings.mo_confirm_timeout
+        d = self._drive(ref)
+        c = d.client
+        # patient for the settle window only: one request's attempts already span it, so a drive that
+        # stays silent costs one request, not the whole mo_confirm_timeout (issue 21 item 8)
+        patience = c.settings.mo_settle
         try:
             if index:
                 self._pulse()
@@ -241,8 +244,18 @@ class MotionGuard:
             # a sign of life per attempt, not one up-front extension for the whole patience
             return ask_patiently(c, letters, self._clock, self._sleep, patience, self.settings.poll_interval,
                                   on_try=self._pulse)
+        except CommunicationError:
+            if c.silent:
+                self.stop_others(ref)
+            raise
         finally:
             self._pulse()
+
+    def stop_others(self, dead: DriveRef) -> None:
+        """A drive of this command went silent: every other drive it moves gets its stop frames at
+        once, without waiting for answers (the guard's exit then confirms them). Never raises."""
+        self._event(f"{drive_label(dead)}: no answer; stopping every other drive of the command now")
+        self._stop_pass(entering=False, skip={(dead.bus, dead.node)})
 
     def unit_mode(self, ref: DriveRef) -> int:
         return self._drive(ref).um
@@ -436,13 +449,13 @@ class MotionGuard:
         finally:
             self._stop_heartbeat()
 
-    def _stop_pass(self, entering: bool) -> None:
+    def _stop_pass(self, entering: bool, skip: set[tuple[str, int]] | None = None) -> None:
         """Every drive whose motor is on gets its stop at once, without waiting for replies; the
         careful per-drive exit (standstill, MO=0, restore) follows. Otherwise a drive that does not
         answer would hold back the stop of the drives after it by its timeouts."""
         method = self.settings.stop_method
-        for d in list(self._drives.values()):
-            if not d.mo or (entering and not d.switched_on):
+        for key, d in list(self._drives.items()):
+            if not d.mo or (entering and not d.switched_on) or (skip and key in skip):
                 continue
             try:
                 if d.um == UM_TORQUE:
@@ -463,6 +476,15 @@ class MotionGuard:
         c, s = d.client, self.settings
         r = DriveStop(d.ref.name, f"{d.ref.bus}:{d.ref.node}")
         motor_confirmed_off = False
+        if c.silent and stop:
+            # no answer to its last request: one more try of each step would cost a timeout each and
+            # hold back the command's end; the drive's own consumer stops it (the heartbeat ends)
+            r.stopped_by = "not reached"
+            r.problems.append(f"no answer (dead or silent): not confirmed stopped; its heartbeat consumer "
+                              f"switches the motor off {s.consumer_time_ms} ms after the tool's heartbeat ends")
+            r.kept.extend(f"{name} (no answer)" for name in ("0x1016:1", "0x1029:1", "0x6007:0"))
+            self._event(r.line())
+            return r
         if not stop:
             r.stopped_by = "not moved by this guard"
             self._restore_dead_man(d, r, stop_failed=False)

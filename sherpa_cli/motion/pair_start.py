@@ -222,7 +222,14 @@ def stop_motors(guard: MotionGuard, refs: Sequence[DriveRef], settings: MotionSe
         from sherpa_cli.motion.stopping import stop_drive
 
         deaf: list[str] = []
+        # a silent drive (no answer to its last request) gets nothing: its partner is stopped at once
+        # instead of after that drive's timeouts; its own consumer stops it when the heartbeat ends
         for r in refs:
+            if guard.client(r).silent:
+                deaf.append(r.name)
+        for r in refs:
+            if r.name in deaf:
+                continue
             try:
                 stop_drive(guard.client(r), unit_mode=guard.unit_mode(r), method=settings.stop_method,
                            standstill_timeout=0.0, poll_interval=settings.poll_interval,

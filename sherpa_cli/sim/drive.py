@@ -301,6 +301,11 @@ class SimDrive:
     def dead(self) -> bool:
         return self._dead
 
+    def die(self) -> None:
+        """Die now, as ``die_at`` would: silent from the next step on (tests that kill a drive at a
+        chosen point of a command)."""
+        self._die_due = self._t
+
     @property
     def motor_on(self) -> bool:
         return self._motor_on
