@@ -35,7 +35,7 @@ def test_ports_past_the_range_are_refused_naming_the_bound(text, buses, bound):
     assert str(info.value).startswith("--serve") and bound in str(info.value)
 
 
-@pytest.mark.parametrize("text", ["127.0.0.1:５４７０１", "127.0.0.1:-1", "127.0.0.1:+80", "127.0.0.1: 80"])
+@pytest.mark.parametrize("text", ["127.0.0.1:\uff15\uff14\uff17\uff10\uff11", "127.0.0.1:-1", "127.0.0.1:+80", "127.0.0.1: 80"])
 def test_ports_are_ascii_digits(text):
     with pytest.raises(UsageError, match="is not HOST:PORT"):
         parse_host_port(text, 1)
@@ -53,7 +53,7 @@ def test_sim_serve_past_the_last_port_is_one_message_and_exit_2(cli, port, bound
 
 
 @pytest.mark.parametrize("spec", ["can0=remote:127.0.0.1:65536", "can0=remote:127.0.0.1:0",
-                                  "can0=remote:127.0.0.1:５４７０１", "can0=remote:ws://h:99999/x"])
+                                  "can0=remote:127.0.0.1:\uff15\uff14\uff17\uff10\uff11", "can0=remote:ws://h:99999/x"])
 def test_bus_map_remote_ports_are_checked(spec):
     with pytest.raises(UsageError, match=r"--bus-map: .*1\.\.65535"):
         parse_bus_map([spec])

@@ -251,6 +251,9 @@ def _convert(node: yaml.Node, path: str, filename: str, key_line: int | None,
             if not isinstance(knode, ScalarNode):
                 raise ConfigError("a mapping key must be a plain name, not a list or mapping",
                                   Location(filename, kline, path or None))
+            if knode.tag in _NUMBER_TAGS and not knode.value.isascii():
+                raise ConfigError(f"key {knode.value[:40]!r} is not written with the ASCII digits 0-9",
+                                  Location(filename, kline, path or None))
             if knode.tag in _NUMBER_TAGS and len(knode.value) > MAX_NUMBER_CHARS:
                 raise ConfigError(f"key {knode.value[:20]}... is a number of {len(knode.value)} characters",
                                   Location(filename, kline, path or None))
@@ -273,6 +276,11 @@ def _convert(node: yaml.Node, path: str, filename: str, key_line: int | None,
     if isinstance(node, SequenceNode):
         seq = [_convert(v, join_path(path, i), filename, None, ctor, depth + 1) for i, v in enumerate(node.value)]
         return YNode(seq, "seq", line, path, filename, key_line)
+    if node.tag in _NUMBER_TAGS and not node.value.isascii():
+        # only an explicit !!int / !!float gets here (the resolver's patterns are ASCII); int() and
+        # float() would read other scripts' digits (U+FF13 -> 3)
+        raise ConfigError(f"number {node.value[:40]!r} is not written with the ASCII digits 0-9",
+                          Location(filename, key_line or line, path or None))
     if node.tag in _NUMBER_TAGS and len(node.value) > MAX_NUMBER_CHARS:
         raise ConfigError(f"number {node.value[:20]}... has {len(node.value)} characters; a number here has at "
                           f"most {MAX_NUMBER_CHARS}", Location(filename, key_line or line, path or None))
