@@ -11,13 +11,43 @@ import functools
 import re
 import sys
 from collections.abc import Sequence
+from typing import Any
 
 import typer
+from typer.core import TyperGroup
 
 from sherpa_cli.cli import context
 from sherpa_cli.errors import ExitCode, SherpaError, UsageError
 
 _ROOT: typer.Typer | None = None
+
+
+class Interrupted(SherpaError):
+    """Ctrl-C that ended a command (exit 130, "interrupted")."""
+
+    exit_code = ExitCode.INTERRUPTED
+
+
+class RootGroup(TyperGroup):
+    """The root command (``typer.Typer(cls=RootGroup)`` in cli/app.py).
+
+    A Ctrl-C while the command line is parsed or a command runs becomes :class:`Interrupted` here,
+    before the installed typer sees it: typer 0.29 turns a KeyboardInterrupt into a silent
+    ``Exit(130)`` (click raised ``Abort``), and it parses slowly the first time (it imports pydantic
+    then), so the one line "interrupted" must not depend on which one is installed.
+    """
+
+    def make_context(self, *args: Any, **kwargs: Any) -> Any:
+        try:
+            return super().make_context(*args, **kwargs)
+        except KeyboardInterrupt as exc:
+            raise Interrupted("interrupted") from exc
+
+    def invoke(self, ctx: Any) -> Any:
+        try:
+            return super().invoke(ctx)
+        except KeyboardInterrupt as exc:
+            raise Interrupted("interrupted") from exc
 
 
 def install(app: typer.Typer) -> None:
