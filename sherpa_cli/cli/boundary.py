@@ -106,16 +106,16 @@ def run(argv: Sequence[str] | None = None) -> int:
 
 
 # A number as a command line gives it (option values, KEY=VALUE, positional), digits of any script,
-# with the unit suffixes sherpa reads: what Python's float()/int() or a Unicode \\d would take.
+# with the unit suffixes sherpa reads: what Python's float()/int() or a str pattern's \d would take.
 _NUMBER_SHAPED = re.compile(r"\s*[+-]?(?:\d+(?:\.\d*)?|\.\d+)(?:[eE][+-]?\d+)?\s*"
                             r"(?:rad|deg|counts?|cnt|a|ma|s|hz|ms)?(?:/s)?\s*", re.IGNORECASE)
 
 
 def refuse_non_ascii_numbers(args: Sequence[str]) -> None:
-    """Numbers are ASCII: Python reads a fullwidth 3 (U+FF13) or Arabic-Indic 12 as 3 and 12 (float(), int(), typer's options), and
-    `--to` with a fullwidth 3 would move a joint by what the technician may not have meant. Refused for every
+    """Numbers are ASCII: Python reads a fullwidth 3 (U+FF13) or Arabic-Indic 12 as 3 and 12 (float(),
+    int(), typer's options), so `--to` with a fullwidth 3 moved a joint 3 rad. Refused for every
     argument before any option parser sees it (the parsers of units, raw commands, targets and
-    config check too). A file or name with such digits is not number-shaped and passes."""
+    config refuse them too). A file or name with such digits is not number-shaped and passes."""
     previous = None
     for arg in args:
         name, eq, value = arg.partition("=")
