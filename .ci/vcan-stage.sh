@@ -48,8 +48,8 @@ python=$(command -v python)
 echo "CI: realbus tests on $interfaces in a QEMU guest ($cpus vCPUs, limit ${limit}s)" >&2
 set +e
 "$vm" -c "$cpus" -i "$interfaces" -t "$limit" -- \
-  env SHERPA_TEST_BUS="socketcan:$interfaces" "$python" -m pytest -m realbus --durations=5 \
-  "${deselect[@]}" "$@"
+  env SHERPA_TEST_BUS="socketcan:$interfaces" "$python" -m pytest -m realbus --durations=5 -p no:randomly \
+  -o timeout="${SHERPA_VCAN_TEST_TIMEOUT:-900}" "${deselect[@]}" "$@"
 rc=$?
 set -e
 case "$rc" in

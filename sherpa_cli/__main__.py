@@ -1,3 +1,3 @@
-from sherpa_cli.cli.app import main
+from sherpa_cli.cli.entry import main
 
 main()

@@ -40,8 +40,24 @@ def parse_bus_map(specs: Iterable[str]) -> dict[str, BusTarget]:
                 # it sends out of the network interface; a sim or test must stay on loopback
                 raise UsageError("--bus-map: the udp_multicast interface is not supported; "
                                  "use remote (python-can-remote) or socketcan")
+            if interface.strip() == "remote":
+                _check_remote_port(item, channel.strip())
             result[bus.strip()] = BusTarget(interface.strip(), channel.strip())
     return result
+
+
+def _check_remote_port(item: str, channel: str) -> None:
+    """python-can-remote's address (HOST:PORT or ws://HOST:PORT/PATH): a port, where given, is
+    1..65535 in ASCII digits, refused here instead of by the socket layer as a bus that cannot open."""
+    from urllib.parse import urlparse
+
+    try:
+        port = urlparse(channel if "://" in channel else "ws://" + channel).port
+    except ValueError:
+        port = -1
+    if port is not None and not 1 <= port <= 65535:
+        raise UsageError(f"--bus-map: '{item}': the port is not a number 1..65535",
+                         hint="e.g. --bus-map can0=remote:127.0.0.1:54701 (what `sherpa sim --serve` prints)")
 
 
 def apply_bus_map(cfg: ArmConfig, mapping: Mapping[str, BusTarget]) -> ArmConfig:

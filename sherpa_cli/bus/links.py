@@ -116,6 +116,7 @@ def open_links(cfg: ArmConfig, names: Iterable[str] | None = None, *,
     with its error and the others are opened anyway; only an interrupt still closes everything."""
     links: dict[str, BusLink] = {}
     network_cls = _paced_network_class()
+    in_hand: Callable[[], Any] | None = None  # closes a bus opened but not yet in links (a signal can land there)
     try:
         for name in names if names is not None else cfg.buses:
             bus_cfg = cfg.buses[name]
@@ -127,13 +128,19 @@ def open_links(cfg: ArmConfig, names: Iterable[str] | None = None, *,
                     continue
             else:
                 bus = open_bus(bus_cfg)
+            in_hand = bus.shutdown
             network = network_cls(bus)
+            in_hand = network.disconnect  # its notifier too, once connected, then the bus
             network.gap = bus_cfg.send_interval_us / 1e6
             network.sdo_timeout = cfg.protocol.sdo_timeout
             network.connect()
             links[name] = BusLink(name, bus_cfg, bus, network)
+            in_hand = None
     except BaseException:
         close_links(links)
+        if in_hand is not None:
+            with contextlib.suppress(Exception):  # closing must not hide the error that made us close
+                in_hand()
         raise
     return links
 

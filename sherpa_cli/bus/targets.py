@@ -134,7 +134,7 @@ def _address_target(cfg: ArmConfig, text: str, bus: str, node_text: str) -> Targ
     if bus not in cfg.buses:
         raise UsageError(f"target '{text}': no bus '{bus}' in the config",
                          hint=f"configured buses: {', '.join(cfg.buses)}")
-    if not node_text.isdigit() or not 1 <= int(node_text) <= MAX_NODE:
+    if not (node_text.isascii() and node_text.isdigit()) or not 1 <= int(node_text) <= MAX_NODE:
         raise UsageError(f"target '{text}': node id must be 1..{MAX_NODE}")
     node = int(node_text)
     for d in cfg.drives.values():

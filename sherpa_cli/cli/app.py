@@ -14,7 +14,7 @@ import typer
 
 from sherpa_cli import __version__
 from sherpa_cli.cli import context
-from sherpa_cli.cli.boundary import install, main, run
+from sherpa_cli.cli.boundary import RootGroup, install, main, run
 from sherpa_cli.cli.context import AppState
 
 DEFAULT_CONFIG = Path("configs/sherpa-arm.yaml")
@@ -22,6 +22,7 @@ CONFIG_NAME = "sherpa-arm.yaml"
 
 app = typer.Typer(
     name="sherpa",
+    cls=RootGroup,  # Ctrl-C reported as one line whatever typer is installed (cli/boundary.py)
     help="Commission and diagnose the SHERPA arm's Elmo SimplIQ Whistle drives over CAN.\n\n"
     "Exit codes: 0 ok, 1 problem found, 2 usage/config error, 3 bus error, "
     "4 drive refused, 5 drive busy (another command moves it), 130 interrupted (docs/exit-codes.md).",

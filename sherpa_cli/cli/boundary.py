@@ -8,15 +8,46 @@ them: no import cycle. Only this module turns a SherpaError into an exit code (d
 from __future__ import annotations
 
 import functools
+import re
 import sys
 from collections.abc import Sequence
+from typing import Any
 
 import typer
+from typer.core import TyperGroup
 
 from sherpa_cli.cli import context
-from sherpa_cli.errors import ExitCode, SherpaError
+from sherpa_cli.errors import ExitCode, SherpaError, UsageError
 
 _ROOT: typer.Typer | None = None
+
+
+class Interrupted(SherpaError):
+    """Ctrl-C that ended a command (exit 130, "interrupted")."""
+
+    exit_code = ExitCode.INTERRUPTED
+
+
+class RootGroup(TyperGroup):
+    """The root command (``typer.Typer(cls=RootGroup)`` in cli/app.py).
+
+    A Ctrl-C while the command line is parsed or a command runs becomes :class:`Interrupted` here,
+    before the installed typer sees it: typer 0.29 turns a KeyboardInterrupt into a silent
+    ``Exit(130)`` (click raised ``Abort``), and it parses slowly the first time (it imports pydantic
+    then), so the one line "interrupted" must not depend on which one is installed.
+    """
+
+    def make_context(self, *args: Any, **kwargs: Any) -> Any:
+        try:
+            return super().make_context(*args, **kwargs)
+        except KeyboardInterrupt as exc:
+            raise Interrupted("interrupted") from exc
+
+    def invoke(self, ctx: Any) -> Any:
+        try:
+            return super().invoke(ctx)
+        except KeyboardInterrupt as exc:
+            raise Interrupted("interrupted") from exc
 
 
 def install(app: typer.Typer) -> None:
@@ -47,6 +78,7 @@ def run(argv: Sequence[str] | None = None) -> int:
     debug = "--debug" in args
     context.CURRENT = None
     try:
+        refuse_non_ascii_numbers(args)
         code = _root()(args=args, prog_name="sherpa", standalone_mode=False)
         return int(code) if isinstance(code, int) else int(ExitCode.OK)
     except SherpaError as exc:
@@ -71,6 +103,48 @@ def run(argv: Sequence[str] | None = None) -> int:
         else:
             sys.stderr.write(f"error: {exc.format_message()}\n")
         return int(ExitCode.USAGE)
+
+
+# A number as a command line gives it (option values, KEY=VALUE, positional), digits of any script,
+# with the unit suffixes sherpa reads: what Python's float()/int() or a str pattern's \d would take.
+_NUMBER_SHAPED = re.compile(r"\s*[+-]?(?:\d+(?:\.\d*)?|\.\d+)(?:[eE][+-]?\d+)?\s*"
+                            r"(?:rad|deg|counts?|cnt|a|ma|s|hz|ms)?(?:/s)?\s*", re.IGNORECASE)
+
+
+def refuse_non_ascii_numbers(args: Sequence[str]) -> None:
+    """Numbers are ASCII: Python reads a fullwidth 3 (U+FF13) or Arabic-Indic 12 as 3 and 12 (float(),
+    int(), typer's options), so `--to` with a fullwidth 3 moved a joint 3 rad. Refused for every
+    argument before any option parser sees it (the parsers of units, raw commands, targets and
+    config refuse them too). A file or name with such digits is not number-shaped and passes."""
+    previous = None
+    for arg in args:
+        name, eq, value = arg.partition("=")
+        if not eq:
+            name, value = (previous if previous and previous.startswith("-") else "argument"), arg
+        previous = arg
+        if value.isascii() or not _number_shaped(value):
+            continue
+        raise UsageError(f"{name} {value!r}: numbers are written with the ASCII digits 0-9",
+                         hint=f"did you mean {_ascii_digits(value)!r}?")
+
+
+def _number_shaped(text: str) -> bool:
+    if _NUMBER_SHAPED.fullmatch(text):
+        return True
+    for convert in (float, int):
+        try:
+            convert(text)
+        except (ValueError, OverflowError):
+            continue
+        return True
+    return False
+
+
+def _ascii_digits(text: str) -> str:
+    import unicodedata
+
+    return "".join(str(unicodedata.decimal(c)) if not c.isascii() and unicodedata.decimal(c, None) is not None
+                   else c for c in text).strip()
 
 
 def _report(message: str, hint: str | None) -> None:

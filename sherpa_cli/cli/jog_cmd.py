@@ -23,6 +23,8 @@ def parse_number(text: str | None, option: str) -> float | None:
     """A plain number in the joint's units (rad, rad/s, A, s)."""
     if text is None:
         return None
+    if not text.isascii():  # float() reads other scripts' digits (U+FF13 -> 3.0)
+        raise UsageError(f"{option} '{text}': expected a number with the ASCII digits 0-9")
     try:
         value = float(text)
     except ValueError:

@@ -161,7 +161,7 @@ def fit_columns(columns: Sequence[str], rows: Sequence[Sequence[str]], width: in
         cells = [columns[i], *(row[i] for row in rows)]
         return max((len(w) for c in cells for w in c.split()), default=0)
 
-    minimum = {i: (max(len(columns[i]), *(len(row[i]) for row in rows)) if i == 0 else longest_word(i))
+    minimum = {i: (max([len(columns[i]), *(len(row[i]) for row in rows)]) if i == 0 else longest_word(i))
                for i in range(len(columns))}
     keep = list(range(len(columns)))
     order = [i for i in (drop if drop is not None else reversed(range(1, len(columns)))) if i != 0]

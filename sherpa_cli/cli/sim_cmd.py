@@ -66,7 +66,7 @@ def sim(
     if duration is not None and duration <= 0:
         raise UsageError(f"--duration must be > 0 seconds, got {duration}")
     if serve:
-        host, port = serving.parse_host_port(serve)
+        host, port = serving.parse_host_port(serve, len(cfg.buses))
         serving.check_bind_address(host, allow_remote)
         served = serving.serve(cfg, host, port, event_log=event_log)
         bus_map = ",".join(f"{bus}={target}" for bus, target in served.bus_map.items())

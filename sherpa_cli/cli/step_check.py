@@ -27,6 +27,18 @@ def _root() -> Any:
     return root_command()
 
 
+def _non_ascii_number(argv: list[str]) -> Any:
+    """What the boundary refuses before parsing (a number in other scripts' digits): the UsageError or None."""
+    from sherpa_cli.cli.boundary import refuse_non_ascii_numbers
+    from sherpa_cli.errors import UsageError
+
+    try:
+        refuse_non_ascii_numbers(argv)
+    except UsageError as exc:
+        return exc
+    return None
+
+
 def check_step_commands(recipe: Recipe) -> None:
     """Raise ConfigError (file, line, step) for the first run step the CLI would refuse to parse."""
     import typer
@@ -42,6 +54,9 @@ def check_step_commands(recipe: Recipe) -> None:
             return ConfigError(f"step {step.number} '{step.name}': {problem}", where,  # noqa: B023
                                hint="run the command with --help to see what it takes")
 
+        digits = _non_ascii_number(list(step.argv))
+        if digits is not None:
+            raise ConfigError(f"step {step.number} '{step.name}': {digits.message}", where, hint=digits.hint)
         cmd, args, words = _root(), list(step.argv), ["sherpa"]
         while isinstance(cmd, TyperGroup):
             if not args or args[0].startswith("-"):

@@ -106,7 +106,7 @@ def load_rosparam(root: YNode, filename: str) -> tuple[ArmConfig, Locs, list[str
     previous = -1
     for key, child in as_map(nodes_node, "a mapping of node numbers '0'..'127'").items():
         kloc = Location(child.file, child.key_line, child.path)
-        if not key.isdigit() or not 0 <= int(key) <= 127:
+        if not (key.isascii() and key.isdigit()) or not 0 <= int(key) <= 127:
             raise ConfigError(f"node key '{key}' is not a node number; expected '0'..'127'", kloc)
         number = int(key)
         if str(number) in nodes:

@@ -137,10 +137,24 @@ def check_limits(text: str, filename: str) -> None:
     One pass over the parser's events (the parser is iterative; PyYAML's composer recurses and
     would hit Python's recursion limit on deep nesting): the depth of open collections, the
     expanded size of every anchor, and the expanded size of the whole document.
+
+    The pass runs with every parser that :func:`compose` may use. libyaml refuses deep flow
+    nesting while scanning ahead (PyYAML 6.0.4: "exceeded maximum nesting depth"), before it
+    yields the events this check counts; ``compose`` then falls back to the pure loader, whose
+    composer recurses. So when libyaml refuses a document, the pure (iterative) parser's events
+    are checked too: the limits hold whatever the installed PyYAML and libyaml refuse first.
     """
     if len(text) > MAX_INPUT_BYTES:
         raise ConfigError(f"text is larger than {MAX_INPUT_BYTES // 1024} KiB, the limit for an input file",
                           Location(filename))
+    loaders = [FAST_LOADER, yaml.SafeLoader] if FAST_LOADER is not None else [yaml.SafeLoader]
+    for loader in loaders:
+        if _check_events(text, filename, loader):
+            return  # this parser reads the whole document: compose() uses it and nothing else
+
+
+def _check_events(text: str, filename: str, loader: Any) -> bool:
+    """The limits over ``loader``'s events; False when the parser refused the text (a syntax error)."""
     stack: list[list[Any]] = []  # [expanded size so far, anchor]
     anchors: dict[str, int] = {}
     total = 0
@@ -156,7 +170,7 @@ def check_limits(text: str, filename: str) -> None:
                               Location(filename, line), hint="write the values out instead of repeating aliases")
 
     try:
-        for ev in yaml.parse(text, Loader=FAST_LOADER or yaml.SafeLoader):
+        for ev in yaml.parse(text, Loader=loader):
             line = ev.start_mark.line + 1 if ev.start_mark is not None else None
             if isinstance(ev, (MappingStartEvent, SequenceStartEvent)):
                 if len(stack) >= MAX_DEPTH:
@@ -182,7 +196,8 @@ def check_limits(text: str, filename: str) -> None:
     except ConfigError:
         raise
     except Exception:  # noqa: BLE001 - syntax errors (libyaml's included) are reported by parse_yaml
-        return
+        return False
+    return True
 
 
 def parse_yaml(text: str, filename: str) -> YNode:
@@ -190,6 +205,11 @@ def parse_yaml(text: str, filename: str) -> YNode:
     check_limits(text, filename)
     try:
         root = compose(text)
+    except RecursionError:
+        # check_limits counts the levels of the parsers compose() uses; this is the net under it
+        # for a PyYAML whose parsers disagree about a document's nesting
+        raise ConfigError(f"nesting deeper than {MAX_DEPTH} levels", Location(filename),
+                          hint="a configuration, recipe or dump is a few levels deep") from None
     except yaml.MarkedYAMLError as exc:
         mark = exc.problem_mark or exc.context_mark
         line = mark.line + 1 if mark is not None else None
@@ -231,6 +251,9 @@ def _convert(node: yaml.Node, path: str, filename: str, key_line: int | None,
             if not isinstance(knode, ScalarNode):
                 raise ConfigError("a mapping key must be a plain name, not a list or mapping",
                                   Location(filename, kline, path or None))
+            if knode.tag in _NUMBER_TAGS and not knode.value.isascii():
+                raise ConfigError(f"key {knode.value[:40]!r} is not written with the ASCII digits 0-9",
+                                  Location(filename, kline, path or None))
             if knode.tag in _NUMBER_TAGS and len(knode.value) > MAX_NUMBER_CHARS:
                 raise ConfigError(f"key {knode.value[:20]}... is a number of {len(knode.value)} characters",
                                   Location(filename, kline, path or None))
@@ -253,6 +276,11 @@ def _convert(node: yaml.Node, path: str, filename: str, key_line: int | None,
     if isinstance(node, SequenceNode):
         seq = [_convert(v, join_path(path, i), filename, None, ctor, depth + 1) for i, v in enumerate(node.value)]
         return YNode(seq, "seq", line, path, filename, key_line)
+    if node.tag in _NUMBER_TAGS and not node.value.isascii():
+        # only an explicit !!int / !!float gets here (the resolver's patterns are ASCII); int() and
+        # float() would read other scripts' digits (U+FF13 -> 3)
+        raise ConfigError(f"number {node.value[:40]!r} is not written with the ASCII digits 0-9",
+                          Location(filename, key_line or line, path or None))
     if node.tag in _NUMBER_TAGS and len(node.value) > MAX_NUMBER_CHARS:
         raise ConfigError(f"number {node.value[:20]}... has {len(node.value)} characters; a number here has at "
                           f"most {MAX_NUMBER_CHARS}", Location(filename, key_line or line, path or None))

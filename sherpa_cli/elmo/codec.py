@@ -314,6 +314,8 @@ def _parse_int(raw: str, what: str) -> int | float:
 def _parse_float(raw: str, what: str) -> float:
     if len(raw) > 64:
         raise CodecError(f"{what}: {raw[:20]}... ({len(raw)} characters) is not a float32 value")
+    if not raw.isascii():  # float() reads other scripts' digits (U+FF13 -> 3.0)
+        raise CodecError(f"{what}: {raw!r} is not a number; write it with the ASCII digits 0-9")
     try:
         value = float(raw)
     except ValueError:

@@ -110,7 +110,8 @@ def milliamps_to_amps(milliamps: float) -> float:
 ANGLE_UNITS = {"rad": "rad", "deg": "deg", "counts": "counts", "count": "counts", "cnt": "counts"}
 CURRENT_UNITS = {"a": "A", "ma": "mA"}
 
-_QUANTITY = re.compile(r"\s*([+-]?(?:\d+(?:\.\d*)?|\.\d+)(?:[eE][+-]?\d+)?)\s*([A-Za-z]*(?:/s)?)\s*")
+# re.ASCII: \d is 0-9 only (a str pattern's \d takes every script's digits, and float() reads U+FF13 as 3)
+_QUANTITY = re.compile(r"\s*([+-]?(?:\d+(?:\.\d*)?|\.\d+)(?:[eE][+-]?\d+)?)\s*([A-Za-z]*(?:/s)?)\s*", re.ASCII)
 
 
 @dataclass(frozen=True)
@@ -129,6 +130,8 @@ class Quantity:
 def _split(text: object, what: str, examples: str) -> tuple[float, str, bool]:
     if not isinstance(text, str):
         raise UsageError(f"{what}: expected text like {examples}, got {text!r}")
+    if not text.isascii():
+        raise UsageError(f"{what}: {text!r} is not a number with ASCII digits 0-9", hint=f"write e.g. {examples}")
     m = _QUANTITY.fullmatch(text)
     if m is None:
         raise UsageError(f"{what}: cannot read {text!r} as a number with an optional unit",

@@ -385,6 +385,8 @@ def parse_candump_line(line: str, where: str) -> Frame | None:
     try:
         if len(parts) < 3 or not (parts[0].startswith("(") and parts[0].endswith(")")):
             raise ValueError("expected '(TIMESTAMP) CHANNEL ID#DATA'")
+        if not (parts[0].isascii() and parts[2].isascii()):  # float()/int() read other scripts' digits
+            raise ValueError("the timestamp and ID#DATA must be ASCII")
         timestamp = float(parts[0][1:-1])
         ident, sep, payload = parts[2].partition("#")
         if not sep or not ident:

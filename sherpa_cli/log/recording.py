@@ -72,6 +72,8 @@ def _read_csv(path: Path) -> Recording:
             if len(row) != len(header):
                 raise UsageError(f"{path}:{number}: {len(row)} cells, the header has {len(header)}")
             try:
+                if not all(cell.isascii() for cell in row):  # float() reads other scripts' digits
+                    raise ValueError("a cell is not a number in ASCII digits 0-9")
                 rec.times.append(float(row[0]))
                 for name, cell in zip(header[1:], row[1:], strict=True):
                     rec.columns[name].append(float(cell) if cell else math.nan)

@@ -111,7 +111,7 @@ class Recipe:
     def find_step(self, text: str) -> Step:
         """A step by its name or 1-based number (``--from``)."""
         for step in self.steps:
-            if step.name == text or (text.isdigit() and int(text) == step.number):
+            if step.name == text or (text.isascii() and text.isdigit() and int(text) == step.number):
                 return step
         from sherpa_cli.errors import UsageError
 

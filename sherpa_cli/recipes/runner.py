@@ -232,7 +232,7 @@ def _resolve(node: Any, parts: list[str], path: str, prefix: str = "") -> list[t
         if head not in node:
             return f"{here}: no such key in the output"
         return _resolve(node[head], rest, path, here)
-    if isinstance(node, list) and head.isdigit():
+    if isinstance(node, list) and head.isascii() and head.isdigit():
         if int(head) >= len(node):
             return f"{here}: the list has only {len(node)} item(s)"
         return _resolve(node[int(head)], rest, path, here)

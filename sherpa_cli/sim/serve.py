@@ -17,10 +17,17 @@ if TYPE_CHECKING:
     from http.server import HTTPServer
 
 
-def parse_host_port(text: str) -> tuple[str, int]:
+def parse_host_port(text: str, buses: int = 1) -> tuple[str, int]:
+    """``HOST:PORT`` of ``--serve``; bus i is served on PORT + i, so every one of the ``buses``
+    ports must be a TCP port (1..65535). Digits are ASCII (``str.isdigit`` takes any script's)."""
     host, sep, port_text = text.rpartition(":")
-    if not sep or not host or not port_text.isdigit() or len(port_text) > 5 or not 0 <= int(port_text) <= 65535:
+    if not sep or not host or not (port_text.isascii() and port_text.isdigit()):
         raise UsageError(f"--serve: '{text}' is not HOST:PORT", hint="e.g. --serve 127.0.0.1:54701")
+    last = 65535 - max(buses, 1) + 1
+    if len(port_text) > 5 or not 1 <= int(port_text) <= last:
+        ports = f"the {buses} buses are served on PORT..PORT+{buses - 1}, " if buses > 1 else ""
+        raise UsageError(f"--serve {text}: port {port_text[:12]} is out of range; {ports}so PORT must be 1..{last}",
+                         hint="e.g. --serve 127.0.0.1:54701")
     return host.strip("[]"), int(port_text)
 
 
