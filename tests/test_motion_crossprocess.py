@@ -175,3 +175,19 @@ def test_sherpa_stop_with_one_bus_unreachable_still_stops_a_jog_on_another_bus(a
     assert offs and offs[0]["event"] == "motor off: MO=0", arm.events()
     code, out, err = finish(proc)  # the jog sees its motor switched off and ends
     assert code == 1, f"{out}\n{err}"
+
+
+def test_program_limits_during_a_jog_in_another_process_is_refused_with_exit_5(arm, tmp_path):
+    proc, t_on = start_jog(arm, tmp_path)
+    try:
+        programmer = sherpa(arm, tmp_path, "program-limits", JOINT, "--apply", "--motor-off")
+        p_code, p_out, p_err = finish(programmer)
+        assert p_code == 5, f"{p_out}\n{p_err}"
+        assert f"{DRIVE} (can1:{NODE}): another sherpa command (pid {proc.pid}) is moving this drive" in p_err
+        assert "Traceback" not in p_err
+        # the jog was not touched: its motor is still on, nobody switched it off
+        assert not motor_offs(arm, t_on), arm.events()
+    finally:
+        proc.send_signal(signal.SIGINT)
+        code, out, err = finish(proc)
+    assert code == 0, f"{out}\n{err}"

@@ -158,3 +158,36 @@ def test_jog_on_a_drive_another_process_moves_exits_5_with_one_line(cli, golden,
     assert result.exit_code == 5 and "Traceback" not in result.stderr
     assert f"(pid {holder.pid})" in result.stderr
     golden("jog-motion-locked.txt", result.transcript().replace(str(holder.pid), "PID"))
+
+
+# -- one write lock per drive for every command that writes to it (issue 21 item 14) -------------------
+
+def test_program_limits_is_refused_while_another_command_moves_the_drive(cli):
+    from sherpa_cli.bus.targets import drive_ref
+    from sherpa_cli.config import load_config as load
+
+    cfg = load("configs/sherpa-arm.yaml")
+    held = DriveLock(drive_ref(cfg, "elbow_1a"))  # what a running jog of elbow_pitch holds
+    held.acquire()
+    try:
+        result = cli("--sim", "program-limits", "elbow_pitch", "--apply", "--motor-off")
+    finally:
+        held.release()
+    assert result.exit_code == ExitCode.BUSY, result.transcript()
+    assert "elbow_1a (can1:40): another sherpa command (this process) is moving this drive" in result.stderr
+    assert "Traceback" not in result.stderr
+
+
+def test_a_jog_is_refused_while_parameters_are_written_to_its_drive(cli):
+    from sherpa_cli.bus.targets import drive_ref
+    from sherpa_cli.config import load_config as load
+
+    cfg = load("configs/sherpa-arm.yaml")
+    held = DriveLock(drive_ref(cfg, "elbow_1a"), purpose="writing parameters to")
+    held.acquire()
+    try:
+        result = cli("--sim", "jog", "elbow_pitch", "--velocity", "0.05", "--for", "0.2", "--apply")
+    finally:
+        held.release()
+    assert result.exit_code == ExitCode.BUSY, result.transcript()
+    assert "is writing parameters to this drive: refused, nothing sent" in result.stderr

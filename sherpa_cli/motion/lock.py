@@ -27,14 +27,16 @@ class MotionLockedError(SherpaError):
 
 
 class DriveLock:
-    """One drive's motion lock: ``<state dir>/motion/<bus>-node<N>.lock``, an OS file lock (flock), so
+    """One drive's lock, taken by every command that moves it or writes its parameters (motion
+    commands, program-limits, params restore): ``<state dir>/motion/<bus>-node<N>.lock``, an OS file lock (flock), so
     the kernel releases it when its process ends, even by SIGKILL. The holder's pid is written beside
     it (``.pid``) for the refusal's message. Two motion commands on one drive would disarm each other's
     dead-man (both use the host id and put 0x1016:1 back when the first ends). `sherpa stop` takes no
     lock: it is the emergency path."""
 
-    def __init__(self, ref: DriveRef) -> None:
+    def __init__(self, ref: DriveRef, purpose: str = "moving") -> None:
         self.label = drive_label(ref)
+        self.purpose = purpose  # what the holder does with the drive, for the other command's refusal
         safe = re.sub(r"[^A-Za-z0-9_.-]", "_", str(ref.bus))
         self.path = paths.state_dir() / "motion" / f"{safe}-node{int(ref.node)}.lock"
         self.pid_path = self.path.with_suffix(".pid")
@@ -47,16 +49,16 @@ class DriveLock:
             self.path.parent.mkdir(parents=True, exist_ok=True)
             self._lock.acquire(timeout=0)
         except filelock.Timeout:
-            pid = self.holder()
+            pid, purpose = self.holder_and_purpose()
             who = "" if pid is None else (" (this process)" if pid == os.getpid() else f" (pid {pid})")
             raise MotionLockedError(
-                f"{self.label}: another sherpa command{who} is moving this drive: refused, nothing sent",
+                f"{self.label}: another sherpa command{who} is {purpose} this drive: refused, nothing sent",
                 hint="wait until it ends, or stop it (`sherpa stop` needs no lock)") from None
         except OSError as exc:
             raise UsageError(f"{self.label}: cannot take the motion lock {self.path}: {exc}",
                              hint=paths.STATE_DIR_HINT) from None
         with contextlib.suppress(OSError):  # the pid is only for a message
-            self.pid_path.write_text(f"{os.getpid()}\n", encoding="utf-8")
+            self.pid_path.write_text(f"{os.getpid()} {self.purpose}\n", encoding="utf-8")
 
     def release(self) -> None:
         if not self._lock.is_locked:
@@ -66,10 +68,15 @@ class DriveLock:
         self._lock.release(force=True)
 
     def holder(self) -> int | None:
+        return self.holder_and_purpose()[0]
+
+    def holder_and_purpose(self) -> tuple[int | None, str]:
+        """The holder's pid (None: unknown) and what it does ("moving", "writing parameters to")."""
         try:
-            return int(self.pid_path.read_text(encoding="utf-8").strip())
+            pid, _, purpose = self.pid_path.read_text(encoding="utf-8").strip().partition(" ")
+            return int(pid), purpose or "moving"
         except (OSError, ValueError):
-            return None
+            return None, "using"
 
 
 class HostIdLock:

@@ -22,6 +22,7 @@ saved, and drives not yet started are not touched.
 
 from __future__ import annotations
 
+import contextlib
 import threading
 import time
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
@@ -31,10 +32,12 @@ from types import MappingProxyType
 from typing import TYPE_CHECKING, Any, TypeVar
 
 from sherpa_cli.bus.parallel import Outcome, run_concurrently
+from sherpa_cli.bus.targets import DriveRef
 from sherpa_cli.elmo import codec
 from sherpa_cli.elmo.commands import COMMANDS, format_value, param_key, parse_param_key
 from sherpa_cli.errors import CodecError, ConfigError, DriveRefusedError, Location, SafetyError, SherpaError
 from sherpa_cli.motion import calibration
+from sherpa_cli.motion.lock import DriveLock
 
 if TYPE_CHECKING:
     from sherpa_cli.bus.session import ArmSession
@@ -519,6 +522,23 @@ def _apply_drive(session: ArmSession, plan: DrivePlan, *, save: bool, ledger: Sa
         out.elapsed = time.perf_counter() - start
 
 
+@contextlib.contextmanager
+def write_locks(plans: Sequence[DrivePlan]) -> Iterator[None]:
+    """The drive lock of every planned drive for the writes (motion/lock.py DriveLock): a jog,
+    home or another programming command on one of them refuses (exit 5), and the writes here are
+    refused while such a command runs -- before anything is sent. Released on every exit path."""
+    taken: list[DriveLock] = []
+    try:
+        for p in plans:
+            lock = DriveLock(DriveRef(p.drive, p.target.bus, p.target.node), purpose="writing parameters to")
+            lock.acquire()
+            taken.append(lock)
+        yield
+    finally:
+        for lock in reversed(taken):
+            lock.release()
+
+
 def apply_plans(session: ArmSession, plans: Sequence[DrivePlan], *, save: bool = False, ledger: SaveLedger | None = None,
                 on_event: Progress | None = None, stop: threading.Event | None = None,
                 max_workers: int = MAX_DRIVE_WORKERS) -> ApplyResult:
@@ -530,7 +550,8 @@ def apply_plans(session: ArmSession, plans: Sequence[DrivePlan], *, save: bool =
     stop = stop or threading.Event()
     jobs = {p.drive: (lambda p=p: _apply_drive(session, p, save=save, ledger=ledger, stop=stop,
                                                on_event=on_event)) for p in plans}
-    outcomes = run_concurrently(jobs, max_workers=max(1, max_workers), on_interrupt=stop.set)
+    with write_locks([p for p in plans if p.changes or p.needs_save]):
+        outcomes = run_concurrently(jobs, max_workers=max(1, max_workers), on_interrupt=stop.set)
     result = _in_plan_order(plans, outcomes, lambda t, message: DriveOutcome(t.drive, t.bus, t.node, status=FAILED,
                                                                             error=message))
     return ApplyResult(result, interrupted=stop.is_set())
@@ -637,7 +658,8 @@ def prove_flash(session: ArmSession, plans: Sequence[DrivePlan], *, boot_timeout
     """Reset every planned drive, wait for its boot-up and read every target back (call check_proof first)."""
     stop = stop or threading.Event()
     jobs = {p.drive: (lambda p=p: _prove_drive(session, p, boot_timeout=boot_timeout, stop=stop)) for p in plans}
-    outcomes = run_concurrently(jobs, max_workers=max(1, max_workers), on_interrupt=stop.set)
+    with write_locks(plans):  # an NMT reset of a drive another command moves: refused
+        outcomes = run_concurrently(jobs, max_workers=max(1, max_workers), on_interrupt=stop.set)
     proofs = _in_plan_order(plans, outcomes, lambda t, message: FlashProof(t.drive, t.bus, t.node,
                                                                            status=PROOF_FAILED, error=message))
     if stop.is_set():
