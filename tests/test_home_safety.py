@@ -166,3 +166,47 @@ def test_pair_edge_window_is_validated(tmp_path):
     with pytest.raises(ConfigError, match="pair_edge_window_ms"):
         variant(tmp_path, ("buses:", "homing: {pair_edge_window_ms: 0}\nbuses:"))
     assert load_config(ARM).homing.pair_edge_window_ms == 100
+
+
+# -- issue 21 item 6: an interrupted home says what it left ------------------------------------------
+
+def test_ctrl_c_during_a_pair_home_reports_the_stop_and_the_joints_left_unhomed():
+    cfg = load_config(ARM)
+    pair = next(iter(cfg.pairs))
+    calls = {"n": 0}
+
+    def sleep(t: float) -> None:
+        calls["n"] += 1
+        if calls["n"] == 3:  # inside the pair's search
+            raise KeyboardInterrupt
+        time.sleep(t)
+
+    report = home.HomeReport()
+    steps: list[str] = []
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
+        with pytest.raises(KeyboardInterrupt):
+            home.run_home(s, home.plan_home(cfg, [pair]), sleep=sleep, report=report, on_step=steps.append)
+    assert report.interrupted == pair
+    assert sorted(report.not_homed) == sorted(j.name for j in cfg.joints.values() if j.pair == pair)
+    assert report.stop is not None and {d.drive for d in report.stop.drives} == {cfg.pairs[pair].drive_a, cfg.pairs[pair].drive_b}
+    assert all(d.motor_off or d.stopped_by == "motor was off" for d in report.stop.drives)
+    assert steps and "search" in steps[0] and " s (homing " in steps[0]
+
+
+def test_cli_home_interrupted_prints_the_stop_report_and_which_joints_are_not_homed(cli, monkeypatch):
+    from sherpa_cli.ops import home as home_mod
+
+    real_wait = home_mod._Runner.wait
+    calls = {"n": 0}
+
+    def wait(self, *a, **k):
+        calls["n"] += 1
+        if calls["n"] == 1:
+            raise KeyboardInterrupt
+        return real_wait(self, *a, **k)
+    monkeypatch.setattr(home_mod._Runner, "wait", wait)
+    result = cli("--sim", "home", "shoulder_diff", "--yes")
+    assert result.exit_code == 130, result.transcript()
+    assert "stop: shoulder_2a (can0:20): stopped by" in result.stderr
+    assert "not homed: shoulder_pitch, shoulder_roll (shoulder_diff did not finish" in result.stderr
+    assert "Traceback" not in result.stderr

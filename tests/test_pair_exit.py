@@ -190,10 +190,11 @@ def test_one_pair_drive_dying_stops_the_partner_at_once_and_ends_the_command_nam
         to_right = [t for t, i, f in _frames(s, "right") if i == 0x300 + right_node and t >= t_dead]
         left_st = [t for t, i, f in _frames(s, "left") if i == 0x300 + 10 and f[:2] == b"ST" and t >= t_dead]
         assert left_st, "the partner was never stopped"
-        # every request to the dead drive after it died, stop frames aside: at most two requests'
-        # attempts (the settle window's patience), then it is given up -- whatever the machine's load
+        # every request to the dead drive after it died, stop frames aside: the one that found it
+        # silent (its attempts, the settle window's patience) and one more on the way out, then it is
+        # given up -- whatever the machine's load (a timeout per exit step cost 11 and more)
         asked = [f[:2] for t, i, f in _frames(s, "right")
                  if i == 0x300 + right_node and t >= t_dead and f[:2] not in (b"ST", b"TC", b"JV", b"BG")]
-        assert len(asked) <= 4, asked
+        assert len(asked) <= 6 and len(set(asked)) <= 2, asked
         assert len(to_right) <= 8, f"{len(to_right)} interpreter frames to the dead drive after it died"
         assert motors_off(s)

@@ -81,15 +81,26 @@ def home(
         if not st.json_mode:
             _render_unit(st, cfg, unit)
 
+    def step(text: str) -> None:
+        st.out.progress(f"home: {text}")  # a live line on a terminal only (never in logs or --json)
+
+    partial = ops_home.HomeReport()
     with st.session(buses=buses) as session:
         try:
-            report = ops_home.run_home(session, plan, on_unit=done)
+            report = ops_home.run_home(session, plan, on_unit=done, on_step=step, report=partial)
         except BaseException as exc:
-            motion = getattr(exc, "motion_report", None)
+            st.out.progress(None)
+            motion = getattr(exc, "motion_report", None) or partial.stop
             if motion is not None and not st.json_mode:
                 for line in motion.lines():
                     st.out.info(f"stop: {line}")
+            if partial.interrupted is not None and not st.json_mode:
+                homed = [u.name for u in partial.units]
+                st.out.info(f"not homed: {', '.join(partial.not_homed)} ({partial.interrupted} did not finish; "
+                            "its calibration mark was cleared before the search: home it again)"
+                            + (f"; homed before it: {', '.join(homed)}" if homed else ""))
             raise
+        st.out.progress(None)
     if st.json_mode:
         st.out.json(report.as_dict())
     else:

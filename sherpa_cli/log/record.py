@@ -271,8 +271,9 @@ class Recorder:
         failures: list[SherpaError] = []
         for d in self._drives.values():
             sdo = self.session.sdo(d.ref)
-            # a drive that answered nothing to its last interpreter request is not waited for here
-            deaf = self.session.client(d.ref).silent
+            # a drive that answered nothing to its last interpreter request gets one try, not the window
+            window = 0.0 if self.session.client(d.ref).silent else RESTORE_WINDOW_S
+            deaf = False
             for index, sub, size, value in reversed(d.saved):
                 if deaf:
                     failures.append(CommunicationError(f"{d.ref.name}: 0x{index:04X}:{sub} not put back: the drive "
@@ -290,7 +291,7 @@ class Recorder:
                         timed_out = isinstance(exc, SdoError) and exc.reason == "timeout"
                         now = time.monotonic()
                         silent_since = (silent_since or now - sdo.timeout) if timed_out else None
-                        deaf = silent_since is not None and now - silent_since >= RESTORE_WINDOW_S
+                        deaf = silent_since is not None and now - silent_since >= window
                         if deaf or attempt == RESTORE_ATTEMPTS - 1:
                             failures.append(exc)
                             break

@@ -476,9 +476,9 @@ class MotionGuard:
         c, s = d.client, self.settings
         r = DriveStop(d.ref.name, f"{d.ref.bus}:{d.ref.node}")
         motor_confirmed_off = False
-        if c.silent and stop:
-            # no answer to its last request: one more try of each step would cost a timeout each and
-            # hold back the command's end; the drive's own consumer stops it (the heartbeat ends)
+        if c.silent and stop and not self._answers(c):
+            # no answer to its last request nor to one more: a try of each step would cost a timeout
+            # each and hold back the command's end; the drive's own consumer stops it (the heartbeat ends)
             r.stopped_by = "not reached"
             r.problems.append(f"no answer (dead or silent): not confirmed stopped; its heartbeat consumer "
                               f"switches the motor off {s.consumer_time_ms} ms after the tool's heartbeat ends")
@@ -542,6 +542,16 @@ class MotionGuard:
         self._restore_dead_man(d, r, stop_failed)
         self._event(r.line())
         return r
+
+    def _answers(self, c: DriveClient) -> bool:
+        """One plain request (no patience) to a drive that went silent: True if it answers again (a
+        passing fault or a loaded bus), then its exit goes on as usual."""
+        try:
+            self._step()
+            c.get("MO")
+        except Exception:  # noqa: BLE001 - any failure means: still silent
+            return False
+        return True
 
     def _restore_profile(self, d: _Drive, r: DriveStop) -> None:
         if self.keep or not d.profile_before or r.stopped_by == "not stopped":

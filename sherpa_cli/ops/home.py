@@ -38,6 +38,7 @@ from sherpa_cli.elmo.protocol import UM_POSITION
 from sherpa_cli.errors import SafetyError, UsageError
 from sherpa_cli.motion import calibration
 from sherpa_cli.motion.guard import MotionGuard
+from sherpa_cli.motion.report import GuardReport
 from sherpa_cli.motion.settings import MotionSettings
 from sherpa_cli.motion.stopping import fault_reason
 
@@ -284,6 +285,11 @@ class UnitResult:
 @dataclass
 class HomeReport:
     units: list[UnitResult] = field(default_factory=list)
+    # an interrupted or failed unit: its name, the joints it leaves un-homed (its old mark was cleared
+    # before the search) and how its motion guard stopped the drives
+    interrupted: str | None = None
+    not_homed: list[str] = field(default_factory=list)
+    stop: GuardReport | None = None
 
     def as_dict(self) -> dict[str, Any]:
         return {"ok": True, "units": [u.as_dict() for u in self.units]}
@@ -327,6 +333,9 @@ class _Runner:
         self.session, self.cfg, self.settings, self.clock, self.sleep = session, cfg, settings, clock, sleep
         self.h = cfg.homing
         self._armed: dict[str, DriveClient] | None = None  # inside a unit's _Disarm: the drives whose HM[] it armed
+        self.guard: MotionGuard | None = None  # the current unit's motion guard (its report after an error)
+        self.on_step: Callable[[str], None] | None = None  # the step running now, with its elapsed time
+        self.t_start = clock()
 
     # HM[] -------------------------------------------------------------------------------------
     def arm_homing(self, c: DriveClient, *, event: int, value: int, after: int, update: int | None = None) -> None:
@@ -364,6 +373,8 @@ class _Runner:
         first_edge: float | None = None
         while True:
             guard.check()
+            if self.on_step is not None:
+                self.on_step(f"{what}: {self.clock() - t0:.1f} s (homing {self.clock() - self.t_start:.1f} s)")
             on = {n: int(guard.query(r, "HM", 1)) == 0 for n, r in refs.items()} if homing else {}
             fired = homing and all(on.values())
             ms = [int(guard.query(r, "MS")) for r in refs.values()]
@@ -441,6 +452,7 @@ class _Runner:
         search = _search_distance(self.cfg, joint)
         with _Disarm(self), MotionGuard(self.session, [ref], settings=self.settings, clock=self.clock,
                                         sleep=self.sleep) as guard:
+            self.guard = guard
             c = guard.client(ref)
             calibration.clear_calibrated(self.cfg, c)  # a re-home that fails must not leave the old mark
             if unit.kind == "home_switch":
@@ -528,6 +540,7 @@ class _Runner:
             dl.cal_pos if dl.cal_pos is not None else sw_d.position)
         with _Disarm(self), MotionGuard(self.session, list(refs.values()), settings=self.settings, clock=self.clock,
                                         sleep=self.sleep) as guard:
+            self.guard = guard
             ca, cb = guard.client(refs[a]), guard.client(refs[b])
             for c in (ca, cb):
                 calibration.clear_calibrated(cfg, c)  # a re-home that fails must not leave the old mark
@@ -610,19 +623,31 @@ class _Runner:
 
 def run_home(session: ArmSession, plan: HomePlan, *, settings: MotionSettings | None = None,
              clock: Callable[[], float] = time.monotonic, sleep: Callable[[float], None] = time.sleep,
-             on_unit: Callable[[UnitResult], None] | None = None) -> HomeReport:
+             on_unit: Callable[[UnitResult], None] | None = None, on_step: Callable[[str], None] | None = None,
+             report: HomeReport | None = None) -> HomeReport:
     """Home every unit of ``plan`` in order; stops at the first failure (an exception; what was
-    homed before it keeps its mark). ``on_unit`` sees each unit's result as it is done."""
+    homed before it keeps its mark). ``on_unit`` sees each unit's result as it is done, ``on_step``
+    the running step and its elapsed time at every poll. On an exception ``report`` (pass one to
+    read it) names the unit that did not finish, its joints left un-homed and its stop report."""
     cfg = session.cfg
     runner = _Runner(session, cfg, settings or MotionSettings.from_config(cfg), clock, sleep)
-    report = HomeReport()
+    runner.on_step = on_step
+    report = report if report is not None else HomeReport()
     for unit in plan.units:
-        if unit.kind == "abs_encoder":
-            result = runner.abs_encoder(unit)
-        elif unit.kind == "pair":
-            result = runner.pair(unit)
-        else:
-            result = runner.plain(unit, plan.measure_range)
+        runner.guard = None
+        try:
+            if unit.kind == "abs_encoder":
+                result = runner.abs_encoder(unit)
+            elif unit.kind == "pair":
+                result = runner.pair(unit)
+            else:
+                result = runner.plain(unit, plan.measure_range)
+        except BaseException:
+            # Ctrl-C, SIGTERM or an error: say which joints are left un-homed and how they stopped
+            report.interrupted = unit.name
+            report.not_homed = list(unit.joints)
+            report.stop = runner.guard.report if runner.guard is not None else None
+            raise
         report.units.append(result)
         if on_unit is not None:
             on_unit(result)
