@@ -89,7 +89,7 @@ def fake():
     (ref,) = drive_refs(cfg, ["elbow"])
     network, sdo = FakeNetwork(), FakeSdo()
     session = SimpleNamespace(cfg=cfg, links={ref.bus: SimpleNamespace(network=network, bus=None)},
-                              client=lambda r: SimpleNamespace(nmt_start=lambda: None), sdo=lambda r: sdo)
+                              client=lambda r: SimpleNamespace(nmt_start=lambda: None, silent=False), sdo=lambda r: sdo)
     sources: list[LateSync] = []
 
     def factory(name, bus, period):
