@@ -280,6 +280,8 @@ class MotionConfig:
     # the move back after a limit breach, in every command: this share of the slowest moved joint's
     # velocity.limit, or recovery_fallback_speed counts/s where no joint has a limit
     recovery_speed: float = 0.5
+    # a commanded move with no progress for this long ends as blocked, naming an active end switch (0: off)
+    stall_time: float = 1.0
     recovery_fallback_speed: int = 100
     # differential pairs (docs/diffdrive.md): how both motors start together. "group": one BG to the
     # group id pair_group_id written to 0x2040 of both drives (RAM, restored afterwards; that it acts

@@ -143,6 +143,8 @@ def _check_motion(cfg: ArmConfig, locs: Locs, r: _Report) -> None:
     elif not 0 <= m.heartbeat_period_ms <= m.consumer_time_ms / 2:
         r.error(where("heartbeat_period_ms"), f"heartbeat_period_ms {m.heartbeat_period_ms} must be 0 (a quarter "
                 f"of consumer_time_ms) or at most half of consumer_time_ms ({m.consumer_time_ms})")
+    if not 0 <= m.stall_time <= 30:
+        r.error(where("stall_time"), f"stall_time {m.stall_time} must be 0 (off) .. 30 s")
     if not 0 < m.recovery_speed <= 1:
         r.error(where("recovery_speed"), f"recovery_speed {m.recovery_speed} must be > 0 and at most 1 "
                 "(a share of the joint's velocity.limit)")

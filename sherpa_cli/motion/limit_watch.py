@@ -20,6 +20,7 @@ from dataclasses import dataclass, field
 
 from sherpa_cli.config.model import ArmConfig, JointConfig, JointRole
 from sherpa_cli.joints.diffpair import Range, is_reachable, to_motors
+from sherpa_cli.motion.blocked import StallWatch
 
 Motors = Mapping[str, int]  # drive name -> motor position (counts, PX)
 
@@ -167,7 +168,8 @@ class WatchResult:
     """How a watched motion ended.
 
     ``outcome``: ``finished`` (the motion's own end), ``elapsed`` (its time, --for, is over),
-    ``breach`` (a joint left its full range: the caller must stop and recover).
+    ``breach`` (a joint left its full range: the caller must stop and recover), ``stalled`` (no
+    progress for the stall time: blocked by a switch, a hard stop or a load; motion/blocked.py).
     """
 
     outcome: str
@@ -181,11 +183,12 @@ class WatchResult:
 def watch(joints: Sequence[WatchedJoint], sample: Callable[[], Motors], *,
           clock: Callable[[], float], sleep: Callable[[float], None], interval: float,
           finished: Callable[[Motors], bool] | None = None, duration: float | None = None,
-          check_drives: Callable[[], None] | None = None) -> WatchResult:
+          check_drives: Callable[[], None] | None = None, stall: StallWatch | None = None) -> WatchResult:
     """Sample the motors every ``interval`` s until the motion finishes, ``duration`` s pass, or a
     joint leaves its full range (checked first on every sample, so a breach always wins).
 
-    ``check_drives`` (the motion guard's fault check) runs after every sample and may raise.
+    ``check_drives`` (the motion guard's fault check) runs after every sample and may raise;
+    ``stall`` ends the watch when the motors stop progressing.
     ``finished`` or ``duration`` must be given: the loop never runs open-ended.
     """
     if finished is None and duration is None:
@@ -206,5 +209,7 @@ def watch(joints: Sequence[WatchedJoint], sample: Callable[[], Motors], *,
             return WatchResult("finished", motors, (), n, elapsed, positions)
         if duration is not None and elapsed >= duration:
             return WatchResult("elapsed", motors, (), n, elapsed, positions)
+        if stall is not None and stall.feed(motors, clock()):
+            return WatchResult("stalled", motors, (), n, elapsed, positions)
         wait = interval if duration is None else min(interval, max(duration - elapsed, 0.0))
         sleep(wait if wait > 0 else interval)

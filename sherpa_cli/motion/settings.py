@@ -6,6 +6,7 @@ from collections.abc import Iterable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
+from sherpa_cli.motion.blocked import StallWatch, min_progress_for
 from sherpa_cli.motion.stopping import recovery_speed
 
 if TYPE_CHECKING:
@@ -31,6 +32,7 @@ class MotionSettings:
     velocity_unit_mode: int = 5
     recovery_speed: float = 0.5  # share of the slowest moved joint's velocity limit
     recovery_fallback_speed: int = 100  # counts/s where no joint has a limit
+    stall_time: float = 1.0  # s without progress that make a commanded move 'blocked' (0: off)
     poll_interval: float = 0.01  # s between polls while waiting (the bus's poll_interval_ms)
     request_bound: float = 0.2  # s one interpreter request can take at worst (timeout x attempts)
 
@@ -63,10 +65,14 @@ class MotionSettings:
                    standstill_timeout=m.standstill_timeout, standstill_velocity=m.standstill_velocity,
                    liveness_timeout=m.liveness_timeout,
                    velocity_unit_mode=m.velocity_unit_mode, recovery_speed=m.recovery_speed,
-                   recovery_fallback_speed=m.recovery_fallback_speed, poll_interval=poll_ms / 1000,
+                   recovery_fallback_speed=m.recovery_fallback_speed, stall_time=m.stall_time, poll_interval=poll_ms / 1000,
                    request_bound=p.reply_timeout * (1 + p.retries))
 
 
     def recovery_speed_for(self, vel_limits: Iterable[int | None]) -> int:
         """counts/s of the move back after a limit breach (motion/stopping.py recovery_speed)."""
         return recovery_speed(vel_limits, self.recovery_speed, self.recovery_fallback_speed)
+
+    def stall_watch(self, speed_counts_per_s: float) -> StallWatch:
+        """The stall watch of a move at this speed (motion/blocked.py)."""
+        return StallWatch(self.stall_time, min_progress_for(speed_counts_per_s, self.stall_time))

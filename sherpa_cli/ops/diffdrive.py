@@ -33,6 +33,7 @@ from sherpa_cli.elmo.protocol import UM_POSITION
 from sherpa_cli.errors import SafetyError, UsageError
 from sherpa_cli.joints import diffpair, units
 from sherpa_cli.motion import calibration, limit_watch
+from sherpa_cli.motion.blocked import blocked_text
 from sherpa_cli.motion.pair_start import CommonStart, pair_settings, stop_motors
 
 if TYPE_CHECKING:
@@ -583,7 +584,8 @@ def run_move(session: ArmSession, pair: PairConfig, request: MoveRequest, *,
                     recorded.t_zero = recorded.recorder.now()
                 start.begin()
                 w = limit_watch.watch(watched, sample, clock=clock, sleep=sleep, interval=interval,
-                                      finished=finished, duration=p.timeout, check_drives=check_drives)
+                                      finished=finished, duration=p.timeout, check_drives=check_drives,
+                                      stall=settings.stall_watch(max(pr.sp for pr in p.profiles.values())))
                 result.duration = round(clock() - t_begin, 3)
                 if w.outcome == "breach":
                     result.outcome = "limit"
@@ -594,6 +596,12 @@ def run_move(session: ArmSession, pair: PairConfig, request: MoveRequest, *,
                     back = limit_watch.recovery_targets(watched, now, w.breaches, hold={})
                     move_to(guard, by_name, clients, back, settings.recovery_speed_for((sj.vel_limit, dj.vel_limit)),
                             settings, clock, sleep, "the move back into the normal range")
+                elif w.outcome == "stalled":
+                    s_now, d_now = w.joints.get(sj.name), w.joints.get(dj.name)
+                    raise SafetyError(f"{pair.name}: {blocked_text(session.cfg, clients, drives, settings.stall_time)}; "
+                                      f"at Σ={s_now}, Δ={d_now} on the way to Σ={p.target[0]}, Δ={p.target[1]}",
+                                      hint="move the joint away from the switch or the stop (`sherpa jog`), "
+                                      "then check the target against the joint's range")
                 elif w.outcome == "elapsed":
                     raise SafetyError(f"{pair.name}: did not reach Σ={p.target[0]}, Δ={p.target[1]} within "
                                       f"{p.timeout:g} s", hint="check the drives with `sherpa monitor --once`")

@@ -25,6 +25,7 @@ from sherpa_cli.elmo.faults import StatusRegister, decode_sr, describe_mf
 from sherpa_cli.elmo.protocol import UM_POSITION, UM_TORQUE
 from sherpa_cli.errors import SafetyError, UsageError
 from sherpa_cli.joints.units import counts_to_rad, rad_per_s_to_counts_per_s, rad_to_counts
+from sherpa_cli.motion.blocked import StallWatch, blocked_text
 from sherpa_cli.motion.guard import MotionGuard
 from sherpa_cli.motion.report import GuardReport
 from sherpa_cli.motion.settings import MotionSettings
@@ -258,8 +259,9 @@ def _move(guard: MotionGuard, target: JogTarget, req: JogRequest, settings: Moti
     start = int(c.get("PX"))
     state["start"] = start
 
-    def watch(done: Callable[[StatusRegister], bool] | None, limit: float | None) -> None:
-        _watch(guard, c, target, clock, sleep, settings, state, on_progress, done=done, limit=limit)
+    def watch(done: Callable[[StatusRegister], bool] | None, limit: float | None,
+              stall: StallWatch | None = None) -> None:
+        _watch(guard, c, target, clock, sleep, settings, state, on_progress, done=done, limit=limit, stall=stall)
 
     if req.mode == "position":
         goal = _counts_to(target, req.to) if req.to is not None else start + _counts_to(target, req.by)  # type: ignore[arg-type]  # --to or --by
@@ -278,7 +280,7 @@ def _move(guard: MotionGuard, target: JogTarget, req: JogRequest, settings: Moti
         state["command"] = f"PA={goal}"
         state["t0"] = clock()
         c.execute("BG")
-        watch(lambda sr: sr.motion_status == 0, bound)
+        watch(lambda sr: sr.motion_status == 0, bound, settings.stall_watch(position_speed(target, settings)))
         state["ended_by"] = state["ended_by"] or "target reached"
     elif req.mode == "velocity":
         assert req.velocity is not None and target.cpr is not None  # checked when the request was made
@@ -288,7 +290,7 @@ def _move(guard: MotionGuard, target: JogTarget, req: JogRequest, settings: Moti
         state["command"] = f"JV={v}"
         state["t0"] = clock()
         c.execute("BG")
-        watch(None, req.duration)
+        watch(None, req.duration, settings.stall_watch(abs(v)))
         state["ended_by"] = state["ended_by"] or "time up"
     else:
         guard.enable(ref, UM_TORQUE)  # TC=0 before MO=1: no old torque command is applied
@@ -319,8 +321,10 @@ def _move_bound(c: DriveClient, distance: int) -> float:
 
 def _watch(guard: MotionGuard, c: DriveClient, target: JogTarget, clock: Callable[[], float], sleep: Callable[[float], None],
            settings: MotionSettings, state: dict[str, Any], on_progress: Callable[[JogProgress], None] | None,
-           *, done: Callable[[StatusRegister], bool] | None, limit: float | None) -> None:
-    """Poll PX and SR until ``done(sr)`` or ``limit`` s (a time-up for velocity/torque, a failure for a move)."""
+           *, done: Callable[[StatusRegister], bool] | None, limit: float | None,
+           stall: StallWatch | None = None) -> None:
+    """Poll PX and SR until ``done(sr)`` or ``limit`` s (a time-up for velocity/torque, a failure for a
+    move); ``stall``: no progress for the stall time ends it as blocked, naming an active end switch."""
     t0 = state["t0"]
     while True:
         guard.check()
@@ -337,6 +341,10 @@ def _watch(guard: MotionGuard, c: DriveClient, target: JogTarget, clock: Callabl
             raise SafetyError(f"{c.label}: the motor was switched off during the jog: {why}")
         if done is not None and done(sr):
             return
+        if stall is not None and stall.feed({target.ref.name: px}, clock()):
+            blocked = blocked_text(guard.session.cfg, {target.ref.name: c}, [target.ref.name], settings.stall_time)
+            raise SafetyError(f"{c.label}: {blocked}; at {px} counts", hint="move the joint away from the switch "
+                              "or the stop, the other way")
         if limit is not None and elapsed >= limit:
             if done is not None:
                 raise SafetyError(f"{c.label}: the move did not reach its target within {limit:.1f} s "

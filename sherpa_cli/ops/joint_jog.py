@@ -35,6 +35,7 @@ from sherpa_cli.elmo.protocol import UM_POSITION, UM_TORQUE
 from sherpa_cli.errors import SafetyError, UsageError
 from sherpa_cli.joints import diffpair, units
 from sherpa_cli.motion import calibration, limit_watch
+from sherpa_cli.motion.blocked import blocked_text
 from sherpa_cli.motion.limit_watch import Breach, WatchedJoint
 from sherpa_cli.motion.stopping import wait_all_standstill
 
@@ -424,7 +425,7 @@ def _run_guarded(guard: MotionGuard, session: ArmSession, cfg: ArmConfig, axis: 
             watched = limit_watch.watch(
                 axis.watched, sample, clock=clock, sleep=sleep, interval=settings.poll_interval,
                 finished=lambda m: all(int(c.get("MS")) == 0 for c in clients.values()), duration=p.timeout,
-                check_drives=check_drives)
+                check_drives=check_drives, stall=settings.stall_watch(max(p.motor_speeds.values(), default=0)))
             if watched.outcome == "elapsed":
                 raise SafetyError(f"{axis.name}: did not reach {p.target} within {p.timeout:g} s "
                                   f"(stopped at {axis.position(watched.motors)})",
@@ -436,7 +437,8 @@ def _run_guarded(guard: MotionGuard, session: ArmSession, cfg: ArmConfig, axis: 
             start.begin()
             watched = limit_watch.watch(axis.watched, sample, clock=clock, sleep=sleep,
                                         interval=settings.poll_interval, duration=p.duration,
-                                        check_drives=check_drives)
+                                        check_drives=check_drives,
+                                        stall=settings.stall_watch(max(map(abs, p.motor_speeds.values()), default=0)))
         else:
             result.motor_commands = {d: {"TC": p.motor_currents[d]} for d in axis.drives}
             for d, c in clients.items():
@@ -444,6 +446,10 @@ def _run_guarded(guard: MotionGuard, session: ArmSession, cfg: ArmConfig, axis: 
             watched = limit_watch.watch(axis.watched, sample, clock=clock, sleep=sleep,
                                         interval=settings.poll_interval, duration=p.duration,
                                         check_drives=check_drives)
+        if watched.outcome == "stalled":
+            raise SafetyError(f"{axis.name}: {blocked_text(session.cfg, clients, axis.drives, settings.stall_time)}; "
+                              f"at {axis.position(watched.motors)} counts",
+                              hint="move the joint away from the switch or the stop, the other way")
         held = {j.name: joints_start[j.name] for j in axis.watched
                 if axis.kind in ("sigma", "delta") and j.name != axis.name and j.drive_b is not None}
         if watched.outcome == "breach":
