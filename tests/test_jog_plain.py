@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import math
 import time
+from pathlib import Path
 
 import pytest
 from test_motion_guard import ARMED, CONFIG, RESTORED
@@ -242,3 +243,62 @@ def test_the_limit_watch_stops_with_the_configured_stop_method(tmp_path):
             executed = [d[:2].decode() for _, cid, d in drive.received if cid == 0x305 and len(d) == 4]
     assert result.breach is not None
     assert "ST" not in executed and "BG" in executed  # motion.stop_method jv0: JV=0 + BG, never ST
+
+
+# -- --hold and gravity-loaded joints (issue 21 item 5) ----------------------------------------------
+
+def test_hold_keeps_the_motor_on_at_the_end_position_until_ctrl_c(cfg):
+    seen: list[tuple[bool, int]] = []
+    holding_from: list[int] = []
+
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
+        drive = s.sim.drives["drive1"]
+
+        def progress(p):
+            with s.sim.lock:
+                seen.append((drive.motor_on, p.counts))
+            if drive.ram.get("UM") == 5 and len(seen) > 40:
+                holding_from.append(len(seen))
+                if len(holding_from) > 20:
+                    raise KeyboardInterrupt  # how a hold ends
+        result = run_jog(s, resolve_jog_target(cfg, "j1"),
+                         JogRequest(mode="velocity", velocity=0.5, duration=0.2, hold=True),
+                         settings=MotionSettings.from_config(cfg), on_progress=progress)
+        with s.sim.lock:
+            off_at_end = not drive.motor_on
+    assert result.ended_by == "held until Ctrl-C"
+    assert "then held at PA=" in result.command
+    held = [on for on, _ in seen[holding_from[0]:]]
+    assert held and all(held)  # on while held
+    assert off_at_end  # the guard's exit switched it off
+
+
+def test_hold_ends_normally_when_sherpa_stop_switches_the_motor_off(cfg):
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
+        ref = resolve_jog_target(cfg, "j1").ref
+        calls = {"n": 0}
+
+        def progress(p):
+            calls["n"] += 1
+            if calls["n"] == 60:
+                s.client(ref).motor_off()  # what `sherpa stop` from a second terminal ends with: MO=0
+        result = run_jog(s, resolve_jog_target(cfg, "j1"),
+                         JogRequest(mode="velocity", velocity=0.5, duration=0.2, hold=True),
+                         settings=MotionSettings.from_config(cfg), on_progress=progress)
+    assert result.ended_by == "held until the motor was switched off (sherpa stop)"
+    assert ref.name == "drive1"
+
+
+def test_a_gravity_loaded_joint_is_named_before_it_moves(cli, tmp_path):
+    import yaml
+
+    data = yaml.safe_load(Path("configs/sherpa-arm.yaml").read_text())
+    data["joints"]["elbow_pitch"]["gravity"] = True
+    path = tmp_path / "arm.yaml"
+    path.write_text(yaml.safe_dump(data, sort_keys=False))
+    assert cli("--config", str(path), "config", "check").exit_code == 0
+    moved = cli("--config", str(path), "--sim", "jog", "elbow_pitch", "--velocity", "0.05", "--for", "0.2", "--apply")
+    assert moved.exit_code == 0, moved.transcript()
+    assert "elbow_pitch: gravity-loaded: the motor is switched off at the end and the joint falls" in moved.stderr
+    held = cli("--config", str(path), "--sim", "jog", "wrist_1", "--velocity", "0.05", "--for", "0.2", "--apply")
+    assert "gravity-loaded" not in held.stderr  # only the marked joint

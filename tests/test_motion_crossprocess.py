@@ -191,3 +191,25 @@ def test_program_limits_during_a_jog_in_another_process_is_refused_with_exit_5(a
         proc.send_signal(signal.SIGINT)
         code, out, err = finish(proc)
     assert code == 0, f"{out}\n{err}"
+
+
+def test_sigkill_during_hold_leaves_the_motor_stopped_by_the_drives_consumer(arm, tmp_path):
+    """`jog --hold`: after its short velocity move the joint is held in position mode; a SIGKILL of
+    the holding tool leaves the drive's own consumer to switch the motor off (issue 21 item 5)."""
+    since = time.monotonic()
+    proc = sherpa(arm, tmp_path, "jog", JOINT, "--velocity", "0.2", "--for", "0.3", "--hold", "--apply")
+    try:
+        on = arm.wait_event(lambda text: text.startswith("motor on"), START_TIMEOUT, after=since)
+        arm.wait_event(lambda text: text.startswith("BG: UM=5, PA="), START_TIMEOUT, after=on["t"])  # holding
+    except AssertionError:
+        proc.kill()
+        out, err = proc.communicate(timeout=EXIT_TIMEOUT)
+        raise AssertionError(f"the jog did not start holding:\n{out}\n{err}") from None
+    time.sleep(0.3)  # well into the hold
+    assert not motor_offs(arm, on["t"]), "the held motor went off before the kill"
+    t_kill = time.monotonic()
+    os.kill(proc.pid, signal.SIGKILL)
+    finish(proc)
+    off = arm.wait_event(lambda text: text.startswith("motor off"), 10 * CONSUMER_S, after=on["t"])
+    assert off["event"] == "motor off: heartbeat lost, 0x6007=2", arm.events()
+    assert 0 < (off["t"] - t_kill) / CONSUMER_S <= 1.5

@@ -54,6 +54,9 @@ def jog(
     uncalibrated: bool = typer.Option(False, "--uncalibrated", help="Allow a position move of a joint that has no "
                                       "absolute encoder and was not homed since power-up."),
     apply: ApplyMotion = False,
+    hold: bool = typer.Option(False, "--hold", help="After the move keep the motor on, holding where it ended, "
+                              "the dead-man armed and the position shown, until Ctrl-C or `sherpa stop` "
+                              "(plain joints; a gravity-loaded joint then does not fall)."),
     interactive: bool = typer.Option(False, "--interactive", help="A full-screen view of the joints with keyboard "
                                      "control (docs/jog.md)."),
     joystick: bool = typer.Option(False, "--joystick", help="Drive the joints from a joystick as the config's "
@@ -85,6 +88,7 @@ def jog(
       sherpa jog wrist_1 --torque 0.5 --for 1 --apply
       sherpa jog shoulder_pitch --by 10deg --apply
       sherpa jog shoulder_roll --velocity 5deg/s --for 2 --apply
+      sherpa jog elbow_pitch --to 0.5 --hold --apply
     """
     from sherpa_cli.motion.settings import MotionSettings
     from sherpa_cli.ops.jog import JogRequest, check_request, resolve_jog_target, run_jog
@@ -105,14 +109,19 @@ def jog(
                          + (f" (got {', '.join(given)})" if given else ""))
     mode = "position" if to is not None or by is not None else "velocity" if velocity is not None else "torque"
     if _is_pair_axis(cfg, joint):
+        if hold:
+            raise UsageError("--hold is for plain joints for now: a Σ/Δ joint is not held after its move",
+                             hint="jog the pair's joint without --hold")
+        _notice_gravity(st, cfg, joint, hold=False, apply=apply)
         _jog_pair(st, cfg, joint, mode, to, by, velocity, torque, parse_number(duration, "--for"), uncalibrated, apply)
         return
     target = resolve_jog_target(cfg, joint)
     req = JogRequest(mode=mode, to=_angle(to, "--to", target.cpr), by=_angle(by, "--by", target.cpr),
                      velocity=_angle(velocity, "--velocity", target.cpr, speed=True),
                      torque=_current(torque, "--torque"), duration=parse_number(duration, "--for"),
-                     uncalibrated=uncalibrated)
+                     uncalibrated=uncalibrated, hold=hold)
     check_request(target, req)
+    _notice_gravity(st, cfg, target.joint.name if target.joint is not None else None, hold=hold, apply=apply)
     if not apply:
         _dry_run(st, target, req, cfg)
         return
@@ -134,6 +143,15 @@ def jog(
     _render(st, name, result)
     if result.breach is not None:
         raise typer.Exit(1)
+
+
+def _notice_gravity(st: AppState, cfg: ArmConfig, joint: str | None, *, hold: bool, apply: bool) -> None:
+    """Before a gravity-loaded joint moves: what the motor switched off at the end does to it."""
+    from sherpa_cli.motion.gravity import gravity_notice
+
+    text = gravity_notice(cfg, [joint] if joint else [], holds=hold)
+    if text is not None and apply:
+        st.out.warn(text)
 
 
 def _live(st: AppState, joints: list[str], interactive: bool, joystick: bool, device: str | None,

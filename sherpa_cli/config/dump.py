@@ -137,6 +137,8 @@ def _joint_body(j: JointConfig) -> dict[str, Any]:
         out["calibration"] = cal
     if j.abs_encoder is not None:
         out["abs_encoder"] = {"source": j.abs_encoder.source, "offset": j.abs_encoder.offset}
+    if j.gravity:
+        out["gravity"] = True
     return out
 
 

@@ -166,6 +166,9 @@ class JointConfig:
     cal_speed: int | None = None  # counts/s toward the calibration switch
     cal_pos: int | None = None  # joint position set when the calibration switch is reached
     abs_encoder: AbsEncoderConfig | None = None
+    # a joint that falls when its motor is switched off (a pitch joint without a brake): every command
+    # that ends with MO=0 says so first, and `jog --hold` keeps it held (docs/motion.md)
+    gravity: bool = False
     where: Location = field(default_factory=Location, compare=False)
 
     @property

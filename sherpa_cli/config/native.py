@@ -57,7 +57,7 @@ IL_KEYS = ["stop", "home", "unused"]
 BUS_KEYS = ["interface", "channel", "bitrate", "send_interval_us", "poll_interval_ms", "options"]
 DRIVE_KEYS = ["bus", "node", "model", "motor"]
 DEVICE_KEYS = ["type", "bus", "node", "position_from", "tpdo_trigger", "cyclic_ms"]
-JOINT_BODY_KEYS = ["cpr", "range", "velocity", "acceleration", "switches", "calibration", "abs_encoder"]
+JOINT_BODY_KEYS = ["cpr", "range", "velocity", "acceleration", "switches", "calibration", "abs_encoder", "gravity"]
 JOINT_KEYS = ["drive", *JOINT_BODY_KEYS, "current"]
 PAIR_JOINT_KEYS = ["name", *JOINT_BODY_KEYS]
 PAIR_KEYS = ["drives", "current", "sigma", "delta"]
@@ -389,7 +389,7 @@ def parse_joint_body(sec: Section, name: str, role: JointRole, drive: str | None
         accel=acc.int("accel") if acc else None, decel=acc.int("decel") if acc else None,
         current=current, switches=tuple(switches),
         cal_speed=cal.int("speed") if cal else None, cal_pos=cal.int("position") if cal else None,
-        abs_encoder=abs_enc, where=sec.node.loc)
+        abs_encoder=abs_enc, gravity=bool(sec.bool("gravity", False)), where=sec.node.loc)
 
 
 def parse_switch(item: YNode, prefix: tuple[str, ...], pos_min: int, pos_max: int, locs: Locs) -> SwitchConfig:

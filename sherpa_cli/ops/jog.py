@@ -25,6 +25,7 @@ from sherpa_cli.elmo.faults import StatusRegister, decode_sr, describe_mf
 from sherpa_cli.elmo.protocol import UM_POSITION, UM_TORQUE
 from sherpa_cli.errors import SafetyError, UsageError
 from sherpa_cli.joints.units import counts_to_rad, rad_per_s_to_counts_per_s, rad_to_counts
+from sherpa_cli.motion import stopping
 from sherpa_cli.motion.blocked import StallWatch, blocked_text
 from sherpa_cli.motion.guard import MotionGuard
 from sherpa_cli.motion.report import GuardReport
@@ -61,6 +62,7 @@ class JogRequest:
     torque: float | None = None  # A
     duration: float | None = None  # s; velocity: None = until Ctrl-C; torque: required
     uncalibrated: bool = False  # allow a position move of a joint not homed since power-up (wave/jog)
+    hold: bool = False  # after the move: the motor stays on holding where it ended until Ctrl-C / sherpa stop
 
 
 @dataclass
@@ -200,7 +202,8 @@ def run_jog(session: ArmSession, target: JogTarget, req: JogRequest, *, settings
             finally:
                 state["t_end"] = clock()  # the motion's time, without the guard's stop and switch-off
     except KeyboardInterrupt as exc:
-        if not (req.mode == "velocity" and req.duration is None and state["t0"] is not None):
+        held = req.hold and state.get("holding")
+        if not held and not (req.mode == "velocity" and req.duration is None and state["t0"] is not None):
             exc.motion_report = guard.report  # type: ignore[attr-defined]  # the CLI shows how it stopped
             raise
         interrupted = True  # Ctrl-C is how an open-ended velocity jog is meant to end
@@ -218,7 +221,8 @@ def run_jog(session: ArmSession, target: JogTarget, req: JogRequest, *, settings
                      start_counts=state["start"], end_counts=stopped.position, target_counts=state["target"],
                      command=state["command"],
                      duration=state["t_end"] - state["t0"] if state["t0"] is not None else 0.0,
-                     ended_by="Ctrl-C" if interrupted else state["ended_by"], cpr=target.cpr, stop=guard.report,
+                     ended_by=("held until Ctrl-C" if state.get("holding") else "Ctrl-C") if interrupted
+                     else state["ended_by"], cpr=target.cpr, stop=guard.report,
                      breach=state.get("breach"), recovered_to=state.get("recovered_to"), calibration=cal)
 
 
@@ -292,7 +296,7 @@ def _move(guard: MotionGuard, target: JogTarget, req: JogRequest, settings: Moti
         c.execute("BG")
         watch(None, req.duration, settings.stall_watch(abs(v)))
         state["ended_by"] = state["ended_by"] or "time up"
-    else:
+    elif req.mode == "torque":
         guard.enable(ref, UM_TORQUE)  # TC=0 before MO=1: no old torque command is applied
         assert req.torque is not None
         c.set("TC", 0, float(req.torque))
@@ -300,6 +304,41 @@ def _move(guard: MotionGuard, target: JogTarget, req: JogRequest, settings: Moti
         state["t0"] = clock()
         watch(None, req.duration)
         state["ended_by"] = state["ended_by"] or "time up"
+    if req.hold and not state.get("breach"):
+        _hold(guard, c, target, req, settings, state, clock, sleep, on_progress)
+
+
+def _hold(guard: MotionGuard, c: DriveClient, target: JogTarget, req: JogRequest, settings: MotionSettings,
+          state: dict[str, Any], clock: Callable[[], float], sleep: Callable[[float], None],
+          on_progress: Callable[[JogProgress], None] | None) -> None:
+    """--hold: stop a velocity or torque motion from standstill, then keep the motor on in position
+    mode holding where it stands (the dead-man still armed, the limit watch still on) until Ctrl-C
+    ends it (a normal end) or the motor is switched off (`sherpa stop`: also a normal end)."""
+    ref = target.ref
+    if req.mode != "position":
+        stopping.send_stop(c, unit_mode=guard.unit_mode(ref), method=settings.stop_method, pulse=guard.check)
+        if stopping.wait_standstill(c, standstill_timeout=settings.standstill_timeout,
+                                    poll_interval=settings.poll_interval, clock=clock, sleep=sleep, pulse=guard.check,
+                                    standstill_velocity=settings.standstill_velocity) is False:
+            raise SafetyError(f"{c.label}: not at standstill {settings.standstill_timeout:g} s after the stop: "
+                              "not held", hint="`sherpa stop` stops every drive")
+        here = int(c.get("PX"))
+        guard.enable(ref, UM_POSITION)
+        c.set("PA", 0, here)
+        c.execute("BG")
+        state["command"] += f", then held at PA={here}"
+    state["holding"] = True
+    while True:
+        guard.check()
+        px = int(guard.query(ref, "PX"))
+        if on_progress is not None:
+            on_progress(JogProgress(clock() - state["t0"], px, counts_to_rad(px, target.cpr) if target.cpr else None))
+        if target.joint is not None and limit_breach(guard, c, target, px, settings, clock, sleep, state):
+            return
+        if not decode_sr(int(guard.query(ref, "SR"))).motor_on:
+            state["ended_by"] = "held until the motor was switched off (sherpa stop)"
+            return
+        sleep(settings.poll_interval)
 
 
 def position_speed(target: JogTarget, settings: MotionSettings) -> int:
