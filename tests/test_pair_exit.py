@@ -153,14 +153,25 @@ def test_a_second_ctrl_c_during_the_restore_does_not_skip_the_rest_of_it(interru
 
 
 @pytest.mark.parametrize("how", ["diffdrive", "sigma_jog"])
-def test_one_pair_drive_dying_stops_the_partner_at_once_and_ends_the_command_naming_it(tmp_path, how):
+def test_one_pair_drive_dying_stops_the_partner_at_once_and_ends_the_command_naming_it(tmp_path, how, monkeypatch):
     """Issue 21 item 8: `right` dies mid-move. Its partner gets its stop after at most one request to
     the dead drive (the request's attempts), never after the dead drive's timeouts of every exit step;
     the command ends with an error naming the dead drive, and the dead drive costs no more requests
     in the exit (the guard, the common start's restore and the recorder skip a silent drive)."""
     import time
 
+    from sherpa_cli.elmo.client import DriveClient
     from sherpa_cli.errors import CommunicationError
+
+    # the tool's own count of requests to the drive once it was found silent (load cannot change it)
+    after_silent: list[str] = []
+    real_exchange = DriveClient._exchange
+
+    def exchange(self, frame, letters, index, **kw):
+        if self.name == "right" and self.silent:
+            after_silent.append(letters)
+        return real_exchange(self, frame, letters, index, **kw)
+    monkeypatch.setattr(DriveClient, "_exchange", exchange)
 
     cfg = load_config(JOG_CONFIG)
     with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
@@ -190,11 +201,7 @@ def test_one_pair_drive_dying_stops_the_partner_at_once_and_ends_the_command_nam
         to_right = [t for t, i, f in _frames(s, "right") if i == 0x300 + right_node and t >= t_dead]
         left_st = [t for t, i, f in _frames(s, "left") if i == 0x300 + 10 and f[:2] == b"ST" and t >= t_dead]
         assert left_st, "the partner was never stopped"
-        # every request to the dead drive after it died, stop frames aside: the one that found it
-        # silent (its attempts, the settle window's patience) and one more on the way out, then it is
-        # given up -- whatever the machine's load (a timeout per exit step cost 11 and more)
-        asked = [f[:2] for t, i, f in _frames(s, "right")
-                 if i == 0x300 + right_node and t >= t_dead and f[:2] not in (b"ST", b"TC", b"JV", b"BG")]
-        assert len(asked) <= 6 and len(set(asked)) <= 2, asked
-        assert len(to_right) <= 8, f"{len(to_right)} interpreter frames to the dead drive after it died"
+        # once the dead drive was found silent it gets one more plain request on the way out, no
+        # timeout per exit step (those cost 11 requests and more)
+        assert len(after_silent) <= 1, after_silent
         assert motors_off(s)
