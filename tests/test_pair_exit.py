@@ -198,7 +198,6 @@ def test_one_pair_drive_dying_stops_the_partner_at_once_and_ends_the_command_nam
             died = [t for t, event in s.sim.drives["right"].events if event == "motor off: the drive died"]
         assert died, "the drive did not die during the move"
         t_dead = died[0]
-        to_right = [t for t, i, f in _frames(s, "right") if i == 0x300 + right_node and t >= t_dead]
         left_st = [t for t, i, f in _frames(s, "left") if i == 0x300 + 10 and f[:2] == b"ST" and t >= t_dead]
         assert left_st, "the partner was never stopped"
         # once the dead drive was found silent it gets one more plain request on the way out, no
