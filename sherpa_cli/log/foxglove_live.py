@@ -23,13 +23,13 @@ install (exit 2).
 from __future__ import annotations
 
 import contextlib
-import ipaddress
 import threading
 import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
+from sherpa_cli import netaddr
 from sherpa_cli.config.model import ArmConfig
 from sherpa_cli.elmo.faults import Emcy
 from sherpa_cli.errors import UsageError
@@ -78,25 +78,14 @@ def require_foxglove(what: str = "--foxglove") -> None:
 
 
 def parse_bind(text: str) -> tuple[str, int]:
-    host, sep, port_text = text.rpartition(":")
-    if not sep or not host or not port_text.isdigit() or len(port_text) > 5 or int(port_text) > 65535:
-        raise UsageError(f"--foxglove-at: '{text}' is not HOST:PORT", hint=f"e.g. --foxglove-at {DEFAULT_BIND}")
-    return host.strip("[]"), int(port_text)
+    return netaddr.parse_host_port(text, "--foxglove-at", example=DEFAULT_BIND)
 
 
-def is_loopback(host: str) -> bool:
-    if host == "localhost":
-        return True
-    try:
-        return ipaddress.ip_address(host).is_loopback
-    except ValueError:
-        return False
+is_loopback = netaddr.is_loopback
 
 
 def check_bind(host: str, allow_remote: bool) -> None:
-    if not is_loopback(host) and not allow_remote:
-        raise UsageError(f"--foxglove-at {host}: refusing to show the arm beyond this machine",
-                         hint="bind to 127.0.0.1, or pass --allow-remote if other machines must connect")
+    netaddr.check_bind(host, allow_remote, "--foxglove-at", "show the arm")
 
 
 def _clean(values: Sequence[float | None]) -> list[float | None]:

@@ -2,13 +2,13 @@
 
 from __future__ import annotations
 
-import ipaddress
 import socket
 import threading
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
+from sherpa_cli import netaddr
 from sherpa_cli.config.model import ArmConfig
 from sherpa_cli.errors import UsageError
 from sherpa_cli.sim.arm import SimArm
@@ -18,32 +18,16 @@ if TYPE_CHECKING:
 
 
 def parse_host_port(text: str, buses: int = 1) -> tuple[str, int]:
-    """``HOST:PORT`` of ``--serve``; bus i is served on PORT + i, so every one of the ``buses``
-    ports must be a TCP port (1..65535). Digits are ASCII (``str.isdigit`` takes any script's)."""
-    host, sep, port_text = text.rpartition(":")
-    if not sep or not host or not (port_text.isascii() and port_text.isdigit()):
-        raise UsageError(f"--serve: '{text}' is not HOST:PORT", hint="e.g. --serve 127.0.0.1:54701")
-    last = 65535 - max(buses, 1) + 1
-    if len(port_text) > 5 or not 1 <= int(port_text) <= last:
-        ports = f"the {buses} buses are served on PORT..PORT+{buses - 1}, " if buses > 1 else ""
-        raise UsageError(f"--serve {text}: port {port_text[:12]} is out of range; {ports}so PORT must be 1..{last}",
-                         hint="e.g. --serve 127.0.0.1:54701")
-    return host.strip("[]"), int(port_text)
+    """``HOST:PORT`` of ``--serve``; bus i is served on PORT + i (sherpa_cli/netaddr.py)."""
+    return netaddr.parse_host_port(text, "--serve", example="127.0.0.1:54701", ports=buses,
+                                   what=f"the {buses} buses are served on")
 
 
-def is_loopback(host: str) -> bool:
-    if host == "localhost":
-        return True
-    try:
-        return ipaddress.ip_address(host).is_loopback
-    except ValueError:
-        return False
+is_loopback = netaddr.is_loopback
 
 
 def check_bind_address(host: str, allow_remote: bool) -> None:
-    if not is_loopback(host) and not allow_remote:
-        raise UsageError(f"--serve {host}: refusing to serve the simulated arm beyond this machine",
-                         hint="bind to 127.0.0.1, or pass --allow-remote if other machines must reach it")
+    netaddr.check_bind(host, allow_remote, "--serve", "serve the simulated arm")
 
 
 @dataclass
