@@ -37,6 +37,7 @@ from sherpa_cli.config.model import ArmConfig, JointConfig, JointRole, SwitchCon
 from sherpa_cli.elmo.protocol import UM_POSITION
 from sherpa_cli.errors import SafetyError, UsageError
 from sherpa_cli.motion import calibration
+from sherpa_cli.motion.blocked import blocked_text
 from sherpa_cli.motion.guard import MotionGuard
 from sherpa_cli.motion.report import GuardReport
 from sherpa_cli.motion.settings import MotionSettings
@@ -371,6 +372,9 @@ class _Runner:
         bound = 2 * (distance / max(1, speed)) + 5.0
         t0 = self.clock()
         first_edge: float | None = None
+        # a search pushing against an end stop (an interrupted search left the joint past its switch)
+        # ends within motion.stall_time instead of at its time bound (issue 21 item 13)
+        stall = self.settings.stall_watch(speed)
         while True:
             guard.check()
             if self.on_step is not None:
@@ -396,6 +400,11 @@ class _Runner:
             if self.clock() - t0 > bound:
                 raise SafetyError(f"{what} did not end within {bound:.1f} s",
                                   hint="check the joint; `sherpa stop` stops every drive")
+            if any(m == 2 for m in ms) and stall.feed({n: int(guard.query(r, "PX")) for n, r in refs.items()},
+                                                     self.clock()):
+                clients = {n: guard.client(r) for n, r in refs.items()}
+                raise SafetyError(f"{what}: {blocked_text(self.cfg, clients, list(refs), self.settings.stall_time)}",
+                                  hint="move the joint off the stop toward its switch (`sherpa jog`), then home again")
             self.sleep(self.settings.poll_interval)
 
     def move_to(self, guard: MotionGuard, refs: dict[str, DriveRef], targets: dict[str, int], speed: int, what: str) -> None:
