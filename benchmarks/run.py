@@ -97,18 +97,25 @@ def _fresh_wall(cmd: list[str], cwd: Path | str = ROOT) -> float:
 
 
 def bench_startup(rounds: int = 15) -> Result:
-    """`sherpa --help` wall time over `python -c pass`, medians of interleaved runs."""
+    """`sherpa scan --help` wall time over `python -c pass`, medians of interleaved runs; the top-level
+    `sherpa --help` is timed beside it and must meet the same goal (issue 26 item 3)."""
     base_cmd = [sys.executable, "-c", "pass"]
-    sherpa_cmd = [*_sherpa(), "--help"]
-    _wall(base_cmd), _wall(sherpa_cmd)  # warm the file and bytecode caches
-    base, sherpa = [], []
+    scan_cmd = [*_sherpa(), "scan", "--help"]
+    top_cmd = [*_sherpa(), "--help"]
+    _wall(base_cmd), _wall(scan_cmd), _wall(top_cmd)  # warm the file and bytecode caches
+    base, scan, top = [], [], []
     for _ in range(rounds):
         base.append(_wall(base_cmd))
-        sherpa.append(_wall(sherpa_cmd))
-    ratio = statistics.median(sherpa) / statistics.median(base)
+        scan.append(_wall(scan_cmd))
+        top.append(_wall(top_cmd))
+    floor = statistics.median(base)
+    ratio = statistics.median(scan) / floor
+    top_ratio = statistics.median(top) / floor
     goal = "<= 4"
-    return Result("startup", round(statistics.median(sherpa) * 1000, 1), "ms", round(ratio, 2), goal,
-                  _judge(ratio, goal), f"medians of {rounds}; python -c pass: {statistics.median(base) * 1000:.1f} ms")
+    return Result("startup", round(statistics.median(scan) * 1000, 1), "ms", round(ratio, 2), goal,
+                  _judge(ratio, goal) and _judge(top_ratio, goal),
+                  f"`sherpa scan --help`, medians of {rounds}; python -c pass: {floor * 1000:.1f} ms; "
+                  f"`sherpa --help`: {statistics.median(top) * 1000:.1f} ms, ratio {top_ratio:.2f} (goal {goal})")
 
 
 def bench_scan(rounds: int = 5) -> Result:
