@@ -6,6 +6,7 @@ Time is injected: a clock that only the network's own sleeps move."""
 from __future__ import annotations
 
 import random
+from pathlib import Path
 
 import pytest
 
@@ -129,7 +130,7 @@ def test_the_config_names_the_mode_and_the_floor(tmp_path):
     from sherpa_cli.errors import SherpaError
 
     base = (tmp_path / "a.yaml")
-    text = open("configs/appendix-c/example1.yaml", encoding="utf-8").read()
+    text = Path("configs/appendix-c/example1.yaml").read_text(encoding="utf-8")
     assert load_config("configs/appendix-c/example1.yaml").protocol.pacing == "per-drive"
     base.write_text(text + "\nprotocol: {pacing: per-bus, pacing_floor_us: 0}\n", encoding="utf-8")
     p = load_config(base).protocol
