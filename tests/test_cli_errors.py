@@ -50,7 +50,7 @@ ARGUMENTS = [
     ("convert-fractional-counts", ["diffdrive", "convert", "shoulder_diff", "--sigma", "1.5", "--delta", "0.5"],
      ["--sigma", "1.5", "whole number"]),
     ("convert-not-a-number", ["diffdrive", "convert", "shoulder_diff", "--sigma", "abc", "--delta", "1"],
-     ["--sigma", "valid number"]),
+     ["--sigma", "is not a valid"]),
     ("convert-parity", ["diffdrive", "convert", "shoulder_diff", "--sigma", "3", "--delta", "2"], ["Σ=3 and Δ=2 cannot be reached", "both even or both odd"]),
     ("convert-nan-rad", ["diffdrive", "convert", "shoulder_diff", "--unit", "rad", "--sigma", "nan",
                          "--delta", "0"], ["finite"]),

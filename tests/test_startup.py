@@ -5,6 +5,7 @@ from __future__ import annotations
 import subprocess
 import sys
 
+import pytest
 from conftest import ROOT
 
 HEAVY = ("can", "canopen", "rich", "yaml")
@@ -26,3 +27,33 @@ def test_the_command_tree_is_built_once_per_process():
     from sherpa_cli.cli.boundary import root_command
 
     assert root_command() is root_command()
+
+
+#: what no `--help` may import: typer 0.29's pydantic adapters (pinned below 0.29 in pyproject.toml,
+#: issue 26 item 3), the CAN stack, rich, the plot, the full-screen view and the simulator
+NOT_FOR_HELP = ("pydantic", "can", "canopen", "rich", "matplotlib", "textual", "sherpa_cli.sim")
+
+
+@pytest.mark.parametrize("argv", [["--help"], ["scan", "--help"], ["jog", "--help"], ["log", "record", "--help"],
+                                  ["commission", "--help"]])
+def test_help_imports_neither_pydantic_nor_anything_heavy(argv):
+    code = (
+        "import sys\n"
+        "from sherpa_cli.cli.app import run\n"
+        f"rc = run({argv!r})\n"
+        f"print(sorted(m for m in {NOT_FOR_HELP!r} if m in sys.modules), rc)\n"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, check=True)
+    assert out.stdout.strip().splitlines()[-1] == "[] 0", out.stdout
+
+
+def test_a_bus_command_imports_no_plot_view_or_mcap():
+    """`--sim scan` needs the CAN stack and the simulator, never matplotlib, textual or the MCAP writer."""
+    code = (
+        "import sys\n"
+        "from sherpa_cli.cli.app import run\n"
+        "rc = run(['--sim', 'scan'])\n"
+        "print(sorted(m for m in ('matplotlib', 'textual', 'mcap', 'pydantic') if m in sys.modules), rc)\n"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, check=True)
+    assert out.stdout.strip().splitlines()[-1].startswith("[] "), out.stdout

@@ -17,15 +17,49 @@ if TYPE_CHECKING:
     import can
 
 
+#: ``protocol.pacing`` (docs/config.md): the gap between frames to the same drive, or (today's
+#: behaviour until issue 26) between any two frames on the bus
+PACING_MODES = ("per-drive", "per-bus")
+
+
+def destination(can_id: int, data: bytes) -> int | None:
+    """The node a frame this tool sends is for: RPDO1..4 (0x200..0x57F, the interpreter's RPDO2
+    0x300 + node among them) and SDO requests (0x600 + node); None for a frame to every node (NMT
+    0x000 with node 0 names its node in byte 1, SYNC, anything else)."""
+    if 0x201 <= can_id <= 0x57F or 0x601 <= can_id <= 0x67F:
+        return can_id & 0x7F or None
+    if can_id == 0x000 and len(data) >= 2 and data[1]:
+        return data[1]
+    return None
+
+
+def answering(can_id: int) -> int | None:
+    """The node a received frame is an answer from: an interpreter reply (TPDO2, 0x280 + node) or
+    an SDO response (0x580 + node); None for anything else (heartbeats, EMCY, other PDOs)."""
+    if 0x281 <= can_id <= 0x2FF or 0x581 <= can_id <= 0x5FF:
+        return can_id & 0x7F
+    return None
+
+
 def _paced_network_class():
     import can
     import canopen
 
     class PacedNetwork(canopen.Network):
-        """canopen.Network that keeps the bus's send gap and retries a full socket buffer.
+        """canopen.Network that paces what this tool sends and retries a full socket buffer.
 
-        Overriding send_message is canopen's documented seam; every SDO, NMT and interpreter
-        frame of this tool goes through it.
+        Pacing (``pacing``, config ``protocol.pacing``; elmo-protocol.md §4.2: a drive's receive
+        buffer is overwritten by the next frame *to the same buffer*):
+
+        - ``per-drive``: frames to one drive keep ``gap`` between them, unless the drive has
+          answered (interpreter reply or SDO response) since the previous one; frames to other
+          drives go meanwhile. A frame to every drive (NMT to all) waits for every drive's gap.
+        - ``per-bus``: ``gap`` between any two frames on the bus (the tool until issue 26).
+
+        Either way ``floor`` (``protocol.pacing_floor_us``, about one frame time) is kept between
+        any two frames on the bus. Overriding send_message and notify is canopen's documented seam
+        (``Network.notify`` is what its listener calls for every received frame); every SDO, NMT and
+        interpreter frame of this tool goes through it.
         """
 
         #: canopen's receive thread wakes this often to see whether it must stop (canopen's
@@ -35,6 +69,10 @@ def _paced_network_class():
         NOTIFIER_CYCLE = 0.02
         #: seconds between two frames sent by this tool on the bus (config: send_interval_us)
         gap: float = 0.0
+        #: "per-drive" or "per-bus" (PACING_MODES)
+        pacing: str = "per-drive"
+        #: seconds between any two frames on the bus in per-drive mode (config: pacing_floor_us)
+        floor: float = 0.0
         #: attempts when the kernel's socket buffer is full (ENOBUFS, python-can issue #2004)
         send_attempts: int = 5
         clock: Callable[[], float] = staticmethod(time.monotonic)
@@ -43,26 +81,60 @@ def _paced_network_class():
         def __init__(self, bus: can.BusABC | None = None) -> None:
             super().__init__(bus)
             self._last_send = float("-inf")
+            self._last_to: dict[int, float] = {}  # node -> when the last frame to it went
+            self._answered: dict[int, bool] = {}  # node -> it answered since that frame
+
+        def notify(self, can_id: int, data: bytearray, timestamp: float) -> None:
+            node = answering(can_id)
+            if node is not None:
+                self._answered[node] = True  # one dict store: atomic, no lock on the receive thread
+            super().notify(can_id, data, timestamp)
+
+        def _wait(self, node: int | None, now: float) -> float:
+            """Seconds the next frame (to ``node``, None = every drive) must still wait."""
+            if self.pacing == "per-bus":
+                return self._last_send + self.gap - now
+            wait = self._last_send + self.floor - now
+            if self.gap:
+                if node is None:
+                    pending = [t for n, t in self._last_to.items() if not self._answered.get(n, False)]
+                    last = max(pending, default=float("-inf"))
+                else:
+                    last = float("-inf") if self._answered.get(node, True) else self._last_to[node]
+                wait = max(wait, last + self.gap - now)
+            return wait
 
         def send_message(self, can_id: int, data: bytes, remote: bool = False) -> None:
             if not self.bus:
                 raise CommunicationError("bus is closed")
             msg = can.Message(is_extended_id=can_id > 0x7FF, arbitration_id=can_id, data=data,
                               is_remote_frame=remote)
-            gap = self.gap
-            with self.send_lock:
-                if gap:  # unpaced (gap 0) skips the clock: every interpreter round trip passes here
-                    wait = self._last_send + gap - self.clock()
-                    if wait > 0:
-                        self.sleep(wait)
-                try:
-                    self.bus.send(msg)
-                except can.CanOperationError as exc:
-                    self._resend(msg, exc)
-                if gap:
-                    self._last_send = self.clock()
+            if not (self.gap or self.floor):  # unpaced skips the clock: every round trip passes here
+                with self.send_lock:
+                    self._send(msg)
+            else:
+                node = destination(can_id, bytes(data))
+                while True:
+                    with self.send_lock:
+                        wait = self._wait(node, self.clock())
+                        if wait <= 0:
+                            self._send(msg)
+                            now = self._last_send = self.clock()
+                            for n in (self._last_to if node is None else (node,)):
+                                self._last_to[n] = now
+                                self._answered[n] = False
+                            break
+                    # outside the lock: frames to other drives go meanwhile (per-drive)
+                    self.sleep(wait)
             if self.notifier is not None and self.notifier.exception is not None:
                 self.check()  # raises the receive thread's error
+
+        def _send(self, msg: can.Message) -> None:
+            assert self.bus is not None  # checked by send_message
+            try:
+                self.bus.send(msg)
+            except can.CanOperationError as exc:
+                self._resend(msg, exc)
 
         def _resend(self, msg: can.Message, exc: can.CanOperationError) -> None:
             for attempt in range(1, self.send_attempts + 1):
@@ -132,6 +204,8 @@ def open_links(cfg: ArmConfig, names: Iterable[str] | None = None, *,
             network = network_cls(bus)
             in_hand = network.disconnect  # its notifier too, once connected, then the bus
             network.gap = bus_cfg.send_interval_us / 1e6
+            network.pacing = cfg.protocol.pacing
+            network.floor = cfg.protocol.pacing_floor_us / 1e6
             network.sdo_timeout = cfg.protocol.sdo_timeout
             network.connect()
             links[name] = BusLink(name, bus_cfg, bus, network)

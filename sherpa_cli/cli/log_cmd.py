@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import threading
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
@@ -317,7 +318,7 @@ def record(
     )
     from sherpa_cli.devices import encoder
     from sherpa_cli.log.record import MAX_LOAD, Poller, Recorder, bus_budget, check_budget
-    from sherpa_cli.log.recording import write_csv
+    from sherpa_cli.log.recording import CsvWriter, write_csv
 
     st = state(ctx)
     if not 0 < duration <= MAX_RECORD_S:
@@ -343,6 +344,9 @@ def record(
     buses = list(dict.fromkeys([*(r.bus for r in refs),  # and the buses of the joints' encoders
                                 *(t.dev.bus for t in encoder.recorded_encoders(cfg, (r.name for r in refs)))]))
     expected: int | None = None
+    late = 0
+    streamed: CsvWriter | None = None
+    rec: Recording | None
     loads = {} if poll else {b.bus: round(b.load, 6) for b in budget}
     with live_view(st, foxglove, foxglove_at, allow_remote) as view, st.session(buses=buses) as session:
         extras = RecordExtras(session, refs, mcap=".mcap" in outputs, view=view, budget=loads)
@@ -355,20 +359,32 @@ def record(
             rec, counts = poller.recording(cfg), poller.counts()
         else:
             recorder = Recorder(session, refs, rate, current=bool(current))
-            with recorder, extras.feed(cfg, recorder_sample(recorder)):
-                interrupted = _wait_for(duration)
-            rec, counts, expected = recorder.recording(), recorder.counts(), recorder.expected()
+            # a CSV-only recording goes to the file row by row as it comes (constant memory; a killed
+            # recording leaves its rows so far); the MCAP writer is given the whole recording at the end
+            if ".csv" in outputs and ".mcap" not in outputs:
+                recorder.sink = streamed = CsvWriter(outputs[".csv"], recorder.columns())
+            try:
+                with recorder, extras.feed(cfg, recorder_sample(recorder)):
+                    interrupted = _wait_for(duration)
+            finally:
+                if streamed is not None:
+                    streamed.close()
+            rec = recorder.recording() if streamed is None else None
+            counts, expected, late = recorder.counts(), recorder.expected(), recorder.late()
             zero_ns = round((recorder.t0 or 0.0) * 1e9)
         extras.read_status()
-    if ".csv" in outputs:
+    if ".csv" in outputs and streamed is None:
+        assert rec is not None
         write_csv(rec, outputs[".csv"])
     if ".mcap" in outputs:
+        assert rec is not None  # never streamed with an MCAP output
         write_mcap(outputs[".mcap"], rec, cfg, time_zero_ns=zero_ns, extras=extras, config_file=str(st.config_path),
                    info={"command": "log record", "source": "poll" if poll else "TPDO on SYNC",
                          "rate_hz": "" if poll else f"{rate:g}", "current": str(bool(current)).lower(),
                          **{f"budget_load.{bus}": f"{load:g}" for bus, load in loads.items()}})
     output = list(outputs.values())
-    _render_record(st, output, counts, expected, len(rec.times))
+    rows = streamed.rows if streamed is not None else len(rec.times) if rec is not None else 0
+    _render_record(st, output, counts, expected, rows, late)
     if interrupted:
         st.out.warn("interrupted: the samples up to the interruption are written; the drives' PDO settings "
                     "are restored")
@@ -401,18 +417,29 @@ def _wait_for(duration: float) -> bool:
     return False
 
 
+def _percent(part: int, whole: int) -> str:
+    """``part`` of ``whole`` in %, rounded down: 4999 of 5000 is 99.98 %, never 100.00 %."""
+    return f"{math.floor(10000 * part / whole) / 100:.2f} %"
+
+
 def _render_record(st: AppState, outputs: Sequence[Path], counts: Mapping[str, int], expected: int | None,
-                   rows: int) -> None:
+                   rows: int, late: int = 0) -> None:
+    """What is in the file: samples per drive (cells written), rows; SYNCs with no row are gaps."""
+    gaps = max(0, expected - rows) if expected else 0
     if st.json_mode:
         extra = {"files": [str(p) for p in outputs]} if len(outputs) > 1 else {}
-        st.out.json({"file": str(outputs[0]), **extra, "rows": rows, "expected": expected,
-                     "drives": [{"drive": n, "samples": c} for n, c in counts.items()]})
+        st.out.json({"file": str(outputs[0]), **extra, "rows": rows, "expected": expected, "gaps": gaps,
+                     "late_frames": late, "drives": [{"drive": n, "samples": c} for n, c in counts.items()]})
         return
     for name, c in counts.items():
-        share = "" if not expected else f" of {expected} ({100 * c / expected:.2f} %)"
+        share = "" if not expected else f" of {expected} ({_percent(c, expected)})"
         st.out.line(f"{name}: {c} samples{share}")
     for output in outputs:
         st.out.line(f"wrote {output} ({rows} rows)")
+    if gaps:
+        st.out.warn(f"{gaps} of {expected} SYNC(s) have no row: no drive's sample arrived for them")
+    if late:
+        st.out.warn(f"{late} frame(s) came after their row was written: not in the file")
 
 
 def _stepped_sim(st: AppState) -> tuple[SteppedTime | None, Callable[[ArmConfig, Mapping[str, str]], SimArm] | None]:

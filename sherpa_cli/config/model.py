@@ -228,6 +228,14 @@ class ProtocolConfig:
     sv_blackout: float = 0.5  # s the drive's CAN is deaf after SV ("a few hundred ms")
     sdo_timeout: float = 0.3  # s to wait for one SDO answer (canopen's default); also scan's listening time
     boot_timeout: float = 2.0  # s to wait for a drive's boot-up after NMT reset node (Elmo gives no boot time)
+    # what each bus's send_interval_us is kept between (issue 26; the Whistle's limit is UNCONFIRMED,
+    # elmo-protocol.md §4.2 puts it in each drive's receive buffer): "per-drive" = frames to the same
+    # drive, skipped once that drive has answered the previous frame; "per-bus" = any two frames on the
+    # bus (the tool before issue 26)
+    pacing: str = "per-drive"
+    # per-drive pacing: µs kept between any two frames on a bus (about one worst-case 8-byte frame,
+    # 138 bits, at 1 Mbit/s); 0 = none
+    pacing_floor_us: int = 140
     # UI[n] that `home` sets to 1 once a joint is homed; RAM only, so a reset clears it (docs/motion.md)
     calibration_flag: int = 3
 

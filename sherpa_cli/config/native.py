@@ -111,6 +111,8 @@ def parse_protocol(top: Section, locs: Locs) -> ProtocolConfig:
         sv_blackout=sec.num("sv_blackout", d.sv_blackout),
         sdo_timeout=sec.num("sdo_timeout", d.sdo_timeout),
         boot_timeout=sec.num("boot_timeout", d.boot_timeout),
+        pacing=sec.str("pacing", d.pacing),
+        pacing_floor_us=sec.int("pacing_floor_us", d.pacing_floor_us),
         calibration_flag=sec.int("calibration_flag", d.calibration_flag),
     )
 

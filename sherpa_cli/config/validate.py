@@ -102,6 +102,11 @@ def _check_protocol(cfg: ArmConfig, locs: Locs, r: _Report) -> None:
     if not 1 <= p.calibration_flag <= 24:
         r.error(locs.get("protocol", "calibration_flag"),
                 f"calibration_flag {p.calibration_flag} must be a UI index 1..24")
+    if p.pacing not in ("per-drive", "per-bus"):
+        r.error(locs.get("protocol", "pacing"), f"pacing {p.pacing!r}: expected per-drive or per-bus")
+    if not 0 <= p.pacing_floor_us <= 1_000_000:
+        r.error(locs.get("protocol", "pacing_floor_us"),
+                f"pacing_floor_us {p.pacing_floor_us} must be 0..1,000,000 µs")
     for key in ("mo_settle", "mo_confirm_timeout", "sv_blackout"):
         if getattr(p, key) < 0:
             r.error(locs.get("protocol", key), f"{key} {getattr(p, key)} s is negative; expected >= 0")

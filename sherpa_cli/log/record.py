@@ -54,6 +54,10 @@ CURRENT_DIVIDER = 2  # current on every 2nd SYNC
 DRAIN_LIMIT_S = 1.0  # longest wait for the answers to the last SYNCs after SYNC stopped
 RESTORE_ATTEMPTS = 30  # SDO tries per object when putting the PDO settings back (a backlog may delay answers)
 RESTORE_WINDOW_S = 3.0  # ... but a drive silent this long is dead: its other objects are not tried
+#: with a sink (``log record``): rows stay in memory this long after the newest sample, for frames that
+#: arrive late (a loaded receive thread) and for latest(); older rows go to the sink and are dropped
+LATE_WINDOW_S = 0.2
+LATE_WINDOW_MIN = 50  # ... and at least this many SYNCs (latest() looks back 50)
 
 
 # -- the bus budget ---------------------------------------------------------------------------------
@@ -186,6 +190,15 @@ class _Drive:
     pos: dict[int, tuple[int, int]] = field(default_factory=dict)  # sample -> (px, vx)
     cur: dict[int, float] = field(default_factory=dict)  # sample -> A
     last: dict[int, int] = field(default_factory=dict)  # TPDO -> last sample index
+    written: int = 0  # position samples already handed to the sink (and dropped from pos)
+    cur_written: int = 0  # current samples likewise
+    late: int = 0  # frames that came after their row was written: not in the file
+
+
+class RowSink(Protocol):
+    """Where a streaming recorder's completed rows go (log/recording.py CsvWriter)."""
+
+    def write(self, rec: Recording) -> None: ...
 
 
 class Recorder:
@@ -193,7 +206,7 @@ class Recorder:
 
     def __init__(self, session: ArmSession, refs: Iterable[DriveRef], rate: float, *, current: bool = False,
                  clock: Callable[[], float] | None = None, sync_factory: SyncFactory | None = None,
-                 enforce_budget: bool = True) -> None:
+                 enforce_budget: bool = True, sink: RowSink | None = None) -> None:
         self.session = session
         self.cfg: ArmConfig = session.cfg
         self.refs = list(refs)
@@ -219,6 +232,14 @@ class Recorder:
         self.t0: float | None = None
         self.t_end: float | None = None
         self._sync_spans: list[list[Any]] = []  # per SYNC source: [started, stopped]
+        # streaming (``sink``): each completed row is handed to the sink as the recording goes, only a
+        # short window stays in memory (constant memory whatever the duration; issue 26 item 5)
+        self.sink = sink
+        self.window = max(LATE_WINDOW_MIN, math.ceil(LATE_WINDOW_S * self.rate))
+        self._flushed = 0  # rows (SYNC indexes) below this one are written
+        self._newest = -1  # newest SYNC index any drive answered
+        self._write_lock = threading.Lock()  # keeps batches in order when two receive threads flush
+        self.rows_written = 0  # rows handed to the sink (SYNCs with at least one drive's sample)
 
     # -- lifetime -------------------------------------------------------------------------------
     def __enter__(self) -> Recorder:
@@ -268,6 +289,8 @@ class Recorder:
             with contextlib.suppress(Exception):
                 network.unsubscribe(cob, callback)
         self._subscribed.clear()
+        if self.sink is not None:
+            self._flush(final=True)  # every row still held: the file ends with the recording's last sample
         failures: list[SherpaError] = []
         for d in self._drives.values():
             sdo = self.session.sdo(d.ref)
@@ -323,15 +346,15 @@ class Recorder:
 
     def _received(self) -> int:
         with self._lock:
-            return sum(len(d.pos) + len(d.cur) for d in self._drives.values())
+            return sum(d.written + len(d.pos) + d.late + d.cur_written + len(d.cur) for d in self._drives.values())
 
     def answered(self, syncs: int) -> bool:
         """Whether every TPDO the first ``syncs`` SYNCs ask for has arrived (position of every
         drive for each, current for every 2nd): a SYNC source in lockstep with a simulated clock
         waits for this before it moves the clock on."""
         with self._lock:
-            return all(len(d.pos) >= syncs and (not self.current
-                                                or len(d.cur) >= CURRENT_DIVIDER * (syncs // CURRENT_DIVIDER))
+            return all(d.written + len(d.pos) >= syncs and (not self.current or d.cur_written + len(d.cur)
+                                                             >= CURRENT_DIVIDER * (syncs // CURRENT_DIVIDER))
                        for d in self._drives.values())
 
     # -- PDO set-up (RAM only) ------------------------------------------------------------------
@@ -394,6 +417,8 @@ class Recorder:
             t = self.clock() if self.clock is not None else timestamp
             with self._lock:
                 track.add(math.floor((t - t0) / self.period + 1e-6), data)
+                if track.last < self._flushed:  # its row is written already: not in the file
+                    track.samples.pop(track.last, None)
         return on_frame
 
     def _callback(self, d: _Drive, n: int) -> Callable[[int, bytes, float], None]:
@@ -411,19 +436,65 @@ class Recorder:
             with self._lock:
                 k = max(k, d.last.get(n, -1) + 1)
                 d.last[n] = k
+                first = k * CURRENT_DIVIDER if n == TPDO_CUR else k
+                if first < self._flushed:  # streaming: its row is in the file already
+                    d.late += 1
+                    return
                 if n == TPDO_POS and len(data) >= 8:
                     d.pos[k] = unpack_pos(data)
+                    if k > self._newest:
+                        self._newest = k
                 elif n == TPDO_CUR and len(data) >= 2:
                     value = unpack_cur(data)[0] * CURRENT_SCALE_A
                     for j in range(CURRENT_DIVIDER):
                         d.cur[k * CURRENT_DIVIDER + j] = value
+                due = self.sink is not None and self._newest - self._flushed >= 2 * self.window
+            if due:
+                self._flush()
         return on_frame
+
+    def _flush(self, *, final: bool = False) -> None:
+        """Hand the rows older than the late-frame window (``final``: all) to the sink and forget
+        them: taken out under the lock, converted and written outside it (the receive threads go on)."""
+        sink = self.sink
+        if sink is None:
+            return
+        with self._write_lock:
+            with self._lock:
+                cut = (max(self._newest, *(t.last for t in self.encoders), -1) + 1 if final
+                       else self._newest - self.window + 1)
+                if cut <= self._flushed:
+                    return
+                taken: dict[str, tuple[dict[int, tuple[int, int]], dict[int, float]]] = {}
+                keys_set: set[int] = set()
+                for d in self._drives.values():
+                    pos = {k: v for k, v in d.pos.items() if k < cut}
+                    cur = {k: v for k, v in d.cur.items() if k < cut}
+                    for k in pos:
+                        del d.pos[k]
+                    for k in cur:
+                        del d.cur[k]
+                    d.written += len(pos)
+                    d.cur_written += len(cur)
+                    keys_set.update(pos)
+                    taken[d.ref.name] = (pos, cur)
+                keys = sorted(keys_set)
+                encoder_columns: dict[str, list[float]] = {}
+                for track in self.encoders:
+                    encoder_columns.update(track.columns(keys))
+                    for k in [k for k in track.samples if k < cut]:
+                        del track.samples[k]
+                self._flushed = cut
+            rec = self._build(keys, taken, None)
+            rec.columns.update(encoder_columns)
+            sink.write(rec)
+            self.rows_written += len(keys)
 
     # -- results --------------------------------------------------------------------------------
     def counts(self) -> dict[str, int]:
         """Samples received per drive (and recorded encoder) so far."""
         with self._lock:
-            return {**{d.ref.name: len(d.pos) for d in self._drives.values()},
+            return {**{d.ref.name: d.written + len(d.pos) for d in self._drives.values()},
                     **{t.dev.name: len(t.samples) for t in self.encoders}}
 
     def latest(self) -> tuple[float, dict[str, tuple[int, int]]] | None:
@@ -438,6 +509,11 @@ class Recorder:
                     return ((self.t0 or 0.0) + k * self.period,
                             {d.ref.name: (int(d.pos[k][0]), int(d.pos[k][1])) for d in drives})
         return None
+
+    def late(self) -> int:
+        """Frames that came after their row was written (streaming only): not in the file."""
+        with self._lock:
+            return sum(d.late for d in self._drives.values())
 
     def expected(self) -> int:
         """SYNCs (samples per drive) the longest-running SYNC source gave the chance to send: each
@@ -454,11 +530,26 @@ class Recorder:
         """Samples in joint units; ``t_zero`` (same clock as the recorder) becomes time 0."""
         with self._lock:
             keys = sorted({k for d in self._drives.values() for k in d.pos})
-            snapshot = {key: (dict(d.pos), dict(d.cur)) for key, d in self._drives.items()}
+            by_name = {d.ref.name: (dict(d.pos), dict(d.cur)) for d in self._drives.values()}
+        rec = self._build(keys, by_name, t_zero)
+        with self._lock:
+            for track in self.encoders:
+                rec.columns.update(track.columns(keys))
+        return rec
+
+    def columns(self) -> list[str]:
+        """The recording's column names (without ``time_s``), in the order :meth:`recording` gives them."""
+        rec = self._build([], {d.ref.name: ({}, {}) for d in self._drives.values()}, None)
+        for track in self.encoders:
+            rec.columns.update(track.columns([]))
+        return list(rec.columns)
+
+    def _build(self, keys: list[int], by_name: dict[str, tuple[dict[int, tuple[int, int]], dict[int, float]]],
+               t_zero: float | None) -> Recording:
+        """Rows ``keys`` (SYNC indexes) in joint units, from each drive's (positions, currents)."""
         shift = 0.0 if t_zero is None or self.t0 is None else self.t0 - t_zero
         rec = Recording(times=[shift + k * self.period for k in keys])
         nan = math.nan
-        by_name = {d.ref.name: snapshot[key] for key, d in self._drives.items()}
 
         def motor(name: str, which: int) -> list[float]:
             pos = by_name[name][0]
@@ -490,9 +581,6 @@ class Recorder:
             rec.columns[f"{ref.name}.vx"] = motor(ref.name, 1)
             if self.current:
                 rec.columns[f"{ref.name}.iq_a"] = amps(ref.name)
-        with self._lock:
-            for track in self.encoders:
-                rec.columns.update(track.columns(keys))
         return rec
 
 

@@ -39,16 +39,45 @@ class Recording:
 
 
 def write_csv(rec: Recording, path: Path) -> None:
-    names = list(rec.columns)
-    with path.open("w", newline="", encoding="utf-8") as fh:
-        writer = csv.writer(fh)
-        writer.writerow([TIME, *names])
+    with CsvWriter(path, list(rec.columns)) as out:
+        out.write(rec)
+
+
+class CsvWriter:
+    """A recording's CSV written as it is made: the header at once, then each batch of rows
+    (:meth:`write`) flushed to the file, so a killed recording leaves a readable file up to its
+    last batch (`log record`, log/record.py ``Recorder(sink=...)``). Rows are formatted exactly
+    as :func:`write_csv` formats a whole recording."""
+
+    def __init__(self, path: Path, names: list[str]) -> None:
+        self.path, self.names, self.rows = path, names, 0
+        self._fh = path.open("w", newline="", encoding="utf-8")
+        self._writer = csv.writer(self._fh)
+        self._writer.writerow([TIME, *names])
+        self._fh.flush()
+        counts = tuple(name.endswith((".px", ".vx", ".pos")) for name in names)
+        self._formats = ["{:.0f}" if c else "{:.6g}" for c in counts]
+
+    def write(self, rec: Recording) -> None:
+        columns = [rec.columns[name] for name in self.names]
+        formats = self._formats
         for i, t in enumerate(rec.times):
             row = [f"{t:.6f}"]
-            for name in names:
-                v = rec.columns[name][i]
-                row.append("" if math.isnan(v) else (f"{v:.0f}" if name.endswith((".px", ".vx", ".pos")) else f"{v:.6g}"))
-            writer.writerow(row)
+            for fmt, values in zip(formats, columns, strict=True):
+                v = values[i]
+                row.append("" if v != v else fmt.format(v))
+            self._writer.writerow(row)
+        self.rows += len(rec.times)
+        self._fh.flush()
+
+    def close(self) -> None:
+        self._fh.close()
+
+    def __enter__(self) -> CsvWriter:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
 
 
 def read_csv(path: Path) -> Recording:
