@@ -80,6 +80,9 @@ def root(
         "(repeat or comma-separate; default $SHERPA_BUS_MAP). `sherpa sim --serve` prints the one to use."),
     version: bool = typer.Option(False, "--version", callback=_version_callback, is_eager=True,
                                  help="Print the version and exit."),
+    allow_user_program: bool = typer.Option(
+        False, "--allow-user-program", help="Let moving commands move a drive whose user program runs (PS=1); "
+        "without it they refuse (SV is refused either way)."),
 ) -> None:
     config_path, looked = (config, ()) if config is not None else default_config_path()
     ctx.obj = context.CURRENT = AppState.create(
@@ -93,6 +96,7 @@ def root(
         bus_map=bus_map if bus_map else ([os.environ["SHERPA_BUS_MAP"]] if os.environ.get("SHERPA_BUS_MAP") else []),
         bus_map_from_env=not bus_map and bool(os.environ.get("SHERPA_BUS_MAP")),
     )
+    ctx.obj.allow_user_program = allow_user_program
 
 
 def _register() -> None:

@@ -30,6 +30,7 @@ from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
 from typing import Any, Literal
 
+from sherpa_cli.bus.health import preflight
 from sherpa_cli.elmo.faults import decode_sr, describe_mf
 from sherpa_cli.elmo.protocol import UM_TORQUE
 from sherpa_cli.errors import CommunicationError, ExitCode, SafetyError, SherpaError, UsageError
@@ -109,6 +110,7 @@ class MotionGuard:
             self._install_signals()
             for ref in self.refs:  # first, before anything is sent: a second command refuses here
                 self._lock(ref)
+            preflight(self.session, self.refs)  # bus state and bit rate, user programs (bus/health.py)
             self._pulse(extra=self._setup_bound())
             for ref in self.refs:
                 self._inspect(ref)
