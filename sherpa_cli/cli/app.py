@@ -24,7 +24,8 @@ app = typer.Typer(
     name="sherpa",
     help="Commission and diagnose the SHERPA arm's Elmo SimplIQ Whistle drives over CAN.\n\n"
     "Exit codes: 0 ok, 1 problem found, 2 usage/config error, 3 bus error, "
-    "4 drive refused, 5 drive busy (another command moves it), 130 interrupted (docs/exit-codes.md).",
+    "4 drive refused, 5 drive busy (another command moves it), 6 privilege missing (bus up/down), "
+    "130 interrupted (docs/exit-codes.md).",
     no_args_is_help=True,
     add_completion=True,  # --install-completion / --show-completion (typer's; issue 11 item 14)
     rich_markup_mode=None,  # plain click help: rich's help formatter doubles start-up time
@@ -102,9 +103,11 @@ def root(
 def _register() -> None:
     # In the order a technician meets them at the arm: find, look, back up, program, commission.
     from sherpa_cli.cli import (
+        bus_cmd,
         cmd_cmd,
         config_cmd,
         diffdrive_cmd,
+        doctor_cmd,
         home_cmd,
         identify_cmd,
         jog_cmd,
@@ -129,11 +132,13 @@ def _register() -> None:
     app.command("program-limits")(program_cmd.program_limits)
     app.command("commission")(recipe_cmd.commission)
     app.command("sim")(sim_cmd.sim)
+    app.command("doctor")(doctor_cmd.doctor)
     app.add_typer(params_cmd.app, name="params")
     app.add_typer(limits_cmd.app, name="limits")
     app.add_typer(diffdrive_cmd.app, name="diffdrive")
     app.add_typer(recipe_cmd.app, name="recipe")
     app.add_typer(config_cmd.app, name="config")
+    app.add_typer(bus_cmd.app, name="bus")
 
     from sherpa_cli.cli import log_cmd
 
