@@ -1,5 +1,6 @@
 #!/usr/bin/env bash
-# CI stage: the realbus-marked tests on kernel SocketCAN vcan0..2 inside a throw-away QEMU guest,
+# CI stage: the realbus-marked tests on kernel SocketCAN vcan0..2 inside a throw-away QEMU guest
+# (and the `vcan`-marked ones, `sherpa bus` on a spare vcan3),
 # the simulated arm (`sherpa sim`) in one process and the commands in the pytest process, as on a
 # technician's Linux machine with vcan. One guest start for the whole selection. docs/testing.md.
 #
@@ -27,6 +28,7 @@ fi
 limit=${SHERPA_VCAN_TIMEOUT:-1500}
 cpus=${SHERPA_VCAN_CPUS:-2}
 interfaces=vcan0,vcan1,vcan2
+spare=vcan3  # the `vcan` tests' own interface (tests/test_bus_vcan.py takes it down and up)
 
 if [ "${SHERPA_SKIP_VCAN:-}" = 1 ]; then
   echo "CI: vcan stage skipped (SHERPA_SKIP_VCAN=1)" >&2
@@ -47,14 +49,15 @@ python=$(command -v python)
 
 echo "CI: realbus tests on $interfaces in a QEMU guest ($cpus vCPUs, limit ${limit}s)" >&2
 set +e
-"$vm" -c "$cpus" -i "$interfaces" -t "$limit" -- \
-  env SHERPA_TEST_BUS="socketcan:$interfaces" "$python" -m pytest -m realbus --durations=5 -p no:randomly \
+"$vm" -c "$cpus" -i "$interfaces,$spare" -t "$limit" -- \
+  env SHERPA_TEST_BUS="socketcan:$interfaces" SHERPA_VCAN_SPARE="$spare" "$python" -m pytest \
+  -m "realbus or vcan" --durations=5 -p no:randomly \
   -o timeout="${SHERPA_VCAN_TEST_TIMEOUT:-900}" "${deselect[@]}" "$@"
 rc=$?
 set -e
 case "$rc" in
   0) ;;
-  5) echo "CI: vcan stage: pytest collected no realbus tests" >&2; exit 1 ;;
+  5) echo "CI: vcan stage: pytest collected no realbus or vcan tests" >&2; exit 1 ;;
   124) echo "CI: vcan stage: timed out after ${limit}s (SHERPA_VCAN_TIMEOUT)" >&2 ;;
   125) echo "CI: vcan stage: the QEMU guest could not run (see the runner's message above)" >&2 ;;
   *) echo "CI: vcan stage: tests failed (exit $rc)" >&2 ;;

@@ -20,6 +20,7 @@ class ExitCode(IntEnum):
     BUS = 3  # bus or communication error (timeout, adapter missing)
     REFUSED = 4  # a drive refused a command (Elmo error reply)
     BUSY = 5  # another sherpa command is moving the drive (its motion lock is held)
+    PRIVILEGE = 6  # the command needs a privilege this process lacks (CAP_NET_ADMIN for `bus up`)
     INTERRUPTED = 130  # Ctrl-C
 
 
@@ -130,3 +131,9 @@ class SafetyError(SherpaError):
     """An operation was refused by a safety rule (motor on, outside limits, unconfirmed save)."""
 
     exit_code = ExitCode.PROBLEM
+
+
+class PrivilegeError(SherpaError):
+    """The operation needs a privilege this process lacks (CAP_NET_ADMIN); nothing was changed (exit 6)."""
+
+    exit_code = ExitCode.PRIVILEGE

@@ -379,6 +379,10 @@ def cli_cases(rng: random.Random, tally: Tally, tmp: Path) -> None:
             ([*EX1, "--sim", "cmd", word, "PX"], True),
             ([*EX1, "--sim", "params", "diff", "config", "live", "--target", word], True),
             ([*EX1, "--sim", "scan", "--bus", word], True),
+            ([*EX1, "--sim", "bus", "status", word, "--window", "0"], True),
+            ([*EX1, "--sim", "bus", "watch", word, "--for", "0.1"], True),
+            ([*EX1, "--sim", "bus", "up", word], True),
+            ([*EX1, "--sim", "bus", "down", word], True),
         ]
     for i, expr in enumerate(BAD_EXPR):
         cases.append(([*EX1, "--sim", "cmd", "joint1", expr, *(["--apply"] if i % 2 else [])], True))
@@ -397,7 +401,14 @@ def cli_cases(rng: random.Random, tally: Tally, tmp: Path) -> None:
                                                                                            "1e400", "abc", "",
                                                                                            "9" * 5000)),
             ([*EX1, "sim", "--duration", n], True),
+            ([*EX1, "--sim", "bus", "status", "--window", n], n not in ("0", "1e-9")),
+            ([*EX1, "--sim", "doctor", "--window", n], n not in ("0", "1e-9")),
+            ([*EX1, "--sim", "bus", "up", "--bitrate", n], n not in ("70000", "65536")),
+            ([*EX1, "--sim", "bus", "up", "--restart-ms", n], n in ("nan", "inf", "-inf", "1e400", "-1", "abc", "",
+                                                                   "9" * 5000, "70000", "65536", "1e-9")),
         ]
+        if n not in ("70000", "65536"):  # a valid duration: the watch would run that long
+            cases.append(([*EX1, "--sim", "bus", "watch", "--for", n], n not in ("1e-9",)))
         if n != "0":  # port 0 is valid: it would serve the arm until Ctrl-C
             cases.append(([*EX1, "sim", "--serve", f"127.0.0.1:{n}"], True))
     for mode in ("counts", "rad", "deg", "", "RAD"):

@@ -8,7 +8,7 @@ import sys
 import pytest
 from conftest import ROOT
 
-HEAVY = ("can", "canopen", "rich", "yaml")
+HEAVY = ("can", "canopen", "rich", "yaml", "pyroute2")
 
 
 def test_help_imports_no_heavy_module():

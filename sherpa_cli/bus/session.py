@@ -63,6 +63,8 @@ class ArmSession:
         # DriveClient keyword arguments that win over the config's (clock, sleep, timeout, retries):
         # `--sim log step` puts the clients' waits on its stepped time; set before the first client
         self.client_overrides: dict[str, Any] = {}
+        # `sherpa --allow-user-program`: the preflight (bus/health.py) lets motion start while a user program runs
+        self.allow_user_program = False
 
     @classmethod
     @contextmanager

@@ -25,7 +25,8 @@ app = typer.Typer(
     cls=RootGroup,  # Ctrl-C reported as one line whatever typer is installed (cli/boundary.py)
     help="Commission and diagnose the SHERPA arm's Elmo SimplIQ Whistle drives over CAN.\n\n"
     "Exit codes: 0 ok, 1 problem found, 2 usage/config error, 3 bus error, "
-    "4 drive refused, 5 drive busy (another command moves it), 130 interrupted (docs/exit-codes.md).",
+    "4 drive refused, 5 drive busy (another command moves it), 6 privilege missing (bus up/down), "
+    "130 interrupted (docs/exit-codes.md).",
     no_args_is_help=True,
     add_completion=True,  # --install-completion / --show-completion (typer's; issue 11 item 14)
     rich_markup_mode=None,  # plain click help: rich's help formatter doubles start-up time
@@ -81,6 +82,9 @@ def root(
         "(repeat or comma-separate; default $SHERPA_BUS_MAP). `sherpa sim --serve` prints the one to use."),
     version: bool = typer.Option(False, "--version", callback=_version_callback, is_eager=True,
                                  help="Print the version and exit."),
+    allow_user_program: bool = typer.Option(
+        False, "--allow-user-program", help="Let moving commands move a drive whose user program runs (PS=1); "
+        "without it they refuse (SV is refused either way)."),
 ) -> None:
     config_path, looked = (config, ()) if config is not None else default_config_path()
     ctx.obj = context.CURRENT = AppState.create(
@@ -94,14 +98,17 @@ def root(
         bus_map=bus_map if bus_map else ([os.environ["SHERPA_BUS_MAP"]] if os.environ.get("SHERPA_BUS_MAP") else []),
         bus_map_from_env=not bus_map and bool(os.environ.get("SHERPA_BUS_MAP")),
     )
+    ctx.obj.allow_user_program = allow_user_program
 
 
 def _register() -> None:
     # In the order a technician meets them at the arm: find, look, back up, program, commission.
     from sherpa_cli.cli import (
+        bus_cmd,
         cmd_cmd,
         config_cmd,
         diffdrive_cmd,
+        doctor_cmd,
         home_cmd,
         identify_cmd,
         jog_cmd,
@@ -126,11 +133,13 @@ def _register() -> None:
     app.command("program-limits")(program_cmd.program_limits)
     app.command("commission")(recipe_cmd.commission)
     app.command("sim")(sim_cmd.sim)
+    app.command("doctor")(doctor_cmd.doctor)
     app.add_typer(params_cmd.app, name="params")
     app.add_typer(limits_cmd.app, name="limits")
     app.add_typer(diffdrive_cmd.app, name="diffdrive")
     app.add_typer(recipe_cmd.app, name="recipe")
     app.add_typer(config_cmd.app, name="config")
+    app.add_typer(bus_cmd.app, name="bus")
 
     from sherpa_cli.cli import log_cmd
 

@@ -30,6 +30,7 @@ class AppState:
     bus_map: list[str] = field(default_factory=list)
     bus_map_from_env: bool = False
     config_looked: tuple[str, ...] = ()  # where the default config was looked for (no --config)
+    allow_user_program: bool = False  # --allow-user-program: motion may start while a drive's program runs
     _config: ArmConfig | None = field(default=None, repr=False)
 
     @classmethod
@@ -49,6 +50,7 @@ class AppState:
         builds the in-process arm instead of the default (SimArm.in_process's ``factory``);
         ``best_effort`` opens what can be opened (ArmSession.open)."""
         from sherpa_cli.bus.busmap import apply_bus_map, parse_bus_map
+        from sherpa_cli.bus.health import check_buses
         from sherpa_cli.bus.session import ArmSession
 
         shared = _shared_for(self)
@@ -57,6 +59,7 @@ class AppState:
             if shared.session is None:
                 shared.session = shared.stack.enter_context(shared.owner.session())
                 shared.opens += 1
+                check_buses(shared.session, what="the recipe")  # bus/health.py: BUS-OFF, passive, bit rate
             yield shared.session
             return
         cfg = self.load_config()
@@ -72,6 +75,7 @@ class AppState:
 
             arm = SimArm.in_process(cfg, sim_factory)  # injected: ops never import the simulator
         with ArmSession.open(cfg, sim=arm, buses=buses, best_effort=best_effort) as session:
+            session.allow_user_program = self.allow_user_program
             yield session
 
     def load_config(self, path: Path | None = None) -> ArmConfig:

@@ -89,6 +89,7 @@ def _hex(value: float | None, width: int = 8) -> str:
 def _render(st: AppState, report: IdentifyReport) -> None:
     from sherpa_cli.bus.canopen_names import VENDORS
     from sherpa_cli.elmo import faults
+    from sherpa_cli.elmo.userprog import describe_ps
 
     if st.json_mode:
         st.out.json(report.as_json())
@@ -127,6 +128,10 @@ def _render(st: AppState, report: IdentifyReport) -> None:
         mf = s.get("MF")
         rows.append(["MF", _hex(mf), "; ".join(faults.describe_mf(mf) or ["no motor failure"])
                      if isinstance(mf, int) else ""])
+        if "PS" in s:
+            rows.append(["PS", fmt_value(s["PS"]), describe_ps(int(s["PS"]))])
+        else:
+            rows.append(["PS", "-", describe_ps(None)])
         px = s.get("PX")
         where = ""
         pair = st.load_config().pair_of_drive(d.drive)

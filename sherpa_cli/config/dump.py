@@ -28,6 +28,7 @@ from sherpa_cli.config.model import (
     ProtocolConfig,
     SimDriveConfig,
 )
+from sherpa_cli.config.simbus import dump_sim_buses
 
 
 def dump_native(cfg: ArmConfig) -> str:
@@ -60,6 +61,8 @@ def dump_native(cfg: ArmConfig) -> str:
     if cfg.sim_wiring:
         sim["wiring"] = {name: _drop_none({"swap": [list(p) for p in w.swap] or None, "invert": list(w.invert) or None})
                          for name, w in cfg.sim_wiring.items()}
+    if cfg.sim_buses:
+        sim["buses"] = dump_sim_buses(cfg.sim_buses)
     if sim:
         sections.append({"sim": sim})
     sections.append({"buses": {b.name: _bus(b) for b in cfg.buses.values()}})

@@ -21,6 +21,7 @@ from dataclasses import dataclass, field
 from enum import Enum
 from typing import Any
 
+from sherpa_cli.config.simbus import SimBusConfig
 from sherpa_cli.errors import Location
 
 
@@ -374,6 +375,8 @@ class SimDriveConfig:
     st_refused_in_speed_mode: bool = False  # ST answers EC 60 in UM=2, as [BLISS] says some firmware does
     start_skew: float = 0.0  # s a separately received BG starts late (a group BG does not; seed Fig. 9.10)
     lag: float = 0.0  # s time constant of the servo loop (bandwidth mismatch of a pair); 0 = perfect
+    user_program: int = -1  # what PS answers: -1 idle, -2 no program, 1 a user program runs (SV refused, EC 82)
+    firmware: str | None = None  # 0x100A software version instead of the simulator's (a replaced drive)
 
 
 @dataclass(frozen=True)
@@ -392,6 +395,7 @@ class SimExtraNode:
     node: int
     vendor_id: int = 0x9A
     device_name: str = "Whistle"
+    heartbeat_ms: int = 0  # 0x1017 producer heartbeat at power-up
 
 
 @dataclass(frozen=True)
@@ -416,6 +420,7 @@ class ArmConfig:
     # `sim: reply_timeout:` s to wait for one interpreter reply with --sim (instead of protocol.reply_timeout):
     # the in-process simulator shares a possibly loaded machine, so it is given patient timeouts
     sim_reply_timeout: float = 1.0
+    sim_buses: Mapping[str, SimBusConfig] = field(default_factory=dict)  # `sim: buses:` controller faults
     source: str | None = None  # file the config came from
     warnings: tuple[str, ...] = ()  # non-fatal findings of validation, shown by `config check`
 

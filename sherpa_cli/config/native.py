@@ -36,6 +36,7 @@ from sherpa_cli.config.model import (
     SwitchConfig,
     SwitchKind,
 )
+from sherpa_cli.config.simbus import parse_sim_buses
 from sherpa_cli.config.yamlnodes import (
     Locs,
     Section,
@@ -163,7 +164,7 @@ def parse_joystick(top: Section, locs: Locs) -> JoystickConfig:
 
 SIM_DRIVE_KEYS = [f.name for f in dataclasses.fields(SimDriveConfig)]
 SIM_EXTRA_KEYS = [f.name for f in dataclasses.fields(SimExtraNode)]
-SIM_KEYS = ["drives", "extra_nodes", "reply_timeout", "power_up", "wiring"]
+SIM_KEYS = ["drives", "extra_nodes", "reply_timeout", "power_up", "wiring", "buses"]
 
 
 def parse_sim(top: Section, locs: Locs) -> tuple[dict[str, SimDriveConfig], tuple[SimExtraNode, ...]]:
@@ -179,9 +180,10 @@ def parse_sim(top: Section, locs: Locs) -> tuple[dict[str, SimDriveConfig], tupl
             d = Section(dnode, SIM_DRIVE_KEYS, what="a mapping of simulated faults")
             register(locs, ("sim", "drives", dname), d)
             locs.put(("sim", "drives", dname), dnode.loc)
-            # every field is a number (the int ones, heartbeat_ms and seed, whole) or a bool
+            # every field is a number (the int ones, heartbeat_ms and seed, whole), a bool or a string
             drives[dname] = SimDriveConfig(**{
-                f.name: (d.int if f.type == "int" else d.bool if f.type == "bool" else d.num)(f.name, f.default)
+                f.name: (d.int if f.type == "int" else d.bool if f.type == "bool" else
+                         d.str if str(f.type).startswith("str") else d.num)(f.name, f.default)
                 for f in dataclasses.fields(SimDriveConfig)})
     extras = []
     if sec.get("extra_nodes") is not None:
@@ -191,7 +193,8 @@ def parse_sim(top: Section, locs: Locs) -> tuple[dict[str, SimDriveConfig], tupl
             base = SimExtraNode("", 0)
             extras.append(SimExtraNode(bus=e.str("bus", required=True), node=e.int("node", required=True),
                                        vendor_id=e.int("vendor_id", base.vendor_id),
-                                       device_name=e.str("device_name", base.device_name)))
+                                       device_name=e.str("device_name", base.device_name),
+                                       heartbeat_ms=e.int("heartbeat_ms", base.heartbeat_ms)))
     return drives, tuple(extras)
 
 
@@ -335,10 +338,11 @@ def load_native(root: YNode, filename: str) -> tuple[ArmConfig, Locs, list[str]]
             pairs[pname] = PairConfig(name=pname, drive_a=pair_drives[0], drive_b=pair_drives[1], sigma=names[0],
                                       delta=names[1], current=current, where=sec.node.loc)
 
+    sim_buses = parse_sim_buses(top, locs, buses, SIM_KEYS)
     cfg = ArmConfig(name=name, buses=buses, drives=drives, joints=joints, pairs=pairs, catalog=catalog, devices=devices,
                     il_codes=il, protocol=protocol, motion=motion, joystick=joystick, sim=sim,
                     sim_extra_nodes=sim_extra_nodes, sim_reply_timeout=sim_reply_timeout, homing=homing,
-                    sim_power_up=sim_power_up, sim_wiring=sim_wiring,
+                    sim_power_up=sim_power_up, sim_wiring=sim_wiring, sim_buses=sim_buses,
                     source=filename)
     return cfg, locs, []
 

@@ -184,6 +184,8 @@ _TABLE: tuple[CommandSpec, ...] = (
     _cmd("UI", "int", "rw", "user integers (RAM; whether SV saves them is UNCONFIRMED); "
          "UI[protocol.calibration_flag] marks a drive homed since power-up", index=(1, 24)),
     _cmd("ET", "int", "rw", "ECAM table entries", index=(1, 1024)),
+    # real-arm.md section 4 (one public source): elmo/userprog.py reads it before SV and motion
+    _cmd("PS", "int", "ro", "user program status: -1 idle, -2 no program, 1 running (values UNCONFIRMED)"),
 )
 
 COMMANDS: Mapping[str, CommandSpec] = MappingProxyType({c.letters: c for c in _TABLE})

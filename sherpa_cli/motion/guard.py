@@ -31,6 +31,7 @@ from dataclasses import dataclass, field
 from types import FrameType, TracebackType
 from typing import TYPE_CHECKING, Any, Literal
 
+from sherpa_cli.bus.health import preflight
 from sherpa_cli.elmo.faults import decode_sr, describe_mf
 from sherpa_cli.elmo.protocol import UM_TORQUE
 from sherpa_cli.errors import CommunicationError, ExitCode, SafetyError, SherpaError, UsageError
@@ -119,6 +120,7 @@ class MotionGuard:
             self._install_signals()
             for ref in self.refs:  # first, before anything is sent: a second command refuses here
                 self._lock(ref)
+            preflight(self.session, self.refs)  # bus state and bit rate, user programs (bus/health.py)
             self.host_id = self._host_lock.acquire()  # before anything is armed: our own heartbeat id
             self._heartbeat.use_host(self.host_id)
             self._pulse(extra=self._setup_bound())

@@ -15,6 +15,7 @@ from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
 from sherpa_cli.config.model import ArmConfig
+from sherpa_cli.elmo.userprog import program_running, read_ps
 from sherpa_cli.joints.diffpair import to_joints
 from sherpa_cli.joints.units import counts_to_rad
 from sherpa_cli.ops.params_read import Progress, open_drive, per_bus
@@ -89,6 +90,9 @@ def _read_one(session: ArmSession, drive: str, progress: Progress | None) -> Dri
         if progress:
             progress(drive, key)
         state[key] = client.get(key)
+    ps = read_ps(client)  # user program (elmo/userprog.py); absent when the drive refuses PS
+    if ps is not None:
+        state["PS"] = ps
     return DriveIdentity(drive, d.bus, d.node, d.model, identity, notes, state)
 
 
@@ -107,6 +111,10 @@ def identify(session: ArmSession, drives: Sequence[str], progress: Progress | No
             errors.append(o.error)
     positions = joint_positions(cfg, {r.drive: int(r.state["PX"]) for r in read if isinstance(r.state.get("PX"), int)})
     findings = find_mismatches(cfg, read)
+    for r in read:
+        if program_running(ps := r.state.get("PS")):  # type: ignore[arg-type]
+            findings.setdefault(r.drive, []).append(
+                f"a user program is running (PS={ps}): SV is refused and it can fight moving commands")
     out = tuple(DriveIdentity(r.drive, r.bus, r.node, r.model, r.identity, r.identity_notes, r.state,
                               positions.get(r.drive), r.error, tuple(findings.get(r.drive, ())))
                 for r in read)

@@ -35,6 +35,7 @@ from sherpa_cli.bus.parallel import Outcome, run_concurrently
 from sherpa_cli.bus.targets import DriveRef
 from sherpa_cli.elmo import codec
 from sherpa_cli.elmo.commands import COMMANDS, format_value, param_key, parse_param_key
+from sherpa_cli.elmo.userprog import refuse_save_while_running
 from sherpa_cli.errors import CodecError, ConfigError, DriveRefusedError, Location, SafetyError, SherpaError
 from sherpa_cli.motion import calibration
 from sherpa_cli.motion.lock import DriveLock
@@ -470,6 +471,7 @@ def _apply_drive(session: ArmSession, plan: DrivePlan, *, save: bool, ledger: Sa
             return out
         if stop.is_set():
             return out  # every write verified, but an interrupted run saves nothing more
+        refuse_save_while_running(client)  # PS: the drive saves nothing while a user program runs
         mark = calibration.clear_for_save(session.cfg, client)  # the homed mark never goes to flash
         out.sv_sent = True
         try:

@@ -17,6 +17,7 @@ from typing import TYPE_CHECKING, Any
 
 from sherpa_cli.elmo import codec, faults
 from sherpa_cli.elmo.commands import param_key
+from sherpa_cli.elmo.userprog import refuse_save_while_running
 from sherpa_cli.errors import DriveRefusedError, SafetyError, SherpaError, UsageError
 
 if TYPE_CHECKING:
@@ -123,6 +124,7 @@ def run_raw(client: DriveClient, node: int, exprs: Sequence[str], *, apply: bool
                 assert request.value is not None  # a set request carries its value
                 client.set(request.letters, request.index, request.value)
             elif request.letters == "SV":
+                refuse_save_while_running(client)  # PS: no save while a user program runs
                 try:
                     client.save()
                 except DriveRefusedError:

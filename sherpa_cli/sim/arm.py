@@ -22,8 +22,10 @@ from collections.abc import Callable, Mapping
 from typing import TYPE_CHECKING, Any, TextIO
 
 from sherpa_cli.config.model import ArmConfig, JointConfig, PairConfig, SwitchConfig, SwitchKind
+from sherpa_cli.config.simbus import SimBusConfig
 from sherpa_cli.elmo.protocol import NMT_ID, SDO_RX_BASE, SYNC_ID
 from sherpa_cli.sim import state as sim_state
+from sherpa_cli.sim.buscontroller import BusController, SimNetlink
 from sherpa_cli.sim.clock import Clock, RealClock
 from sherpa_cli.sim.drive import SimDrive
 from sherpa_cli.sim.encoder import SimEncoder
@@ -74,7 +76,9 @@ def settings_for(cfg: ArmConfig, drive: str, **overrides: object) -> SimSettings
                     start_skew_s=faults.start_skew, lag_s=faults.lag,
                     servo_bandwidth_hz=faults.servo_bandwidth, servo_damping=faults.servo_damping,
                     servo_current_limit=faults.servo_current_limit,
-                    supply_current_limit=faults.supply_current_limit)
+                    supply_current_limit=faults.supply_current_limit, user_program=faults.user_program)
+        if faults.firmware is not None:
+            base["sw_version"] = faults.firmware
     base.update(overrides)
     return SimSettings(**base)
 
@@ -296,7 +300,7 @@ class SimArm:
         self.extras: dict[str, tuple[str, SimDrive]] = {
             f"extra-{e.bus}-{e.node}-{i}": (e.bus, SimDrive(
                 e.node, clock=self.clock, serial=0x7E000000 + i,
-                settings=SimSettings(vendor_id=e.vendor_id, device_name=e.device_name)))
+                settings=SimSettings(vendor_id=e.vendor_id, device_name=e.device_name, heartbeat_ms=e.heartbeat_ms)))
             for i, e in enumerate(cfg.sim_extra_nodes)}
         # `devices:` of other types (sherpa_cli/devices): a CANopen encoder answers NMT and SDO (identity,
         # 0x1000 = CiA 406, 0x6004 = its joint's real position minus the joint's abs_encoder offset) and
@@ -309,6 +313,10 @@ class SimArm:
                     settings=SimSettings(vendor_id=ENCODER_VENDOR, device_name="CANopen encoder", inputs=1),
                     od_live={(0x1000, 0): lambda: ENCODER_DEVICE_TYPE, (0x6004, 0): reading}))
         self.lock = threading.RLock()  # held by the pumps while they touch drives; tests take it too
+        # the host's CAN controller on each bus (`sim: buses:`), read like netlink (bus/linkstate.py)
+        self.controllers = {name: BusController(name, cfg.sim_buses.get(name, SimBusConfig()), bus.bitrate,
+                                                self.clock.now()) for name, bus in cfg.buses.items()}
+        self.netlink = SimNetlink(self.controllers, self.lock)
         self._stop = threading.Event()
         self._threads: list[threading.Thread] = []
         self._buses: dict[str, can.BusABC] = {}
@@ -456,6 +464,17 @@ class SimArm:
             bus.send(can.Message(arbitration_id=can_id, data=data, is_extended_id=False))
         return send
 
+    @staticmethod
+    def _send_raw(bus: Any, can_id: int, data: bytes, is_error: bool) -> None:
+        """A frame of the bus controller: an error frame (class bits in the id) or another node's frame."""
+        import can
+
+        bus.send(can.Message(arbitration_id=can_id, data=data, is_extended_id=False, is_error_frame=is_error))
+
+    def bus_controller(self, bus: str) -> BusController:
+        """The host's controller on ``bus`` (a test control: take ``self.lock`` to call it)."""
+        return self.controllers[bus]
+
     def _pump(self, bus_name: str, powered: threading.Event | None = None) -> None:
         bus = self._buses[bus_name]
         send = self._sender(bus)
@@ -467,6 +486,7 @@ class SimArm:
             by_node.setdefault(drive.node, []).append(n)  # two entries: a duplicate node id
         next_tick = 0.0
         last_tick = self.clock.now()
+        ctrl = self.controllers.get(bus_name)
         try:
             while not self._stop.is_set():
                 msg = bus.recv(timeout=self.tick_s)
@@ -478,7 +498,11 @@ class SimArm:
                     # a frame advances only the drives it reached (their replies go out now);
                     # every drive advances at least once per tick_s (motion, heartbeats, latency)
                     touched: list[str] = []
-                    if msg is not None and not msg.is_error_frame and not msg.is_extended_id:
+                    # frames pass only while the host's controller runs (not bus-off, down or missing)
+                    passing = ctrl is None or ctrl.running
+                    if msg is not None and not msg.is_error_frame and not msg.is_extended_id and passing:
+                        if ctrl is not None:
+                            ctrl.count(host_sent=1, sent_bytes=len(msg.data))
                         # receive() ran the drives to now: what the frame caused is in their outbox
                         touched = self._dispatch(msg.arbitration_id, bytes(msg.data), on_bus, by_node)
                     now = self.clock.now()
@@ -491,7 +515,14 @@ class SimArm:
                         if ticking:
                             drive.tick()
                         for can_id, data in drive.pop_frames():
-                            send(can_id, data)
+                            if passing:
+                                send(can_id, data)
+                                if ctrl is not None:
+                                    ctrl.count(host_received=1, received_bytes=len(data))
+                    if ctrl is not None:
+                        ctrl.tick(now)
+                        for can_id, data, is_error in ctrl.pop_frames():
+                            self._send_raw(bus, can_id, data, is_error)
                 if powered is not None and touched is names:
                     powered.set()
         except BaseException as exc:  # noqa: BLE001 - kept in errors: a dead pump shows in tests and `sim --serve`

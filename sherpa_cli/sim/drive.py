@@ -68,6 +68,7 @@ ERR_REG_GENERIC, ERR_REG_COMMUNICATION = 0x01, 0x11  # 0x1001 values from the 0x
 EMCY_FRAME = struct.Struct("<HBBHH")
 
 SR_MO, SR_MF, SR_UM_SHIFT, SR_MS_SHIFT, SR_LIMIT_STOP = 1 << 4, 1 << 6, 7, 14, 1 << 28
+SR_PROGRAM = 1 << 12  # a user program is running (elmo-protocol.md 2.5)
 
 
 def _make_motor(settings: SimSettings, position: int) -> Motor:
@@ -174,6 +175,7 @@ class SimDrive:
         self._next_heartbeat = math.inf
         self._rpdo2_type = 255  # 0x1401:2
         self._rpdo2_buffer: bytes | None = None  # a synchronous RPDO2 waiting for SYNC
+        self.user_program = self.settings.user_program  # PS; a test control (a program started or stopped)
         self._boot()
 
     def _after_start(self, seconds: float | None) -> float | None:
@@ -372,6 +374,8 @@ class SimDrive:
         elif letters in ("SV", "LD"):
             if self._motor_on:
                 raise Refused(interpreter.EC_MOTOR_MUST_BE_OFF)
+            if letters == "SV" and self.program_running:
+                raise Refused(self.settings.sv_program_error)
             self._save() if letters == "SV" else self._load_ram()
         # HP: meaning UNCONFIRMED; accepted and ignored so [ELMOCAN]'s HP+SV sequence works.
 
@@ -631,6 +635,7 @@ class SimDrive:
             "PY": lambda: wrap_int32(round(self.motor.position) + self.settings.py_offset),
             "IQ": self._iq, "ID": lambda: 0.0, "MC": lambda: self.settings.max_current, "LC": lambda: 0,
             "IP": self._ip, "SR": self._sr, "MF": lambda: self._mf, "EC": lambda: self.last_error,
+            "PS": lambda: self.user_program,
             **{f"IB[{n}]": functools.partial(self._ib, n) for n in range(32)},
         }
 
@@ -819,4 +824,10 @@ class SimDrive:
             sr |= SR_MF
         if self._limit_stop:
             sr |= SR_LIMIT_STOP
+        if self.program_running:
+            sr |= SR_PROGRAM
         return wrap_int32(sr)
+
+    @property
+    def program_running(self) -> bool:
+        return self.user_program == self.settings.user_program_running

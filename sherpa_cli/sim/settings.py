@@ -93,6 +93,12 @@ class SimSettings:
     servo_current_limit: float | None = None
     supply_current_limit: float | None = None
     supply_speed: float = 100000.0  # cnt/s at which the supply current equals the motor current
+    # User program (real-arm.md section 4, one public source: UNCONFIRMED): what PS answers at power-up
+    # (-1 idle, -2 no program, 1 running; tests set SimDrive.user_program). While PS reads
+    # user_program_running, SR bit 12 is set and SV answers sv_program_error (EC 82 "program is running").
+    user_program: int = -1
+    user_program_running: int = 1
+    sv_program_error: int = 82
 
     def __post_init__(self) -> None:
         for name in ("mo_settle_s", "sv_blackout_s", "reply_latency_s", "sdo_latency_s", "start_skew_s", "lag_s"):

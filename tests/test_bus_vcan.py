@@ -1,0 +1,130 @@
+"""`sherpa bus` on kernel vcan, in the QEMU guest of .ci/vcan-stage.sh (marker `vcan`).
+
+They use a spare interface of their own (SHERPA_VCAN_SPARE, vcan3 in the stage), never vcan0..2: the
+simulated arm of the realbus tests is bound to those, and `bus down` would pull the link from under
+it. Elsewhere they are skipped: the normal suite runs on python-can virtual buses, and this
+machine's kernel has no SocketCAN.
+
+- pyroute2 reads vcan's link: up, frame counters; vcan has no CAN controller, and the status says so;
+- `bus down` / `bus up` as root set what vcan takes (the link) and say what it cannot (the bit rate);
+- error frames injected on vcan (can-utils `cansend` where installed, else python-can sending an error
+  frame) are decoded by `bus watch`.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import subprocess
+import threading
+from pathlib import Path
+
+import pytest
+
+ARM = Path(__file__).resolve().parent.parent / "configs" / "sherpa-arm.yaml"
+pytestmark = pytest.mark.vcan
+
+
+@pytest.fixture
+def spare(test_bus) -> str:
+    name = os.environ.get("SHERPA_VCAN_SPARE")
+    if test_bus.kind != "socketcan" or not name:
+        pytest.skip("needs kernel vcan with a spare interface (SHERPA_VCAN_SPARE; .ci/vcan-stage.sh sets it)")
+    return name
+
+
+def bus_map(spare: str) -> tuple[str, str]:
+    return ("--bus-map", f"can0=socketcan:{spare}")
+
+
+def test_pyroute2_reads_vcan_and_the_status_says_what_vcan_cannot_report(cli, spare):
+    from sherpa_cli.bus.netlink import Pyroute2Netlink
+
+    nl = Pyroute2Netlink()
+    try:
+        figures = nl.link(spare)
+    finally:
+        nl.close()
+    assert figures is not None and figures["kind"] == "vcan" and figures["up"] is True
+    assert figures.get("can_state") is None and "rx_packets" in figures["stats"]
+
+    result = cli(*bus_map(spare), "--json", "bus", "status", "can0", "--window", "0.2")
+    assert result.exit_code == 0, result.transcript()
+    row = json.loads(result.stdout)["buses"][0]
+    assert (row["channel"], row["kind"], row["state"], row["controller_state"]) == (spare, "vcan", "up", None)
+    for figure in ("state", "counters", "bitrate", "sample_point", "restart_ms", "berr_reporting"):
+        assert row["not_reported"][figure] == "not reported by vcan"
+    assert row["load"] is not None and row["problems"] == []
+    plain = cli(*bus_map(spare), "bus", "status", "can0", "--window", "0")
+    assert "not reported by vcan" in plain.stdout and "Traceback" not in plain.stderr
+
+
+def test_bus_up_as_root_sets_what_vcan_takes_and_names_what_it_cannot(cli, spare):
+    assert os.geteuid() == 0, "the guest runs the tests as root"
+    down = cli(*bus_map(spare), "bus", "down", "can0")
+    assert down.exit_code == 0, down.transcript()
+    status = json.loads(cli(*bus_map(spare), "--json", "bus", "status", "can0", "--window", "0").stdout)
+    assert status["buses"][0]["state"] == "down"
+
+    up = cli(*bus_map(spare), "--json", "bus", "up", "can0")
+    assert up.exit_code == 0, up.transcript()
+    change = json.loads(up.stdout)["buses"][0]
+    assert change["kind"] == "vcan" and change["done"] == ["link up"]
+    assert change["not_taken"] == ["bit rate (1000000 in the config): vcan has no CAN controller",
+                                   "restart-ms: vcan has no CAN controller",
+                                   "berr-reporting: vcan has no CAN controller"]
+    status = json.loads(cli(*bus_map(spare), "--json", "bus", "status", "can0", "--window", "0").stdout)
+    assert status["buses"][0]["state"] == "up"
+
+
+# (class bits, data): no ACK with TEC 8; a stuff error in the data field with REC 1; error-passive (TX)
+FRAMES = [(0x220, bytes([0, 0, 0, 0, 0, 0, 8, 0])), (0x288, bytes([0, 0, 0x04, 0x0A, 0, 0, 8, 1])),
+          (0x204, bytes([0, 0x20, 0, 0, 0, 0, 136, 1])), (0x240, bytes([0, 0, 0, 0, 0, 0, 255, 1]))]
+
+
+def _sender(spare: str, stop: threading.Event, cansend: str | None) -> None:
+    """Send the error frames again and again until the watch is over (the guest is slow to start it)."""
+    bus = None
+    if cansend is None:
+        import can
+
+        bus = can.Bus(interface="socketcan", channel=spare)
+    try:
+        while not stop.wait(0.2):
+            for cls, data in FRAMES:
+                if cansend is not None:
+                    subprocess.run([cansend, spare, f"{0x20000000 | cls:08X}#{data.hex().upper()}"], check=True,
+                                   timeout=30)
+                else:
+                    import can
+
+                    assert bus is not None
+                    bus.send(can.Message(arbitration_id=cls, data=data, is_extended_id=False, is_error_frame=True))
+    finally:
+        if bus is not None:
+            bus.shutdown()
+
+
+@pytest.mark.parametrize("tool", ["cansend", "python-can"])
+def test_error_frames_injected_on_vcan_are_decoded_by_bus_watch(cli, spare, tool):
+    cansend = shutil.which("cansend") if tool == "cansend" else None
+    if tool == "cansend" and cansend is None:
+        pytest.skip("can-utils is not installed here (apt-get install can-utils); python-can sends them instead")
+    stop = threading.Event()
+    sender = threading.Thread(target=_sender, args=(spare, stop, cansend), name="vcan-error-frames", daemon=True)
+    sender.start()
+    try:
+        result = cli(*bus_map(spare), "bus", "watch", "can0", "--for", "4", "--interval", "0.5")
+    finally:
+        stop.set()
+        sender.join(timeout=60)
+    assert result.exit_code == 0, result.transcript()
+    out = result.stdout
+    assert "can0: no ACK on transmission (TEC 8, REC 0)" in out
+    assert "hint: no ACK: is another node powered, is the bus terminated?" in out
+    assert "can0: stuff error at data field (TEC 8, REC 1)" in out
+    assert "hint: stuff/form errors: bit rate mismatch or wiring" in out
+    assert "can0: controller: error-passive (TX) (TEC 136, REC 1)" in out
+    assert "can0: bus-off (TEC 255, REC 1)" in out
+    assert "error frames seen" in out
