@@ -159,12 +159,13 @@ def check_drives(report: DoctorReport, session: Any, buses: Sequence[str], *, wi
             report.skip(row, "no bus fit to talk on")
         return
     host = cfg.motion.host_node_id
-    heard: dict[str, int] = {}
+    hosts = cfg.motion.host_ids  # every id a sherpa motion command may send its dead-man heartbeat as
+    heard: dict[str, set[int]] = {}
 
-    def on_host_beat(bus: str) -> Callable[[int, bytes, float], None]:
-        return lambda can_id, data, ts: heard.__setitem__(bus, heard.get(bus, 0) + 1)
+    def on_host_beat(bus: str, hid: int) -> Callable[[int, bytes, float], None]:
+        return lambda can_id, data, ts: heard.setdefault(bus, set()).add(hid)
 
-    subs = [(session.links[b].network, HEARTBEAT_BASE + host, on_host_beat(b)) for b in buses]
+    subs = [(session.links[b].network, HEARTBEAT_BASE + hid, on_host_beat(b, hid)) for b in buses for hid in hosts]
     start = clock()
     for network, can_id, cb in subs:
         network.subscribe(can_id, cb)
@@ -186,7 +187,7 @@ def check_drives(report: DoctorReport, session: Any, buses: Sequence[str], *, wi
             problems.append(f"{bus_scan.bus}: {bus_scan.error}")
             continue
         for n in bus_scan.nodes:
-            if n.node == host and n.drive is None:
+            if n.node in hosts and n.drive is None:
                 continue  # the host id row says it
             if n.verdict in (MISSING, NO_SDO):
                 problems.append(f"{n.drive} ({bus_scan.bus}:{n.node}) {n.verdict}")
@@ -223,10 +224,12 @@ def check_drives(report: DoctorReport, session: Any, buses: Sequence[str], *, wi
         report.add("heartbeats", True, "no drive sends a heartbeat (0x1017 = 0, the default); "
                    "moving commands watch the drives themselves")
     taken = sorted(heard)
-    report.add("host node id", not taken, f"{host}: free ({window:g} s listened on 0x{HEARTBEAT_BASE + host:03X})"
-               if not taken else f"{host}: another node heartbeats on 0x{HEARTBEAT_BASE + host:03X} on "
-               + ", ".join(taken), "another master (a second sherpa, a ROS node) uses the host id: stop it, or "
-               "set motion.host_node_id to a free id")
+    ids = ", ".join(map(str, hosts))
+    report.add("host node id", not taken, f"{ids}: free ({window:g} s listened)"
+               if not taken else "; ".join(f"{bus}: heartbeats on host id(s) {', '.join(map(str, sorted(heard[bus])))}"
+                                          for bus in taken),
+               "another master (a second sherpa moving drives, a ROS node) uses a host id: stop it, or give "
+               "motion.host_node_id / host_id_pool ids no other node uses")
     refs = {d: DriveRef(d, cfg.drives[d].bus, cfg.drives[d].node, cfg.drives[d]) for d in found}
     running, unknown = [], []
     for d, ref in refs.items():
