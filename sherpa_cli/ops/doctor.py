@@ -158,7 +158,6 @@ def check_drives(report: DoctorReport, session: Any, buses: Sequence[str], *, wi
         for row in names:
             report.skip(row, "no bus fit to talk on")
         return
-    host = cfg.motion.host_node_id
     hosts = cfg.motion.host_ids  # every id a sherpa motion command may send its dead-man heartbeat as
     heard: dict[str, set[int]] = {}
 
