@@ -66,7 +66,7 @@ def test_interactive_view_through_the_command_leaves_every_motor_off(cli, monkey
     assert result.exit_code == 0, result.transcript()
     assert abs(seen["j2"] - seen["start"] - 50) <= 1
     assert seen["on"] == []
-    assert "stop: elbow (can0:6): stopped by ST; motor off" in result.stdout
+    assert "stop: elbow (can0:6): stopped; motor off; settings put back" in result.stdout
 
 
 def test_sigterm_during_the_view_ends_with_the_interrupted_exit_code(cli, monkeypatch):

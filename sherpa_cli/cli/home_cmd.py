@@ -8,6 +8,7 @@ import typer
 
 from sherpa_cli.cli.context import state
 from sherpa_cli.cli.options import YesMotion
+from sherpa_cli.cli.output import stop_lines
 from sherpa_cli.errors import SafetyError, UsageError
 
 KIND_TEXT = {"home_switch": "home switch", "end_switches": "end switches", "pair": "differential pair",
@@ -82,7 +83,7 @@ def home(
         except BaseException as exc:
             motion = getattr(exc, "motion_report", None)
             if motion is not None and not st.json_mode:
-                for line in motion.lines():
+                for line in motion.lines(st.verbose):
                     st.out.info(f"stop: {line}")
             raise
     if st.json_mode:
@@ -108,7 +109,7 @@ def _show_plan(st, cfg, plan) -> None:
 
 
 def _render_unit(st, cfg, u) -> None:
-    for line in u.motion_lines:
+    for line in stop_lines(st, u.motion_stop, u.motion_lines):
         st.out.line(f"stop: {line}")
     sets = ", ".join(f"{j} = {v}" for j, v in u.set_to.items())
     at = ", ".join(f"{j} at {v} counts" for j, v in u.positions.items())
@@ -129,6 +130,19 @@ def _check_wiring(st, name: str) -> None:
 
     cfg = st.load_config()
     plan = ops_home.wiring_plan(cfg, name)
+    if not plan:  # an absolute-encoder joint: nothing to press, nothing is read
+        joints = [cfg.joints[n] for n in ops_home.wiring_joints(cfg, name)]
+        sources = [(j.name, j.abs_encoder.source) for j in joints if j.abs_encoder is not None]
+        shown = sources[0][1] if len(sources) == 1 and sources[0][0] == name else \
+            ", ".join(f"{j}: {s}" for j, s in sources)
+        text = (f"{name} has an absolute encoder ({shown}) and no switches: there is no wiring to check; "
+                "its position comes from the encoder (`sherpa home` reads it, no motion)")
+        if st.json_mode:
+            st.out.json({"joint": name, "ok": True, "switches": 0, "abs_encoder": True, "findings": [],
+                         "note": text})
+        else:
+            st.out.line(text)
+        return
     buses = sorted({cfg.drives[d].bus for _, _, drives in plan for d in drives})
     with st.session(buses=buses) as session:
         sim = getattr(session, "sim", None) if st.sim else None

@@ -40,7 +40,7 @@ def _buses(cfg: Any, axes: Sequence[Any]) -> list[str]:
 
 
 def _stop_lines(st: Any, report: Any) -> None:
-    for line in report.lines():
+    for line in report.lines(st.verbose):
         st.out.line(f"stop: {line}")
 
 
@@ -78,7 +78,7 @@ def interactive(st: Any, names: Sequence[str], *, apply: bool, uncalibrated: boo
         except BaseException as exc:
             report = getattr(live, "guard", None) and live.guard.report
             if report is not None and report.drives:
-                for line in report.lines():
+                for line in report.lines(st.verbose):
                     st.out.info(f"stop: {line}")
             raise exc
     _stop_lines(st, live.report)

@@ -479,7 +479,7 @@ def step(
                 f"MO/UM switch {1000 * result.switch_s:.0f} ms; {result.ended_by}; "
                 f"{result.samples} of {result.expected} samples")
     render_metrics(st, {(result.joint, result.signal): result.metrics})
-    for line in result.stop.lines():
+    for line in result.stop.lines(st.verbose):
         st.out.line(line)
     if result.breach is not None:
         b = result.breach
