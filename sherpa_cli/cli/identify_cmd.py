@@ -2,11 +2,17 @@
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import typer
 
 from sherpa_cli.cli.context import state
 from sherpa_cli.cli.options import Targets
 from sherpa_cli.cli.output import fmt_value
+
+if TYPE_CHECKING:
+    from sherpa_cli.cli.context import AppState
+    from sherpa_cli.ops.identify import IdentifyReport
 
 
 def identify(
@@ -83,7 +89,7 @@ def _hex(value, width: int = 8) -> str:
     return "-" if value is None else f"0x{value & 0xFFFFFFFF:0{width}X}"
 
 
-def _render(st, report, *, verbose: bool = False) -> None:
+def _render(st: AppState, report: IdentifyReport, *, verbose: bool = False) -> None:
     if st.json_mode:
         st.out.json(report.as_json())
         return
@@ -104,7 +110,7 @@ def _render(st, report, *, verbose: bool = False) -> None:
     st.out.line(summary)
 
 
-def _render_summary(st, report) -> None:
+def _render_summary(st: AppState, report: IdentifyReport) -> None:
     """One line per drive: who it is, its motor and faults, where its joint is, and whether it fits."""
     from sherpa_cli.elmo import faults
 
@@ -132,7 +138,7 @@ def _render_summary(st, report) -> None:
                                             "check"], rows, drop=(3, 2, 4, 6, 5), one_line=True)
 
 
-def _render_details(st, report) -> None:
+def _render_details(st: AppState, report: IdentifyReport) -> None:
     from sherpa_cli.bus.canopen_names import VENDORS
     from sherpa_cli.elmo import faults
 
@@ -163,7 +169,7 @@ def _render_details(st, report) -> None:
         mo = s.get("MO")
         rows.append(["MO", fmt_value(mo), "motor on" if mo == 1 else "motor off"])
         um = s.get("UM")
-        rows.append(["UM", fmt_value(um), faults.UNIT_MODES.get(um, "unknown unit mode") if um is not None else ""])
+        rows.append(["UM", fmt_value(um), faults.UNIT_MODES.get(int(um), "unknown unit mode") if um is not None else ""])
         sr = s.get("SR")
         rows.append(["SR", _hex(sr), "; ".join(faults.describe_sr(sr)) if isinstance(sr, int) else ""])
         mf = s.get("MF")
