@@ -44,7 +44,7 @@ def test_interactive_view_through_the_command_leaves_every_motor_off(cli, monkey
     async def auto(pilot):
         await pilot.pause(0.2)
         seen["start"] = pilot.app.live.state["j2"].counts
-        await pilot.press("right")  # j2 has an absolute encoder: calibrated, a +50 counts step
+        await pilot.press("right")  # j2 has an absolute encoder: calibrated, a +0.05 rad (29 counts) step
         await pilot.pause(0.5)
         seen["j2"] = pilot.app.live.state["j2"].counts
         await pilot.press("q")
@@ -64,9 +64,9 @@ def test_interactive_view_through_the_command_leaves_every_motor_off(cli, monkey
     monkeypatch.setattr(live_jog.LiveJog, "__exit__", record)
     result = cli(*F, "jog", "--interactive", "j2", "--apply")
     assert result.exit_code == 0, result.transcript()
-    assert abs(seen["j2"] - seen["start"] - 50) <= 1
+    assert abs(seen["j2"] - seen["start"] - 29) <= 1
     assert seen["on"] == []
-    assert "stop: elbow (can0:6): stopped by ST; motor off" in result.stdout
+    assert "stop: elbow (can0:6): stopped; motor off; settings put back" in result.stdout
 
 
 def test_sigterm_during_the_view_ends_with_the_interrupted_exit_code(cli, monkeypatch):

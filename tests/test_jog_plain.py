@@ -144,7 +144,7 @@ def test_cli_velocity_jog_final_line(cli):
     assert result.exit_code == 0, result.transcript()
     *stops, last = result.stdout.splitlines()
     assert last.startswith("elbow_pitch (elbow_1a, can1:40): stopped at ") and "time up" in last
-    assert stops == ["stop: elbow_1a (can1:40): stopped by ST; motor off; restored 0x1016:1, 0x1029:1, 0x6007:0"]
+    assert stops == ["stop: elbow_1a (can1:40): stopped; motor off; settings put back"]
     assert "\r" not in result.stderr  # not a terminal: no live line
 
 

@@ -4,6 +4,7 @@ simulated arm (in-process, real time: the guard's heartbeat thread runs on the w
 from __future__ import annotations
 
 import asyncio
+import math
 import time
 from pathlib import Path
 
@@ -23,6 +24,10 @@ CONFIG = JOG_CONFIG
 @pytest.fixture
 def cfg():
     return load_config(CONFIG)
+
+
+def cpr_of(cfg, joint: str) -> int:
+    return cfg.joints[joint].cpr
 
 
 def motor_events(session):
@@ -53,12 +58,12 @@ def test_select_step_switch_mode_space_stops_and_q_leaves_with_every_motor_stopp
                 await pilot.press("down")  # select j2 (absolute encoder: calibrated)
                 assert app.current == "j2"
                 start = live.state["j2"].counts
-                await pilot.press("right")  # position step: +50 counts (the default increment)
+                await pilot.press("right")  # position step: +0.05 rad = 29 counts (the default increment)
                 await pilot.pause(0.4)
                 seen["stepped"] = live.state["j2"].counts - start
                 await pilot.press("m")  # velocity mode
                 assert live.state["j2"].mode == "velocity"
-                await pilot.press("right", "right")  # set point 2 x 200 counts/s, running
+                await pilot.press("right", "right")  # set point 2 x 0.1 rad/s = 115 counts/s, running
                 await pilot.pause(0.2)
                 seen["running"] = dict(live.running)
                 seen["msg1"] = (app.message, list(live.messages), live.state["j2"])
@@ -68,7 +73,7 @@ def test_select_step_switch_mode_space_stops_and_q_leaves_with_every_motor_stopp
                 seen["after_space"] = dict(live.running)
                 seen["setpoint"] = app.setpoint["j2"]
                 seen["status"] = str(app.query_one("#status").render())
-                await pilot.press("left")  # velocity -200 again
+                await pilot.press("left")  # velocity -0.1 rad/s again
                 await pilot.pause(0.1)
                 seen["running_again"] = dict(live.running)
                 seen["msg"] = app.message
@@ -78,12 +83,12 @@ def test_select_step_switch_mode_space_stops_and_q_leaves_with_every_motor_stopp
 
     with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
         seen = asyncio.run(scenario(s))
-        assert abs(seen["stepped"] - 50) <= 1
+        assert abs(seen["stepped"] - 29) <= 1
         assert set(seen["running"]) == {"j2"}, seen["msg1"]
-        assert seen["running"]["j2"].motors == {"elbow": 400}
+        assert seen["running"]["j2"].motors == {"elbow": 115}
         assert seen["on_while_running"] == {"elbow"}
         assert seen["after_space"] == {} and seen["setpoint"] == 0.0 and "every joint stopped" in seen["status"]
-        assert seen["running_again"]["j2"].motors == {"elbow": -200}, seen["msg"]
+        assert seen["running_again"]["j2"].motors == {"elbow": -57}, seen["msg"]
         # q left with every motor stopped and off: the guard's report and the simulator's record
         assert motors_on(s) == set()
         assert {d.drive for d in seen["report"].drives} == {"yaw", "elbow"}
@@ -159,6 +164,8 @@ def test_calibrate_shows_the_plan_cancel_moves_nothing_confirm_homes_and_the_jog
             async with app.run_test(size=(130, 40)) as pilot:
                 await pilot.pause(0.1)
                 assert not live.state["yaw"].calibrated
+                await pilot.press("right")  # a position step: refused, the joint is not homed
+                seen["refused"] = str(app.query_one("#detail").render())
                 # velocity mode, -200 counts/s (away from the home switch above): the live guard switches
                 # the motor on; Space stops it (it stays on, holding)
                 await pilot.press("m", "left")
@@ -177,6 +184,8 @@ def test_calibrate_shows_the_plan_cancel_moves_nothing_confirm_homes_and_the_jog
                 seen["message"] = app.message
                 seen["calibrated"] = live.state["yaw"].calibrated
                 seen["on_after_home"] = motors_on(session)
+                await pilot.pause(0.3)
+                seen["detail_after"] = str(app.query_one("#detail").render())
                 # the jog resumes on the calibrated joint: a position step is accepted now
                 await pilot.press("m", "m")  # velocity -> torque -> position
                 start = live.state["yaw"].counts
@@ -193,7 +202,7 @@ def test_calibrate_shows_the_plan_cancel_moves_nothing_confirm_homes_and_the_jog
     with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
         seen = asyncio.run(scenario(s))
         assert seen["done"], seen["message"]
-        assert seen["jogging"]["yaw"].motors == {"yaw_drive": -200}
+        assert seen["jogging"]["yaw"].motors == {"yaw_drive": -round(0.1 * cpr_of(cfg, "yaw") / (2 * math.pi))}
         assert isinstance(seen["screen"], HomeConfirm)
         assert "search: yaw up at 1000 counts/s, at most 820 counts" in seen["plan"]
         assert "uses input 1: home switch" in seen["plan"]
@@ -202,7 +211,10 @@ def test_calibrate_shows_the_plan_cancel_moves_nothing_confirm_homes_and_the_jog
         assert seen["done"], seen["message"]
         assert seen["message"].startswith("calibrate: yaw: homed (home switch): set yaw = 0"), seen["message"]
         assert seen["calibrated"] and seen["on_after_home"] == set()  # home's guard switched it off again
-        assert abs(seen["stepped"] - 50) <= 1, seen["note"]
+        # the "not homed" refusal was shown, and is gone once homed (no stale message)
+        assert "position steps need a calibrated joint" in seen["refused"]
+        assert "calibrated joint" not in seen["detail_after"] and "NOT calibrated" not in seen["detail_after"]
+        assert abs(seen["stepped"] - round(0.05 * cpr_of(cfg, "yaw") / (2 * math.pi))) <= 1, seen["note"]
         assert abs(physical(s, "yaw_drive") - px(s, "yaw_drive")) <= 1  # the counter means the joint now
         # the simulator's record: the jog's motor on, its stop and motor off before homing; the homing
         # (home event); home's own motor off; the step's motor on; q's motor off

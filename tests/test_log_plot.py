@@ -114,12 +114,14 @@ def test_plot_writes_a_png_with_the_metrics(cli, tmp_path):
     assert result.exit_code == 0, result.stderr
     assert "elbow_pitch" in result.stdout and "overshoot" in result.stdout
     with Image.open(tmp_path / "run.png") as img:
-        assert img.format == "PNG" and img.size[0] >= 400 and img.size[1] >= 300
+        assert img.format == "PNG" and img.size == (1000, 600)  # fits a screen, whatever the joints
         assert sum(1 for count in img.convert("L").histogram() if count) > 10  # not a blank canvas
+    # the velocity of a position step starts and ends at 0: it did not step, so no metrics for it
     js = cli("--json", "log", "plot", str(tmp_path / "run.csv"), "-o", str(tmp_path / "v.png"), "--signal", "vel")
     import json
 
-    assert json.loads(js.stdout)["metrics"][0]["signal"] == "vel"
+    data = json.loads(js.stdout)
+    assert data["metrics"] == [] and data["not_stepped"] == ["elbow_pitch.vel"]
 
 
 def test_plot_refuses_bad_input(cli, tmp_path):
@@ -149,3 +151,128 @@ def test_plot_and_step_refuse_non_finite_numbers(cli, tmp_path):
         assert r.exit_code == 2 and f"{opt} nan" in r.stderr
     r = cli("--sim", "log", "step", "elbow_pitch", "--position", "inf", "-o", str(tmp_path / "s"))
     assert r.exit_code == 2 and "--position inf" in r.stderr
+
+
+# -- plots a technician reads at a glance (issue 25 item 2): pixel-free, through the artist tree --------
+
+def _artists(fig):
+    """Per axes (visible ones, top to bottom): title, labels, legend texts and the legend's placement."""
+    fig.canvas.draw()  # lays the figure out: legend and axes extents, tick offsets
+    out = []
+    for ax in fig.axes:
+        if not ax.get_visible():
+            continue
+        legend = ax.get_legend()
+        out.append({"ax": ax, "title": ax.get_title(), "ylabel": ax.get_ylabel(), "xlabel": ax.get_xlabel(),
+                    "labels": [t.get_text() for t in legend.get_texts()] if legend else [],
+                    "legend_outside": legend is not None and legend.get_window_extent().x0
+                    >= ax.get_window_extent().x1,
+                    "offset": ax.yaxis.get_offset_text().get_text(), "ylim": ax.get_ylim()})
+    return out
+
+
+def _labelled(ax, label):
+    return [a for a in (*ax.lines, *ax.patches) if a.get_label() == label]
+
+
+def _step_recording(still_joint: bool = False):
+    ts, ys = sampled(0.5, 25.0, 0.08, 0.1, 0.0, n=1500)
+    cols = {"elbow_pitch.vel_rad_s": ys, "elbow_pitch.pos_rad": [0.01 * t for t in ts]}
+    if still_joint:  # a joint that holds still: a few 1e-16 of float noise on a constant
+        cols["wrist_1.pos_rad"] = [0.25 + (1e-16 if i % 2 else 0.0) for i in range(len(ts))]
+    return Recording(times=ts, columns=cols)
+
+
+def test_a_step_plot_has_units_the_command_the_switch_window_and_settling_with_the_legend_outside(tmp_path):
+    pytest.importorskip("matplotlib")
+    from sherpa_cli.log.plot import FIG_SIZE, StepMarks, plot_recording, step_title
+
+    rec = _step_recording()
+    t, y = rec.series("elbow_pitch", "vel")
+    m = step_metrics(t, y, target=0.1)
+    marks = StepMarks("velocity", 0.1, 0.03)
+    fig = plot_recording(rec, ["elbow_pitch"], tmp_path / "s.png", metrics={("elbow_pitch", "vel"): m},
+                         marks=marks, title=step_title("elbow_pitch", marks))
+    assert tuple(fig.get_size_inches()) == FIG_SIZE and fig.dpi == 100  # 1000 x 600 px
+    assert fig.get_suptitle() == "elbow_pitch: velocity step +0.1 rad/s; MO/UM switch 30 ms"
+    pos, vel = _artists(fig)
+    assert pos["ylabel"] == "position [rad]" and vel["ylabel"] == "velocity [rad/s]"
+    assert vel["xlabel"] == "time since the command [s]" and pos["title"] == "elbow_pitch"
+    for axes in (pos, vel):
+        assert axes["legend_outside"] and axes["offset"] == ""
+        assert "command (t = 0)" in axes["labels"] and "MO/UM switch 30 ms" in axes["labels"]
+        (command,) = _labelled(axes["ax"], "command (t = 0)")
+        assert list(command.get_xdata()) == [0.0, 0.0]
+        (window,) = _labelled(axes["ax"], "MO/UM switch 30 ms")  # axvspan: x in data, y the whole axes
+        xs = window.get_path().transformed(window.get_patch_transform()).vertices[:, 0]
+        assert min(xs) == 0.0 and max(xs) == pytest.approx(0.03)
+    settled = f"settled (2 %) {1000 * m.settling_time:.1f} ms"
+    assert settled in vel["labels"] and f"final {m.final:.4g} rad/s" in vel["labels"]
+    assert any(label.startswith("overshoot: ") for label in vel["labels"])
+    assert _labelled(vel["ax"], settled)[0].get_xdata()[0] == pytest.approx(m.settling_time)
+    assert "JV" not in fig.get_suptitle() and "JV" not in " ".join(vel["labels"])
+
+
+def test_a_step_that_did_not_settle_draws_no_final_line_and_no_overshoot(tmp_path):
+    pytest.importorskip("matplotlib")
+    from sherpa_cli.log.plot import StepMarks, plot_recording
+
+    ts = [i * 0.001 for i in range(400)]
+    ys = [min(1.0, t * 2.5) + 0.2 * math.sin(60 * t) * (t > 0.3) for t in ts]  # still ringing at the end
+    m = step_metrics(ts, ys, target=1.0)
+    assert not m.settled
+    rec = Recording(times=ts, columns={"arm.pos_rad": ys})
+    fig = plot_recording(rec, ["arm"], tmp_path / "n.png", metrics={("arm", "pos"): m},
+                         marks=StepMarks("position", 1.0, 0.0))
+    (pos,) = _artists(fig)
+    assert "not settled: no overshoot or steady-state error" in pos["labels"]
+    assert not any(label.startswith(("final", "overshoot", "settled", "steady-state")) for label in pos["labels"])
+    assert "MO/UM switch" not in " ".join(pos["labels"])  # no switch: no window drawn
+
+
+def test_a_joint_that_holds_still_is_a_flat_line_with_a_minimum_span_and_no_offset(tmp_path):
+    pytest.importorskip("matplotlib")
+    from sherpa_cli.log.plot import MIN_SPAN, plot_recording
+
+    fig = plot_recording(_step_recording(still_joint=True), ["elbow_pitch", "wrist_1"], tmp_path / "two.png")
+    assert tuple(fig.get_size_inches() * fig.dpi) == (1000, 600)  # two joints: the same size
+    wrist = [a for a in _artists(fig) if a["title"] == "wrist_1"]
+    (still,) = wrist
+    lo, hi = still["ylim"]
+    assert hi - lo >= MIN_SPAN["pos"] * 0.999 and lo < 0.25 < hi
+    assert still["offset"] == "" and still["legend_outside"]
+    labels = [t.get_text() for t in still["ax"].get_yticklabels()]
+    assert labels and not any("e-" in t or "1e" in t for t in labels)
+
+
+def test_log_plot_computes_metrics_only_for_signals_that_stepped(cli, tmp_path):
+    pytest.importorskip("matplotlib")
+    write_csv(_step_recording(still_joint=True), tmp_path / "r.csv")
+    result = cli("log", "plot", str(tmp_path / "r.csv"), "-o", str(tmp_path / "r.png"))
+    assert result.exit_code == 0, result.transcript()
+    assert "elbow_pitch pos" in result.stdout  # 0.01 rad/s ramp over 0.5 s: a step of its own
+    assert "wrist_1 pos: did not step (changed less than 0.005 rad): no step metrics" in result.stdout
+    assert "wrist_1 pos:" not in result.stdout.replace("wrist_1 pos: did not step", "")
+
+
+def test_the_pair_plot_marks_the_held_joints_excursion_with_a_sensible_span(tmp_path):
+    pytest.importorskip("matplotlib")
+    from sherpa_cli.log.plot import PairTrace, plot_pair
+
+    count = 2 * math.pi / 4000
+    ts = [i * 0.01 for i in range(200)]
+    sigma = [min(0.5, t) for t in ts]
+    delta = [0.1 + count * (1 if 30 < i < 60 else 0) for i in range(200)]  # one count of quantisation
+    trace = PairTrace("diff", "pitch", "roll", ts, sigma, delta, 0.5, 0.1, held="roll", held_excursion=count,
+                      held_span=20 * count, subtitle="group")
+    fig = plot_pair(trace, tmp_path / "pair.png")
+    assert tuple(fig.get_size_inches() * fig.dpi) == (1000, 600)
+    assert fig.get_suptitle() == ("diffdrive move diff: Σ pitch to +0.5000 rad, Δ roll to +0.1000 rad (group)")
+    top, bottom = _artists(fig)
+    assert top["title"] == "Σ pitch" and top["ylabel"] == "Σ pitch [rad]" and "target +0.5000 rad" in top["labels"]
+    assert bottom["title"] == "Δ roll (held)" and bottom["xlabel"] == "time since the command [s]"
+    lo, hi = bottom["ylim"]
+    assert hi - lo >= 20 * count * 0.999  # not autoscaled to ±1 count
+    excursion = f"peak excursion ±{count:.4f} rad"
+    assert excursion in bottom["labels"] and _labelled(bottom["ax"], excursion)
+    assert all(a["legend_outside"] and a["offset"] == "" for a in (top, bottom))

@@ -133,7 +133,7 @@ def test_cli_step_writes_csv_png_and_metrics(cli, tmp_path):
     metrics = json.loads((out / "metrics.json").read_text())
     assert metrics["mode"] == "torque" and metrics["metrics"]["final"] == pytest.approx(0.5, abs=0.01)
     assert (out / "recording.csv").stat().st_size > 0 and (out / "step.png").stat().st_size > 1000
-    assert "stopped by" in result.stdout
+    assert "stopped; motor off; settings put back" in result.stdout
     bad = cli("--sim", "log", "step", "elbow_pitch", "--torque", "9", "-o", str(out))
     assert bad.exit_code == 2 and "continuous current limit" in bad.stderr
     both = cli("--sim", "log", "step", "elbow_pitch", "--torque", "1", "--position", "1", "-o", str(out))

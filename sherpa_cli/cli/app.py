@@ -73,6 +73,8 @@ def root(
     ),
     json_out: bool = typer.Option(False, "--json", help="Print results as JSON on stdout."),
     debug: bool = typer.Option(False, "--debug", help="Show tracebacks for errors."),
+    verbose: bool = typer.Option(False, "--verbose", "-v", help="Show the details: each drive's identity in "
+                                 "`identify`, the objects a motion's guard put back at its end."),
     no_color: bool = typer.Option(False, "--no-color", help="No colour (NO_COLOR is honoured too)."),
     sim: bool = typer.Option(False, "--sim", help="Run against the simulated arm, in this process "
                              "(python-can virtual buses; the drives' flash persists in the state dir)."),
@@ -97,6 +99,7 @@ def root(
         sim=sim,
         bus_map=bus_map if bus_map else ([os.environ["SHERPA_BUS_MAP"]] if os.environ.get("SHERPA_BUS_MAP") else []),
         bus_map_from_env=not bus_map and bool(os.environ.get("SHERPA_BUS_MAP")),
+        verbose=verbose,
     )
     ctx.obj.allow_user_program = allow_user_program
 

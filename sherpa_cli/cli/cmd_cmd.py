@@ -43,6 +43,7 @@ def cmd(
     """
     from sherpa_cli.bus.targets import single_drive
     from sherpa_cli.errors import SherpaError
+    from sherpa_cli.joints.limits import il_roles
     from sherpa_cli.ops.raw import check_raw_save, parse_all, run_raw
 
     st = state(ctx)
@@ -59,7 +60,7 @@ def cmd(
             on_save = _ledger_counter(session, ref, warnings) if saving else None
             client.nmt_start()
             run_raw(client, ref.node, exprs, apply=apply, query_long=cfg.protocol.query_long, results=done,
-                    on_save=on_save)
+                    on_save=on_save, il_roles=il_roles(cfg))
         except SherpaError as exc:
             error = exc
     if done or error is None:

@@ -31,16 +31,18 @@ class AppState:
     bus_map_from_env: bool = False
     config_looked: tuple[str, ...] = ()  # where the default config was looked for (no --config)
     allow_user_program: bool = False  # --allow-user-program: motion may start while a drive's program runs
+    verbose: bool = False  # --verbose: the details (each drive's identity, the objects a guard put back)
     _config: ArmConfig | None = field(default=None, repr=False)
 
     @classmethod
     def create(cls, *, config_path: Path, config_given: bool, json_mode: bool, debug: bool,
                no_color: bool, sim: bool = False, bus_map: list[str] | None = None,
-               bus_map_from_env: bool = False, config_looked: tuple[str, ...] = ()) -> AppState:
+               bus_map_from_env: bool = False, config_looked: tuple[str, ...] = (),
+               verbose: bool = False) -> AppState:
         return cls(config_path=config_path, config_given=config_given, json_mode=json_mode,
                    debug=debug, out=Output.create(json_mode=json_mode, no_color=no_color),
                    sim=sim, bus_map=list(bus_map or []), bus_map_from_env=bus_map_from_env,
-                   config_looked=config_looked)
+                   config_looked=config_looked, verbose=verbose)
 
     @contextmanager
     def session(self, buses: Iterable[str] | None = None,

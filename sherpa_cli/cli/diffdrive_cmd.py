@@ -8,6 +8,7 @@ import typer
 
 from sherpa_cli.cli.context import AppState, state
 from sherpa_cli.cli.options import ApplyMotion
+from sherpa_cli.cli.output import stop_lines
 from sherpa_cli.errors import UsageError
 
 if TYPE_CHECKING:
@@ -226,7 +227,7 @@ def move(
         except BaseException as exc:
             report = getattr(exc, "motion_report", None)
             if report is not None and not st.json_mode:
-                for line in report.lines():
+                for line in report.lines(st.verbose):
                     st.out.info(f"stop: {line}")
             raise
     if plot is not None:
@@ -245,7 +246,7 @@ def _render_move(st: AppState, r: MoveResult, plot: str | None) -> None:
             d["plot"] = plot
         st.out.json(d)
         return
-    for line in r.guard_lines:
+    for line in stop_lines(st, r.stop, r.guard_lines):
         st.out.line(f"stop: {line}")
     cmds = "; ".join(f"{d} " + " ".join(f"{k}={v}" for k, v in c.items()) for d, c in r.motor_commands.items())
     if cmds:

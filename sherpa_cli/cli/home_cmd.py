@@ -9,6 +9,7 @@ import typer
 
 from sherpa_cli.cli.context import AppState, state
 from sherpa_cli.cli.options import YesMotion
+from sherpa_cli.cli.output import stop_lines
 from sherpa_cli.errors import SafetyError, UsageError
 
 if TYPE_CHECKING:
@@ -92,7 +93,7 @@ def home(
             st.out.progress(None)
             motion = getattr(exc, "motion_report", None) or partial.stop
             if motion is not None and not st.json_mode:
-                for line in motion.lines():
+                for line in motion.lines(st.verbose):
                     st.out.info(f"stop: {line}")
             if partial.interrupted is not None and not st.json_mode:
                 homed = [u.name for u in partial.units]
@@ -124,7 +125,7 @@ def _show_plan(st: AppState, cfg: ArmConfig, plan: HomePlan) -> None:
 
 
 def _render_unit(st: AppState, cfg: ArmConfig, u: UnitResult) -> None:
-    for line in u.motion_lines:
+    for line in stop_lines(st, u.motion_stop, u.motion_lines):
         st.out.line(f"stop: {line}")
     sets = ", ".join(f"{j} = {v}" for j, v in u.set_to.items())
     at = ", ".join(f"{j} at {v} counts" for j, v in u.positions.items())
@@ -145,6 +146,19 @@ def _check_wiring(st: AppState, name: str) -> None:
 
     cfg = st.load_config()
     plan = ops_home.wiring_plan(cfg, name)
+    if not plan:  # an absolute-encoder joint: nothing to press, nothing is read
+        joints = [cfg.joints[n] for n in ops_home.wiring_joints(cfg, name)]
+        sources = [(j.name, j.abs_encoder.source) for j in joints if j.abs_encoder is not None]
+        shown = sources[0][1] if len(sources) == 1 and sources[0][0] == name else \
+            ", ".join(f"{j}: {s}" for j, s in sources)
+        text = (f"{name} has an absolute encoder ({shown}) and no switches: there is no wiring to check; "
+                "its position comes from the encoder (`sherpa home` reads it, no motion)")
+        if st.json_mode:
+            st.out.json({"joint": name, "ok": True, "switches": 0, "abs_encoder": True, "findings": [],
+                         "note": text})
+        else:
+            st.out.line(text)
+        return
     buses = sorted({cfg.drives[d].bus for _, _, drives in plan for d in drives})
     with st.session(buses=buses) as session:
         sim = getattr(session, "sim", None) if st.sim else None

@@ -18,9 +18,12 @@ if TYPE_CHECKING:
 def identify(
     ctx: typer.Context,
     targets: Targets = None,
+    verbose: bool = typer.Option(False, "--verbose", "-v", help="Each drive's identity and state in full "
+                                 "(a table per drive) before the summary."),
 ) -> None:
     """Read who each drive is (SDO 0x1000, 0x1008, 0x1009, 0x100A, 0x1018) and its state (MO, UM, SR, MF, PX).
 
+    Ends with one line per drive (device, firmware, motor, faults, joint position, check).
     Flags a drive whose device name does not match the model the config names, and drives
     whose firmware or product code differ from the other drives of the same model.
     Buses are read at the same time. Exit 1 when something is flagged, 3 when a drive
@@ -29,6 +32,7 @@ def identify(
     \b
     Examples:
       sherpa identify
+      sherpa identify --verbose elbow_1a
       sherpa identify shoulder_diff elbow_1a --json
     """
     from sherpa_cli.bus.targets import drive_names
@@ -51,7 +55,7 @@ def identify(
         st.out.json({**report.as_json(), "devices": [d.as_json() for d in found]})
     else:
         if drives or not found:
-            _render(st, report)
+            _render(st, report, verbose=verbose or st.verbose)
         _render_devices(st, found)
     if any(d.error for d in found) and not report.errors:
         raise typer.Exit(int(ExitCode.PROBLEM))
@@ -86,14 +90,60 @@ def _hex(value: float | None, width: int = 8) -> str:
     return "-" if value is None else f"0x{int(value) & 0xFFFFFFFF:0{width}X}"
 
 
-def _render(st: AppState, report: IdentifyReport) -> None:
+def _render(st: AppState, report: IdentifyReport, *, verbose: bool = False) -> None:
+    if st.json_mode:
+        st.out.json(report.as_json())
+        return
+    if verbose:
+        _render_details(st, report)
+    _render_summary(st, report)
+    findings = report.findings
+    failed = [d.drive for d in report.drives if d.error]
+    read = len(report.drives) - len(failed)
+    for drive, finding in findings:
+        st.out.line(f"{drive}: {finding}")
+    summary = f"{read} of {len(report.drives)} drive(s) identified"
+    summary += f", {len(findings)} finding(s)" if findings else ", no mismatch in model or firmware"
+    if failed:
+        summary += f"; not answering: {', '.join(failed)}"
+    if not verbose:
+        summary += " (--verbose: each drive in full)"
+    st.out.line(summary)
+
+
+def _render_summary(st: AppState, report: IdentifyReport) -> None:
+    """One line per drive: who it is, its motor and faults, where its joint is, and whether it fits."""
+    from sherpa_cli.elmo import faults
+
+    rows = []
+    for d in report.drives:
+        if d.error:
+            rows.append([d.drive, f"{d.bus}:{d.node}", "-", "-", "-", "-", "-", "NO ANSWER"])
+            continue
+        s = d.state
+        mo, um, sr, mf = (s.get(k) for k in ("MO", "UM", "SR", "MF"))
+        motor = "-" if mo is None else ("on" if mo == 1 else "off")
+        if um is not None:
+            motor += f", UM={fmt_value(um)}"
+        problems = len(faults.sr_problems(sr)) if isinstance(sr, int) else 0
+        status = ("MF " + _hex(mf)) if isinstance(mf, int) and mf else ("SR: check" if problems else "ok")
+        where = "-"
+        if d.joint is not None:
+            where = f"{d.joint.joint} {d.joint.rad:.4f} rad"
+        elif st.load_config().pair_of_drive(d.drive) is not None:
+            where = "pair motor"
+        check = f"{len(d.findings)} finding(s)" if d.findings else "ok"
+        rows.append([d.drive, f"{d.bus}:{d.node}", str(d.identity.get("device_name") or "-"),
+                     str(d.identity.get("software_version") or "-"), motor, status, where, check])
+    st.out.table(f"{len(rows)} drive(s)", ["drive", "address", "device", "firmware", "motor", "faults", "joint",
+                                            "check"], rows, drop=(3, 2, 4, 6, 5), one_line=True)
+
+
+def _render_details(st: AppState, report: IdentifyReport) -> None:
     from sherpa_cli.bus.canopen_names import VENDORS
     from sherpa_cli.elmo import faults
     from sherpa_cli.elmo.userprog import describe_ps
 
-    if st.json_mode:
-        st.out.json(report.as_json())
-        return
     for d in report.drives:
         title = f"{d.drive} ({d.bus}:{d.node})" + (f" - config model {d.model}" if d.model else "")
         if d.error:
@@ -143,13 +193,3 @@ def _render(st: AppState, report: IdentifyReport) -> None:
                 where += f" ({d.joint.formula})"
         rows.append(["PX", f"{fmt_value(px)} counts", where])
         st.out.table(title, ["field", "value", "meaning"], rows)
-    findings = report.findings
-    failed = [d.drive for d in report.drives if d.error]
-    read = len(report.drives) - len(failed)
-    for drive, finding in findings:
-        st.out.line(f"{drive}: {finding}")
-    summary = f"{read} of {len(report.drives)} drive(s) identified"
-    summary += f", {len(findings)} finding(s)" if findings else ", no mismatch in model or firmware"
-    if failed:
-        summary += f"; not answering: {', '.join(failed)}"
-    st.out.line(summary)

@@ -11,6 +11,7 @@ import typer
 
 from sherpa_cli.cli.context import AppState, state
 from sherpa_cli.cli.options import ApplyMotion
+from sherpa_cli.cli.output import stop_lines
 from sherpa_cli.errors import SherpaError, UsageError
 
 if TYPE_CHECKING:
@@ -213,7 +214,7 @@ def _render(st: AppState, name: str, result: ops_jog.JogResult) -> None:
     if st.json_mode:
         st.out.json(result.as_json())
         return
-    for line in result.stop.lines():
+    for line in result.stop.lines(st.verbose):
         st.out.line(f"stop: {line}")
     b = result.breach
     if b is not None:
@@ -348,7 +349,7 @@ def _render_pair(st: AppState, r: joint_jog.JogResult) -> None:
     if st.json_mode:
         st.out.json(r.as_dict())
         return
-    for line in r.guard_lines:
+    for line in stop_lines(st, r.stop, r.guard_lines):
         st.out.line(f"stop: {line}")
     cmds = "; ".join(f"{d} " + " ".join(f"{k}={v:g}" if isinstance(v, float) else f"{k}={v}" for k, v in c.items())
                      for d, c in r.motor_commands.items())
@@ -386,5 +387,5 @@ def _show_stop_report(st: AppState, exc: BaseException) -> None:
                                                                  else f"{type(exc).__name__}: {exc}")
         st.out.json({"error": message, "stop": report.as_json()})
         return
-    for line in report.lines():
+    for line in report.lines(st.verbose):
         st.out.info(f"stop: {line}")

@@ -46,7 +46,7 @@ def _buses(cfg: ArmConfig, axes: Sequence[LiveAxis]) -> list[str]:
 
 
 def _stop_lines(st: AppState, report: GuardReport) -> None:
-    for line in report.lines():
+    for line in report.lines(st.verbose):
         st.out.line(f"stop: {line}")
 
 
@@ -84,7 +84,7 @@ def interactive(st: AppState, names: Sequence[str], *, apply: bool, uncalibrated
         except BaseException as exc:
             report = getattr(live, "guard", None) and live.guard.report
             if report is not None and report.drives:
-                for line in report.lines():
+                for line in report.lines(st.verbose):
                     st.out.info(f"stop: {line}")
             raise exc
     _stop_lines(st, live.report)

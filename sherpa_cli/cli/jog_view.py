@@ -10,30 +10,35 @@ from __future__ import annotations
 
 import threading
 from collections.abc import Callable, Sequence
-from typing import TYPE_CHECKING, ClassVar
+from typing import TYPE_CHECKING, Any, ClassVar
 
 from rich.text import Text
 from textual.app import App, ComposeResult
 from textual.binding import Binding, BindingType
-from textual.containers import Vertical
 from textual.screen import ModalScreen
-from textual.widgets import Footer, Static
+from textual.widgets import Input, Static
 
 from sherpa_cli.errors import SherpaError
-from sherpa_cli.joints.units import counts_to_rad
+from sherpa_cli.joints import units
 
 if TYPE_CHECKING:
     from sherpa_cli.ops.home import HomePlan, HomeReport
     from sherpa_cli.ops.live_jog import LiveJog
 
-# per mode: the increments a key press can use (counts, counts/s, A)
+# per mode: the increments a key press can use, in joint units (rad, rad/s, A)
 INCREMENTS: dict[str, tuple[float, ...]] = {
-    "position": (10, 50, 200, 1000),
-    "velocity": (50, 200, 1000, 4000),
+    "position": (0.005, 0.01, 0.05, 0.1, 0.25),
+    "velocity": (0.01, 0.05, 0.1, 0.25, 0.5),
     "torque": (0.05, 0.1, 0.25, 0.5),
 }
-UNITS = {"position": "counts", "velocity": "counts/s", "torque": "A"}
+DEFAULT_INCREMENT = {"position": 2, "velocity": 2, "torque": 1}  # 0.05 rad, 0.1 rad/s, 0.1 A
+UNITS = {"position": "rad", "velocity": "rad/s", "torque": "A"}
+TYPED_EXAMPLES = {"position": "0.5, -10deg, 200counts", "velocity": "0.2, 5deg/s, 300counts/s",
+                  "torque": "0.5, 0.5A, 800mA"}
 BAR = 36
+LIST_BAR = 16  # the joint list's bars: one line per joint fits 80 columns
+KEY_HELP = ("↑↓ joint  ←→ step/set  t type set point  Enter start  s stop  Space STOP ALL\n"
+            "m mode  +/- step size  c calibrate  g get status  d details  q quit")
 
 
 def bar(counts: int | None, full: tuple[int, int], normal: tuple[int, int], width: int = BAR) -> str:
@@ -108,28 +113,76 @@ class HomeConfirm(ModalScreen[bool]):
         self.dismiss(yes)
 
 
+class SetPointDialog(ModalScreen[str | None]):
+    """The typed set point of the selected joint in its mode's joint unit: Enter takes it, Esc cancels."""
+
+    DEFAULT_CSS = """
+    SetPointDialog { align: center middle; }
+    #box { width: 70; height: auto; padding: 1 2; border: thick $accent; background: $surface; }
+    #error { color: $error; height: auto; }
+    """
+    BINDINGS: ClassVar[list[BindingType]] = [Binding("escape", "cancel", "cancel")]
+
+    def __init__(self, joint: str, mode: str, check: Callable[[str], str | None]) -> None:
+        super().__init__()
+        self.joint, self.mode, self.check = joint, mode, check
+
+    def compose(self) -> ComposeResult:
+        from textual.containers import Vertical
+
+        with Vertical(id="box"):
+            yield Static(Text(f"{self.joint}: {self.mode} set point in {UNITS[self.mode]} "
+                              f"(e.g. {TYPED_EXAMPLES[self.mode]})", style="bold"))
+            yield Input(placeholder=TYPED_EXAMPLES[self.mode].split(",")[0], id="value")
+            yield Static("", id="error")
+            yield Static("Enter: set it (Enter again in the view starts)   Esc: cancel")
+
+    def on_mount(self) -> None:
+        self.query_one(Input).focus()
+
+    def on_input_submitted(self, event: Input.Submitted) -> None:
+        problem = self.check(event.value)
+        if problem:
+            self.query_one("#error", Static).update(problem)
+            return
+        self.dismiss(event.value)
+
+    def action_cancel(self) -> None:
+        self.dismiss(None)
+
+
 class JogView(App):
-    """The view; ``live`` is an entered LiveJog. ``calibrate``: the ``c`` key homes the selected joint
-    (ops/live_jog.LiveJog.calibrate, in a worker thread so Space can abort it)."""
+    """The seed's test GUI (Appendix E) in the terminal; ``live`` is an entered LiveJog.
+
+    One line per joint (position, a bar between its limits, mode, what runs) in a list that always
+    shows the selected joint, and the selected joint's panel: position in rad/deg/counts, the step
+    size and set point in joint units (the set point shown is what was sent), Get Status (OK/Fail,
+    decoded SR/MF on request), the last note. The key help is always on screen (80x24 and up).
+    ``calibrate``: the ``c`` key homes the selected joint (ops/live_jog.LiveJog.calibrate, in a
+    worker thread so Space can abort it)."""
 
     CSS = """
-    #joints { height: auto; }
-    .joint { height: auto; padding: 0 1; }
-    #status { dock: bottom; height: auto; padding: 0 1; background: $boost; }
+    #list { height: 1fr; padding: 0 1; }
+    #detail { height: auto; padding: 0 1; border-top: solid $primary; }
+    #status { height: auto; padding: 0 1; background: $boost; }
+    #keys { height: auto; padding: 0 1; color: $text-muted; }
     """
     BINDINGS: ClassVar[list[BindingType]] = [
-        Binding("up", "select(-1)", "joint up"),
-        Binding("down", "select(1)", "joint down"),
-        Binding("left", "step(-1)", "step -"),
-        Binding("right", "step(1)", "step +"),
-        Binding("m", "mode", "mode"),
-        Binding("plus,equals_sign,right_square_bracket", "increment(1)", "inc +", key_display="+"),
-        Binding("minus,left_square_bracket", "increment(-1)", "inc -", key_display="-"),
-        Binding("enter", "start", "start"),
-        Binding("s", "stop", "stop"),
-        Binding("space", "stop_all", "STOP ALL", priority=True),
-        Binding("c", "calibrate", "calibrate"),
-        Binding("q", "quit", "quit"),
+        Binding("up", "select(-1)", "joint up", show=False),
+        Binding("down", "select(1)", "joint down", show=False),
+        Binding("left", "step(-1)", "step -", show=False),
+        Binding("right", "step(1)", "step +", show=False),
+        Binding("m", "mode", "mode", show=False),
+        Binding("plus,equals_sign,right_square_bracket", "increment(1)", "inc +", show=False),
+        Binding("minus,left_square_bracket", "increment(-1)", "inc -", show=False),
+        Binding("t", "type", "type set point", show=False),
+        Binding("enter", "start", "start", show=False),
+        Binding("s", "stop", "stop", show=False),
+        Binding("space", "stop_all", "STOP ALL", priority=True, show=False),
+        Binding("c", "calibrate", "calibrate", show=False),
+        Binding("g", "status", "get status", show=False),
+        Binding("d", "details", "details", show=False),
+        Binding("q", "quit", "quit", show=False),
         Binding("ctrl+c", "quit", "quit", show=False, priority=True),
     ]
 
@@ -146,67 +199,175 @@ class JogView(App):
         self.tick_period = tick_period
         self.names = list(live.axes)
         self.selected = 0
-        self.inc_index = {name: {m: 1 for m in INCREMENTS} for name in self.names}
-        self.setpoint = {name: 0.0 for name in self.names}  # velocity (counts/s) or torque (A)
+        self.inc_index = {name: dict(DEFAULT_INCREMENT) for name in self.names}
+        self.setpoint = {name: 0.0 for name in self.names}  # velocity (rad/s) or torque (A) now sent
+        self.typed: dict[str, dict[str, float]] = {name: {} for name in self.names}  # mode -> rad, rad/s, A
+        self.status: dict[str, list[Any]] = {}  # the last Get Status per joint (LiveJog.status)
+        self.show_details = False
         self.message = ""
+        self.seen_messages = len(live.messages)  # the session's messages already shown once
         self.error: BaseException | None = None
 
     # -- layout ---------------------------------------------------------------------------------
 
     def compose(self) -> ComposeResult:
-        with Vertical(id="joints"):
-            for name in self.names:
-                yield Static(id=f"j-{name}", classes="joint")
+        yield Static(id="list")
+        yield Static(id="detail")
         yield Static(id="status")
-        yield Footer()
+        yield Static(Text(KEY_HELP), id="keys")
 
     def on_mount(self) -> None:
         self.title = "sherpa jog --interactive"
         self.tick()  # a sign of life for the guard's dead-man as soon as the view is up
         self.set_interval(self.tick_period, self.tick)
 
+    def on_resize(self) -> None:
+        self.call_after_refresh(self.render_state)
+
     @property
     def current(self) -> str:
         return self.names[self.selected]
 
     def increment(self, name: str) -> float:
+        """The selected mode's step size in joint units (rad, rad/s, A)."""
         mode = self.live.state[name].mode
         return INCREMENTS[mode][self.inc_index[name][mode]]
 
+    def _cpr(self, name: str) -> int:
+        return int(self.live.axes[name].cpr)
+
+    def increment_counts(self, name: str) -> int:
+        """The position step in counts: at least one."""
+        return max(1, abs(units.rad_to_counts(self.increment(name), self._cpr(name))))
+
+    def sent(self, name: str) -> tuple[float, str] | None:
+        """What runs for the joint now, from what was sent to its motors: the joint value in its
+        unit (a Σ joint's speed is the motors' sum, Δ's their difference) and the motor commands."""
+        run = self.live.running.get(name)
+        if run is None:
+            return None
+        axis = self.live.axes[name]
+        motors = {d: v for d, v in run.motors.items() if d != "target"}
+        if run.mode == "position":
+            goal = int(run.motors.get("target", 0))
+            return units.counts_to_rad(goal, axis.cpr), ", ".join(f"{d} PA={int(v)}" for d, v in motors.items())
+        letters = "TC" if run.mode == "torque" else "JV"
+        text = ", ".join(f"{d} {letters}={v:g}" if isinstance(v, float) else f"{d} {letters}={v}"
+                         for d, v in motors.items())
+        vals = [motors[d] for d in axis.drives if d in motors]
+        if run.mode == "torque":
+            value = vals[0] if axis.kind == "plain" else (vals[0] + vals[1] if axis.kind == "sigma"
+                                                          else vals[0] - vals[1])
+            return float(value), text
+        cps = vals[0] if axis.kind == "plain" else (vals[0] + vals[1] if axis.kind == "sigma" else vals[0] - vals[1])
+        return units.counts_per_s_to_rad_per_s(cps, axis.cpr), text
+
+    def _note(self, name: str) -> str:
+        """The joint's last note, unless it no longer holds (a calibration refusal once calibrated)."""
+        st = self.live.state[name]
+        if st.calibrated and "calibrated joint" in st.note:
+            return ""
+        return st.note
+
+    def _list_rows(self) -> int:
+        try:
+            height = self.screen_stack[0].query_one("#list", Static).size.height
+        except Exception:  # noqa: BLE001 - not laid out yet: every joint
+            return len(self.names)
+        return height or len(self.names)
+
+    def _row(self, i: int, name: str, width: int) -> Text:
+        st = self.live.state[name]
+        j = self.live.axes[name].joint
+        flag = "!" if st.faults else ("?" if not st.calibrated else " ")
+        text = Text()
+        text.append("▶ " if i == self.selected else "  ", style="bold")
+        text.append(f"{name:<{width}}", style="bold reverse" if i == self.selected else "")
+        text.append(f" {flag}", style="bold red" if flag == "!" else "yellow")
+        text.append(f" {st.rad:+8.4f} rad " if st.rad is not None else "        ? rad ")
+        text.append(bar(st.counts, j.full_range, j.normal_range, LIST_BAR))
+        text.append(f" {st.mode:<8} {st.command}")
+        room = self.size.width - 2  # the list's padding; one line per joint, what does not fit is cut
+        if room > 20:
+            text.truncate(room, overflow="ellipsis")
+        return text
+
     def render_state(self) -> None:
-        base = self.screen_stack[0]  # the joints' screen, also under the calibrate question
-        for i, name in enumerate(self.names):
-            st = self.live.state[name]
-            axis = self.live.axes[name]
-            j = axis.joint
-            text = Text()
-            text.append("▶ " if i == self.selected else "  ", style="bold")
-            text.append(f"{name:<12}", style="bold" if i == self.selected else "")
-            rad = f"{st.rad:+8.4f} rad" if st.rad is not None else "    ? rad"
-            cnt = f"({st.counts:>7} counts)" if st.counts is not None else "(   ? counts)"
-            text.append(f"{rad} {cnt} ")
-            text.append(bar(st.counts, j.full_range, j.normal_range))
-            text.append(f"\n    mode {st.mode:<8}  step {self.increment(name):g} {UNITS[st.mode]:<8}  ")
-            if st.mode != "position":
-                text.append(f"set {self.setpoint[name]:g} {UNITS[st.mode]}  ")
-            text.append(f"now {st.command}")
-            text.append("\n    ")
-            text.append("calibrated" if st.calibrated else "NOT calibrated",
-                        style="green" if st.calibrated else "yellow")
-            text.append(f"  full [{j.full_range[0]}, {j.full_range[1]}] "
-                        f"normal [{j.normal_range[0]}, {j.normal_range[1]}]  ")
-            text.append("faults (SR/MF): " + ("; ".join(st.faults) if st.faults else "none"),
-                        style="bold red" if st.faults else "")
-            if st.note:
-                text.append(f"\n    {st.note}", style="yellow")
-            base.query_one(f"#j-{name}", Static).update(text)
-        status = Text(self.live.deadman + "\n")
-        last = self.live.messages[-1] if self.live.messages else ""
+        base = self.screen_stack[0]  # the joints' screen, also under a dialog
+        rows = max(1, self._list_rows())
+        width = min(22, max(len(n) for n in self.names))
+        n = len(self.names)
+        shown = rows if n <= rows else max(1, rows - 1)  # one line says what is above / below
+        first = min(max(0, self.selected - shown // 2), max(0, n - shown))
+        listing = Text()
+        for i in range(first, min(n, first + shown)):
+            if i > first:
+                listing.append("\n")
+            listing.append_text(self._row(i, self.names[i], width))
+        if n > shown:
+            listing.append(f"\n  ↑ {first} above, ↓ {n - first - shown} below (↑/↓ select)", style="dim")
+        base.query_one("#list", Static).update(listing)
+        base.query_one("#detail", Static).update(self._detail())
+        status = Text()
         if self.homing is not None:
             what = "aborting homing" if self.abort_homing.is_set() else "homing"
             status.append(f"{what} {self.homing_joint} ... (Space aborts)\n", style="bold yellow")
-        status.append(self.message or last, style="bold")
+        status.append((self.message or "ready") + "\n", style="bold")
+        s = self.live.settings
+        status.append(f"dead-man: heartbeat {s.heartbeat_period * 1000:.0f} ms; velocity/torque stop "
+                      f"{self.live.keepalive:g} s after the last key", style="dim")
         base.query_one("#status", Static).update(status)
+
+    def _detail(self) -> Text:
+        name = self.current
+        st = self.live.state[name]
+        axis = self.live.axes[name]
+        cpr, j = axis.cpr, axis.joint
+        text = Text()
+        text.append(f"{name}", style="bold")
+        text.append(f" ({', '.join(axis.drives)}) ")
+        text.append("calibrated" if st.calibrated else f"NOT calibrated: {st.calibration.split(' (')[0]}",
+                    style="green" if st.calibrated else "yellow")
+        text.append("  faults: " + ("; ".join(st.faults) if st.faults else "none"),
+                    style="bold red" if st.faults else "")
+        if st.counts is not None:
+            text.append(f"\nposition {units.counts_to_rad(st.counts, cpr):+.4f} rad "
+                        f"({units.counts_to_deg(st.counts, cpr):+.2f}°, {st.counts} counts)")
+        lo, hi = j.normal_range
+        text.append(f"  normal [{units.counts_to_rad(lo, cpr):+.3f}, {units.counts_to_rad(hi, cpr):+.3f}] rad")
+        unit = UNITS[st.mode]
+        step = f"step {self.increment(name):g} {unit}"
+        if st.mode == "position":
+            step += f" ({self.increment_counts(name)} counts)"
+        typed = self.typed[name].get(st.mode)
+        text.append(f"\nmode {st.mode}  {step}  set point ")
+        text.append("-" if typed is None else f"{typed:+.4g} {unit}", style="bold")
+        text.append(" (t: type, Enter: start)")
+        now = self.sent(name)
+        text.append("\nrunning: ")
+        if now is None:
+            text.append("nothing")
+        else:
+            text.append(f"{now[0]:+.4g} {unit}", style="bold")
+            text.append(f" = {now[1]}")
+        got = self.status.get(name)
+        text.append("\nstatus: ")
+        if got is None:
+            text.append("g: get status")
+        else:
+            ok = all(d.ok for d in got)
+            text.append("OK" if ok else "Fail", style="bold green" if ok else "bold red")
+            if not ok:
+                text.append(": " + "; ".join(f"{d.drive}: {', '.join(d.problems)}" for d in got if not d.ok))
+            text.append("  (d: hide details)" if self.show_details else "  (d: details)")
+            if self.show_details:
+                for d in got:
+                    text.append(f"\n  {d.drive}: SR 0x{d.sr & 0xFFFFFFFF:08X}, MF 0x{d.mf & 0xFFFFFFFF:08X}: "
+                                + "; ".join(d.details))
+        note = self._note(name)
+        if note:
+            text.append(f"\n{note}", style="yellow")
+        return text
 
     # -- periodic -------------------------------------------------------------------------------
 
@@ -228,23 +389,30 @@ class JogView(App):
         for name in self.names:  # an expired command resets its set point: a new press starts small
             if name not in self.live.running:
                 self.setpoint[name] = 0.0
+        if len(self.live.messages) > self.seen_messages:  # a limit or trip: shown until the next key
+            self.message = self.live.messages[-1]
+            self.seen_messages = len(self.live.messages)
         self.render_state()
 
-    def _do(self, fn: Callable[[], object]) -> None:
+    def _do(self, fn: Callable[[], Any]) -> bool:
+        """Run one session call; its answer becomes the message. False when it raised."""
         if self.homing is not None:
             self.message = f"homing {self.homing_joint} runs: wait for it, or Space to abort it"
             self.render_state()
-            return
+            return False
         try:
             out = fn()
             self.message = out if isinstance(out, str) else ""
         except SherpaError as exc:
             self.message = f"error: {exc}"
+            self.render_state()
+            return False
         except BaseException as exc:  # noqa: BLE001  re-raised by the caller of run() (app.error)
             self.error = exc
             self.exit()
-            return
+            return False
         self.render_state()
+        return True
 
     # -- actions --------------------------------------------------------------------------------
 
@@ -257,6 +425,7 @@ class JogView(App):
         name = self.current
         mode = self.live.state[name].mode
         self.inc_index[name][mode] = min(max(self.inc_index[name][mode] + delta, 0), len(INCREMENTS[mode]) - 1)
+        self.message = ""
         self.render_state()
 
     def action_mode(self) -> None:
@@ -274,28 +443,77 @@ class JogView(App):
     def action_step(self, sign: int) -> None:
         name = self.current
         mode = self.live.state[name].mode
-        inc = self.increment(name)
         if mode == "position":
-            self._do(lambda: self.live.step(name, int(sign * inc)))
+            counts = sign * self.increment_counts(name)
+            self._do(lambda: self.live.step(name, counts))
             return
-        self.setpoint[name] = round(self.setpoint[name] + sign * inc, 6)
-        self._send(name)
+        self._send(name, round(self.setpoint[name] + sign * self.increment(name), 6))
+
+    def _check_typed(self, name: str, mode: str, text: str) -> str | None:
+        try:
+            self._parse(name, mode, text)
+        except SherpaError as exc:
+            return str(exc)
+        return None
+
+    def _parse(self, name: str, mode: str, text: str) -> float:
+        """A typed set point in the joint's unit (rad, rad/s, A); deg and counts are converted."""
+        cpr = self._cpr(name)
+        if mode == "position":
+            return units.counts_to_rad(units.parse_position(text, cpr, what="set point"), cpr)
+        if mode == "velocity":
+            return units.counts_per_s_to_rad_per_s(units.parse_velocity(text, cpr, what="set point"), cpr)
+        return units.parse_current(text, what="set point")
+
+    def action_type(self) -> None:
+        name = self.current
+        mode = self.live.state[name].mode
+
+        def typed(value: str | None) -> None:
+            if value is None:
+                self.message = f"{name}: set point unchanged"
+            else:
+                self.typed[name][mode] = self._parse(name, mode, value)
+                self.message = f"{name}: {mode} set point {self.typed[name][mode]:+.4g} {UNITS[mode]}; Enter starts"
+            self.render_state()
+
+        self.push_screen(SetPointDialog(name, mode, lambda text: self._check_typed(name, mode, text)), typed)
 
     def action_start(self) -> None:
+        """Start: send the typed set point (position: go there; velocity/torque: run at it while
+        Enter is held, like an arrow key); without one, the current set point again."""
         name = self.current
-        if self.live.state[name].mode == "position":
-            self.message = "position mode: ← and → step the joint"
-            self.render_state()
-            return
-        self._send(name)
-
-    def _send(self, name: str) -> None:
         mode = self.live.state[name].mode
-        v = self.setpoint[name]
+        typed = self.typed[name].get(mode)
+        if mode == "position":
+            if typed is None:
+                self.message = "position mode: type a target with t (or step with ← →)"
+                self.render_state()
+                return
+            goal = units.rad_to_counts(typed, self._cpr(name))
+            self._do(lambda: self.live.step(name, 0, to=goal))
+            return
+        self._send(name, typed if typed is not None else self.setpoint[name])
+
+    def _send(self, name: str, value: float) -> None:
+        """Velocity (rad/s) or torque (A): a set point the session accepted becomes the one the keys
+        step from (what runs is shown from the motors' commands, :meth:`sent`); a refused one
+        leaves the old set point and what runs as they were."""
+        mode = self.live.state[name].mode
+        axis = self.live.axes[name]
+        before = self.live.running.get(name)
         if mode == "velocity":
-            self._do(lambda: self.live.set_velocity(name, int(v)))
+            cps = units.rad_per_s_to_counts_per_s(value, axis.cpr)
+            ok = self._do(lambda: self.live.set_velocity(name, cps))
         else:
-            self._do(lambda: self.live.set_torque(name, v))
+            ok = self._do(lambda: self.live.set_torque(name, value))
+        after = self.live.running.get(name)
+        if ok and after is not None and after is not before:  # a new command went out
+            self.setpoint[name] = value
+            self.typed[name][mode] = value  # the set point shown: Enter sends it again
+        elif ok and after is None:  # stopped (a set point of 0, or refused at a range edge)
+            self.setpoint[name] = 0.0
+        self.render_state()
 
     def action_stop(self) -> None:
         name = self.current
@@ -321,6 +539,24 @@ class JogView(App):
             return "STOP: every joint stopped"
 
         self._do(stop_all)
+
+    def action_status(self) -> None:
+        """Get Status: OK or Fail per drive of the selected joint (d shows SR and MF decoded)."""
+        name = self.current
+
+        def get() -> str:
+            self.status[name] = self.live.status(name)
+            bad = [d for d in self.status[name] if not d.ok]
+            return f"{name}: status OK" if not bad else \
+                f"{name}: status Fail: " + "; ".join(f"{d.drive}: {', '.join(d.problems)}" for d in bad)
+
+        self._do(get)
+
+    def action_details(self) -> None:
+        if self.current not in self.status:
+            self.action_status()
+        self.show_details = not self.show_details
+        self.render_state()
 
     def action_calibrate(self) -> None:
         if self.homing is not None:
@@ -382,6 +618,7 @@ class JogView(App):
             assert result is not None  # work() set it before its thread ended
             self.message = f"calibrate: {report_line(result)}"
         self.home_log.append(self.message)
+        self.seen_messages = len(self.live.messages)  # homing's own messages: the line above says it
 
     async def action_quit(self) -> None:
         if self.homing is not None:  # the worker's homing ends first: its guard stops its motors
@@ -394,4 +631,4 @@ class JogView(App):
 
 
 def counts_text(counts: int, cpr: int) -> str:
-    return f"{counts_to_rad(counts, cpr):+.4f} rad ({counts} counts)"
+    return f"{units.counts_to_rad(counts, cpr):+.4f} rad ({counts} counts)"

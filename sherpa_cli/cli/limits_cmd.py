@@ -11,7 +11,7 @@ from sherpa_cli.cli.options import Targets
 from sherpa_cli.cli.output import fmt_value
 
 if TYPE_CHECKING:
-    from sherpa_cli.config.model import ArmConfig, ILCodes
+    from sherpa_cli.config.model import ArmConfig
 
 app = typer.Typer(no_args_is_help=True, help="Drive limits derived from the config (seed Appendix C).")
 
@@ -33,16 +33,6 @@ MEANING = {
 }
 
 
-def _il_meaning(value: int, il_codes: ILCodes) -> str:
-    if value == il_codes.stop:
-        return "input logic: stop switch"
-    if value == il_codes.home:
-        return "input logic: home switch"
-    if value == il_codes.unused:
-        return "input logic: no function (no switch)"
-    return "input logic"
-
-
 @app.command("show")
 def show(ctx: typer.Context,
          names: Targets = None,
@@ -56,7 +46,8 @@ def show(ctx: typer.Context,
       sherpa --config configs/appendix-c/example3.yaml limits show --software
     """
     from sherpa_cli.bus.targets import drive_names
-    from sherpa_cli.joints.limits import derive_checked, left_as_they_are
+    from sherpa_cli.elmo.faults import describe_il
+    from sherpa_cli.joints.limits import derive_checked, il_roles, left_as_they_are
 
     st = state(ctx)
     cfg = st.load_config()
@@ -74,11 +65,12 @@ def show(ctx: typer.Context,
             body["note"] = note
         st.out.json(body)
         return
+    roles = il_roles(cfg)
     for d in derived:
         moves = drive_moves(cfg, d.drive)
         rows = []
         for key, value in d.params.items():
-            text = _il_meaning(int(value), cfg.il_codes) if key.startswith("IL[") else MEANING.get(key, "")
+            text = f"input: {describe_il(int(value), roles)}" if key.startswith("IL[") else MEANING.get(key, "")
             rows.append([key, fmt_value(value), text])
         st.out.table(f"{d.drive} ({d.bus}:{d.node}) - {moves}", ["param", "value", "meaning"], rows, right=(1,))
     if note:

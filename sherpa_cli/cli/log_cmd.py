@@ -198,7 +198,8 @@ def plot(
       sherpa log plot step/recording.csv -o elbow.png --joint elbow_pitch --signal vel --target 0.1
     """
     from sherpa_cli.log.plot import MISSING, MISSING_HINT, have_matplotlib, plot_recording
-    from sherpa_cli.log.recording import SIGNALS, read_csv
+    from sherpa_cli.log.recording import SIGNALS, UNITS, read_csv
+    from sherpa_cli.log.step_metrics import MIN_STEP
 
     st = state(ctx)
     if signal not in SIGNALS:
@@ -217,19 +218,30 @@ def plot(
     for j in joints:
         if j not in rec.joints():
             raise UsageError(f"--joint {j}: not in {file} (it has {', '.join(rec.joints()) or 'no joints'})")
-    metrics = _metrics(rec, joints, signal, step_at, target)
-    plot_recording(rec, joints, output, metrics=metrics, title=file.name)
-    render_metrics(st, metrics, extra={"png": str(output)})
+    still: list[str] = []
+    metrics = _metrics(rec, joints, signal, step_at, target, still)
+    plot_recording(rec, joints, output, metrics=metrics, title=f"{file.name}: {', '.join(joints)}")
+    render_metrics(st, metrics, extra={"png": str(output), "not_stepped": [f"{j}.{signal}" for j in still]})
+    if not st.json_mode:
+        for j in still:
+            st.out.line(f"{j} {signal}: did not step (changed less than {MIN_STEP[SIGNALS[signal]]:g} "
+                        f"{UNITS[SIGNALS[signal]]}): no step metrics")
 
 
-def _metrics(rec: Recording, joints: Sequence[str], signal: str, step_at: float,
-             target: float | None) -> dict[tuple[str, str], StepMetrics]:
-    from sherpa_cli.log.step_metrics import step_metrics
+def _metrics(rec: Recording, joints: Sequence[str], signal: str, step_at: float, target: float | None,
+             still: list[str] | None = None) -> dict[tuple[str, str], StepMetrics]:
+    """Step metrics of the joints whose ``signal`` stepped; the others are listed in ``still``."""
+    from sherpa_cli.log.recording import SIGNALS
+    from sherpa_cli.log.step_metrics import MIN_STEP, step_metrics, stepped
 
     out = {}
     for j in joints:
         series = rec.series(j, signal)
         if series is None or len(series[0]) < 2:
+            continue
+        if not stepped(series[0], series[1], threshold=MIN_STEP[SIGNALS[signal]], t_step=step_at):
+            if still is not None:
+                still.append(j)
             continue
         try:
             out[(j, signal)] = step_metrics(series[0], series[1], t_step=step_at, target=target)
@@ -495,7 +507,7 @@ def step(
     import json
 
     from sherpa_cli.cli.robotics import RecordExtras, record_outputs, write_mcap
-    from sherpa_cli.log.plot import have_matplotlib, plot_recording
+    from sherpa_cli.log.plot import StepMarks, have_matplotlib, plot_recording, step_title
     from sherpa_cli.log.recording import write_csv
     from sherpa_cli.motion.settings import MotionSettings
     from sherpa_cli.ops.step import resolve_step_target, run_step, step_request
@@ -558,9 +570,10 @@ def step(
     (output / "metrics.json").write_text(json.dumps(result.as_json(), indent=2) + "\n", encoding="utf-8")
     files = {"csv": str(output / "recording.csv"), "metrics": str(output / "metrics.json")}
     if have_matplotlib():
+        marks = StepMarks(mode, value, result.switch_s)
         plot_recording(result.recording, [result.joint], output / "step.png",
-                       metrics={(result.joint, result.signal): result.metrics},
-                       title=f"{result.joint}: {result.command} (switch {1000 * result.switch_s:.0f} ms)")
+                       metrics={(result.joint, result.signal): result.metrics}, marks=marks,
+                       title=step_title(result.joint, marks))
         files["png"] = str(output / "step.png")
     else:
         st.out.warn("no PNG: matplotlib is not installed (pip install 'sherpa-cli[plot]')")
@@ -575,7 +588,7 @@ def _render_step(st: Any, result: Any, mode: str, value: float, files: dict[str,
                 f"MO/UM switch {1000 * result.switch_s:.0f} ms; {result.ended_by}; "
                 f"{result.samples} of {result.expected} samples")
     render_metrics(st, {(result.joint, result.signal): result.metrics})
-    for line in result.stop.lines():
+    for line in result.stop.lines(st.verbose):
         st.out.line(line)
     if result.breach is not None:
         b = result.breach

@@ -19,6 +19,22 @@ if TYPE_CHECKING:
     from rich.console import Console
     from rich.table import Table
 
+# The width of output that is not a terminal (a pipe, a file, a report): wide enough that nothing is
+# wrapped and no column dropped. Tables never grow to it (they take their natural width).
+UNWRAPPED = 10_000
+
+
+def output_width(stream: Any) -> int | None:
+    """The width to lay out for on ``stream``: None (the terminal's, or COLUMNS) on a terminal or when
+    COLUMNS is set; otherwise UNWRAPPED, so piped output keeps full names and every column."""
+    if os.environ.get("COLUMNS", "").strip().isdigit():
+        return None  # asked for a width: lay out as a terminal of that width (the goldens' 80/100)
+    try:
+        tty = stream.isatty()
+    except (AttributeError, ValueError):
+        tty = False
+    return None if tty else UNWRAPPED
+
 
 def _color_allowed(no_color_flag: bool) -> bool:
     # https://no-color.org: any non-empty NO_COLOR disables colour
@@ -43,8 +59,10 @@ class Output:
         attr = "_err" if stderr else "_out"
         console = getattr(self, attr)
         if console is None:
+            stream = sys.stderr if stderr else sys.stdout
             console = Console(
-                file=sys.stderr if stderr else sys.stdout,
+                file=stream,
+                width=output_width(stream),
                 no_color=not self.color,
                 color_system="auto" if self.color else None,
                 highlight=False,
@@ -76,9 +94,9 @@ class Output:
         sys.stdout.flush()
 
     def table(self, title: str | None, columns: Sequence[str], rows: Iterable[Sequence[Any]],
-              *, right: Iterable[int] = (), drop: Sequence[int] | None = None) -> None:
+              *, right: Iterable[int] = (), drop: Sequence[int] | None = None, one_line: bool = False) -> None:
         self.result(make_table(title, columns, rows, right=right, drop=drop,
-                               width=self._console(stderr=False).width))
+                               width=self._console(stderr=False).width, one_line=one_line))
 
     # diagnostics (stderr)
     def info(self, text: str) -> None:
@@ -122,22 +140,28 @@ class Output:
 
 
 def make_table(title: str | None, columns: Sequence[str], rows: Iterable[Sequence[Any]],
-               *, right: Iterable[int] = (), drop: Sequence[int] | None = None, width: int | None = None) -> Table:
-    """A table that stays readable at ``width`` columns (default: the terminal's).
+               *, right: Iterable[int] = (), drop: Sequence[int] | None = None, width: int | None = None,
+               one_line: bool = False) -> Table:
+    """A table that stays readable at ``width`` columns (default: the terminal's; output that is not a
+    terminal is not wrapped, see :func:`output_width`).
 
     No word is broken mid-name: cells wrap only between words, and when even that does not fit,
     whole columns are left out in ``drop`` order (default: from the last column; never the
-    first), and the title says which.
+    first), and the title says which. ``one_line``: no cell wraps either (a summary of one line per
+    row): columns are left out until every row fits on one line.
     """
     from rich import box
     from rich.table import Table
 
     texts = [["" if v is None else str(v) for v in row] for row in rows]
     if width is None:
+        width = output_width(sys.stdout)
+    if width is None:
         from rich.console import Console
 
         width = Console().width
-    keep = fit_columns(columns, texts, width, drop)
+    keep = fit_columns(columns, texts, width, drop, one_line=one_line)
+    fixed = {} if one_line else shared_widths(columns, texts, keep, width)
     left_out = [columns[i] for i in range(len(columns)) if i not in keep]
     if left_out and title is not None:
         title = f"{title} (not shown: {', '.join(left_out)}; wider terminal or --json)"
@@ -146,23 +170,20 @@ def make_table(title: str | None, columns: Sequence[str], rows: Iterable[Sequenc
     for i in keep:
         # a technician must see the whole name or number:
         # fold, never truncate; the first column (the name) stays on one line
+        # widths shared out here, not by rich: rich narrows the widest columns first and would fold
+        # a long name mid-word (`shoulder_pi` / `tch`) although the kept columns' words all fit
         table.add_column(columns[i], justify="right" if i in right_cols else "left", overflow="fold",
-                         no_wrap=(i == 0))
+                         no_wrap=(i == 0 or one_line), width=fixed.get(i))
     for row in texts:
         table.add_row(*(row[i] for i in keep))
     return table
 
 
 def fit_columns(columns: Sequence[str], rows: Sequence[Sequence[str]], width: int,
-                drop: Sequence[int] | None = None) -> list[int]:
-    """The columns to show so that no word (header or cell) must be broken to fit ``width``."""
-
-    def longest_word(i: int) -> int:
-        cells = [columns[i], *(row[i] for row in rows)]
-        return max((len(w) for c in cells for w in c.split()), default=0)
-
-    minimum = {i: (max([len(columns[i]), *(len(row[i]) for row in rows)]) if i == 0 else longest_word(i))
-               for i in range(len(columns))}
+                drop: Sequence[int] | None = None, *, one_line: bool = False) -> list[int]:
+    """The columns to show so that no word (header or cell) must be broken to fit ``width``
+    (``one_line``: no cell at all)."""
+    minimum = min_widths(columns, rows, one_line=one_line)
     keep = list(range(len(columns)))
     order = [i for i in (drop if drop is not None else reversed(range(1, len(columns)))) if i != 0]
     for i in [*order, *(j for j in reversed(range(1, len(columns))) if j not in order)]:
@@ -171,6 +192,54 @@ def fit_columns(columns: Sequence[str], rows: Sequence[Sequence[str]], width: in
             break
         keep.remove(i)
     return keep
+
+
+def shared_widths(columns: Sequence[str], rows: Sequence[Sequence[str]], keep: Sequence[int],
+                  width: int) -> dict[int, int]:
+    """Fixed widths for the ``keep`` columns when their natural widths do not fit ``width``: as rich
+    does, the widest columns are narrowed first down to one level, but none below its longest word.
+    Empty when everything fits as it is (rich lays it out itself)."""
+    minimum = min_widths(columns, rows)
+    natural = {i: max(len(line) for c in [columns[i], *(row[i] for row in rows)] for line in c.split("\n"))
+               for i in keep}
+    avail = width - 3 * (len(keep) - 1) - 2
+    if sum(natural.values()) <= avail or sum(minimum[i] for i in keep) > avail:
+        return {}
+
+    def at(level: int) -> dict[int, int]:
+        return {i: min(natural[i], max(minimum[i], level)) for i in keep}
+
+    level = max(natural.values())
+    while level > 0 and sum(at(level).values()) > avail:
+        level -= 1
+    out = at(level)
+    for i in sorted(keep, key=lambda k: natural[k], reverse=True):  # the rest to the widest, one each
+        if sum(out.values()) < avail and out[i] < natural[i]:
+            out[i] += 1
+    return out
+
+
+def min_widths(columns: Sequence[str], rows: Sequence[Sequence[str]], *, one_line: bool = False) -> dict[int, int]:
+    """Per column the narrowest width that breaks no word: the whole cell for the first column (the
+    name stays on one line; every column with ``one_line``), the longest word elsewhere."""
+
+    def longest_word(i: int) -> int:
+        cells = [columns[i], *(row[i] for row in rows)]
+        return max((len(w) for c in cells for w in c.split()), default=0)
+
+    return {i: (max(len(columns[i]), *(len(row[i]) for row in rows)) if i == 0 or one_line else longest_word(i))
+            for i in range(len(columns))}
+
+
+def stop_lines(st: Any, stop: dict[str, Any] | None, fallback: Sequence[str] = ()) -> list[str]:
+    """A motion's stop lines from the guard's report kept as JSON (GuardReport.as_json): a normal end
+    reads "stopped; motor off; settings put back", ``--verbose`` names the objects put back.
+    ``fallback``: lines already rendered, for a result without the report."""
+    if not stop:
+        return list(fallback)
+    from sherpa_cli.motion.report import GuardReport
+
+    return GuardReport.from_json(stop).lines(bool(getattr(st, "verbose", False)))
 
 
 def fmt_value(value: object) -> str:

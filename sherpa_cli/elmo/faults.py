@@ -488,6 +488,13 @@ def decode_il(value: int) -> InputFunction:
     return InputFunction(value, function, value % 2 == 1)
 
 
-def describe_il(value: int) -> str:
-    """``"forward limit switch (FLS), active high"`` for 11."""
-    return decode_il(value).text()
+def describe_il(value: int, roles: Mapping[int, str] | None = None) -> str:
+    """What the drive does with an input whose IL is ``value`` (the [MBARI] table, elmo-protocol.md
+    IL[N]): ``"forward limit switch (FLS), active high"`` for 11. ``roles`` maps the config's
+    il_codes to what the tool uses the input for (``joints.limits.il_roles``); a value found there
+    gets it added: 5 reads ``"ignore, active high (config: home switch)"`` -- the drive
+    itself does nothing with a home switch's input, the tool reads the pin (IP) while homing.
+    The one decoder of IL values: `cmd DRIVE "IL[1]"` and `limits show` both use it."""
+    text = decode_il(value).text()
+    role = (roles or {}).get(value)
+    return f"{text} (config: {role})" if role else text

@@ -154,6 +154,13 @@ def _current_params(cur: CurrentLimits, owner: str) -> dict[str, ParamValue]:
     return {"CL[1]": float(cur.continuous), "PL[1]": float(cur.peak), "PL[2]": int(peak_time)}
 
 
+def il_roles(cfg: ArmConfig) -> dict[int, str]:
+    """The config's il_codes by value -> what the tool uses such an input for (for
+    ``elmo.faults.describe_il``): ``{21: "stop switch", 5: "home switch", 4: "unused input"}``."""
+    codes = cfg.il_codes
+    return {codes.unused: "unused input", codes.home: "home switch", codes.stop: "stop switch"}
+
+
 def _switch_code(cfg: ArmConfig, sw: SwitchConfig) -> int:
     return cfg.il_codes.stop if sw.kind is SwitchKind.STOP else cfg.il_codes.home
 

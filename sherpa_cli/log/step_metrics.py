@@ -50,6 +50,27 @@ def _crossing(t: Sequence[float], y: Sequence[float], start: int, level: float, 
     return None
 
 
+# the least change (initial -> final) that counts as a step, per signal column (rad, rad/s, A): a few
+# counts of a still joint's quantisation are not a step, and get no metrics
+MIN_STEP = {"pos_rad": 0.005, "vel_rad_s": 0.01, "cur_a": 0.02}
+
+
+def step_size(t: Sequence[float], y: Sequence[float], *, t_step: float = 0.0, final_share: float = 0.05) -> float:
+    """final - initial as :func:`step_metrics` takes them (0.0 when there is nothing after the step)."""
+    first = next((i for i, ti in enumerate(t) if ti >= t_step), None)
+    if first is None or len(t) < 2 or len(t) != len(y):
+        return 0.0
+    y0 = y[max(first - 1, 0)]
+    tail_from = t[-1] - final_share * (t[-1] - t[first])
+    tail = [v for ti, v in zip(t, y, strict=True) if ti >= tail_from] or [y[-1]]
+    return sum(tail) / len(tail) - y0
+
+
+def stepped(t: Sequence[float], y: Sequence[float], *, threshold: float, t_step: float = 0.0) -> bool:
+    """Whether the signal changed by at least ``threshold`` across the step (MIN_STEP per signal)."""
+    return abs(step_size(t, y, t_step=t_step)) >= threshold
+
+
 def step_metrics(t: Sequence[float], y: Sequence[float], *, t_step: float = 0.0, target: float | None = None,
                  initial: float | None = None, band: float = 0.02, final_share: float = 0.05) -> StepMetrics:
     """Metrics of the response ``y(t)`` to a step commanded at ``t_step`` (times in s, ascending)."""

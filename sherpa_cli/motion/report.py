@@ -5,6 +5,11 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any
 
+# how these read without --verbose; any other stop (ST, JV=0 + BG, TC=0 + ST, ...) reads "stopped" (the
+# method is a detail), and "not stopped" / "-" always as they are
+STOPPED_TEXT = {"motor was off": "motor was off", "not moved by this guard": "not moved"}
+UNSTOPPED = ("not stopped", "-")
+
 
 @dataclass
 class DriveStop:
@@ -20,14 +25,24 @@ class DriveStop:
     kept: list[str] = field(default_factory=list)
     problems: list[str] = field(default_factory=list)
 
-    def line(self) -> str:
-        parts = [f"{self.drive} ({self.address}): stopped by {self.stopped_by}"]
+    def line(self, verbose: bool = False) -> str:
+        """``elbow (can0:6): stopped; motor off; settings put back`` -- a normal end reads as one.
+        ``verbose`` names the stop (``stopped by ST``) and the objects put back (``restored
+        0x1016:1, ...``); what was kept and every problem are always shown. Rendering only: the
+        report's data (as_json) is the same either way."""
+        if self.stopped_by == "not stopped":
+            stopped = "NOT stopped"
+        elif verbose or self.stopped_by in UNSTOPPED:
+            stopped = f"stopped by {self.stopped_by}"
+        else:
+            stopped = STOPPED_TEXT.get(self.stopped_by, "stopped")
+        parts = [f"{self.drive} ({self.address}): {stopped}"]
         if self.standstill is False:
             parts.append("NOT at standstill")
         if self.motor_off:
             parts.append("motor off")
         if self.restored:
-            parts.append("restored " + ", ".join(self.restored))
+            parts.append("restored " + ", ".join(self.restored) if verbose else "settings put back")
         if self.kept:
             parts.append("kept " + ", ".join(self.kept))
         text = "; ".join(parts)
@@ -51,8 +66,13 @@ class GuardReport:
     def ok(self) -> bool:
         return all(not d.problems for d in self.drives)
 
-    def lines(self) -> list[str]:
-        return [d.line() for d in self.drives]
+    def lines(self, verbose: bool = False) -> list[str]:
+        return [d.line(verbose) for d in self.drives]
+
+    @classmethod
+    def from_json(cls, data: dict[str, Any]) -> GuardReport:
+        """The report back from :meth:`as_json` (a result that kept only that, rendered again)."""
+        return cls([DriveStop(**d) for d in data.get("drives", [])], data.get("reason", "end"))
 
     def as_json(self) -> dict[str, Any]:
         return {"reason": self.reason, "drives": [d.as_json() for d in self.drives]}

@@ -634,29 +634,23 @@ def run_move(session: ArmSession, pair: PairConfig, request: MoveRequest, *,
 
 # --------------------------------------------------------------------------- plot
 
-def plot(result: MoveResult, path: str) -> None:
-    """Both joints over time (rad), like the seed's Figs. 9.10/9.11; matplotlib's Agg backend."""
-    try:
-        import matplotlib
-    except ImportError:
-        raise UsageError("--plot needs matplotlib, which is not installed",
-                         hint="pip install 'sherpa-cli[plot]' (or pip install matplotlib)") from None
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+def plot(result: MoveResult, path: str) -> Any:
+    """Both joints over time (rad), like the seed's Figs. 9.10/9.11 (log/plot.py plot_pair: the
+    held joint with a span of at least HELD_SPAN_COUNTS and its peak excursion marked)."""
+    from sherpa_cli.log.plot import PairTrace, plot_pair
 
-    t = [s[0] for s in result.samples]
-    sig = [units.counts_to_rad(s[1] + s[2], result.sigma_cpr) for s in result.samples]
-    dlt = [units.counts_to_rad(s[1] - s[2], result.delta_cpr) for s in result.samples]
-    fig, axes = plt.subplots(2, 1, sharex=True, figsize=(7, 5))
-    for ax, ys, name, i, cpr in ((axes[0], sig, f"Σ {result.sigma}", 0, result.sigma_cpr),
-                                 (axes[1], dlt, f"Δ {result.delta}", 1, result.delta_cpr)):
-        ax.plot(t, ys, label="measured")
-        ax.axhline(units.counts_to_rad(result.target[i], cpr), linestyle="--", color="grey", label="target")
-        ax.set_ylabel(f"{name} (rad)")
-        ax.grid(True)
-        ax.legend(loc="best")
-    axes[1].set_xlabel("time (s)")
-    fig.suptitle(f"diffdrive move {result.pair} ({result.mode}{', feedback' if result.feedback else ''})")
-    fig.tight_layout()
-    fig.savefig(path)
-    plt.close(fig)
+    c = result.coupling
+    held = c.held if c is not None else None
+    held_cpr = (result.sigma_cpr if held == result.sigma else result.delta_cpr) if held else result.sigma_cpr
+    trace = PairTrace(
+        result.pair, result.sigma, result.delta, [s[0] for s in result.samples],
+        [units.counts_to_rad(s[1] + s[2], result.sigma_cpr) for s in result.samples],
+        [units.counts_to_rad(s[1] - s[2], result.delta_cpr) for s in result.samples],
+        units.counts_to_rad(result.target[0], result.sigma_cpr), units.counts_to_rad(result.target[1], result.delta_cpr),
+        held=held, held_excursion=units.counts_to_rad(c.held_peak, held_cpr) if c is not None and held else 0.0,
+        held_span=units.counts_to_rad(HELD_SPAN_COUNTS, held_cpr),
+        subtitle=result.mode + (", feedback" if result.feedback else ""))
+    return plot_pair(trace, path)
+
+
+HELD_SPAN_COUNTS = 20  # the held joint's plot shows at least this many counts: quantisation stays small

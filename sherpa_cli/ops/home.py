@@ -267,6 +267,7 @@ class UnitResult:
     measured_travel: int | None = None  # end_switches --measure-range: counts between the switch edges
     configured_travel: int | None = None
     motion_lines: list[str] = field(default_factory=list)  # the guard's stop lines
+    motion_stop: dict[str, Any] = field(default_factory=dict)  # the guard's report (GuardReport.as_json)
 
     def as_dict(self) -> dict[str, Any]:
         out: dict[str, Any] = {"name": self.name, "kind": self.kind, "drives": list(self.drives),
@@ -530,6 +531,7 @@ class _Runner:
             res.positions[joint.name] = int(c.get("PX"))
             calibration.mark_calibrated(self.cfg, c)
         res.motion_lines = guard.report.lines()
+        res.motion_stop = guard.report.as_json()
         return res
 
     def pair(self, unit: HomeUnit) -> UnitResult:
@@ -627,6 +629,7 @@ class _Runner:
             for c in (ca, cb):
                 calibration.mark_calibrated(cfg, c)
         res.motion_lines = guard.report.lines()
+        res.motion_stop = guard.report.as_json()
         return res
 
 
@@ -731,6 +734,13 @@ def _switch_label(sw: SwitchConfig) -> str:
     return f"input {sw.input} ({what})"
 
 
+def wiring_joints(cfg: ArmConfig, name: str) -> list[str]:
+    """The joints the wiring check of ``name`` (a joint, a pair, a drive of a joint) covers."""
+    from sherpa_cli.bus import targets
+
+    return [j.name for j in targets.resolve_one(cfg, name).joints]
+
+
 def wiring_plan(cfg: ArmConfig, name: str) -> list[tuple[JointConfig, SwitchConfig, tuple[str, ...]]]:
     """Each switch of the joint (or of both joints of a pair) and the drives it is wired to."""
     from sherpa_cli.bus import targets
@@ -743,6 +753,8 @@ def wiring_plan(cfg: ArmConfig, name: str) -> list[tuple[JointConfig, SwitchConf
         drives = calibration.joint_drives(cfg, joint)
         for sw in joint.switches:
             out.append((joint, sw, tuple(sw.drives) or drives))
+    if not out and all(j.abs_encoder is not None for j in t.joints):
+        return []  # an absolute encoder says where the joint is: no switch to check (the CLI says so)
     if not out:
         raise UsageError(f"{name}: no switches configured, nothing to check",
                          hint="switches: [{input: N, kind: home|stop, ...}] in the joint's config")

@@ -32,7 +32,7 @@ from typing import TYPE_CHECKING
 
 from sherpa_cli.bus import targets
 from sherpa_cli.config.model import ArmConfig, JointConfig, JointRole
-from sherpa_cli.elmo.faults import decode_sr, describe_mf, sr_problems
+from sherpa_cli.elmo.faults import decode_sr, describe_mf, describe_sr, sr_problems
 from sherpa_cli.elmo.protocol import UM_POSITION, UM_TORQUE
 from sherpa_cli.errors import ExitCode, SafetyError, SherpaError, UsageError
 from sherpa_cli.joints import diffpair
@@ -121,6 +121,18 @@ class AxisState:
     note: str = ""  # the last refusal or limit message for this joint
 
 
+@dataclass(frozen=True)
+class DriveStatus:
+    """One drive's answer to Get Status: OK or Fail with why, and the decoded SR/MF on request."""
+
+    drive: str
+    ok: bool
+    sr: int
+    mf: int
+    problems: list[str]  # why it fails (empty: OK)
+    details: list[str]  # every fact SR and MF state
+
+
 @dataclass
 class _Running:
     mode: str  # velocity | torque | position
@@ -201,8 +213,9 @@ class LiveJog:
         self.stop(name)
         self.state[name].mode = mode
 
-    def step(self, name: str, counts: int) -> str:
-        """Position mode: move the joint by ``counts`` (the other joint of a pair holds)."""
+    def step(self, name: str, counts: int, *, to: int | None = None) -> str:
+        """Position mode: move the joint by ``counts`` (the other joint of a pair holds); ``to``: to
+        that position instead (counts, absolute: a typed set point)."""
         a = self._axis(name)
         st = self.state[name]
         if not (st.calibrated or self.allow_uncalibrated):
@@ -213,7 +226,7 @@ class LiveJog:
         start = a.position(now)
         base = self.running[name].motors.get("target", start) if name in self.running and \
             self.running[name].mode == "position" else start
-        goal = int(base) + int(counts)
+        goal = int(to) if to is not None else int(base) + int(counts)
         lo, hi = a.joint.normal_range
         if not lo <= goal <= hi:
             return self._refuse(name, f"{name}: target {goal} counts is outside the normal range [{lo}, {hi}]: "
@@ -325,6 +338,19 @@ class LiveJog:
             joint_jog.stop_now({d: self._client(d)},
                                "torque" if self.guard.unit_mode(self.refs[d]) == UM_TORQUE else "position",
                                self.settings.stop_method)
+
+    def status(self, name: str) -> list[DriveStatus]:
+        """Get Status (the seed GUI's button): SR and MF of the joint's drives, read now. OK when no SR
+        problem, no motor failure and the drive is still commanded in this session."""
+        out = []
+        for d in self._axis(name).drives:
+            q = (lambda key, d=d: self._raw(d).get(key)) if d in self.unguarded else \
+                (lambda key, d=d: self.guard.query(self.refs[d], key))
+            sr, mf = int(q("SR")), int(q("MF"))
+            problems = [f.line() for f in sr_problems(sr) if f.code != 1 << 28]
+            fails = problems + describe_mf(mf) + ([f"not commanded again: {self.dead[d]}"] if d in self.dead else [])
+            out.append(DriveStatus(d, not fails, sr, mf, fails, describe_sr(sr) + (describe_mf(mf) or ["MF: none"])))
+        return out
 
     # -- calibrate (home) ----------------------------------------------------------------------------
 

@@ -11,7 +11,7 @@ and counted in the save ledger under the drive's serial number.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
@@ -80,8 +80,9 @@ def expr_text(request: codec.Request) -> str:
     return key
 
 
-def decode_value(letters: str, value: int | float | None) -> list[str]:
-    """What a register value means, for the commands that have a decoder."""
+def decode_value(letters: str, value: int | float | None, il_roles: Mapping[int, str] | None = None) -> list[str]:
+    """What a register value means, for the commands that have a decoder (``il_roles``: the config's
+    IL codes, joints.limits.il_roles, so IL reads as `limits show` shows it)."""
     if not isinstance(value, int):
         return []
     if letters == "SR":
@@ -93,13 +94,14 @@ def decode_value(letters: str, value: int | float | None) -> list[str]:
     if letters == "IP":
         return faults.describe_ip(value)
     if letters == "IL":
-        return [faults.describe_il(value)]
+        return [faults.describe_il(value, il_roles)]
     return []
 
 
 def run_raw(client: DriveClient, node: int, exprs: Sequence[str], *, apply: bool, query_long: bool = False,
             results: list[RawResult] | None = None,
-            on_save: Callable[[RawResult], None] | None = None) -> list[RawResult]:
+            on_save: Callable[[RawResult], None] | None = None,
+            il_roles: Mapping[int, str] | None = None) -> list[RawResult]:
     """Run the expressions in order on one drive; stop at the first error (it propagates).
 
     ``results`` collects what was done before an error, so the caller can still show it.
@@ -114,7 +116,7 @@ def run_raw(client: DriveClient, node: int, exprs: Sequence[str], *, apply: bool
         if request.kind == "query":
             result.value = client.get(request.letters, request.index)
             result.sent = True
-            result.decoded = decode_value(request.letters, result.value)
+            result.decoded = decode_value(request.letters, result.value, il_roles)
         elif apply:
             if request.kind == "set" and request.letters == "MO" and request.value in (0, 1):
                 # the confirmed motor switch: MO=1/0, then MO polled until it reads back (the drive is

@@ -1,0 +1,213 @@
+"""The seed's test GUI (Appendix E) in the terminal, headless at 80x24 (issue 25 item 4):
+the selected joint and the key help always on screen, typed set points in joint units with
+Start/Stop, the set point shown equal to what was sent, Get Status with details on request; and
+the shipped config's `joystick:` section (the seed's Z axis and XY+/XY-) with a scripted device.
+
+The simulated arm runs in-process in real time (the guard's heartbeat thread runs on the wall
+clock); every wait is bounded and polls for its condition."""
+
+from __future__ import annotations
+
+import asyncio
+import time
+from pathlib import Path
+
+import pytest
+from motion_helpers import JOG_CONFIG
+
+from sherpa_cli.bus.session import ArmSession
+from sherpa_cli.cli.jog_view import KEY_HELP, JogView, SetPointDialog
+from sherpa_cli.config import load_config
+from sherpa_cli.joints import units
+from sherpa_cli.ops import joystick
+from sherpa_cli.ops.joystick import ScriptedSource, run_joystick
+from sherpa_cli.ops.live_jog import LiveJog, resolve_axes
+from sherpa_cli.sim.arm import SimArm
+
+SHIPPED = Path(__file__).resolve().parent.parent / "configs" / "sherpa-arm.yaml"
+SIZE = (80, 24)
+
+
+def text_of(app, widget: str) -> str:
+    return str(app.screen_stack[0].query_one(widget).render())
+
+
+def on_screen(app, widget: str) -> bool:
+    region = app.screen_stack[0].query_one(widget).region
+    return region.height > 0 and region.y >= 0 and region.y + region.height <= SIZE[1]
+
+
+def motors_on(session):
+    with session.sim.lock:
+        return {name for name, d in session.sim.drives.items() if d.motor_on}
+
+
+async def until(pilot, cond, timeout: float = 10.0) -> bool:
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        if cond():
+            return True
+        await pilot.pause(0.05)
+    return cond()
+
+
+async def type_set_point(pilot, app, text: str) -> None:
+    await pilot.press("t")
+    assert await until(pilot, lambda: isinstance(app.screen, SetPointDialog))
+    await pilot.press(*text)
+    await pilot.press("enter")
+
+
+def test_every_joint_of_the_shipped_arm_is_reachable_at_80x24_with_the_key_help_visible(cli_windows):
+    cfg = load_config(SHIPPED)
+    cli_windows(True)  # short MO windows in the simulator and the session
+
+    async def scenario(session) -> list[str]:
+        problems = []
+        with LiveJog(session, resolve_axes(cfg, None)) as live:
+            app = JogView(live, tick_period=0.3)
+            async with app.run_test(size=SIZE) as pilot:
+                await pilot.pause(0.3)
+                for i, name in enumerate(app.names):
+                    if i:
+                        await pilot.press("down")
+                    listing = text_of(app, "#list")
+                    row = next((line for line in listing.splitlines() if line.startswith("▶ ")), "")
+                    if not row.startswith(f"▶ {name} "):
+                        problems.append(f"{name} not the marked row: {row!r}")
+                    if not text_of(app, "#detail").startswith(name):
+                        problems.append(f"{name}: the panel shows {text_of(app, '#detail')[:30]!r}")
+                    for w in ("#list", "#detail", "#status", "#keys"):
+                        if not on_screen(app, w):
+                            problems.append(f"{name}: {w} off screen")
+                    if max(len(line) for line in listing.splitlines()) > SIZE[0] - 2:
+                        problems.append(f"{name}: a list line is wider than the screen")
+                keys = text_of(app, "#keys")
+                if keys != KEY_HELP or "c calibrate" not in keys or "q quit" not in keys:
+                    problems.append(f"key help: {keys!r}")
+                await pilot.press("q")
+        return problems
+
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
+        assert asyncio.run(scenario(s)) == []
+        assert motors_on(s) == set()
+
+
+def test_typed_targets_start_stop_and_get_status_in_joint_units():
+    cfg = load_config(JOG_CONFIG)
+    cpr = cfg.joints["j2"].cpr
+
+    async def scenario(session) -> dict:
+        seen: dict = {}
+        with LiveJog(session, resolve_axes(cfg, ["j1", "j2", "diff"]), keepalive=30.0) as live:
+            app = JogView(live, tick_period=0.2)
+            async with app.run_test(size=SIZE) as pilot:
+                await pilot.pause(0.2)
+                await pilot.press("down")  # j2: absolute encoder, calibrated
+                # a typed position target in rad, then in deg; Enter starts
+                await type_set_point(pilot, app, "0.1")
+                seen["typed"] = app.typed["j2"]["position"]
+                await pilot.press("enter")
+                seen["at_rad"] = await until(pilot, lambda: "j2" not in live.running
+                                             and abs(live.state["j2"].counts - units.rad_to_counts(0.1, cpr)) <= 1)
+                await type_set_point(pilot, app, "-5deg")
+                await pilot.press("enter")
+                seen["at_deg"] = await until(pilot, lambda: "j2" not in live.running
+                                             and abs(live.state["j2"].counts - units.deg_to_counts(-5, cpr)) <= 1)
+                # a bad set point: one message in the dialog, which stays open; Esc leaves it unchanged
+                await pilot.press("t")
+                await until(pilot, lambda: isinstance(app.screen, SetPointDialog))
+                await pilot.press(*"fast", "enter")
+                seen["bad"] = (type(app.screen).__name__, str(app.screen.query_one("#error").render()))
+                await pilot.press("escape")
+                seen["after_bad"] = app.typed["j2"]["position"]
+                # velocity: typed in rad/s, Start runs it, the panel shows what was sent; Stop stops
+                await pilot.press("m")
+                await type_set_point(pilot, app, "0.2")
+                await pilot.press("enter")
+                seen["vel_running"] = dict(live.running["j2"].motors)
+                seen["vel_sent"] = app.sent("j2")
+                seen["vel_panel"] = text_of(app, "#detail")
+                await pilot.press("s")
+                seen["stopped"] = ("j2" in live.running, app.message)
+                # torque above the continuous limit: refused, nothing runs, the set point stays 0
+                await pilot.press("m")
+                await type_set_point(pilot, app, "5A")
+                await pilot.press("enter")
+                seen["torque"] = (dict(live.running), app.setpoint["j2"], app.message)
+                # a Σ joint: the set point shown is the joint's, the motors get half each (the old view
+                # showed "set 400 counts/s" while sending 200 to each motor)
+                await pilot.press("down")  # pitch
+                await pilot.press("m", "right")  # velocity, +0.1 rad/s
+                seen["sigma_motors"] = dict(live.running["pitch"].motors)
+                seen["sigma_sent"] = app.sent("pitch")
+                seen["sigma_setpoint"] = app.setpoint["pitch"]
+                seen["sigma_panel"] = text_of(app, "#detail")
+                await pilot.press("space")
+                # Get Status: OK, details on request
+                await pilot.press("g")
+                seen["status"] = (app.message, text_of(app, "#detail"))
+                await pilot.press("d")
+                seen["details"] = text_of(app, "#detail")
+                seen["keys_visible"] = on_screen(app, "#keys")
+                await pilot.press("q")
+            seen["report"] = live.report
+        return seen
+
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
+        seen = asyncio.run(scenario(s))
+    assert seen["typed"] == pytest.approx(units.counts_to_rad(units.rad_to_counts(0.1, cpr), cpr))
+    assert seen["at_rad"] and seen["at_deg"]
+    assert seen["bad"][0] == "SetPointDialog" and "set point" in seen["bad"][1] and "'fast'" in seen["bad"][1]
+    assert seen["after_bad"] == pytest.approx(units.counts_to_rad(units.deg_to_counts(-5, cpr), cpr))
+    jv = units.rad_per_s_to_counts_per_s(0.2, cpr)
+    assert seen["vel_running"] == {"elbow": jv}
+    assert seen["vel_sent"][0] == pytest.approx(units.counts_per_s_to_rad_per_s(jv, cpr))
+    assert f"running: {seen['vel_sent'][0]:+.4g} rad/s = elbow JV={jv}" in seen["vel_panel"]
+    assert seen["stopped"] == (False, "j2: stopped")
+    running, setpoint, message = seen["torque"]
+    assert running == {} and setpoint == 0.0 and "above the continuous limit" in message
+    a, b = seen["sigma_motors"].values()
+    sigma_cpr = cfg.joints["pitch"].cpr
+    assert seen["sigma_setpoint"] == pytest.approx(0.1)
+    assert seen["sigma_sent"][0] == pytest.approx(units.counts_per_s_to_rad_per_s(a + b, sigma_cpr))
+    assert abs(seen["sigma_sent"][0] - 0.1) < 2 * 2 * 3.1416 / sigma_cpr  # the joint's speed, to a count
+    assert f"left JV={a}, right JV={b}" in seen["sigma_panel"] and "rad/s" in seen["sigma_panel"]
+    assert seen["status"][0] == "pitch: status OK" and "status: OK" in seen["status"][1]
+    assert "SR 0x" in seen["details"] and "MF 0x" in seen["details"] and "left:" in seen["details"]
+    assert seen["keys_visible"]
+    assert all(d.stopped_by != "not stopped" for d in seen["report"].drives)
+
+
+def test_the_shipped_joystick_section_is_the_seeds_mapping_and_drives_it(cli_windows):
+    """configs/sherpa-arm.yaml's `joystick:`: Z -> the lower rotation; X/Y -> the shoulder pair as
+    XY+ (motor a at X+Y) and XY- (motor b at X-Y); a scripted device in place of the stick."""
+    cfg = load_config(SHIPPED)
+    cli_windows(True)
+    j = cfg.joystick
+    maps = {(m.axis, m.joint) if m.joint else (m.x, m.y, m.pair, m.mix) for m in j.axes}
+    assert maps == {("ABS_Z", "shoulder_yaw"), ("ABS_X", "ABS_Y", "shoulder_diff", "xy")}
+    assert j.deadman == "BTN_TRIGGER" and j.device is None  # the seed's device is unknown: commented out
+
+    def px(session, drive):
+        with session.sim.lock:
+            return session.sim.drives[drive].motor.counts
+
+    def run(session, x: float, y: float, z: float) -> dict[str, int]:
+        start = {d: px(session, d) for d in ("shoulder_1a", "shoulder_2a", "shoulder_2b")}
+        axes = resolve_axes(cfg, joystick.joints_of(cfg, j))
+        script = [(0.0, "BTN_TRIGGER", 1.0), (0.0, "ABS_X", x), (0.0, "ABS_Y", y), (0.0, "ABS_Z", z),
+                  (2.0, "BTN_TRIGGER", 0.0)]
+        with LiveJog(session, axes, keepalive=0.3) as live:
+            run_joystick(live, cfg, j, ScriptedSource(script, time.monotonic), duration=2.2)
+        return {d: px(session, d) - v for d, v in start.items()}
+
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
+        moved = run(s, x=1.0, y=0.0, z=1.0)  # X alone: XY+ = XY-, both motors forward (Σ); Z: the yaw
+        assert moved["shoulder_1a"] > 20, moved
+        assert moved["shoulder_2a"] > 20 and abs(moved["shoulder_2a"] - moved["shoulder_2b"]) < 0.2 * moved[
+            "shoulder_2a"], moved
+        moved = run(s, x=0.0, y=1.0, z=0.0)  # Y alone: motor a forward, motor b backward (Δ)
+        assert moved["shoulder_1a"] == 0, moved
+        assert moved["shoulder_2a"] > 20 and moved["shoulder_2b"] < -20, moved
+        assert motors_on(s) == set()
