@@ -35,6 +35,7 @@ from sherpa_cli.elmo.faults import decode_sr, describe_mf
 from sherpa_cli.elmo.protocol import UM_TORQUE
 from sherpa_cli.errors import CommunicationError, ExitCode, SafetyError, SherpaError, UsageError
 from sherpa_cli.motion.deadman import COMM_ERROR, CONSUMER, LOSS_ACTION, OBJECT_NAMES, SIZES, HostHeartbeat
+from sherpa_cli.motion.drive_watch import DriveWatch, DriveWatchError
 from sherpa_cli.motion.lock import DriveLock, HostIdLock, drive_label
 from sherpa_cli.motion.report import DriveStop, GuardReport
 from sherpa_cli.motion.settings import PROFILE_KEYS, MotionSettings
@@ -107,6 +108,10 @@ class MotionGuard:
         # the dead-man id of this command alone, taken on entry (motion/lock.py HostIdLock)
         self._host_lock = HostIdLock(buses, settings.host_ids)
         self.host_id = settings.host_node_id
+        # the watch of the drives: error EMCYs, NMT commands of other nodes, the drives' heartbeats
+        self._watch = DriveWatch(lambda bus: session.links[bus].network, warning_codes=settings.emcy_warning_codes,
+                                 min_silence=3 * settings.poll_interval)
+        self._next_deadman_check = 0.0
         # signals
         self._signal: str | None = None
         self._exiting = False
@@ -128,6 +133,10 @@ class MotionGuard:
             for d in self._drives.values():
                 self._arm(d)
             self._beat_now()
+            for d in self._drives.values():
+                self._watch_drive(d)
+            self._watch.start()
+            self._next_deadman_check = self._clock() + self.settings.deadman_check_interval
             self._pulse()
         except BaseException:
             self._exiting = True
@@ -186,6 +195,7 @@ class MotionGuard:
                 self._event(f"{c.label}: MO=0 to change UM {d.um} -> {unit_mode}")
                 c.motor_off()
                 d.mo = 0
+                self._watch.set_moving(ref.bus, ref.node, False)
             if d.um_changed_from is None:
                 d.um_changed_from = d.um  # recorded first: a write that fails half-way is still put back
             c.set("UM", 0, unit_mode)
@@ -195,6 +205,7 @@ class MotionGuard:
                 c.set("TC", 0, 0.0)  # MO=1 in UM=1 applies TC at once: never an old torque command
             self._pulse(extra=bound)
             d.switched_on = True  # before the request: a lost confirmation must still end in MO=0
+            self._watch.set_moving(ref.bus, ref.node, True)
             c.motor_on()
             d.mo = 1
             self._event(f"{c.label}: motor on (UM={unit_mode})")
@@ -209,7 +220,42 @@ class MotionGuard:
                                hint="the drives stop on their own within the consumer time")
         if self._heartbeat.given_up is not None:
             raise DeadManError(f"host heartbeat stopped: {self._heartbeat.given_up}")
+        self._raise_if_tripped()
         self._pulse()
+        if self._clock() >= self._next_deadman_check:
+            self._check_deadman()
+
+    def _raise_if_tripped(self) -> None:
+        """The drive watch's reason to stop, raised on the command's thread (motion/drive_watch.py)."""
+        if self._exiting:
+            return
+        error = self._watch.poll()
+        if error is not None:
+            raise error
+
+    def _check_deadman(self) -> None:
+        """Read 0x1016:1 of every drive whose motor is on, at ``deadman_check_interval``: another node
+        that changed it (disarmed the dead-man, or pointed it elsewhere) stops the command."""
+        self._next_deadman_check = self._clock() + self.settings.deadman_check_interval
+        expected = self.settings.consumer_entry_for(self.host_id)
+        for d in list(self._drives.values()):
+            if not d.mo or d.client.silent:
+                continue
+            self._pulse()
+            try:
+                value = self._sdo_read(d, CONSUMER)
+            except SherpaError:
+                self._raise_if_tripped()  # the watch knows why (a silent drive, NMT Stopped): say that
+                raise
+            if value != expected:
+                raise DriveWatchError(
+                    f"{d.client.label}: its dead-man entry 0x1016:1 reads 0x{value:08X}, not the 0x{expected:08X} "
+                    "this command wrote: another node changed it; stopping every drive of the command",
+                    hint="find which tool or node writes the drive's object dictionary (SDO) meanwhile")
+
+    def _watch_drive(self, d: _Drive) -> None:
+        self._watch.add(d.ref.bus, d.ref.node, d.client.label, d.client)
+        self._watch.set_moving(d.ref.bus, d.ref.node, bool(d.mo))
 
     def keep_alive(self, seconds: float) -> None:
         """:meth:`check`, and a sign of life that lasts ``seconds`` more: for a caller that lets another
@@ -237,13 +283,18 @@ class MotionGuard:
         # patient for the settle window only: one request's attempts already span it, so a drive that
         # stays silent costs one request, not the whole mo_confirm_timeout (issue 21 item 8)
         patience = c.settings.mo_settle
+
+        def on_try() -> None:
+            self._raise_if_tripped()
+            self._pulse()
+
         try:
             if index:
-                self._pulse()
+                on_try()
                 return c.get(letters, index)
             # a sign of life per attempt, not one up-front extension for the whole patience
             return ask_patiently(c, letters, self._clock, self._sleep, patience, self.settings.poll_interval,
-                                  on_try=self._pulse)
+                                  on_try=on_try)
         except CommunicationError:
             if c.silent:
                 self.stop_others(ref)
@@ -272,6 +323,7 @@ class MotionGuard:
         bad: list[str] = []
         for ref in refs:
             d = self._drive(ref)
+            self._watch.remove(ref.bus, ref.node)  # its own stop must not be cut short
             try:
                 r = self._exit_drive(d)
             except Exception as exc:  # noqa: BLE001 - reported; the drive stays guarded and SafetyError names it
@@ -280,6 +332,7 @@ class MotionGuard:
             out.append(r)
             if r.problems:
                 bad += [f"{r.drive}: {p}" for p in r.problems]
+                self._watch_drive(d)
                 continue
             del self._drives[(ref.bus, ref.node)]
             self._released[(ref.bus, ref.node)] = r
@@ -303,6 +356,7 @@ class MotionGuard:
                 self._pulse(extra=self._setup_bound())
                 self._inspect(ref)
                 self._arm(self._drives[key])
+                self._watch_drive(self._drives[key])
             except BaseException:
                 d = self._drives.pop(key, None)
                 try:
@@ -434,6 +488,7 @@ class MotionGuard:
 
     def _exit_all(self, reason: str, entering: bool = False) -> None:
         self._exiting = True
+        self._watch.stop()  # first: nothing may cut the exit's own requests short
         self.report.reason = reason
         try:
             self._stop_pass(entering)

@@ -6,6 +6,7 @@ from collections.abc import Iterable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
+from sherpa_cli.motion.drive_watch import DEFAULT_EMCY_WARNING_CODES
 from sherpa_cli.motion.stopping import recovery_speed
 
 if TYPE_CHECKING:
@@ -33,6 +34,8 @@ class MotionSettings:
     recovery_fallback_speed: int = 100  # counts/s where no joint has a limit
     poll_interval: float = 0.01  # s between polls while waiting (the bus's poll_interval_ms)
     request_bound: float = 0.2  # s one interpreter request can take at worst (timeout x attempts)
+    emcy_warning_codes: tuple[int, ...] = DEFAULT_EMCY_WARNING_CODES  # EMCYs that do not stop a motion
+    deadman_check_interval: float = 0.5  # s between reads of a moving drive's 0x1016:1
 
     @property
     def heartbeat_period(self) -> float:
@@ -64,7 +67,8 @@ class MotionSettings:
                    liveness_timeout=m.liveness_timeout,
                    velocity_unit_mode=m.velocity_unit_mode, recovery_speed=m.recovery_speed,
                    recovery_fallback_speed=m.recovery_fallback_speed, poll_interval=poll_ms / 1000,
-                   request_bound=p.reply_timeout * (1 + p.retries))
+                   request_bound=p.reply_timeout * (1 + p.retries),
+                   emcy_warning_codes=tuple(m.emcy_warning_codes), deadman_check_interval=m.deadman_check_interval)
 
 
     def recovery_speed_for(self, vel_limits: Iterable[int | None]) -> int:
