@@ -10,7 +10,8 @@ import time
 
 import can
 import pytest
-from test_motion_crossprocess import DRIVE, NODE, arm, finish, motor_offs, start_jog  # noqa: F401 - arm: fixture
+from test_motion_crossprocess import DRIVE, NODE, finish, motor_offs, start_jog
+from test_motion_crossprocess import arm as arm
 
 from sherpa_cli.bus.busmap import parse_bus_map
 

@@ -31,6 +31,7 @@ from dataclasses import dataclass, field
 from types import FrameType, TracebackType
 from typing import TYPE_CHECKING, Any, Literal
 
+from sherpa_cli.bus import journal
 from sherpa_cli.elmo.faults import decode_sr, describe_mf
 from sherpa_cli.elmo.protocol import UM_TORQUE
 from sherpa_cli.errors import CommunicationError, ExitCode, SafetyError, SherpaError, UsageError
@@ -48,6 +49,11 @@ if TYPE_CHECKING:
 
 log = logging.getLogger(__name__)
 MS_PROFILER_ACTIVE = 2
+JOURNAL_OWNER = "motion command"
+
+
+def _size(key: tuple[int, int]) -> int:
+    return struct.calcsize(SIZES[key])
 
 
 class MotionStopped(SherpaError):
@@ -71,6 +77,7 @@ class _Drive:
     switched_on: bool = False
     um_changed_from: int | None = None
     profile_before: dict[str, int] = field(default_factory=dict)  # SP/AC/DC found at entry
+    put_back: set[str] = field(default_factory=set)  # journal step names put back (or never changed)
     od_before: dict[tuple[int, int], int] = field(default_factory=dict)  # the dead-man objects it wrote
 
 
@@ -127,6 +134,8 @@ class MotionGuard:
             self.host_id = self._host_lock.acquire()  # before anything is armed: our own heartbeat id
             self._heartbeat.use_host(self.host_id)
             self._pulse(extra=self._setup_bound())
+            for ref in self.refs:
+                self._leftovers(ref)
             for ref in self.refs:
                 self._inspect(ref)
             self._start_heartbeat()
@@ -198,6 +207,7 @@ class MotionGuard:
                 self._watch.set_moving(ref.bus, ref.node, False)
             if d.um_changed_from is None:
                 d.um_changed_from = d.um  # recorded first: a write that fails half-way is still put back
+                journal.note(ref, journal.interp(JOURNAL_OWNER, "UM", 0, d.um))
             c.set("UM", 0, unit_mode)
             d.um = unit_mode
         if not d.mo:
@@ -402,6 +412,25 @@ class MotionGuard:
         except Exception as exc:  # noqa: BLE001 - logged; the kernel frees it at exit anyway
             log.warning("dead-man host id %s not released: %s", self.host_id, exc)
 
+    def _leftovers(self, ref: DriveRef) -> None:
+        """What a killed command left on the drive (the journal): refused, or put back with --recover."""
+        steps = journal.leftover(ref)
+        if not steps:
+            return
+        text = journal.leftover_text(ref, steps)
+        if not journal.auto_recover():
+            raise journal.LeftoverError(text + "; refusing to move it",
+                                        hint=f"`sherpa recover {ref.name}` shows it, `--apply` puts it back; or "
+                                             "run this command as `sherpa --recover ...`")
+        res = journal.restore(self.session, ref, apply=True)
+        self._event(text)
+        if res.tripped:
+            self._event(f"{drive_label(ref)}: {res.tripped}")
+        self._event(f"{drive_label(ref)}: put back: {', '.join(res.done or []) or 'nothing'}")
+        if res.problems:
+            raise journal.LeftoverError(f"{drive_label(ref)}: not recovered: {'; '.join(res.problems)}",
+                                        hint=f"`sherpa recover {ref.name} --apply` tries again")
+
     def _setup_bound(self) -> float:
         return 12 * self.settings.request_bound * max(1, len(self.refs)) + 3.0
 
@@ -422,6 +451,8 @@ class MotionGuard:
         # motion commands scale SP/AC/DC (pair profiles, limit recovery): RAM changes put back on
         # exit, so a later SV never flashes a jog's speed
         d.profile_before = {key: int(client.get(key)) for key in PROFILE_KEYS}
+        # on disk before anything changes them (the journal, issue 22 item 3; the dead-man objects follow)
+        journal.note(ref, *(journal.interp(JOURNAL_OWNER, k, 0, v) for k, v in d.profile_before.items()))
 
     def _sdo_read(self, d: _Drive, key: tuple[int, int]) -> int:
         """An SDO upload through the session's client of the drive (SdoError names drive and object)."""
@@ -449,12 +480,14 @@ class MotionGuard:
                 log.warning("%s", msg)
                 self._event(msg)
                 d.od_before[key] = 0
+                journal.note(d.ref, journal.sdo(JOURNAL_OWNER, key[0], key[1], _size(key), 0))
                 if before != value:
                     self._sdo_write(d, key, value)
                 continue
             if before == value:
                 continue
             d.od_before[key] = before  # recorded first: a write that fails half-way is still put back
+            journal.note(d.ref, journal.sdo(JOURNAL_OWNER, key[0], key[1], _size(key), before))
             self._sdo_write(d, key, value)
         self._event(f"{d.client.label}: dead-man armed: host {self.host_id}, {s.consumer_time_ms} ms, "
                     f"0x6007={s.loss_action}")
@@ -543,6 +576,7 @@ class MotionGuard:
         if not stop:
             r.stopped_by = "not moved by this guard"
             self._restore_dead_man(d, r, stop_failed=False)
+            journal.forget(d.ref, JOURNAL_OWNER, d.put_back | set(PROFILE_KEYS))  # the profile was never changed
             self._event(r.line())
             return r
         try:
@@ -588,6 +622,7 @@ class MotionGuard:
                     self._step()
                     c.set("UM", 0, d.um_changed_from)
                     r.restored.append(f"UM={d.um_changed_from}")
+                    d.put_back.add("UM")
                 except Exception as exc:  # noqa: BLE001 - reported in the drive's stop report
                     r.problems.append(f"UM={d.um_changed_from} not restored: {why(exc)}")
             else:
@@ -595,6 +630,10 @@ class MotionGuard:
                 r.problems.append(f"UM={d.um_changed_from} not restored: the motor is not confirmed off")
         self._restore_profile(d, r)
         self._restore_dead_man(d, r, stop_failed)
+        if self.keep:  # left as the motion left them on purpose: not a leftover of a killed command
+            journal.forget(d.ref, JOURNAL_OWNER)
+        else:
+            journal.forget(d.ref, JOURNAL_OWNER, d.put_back)
         self._event(r.line())
         return r
 
@@ -608,6 +647,7 @@ class MotionGuard:
                     self._step()
                     d.client.set(key, 0, before)
                     r.restored.append(f"{key}={before}")
+                d.put_back.add(key)
             except Exception as exc:  # noqa: BLE001 - reported in the drive's stop report
                 r.problems.append(f"{key}={before} not restored: {why(exc)}")
 
@@ -627,6 +667,7 @@ class MotionGuard:
                 self._step()
                 self._sdo_write(d, key, d.od_before[key])
                 r.restored.append(name)
+                d.put_back.add(name)
             except Exception as exc:  # noqa: BLE001 - reported in the drive's stop report
                 r.problems.append(f"restore {name}: {why(exc)}")
 
