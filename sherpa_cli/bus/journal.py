@@ -157,8 +157,10 @@ def forget(ref: DriveRef, owner: str, names: set[str] | None = None) -> None:
 
 
 def _alive(pid: int) -> bool:
-    if pid <= 0 or pid == os.getpid():
+    if pid <= 0:
         return False
+    if pid == os.getpid():  # this process's own change (a guard nested in the interactive view)
+        return True
     try:
         os.kill(pid, 0)
     except ProcessLookupError:

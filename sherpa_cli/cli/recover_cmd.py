@@ -5,12 +5,11 @@ from __future__ import annotations
 import typer
 
 from sherpa_cli.cli.context import state
-from sherpa_cli.cli.options import Targets
+from sherpa_cli.cli.options import ApplyRecover, Targets
 from sherpa_cli.errors import SafetyError
 
 
-def recover(ctx: typer.Context, targets: Targets = None,
-            apply: bool = typer.Option(False, "--apply", help="Put it back (default: only show it).")) -> None:
+def recover(ctx: typer.Context, targets: Targets = None, apply: ApplyRecover = False) -> None:
     """Show, and with --apply put back, what a command that did not finish left on the drives.
 
     A moving command or a recording notes every temporary change (UM, SP/AC/DC, the dead-man objects
