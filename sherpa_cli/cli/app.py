@@ -82,12 +82,17 @@ def root(
         None, "--bus-map", metavar="BUS=INTERFACE:CHANNEL",
         help="Point configured buses elsewhere, e.g. can0=socketcan:vcan0 or can0=remote:127.0.0.1:54701 "
         "(repeat or comma-separate; default $SHERPA_BUS_MAP). `sherpa sim --serve` prints the one to use."),
+    recover: bool = typer.Option(False, "--recover", help="A motion command puts back what a killed command "
+                                 "left on its drives (the journal, `sherpa recover`) instead of refusing."),
     version: bool = typer.Option(False, "--version", callback=_version_callback, is_eager=True,
                                  help="Print the version and exit."),
     allow_user_program: bool = typer.Option(
         False, "--allow-user-program", help="Let moving commands move a drive whose user program runs (PS=1); "
         "without it they refuse (SV is refused either way)."),
 ) -> None:
+    from sherpa_cli.bus import journal
+
+    journal.set_auto_recover(recover)
     config_path, looked = (config, ()) if config is not None else default_config_path()
     ctx.obj = context.CURRENT = AppState.create(
         config_path=config_path,
@@ -120,6 +125,7 @@ def _register() -> None:
         params_cmd,
         program_cmd,
         recipe_cmd,
+        recover_cmd,
         scan_cmd,
         sim_cmd,
         stop_cmd,
@@ -131,6 +137,7 @@ def _register() -> None:
     app.command("cmd")(cmd_cmd.cmd)
     app.command("jog")(jog_cmd.jog)
     app.command("stop")(stop_cmd.stop)
+    app.command("recover")(recover_cmd.recover)
     app.command("home")(home_cmd.home)
     app.command("dump-params")(params_cmd.dump_params)
     app.command("program-limits")(program_cmd.program_limits)

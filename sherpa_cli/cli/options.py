@@ -47,6 +47,9 @@ VerifyFlash = Annotated[bool, typer.Option(
     "boot-up and read every target back. The reset clears the position counter and any homing mark. With --save "
     "only drives whose flash differs are written and saved, then proven again.")]
 
+ApplyRecover = Annotated[bool, typer.Option(
+    "--apply", help="Put back what a killed command left (NMT start, the journal's values, a tripped dead-man's MF "
+    "cleared); without it only shown.")]
 ApplyMotion = Annotated[bool, typer.Option(
     "--apply", help="Move the motor; without it only show what would be sent (nothing is written).")]
 YesMotion = Annotated[bool, typer.Option(

@@ -307,6 +307,11 @@ class MotionConfig:
     # diffdrive move records both motors by TPDO on SYNC (log/record.py) at this rate (Hz, capped to
     # what the bus budget allows); --poll or a recorder that cannot be set up: PX polled instead
     pair_record_rate: float = 500.0
+    # the guard's watch of its drives (docs/motion.md): EMCY codes that are warnings (counted, the
+    # motion goes on); any other EMCY from a drive whose motor is on stops the command
+    emcy_warning_codes: tuple[int, ...] = (0x6300, 0x8110, 0x8140, 0x8200, 0x8210)
+    # s between two reads of a moving drive's dead-man entry 0x1016:1 (another node may disarm it)
+    deadman_check_interval: float = 0.5
 
     @property
     def heartbeat_period_s(self) -> float:

@@ -128,10 +128,13 @@ def parse_motion(top: Section, locs: Locs) -> MotionConfig:
     register(locs, ("motion",), sec)
     d = MotionConfig()
     values = {f.name: (sec.str if f.type == "str" else sec.num if f.type == "float" else sec.int)(
-        f.name, getattr(d, f.name)) for f in dataclasses.fields(MotionConfig) if f.name != "host_id_pool"}
+        f.name, getattr(d, f.name)) for f in dataclasses.fields(MotionConfig) if f.name not in ("host_id_pool", "emcy_warning_codes")}
     pool = sec.get("host_id_pool")
     if pool is not None:
         values["host_id_pool"] = tuple(as_int(n) for n in as_seq(pool, "a list of node ids (1..127)"))
+    codes = sec.get("emcy_warning_codes")
+    if codes is not None:
+        values["emcy_warning_codes"] = tuple(as_int(n) for n in as_seq(codes, "a list of EMCY codes (0..0xFFFF)"))
     return MotionConfig(**values)
 
 

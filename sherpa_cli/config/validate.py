@@ -169,6 +169,12 @@ def _check_motion(cfg: ArmConfig, locs: Locs, r: _Report) -> None:
     for key in ("standstill_timeout", "liveness_timeout"):
         if not getattr(m, key) > 0:
             r.error(where(key), f"{key} {getattr(m, key)} s must be > 0")
+    for code in m.emcy_warning_codes:
+        if not 0 <= code <= 0xFFFF:
+            r.error(where("emcy_warning_codes"), f"emcy_warning_codes: {code} out of range 0..0xFFFF (an EMCY code)")
+    if not (math.isfinite(m.deadman_check_interval) and 0.05 <= m.deadman_check_interval <= 10):
+        r.error(where("deadman_check_interval"), f"deadman_check_interval {m.deadman_check_interval} s must be "
+                "0.05..10")
     if not 0 <= m.standstill_velocity <= 1000:
         r.error(where("standstill_velocity"), f"standstill_velocity {m.standstill_velocity} counts/s must be 0..1000")
     from sherpa_cli.config.model import PAIR_START_METHODS

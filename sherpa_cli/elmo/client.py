@@ -24,7 +24,14 @@ from sherpa_cli.elmo.commands import COMMANDS
 from sherpa_cli.elmo.faults import Emcy, decode_emcy, ec_text
 from sherpa_cli.elmo.protocol import EMCY_BASE, NMT_ID, NMT_START
 from sherpa_cli.elmo.transport import Transport
-from sherpa_cli.errors import CodecError, CommunicationError, DriveRefusedError, DriveTimeoutError, ProtocolError
+from sherpa_cli.errors import (
+    CodecError,
+    CommunicationError,
+    DriveRefusedError,
+    DriveTimeoutError,
+    ProtocolError,
+    SherpaError,
+)
 
 log = logging.getLogger(__name__)
 
@@ -74,7 +81,7 @@ class _Pending:
         self.arrived = threading.Lock()
         self.arrived.acquire()
         self.reply: Reply | None = None
-        self.error: ProtocolError | None = None  # the drive answered with a frame we cannot read
+        self.error: SherpaError | None = None  # a frame we cannot read, or abort_pending's reason
 
 
 @functools.lru_cache(maxsize=1024)
@@ -436,6 +443,23 @@ class DriveClient:
             callbacks = list(self._emcy_callbacks)
         for callback in callbacks:
             callback(emcy)
+
+    def remove_emcy(self, callback: Callable[[Emcy], None]) -> None:
+        """Undo :meth:`on_emcy` (the motion guard's drive watch, at its exit)."""
+        with self._state:
+            if callback in self._emcy_callbacks:
+                self._emcy_callbacks.remove(callback)
+
+    def abort_pending(self, error: SherpaError) -> None:
+        """End the request a caller is waiting for now, raising ``error`` there (the motion guard's
+        drive watch: a drive that left Operational is deaf, and its command must not wait out the
+        reply timeouts). No request pending: nothing happens. Sends nothing."""
+        with self._state:
+            pending = self._pending
+            if pending is None or pending.reply is not None or pending.error is not None:
+                return
+            pending.error = error
+        pending.arrived.release()
 
     def _emcy_seen(self) -> int:
         with self._state:

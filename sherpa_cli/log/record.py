@@ -26,6 +26,7 @@ from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, Protocol
 
+from sherpa_cli.bus import journal
 from sherpa_cli.bus.targets import DriveRef
 from sherpa_cli.config.model import ArmConfig
 from sherpa_cli.devices import encoder
@@ -318,6 +319,8 @@ class Recorder:
                         if deaf or attempt == RESTORE_ATTEMPTS - 1:
                             failures.append(exc)
                             break
+            if not failures:
+                journal.forget(d.ref, "log record")
             d.saved.clear()
         for track in self.encoders:
             try:
@@ -379,6 +382,10 @@ class Recorder:
         old_entries = [read(mapping, sub, 4) for sub in range(1, len(entries) + 1)]
         # restored in reverse: PDO off, count 0, entries, count, transmission type, COB-ID last
         d.saved.append((comm, 1, 4, old_cob))
+        journal.note(d.ref, *(journal.sdo("log record", i, s, n, v) for i, s, n, v in  # issue 22 item 3
+                              [(comm, 1, 4, old_cob), (comm, 2, 1, old_type), (mapping, 0, 1, old_count),
+                               *((mapping, sub, 4, v) for sub, v in enumerate(old_entries, 1)),
+                               (mapping, 0, 1, 0), (comm, 1, 4, old_cob | 0x80000000)]))
         write(comm, 1, 4, old_cob | 0x80000000)  # PDO off while it is changed (CiA 301)
         d.saved.append((comm, 2, 1, old_type))
         d.saved.append((mapping, 0, 1, old_count))

@@ -31,11 +31,13 @@ from dataclasses import dataclass, field
 from types import FrameType, TracebackType
 from typing import TYPE_CHECKING, Any, Literal
 
+from sherpa_cli.bus import journal
 from sherpa_cli.bus.health import preflight
 from sherpa_cli.elmo.faults import decode_sr, describe_mf
 from sherpa_cli.elmo.protocol import UM_TORQUE
 from sherpa_cli.errors import CommunicationError, ExitCode, SafetyError, SherpaError, UsageError
 from sherpa_cli.motion.deadman import COMM_ERROR, CONSUMER, LOSS_ACTION, OBJECT_NAMES, SIZES, HostHeartbeat
+from sherpa_cli.motion.drive_watch import DriveWatch, DriveWatchError
 from sherpa_cli.motion.lock import DriveLock, HostIdLock, drive_label
 from sherpa_cli.motion.report import DriveStop, GuardReport
 from sherpa_cli.motion.settings import PROFILE_KEYS, MotionSettings
@@ -48,6 +50,11 @@ if TYPE_CHECKING:
 
 log = logging.getLogger(__name__)
 MS_PROFILER_ACTIVE = 2
+JOURNAL_OWNER = "motion command"
+
+
+def _size(key: tuple[int, int]) -> int:
+    return struct.calcsize(SIZES[key])
 
 
 class MotionStopped(SherpaError):
@@ -71,6 +78,7 @@ class _Drive:
     switched_on: bool = False
     um_changed_from: int | None = None
     profile_before: dict[str, int] = field(default_factory=dict)  # SP/AC/DC found at entry
+    put_back: set[str] = field(default_factory=set)  # journal step names put back (or never changed)
     od_before: dict[tuple[int, int], int] = field(default_factory=dict)  # the dead-man objects it wrote
 
 
@@ -108,6 +116,10 @@ class MotionGuard:
         # the dead-man id of this command alone, taken on entry (motion/lock.py HostIdLock)
         self._host_lock = HostIdLock(buses, settings.host_ids)
         self.host_id = settings.host_node_id
+        # the watch of the drives: error EMCYs, NMT commands of other nodes, the drives' heartbeats
+        self._watch = DriveWatch(lambda bus: session.links[bus].network, warning_codes=settings.emcy_warning_codes,
+                                 min_silence=3 * settings.poll_interval)
+        self._next_deadman_check = 0.0
         # signals
         self._signal: str | None = None
         self._exiting = False
@@ -125,11 +137,17 @@ class MotionGuard:
             self._heartbeat.use_host(self.host_id)
             self._pulse(extra=self._setup_bound())
             for ref in self.refs:
+                self._leftovers(ref)
+            for ref in self.refs:
                 self._inspect(ref)
             self._start_heartbeat()
             for d in self._drives.values():
                 self._arm(d)
             self._beat_now()
+            for d in self._drives.values():
+                self._watch_drive(d)
+            self._watch.start()
+            self._next_deadman_check = self._clock() + self.settings.deadman_check_interval
             self._pulse()
         except BaseException:
             self._exiting = True
@@ -188,8 +206,10 @@ class MotionGuard:
                 self._event(f"{c.label}: MO=0 to change UM {d.um} -> {unit_mode}")
                 c.motor_off()
                 d.mo = 0
+                self._watch.set_moving(ref.bus, ref.node, False)
             if d.um_changed_from is None:
                 d.um_changed_from = d.um  # recorded first: a write that fails half-way is still put back
+                journal.note(ref, journal.interp(JOURNAL_OWNER, "UM", 0, d.um))
             c.set("UM", 0, unit_mode)
             d.um = unit_mode
         if not d.mo:
@@ -197,6 +217,7 @@ class MotionGuard:
                 c.set("TC", 0, 0.0)  # MO=1 in UM=1 applies TC at once: never an old torque command
             self._pulse(extra=bound)
             d.switched_on = True  # before the request: a lost confirmation must still end in MO=0
+            self._watch.set_moving(ref.bus, ref.node, True)
             c.motor_on()
             d.mo = 1
             self._event(f"{c.label}: motor on (UM={unit_mode})")
@@ -211,7 +232,42 @@ class MotionGuard:
                                hint="the drives stop on their own within the consumer time")
         if self._heartbeat.given_up is not None:
             raise DeadManError(f"host heartbeat stopped: {self._heartbeat.given_up}")
+        self._raise_if_tripped()
         self._pulse()
+        if self._clock() >= self._next_deadman_check:
+            self._check_deadman()
+
+    def _raise_if_tripped(self) -> None:
+        """The drive watch's reason to stop, raised on the command's thread (motion/drive_watch.py)."""
+        if self._exiting:
+            return
+        error = self._watch.poll()
+        if error is not None:
+            raise error
+
+    def _check_deadman(self) -> None:
+        """Read 0x1016:1 of every drive whose motor is on, at ``deadman_check_interval``: another node
+        that changed it (disarmed the dead-man, or pointed it elsewhere) stops the command."""
+        self._next_deadman_check = self._clock() + self.settings.deadman_check_interval
+        expected = self.settings.consumer_entry_for(self.host_id)
+        for d in list(self._drives.values()):
+            if not d.mo or d.client.silent:
+                continue
+            self._pulse()
+            try:
+                value = self._sdo_read(d, CONSUMER)
+            except SherpaError:
+                self._raise_if_tripped()  # the watch knows why (a silent drive, NMT Stopped): say that
+                raise
+            if value != expected:
+                raise DriveWatchError(
+                    f"{d.client.label}: its dead-man entry 0x1016:1 reads 0x{value:08X}, not the 0x{expected:08X} "
+                    "this command wrote: another node changed it; stopping every drive of the command",
+                    hint="find which tool or node writes the drive's object dictionary (SDO) meanwhile")
+
+    def _watch_drive(self, d: _Drive) -> None:
+        self._watch.add(d.ref.bus, d.ref.node, d.client.label, d.client)
+        self._watch.set_moving(d.ref.bus, d.ref.node, bool(d.mo))
 
     def keep_alive(self, seconds: float) -> None:
         """:meth:`check`, and a sign of life that lasts ``seconds`` more: for a caller that lets another
@@ -239,13 +295,18 @@ class MotionGuard:
         # patient for the settle window only: one request's attempts already span it, so a drive that
         # stays silent costs one request, not the whole mo_confirm_timeout (issue 21 item 8)
         patience = c.settings.mo_settle
+
+        def on_try() -> None:
+            self._raise_if_tripped()
+            self._pulse()
+
         try:
             if index:
-                self._pulse()
+                on_try()
                 return c.get(letters, index)
             # a sign of life per attempt, not one up-front extension for the whole patience
             return ask_patiently(c, letters, self._clock, self._sleep, patience, self.settings.poll_interval,
-                                  on_try=self._pulse)
+                                  on_try=on_try)
         except CommunicationError:
             if c.silent:
                 self.stop_others(ref)
@@ -274,6 +335,7 @@ class MotionGuard:
         bad: list[str] = []
         for ref in refs:
             d = self._drive(ref)
+            self._watch.remove(ref.bus, ref.node)  # its own stop must not be cut short
             try:
                 r = self._exit_drive(d)
             except Exception as exc:  # noqa: BLE001 - reported; the drive stays guarded and SafetyError names it
@@ -282,6 +344,7 @@ class MotionGuard:
             out.append(r)
             if r.problems:
                 bad += [f"{r.drive}: {p}" for p in r.problems]
+                self._watch_drive(d)
                 continue
             del self._drives[(ref.bus, ref.node)]
             self._released[(ref.bus, ref.node)] = r
@@ -305,6 +368,7 @@ class MotionGuard:
                 self._pulse(extra=self._setup_bound())
                 self._inspect(ref)
                 self._arm(self._drives[key])
+                self._watch_drive(self._drives[key])
             except BaseException:
                 d = self._drives.pop(key, None)
                 try:
@@ -350,6 +414,25 @@ class MotionGuard:
         except Exception as exc:  # noqa: BLE001 - logged; the kernel frees it at exit anyway
             log.warning("dead-man host id %s not released: %s", self.host_id, exc)
 
+    def _leftovers(self, ref: DriveRef) -> None:
+        """What a killed command left on the drive (the journal): refused, or put back with --recover."""
+        steps = journal.leftover(ref)
+        if not steps:
+            return
+        text = journal.leftover_text(ref, steps)
+        if not journal.auto_recover():
+            raise journal.LeftoverError(text + "; refusing to move it",
+                                        hint=f"`sherpa recover {ref.name}` shows it, `--apply` puts it back; or "
+                                             "run this command as `sherpa --recover ...`")
+        res = journal.restore(self.session, ref, apply=True)
+        self._event(text)
+        if res.tripped:
+            self._event(f"{drive_label(ref)}: {res.tripped}")
+        self._event(f"{drive_label(ref)}: put back: {', '.join(res.done or []) or 'nothing'}")
+        if res.problems:
+            raise journal.LeftoverError(f"{drive_label(ref)}: not recovered: {'; '.join(res.problems)}",
+                                        hint=f"`sherpa recover {ref.name} --apply` tries again")
+
     def _setup_bound(self) -> float:
         return 12 * self.settings.request_bound * max(1, len(self.refs)) + 3.0
 
@@ -370,6 +453,8 @@ class MotionGuard:
         # motion commands scale SP/AC/DC (pair profiles, limit recovery): RAM changes put back on
         # exit, so a later SV never flashes a jog's speed
         d.profile_before = {key: int(client.get(key)) for key in PROFILE_KEYS}
+        # on disk before anything changes them (the journal, issue 22 item 3; the dead-man objects follow)
+        journal.note(ref, *(journal.interp(JOURNAL_OWNER, k, 0, v) for k, v in d.profile_before.items()))
 
     def _sdo_read(self, d: _Drive, key: tuple[int, int]) -> int:
         """An SDO upload through the session's client of the drive (SdoError names drive and object)."""
@@ -397,12 +482,14 @@ class MotionGuard:
                 log.warning("%s", msg)
                 self._event(msg)
                 d.od_before[key] = 0
+                journal.note(d.ref, journal.sdo(JOURNAL_OWNER, key[0], key[1], _size(key), 0))
                 if before != value:
                     self._sdo_write(d, key, value)
                 continue
             if before == value:
                 continue
             d.od_before[key] = before  # recorded first: a write that fails half-way is still put back
+            journal.note(d.ref, journal.sdo(JOURNAL_OWNER, key[0], key[1], _size(key), before))
             self._sdo_write(d, key, value)
         self._event(f"{d.client.label}: dead-man armed: host {self.host_id}, {s.consumer_time_ms} ms, "
                     f"0x6007={s.loss_action}")
@@ -436,6 +523,7 @@ class MotionGuard:
 
     def _exit_all(self, reason: str, entering: bool = False) -> None:
         self._exiting = True
+        self._watch.stop()  # first: nothing may cut the exit's own requests short
         self.report.reason = reason
         try:
             self._stop_pass(entering)
@@ -490,6 +578,7 @@ class MotionGuard:
         if not stop:
             r.stopped_by = "not moved by this guard"
             self._restore_dead_man(d, r, stop_failed=False)
+            journal.forget(d.ref, JOURNAL_OWNER, d.put_back | set(PROFILE_KEYS))  # the profile was never changed
             self._event(r.line())
             return r
         try:
@@ -535,6 +624,7 @@ class MotionGuard:
                     self._step()
                     c.set("UM", 0, d.um_changed_from)
                     r.restored.append(f"UM={d.um_changed_from}")
+                    d.put_back.add("UM")
                 except Exception as exc:  # noqa: BLE001 - reported in the drive's stop report
                     r.problems.append(f"UM={d.um_changed_from} not restored: {why(exc)}")
             else:
@@ -542,6 +632,10 @@ class MotionGuard:
                 r.problems.append(f"UM={d.um_changed_from} not restored: the motor is not confirmed off")
         self._restore_profile(d, r)
         self._restore_dead_man(d, r, stop_failed)
+        if self.keep:  # left as the motion left them on purpose: not a leftover of a killed command
+            journal.forget(d.ref, JOURNAL_OWNER)
+        else:
+            journal.forget(d.ref, JOURNAL_OWNER, d.put_back)
         self._event(r.line())
         return r
 
@@ -565,6 +659,7 @@ class MotionGuard:
                     self._step()
                     d.client.set(key, 0, before)
                     r.restored.append(f"{key}={before}")
+                d.put_back.add(key)
             except Exception as exc:  # noqa: BLE001 - reported in the drive's stop report
                 r.problems.append(f"{key}={before} not restored: {why(exc)}")
 
@@ -584,6 +679,7 @@ class MotionGuard:
                 self._step()
                 self._sdo_write(d, key, d.od_before[key])
                 r.restored.append(name)
+                d.put_back.add(name)
             except Exception as exc:  # noqa: BLE001 - reported in the drive's stop report
                 r.problems.append(f"restore {name}: {why(exc)}")
 

@@ -7,6 +7,7 @@ import functools
 from collections.abc import Callable, Mapping, Sequence
 from typing import TYPE_CHECKING
 
+from sherpa_cli.bus import journal
 from sherpa_cli.config.model import PAIR_START_METHODS, ArmConfig
 from sherpa_cli.elmo.protocol import GROUP_INDEX, RPDO2_BASE, SYNC_ID, TPDO2_BASE
 from sherpa_cli.errors import ConfigError, DriveTimeoutError
@@ -73,6 +74,7 @@ class CommonStart:
                 if self.method == "group":
                     old = (bytes(sdo.upload(GROUP_INDEX, 0, name="group id")) + b"\0")[0]
                     if old != self.group_id:
+                        journal.note(r, journal.sdo("pair start", GROUP_INDEX, 0, 1, old))
                         sdo.download(GROUP_INDEX, 0, bytes([self.group_id]), name="group id")
                         self._old[r.name] = old
                 elif self.method == "sync_rpdo":
@@ -123,6 +125,7 @@ class CommonStart:
             for r in self.refs:
                 if self._rpdo_type[r.name] != SYNC_RPDO_TYPE:
                     self._synchronous.add(r.name)
+                    journal.note(r, journal.sdo("pair start", RPDO2_COMM, 2, 1, self._rpdo_type[r.name]))
                     self.session.sdo(r).download(RPDO2_COMM, 2, bytes([SYNC_RPDO_TYPE]), name=RPDO2_TYPE_NAME)
             for r in self.refs:
                 callback = listener(r.name)
@@ -159,6 +162,7 @@ class CommonStart:
 
     def _put_rpdo_type(self, ref: DriveRef) -> None:
         self.session.sdo(ref).download(RPDO2_COMM, 2, bytes([self._rpdo_type[ref.name]]), name=RPDO2_TYPE_NAME)
+        journal.forget(ref, "pair start", {f"0x{RPDO2_COMM:04X}:2"})
         self._synchronous.discard(ref.name)
 
     def keep_profile(self, drive: str) -> None:
@@ -200,6 +204,7 @@ class CommonStart:
 
     def _put_group_id(self, ref: DriveRef, value: int) -> None:
         self.session.sdo(ref).download(GROUP_INDEX, 0, bytes([value]), name="group id")
+        journal.forget(ref, "pair start", {f"0x{GROUP_INDEX:04X}:0"})
 
     def __exit__(self, *exc: object) -> None:
         deaf: Sequence[str] = ()

@@ -7,6 +7,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 from sherpa_cli.motion.blocked import StallWatch, min_progress_for
+from sherpa_cli.motion.drive_watch import DEFAULT_EMCY_WARNING_CODES
 from sherpa_cli.motion.stopping import recovery_speed
 
 if TYPE_CHECKING:
@@ -35,6 +36,8 @@ class MotionSettings:
     stall_time: float = 1.0  # s without progress that make a commanded move 'blocked' (0: off)
     poll_interval: float = 0.01  # s between polls while waiting (the bus's poll_interval_ms)
     request_bound: float = 0.2  # s one interpreter request can take at worst (timeout x attempts)
+    emcy_warning_codes: tuple[int, ...] = DEFAULT_EMCY_WARNING_CODES  # EMCYs that do not stop a motion
+    deadman_check_interval: float = 0.5  # s between reads of a moving drive's 0x1016:1
 
     @property
     def heartbeat_period(self) -> float:
@@ -66,7 +69,8 @@ class MotionSettings:
                    liveness_timeout=m.liveness_timeout,
                    velocity_unit_mode=m.velocity_unit_mode, recovery_speed=m.recovery_speed,
                    recovery_fallback_speed=m.recovery_fallback_speed, stall_time=m.stall_time, poll_interval=poll_ms / 1000,
-                   request_bound=p.reply_timeout * (1 + p.retries))
+                   request_bound=p.reply_timeout * (1 + p.retries),
+                   emcy_warning_codes=tuple(m.emcy_warning_codes), deadman_check_interval=m.deadman_check_interval)
 
 
     def recovery_speed_for(self, vel_limits: Iterable[int | None]) -> int:

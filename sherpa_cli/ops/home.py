@@ -32,6 +32,7 @@ from dataclasses import dataclass, field
 from types import TracebackType
 from typing import TYPE_CHECKING, Any, Literal
 
+from sherpa_cli.bus import journal
 from sherpa_cli.bus.targets import DriveRef, drive_ref
 from sherpa_cli.config.model import ArmConfig, JointConfig, JointRole, SwitchConfig, SwitchKind
 from sherpa_cli.elmo.protocol import UM_POSITION
@@ -319,6 +320,7 @@ class _Disarm:
         for label, c in self.armed.items():
             try:
                 c.set("HM", 1, 0)
+                journal.forget(drive_ref(self.runner.cfg, c.name), "home")
             except Exception as e:  # noqa: BLE001 - collected: every drive gets its try; raised or logged below
                 failed.append(f"{label}: {e}")
         if failed and exc_type is None:
@@ -348,6 +350,7 @@ class _Runner:
         c.set("HM", 4, after)
         c.set("HM", 5, self.h.px_absolute if update is None else update)
         c.set("HM", 2, value)
+        journal.note(drive_ref(self.cfg, c.name), journal.interp("home", "HM", 1, 0))  # issue 22 item 3
         c.set("HM", 1, 1)
 
     def input_event(self, sw: SwitchConfig) -> int:

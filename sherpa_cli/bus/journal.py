@@ -1,0 +1,259 @@
+"""The journal of temporary drive changes (issue 22 item 3, docs/motion.md "After a crash").
+
+Before a command changes a drive's RAM for its own use (the guard's UM, SP/AC/DC and dead-man objects,
+the pair start's group id and RPDO2 type, homing's HM[1], the recorder's TPDO settings) it notes here
+what it will change and the value to put back; once put back, the note is cleared. A command killed
+in between (SIGKILL, a power loss of the host) leaves the note behind: one JSON file per drive in the
+state directory, ``journal/<bus>-node<N>.json``, written atomically.
+
+Each note is one undo step: an interpreter value (``UM=5``) or an SDO object (index, sub, size,
+value), tagged with its owner. Steps are put back in reverse order (the recorder's PDO settings need
+it). The next command that opens the drive finds them (:func:`leftover`); ``sherpa recover`` or
+``--recover`` puts them back (:func:`restore`).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import logging
+import os
+import tempfile
+import threading
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from sherpa_cli.errors import SafetyError, SherpaError
+from sherpa_cli.paths import read_json, state_dir
+
+if TYPE_CHECKING:
+    from sherpa_cli.bus.session import ArmSession
+    from sherpa_cli.bus.targets import DriveRef
+
+log = logging.getLogger(__name__)
+_lock = threading.Lock()  # one read-modify-write of a drive's file at a time in this process
+_auto_recover = False  # `sherpa --recover ...`: a motion command puts leftovers back itself
+
+
+class LeftoverError(SafetyError):
+    """A motion command found what a killed command left on a drive (exit 1): `sherpa recover`."""
+
+
+@dataclass(frozen=True)
+class Step:
+    """One undo step: put ``old`` back into an interpreter value or an SDO object."""
+
+    owner: str
+    kind: str  # "interp" | "sdo"
+    name: str  # "UM", "HM[1]", "0x1016:1"
+    old: int | float
+    letters: str = ""
+    index: int = 0
+    sub: int = 0
+    size: int = 0
+    pid: int = 0  # the process that made the change
+
+    def text(self) -> str:
+        return f"{self.name}={self.old:#x}" if self.kind == "sdo" else f"{self.name}={self.old}"
+
+    def as_json(self) -> dict[str, Any]:
+        return {"owner": self.owner, "kind": self.kind, "name": self.name, "old": self.old,
+                "letters": self.letters, "index": self.index, "sub": self.sub, "size": self.size,
+                "pid": self.pid or os.getpid()}
+
+
+def set_auto_recover(on: bool) -> None:
+    global _auto_recover
+    _auto_recover = on
+
+
+def auto_recover() -> bool:
+    return _auto_recover
+
+
+def _write(path: Path, data: dict[str, Any]) -> None:
+    """Atomic (a temporary file renamed over it) but without fsync: what a killed process wrote is in the
+    kernel's page cache, and an fsync on a busy disk can stall a moving command past its liveness bound."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8") as handle:
+            handle.write(json.dumps(data, indent=1))
+        os.replace(tmp, path)
+    except BaseException:
+        with contextlib.suppress(FileNotFoundError):
+            os.unlink(tmp)
+        raise
+
+
+def journal_dir() -> Path:
+    return state_dir() / "journal"
+
+
+def path_for(bus: str, node: int) -> Path:
+    return journal_dir() / f"{bus}-node{node}.json"
+
+
+def interp(owner: str, letters: str, index: int, old: int | float) -> Step:
+    name = f"{letters}[{index}]" if index else letters
+    return Step(owner, "interp", name, old, letters=letters, index=index)
+
+
+def sdo(owner: str, index: int, sub: int, size: int, old: int) -> Step:
+    return Step(owner, "sdo", f"0x{index:04X}:{sub}", int(old), index=index, sub=sub, size=size)
+
+
+def _load(path: Path) -> dict[str, Any]:
+    try:
+        data = read_json(path, None)
+    except (OSError, ValueError) as exc:
+        log.warning("journal %s unreadable: %s", path, exc)
+        return {}
+    return data if isinstance(data, dict) else {}
+
+
+def steps_of(data: dict[str, Any]) -> list[Step]:
+    out = []
+    for raw in data.get("steps", []):
+        try:
+            out.append(Step(str(raw["owner"]), str(raw["kind"]), str(raw["name"]), raw["old"],
+                            str(raw.get("letters", "")), int(raw.get("index", 0)), int(raw.get("sub", 0)),
+                            int(raw.get("size", 0)), int(raw.get("pid", 0))))
+        except (KeyError, TypeError, ValueError):
+            log.warning("journal: a damaged step skipped: %r", raw)
+    return out
+
+
+def note(ref: DriveRef, *steps: Step) -> None:
+    """Before the change: add ``steps`` to the drive's journal (atomically, on disk before returning)."""
+    if not steps:
+        return
+    path = path_for(ref.bus, ref.node)
+    with _lock:
+        data = _load(path) or {"drive": ref.name, "bus": ref.bus, "node": ref.node, "steps": []}
+        data.setdefault("pids", [])
+        if os.getpid() not in data["pids"]:
+            data["pids"].append(os.getpid())
+        data["steps"] = [*data.get("steps", []), *(s.as_json() for s in steps)]
+        _write(path, data)
+
+
+def forget(ref: DriveRef, owner: str, names: set[str] | None = None) -> None:
+    """The change was put back: drop ``owner``'s steps (only those named, if ``names``)."""
+    path = path_for(ref.bus, ref.node)
+    with _lock:
+        data = _load(path)
+        if not data:
+            return
+        keep = [s for s in data.get("steps", []) if not (s.get("owner") == owner and
+                                                          (names is None or s.get("name") in names))]
+        if keep:
+            data["steps"] = keep
+            _write(path, data)
+        else:
+            with contextlib.suppress(FileNotFoundError):
+                path.unlink()
+
+
+def _alive(pid: int) -> bool:
+    if pid <= 0:
+        return False
+    if pid == os.getpid():  # this process's own change (a guard nested in the interactive view)
+        return True
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except OSError:  # another user's process: it exists
+        return True
+    return True
+
+
+def leftover(ref: DriveRef) -> list[Step]:
+    """What a command that did not finish left on this drive (empty: nothing). A drive another running
+    command has changed (its process lives: a recording beside a jog) has no leftover."""
+    steps = steps_of(_load(path_for(ref.bus, ref.node)))
+    if any(_alive(s.pid) for s in steps):
+        return []
+    return steps
+
+
+def leftover_text(ref: DriveRef, steps: list[Step]) -> str:
+    owners = sorted({s.owner for s in steps})
+    values = ", ".join(dict.fromkeys(s.text() for s in reversed(steps)))
+    return (f"{ref.name} ({ref.bus}:{ref.node}): a {', '.join(owners)} that did not finish (killed?) left "
+            f"temporary changes; to put back: {values}")
+
+
+@dataclass
+class RecoverResult:
+    drive: str
+    address: str
+    found: list[str]
+    tripped: str | None = None  # the aftermath of a tripped dead-man, when found
+    done: list[str] | None = None
+    problems: list[str] | None = None
+
+
+MF_HEARTBEAT_LOSS = 0x800
+
+
+def restore(session: ArmSession, ref: DriveRef, *, apply: bool) -> RecoverResult:
+    """Put back what the journal holds for ``ref`` (reverse order), NMT start first (a tripped dead-man
+    leaves the drive in NMT Stopped, deaf to the interpreter and SDO), and clear a latched MF 0x800
+    (heartbeat loss) with a confirmed MO=1, MO=0 once the dead-man objects are back. Dry run without
+    ``apply``: only reads MF. Never raises for one step: problems are reported."""
+    steps = leftover(ref)
+    done: list[str] = []
+    problems: list[str] = []
+    res = RecoverResult(ref.name, f"{ref.bus}:{ref.node}", [s.text() for s in reversed(steps)], done=done,
+                        problems=problems)
+    client = session.client(ref)
+    try:
+        client.nmt_start()
+        mf = int(client.get("MF"))
+        mo = int(client.get("MO"))
+    except SherpaError as exc:
+        problems.append(f"not reached: {exc}")
+        return res
+    armed = any(s.name == "0x1016:1" for s in steps)
+    if mf & MF_HEARTBEAT_LOSS:
+        res.tripped = ("its dead-man tripped: the drive's heartbeat consumer switched the motor off after the "
+                       "command's heartbeat ended (MF 0x800 latched, NMT Stopped" +
+                       (", the consumer still armed)" if armed else ")"))
+    if not apply:
+        return res
+    if mo and steps:
+        problems.append("the motor is on (MO=1): another tool moves it? nothing put back")
+        return res
+    failed = False
+    for s in reversed(steps):
+        try:
+            if s.kind == "interp":
+                client.set(s.letters, s.index, s.old)
+            else:
+                session.sdo(ref).download(s.index, s.sub, int(s.old).to_bytes(s.size, "little"))
+            done.append(s.text())
+        except (SherpaError, OverflowError) as exc:
+            failed = True
+            problems.append(f"{s.text()} not put back: {exc}")
+    if not failed:
+        forget_all(ref)
+    if res.tripped and not failed and mf == MF_HEARTBEAT_LOSS:
+        try:
+            if int(client.get("UM")) == 1 and client.get("TC") != 0:
+                client.set("TC", 0, 0.0)
+            client.motor_on()  # MO=1 clears the latched MF; at once off again, confirmed
+            client.motor_off()
+            done.append("MF 0x800 cleared (MO=1, MO=0)")
+        except SherpaError as exc:
+            problems.append(f"MF not cleared: {exc}")
+    elif res.tripped and mf != MF_HEARTBEAT_LOSS:
+        problems.append(f"MF=0x{mf:X} has more than the heartbeat loss: not cleared; find the cause first")
+    return res
+
+
+def forget_all(ref: DriveRef) -> None:
+    with _lock, contextlib.suppress(FileNotFoundError):
+        path_for(ref.bus, ref.node).unlink()

@@ -1,0 +1,59 @@
+"""`sherpa recover [TARGET...]`: what a killed command left on the drives (the journal), put back with --apply."""
+
+from __future__ import annotations
+
+import typer
+
+from sherpa_cli.cli.context import state
+from sherpa_cli.cli.options import ApplyRecover, Targets
+from sherpa_cli.errors import SafetyError
+
+
+def recover(ctx: typer.Context, targets: Targets = None, apply: ApplyRecover = False) -> None:
+    """Show, and with --apply put back, what a command that did not finish left on the drives.
+
+    A moving command or a recording notes every temporary change (UM, SP/AC/DC, the dead-man objects
+    0x1016:1/0x1029:1/0x6007, the pair's group id or RPDO2 type, HM[1], TPDO settings) in a journal
+    in the state directory before it makes it, and clears the note once it is put back. A killed
+    command leaves the note: a motion command then refuses the drive (exit 1) until this puts it back.
+    With --apply: NMT start, every value put back (last change first), and a dead-man that tripped
+    (MF 0x800, heartbeat lost) cleared with MO=1, MO=0. Exit 1 if something was left and not put back.
+
+    \b
+    Examples:
+      sherpa recover
+      sherpa recover elbow_pitch --apply
+    """
+    from sherpa_cli.bus import journal
+    from sherpa_cli.bus.targets import drive_refs
+
+    st = state(ctx)
+    cfg = st.load_config()
+    refs = [r for r in drive_refs(cfg, targets) if journal.leftover(r)]
+    if not refs:
+        if st.json_mode:
+            st.out.json({"drives": []})
+        else:
+            st.out.line("nothing to recover: no drive has changes left by a command that did not finish")
+        return
+    buses = sorted({r.bus for r in refs}, key=list(cfg.buses).index)
+    with st.session(buses=buses) as session:
+        results = [journal.restore(session, r, apply=apply) for r in refs]
+    if st.json_mode:
+        st.out.json({"apply": apply, "drives": [{"drive": r.drive, "address": r.address, "left": r.found,
+                                                 "tripped": r.tripped, "put_back": r.done,
+                                                 "problems": r.problems} for r in results]})
+    else:
+        for r in results:
+            st.out.line(f"{r.drive} ({r.address}): left by a command that did not finish: {', '.join(r.found)}")
+            if r.tripped:
+                st.out.line(f"  {r.tripped}")
+            if apply:
+                st.out.line(f"  put back: {', '.join(r.done or []) or 'nothing'}")
+            for p in r.problems or []:
+                st.out.line(f"  problem: {p}")
+        if not apply:
+            st.out.line("dry run: nothing sent but NMT start and reads; --apply puts it back")
+    bad = [r.drive for r in results if r.problems]
+    if bad:
+        raise SafetyError(f"not recovered: {', '.join(bad)}", hint="see the problems above")

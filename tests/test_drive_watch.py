@@ -1,0 +1,307 @@
+"""The guard's watch of its drives (issue 21 item 10, issue 22 item 7) on the simulated arm, in process:
+an error EMCY from a moving drive, an NMT command another node sends, a drive's heartbeat that goes
+silent, and a foreign SDO write that disarms the dead-man each stop every drive of the command.
+
+"Another node" is a second python-can virtual bus on the simulated arm's channel: what it sends
+reaches the drives and the command alike, as on a real bus.
+"""
+
+from __future__ import annotations
+
+import struct
+import time
+
+import can
+import pytest
+
+from sherpa_cli.bus.session import ArmSession, resolve_target
+from sherpa_cli.config import load_config
+from sherpa_cli.elmo.faults import decode_emcy
+from sherpa_cli.errors import CommunicationError, ExitCode, SafetyError
+from sherpa_cli.motion.drive_watch import DriveSilentError, DriveWatch, DriveWatchError
+from sherpa_cli.motion.guard import MotionGuard
+from sherpa_cli.motion.settings import MotionSettings
+from sherpa_cli.sim.arm import SimArm
+
+CONFIG = """\
+name: watch-test
+protocol: {mo_settle: 0.05, sv_blackout: 0.2, reply_timeout: 1.0, retries: 2}
+motion: {consumer_time_ms: 300, deadman_check_interval: 0.1}
+buses:
+  can0: {interface: socketcan, channel: can0}
+drives:
+  drive1: {bus: can0, node: 5, model: whistle-10/60}
+  drive2: {bus: can0, node: 6, model: whistle-10/60}
+sim:
+  drives:
+    drive1: {heartbeat_ms: 20}
+"""
+NODE1, NODE2 = 5, 6
+BOUND = 5.0  # s a test waits at most for the watch (it needs far less: a few poll periods)
+
+
+@pytest.fixture
+def cfg(tmp_path):
+    path = tmp_path / "arm.yaml"
+    path.write_text(CONFIG, encoding="utf-8")
+    return load_config(path)
+
+
+@pytest.fixture
+def other_node(request):
+    """A bus of "another node" on the arm's channel; opened by :func:`open_other`."""
+    buses: list[can.BusABC] = []
+    yield buses
+    for b in buses:
+        b.shutdown()
+
+
+def open_other(session: ArmSession, buses: list) -> can.BusABC:
+    ep = dict(session.sim.endpoints["can0"])
+    bus = can.Bus(interface="virtual", channel=ep["channel"])
+    buses.append(bus)
+    return bus
+
+
+def emcy_frame(node: int, code: int, register: int = 1) -> can.Message:
+    return can.Message(arbitration_id=0x80 + node, data=struct.pack("<HBBHH", code, register, 0, 0, 0),
+                       is_extended_id=False)
+
+
+def start_both(g, refs):
+    for ref in refs:
+        g.enable(ref, 5)
+        c = g.client(ref)
+        c.set("JV", 0, 3000)
+        c.execute("BG")
+
+
+def run_until_stopped(g, refs, during=None, bound=BOUND):
+    """Poll like a jog (PX, SR through the guard) until the guard raises; ``during()`` once moving."""
+    deadline = time.monotonic() + bound
+    started = None
+    while time.monotonic() < deadline:
+        g.check()
+        for ref in refs:
+            g.query(ref, "PX")
+        if during is not None and started is None:
+            started = time.monotonic()
+            during()
+        time.sleep(0.01)
+    raise AssertionError("the guard did not stop the command")
+
+
+def assert_all_stopped(s, g):
+    for name in ("drive1", "drive2"):
+        assert not s.sim.drives[name].motor_on, name
+    assert {r.drive for r in g.report.drives} == {"drive1", "drive2"}
+    for r in g.report.drives:
+        assert r.stopped_by != "not stopped", r.line()
+
+
+def test_an_error_emcy_from_a_moving_drive_stops_every_drive_of_the_command(cfg, other_node):
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
+        refs = [resolve_target(cfg, "drive1"), resolve_target(cfg, "drive2")]
+        other = open_other(s, other_node)
+        with pytest.raises(DriveWatchError) as info, MotionGuard(s, refs, settings=MotionSettings.from_config(cfg)) as g:
+            start_both(g, refs)
+            run_until_stopped(g, refs, during=lambda: other.send(emcy_frame(NODE2, 0x8611)))
+        msg = str(info.value)
+        assert msg.startswith("drive2 (node 6): EMCY 0x8611: position tracking error"), msg
+        assert "stopping every drive of the command" in msg
+        assert info.value.exit_code == ExitCode.PROBLEM
+        assert g.report.reason == "error"
+        assert_all_stopped(s, g)
+
+
+def test_warning_class_emcys_are_counted_and_a_flood_never_stalls_the_command(cfg, other_node):
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
+        refs = [resolve_target(cfg, "drive1"), resolve_target(cfg, "drive2")]
+        other = open_other(s, other_node)
+        with pytest.raises(DriveWatchError, match="EMCY 0x2340: short circuit"), \
+                MotionGuard(s, refs, settings=MotionSettings.from_config(cfg)) as g:
+            start_both(g, refs)
+            for _ in range(3000):  # a flood of warnings (CAN message lost): the motion goes on
+                other.send(emcy_frame(NODE1, 0x8110))
+            for _ in range(20):  # polls still answered at their pace, nothing stopped
+                g.check()
+                g.query(refs[0], "PX")
+            assert s.sim.drives["drive1"].motor_on and s.sim.drives["drive2"].motor_on
+            t0 = time.monotonic()
+            for _ in range(3000):  # then a flood of errors: the first one stops the command
+                other.send(emcy_frame(NODE1, 0x2340))
+            run_until_stopped(g, refs)
+        assert time.monotonic() - t0 < BOUND
+        assert_all_stopped(s, g)
+
+
+def test_a_configured_warning_code_does_not_stop_the_motion(tmp_path, other_node):
+    path = tmp_path / "arm.yaml"
+    path.write_text(CONFIG.replace("deadman_check_interval: 0.1", "deadman_check_interval: 0.1, "
+                                   "emcy_warning_codes: [0x8611]"), encoding="utf-8")
+    cfg = load_config(path)
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
+        refs = [resolve_target(cfg, "drive1")]
+        other = open_other(s, other_node)
+        with MotionGuard(s, refs, settings=MotionSettings.from_config(cfg)) as g:
+            start_both(g, refs)
+            other.send(emcy_frame(NODE1, 0x8611))
+            for _ in range(20):
+                g.check()
+                g.query(refs[0], "PX")
+                time.sleep(0.01)
+            assert s.sim.drives["drive1"].motor_on
+        assert g.report.ok
+
+
+@pytest.mark.parametrize("command,what", [(0x02, "NMT Stopped"), (0x80, "NMT Pre-operational")])
+@pytest.mark.parametrize("target", [NODE1, 0])
+def test_an_nmt_command_from_another_node_ends_the_command_at_once(cfg, other_node, command, what, target):
+    """The drive made deaf by NMT Stopped would keep the command waiting 3 x 1 s per request."""
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
+        refs = [resolve_target(cfg, "drive1"), resolve_target(cfg, "drive2")]
+        other = open_other(s, other_node)
+        t_sent: list[float] = []
+
+        def send() -> None:
+            t_sent.append(time.monotonic())
+            other.send(can.Message(arbitration_id=0, data=bytes([command, target]), is_extended_id=False))
+
+        with pytest.raises(DriveWatchError) as info, MotionGuard(s, refs, settings=MotionSettings.from_config(cfg)) as g:
+            start_both(g, refs)
+            run_until_stopped(g, refs, during=send)
+        took = time.monotonic() - t_sent[0]
+        assert f"another node sent {what}" in str(info.value)
+        assert took < 1.0, f"{took:.2f} s: the command waited for a deaf drive"  # 3 s of retries otherwise
+        assert_all_stopped(s, g)
+
+
+def test_a_drive_whose_heartbeat_goes_silent_stops_the_others(cfg):
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
+        refs = [resolve_target(cfg, "drive1"), resolve_target(cfg, "drive2")]
+        with pytest.raises(DriveSilentError, match=r"drive1 \(node 5\): its heartbeat went silent") as info, \
+                MotionGuard(s, refs, settings=MotionSettings.from_config(cfg)) as g:
+            start_both(g, refs)
+            for _ in range(10):  # a few of its heartbeats (20 ms)
+                g.check()
+                time.sleep(0.01)
+            with s.sim.lock:
+                s.sim.drives["drive1"].die()
+            deadline = time.monotonic() + BOUND
+            while time.monotonic() < deadline:  # no request to drive1: only its heartbeat tells
+                g.check()
+                g.query(refs[1], "PX")
+                time.sleep(0.01)
+        assert isinstance(info.value, CommunicationError)
+        assert not s.sim.drives["drive2"].motor_on
+        by = {r.drive: r for r in g.report.drives}
+        assert by["drive1"].stopped_by == "not reached"
+        assert by["drive2"].motor_off
+
+
+def test_a_foreign_sdo_write_that_disarms_the_dead_man_stops_the_command(cfg, other_node):
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
+        refs = [resolve_target(cfg, "drive1"), resolve_target(cfg, "drive2")]
+        other = open_other(s, other_node)
+        disarm = can.Message(arbitration_id=0x600 + NODE2, data=bytes([0x23, 0x16, 0x10, 1, 0, 0, 0, 0]),
+                             is_extended_id=False)
+        with pytest.raises(DriveWatchError, match=r"drive2 \(node 6\): its dead-man entry 0x1016:1 reads "
+                                                  r"0x00000000, not the 0x007E012C"), \
+                MotionGuard(s, refs, settings=MotionSettings.from_config(cfg)) as g:
+            start_both(g, refs)
+            run_until_stopped(g, refs, during=lambda: other.send(disarm))
+        assert_all_stopped(s, g)
+
+
+def test_an_error_emcy_from_a_drive_with_its_motor_off_is_only_logged(cfg, other_node):
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
+        refs = [resolve_target(cfg, "drive1"), resolve_target(cfg, "drive2")]
+        other = open_other(s, other_node)
+        with MotionGuard(s, refs, settings=MotionSettings.from_config(cfg)) as g:
+            start_both(g, refs[:1])  # drive2 is guarded, its motor stays off
+            other.send(emcy_frame(NODE2, 0x8611))
+            for _ in range(20):
+                g.check()
+                g.query(refs[0], "PX")
+                time.sleep(0.01)
+        assert g.report.ok
+
+
+# -- the watch alone, on fakes and a fake clock -------------------------------------------------------
+
+class FakeNetwork:
+    def __init__(self) -> None:
+        self.subs: dict[int, list] = {}
+
+    def subscribe(self, can_id, cb):
+        self.subs.setdefault(can_id, []).append(cb)
+
+    def unsubscribe(self, can_id, cb=None):
+        self.subs[can_id].remove(cb)
+
+    def deliver(self, can_id, data):
+        for cb in list(self.subs.get(can_id, [])):
+            cb(can_id, bytearray(data), 0.0)
+
+
+class FakeClient:
+    def __init__(self) -> None:
+        self.emcy_cbs: list = []
+        self.aborted: list = []
+        self.silent = False
+
+    def on_emcy(self, cb):
+        self.emcy_cbs.append(cb)
+
+    def remove_emcy(self, cb):
+        self.emcy_cbs.remove(cb)
+
+    def abort_pending(self, error):
+        self.aborted.append(error)
+
+
+def make_watch():
+    now = [0.0]
+    net, client = FakeNetwork(), FakeClient()
+    w = DriveWatch(lambda bus: net, now=lambda: now[0], min_silence=0.03)
+    w.add("can0", 5, "d (node 5)", client)
+    w.start()
+    return w, net, client, now
+
+
+def test_heartbeat_states_other_than_operational_trip_and_abort_the_pending_request():
+    w, net, client, _ = make_watch()
+    net.deliver(0x705, b"\x05")
+    assert w.poll() is None
+    net.deliver(0x705, b"\x04")
+    assert isinstance(w.poll(), DriveWatchError) and "heartbeat says Stopped" in str(w.error)
+    assert client.aborted == [w.error]
+
+
+def test_silence_is_three_heartbeat_periods_on_the_watch_clock():
+    w, net, client, now = make_watch()
+    for t in (0.0, 0.1, 0.2):
+        now[0] = t
+        net.deliver(0x705, b"\x05")
+    now[0] = 0.49
+    assert w.poll() is None
+    now[0] = 0.51
+    assert isinstance(w.poll(), DriveSilentError) and client.silent
+
+
+def test_after_stop_nothing_trips_and_every_subscription_is_undone():
+    w, net, client, _ = make_watch()
+    w.stop()
+    assert all(not cbs for cbs in net.subs.values()) and not client.emcy_cbs
+    net.deliver(0x705, b"\x04")
+    assert w.poll() is None and not client.aborted
+
+
+def test_warning_codes_and_error_reset_never_trip_a_moving_drive():
+    w, _net, client, _ = make_watch()
+    w.set_moving("can0", 5, True)
+    for code in (0x0000, 0x6300, 0x8110):
+        client.emcy_cbs[0](decode_emcy(struct.pack("<HBBHH", code, 0, 0, 0, 0)))
+    assert w.poll() is None
+    client.emcy_cbs[0](decode_emcy(struct.pack("<HBBHH", 0x8130, 0x11, 0, 0, 0)))
+    assert isinstance(w.poll(), SafetyError) and "EMCY 0x8130: heartbeat event" in str(w.error)

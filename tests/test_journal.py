@@ -1,0 +1,68 @@
+"""The journal of temporary drive changes (sherpa_cli/bus/journal.py) and `sherpa recover` in process."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+
+from sherpa_cli.bus import journal
+from sherpa_cli.bus.targets import DriveRef
+
+
+def ref(node: int = 40) -> DriveRef:
+    return DriveRef("elbow_1a", "can1", node, None)  # type: ignore[arg-type]
+
+
+def dead_pid() -> int:
+    proc = subprocess.Popen([sys.executable, "-c", "pass"])
+    proc.wait()
+    return proc.pid
+
+
+def test_note_then_forget_leaves_no_file_and_steps_keep_their_order():
+    r = ref()
+    journal.note(r, journal.interp("motion command", "UM", 0, 5), journal.sdo("motion command", 0x1016, 1, 4, 0))
+    journal.note(r, journal.sdo("log record", 0x1800, 1, 4, 0x1C0))
+    data = json.loads(journal.path_for("can1", 40).read_text())
+    assert [s["name"] for s in data["steps"]] == ["UM", "0x1016:1", "0x1800:1"]
+    assert journal.leftover(r) == []  # this process is alive: not a leftover
+    journal.forget(r, "motion command", {"UM"})
+    assert [s["name"] for s in json.loads(journal.path_for("can1", 40).read_text())["steps"]] == ["0x1016:1",
+                                                                                                   "0x1800:1"]
+    journal.forget(r, "motion command")
+    journal.forget(r, "log record")
+    assert not journal.path_for("can1", 40).exists()
+
+
+def test_a_dead_process_leaves_a_leftover_named_in_the_text():
+    r = ref()
+    pid = dead_pid()
+    steps = [journal.Step("motion command", "interp", "UM", 5, "UM", pid=pid),
+             journal.Step("motion command", "sdo", "0x1016:1", 0, index=0x1016, sub=1, size=4, pid=pid)]
+    journal.path_for("can1", 40).parent.mkdir(parents=True, exist_ok=True)
+    journal.path_for("can1", 40).write_text(json.dumps({"steps": [s.as_json() for s in steps]}))
+    left = journal.leftover(r)
+    assert [s.name for s in left] == ["UM", "0x1016:1"]
+    text = journal.leftover_text(r, left)
+    assert text == ("elbow_1a (can1:40): a motion command that did not finish (killed?) left temporary changes; "
+                    "to put back: 0x1016:1=0x0, UM=5")
+    assert pid != os.getpid()
+
+
+def test_a_damaged_journal_is_no_traceback(tmp_path):
+    journal.path_for("can1", 41).parent.mkdir(parents=True, exist_ok=True)
+    journal.path_for("can1", 41).write_text("{not json")
+    assert journal.leftover(ref(41)) == []
+
+
+def test_recover_with_nothing_left_says_so(cli):
+    result = cli("--sim", "recover")
+    assert result.exit_code == 0
+    assert "nothing to recover" in result.stdout
+
+
+def test_recover_of_an_unknown_target_is_a_usage_error(cli):
+    result = cli("--sim", "recover", "no_such_joint")
+    assert result.exit_code == 2 and "Traceback" not in result.stderr
