@@ -206,6 +206,6 @@ def test_cli_home_interrupted_prints_the_stop_report_and_which_joints_are_not_ho
     monkeypatch.setattr(home_mod._Runner, "wait", wait)
     result = cli("--sim", "home", "shoulder_diff", "--yes")
     assert result.exit_code == 130, result.transcript()
-    assert "stop: shoulder_2a (can0:20): stopped by" in result.stderr
+    assert "stop: shoulder_2a (can0:20): stopped" in result.stderr
     assert "not homed: shoulder_pitch, shoulder_roll (shoulder_diff did not finish" in result.stderr
     assert "Traceback" not in result.stderr
