@@ -137,10 +137,10 @@ def test_motion_is_refused_while_a_program_runs_unless_allowed(cli, tmp_path):
 
 def test_identify_shows_ps(cli, tmp_path):
     config = faulty(tmp_path, "  drives:\n    wrist_2a: {user_program: 1}\n")
-    result = cli("--sim", "--config", config, "identify", "wrist_2a", "wrist_2b")
+    result = cli("--sim", "--config", config, "identify", "--verbose", "wrist_2a", "wrist_2b")
     assert result.exit_code == 1, result.transcript()
     assert "a user program is running" in result.stdout
-    assert "idle (no program running)" in result.stdout
+    assert "idle (no program running)" in result.stdout  # the PS row of each drive, in the details
     assert "wrist_2a: a user program is running (PS=1)" in result.stdout
 
 

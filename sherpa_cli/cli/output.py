@@ -227,7 +227,7 @@ def min_widths(columns: Sequence[str], rows: Sequence[Sequence[str]], *, one_lin
         cells = [columns[i], *(row[i] for row in rows)]
         return max((len(w) for c in cells for w in c.split()), default=0)
 
-    return {i: (max(len(columns[i]), *(len(row[i]) for row in rows)) if i == 0 or one_line else longest_word(i))
+    return {i: (max([len(columns[i]), *(len(row[i]) for row in rows)]) if i == 0 or one_line else longest_word(i))
             for i in range(len(columns))}
 
 
