@@ -15,6 +15,7 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import functools
+import logging
 import math
 import threading
 import uuid
@@ -34,6 +35,8 @@ if TYPE_CHECKING:
 
     from sherpa_cli.sim.sdo import SdoServer
 
+log = logging.getLogger(__name__)
+
 SDO_RX = SDO_RX_BASE
 # counts either side of a home switch's position where it reads pressed; a joint that crosses the
 # position within one model step also presses it for that step (a fast pass is never missed), so the
@@ -41,6 +44,7 @@ SDO_RX = SDO_RX_BASE
 HOME_SWITCH_HALF_WIDTH = 0
 ENCODER_VENDOR = 0x0000_0145  # made up: a CiA 406 encoder maker (the sim's, not a real vendor id)
 ENCODER_DEVICE_TYPE = 0x0001_0196  # 0x1000: CiA 406 (0x196), single-turn absolute rotary encoder
+LOOPBACK_ROUNDS = 4  # frames drives send because of other drives' frames, per pump cycle
 SIM_SV_SHARE = 0.6  # the simulated drive is deaf for this share of protocol.sv_blackout (the tool's bound)
 
 
@@ -303,11 +307,11 @@ class SimArm:
         # sends 0x6004 in its TPDO1 (sim/encoder.py: cyclic by 0x6200, or on SYNC)
         for dev in cfg.devices.values():
             if dev.type == "canopen-encoder":
-                reading = self._encoder_reading(dev.name)
+                reading, resolution = self._encoder_reading(dev.name)
                 self.extras[dev.name] = (dev.bus, SimEncoder(
-                    dev.node, position=reading, clock=self.clock, serial=0x7E100000 + dev.node,
+                    dev.node, position=reading, clock=self.clock, serial=0x7E100000 + dev.node, resolution=resolution,
                     settings=SimSettings(vendor_id=ENCODER_VENDOR, device_name="CANopen encoder", inputs=1),
-                    od_live={(0x1000, 0): lambda: ENCODER_DEVICE_TYPE, (0x6004, 0): reading}))
+                    od_live={(0x1000, 0): lambda: ENCODER_DEVICE_TYPE}))
         self.lock = threading.RLock()  # held by the pumps while they touch drives; tests take it too
         self._stop = threading.Event()
         self._threads: list[threading.Thread] = []
@@ -355,20 +359,21 @@ class SimArm:
                                            "event": text}) + "\n")
         self._event_file.flush()
 
-    def _encoder_reading(self, device: str) -> Callable[[], int]:
-        """What encoder ``device`` reads: the real position of the joint whose abs_encoder names it."""
+    def _encoder_reading(self, device: str) -> tuple[Callable[[], int], int]:
+        """What encoder ``device`` reads: the real position of the joint whose abs_encoder names it, and
+        its steps per revolution (the joint's cpr)."""
         cfg = self.cfg
         for joint in cfg.joints.values():
             enc = joint.abs_encoder
             if enc is None or cfg.device_by_source(enc.source) is not cfg.devices[device]:
                 continue
             if joint.drive is not None:
-                return functools.partial(_plain_reading, self.drives[joint.drive], enc.offset)
+                return functools.partial(_plain_reading, self.drives[joint.drive], enc.offset), joint.cpr
             pair = _pair_of(cfg, joint)
             a, b = self.drives[pair.drive_a], self.drives[pair.drive_b]
             sign = 1 if joint.name == pair.sigma else -1
-            return functools.partial(_pair_reading, a, b, sign, enc.offset)
-        return lambda: 0  # an encoder no joint uses reads 0
+            return functools.partial(_pair_reading, a, b, sign, enc.offset), joint.cpr
+        return (lambda: 0), 4096  # an encoder no joint uses reads 0
 
     def press_switch(self, drive: str, switch_input: int, pressed: bool | None) -> None:
         """A technician holds (True), lets go of (False) or leaves (None) the switch wired to
@@ -473,30 +478,57 @@ class SimArm:
                 with self.lock:
                     # running motors: every drive of the bus up to (almost) now together first
                     stepped_to = self.clock.now()
-                    self._lockstep(on_bus, last_tick, stepped_to)
+                    self._guarded(bus_name, "a drive", functools.partial(self._lockstep, on_bus, last_tick, stepped_to))
                     last_tick = stepped_to
                     # a frame advances only the drives it reached (their replies go out now);
                     # every drive advances at least once per tick_s (motion, heartbeats, latency)
                     touched: list[str] = []
                     if msg is not None and not msg.is_error_frame and not msg.is_extended_id:
                         # receive() ran the drives to now: what the frame caused is in their outbox
-                        touched = self._dispatch(msg.arbitration_id, bytes(msg.data), on_bus, by_node)
+                        touched = self._dispatch(msg.arbitration_id, bytes(msg.data), on_bus, by_node, bus_name=bus_name)
                     now = self.clock.now()
                     ticking = now >= next_tick
                     if ticking:
                         touched = names
                         next_tick = now + self.tick_s
-                    for name in touched:
-                        drive = on_bus[name]
-                        if ticking:
-                            drive.tick()
-                        for can_id, data in drive.pop_frames():
-                            send(can_id, data)
+                        for name in touched:
+                            self._guarded(bus_name, name, on_bus[name].tick)
+                    self._send_out(touched, on_bus, by_node, send, bus_name)
                 if powered is not None and touched is names:
                     powered.set()
         except BaseException as exc:  # noqa: BLE001 - kept in errors: a dead pump shows in tests and `sim --serve`
             if not self._stop.is_set():
                 self.errors.append(exc)
+
+    def _guarded(self, bus_name: str, name: str, work: Callable[[], object]) -> bool:
+        """Run one drive's ``work``; a fault inside the simulator is logged at once and kept in
+        :attr:`errors`, and the bus goes on (other drives, later frames). False: it failed."""
+        try:
+            work()
+            return True
+        except Exception as exc:
+            log.exception("simulated %s on %s: internal fault (the bus goes on)", name, bus_name)
+            self.errors.append(exc)
+            return False
+
+    def _send_out(self, touched: list[str], on_bus: Mapping[str, SimDrive], by_node: Mapping[int, list[str]],
+                  send: Callable[[int, bytes], None], bus_name: str) -> None:
+        """Send what the ``touched`` drives produced; every frame also reaches the other nodes of the
+        bus (a CAN controller does not hear itself), as on a real bus: one drive's heartbeat feeds
+        another's consumer. What that makes them send goes out too (a few rounds at most)."""
+        pending = list(touched)
+        for _ in range(LOOPBACK_ROUNDS):
+            if not pending:
+                break
+            frames = [(name, can_id, data) for name in pending for can_id, data in on_bus[name].pop_frames()]
+            reached: list[str] = []
+            for sender, can_id, data in frames:
+                send(can_id, data)
+                if len(on_bus) > 1:
+                    for name in self._dispatch(can_id, data, on_bus, by_node, exclude=sender, bus_name=bus_name):
+                        if name not in reached:
+                            reached.append(name)
+            pending = reached
 
     @staticmethod
     def _lockstep(on_bus: Mapping[str, SimDrive], since: float, now: float) -> None:
@@ -514,8 +546,9 @@ class SimArm:
             t += step
 
     def _dispatch(self, can_id: int, data: bytes, on_bus: Mapping[str, SimDrive],
-                  by_node: Mapping[int, list[str]]) -> list[str]:
-        """Hand a frame to the drive(s) it concerns; returns their names."""
+                  by_node: Mapping[int, list[str]], exclude: str | None = None, bus_name: str = "") -> list[str]:
+        """Hand a frame to the drive(s) it concerns (not to ``exclude``, the node that sent it);
+        returns their names."""
         if can_id in (NMT_ID, SYNC_ID) or 0x700 <= can_id <= 0x77F:
             targets = list(on_bus)  # NMT broadcast / SYNC / host heartbeats: every drive decides for itself
         else:
@@ -523,8 +556,20 @@ class SimArm:
             if 0x301 <= can_id <= 0x37F:  # RPDO2 of a group id (0x2040): every drive of the group
                 targets = targets + [n for n, d in on_bus.items()
                                      if d.group_id == can_id - 0x300 and n not in targets]
+        if exclude is not None:
+            targets = [name for name in targets if name != exclude]
+        sdo = SDO_RX + 1 <= can_id <= SDO_RX + 0x7F
         for name in targets:
-            arrived = on_bus[name].receive(can_id, data)
-            if arrived and SDO_RX + 1 <= can_id <= SDO_RX + 0x7F:
+            arrived = self._receive(bus_name, name, on_bus[name], can_id, data)
+            if arrived is None:
+                if sdo and name in self._sdo:
+                    self._sdo[name].abort_request(data)  # the client hears an abort, not silence
+            elif arrived and sdo:
                 self._sdo[name].receive(can_id, data)
         return targets
+
+    def _receive(self, bus_name: str, name: str, drive: SimDrive, can_id: int, data: bytes) -> bool | None:
+        """``drive.receive``; None: it failed inside (logged and kept, see :meth:`_guarded`)."""
+        result: list[bool] = []
+        ok = self._guarded(bus_name or "its bus", name, lambda: result.append(drive.receive(can_id, data)))
+        return result[0] if ok else None

@@ -51,7 +51,7 @@ from sherpa_cli.sim.od import (
     flash_key,
 )
 from sherpa_cli.sim.params import Value, factory_ram, is_persistent, parse_flash, wrap_int32
-from sherpa_cli.sim.pdo import TpdoTable, is_pdo_object
+from sherpa_cli.sim.pdo import TpdoTable
 from sherpa_cli.sim.servo import ServoMotor
 from sherpa_cli.sim.settings import SimSettings
 
@@ -59,7 +59,9 @@ Frame = tuple[int, bytes]
 TIME_EPS = 1e-9  # s; float error of summed clock steps, far below any drive timing
 
 NMT = NMT_ID
-RPDO2_COMM, RPDO_SYNC_MAX = 0x1401, 240  # transmission types 0..240: executed at the next SYNC
+RPDO2_COMM, RPDO2_MAP, RPDO_SYNC_MAX = 0x1401, 0x1601, 240  # transmission types 0..240: run at the next SYNC
+INTERPRETER_IN, INTERPRETER_OUT = 0x2012, 0x2013  # RPDO2 / TPDO2 mapped objects ([IG] 5-8; 64 bits each)
+ABORT_UNSUPPORTED = 0x06010000
 PRE_OPERATIONAL, OPERATIONAL, STOPPED = NMT_PRE_OPERATIONAL, NMT_OPERATIONAL, NMT_STOPPED  # heartbeat state bytes
 
 MF_HEARTBEAT, MF_SPEED_LIMIT, MF_POSITION_LIMIT = 0x800, 0x20000, 0x400000
@@ -144,7 +146,9 @@ class SimDrive:
         self._trip_due = self._after_start(self.settings.limit_trip_at)
         self.inputs = Inputs(self.settings.inputs)
         self._od_live = dict(od_live or {})  # extra live objects: another device type's profile (sim/arm.py)
-        self.tpdo = TpdoTable(node)
+        self.tpdo = self._make_tpdo_table(node)
+        self.last_request = b""  # the last binary interpreter request (0x2012) and reply (0x2013)
+        self.last_reply = b""
         self.syncs = 0  # SYNC frames this drive answered (Operational)
         # interpreter requests lost to the MO settle window, and the settle time each had left: what a
         # host waited for them (sim/stepped.py charges it on its clock)
@@ -175,6 +179,10 @@ class SimDrive:
         self._rpdo2_type = 255  # 0x1401:2
         self._rpdo2_buffer: bytes | None = None  # a synchronous RPDO2 waiting for SYNC
         self._boot()
+
+    def _make_tpdo_table(self, node: int) -> TpdoTable:
+        """TPDO1/3/4 free to map, TPDO2 the interpreter's reply channel (sim/pdo.py)."""
+        return TpdoTable(node)
 
     def _after_start(self, seconds: float | None) -> float | None:
         return None if seconds is None else self._t + seconds
@@ -263,21 +271,28 @@ class SimDrive:
     def od_read(self, index: int, sub: int) -> OdValue:
         """Read an object; raises od.ODError. A dead drive still answers here: an SDO server
         must check :attr:`dead` and stay silent, as the interpreter does."""
-        if is_pdo_object(index):
+        if self.tpdo.serves(index):
             return self.tpdo.read(index, sub)
-        if index == RPDO2_COMM:
-            return self._rpdo2_read(sub)
+        if index in (RPDO2_COMM, RPDO2_MAP):
+            return self._rpdo2_read(index, sub)
+        if sub == 0 and index in self._pdo_values():
+            return self._pdo_values()[index]()
+        if (index, sub) in ((INTERPRETER_IN, 0), (INTERPRETER_OUT, 0)):
+            frame = self.last_request if index == INTERPRETER_IN else self.last_reply
+            return int.from_bytes(frame[:8].ljust(8, b"\0"), "little")
         return self._od.read(index, sub)
 
     def od_write(self, index: int, sub: int, value: int) -> None:
         """Write an object; raises od.ODError carrying the SDO abort code on refusal."""
         self.advance_to(self.clock.now())
-        if is_pdo_object(index):
-            self.tpdo.write(index, sub, value)
+        if self.tpdo.serves(index):
+            self.tpdo.write(index, sub, value, now=self._t)
             self.od_writes.append((self._t, index, sub, value))
             return
-        if index == RPDO2_COMM:
-            self._rpdo2_write(sub, value)
+        if index in (INTERPRETER_IN, INTERPRETER_OUT):
+            raise ODError(f"0x{index:04X}: the binary interpreter is reached by RPDO2 only", ABORT_UNSUPPORTED)
+        if index in (RPDO2_COMM, RPDO2_MAP):
+            self._rpdo2_write(index, sub, value)
             self.od_writes.append((self._t, index, sub, value))
             return
         value = self._od.check_write(index, sub, value)
@@ -408,6 +423,14 @@ class SimDrive:
         self._send(HEARTBEAT_BASE + self.node, b"\x00")
 
     def _nmt(self, cs: int) -> None:
+        before = self._nmt_state
+        self._nmt_command(cs)
+        if self._nmt_state == OPERATIONAL and before != OPERATIONAL:
+            self.tpdo.start_timers(self._t)  # event-driven TPDOs live in Operational only
+        elif self._nmt_state != OPERATIONAL:
+            self.tpdo.stop_timers()
+
+    def _nmt_command(self, cs: int) -> None:
         # Unknown command specifiers are ignored (the real drive may raise EMCY 0x8200).
         if cs == NMT_START:
             self._nmt_state = OPERATIONAL
@@ -434,7 +457,7 @@ class SimDrive:
             finally:
                 self._via_group = False
         for can_id, data in self.tpdo.on_sync(self._pdo_values()):
-            self._send(can_id, data)
+            self._send_pdo(can_id, data)
 
     def _pdo_values(self) -> dict[int, Callable[[], int]]:
         values = self._pdo_sources
@@ -443,19 +466,20 @@ class SimDrive:
                                           0x6078: lambda: max(-32768, min(32767, round(self._iq() * 1000)))}
         return values
 
-    def _rpdo2_read(self, sub: int) -> int:
-        """0x1401, RPDO2 (the binary interpreter's) communication parameter: COB-ID and transmission type."""
-        if sub == 0:
-            return 2
-        if sub == 1:
-            return RPDO2_BASE + self.node
-        if sub == 2:
-            return self._rpdo2_type
-        raise ODError(f"object 0x{RPDO2_COMM:04X} has no sub-index {sub}", ABORT_NO_SUBINDEX)
+    def _rpdo2_read(self, index: int, sub: int) -> int:
+        """RPDO2, the binary interpreter's: 0x1401 communication parameter (COB-ID, transmission type)
+        and 0x1601 its fixed mapping (0x2012, 64 bits)."""
+        values = {0: 2, 1: RPDO2_BASE + self.node, 2: self._rpdo2_type} if index == RPDO2_COMM else \
+            {0: 1, 1: INTERPRETER_IN << 16 | 64}
+        if sub in values:
+            return values[sub]
+        raise ODError(f"object 0x{index:04X} has no sub-index {sub}", ABORT_NO_SUBINDEX)
 
-    def _rpdo2_write(self, sub: int, value: int) -> None:
-        if sub != 2:
-            raise ODError(f"0x{RPDO2_COMM:04X}:{sub} is read-only here", ABORT_READ_ONLY)
+    def _rpdo2_write(self, index: int, sub: int, value: int) -> None:
+        if index == RPDO2_MAP or sub != 2:
+            if (index == RPDO2_COMM and sub > 2) or (index == RPDO2_MAP and sub > 1):
+                raise ODError(f"object 0x{index:04X} has no sub-index {sub}", ABORT_NO_SUBINDEX)
+            raise ODError(f"0x{index:04X}:{sub} is read-only (the binary interpreter's RPDO2)", ABORT_READ_ONLY)
         if not 0 <= value <= 255 or RPDO_SYNC_MAX < value < 254:
             raise ODError(f"0x{RPDO2_COMM:04X}:2: {value} is no transmission type (0..240, 254, 255)", ABORT_RANGE)
         self._rpdo2_type = value
@@ -505,6 +529,8 @@ class SimDrive:
                 times.append(self._hb_last + timeout)
         if self._replies:
             times.append(self._replies[0][0])
+        if self._nmt_state == OPERATIONAL:
+            times.append(self.tpdo.next_due())
         return min(times)
 
     def _fire_events(self) -> None:
@@ -541,6 +567,9 @@ class SimDrive:
         while self._replies and self._replies[0][0] <= t:
             _, _, (can_id, data) = heapq.heappop(self._replies)
             self._send(can_id, data, blackout_applies=False)
+        if self._nmt_state == OPERATIONAL:
+            for can_id, data in self.tpdo.on_timers(self._t, self._pdo_values(), TIME_EPS):
+                self._send_pdo(can_id, data)
         if t >= self._next_heartbeat:
             self._send(HEARTBEAT_BASE + self.node, bytes([self._nmt_state]))
             period = self._od.values[(0x1017, 0)] / 1000
@@ -570,6 +599,10 @@ class SimDrive:
             return
         self._outbox.append((can_id, data))
 
+    def _send_pdo(self, can_id: int, data: bytes) -> None:
+        """A TPDO the table made (on SYNC or its event timer)."""
+        self._send(can_id, data)
+
     def _emcy(self, code: int, register: int, elmo_code: int = 0) -> None:
         self._error_register = register
         self._error_field = encode_error_field(code, register, elmo_code)
@@ -583,9 +616,11 @@ class SimDrive:
             self.unheard += 1
             self.unheard_s += self._settle_until - self._t
             return
+        self.last_request = data
         reply = interpreter.handle(self, data)
         if reply is None:
             return
+        self.last_reply = reply
         release = self._t + self.settings.reply_latency_s
         heapq.heappush(self._replies, (release, next(self._seq), (TPDO2_BASE + self.node, reply)))
         self._fire_events()
