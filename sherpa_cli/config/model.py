@@ -349,6 +349,15 @@ class SimDriveConfig:
     st_refused_in_speed_mode: bool = False  # ST answers EC 60 in UM=2, as [BLISS] says some firmware does
     start_skew: float = 0.0  # s a separately received BG starts late (a group BG does not; seed Fig. 9.10)
     lag: float = 0.0  # s time constant of the servo loop (bandwidth mismatch of a pair); 0 = perfect
+    # the load (sim/load.py), joint side, SI; None: the simulator's default (a shoulder-like joint)
+    inertia: float | None = None  # kg m^2
+    torque_constant: float | None = None  # N m/A
+    viscous: float | None = None  # N m s/rad
+    coulomb: float | None = None  # N m
+    gravity: float | None = None  # N m at horizontal (position 0): a pitch joint's gravity torque
+    back_emf: float | None = None  # V s/rad
+    resistance: float | None = None  # ohm
+    supply_voltage: float | None = None  # V
 
 
 @dataclass(frozen=True)

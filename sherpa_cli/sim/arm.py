@@ -65,6 +65,9 @@ def settings_for(cfg: ArmConfig, drive: str, **overrides: object) -> SimSettings
         hm_event_immediate=cfg.homing.event_immediate, hm_event_input_base=cfg.homing.event_input_base,
         hm_after_stop=cfg.homing.after_stop, hm_px_absolute=cfg.homing.px_absolute,
     )
+    cpr = _drive_cpr(cfg, drive)
+    if cpr:
+        base["counts_per_rad"] = cpr / (2 * math.pi)
     joint = cfg.joint_of_drive(drive)
     if joint is not None and joint.abs_encoder is not None and joint.abs_encoder.source.upper() == "DRIVE:PY":
         base["py_offset"] = -joint.abs_encoder.offset  # encoder + offset = joint position
@@ -79,8 +82,23 @@ def settings_for(cfg: ArmConfig, drive: str, **overrides: object) -> SimSettings
                     servo_bandwidth_hz=faults.servo_bandwidth, servo_damping=faults.servo_damping,
                     servo_current_limit=faults.servo_current_limit,
                     supply_current_limit=faults.supply_current_limit)
+        base.update({key: getattr(faults, key) for key in LOAD_KEYS if getattr(faults, key) is not None})
     base.update(overrides)
     return SimSettings(**base)
+
+
+LOAD_KEYS = ("inertia", "torque_constant", "viscous", "coulomb", "gravity", "back_emf", "resistance", "supply_voltage")
+
+
+def _drive_cpr(cfg: ArmConfig, drive: str) -> int | None:
+    """Counts per joint turn of what ``drive`` moves: its plain joint, or its pair's Σ joint."""
+    joint = cfg.joint_of_drive(drive)
+    if joint is not None:
+        return joint.cpr
+    for pair in cfg.pairs.values():
+        if drive in (pair.drive_a, pair.drive_b):
+            return cfg.joints[pair.sigma].cpr
+    return None
 
 
 # how far from its calibration switch a joint without absolute feedback powers up by default: this

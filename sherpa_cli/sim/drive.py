@@ -73,13 +73,16 @@ SR_MO, SR_MF, SR_UM_SHIFT, SR_MS_SHIFT, SR_LIMIT_STOP = 1 << 4, 1 << 6, 7, 14, 1
 
 
 def _make_motor(settings: SimSettings, position: int) -> Motor:
-    """The kinematic motor, or with ``servo_bandwidth_hz`` the servo-loop model (sim/servo.py)."""
-    if settings.servo_bandwidth_hz <= 0:
-        return Motor(counts=position)
-    return ServoMotor(counts=position, wn=2 * math.pi * settings.servo_bandwidth_hz, zeta=settings.servo_damping,
-                      torque_accel_per_amp=settings.torque_accel,
-                      current_limit=settings.servo_current_limit or settings.max_current,
-                      supply_limit=settings.supply_current_limit, supply_speed=settings.supply_speed)
+    """The kinematic motor, or with ``servo_bandwidth_hz`` / ``lag_s`` the servo model (sim/servo.py);
+    either drives the load (sim/load.py) in torque mode."""
+    load, k = settings.load(), settings.counts_per_rad
+    if settings.servo_bandwidth_hz > 0:
+        return ServoMotor(counts=position, load=load, counts_per_rad=k, wn=2 * math.pi * settings.servo_bandwidth_hz,
+                          zeta=settings.servo_damping)
+    if settings.lag_s > 0:  # the same model as a first-order lag: trails by lag_s at speed
+        return ServoMotor(counts=position, load=load, counts_per_rad=k, wn=2 / settings.lag_s, zeta=1.0,
+                          feed_forward=0.0, integral_gain=0.0)
+    return Motor(counts=position, load=load, counts_per_rad=k)
 
 
 _T = TypeVar("_T")
@@ -132,7 +135,6 @@ class SimDrive:
         self.od_writes: list[tuple[float, int, int, int]] = []  # SDO writes, for "dry run wrote nothing"
         self.boots = 0
         self.motor = _make_motor(self.settings, int(position))
-        self._lagged = float(position)  # where the motor really is with settings.lag_s (else the profile)
         self._outbox: list[Frame] = []
         self._replies: list[tuple[float, int, Frame]] = []  # heap: (release time, seq, frame)
         self._seq = itertools.count()
@@ -323,13 +325,11 @@ class SimDrive:
     @property
     def position(self) -> float:
         """Physical motor position in counts (not PX), for arm mechanics."""
-        return self._lagged if self.settings.lag_s > 0 else self.motor.position
+        return self.motor.position
 
     @property
     def px(self) -> int:
-        if self.settings.lag_s > 0:
-            return wrap_int32(math.floor(self._lagged + 0.5) + self._px_offset)
-        return wrap_int32(self.motor.counts + self._px_offset)
+        return wrap_int32(self.motor.rounded + self._px_offset)
 
     @property
     def mf(self) -> int:
@@ -349,7 +349,7 @@ class SimDrive:
         if key == "MO":
             self._set_motor(bool(value))
         elif key == "PX":
-            self._px_offset = int(value) - self.motor.counts
+            self._px_offset = int(value) - self.motor.rounded
         elif key == "HM[1]":
             self.ram[key] = int(value)
             self._arm_homing(bool(value))
@@ -402,7 +402,7 @@ class SimDrive:
         self._od = build_od(self.settings, self.serial, self.flash, live)
         self._motor_on = False
         self.motor.off()
-        self._px_offset = -self.motor.counts
+        self._px_offset = -self.motor.rounded
         self._mf = 0
         self._error_register = 0
         self._limit_stop = False
@@ -686,7 +686,7 @@ class SimDrive:
             self._apply_torque()
 
     def _apply_torque(self) -> None:
-        self.motor.torque(self.ram["TC"] * self.settings.torque_accel * self.speed_gain)
+        self.motor.torque(self.ram["TC"] * self.speed_gain)
 
     def _begin(self) -> None:
         um, r, g = self.ram["UM"], self.ram, self.speed_gain
@@ -724,13 +724,10 @@ class SimDrive:
                 m.stop(self.ram["SD"] * self.speed_gain)
                 self._limit_stop = True
             m.step(dt)
-            self._follow(dt)
             if self._quick_stop and m.v == 0 and m.mode in ("idle", "stop"):
                 self._shut_down(MF_HEARTBEAT, "heartbeat lost, 0x6007=3 (quick stop done)")
                 return
             self._check_limits()
-        else:
-            self._lagged = self.motor.position  # a motor that is off stands where it is
         if self.on_step is not None:
             self.on_step(self)
         self._check_homing()
@@ -766,19 +763,13 @@ class SimDrive:
         if update == s.hm_px_absolute:
             # an input edge (the motor moving) is taken at the nearest count of the motor's position,
             # not its floor; an immediate event sets PX itself to the value (it reads back as written)
-            self._px_offset = value - (round(self.motor.position) if edge else self.motor.counts)
+            self._px_offset = value - (round(self.motor.position) if edge else self.motor.rounded)
         elif update == s.hm_px_absolute + 1:  # relative: the event's position moves by HM[2]
             self._px_offset += value
         if int(r.get("HM[4]", 0)) == s.hm_after_stop and self._motor_on:
             self.motor.stop(r["SD"] * self.speed_gain)
         r["HM[1]"] = 0
         self._record(f"home event: PX={self.px}")
-
-    def _follow(self, dt: float) -> None:
-        """The servo loop's bandwidth: the real position follows the profile with time constant lag_s."""
-        tau = self.settings.lag_s
-        if tau > 0:
-            self._lagged += (self.motor.position - self._lagged) * (1.0 - math.exp(-dt / tau))
 
     def _check_limits(self) -> None:
         r = self.ram
@@ -826,11 +817,10 @@ class SimDrive:
     def _iq(self) -> float:
         if not self._motor_on:
             return 0.0
-        if isinstance(self.motor, ServoMotor):
-            return self.motor.current
-        if self.ram["UM"] == 1:
-            return self.ram["TC"]
-        return self.motor.a / self.settings.torque_accel
+        if isinstance(self.motor, ServoMotor) or self.ram["UM"] == 1:
+            return self.motor.current  # what the drive really puts through: clamped, as on the drive
+        peak = self.settings.max_current
+        return max(-peak, min(peak, self.motor.a / self.settings.torque_accel))
 
     def _il(self, n: int) -> int:
         return self._int_param(f"IL[{n}]")
