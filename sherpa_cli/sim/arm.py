@@ -22,6 +22,8 @@ import uuid
 from collections.abc import Callable, Mapping
 from typing import TYPE_CHECKING, Any, TextIO
 
+import filelock
+
 from sherpa_cli.config.model import ArmConfig, JointConfig, PairConfig, SwitchConfig, SwitchKind
 from sherpa_cli.elmo.protocol import NMT_ID, SDO_RX_BASE, SYNC_ID
 from sherpa_cli.sim import state as sim_state
@@ -285,11 +287,13 @@ class SimArm:
                  clock: Clock | None = None, flash: Mapping[str, sim_state.DriveFlash] | None = None,
                  settings: Mapping[str, SimSettings] | None = None, persist: bool = False,
                  tick_s: float = 0.002, bus_factory: Callable[..., can.BusABC] | None = None,
-                 event_log: str | None = None) -> None:
+                 event_log: str | None = None, keep_ram: bool = False) -> None:
         """``endpoints``: bus name -> keyword arguments for ``can.Bus`` (interface, channel);
         ``bus_factory`` opens them instead of ``can.Bus``; ``event_log``: a file that gets one JSON
         line per motor on/off and dead-man event (appended, flushed at once), so another process can
-        tell when a motor went off."""
+        tell when a motor went off; ``keep_ram``: the arm stays powered between runs (`--sim`): its RAM
+        is loaded from the state directory by :meth:`start` and saved by :meth:`stop`, under a lock
+        held meanwhile (sim/state.py)."""
         self.cfg = cfg
         self.endpoints = dict(endpoints)
         self.bus_factory = bus_factory
@@ -338,6 +342,8 @@ class SimArm:
         self.errors: list[BaseException] = []
         self.event_log = event_log
         self._event_file: TextIO | None = None
+        self.keep_ram = keep_ram
+        self._ram_lock: filelock.BaseFileLock | None = None
 
     def _drive_stepped(self, name: str, drive: SimDrive) -> None:
         """A drive's ``on_step``: the mechanics follow its motor."""
@@ -360,7 +366,7 @@ class SimArm:
         """The in-process arm of ``--sim``: virtual channels, flash kept in the state directory;
         ``clock``: its time (default wall time; `log step` gives it a stepped clock)."""
         return cls(cfg, {bus: {"interface": "virtual", "channel": ch} for bus, ch in channels.items()},
-                   persist=True, clock=clock)
+                   persist=True, clock=clock, keep_ram=True)
 
     def _log_event(self, name: str, node: int, t: float, text: str) -> None:
         """One JSON line per event: ``t`` is the drive's clock (time.monotonic() for a RealClock,
@@ -412,11 +418,14 @@ class SimArm:
 
         from sherpa_cli.sim.sdo import SdoServer
 
+        if self.keep_ram:
+            self._power_on()
         try:
             for bus_name, kwargs in self.endpoints.items():
                 self._buses[bus_name] = (self.bus_factory or can.Bus)(**kwargs)
         except BaseException:
             self._close_buses()
+            self._release_ram()
             raise
         for name, d in self.cfg.drives.items():
             if d.bus in self._buses:
@@ -449,8 +458,57 @@ class SimArm:
         if self._event_file is not None:
             self._event_file.close()
             self._event_file = None
-        if self.persist:
-            self.save_state()
+        try:
+            if self.persist:
+                self.save_state()
+        finally:
+            if self.keep_ram and self._ram_lock is not None:
+                try:
+                    self._save_ram()
+                finally:
+                    self._release_ram()
+
+    # -- RAM between runs ----------------------------------------------------------------------------
+    RAM_LOCK_TIMEOUT = 30.0  # s a `--sim` command waits for another to leave the arm (then exit 5)
+
+    def _ram_nodes(self) -> dict[str, SimDrive]:
+        nodes = dict(self.drives)
+        nodes.update((name, node) for name, (_, node) in self.extras.items() if isinstance(node, SimEncoder))
+        return nodes
+
+    def _power_on(self) -> None:
+        """Take the arm's lock and put back what it held when the last command left it (positions only
+        after `sim --power-cycle`; nothing after `--reset-state` or the first time)."""
+        self._ram_lock = sim_state.ram_lock(self.cfg, self.RAM_LOCK_TIMEOUT)
+        try:
+            saved = sim_state.load_ram(self.cfg)
+            if saved is None:
+                return
+            with self.lock:
+                for name, node in self._ram_nodes().items():
+                    item = saved["drives"].get(name)
+                    if not isinstance(item, dict):
+                        continue
+                    try:
+                        if saved.get("powered", True) and "ram" in item:
+                            node.restore_ram(item)
+                        elif isinstance(item.get("position"), (int, float)) and math.isfinite(item["position"]):
+                            node.restore_position(float(item["position"]))
+                    except (ValueError, TypeError, KeyError, LookupError) as exc:
+                        raise sim_state.ram_damaged(sim_state.ram_path(self.cfg), f"{name}: {exc}") from None
+        except BaseException:
+            self._release_ram()
+            raise
+
+    def _save_ram(self) -> None:
+        with self.lock:
+            snapshot = {name: node.ram_snapshot() for name, node in self._ram_nodes().items()}
+        sim_state.save_ram(self.cfg, snapshot)
+
+    def _release_ram(self) -> None:
+        lock, self._ram_lock = self._ram_lock, None
+        if lock is not None:
+            lock.release()
 
     def save_state(self) -> None:
         with self.lock:

@@ -85,6 +85,13 @@ def _make_motor(settings: SimSettings, position: int) -> Motor:
     return Motor(counts=position, load=load, counts_per_rad=k)
 
 
+def _saved_int(saved: Mapping[str, object], key: str) -> int:
+    value = saved[key]
+    if isinstance(value, bool) or not isinstance(value, int):
+        raise TypeError(f"{key} {value!r} is not an integer")
+    return value
+
+
 _T = TypeVar("_T")
 
 
@@ -334,6 +341,64 @@ class SimDrive:
     @property
     def mf(self) -> int:
         return self._mf
+
+    # -- RAM between `--sim` commands (sim/state.py) ----------------------------------------------
+
+    def ram_snapshot(self) -> dict[str, object]:
+        """What a powered drive keeps: the joint's position, RAM, objects, faults, NMT state and whether
+        its heartbeat consumer was watching (the host that armed it has gone when this is restored)."""
+        self.advance_to(self.clock.now())
+        return {"position": self.motor.position, "px_offset": self._px_offset, "motor_on": self._motor_on,
+                "ram": dict(self.ram), "od": {flash_key(*key): value for key, value in self._od.values.items()},
+                "mf": self._mf, "last_error": self.last_error, "error_field": self._error_field,
+                "error_register": self._error_register, "limit_stop": self._limit_stop, "nmt": self._nmt_state,
+                "tpdo": self.tpdo.snapshot(), "rpdo2_type": self._rpdo2_type,
+                "consumer_watching": self._hb_last is not None and self._consumer()[1] > 0}
+
+    def restore_position(self, position: float) -> None:
+        """The joint stands at ``position`` (counts) at this power-up; PX reads 0 there."""
+        whole = math.floor(position)
+        self.motor.off()
+        self.motor.counts, self.motor.frac = whole, position - whole
+        self._px_offset = -self.motor.rounded
+
+    def restore_ram(self, saved: Mapping[str, object]) -> None:
+        """Power this drive back to what :meth:`ram_snapshot` gave, without a boot. A motion does not
+        carry over (a motor left on holds its position); a consumer that was watching has lost its host's
+        heartbeat and acts on it now. ValueError / TypeError / KeyError: the snapshot is damaged."""
+        position = saved["position"]
+        if not isinstance(position, (int, float)) or not math.isfinite(position):
+            raise ValueError(f"position {position!r}")
+        ram, od_values, tpdo = saved["ram"], saved["od"], saved["tpdo"]
+        if not isinstance(ram, dict) or not isinstance(od_values, dict) or not isinstance(tpdo, dict):
+            raise TypeError("ram, od and tpdo must be mappings")
+        ints = {key: _saved_int(saved, key) for key in ("px_offset", "mf", "last_error", "error_field",
+                                                         "error_register", "nmt", "rpdo2_type")}
+        if ints["nmt"] not in (PRE_OPERATIONAL, OPERATIONAL, STOPPED):
+            raise ValueError(f"NMT state {ints['nmt']}")
+        values = {}
+        for key, value in od_values.items():
+            index, sub = (int(part, 16) if i == 0 else int(part) for i, part in enumerate(str(key).split(":")))
+            values[(index, sub)] = self._od.check_write(index, sub, value)
+        self.tpdo.restore(tpdo)
+        self.ram = {str(k): v for k, v in ram.items() if isinstance(v, (int, float)) and not isinstance(v, bool)}
+        self._od.values.update(values)
+        self.restore_position(float(position))
+        self._px_offset = ints["px_offset"]
+        self._mf, self.last_error = ints["mf"], ints["last_error"]
+        self._error_field, self._error_register = ints["error_field"], ints["error_register"]
+        self._nmt_state, self._rpdo2_type = ints["nmt"], ints["rpdo2_type"]
+        self._limit_stop = bool(saved.get("limit_stop", False))
+        self._motor_on = bool(saved["motor_on"])
+        if self._motor_on and self.ram.get("UM") == 1:
+            self._apply_torque()
+        period = self._od.values[(0x1017, 0)]
+        self._next_heartbeat = self._t + period / 1000 if period else math.inf
+        if self._nmt_state == OPERATIONAL:
+            self.tpdo.start_timers(self._t)
+        self._outbox.clear()  # a powered drive did not boot: no boot-up frame
+        if saved.get("consumer_watching"):
+            self._heartbeat_lost()  # the command that armed it has ended without disarming it
 
     # -- interpreter state, used by sim.interpreter -------------------------------------------
 

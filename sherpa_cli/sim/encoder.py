@@ -214,3 +214,19 @@ class SimEncoder(SimDrive):
     @property
     def next_cyclic(self) -> float:
         return self.tpdo.next_due() if self._nmt_state == OPERATIONAL else math.inf
+
+    # -- RAM between `--sim` commands ----------------------------------------------------------
+    def ram_snapshot(self) -> dict[str, object]:
+        saved = super().ram_snapshot()
+        saved["encoder"] = {"operating": self.operating, "units_per_rev": self.units_per_rev,
+                            "total_range": self.total_range, "offset": self.offset}
+        return saved
+
+    def restore_ram(self, saved: Mapping[str, object]) -> None:
+        super().restore_ram(saved)
+        enc = saved.get("encoder")
+        if not isinstance(enc, dict) or not all(isinstance(enc.get(k), int) for k in
+                                                ("operating", "units_per_rev", "total_range", "offset")):
+            raise ValueError("encoder objects missing")
+        self.operating, self.units_per_rev = enc["operating"], enc["units_per_rev"]
+        self.total_range, self.offset = enc["total_range"], enc["offset"]
