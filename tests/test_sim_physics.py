@@ -157,6 +157,7 @@ def _position_step(cli, tmp_path: Path, supply: float) -> list[dict[str, float]]
     config = tmp_path / f"seed-{supply:g}A.yaml"
     config.write_text(text, encoding="utf-8")
     out = tmp_path / f"step-{supply:g}A"
+    assert cli("--config", str(config), "sim", "--reset-state").exit_code == 0  # a fresh arm: the joint at 0
     result = cli("--config", str(config), "--sim", "log", "step", "shoulder_yaw", "--position", "1", "--uncalibrated",
                  "-o", str(out), "--apply")
     assert result.exit_code == 0, result.stderr
