@@ -267,8 +267,8 @@ def _check_arm_args(args: tuple[str, ...]) -> None:
 def arm_cli(request, cli, cli_windows, arm_process):
     """``arm_cli(*args)``: `sherpa ARGS` against the simulated arm on the selected transport.
 
-    Every test starts with factory flash, every command with a power-cycled arm, as with
-    `--sim`. The transcript shows the logical command (``--sim``), so golden files are the
+    Every test starts with factory flash, every command with a power-cycled arm (`sim
+    --power-cycle` before each in-process `--sim` command, NMT reset with a separate simulator). The transcript shows the logical command (``--sim``), so golden files are the
     same whatever the transport. A simulator in another process keeps its config's protocol
     windows (a slow guest needs them), so the commands use those too.
     """
@@ -280,6 +280,10 @@ def arm_cli(request, cli, cli_windows, arm_process):
     def invoke(*args: str, stdin: str = "") -> CliResult:
         _check_arm_args(args)
         if arm_process is None:
+            # `--sim` keeps the arm powered between commands; a separate simulator is reset before each
+            # command (arm_harness), so here too: one golden file for every transport
+            cycled = cli("sim", "--power-cycle")
+            assert cycled.exit_code == 0, cycled.transcript()
             result = cli("--sim", *args, stdin=stdin)
         else:
             arm_process.before_command()

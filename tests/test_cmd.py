@@ -58,11 +58,15 @@ def test_exit_codes(cli):
     assert cli("--sim", "cmd", "shoulder_1a", "XQ").exit_code == 2  # unknown command, nothing sent
 
 
-def test_apply_then_a_new_invocation_sees_the_power_cycled_drive(cli):
+def test_apply_then_a_new_invocation_sees_the_powered_drive_and_a_power_cycle_forgets_it(cli):
     cli("--sim", "cmd", "shoulder_1a", "AC=150000", "--apply")
+    again = json.loads(cli("--sim", "--json", "cmd", "shoulder_1a", "AC").stdout)
+    assert again["results"][0]["value"] == 150000  # --sim keeps the arm powered: RAM stays
+    assert cli("sim", "--power-cycle").exit_code == 0
     again = json.loads(cli("--sim", "--json", "cmd", "shoulder_1a", "AC").stdout)
     assert again["results"][0]["value"] == 100000  # not saved: RAM is new after the power cycle
     cli("--sim", "cmd", "shoulder_1a", "AC=150000", "SV", "--apply", "--raw-save")
+    assert cli("sim", "--power-cycle").exit_code == 0
     saved = json.loads(cli("--sim", "--json", "cmd", "shoulder_1a", "AC").stdout)
     assert saved["results"][0]["value"] == 150000
 

@@ -100,7 +100,7 @@ def test_sdo_only_and_the_fallbacks():
 def test_no_tpdo_within_the_wait_falls_back_to_sdo_and_restores(monkeypatch):
     from sherpa_cli.sim.encoder import SimEncoder
 
-    monkeypatch.setattr(SimEncoder, "_send_tpdo", lambda self: None)  # an encoder whose TPDO never comes
+    monkeypatch.setattr(SimEncoder, "_send_tpdo", lambda self, *frame: None)  # an encoder whose TPDO never comes
     cfg = load_config(ARM)
     dev = cfg.devices["elbow_encoder"]
     with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
@@ -144,9 +144,11 @@ def test_the_simulated_encoder_sends_tpdo1_every_cyclic_period_and_on_sync():
     enc.tick()
     assert enc.pop_frames() == []
     enc.receive(0x080, b"")
-    assert enc.pop_frames() == [(0x1AD, (-5).to_bytes(4, "little", signed=True))]
+    # TPDO1 now synchronous, and TPDO2 (0x280 + node), synchronous from the factory (CiA 406)
+    assert enc.pop_frames() == [(0x1AD, (-5).to_bytes(4, "little", signed=True)),
+                                (0x2AD, (-5).to_bytes(4, "little", signed=True))]
     enc.receive(0x000, bytes([0x81, 45]))  # reset node: RAM defaults again, Pre-operational
-    assert (enc.enc_ttype, enc.cyclic_ms) == (254, 100)
+    assert (enc.od_read(0x1800, 2), enc.cyclic_ms) == (254, 100)
 
 
 def test_encoder_settings_are_checked(tmp_path):
@@ -180,7 +182,7 @@ def test_the_simulated_encoder_refuses_a_mapping_change_while_tpdo1_is_valid():
     enc = SimEncoder(45, position=lambda: 0, clock=ManualClock())
     with pytest.raises(ODError) as info:
         enc.od_write(0x1A00, 0, 0)
-    assert info.value.abort_code == 0x08000022
+    assert info.value.abort_code == 0x06010000  # CiA 301 (CANopenNode: ODR_UNSUPP_ACCESS)
     enc.od_write(0x1800, 1, 0x80000000 | 0x1AD)
     enc.od_write(0x1A00, 0, 0)
     assert enc.od_read(0x1A00, 0) == 0

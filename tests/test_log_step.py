@@ -16,6 +16,7 @@ from sherpa_cli.motion.settings import MotionSettings
 from sherpa_cli.ops.jog import resolve_jog_target
 from sherpa_cli.ops.step import run_step
 from sherpa_cli.sim.arm import SimArm, settings_for
+from sherpa_cli.sim.load import Load
 from sherpa_cli.sim.servo import ServoMotor
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -109,8 +110,7 @@ def test_torque_step_of_one_ampere():
 def test_supply_limit_slows_a_step():
     """The seed's 1 A supply: the same step takes longer when the supply limits the current."""
     def settle(supply):
-        m = ServoMotor(wn=2 * 3.14159 * 8, zeta=0.6, torque_accel_per_amp=10000.0, current_limit=10.0,
-                       supply_limit=supply, supply_speed=20000.0)
+        m = ServoMotor(wn=2 * 3.14159 * 8, zeta=0.6, load=Load(peak_current=10.0, supply_current=supply))
         m.move_to(2000, 1e9, 1e9, 1e9)
         t = 0.0
         while t < 5:
@@ -155,7 +155,7 @@ def test_the_config_sim_section_turns_the_servo_model_on(tmp_path):
     settings = settings_for(cfg, "elbow_1a")
     assert settings.servo_bandwidth_hz == 8 and settings.supply_current_limit == 1.0
     motor = SimDrive(40, clock=ManualClock(), settings=settings).motor
-    assert isinstance(motor, ServoMotor) and motor.supply_limit == 1.0
+    assert isinstance(motor, ServoMotor) and motor.load is not None and motor.load.supply_current == 1.0
     assert not isinstance(SimDrive(41, clock=ManualClock(), settings=settings_for(cfg, "elbow_1b")).motor,
                           ServoMotor)
 

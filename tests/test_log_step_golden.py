@@ -68,6 +68,8 @@ def test_the_same_step_gives_the_same_recording_twice(cli, tmp_path):
     runs = []
     for i in range(2):
         out = tmp_path / f"run{i}"
+        # the same arm each time: --sim keeps it powered (the joint would start where run 0 left it)
+        assert cli(*ARM[:2], "sim", "--reset-state").exit_code == 0
         result = cli(*ARM, "log", "step", "arm", "--position", "1", "--rate", "500", "-o", str(out), "--apply")
         assert result.exit_code == 0, result.transcript()
         runs.append((out / "recording.csv").read_text())

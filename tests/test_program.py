@@ -20,6 +20,7 @@ from sherpa_cli.joints.limits import derive_checked
 from sherpa_cli.ops import program
 from sherpa_cli.ops.program import DriveTarget, write_order
 from sherpa_cli.ops.save_ledger import SaveLedger, save_warning
+from sherpa_cli.sim import state as sim_state
 from sherpa_cli.sim.arm import SimArm
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -400,6 +401,7 @@ def test_a_ledger_that_cannot_be_written_does_not_hide_the_saves(state_home, cfg
         result = program.apply_plans(session, plans, ledger=ledger)
         assert result.ok and all(o.status == "programmed" for o in result.outcomes)
         assert all("save ledger" in o.save_warning and "not updated" in o.save_warning for o in result.outcomes)
+    sim_state.power_cycle(cfg3)  # --sim keeps the arm powered; this test wants it power-cycled
     with ArmSession.open(cfg3, sim=SimArm.in_process(cfg3)) as session:  # a new power-up: RAM holds the old values again
         plans = program.read_plans(session, targets, need_serial=True)
         result = program.apply_plans(session, plans, save=True, ledger=ledger)

@@ -174,6 +174,9 @@ def test_power_cycle_keeps_flash_and_save_count(tmp_path):
     assert saved["flash"]["DC"] == FACTORY_DC  # SV saved the RAM of that moment, before DC=120000
     assert saved["save_count"] == 1
 
+    with sim_session(cfg) as s:  # still powered (--sim keeps RAM between sessions): DC is as set
+        assert client(s, "drive1").get("DC") == 120_000
+    assert sim_state.power_cycle(cfg)
     with sim_session(cfg) as s:  # power cycle: new RAM from the persisted flash
         c = client(s, "drive1")
         c.nmt_start()

@@ -25,7 +25,12 @@ def sim(
         "--allow-remote)."),
     allow_remote: bool = typer.Option(False, "--allow-remote", help="Allow --serve on a non-loopback address."),
     reset_state: bool = typer.Option(False, "--reset-state",
-                                     help="Forget what the simulated drives saved (SV): factory flash."),
+                                     help="Forget what the simulated drives saved (SV) and their RAM: factory flash, "
+                                     "joints back at their power-up positions."),
+    power_cycle: bool = typer.Option(False, "--power-cycle",
+                                     help="Power the in-process simulated arm (--sim) off and on: RAM is lost "
+                                     "(not homed, motors off, PDOs and dead-man objects at their defaults); "
+                                     "flash and the joints' positions stay."),
     duration: float | None = typer.Option(None, "--duration", metavar="SECONDS",
                                              help="Stop by itself after this long (default: until Ctrl-C)."),
     event_log: str | None = typer.Option(None, "--event-log", metavar="FILE",
@@ -37,12 +42,15 @@ def sim(
     With --serve the buses are served over python-can-remote and the command prints the
     --bus-map a second terminal must use. With the global --bus-map (e.g.
     can0=socketcan:vcan0) the drives answer on those interfaces, e.g. kernel vcan.
-    The drives' flash (what SV saved) persists between runs in the state directory.
+    The drives' flash (what SV saved) persists between runs in the state directory. The
+    in-process arm of --sim stays powered between commands (its RAM too); --power-cycle
+    switches it off and on, --reset-state returns it to the state it was delivered in.
 
     \b
     Examples:
       sherpa sim --serve 127.0.0.1:54701
       sherpa --bus-map can0=socketcan:vcan0,can1=socketcan:vcan1,can2=socketcan:vcan2 sim
+      sherpa sim --power-cycle
       sherpa sim --reset-state
     """
     from sherpa_cli.bus.busmap import apply_bus_map, bus_kwargs, parse_bus_map
@@ -60,7 +68,14 @@ def sim(
     if reset_state:
         path = sim_state.state_path(cfg)
         removed = sim_state.reset(cfg)
+        sim_state.reset_ram(cfg)
         st.out.line(f"simulated arm '{cfg.name}': factory flash ({'removed ' if removed else 'no saved state at '}{path})")
+        if not serve and not mapping:
+            return
+    if power_cycle:
+        was = sim_state.power_cycle(cfg)
+        st.out.line(f"simulated arm '{cfg.name}': power cycled (RAM lost; flash and positions kept)" if was else
+                    f"simulated arm '{cfg.name}': was not powered (nothing in {sim_state.ram_path(cfg)})")
         if not serve and not mapping:
             return
     if duration is not None and duration <= 0:

@@ -382,6 +382,15 @@ class SimDriveConfig:
     lag: float = 0.0  # s time constant of the servo loop (bandwidth mismatch of a pair); 0 = perfect
     user_program: int = -1  # what PS answers: -1 idle, -2 no program, 1 a user program runs (SV refused, EC 82)
     firmware: str | None = None  # 0x100A software version instead of the simulator's (a replaced drive)
+    # the load (sim/load.py), joint side, SI; None: the simulator's default (a shoulder-like joint)
+    inertia: float | None = None  # kg m^2
+    torque_constant: float | None = None  # N m/A
+    viscous: float | None = None  # N m s/rad
+    coulomb: float | None = None  # N m
+    gravity: float | None = None  # N m at horizontal (position 0): a pitch joint's gravity torque
+    back_emf: float | None = None  # V s/rad
+    resistance: float | None = None  # ohm
+    supply_voltage: float | None = None  # V
 
 
 @dataclass(frozen=True)

@@ -617,6 +617,7 @@ SPEED_GAIN_MAX = 1000.0
 SERVO_BANDWIDTH_MAX = 100.0  # Hz
 SERVO_DAMPING_MAX = 10.0
 SIM_CURRENT_MAX = 1000.0  # A
+SIM_LOAD_MAX = 1e6  # the load's numbers (inertia, friction, gravity, EMF, ohm, V): finite and below this
 
 
 def _bad_number(value: object) -> str | None:
@@ -672,6 +673,12 @@ def _check_bounds(cfg: ArmConfig, locs: Locs, r: _Report) -> None:
         positive(sim_drive.servo_damping, SERVO_DAMPING_MAX, at_sim("servo_damping"), "servo_damping")
         for key in ("servo_current_limit", "supply_current_limit"):
             positive(getattr(sim_drive, key), SIM_CURRENT_MAX, at_sim(key), key, " A")
+        for key in ("inertia", "torque_constant", "resistance", "supply_voltage"):  # the load (sim/load.py)
+            positive(getattr(sim_drive, key), SIM_LOAD_MAX, at_sim(key), key)
+        for key in ("viscous", "coulomb", "back_emf", "gravity"):
+            lo = -SIM_LOAD_MAX if key == "gravity" else 0.0
+            if getattr(sim_drive, key) is not None:
+                within(getattr(sim_drive, key), lo, SIM_LOAD_MAX, at_sim(key), key)
         for key in ("start_skew", "lag"):  # the simulator refuses a negative time (SimSettings)
             within(getattr(sim_drive, key), 0.0, WAIT_MAX, at_sim(key), key, " s")
         if _bad_number(sim_drive.drop_probability):

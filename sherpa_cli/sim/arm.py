@@ -15,11 +15,14 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import functools
+import logging
 import math
 import threading
 import uuid
 from collections.abc import Callable, Mapping
 from typing import TYPE_CHECKING, Any, TextIO
+
+import filelock
 
 from sherpa_cli.config.model import ArmConfig, JointConfig, PairConfig, SwitchConfig, SwitchKind
 from sherpa_cli.config.simbus import SimBusConfig
@@ -36,6 +39,8 @@ if TYPE_CHECKING:
 
     from sherpa_cli.sim.sdo import SdoServer
 
+log = logging.getLogger(__name__)
+
 SDO_RX = SDO_RX_BASE
 # counts either side of a home switch's position where it reads pressed; a joint that crosses the
 # position within one model step also presses it for that step (a fast pass is never missed), so the
@@ -43,6 +48,7 @@ SDO_RX = SDO_RX_BASE
 HOME_SWITCH_HALF_WIDTH = 0
 ENCODER_VENDOR = 0x0000_0145  # made up: a CiA 406 encoder maker (the sim's, not a real vendor id)
 ENCODER_DEVICE_TYPE = 0x0001_0196  # 0x1000: CiA 406 (0x196), single-turn absolute rotary encoder
+LOOPBACK_ROUNDS = 4  # frames drives send because of other drives' frames, per pump cycle
 SIM_SV_SHARE = 0.6  # the simulated drive is deaf for this share of protocol.sv_blackout (the tool's bound)
 
 
@@ -63,6 +69,9 @@ def settings_for(cfg: ArmConfig, drive: str, **overrides: object) -> SimSettings
         hm_event_immediate=cfg.homing.event_immediate, hm_event_input_base=cfg.homing.event_input_base,
         hm_after_stop=cfg.homing.after_stop, hm_px_absolute=cfg.homing.px_absolute,
     )
+    cpr = _drive_cpr(cfg, drive)
+    if cpr:
+        base["counts_per_rad"] = cpr / (2 * math.pi)
     joint = cfg.joint_of_drive(drive)
     if joint is not None and joint.abs_encoder is not None and joint.abs_encoder.source.upper() == "DRIVE:PY":
         base["py_offset"] = -joint.abs_encoder.offset  # encoder + offset = joint position
@@ -79,8 +88,23 @@ def settings_for(cfg: ArmConfig, drive: str, **overrides: object) -> SimSettings
                     supply_current_limit=faults.supply_current_limit, user_program=faults.user_program)
         if faults.firmware is not None:
             base["sw_version"] = faults.firmware
+        base.update({key: getattr(faults, key) for key in LOAD_KEYS if getattr(faults, key) is not None})
     base.update(overrides)
     return SimSettings(**base)
+
+
+LOAD_KEYS = ("inertia", "torque_constant", "viscous", "coulomb", "gravity", "back_emf", "resistance", "supply_voltage")
+
+
+def _drive_cpr(cfg: ArmConfig, drive: str) -> int | None:
+    """Counts per joint turn of what ``drive`` moves: its plain joint, or its pair's Σ joint."""
+    joint = cfg.joint_of_drive(drive)
+    if joint is not None:
+        return joint.cpr
+    for pair in cfg.pairs.values():
+        if drive in (pair.drive_a, pair.drive_b):
+            return cfg.joints[pair.sigma].cpr
+    return None
 
 
 # how far from its calibration switch a joint without absolute feedback powers up by default: this
@@ -267,11 +291,13 @@ class SimArm:
                  clock: Clock | None = None, flash: Mapping[str, sim_state.DriveFlash] | None = None,
                  settings: Mapping[str, SimSettings] | None = None, persist: bool = False,
                  tick_s: float = 0.002, bus_factory: Callable[..., can.BusABC] | None = None,
-                 event_log: str | None = None) -> None:
+                 event_log: str | None = None, keep_ram: bool = False) -> None:
         """``endpoints``: bus name -> keyword arguments for ``can.Bus`` (interface, channel);
         ``bus_factory`` opens them instead of ``can.Bus``; ``event_log``: a file that gets one JSON
         line per motor on/off and dead-man event (appended, flushed at once), so another process can
-        tell when a motor went off."""
+        tell when a motor went off; ``keep_ram``: the arm stays powered between runs (`--sim`): its RAM
+        is loaded from the state directory by :meth:`start` and saved by :meth:`stop`, under a lock
+        held meanwhile (sim/state.py)."""
         self.cfg = cfg
         self.endpoints = dict(endpoints)
         self.bus_factory = bus_factory
@@ -307,11 +333,11 @@ class SimArm:
         # sends 0x6004 in its TPDO1 (sim/encoder.py: cyclic by 0x6200, or on SYNC)
         for dev in cfg.devices.values():
             if dev.type == "canopen-encoder":
-                reading = self._encoder_reading(dev.name)
+                reading, resolution = self._encoder_reading(dev.name)
                 self.extras[dev.name] = (dev.bus, SimEncoder(
-                    dev.node, position=reading, clock=self.clock, serial=0x7E100000 + dev.node,
+                    dev.node, position=reading, clock=self.clock, serial=0x7E100000 + dev.node, resolution=resolution,
                     settings=SimSettings(vendor_id=ENCODER_VENDOR, device_name="CANopen encoder", inputs=1),
-                    od_live={(0x1000, 0): lambda: ENCODER_DEVICE_TYPE, (0x6004, 0): reading}))
+                    od_live={(0x1000, 0): lambda: ENCODER_DEVICE_TYPE}))
         self.lock = threading.RLock()  # held by the pumps while they touch drives; tests take it too
         # the host's CAN controller on each bus (`sim: buses:`), read like netlink (bus/linkstate.py)
         self.controllers = {name: BusController(name, cfg.sim_buses.get(name, SimBusConfig()), bus.bitrate,
@@ -324,6 +350,8 @@ class SimArm:
         self.errors: list[BaseException] = []
         self.event_log = event_log
         self._event_file: TextIO | None = None
+        self.keep_ram = keep_ram
+        self._ram_lock: filelock.BaseFileLock | None = None
 
     def _drive_stepped(self, name: str, drive: SimDrive) -> None:
         """A drive's ``on_step``: the mechanics follow its motor."""
@@ -346,7 +374,7 @@ class SimArm:
         """The in-process arm of ``--sim``: virtual channels, flash kept in the state directory;
         ``clock``: its time (default wall time; `log step` gives it a stepped clock)."""
         return cls(cfg, {bus: {"interface": "virtual", "channel": ch} for bus, ch in channels.items()},
-                   persist=True, clock=clock)
+                   persist=True, clock=clock, keep_ram=True)
 
     def _log_event(self, name: str, node: int, t: float, text: str) -> None:
         """One JSON line per event: ``t`` is the drive's clock (time.monotonic() for a RealClock,
@@ -363,20 +391,21 @@ class SimArm:
                                            "event": text}) + "\n")
         self._event_file.flush()
 
-    def _encoder_reading(self, device: str) -> Callable[[], int]:
-        """What encoder ``device`` reads: the real position of the joint whose abs_encoder names it."""
+    def _encoder_reading(self, device: str) -> tuple[Callable[[], int], int]:
+        """What encoder ``device`` reads: the real position of the joint whose abs_encoder names it, and
+        its steps per revolution (the joint's cpr)."""
         cfg = self.cfg
         for joint in cfg.joints.values():
             enc = joint.abs_encoder
             if enc is None or cfg.device_by_source(enc.source) is not cfg.devices[device]:
                 continue
             if joint.drive is not None:
-                return functools.partial(_plain_reading, self.drives[joint.drive], enc.offset)
+                return functools.partial(_plain_reading, self.drives[joint.drive], enc.offset), joint.cpr
             pair = _pair_of(cfg, joint)
             a, b = self.drives[pair.drive_a], self.drives[pair.drive_b]
             sign = 1 if joint.name == pair.sigma else -1
-            return functools.partial(_pair_reading, a, b, sign, enc.offset)
-        return lambda: 0  # an encoder no joint uses reads 0
+            return functools.partial(_pair_reading, a, b, sign, enc.offset), joint.cpr
+        return (lambda: 0), 4096  # an encoder no joint uses reads 0
 
     def press_switch(self, drive: str, switch_input: int, pressed: bool | None) -> None:
         """A technician holds (True), lets go of (False) or leaves (None) the switch wired to
@@ -397,11 +426,14 @@ class SimArm:
 
         from sherpa_cli.sim.sdo import SdoServer
 
+        if self.keep_ram:
+            self._power_on()
         try:
             for bus_name, kwargs in self.endpoints.items():
                 self._buses[bus_name] = (self.bus_factory or can.Bus)(**kwargs)
         except BaseException:
             self._close_buses()
+            self._release_ram()
             raise
         for name, d in self.cfg.drives.items():
             if d.bus in self._buses:
@@ -434,8 +466,57 @@ class SimArm:
         if self._event_file is not None:
             self._event_file.close()
             self._event_file = None
-        if self.persist:
-            self.save_state()
+        try:
+            if self.persist:
+                self.save_state()
+        finally:
+            if self.keep_ram and self._ram_lock is not None:
+                try:
+                    self._save_ram()
+                finally:
+                    self._release_ram()
+
+    # -- RAM between runs ----------------------------------------------------------------------------
+    RAM_LOCK_TIMEOUT = 30.0  # s a `--sim` command waits for another to leave the arm (then exit 5)
+
+    def _ram_nodes(self) -> dict[str, SimDrive]:
+        nodes = dict(self.drives)
+        nodes.update((name, node) for name, (_, node) in self.extras.items() if isinstance(node, SimEncoder))
+        return nodes
+
+    def _power_on(self) -> None:
+        """Take the arm's lock and put back what it held when the last command left it (positions only
+        after `sim --power-cycle`; nothing after `--reset-state` or the first time)."""
+        self._ram_lock = sim_state.ram_lock(self.cfg, self.RAM_LOCK_TIMEOUT)
+        try:
+            saved = sim_state.load_ram(self.cfg)
+            if saved is None:
+                return
+            with self.lock:
+                for name, node in self._ram_nodes().items():
+                    item = saved["drives"].get(name)
+                    if not isinstance(item, dict):
+                        continue
+                    try:
+                        if saved.get("powered", True) and "ram" in item:
+                            node.restore_ram(item)
+                        elif isinstance(item.get("position"), (int, float)) and math.isfinite(item["position"]):
+                            node.restore_position(float(item["position"]))
+                    except (ValueError, TypeError, KeyError, LookupError) as exc:
+                        raise sim_state.ram_damaged(sim_state.ram_path(self.cfg), f"{name}: {exc}") from None
+        except BaseException:
+            self._release_ram()
+            raise
+
+    def _save_ram(self) -> None:
+        with self.lock:
+            snapshot = {name: node.ram_snapshot() for name, node in self._ram_nodes().items()}
+        sim_state.save_ram(self.cfg, snapshot)
+
+    def _release_ram(self) -> None:
+        lock, self._ram_lock = self._ram_lock, None
+        if lock is not None:
+            lock.release()
 
     def save_state(self) -> None:
         with self.lock:
@@ -493,7 +574,7 @@ class SimArm:
                 with self.lock:
                     # running motors: every drive of the bus up to (almost) now together first
                     stepped_to = self.clock.now()
-                    self._lockstep(on_bus, last_tick, stepped_to)
+                    self._guarded(bus_name, "a drive", functools.partial(self._lockstep, on_bus, last_tick, stepped_to))
                     last_tick = stepped_to
                     # a frame advances only the drives it reached (their replies go out now);
                     # every drive advances at least once per tick_s (motion, heartbeats, latency)
@@ -504,21 +585,24 @@ class SimArm:
                         if ctrl is not None:
                             ctrl.count(host_sent=1, sent_bytes=len(msg.data))
                         # receive() ran the drives to now: what the frame caused is in their outbox
-                        touched = self._dispatch(msg.arbitration_id, bytes(msg.data), on_bus, by_node)
+                        touched = self._dispatch(msg.arbitration_id, bytes(msg.data), on_bus, by_node, bus_name=bus_name)
                     now = self.clock.now()
                     ticking = now >= next_tick
                     if ticking:
                         touched = names
                         next_tick = now + self.tick_s
-                    for name in touched:
-                        drive = on_bus[name]
-                        if ticking:
-                            drive.tick()
-                        for can_id, data in drive.pop_frames():
-                            if passing:
-                                send(can_id, data)
-                                if ctrl is not None:
-                                    ctrl.count(host_received=1, received_bytes=len(data))
+                    if ticking:
+                        for name in touched:
+                            self._guarded(bus_name, name, on_bus[name].tick)
+
+                    def out(can_id: int, data: bytes, _send: Callable[[int, bytes], None] = send,
+                            _passing: bool = passing) -> None:
+                        # frames pass only while the host's controller runs (not bus-off, down or missing)
+                        if _passing:
+                            _send(can_id, data)
+                            if ctrl is not None:
+                                ctrl.count(host_received=1, received_bytes=len(data))
+                    self._send_out(touched, on_bus, by_node, out, bus_name)
                     if ctrl is not None:
                         ctrl.tick(now)
                         for can_id, data, is_error in ctrl.pop_frames():
@@ -528,6 +612,36 @@ class SimArm:
         except BaseException as exc:  # noqa: BLE001 - kept in errors: a dead pump shows in tests and `sim --serve`
             if not self._stop.is_set():
                 self.errors.append(exc)
+
+    def _guarded(self, bus_name: str, name: str, work: Callable[[], object]) -> bool:
+        """Run one drive's ``work``; a fault inside the simulator is logged at once and kept in
+        :attr:`errors`, and the bus goes on (other drives, later frames). False: it failed."""
+        try:
+            work()
+            return True
+        except Exception as exc:
+            log.exception("simulated %s on %s: internal fault (the bus goes on)", name, bus_name)
+            self.errors.append(exc)
+            return False
+
+    def _send_out(self, touched: list[str], on_bus: Mapping[str, SimDrive], by_node: Mapping[int, list[str]],
+                  send: Callable[[int, bytes], None], bus_name: str) -> None:
+        """Send what the ``touched`` drives produced; every frame also reaches the other nodes of the
+        bus (a CAN controller does not hear itself), as on a real bus: one drive's heartbeat feeds
+        another's consumer. What that makes them send goes out too (a few rounds at most)."""
+        pending = list(touched)
+        for _ in range(LOOPBACK_ROUNDS):
+            if not pending:
+                break
+            frames = [(name, can_id, data) for name in pending for can_id, data in on_bus[name].pop_frames()]
+            reached: list[str] = []
+            for sender, can_id, data in frames:
+                send(can_id, data)
+                if len(on_bus) > 1:
+                    for name in self._dispatch(can_id, data, on_bus, by_node, exclude=sender, bus_name=bus_name):
+                        if name not in reached:
+                            reached.append(name)
+            pending = reached
 
     @staticmethod
     def _lockstep(on_bus: Mapping[str, SimDrive], since: float, now: float) -> None:
@@ -545,8 +659,9 @@ class SimArm:
             t += step
 
     def _dispatch(self, can_id: int, data: bytes, on_bus: Mapping[str, SimDrive],
-                  by_node: Mapping[int, list[str]]) -> list[str]:
-        """Hand a frame to the drive(s) it concerns; returns their names."""
+                  by_node: Mapping[int, list[str]], exclude: str | None = None, bus_name: str = "") -> list[str]:
+        """Hand a frame to the drive(s) it concerns (not to ``exclude``, the node that sent it);
+        returns their names."""
         if can_id in (NMT_ID, SYNC_ID) or 0x700 <= can_id <= 0x77F:
             targets = list(on_bus)  # NMT broadcast / SYNC / host heartbeats: every drive decides for itself
         else:
@@ -554,8 +669,20 @@ class SimArm:
             if 0x301 <= can_id <= 0x37F:  # RPDO2 of a group id (0x2040): every drive of the group
                 targets = targets + [n for n, d in on_bus.items()
                                      if d.group_id == can_id - 0x300 and n not in targets]
+        if exclude is not None:
+            targets = [name for name in targets if name != exclude]
+        sdo = SDO_RX + 1 <= can_id <= SDO_RX + 0x7F
         for name in targets:
-            arrived = on_bus[name].receive(can_id, data)
-            if arrived and SDO_RX + 1 <= can_id <= SDO_RX + 0x7F:
+            arrived = self._receive(bus_name, name, on_bus[name], can_id, data)
+            if arrived is None:
+                if sdo and name in self._sdo:
+                    self._sdo[name].abort_request(data)  # the client hears an abort, not silence
+            elif arrived and sdo:
                 self._sdo[name].receive(can_id, data)
         return targets
+
+    def _receive(self, bus_name: str, name: str, drive: SimDrive, can_id: int, data: bytes) -> bool | None:
+        """``drive.receive``; None: it failed inside (logged and kept, see :meth:`_guarded`)."""
+        result: list[bool] = []
+        ok = self._guarded(bus_name or "its bus", name, lambda: result.append(drive.receive(can_id, data)))
+        return result[0] if ok else None

@@ -51,7 +51,7 @@ from sherpa_cli.sim.od import (
     flash_key,
 )
 from sherpa_cli.sim.params import Value, factory_ram, is_persistent, parse_flash, wrap_int32
-from sherpa_cli.sim.pdo import TpdoTable, is_pdo_object
+from sherpa_cli.sim.pdo import TpdoTable
 from sherpa_cli.sim.servo import ServoMotor
 from sherpa_cli.sim.settings import SimSettings
 
@@ -59,7 +59,9 @@ Frame = tuple[int, bytes]
 TIME_EPS = 1e-9  # s; float error of summed clock steps, far below any drive timing
 
 NMT = NMT_ID
-RPDO2_COMM, RPDO_SYNC_MAX = 0x1401, 240  # transmission types 0..240: executed at the next SYNC
+RPDO2_COMM, RPDO2_MAP, RPDO_SYNC_MAX = 0x1401, 0x1601, 240  # transmission types 0..240: run at the next SYNC
+INTERPRETER_IN, INTERPRETER_OUT = 0x2012, 0x2013  # RPDO2 / TPDO2 mapped objects ([IG] 5-8; 64 bits each)
+ABORT_UNSUPPORTED = 0x06010000
 PRE_OPERATIONAL, OPERATIONAL, STOPPED = NMT_PRE_OPERATIONAL, NMT_OPERATIONAL, NMT_STOPPED  # heartbeat state bytes
 
 MF_HEARTBEAT, MF_SPEED_LIMIT, MF_POSITION_LIMIT = 0x800, 0x20000, 0x400000
@@ -72,13 +74,23 @@ SR_PROGRAM = 1 << 12  # a user program is running (elmo-protocol.md 2.5)
 
 
 def _make_motor(settings: SimSettings, position: int) -> Motor:
-    """The kinematic motor, or with ``servo_bandwidth_hz`` the servo-loop model (sim/servo.py)."""
-    if settings.servo_bandwidth_hz <= 0:
-        return Motor(counts=position)
-    return ServoMotor(counts=position, wn=2 * math.pi * settings.servo_bandwidth_hz, zeta=settings.servo_damping,
-                      torque_accel_per_amp=settings.torque_accel,
-                      current_limit=settings.servo_current_limit or settings.max_current,
-                      supply_limit=settings.supply_current_limit, supply_speed=settings.supply_speed)
+    """The kinematic motor, or with ``servo_bandwidth_hz`` / ``lag_s`` the servo model (sim/servo.py);
+    either drives the load (sim/load.py) in torque mode."""
+    load, k = settings.load(), settings.counts_per_rad
+    if settings.servo_bandwidth_hz > 0:
+        return ServoMotor(counts=position, load=load, counts_per_rad=k, wn=2 * math.pi * settings.servo_bandwidth_hz,
+                          zeta=settings.servo_damping)
+    if settings.lag_s > 0:  # the same model as a first-order lag: trails by lag_s at speed
+        return ServoMotor(counts=position, load=load, counts_per_rad=k, wn=2 / settings.lag_s, zeta=1.0,
+                          feed_forward=0.0, integral_gain=0.0)
+    return Motor(counts=position, load=load, counts_per_rad=k)
+
+
+def _saved_int(saved: Mapping[str, object], key: str) -> int:
+    value = saved[key]
+    if isinstance(value, bool) or not isinstance(value, int):
+        raise TypeError(f"{key} {value!r} is not an integer")
+    return value
 
 
 _T = TypeVar("_T")
@@ -131,7 +143,6 @@ class SimDrive:
         self.od_writes: list[tuple[float, int, int, int]] = []  # SDO writes, for "dry run wrote nothing"
         self.boots = 0
         self.motor = _make_motor(self.settings, int(position))
-        self._lagged = float(position)  # where the motor really is with settings.lag_s (else the profile)
         self._outbox: list[Frame] = []
         self._replies: list[tuple[float, int, Frame]] = []  # heap: (release time, seq, frame)
         self._seq = itertools.count()
@@ -145,7 +156,9 @@ class SimDrive:
         self._trip_due = self._after_start(self.settings.limit_trip_at)
         self.inputs = Inputs(self.settings.inputs)
         self._od_live = dict(od_live or {})  # extra live objects: another device type's profile (sim/arm.py)
-        self.tpdo = TpdoTable(node)
+        self.tpdo = self._make_tpdo_table(node)
+        self.last_request = b""  # the last binary interpreter request (0x2012) and reply (0x2013)
+        self.last_reply = b""
         self.syncs = 0  # SYNC frames this drive answered (Operational)
         # interpreter requests lost to the MO settle window, and the settle time each had left: what a
         # host waited for them (sim/stepped.py charges it on its clock)
@@ -177,6 +190,10 @@ class SimDrive:
         self._rpdo2_buffer: bytes | None = None  # a synchronous RPDO2 waiting for SYNC
         self.user_program = self.settings.user_program  # PS; a test control (a program started or stopped)
         self._boot()
+
+    def _make_tpdo_table(self, node: int) -> TpdoTable:
+        """TPDO1/3/4 free to map, TPDO2 the interpreter's reply channel (sim/pdo.py)."""
+        return TpdoTable(node)
 
     def _after_start(self, seconds: float | None) -> float | None:
         return None if seconds is None else self._t + seconds
@@ -265,21 +282,28 @@ class SimDrive:
     def od_read(self, index: int, sub: int) -> OdValue:
         """Read an object; raises od.ODError. A dead drive still answers here: an SDO server
         must check :attr:`dead` and stay silent, as the interpreter does."""
-        if is_pdo_object(index):
+        if self.tpdo.serves(index):
             return self.tpdo.read(index, sub)
-        if index == RPDO2_COMM:
-            return self._rpdo2_read(sub)
+        if index in (RPDO2_COMM, RPDO2_MAP):
+            return self._rpdo2_read(index, sub)
+        if sub == 0 and index in self._pdo_values():
+            return self._pdo_values()[index]()
+        if (index, sub) in ((INTERPRETER_IN, 0), (INTERPRETER_OUT, 0)):
+            frame = self.last_request if index == INTERPRETER_IN else self.last_reply
+            return int.from_bytes(frame[:8].ljust(8, b"\0"), "little")
         return self._od.read(index, sub)
 
     def od_write(self, index: int, sub: int, value: int) -> None:
         """Write an object; raises od.ODError carrying the SDO abort code on refusal."""
         self.advance_to(self.clock.now())
-        if is_pdo_object(index):
-            self.tpdo.write(index, sub, value)
+        if self.tpdo.serves(index):
+            self.tpdo.write(index, sub, value, now=self._t)
             self.od_writes.append((self._t, index, sub, value))
             return
-        if index == RPDO2_COMM:
-            self._rpdo2_write(sub, value)
+        if index in (INTERPRETER_IN, INTERPRETER_OUT):
+            raise ODError(f"0x{index:04X}: the binary interpreter is reached by RPDO2 only", ABORT_UNSUPPORTED)
+        if index in (RPDO2_COMM, RPDO2_MAP):
+            self._rpdo2_write(index, sub, value)
             self.od_writes.append((self._t, index, sub, value))
             return
         value = self._od.check_write(index, sub, value)
@@ -315,17 +339,73 @@ class SimDrive:
     @property
     def position(self) -> float:
         """Physical motor position in counts (not PX), for arm mechanics."""
-        return self._lagged if self.settings.lag_s > 0 else self.motor.position
+        return self.motor.position
 
     @property
     def px(self) -> int:
-        if self.settings.lag_s > 0:
-            return wrap_int32(math.floor(self._lagged + 0.5) + self._px_offset)
-        return wrap_int32(self.motor.counts + self._px_offset)
+        return wrap_int32(self.motor.rounded + self._px_offset)
 
     @property
     def mf(self) -> int:
         return self._mf
+
+    # -- RAM between `--sim` commands (sim/state.py) ----------------------------------------------
+
+    def ram_snapshot(self) -> dict[str, object]:
+        """What a powered drive keeps: the joint's position, RAM, objects, faults, NMT state and whether
+        its heartbeat consumer was watching (the host that armed it has gone when this is restored)."""
+        self.advance_to(self.clock.now())
+        return {"position": self.motor.position, "px_offset": self._px_offset, "motor_on": self._motor_on,
+                "ram": dict(self.ram), "od": {flash_key(*key): value for key, value in self._od.values.items()},
+                "mf": self._mf, "last_error": self.last_error, "error_field": self._error_field,
+                "error_register": self._error_register, "limit_stop": self._limit_stop, "nmt": self._nmt_state,
+                "tpdo": self.tpdo.snapshot(), "rpdo2_type": self._rpdo2_type,
+                "consumer_watching": self._hb_last is not None and self._consumer()[1] > 0}
+
+    def restore_position(self, position: float) -> None:
+        """The joint stands at ``position`` (counts) at this power-up; PX reads 0 there."""
+        whole = math.floor(position)
+        self.motor.off()
+        self.motor.counts, self.motor.frac = whole, position - whole
+        self._px_offset = -self.motor.rounded
+
+    def restore_ram(self, saved: Mapping[str, object]) -> None:
+        """Power this drive back to what :meth:`ram_snapshot` gave, without a boot. A motion does not
+        carry over (a motor left on holds its position); a consumer that was watching has lost its host's
+        heartbeat and acts on it now. ValueError / TypeError / KeyError: the snapshot is damaged."""
+        position = saved["position"]
+        if not isinstance(position, (int, float)) or not math.isfinite(position):
+            raise ValueError(f"position {position!r}")
+        ram, od_values, tpdo = saved["ram"], saved["od"], saved["tpdo"]
+        if not isinstance(ram, dict) or not isinstance(od_values, dict) or not isinstance(tpdo, dict):
+            raise TypeError("ram, od and tpdo must be mappings")
+        ints = {key: _saved_int(saved, key) for key in ("px_offset", "mf", "last_error", "error_field",
+                                                         "error_register", "nmt", "rpdo2_type")}
+        if ints["nmt"] not in (PRE_OPERATIONAL, OPERATIONAL, STOPPED):
+            raise ValueError(f"NMT state {ints['nmt']}")
+        values = {}
+        for key, value in od_values.items():
+            index, sub = (int(part, 16) if i == 0 else int(part) for i, part in enumerate(str(key).split(":")))
+            values[(index, sub)] = self._od.check_write(index, sub, value)
+        self.tpdo.restore(tpdo)
+        self.ram = {str(k): v for k, v in ram.items() if isinstance(v, (int, float)) and not isinstance(v, bool)}
+        self._od.values.update(values)
+        self.restore_position(float(position))
+        self._px_offset = ints["px_offset"]
+        self._mf, self.last_error = ints["mf"], ints["last_error"]
+        self._error_field, self._error_register = ints["error_field"], ints["error_register"]
+        self._nmt_state, self._rpdo2_type = ints["nmt"], ints["rpdo2_type"]
+        self._limit_stop = bool(saved.get("limit_stop", False))
+        self._motor_on = bool(saved["motor_on"])
+        if self._motor_on and self.ram.get("UM") == 1:
+            self._apply_torque()
+        period = self._od.values[(0x1017, 0)]
+        self._next_heartbeat = self._t + period / 1000 if period else math.inf
+        if self._nmt_state == OPERATIONAL:
+            self.tpdo.start_timers(self._t)
+        self._outbox.clear()  # a powered drive did not boot: no boot-up frame
+        if saved.get("consumer_watching"):
+            self._heartbeat_lost()  # the command that armed it has ended without disarming it
 
     # -- interpreter state, used by sim.interpreter -------------------------------------------
 
@@ -341,7 +421,7 @@ class SimDrive:
         if key == "MO":
             self._set_motor(bool(value))
         elif key == "PX":
-            self._px_offset = int(value) - self.motor.counts
+            self._px_offset = int(value) - self.motor.rounded
         elif key == "HM[1]":
             self.ram[key] = int(value)
             self._arm_homing(bool(value))
@@ -396,7 +476,7 @@ class SimDrive:
         self._od = build_od(self.settings, self.serial, self.flash, live)
         self._motor_on = False
         self.motor.off()
-        self._px_offset = -self.motor.counts
+        self._px_offset = -self.motor.rounded
         self._mf = 0
         self._error_register = 0
         self._limit_stop = False
@@ -417,6 +497,14 @@ class SimDrive:
         self._send(HEARTBEAT_BASE + self.node, b"\x00")
 
     def _nmt(self, cs: int) -> None:
+        before = self._nmt_state
+        self._nmt_command(cs)
+        if self._nmt_state == OPERATIONAL and before != OPERATIONAL:
+            self.tpdo.start_timers(self._t)  # event-driven TPDOs live in Operational only
+        elif self._nmt_state != OPERATIONAL:
+            self.tpdo.stop_timers()
+
+    def _nmt_command(self, cs: int) -> None:
         # Unknown command specifiers are ignored (the real drive may raise EMCY 0x8200).
         if cs == NMT_START:
             self._nmt_state = OPERATIONAL
@@ -443,7 +531,7 @@ class SimDrive:
             finally:
                 self._via_group = False
         for can_id, data in self.tpdo.on_sync(self._pdo_values()):
-            self._send(can_id, data)
+            self._send_pdo(can_id, data)
 
     def _pdo_values(self) -> dict[int, Callable[[], int]]:
         values = self._pdo_sources
@@ -452,19 +540,20 @@ class SimDrive:
                                           0x6078: lambda: max(-32768, min(32767, round(self._iq() * 1000)))}
         return values
 
-    def _rpdo2_read(self, sub: int) -> int:
-        """0x1401, RPDO2 (the binary interpreter's) communication parameter: COB-ID and transmission type."""
-        if sub == 0:
-            return 2
-        if sub == 1:
-            return RPDO2_BASE + self.node
-        if sub == 2:
-            return self._rpdo2_type
-        raise ODError(f"object 0x{RPDO2_COMM:04X} has no sub-index {sub}", ABORT_NO_SUBINDEX)
+    def _rpdo2_read(self, index: int, sub: int) -> int:
+        """RPDO2, the binary interpreter's: 0x1401 communication parameter (COB-ID, transmission type)
+        and 0x1601 its fixed mapping (0x2012, 64 bits)."""
+        values = {0: 2, 1: RPDO2_BASE + self.node, 2: self._rpdo2_type} if index == RPDO2_COMM else \
+            {0: 1, 1: INTERPRETER_IN << 16 | 64}
+        if sub in values:
+            return values[sub]
+        raise ODError(f"object 0x{index:04X} has no sub-index {sub}", ABORT_NO_SUBINDEX)
 
-    def _rpdo2_write(self, sub: int, value: int) -> None:
-        if sub != 2:
-            raise ODError(f"0x{RPDO2_COMM:04X}:{sub} is read-only here", ABORT_READ_ONLY)
+    def _rpdo2_write(self, index: int, sub: int, value: int) -> None:
+        if index == RPDO2_MAP or sub != 2:
+            if (index == RPDO2_COMM and sub > 2) or (index == RPDO2_MAP and sub > 1):
+                raise ODError(f"object 0x{index:04X} has no sub-index {sub}", ABORT_NO_SUBINDEX)
+            raise ODError(f"0x{index:04X}:{sub} is read-only (the binary interpreter's RPDO2)", ABORT_READ_ONLY)
         if not 0 <= value <= 255 or RPDO_SYNC_MAX < value < 254:
             raise ODError(f"0x{RPDO2_COMM:04X}:2: {value} is no transmission type (0..240, 254, 255)", ABORT_RANGE)
         self._rpdo2_type = value
@@ -514,6 +603,8 @@ class SimDrive:
                 times.append(self._hb_last + timeout)
         if self._replies:
             times.append(self._replies[0][0])
+        if self._nmt_state == OPERATIONAL:
+            times.append(self.tpdo.next_due())
         return min(times)
 
     def _fire_events(self) -> None:
@@ -550,6 +641,9 @@ class SimDrive:
         while self._replies and self._replies[0][0] <= t:
             _, _, (can_id, data) = heapq.heappop(self._replies)
             self._send(can_id, data, blackout_applies=False)
+        if self._nmt_state == OPERATIONAL:
+            for can_id, data in self.tpdo.on_timers(self._t, self._pdo_values(), TIME_EPS):
+                self._send_pdo(can_id, data)
         if t >= self._next_heartbeat:
             self._send(HEARTBEAT_BASE + self.node, bytes([self._nmt_state]))
             period = self._od.values[(0x1017, 0)] / 1000
@@ -579,6 +673,10 @@ class SimDrive:
             return
         self._outbox.append((can_id, data))
 
+    def _send_pdo(self, can_id: int, data: bytes) -> None:
+        """A TPDO the table made (on SYNC or its event timer)."""
+        self._send(can_id, data)
+
     def _emcy(self, code: int, register: int, elmo_code: int = 0) -> None:
         self._error_register = register
         self._error_field = encode_error_field(code, register, elmo_code)
@@ -592,9 +690,11 @@ class SimDrive:
             self.unheard += 1
             self.unheard_s += self._settle_until - self._t
             return
+        self.last_request = data
         reply = interpreter.handle(self, data)
         if reply is None:
             return
+        self.last_reply = reply
         release = self._t + self.settings.reply_latency_s
         heapq.heappush(self._replies, (release, next(self._seq), (TPDO2_BASE + self.node, reply)))
         self._fire_events()
@@ -661,7 +761,7 @@ class SimDrive:
             self._apply_torque()
 
     def _apply_torque(self) -> None:
-        self.motor.torque(self.ram["TC"] * self.settings.torque_accel * self.speed_gain)
+        self.motor.torque(self.ram["TC"] * self.speed_gain)
 
     def _begin(self) -> None:
         um, r, g = self.ram["UM"], self.ram, self.speed_gain
@@ -699,13 +799,10 @@ class SimDrive:
                 m.stop(self.ram["SD"] * self.speed_gain)
                 self._limit_stop = True
             m.step(dt)
-            self._follow(dt)
             if self._quick_stop and m.v == 0 and m.mode in ("idle", "stop"):
                 self._shut_down(MF_HEARTBEAT, "heartbeat lost, 0x6007=3 (quick stop done)")
                 return
             self._check_limits()
-        else:
-            self._lagged = self.motor.position  # a motor that is off stands where it is
         if self.on_step is not None:
             self.on_step(self)
         self._check_homing()
@@ -741,19 +838,13 @@ class SimDrive:
         if update == s.hm_px_absolute:
             # an input edge (the motor moving) is taken at the nearest count of the motor's position,
             # not its floor; an immediate event sets PX itself to the value (it reads back as written)
-            self._px_offset = value - (round(self.motor.position) if edge else self.motor.counts)
+            self._px_offset = value - (round(self.motor.position) if edge else self.motor.rounded)
         elif update == s.hm_px_absolute + 1:  # relative: the event's position moves by HM[2]
             self._px_offset += value
         if int(r.get("HM[4]", 0)) == s.hm_after_stop and self._motor_on:
             self.motor.stop(r["SD"] * self.speed_gain)
         r["HM[1]"] = 0
         self._record(f"home event: PX={self.px}")
-
-    def _follow(self, dt: float) -> None:
-        """The servo loop's bandwidth: the real position follows the profile with time constant lag_s."""
-        tau = self.settings.lag_s
-        if tau > 0:
-            self._lagged += (self.motor.position - self._lagged) * (1.0 - math.exp(-dt / tau))
 
     def _check_limits(self) -> None:
         r = self.ram
@@ -801,11 +892,10 @@ class SimDrive:
     def _iq(self) -> float:
         if not self._motor_on:
             return 0.0
-        if isinstance(self.motor, ServoMotor):
-            return self.motor.current
-        if self.ram["UM"] == 1:
-            return self.ram["TC"]
-        return self.motor.a / self.settings.torque_accel
+        if isinstance(self.motor, ServoMotor) or self.ram["UM"] == 1:
+            return self.motor.current  # what the drive really puts through: clamped, as on the drive
+        peak = self.settings.max_current
+        return max(-peak, min(peak, self.motor.a / self.settings.torque_accel))
 
     def _il(self, n: int) -> int:
         return self._int_param(f"IL[{n}]")

@@ -11,7 +11,13 @@ import math
 from dataclasses import dataclass
 from typing import Literal
 
+from sherpa_cli.sim.load import Load
+
 Mode = Literal["idle", "velocity", "position", "stop", "torque"]
+COUNTS_PER_RAD = 3600 / (2 * math.pi)  # a joint of 3600 counts per turn when nothing says otherwise
+
+
+NO_LOAD_ACCEL = 10000.0  # cnt/s^2 per A of a Motor without a load
 
 
 def _sign(x: float) -> int:
@@ -30,8 +36,11 @@ class Motor:
     speed: float = 0.0  # SP of the running PTP move
     accel: float = 0.0
     decel: float = 0.0
-    torque_accel: float = 0.0  # UM=1: cnt/s^2 from TC
+    torque_amps: float = 0.0  # UM=1: the current TC asks for
     at_target: bool = False  # a PTP move finished (MS=0)
+    load: Load | None = None  # what torque mode drives (sim/load.py); None: 10000 cnt/s^2 per A, no friction
+    counts_per_rad: float = COUNTS_PER_RAD
+    current: float = 0.0  # A through the motor in the last torque-mode step
 
     @property
     def position(self) -> float:
@@ -39,7 +48,7 @@ class Motor:
 
     def off(self) -> None:
         """Motor disabled: the model has no coasting, it stops dead."""
-        self.v = self.a = 0.0
+        self.v = self.a = self.current = 0.0
         self.mode = "idle"
         self.at_target = False
 
@@ -58,8 +67,28 @@ class Motor:
         self.mode, self.v_target, self.decel = "stop", 0.0, decel
         self.at_target = False
 
-    def torque(self, accel: float) -> None:
-        self.mode, self.torque_accel, self.at_target = "torque", accel, False
+    def torque(self, amps: float) -> None:
+        self.mode, self.torque_amps, self.at_target = "torque", amps, False
+
+    @property
+    def rounded(self) -> int:
+        """The count the encoder shows (the kinematic model moves in whole counts plus a remainder)."""
+        return self.counts
+
+    def _drive_load(self, amps: float, dt: float, midpoint: bool = True) -> None:
+        """One step of the load driven by ``amps`` (limited by the drive and the supply first); the
+        position moves by the mean speed of the step, or (``midpoint`` False: semi-implicit Euler, for a
+        servo loop) by the new speed."""
+        v0 = self.v
+        if self.load is None:
+            self.current = amps
+            self.v = v0 + amps * NO_LOAD_ACCEL * dt
+        else:
+            k = self.counts_per_rad
+            self.current = self.load.current(amps, v0 / k)
+            self.v = self.load.step(self.current, v0 / k, self.position / k, dt) * k
+        self.a = (self.v - v0) / dt
+        self._advance(((v0 + self.v) / 2 if midpoint else self.v) * dt)
 
     def intended_direction(self) -> int:
         """Where the motion is heading (or about to), for the stop-switch check."""
@@ -77,8 +106,9 @@ class Motor:
             self._step_position(dt)
             return
         if self.mode == "torque":
-            self.v = v0 + self.torque_accel * dt
-        elif self.mode in ("velocity", "stop"):
+            self._drive_load(self.torque_amps, dt)
+            return
+        if self.mode in ("velocity", "stop"):
             self.v = _approach(v0, self.v_target, self.accel, self.decel, dt)
             if self.mode == "stop" and self.v == 0:
                 self.mode = "idle"

@@ -7,6 +7,7 @@ the single CPU of a real drive would.
 
 from __future__ import annotations
 
+import logging
 import struct
 from collections.abc import Callable
 from typing import Protocol, cast
@@ -17,6 +18,8 @@ from canopen.sdo.exceptions import SdoAbortedError
 
 from sherpa_cli.elmo.protocol import SDO_TX_BASE
 from sherpa_cli.sim.od import ODError, OdValue
+
+log = logging.getLogger(__name__)
 
 ObjectSpec = tuple[int, int | None, str, int, str]  # index, sub (None: a plain variable), name, data type, access
 Callback = Callable[[int, bytearray, float], None]  # a subscriber of canopen's Network: (can_id, data, timestamp)
@@ -36,20 +39,33 @@ _OBJECTS: list[ObjectSpec] = [
     (0x1018, 4, "Serial number", od.UNSIGNED32, "ro"),
     (0x1029, 1, "Communication error behaviour", od.UNSIGNED8, "rw"),
     (0x6007, None, "Abort connection option code", od.INTEGER16, "rw"),
-    (0x6004, None, "Position value", od.INTEGER32, "ro"),  # CiA 406: only a simulated encoder has it
     (0x2040, None, "Group ID", od.UNSIGNED8, "rw"),
 ]
+# a Whistle's: the binary interpreter's RPDO2/TPDO2 objects and the mappable DS402 values (sim/pdo.py)
+DRIVE_OBJECTS: tuple[ObjectSpec, ...] = (
+    (0x2012, None, "Binary interpreter input", od.UNSIGNED64, "ro"),
+    (0x2013, None, "Binary interpreter output", od.UNSIGNED64, "ro"),
+    (0x6064, None, "Position actual value", od.INTEGER32, "ro"),
+    (0x6069, None, "Velocity sensor actual value", od.INTEGER32, "ro"),
+    (0x606C, None, "Velocity actual value", od.INTEGER32, "ro"),
+    (0x6078, None, "Current actual value", od.INTEGER16, "ro"),
+)
+MAPPABLE_OBJECTS = frozenset({0x2012, 0x2013, 0x6004, 0x6064, 0x6069, 0x606C, 0x6078})
 _RECORD_NAMES = {0x1003: "Pre-defined error field", 0x1016: "Consumer heartbeat time", 0x1018: "Identity object", 0x1029: "Error behaviour"}
 
 
-def build_object_dictionary(extra: tuple[ObjectSpec, ...] = ()) -> od.ObjectDictionary:
-    """``extra``: more (index, sub or None, name, data type, access) of another device type (sim/encoder.py)."""
+def build_object_dictionary(extra: tuple[ObjectSpec, ...] = DRIVE_OBJECTS, tpdos: tuple[int, ...] = (0, 1, 2, 3),
+                            fixed: frozenset[int] = frozenset({1}), rpdo2: bool = True) -> od.ObjectDictionary:
+    """``extra``: more (index, sub or None, name, data type, access) of the device type (a Whistle's by
+    default; sim/encoder.py has its own); ``tpdos``: its TPDO numbers - 1, ``fixed`` those that
+    refuse writes (the interpreter's TPDO2); ``rpdo2``: it has the interpreter's RPDO2."""
     dictionary = od.ObjectDictionary()
     records: dict[int, od.ODRecord] = {}
     for index, sub, name, data_type, access in (*_OBJECTS, *extra):
         var = od.ODVariable(name, index, sub or 0)
         var.data_type = data_type
         var.access_type = access
+        var.pdo_mappable = index in MAPPABLE_OBJECTS
         if sub is None:
             dictionary.add_object(var)
             continue
@@ -63,46 +79,40 @@ def build_object_dictionary(extra: tuple[ObjectSpec, ...] = ()) -> od.ObjectDict
         record.add_member(var)
     for record in records.values():
         record[0].default = max(k for k in record.subindices)
-    _add_pdo_objects(dictionary)
+    _add_pdo_objects(dictionary, tpdos, fixed, rpdo2)
     return dictionary
 
 
-def _add_pdo_objects(dictionary: od.ObjectDictionary) -> None:
-    """TPDO1..4 communication (0x1800..: COB-ID, transmission type) and mapping (0x1A00..: count,
-    eight entries), served from the drive's RAM (sim/pdo.py); sub 0 of a mapping is writable. And
-    RPDO2's communication parameter (0x1401, the binary interpreter's: COB-ID, transmission type)."""
-    rpdo2 = od.ODRecord("RPDO2 communication parameter", 0x1401)
-    for sub, name, data_type, access in ((0, "Highest sub-index supported", od.UNSIGNED8, "ro"),
-                                         (1, "COB-ID", od.UNSIGNED32, "rw"),
-                                         (2, "Transmission type", od.UNSIGNED8, "rw")):
-        var = od.ODVariable(name, 0x1401, sub)
+def _record(dictionary: od.ObjectDictionary, name: str, index: int,
+            members: tuple[tuple[int, str, int, str], ...]) -> None:
+    record = od.ODRecord(name, index)
+    for sub, member, data_type, access in members:
+        var = od.ODVariable(member, index, sub)
         var.data_type, var.access_type = data_type, access
-        rpdo2.add_member(var)
-    rpdo2[0].default = 2
-    dictionary.add_object(rpdo2)
-    # canopen's LocalNode pairs every 0x14xx with its 0x16xx: the interpreter's fixed mapping, not served
-    rpdo2_map = od.ODRecord("RPDO2 mapping parameter", 0x1601)
-    count = od.ODVariable("Number of mapped objects", 0x1601, 0)
-    count.data_type, count.access_type, count.default = od.UNSIGNED8, "ro", 0
-    rpdo2_map.add_member(count)
-    dictionary.add_object(rpdo2_map)
-    for n in range(4):
-        comm = od.ODRecord(f"TPDO{n + 1} communication parameter", 0x1800 + n)
-        for sub, name, data_type, access in ((0, "Highest sub-index supported", od.UNSIGNED8, "ro"),
-                                             (1, "COB-ID", od.UNSIGNED32, "rw"),
-                                             (2, "Transmission type", od.UNSIGNED8, "rw")):
-            var = od.ODVariable(name, 0x1800 + n, sub)
-            var.data_type, var.access_type = data_type, access
-            comm.add_member(var)
-        comm[0].default = 2
-        dictionary.add_object(comm)
-        mapping = od.ODRecord(f"TPDO{n + 1} mapping parameter", 0x1A00 + n)
-        for sub in range(9):
-            var = od.ODVariable("Number of mapped objects" if sub == 0 else f"Mapped object {sub}", 0x1A00 + n, sub)
-            var.data_type = od.UNSIGNED8 if sub == 0 else od.UNSIGNED32
-            var.access_type = "rw"
-            mapping.add_member(var)
-        dictionary.add_object(mapping)
+        record.add_member(var)
+    record[0].default = max(sub for sub, *_ in members)
+    dictionary.add_object(record)
+
+
+def _add_pdo_objects(dictionary: od.ObjectDictionary, tpdos: tuple[int, ...], fixed: frozenset[int],
+                     rpdo2: bool) -> None:
+    """TPDO communication (0x1800 + n: COB-ID, transmission type, inhibit time, event timer) and mapping
+    (0x1A00 + n: count, eight entries), served from the node's RAM (sim/pdo.py); and RPDO2's (0x1401 /
+    0x1601, the binary interpreter's: only its transmission type is writable)."""
+    u8, u16, u32 = od.UNSIGNED8, od.UNSIGNED16, od.UNSIGNED32
+    if rpdo2:
+        _record(dictionary, "RPDO2 communication parameter", 0x1401,
+                ((0, "Highest sub-index supported", u8, "ro"), (1, "COB-ID", u32, "ro"), (2, "Transmission type", u8, "rw")))
+        _record(dictionary, "RPDO2 mapping parameter", 0x1601,
+                ((0, "Number of mapped objects", u8, "ro"), (1, "Mapped object 1", u32, "ro")))
+    for n in tpdos:
+        access = "ro" if n in fixed else "rw"
+        _record(dictionary, f"TPDO{n + 1} communication parameter", 0x1800 + n,
+                ((0, "Highest sub-index supported", u8, "ro"), (1, "COB-ID", u32, access),
+                 (2, "Transmission type", u8, access), (3, "Inhibit time", u16, access), (5, "Event timer", u16, access)))
+        _record(dictionary, f"TPDO{n + 1} mapping parameter", 0x1A00 + n,
+                tuple((sub, "Number of mapped objects" if sub == 0 else f"Mapped object {sub}", u8 if sub == 0 else u32,
+                       access) for sub in range(9)))
 
 
 class _Task:
@@ -150,6 +160,13 @@ class ServedDrive(Protocol):
     def od_write(self, index: int, sub: int, value: int) -> None: ...
 
 
+def dictionary_of(drive: object) -> od.ObjectDictionary:
+    """The SDO dictionary of a simulated node: a Whistle's, or what its class declares (``sdo_extra``,
+    ``sdo_tpdos``, ``sdo_fixed_tpdos``, ``sdo_rpdo2``; sim/encoder.py)."""
+    return build_object_dictionary(getattr(drive, "sdo_extra", DRIVE_OBJECTS), getattr(drive, "sdo_tpdos", (0, 1, 2, 3)),
+                                   getattr(drive, "sdo_fixed_tpdos", frozenset({1})), getattr(drive, "sdo_rpdo2", True))
+
+
 class SdoServer:
     """Answers SDO requests (0x600+node) from a simulated drive's od_read/od_write.
 
@@ -169,7 +186,7 @@ class SdoServer:
         self._transfer: str | None = None  # "upload" / "download" while a segmented transfer runs
         self._where = (0, 0)  # index, sub-index of the last initiated transfer
         self.shim = NetworkShim(self._send)
-        self.local = canopen.LocalNode(node, build_object_dictionary(getattr(drive, "sdo_extra", ())))
+        self.local = canopen.LocalNode(node, dictionary_of(drive))
         self.local.add_read_callback(self._read)
         self.local.add_write_callback(self._write)
         # the shim has what LocalNode uses of a canopen.Network (subscribe, unsubscribe, send_message,
@@ -181,12 +198,15 @@ class SdoServer:
     def _read(self, index: int, subindex: int, od: canopen.objectdictionary.ODVariable) -> OdValue | None:
         if subindex == 0 and isinstance(od, canopen.objectdictionary.ODVariable) and od.parent is not None \
                 and not isinstance(od.parent, canopen.objectdictionary.ObjectDictionary) and index != 0x1003 \
-                and not 0x1A00 <= index < 0x1A04:
-            return od.default  # 0x1003:0 counts the stored errors: the drive's, not a constant
+                and not 0x1400 <= index < 0x1C00:
+            return od.default  # 0x1003:0 counts the stored errors, PDO records are the node's: not constants
         try:
             return self.drive.od_read(index, subindex)
         except ODError as exc:
             raise SdoAbortedError(exc.abort_code) from None
+        except Exception:
+            log.exception("simulated node %d: reading 0x%04X:%d failed", self.node, index, subindex)
+            raise SdoAbortedError(ABORT_GENERAL) from None
 
     def _write(self, index: int, subindex: int, od: canopen.objectdictionary.ODVariable, data: bytes) -> None:
         try:
@@ -194,6 +214,9 @@ class SdoServer:
             self.drive.od_write(index, subindex, cast(int, od.decode_raw(data)))
         except ODError as exc:
             raise SdoAbortedError(exc.abort_code) from None
+        except Exception:
+            log.exception("simulated node %d: writing 0x%04X:%d failed", self.node, index, subindex)
+            raise SdoAbortedError(ABORT_GENERAL) from None
 
     def _send(self, can_id: int, data: bytes) -> None:
         self._sent.append(bytes(data))
@@ -202,6 +225,12 @@ class SdoServer:
     def _abort(self, index: int, sub: int, code: int) -> None:
         self._transfer = None
         self._send(SDO_TX_BASE + self.node, struct.pack("<BHBL", 0x80, index, sub, code))
+
+    def abort_request(self, data: bytes) -> None:
+        """Answer a request the node failed on (a fault inside the simulator) with a general error."""
+        if len(data) == 8 and data[0] >> 5 != CCS_ABORT:
+            index, sub = struct.unpack_from("<HB", data, 1)
+            self._abort(index, sub, ABORT_GENERAL)
 
     def receive(self, can_id: int, data: bytes, timestamp: float = 0.0) -> None:
         data = bytes(data)
@@ -225,7 +254,8 @@ class SdoServer:
         try:
             for callback in self.shim.subscribers.get(can_id, ()):
                 callback(can_id, bytearray(data), timestamp)
-        except Exception:  # noqa: BLE001 - LocalNode failed on a frame it should have aborted: abort it here
+        except Exception:
+            log.exception("simulated node %d: SDO request %s failed", self.node, data.hex())
             self._abort(*self._where, ABORT_GENERAL)
             return
         last = self._sent[-1] if self._sent else None

@@ -1,13 +1,18 @@
-"""Servo-loop motor model: the drive's profile (sim/motor.py's kinematic Motor) is the reference,
-and the motor follows it through a second-order position loop with a current limit and an
-optional supply current limit, so a step has a realistic rise, overshoot and settling.
+"""The one servo model of a simulated drive: the drive's profile (sim/motor.py's kinematic Motor) is the
+reference, a PID position loop turns the error into a current, the drive clamps it (its peak current,
+the supply's voltage and current against the back-EMF: sim/load.py) and the current drives the
+joint's load (inertia, friction, gravity):
 
-    a_cmd = wn^2 (x_ref - x) + 2 zeta wn (v_ref - v)        (no feed-forward: a step shows the loop)
-    i     = a_cmd / torque_accel, limited to +-current_limit and, at speed v, to
-            supply_limit * supply_speed / |v|               (supply current ~ i * |v| / supply_speed)
-    v    += (i * torque_accel) dt;  x += v dt               (semi-implicit Euler: stable for wn dt << 1)
+    a_cmd = wn^2 e + 2 zeta wn (ff v_ref - v) + ki integral(e)   e = x_ref - x (counts); ki = 0.2 wn^3,
+                                                                 integrating while the reference stands
+    i     = load.current(a_cmd / accel_per_amp, w)                      (limits, sim/load.py)
+    w    <- load.step(i, w, theta, dt);  x += v dt                     (semi-implicit Euler)
 
-Torque mode (UM=1) bypasses the loop: the current is TC, limited the same way.
+``feed_forward`` 1 (`servo_bandwidth`, docs/log.md): the velocity reference is fed forward, so at speed the
+motor tracks its profile and a step shows the loop. ``feed_forward`` 0 with damping 1 is the same model
+as a first-order lag: the motor trails its profile by 2 zeta / wn = tau s at speed (`lag: tau`,
+docs/diffdrive.md; wn = 2 / tau). Torque mode (UM=1) bypasses the loop: the current is TC, limited the
+same way.
 """
 
 from __future__ import annotations
@@ -15,6 +20,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
+from sherpa_cli.sim.load import Load
 from sherpa_cli.sim.motor import Motor
 
 
@@ -22,15 +28,18 @@ from sherpa_cli.sim.motor import Motor
 class ServoMotor(Motor):
     wn: float = 2 * math.pi * 20.0  # rad/s
     zeta: float = 0.5
-    torque_accel_per_amp: float = 10000.0  # cnt/s^2 per A
-    current_limit: float = 20.0  # A
-    supply_limit: float | None = None  # A
-    supply_speed: float = 100000.0  # cnt/s
-    current: float = 0.0  # A of the last step
+    feed_forward: float = 1.0  # share of the reference velocity fed forward (0: a lag)
+    integral_gain: float = 0.2  # ki = integral_gain * wn^3, at standstill: removes the error friction leaves
     ref: Motor = field(default_factory=Motor)
+    _integral: float = 0.0  # counts s
+
+    def __post_init__(self) -> None:
+        if self.load is None:
+            self.load = Load()
 
     def _sync_ref(self) -> None:
         self.ref.counts, self.ref.frac, self.ref.v, self.ref.a = self.counts, self.frac, self.v, 0.0
+        self._integral = 0.0
 
     def off(self) -> None:
         super().off()
@@ -54,29 +63,32 @@ class ServoMotor(Motor):
         super().stop(decel)
         self.ref.stop(decel)
 
-    def torque(self, accel: float) -> None:
-        super().torque(accel)
+    def torque(self, amps: float) -> None:
+        super().torque(amps)
         self.ref.off()
 
-    def _limit(self, amps: float) -> float:
-        limit = self.current_limit
-        if self.supply_limit is not None and self.v:
-            limit = min(limit, self.supply_limit * self.supply_speed / abs(self.v))
-        return max(-limit, min(limit, amps))
+    @property
+    def rounded(self) -> int:
+        """The count the encoder shows: the nearest (a loop settles on its target from either side)."""
+        return math.floor(self.position + 0.5)
 
     def step(self, dt: float) -> None:
-        v0 = self.v
+        load = self.load or Load()
+        k = self.counts_per_rad
         if self.mode == "torque":
-            amps = self._limit(self.torque_accel / self.torque_accel_per_amp)
+            amps = self.torque_amps
             self._sync_ref()
         else:
             self.ref.step(dt)
             e = self.ref.position - self.position
-            amps = self._limit((self.wn * self.wn * e + 2 * self.zeta * self.wn * (self.ref.v - self.v))
-                               / self.torque_accel_per_amp)
+            if self.ref.v == 0:  # the integrator holds a standing target against friction; no wind-up in motion
+                self._integral += e * dt
+            ki = self.integral_gain * self.wn ** 3
+            a_cmd = self.wn * self.wn * e + 2 * self.zeta * self.wn * (self.feed_forward * self.ref.v - self.v) \
+                + ki * self._integral
+            amps = a_cmd / (load.accel_per_amp * k)
+            if abs(amps) > load.peak_current and self.ref.v == 0:
+                self._integral -= e * dt  # saturated: no wind-up
             self.mode, self.at_target = self.ref.mode, self.ref.at_target and abs(e) < 1.0
             self.x_target, self.v_target = self.ref.x_target, self.ref.v_target
-        self.current = amps
-        self.v = v0 + amps * self.torque_accel_per_amp * dt
-        self.a = (self.v - v0) / dt
-        self._advance(self.v * dt)
+        self._drive_load(amps, dt, midpoint=False)

@@ -10,6 +10,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+from sherpa_cli.sim.load import Load
+
 
 @dataclass(frozen=True)
 class SimSettings:
@@ -49,10 +51,22 @@ class SimSettings:
     # IL value whose input acts as an end (stop) switch. The seed's Whistle firmware uses 21;
     # public tables disagree across firmware (design.md), so it follows the config's il_codes.
     stop_code: int = 21
-    # Motor model: cnt/s^2 of acceleration per ampere of TC in UM=1 (no friction, no load),
-    # integrated in steps of at most model_step_s so a coarse tick() still brakes in time.
+    # The kinematic model's IQ outside torque mode: its profile's acceleration / this (cnt/s^2 per A),
+    # clamped to the peak current. Motion is integrated in steps of at most model_step_s so a coarse
+    # tick() still brakes in time.
     torque_accel: float = 10000.0
     model_step_s: float = 0.001
+    # The load (sim/load.py), joint side, SI: what torque mode (UM=1) and the servo model drive. The
+    # defaults are a shoulder-like joint: 1 A settles near 0.5 rad/s (seed Fig. 9.8/9.9).
+    inertia: float = 0.06  # kg m^2
+    torque_constant: float = 1.0  # N m/A
+    viscous: float = 1.2  # N m s/rad
+    coulomb: float = 0.4  # N m
+    gravity: float = 0.0  # N m at horizontal (position 0); a pitch joint's setting
+    back_emf: float = 4.0  # V s/rad
+    resistance: float = 1.0  # ohm
+    supply_voltage: float = 25.0  # V
+    counts_per_rad: float = 3600 / (2 * math.pi)  # the joint's cpr / 2 pi
     # Fault injection: at die_at the drive goes silent for good (crashed CPU, power stage off);
     # at reboot_at it resets once as after NMT reset node (brown-out, watchdog).
     die_at: float | None = None
@@ -78,27 +92,31 @@ class SimSettings:
     # begin commands). A BG sent to the drive's group id (0x2040) or executed at SYNC starts at
     # once on every drive of the group.
     start_skew_s: float = 0.0
-    # Bandwidth of the servo loop: the motor follows its profile through a first-order lag with
-    # this time constant (s); 0 = a perfect loop (the motor is the profile). A pair whose motors
-    # differ here drifts apart while accelerating (seed Fig. 9.10/9.11).
+    # The servo model (sim/servo.py), one model for both settings: lag_s > 0 (diffdrive) is its
+    # first-order-lag form (damping 1, no velocity feed-forward, bandwidth 1 / (pi lag_s)): the motor
+    # trails its profile by lag_s at speed; servo_bandwidth_hz > 0 (`log step`) its PID form with
+    # velocity feed-forward (natural frequency, damping). The current goes through the load's limits:
+    # servo_current_limit A (None: max_current; never above it), the supply's voltage against the
+    # back-EMF, and supply_current_limit A of supply current (the seed's 1 A supply, Fig. 9.4/9.5).
+    # Both 0 = the kinematic model (a perfect loop; torque mode still drives the load).
     lag_s: float = 0.0
-    # Servo-loop motor model (sim/servo.py; `log step`): servo_bandwidth_hz > 0 makes the motor
-    # follow the profile through a second-order position loop (natural frequency, damping) whose
-    # current is limited to servo_current_limit A (None: max_current) and, with
-    # supply_current_limit A, to what the supply can give at speed (the seed's 1 A-supply
-    # slowdown, Fig. 9.x): supply current ~ motor current x speed / supply_speed. 0 = the
-    # kinematic model (a perfect loop).
     servo_bandwidth_hz: float = 0.0
     servo_damping: float = 0.5
     servo_current_limit: float | None = None
     supply_current_limit: float | None = None
-    supply_speed: float = 100000.0  # cnt/s at which the supply current equals the motor current
     # User program (real-arm.md section 4, one public source: UNCONFIRMED): what PS answers at power-up
     # (-1 idle, -2 no program, 1 running; tests set SimDrive.user_program). While PS reads
     # user_program_running, SR bit 12 is set and SV answers sv_program_error (EC 82 "program is running").
     user_program: int = -1
     user_program_running: int = 1
     sv_program_error: int = 82
+
+    def load(self) -> Load:
+        """The load this drive's motor drives (sim/load.py)."""
+        peak = self.max_current if self.servo_current_limit is None else min(self.servo_current_limit, self.max_current)
+        return Load(inertia=self.inertia, torque_constant=self.torque_constant, viscous=self.viscous,
+                    coulomb=self.coulomb, gravity=self.gravity, back_emf=self.back_emf, resistance=self.resistance,
+                    supply_voltage=self.supply_voltage, supply_current=self.supply_current_limit, peak_current=peak)
 
     def __post_init__(self) -> None:
         for name in ("mo_settle_s", "sv_blackout_s", "reply_latency_s", "sdo_latency_s", "start_skew_s", "lag_s"):
@@ -118,6 +136,9 @@ class SimSettings:
             raise ValueError("SimSettings.servo_bandwidth_hz must be a finite number >= 0")
         if not (math.isfinite(self.servo_damping) and self.servo_damping > 0):
             raise ValueError("SimSettings.servo_damping must be a finite number > 0")
+        if not (math.isfinite(self.counts_per_rad) and self.counts_per_rad > 0):
+            raise ValueError("SimSettings.counts_per_rad must be a finite number > 0")
+        self.load()  # checks the load's numbers
         for name in ("servo_current_limit", "supply_current_limit"):
             value = getattr(self, name)
             if value is not None and not (math.isfinite(value) and value > 0):

@@ -1,9 +1,13 @@
 """What a simulated drive keeps across power cycles: its flash (what SV saved) and its save count.
 
-``--sim`` behaves like a real arm that is power-cycled between commands: RAM is new each
-run, flash persists in one JSON file per arm under the user's state directory. Two simulators
-of the same arm (two commands at once) merge their saves under a file lock: neither loses the
-other's SV.
+Flash persists in one JSON file per arm under the user's state directory. Two simulators of the
+same arm merge their saves under a file lock: neither loses the other's SV.
+
+``--sim`` keeps the arm powered between commands: the in-process arm's RAM (positions, parameters,
+calibration marks, PDO and dead-man objects, faults) lives beside the flash in ``<arm>.ram.json``,
+loaded when a command's arm starts and saved when it stops, under a lock held meanwhile (two `--sim`
+commands at once are serialised). `sherpa sim --power-cycle` drops the RAM (positions stay, as the
+joints do), `--reset-state` drops RAM and flash.
 """
 
 from __future__ import annotations
@@ -12,9 +16,12 @@ import hashlib
 import json
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
+
+import filelock
 
 from sherpa_cli.config.model import ArmConfig
-from sherpa_cli.errors import ConfigError, Location, SherpaError
+from sherpa_cli.errors import ConfigError, ExitCode, Location, SherpaError
 from sherpa_cli.paths import STATE_DIR_HINT, file_lock, move_aside_hint, read_json, state_dir, write_atomic
 
 FORMAT = 1
@@ -145,3 +152,97 @@ def reset(cfg: ArmConfig, path: Path | None = None) -> bool:
             return True
         except FileNotFoundError:
             return False
+
+
+# -- RAM: the arm stays powered between `--sim` commands ------------------------------------------------
+
+RAM_FORMAT = 1
+
+
+class SimArmBusyError(SherpaError):
+    """Another `--sim` command holds the simulated arm (its RAM state) for longer than we waited (exit 5)."""
+
+    exit_code = ExitCode.BUSY
+
+
+def ram_path(cfg: ArmConfig) -> Path:
+    """The powered arm's RAM (positions, parameters, PDO and dead-man objects, faults), beside its flash."""
+    return state_dir() / "sim" / f"{arm_key(cfg)}.ram.json"
+
+
+def ram_lock(cfg: ArmConfig, timeout: float) -> filelock.BaseFileLock:
+    """Held by an in-process `--sim` arm from loading its RAM to saving it: two commands are serialised
+    (the second waits up to ``timeout`` s, then :class:`SimArmBusyError`)."""
+    target = ram_path(cfg)
+    lock = file_lock(target, timeout=timeout)
+    try:
+        lock.acquire()
+    except filelock.Timeout:
+        raise SimArmBusyError(f"simulated arm '{cfg.name}': another `--sim` command is using it (waited {timeout:g} s)",
+                              hint=f"wait for it to end; its state is {target}") from None
+    except OSError as exc:
+        raise SherpaError(f"{target}: cannot lock the simulated arm's state: {exc.strerror or exc}",
+                          hint=STATE_DIR_HINT) from None
+    return lock
+
+
+def load_ram(cfg: ArmConfig, path: Path | None = None) -> dict[str, Any] | None:
+    """The powered arm's RAM as saved, or None (never powered, or reset). A damaged file raises ConfigError."""
+    target = path or ram_path(cfg)
+    try:
+        data: object = read_json(target, None)
+    except OSError as exc:
+        raise SherpaError(f"{target}: cannot read the simulated arm's RAM: {exc.strerror or exc}",
+                          hint=STATE_DIR_HINT) from None
+    except ValueError as exc:
+        raise ram_damaged(target, str(exc)) from None
+    if data is None:
+        return None
+    if not isinstance(data, dict) or data.get("format") != RAM_FORMAT or not isinstance(data.get("drives"), dict):
+        raise ram_damaged(target, "not a simulated arm's RAM file")
+    return data
+
+
+def ram_damaged(target: Path, problem: str) -> ConfigError:
+    return ConfigError(f"simulated arm RAM state is damaged ({problem})", Location(str(target)),
+                       hint=move_aside_hint(target, "or power the simulated arm off and on with `sherpa sim --power-cycle`"))
+
+
+def save_ram(cfg: ArmConfig, drives: dict[str, Any], powered: bool = True, path: Path | None = None) -> Path:
+    """Write the arm's RAM atomically (``powered`` False: only positions survive, a power cycle)."""
+    target = path or ram_path(cfg)
+    body = {"format": RAM_FORMAT, "arm": cfg.name, "powered": powered, "drives": drives}
+    try:
+        write_atomic(target, json.dumps(body, indent=1, sort_keys=True) + "\n")
+    except OSError as exc:
+        raise SherpaError(f"{target}: cannot save the simulated arm's RAM: {exc.strerror or exc}",
+                          hint=STATE_DIR_HINT) from None
+    return target
+
+
+def power_cycle(cfg: ArmConfig, timeout: float = 10.0) -> bool:
+    """`sherpa sim --power-cycle`: RAM is lost, the joints stay where they are (PX reads 0 there at the
+    next power-up). True if the arm was powered."""
+    lock = ram_lock(cfg, timeout)
+    try:
+        saved = load_ram(cfg)
+        if saved is None:
+            return False
+        positions = {name: {"position": d.get("position")} for name, d in saved["drives"].items()
+                     if isinstance(d, dict) and "position" in d}
+        save_ram(cfg, positions, powered=False)
+        return bool(saved.get("powered", True))
+    finally:
+        lock.release()
+
+
+def reset_ram(cfg: ArmConfig, timeout: float = 10.0) -> bool:
+    """Forget RAM and positions (the arm as delivered); True if there was a RAM file."""
+    lock = ram_lock(cfg, timeout)
+    try:
+        ram_path(cfg).unlink()
+        return True
+    except FileNotFoundError:
+        return False
+    finally:
+        lock.release()
