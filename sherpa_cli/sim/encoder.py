@@ -77,7 +77,7 @@ class SimEncoder(SimDrive):
         super()._boot()
 
     # -- objects -------------------------------------------------------------------------------
-    def od_read(self, index: int, sub: int) -> OdValue:
+    def od_read(self, index: int, sub: int) -> OdValue | bytes:
         objects = {(0x1800, 0): 2, (0x1800, 1): self.enc_cob, (0x1800, 2): self.enc_ttype, (0x1A00, 0): self.enc_map_count, (0x1A00, 1): self.enc_entry,
                    (CYCLIC_TIMER, 0): self.cyclic_ms}
         if (index, sub) in objects:

@@ -39,7 +39,7 @@ _OBJECTS: list[ObjectSpec] = [
     (0x6004, None, "Position value", od.INTEGER32, "ro"),  # CiA 406: only a simulated encoder has it
     (0x2040, None, "Group ID", od.UNSIGNED8, "rw"),
 ]
-_RECORD_NAMES = {0x1003: "Pre-defined error field", 0x1016: "Consumer heartbeat time", 0x1018: "Identity object", 0x1029: "Error behaviour"}
+_RECORD_NAMES = {0x2030: "Bring recorded data", 0x1003: "Pre-defined error field", 0x1016: "Consumer heartbeat time", 0x1018: "Identity object", 0x1029: "Error behaviour"}
 
 
 def build_object_dictionary(extra: tuple[ObjectSpec, ...] = ()) -> od.ObjectDictionary:
@@ -145,7 +145,7 @@ class ServedDrive(Protocol):
     """What the SDO server needs of a drive (sim/drive.py's SimDrive, sim/encoder.py's SimEncoder);
     one may also have ``sdo_extra``, more objects for the dictionary (:func:`build_object_dictionary`)."""
 
-    def od_read(self, index: int, sub: int) -> OdValue: ...
+    def od_read(self, index: int, sub: int) -> OdValue | bytes: ...
 
     def od_write(self, index: int, sub: int, value: int) -> None: ...
 
@@ -178,7 +178,7 @@ class SdoServer:
         # NMT is the simulated drive's own state machine, not LocalNode's
         self.shim.unsubscribe(0)
 
-    def _read(self, index: int, subindex: int, od: canopen.objectdictionary.ODVariable) -> OdValue | None:
+    def _read(self, index: int, subindex: int, od: canopen.objectdictionary.ODVariable) -> OdValue | bytes | None:
         if subindex == 0 and isinstance(od, canopen.objectdictionary.ODVariable) and od.parent is not None \
                 and not isinstance(od.parent, canopen.objectdictionary.ObjectDictionary) and index != 0x1003 \
                 and not 0x1A00 <= index < 0x1A04:
