@@ -403,6 +403,8 @@ class ArmConfig:
     # `sim: reply_timeout:` s to wait for one interpreter reply with --sim (instead of protocol.reply_timeout):
     # the in-process simulator shares a possibly loaded machine, so it is given patient timeouts
     sim_reply_timeout: float = 1.0
+    # `tuning:` gain key ("KP[2]") -> (low, high) that `tune set` accepts; ops/tune.py has the defaults
+    tuning: Mapping[str, tuple[float, float]] = field(default_factory=dict)
     source: str | None = None  # file the config came from
     warnings: tuple[str, ...] = ()  # non-fatal findings of validation, shown by `config check`
 
