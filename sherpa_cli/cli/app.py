@@ -151,9 +151,10 @@ def _register() -> None:
     app.add_typer(config_cmd.app, name="config")
     app.add_typer(bus_cmd.app, name="bus")
 
-    from sherpa_cli.cli import log_cmd
+    from sherpa_cli.cli import log_cmd, tune_cmd
 
     app.add_typer(log_cmd.app, name="log")
+    app.add_typer(tune_cmd.app, name="tune")
 
 
 _register()

@@ -297,6 +297,11 @@ def record(
     foxglove: Foxglove = False,
     foxglove_at: FoxgloveAt = DEFAULT_AT,
     allow_remote: AllowRemote = False,
+    source: str = typer.Option("can", "--source", metavar="can|drive",
+                               help="drive: the drives' own recorders at the servo rate (docs/log.md; --rate, "
+                               "--current, --poll do not apply)."),
+    trigger: str = typer.Option("now", "--trigger", metavar="now|bg",
+                                help="With --source drive: start now, or at the next BG (a move started elsewhere)."),
 ) -> None:
     """Record position and velocity (and current) of joints, in joint units (rad, rad/s, A; Σ/Δ for
     pairs) plus the motor counts, with one timestamp per sample, into a CSV file.
@@ -317,6 +322,12 @@ def record(
       sherpa log record shoulder_diff --rate 500 --for 10 --current -o pair.csv
       sherpa log record --poll --for 5 -o slow.csv
       sherpa log record --rate 500 --for 10 -o run.csv -o run.mcap --foxglove
+      sherpa log record shoulder_diff --source drive --for 0.5 -o pair.csv
+      sherpa log record shoulder_diff --source drive --trigger bg --for 2 -o move.csv
+
+    With --source drive the drives' own recorders sample at the servo rate (position, velocity,
+    active current, position error, speed command), both motors of a pair with the same settings;
+    the recorder settings are RAM only and restored on every exit path (docs/log.md).
     """
     from sherpa_cli.bus.targets import drive_refs
     from sherpa_cli.cli.robotics import (
@@ -333,6 +344,11 @@ def record(
     from sherpa_cli.log.recording import CsvWriter, write_csv
 
     st = state(ctx)
+    if source != "can":
+        from sherpa_cli.cli.log_drive import record_from_drive
+
+        record_from_drive(st, targets, duration, output, source=source, trigger=trigger, poll=poll, live=foxglove)
+        return
     if not 0 < duration <= MAX_RECORD_S:
         raise UsageError(f"--for {duration}: expected seconds > 0 and <= {MAX_RECORD_S:g}")
     if not (0 < rate <= 10000):

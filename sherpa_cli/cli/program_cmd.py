@@ -59,7 +59,7 @@ def program_limits(
 
     st = state(ctx)
     cfg = st.load_config()
-    _check_options(apply, save)
+    check_options(apply, save)
     derived, warnings = derive_checked(cfg, drive_names(cfg, names))
     targets = [DriveTarget(d.drive, d.bus, d.node, d.params) for d in derived]
     run_program(st, "program-limits", targets, warnings, apply=apply, save=save, yes=yes, motor_off=motor_off,
@@ -96,7 +96,7 @@ def params_restore(
 
     st = state(ctx)
     cfg = st.load_config()
-    _check_options(apply, save)
+    check_options(apply, save)
     dump = read_dump(file)
     targets, warnings = restore_targets(cfg, dump, file, other_serial=other_serial)
     from sherpa_cli.errors import Location
@@ -106,7 +106,7 @@ def params_restore(
                 where=lambda drive: Location(str(file), None, f"drives.{drive}.params"), verify_flash=verify_flash)
 
 
-def _check_options(apply: bool, save: bool) -> None:
+def check_options(apply: bool, save: bool) -> None:
     from sherpa_cli.errors import UsageError
 
     if save and not apply:
@@ -122,7 +122,7 @@ def run_program(st: AppState, command: str, targets: Sequence[DriveTarget], warn
                 source: Path | None = None, verify_flash: bool = False, note: str | None = None) -> None:
     """Check, plan, show; with ``apply`` write/verify/save and report. Raises the error to exit with.
 
-    Callers run :func:`_check_options` first, before they read files or derive targets, so a
+    Callers run :func:`check_options` first, before they read files or derive targets, so a
     bad option combination is reported ahead of any other problem.
 
     ``verify_flash`` (with ``apply``): every drive is reset first (NMT reset node), so RAM is

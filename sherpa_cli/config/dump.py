@@ -37,6 +37,8 @@ def dump_native(cfg: ArmConfig) -> str:
         sections.append({"il_codes": dataclasses.asdict(cfg.il_codes)})
     if cfg.protocol != ProtocolConfig():
         sections.append({"protocol": dataclasses.asdict(cfg.protocol)})
+    if cfg.tuning:
+        sections.append({"tuning": {key: list(bounds) for key, bounds in cfg.tuning.items()}})
     if cfg.motion != MotionConfig():
         sections.append({"motion": dataclasses.asdict(cfg.motion)})
     if cfg.homing != HomingConfig():

@@ -435,6 +435,8 @@ class ArmConfig:
     # the in-process simulator shares a possibly loaded machine, so it is given patient timeouts
     sim_reply_timeout: float = 1.0
     sim_buses: Mapping[str, SimBusConfig] = field(default_factory=dict)  # `sim: buses:` controller faults
+    # `tuning:` gain key ("KP[2]") -> (low, high) that `tune set` accepts; ops/tune.py has the defaults
+    tuning: Mapping[str, tuple[float, float]] = field(default_factory=dict)
     source: str | None = None  # file the config came from
     warnings: tuple[str, ...] = ()  # non-fatal findings of validation, shown by `config check`
 

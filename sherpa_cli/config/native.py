@@ -44,6 +44,7 @@ from sherpa_cli.config.yamlnodes import (
     as_int,
     as_map,
     as_name,
+    as_num,
     as_seq,
     as_str,
     named_items,
@@ -53,7 +54,8 @@ from sherpa_cli.config.yamlnodes import (
 from sherpa_cli.errors import ConfigError
 
 TOP_KEYS = ["name", "il_codes", "protocol", "motion", "homing", "joystick", "sim", "buses", "drives", "devices", "joints",
-            "pairs", "catalog"]
+            "pairs", "catalog", "tuning"]
+TUNING_KEYS = [f"{g}[{n}]" for g in ("KP", "KI", "FF") for n in (1, 2, 3)]  # `tuning:` (docs/tune.md)
 IL_KEYS = ["stop", "home", "unused"]
 BUS_KEYS = ["interface", "channel", "bitrate", "send_interval_us", "poll_interval_ms", "options"]
 DRIVE_KEYS = ["bus", "node", "model", "motor"]
@@ -116,6 +118,27 @@ def parse_protocol(top: Section, locs: Locs) -> ProtocolConfig:
         pacing_floor_us=sec.int("pacing_floor_us", d.pacing_floor_us),
         calibration_flag=sec.int("calibration_flag", d.calibration_flag),
     )
+
+
+def parse_tuning(top: Section, locs: Locs) -> dict[str, tuple[float, float]]:
+    """``tuning:`` gain key -> [low, high]: the bounds `tune set` accepts (docs/tune.md)."""
+    sec = top.section("tuning", TUNING_KEYS, what="a mapping of gain bounds, e.g. KP[2]: [0, 5]")
+    if sec is None:
+        return {}
+    register(locs, ("tuning",), sec)
+    out: dict[str, tuple[float, float]] = {}
+    for key in TUNING_KEYS:
+        node = sec.get(key)
+        if node is None:
+            continue
+        items = as_seq(node, "a list [low, high]")
+        if len(items) != 2:
+            raise node.error(f"tuning.{key}: expected [low, high], got {len(items)} value(s)")
+        low, high = as_num(items[0]), as_num(items[1])
+        if not low <= high:
+            raise node.error(f"tuning.{key}: low {low:g} is above high {high:g}")
+        out[key] = (float(low), float(high))
+    return out
 
 
 MOTION_KEYS = [f.name for f in dataclasses.fields(MotionConfig)]
@@ -261,6 +284,7 @@ def load_native(root: YNode, filename: str) -> tuple[ArmConfig, Locs, list[str]]
     motion = parse_motion(top, locs)
     joystick = parse_joystick(top, locs)
     homing = parse_homing(top, locs)
+    tuning = parse_tuning(top, locs)
     sim, sim_extra_nodes = parse_sim(top, locs)
     sim_power_up, sim_wiring = parse_sim_homing(top)
     sim_reply_timeout = parse_sim_reply_timeout(top)
@@ -345,7 +369,7 @@ def load_native(root: YNode, filename: str) -> tuple[ArmConfig, Locs, list[str]]
     cfg = ArmConfig(name=name, buses=buses, drives=drives, joints=joints, pairs=pairs, catalog=catalog, devices=devices,
                     il_codes=il, protocol=protocol, motion=motion, joystick=joystick, sim=sim,
                     sim_extra_nodes=sim_extra_nodes, sim_reply_timeout=sim_reply_timeout, homing=homing,
-                    sim_power_up=sim_power_up, sim_wiring=sim_wiring, sim_buses=sim_buses,
+                    sim_power_up=sim_power_up, sim_wiring=sim_wiring, sim_buses=sim_buses, tuning=tuning,
                     source=filename)
     return cfg, locs, []
 

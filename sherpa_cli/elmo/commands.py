@@ -186,6 +186,20 @@ _TABLE: tuple[CommandSpec, ...] = (
     _cmd("ET", "int", "rw", "ECAM table entries", index=(1, 1024)),
     # real-arm.md section 4 (one public source): elmo/userprog.py reads it before SV and motion
     _cmd("PS", "int", "ro", "user program status: -1 idle, -2 no program, 1 running (values UNCONFIRMED)"),
+    # The recorder (real-arm.md 2; MAN-SIMCR, MAN-SIMSW 7.4): RAM settings, elmo/recorder.py drives them.
+    _cmd("RV", "int", "rw", "recorder: signal id mapped to logical signal N", index=(1, 16)),
+    _cmd("RC", "int", "rw", "recorder: mask of recorded logical signals (at most 8 bits)"),
+    _cmd("RG", "int", "rw", "recorder: gap, samples every RG sample times (1..4096)"),
+    _cmd("RL", "int", "rw", "recorder: length, samples per signal"),
+    _cmd("RP", "int", "rw", "recorder: 3 trigger (0 now, 1 BG, ...), 4/5 levels, 6/7 input, 8/9 upload part",
+         index=(0, 9)),
+    _cmd("RR", "int", "rw", "recorder: write 0 kill, 1 at next BG, 2 now, 3 per RP; read -1 no data, "
+         "0 data ready, 1..3 waiting"),
+    # Gains (real-arm.md 3; MAN-SIMSW ch. 15): KP[2]/KI[2] speed loop, KP[3] position loop; the
+    # meanings of KP[1]/KI[1]/KI[3] and of every FF[] index are UNCONFIRMED.
+    _cmd("KP", "float", "rw", "proportional gain: 2 speed loop, 3 position loop (1 UNCONFIRMED)", index=(1, 3)),
+    _cmd("KI", "float", "rw", "integral gain: 2 speed loop (1, 3 UNCONFIRMED)", index=(1, 3)),
+    _cmd("FF", "float", "rw", "feed-forward (index meanings UNCONFIRMED)", index=(1, 3)),
 )
 
 COMMANDS: Mapping[str, CommandSpec] = MappingProxyType({c.letters: c for c in _TABLE})

@@ -52,6 +52,7 @@ from sherpa_cli.sim.od import (
 )
 from sherpa_cli.sim.params import Value, factory_ram, is_persistent, parse_flash, wrap_int32
 from sherpa_cli.sim.pdo import TpdoTable
+from sherpa_cli.sim.recorder import SDO_ENTRIES, SimRecorder
 from sherpa_cli.sim.servo import ServoMotor
 from sherpa_cli.sim.settings import SimSettings
 
@@ -189,6 +190,8 @@ class SimDrive:
         self._rpdo2_type = 255  # 0x1401:2
         self._rpdo2_buffer: bytes | None = None  # a synchronous RPDO2 waiting for SYNC
         self.user_program = self.settings.user_program  # PS; a test control (a program started or stopped)
+        self.recorder = SimRecorder(self.settings, ram=lambda: self.ram, now=lambda: self._t,
+                                    sources=self._recorder_sources())  # sim/recorder.py
         self._boot()
 
     def _make_tpdo_table(self, node: int) -> TpdoTable:
@@ -279,9 +282,14 @@ class SimDrive:
         lies: +1 positive side, -1 negative, 0 both (a hard stop freezes motion either way)."""
         self.inputs.set(n, active, direction)
 
-    def od_read(self, index: int, sub: int) -> OdValue:
+    # 0x2030, the recorder's upload: added to the Whistle's objects by sim/sdo.py
+    sdo_more: tuple[tuple[int, int | None, str, int, str], ...] = SDO_ENTRIES
+
+    def od_read(self, index: int, sub: int) -> OdValue | bytes:
         """Read an object; raises od.ODError. A dead drive still answers here: an SDO server
         must check :attr:`dead` and stay silent, as the interpreter does."""
+        if index == SDO_ENTRIES[0][0]:
+            return self.recorder.upload(sub)
         if self.tpdo.serves(index):
             return self.tpdo.read(index, sub)
         if index in (RPDO2_COMM, RPDO2_MAP):
@@ -429,6 +437,10 @@ class SimDrive:
             for skewed, amount in self.settings.store_skew:
                 if skewed == key:
                     value = type(value)(value + amount)
+            if key[:2] in ("RC", "RG", "RL", "RR"):
+                self.recorder.check(key, value)  # refuses like the drive (EC 21)
+                if key == "RR":
+                    self.recorder.write_rr(int(value))
             self.ram[key] = value
             if key in ("PA", "PR", "JV"):
                 self._target_kind = key  # what the next BG starts in UM=5: a move or a jog
@@ -445,6 +457,7 @@ class SimDrive:
                 self._begin_due = self._t + skew  # a separately received BG starts late (seed Fig. 9.10)
             else:
                 self._begin()
+            self.recorder.on_bg()  # the recorder's BG trigger (RR=1, RP[3]=1)
         elif letters == "ST":
             if self.settings.st_refused_in_speed_mode and self.ram["UM"] == 2:
                 raise Refused(interpreter.EC_NOT_IN_THIS_UM)  # [BLISS]: "cannot be executed in speed mode"
@@ -494,6 +507,7 @@ class SimDrive:
         self.tpdo.reset()  # PDO settings are RAM only here
         self._rpdo2_type = 255  # 0x1401:2, RAM only: asynchronous, every frame runs when it arrives
         self._rpdo2_buffer = None
+        self.recorder.reset()  # the recorder is RAM
         self._send(HEARTBEAT_BASE + self.node, b"\x00")
 
     def _nmt(self, cs: int) -> None:
@@ -605,6 +619,7 @@ class SimDrive:
             times.append(self._replies[0][0])
         if self._nmt_state == OPERATIONAL:
             times.append(self.tpdo.next_due())
+        times.append(self.recorder.next_due)
         return min(times)
 
     def _fire_events(self) -> None:
@@ -623,6 +638,7 @@ class SimDrive:
             self._replies.clear()
             self._outbox.clear()  # not on the bus yet: a dead drive sends nothing more, its boot-up included
             return
+        self.recorder.fire(t - TIME_EPS)  # servo-rate samples due by now
         if self._reboot_due is not None and t >= self._reboot_due:
             self._reboot_due = None
             self._boot()
@@ -736,6 +752,7 @@ class SimDrive:
             "IQ": self._iq, "ID": lambda: 0.0, "MC": lambda: self.settings.max_current, "LC": lambda: 0,
             "IP": self._ip, "SR": self._sr, "MF": lambda: self._mf, "EC": lambda: self.last_error,
             "PS": lambda: self.user_program,
+            "RR": lambda: self.recorder.rr,
             **{f"IB[{n}]": functools.partial(self._ib, n) for n in range(32)},
         }
 
@@ -916,8 +933,18 @@ class SimDrive:
             sr |= SR_LIMIT_STOP
         if self.program_running:
             sr |= SR_PROGRAM
+        sr |= self.recorder.state << 16  # recorder state, SR bits 16-17
         return wrap_int32(sr)
 
     @property
     def program_running(self) -> bool:
         return self.user_program == self.settings.user_program_running
+
+    def _recorder_sources(self) -> dict[str, Callable[[], float]]:
+        """What the recorder samples (sim/recorder.py): the servo model's command and error where it has one."""
+        def ref() -> Motor:
+            return self.motor.ref if isinstance(self.motor, ServoMotor) else self.motor
+
+        return {"pos": lambda: self.px, "vel": lambda: self.motor.v, "cur": self._iq,
+                "pos_err": lambda: ref().position - self.motor.position if self._motor_on else 0.0,
+                "vel_cmd": lambda: ref().v if self._motor_on else 0.0}

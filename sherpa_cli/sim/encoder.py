@@ -85,6 +85,7 @@ class SimEncoder(SimDrive):
     """The encoder node: a SimDrive for NMT, heartbeat and SDO, with its own TPDOs and CiA 406 objects."""
 
     sdo_extra = ENCODER_OBJECTS
+    sdo_more = ()  # an encoder has no drive recorder
     sdo_tpdos = (0, 1)
     sdo_fixed_tpdos: frozenset[int] = frozenset()
     sdo_rpdo2 = False
@@ -139,7 +140,7 @@ class SimEncoder(SimDrive):
         return {0x6004: self.position_value}
 
     # -- objects -------------------------------------------------------------------------------
-    def od_read(self, index: int, sub: int) -> OdValue:
+    def od_read(self, index: int, sub: int) -> OdValue | bytes:
         if sub == 0:
             hours_10 = int((self._t - self._power_up_t) / 360)
             values = {0x6000: self.operating, 0x6001: self.units_per_rev, 0x6002: self.total_range,

@@ -41,12 +41,17 @@ _FACTORY: dict[str, Value] = {
     # IL=4 is "ignore, active low" ([ELMOCAN] writes it to disable switches). It differs from
     # both seed codes (21 stop, 5 home), so programming a switch always shows as a change.
     "IL": 4,
+    # recorder (RAM only; sim/recorder.py): the manual's default mapping RV[N]=N
+    "RC": 0, "RG": 1, "RL": 256, **{f"RP[{n}]": 0 for n in range(10)}, **{f"RV[{n}]": n for n in range(1, 17)},
+    # gains: made-up but plausible; the servo model (sim/servo.py) does not read them
+    "KP[1]": 1.0, "KP[2]": 0.5, "KP[3]": 30.0, "KI[1]": 100.0, "KI[2]": 200.0, "KI[3]": 0.0,
+    "FF[1]": 0.0, "FF[2]": 0.0, "FF[3]": 0.0,
 }
 
 # What SV writes to flash. Targets, commands and counters (JV, PA, PR, TC, PX, PY, MO, HM)
 # are volatile on the real drive too: a reboot must not resume a motion.
 PERSISTENT = frozenset({"UM", "PM", "AC", "DC", "SD", "SP", "LL", "HL", "VL", "VH", "ER", "CL", "PL",
-                        "XM", "YM", "TR", "IL", "CA", "ET"})
+                        "XM", "YM", "TR", "IL", "CA", "ET", "KP", "KI", "FF"})
 
 
 def factory_ram(inputs: int) -> dict[str, Value]:

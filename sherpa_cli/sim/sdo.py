@@ -51,7 +51,7 @@ DRIVE_OBJECTS: tuple[ObjectSpec, ...] = (
     (0x6078, None, "Current actual value", od.INTEGER16, "ro"),
 )
 MAPPABLE_OBJECTS = frozenset({0x2012, 0x2013, 0x6004, 0x6064, 0x6069, 0x606C, 0x6078})
-_RECORD_NAMES = {0x1003: "Pre-defined error field", 0x1016: "Consumer heartbeat time", 0x1018: "Identity object", 0x1029: "Error behaviour"}
+_RECORD_NAMES = {0x2030: "Bring recorded data", 0x1003: "Pre-defined error field", 0x1016: "Consumer heartbeat time", 0x1018: "Identity object", 0x1029: "Error behaviour"}
 
 
 def build_object_dictionary(extra: tuple[ObjectSpec, ...] = DRIVE_OBJECTS, tpdos: tuple[int, ...] = (0, 1, 2, 3),
@@ -155,7 +155,7 @@ class ServedDrive(Protocol):
     """What the SDO server needs of a drive (sim/drive.py's SimDrive, sim/encoder.py's SimEncoder);
     one may also have ``sdo_extra``, more objects for the dictionary (:func:`build_object_dictionary`)."""
 
-    def od_read(self, index: int, sub: int) -> OdValue: ...
+    def od_read(self, index: int, sub: int) -> OdValue | bytes: ...
 
     def od_write(self, index: int, sub: int, value: int) -> None: ...
 
@@ -163,7 +163,8 @@ class ServedDrive(Protocol):
 def dictionary_of(drive: object) -> od.ObjectDictionary:
     """The SDO dictionary of a simulated node: a Whistle's, or what its class declares (``sdo_extra``,
     ``sdo_tpdos``, ``sdo_fixed_tpdos``, ``sdo_rpdo2``; sim/encoder.py)."""
-    return build_object_dictionary(getattr(drive, "sdo_extra", DRIVE_OBJECTS), getattr(drive, "sdo_tpdos", (0, 1, 2, 3)),
+    return build_object_dictionary(tuple(getattr(drive, "sdo_extra", DRIVE_OBJECTS)) + tuple(getattr(drive, "sdo_more", ())),
+                                   getattr(drive, "sdo_tpdos", (0, 1, 2, 3)),
                                    getattr(drive, "sdo_fixed_tpdos", frozenset({1})), getattr(drive, "sdo_rpdo2", True))
 
 
@@ -195,7 +196,7 @@ class SdoServer:
         # NMT is the simulated drive's own state machine, not LocalNode's
         self.shim.unsubscribe(0)
 
-    def _read(self, index: int, subindex: int, od: canopen.objectdictionary.ODVariable) -> OdValue | None:
+    def _read(self, index: int, subindex: int, od: canopen.objectdictionary.ODVariable) -> OdValue | bytes | None:
         if subindex == 0 and isinstance(od, canopen.objectdictionary.ODVariable) and od.parent is not None \
                 and not isinstance(od.parent, canopen.objectdictionary.ObjectDictionary) and index != 0x1003 \
                 and not 0x1400 <= index < 0x1C00:

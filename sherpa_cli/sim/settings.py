@@ -117,6 +117,19 @@ class SimSettings:
         return Load(inertia=self.inertia, torque_constant=self.torque_constant, viscous=self.viscous,
                     coulomb=self.coulomb, gravity=self.gravity, back_emf=self.back_emf, resistance=self.resistance,
                     supply_voltage=self.supply_voltage, supply_current=self.supply_current_limit, peak_current=peak)
+    # The drive's recorder (sim/recorder.py, real-arm.md 2): one source each, so the simulator plays
+    # whatever the host's RecorderSettings (elmo/recorder.py) may assume. Sample time at RG=1 (s),
+    # samples shared by the signals, 0x2030 header layout ("cob" / "aligned"), data type nibble
+    # (4 long, 5 float), signal ids by name, the 0x2030 sub-index of logical signal 1, and an
+    # injected upload fault ("" none, "short", "bad_type", "abort").
+    recorder_sample_s: float = 360e-6
+    recorder_capacity: int = 4096
+    recorder_header: str = "cob"
+    recorder_type: int = 4
+    recorder_signals: tuple[tuple[str, int], ...] = (("pos", 2), ("vel", 1), ("cur", 10), ("pos_err", 4),
+                                                     ("vel_cmd", 16))
+    recorder_sub_base: int = 1
+    recorder_upload_fault: str = ""
 
     def __post_init__(self) -> None:
         for name in ("mo_settle_s", "sv_blackout_s", "reply_latency_s", "sdo_latency_s", "start_skew_s", "lag_s"):
@@ -139,6 +152,12 @@ class SimSettings:
         if not (math.isfinite(self.counts_per_rad) and self.counts_per_rad > 0):
             raise ValueError("SimSettings.counts_per_rad must be a finite number > 0")
         self.load()  # checks the load's numbers
+        if not self.recorder_sample_s > 0 or self.recorder_capacity < 1:
+            raise ValueError("SimSettings.recorder_sample_s and recorder_capacity must be > 0")
+        if self.recorder_header not in ("cob", "aligned") or self.recorder_type not in (4, 5) \
+                or self.recorder_upload_fault not in ("", "short", "bad_type", "abort"):
+            raise ValueError("SimSettings.recorder_header must be cob|aligned, recorder_type 4|5, "
+                             "recorder_upload_fault ''|short|bad_type|abort")
         for name in ("servo_current_limit", "supply_current_limit"):
             value = getattr(self, name)
             if value is not None and not (math.isfinite(value) and value > 0):

@@ -1,0 +1,127 @@
+"""`log record --source drive`: servo-rate traces from the drives' own recorders (elmo/recorder.py).
+
+Every drive of the command is configured alike (same signals, gap, length), then armed one after
+the other: with ``trigger="bg"`` they all wait for the next BG (a pair's one group BG starts both
+at once); with ``"now"`` each starts when its RR=2 arrives (a pair's two traces are then a few
+milliseconds apart, one interpreter round trip). The recorder settings are RAM only: read first
+and written back on every exit path (end, error, Ctrl-C); nothing is saved. A bad upload of any
+signal of any drive fails the whole recording: no partial result, no file.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from typing import Literal
+
+from sherpa_cli.bus.session import ArmSession
+from sherpa_cli.bus.targets import DriveRef
+from sherpa_cli.config.model import ArmConfig
+from sherpa_cli.elmo.recorder import SIGNALS, DriveRecorder, RecorderPlan, RecorderSettings, plan_recording
+from sherpa_cli.errors import SherpaError
+from sherpa_cli.joints.units import counts_per_s_to_rad_per_s, counts_to_rad
+from sherpa_cli.log.recording import Recording
+
+log = logging.getLogger(__name__)
+
+# recording column suffix per recorder signal (log/recording.py's drive columns, plus two)
+COLUMNS = {"pos": "px", "vel": "vx", "cur": "iq_a", "pos_err": "pe", "vel_cmd": "vcmd"}
+WAIT_MARGIN_S = 2.0  # beyond the recording time, for the drives to report data ready
+
+
+@dataclass
+class DriveRecordResult:
+    recording: Recording
+    plan: RecorderPlan
+    period_s: float
+    samples: dict[str, int]  # drive -> samples per signal
+
+
+def record_drives(session: ArmSession, refs: Sequence[DriveRef], duration: float, *,
+                  trigger: Literal["now", "bg"] = "now", wait_s: float | None = None,
+                  settings: RecorderSettings | None = None, signals: Sequence[str] = SIGNALS,
+                  clock: Callable[[], float] = time.monotonic, sleep: Callable[[float], None] = time.sleep,
+                  on_armed: Callable[[], None] | None = None) -> DriveRecordResult:
+    """Record ``duration`` s of ``signals`` on every drive of ``refs``. ``wait_s``: how long to wait
+    for the data after arming (default: the recording time plus a margin; with ``trigger="bg"``
+    this is also how long the drives wait for the BG). ``on_armed`` runs once every drive is armed
+    (e.g. the BG of a step)."""
+    settings = settings or RecorderSettings()
+    plan = plan_recording(duration, settings, signals=signals, trigger=trigger)
+    recorders = {ref.name: DriveRecorder(session.client(ref), _uploader(session, ref), settings,
+                                         clock=clock, sleep=sleep) for ref in refs}
+    saved: dict[str, list[tuple[str, int, int | float]]] = {}
+    data: dict[str, dict[str, list[float]]] = {}
+    wait = wait_s if wait_s is not None else plan.length * plan.period(settings) + WAIT_MARGIN_S
+    for rec in recorders.values():
+        rec.client.nmt_start()  # the binary interpreter answers only in Operational
+    try:
+        for name, rec in recorders.items():
+            saved[name] = rec.snapshot(plan)
+        for rec in recorders.values():
+            rec.configure(plan)
+        for rec in recorders.values():
+            rec.arm(plan)
+        if on_armed is not None:
+            on_armed()
+        for rec in recorders.values():
+            rec.wait_ready(wait)
+        for name, rec in recorders.items():
+            data[name] = rec.read(plan)  # in memory: nothing is written before every drive is in
+    finally:
+        _restore(recorders, saved)
+    period = plan.period(settings)
+    return DriveRecordResult(to_recording(session.cfg, refs, data, period), plan, period,
+                             {name: len(next(iter(d.values()))) for name, d in data.items()})
+
+
+def _uploader(session: ArmSession, ref: DriveRef) -> Callable[[int, int], bytes]:
+    sdo = session.sdo(ref)
+    return lambda index, sub: sdo.upload(index, sub, name="recorded data")
+
+
+def _restore(recorders: dict[str, DriveRecorder], saved: dict[str, list[tuple[str, int, int | float]]]) -> None:
+    """Put every drive's recorder settings back; a silent drive is skipped, a failure is logged and
+    does not keep the other drives from theirs."""
+    for name, rec in recorders.items():
+        if rec.client.silent:
+            log.warning("%s: silent, its recorder settings are not restored", rec.client.label)
+            continue
+        try:
+            rec.restore(saved.get(name, []))
+        except SherpaError as exc:
+            log.warning("%s: recorder settings not restored: %s", rec.client.label, exc)
+
+
+def to_recording(cfg: ArmConfig, refs: Sequence[DriveRef], data: dict[str, dict[str, list[float]]],
+                 period: float) -> Recording:
+    """The `log record` format: time = k x period, joint columns (Σ/Δ for a pair) and drive columns."""
+    n = min((len(v) for d in data.values() for v in d.values()), default=0)
+    rec = Recording(times=[k * period for k in range(n)])
+    for joint in cfg.joints.values():
+        if joint.drive is not None and joint.drive in data:
+            d = data[joint.drive]
+            if "pos" in d:
+                rec.columns[f"{joint.name}.pos_rad"] = [counts_to_rad(v, joint.cpr) for v in d["pos"][:n]]
+            if "vel" in d:
+                rec.columns[f"{joint.name}.vel_rad_s"] = [counts_per_s_to_rad_per_s(v, joint.cpr) for v in d["vel"][:n]]
+            if "cur" in d:
+                rec.columns[f"{joint.name}.cur_a"] = list(d["cur"][:n])
+        elif joint.pair is not None:
+            pair = cfg.pairs[joint.pair]
+            a, b = data.get(pair.drive_a), data.get(pair.drive_b)
+            if a is None or b is None:
+                continue
+            sign = 1 if joint.name == pair.sigma else -1
+            for signal, col, conv in (("pos", "pos_rad", counts_to_rad), ("vel", "vel_rad_s", counts_per_s_to_rad_per_s)):
+                if signal in a and signal in b:
+                    rec.columns[f"{joint.name}.{col}"] = [conv(x + sign * y, joint.cpr)
+                                                          for x, y in zip(a[signal][:n], b[signal][:n], strict=True)]
+    for ref in refs:
+        d = data.get(ref.name, {})
+        for signal in SIGNALS:
+            if signal in d:
+                rec.columns[f"{ref.name}.{COLUMNS[signal]}"] = list(d[signal][:n])
+    return rec
