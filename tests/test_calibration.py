@@ -115,37 +115,3 @@ def test_sv_does_not_save_the_flag_in_the_sim():
     client.set("UI", 3, 1)
     drive.execute("SV")
     assert "UI[3]" not in drive.flash
-
-
-def test_an_absolute_joint_whose_counter_restarted_is_refused_until_home_resyncs_it(tmp_path, monkeypatch):
-    """Issue 21 item 11: after a drive reset PX restarts at 0 while the joint stands elsewhere; the
-    joint must not count as calibrated (a `jog --to` then drove into the end stop while the watch,
-    reading PX, never fired). `sherpa home` re-syncs PX from the encoder, without moving."""
-    import canopen
-
-    from sherpa_cli.bus.session import ArmSession
-    from sherpa_cli.bus.targets import drive_ref
-    from sherpa_cli.motion.calibration import read_calibration
-    from sherpa_cli.ops import home
-    from sherpa_cli.sim.arm import SimArm
-
-    monkeypatch.setenv("XDG_STATE_HOME", str(tmp_path))
-    monkeypatch.setattr(canopen.Network, "NOTIFIER_CYCLE", 0.02)
-    cfg = load_config("configs/sherpa-arm.yaml")
-    elbow = cfg.joints["elbow_pitch"]
-    with ArmSession.open(cfg, sim=SimArm.in_process(cfg), buses=["can1"]) as s:
-        c = s.client(drive_ref(cfg, "elbow_1a"))
-        c.nmt_start()
-        assert read_calibration(cfg, elbow, lambda n: s.client(drive_ref(cfg, n))).calibrated
-        with s.sim.lock:
-            s.sim.drives["elbow_1a"].motor.counts = 1370  # the joint stands at 1370 (PY reads it)
-        c.set("PX", 0, 1370)  # and the counter meant it
-        assert read_calibration(cfg, elbow, lambda n: s.client(drive_ref(cfg, n))).calibrated
-        c.reset_node(boot_timeout=5.0)  # a flash proof's NMT reset: PX restarts at 0
-        cal = read_calibration(cfg, elbow, lambda n: s.client(drive_ref(cfg, n)))
-        assert not cal.calibrated
-        assert "PX=0 does not match its absolute encoder (1370 counts)" in cal.reason
-        assert "`sherpa home elbow_pitch` re-syncs it without moving" in cal.reason
-        home.run_home(s, home.plan_home(cfg, ["elbow_pitch"]))
-        assert read_calibration(cfg, elbow, lambda n: s.client(drive_ref(cfg, n))).calibrated
-        assert int(c.get("PX")) == 1370

@@ -69,37 +69,12 @@ def judge(cfg: ArmConfig, joint: JointConfig, flags: Mapping[str, int]) -> Calib
 
 
 def read_calibration(cfg: ArmConfig, joint: JointConfig, client_of: Callable[[str], DriveClient]) -> Calibration:
-    """Read the flag from each drive of the joint. An absolute joint read by its drive's auxiliary
-    counter (``drive:PY``) is checked instead: its motor counter PX must match the encoder, because
-    the limits and the watch use PX, and PX restarts at 0 when the drive resets (a flash proof,
-    ``--verify-flash``, a power cycle) wherever the joint stands. A mismatch is refused, never
-    assumed: `sherpa home` re-syncs it without moving (issue 21 item 11)."""
+    """Read the flag from each drive of the joint (nothing is read for an absolute joint)."""
     if absolute(cfg, joint):
-        unsynced = _unsynced(cfg, joint, client_of)
-        if unsynced is not None:
-            return Calibration(joint.name, False, unsynced)
         return judge(cfg, joint, {})
     index = cfg.protocol.calibration_flag
     flags = {d: int(client_of(d).get("UI", index)) for d in joint_drives(cfg, joint)}
     return judge(cfg, joint, flags)
-
-
-SYNC_TOLERANCE = 2  # counts PX may differ from the encoder's reading (a motor holding position)
-
-
-def _unsynced(cfg: ArmConfig, joint: JointConfig, client_of: Callable[[str], DriveClient]) -> str | None:
-    """Why a plain joint's counter does not mean its absolute encoder's position, or None. Only the
-    drive's own auxiliary input (``drive:PY``) is compared here; an encoder on the bus is read by
-    `sherpa home` (which sets PX from it)."""
-    enc = joint.abs_encoder
-    if joint.role is not JointRole.PLAIN or enc is None or enc.source.upper() != "DRIVE:PY" or joint.drive is None:
-        return None
-    c = client_of(joint.drive)
-    px, expected = int(c.get("PX")), int(c.get("PY")) + enc.offset
-    if abs(px - expected) <= SYNC_TOLERANCE:
-        return None
-    return (f"its counter PX={px} does not match its absolute encoder ({expected} counts): the drive's counter "
-            f"restarted (a reset or power cycle?); `sherpa home {joint.name}` re-syncs it without moving")
 
 
 def mark_calibrated(cfg: ArmConfig, client: DriveClient) -> None:
