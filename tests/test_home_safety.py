@@ -183,9 +183,8 @@ def test_ctrl_c_during_a_pair_home_reports_the_stop_and_the_joints_left_unhomed(
 
     report = home.HomeReport()
     steps: list[str] = []
-    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
-        with pytest.raises(KeyboardInterrupt):
-            home.run_home(s, home.plan_home(cfg, [pair]), sleep=sleep, report=report, on_step=steps.append)
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s, pytest.raises(KeyboardInterrupt):
+        home.run_home(s, home.plan_home(cfg, [pair]), sleep=sleep, report=report, on_step=steps.append)
     assert report.interrupted == pair
     assert sorted(report.not_homed) == sorted(j.name for j in cfg.joints.values() if j.pair == pair)
     assert report.stop is not None and {d.drive for d in report.stop.drives} == {cfg.pairs[pair].drive_a, cfg.pairs[pair].drive_b}
