@@ -43,7 +43,13 @@ fi
 # slower guest (about 9 minutes alone; it passes in the remote stage in 6 s), so it runs here only with
 # SHERPA_VCAN_FULL=1 (docs/testing.md); every motion test runs on vcan.
 deselect=(--deselect tests/test_commission.py::test_commission_whole_arm)
-if [ "${SHERPA_VCAN_FULL:-}" = 1 ]; then deselect=(); fi
+# Two cross-process tests need the jog's heartbeat thread on time while a third Python process starts
+# (an EMCY flood, program-limits): in the 15-20x slower emulated guest the thread starved past the
+# 500 ms consumer time and the drive's dead-man tripped first (correct dead-man behaviour, but the
+# tests' premise gone). Both run in the remote stage (python-can-remote) every CI.
+deselect+=(--deselect tests/test_drive_watch_crossprocess.py::test_an_emcy_flood_from_the_moving_drive_stops_the_jog
+           --deselect tests/test_motion_crossprocess.py::test_program_limits_during_a_jog_in_another_process_is_refused_with_exit_5)
+if [ "${SHERPA_VCAN_FULL:-}" = 1 ]; then deselect=(); fi  # everything, the slow-guest ones included
 # the guest sees this machine's files read-only, so the same interpreter and virtualenv work there
 python=$(command -v python)
 
