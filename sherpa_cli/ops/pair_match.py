@@ -282,13 +282,17 @@ def measure(session: ArmSession, pair: PairConfig, settings: MatchSettings, *,
 
     with guard:
         stop = stop_motors(guard, refs, motion)
+
+        def stop_before_upload() -> None:
+            stop()  # a drive that does not answer: the guard's exit stops it and reports
+
         with CommonStart(session, refs, {r.name: guard.client(r) for r in refs}, method, group_id, stop=stop) as begin:
             for r in refs:
                 guard.enable(r, motion.velocity_unit_mode)
                 guard.client(r).set("JV", 0, speed)
             result = record_drives(session, refs, settings.step_s, trigger="bg", settings=rec_settings,
                                    signals=SIGNALS, clock=clock, sleep=alive_sleep, on_armed=begin.begin,
-                                   on_ready=lambda: None if stop() is None else None)
+                                   on_ready=stop_before_upload)
             moving = wait_all_standstill({r.name: guard.client(r) for r in refs},
                                          standstill_timeout=motion.standstill_timeout,
                                          poll_interval=motion.poll_interval,
@@ -451,3 +455,30 @@ def _put_back(session: ArmSession, ref: DriveRef, held: Mapping[str, float], cli
     if failed:
         raise ProtocolError(f"{ref.name}: the trial gains {', '.join(failed)} were not put back",
                             hint="`sherpa recover --apply` puts them back from the journal")
+
+
+def plot(result: MatchResult, path: str) -> Any:
+    """Before / after: both motors' recorded speed and Δ (m_a - m_b, counts) of the Σ step (the round
+    with the drives' own gains and the round whose gains are proposed). PNG, matplotlib (log/plot.py)."""
+    from sherpa_cli.log.plot import _figure
+
+    fig = _figure()
+    axes = fig.subplots(2, 2, sharex=True)
+    a, b = result.proposal.drives
+    for col, (k, label) in enumerate(((0, "before"), (result.chosen, "after"))):
+        step, rnd = result.steps[k], result.rounds[k]
+        t = [x * 1e3 for x in step.times]
+        ax = axes[0][col]
+        for drive in (a, b):
+            ax.plot(t, step.data[drive]["vel"], label=f"{drive} ({rnd.models[drive].delay_s * 1e3:.1f} ms)")
+        ax.plot(t, step.data[a]["vel_cmd"], "k:", linewidth=0.8, label="command")
+        ax.set_title(f"{label}: speed (counts/s)")
+        ax.legend(fontsize="small")
+        pa, pb = step.data[a]["pos"], step.data[b]["pos"]
+        d0 = pa[0] - pb[0]
+        axes[1][col].plot(t, [x - y - d0 for x, y in zip(pa, pb, strict=False)])
+        axes[1][col].set_title(f"{label}: Δ drag, peak {rnd.excursion:.0f} counts")
+        axes[1][col].set_xlabel("ms from BG")
+    fig.suptitle(f"diffdrive match {result.pair}")
+    fig.savefig(path)
+    return fig
