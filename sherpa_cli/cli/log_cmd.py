@@ -581,7 +581,7 @@ def step(
             from sherpa_cli.cli.log_drive import drive_step
 
             drive_step(st, session, target, mode, value, duration=duration, rate=rate, settings=settings,
-                       uncalibrated=uncalibrated, timebase=timebase, output=output)
+                       uncalibrated=uncalibrated, timebase=timebase, output=output, render_metrics=render_metrics)
             return
         extras = RecordExtras(session, [target.ref], mcap=to_mcap, view=None)
         extras.start()

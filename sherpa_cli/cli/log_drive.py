@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any, Literal, cast
 
@@ -50,13 +50,13 @@ def record_from_drive(st: AppState, targets: Sequence[str] | None, duration: flo
 
 
 def drive_step(st: AppState, session: Any, target: Any, mode: str, value: float, *, duration: float, rate: float,
-               settings: Any, uncalibrated: bool, timebase: Any, output: Path) -> None:
+               settings: Any, uncalibrated: bool, timebase: Any, output: Path,
+               render_metrics: Callable[[AppState, Any], None]) -> None:
     """`log step --source drive`: the step recorded by the drive's recorder and over the bus at once
     (ops/drive_step.py); both recordings, both metrics and their differences."""
     import json
     import time
 
-    from sherpa_cli.cli.log_cmd import render_metrics
     from sherpa_cli.log.recording import write_csv
     from sherpa_cli.ops.drive_step import DriveTrace
     from sherpa_cli.ops.step import run_step

@@ -89,7 +89,6 @@ class DriveTrace:
                 initial: float | None = None) -> DriveStep:
         """Wait for the data, upload it, put the settings back; the joint's ``signal`` on the step's time."""
         from sherpa_cli.ops.drive_record import to_recording
-        from sherpa_cli.ops.step import _cut
 
         assert self._rec is not None and self._plan is not None and self.t0 is not None
         period = self._plan.period(self.settings)
@@ -99,7 +98,9 @@ class DriveTrace:
         finally:
             self.close()
         raw = to_recording(cfg, [self.ref], {self.ref.name: data}, period)  # type: ignore[arg-type]
-        recording = _cut(Recording(times=[self.t0 + t for t in raw.times], columns=raw.columns), until)
+        keep = [i for i, t in enumerate(raw.times) if self.t0 + t < until]  # cut where the CAN recording ends
+        recording = Recording(times=[self.t0 + raw.times[i] for i in keep],
+                              columns={name: [values[i] for i in keep] for name, values in raw.columns.items()})
         series = recording.series(joint, signal)
         if series is None or len(series[0]) < 2:
             raise SherpaError(f"{joint}: the drive recorded no {signal} samples")
