@@ -70,7 +70,7 @@ def _gains(session, cfg) -> dict[str, dict[str, float]]:
     return pair_match.read_matched_gains(session, pair_match._refs(cfg, cfg.pairs["diff"]))
 
 
-def test_match_on_the_mismatched_simulated_pair_reaches_the_goal_and_puts_the_trials_back():
+def test_match_on_the_mismatched_simulated_pair_reaches_the_goal_and_puts_the_trials_back(tmp_path):
     cfg = load_config(MATCH)
     with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
         result = run_match(s, cfg.pairs["diff"], MatchSettings(), bounds=bounds(cfg))
@@ -83,6 +83,14 @@ def test_match_on_the_mismatched_simulated_pair_reaches_the_goal_and_puts_the_tr
     assert result.proposal.changes["right"]["KP[3]"] < 30  # slowed, not sped up
     assert after == {"left": HELD, "right": HELD}  # the trials were RAM only and put back
     assert journal.leftover(pair_match._refs(cfg, cfg.pairs["diff"])[1]) == []
+    from sherpa_cli.log.plot import have_matplotlib
+
+    if have_matplotlib():  # the before/after plot: both speeds and the Δ drag of both rounds
+        fig = pair_match.plot(result, str(tmp_path / "match.png"))
+        assert (tmp_path / "match.png").stat().st_size > 0
+        titles = [ax.get_title() for ax in fig.axes]
+        assert f"before: Δ drag, peak {first.excursion:.0f} counts" in titles
+        assert f"after: Δ drag, peak {best.excursion:.0f} counts" in titles
 
 
 def test_match_on_a_matched_pair_proposes_no_change_and_tries_nothing():

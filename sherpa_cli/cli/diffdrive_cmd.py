@@ -7,7 +7,7 @@ from typing import TYPE_CHECKING, Any
 import typer
 
 from sherpa_cli.cli.context import AppState, state
-from sherpa_cli.cli.options import ApplyMotion
+from sherpa_cli.cli.options import ApplyMatch, ApplyMotion, Save, Yes
 from sherpa_cli.cli.output import stop_lines
 from sherpa_cli.errors import UsageError
 
@@ -283,11 +283,9 @@ def match(
     pair: str = PairArg,
     measure: bool = typer.Option(False, "--measure", help="Step the pair (small Σ steps inside the motion guard, "
                                  "trial gains in RAM, put back) and show the proposal; nothing lasting is written."),
-    apply: bool = typer.Option(False, "--apply", help="--measure, then write the proposal through `tune set`'s "
-                               "path (read back); without it nothing is written."),
-    save: bool = typer.Option(False, "--save", help="With --apply: SV once the written gains were read back, "
-                              "counted in the save ledger (asks first; --yes)."),
-    yes: bool = typer.Option(False, "--yes", "-y", help="Do not ask before saving."),
+    apply: ApplyMatch = False,
+    save: Save = False,
+    yes: Yes = False,
     speed: int | None = typer.Option(None, "--speed", metavar="COUNTS/S", help="Each motor's speed in the step "
                                      "(default: a quarter of the Σ joint's speed limit)."),
     rounds: int = typer.Option(5, "--rounds", help="Trial steps at most after the first."),
