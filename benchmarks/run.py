@@ -590,10 +590,11 @@ def bench_coupling(rounds: int = 3) -> Result:
 MATCH_CONFIG = ROOT / "tests/data/match-pair.yaml"
 
 
-def bench_match() -> Result:
+def bench_match(rounds: int = 3) -> Result:
     """Peak Δ excursion of a 1 rad Σ move on the simulated pair whose speed loops differ
     (tests/data/match-pair.yaml) after `diffdrive match` / before, for the naive move (two BG, unscaled
-    profiles; the goal), and reported for the group start and --feedback too. One in-process simulated
+    profiles; the goal), and reported for the group start and --feedback too; medians of ``rounds``
+    moves (the naive move's two BG are as far apart as the host makes them). One in-process simulated
     arm: the proposal is written to the faster drive's RAM as `diffdrive match --apply` would."""
     import tempfile as _tf
 
@@ -615,8 +616,12 @@ def bench_match() -> Result:
                 def peaks() -> dict[str, float]:
                     out = {}
                     for name, kw in modes.items():
-                        out[name] = diffdrive.run_move(s, pair, diffdrive.MoveRequest(sigma="1", **kw)).coupling.held_peak
-                        diffdrive.run_move(s, pair, diffdrive.MoveRequest(sigma="0"))
+                        runs = []
+                        for _ in range(rounds):
+                            move = diffdrive.run_move(s, pair, diffdrive.MoveRequest(sigma="1", **kw))
+                            runs.append(move.coupling.held_peak)
+                            diffdrive.run_move(s, pair, diffdrive.MoveRequest(sigma="0"))
+                        out[name] = statistics.median(runs)
                     return out
 
                 before = peaks()
