@@ -422,8 +422,12 @@ def run_match(session: ArmSession, pair: PairConfig, settings: MatchSettings, *,
             s_prev, tau_prev = s, tau
             s = s * (tau / target) ** (1 / p)
     finally:
-        _put_back(session, ref, held[fast], client)
-        journal.forget(ref, JOURNAL_OWNER)
+        failed = _put_back(held[fast], client)
+        if not failed:
+            journal.forget(ref, JOURNAL_OWNER)  # else the journal keeps them for `sherpa recover`
+    if failed:
+        raise ProtocolError(f"{ref.name}: the trial gains {', '.join(failed)} were not put back",
+                            hint="`sherpa recover --apply` puts them back from the journal")
     chosen = min(range(1, len(history)), key=lambda k: history[k].error(fast, slow))
     best = history[chosen]
     final = scaled_gains(held[fast], best.scale)
@@ -442,8 +446,9 @@ def _check_bounds(drive: str, gains: Mapping[str, float], bounds: Mapping[str, t
                               hint="the bounds are the config's `tuning:` section (docs/tune.md)")
 
 
-def _put_back(session: ArmSession, ref: DriveRef, held: Mapping[str, float], client: Any) -> None:
-    """The trial's gains back to what the drive held; a failure is reported after every key was tried."""
+def _put_back(held: Mapping[str, float], client: Any) -> list[str]:
+    """The trial's gains back to what the drive held; every key is tried. Returns those that failed
+    (never raises: on the way out of an error, that error is the one reported)."""
     from sherpa_cli.elmo.commands import parse_param_key
 
     failed: list[str] = []
@@ -452,9 +457,7 @@ def _put_back(session: ArmSession, ref: DriveRef, held: Mapping[str, float], cli
             client.set(*parse_param_key(key), value)
         except Exception:  # noqa: BLE001 - every key is tried; the journal keeps what failed for `sherpa recover`
             failed.append(key)
-    if failed:
-        raise ProtocolError(f"{ref.name}: the trial gains {', '.join(failed)} were not put back",
-                            hint="`sherpa recover --apply` puts them back from the journal")
+    return failed
 
 
 def plot(result: MatchResult, path: str) -> Any:
