@@ -115,3 +115,71 @@ def test_sv_does_not_save_the_flag_in_the_sim():
     client.set("UI", 3, 1)
     drive.execute("SV")
     assert "UI[3]" not in drive.flash
+
+
+def _elbow_after_a_reset(s, cfg, at: int):
+    """elbow_1a's joint stands at ``at`` (its encoder PY reads it), PX meant it, then an NMT reset:
+    PX restarts at 0 wherever the joint stands."""
+    from sherpa_cli.bus.targets import drive_ref
+
+    c = s.client(drive_ref(cfg, "elbow_1a"))
+    c.nmt_start()
+    with s.sim.lock:
+        s.sim.drives["elbow_1a"].motor.counts = at
+    c.set("PX", 0, at)
+    c.reset_node(boot_timeout=5.0)
+    return c
+
+
+@pytest.fixture
+def elbow_session(tmp_path, monkeypatch, cfg):
+    import canopen
+
+    from sherpa_cli.bus.session import ArmSession
+    from sherpa_cli.sim.arm import SimArm
+
+    monkeypatch.setenv("XDG_STATE_HOME", str(tmp_path))
+    monkeypatch.setattr(canopen.Network, "NOTIFIER_CYCLE", 0.02)
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg), buses=["can1"]) as s:
+        yield s
+
+
+def test_an_absolute_joint_whose_counter_restarted_is_not_calibrated_when_only_looked_at(elbow_session, cfg):
+    """Issue 21 item 11: after a drive reset PX restarts at 0 while the joint stands elsewhere, and
+    the limits and the watch read PX: never assumed calibrated; a looking command writes nothing."""
+    from sherpa_cli.bus.targets import drive_ref
+
+    s = elbow_session
+    elbow = cfg.joints["elbow_pitch"]
+    c = _elbow_after_a_reset(s, cfg, 1370)
+    cal = read_calibration(cfg, elbow, lambda n: s.client(drive_ref(cfg, n)))
+    assert not cal.calibrated and "PX=0 does not match its absolute encoder (1370 counts)" in cal.reason
+    assert int(c.get("PX")) == 0  # nothing written
+
+
+def test_a_moving_command_resyncs_the_counter_with_the_motor_off(elbow_session, cfg):
+    from sherpa_cli.bus.targets import drive_ref
+
+    s = elbow_session
+    elbow = cfg.joints["elbow_pitch"]
+    c = _elbow_after_a_reset(s, cfg, -1200)
+    cal = read_calibration(cfg, elbow, lambda n: s.client(drive_ref(cfg, n)), resync=True)
+    assert cal.calibrated and cal.reason == "absolute encoder (counter re-synced: PX was 0, now -1200)"
+    assert int(c.get("PX")) == -1200
+    # synced now: nothing more to do, and a second look agrees
+    assert read_calibration(cfg, elbow, lambda n: s.client(drive_ref(cfg, n))).reason == "absolute encoder"
+
+
+def test_a_counter_is_not_resynced_under_a_running_motor(elbow_session, cfg):
+    from sherpa_cli.bus.targets import drive_ref
+
+    s = elbow_session
+    elbow = cfg.joints["elbow_pitch"]
+    c = _elbow_after_a_reset(s, cfg, 900)
+    c.nmt_start()
+    c.set("UM", 0, 2)
+    c.motor_on()
+    cal = read_calibration(cfg, elbow, lambda n: s.client(drive_ref(cfg, n)), resync=True)
+    c.motor_off()
+    assert not cal.calibrated and "its motor is on" in cal.reason
+    assert abs(int(c.get("PX"))) <= 2  # left alone

@@ -12,10 +12,10 @@ from pathlib import Path
 
 import typer
 
-from sherpa_cli import __version__
 from sherpa_cli.cli import context
 from sherpa_cli.cli.boundary import RootGroup, install, main, run
 from sherpa_cli.cli.context import AppState
+from sherpa_cli.version import __version__
 
 DEFAULT_CONFIG = Path("configs/sherpa-arm.yaml")
 CONFIG_NAME = "sherpa-arm.yaml"

@@ -107,11 +107,9 @@ def params_restore(
 
 
 def check_options(apply: bool, save: bool) -> None:
-    from sherpa_cli.errors import UsageError
+    from sherpa_cli.api.programming import check_options as check
 
-    if save and not apply:
-        raise UsageError("--save needs --apply: only written and verified values are saved",
-                         hint="add --apply, or leave out --save for a dry run")
+    check(apply, save)
 
 
 # --------------------------------------------------------------------------- shared front end
@@ -120,95 +118,46 @@ def run_program(st: AppState, command: str, targets: Sequence[DriveTarget], warn
                 apply: bool, save: bool, yes: bool, motor_off: bool, need_serial: bool, allow_disabled: bool,
                 title: Callable[[str], str], where: Callable[[str], Location | None] | None = None,
                 source: Path | None = None, verify_flash: bool = False, note: str | None = None) -> None:
-    """Check, plan, show; with ``apply`` write/verify/save and report. Raises the error to exit with.
+    """The plan/apply/save engine (api/programming.py) with the plan shown before any question and
+    the outcome after; raises the error to exit with.
 
     Callers run :func:`check_options` first, before they read files or derive targets, so a
     bad option combination is reported ahead of any other problem.
-
-    ``verify_flash`` (with ``apply``): every drive is reset first (NMT reset node), so RAM is
-    what flash holds; the plan is read again from there, so only drives whose flash differs are
-    written (and with ``save`` saved, then proven again).
     """
-    from sherpa_cli.ops import program
-    from sherpa_cli.ops.save_ledger import SaveLedger
+    from sherpa_cli.api import programming
 
-    warnings = [*warnings, *program.check_targets(targets, allow_disabled=allow_disabled, where=where)]
+    warnings = programming.check(targets, warnings, allow_disabled=allow_disabled, where=where)
     for w in warnings:
         st.out.warn(w)
     st.out.assume_yes = st.out.assume_yes or yes
     buses = sorted({t.bus for t in targets})
-    result = None
-    proofs: list[FlashProof] = []
-    after: list[FlashProof] = []
-    with st.session(buses=buses) as session:
-        # apply needs the serial too: the ledger remembers drives written but not saved
-        plans = program.read_plans(session, targets, need_serial=need_serial or apply)
-        ledger = SaveLedger() if apply else None
-        if ledger is not None:
-            ledger.check()  # a damaged ledger is reported before anything is written
-        if save and ledger is not None and not verify_flash:
-            plans = program.mark_save_due(plans, ledger)  # a flash proof supersedes the ledger's guess
-        if not st.json_mode:
-            _render_plan_text(st, plans, title)  # the technician sees the plan before any question
-            if note:
-                st.out.line(f"note: {note}")
-                st.out.line("")
-            if verify_flash:
-                st.out.line(_reset_note(plans, apply))
-                st.out.line("")
-        if not apply:
-            _render(st, command, plans, None, apply=False, save=False, source=source, verify_flash=verify_flash)
-            err = program.plan_error(plans)
-            if err is not None:
-                raise err
+
+    def show_plan(plans: Sequence[DrivePlan]) -> None:
+        if st.json_mode:
             return
-        try:
-            if verify_flash:
-                program.check_proof(plans, motor_off=motor_off)
-                if save:
-                    _confirm_save(st, [p.drive for p in plans], proof=True)
-            else:
-                program.check_apply(plans, motor_off=motor_off)
-                to_save = [p.drive for p in plans if p.needs_save]
-                if save and to_save:
-                    _confirm_save(st, to_save)
-        except Exception:
-            _render(st, command, plans, None, apply=True, save=save, source=source, verify_flash=verify_flash)
-            raise
+        _render_plan_text(st, plans, title)
+        if note:
+            st.out.line(f"note: {note}")
+            st.out.line("")
         if verify_flash:
-            proofs = program.prove_flash(session, plans, boot_timeout=session.cfg.protocol.boot_timeout)
-            problem = program.proof_problem(proofs)
-            if problem is not None and any(p.status == program.PROOF_FAILED for p in proofs):
-                _render(st, command, plans, None, apply=True, save=save, source=source, verify_flash=True,
-                        proofs=proofs)
-                raise problem  # flash unknown somewhere: nothing is written after an error
-            # RAM now holds what flash holds: plan again from there
-            plans = program.read_plans(session, targets, need_serial=True)
-            try:
-                program.check_apply(plans, motor_off=False)
-            except Exception:
-                _render(st, command, plans, None, apply=True, save=save, source=source, verify_flash=True,
-                        proofs=proofs)
-                raise
-        result = program.apply_plans(session, plans, save=save, ledger=ledger)
-        if verify_flash and save and not result.interrupted:
-            saved = [p for p, o in zip(plans, result.outcomes, strict=True) if o.status == program.SAVED]
-            if saved:
-                after = program.prove_flash(session, saved, boot_timeout=session.cfg.protocol.boot_timeout)
-    _render(st, command, plans, result, apply=True, save=save, source=source, verify_flash=verify_flash,
-            proofs=proofs, after=after)
-    for o in result.outcomes:
-        if o.save_warning:
-            st.out.warn(o.save_warning)
-    if result.interrupted:
-        raise KeyboardInterrupt
-    problem = program.exit_problem(result)
-    if problem is not None:
-        raise problem
-    if verify_flash:
-        problem = program.proof_problem(after, after_save=True) if save else program.proof_problem(proofs)
-        if problem is not None:
-            raise problem
+            st.out.line(_reset_note(plans, apply))
+            st.out.line("")
+
+    def confirm(drives: Sequence[str], proof: bool) -> bool:
+        _confirm_save(st, drives, proof=proof)
+        return True
+
+    with st.session(buses=buses) as session:
+        report = programming.run(session, targets, apply=apply, save=save, motor_off=motor_off,
+                                 need_serial=need_serial, verify_flash=verify_flash, warnings=warnings,
+                                 confirm_save=confirm, on_plan=show_plan)
+    _render(st, command, report.plans, report.result, apply=apply, save=save and apply, source=source,
+            verify_flash=verify_flash, proofs=report.proofs, after=report.after)
+    if report.result is not None:
+        for o in report.result.outcomes:
+            if o.save_warning:
+                st.out.warn(o.save_warning)
+    report.check()
 
 
 def _reset_note(plans: Sequence[DrivePlan], apply: bool) -> str:

@@ -38,7 +38,7 @@ def scan(
       sherpa scan
       sherpa scan --bus can1 --reset --apply
     """
-    from sherpa_cli.ops.scan import scan as run_scan
+    from sherpa_cli.api import Arm
 
     st = state(ctx)
     cfg = st.load_config()
@@ -52,7 +52,7 @@ def scan(
                     f"{', '.join(selected)} (unsaved RAM is lost); not sent (add --apply)")
         reset = False
     with st.session(buses=selected) as session, _progress(st, selected) as progress:
-        report = run_scan(session, selected, reset=reset, progress=progress)
+        report = Arm(session).scan(selected, reset=reset, progress=progress)
     _render(st, report)
     if report.bus_errors:
         first = report.bus_errors[0]

@@ -68,13 +68,61 @@ def judge(cfg: ArmConfig, joint: JointConfig, flags: Mapping[str, int]) -> Calib
     return Calibration(joint.name, True, f"homed since power-up ({key}={CALIBRATED})")
 
 
-def read_calibration(cfg: ArmConfig, joint: JointConfig, client_of: Callable[[str], DriveClient]) -> Calibration:
-    """Read the flag from each drive of the joint (nothing is read for an absolute joint)."""
+def read_calibration(cfg: ArmConfig, joint: JointConfig, client_of: Callable[[str], DriveClient], *,
+                     resync: bool = False) -> Calibration:
+    """Read the flag from each drive of the joint.
+
+    An absolute joint read by its drive's auxiliary counter (``drive:PY``) is checked instead: its
+    motor counter PX must mean the encoder's position, because the limits and the watch use PX, and
+    PX restarts at 0 when the drive resets (a flash proof, a power cycle, an NMT reset) wherever the
+    joint stands. It is never assumed (issue 21 item 11): a moving command's entry passes ``resync``
+    and PX is set from the encoder with the motor off (read back); a looking command (monitor,
+    doctor) only says it does not match.
+    """
     if absolute(cfg, joint):
-        return judge(cfg, joint, {})
+        mismatch = _counter_mismatch(cfg, joint, client_of)
+        if mismatch is None:
+            return judge(cfg, joint, {})
+        return _resynced(cfg, joint, client_of, *mismatch) if resync else Calibration(
+            joint.name, False, f"its counter PX={mismatch[0]} does not match its absolute encoder ({mismatch[1]} "
+            "counts): the drive's counter restarted (a reset or power cycle?); a moving command or `sherpa home` "
+            "re-syncs it with the motor off")
     index = cfg.protocol.calibration_flag
     flags = {d: int(client_of(d).get("UI", index)) for d in joint_drives(cfg, joint)}
     return judge(cfg, joint, flags)
+
+
+SYNC_TOLERANCE = 2  # counts PX may differ from the encoder's reading (a motor holding position)
+
+
+def _counter_mismatch(cfg: ArmConfig, joint: JointConfig,
+                      client_of: Callable[[str], DriveClient]) -> tuple[int, int] | None:
+    """(PX, the encoder's position) when a plain joint's counter does not mean its drive's absolute
+    encoder (``drive:PY``), else None. An encoder on the bus (CiA 406) is read by `sherpa home`."""
+    enc = joint.abs_encoder
+    if joint.role is not JointRole.PLAIN or enc is None or enc.source.upper() != "DRIVE:PY" or joint.drive is None:
+        return None
+    c = client_of(joint.drive)
+    px, expected = int(c.get("PX")), int(c.get("PY")) + enc.offset
+    return None if abs(px - expected) <= SYNC_TOLERANCE else (px, expected)
+
+
+def _resynced(cfg: ArmConfig, joint: JointConfig, client_of: Callable[[str], DriveClient],
+              px: int, expected: int) -> Calibration:
+    """PX := the encoder's position, only with the motor off (a moving motor's counter is the servo's
+    reference), read back."""
+    assert joint.drive is not None and joint.abs_encoder is not None
+    c = client_of(joint.drive)
+    if int(c.get("MO")):
+        return Calibration(joint.name, False, f"its counter PX={px} does not match its absolute encoder ({expected} "
+                           "counts) and its motor is on: stop it (`sherpa stop`) so the counter can be re-synced")
+    c.set("PX", 0, expected)
+    now = int(c.get("PX"))
+    back = int(c.get("PY")) + joint.abs_encoder.offset
+    if abs(now - back) > SYNC_TOLERANCE:
+        return Calibration(joint.name, False, f"its counter could not be re-synced with its absolute encoder "
+                           f"(PX={now} after PX={expected} was written, encoder {back})")
+    return Calibration(joint.name, True, f"absolute encoder (counter re-synced: PX was {px}, now {now})")
 
 
 def mark_calibrated(cfg: ArmConfig, client: DriveClient) -> None:

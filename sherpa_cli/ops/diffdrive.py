@@ -372,7 +372,7 @@ def prepare(session: ArmSession, pair: PairConfig, request: MoveRequest) -> tupl
     acs = [int(c.get("AC")) for c in clients.values()]
     dcs = [int(c.get("DC")) for c in clients.values()]
     p = plan_move(cfg, pair, request, motors, accel=min(acs) or None, decel=min(dcs) or None)
-    cal = calibration.read_calibration(cfg, cfg.joints[pair.sigma], lambda d: clients[d])
+    cal = calibration.read_calibration(cfg, cfg.joints[pair.sigma], lambda d: clients[d], resync=True)
     if not cal.calibrated and not request.uncalibrated:
         raise SafetyError(f"{pair.name}: refusing a move: joint {cal.joint} is {cal.reason}",
                           hint="home it first, or pass --uncalibrated to move by the counter as it is "

@@ -229,14 +229,27 @@ def run_jog(session: ArmSession, target: JogTarget, req: JogRequest, *, settings
 def precheck(session: ArmSession, target: JogTarget, req: JogRequest) -> Calibration | None:
     """Before anything is armed (wave/jog, docs/motion.md): a position move must stay inside the
     joint's NORMAL range and needs a calibrated joint (or ``uncalibrated``). Reads PX and the
-    calibration flag; writes nothing. Returns the calibration found (None for other modes)."""
+    calibration flag; writes nothing but PX of an absolute-encoder joint whose counter restarted
+    (re-synced from the encoder with the motor off, first: the goal is computed from it).
+    Returns the calibration found (None for other modes)."""
     joint = target.joint
-    if joint is None or req.mode != "position":
+    if joint is None:
         return None
     from sherpa_cli.motion import calibration
 
+    if req.mode != "position":
+        if calibration.absolute(session.cfg, joint):
+            # the watch's limits read PX in every mode: a counter that restarted is re-synced first
+            c = session.client(target.ref)
+            c.nmt_start()
+            synced = calibration.read_calibration(session.cfg, joint, lambda name: c, resync=True)
+            if not synced.calibrated:
+                raise SafetyError(f"{joint.name}: refusing to move: joint {joint.name} is {synced.reason}",
+                                  hint="its limits are watched on the counter, which must mean the encoder")
+        return None
     c = session.client(target.ref)
     c.nmt_start()
+    cal = calibration.read_calibration(session.cfg, joint, lambda name: c, resync=True)
     start = int(c.get("PX"))
     if req.to is not None:
         goal = _counts_to(target, req.to)
@@ -247,7 +260,6 @@ def precheck(session: ArmSession, target: JogTarget, req: JogRequest) -> Calibra
     if not lo <= goal <= hi:
         raise UsageError(f"{joint.name}: target {goal} counts is outside the joint's normal range [{lo}, {hi}]",
                           hint="jog moves a joint only inside its normal range")
-    cal = calibration.read_calibration(session.cfg, joint, lambda name: c)
     if not cal.calibrated and not req.uncalibrated:
         raise SafetyError(f"{joint.name}: refusing a position move: joint {joint.name} is {cal.reason}",
                           hint="home it first, or pass --uncalibrated to move by the counter as it is "

@@ -335,7 +335,7 @@ def prepare(session: ArmSession, axis: Axis, request: JogRequest
             if key in seen:
                 continue
             seen.add(key)
-            cals.append(calibration.read_calibration(cfg, joint, lambda d: clients[d]))
+            cals.append(calibration.read_calibration(cfg, joint, lambda d: clients[d], resync=True))
         missing = [c for c in cals if not c.calibrated]
         if missing and not request.uncalibrated:
             first = missing[0]

@@ -430,7 +430,7 @@ class LiveJog:
 
     def _read_calibration(self, axes: Sequence[LiveAxis]) -> None:
         for a in axes:
-            c = calibration.read_calibration(self.cfg, a.joint, lambda d: self._raw(d))
+            c = calibration.read_calibration(self.cfg, a.joint, lambda d: self._raw(d), resync=True)
             self.state[a.name].calibrated = c.calibrated
             self.state[a.name].calibration = c.reason
 

@@ -15,13 +15,13 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from sherpa_cli import __version__
 from sherpa_cli.bus.parallel import Outcome, run_concurrently
 from sherpa_cli.config.model import ArmConfig
 from sherpa_cli.errors import DriveRefusedError, SherpaError
 from sherpa_cli.joints.params import PARAM_ORDER
 from sherpa_cli.ops.params_file import DriveDump, ParamDump
 from sherpa_cli.ops.tune import GAINS
+from sherpa_cli.version import __version__
 
 if TYPE_CHECKING:
     from sherpa_cli.bus.sdo import DriveSdo

@@ -18,6 +18,7 @@ from typing import TYPE_CHECKING, Any
 from sherpa_cli.bus.parallel import run_concurrently
 from sherpa_cli.bus.targets import DriveRef
 from sherpa_cli.elmo.protocol import UM_TORQUE
+from sherpa_cli.errors import SafetyError
 from sherpa_cli.motion.settings import MotionSettings
 from sherpa_cli.motion.stopping import ask_patiently, stop_drive, why
 
@@ -112,3 +113,36 @@ def stop_drives(session: ArmSession, refs: Sequence[DriveRef], settings: MotionS
             for ref in by_bus[bus]:
                 done[(ref.bus, ref.node)] = StopResult(ref.name, ref.address, problems=[str(outcome.error)])
     return [done[(ref.bus, ref.node)] for ref in refs]
+
+
+@dataclass
+class StopReport:
+    """What `sherpa stop` did to each drive, in the order asked; ``problem()`` is "partly stopped"."""
+
+    drives: list[StopResult]
+
+    @property
+    def ok(self) -> bool:
+        return all(r.ok for r in self.drives)
+
+    @property
+    def not_reached(self) -> list[str]:
+        return [r.drive for r in self.drives if not r.ok and not r.reached]
+
+    @property
+    def unconfirmed(self) -> list[str]:
+        return [r.drive for r in self.drives if not r.ok and r.reached]
+
+    def problem(self) -> SafetyError | None:
+        """Exit 1 "partly stopped" naming each drive not reached or not confirmed stopped."""
+        if self.ok:
+            return None
+        parts = []
+        if self.unconfirmed:
+            parts.append(f"{len(self.unconfirmed)} drive(s) not confirmed stopped: {', '.join(self.unconfirmed)}")
+        if self.not_reached:
+            parts.append(f"{len(self.not_reached)} drive(s) not reached (bus could not be opened): "
+                         f"{', '.join(self.not_reached)}")
+        stopped = sum(1 for r in self.drives if r.ok)
+        return SafetyError(f"partly stopped ({stopped} of {len(self.drives)} drive(s) stopped): " + "; ".join(parts),
+                           hint="check them with `sherpa monitor --once`; cut the motor power if they still move")
