@@ -587,6 +587,68 @@ def bench_coupling(rounds: int = 3) -> Result:
                   f"(ratio {ratio_d:.3f}); the ratio shown is the larger")
 
 
+MATCH_CONFIG = ROOT / "tests/data/match-pair.yaml"
+
+
+def bench_match(rounds: int = 3) -> Result:
+    """Peak Δ excursion of a 1 rad Σ move on the simulated pair whose speed loops differ
+    (tests/data/match-pair.yaml) after `diffdrive match` / before, for the naive move (two BG, unscaled
+    profiles; the goal), and reported for the group start and --feedback too; medians of ``rounds``
+    moves (the naive move's two BG are as far apart as the host makes them). One in-process simulated
+    arm: the proposal is written to the faster drive's RAM as `diffdrive match --apply` would."""
+    import tempfile as _tf
+
+    from sherpa_cli.bus.session import ArmSession
+    from sherpa_cli.config import load_config
+    from sherpa_cli.elmo.commands import parse_param_key
+    from sherpa_cli.ops import diffdrive, pair_match
+    from sherpa_cli.ops.tune import bounds
+    from sherpa_cli.sim.arm import SimArm
+
+    cfg = load_config(MATCH_CONFIG)
+    pair = cfg.pairs["diff"]
+    modes = {"naive": {"naive": True}, "group": {}, "feedback": {"feedback": True}}
+    with _tf.TemporaryDirectory(prefix="sherpa-bench-match-") as state:
+        old = os.environ.get("XDG_STATE_HOME")
+        os.environ["XDG_STATE_HOME"] = state
+        try:
+            with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
+                def peaks() -> dict[str, float]:
+                    out = {}
+                    for name, kw in modes.items():
+                        runs = []
+                        for _ in range(rounds):
+                            move = diffdrive.run_move(s, pair, diffdrive.MoveRequest(sigma="1", **kw))
+                            runs.append(move.coupling.held_peak)
+                            diffdrive.run_move(s, pair, diffdrive.MoveRequest(sigma="0"))
+                        out[name] = statistics.median(runs)
+                    return out
+
+                before = peaks()
+                start = time.perf_counter()
+                result = pair_match.run_match(s, pair, pair_match.MatchSettings(), bounds=bounds(cfg))
+                took = time.perf_counter() - start
+                for drive, changes in result.proposal.changes.items():
+                    client = s.client(next(r for r in pair_match._refs(cfg, pair) if r.name == drive))
+                    for key, value in changes.items():
+                        client.set(*parse_param_key(key), value)
+                after = peaks()
+        finally:
+            if old is None:
+                os.environ.pop("XDG_STATE_HOME", None)
+            else:
+                os.environ["XDG_STATE_HOME"] = old
+    ratio = after["naive"] / before["naive"] if before["naive"] else 0.0
+    goal = "<= 0.25"
+    changes = "; ".join(f"{d} " + " ".join(f"{k}={v:g}" for k, v in c.items())
+                        for d, c in result.proposal.changes.items()) or "none"
+    return Result("match", round(after["naive"], 1), "counts", round(ratio, 3), goal, _judge(ratio, goal),
+                  f"held Δ peak of a 1 rad Σ move before/after match: naive {before['naive']:.0f}/{after['naive']:.0f}, "
+                  f"group {before['group']:.0f}/{after['group']:.0f}, feedback {before['feedback']:.0f}/"
+                  f"{after['feedback']:.0f} counts; proposal {changes} after {len(result.rounds) - 1} trial "
+                  f"round(s), {took:.1f} s wall")
+
+
 def _serve_sim(env: dict, log: Path) -> tuple[subprocess.Popen, str]:
     import socket
 
@@ -828,6 +890,7 @@ BENCHMARKS: dict[str, Callable[[], Result]] = {
     "record": bench_record,
     "record_memory": bench_record_memory,
     "recorder": bench_recorder,
+    "match": bench_match,
     "capture": bench_capture,
 }
 

@@ -73,3 +73,15 @@ def test_bad_tuning_section_is_a_config_error():
     text = (ROOT / "configs/sherpa-arm.yaml").read_text() + "\ntuning:\n  KP[2]: [3, 1]\n"
     with pytest.raises(ConfigError, match=r"tuning.KP\[2\]: low 3 is above high 1"):
         load_config_text(text, "arm.yaml")
+
+
+def test_gains_are_in_dump_params_and_params_diff(cli, tmp_path):
+    dump = tmp_path / "before.yaml"
+    assert cli("--sim", "dump-params", "elbow_pitch", "-o", str(dump)).exit_code == 0
+    text = dump.read_text()
+    assert "KP[2]: 0.5" in text and "KI[2]: 200.0" in text and "FF[1]: 0.0" in text
+    assert cli("--sim", "tune", "set", "elbow_pitch", "KP[2]=0.8", "--apply").exit_code == 0
+    result = cli("--sim", "params", "diff", str(dump), "live", "--only-differences")
+    assert result.exit_code == 1
+    rows = [line.split() for line in result.stdout.splitlines() if line.strip().startswith("KP")]
+    assert len(rows) == 1 and rows[0][:3] == ["KP[2]", "0.5", "0.8"]  # only the gain that was changed

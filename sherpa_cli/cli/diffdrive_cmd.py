@@ -7,7 +7,7 @@ from typing import TYPE_CHECKING, Any
 import typer
 
 from sherpa_cli.cli.context import AppState, state
-from sherpa_cli.cli.options import ApplyMotion
+from sherpa_cli.cli.options import ApplyMatch, ApplyMotion, Save, Yes
 from sherpa_cli.cli.output import stop_lines
 from sherpa_cli.errors import UsageError
 
@@ -273,5 +273,119 @@ def _render_move(st: AppState, r: MoveResult, plot: str | None) -> None:
                     f"({counts_to_rad(c.peak_sigma, c.sigma_cpr):.4f} rad), Δ up to {c.peak_delta:.0f} counts "
                     f"({counts_to_rad(c.peak_delta, c.delta_cpr):.4f} rad)")
     st.out.line(f"recording: {r.trace_source}, {len(r.samples)} samples")
+    if plot is not None:
+        st.out.line(f"plot: {plot}")
+
+
+@app.command("match")
+def match(
+    ctx: typer.Context,
+    pair: str = PairArg,
+    measure: bool = typer.Option(False, "--measure", help="Step the pair (small Σ steps inside the motion guard, "
+                                 "trial gains in RAM, put back) and show the proposal; nothing lasting is written."),
+    apply: ApplyMatch = False,
+    save: Save = False,
+    yes: Yes = False,
+    speed: int | None = typer.Option(None, "--speed", metavar="COUNTS/S", help="Each motor's speed in the step "
+                                     "(default: a quarter of the Σ joint's speed limit)."),
+    rounds: int = typer.Option(5, "--rounds", help="Trial steps at most after the first."),
+    plot: str | None = typer.Option(None, "--plot", metavar="FILE.png", help="Draw both motors' speeds and Δ "
+                                    "before and after."),
+    uncalibrated: bool = typer.Option(False, "--uncalibrated", help="Allow the steps although the pair was not "
+                                      "homed since power-up."),
+) -> None:
+    """Make both speed loops of PAIR equally fast (the seed's first cure for its coupled pair).
+
+    Steps both motors together (a small Σ velocity step, one common BG), records them with the drives'
+    own recorders, identifies each loop's delay, and proposes gains for the faster motor (KP[2], KP[3]
+    x s, KI[2] x s^2) so both delays agree, trying them in RAM first. Without --measure or --apply
+    nothing moves. docs/tune.md.
+
+    \b
+    Examples:
+      sherpa diffdrive match shoulder_diff
+      sherpa diffdrive match shoulder_diff --measure --plot match.png
+      sherpa diffdrive match shoulder_diff --apply --save --yes
+    """
+    from sherpa_cli.bus.targets import pair_of
+    from sherpa_cli.cli.program_cmd import check_options
+    from sherpa_cli.ops import pair_match
+    from sherpa_cli.ops.tune import bounds
+
+    st = state(ctx)
+    check_options(apply, save)
+    if rounds < 1:
+        raise UsageError(f"--rounds {rounds}: expected 1 or more")
+    if plot is not None and not plot.lower().endswith(".png"):
+        raise UsageError(f"--plot {plot}: expected a .png file name")
+    if apply and st.json_mode:
+        raise UsageError("--json with --apply: the proposal and the write would be two reports",
+                         hint="--measure --json shows the proposal; write it with `sherpa tune set ... --apply`")
+    cfg = st.load_config()
+    p = pair_of(cfg, pair)
+    v = pair_match.step_speed(cfg, p, speed)
+    settings = pair_match.MatchSettings(speed=v, uncalibrated=uncalibrated)
+    if not (measure or apply):
+        if st.json_mode:
+            st.out.json({"pair": p.name, "measured": False, "speed": v, "step_s": settings.step_s,
+                         "rounds": rounds, "tolerance": settings.tolerance})
+            return
+        st.out.line(f"dry run: would step pair {p.name} ({p.drive_a}, {p.drive_b}): both motors JV={v} counts/s "
+                    f"for {settings.step_s:g} s from one common BG, recorded by their drives, then back to where "
+                    f"they stood")
+        st.out.line(f"  then up to {rounds} trial steps with the faster motor's KP[2], KP[3], KI[2] scaled in RAM "
+                    f"(put back after), until both delays agree within {settings.tolerance:.0%}")
+        st.out.line("nothing sent; add --measure to step and see the proposal, --apply to also write it")
+        return
+    with st.session(buses=sorted({cfg.drives[d].bus for d in (p.drive_a, p.drive_b)})) as session:
+        result = pair_match.run_match(session, p, settings, rounds=rounds, bounds=bounds(cfg))
+    if plot is not None:
+        pair_match.plot(result, plot)
+    if st.json_mode:
+        st.out.json({**result.as_dict(), **({"plot": plot} if plot else {})})
+        return
+    _render_match(st, result, plot)
+    changes = result.proposal.changes
+    if not changes:
+        return
+    if not result.reached:
+        st.out.warn(f"the delays still differ by more than {result.proposal.tolerance:.0%} after {rounds} trial(s): "
+                    f"the best trial is proposed")
+    if not apply:
+        drive, values = next(iter(changes.items()))
+        st.out.line("nothing written; add --apply to write it, or: sherpa tune set "
+                    f"{drive} " + " ".join(f"{k}={x:g}" for k, x in values.items()) + " --apply")
+        return
+    from sherpa_cli.cli.limits_cmd import drive_moves
+    from sherpa_cli.cli.program_cmd import run_program
+    from sherpa_cli.ops.program import DriveTarget
+
+    targets = [DriveTarget(d, cfg.drives[d].bus, cfg.drives[d].node, dict(values)) for d, values in changes.items()]
+    run_program(st, "diffdrive match", targets, [], apply=True, save=save, yes=yes, motor_off=False,
+                need_serial=save, allow_disabled=False, title=lambda drive: drive_moves(cfg, drive))
+
+
+def _render_match(st: AppState, r: Any, plot: str | None) -> None:
+    prop = r.proposal
+    rows = []
+    for k, rnd in enumerate(r.rounds):
+        for drive in prop.drives:
+            m = rnd.models[drive]
+            rows.append([("own gains" if k == 0 else f"trial {k}") + (" *" if k == r.chosen and k else ""), drive,
+                         f"{m.delay_s * 1e3:.1f}", f"{m.rise_s * 1e3:.1f}", f"{m.overshoot:.1%}",
+                         f"{m.bandwidth_hz:.1f}", f"{m.zeta:.2f}", f"{rnd.excursion:.0f}"])
+    st.out.line(f"pair {r.pair}: Σ step, each motor {prop.speed:g} counts/s, recorded by the drives")
+    st.out.table(None, ["round", "drive", "delay ms", "rise ms", "overshoot", "bandwidth Hz", "damping", "Δ peak"],
+                 rows, right=(2, 3, 4, 5, 6, 7))
+    before, after = r.rounds[0], r.rounds[r.chosen]
+    st.out.line(f"Δ excursion of the Σ step (counts): predicted {prop.predicted_excursion(False):.1f} -> "
+                f"{prop.predicted_excursion(True):.1f}, measured {before.excursion:.0f} -> {after.excursion:.0f}")
+    if not prop.changes:
+        st.out.line(f"no change: {prop.note}")
+    else:
+        for drive, values in prop.changes.items():
+            held = prop.gains[drive]
+            st.out.line(f"proposal: {drive} " + ", ".join(f"{k} {held[k]:g} -> {x:g}" for k, x in values.items())
+                        + f" ({prop.note})")
     if plot is not None:
         st.out.line(f"plot: {plot}")

@@ -499,6 +499,9 @@ def step(
                                 ".mcap file with the recording and the metrics (robotics extra)."),
     uncalibrated: bool = typer.Option(False, "--uncalibrated", help="Allow a position step of a joint that has no "
                                       "absolute encoder and was not homed since power-up."),
+    source: str = typer.Option("can", "--source", metavar="can|drive",
+                               help="drive: also record the step with the drive's own recorder (servo rate); "
+                               "recording.csv is the drive's, can-recording.csv the bus's, the report shows both."),
     apply: ApplyMotion = False,
 ) -> None:
     """The seed's Section 9 step experiment in one command: start recording, command the step at
@@ -542,6 +545,11 @@ def step(
     if not (0 < rate <= 10000):
         raise UsageError(f"--rate {rate}: expected Hz > 0 and <= 10000")
     to_mcap = output.suffix.lower() == ".mcap" and not output.is_dir()
+    if source not in ("can", "drive"):
+        raise UsageError(f"--source {source}: expected can or drive")
+    if source == "drive" and to_mcap:
+        raise UsageError("--source drive writes a directory (recording.csv, can-recording.csv, metrics.json): "
+                         "give -o DIR")
     if to_mcap:
         record_outputs([output])  # the directory, the robotics extra
     elif output.exists() and not output.is_dir():
@@ -569,6 +577,12 @@ def step(
                 session.client_overrides.update(stepped.client_overrides(cfg.protocol.reply_timeout,
                                                                          cfg.protocol.retries, unheard))
                 timebase = stepped
+        if source == "drive":
+            from sherpa_cli.cli.log_drive import drive_step
+
+            drive_step(st, session, target, mode, value, duration=duration, rate=rate, settings=settings,
+                       uncalibrated=uncalibrated, timebase=timebase, output=output, render_metrics=render_metrics)
+            return
         extras = RecordExtras(session, [target.ref], mcap=to_mcap, view=None)
         extras.start()
         zero_ns = _time.time_ns()  # t = 0 (the step's command) is placed at the wall time the step began

@@ -2,9 +2,9 @@
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import Literal, cast
+from typing import Any, Literal, cast
 
 from sherpa_cli.cli.context import AppState
 from sherpa_cli.errors import UsageError
@@ -47,3 +47,58 @@ def record_from_drive(st: AppState, targets: Sequence[str] | None, duration: flo
     st.out.line(f"wrote {paths[0]} ({len(result.recording.times)} rows)")
 
 
+
+
+def drive_step(st: AppState, session: Any, target: Any, mode: str, value: float, *, duration: float, rate: float,
+               settings: Any, uncalibrated: bool, timebase: Any, output: Path,
+               render_metrics: Callable[[AppState, Any], None]) -> None:
+    """`log step --source drive`: the step recorded by the drive's recorder and over the bus at once
+    (ops/drive_step.py); both recordings, both metrics and their differences."""
+    import json
+    import time
+
+    from sherpa_cli.log.recording import write_csv
+    from sherpa_cli.ops.drive_step import DriveTrace
+    from sherpa_cli.ops.step import run_step
+
+    clock, sleep = (timebase.now, timebase.sleep) if timebase is not None else (time.monotonic, time.sleep)
+    with DriveTrace(session, target.ref, duration, clock=clock, sleep=sleep) as trace:
+        result = run_step(session, target, mode, value, duration=duration, rate=rate, settings=settings,
+                          uncalibrated=uncalibrated, timebase=timebase, drive_trace=trace)
+    drive = trace.result
+    assert drive is not None  # run_step collects it or raises
+    write_csv(drive.recording, output / "recording.csv")
+    write_csv(result.recording, output / "can-recording.csv")
+    keys = ("dead_time", "rise_time", "settling_time")
+    diff = {k: _diff(getattr(drive.metrics, k), getattr(result.metrics, k)) for k in keys}
+    report = {**result.as_json(), "source": "drive",
+              "drive": {"metrics": drive.metrics.as_json(), "period_s": drive.period_s, "gap": drive.gap,
+                        "samples": drive.samples, "t0": round(drive.t0, 6)},
+              "can_period_s": 1.0 / rate, "drive_minus_can_s": diff}
+    (output / "metrics.json").write_text(json.dumps(report, indent=2) + "\n", encoding="utf-8")
+    files = {"csv": str(output / "recording.csv"), "can csv": str(output / "can-recording.csv"),
+             "metrics": str(output / "metrics.json")}
+    if st.json_mode:
+        st.out.json({**report, "files": files})
+        return
+    st.out.line(f"{result.joint} ({result.drive}): {mode} step {value:g} -> {result.command}; "
+                f"MO/UM switch {1000 * result.switch_s:.0f} ms; {result.ended_by}")
+    st.out.line(f"drive recorder: {drive.samples} samples every {drive.period_s * 1e6:.0f} us (RG={drive.gap}), "
+                f"first at {drive.t0 * 1e3:.1f} ms")
+    render_metrics(st, {(f"{result.joint} (drive)", result.signal): drive.metrics})
+    st.out.line(f"CAN: {result.samples} of {result.expected} samples at {rate:g} Hz")
+    render_metrics(st, {(f"{result.joint} (CAN)", result.signal): result.metrics})
+    st.out.line("drive - CAN: " + ", ".join(f"{k.replace('_', ' ')} {_ms(v)}" for k, v in diff.items())
+                + f" (CAN sample period {1e3 / rate:g} ms)")
+    for line in result.stop.lines(st.verbose):
+        st.out.line(line)
+    for key, path in files.items():
+        st.out.line(f"{key}: {path}")
+
+
+def _diff(a: float | None, b: float | None) -> float | None:
+    return None if a is None or b is None else round(a - b, 6)
+
+
+def _ms(v: float | None) -> str:
+    return "-" if v is None else f"{v * 1e3:+.1f} ms"

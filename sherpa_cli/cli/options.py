@@ -52,6 +52,9 @@ ApplyRecover = Annotated[bool, typer.Option(
     "cleared); without it only shown.")]
 ApplyMotion = Annotated[bool, typer.Option(
     "--apply", help="Move the motor; without it only show what would be sent (nothing is written).")]
+ApplyMatch = Annotated[bool, typer.Option(
+    "--apply", help="--measure, then write the proposal through `tune set`'s path (read back); without it "
+    "nothing is written.")]
 YesMotion = Annotated[bool, typer.Option(
     "--yes", "-y", help="Do not ask before moving (needed when stdin is not a terminal: without it `home` refuses "
     "before anything moves).")]

@@ -1,11 +1,14 @@
-"""`sherpa tune show|set JOINT`: the drives' speed and position loop gains (docs/tune.md)."""
+"""`sherpa tune show|step|set JOINT`: the drives' speed and position loop gains (docs/tune.md)."""
 
 from __future__ import annotations
+
+from typing import Any
 
 import typer
 
 from sherpa_cli.cli.context import state
-from sherpa_cli.cli.options import Apply, MotorOff, Save, Yes
+from sherpa_cli.cli.options import Apply, ApplyMotion, MotorOff, Save, Yes
+from sherpa_cli.errors import UsageError
 
 app = typer.Typer(help="Read and write the drives' speed and position loop gains (docs/tune.md).",
                   no_args_is_help=True)
@@ -74,3 +77,81 @@ def set_gains(
     targets = [DriveTarget(r.name, r.bus, r.node, values) for r in refs]
     run_program(st, "tune set", targets, [], apply=apply, save=save, yes=yes, motor_off=motor_off,
                 need_serial=save, allow_disabled=False, title=lambda drive: drive_moves(cfg, drive))
+
+
+@app.command("step")
+def step(
+    ctx: typer.Context,
+    joint: str = typer.Argument(..., metavar="JOINT", help="A plain joint (or its drive)."),
+    gains: list[str] = typer.Argument(..., metavar="GAIN=VALUE...", help="The trial gains, e.g. KP[2]=0.8"),
+    position: float | None = typer.Option(None, "--position", metavar="X", help="A position step of X rad "
+                                          "(then back -X with the trial gains)."),
+    velocity: float | None = typer.Option(None, "--velocity", metavar="V", help="A velocity step to V rad/s."),
+    duration: float = typer.Option(2.0, "--for", metavar="S", help="Record at most S s after each command."),
+    rate: float = typer.Option(500.0, "--rate", metavar="HZ", help="Samples per second."),
+    uncalibrated: bool = typer.Option(False, "--uncalibrated", help="Allow a position step of a joint that was "
+                                      "not homed since power-up."),
+    apply: ApplyMotion = False,
+) -> None:
+    """Step JOINT with the gains its drive holds, then with trial gains (RAM only, put back on every
+    exit path), and show the step metrics of both. Nothing is saved; `tune set` writes gains to keep.
+
+    \b
+    Examples:
+      sherpa tune step elbow_pitch --velocity 0.1 KP[2]=0.8 --apply
+      sherpa tune step elbow_pitch --position 0.2 KP[3]=40 --apply
+    """
+    import math
+
+    from sherpa_cli.cli.log_cmd import _stepped_sim, render_metrics
+    from sherpa_cli.motion.settings import MotionSettings
+    from sherpa_cli.ops.step import resolve_step_target, run_step, step_request
+    from sherpa_cli.ops.tune import parse_assignments
+    from sherpa_cli.ops.tune_step import run_tune_step
+
+    st = state(ctx)
+    given = [(m, v) for m, v in (("position", position), ("velocity", velocity)) if v is not None]
+    if len(given) != 1:
+        raise UsageError("give exactly one of --position X or --velocity V")
+    mode, value = given[0]
+    if not math.isfinite(value):
+        raise UsageError(f"--{mode} {value}: expected a finite number")
+    if not (math.isfinite(duration) and 0 < duration <= 60):
+        raise UsageError(f"--for {duration}: expected seconds > 0 and <= 60")
+    if not (0 < rate <= 10000):
+        raise UsageError(f"--rate {rate}: expected Hz > 0 and <= 10000")
+    cfg = st.load_config()
+    trial = parse_assignments(cfg, gains)
+    target = resolve_step_target(cfg, joint)
+    step_request(target, mode, value, duration=duration, uncalibrated=uncalibrated)
+    if not apply:
+        text = " ".join(f"{k}={v:g}" for k, v in trial.items())
+        if st.json_mode:
+            st.out.json({"joint": target.name, "drive": target.ref.name, "mode": mode, "value": value,
+                         "trial": trial, "applied": False})
+            return
+        st.out.line(f"dry run: would step {target.name} ({target.ref.name}) {mode} {value:g} with its own gains, "
+                    f"then {'back ' if mode == 'position' else ''}with {text} (RAM only, put back after)")
+        st.out.line("nothing sent; add --apply to move")
+        return
+    settings = MotionSettings.from_config(cfg, [target.ref.bus])
+    stepped, sim_factory = _stepped_sim(st)
+    with st.session(buses=[target.ref.bus], sim_factory=sim_factory) as session:
+        timebase = None
+        if stepped is not None and session.sim is not None and getattr(session.sim, "clock", None) is stepped.clock:
+            session.client_overrides.update(stepped.client_overrides(cfg.protocol.reply_timeout, cfg.protocol.retries))
+            timebase = stepped
+
+        def one(m: str, v: float) -> Any:
+            return run_step(session, target, m, v, duration=duration, rate=rate, settings=settings,
+                            uncalibrated=uncalibrated, timebase=timebase)
+
+        result = run_tune_step(session, target, mode, value, trial, one)
+    if st.json_mode:
+        st.out.json(result.as_json())
+        return
+    held = " ".join(f"{k}={v:g}" for k, v in result.held.items())
+    text = " ".join(f"{k}={v:g}" for k, v in result.trial.items())
+    render_metrics(st, {(f"{result.before.joint} ({held})", result.before.signal): result.before.metrics})
+    render_metrics(st, {(f"{result.after.joint} ({text})", result.after.signal): result.after.metrics})
+    st.out.line(f"{target.ref.name}: the trial gains were RAM only and are put back ({held})")

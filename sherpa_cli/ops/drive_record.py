@@ -43,11 +43,13 @@ def record_drives(session: ArmSession, refs: Sequence[DriveRef], duration: float
                   trigger: Literal["now", "bg"] = "now", wait_s: float | None = None,
                   settings: RecorderSettings | None = None, signals: Sequence[str] = SIGNALS,
                   clock: Callable[[], float] = time.monotonic, sleep: Callable[[float], None] = time.sleep,
-                  on_armed: Callable[[], None] | None = None) -> DriveRecordResult:
+                  on_armed: Callable[[], None] | None = None,
+                  on_ready: Callable[[], None] | None = None) -> DriveRecordResult:
     """Record ``duration`` s of ``signals`` on every drive of ``refs``. ``wait_s``: how long to wait
     for the data after arming (default: the recording time plus a margin; with ``trigger="bg"``
     this is also how long the drives wait for the BG). ``on_armed`` runs once every drive is armed
-    (e.g. the BG of a step)."""
+    (e.g. the BG of a step); ``on_ready`` once every drive has its data, before the uploads (e.g. the
+    stop of a step: the motors do not run on through the uploads)."""
     settings = settings or RecorderSettings()
     plan = plan_recording(duration, settings, signals=signals, trigger=trigger)
     recorders = {ref.name: DriveRecorder(session.client(ref), _uploader(session, ref), settings,
@@ -68,6 +70,8 @@ def record_drives(session: ArmSession, refs: Sequence[DriveRef], duration: float
             on_armed()
         for rec in recorders.values():
             rec.wait_ready(wait)
+        if on_ready is not None:
+            on_ready()
         for name, rec in recorders.items():
             data[name] = rec.read(plan)  # in memory: nothing is written before every drive is in
     finally:

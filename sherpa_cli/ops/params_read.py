@@ -20,6 +20,7 @@ from sherpa_cli.config.model import ArmConfig
 from sherpa_cli.errors import DriveRefusedError, SherpaError
 from sherpa_cli.joints.params import PARAM_ORDER
 from sherpa_cli.ops.params_file import DriveDump, ParamDump
+from sherpa_cli.ops.tune import GAINS
 from sherpa_cli.version import __version__
 
 if TYPE_CHECKING:
@@ -46,10 +47,11 @@ Progress = Callable[[str, str], None]  # (drive, what is being read)
 
 
 def params_to_read(cfg: ArmConfig, drive: str) -> list[str]:
-    """What commissioning touches: UM, every Appendix C parameter, IL[1..inputs], CA[18]."""
+    """What commissioning touches: UM, every Appendix C parameter, IL[1..inputs], CA[18], and the
+    loop gains `tune show` reads (ops/tune.py GAINS: `tune set` and `diffdrive match` change them)."""
     model = cfg.drives[drive].model
     inputs = cfg.catalog.drives[model].inputs if model is not None and model in cfg.catalog.drives else DEFAULT_INPUTS
-    return ["UM", *PARAM_ORDER, *(f"IL[{n}]" for n in range(1, inputs + 1)), "CA[18]"]
+    return ["UM", *PARAM_ORDER, *(f"IL[{n}]" for n in range(1, inputs + 1)), "CA[18]", *GAINS]
 
 
 def read_identity(sdo: DriveSdo) -> tuple[dict[str, Any], dict[str, str]]:

@@ -46,6 +46,7 @@ if TYPE_CHECKING:
     from sherpa_cli.bus.session import ArmSession
     from sherpa_cli.bus.targets import DriveRef
     from sherpa_cli.motion.limit_watch import Breach
+    from sherpa_cli.ops.drive_step import DriveTrace
 
 SIGNAL = {"position": "pos", "velocity": "vel", "torque": "cur"}
 PRE_S = 0.1  # s recorded before the command
@@ -135,9 +136,12 @@ def step_request(target: JogTarget, mode: str, value: float, *, duration: float,
 def run_step(session: ArmSession, target: JogTarget, mode: str, value: float, *, duration: float, rate: float,
              settings: MotionSettings, sleep: Callable[[float], None] = time.sleep,
              on_event: Callable[[str], None] | None = None, recorder_kw: dict[str, Any] | None = None,
-             uncalibrated: bool = False, timebase: StepTime | None = None) -> StepResult:
+             uncalibrated: bool = False, timebase: StepTime | None = None,
+             drive_trace: DriveTrace | None = None) -> StepResult:
     """``timebase``: the step's clock, waits and SYNC source (the recorder's, the motion guard's
-    and the waits here); without it wall time, ``sleep`` and ``recorder_kw``."""
+    and the waits here); without it wall time, ``sleep`` and ``recorder_kw``. ``drive_trace``: the
+    drive's own recorder of the same step (ops/drive_step.py, `--source drive`), armed just before
+    the command and read once the guard has stopped the motor."""
     req = step_request(target, mode, value, duration=duration, uncalibrated=uncalibrated)
     # jog's checks before anything is armed: a position goal inside the normal range, a calibrated joint
     precheck(session, target, req)
@@ -159,8 +163,13 @@ def run_step(session: ArmSession, target: JogTarget, mode: str, value: float, *,
                 _StopFirst(guard, ref, settings, rec, state, clock, sleep):
             if timebase is not None:
                 timebase.follow(rec.answered)
+            if drive_trace is not None:  # armed before t = 0: its set-up is not in the step's dead time
+                drive_trace.arm("now" if mode == "torque" else "bg")
+                t_armed = rec.now()
             _wait(guard, clock, sleep, PRE_S)
             t_cmd = rec.now()
+            if drive_trace is not None and mode == "torque":
+                drive_trace.started(t_armed - t_cmd)  # no BG: it records from its arming on
             if mode == "position":
                 goal = start_counts + rad_to_counts(value, joint.cpr)
                 lo, hi = joint.normal_range
@@ -170,6 +179,8 @@ def run_step(session: ArmSession, target: JogTarget, mode: str, value: float, *,
                 guard.enable(ref, UM_POSITION)
                 c.set("PA", 0, goal)
                 state["switch"] = rec.now() - t_cmd
+                if drive_trace is not None:
+                    drive_trace.started(state["switch"])
                 c.execute("BG")
                 state["command"], state["target"] = f"PA={goal}", counts_to_rad(goal, joint.cpr)
             elif mode == "velocity":
@@ -177,6 +188,8 @@ def run_step(session: ArmSession, target: JogTarget, mode: str, value: float, *,
                 guard.enable(ref, settings.velocity_unit_mode)
                 c.set("JV", 0, v)
                 state["switch"] = rec.now() - t_cmd
+                if drive_trace is not None:
+                    drive_trace.started(state["switch"])
                 c.execute("BG")
                 state["command"], state["target"] = f"JV={v}", value
             else:
@@ -201,6 +214,10 @@ def run_step(session: ArmSession, target: JogTarget, mode: str, value: float, *,
         start = before[-1] if before else series[1][0]
         target_value = start + value
     metrics = step_metrics(series[0], series[1], t_step=0.0, target=target_value)
+    if drive_trace is not None:
+        before = [v for t, v in zip(*series, strict=True) if t < 0]
+        drive_trace.collect(session.cfg, joint.name, signal, state["t_stop"] - t_cmd, target_value,
+                            initial=before[-1] if before else None)
     return StepResult(joint=joint.name, drive=ref.name, mode=mode, value=value, target=target_value,
                       command=state["command"], switch_s=state["switch"], ended_by=state["ended_by"],
                       metrics=metrics, recording=recording, samples=samples, expected=expected, stop=guard.report,

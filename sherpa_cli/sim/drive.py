@@ -809,6 +809,8 @@ class SimDrive:
     def _model_step(self, dt: float) -> None:
         m = self.motor
         if self._motor_on:
+            if isinstance(m, ServoMotor):
+                m.set_gains(self.ram)  # the loop runs on the gains the drive holds now (tune set, RAM)
             heading = m.intended_direction()
             moving = heading and m.mode in ("velocity", "position", "torque")
             if moving and heading in self.inputs.blocked(self._il, self.settings.stop_code):

@@ -43,7 +43,8 @@ _FACTORY: dict[str, Value] = {
     "IL": 4,
     # recorder (RAM only; sim/recorder.py): the manual's default mapping RV[N]=N
     "RC": 0, "RG": 1, "RL": 256, **{f"RP[{n}]": 0 for n in range(10)}, **{f"RV[{n}]": n for n in range(1, 17)},
-    # gains: made-up but plausible; the servo model (sim/servo.py) does not read them
+    # gains: made-up but plausible; the servo model (sim/servo.py) reads KP[2], KI[2], KP[3] relative
+    # to these (its REFERENCE_GAINS): a drive's configured loop is the loop at these gains
     "KP[1]": 1.0, "KP[2]": 0.5, "KP[3]": 30.0, "KI[1]": 100.0, "KI[2]": 200.0, "KI[3]": 0.0,
     "FF[1]": 0.0, "FF[2]": 0.0, "FF[3]": 0.0,
 }
