@@ -171,6 +171,8 @@ def move(
     naive: bool = typer.Option(False, "--naive", help="The seed's way, for comparison: two separate BG and "
                                "unscaled profiles."),
     plot: str | None = typer.Option(None, "--plot", metavar="FILE.png", help="Draw both joints during the move."),
+    report: str | None = typer.Option(None, "--report", metavar="FILE.json", help="Also write the move's report "
+                                      "(what --json prints) to FILE, e.g. for `sherpa log section9`."),
     poll: bool = typer.Option(False, "--poll", help="Record by polling PX through the interpreter instead of "
                               "TPDOs on SYNC (changes no PDO settings; coarser, one motor a round trip after the other)."),
     uncalibrated: bool = typer.Option(False, "--uncalibrated", help="Allow the move although the pair was not "
@@ -198,6 +200,10 @@ def move(
     method, _ = diffdrive.pair_settings(cfg)
     if plot is not None and not plot.lower().endswith(".png"):
         raise UsageError(f"--plot {plot}: expected a .png file name")
+    if report is not None:
+        from sherpa_cli.output_files import check_output_path
+
+        check_output_path(report, "--report", "the move's report")
     # the values, and absolute targets against the normal ranges, are checked without the bus (a held
     # joint is taken at 0 here; the real check with the present positions follows on the bus)
     diffdrive.plan_move(cfg, p, req, {p.drive_a: 0, p.drive_b: 0})
@@ -232,6 +238,13 @@ def move(
             raise
     if plot is not None:
         diffdrive.plot(result, plot)
+    if report is not None:
+        import json
+
+        from sherpa_cli.output_files import write_output
+
+        write_output(report, json.dumps({**result.as_dict(), "plot": plot}, indent=2) + "\n", "--report",
+                     what="the move's report")
     _render_move(st, result, plot)
     if not result.ok:
         raise typer.Exit(1)

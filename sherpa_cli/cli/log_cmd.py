@@ -676,12 +676,16 @@ def _step_compare(st: AppState, runs: Sequence[Path], output: Path) -> None:
     def num(v: float | None, fmt: str, scale: float = 1.0) -> str:
         return "-" if v is None else format(v * scale, fmt)
 
+    # a position move has no steady speed: its steady columns stay empty
     rows = [[f.name, f"{f.mode} {f.value:+g}", f"{1000 * f.switch_s:.0f}", "yes" if f.settled else "no",
              num(f.metrics.get("dead_time"), ".0f", 1000), num(f.peak_speed, "+.3f"),
              num(f.peak_speed_after_s, ".0f", 1000), num(f.slowing_after_s, ".0f", 1000),
-             num(f.steady_speed, "+.3f"), num(f.steady_ripple, ".1%")] for f, _ in loaded]
-    st.out.table(None, ["run", "step", "switch ms", "settled", "dead ms", "peak rad/s", "peak after ms",
-                        "slowing after ms", "steady rad/s", "ripple"], rows, right=tuple(range(2, 10)))
+             "-" if f.mode == "position" else num(f.steady_speed, "+.3f"),
+             "-" if f.mode == "position" else num(f.steady_ripple, ".1%")] for f, _ in loaded]
+    st.out.table(None, ["run", "step", "switch", "settled", "dead", "peak", "peak at", "slows at", "steady",
+                        "ripple"], rows, right=tuple(range(2, 10)))
+    st.out.line("switch, dead: ms from the command; peak, steady: rad/s; peak at, slows at: ms from the motion's "
+                "start; ripple: standard deviation / mean of the steady speed")
     if written:
         st.out.line(f"png: {output}")
 
@@ -711,3 +715,49 @@ def _step_dry_run(st: AppState, cfg: ArmConfig, target: JogTarget, mode: str, va
     st.out.line(f"dry run: would record {target.name} ({ref.name}, {ref.address}) at {rate:g} Hz and step it: "
                 f"{plan}, then stop and switch off")
     st.out.line("nothing sent; add --apply to move")
+
+
+@app.command("section9")
+def section9(
+    ctx: typer.Context,
+    folder: Path = typer.Argument(..., metavar="DIR", help="The out directory of recipes/seed-section9.yaml."),
+    bands: Path | None = typer.Option(None, "--bands", metavar="FILE.yaml",
+                                      help="Check every figure against these bands (docs/section9/bands.yaml): "
+                                      "exit 1 when one is outside."),
+) -> None:
+    """The seed's Section 9 in numbers: summarise the runs of recipes/seed-section9.yaml (switch
+    delays, speeds and their ripple, the 1 A supply's drop, the pair's coupling) into DIR/summary.json
+    and DIR/summary.md, each number beside its band from the seed's text (docs/section9.md).
+
+    \b
+    Example:
+      sherpa log section9 section9-out --bands docs/section9/bands.yaml
+    """
+    import json
+
+    from sherpa_cli.log.section9 import check, load_bands, summarize
+
+    st = state(ctx)
+    numbers = summarize(folder)
+    checked = check(numbers, load_bands(bands)) if bands is not None else []
+    banded = {b.key for b, _, _ in checked}
+    doc = {"numbers": {k: (None if v is None else round(v, 6)) for k, v in numbers.items()},
+           "bands": [{"key": b.key, "figure": b.figure, "value": None if v is None else round(v, 6), "min": b.low,
+                      "max": b.high, "unit": b.unit, "holds": ok, "quote": b.quote} for b, v, ok in checked]}
+    (folder / "summary.json").write_text(json.dumps(doc, indent=2) + "\n", encoding="utf-8")
+    rows = [[b.figure, b.key, "-" if v is None else f"{v:.4g}", f"{b.low:g} .. {b.high:g} {b.unit}",
+             "ok" if ok else "OUTSIDE"] for b, v, ok in checked]
+    rows += [["", k, "-" if v is None else f"{v:.4g}", "", ""] for k, v in numbers.items() if k not in banded]
+    md = ["# Section 9 on this arm", "", "| figure | number | value | band (seed's text) | |", "|---|---|---|---|---|",
+          *(f"| {' | '.join(r)} |" for r in rows), ""]
+    (folder / "summary.md").write_text("\n".join(md), encoding="utf-8")
+    failed = [b.key for b, _, ok in checked if not ok]
+    if st.json_mode:
+        st.out.json({**doc, "files": [str(folder / "summary.json"), str(folder / "summary.md")], "ok": not failed})
+    else:
+        st.out.table(None, ["figure", "number", "value", "band (seed's text)", "check"], rows, right=(2,))
+        st.out.line(f"summary: {folder / 'summary.json'}, {folder / 'summary.md'}")
+        if failed:
+            st.out.line(f"{len(failed)} of {len(checked)} figure(s) outside the seed's band: {', '.join(failed)}")
+    if failed:
+        raise typer.Exit(1)

@@ -109,13 +109,17 @@ def plot_compare(runs: Sequence[tuple[RunFigures, Recording]], path: Path) -> An
 
     fig = _figure()
     axes = fig.subplots(2, 1, squeeze=False, sharex=True)
-    for row, (signal, label, unit) in enumerate((("pos", "position", "rad"), ("vel", "velocity", "rad/s"))):
+    rows = (("pos", "position change", "rad"), ("vel", "velocity", "rad/s"))
+    for row, (signal, label, unit) in enumerate(rows):
         ax = axes[row][0]
         values: list[float] = []
         for f, rec in runs:
             series = rec.series(f.joint, signal)
             if series is None:
                 continue
+            if signal == "pos":  # from where each run's joint stood at t = 0: runs from other places overlay
+                before = [v for t, v in zip(*series, strict=True) if t < 0] or series[1][:1]
+                series = (series[0], [v - before[-1] for v in series[1]])
             values.extend(series[1])
             what = f"{f.name}: {f.mode} {f.value:+g}"
             if signal == "vel":

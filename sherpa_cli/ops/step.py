@@ -210,7 +210,8 @@ def run_step(session: ArmSession, target: JogTarget, mode: str, value: float, *,
                                                state["switch"] + duration, clock, sleep, settle=mode != "torque",
                                                jog_target=target, settings=settings, state=state, hold=hold)
         # the step ends where the motor was told to stop: the stop (and a limit recovery) is not the step
-        recording = _cut(rec.recording(t_zero=t_cmd), state["t_stop"] - t_cmd)
+        # --mode-first: the switch and its settle window before t = 0 are not the step either
+        recording = _cut(rec.recording(t_zero=t_cmd), state["t_stop"] - t_cmd, since=-PRE_S if mode_first else None)
         samples, expected = min(rec.counts().values()), rec.expected()
     # position: the recorded start is the reference (PX may not have been exactly 0)
     series = recording.series(joint.name, signal)
@@ -323,8 +324,8 @@ class _StopFirst:
             # on the way out of an error: never hide it; the guard's stop follows and reports
 
 
-def _cut(recording: Recording, until: float) -> Recording:
-    """The samples taken before ``until`` (s, the recording's time)."""
-    keep = [i for i, t in enumerate(recording.times) if t < until]
+def _cut(recording: Recording, until: float, since: float | None = None) -> Recording:
+    """The samples taken before ``until`` (and from ``since`` on, when given; s, the recording's time)."""
+    keep = [i for i, t in enumerate(recording.times) if t < until and (since is None or t >= since - 1e-9)]
     return Recording(times=[recording.times[i] for i in keep],
                      columns={name: [values[i] for i in keep] for name, values in recording.columns.items()})
