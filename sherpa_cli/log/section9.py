@@ -90,8 +90,11 @@ def departs_at(weak: tuple[RunFigures, Recording], strong: tuple[RunFigures, Rec
     wt, wv = _speed_at(weak[1], weak[0].joint)
     st, sv = _speed_at(strong[1], strong[0].joint)
     floor = 0.5 * abs(strong[0].peak_speed)
+    # the runs side by side from where each began to move: on wall time their dead times differ by
+    # some ms, which would read as a drop or hide one
+    shift = (strong[0].motion_start_s or 0.0) - (weak[0].motion_start_s or 0.0)
     for t, v in zip(wt, wv, strict=True):
-        s = _at(st, sv, t)  # the two runs were sampled at their own times: interpolated
+        s = _at(st, sv, t + shift)  # the two runs were sampled at their own times: interpolated
         if t > 0 and s is not None and abs(s) >= floor and abs(v) < DEPART * abs(s):
             return t
     return None
