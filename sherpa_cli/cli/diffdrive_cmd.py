@@ -215,10 +215,19 @@ def move(
         start = {"group": f"one BG to group id {cfg.motion.pair_group_id} (0x2040, RAM, put back after)",
                  "sync_rpdo": "BG to both buffered as synchronous RPDO2 (0x1401:2=1, RAM, put back after), one SYNC",
                  "sequential": "two BG back to back", "naive": "two BG back to back, unscaled profiles"}[mode]
+        refused = _pair_would_refuse(st, cfg, p, req)
         if st.json_mode:
             st.out.json({"pair": p.name, "applied": False, "move": what, "holds": held, "start": mode,
-                         "feedback": feedback, "recording": "poll" if poll else "sync"})
+                         "feedback": feedback, "recording": "poll" if poll else "sync",
+                         "checked": refused is not None, "would_be_refused": refused or []})
+            if refused:
+                raise typer.Exit(1)
             return
+        if refused:
+            st.out.line(f"dry run: would be refused: {'; '.join(refused)}")
+            st.out.line(f"  (the plan: move pair {p.name} ({p.drive_a}, {p.drive_b}): {what})")
+            st.out.line("nothing sent; --apply would refuse it too")
+            raise typer.Exit(1)
         st.out.line(f"dry run: would move pair {p.name} ({p.drive_a}, {p.drive_b}): {what}"
                     + (f"; {held[0]} holds" if held else ""))
         st.out.line(f"  UM=5, SP/AC/DC of equal duration, PA, {start}"
@@ -248,6 +257,20 @@ def move(
     _render_move(st, result, plot)
     if not result.ok:
         raise typer.Exit(1)
+
+
+def _pair_would_refuse(st: AppState, cfg: Any, p: Any, req: Any) -> list[str] | None:
+    """What `--apply` would refuse (ops/dry_check.py), read from the drives; None when they cannot
+    be read (the dry run then says it did not check)."""
+    from sherpa_cli.errors import SherpaError
+    from sherpa_cli.ops.dry_check import pair_would_refuse
+
+    try:
+        with st.session(buses=sorted({cfg.drives[d].bus for d in (p.drive_a, p.drive_b)})) as session:
+            return pair_would_refuse(session, p, req)
+    except SherpaError as exc:
+        st.out.warn(f"not checked on the drives ({exc}): --apply checks calibration, ranges and faults first")
+        return None
 
 
 def _render_move(st: AppState, r: MoveResult, plot: str | None) -> None:

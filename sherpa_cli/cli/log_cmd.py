@@ -581,9 +581,12 @@ def step(
         raise UsageError(f"-o {output}: exists and is not a directory")
     cfg = st.load_config()
     target = resolve_step_target(cfg, joint)
-    step_request(target, mode, value, duration=duration, uncalibrated=uncalibrated)
+    req = step_request(target, mode, value, duration=duration, uncalibrated=uncalibrated)
     if not apply:
-        _step_dry_run(st, cfg, target, mode, value, duration, rate, mode_first=mode_first, hold=hold)
+        refused = _step_would_refuse(st, target, req)
+        _step_dry_run(st, cfg, target, mode, value, duration, rate, mode_first=mode_first, hold=hold, refused=refused)
+        if refused:
+            raise typer.Exit(1)
         return
     settings = MotionSettings.from_config(cfg, [target.ref.bus])
     if not to_mcap:
@@ -690,8 +693,23 @@ def _step_compare(st: AppState, runs: Sequence[Path], output: Path) -> None:
         st.out.line(f"png: {output}")
 
 
+def _step_would_refuse(st: AppState, target: JogTarget, req: Any) -> list[str] | None:
+    """What `--apply` would refuse (ops/dry_check.py), read from the drive; None when the drive
+    cannot be read (the dry run then says it did not check)."""
+    from sherpa_cli.errors import SherpaError
+    from sherpa_cli.ops.dry_check import would_refuse
+
+    try:
+        with st.session(buses=[target.ref.bus]) as session:
+            return would_refuse(session, target, req)
+    except SherpaError as exc:
+        st.out.warn(f"not checked on the drive ({exc}): --apply checks calibration, limits and faults first")
+        return None
+
+
 def _step_dry_run(st: AppState, cfg: ArmConfig, target: JogTarget, mode: str, value: float, duration: float,
-                  rate: float, *, mode_first: bool = False, hold: float = 0.0) -> None:
+                  rate: float, *, mode_first: bool = False, hold: float = 0.0,
+                  refused: list[str] | None = None) -> None:
     """Without --apply: what the step would send; nothing is sent, no file is written."""
     from sherpa_cli.joints.units import rad_per_s_to_counts_per_s, rad_to_counts
 
@@ -710,7 +728,14 @@ def _step_dry_run(st: AppState, cfg: ArmConfig, target: JogTarget, mode: str, va
         plan = "before t = 0 the drive in the step's mode, motor on, its settle window waited; then " + plan
     if st.json_mode:
         st.out.json({"joint": target.name, "drive": ref.name, "address": ref.address, "mode": mode, "value": value,
-                     "applied": False, "plan": plan, "rate": rate})
+                     "applied": False, "plan": plan, "rate": rate, "checked": refused is not None,
+                     "would_be_refused": refused or []})
+        return
+    if refused:
+        st.out.line(f"dry run: would be refused: {'; '.join(refused)}")
+        st.out.line(f"  (the plan: record {target.name} ({ref.name}, {ref.address}) at {rate:g} Hz and step it: "
+                    f"{plan})")
+        st.out.line("nothing sent; --apply would refuse it too")
         return
     st.out.line(f"dry run: would record {target.name} ({ref.name}, {ref.address}) at {rate:g} Hz and step it: "
                 f"{plan}, then stop and switch off")
