@@ -88,3 +88,12 @@ def test_interpolation_between_samples():
     assert _at([0.0, 1.0], [0.0, 10.0], 0.25) == 2.5
     assert _at([0.0, 1.0], [0.0, 10.0], 1.0) == 10.0
     assert _at([0.0, 1.0], [0.0, 10.0], 1.5) is None and _at([0.5, 1.0], [0.0, 1.0], 0.1) is None
+
+
+def test_the_recipe_checks_and_its_dry_run_moves_nothing_and_writes_nothing(cli, tmp_path):
+    out = tmp_path / "dry"
+    assert cli("recipe", "check", "recipes/seed-section9.yaml").exit_code == 0
+    dry = cli("--config", SEED_PROFILE, "--sim", "recipe", "run", "recipes/seed-section9.yaml", "--set", f"out={out}")
+    assert dry.exit_code == 0, dry.transcript()
+    assert "summary           skipped (dry run: nothing was written)" in dry.stdout
+    assert not out.exists()
