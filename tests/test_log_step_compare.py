@@ -91,3 +91,10 @@ def test_compare_refuses_what_is_not_a_run(cli, tmp_path):
 def test_hold_must_fit_in_for(cli, tmp_path):
     result = cli(*ARM, "log", "step", "arm", "--velocity", "0.1", "--for", "1", "--hold", "1", "-o", str(tmp_path))
     assert result.exit_code == 2 and "--hold 1.0: expected seconds >= 0 and less than --for 1" in result.stderr
+
+
+def test_mode_first_is_refused_for_a_torque_step(cli, tmp_path):
+    """The motor would be on at TC=0 for the settle window before the step: a loaded joint sags."""
+    result = cli(*ARM, "log", "step", "arm", "--torque", "1", "--for", "0.3", "--mode-first", "-o", str(tmp_path),
+                 "--apply")
+    assert result.exit_code == 2 and "--mode-first is for position and velocity steps" in result.stderr

@@ -548,7 +548,7 @@ def step(
     from sherpa_cli.log.plot import StepMarks, have_matplotlib, plot_recording, step_title
     from sherpa_cli.log.recording import write_csv
     from sherpa_cli.motion.settings import MotionSettings
-    from sherpa_cli.ops.step import resolve_step_target, run_step, step_request
+    from sherpa_cli.ops.step import check_mode_first, resolve_step_target, run_step, step_request
 
     st = state(ctx)
     if compare_runs:
@@ -582,6 +582,7 @@ def step(
     cfg = st.load_config()
     target = resolve_step_target(cfg, joint)
     req = step_request(target, mode, value, duration=duration, uncalibrated=uncalibrated)
+    check_mode_first(mode, mode_first)
     if not apply:
         refused = _step_would_refuse(st, target, req)
         _step_dry_run(st, cfg, target, mode, value, duration, rate, mode_first=mode_first, hold=hold, refused=refused)

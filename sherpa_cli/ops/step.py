@@ -141,6 +141,16 @@ def step_request(target: JogTarget, mode: str, value: float, *, duration: float,
     return req
 
 
+def check_mode_first(mode: str, mode_first: bool) -> None:
+    """--mode-first holds the drive in the step's mode with its motor on before t = 0; in torque
+    mode that is TC=0 for the settle window, with no limit watch yet: a joint under load would
+    sag or fall, so it is refused (the seed's Fig. 9.2 is a position step)."""
+    if mode_first and mode == "torque":
+        raise UsageError("--mode-first is for position and velocity steps: in torque mode the motor would be on "
+                         "with no torque (TC=0) for the settle window before the step",
+                         hint="a torque step's own switch is short: leave --mode-first out")
+
+
 def run_step(session: ArmSession, target: JogTarget, mode: str, value: float, *, duration: float, rate: float,
              settings: MotionSettings, sleep: Callable[[float], None] = time.sleep,
              on_event: Callable[[str], None] | None = None, recorder_kw: dict[str, Any] | None = None,
@@ -154,6 +164,7 @@ def run_step(session: ArmSession, target: JogTarget, mode: str, value: float, *,
     req = step_request(target, mode, value, duration=duration, uncalibrated=uncalibrated)
     if not (math.isfinite(hold) and 0 <= hold < duration):
         raise UsageError(f"--hold {hold}: expected seconds >= 0 and less than --for {duration:g}")
+    check_mode_first(mode, mode_first)
     # jog's checks before anything is armed: a position goal inside the normal range, a calibrated joint
     precheck(session, target, req)
     ref, joint = target.ref, target.joint
