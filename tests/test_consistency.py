@@ -124,3 +124,51 @@ def test_check_wiring_of_an_absolute_encoder_joint_says_there_is_nothing_to_chec
     assert js["abs_encoder"] is True and js["switches"] == 0 and js["findings"] == []
     no_switch = cli("--config", "configs/appendix-c/example3.yaml", "--sim", "home", "--check-wiring", "joint1")
     assert no_switch.exit_code in (0, 2)  # a joint with switches or none: the old answers stand
+
+
+def test_a_log_step_dry_run_says_what_apply_would_refuse(cli, tmp_path):
+    """Issue 25: the dry run said "would move" and --apply then refused the joint as not homed."""
+    out = tmp_path / "step"
+    dry = cli("--sim", "log", "step", "shoulder_yaw", "--position", "0.1", "-o", str(out))
+    assert not out.exists()  # a dry run writes nothing
+    real = cli("--sim", "log", "step", "shoulder_yaw", "--position", "0.1", "-o", str(out), "--apply")
+    assert real.exit_code == 1 and "not homed" in real.stderr  # the real run refuses ...
+    assert dry.exit_code == 1, dry.transcript()  # ... and its dry run says so, with the same reason
+    assert dry.stdout.startswith("dry run: would be refused: shoulder_yaw: not homed since power-up")
+    assert "--apply would refuse it too" in dry.stdout
+    far = json.loads(cli("--sim", "--json", "log", "step", "upper_arm_twist", "--position", "9", "-o",
+                         str(out)).stdout)
+    assert far["checked"] is True and "outside the joint's normal range" in far["would_be_refused"][0]
+    fine = cli("--sim", "log", "step", "shoulder_yaw", "--position", "0.1", "--uncalibrated", "-o", str(out))
+    assert fine.exit_code == 0 and fine.stdout.startswith("dry run: would record shoulder_yaw")
+
+
+def test_a_log_step_dry_run_names_a_drive_in_fault(cli, tmp_path, monkeypatch):
+    from sherpa_cli.sim.arm import SimArm
+
+    start = SimArm.start
+
+    def faulted(self):
+        start(self)
+        with self.lock:
+            self.drives["elbow_1a"]._shut_down(0x1000, "test: a latched motor fault")  # MF stays until MO=1
+        return self
+
+    monkeypatch.setattr(SimArm, "start", faulted)
+    dry = cli("--sim", "log", "step", "elbow_pitch", "--velocity", "0.1", "-o", str(tmp_path / "s"))
+    assert dry.exit_code == 1 and dry.stdout.startswith("dry run: would be refused: elbow_1a"), dry.transcript()
+    assert "in fault" in dry.stdout
+
+
+def test_a_diffdrive_move_dry_run_says_what_apply_would_refuse(cli):
+    """Issue 25: `diffdrive move`'s dry run said "would move" where --apply refused an un-homed pair."""
+    fast = ["--config", "tests/data/jog-fast-arm.yaml", "--sim"]
+    dry = cli(*fast, "diffdrive", "move", "diff", "--sigma", "100counts")
+    real = cli(*fast, "diffdrive", "move", "diff", "--sigma", "100counts", "--apply")
+    assert real.exit_code == 1 and "joint pitch is not homed since power-up" in real.stderr
+    assert dry.exit_code == 1, dry.transcript()
+    assert dry.stdout.startswith("dry run: would be refused: diff: refusing a move: joint pitch is not homed")
+    js = json.loads(cli(*fast, "--json", "diffdrive", "move", "diff", "--sigma", "100counts").stdout)
+    assert js["applied"] is False and js["checked"] is True and "not homed" in js["would_be_refused"][0]
+    ok = cli(*fast, "diffdrive", "move", "diff", "--sigma", "100counts", "--uncalibrated")
+    assert ok.exit_code == 0 and ok.stdout.startswith("dry run: would move pair diff")

@@ -213,6 +213,10 @@ def test_the_limit_watch_stops_a_step_that_leaves_the_full_range(arm, mode, valu
     with ArmSession.open(cfg, sim=sim, buses=["can1"]) as session:
         c = session.client(target.ref)
         c.nmt_start()
+        # the joint stands there (its absolute encoder PY reads it), not only its counter: an absolute
+        # joint's PX is re-synced from the encoder when the step starts
+        with sim.lock:
+            sim.drives["elbow_1a"].motor.counts = 1360
         c.set("PX", 0, 1360)
         result = run_step(session, target, mode, value, duration=3.0, rate=200,
                           settings=MotionSettings.from_config(cfg, ["can1"]))

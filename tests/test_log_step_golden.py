@@ -25,6 +25,12 @@ CASES = [
     ("log-step-position-no-switch", ["--position", "1"], (5, 1)),  # already position mode, motor on
     ("log-step-velocity", ["--velocity", "0.1", "--for", "1"], None),
     ("log-step-torque", ["--torque", "1", "--for", "0.3"], None),
+    # issue 25 item 1: cut off before it settles -> "not settled within 0.2 s", no overshoot or error
+    ("log-step-position-not-settled", ["--position", "1", "--for", "0.2"], None),
+    # Fig. 9.2: the drive put in position mode before t = 0, so the step has no switch
+    ("log-step-position-mode-first", ["--position", "1", "--mode-first"], None),
+    # Figs. 9.3/9.6: a velocity step that goes on recording its constant speed
+    ("log-step-velocity-hold", ["--velocity", "0.1", "--for", "1", "--hold", "0.5"], None),
 ]
 
 
@@ -61,6 +67,19 @@ def test_log_step_golden(cli, golden, monkeypatch, tmp_path, name, args, before)
         # MO=0, UM 2 -> 5, MO=1: at least the drive's two MO settle windows (the cli fixture's)
         assert metrics["switch_s"] >= 2 * TEST_PROTOCOL_WINDOWS["mo_settle"] - 1e-9
         assert metrics["metrics"]["dead_time"] > metrics["switch_s"]
+        assert metrics["switch_steps"] == ["MO=0", "UM=5", "MO=1"]  # the motor was on: two settle windows
+    elif name == "log-step-position-not-settled":
+        assert metrics["settled"] is False and metrics["ended_by"] == "time up"
+        m = metrics["metrics"]
+        assert m["overshoot"] is None and m["steady_state_error"] is None and m["settling_time"] is None
+        assert "not settled within 0.2 s" in result.stdout and "overshoot" not in result.stdout.split("no overshoot")[0]
+    elif name == "log-step-position-mode-first":
+        assert metrics["switch_steps"] == [] and metrics["switch_s"] < 0.01 and metrics["settled"] is True
+        assert metrics["metrics"]["dead_time"] < 0.05
+    elif name == "log-step-velocity-hold":
+        times = [float(line.split(",")[0]) for line in (out / "recording.csv").read_text().splitlines()[1:]]
+        # settled (>= the 0.2 s hold of the settle check) and then recorded 0.5 s more
+        assert metrics["settled"] is True and times[-1] >= metrics["metrics"]["settling_time"] + 0.5
 
 
 def test_the_same_step_gives_the_same_recording_twice(cli, tmp_path):

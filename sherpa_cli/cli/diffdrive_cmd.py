@@ -171,6 +171,8 @@ def move(
     naive: bool = typer.Option(False, "--naive", help="The seed's way, for comparison: two separate BG and "
                                "unscaled profiles."),
     plot: str | None = typer.Option(None, "--plot", metavar="FILE.png", help="Draw both joints during the move."),
+    report: str | None = typer.Option(None, "--report", metavar="FILE.json", help="Also write the move's report "
+                                      "(what --json prints) to FILE, e.g. for `sherpa log section9`."),
     poll: bool = typer.Option(False, "--poll", help="Record by polling PX through the interpreter instead of "
                               "TPDOs on SYNC (changes no PDO settings; coarser, one motor a round trip after the other)."),
     uncalibrated: bool = typer.Option(False, "--uncalibrated", help="Allow the move although the pair was not "
@@ -198,6 +200,10 @@ def move(
     method, _ = diffdrive.pair_settings(cfg)
     if plot is not None and not plot.lower().endswith(".png"):
         raise UsageError(f"--plot {plot}: expected a .png file name")
+    if report is not None:
+        from sherpa_cli.output_files import check_output_path
+
+        check_output_path(report, "--report", "the move's report")
     # the values, and absolute targets against the normal ranges, are checked without the bus (a held
     # joint is taken at 0 here; the real check with the present positions follows on the bus)
     diffdrive.plan_move(cfg, p, req, {p.drive_a: 0, p.drive_b: 0})
@@ -209,10 +215,19 @@ def move(
         start = {"group": f"one BG to group id {cfg.motion.pair_group_id} (0x2040, RAM, put back after)",
                  "sync_rpdo": "BG to both buffered as synchronous RPDO2 (0x1401:2=1, RAM, put back after), one SYNC",
                  "sequential": "two BG back to back", "naive": "two BG back to back, unscaled profiles"}[mode]
+        refused = _pair_would_refuse(st, cfg, p, req)
         if st.json_mode:
             st.out.json({"pair": p.name, "applied": False, "move": what, "holds": held, "start": mode,
-                         "feedback": feedback, "recording": "poll" if poll else "sync"})
+                         "feedback": feedback, "recording": "poll" if poll else "sync",
+                         "checked": refused is not None, "would_be_refused": refused or []})
+            if refused:
+                raise typer.Exit(1)
             return
+        if refused:
+            st.out.line(f"dry run: would be refused: {'; '.join(refused)}")
+            st.out.line(f"  (the plan: move pair {p.name} ({p.drive_a}, {p.drive_b}): {what})")
+            st.out.line("nothing sent; --apply would refuse it too")
+            raise typer.Exit(1)
         st.out.line(f"dry run: would move pair {p.name} ({p.drive_a}, {p.drive_b}): {what}"
                     + (f"; {held[0]} holds" if held else ""))
         st.out.line(f"  UM=5, SP/AC/DC of equal duration, PA, {start}"
@@ -232,9 +247,30 @@ def move(
             raise
     if plot is not None:
         diffdrive.plot(result, plot)
+    if report is not None:
+        import json
+
+        from sherpa_cli.output_files import write_output
+
+        write_output(report, json.dumps({**result.as_dict(), "plot": plot}, indent=2) + "\n", "--report",
+                     what="the move's report")
     _render_move(st, result, plot)
     if not result.ok:
         raise typer.Exit(1)
+
+
+def _pair_would_refuse(st: AppState, cfg: Any, p: Any, req: Any) -> list[str] | None:
+    """What `--apply` would refuse (ops/dry_check.py), read from the drives; None when they cannot
+    be read (the dry run then says it did not check)."""
+    from sherpa_cli.errors import SherpaError
+    from sherpa_cli.ops.dry_check import pair_would_refuse
+
+    try:
+        with st.session(buses=sorted({cfg.drives[d].bus for d in (p.drive_a, p.drive_b)})) as session:
+            return pair_would_refuse(session, p, req)
+    except SherpaError as exc:
+        st.out.warn(f"not checked on the drives ({exc}): --apply checks calibration, ranges and faults first")
+        return None
 
 
 def _render_move(st: AppState, r: MoveResult, plot: str | None) -> None:

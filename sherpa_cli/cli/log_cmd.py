@@ -264,10 +264,15 @@ def render_metrics(st: AppState, metrics: Mapping[tuple[str, str], StepMetrics],
         return
     for (j, s), m in metrics.items():
         unit = UNITS[SIGNALS[s]]
-        settle = _ms(m.settling_time) + ("" if m.settled else " (not settled at the end)")
+        if not m.settled or m.overshoot is None:
+            # a step cut off before it settled: its "final" value is only where the record ended
+            st.out.line(f"{j} {s}: not settled: {m.initial:.4f} -> {m.final:.4f} {unit} at the end; dead time "
+                        f"{_ms(m.dead_time)}, rise (10-90 %) {_ms(m.rise_time)}; no overshoot or steady-state error")
+            continue
         sse = "" if m.steady_state_error is None else f", steady-state error {m.steady_state_error:.4f} {unit}"
         st.out.line(f"{j} {s}: {m.initial:.4f} -> {m.final:.4f} {unit}; dead time {_ms(m.dead_time)}, "
-                    f"rise (10-90 %) {_ms(m.rise_time)}, overshoot {m.overshoot:.1f} %, settling (2 %) {settle}{sse}")
+                    f"rise (10-90 %) {_ms(m.rise_time)}, overshoot {m.overshoot:.1f} %, "
+                    f"settling (2 %) {_ms(m.settling_time)}{sse}")
     for key, value in (extra or {}).items():
         st.out.line(f"{key}: {value}")
 
@@ -485,7 +490,9 @@ def _stepped_sim(st: AppState) -> tuple[SteppedTime | None, Callable[[ArmConfig,
 @app.command("step")
 def step(
     ctx: typer.Context,
-    joint: str = typer.Argument(..., metavar="JOINT", help="A plain joint (or the drive of one); not a Σ/Δ joint."),
+    args: list[str] = typer.Argument(..., metavar="JOINT | RUN...",
+                                     help="A plain joint (or the drive of one); not a Σ/Δ joint. With --compare: "
+                                     "the directories of earlier runs."),
     position: float | None = typer.Option(None, "--position", metavar="X",
                                              help="A position step of X rad from where the joint stands."),
     velocity: float | None = typer.Option(None, "--velocity", metavar="V", help="A velocity step to V rad/s."),
@@ -496,12 +503,20 @@ def step(
     rate: float = typer.Option(1000.0, "--rate", metavar="HZ", help="Samples per second."),
     output: Path = typer.Option(..., "--output", "-o", metavar="DIR|FILE.mcap",
                                 help="Directory for recording.csv, step.png and metrics.json (created); or one "
-                                ".mcap file with the recording and the metrics (robotics extra)."),
+                                ".mcap file with the recording and the metrics (robotics extra); with --compare "
+                                "the .png of the runs."),
     uncalibrated: bool = typer.Option(False, "--uncalibrated", help="Allow a position step of a joint that has no "
                                       "absolute encoder and was not homed since power-up."),
     source: str = typer.Option("can", "--source", metavar="can|drive",
                                help="drive: also record the step with the drive's own recorder (servo rate); "
                                "recording.csv is the drive's, can-recording.csv the bus's, the report shows both."),
+    mode_first: bool = typer.Option(False, "--mode-first", help="Put the drive in the step's unit mode with its "
+                                    "motor on before t = 0 and wait its settle window: the step itself has no "
+                                    "MO/UM switch (seed Fig. 9.2)."),
+    hold: float = typer.Option(0.0, "--hold", metavar="S", help="Go on recording S seconds once the step has "
+                               "settled (a velocity step's constant speed, seed Figs. 9.3/9.6); within --for."),
+    compare_runs: bool = typer.Option(False, "--compare", help="Compare earlier runs (the RUN directories "
+                                      "of `log step -o DIR`): one plot (-o FILE.png) and their figures; moves nothing."),
     apply: ApplyMotion = False,
 ) -> None:
     """The seed's Section 9 step experiment in one command: start recording, command the step at
@@ -517,9 +532,16 @@ def step(
     joint's normal range and needs a calibrated joint (or --uncalibrated); a joint that leaves
     its full range is stopped and brought back to the nearest edge of its normal range (exit 1).
 
+    A step that has not settled within --for is reported as "not settled within S s", with no
+    overshoot, settling time or steady-state error. --compare RUN... overlays earlier runs (for
+    example the 1 A and 20 A supply runs of seed Fig. 9.4) and lists their figures.
+
     \b
     Examples:
       sherpa log step elbow_pitch --position 1 -o steps/pos --apply
+      sherpa log step elbow_pitch --position -1 --mode-first -o steps/pos2 --apply
+      sherpa log step elbow_pitch --velocity 0.1 --for 5 --hold 3 -o steps/vel --apply
+      sherpa log step --compare steps/pos steps/pos2 -o steps/compare.png
       sherpa log step elbow_pitch --velocity 0.1 --for 1 -o steps/vel --apply
       sherpa log step elbow_pitch --torque 1 --for 0.3 -o steps/torque --apply
     """
@@ -529,9 +551,18 @@ def step(
     from sherpa_cli.log.plot import StepMarks, have_matplotlib, plot_recording, step_title
     from sherpa_cli.log.recording import write_csv
     from sherpa_cli.motion.settings import MotionSettings
-    from sherpa_cli.ops.step import resolve_step_target, run_step, step_request
+    from sherpa_cli.ops.step import check_mode_first, resolve_step_target, run_step, step_request
 
     st = state(ctx)
+    if compare_runs:
+        if position is not None or velocity is not None or torque is not None or apply:
+            raise UsageError("--compare reads earlier runs: it takes no --position/--velocity/--torque or --apply")
+        _step_compare(st, [Path(a) for a in args], output)
+        return
+    if len(args) != 1:
+        raise UsageError(f"log step steps one joint; got {len(args)} ({' '.join(args)})",
+                         hint="to compare earlier runs: sherpa log step --compare RUN... -o FILE.png")
+    joint = args[0]
     given = [(m, v) for m, v in (("position", position), ("velocity", velocity), ("torque", torque)) if v is not None]
     if len(given) != 1:
         raise UsageError("give exactly one of --position X, --velocity V or --torque A")
@@ -544,6 +575,8 @@ def step(
         raise UsageError(f"--for {duration}: expected seconds > 0 and <= {MAX_RECORD_S:g}")
     if not (0 < rate <= 10000):
         raise UsageError(f"--rate {rate}: expected Hz > 0 and <= 10000")
+    if not (math.isfinite(hold) and 0 <= hold < duration):
+        raise UsageError(f"--hold {hold}: expected seconds >= 0 and less than --for {duration:g}")
     to_mcap = output.suffix.lower() == ".mcap" and not output.is_dir()
     if source not in ("can", "drive"):
         raise UsageError(f"--source {source}: expected can or drive")
@@ -556,9 +589,13 @@ def step(
         raise UsageError(f"-o {output}: exists and is not a directory")
     cfg = st.load_config()
     target = resolve_step_target(cfg, joint)
-    step_request(target, mode, value, duration=duration, uncalibrated=uncalibrated)
+    req = step_request(target, mode, value, duration=duration, uncalibrated=uncalibrated)
+    check_mode_first(mode, mode_first)
     if not apply:
-        _step_dry_run(st, cfg, target, mode, value, duration, rate)
+        refused = _step_would_refuse(st, target, req)
+        _step_dry_run(st, cfg, target, mode, value, duration, rate, mode_first=mode_first, hold=hold, refused=refused)
+        if refused:
+            raise typer.Exit(1)
         return
     settings = MotionSettings.from_config(cfg, [target.ref.bus])
     if not to_mcap:
@@ -587,7 +624,7 @@ def step(
         extras.start()
         zero_ns = _time.time_ns()  # t = 0 (the step's command) is placed at the wall time the step began
         result = run_step(session, target, mode, value, duration=duration, rate=rate, settings=settings,
-                          uncalibrated=uncalibrated, timebase=timebase)
+                          uncalibrated=uncalibrated, timebase=timebase, mode_first=mode_first, hold=hold)
         extras.read_status()
     if to_mcap:
         write_mcap(output, result.recording, cfg, time_zero_ns=zero_ns, extras=extras,
@@ -614,9 +651,13 @@ def _render_step(st: Any, result: Any, mode: str, value: float, files: dict[str,
     if st.json_mode:
         st.out.json({**result.as_json(), "files": files})
         return
+    steps = result.switch_steps
+    switch = (f"MO/UM switch {1000 * result.switch_s:.0f} ms ({', '.join(steps)})" if steps else
+              "no MO/UM switch" + (" (--mode-first)" if result.mode_first else ""))
+    ended = result.ended_by if result.settled or result.breach is not None else \
+        f"not settled within {result.within:g} s"
     st.out.line(f"{result.joint} ({result.drive}): {mode} step {value:g} -> {result.command}; "
-                f"MO/UM switch {1000 * result.switch_s:.0f} ms; {result.ended_by}; "
-                f"{result.samples} of {result.expected} samples")
+                f"{switch}; {ended}; {result.samples} of {result.expected} samples")
     render_metrics(st, {(result.joint, result.signal): result.metrics})
     for line in result.stop.lines(st.verbose):
         st.out.line(line)
@@ -631,7 +672,59 @@ def _render_step(st: Any, result: Any, mode: str, value: float, files: dict[str,
         raise typer.Exit(1)
 
 
-def _step_dry_run(st: AppState, cfg: ArmConfig, target: JogTarget, mode: str, value: float, duration: float, rate: float) -> None:
+def _step_compare(st: AppState, runs: Sequence[Path], output: Path) -> None:
+    """`log step --compare RUN... -o FILE.png`: the runs' figures (log/step_compare.py) and one plot."""
+    from sherpa_cli.log.plot import have_matplotlib
+    from sherpa_cli.log.step_compare import compare, plot_compare
+
+    if output.suffix.lower() != ".png":
+        raise UsageError(f"-o {output}: --compare writes one plot: expected a .png file name")
+    loaded = compare(runs)
+    written = False
+    if have_matplotlib():
+        output.parent.mkdir(parents=True, exist_ok=True)
+        plot_compare(loaded, output)
+        written = True
+    elif not st.json_mode:
+        st.out.warn("no PNG: matplotlib is not installed (pip install 'sherpa-cli[plot]')")
+    if st.json_mode:
+        st.out.json({"runs": [f.as_json() for f, _ in loaded], "png": str(output) if written else None})
+        return
+
+    def num(v: float | None, fmt: str, scale: float = 1.0) -> str:
+        return "-" if v is None else format(v * scale, fmt)
+
+    # a position move has no steady speed: its steady columns stay empty
+    rows = [[f.name, f"{f.mode} {f.value:+g}", f"{1000 * f.switch_s:.0f}", "yes" if f.settled else "no",
+             num(f.metrics.get("dead_time"), ".0f", 1000), num(f.peak_speed, "+.3f"),
+             num(f.peak_speed_after_s, ".0f", 1000), num(f.slowing_after_s, ".0f", 1000),
+             "-" if f.mode == "position" else num(f.steady_speed, "+.3f"),
+             "-" if f.mode == "position" else num(f.steady_ripple, ".1%")] for f, _ in loaded]
+    st.out.table(None, ["run", "step", "switch", "settled", "dead", "peak", "peak at", "slows at", "steady",
+                        "ripple"], rows, right=tuple(range(2, 10)))
+    st.out.line("switch, dead: ms from the command; peak, steady: rad/s; peak at, slows at: ms from the motion's "
+                "start; ripple: standard deviation / mean of the steady speed")
+    if written:
+        st.out.line(f"png: {output}")
+
+
+def _step_would_refuse(st: AppState, target: JogTarget, req: Any) -> list[str] | None:
+    """What `--apply` would refuse (ops/dry_check.py), read from the drive; None when the drive
+    cannot be read (the dry run then says it did not check)."""
+    from sherpa_cli.errors import SherpaError
+    from sherpa_cli.ops.dry_check import would_refuse
+
+    try:
+        with st.session(buses=[target.ref.bus]) as session:
+            return would_refuse(session, target, req)
+    except SherpaError as exc:
+        st.out.warn(f"not checked on the drive ({exc}): --apply checks calibration, limits and faults first")
+        return None
+
+
+def _step_dry_run(st: AppState, cfg: ArmConfig, target: JogTarget, mode: str, value: float, duration: float,
+                  rate: float, *, mode_first: bool = False, hold: float = 0.0,
+                  refused: list[str] | None = None) -> None:
     """Without --apply: what the step would send; nothing is sent, no file is written."""
     from sherpa_cli.joints.units import rad_per_s_to_counts_per_s, rad_to_counts
 
@@ -644,10 +737,67 @@ def _step_dry_run(st: AppState, cfg: ArmConfig, target: JogTarget, mode: str, va
                 f"at most {duration:g} s")
     else:
         plan = f"UM=1, TC={value:g} for {duration:g} s"
+    if hold and mode != "torque":
+        plan = plan.replace("until settled,", f"until settled and {hold:g} s more,")
+    if mode_first:
+        plan = "before t = 0 the drive in the step's mode, motor on, its settle window waited; then " + plan
     if st.json_mode:
         st.out.json({"joint": target.name, "drive": ref.name, "address": ref.address, "mode": mode, "value": value,
-                     "applied": False, "plan": plan, "rate": rate})
+                     "applied": False, "plan": plan, "rate": rate, "checked": refused is not None,
+                     "would_be_refused": refused or []})
+        return
+    if refused:
+        st.out.line(f"dry run: would be refused: {'; '.join(refused)}")
+        st.out.line(f"  (the plan: record {target.name} ({ref.name}, {ref.address}) at {rate:g} Hz and step it: "
+                    f"{plan})")
+        st.out.line("nothing sent; --apply would refuse it too")
         return
     st.out.line(f"dry run: would record {target.name} ({ref.name}, {ref.address}) at {rate:g} Hz and step it: "
                 f"{plan}, then stop and switch off")
     st.out.line("nothing sent; add --apply to move")
+
+
+@app.command("section9")
+def section9(
+    ctx: typer.Context,
+    folder: Path = typer.Argument(..., metavar="DIR", help="The out directory of recipes/seed-section9.yaml."),
+    bands: Path | None = typer.Option(None, "--bands", metavar="FILE.yaml",
+                                      help="Check every figure against these bands (docs/section9/bands.yaml): "
+                                      "exit 1 when one is outside."),
+) -> None:
+    """The seed's Section 9 in numbers: summarise the runs of recipes/seed-section9.yaml (switch
+    delays, speeds and their ripple, the 1 A supply's drop, the pair's coupling) into DIR/summary.json
+    and DIR/summary.md, each number beside its band from the seed's text (docs/section9.md).
+
+    \b
+    Example:
+      sherpa log section9 section9-out --bands docs/section9/bands.yaml
+    """
+    import json
+
+    from sherpa_cli.log.section9 import check, load_bands, summarize
+
+    st = state(ctx)
+    numbers = summarize(folder)
+    checked = check(numbers, load_bands(bands)) if bands is not None else []
+    banded = {b.key for b, _, _ in checked}
+    doc = {"numbers": {k: (None if v is None else round(v, 6)) for k, v in numbers.items()},
+           "bands": [{"key": b.key, "figure": b.figure, "value": None if v is None else round(v, 6), "min": b.low,
+                      "max": b.high, "unit": b.unit, "holds": ok, "quote": b.quote} for b, v, ok in checked]}
+    (folder / "summary.json").write_text(json.dumps(doc, indent=2) + "\n", encoding="utf-8")
+    rows = [[b.figure, b.key, "-" if v is None else f"{v:.4g}", f"{b.low:g} .. {b.high:g} {b.unit}",
+             "ok" if ok else "OUTSIDE"] for b, v, ok in checked]
+    rows += [["", k, "-" if v is None else f"{v:.4g}", "", ""] for k, v in numbers.items() if k not in banded]
+    md = ["# Section 9 on this arm", "", "| figure | number | value | band (seed's text) | |", "|---|---|---|---|---|",
+          *(f"| {' | '.join(r)} |" for r in rows), ""]
+    (folder / "summary.md").write_text("\n".join(md), encoding="utf-8")
+    failed = [b.key for b, _, ok in checked if not ok]
+    if st.json_mode:
+        st.out.json({**doc, "files": [str(folder / "summary.json"), str(folder / "summary.md")], "ok": not failed})
+    else:
+        st.out.table(None, ["figure", "number", "value", "band (seed's text)", "check"], rows, right=(2,))
+        st.out.line(f"summary: {folder / 'summary.json'}, {folder / 'summary.md'}")
+        if failed:
+            st.out.line(f"{len(failed)} of {len(checked)} figure(s) outside the seed's band: {', '.join(failed)}")
+    if failed:
+        raise typer.Exit(1)

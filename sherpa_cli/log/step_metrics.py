@@ -28,7 +28,7 @@ class StepMetrics:
     target: float | None
     dead_time: float | None  # s
     rise_time: float | None  # s, 10-90 %
-    overshoot: float  # % of the step
+    overshoot: float | None  # % of the step (None: the step did not settle, log/settle.py)
     settling_time: float | None  # s to stay within band of the final value
     steady_state_error: float | None  # target - final, in the signal's unit
     settled: bool  # the record ends inside the band

@@ -323,6 +323,11 @@ class MotionGuard:
     def unit_mode(self, ref: DriveRef) -> int:
         return self._drive(ref).um
 
+    def motor_on(self, ref: DriveRef) -> bool:
+        """Whether the guard knows the motor to be on (MO=1): :meth:`enable` then switches it off
+        before a UM change and waits the drive's settle window twice (log step's switch report)."""
+        return bool(self._drive(ref).mo)
+
     def release(self, refs: Iterable[DriveRef]) -> list[DriveStop]:
         """Hand drives over to another motion guard (the interactive view's calibrate key runs
         `home`, which guards its drives itself: two guards on one drive would fight over the dead-man

@@ -33,6 +33,7 @@ from sherpa_cli.errors import UsageError
 from sherpa_cli.joints.units import counts_to_rad, rad_per_s_to_counts_per_s, rad_to_counts
 from sherpa_cli.log.record import Recorder, bus_budget
 from sherpa_cli.log.recording import Recording
+from sherpa_cli.log.settle import HOLD_S, judged, settled_at_end
 from sherpa_cli.log.step_metrics import StepMetrics, step_metrics
 from sherpa_cli.motion.guard import MotionGuard
 from sherpa_cli.motion.report import GuardReport
@@ -50,7 +51,8 @@ if TYPE_CHECKING:
 
 SIGNAL = {"position": "pos", "velocity": "vel", "torque": "cur"}
 PRE_S = 0.1  # s recorded before the command
-SETTLE_HOLD_S = 0.2  # s the response must stay within 2 % of the step to count as settled
+SETTLE_HOLD_S = HOLD_S  # s the response must stay within 2 % of the step to count as settled (log/settle.py)
+UM_OF = {"position": UM_POSITION, "torque": UM_TORQUE}  # velocity: motion.velocity_unit_mode
 CHECK_EVERY_S = 0.05
 
 
@@ -71,6 +73,11 @@ class StepResult:
     stop: GuardReport = field(default_factory=GuardReport)
     breach: Breach | None = None  # when the joint left its full range (the step then failed)
     recovered_to: int | None = None  # counts, where the limit recovery brought the joint
+    settled: bool = False  # the signal stayed within 2 % of the target at the end (log/settle.py)
+    within: float = 0.0  # s after the step was sent that the record was allowed (--for)
+    switch_steps: tuple[str, ...] = ()  # what the MO/UM switch sent: ("MO=0", "UM=5", "MO=1"), () for none
+    mode_first: bool = False  # the drive was put in the step's mode before t = 0 (Fig. 9.2)
+    hold: float = 0.0  # s recorded after settling (a velocity step's constant speed, Figs. 9.3/9.6)
 
     @property
     def signal(self) -> str:
@@ -79,7 +86,9 @@ class StepResult:
     def as_json(self) -> dict[str, Any]:
         return {"joint": self.joint, "drive": self.drive, "mode": self.mode, "value": self.value,
                 "signal": self.signal, "target": round(self.target, 6), "command": self.command,
-                "switch_s": round(self.switch_s, 4), "ended_by": self.ended_by, "samples": self.samples,
+                "switch_s": round(self.switch_s, 4), "switch_steps": list(self.switch_steps),
+                "mode_first": self.mode_first, "ended_by": self.ended_by, "settled": self.settled,
+                "within_s": round(self.within, 4), "hold_s": self.hold, "samples": self.samples,
                 "expected": self.expected, "metrics": self.metrics.as_json(), "ok": self.breach is None,
                 "limit": None if self.breach is None else {**self.breach.as_dict(), "recovered_to": self.recovered_to}}
 
@@ -133,16 +142,32 @@ def step_request(target: JogTarget, mode: str, value: float, *, duration: float,
     return req
 
 
+def check_mode_first(mode: str, mode_first: bool) -> None:
+    """--mode-first holds the drive in the step's mode with its motor on before t = 0; in torque
+    mode that is TC=0 for the settle window, with no limit watch yet: a joint under load would
+    sag or fall, so it is refused (the seed's Fig. 9.2 is a position step)."""
+    if mode_first and mode == "torque":
+        raise UsageError("--mode-first is for position and velocity steps: in torque mode the motor would be on "
+                         "with no torque (TC=0) for the settle window before the step",
+                         hint="a torque step's own switch is short: leave --mode-first out")
+
+
 def run_step(session: ArmSession, target: JogTarget, mode: str, value: float, *, duration: float, rate: float,
              settings: MotionSettings, sleep: Callable[[float], None] = time.sleep,
              on_event: Callable[[str], None] | None = None, recorder_kw: dict[str, Any] | None = None,
-             uncalibrated: bool = False, timebase: StepTime | None = None,
-             drive_trace: DriveTrace | None = None) -> StepResult:
+             uncalibrated: bool = False, timebase: StepTime | None = None, mode_first: bool = False,
+             hold: float = 0.0, drive_trace: DriveTrace | None = None) -> StepResult:
     """``timebase``: the step's clock, waits and SYNC source (the recorder's, the motion guard's
-    and the waits here); without it wall time, ``sleep`` and ``recorder_kw``. ``drive_trace``: the
+    and the waits here); without it wall time, ``sleep`` and ``recorder_kw``. ``mode_first``: the
+    drive is put in the step's unit mode with its motor on before t = 0, and the drive's settle
+    window waited out, so the step itself has no MO/UM switch (seed Fig. 9.2). ``hold``: s to go
+    on recording once the step has settled (bounded by ``duration``). ``drive_trace``: the
     drive's own recorder of the same step (ops/drive_step.py, `--source drive`), armed just before
     the command and read once the guard has stopped the motor."""
     req = step_request(target, mode, value, duration=duration, uncalibrated=uncalibrated)
+    if not (math.isfinite(hold) and 0 <= hold < duration):
+        raise UsageError(f"--hold {hold}: expected seconds >= 0 and less than --for {duration:g}")
+    check_mode_first(mode, mode_first)
     # jog's checks before anything is armed: a position goal inside the normal range, a calibrated joint
     precheck(session, target, req)
     ref, joint = target.ref, target.joint
@@ -163,6 +188,12 @@ def run_step(session: ArmSession, target: JogTarget, mode: str, value: float, *,
                 _StopFirst(guard, ref, settings, rec, state, clock, sleep):
             if timebase is not None:
                 timebase.follow(rec.answered)
+            um = UM_OF.get(mode, settings.velocity_unit_mode)
+            if mode_first:
+                # Fig. 9.2: the drive already in the step's mode, its motor on and past the settle window
+                guard.enable(ref, um)
+                _wait(guard, clock, sleep, session.cfg.protocol.mo_settle)
+            state["switch_steps"] = _switch_steps(guard, ref, um)
             if drive_trace is not None:  # armed before t = 0: its set-up is not in the step's dead time
                 drive_trace.arm("now" if mode == "torque" else "bg")
                 t_armed = rec.now()
@@ -200,9 +231,10 @@ def run_step(session: ArmSession, target: JogTarget, mode: str, value: float, *,
             # --for counts from the step itself, not from the command (a switch may come first)
             state["ended_by"] = _until_settled(guard, rec, joint.name, signal, t_cmd, state["target"],
                                                state["switch"] + duration, clock, sleep, settle=mode != "torque",
-                                               jog_target=target, settings=settings, state=state)
+                                               jog_target=target, settings=settings, state=state, hold=hold)
         # the step ends where the motor was told to stop: the stop (and a limit recovery) is not the step
-        recording = _cut(rec.recording(t_zero=t_cmd), state["t_stop"] - t_cmd)
+        # --mode-first: the switch and its settle window before t = 0 are not the step either
+        recording = _cut(rec.recording(t_zero=t_cmd), state["t_stop"] - t_cmd, since=-PRE_S if mode_first else None)
         samples, expected = min(rec.counts().values()), rec.expected()
     # position: the recorded start is the reference (PX may not have been exactly 0)
     series = recording.series(joint.name, signal)
@@ -213,7 +245,13 @@ def run_step(session: ArmSession, target: JogTarget, mode: str, value: float, *,
         before = [v for t, v in zip(*series, strict=True) if t < 0]
         start = before[-1] if before else series[1][0]
         target_value = start + value
-    metrics = step_metrics(series[0], series[1], t_step=0.0, target=target_value)
+    # metrics only from a settled step: position and velocity settled while recording; a torque step
+    # (recorded for --for) has settled when its current ends within the band (log/settle.py)
+    if mode == "torque":
+        settled = state.get("breach") is None and settled_at_end(series[0], series[1], target_value)
+    else:
+        settled = "settled_at" in state
+    metrics = judged(step_metrics(series[0], series[1], t_step=0.0, target=target_value), settled)
     if drive_trace is not None:
         before = [v for t, v in zip(*series, strict=True) if t < 0]
         drive_trace.collect(session.cfg, joint.name, signal, state["t_stop"] - t_cmd, target_value,
@@ -221,7 +259,22 @@ def run_step(session: ArmSession, target: JogTarget, mode: str, value: float, *,
     return StepResult(joint=joint.name, drive=ref.name, mode=mode, value=value, target=target_value,
                       command=state["command"], switch_s=state["switch"], ended_by=state["ended_by"],
                       metrics=metrics, recording=recording, samples=samples, expected=expected, stop=guard.report,
-                      breach=state.get("breach"), recovered_to=state.get("recovered_to"))
+                      breach=state.get("breach"), recovered_to=state.get("recovered_to"), settled=settled,
+                      within=duration, switch_steps=tuple(state["switch_steps"]), mode_first=mode_first, hold=hold)
+
+
+def _switch_steps(guard: MotionGuard, ref: DriveRef, unit_mode: int) -> list[str]:
+    """What :meth:`MotionGuard.enable` will send before the step: a UM change needs the motor off
+    first, so a drive whose motor is on in another mode pays the drive's MO settle window twice
+    (MO=0 and MO=1: the 1026 ms of issue 25 on a 500 ms window), a drive whose motor is off once."""
+    steps = []
+    if guard.unit_mode(ref) != unit_mode:
+        if guard.motor_on(ref):
+            steps.append("MO=0")
+        steps.append(f"UM={unit_mode}")
+    if not guard.motor_on(ref) or steps:
+        steps.append("MO=1")
+    return steps
 
 
 def _wait(guard: MotionGuard, clock: Callable[[], float], sleep: Callable[[float], None], seconds: float) -> None:
@@ -237,9 +290,10 @@ def _wait(guard: MotionGuard, clock: Callable[[], float], sleep: Callable[[float
 def _until_settled(guard: MotionGuard, rec: Recorder, joint: str, signal: str, t_cmd: float, target: float,
                    duration: float, clock: Callable[[], float], sleep: Callable[[float], None], *, settle: bool,
                    jog_target: JogTarget,
-                   settings: MotionSettings, state: dict[str, Any]) -> str:
+                   settings: MotionSettings, state: dict[str, Any], hold: float = 0.0) -> str:
     """Record until the signal has stayed within 2 % of the step around the target for
-    SETTLE_HOLD_S (position and velocity steps), or until ``duration`` s after the command.
+    SETTLE_HOLD_S (position and velocity steps) and then ``hold`` s more, or until ``duration`` s
+    after the command (whichever comes first; a step cut off by ``duration`` is "not settled").
     Meanwhile the joint-limit watch (jog's, every ``settings.poll_interval``): past the full range
     the motor is stopped at once and the joint brought back to the nearest edge of its normal range."""
     next_settle = 0.0
@@ -251,13 +305,19 @@ def _until_settled(guard: MotionGuard, rec: Recorder, joint: str, signal: str, t
             state["t_stop"] = now  # the watch stopped the motor here; the way back is not the step
             return state["ended_by"]
         elapsed = now - t_cmd
+        settled_at = state.get("settled_at")
+        if settled_at is not None and elapsed >= settled_at + hold:
+            return "settled"
         if elapsed >= duration:
-            return "time up"
-        if settle and elapsed > SETTLE_HOLD_S and elapsed >= next_settle:
+            return "settled" if settled_at is not None else "time up"
+        if settle and settled_at is None and elapsed > SETTLE_HOLD_S and elapsed >= next_settle:
             next_settle = elapsed + CHECK_EVERY_S
             series = rec.recording(t_zero=t_cmd).series(joint, signal)
-            if series is not None and _settled(series, target):
-                return "settled"
+            if series is not None and settled_at_end(*series, target):
+                state["settled_at"] = elapsed
+                if hold <= 0:
+                    return "settled"
+                continue
         sleep(settings.poll_interval)
 
 
@@ -291,19 +351,8 @@ class _StopFirst:
             # on the way out of an error: never hide it; the guard's stop follows and reports
 
 
-def _cut(recording: Recording, until: float) -> Recording:
-    """The samples taken before ``until`` (s, the recording's time)."""
-    keep = [i for i, t in enumerate(recording.times) if t < until]
+def _cut(recording: Recording, until: float, since: float | None = None) -> Recording:
+    """The samples taken before ``until`` (and from ``since`` on, when given; s, the recording's time)."""
+    keep = [i for i, t in enumerate(recording.times) if t < until and (since is None or t >= since - 1e-9)]
     return Recording(times=[recording.times[i] for i in keep],
                      columns={name: [values[i] for i in keep] for name, values in recording.columns.items()})
-
-
-def _settled(series: tuple[list[float], list[float]], target: float) -> bool:
-    times, values = series
-    before = [v for t, v in zip(times, values, strict=True) if t < 0]
-    if not before:
-        return False
-    band = 0.02 * max(abs(target - before[-1]), 1e-9)
-    end = times[-1]
-    tail = [v for t, v in zip(times, values, strict=True) if t >= end - SETTLE_HOLD_S]
-    return len(tail) > 2 and end > SETTLE_HOLD_S and all(abs(v - target) <= band for v in tail)
