@@ -18,6 +18,7 @@ from sherpa_cli.config import load_config
 from sherpa_cli.elmo.codec import encode_execute, encode_set
 from sherpa_cli.errors import SafetyError, UsageError
 from sherpa_cli.motion import pair_start
+from sherpa_cli.motion.axis import resolve_axis
 from sherpa_cli.ops import diffdrive
 from sherpa_cli.ops.diffdrive import MoveRequest
 from sherpa_cli.sim import ManualClock, SimSettings
@@ -234,7 +235,7 @@ def test_jog_of_a_pair_joint_starts_both_motors_with_one_group_bg():
 
     cfg = load_config(FAST)
     with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
-        r = joint_jog.run(s, joint_jog.resolve_axis(cfg, "pitch"),
+        r = joint_jog.run(s, resolve_axis(cfg, "pitch"),
                           joint_jog.JogRequest(mode="position", to="300counts", uncalibrated=True))
         assert abs(r.end - 300) <= 1
         with s.sim.lock:
@@ -566,7 +567,7 @@ def test_jog_of_a_pair_joint_with_sync_rpdo_starts_both_at_one_sync(tmp_path):
     path.write_text(text)
     cfg = load_config(path)
     with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
-        r = joint_jog.run(s, joint_jog.resolve_axis(cfg, "pitch"),
+        r = joint_jog.run(s, resolve_axis(cfg, "pitch"),
                           joint_jog.JogRequest(mode="position", to="300counts", uncalibrated=True))
         assert abs(r.end - 300) <= 1
         with s.sim.lock:

@@ -11,6 +11,7 @@ from motion_helpers import JOG_CONFIG, calibrate, motors_off
 from sherpa_cli.bus.session import ArmSession
 from sherpa_cli.bus.targets import drive_ref
 from sherpa_cli.config import load_config
+from sherpa_cli.motion.axis import resolve_axis
 from sherpa_cli.motion.pair_start import CommonStart
 from sherpa_cli.ops import diffdrive, joint_jog
 from sherpa_cli.ops.diffdrive import MoveRequest
@@ -59,7 +60,7 @@ def test_a_sigma_jog_after_a_diffdrive_move_still_holds_delta():
     with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
         calibrate(s, "left", "right")
         diffdrive.run_move(s, cfg.pairs["diff"], MoveRequest(sigma="200counts", delta="200counts", relative=True))
-        axis = joint_jog.resolve_axis(cfg, "pitch")
+        axis = resolve_axis(cfg, "pitch")
         r = joint_jog.run(s, axis, joint_jog.JogRequest(mode="velocity", velocity="2000counts/s", duration=0.4))
     assert abs(r.joints_end["roll"] - r.joints_start["roll"]) <= 20, (r.joints_start, r.joints_end)
 
@@ -105,7 +106,7 @@ def test_an_error_during_a_sigma_jog_stops_both_motors_before_the_restore():
             raise RuntimeError("the view went away")
 
     with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
-        axis = joint_jog.resolve_axis(cfg, "pitch")
+        axis = resolve_axis(cfg, "pitch")
         with pytest.raises(RuntimeError):
             joint_jog.run(s, axis, joint_jog.JogRequest(mode="velocity", velocity="1000counts/s", duration=2.0),
                           on_progress=progress)
@@ -191,7 +192,7 @@ def test_one_pair_drive_dying_stops_the_partner_at_once_and_ends_the_command_nam
                 diffdrive.run_move(s, cfg.pairs["diff"], MoveRequest(sigma="2500counts", delta="0counts",
                                                                      relative=True, uncalibrated=True), sleep=sleep)
             else:
-                axis = joint_jog.resolve_axis(cfg, "pitch")
+                axis = resolve_axis(cfg, "pitch")
                 joint_jog.run(s, axis, joint_jog.JogRequest(mode="velocity", velocity="1000counts/s", duration=5.0),
                               sleep=sleep)
         with s.sim.lock:

@@ -16,8 +16,9 @@ from sherpa_cli.bus.session import ArmSession
 from sherpa_cli.config import load_config
 from sherpa_cli.config.model import SimDriveConfig
 from sherpa_cli.errors import SafetyError
+from sherpa_cli.motion.axis import resolve_axis
 from sherpa_cli.ops import joint_jog
-from sherpa_cli.ops.joint_jog import JogRequest, resolve_axis
+from sherpa_cli.ops.joint_jog import JogRequest
 from sherpa_cli.ops.live_jog import LiveJog, resolve_axes
 from sherpa_cli.sim.arm import SimArm
 

@@ -16,6 +16,7 @@ from sherpa_cli.errors import SherpaError, UsageError
 
 if TYPE_CHECKING:
     from sherpa_cli.config.model import ArmConfig
+    from sherpa_cli.motion.axis import Axis
     from sherpa_cli.ops import jog as ops_jog
     from sherpa_cli.ops import joint_jog
 
@@ -91,8 +92,9 @@ def jog(
       sherpa jog shoulder_roll --velocity 5deg/s --for 2 --apply
       sherpa jog elbow_pitch --to 0.5 --hold --apply
     """
+    from sherpa_cli.motion.axis import resolve_axis
     from sherpa_cli.motion.settings import MotionSettings
-    from sherpa_cli.ops.jog import JogRequest, check_request, resolve_jog_target, run_jog
+    from sherpa_cli.ops.jog import JogRequest, check_request, run_jog
 
     st = state(ctx)
     if _live(st, joints or [], interactive, joystick, device, list_joysticks, apply, uncalibrated,
@@ -109,14 +111,14 @@ def jog(
         raise UsageError("give exactly one of --to, --by, --velocity or --torque"
                          + (f" (got {', '.join(given)})" if given else ""))
     mode = "position" if to is not None or by is not None else "velocity" if velocity is not None else "torque"
-    if _is_pair_axis(cfg, joint):
+    target = resolve_axis(cfg, joint)  # the one resolver: plain joint, Σ/Δ joint, pair motor or drive
+    if target.pair is not None:  # ops/joint_jog.py moves what involves a pair (both motors, or Σ and Δ)
         if hold:
             raise UsageError("--hold is for plain joints for now: a Σ/Δ joint is not held after its move",
                              hint="jog the pair's joint without --hold")
         _notice_gravity(st, cfg, joint, hold=False, apply=apply)
-        _jog_pair(st, cfg, joint, mode, to, by, velocity, torque, parse_number(duration, "--for"), uncalibrated, apply)
+        _jog_pair(st, cfg, target, mode, to, by, velocity, torque, parse_number(duration, "--for"), uncalibrated, apply)
         return
-    target = resolve_jog_target(cfg, joint)
     req = JogRequest(mode=mode, to=_angle(to, "--to", target.cpr), by=_angle(by, "--by", target.cpr),
                      velocity=_angle(velocity, "--velocity", target.cpr, speed=True),
                      torque=_current(torque, "--torque"), duration=parse_number(duration, "--for"),
@@ -184,7 +186,7 @@ def _live(st: AppState, joints: list[str], interactive: bool, joystick: bool, de
     return True
 
 
-def _dry_run(st: AppState, target: ops_jog.JogTarget, req: ops_jog.JogRequest, cfg: ArmConfig) -> None:
+def _dry_run(st: AppState, target: Axis, req: ops_jog.JogRequest, cfg: ArmConfig) -> None:
     from sherpa_cli.joints.units import rad_per_s_to_counts_per_s, rad_to_counts
 
     ref = target.ref
@@ -258,19 +260,12 @@ def _current(text: str | None, option: str) -> float | None:
     return None if text is None else units.parse_current(text, what=option)
 
 
-def _is_pair_axis(cfg: ArmConfig, name: str) -> bool:
-    """A Σ/Δ joint, a pair, or one motor of a pair: jogged through ops/joint_jog.py."""
-    from sherpa_cli.bus import targets
-
-    return targets.resolve_one(cfg, name).pair is not None
-
-
-def _jog_pair(st: AppState, cfg: ArmConfig, name: str, mode: str, to: str | None, by: str | None,
+def _jog_pair(st: AppState, cfg: ArmConfig, axis: Axis, mode: str, to: str | None, by: str | None,
               velocity: str | None, torque: str | None, duration: float | None, uncalibrated: bool,
               apply: bool) -> None:
     from sherpa_cli.ops import joint_jog
 
-    axis = joint_jog.resolve_axis(cfg, name)
+    name = axis.name
     req = joint_jog.JogRequest(mode=mode, to=to, by=by, velocity=velocity, torque=torque, duration=duration,
                                uncalibrated=uncalibrated)
     if mode == "velocity" and duration is None:
@@ -299,7 +294,7 @@ def _jog_pair(st: AppState, cfg: ArmConfig, name: str, mode: str, to: str | None
         raise typer.Exit(1)
 
 
-def _axis_label(axis: joint_jog.Axis) -> str:
+def _axis_label(axis: Axis) -> str:
     pair = axis.pair
     assert pair is not None  # resolve_axis: every axis is a joint or a motor of a pair
     if axis.kind == "motor":
@@ -315,7 +310,7 @@ def _pos(counts: int, cpr: int) -> str:
     return f"{counts_to_rad(counts, cpr):+.4f} rad ({counts} counts)"
 
 
-def _pair_dry_run(st: AppState, axis: joint_jog.Axis, req: joint_jog.JogRequest,
+def _pair_dry_run(st: AppState, axis: Axis, req: joint_jog.JogRequest,
                   plan: joint_jog.JogPlan | None) -> None:
     a_b = ", ".join(axis.drives)
     if req.mode == "position":

@@ -21,7 +21,7 @@ if TYPE_CHECKING:
     from sherpa_cli.log.capture import CaptureResult
     from sherpa_cli.log.recording import Recording
     from sherpa_cli.log.step_metrics import StepMetrics
-    from sherpa_cli.ops.jog import JogTarget
+    from sherpa_cli.motion.axis import Axis
     from sherpa_cli.sim.arm import SimArm
     from sherpa_cli.sim.stepped import SteppedTime
 
@@ -617,7 +617,7 @@ def _render_step(st: Any, result: Any, mode: str, value: float, files: dict[str,
         raise typer.Exit(1)
 
 
-def _step_dry_run(st: AppState, cfg: ArmConfig, target: JogTarget, mode: str, value: float, duration: float, rate: float) -> None:
+def _step_dry_run(st: AppState, cfg: ArmConfig, target: Axis, mode: str, value: float, duration: float, rate: float) -> None:
     """Without --apply: what the step would send; nothing is sent, no file is written."""
     from sherpa_cli.joints.units import rad_per_s_to_counts_per_s, rad_to_counts
 

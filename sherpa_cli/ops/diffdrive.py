@@ -33,6 +33,7 @@ from sherpa_cli.elmo.protocol import UM_POSITION
 from sherpa_cli.errors import SafetyError, UsageError
 from sherpa_cli.joints import diffpair, units
 from sherpa_cli.motion import calibration, limit_watch
+from sherpa_cli.motion.axis import joints_moved_by
 from sherpa_cli.motion.blocked import blocked_text
 from sherpa_cli.motion.pair_start import CommonStart, pair_settings, stop_motors
 
@@ -491,7 +492,7 @@ def run_move(session: ArmSession, pair: PairConfig, request: MoveRequest, *,
     refs = _refs(cfg, drives)
     by_name = {r.name: r for r in refs}
     settings = MotionSettings.from_config(cfg, {r.bus for r in refs})
-    watched = tuple(limit_watch.joints_moved_by(cfg, drives))
+    watched = tuple(joints_moved_by(cfg, drives))
     sj, dj = cfg.joints[pair.sigma], cfg.joints[pair.delta]
     result = MoveResult(pair.name, pair.sigma, pair.delta, drives, "naive" if request.naive else method,
                         request.feedback, p.start, p.target, p.start, sj.cpr, dj.cpr,

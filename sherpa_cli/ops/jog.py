@@ -18,14 +18,12 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
-from sherpa_cli.bus import targets
-from sherpa_cli.bus.targets import DriveRef
-from sherpa_cli.config.model import ArmConfig, JointConfig, JointRole
 from sherpa_cli.elmo.faults import StatusRegister, decode_sr, describe_mf
 from sherpa_cli.elmo.protocol import UM_POSITION, UM_TORQUE
 from sherpa_cli.errors import SafetyError, UsageError
 from sherpa_cli.joints.units import counts_to_rad, rad_per_s_to_counts_per_s, rad_to_counts
 from sherpa_cli.motion import stopping
+from sherpa_cli.motion.axis import Axis
 from sherpa_cli.motion.blocked import StallWatch, blocked_text
 from sherpa_cli.motion.guard import MotionGuard
 from sherpa_cli.motion.report import GuardReport
@@ -38,19 +36,6 @@ if TYPE_CHECKING:
     from sherpa_cli.motion.limit_watch import Breach
 
 MODES = ("position", "velocity", "torque")
-
-
-@dataclass(frozen=True)
-class JogTarget:
-    """What a name given to `jog` moves: one drive, and the plain joint it drives (if any)."""
-
-    name: str  # as the user gave it
-    ref: DriveRef
-    joint: JointConfig | None
-
-    @property
-    def cpr(self) -> int | None:
-        return self.joint.cpr if self.joint is not None else None
 
 
 @dataclass(frozen=True)
@@ -114,21 +99,11 @@ class JogResult:
                 "calibration": None if self.calibration is None else self.calibration.as_dict()}
 
 
-def resolve_jog_target(cfg: ArmConfig, text: str) -> JogTarget:
-    """A plain joint, the drive of one, or BUS:NODE (bus/targets.py decides what a name means);
-    a differential pair, its Σ/Δ joints and its motors are refused here."""
-    t = targets.resolve_one(cfg, text)
-    if t.pair is not None:
-        raise UsageError(f"'{text}' moves the differential pair '{t.pair.name}': jogging Σ/Δ joints is not "
-                         "supported here", hint="jog a plain joint or its drive")
-    if len(t.drives) != 1:
-        raise UsageError(f"'{text}' is moved by {len(t.drives)} drives ({', '.join(t.drive_names)}); name one")
-    plain = [j for j in t.joints if j.role is JointRole.PLAIN]
-    return JogTarget(text, t.drives[0], plain[0] if len(plain) == 1 else None)
-
-
-def check_request(target: JogTarget, req: JogRequest) -> None:
+def check_request(target: Axis, req: JogRequest) -> None:
     """Refuse what must not reach a drive, before the bus is even opened."""
+    if target.pair is not None:  # a Σ/Δ joint or a pair motor: ops/joint_jog.py moves those
+        raise UsageError(f"'{target.name}' moves the differential pair '{target.pair.name}': jogging Σ/Δ joints is "
+                         "not supported here", hint="jog a plain joint or its drive")
     if req.mode not in MODES:
         raise UsageError(f"jog mode '{req.mode}': expected one of {', '.join(MODES)}")
     for what, value in (("--to", req.to), ("--by", req.by), ("--velocity", req.velocity),
@@ -178,12 +153,12 @@ def check_request(target: JogTarget, req: JogRequest) -> None:
                              f"{current.continuous} A (config current.continuous)")
 
 
-def _counts_to(target: JogTarget, rad: float) -> int:
+def _counts_to(target: Axis, rad: float) -> int:
     assert target.cpr is not None
     return rad_to_counts(rad, target.cpr)
 
 
-def run_jog(session: ArmSession, target: JogTarget, req: JogRequest, *, settings: MotionSettings,
+def run_jog(session: ArmSession, target: Axis, req: JogRequest, *, settings: MotionSettings,
             clock: Callable[[], float] = time.monotonic, sleep: Callable[[float], None] = time.sleep,
             on_progress: Callable[[JogProgress], None] | None = None,
             on_event: Callable[[str], None] | None = None, keep: bool = False) -> JogResult:
@@ -226,7 +201,7 @@ def run_jog(session: ArmSession, target: JogTarget, req: JogRequest, *, settings
                      breach=state.get("breach"), recovered_to=state.get("recovered_to"), calibration=cal)
 
 
-def precheck(session: ArmSession, target: JogTarget, req: JogRequest) -> Calibration | None:
+def precheck(session: ArmSession, target: Axis, req: JogRequest) -> Calibration | None:
     """Before anything is armed (wave/jog, docs/motion.md): a position move must stay inside the
     joint's NORMAL range and needs a calibrated joint (or ``uncalibrated``). Reads PX and the
     calibration flag; writes nothing. Returns the calibration found (None for other modes)."""
@@ -255,7 +230,7 @@ def precheck(session: ArmSession, target: JogTarget, req: JogRequest) -> Calibra
     return cal
 
 
-def _move(guard: MotionGuard, target: JogTarget, req: JogRequest, settings: MotionSettings, state: dict[str, Any],
+def _move(guard: MotionGuard, target: Axis, req: JogRequest, settings: MotionSettings, state: dict[str, Any],
           clock: Callable[[], float], sleep: Callable[[float], None],
           on_progress: Callable[[JogProgress], None] | None) -> None:
     ref = target.ref
@@ -278,13 +253,14 @@ def _move(guard: MotionGuard, target: JogTarget, req: JogRequest, settings: Moti
         guard.enable(ref, UM_POSITION)
         # the speed comes from the config, never from whatever SP the drive holds (an unprogrammed
         # drive: 1800 counts/s); the guard puts SP back on the way out
-        c.set("SP", 0, position_speed(target, settings))
-        bound = _move_bound(c, abs(goal - start))
+        speed = position_speed(target, settings)
+        c.set("SP", 0, speed)
+        bound = _move_bound(c, target, abs(goal - start), speed)
         c.set("PA", 0, goal)
         state["command"] = f"PA={goal}"
         state["t0"] = clock()
         c.execute("BG")
-        watch(lambda sr: sr.motion_status == 0, bound, settings.stall_watch(position_speed(target, settings)))
+        watch(lambda sr: sr.motion_status == 0, bound, settings.stall_watch(speed))
         state["ended_by"] = state["ended_by"] or "target reached"
     elif req.mode == "velocity":
         assert req.velocity is not None and target.cpr is not None  # checked when the request was made
@@ -308,7 +284,7 @@ def _move(guard: MotionGuard, target: JogTarget, req: JogRequest, settings: Moti
         _hold(guard, c, target, req, settings, state, clock, sleep, on_progress)
 
 
-def _hold(guard: MotionGuard, c: DriveClient, target: JogTarget, req: JogRequest, settings: MotionSettings,
+def _hold(guard: MotionGuard, c: DriveClient, target: Axis, req: JogRequest, settings: MotionSettings,
           state: dict[str, Any], clock: Callable[[], float], sleep: Callable[[float], None],
           on_progress: Callable[[JogProgress], None] | None) -> None:
     """--hold: stop a velocity or torque motion from standstill, then keep the motor on in position
@@ -341,7 +317,7 @@ def _hold(guard: MotionGuard, c: DriveClient, target: JogTarget, req: JogRequest
         sleep(settings.poll_interval)
 
 
-def position_speed(target: JogTarget, settings: MotionSettings) -> int:
+def position_speed(target: Axis, settings: MotionSettings) -> int:
     """counts/s of a position jog: the joint's velocity.limit, or motion.recovery_fallback_speed for a
     joint without one (the seed's rosparam format has none)."""
     joint = target.joint
@@ -350,15 +326,13 @@ def position_speed(target: JogTarget, settings: MotionSettings) -> int:
     return settings.recovery_fallback_speed
 
 
-def _move_bound(c: DriveClient, distance: int) -> float:
-    """A generous bound for a PTP move: twice the profile's time at SP, AC and DC, plus 2 s."""
-    sp = max(abs(int(c.get("SP"))), 1)
-    ac = max(abs(int(c.get("AC"))), 1)
-    dc = max(abs(int(c.get("DC"))), 1)
-    return 2 * (distance / sp + sp / ac + sp / dc) + 2.0
+def _move_bound(c: DriveClient, target: Axis, distance: int, speed: int) -> float:
+    """The one move-time bound (motion/axis.py) at the speed set, with the ramps the drive will use."""
+    return target.move_time_bound(distance, speed, accel=abs(int(c.get("AC"))) or None,
+                                  decel=abs(int(c.get("DC"))) or None)
 
 
-def _watch(guard: MotionGuard, c: DriveClient, target: JogTarget, clock: Callable[[], float], sleep: Callable[[float], None],
+def _watch(guard: MotionGuard, c: DriveClient, target: Axis, clock: Callable[[], float], sleep: Callable[[float], None],
            settings: MotionSettings, state: dict[str, Any], on_progress: Callable[[JogProgress], None] | None,
            *, done: Callable[[StatusRegister], bool] | None, limit: float | None,
            stall: StallWatch | None = None) -> None:
@@ -392,7 +366,7 @@ def _watch(guard: MotionGuard, c: DriveClient, target: JogTarget, clock: Callabl
         sleep(settings.poll_interval if limit is None else min(settings.poll_interval, max(limit - elapsed, 0.0)))
 
 
-def limit_breach(guard: MotionGuard, c: DriveClient, target: JogTarget, px: int, settings: MotionSettings,
+def limit_breach(guard: MotionGuard, c: DriveClient, target: Axis, px: int, settings: MotionSettings,
                   clock: Callable[[], float], sleep: Callable[[float], None], state: dict[str, Any]) -> bool:
     """The joint-limit watch (seed 6.1, motion/limit_watch.py): past the full range, stop at once, send
     nothing more of the jog, and move the joint back (position mode) to the nearest normal edge."""
@@ -401,7 +375,7 @@ def limit_breach(guard: MotionGuard, c: DriveClient, target: JogTarget, px: int,
 
     joint = target.joint
     assert joint is not None
-    watched = [limit_watch.WatchedJoint(joint.name, joint.full_range, joint.normal_range, target.ref.name)]
+    watched = list(target.watched)
     breaches = limit_watch.check(watched, {target.ref.name: px})
     if not breaches:
         return False

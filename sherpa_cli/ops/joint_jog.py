@@ -30,13 +30,14 @@ from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
 from sherpa_cli.bus.targets import DriveRef
-from sherpa_cli.config.model import ArmConfig, JointConfig, PairConfig
+from sherpa_cli.config.model import ArmConfig
 from sherpa_cli.elmo.protocol import UM_POSITION, UM_TORQUE
 from sherpa_cli.errors import SafetyError, UsageError
 from sherpa_cli.joints import diffpair, units
 from sherpa_cli.motion import calibration, limit_watch
+from sherpa_cli.motion.axis import Axis, move_time_bound
 from sherpa_cli.motion.blocked import blocked_text
-from sherpa_cli.motion.limit_watch import Breach, WatchedJoint
+from sherpa_cli.motion.limit_watch import Breach
 from sherpa_cli.motion.stopping import wait_all_standstill
 
 if TYPE_CHECKING:
@@ -47,64 +48,6 @@ if TYPE_CHECKING:
 
 Range = tuple[int, int]
 MODES = ("position", "velocity", "torque")
-
-
-@dataclass(frozen=True)
-class Axis:
-    """What a jog moves, with the limits that apply to it."""
-
-    name: str  # as the user named it
-    kind: str  # sigma | delta | motor
-    cpr: int
-    drives: tuple[str, ...]  # one drive, or (drive_a, drive_b) of a pair
-    normal: Range | None  # of the moved joint (None for a motor: both pair joints are checked)
-    full: Range | None
-    vel_limit: int | None  # counts/s of the moved joint
-    current_limit: float | None  # A per motor (the configured continuous limit)
-    watched: tuple[WatchedJoint, ...]
-    joints: tuple[JointConfig, ...]  # the joints whose calibration matters
-    pair: PairConfig | None = None
-
-    @property
-    def sensed(self) -> tuple[str, ...]:
-        """Every drive whose position the watch needs (a pair motor alone: both motors of the pair)."""
-        out = list(self.drives)
-        for j in self.watched:
-            out += [d for d in j.drives if d not in out]
-        return tuple(out)
-
-    def position(self, motors: Mapping[str, int]) -> int:
-        if self.kind == "motor":
-            return motors[self.drives[0]]
-        a, b = (motors[d] for d in self.drives)
-        return a + b if self.kind == "sigma" else a - b
-
-
-def resolve_axis(cfg: ArmConfig, name: str) -> Axis:
-    """The axis behind a Σ/Δ joint, or one motor of a pair (by drive name or BUS:NODE); bus/targets.py
-    decides what the name means. Plain joints go through ops/jog.py; a whole pair is refused."""
-    from sherpa_cli.bus import targets
-
-    t = targets.resolve_one(cfg, name)
-    pair = t.pair
-    if pair is None:
-        raise UsageError(f"'{name}' is not a joint or motor of a differential pair; a plain joint is jogged "
-                         "through ops/jog.py")
-    if t.kind is targets.TargetKind.PAIR:
-        raise UsageError(f"'{name}' is a differential pair: name the joint to move ({pair.sigma} or {pair.delta}) "
-                         f"or one motor ({pair.drive_a} or {pair.drive_b})")
-    sigma, delta = cfg.joints[pair.sigma], cfg.joints[pair.delta]
-    cur = pair.current.continuous if pair.current is not None else None
-    if t.kind is not targets.TargetKind.JOINT:  # a drive name or BUS:NODE: one motor of the pair
-        (ref,) = t.drives
-        # one motor at v moves Σ and Δ at v each: the slower joint limit bounds it
-        limits = [v for v in (sigma.vel_limit, delta.vel_limit) if v is not None]
-        return Axis(ref.name, "motor", sigma.cpr, (ref.name,), None, None, min(limits) if limits else None, cur,
-                    tuple(limit_watch.joints_moved_by(cfg, [ref.name])), (sigma, delta), pair)
-    (joint,) = t.joints
-    watched = tuple(limit_watch.joints_moved_by(cfg, (pair.drive_a, pair.drive_b)))
-    return Axis(joint.name, joint.role.value, joint.cpr, (pair.drive_a, pair.drive_b), joint.normal_range,
-                joint.full_range, joint.vel_limit, cur, watched, (joint,), pair)
 
 
 @dataclass(frozen=True)
@@ -169,35 +112,21 @@ def plan(cfg: ArmConfig, axis: Axis, request: JogRequest, motors: Mapping[str, i
     if request.mode == "velocity":
         if request.velocity is None:
             raise UsageError("a velocity jog needs --velocity")
-        v = units.parse_velocity(request.velocity, axis.cpr, what="--velocity")
+        v = units.parse_velocity(request.velocity, axis.joint_cpr, what="--velocity")
         _check_speed(axis, v, "--velocity")
         return JogPlan(axis, "velocity", start, speed=v, duration=request.duration,
-                       motor_speeds=_motor_speeds(axis, v))
+                       motor_speeds=axis.motor_velocities(v))
     if request.torque is None:
         raise UsageError("a torque jog needs --torque")
     amps = units.parse_current(request.torque, what="--torque")
     if amps == 0:
         raise UsageError("--torque must not be 0")
-    currents = _motor_currents(axis, amps)
+    currents = axis.motor_currents(amps)
     worst = max(abs(c) for c in currents.values())
     if axis.current_limit is not None and worst > axis.current_limit:
         raise UsageError(f"{axis.name}: --torque {amps:g} A puts {worst:g} A on a motor, above the configured "
                           f"continuous limit {axis.current_limit:g} A")
     return JogPlan(axis, "torque", start, current=amps, duration=request.duration, motor_currents=currents)
-
-
-def _motor_speeds(axis: Axis, v: int) -> dict[str, int]:
-    if axis.kind == "motor":
-        return {axis.drives[0]: v}
-    a, b = diffpair.motor_velocities(v, 0) if axis.kind == "sigma" else diffpair.motor_velocities(0, v)
-    return dict(zip(axis.drives, (a, b), strict=True))
-
-
-def _motor_currents(axis: Axis, amps: float) -> dict[str, float]:
-    if axis.kind == "motor":
-        return {axis.drives[0]: amps}
-    a, b = diffpair.motor_currents(amps, 0.0) if axis.kind == "sigma" else diffpair.motor_currents(0.0, amps)
-    return dict(zip(axis.drives, (a, b), strict=True))
 
 
 def _plan_position(cfg: ArmConfig, axis: Axis, request: JogRequest, motors: Mapping[str, int],
@@ -207,9 +136,9 @@ def _plan_position(cfg: ArmConfig, axis: Axis, request: JogRequest, motors: Mapp
     if request.duration is not None:
         raise UsageError("--for applies to --velocity and --torque jogs; a position move ends at its target")
     if request.to is not None:
-        target = units.parse_position(request.to, axis.cpr, what="--to")
+        target = units.parse_position(request.to, axis.joint_cpr, what="--to")
     else:
-        target = start + units.parse_position(request.by or "", axis.cpr, what="--by")
+        target = start + units.parse_position(request.by or "", axis.joint_cpr, what="--by")
     if axis.normal is not None and not axis.normal[0] <= target <= axis.normal[1]:
         raise UsageError(f"{axis.name}: target {target} counts is outside the joint's normal range "
                           f"{_fmt_range(axis.normal)}", hint="jog moves a joint only inside its normal range")
@@ -218,11 +147,11 @@ def _plan_position(cfg: ArmConfig, axis: Axis, request: JogRequest, motors: Mapp
         after = {**motors, **targets}
         for j in axis.watched:
             p = j.position(after)
-            if not j.normal[0] <= p <= j.normal[1]:
+            if j.normal is not None and not j.inside_normal(p):
                 raise UsageError(f"{axis.name}: moving this motor to {target} puts joint {j.name} at {p} counts, "
                                   f"outside its normal range {_fmt_range(j.normal)}")
     if request.velocity is not None:
-        speed = abs(units.parse_velocity(request.velocity, axis.cpr, what="--velocity"))
+        speed = abs(units.parse_velocity(request.velocity, axis.joint_cpr, what="--velocity"))
         _check_speed(axis, speed, "--velocity")
     elif axis.vel_limit is not None:
         speed = axis.vel_limit
@@ -232,22 +161,14 @@ def _plan_position(cfg: ArmConfig, axis: Axis, request: JogRequest, motors: Mapp
     duration = distance / speed if distance else 0.0
     sp = {d: (max(1, math.ceil(abs(t - motors[d]) / duration)) if duration else speed)
           for d, t in targets.items()}
-    timeout = 2 * duration + 5.0  # ramps and settling; arriving later means something is wrong
+    timeout = move_time_bound(distance, speed)  # the one bound (motion/axis.py)
     return JogPlan(axis, "position", start, target=target, speed=speed, motor_targets=targets, motor_speeds=sp,
                    timeout=timeout)
 
 
 def _motor_targets(axis: Axis, target: int, motors: Mapping[str, int]) -> dict[str, int]:
-    if axis.kind == "motor":
-        return {axis.drives[0]: target}
-    a, b = axis.drives
-    s, d = motors[a] + motors[b], motors[a] - motors[b]
     held = next((j for j in axis.watched if j.name != axis.name and j.drive_b is not None), None)
-    if axis.kind == "sigma":
-        s2, d2 = diffpair.hold_other(target, d, "sigma", held.normal if held else None)
-    else:
-        s2, d2 = diffpair.hold_other(s, target, "delta", held.normal if held else None)
-    return dict(zip(axis.drives, diffpair.to_motors(s2, d2), strict=True))
+    return axis.motor_targets(target, motors, held.normal if held is not None else None)
 
 
 def check_offline(cfg: ArmConfig, axis: Axis, request: JogRequest) -> JogPlan | None:
@@ -259,9 +180,9 @@ def check_offline(cfg: ArmConfig, axis: Axis, request: JogRequest) -> JogPlan | 
     if request.to is not None and request.by is None:
         return plan(cfg, axis, request, zero) if axis.kind != "motor" else None
     if request.by is not None and request.to is None:
-        units.parse_position(request.by, axis.cpr, what="--by")
+        units.parse_position(request.by, axis.joint_cpr, what="--by")
         if request.velocity is not None:
-            _check_speed(axis, abs(units.parse_velocity(request.velocity, axis.cpr, what="--velocity")), "--velocity")
+            _check_speed(axis, abs(units.parse_velocity(request.velocity, axis.joint_cpr, what="--velocity")), "--velocity")
         return None
     raise UsageError("a position jog needs exactly one of --to and --by")
 
@@ -364,7 +285,7 @@ def run(session: ArmSession, axis: Axis, request: JogRequest, *,
     settings = MotionSettings.from_config(cfg, {r.bus for r in refs})
     factory = guard_factory or MotionGuard
     joints_start = {j.name: j.position(motors) for j in axis.watched}
-    result = JogResult(axis.name, axis.kind, p.mode, axis.drives, axis.cpr, p.start, p.start, target=p.target,
+    result = JogResult(axis.name, axis.kind, p.mode, axis.drives, axis.joint_cpr, p.start, p.start, target=p.target,
                        speed=p.speed, current=p.current, duration=p.duration, joints_start=joints_start,
                        motors_start=dict(motors), calibration=cals,
                        joint_cpr={j.name: cfg.joints[j.name].cpr for j in axis.watched})

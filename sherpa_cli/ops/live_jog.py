@@ -38,8 +38,8 @@ from sherpa_cli.errors import ExitCode, SafetyError, SherpaError, UsageError
 from sherpa_cli.joints import diffpair
 from sherpa_cli.joints.units import counts_to_rad
 from sherpa_cli.motion import calibration, limit_watch
+from sherpa_cli.motion.axis import Axis, joint_axis, joints_moved_by
 from sherpa_cli.motion.guard import MotionGuard
-from sherpa_cli.motion.limit_watch import WatchedJoint
 from sherpa_cli.motion.report import GuardReport
 from sherpa_cli.motion.settings import MotionSettings
 from sherpa_cli.ops import joint_jog
@@ -60,27 +60,7 @@ class HomingAborted(SherpaError):
 KEEPALIVE_S = 0.5  # a velocity/torque command stops this long after the last key press
 
 
-@dataclass(frozen=True)
-class LiveAxis:
-    """One joint the session can move: a plain joint (one drive) or a Σ/Δ joint of a pair."""
-
-    name: str
-    kind: str  # plain | sigma | delta
-    joint: JointConfig
-    drives: tuple[str, ...]
-    watched: WatchedJoint
-    vel_limit: int | None  # counts/s
-    current_limit: float | None  # A per motor
-
-    @property
-    def cpr(self) -> int:
-        return self.joint.cpr
-
-    def position(self, motors: Mapping[str, int]) -> int:
-        return self.watched.position(motors)
-
-
-def resolve_axes(cfg: ArmConfig, names: Sequence[str] | None) -> list[LiveAxis]:
+def resolve_axes(cfg: ArmConfig, names: Sequence[str] | None) -> list[Axis]:
     """The joints named (a pair means both its joints), or every joint of the config."""
     chosen: list[JointConfig] = []
     if not names:
@@ -93,17 +73,7 @@ def resolve_axes(cfg: ArmConfig, names: Sequence[str] | None) -> list[LiveAxis]:
         if not joints:
             raise UsageError(f"'{text}' moves no configured joint", hint="name a joint, a pair or a drive of the config")
         chosen += [j for j in joints if j not in chosen]
-    out = []
-    for j in chosen:
-        w = WatchedJoint.of(cfg, j)
-        if j.role is JointRole.PLAIN:
-            cur = j.current.continuous if j.current is not None else None
-            out.append(LiveAxis(j.name, "plain", j, w.drives, w, j.vel_limit, cur))
-        else:
-            pair = cfg.pairs[j.pair]  # type: ignore[index]
-            cur = pair.current.continuous if pair.current is not None else None
-            out.append(LiveAxis(j.name, j.role.value, j, (pair.drive_a, pair.drive_b), w, j.vel_limit, cur))
-    return out
+    return [joint_axis(cfg, j) for j in chosen]
 
 
 @dataclass
@@ -143,7 +113,7 @@ class _Running:
 class LiveJog:
     """``with LiveJog(session, axes) as live:`` -- see the module docstring."""
 
-    def __init__(self, session: ArmSession, axes: Sequence[LiveAxis], *, settings: MotionSettings | None = None,
+    def __init__(self, session: ArmSession, axes: Sequence[Axis], *, settings: MotionSettings | None = None,
                  keepalive: float = KEEPALIVE_S, allow_uncalibrated: bool = False, tick_period: float = 0.1,
                  clock: Callable[[], float] = time.monotonic, sleep: Callable[[float], None] = time.sleep,
                  on_event: Callable[[str], None] | None = None) -> None:
@@ -158,7 +128,7 @@ class LiveJog:
         self.drives = tuple(drives)
         self.refs = {d: targets.drive_ref(self.cfg, d) for d in drives}
         # every joint these motors move (a Σ joint alone still moves Δ): the watch covers them all
-        self.watched = limit_watch.joints_moved_by(self.cfg, drives)
+        self.watched = joints_moved_by(self.cfg, drives)
         self.settings = settings or MotionSettings.from_config(self.cfg, {r.bus for r in self.refs.values()})
         self.keepalive = keepalive
         self.tick_period = tick_period  # how often the caller ticks (the edge hold looks this far ahead)
@@ -222,12 +192,13 @@ class LiveJog:
             return self._refuse(name, f"{name} is {st.calibration}: position steps need a calibrated joint "
                                       "(home it, or start with --uncalibrated)")
         self.guard.check()
-        now = self._sample(a.drives + tuple(d for d in a.watched.drives if d not in a.drives))
+        now = self._sample(a.drives)
         start = a.position(now)
         base = self.running[name].motors.get("target", start) if name in self.running and \
             self.running[name].mode == "position" else start
         goal = int(to) if to is not None else int(base) + int(counts)
-        lo, hi = a.joint.normal_range
+        assert a.normal is not None  # a joint's axis (resolve_axes) has its ranges
+        lo, hi = a.normal
         if not lo <= goal <= hi:
             return self._refuse(name, f"{name}: target {goal} counts is outside the normal range [{lo}, {hi}]: "
                                       "not sent")
@@ -235,7 +206,8 @@ class LiveJog:
             motor_targets = {a.drives[0]: goal}
         else:
             # the other joint of the pair holds; on a parity clash it gives way by one count (joint_jog)
-            pair = self.cfg.pairs[a.joint.pair]  # type: ignore[index]
+            pair = a.pair
+            assert pair is not None  # a Σ/Δ joint's axis carries its pair
             held = self.cfg.joints[pair.delta if a.kind == "sigma" else pair.sigma]
             ma, mb = (now[d] for d in a.drives)
             s_now, d_now = ma + mb, ma - mb
@@ -428,9 +400,9 @@ class LiveJog:
                 self._read_calibration([a for a in self.axes.values() if set(a.drives) & set(drives)])
         return report
 
-    def _read_calibration(self, axes: Sequence[LiveAxis]) -> None:
+    def _read_calibration(self, axes: Sequence[Axis]) -> None:
         for a in axes:
-            c = calibration.read_calibration(self.cfg, a.joint, lambda d: self._raw(d))
+            c = calibration.read_calibration(self.cfg, self._joint(a), lambda d: self._raw(d))
             self.state[a.name].calibrated = c.calibrated
             self.state[a.name].calibration = c.reason
 
@@ -476,7 +448,7 @@ class LiveJog:
         for name, a in self.axes.items():
             st = self.state[name]
             st.counts = a.position(motors)
-            st.rad = counts_to_rad(st.counts, a.cpr)
+            st.rad = counts_to_rad(st.counts, self._joint(a).cpr)
             now_running = self.running.get(name)
             if now_running is not None and now_running.mode == "position" and all(
                     int(self._client(d).get("MS")) == 0 for d in a.drives if d not in self.dead):
@@ -493,19 +465,24 @@ class LiveJog:
 
     # -- internals ---------------------------------------------------------------------------------
 
-    def _axis(self, name: str) -> LiveAxis:
+    def _axis(self, name: str) -> Axis:
         try:
             return self.axes[name]
         except KeyError:
             raise UsageError(f"'{name}' is not a joint of this session ({', '.join(self.axes)})") from None
 
-    def _pair_axes(self, a: LiveAxis) -> list[LiveAxis]:
+    @staticmethod
+    def _joint(a: Axis) -> JointConfig:
+        assert a.joint is not None  # the session's axes are joints (resolve_axes)
+        return a.joint
+
+    def _pair_axes(self, a: Axis) -> list[Axis]:
         out = [b for b in self.axes.values() if b.drives == a.drives]
         if a.kind == "plain":
             return [a]
         if len(out) < 2:  # the other joint of the pair is not in the session: still limit it
             for j in (self.cfg.joints[n] for n in self.cfg.joints):
-                if j.pair == a.joint.pair and j.name != a.name:
+                if j.pair == self._joint(a).pair and j.name != a.name:
                     out += resolve_axes(self.cfg, [j.name])
         return out
 
@@ -572,8 +549,8 @@ class LiveJog:
         velocity mode the edge is met early by the distance the joint needs to stop (its configured
         decel) plus one tick of travel, so the stop lands inside the normal range."""
         pos = positions if positions is not None else self.motors
-        for j in limit_watch.joints_moved_by(self.cfg, motors):
-            if any(d not in pos for d in j.drives):
+        for j in joints_moved_by(self.cfg, motors):
+            if any(d not in pos for d in j.drives) or j.normal is None:
                 continue
             rate = float(motors.get(j.drive_a, 0)) + (j.sign * float(motors.get(j.drive_b, 0))
                                                        if j.drive_b is not None else 0.0)

@@ -34,11 +34,12 @@ from sherpa_cli.joints.units import counts_to_rad, rad_per_s_to_counts_per_s, ra
 from sherpa_cli.log.record import Recorder, bus_budget
 from sherpa_cli.log.recording import Recording
 from sherpa_cli.log.step_metrics import StepMetrics, step_metrics
+from sherpa_cli.motion.axis import Axis, resolve_axis
 from sherpa_cli.motion.guard import MotionGuard
 from sherpa_cli.motion.report import GuardReport
 from sherpa_cli.motion.settings import MotionSettings
 from sherpa_cli.motion.stopping import stop_drive
-from sherpa_cli.ops.jog import JogRequest, JogTarget, check_request, limit_breach, precheck, resolve_jog_target
+from sherpa_cli.ops.jog import JogRequest, check_request, limit_breach, precheck
 
 if TYPE_CHECKING:
     import can
@@ -83,7 +84,7 @@ class StepResult:
                 "limit": None if self.breach is None else {**self.breach.as_dict(), "recovered_to": self.recovered_to}}
 
 
-def resolve_step_target(cfg: ArmConfig, text: str) -> JogTarget:
+def resolve_step_target(cfg: ArmConfig, text: str) -> Axis:
     """The joint to step: a plain joint or its drive. A differential pair (its Σ/Δ joints or its
     motors) is refused: a Σ or Δ step moves both motors at once, which is `diffdrive move`'s."""
     from sherpa_cli.bus.targets import resolve_one
@@ -96,7 +97,7 @@ def resolve_step_target(cfg: ArmConfig, text: str) -> JogTarget:
                          f"steps move both motors ({p.drive_a}, {p.drive_b})",
                          hint=f"record the pair (sherpa log record {p.sigma} {p.delta} --for S -o pair.csv) while "
                          "`sherpa diffdrive move` moves it")
-    return resolve_jog_target(cfg, text)
+    return resolve_axis(cfg, text)
 
 
 class SyncSource(Protocol):
@@ -118,7 +119,7 @@ class StepTime(Protocol):
     def follow(self, answered: Callable[[int], bool]) -> None: ...
 
 
-def step_request(target: JogTarget, mode: str, value: float, *, duration: float,
+def step_request(target: Axis, mode: str, value: float, *, duration: float,
                  uncalibrated: bool = False) -> JogRequest:
     """The step as a jog request, with every check that needs no bus (`jog`'s); a dry run's checks."""
     if target.joint is None:
@@ -132,7 +133,7 @@ def step_request(target: JogTarget, mode: str, value: float, *, duration: float,
     return req
 
 
-def run_step(session: ArmSession, target: JogTarget, mode: str, value: float, *, duration: float, rate: float,
+def run_step(session: ArmSession, target: Axis, mode: str, value: float, *, duration: float, rate: float,
              settings: MotionSettings, sleep: Callable[[float], None] = time.sleep,
              on_event: Callable[[str], None] | None = None, recorder_kw: dict[str, Any] | None = None,
              uncalibrated: bool = False, timebase: StepTime | None = None) -> StepResult:
@@ -219,7 +220,7 @@ def _wait(guard: MotionGuard, clock: Callable[[], float], sleep: Callable[[float
 
 def _until_settled(guard: MotionGuard, rec: Recorder, joint: str, signal: str, t_cmd: float, target: float,
                    duration: float, clock: Callable[[], float], sleep: Callable[[float], None], *, settle: bool,
-                   jog_target: JogTarget,
+                   jog_target: Axis,
                    settings: MotionSettings, state: dict[str, Any]) -> str:
     """Record until the signal has stayed within 2 % of the step around the target for
     SETTLE_HOLD_S (position and velocity steps), or until ``duration`` s after the command.
