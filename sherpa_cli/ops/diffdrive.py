@@ -32,8 +32,8 @@ from sherpa_cli.config.model import ArmConfig, PairConfig
 from sherpa_cli.elmo.protocol import UM_POSITION
 from sherpa_cli.errors import SafetyError, UsageError
 from sherpa_cli.joints import diffpair, units
-from sherpa_cli.motion import calibration, limit_watch
-from sherpa_cli.motion.axis import joints_moved_by
+from sherpa_cli.motion import calibration, limit_watch, recovery
+from sherpa_cli.motion.axis import joints_moved_by, move_time_bound
 from sherpa_cli.motion.blocked import blocked_text
 from sherpa_cli.motion.pair_start import CommonStart, pair_settings, stop_motors
 
@@ -175,9 +175,9 @@ def plan_move(cfg: ArmConfig, pair: PairConfig, request: MoveRequest, motors: Ma
     prof = profiles(dist, speed, ac, dc, scaled=not request.naive)
     if request.naive:
         prof = {n: Profile(speed, ac, dc) for n in dist}
-    ramps = speed / ac + speed / dc
+    # the one move-time bound (motion/axis.py): the cruise at speed plus both ramps
     return MovePlan(pair, (s0, d0), (s1, d1), dict(motors), {a: ma, b: mb}, prof, duration,
-                    timeout=2 * (duration + ramps) + 5.0, naive=request.naive)
+                    timeout=move_time_bound(speed * duration, speed, ac, dc), naive=request.naive)
 
 
 # --------------------------------------------------------------------------- coupling (pure)
@@ -479,7 +479,6 @@ def run_move(session: ArmSession, pair: PairConfig, request: MoveRequest, *,
     ``samples`` and ``source`` (PX is then polled, as with --poll)."""
     from sherpa_cli.motion.guard import MotionGuard
     from sherpa_cli.motion.settings import MotionSettings
-    from sherpa_cli.ops.joint_jog import move_to, recovery_from_standstill, stop_now
 
     cfg = session.cfg
     method, group_id = pair_settings(cfg)
@@ -591,12 +590,10 @@ def run_move(session: ArmSession, pair: PairConfig, request: MoveRequest, *,
                 if w.outcome == "breach":
                     result.outcome = "limit"
                     result.breaches = list(w.breaches)
-                    stop_now(clients, "position", settings.stop_method)
-                    recovery_from_standstill(clients, guard, settings, clock, sleep, w.breaches)
-                    now = {d: int(clients[d].get("PX")) for d in drives}
-                    back = limit_watch.recovery_targets(watched, now, w.breaches, hold={})
-                    move_to(guard, by_name, clients, back, settings.recovery_speed_for((sj.vel_limit, dj.vel_limit)),
-                            settings, clock, sleep, "the move back into the normal range")
+                    recovery.recover(guard, by_name, clients, watched, w.breaches,
+                                     lambda: {d: int(clients[d].get("PX")) for d in drives}, settings=settings,
+                                     clock=clock, sleep=sleep, hold={},
+                                     speed=recovery.recovery_speed(settings, watched))
                 elif w.outcome == "stalled":
                     s_now, d_now = w.joints.get(sj.name), w.joints.get(dj.name)
                     raise SafetyError(f"{pair.name}: {blocked_text(session.cfg, clients, drives, settings.stall_time)}; "

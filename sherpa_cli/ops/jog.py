@@ -22,7 +22,7 @@ from sherpa_cli.elmo.faults import StatusRegister, decode_sr, describe_mf
 from sherpa_cli.elmo.protocol import UM_POSITION, UM_TORQUE
 from sherpa_cli.errors import SafetyError, UsageError
 from sherpa_cli.joints.units import counts_to_rad, rad_per_s_to_counts_per_s, rad_to_counts
-from sherpa_cli.motion import stopping
+from sherpa_cli.motion import recovery, stopping
 from sherpa_cli.motion.axis import Axis
 from sherpa_cli.motion.blocked import StallWatch, blocked_text
 from sherpa_cli.motion.guard import MotionGuard
@@ -293,11 +293,7 @@ def _hold(guard: MotionGuard, c: DriveClient, target: Axis, req: JogRequest, set
     ref = target.ref
     if req.mode != "position":
         stopping.send_stop(c, unit_mode=guard.unit_mode(ref), method=settings.stop_method, pulse=guard.check)
-        if stopping.wait_standstill(c, standstill_timeout=settings.standstill_timeout,
-                                    poll_interval=settings.poll_interval, clock=clock, sleep=sleep, pulse=guard.check,
-                                    standstill_velocity=settings.standstill_velocity) is False:
-            raise SafetyError(f"{c.label}: not at standstill {settings.standstill_timeout:g} s after the stop: "
-                              "not held", hint="`sherpa stop` stops every drive")
+        recovery.wait_standstill({ref.name: c}, settings, clock, sleep, guard.check, before="the hold")
         here = int(c.get("PX"))
         guard.enable(ref, UM_POSITION)
         c.set("PA", 0, here)
@@ -368,32 +364,18 @@ def _watch(guard: MotionGuard, c: DriveClient, target: Axis, clock: Callable[[],
 
 def limit_breach(guard: MotionGuard, c: DriveClient, target: Axis, px: int, settings: MotionSettings,
                   clock: Callable[[], float], sleep: Callable[[float], None], state: dict[str, Any]) -> bool:
-    """The joint-limit watch (seed 6.1, motion/limit_watch.py): past the full range, stop at once, send
-    nothing more of the jog, and move the joint back (position mode) to the nearest normal edge."""
-    from sherpa_cli.motion import limit_watch, stopping
-    from sherpa_cli.ops import joint_jog
+    """The joint-limit watch (seed 6.1, motion/limit_watch.py): past the full range, the one recovery
+    (motion/recovery.py): stop at once, nothing more of the jog, standstill, then back (position
+    mode) to the nearest normal edge at motion.recovery_speed."""
+    from sherpa_cli.motion import limit_watch, recovery
 
-    joint = target.joint
-    assert joint is not None
-    watched = list(target.watched)
-    breaches = limit_watch.check(watched, {target.ref.name: px})
+    breaches = limit_watch.check(target.watched, {target.ref.name: px})
     if not breaches:
         return False
-    clients = {target.ref.name: c}
-    # the configured stop (motion.stop_method: ST, or JV=0 + BG where ST must not be used), TC=0 first
-    # in torque mode, then the bounded wait for standstill
-    _how, standstill, problems = stopping.stop_drive(
-        c, unit_mode=guard.unit_mode(target.ref), method=settings.stop_method,
-        standstill_timeout=settings.standstill_timeout, poll_interval=settings.poll_interval, clock=clock,
-        sleep=sleep, pulse=guard.check, standstill_velocity=settings.standstill_velocity)
-    if problems or standstill is False:
-        raise SafetyError(f"{breaches[0].describe()}; the recovery failed: the stop at the joint limit did not go "
-                          "cleanly (" + "; ".join(problems or ["not at standstill"]) + "); the move back was not started",
-                          hint="check the joint; `sherpa stop` stops every drive")
-    back = limit_watch.recovery_targets(watched, {target.ref.name: int(c.get("PX"))}, breaches)
-    speed = settings.recovery_speed_for([joint.vel_limit])
-    joint_jog.move_to(guard, {target.ref.name: target.ref}, clients, back, speed, settings, clock, sleep,
-                       f"{joint.name}: the move back into the normal range")
+    ref = target.ref
+    recovery.recover(guard, {ref.name: ref}, {ref.name: c}, target.watched, breaches,
+                     lambda: {ref.name: int(c.get("PX"))}, settings=settings, clock=clock, sleep=sleep,
+                     torque=guard.unit_mode(ref) == UM_TORQUE, speed=recovery.recovery_speed(settings, [target]))
     state["breach"] = breaches[0]
     state["recovered_to"] = int(c.get("PX"))
     state["ended_by"] = f"left its full range, brought back to {breaches[0].back_to} counts"

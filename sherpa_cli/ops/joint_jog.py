@@ -25,7 +25,7 @@ from __future__ import annotations
 import contextlib
 import math
 import time
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
@@ -34,11 +34,10 @@ from sherpa_cli.config.model import ArmConfig
 from sherpa_cli.elmo.protocol import UM_POSITION, UM_TORQUE
 from sherpa_cli.errors import SafetyError, UsageError
 from sherpa_cli.joints import diffpair, units
-from sherpa_cli.motion import calibration, limit_watch
+from sherpa_cli.motion import calibration, limit_watch, recovery
 from sherpa_cli.motion.axis import Axis, move_time_bound
 from sherpa_cli.motion.blocked import blocked_text
 from sherpa_cli.motion.limit_watch import Breach
-from sherpa_cli.motion.stopping import wait_all_standstill
 
 if TYPE_CHECKING:
     from sherpa_cli.bus.session import ArmSession
@@ -376,52 +375,22 @@ def _run_guarded(guard: MotionGuard, session: ArmSession, cfg: ArmConfig, axis: 
         if watched.outcome == "breach":
             result.outcome = "limit"
             result.breaches = list(watched.breaches)
-            stop_now(clients, p.mode, settings.stop_method)
-            recovery_from_standstill(clients, guard, settings, clock, sleep, watched.breaches)
-            back = limit_watch.recovery_targets(axis.watched, sample(), watched.breaches, hold=held)
-            move_to(guard, by_name, clients, back, settings.recovery_speed_for([axis.vel_limit, *(j.vel_limit for j in axis.joints)]),
-                    settings, clock, sleep, "the move back into the normal range")
+            recovery.recover(guard, by_name, clients, axis.watched, watched.breaches, sample, settings=settings,
+                             clock=clock, sleep=sleep, torque=p.mode == "torque", hold=held,
+                             speed=recovery.recovery_speed(settings, [axis, *axis.watched]))
             final = sample()
             result.recovered_to = {j.name: j.position(final) for j in axis.watched}
         else:
             if p.mode != "position":
-                stop_now(clients, p.mode, settings.stop_method)
-                wait_standstill(clients, guard, settings, clock, sleep, before="the correction of the held joint")
+                recovery.stop_now(clients, p.mode, settings.stop_method)
+                recovery.wait_standstill(clients, settings, clock, sleep, guard.check,
+                                         before="the correction of the held joint")
             final = sample()
             if held and p.mode != "position":
                 # start and stop skew between the two motors shifts the held joint a little (seed
                 # Fig. 9.10/9.11): put it back, keeping the moved joint where it ended
                 final = _restore_held(guard, by_name, clients, axis, final, held, settings, clock, sleep, result)
     return final
-
-
-def recovery_from_standstill(clients: Mapping[str, DriveClient], guard: MotionGuard, settings: MotionSettings,
-                              clock: Callable[[], float], sleep: Callable[[float], None],
-                              breaches: Sequence[limit_watch.Breach]) -> None:
-    """Before a move back after a breach: standstill, or an error that says the joint left its range
-    first and then why the move back did not start (issue 21 item 7)."""
-    try:
-        wait_standstill(clients, guard, settings, clock, sleep, before="the move back into the normal range")
-    except SafetyError as exc:
-        left = "; ".join(b.describe() for b in breaches)
-        raise SafetyError(f"{left}; the recovery failed: {exc}", hint=exc.hint) from exc
-
-
-def stop_now(clients: Mapping[str, DriveClient], mode: str, method: str = "auto") -> None:
-    """Stop every motor of the jog at once (the stop frames of each, no wait in between); nothing
-    queued is sent after this. The guard's one stop path (motion/stopping.send_stop): TC=0 first in torque
-    mode, then by ``method`` (motion.stop_method: auto, st, jv0). A problem (ST refused with ``st``)
-    is raised once every motor got its stop."""
-    from sherpa_cli.elmo.protocol import UM_TORQUE
-    from sherpa_cli.motion.stopping import send_stop
-
-    problems = []
-    for c in clients.values():
-        _, found = send_stop(c, unit_mode=UM_TORQUE if mode == "torque" else None, method=method)
-        problems += [f"{c.label}: {p}" for p in found]
-    if problems:
-        raise SafetyError("the stop did not go cleanly: " + "; ".join(problems),
-                          hint="check the drives with `sherpa monitor --once`; `sherpa stop` stops them all")
 
 
 def _slow(axis: Axis) -> int:
@@ -442,43 +411,6 @@ def _restore_held(guard: MotionGuard, by_name: Mapping[str, DriveRef], clients: 
         s2, d2 = diffpair.hold_other(value, d, "sigma")
     targets = dict(zip(axis.drives, diffpair.to_motors(s2, d2), strict=True))
     result.held_correction = {name: {"from": (d if axis.kind == "sigma" else s), "to": value}}
-    move_to(guard, by_name, clients, targets, _slow(axis), settings, clock, sleep,
-             f"the correction of the held joint {name}")
+    recovery.move_to(guard, by_name, clients, targets, _slow(axis), settings, clock, sleep,
+                     f"the correction of the held joint {name}")
     return {**now, **{dr: int(c.get("PX")) for dr, c in clients.items()}}
-
-
-def move_to(guard: MotionGuard, by_name: Mapping[str, DriveRef], clients: Mapping[str, DriveClient],
-             targets: Mapping[str, int], speed: int, settings: MotionSettings, clock: Callable[[], float], sleep: Callable[[float], None],
-             what: str) -> None:
-    """Position mode (UM=5; the guard cycles MO if the mode changes), every motor of ``targets`` to
-    its target with equal-duration profiles, bounded in time."""
-    if not targets:
-        return
-    now = {d: int(clients[d].get("PX")) for d in targets}
-    longest = max(abs(t - now[d]) for d, t in targets.items())
-    duration = longest / speed if longest else 0.0
-    for d, t in targets.items():
-        guard.enable(by_name[d], UM_POSITION)
-        c = clients[d]
-        c.set("SP", 0, max(1, math.ceil(abs(t - now[d]) / duration)) if duration else speed)
-        c.set("PA", 0, t)
-    for d in targets:
-        clients[d].execute("BG")
-    deadline = clock() + 2 * duration + 5.0
-    while not all(int(clients[d].get("MS")) == 0 for d in targets):
-        guard.check()
-        if clock() >= deadline:
-            raise SafetyError(f"{what} did not finish in time", hint="check the joint; `sherpa stop` stops every drive")
-        sleep(settings.poll_interval)
-
-
-def wait_standstill(clients: Mapping[str, DriveClient], guard: MotionGuard, settings: MotionSettings,
-                    clock: Callable[[], float], sleep: Callable[[float], None], *, before: str = "the next move") -> None:
-    """The one standstill rule (motion/stopping.wait_all_standstill), bounded; a drive still moving
-    when the time is up raises: ``before`` (a move back, a correction) is never started from motion."""
-    moving = wait_all_standstill(clients, standstill_timeout=settings.standstill_timeout,
-                                 poll_interval=settings.poll_interval, standstill_velocity=settings.standstill_velocity,
-                                 clock=clock, sleep=sleep, pulse=guard.check)
-    if moving:
-        raise SafetyError(f"{', '.join(moving)}: not at standstill {settings.standstill_timeout:g} s after the stop; "
-                          f"{before} was not started", hint="check the joint; `sherpa stop` stops every drive")

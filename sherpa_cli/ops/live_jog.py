@@ -37,12 +37,11 @@ from sherpa_cli.elmo.protocol import UM_POSITION, UM_TORQUE
 from sherpa_cli.errors import ExitCode, SafetyError, SherpaError, UsageError
 from sherpa_cli.joints import diffpair
 from sherpa_cli.joints.units import counts_to_rad
-from sherpa_cli.motion import calibration, limit_watch
+from sherpa_cli.motion import calibration, limit_watch, recovery
 from sherpa_cli.motion.axis import Axis, joint_axis, joints_moved_by
 from sherpa_cli.motion.guard import MotionGuard
 from sherpa_cli.motion.report import GuardReport
 from sherpa_cli.motion.settings import MotionSettings
-from sherpa_cli.ops import joint_jog
 
 if TYPE_CHECKING:
     from sherpa_cli.bus.session import ArmSession
@@ -293,7 +292,7 @@ class LiveJog:
         drives = [d for d in a.drives if d not in self.dead]
         if run is not None and drives:
             self.guard.check()
-            joint_jog.stop_now({d: self._client(d) for d in drives}, run.mode, self.settings.stop_method)
+            recovery.stop_now({d: self._client(d) for d in drives}, run.mode, self.settings.stop_method)
         self.state[name].command = "-"
 
     def stop_all(self) -> None:
@@ -307,7 +306,7 @@ class LiveJog:
         if live:
             self.guard.check()
         for d in live:
-            joint_jog.stop_now({d: self._client(d)},
+            recovery.stop_now({d: self._client(d)},
                                "torque" if self.guard.unit_mode(self.refs[d]) == UM_TORQUE else "position",
                                self.settings.stop_method)
 
@@ -608,12 +607,9 @@ class LiveJog:
         modes = {run.mode for run in self.running.values()}
         self.running.clear()
         live = {d: self._client(d) for d in self.drives if d not in self.dead}
-        joint_jog.stop_now(live, "torque" if "torque" in modes else "position", self.settings.stop_method)
-        joint_jog.recovery_from_standstill(live, self.guard, self.settings, self.clock, self.sleep, breaches)
-        back = limit_watch.recovery_targets(self.watched, self._sample(self.drives), breaches)
-        speed = self.settings.recovery_speed_for(a.vel_limit for a in self.axes.values())
-        joint_jog.move_to(self.guard, self.refs, live, {d: t for d, t in back.items() if d in live}, speed,
-                           self.settings, self.clock, self.sleep, "the move back into the normal range")
+        recovery.recover(self.guard, self.refs, live, self.watched, breaches, lambda: self._sample(self.drives),
+                         settings=self.settings, clock=self.clock, sleep=self.sleep, torque="torque" in modes,
+                         speed=recovery.recovery_speed(self.settings, self.axes.values()))
         for b in breaches:
             text = (f"limit: {b.joint} left its full range [{b.full[0]}, {b.full[1]}] on the {b.side} side: "
                     f"stopped everything, brought back to {b.back_to} counts")
