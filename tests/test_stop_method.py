@@ -17,8 +17,8 @@ from sherpa_cli.config import load_config
 from sherpa_cli.config.model import SimDriveConfig
 from sherpa_cli.errors import SafetyError
 from sherpa_cli.motion.axis import resolve_axis
+from sherpa_cli.motion.request import parse_request
 from sherpa_cli.ops import joint_jog
-from sherpa_cli.ops.joint_jog import JogRequest
 from sherpa_cli.ops.live_jog import LiveJog, resolve_axes
 from sherpa_cli.sim.arm import SimArm
 
@@ -116,7 +116,7 @@ def test_live_jog_expiry_stops_with_the_configured_method():
 def test_pair_velocity_jog_ends_with_the_configured_stop_method(method, stop):
     cfg = with_motion(load_config(JOG_CONFIG), stop_method=method)
     with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
-        r = joint_jog.run(s, resolve_axis(cfg, "pitch"), JogRequest(mode="velocity", velocity="2000counts",
+        r = joint_jog.run(s, resolve_axis(cfg, "pitch"), parse_request(resolve_axis(cfg, "pitch"), mode="velocity", velocity="2000counts",
                                                                     duration=0.2))
         assert r.ok
         for drive in ("left", "right"):

@@ -191,7 +191,7 @@ def move(
     st = state(ctx)
     cfg = st.load_config()
     p = pair_of(cfg, pair)
-    req = diffdrive.MoveRequest(sigma=sigma, delta=delta, relative=relative, velocity=velocity, naive=naive,
+    req = diffdrive.PairTarget(sigma=sigma, delta=delta, relative=relative, velocity=velocity, naive=naive,
                                 feedback=feedback, uncalibrated=uncalibrated, poll=poll)
     if naive and feedback:
         raise UsageError("--naive and --feedback do not go together: --naive is the seed's way, for comparison")

@@ -49,8 +49,13 @@ SETTLE_S = 0.3  # s a finished move may take for PX to reach the target (servo l
 # --------------------------------------------------------------------------- planning (pure)
 
 @dataclass(frozen=True)
-class MoveRequest:
-    """A move as typed: Σ and Δ still text (their units need each joint's cpr); None = hold."""
+class PairTarget:
+    """A `diffdrive move` as typed: Σ and Δ still text (their units need each joint's cpr); None = hold.
+
+    Not the one-axis request (motion/request.MoveRequest): it sets both joints of the pair at once,
+    two targets with one timing and a choice of profile (naive, feedback, the recording), which a
+    request for one axis does not describe; its plan uses the same pair maths (joints/diffpair.py)
+    and the one move-time bound (motion/axis.py)."""
 
     sigma: str | None = None
     delta: str | None = None
@@ -112,7 +117,7 @@ def _value(text: str, cpr: int, what: str) -> int:
     return units.parse_position(text, cpr, what=what)
 
 
-def plan_move(cfg: ArmConfig, pair: PairConfig, request: MoveRequest, motors: Mapping[str, int], *,
+def plan_move(cfg: ArmConfig, pair: PairConfig, request: PairTarget, motors: Mapping[str, int], *,
               accel: int | None = None, decel: int | None = None) -> MovePlan:
     """Motor targets and profiles for ``request`` from the motors' present positions; refuses a
     target outside either joint's normal range or the motor box. ``accel``/``decel``: motor
@@ -362,7 +367,7 @@ def _refs(cfg: ArmConfig, drives: Sequence[str]) -> list[DriveRef]:
     return [DriveRef(d, cfg.drives[d].bus, cfg.drives[d].node, cfg.drives[d]) for d in drives]
 
 
-def prepare(session: ArmSession, pair: PairConfig, request: MoveRequest) -> tuple[MovePlan, list[calibration.Calibration]]:
+def prepare(session: ArmSession, pair: PairConfig, request: PairTarget) -> tuple[MovePlan, list[calibration.Calibration]]:
     """Read positions and calibration, then plan; nothing is written but NMT start."""
     cfg = session.cfg
     refs = _refs(cfg, (pair.drive_a, pair.drive_b))
@@ -445,7 +450,7 @@ class Feedback:
         return {a: scaled(p.profiles[a], k if corr > 0 else 1.0), b: scaled(p.profiles[b], k if corr < 0 else 1.0)}
 
 
-def _open_trace(stack: contextlib.ExitStack, session: ArmSession, refs: Sequence[DriveRef], request: MoveRequest,
+def _open_trace(stack: contextlib.ExitStack, session: ArmSession, refs: Sequence[DriveRef], request: PairTarget,
                 drives: tuple[str, str], recorder_kw: Mapping[str, Any] | None) -> PolledTrace | RecordedTrace:
     """The move's recording: the recorder of `sherpa log` (TPDO on SYNC), or PX polled by the move's
     loop with --poll or when the recorder cannot be set up (its source says which)."""
@@ -466,7 +471,7 @@ def _open_trace(stack: contextlib.ExitStack, session: ArmSession, refs: Sequence
     return RecordedTrace(rec, drives, rate, note)
 
 
-def run_move(session: ArmSession, pair: PairConfig, request: MoveRequest, *,
+def run_move(session: ArmSession, pair: PairConfig, request: PairTarget, *,
              guard_factory: Callable[..., MotionGuard] | None = None,
              clock: Callable[[], float] = time.monotonic, sleep: Callable[[float], None] = time.sleep,
              on_event: Callable[[str], None] | None = None,

@@ -12,7 +12,6 @@ rad/s, A) and are converted with the joint's cpr.
 
 from __future__ import annotations
 
-import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -21,12 +20,13 @@ from typing import TYPE_CHECKING, Any
 from sherpa_cli.elmo.faults import StatusRegister, decode_sr, describe_mf
 from sherpa_cli.elmo.protocol import UM_POSITION, UM_TORQUE
 from sherpa_cli.errors import SafetyError, UsageError
-from sherpa_cli.joints.units import counts_to_rad, rad_per_s_to_counts_per_s, rad_to_counts
+from sherpa_cli.joints.units import counts_to_rad
 from sherpa_cli.motion import recovery, stopping
 from sherpa_cli.motion.axis import Axis
 from sherpa_cli.motion.blocked import StallWatch, blocked_text
 from sherpa_cli.motion.guard import MotionGuard
 from sherpa_cli.motion.report import GuardReport
+from sherpa_cli.motion.request import MoveRequest
 from sherpa_cli.motion.settings import MotionSettings
 
 if TYPE_CHECKING:
@@ -36,18 +36,6 @@ if TYPE_CHECKING:
     from sherpa_cli.motion.limit_watch import Breach
 
 MODES = ("position", "velocity", "torque")
-
-
-@dataclass(frozen=True)
-class JogRequest:
-    mode: str  # position | velocity | torque
-    to: float | None = None  # rad, absolute
-    by: float | None = None  # rad, relative to the position at the start
-    velocity: float | None = None  # rad/s
-    torque: float | None = None  # A
-    duration: float | None = None  # s; velocity: None = until Ctrl-C; torque: required
-    uncalibrated: bool = False  # allow a position move of a joint not homed since power-up (wave/jog)
-    hold: bool = False  # after the move: the motor stays on holding where it ended until Ctrl-C / sherpa stop
 
 
 @dataclass
@@ -99,47 +87,27 @@ class JogResult:
                 "calibration": None if self.calibration is None else self.calibration.as_dict()}
 
 
-def check_request(target: Axis, req: JogRequest) -> None:
-    """Refuse what must not reach a drive, before the bus is even opened."""
+def check_request(target: Axis, req: MoveRequest) -> None:
+    """Refuse what must not reach a drive, before the bus is even opened (the request's own values
+    were checked when it was parsed: motion/request.py)."""
     if target.pair is not None:  # a Σ/Δ joint or a pair motor: ops/joint_jog.py moves those
         raise UsageError(f"'{target.name}' moves the differential pair '{target.pair.name}': jogging Σ/Δ joints is "
                          "not supported here", hint="jog a plain joint or its drive")
-    if req.mode not in MODES:
-        raise UsageError(f"jog mode '{req.mode}': expected one of {', '.join(MODES)}")
-    for what, value in (("--to", req.to), ("--by", req.by), ("--velocity", req.velocity),
-                        ("--torque", req.torque), ("--for", req.duration)):
-        if value is not None and not math.isfinite(value):
-            raise UsageError(f"{what} {value}: expected a finite number")
-    if req.duration is not None and not req.duration > 0:
-        raise UsageError(f"--for {req.duration}: expected a time > 0 s")
     if target.cpr is None and req.mode != "torque":
         raise UsageError(f"{target.name}: no plain joint of the config is driven by {target.ref.name}, so there is "
                          "no cpr to convert rad into counts", hint="name the joint, or a drive that moves a plain joint")
     joint = target.joint
     if req.mode == "position":
-        if (req.to is None) == (req.by is None):
-            raise UsageError("a position jog needs exactly one of --to or --by")
-        if req.duration is not None:
-            raise UsageError("--for applies to --velocity and --torque jogs; a position move ends at its target")
-        if req.to is not None and joint is not None and target.cpr is not None:
-            goal, (lo, hi) = _counts_to(target, req.to), joint.normal_range
-            if not lo <= goal <= hi:  # --by is checked once PX is known (precheck)
+        if not req.relative and joint is not None:  # --by is checked once PX is known (precheck)
+            goal, (lo, hi) = req.counts, joint.normal_range
+            if not lo <= goal <= hi:
                 raise UsageError(f"{joint.name}: target {goal} counts is outside the joint's normal range "
                                   f"[{lo}, {hi}]", hint="jog moves a joint only inside its normal range")
+        if req.speed is not None:
+            _check_speed(target, req.speed, "--velocity")
     elif req.mode == "velocity":
-        assert req.velocity is not None
-        if joint is None or joint.vel_limit is None:  # never an unchecked speed (seed rosparam has no limit)
-            where = f"joints.{joint.name}.velocity.limit" if joint is not None else "velocity.limit of its joint"
-            raise UsageError(f"{target.name}: no speed limit configured ({where} is missing), so a velocity jog "
-                             "cannot be checked", hint="give the joint `velocity: {limit: COUNTS_PER_S}` in the config")
-        else:
-            counts = abs(rad_per_s_to_counts_per_s(req.velocity, joint.cpr))
-            if counts > joint.vel_limit:
-                limit = counts_to_rad(joint.vel_limit, joint.cpr)
-                raise UsageError(f"--velocity {req.velocity} rad/s ({counts} counts/s) is above {joint.name}'s "
-                                 f"velocity limit {limit:.4f} rad/s ({joint.vel_limit} counts/s)")
+        _check_speed(target, req.velocity, "--velocity")
     elif req.mode == "torque":
-        assert req.torque is not None
         if req.duration is None:
             raise UsageError("a torque jog needs --for SECONDS: no position or speed limit of the drive acts in "
                              "torque mode, so it must end by itself")
@@ -147,18 +115,25 @@ def check_request(target: Axis, req: JogRequest) -> None:
         if current is None:
             raise UsageError(f"{target.name}: no current limits configured for it, so no torque can be checked",
                              hint="give the joint `current: {continuous: A, peak: A, peak_time: s}`")
-        assert joint is not None and req.torque is not None  # current came from the joint; torque mode has one
-        if abs(req.torque) > current.continuous:
-            raise UsageError(f"--torque {req.torque} A is beyond {joint.name}'s continuous current limit "
+        assert joint is not None  # current came from the joint
+        if abs(req.amps) > current.continuous:
+            raise UsageError(f"--torque {req.amps} A is beyond {joint.name}'s continuous current limit "
                              f"{current.continuous} A (config current.continuous)")
 
 
-def _counts_to(target: Axis, rad: float) -> int:
-    assert target.cpr is not None
-    return rad_to_counts(rad, target.cpr)
+def _check_speed(target: Axis, counts: int, option: str) -> None:
+    joint = target.joint
+    if joint is None or joint.vel_limit is None:  # never an unchecked speed (seed rosparam has no limit)
+        where = f"joints.{joint.name}.velocity.limit" if joint is not None else "velocity.limit of its joint"
+        raise UsageError(f"{target.name}: no speed limit configured ({where} is missing), so a velocity jog "
+                         "cannot be checked", hint="give the joint `velocity: {limit: COUNTS_PER_S}` in the config")
+    if abs(counts) > joint.vel_limit:
+        rad, limit = counts_to_rad(abs(counts), joint.cpr), counts_to_rad(joint.vel_limit, joint.cpr)
+        raise UsageError(f"{option} {rad:.4f} rad/s ({abs(counts)} counts/s) is above {joint.name}'s "
+                         f"velocity limit {limit:.4f} rad/s ({joint.vel_limit} counts/s)")
 
 
-def run_jog(session: ArmSession, target: Axis, req: JogRequest, *, settings: MotionSettings,
+def run_jog(session: ArmSession, target: Axis, req: MoveRequest, *, settings: MotionSettings,
             clock: Callable[[], float] = time.monotonic, sleep: Callable[[float], None] = time.sleep,
             on_progress: Callable[[JogProgress], None] | None = None,
             on_event: Callable[[str], None] | None = None, keep: bool = False) -> JogResult:
@@ -201,7 +176,7 @@ def run_jog(session: ArmSession, target: Axis, req: JogRequest, *, settings: Mot
                      breach=state.get("breach"), recovered_to=state.get("recovered_to"), calibration=cal)
 
 
-def precheck(session: ArmSession, target: Axis, req: JogRequest) -> Calibration | None:
+def precheck(session: ArmSession, target: Axis, req: MoveRequest) -> Calibration | None:
     """Before anything is armed (wave/jog, docs/motion.md): a position move must stay inside the
     joint's NORMAL range and needs a calibrated joint (or ``uncalibrated``). Reads PX and the
     calibration flag; writes nothing. Returns the calibration found (None for other modes)."""
@@ -213,11 +188,7 @@ def precheck(session: ArmSession, target: Axis, req: JogRequest) -> Calibration 
     c = session.client(target.ref)
     c.nmt_start()
     start = int(c.get("PX"))
-    if req.to is not None:
-        goal = _counts_to(target, req.to)
-    else:
-        assert req.by is not None  # check_request: exactly one of --to and --by
-        goal = start + _counts_to(target, req.by)
+    goal = req.goal(start)
     lo, hi = joint.normal_range
     if not lo <= goal <= hi:
         raise UsageError(f"{joint.name}: target {goal} counts is outside the joint's normal range [{lo}, {hi}]",
@@ -230,7 +201,7 @@ def precheck(session: ArmSession, target: Axis, req: JogRequest) -> Calibration 
     return cal
 
 
-def _move(guard: MotionGuard, target: Axis, req: JogRequest, settings: MotionSettings, state: dict[str, Any],
+def _move(guard: MotionGuard, target: Axis, req: MoveRequest, settings: MotionSettings, state: dict[str, Any],
           clock: Callable[[], float], sleep: Callable[[float], None],
           on_progress: Callable[[JogProgress], None] | None) -> None:
     ref = target.ref
@@ -243,7 +214,7 @@ def _move(guard: MotionGuard, target: Axis, req: JogRequest, settings: MotionSet
         _watch(guard, c, target, clock, sleep, settings, state, on_progress, done=done, limit=limit, stall=stall)
 
     if req.mode == "position":
-        goal = _counts_to(target, req.to) if req.to is not None else start + _counts_to(target, req.by)  # type: ignore[arg-type]  # --to or --by
+        goal = req.goal(start)
         if target.joint is not None:  # again with this PX: the joint may have moved since precheck
             lo, hi = target.joint.normal_range
             if not lo <= goal <= hi:
@@ -253,7 +224,7 @@ def _move(guard: MotionGuard, target: Axis, req: JogRequest, settings: MotionSet
         guard.enable(ref, UM_POSITION)
         # the speed comes from the config, never from whatever SP the drive holds (an unprogrammed
         # drive: 1800 counts/s); the guard puts SP back on the way out
-        speed = position_speed(target, settings)
+        speed = req.speed or position_speed(target, settings)
         c.set("SP", 0, speed)
         bound = _move_bound(c, target, abs(goal - start), speed)
         c.set("PA", 0, goal)
@@ -263,8 +234,7 @@ def _move(guard: MotionGuard, target: Axis, req: JogRequest, settings: MotionSet
         watch(lambda sr: sr.motion_status == 0, bound, settings.stall_watch(speed))
         state["ended_by"] = state["ended_by"] or "target reached"
     elif req.mode == "velocity":
-        assert req.velocity is not None and target.cpr is not None  # checked when the request was made
-        v = rad_per_s_to_counts_per_s(req.velocity, target.cpr)
+        v = req.velocity
         guard.enable(ref, settings.velocity_unit_mode)
         c.set("JV", 0, v)
         state["command"] = f"JV={v}"
@@ -274,9 +244,8 @@ def _move(guard: MotionGuard, target: Axis, req: JogRequest, settings: MotionSet
         state["ended_by"] = state["ended_by"] or "time up"
     elif req.mode == "torque":
         guard.enable(ref, UM_TORQUE)  # TC=0 before MO=1: no old torque command is applied
-        assert req.torque is not None
-        c.set("TC", 0, float(req.torque))
-        state["command"] = f"TC={req.torque:g}"
+        c.set("TC", 0, req.amps)
+        state["command"] = f"TC={req.amps:g}"
         state["t0"] = clock()
         watch(None, req.duration)
         state["ended_by"] = state["ended_by"] or "time up"
@@ -284,7 +253,7 @@ def _move(guard: MotionGuard, target: Axis, req: JogRequest, settings: MotionSet
         _hold(guard, c, target, req, settings, state, clock, sleep, on_progress)
 
 
-def _hold(guard: MotionGuard, c: DriveClient, target: Axis, req: JogRequest, settings: MotionSettings,
+def _hold(guard: MotionGuard, c: DriveClient, target: Axis, req: MoveRequest, settings: MotionSettings,
           state: dict[str, Any], clock: Callable[[], float], sleep: Callable[[float], None],
           on_progress: Callable[[JogProgress], None] | None) -> None:
     """--hold: stop a velocity or torque motion from standstill, then keep the motor on in position

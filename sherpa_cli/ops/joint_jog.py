@@ -33,11 +33,12 @@ from sherpa_cli.bus.targets import DriveRef
 from sherpa_cli.config.model import ArmConfig
 from sherpa_cli.elmo.protocol import UM_POSITION, UM_TORQUE
 from sherpa_cli.errors import SafetyError, UsageError
-from sherpa_cli.joints import diffpair, units
+from sherpa_cli.joints import diffpair
 from sherpa_cli.motion import calibration, limit_watch, recovery
 from sherpa_cli.motion.axis import Axis, move_time_bound
 from sherpa_cli.motion.blocked import blocked_text
 from sherpa_cli.motion.limit_watch import Breach
+from sherpa_cli.motion.request import MoveRequest
 
 if TYPE_CHECKING:
     from sherpa_cli.bus.session import ArmSession
@@ -46,20 +47,6 @@ if TYPE_CHECKING:
     from sherpa_cli.motion.settings import MotionSettings
 
 Range = tuple[int, int]
-MODES = ("position", "velocity", "torque")
-
-
-@dataclass(frozen=True)
-class JogRequest:
-    """A jog as the technician typed it (values still text: their units need the joint's cpr)."""
-
-    mode: str  # position | velocity | torque
-    to: str | None = None
-    by: str | None = None
-    velocity: str | None = None  # position: the speed of the move; velocity: the jog speed
-    torque: str | None = None
-    duration: float | None = None  # --for, s
-    uncalibrated: bool = False
 
 
 @dataclass(frozen=True)
@@ -94,10 +81,8 @@ def _check_speed(axis: Axis, speed: int, what: str) -> None:
                           f"{axis.vel_limit} counts/s", hint="ask for less, or raise velocity.limit in the config")
 
 
-def plan(cfg: ArmConfig, axis: Axis, request: JogRequest, motors: Mapping[str, int]) -> JogPlan:
+def plan(cfg: ArmConfig, axis: Axis, request: MoveRequest, motors: Mapping[str, int]) -> JogPlan:
     """Motor commands for ``request`` from the motors' present positions; refuses what is unsafe."""
-    if request.mode not in MODES:
-        raise UsageError(f"unknown jog mode {request.mode!r}")
     start = axis.position(motors)
     if request.mode == "position":
         return _plan_position(cfg, axis, request, motors, start)
@@ -106,18 +91,12 @@ def plan(cfg: ArmConfig, axis: Axis, request: JogRequest, motors: Mapping[str, i
                          + (" (in torque mode no drive limit acts; the time limit is the last guard)"
                             if request.mode == "torque" else ""),
                          hint=f"e.g. sherpa jog {axis.name} --{request.mode} ... --for 1")
-    if not (math.isfinite(request.duration) and request.duration > 0):
-        raise UsageError(f"--for must be a positive number of seconds, got {request.duration!r}")
     if request.mode == "velocity":
-        if request.velocity is None:
-            raise UsageError("a velocity jog needs --velocity")
-        v = units.parse_velocity(request.velocity, axis.joint_cpr, what="--velocity")
+        v = request.velocity
         _check_speed(axis, v, "--velocity")
         return JogPlan(axis, "velocity", start, speed=v, duration=request.duration,
                        motor_speeds=axis.motor_velocities(v))
-    if request.torque is None:
-        raise UsageError("a torque jog needs --torque")
-    amps = units.parse_current(request.torque, what="--torque")
+    amps = request.amps
     if amps == 0:
         raise UsageError("--torque must not be 0")
     currents = axis.motor_currents(amps)
@@ -128,16 +107,9 @@ def plan(cfg: ArmConfig, axis: Axis, request: JogRequest, motors: Mapping[str, i
     return JogPlan(axis, "torque", start, current=amps, duration=request.duration, motor_currents=currents)
 
 
-def _plan_position(cfg: ArmConfig, axis: Axis, request: JogRequest, motors: Mapping[str, int],
+def _plan_position(cfg: ArmConfig, axis: Axis, request: MoveRequest, motors: Mapping[str, int],
                    start: int) -> JogPlan:
-    if (request.to is None) == (request.by is None):
-        raise UsageError("a position jog needs exactly one of --to and --by")
-    if request.duration is not None:
-        raise UsageError("--for applies to --velocity and --torque jogs; a position move ends at its target")
-    if request.to is not None:
-        target = units.parse_position(request.to, axis.joint_cpr, what="--to")
-    else:
-        target = start + units.parse_position(request.by or "", axis.joint_cpr, what="--by")
+    target = request.goal(start)
     if axis.normal is not None and not axis.normal[0] <= target <= axis.normal[1]:
         raise UsageError(f"{axis.name}: target {target} counts is outside the joint's normal range "
                           f"{_fmt_range(axis.normal)}", hint="jog moves a joint only inside its normal range")
@@ -149,8 +121,8 @@ def _plan_position(cfg: ArmConfig, axis: Axis, request: JogRequest, motors: Mapp
             if j.normal is not None and not j.inside_normal(p):
                 raise UsageError(f"{axis.name}: moving this motor to {target} puts joint {j.name} at {p} counts, "
                                   f"outside its normal range {_fmt_range(j.normal)}")
-    if request.velocity is not None:
-        speed = abs(units.parse_velocity(request.velocity, axis.joint_cpr, what="--velocity"))
+    if request.speed is not None:
+        speed = request.speed
         _check_speed(axis, speed, "--velocity")
     elif axis.vel_limit is not None:
         speed = axis.vel_limit
@@ -170,20 +142,17 @@ def _motor_targets(axis: Axis, target: int, motors: Mapping[str, int]) -> dict[s
     return axis.motor_targets(target, motors, held.normal if held is not None else None)
 
 
-def check_offline(cfg: ArmConfig, axis: Axis, request: JogRequest) -> JogPlan | None:
+def check_offline(cfg: ArmConfig, axis: Axis, request: MoveRequest) -> JogPlan | None:
     """Every refusal that needs no bus (a dry run's checks): the whole plan for velocity and torque
     jogs (they do not depend on where the motors stand), the values and the --to range for a move."""
     zero = {d: 0 for d in axis.sensed}
     if request.mode != "position":
         return plan(cfg, axis, request, zero)
-    if request.to is not None and request.by is None:
+    if not request.relative:
         return plan(cfg, axis, request, zero) if axis.kind != "motor" else None
-    if request.by is not None and request.to is None:
-        units.parse_position(request.by, axis.joint_cpr, what="--by")
-        if request.velocity is not None:
-            _check_speed(axis, abs(units.parse_velocity(request.velocity, axis.joint_cpr, what="--velocity")), "--velocity")
-        return None
-    raise UsageError("a position jog needs exactly one of --to and --by")
+    if request.speed is not None:
+        _check_speed(axis, request.speed, "--velocity")
+    return None
 
 
 # --------------------------------------------------------------------------- running it
@@ -237,7 +206,7 @@ def _refs(cfg: ArmConfig, drives: tuple[str, ...]) -> list[DriveRef]:
     return [DriveRef(d, cfg.drives[d].bus, cfg.drives[d].node, cfg.drives[d]) for d in drives]
 
 
-def prepare(session: ArmSession, axis: Axis, request: JogRequest
+def prepare(session: ArmSession, axis: Axis, request: MoveRequest
             ) -> tuple[JogPlan, dict[str, int], list[calibration.Calibration]]:
     """Read positions (and calibration), then plan; nothing is written to a drive here but NMT start."""
     cfg = session.cfg
@@ -265,7 +234,7 @@ def prepare(session: ArmSession, axis: Axis, request: JogRequest
     return p, motors, cals
 
 
-def run(session: ArmSession, axis: Axis, request: JogRequest, *,
+def run(session: ArmSession, axis: Axis, request: MoveRequest, *,
         guard_factory: Callable[..., MotionGuard] | None = None,
         clock: Callable[[], float] = time.monotonic, sleep: Callable[[float], None] = time.sleep,
         on_event: Callable[[str], None] | None = None,

@@ -37,9 +37,10 @@ from sherpa_cli.log.step_metrics import StepMetrics, step_metrics
 from sherpa_cli.motion.axis import Axis, resolve_axis
 from sherpa_cli.motion.guard import MotionGuard
 from sherpa_cli.motion.report import GuardReport
+from sherpa_cli.motion.request import MoveRequest, parse_request
 from sherpa_cli.motion.settings import MotionSettings
 from sherpa_cli.motion.stopping import stop_drive
-from sherpa_cli.ops.jog import JogRequest, check_request, limit_breach, precheck
+from sherpa_cli.ops.jog import check_request, limit_breach, precheck
 
 if TYPE_CHECKING:
     import can
@@ -120,13 +121,13 @@ class StepTime(Protocol):
 
 
 def step_request(target: Axis, mode: str, value: float, *, duration: float,
-                 uncalibrated: bool = False) -> JogRequest:
+                 uncalibrated: bool = False) -> MoveRequest:
     """The step as a jog request, with every check that needs no bus (`jog`'s); a dry run's checks."""
     if target.joint is None:
         raise UsageError(f"{target.name}: log step needs a plain joint (its cpr converts rad to counts)")
-    req = JogRequest(mode=mode, by=value if mode == "position" else None,
-                     velocity=value if mode == "velocity" else None, torque=value if mode == "torque" else None,
-                     duration=duration if mode != "position" else None, uncalibrated=uncalibrated)
+    req = parse_request(target, mode, by=value if mode == "position" else None,
+                        velocity=value if mode == "velocity" else None, torque=value if mode == "torque" else None,
+                        duration=duration if mode != "position" else None, uncalibrated=uncalibrated)
     check_request(target, req)
     if not (math.isfinite(duration) and duration > 0):
         raise UsageError(f"--for {duration}: expected a time > 0 s")
