@@ -79,3 +79,13 @@ def test_one_resolver_for_every_kind():
         resolve_axis(CFG, "diff")
     with pytest.raises(UsageError, match="moves no single joint"):
         _ = AXES["left"].joint_config
+
+
+def test_a_position_move_speed_comes_from_the_request_or_the_config_never_the_drive():
+    from sherpa_cli.motion.axis import profile_speed
+
+    j1 = AXES["j1"]
+    assert j1.vel_limit and profile_speed(j1, 100) == j1.vel_limit
+    assert profile_speed(j1, 100, requested=-250) == 250
+    bare = resolve_axis(CFG, "can0:99")  # a drive of no joint: no limit, the configured fallback
+    assert bare.kind == "drive" and profile_speed(bare, 123) == 123

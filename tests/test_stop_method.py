@@ -1,4 +1,4 @@
-"""motion.stop_method everywhere: the jogs' own stops (ops/joint_jog.stop_now: the pair/`jog` limit
+"""motion.stop_method everywhere: the jogs' own stops (motion/recovery.stop_now: the pair/`jog` limit
 stop and end of a velocity/torque jog; ops/live_jog: `s`, Space, expiry, the limit watch) go the
 guard's one stop path (motion/stopping.send_stop), so `st`, `jv0` and `auto` show in the frames each
 simulated drive received: `st` ST only, `jv0` JV=0 + BG (no ST), `auto` ST, and JV=0 + BG where the

@@ -189,6 +189,17 @@ class Axis:
         return self.full is None or self.full[0] <= position <= self.full[1]
 
 
+def profile_speed(axis: Axis, fallback: int, requested: int | None = None) -> int:
+    """counts/s of a position move of ``axis`` (issue 21 item 12): the requested speed, else the
+    joint's configured speed limit, else ``fallback`` (motion.recovery_fallback_speed) -- never the
+    SP the drive happens to hold. The motion guard puts the drive's SP back afterwards."""
+    if requested:
+        return abs(int(requested))
+    if axis.vel_limit:
+        return abs(int(axis.vel_limit))
+    return fallback
+
+
 # --------------------------------------------------------------------------- resolving
 
 def _current_limit(cfg: ArmConfig, joint: JointConfig) -> float | None:

@@ -22,7 +22,7 @@ from sherpa_cli.elmo.protocol import UM_POSITION, UM_TORQUE
 from sherpa_cli.errors import SafetyError, UsageError
 from sherpa_cli.joints.units import counts_to_rad
 from sherpa_cli.motion import recovery, stopping
-from sherpa_cli.motion.axis import Axis
+from sherpa_cli.motion.axis import Axis, profile_speed
 from sherpa_cli.motion.blocked import StallWatch, blocked_text
 from sherpa_cli.motion.guard import MotionGuard
 from sherpa_cli.motion.report import GuardReport
@@ -224,7 +224,7 @@ def _move(guard: MotionGuard, target: Axis, req: MoveRequest, settings: MotionSe
         guard.enable(ref, UM_POSITION)
         # the speed comes from the config, never from whatever SP the drive holds (an unprogrammed
         # drive: 1800 counts/s); the guard puts SP back on the way out
-        speed = req.speed or position_speed(target, settings)
+        speed = profile_speed(target, settings.recovery_fallback_speed, req.speed)
         c.set("SP", 0, speed)
         bound = _move_bound(c, target, abs(goal - start), speed)
         c.set("PA", 0, goal)
@@ -280,15 +280,6 @@ def _hold(guard: MotionGuard, c: DriveClient, target: Axis, req: MoveRequest, se
             state["ended_by"] = "held until the motor was switched off (sherpa stop)"
             return
         sleep(settings.poll_interval)
-
-
-def position_speed(target: Axis, settings: MotionSettings) -> int:
-    """counts/s of a position jog: the joint's velocity.limit, or motion.recovery_fallback_speed for a
-    joint without one (the seed's rosparam format has none)."""
-    joint = target.joint
-    if joint is not None and joint.vel_limit:
-        return abs(int(joint.vel_limit))
-    return settings.recovery_fallback_speed
 
 
 def _move_bound(c: DriveClient, target: Axis, distance: int, speed: int) -> float:

@@ -35,7 +35,7 @@ from sherpa_cli.elmo.protocol import UM_POSITION, UM_TORQUE
 from sherpa_cli.errors import SafetyError, UsageError
 from sherpa_cli.joints import diffpair
 from sherpa_cli.motion import calibration, limit_watch, recovery
-from sherpa_cli.motion.axis import Axis, move_time_bound
+from sherpa_cli.motion.axis import Axis, move_time_bound, profile_speed
 from sherpa_cli.motion.blocked import blocked_text
 from sherpa_cli.motion.limit_watch import Breach
 from sherpa_cli.motion.request import MoveRequest
@@ -362,8 +362,9 @@ def _run_guarded(guard: MotionGuard, session: ArmSession, cfg: ArmConfig, axis: 
     return final
 
 
-def _slow(axis: Axis) -> int:
-    return max(1, (axis.vel_limit or 200) // 2)
+def _slow(axis: Axis, settings: MotionSettings) -> int:
+    """The held joint's correction: half the speed of a move (motion/axis.profile_speed)."""
+    return max(1, profile_speed(axis, settings.recovery_fallback_speed) // 2)
 
 
 def _restore_held(guard: MotionGuard, by_name: Mapping[str, DriveRef], clients: Mapping[str, DriveClient],
@@ -380,6 +381,6 @@ def _restore_held(guard: MotionGuard, by_name: Mapping[str, DriveRef], clients: 
         s2, d2 = diffpair.hold_other(value, d, "sigma")
     targets = dict(zip(axis.drives, diffpair.to_motors(s2, d2), strict=True))
     result.held_correction = {name: {"from": (d if axis.kind == "sigma" else s), "to": value}}
-    recovery.move_to(guard, by_name, clients, targets, _slow(axis), settings, clock, sleep,
+    recovery.move_to(guard, by_name, clients, targets, _slow(axis, settings), settings, clock, sleep,
                      f"the correction of the held joint {name}")
     return {**now, **{dr: int(c.get("PX")) for dr, c in clients.items()}}

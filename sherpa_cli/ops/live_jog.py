@@ -1,6 +1,6 @@
 """A live jog session: the ops layer under `sherpa jog --interactive` and `sherpa jog --joystick`
 (docs/jog.md). One motion guard (motion/guard.py) around every motor of the chosen joints, the same
-joint limits and limit watch as `sherpa jog` (motion/limit_watch.py, ops/joint_jog.py), and small
+joint limits, limit watch and recovery as `sherpa jog` (motion/limit_watch.py, motion/recovery.py), and small
 commands a user interface calls as keys are pressed or a joystick moves:
 
 - :meth:`LiveJog.step` moves a joint by N counts (position mode, only to a target inside the
@@ -38,7 +38,7 @@ from sherpa_cli.errors import ExitCode, SafetyError, SherpaError, UsageError
 from sherpa_cli.joints import diffpair
 from sherpa_cli.joints.units import counts_to_rad
 from sherpa_cli.motion import calibration, limit_watch, recovery
-from sherpa_cli.motion.axis import Axis, joint_axis, joints_moved_by
+from sherpa_cli.motion.axis import Axis, joint_axis, joints_moved_by, profile_speed
 from sherpa_cli.motion.guard import MotionGuard
 from sherpa_cli.motion.report import GuardReport
 from sherpa_cli.motion.settings import MotionSettings
@@ -213,7 +213,8 @@ class LiveJog:
             s2, d2 = (diffpair.hold_other(goal, d_now, "sigma", held.normal_range) if a.kind == "sigma"
                       else diffpair.hold_other(s_now, goal, "delta", held.normal_range))
             motor_targets = dict(zip(a.drives, diffpair.to_motors(s2, d2), strict=True))
-        speed = max(1, (a.vel_limit or 400) // 2)
+        # half the joint's speed (motion/axis.profile_speed), never the SP the drive holds
+        speed = max(1, profile_speed(a, self.settings.recovery_fallback_speed) // 2)
         distance = max(abs(t - now[d]) for d, t in motor_targets.items())
         duration = distance / speed if distance else 0.0
         self._stop_others_on(a.drives, name)
