@@ -92,3 +92,18 @@ def test_no_standstill_is_one_typed_outcome_and_no_move_back():
     assert not any(x.startswith("PA=") for x in drive.sent) and "BG" not in drive.sent
     assert clock.t == pytest.approx(0.5, abs=0.02)  # bounded by motion.standstill_timeout
     assert isinstance(err, SafetyError)
+
+
+def test_a_motion_error_carries_the_guard_report_as_a_typed_field():
+    from sherpa_cli.motion.report import GuardReport, MotionInterrupted, report_of, with_report
+
+    report = GuardReport()
+    err = SafetyError("boom")
+    assert report_of(err) is None
+    assert with_report(err, report) is err and report_of(err) is report  # the same error, now with the report
+    ctrl_c = with_report(KeyboardInterrupt(), report)
+    assert isinstance(ctrl_c, MotionInterrupted) and isinstance(ctrl_c, KeyboardInterrupt)  # still exit 130
+    assert report_of(ctrl_c) is report
+    bug = ValueError("a bug")
+    assert with_report(bug, report) is bug and report_of(bug) is None
+    assert report_of(SafetyError("x", motion_report=report)) is report  # a constructor field

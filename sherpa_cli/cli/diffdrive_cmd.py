@@ -225,7 +225,9 @@ def move(
         try:
             result = diffdrive.run_move(session, p, req)
         except BaseException as exc:
-            report = getattr(exc, "motion_report", None)
+            from sherpa_cli.motion.report import report_of
+
+            report = report_of(exc)
             if report is not None and not st.json_mode:
                 for line in report.lines(st.verbose):
                     st.out.info(f"stop: {line}")

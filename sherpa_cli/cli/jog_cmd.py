@@ -342,7 +342,9 @@ def _render_pair(st: AppState, r: joint_jog.JogResult) -> None:
 def _show_stop_report(st: AppState, exc: BaseException) -> None:
     """How the guard stopped the motor, on an error path too: text lines, or with --json an error
     object on stdout (``error``, ``stop``); the error message itself still goes to stderr."""
-    report = getattr(exc, "motion_report", None)
+    from sherpa_cli.motion.report import report_of
+
+    report = report_of(exc)
     if report is None:
         return
     if st.json_mode:

@@ -36,6 +36,7 @@ from sherpa_cli.motion import calibration, limit_watch, recovery
 from sherpa_cli.motion.axis import joints_moved_by, move_time_bound
 from sherpa_cli.motion.blocked import blocked_text
 from sherpa_cli.motion.pair_start import CommonStart, pair_settings, stop_motors
+from sherpa_cli.motion.report import with_report
 
 if TYPE_CHECKING:
     from sherpa_cli.bus.session import ArmSession
@@ -621,8 +622,10 @@ def run_move(session: ArmSession, pair: PairConfig, request: PairTarget, *,
             if recorded is not None:
                 recorded.collect()  # the recorder has stopped and put the PDO settings back
     except BaseException as exc:
-        exc.motion_report = guard.report  # type: ignore[attr-defined]
-        raise
+        carried = with_report(exc, guard.report)  # the CLI shows how the guard stopped the motors
+        if carried is exc:
+            raise
+        raise carried from exc
     result.motors_end = final
     result.end = diffpair.to_joints(final[pair.drive_a], final[pair.drive_b])
     result.samples = list(trace.samples)

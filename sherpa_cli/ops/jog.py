@@ -25,7 +25,7 @@ from sherpa_cli.motion import recovery, stopping
 from sherpa_cli.motion.axis import Axis, profile_speed
 from sherpa_cli.motion.blocked import StallWatch, blocked_text
 from sherpa_cli.motion.guard import MotionGuard
-from sherpa_cli.motion.report import GuardReport
+from sherpa_cli.motion.report import GuardReport, MotionInterrupted, with_report
 from sherpa_cli.motion.request import MoveRequest
 from sherpa_cli.motion.settings import MotionSettings
 
@@ -154,18 +154,18 @@ def run_jog(session: ArmSession, target: Axis, req: MoveRequest, *, settings: Mo
     except KeyboardInterrupt as exc:
         held = req.hold and state.get("holding")
         if not held and not (req.mode == "velocity" and req.duration is None and state["t0"] is not None):
-            exc.motion_report = guard.report  # type: ignore[attr-defined]  # the CLI shows how it stopped
-            raise
+            raise MotionInterrupted(guard.report) from exc  # the CLI shows how it stopped
         interrupted = True  # Ctrl-C is how an open-ended velocity jog is meant to end
         if not guard.report.ok:  # ... but a stop or restore that failed is never hidden behind it
             problems = [f"{d.drive}: {p}" for d in guard.report.drives for p in d.problems]
-            err = SafetyError("the stop after the motion did not go cleanly: " + "; ".join(problems),
-                              hint="check the drives with `sherpa monitor --once`; `sherpa stop` stops them all")
-            err.motion_report = guard.report  # type: ignore[attr-defined]
-            raise err from exc
+            raise SafetyError("the stop after the motion did not go cleanly: " + "; ".join(problems),
+                              hint="check the drives with `sherpa monitor --once`; `sherpa stop` stops them all",
+                              motion_report=guard.report) from exc
     except BaseException as exc:
-        exc.motion_report = guard.report  # type: ignore[attr-defined]
-        raise
+        carried = with_report(exc, guard.report)  # the CLI shows how the guard stopped the motors
+        if carried is exc:
+            raise
+        raise carried from exc
     (stopped,) = guard.report.drives
     return JogResult(target=target.name, drive=ref.name, address=ref.address, mode=req.mode,
                      start_counts=state["start"], end_counts=stopped.position, target_counts=state["target"],

@@ -38,6 +38,7 @@ from sherpa_cli.motion import calibration, limit_watch, recovery
 from sherpa_cli.motion.axis import Axis, move_time_bound, profile_speed
 from sherpa_cli.motion.blocked import blocked_text
 from sherpa_cli.motion.limit_watch import Breach
+from sherpa_cli.motion.report import with_report
 from sherpa_cli.motion.request import MoveRequest
 
 if TYPE_CHECKING:
@@ -262,8 +263,10 @@ def run(session: ArmSession, axis: Axis, request: MoveRequest, *,
         final = _run_guarded(guard, session, cfg, axis, p, by_name, settings, joints_start, result, clock, sleep,
                              on_progress)
     except BaseException as exc:
-        exc.motion_report = guard.report  # type: ignore[attr-defined]  # the CLI shows how it stopped
-        raise
+        carried = with_report(exc, guard.report)  # the CLI shows how the guard stopped the motors
+        if carried is exc:
+            raise
+        raise carried from exc
     # the guard stopped every motor (ST, MO=0) and put back what it changed
     result.motors_end = final
     result.joints_end = {j.name: j.position(final) for j in axis.watched}
