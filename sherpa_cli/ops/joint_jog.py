@@ -33,7 +33,6 @@ from sherpa_cli.bus.targets import DriveRef
 from sherpa_cli.config.model import ArmConfig
 from sherpa_cli.elmo.protocol import UM_POSITION, UM_TORQUE
 from sherpa_cli.errors import SafetyError, UsageError
-from sherpa_cli.joints import diffpair
 from sherpa_cli.motion import calibration, limit_watch, recovery
 from sherpa_cli.motion.axis import Axis, move_time_bound, profile_speed
 from sherpa_cli.motion.blocked import blocked_text
@@ -378,11 +377,9 @@ def _restore_held(guard: MotionGuard, by_name: Mapping[str, DriveRef], clients: 
     s, d = now[a] + now[b], now[a] - now[b]
     if (d if axis.kind == "sigma" else s) == value:
         return now
-    if axis.kind == "sigma":
-        s2, d2 = diffpair.hold_other(s, value, "delta")
-    else:
-        s2, d2 = diffpair.hold_other(value, d, "sigma")
-    targets = dict(zip(axis.drives, diffpair.to_motors(s2, d2), strict=True))
+    # the held joint's own axis to its value, the moved joint giving way by a count on a parity clash
+    (other,) = [j for j in axis.watched if j.name == name]
+    targets = other.motor_targets(value, now)
     result.held_correction = {name: {"from": (d if axis.kind == "sigma" else s), "to": value}}
     recovery.move_to(guard, by_name, clients, targets, _slow(axis, settings), settings, clock, sleep,
                      f"the correction of the held joint {name}")

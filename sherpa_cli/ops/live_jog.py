@@ -35,7 +35,6 @@ from sherpa_cli.config.model import ArmConfig, JointConfig, JointRole
 from sherpa_cli.elmo.faults import decode_sr, describe_mf, describe_sr, sr_problems
 from sherpa_cli.elmo.protocol import UM_POSITION, UM_TORQUE
 from sherpa_cli.errors import ExitCode, SafetyError, SherpaError, UsageError
-from sherpa_cli.joints import diffpair
 from sherpa_cli.joints.units import counts_to_rad
 from sherpa_cli.motion import calibration, limit_watch, recovery
 from sherpa_cli.motion.axis import Axis, joint_axis, joints_moved_by, profile_speed
@@ -201,18 +200,10 @@ class LiveJog:
         if not lo <= goal <= hi:
             return self._refuse(name, f"{name}: target {goal} counts is outside the normal range [{lo}, {hi}]: "
                                       "not sent")
-        if a.kind == "plain":
-            motor_targets = {a.drives[0]: goal}
-        else:
-            # the other joint of the pair holds; on a parity clash it gives way by one count (joint_jog)
-            pair = a.pair
-            assert pair is not None  # a Σ/Δ joint's axis carries its pair
-            held = self.cfg.joints[pair.delta if a.kind == "sigma" else pair.sigma]
-            ma, mb = (now[d] for d in a.drives)
-            s_now, d_now = ma + mb, ma - mb
-            s2, d2 = (diffpair.hold_other(goal, d_now, "sigma", held.normal_range) if a.kind == "sigma"
-                      else diffpair.hold_other(s_now, goal, "delta", held.normal_range))
-            motor_targets = dict(zip(a.drives, diffpair.to_motors(s2, d2), strict=True))
+        # the other joint of a pair holds; on a parity clash it gives way by one count inside its
+        # normal range (Axis.motor_targets, the same map as `jog`)
+        other = next((j for j in joints_moved_by(self.cfg, a.drives) if j.name != a.name), None)
+        motor_targets = a.motor_targets(goal, now, other.normal if other is not None and a.is_pair_joint else None)
         # half the joint's speed (motion/axis.profile_speed), never the SP the drive holds
         speed = max(1, profile_speed(a, self.settings.recovery_fallback_speed) // 2)
         distance = max(abs(t - now[d]) for d, t in motor_targets.items())
@@ -242,21 +233,12 @@ class LiveJog:
         if abs(v) > a.vel_limit:
             return self._refuse(name, f"{name}: {abs(v)} counts/s is above the joint's speed limit "
                                       f"{a.vel_limit} counts/s: not sent")
-        if a.kind == "plain":
-            motors = {a.drives[0]: v}
-        else:
-            va, vb = diffpair.motor_velocities(v, 0) if a.kind == "sigma" else diffpair.motor_velocities(0, v)
-            motors = dict(zip(a.drives, (va, vb), strict=True))
-        return self._run(name, "velocity", motors)
+        return self._run(name, "velocity", a.motor_velocities(v))
 
     def set_torque(self, name: str, amps: float) -> str:
         """Apply ``amps`` (per joint; a Σ/Δ joint through the pair's transpose) until ``keepalive`` s pass."""
         a = self._axis(name)
-        if a.kind == "plain":
-            motors = {a.drives[0]: float(amps)}
-        else:
-            ia, ib = diffpair.motor_currents(amps, 0.0) if a.kind == "sigma" else diffpair.motor_currents(0.0, amps)
-            motors = dict(zip(a.drives, (ia, ib), strict=True))
+        motors = a.motor_currents(amps)
         if a.current_limit is None:
             return self._refuse(name, f"{name}: no current limits configured: torque not sent")
         if max(abs(x) for x in motors.values()) > a.current_limit:
