@@ -45,11 +45,15 @@ class SherpaError(Exception):
     """Root of every error sherpa-cli raises on purpose."""
 
     exit_code: ExitCode = ExitCode.PROBLEM
+    motion_report: object | None = None  # also for subclasses that set up their own __init__
 
-    def __init__(self, message: str, *, hint: str | None = None) -> None:
+    def __init__(self, message: str, *, hint: str | None = None, motion_report: object | None = None) -> None:
         super().__init__(message)
         self.message = message
         self.hint = hint
+        # how the motion guard stopped the motors when this error ended a motion (motion/report.py
+        # GuardReport; read it typed with motion.report.report_of); None outside a motion
+        self.motion_report = motion_report
 
     def __str__(self) -> str:
         return self.message

@@ -13,11 +13,13 @@ from hypothesis import strategies as st
 from sherpa_cli.bus.session import ArmSession
 from sherpa_cli.config import load_config
 from sherpa_cli.errors import SafetyError
+from sherpa_cli.motion.axis import resolve_axis
 from sherpa_cli.motion.blocked import StallWatch, min_progress_for
+from sherpa_cli.motion.request import parse_request
 from sherpa_cli.motion.settings import MotionSettings
 from sherpa_cli.ops import diffdrive
-from sherpa_cli.ops.diffdrive import MoveRequest
-from sherpa_cli.ops.jog import JogRequest, resolve_jog_target, run_jog
+from sherpa_cli.ops.diffdrive import PairTarget
+from sherpa_cli.ops.jog import run_jog
 from sherpa_cli.sim.arm import SimArm
 
 ARM = Path(__file__).resolve().parent / "data" / "home-arm.yaml"
@@ -53,7 +55,7 @@ def test_a_pair_move_into_a_pressed_end_switch_ends_blocked_naming_it():
         for d in ("pair_a", "pair_b"):
             s.sim.press_switch(d, 2, True)  # the Σ (pitch) high end switch is held
         with pytest.raises(SafetyError, match=r"diff: blocked: no progress for 1 s; pitch high end switch \(input 2\) active"):
-            diffdrive.run_move(s, cfg.pairs["diff"], MoveRequest(sigma="400counts", delta="0counts",
+            diffdrive.run_move(s, cfg.pairs["diff"], PairTarget(sigma="400counts", delta="0counts",
                                                                  relative=True, uncalibrated=True))
         with s.sim.lock:
             assert not any(d.motor_on for d in s.sim.drives.values())
@@ -62,12 +64,12 @@ def test_a_pair_move_into_a_pressed_end_switch_ends_blocked_naming_it():
 def test_a_plain_jog_into_a_pressed_end_switch_ends_blocked_naming_it():
     cfg = load_config(ARM)
     with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
-        c = s.client(resolve_jog_target(cfg, "stiff").ref)
+        c = s.client(resolve_axis(cfg, "stiff").ref)
         c.nmt_start()
         c.set("IL", 3, cfg.il_codes.stop)  # the switch's stop function, as program-limits writes it
         s.sim.press_switch("stiff_drive", 3, True)  # the low end switch is held
         with pytest.raises(SafetyError, match=r"blocked: no progress for 1 s; stiff low end switch \(input 3\) active"):
-            run_jog(s, resolve_jog_target(cfg, "stiff"), JogRequest(mode="velocity", velocity=-0.5, duration=10.0),
+            run_jog(s, resolve_axis(cfg, "stiff"), parse_request(resolve_axis(cfg, "stiff"), mode="velocity", velocity=-0.5, duration=10.0),
                     settings=MotionSettings.from_config(cfg))
         with s.sim.lock:
             assert not s.sim.drives["stiff_drive"].motor_on

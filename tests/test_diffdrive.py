@@ -18,8 +18,10 @@ from sherpa_cli.config import load_config
 from sherpa_cli.elmo.codec import encode_execute, encode_set
 from sherpa_cli.errors import SafetyError, UsageError
 from sherpa_cli.motion import pair_start
+from sherpa_cli.motion.axis import resolve_axis
+from sherpa_cli.motion.request import parse_request
 from sherpa_cli.ops import diffdrive
-from sherpa_cli.ops.diffdrive import MoveRequest
+from sherpa_cli.ops.diffdrive import PairTarget
 from sherpa_cli.sim import ManualClock, SimSettings
 from sherpa_cli.sim.arm import SimArm
 from sherpa_cli.sim.drive import SimDrive
@@ -47,10 +49,10 @@ def test_equal_duration_profiles_scale_every_motor_by_its_share():
 
 def test_plan_converts_sigma_delta_to_motor_targets_and_holds_the_other(cfg):
     pair = cfg.pairs["diff"]
-    p = diffdrive.plan_move(cfg, pair, MoveRequest(sigma="200counts"), {"left": 50, "right": 10})
+    p = diffdrive.plan_move(cfg, pair, PairTarget(sigma="200counts"), {"left": 50, "right": 10})
     assert p.start == (60, 40) and p.target == (200, 40)
     assert p.motor_targets == {"left": 120, "right": 80}
-    both = diffdrive.plan_move(cfg, pair, MoveRequest(sigma="100counts", delta="-300counts", relative=True),
+    both = diffdrive.plan_move(cfg, pair, PairTarget(sigma="100counts", delta="-300counts", relative=True),
                                {"left": 0, "right": 0})
     assert both.target == (100, -300) and both.motor_targets == {"left": -100, "right": 200}
     # the longer motor gets the full profile, the other its share
@@ -59,18 +61,18 @@ def test_plan_converts_sigma_delta_to_motor_targets_and_holds_the_other(cfg):
 
 def test_plan_in_rad_and_deg(cfg):
     pair = cfg.pairs["diff"]
-    p = diffdrive.plan_move(cfg, pair, MoveRequest(sigma="1", delta="-6deg"), {"left": 0, "right": 0})
+    p = diffdrive.plan_move(cfg, pair, PairTarget(sigma="1", delta="-6deg"), {"left": 0, "right": 0})
     # 1 rad = 955 counts and 6° = -100 counts of cpr 6000: different parity, so one gives way a count
     assert abs(p.target[0] - 955) + abs(p.target[1] + 100) == 1 and (p.target[0] - p.target[1]) % 2 == 0
 
 
 @pytest.mark.parametrize("req, text", [
-    (MoveRequest(sigma="3000counts"), "normal range [-2800, 2800]"),
-    (MoveRequest(delta="-1950counts"), "roll target -1950 counts is outside"),
-    (MoveRequest(delta="2000counts", relative=True), "outside the joint's normal range"),
-    (MoveRequest(), "give --sigma, --delta or both"),
-    (MoveRequest(sigma="10furlong"), "--sigma"),
-    (MoveRequest(sigma="100counts", velocity="2000counts"), "above its speed limit"),
+    (PairTarget(sigma="3000counts"), "normal range [-2800, 2800]"),
+    (PairTarget(delta="-1950counts"), "roll target -1950 counts is outside"),
+    (PairTarget(delta="2000counts", relative=True), "outside the joint's normal range"),
+    (PairTarget(), "give --sigma, --delta or both"),
+    (PairTarget(sigma="10furlong"), "--sigma"),
+    (PairTarget(sigma="100counts", velocity="2000counts"), "above its speed limit"),
 ])
 def test_plan_refusals(cfg, req, text):
     with pytest.raises(UsageError, match=None) as exc:
@@ -89,7 +91,7 @@ def test_coupling_of_a_sigma_move_measures_the_held_delta():
 
 
 def test_feedback_slows_the_motor_ahead_within_its_bound(cfg):
-    p = diffdrive.plan_move(cfg, cfg.pairs["diff"], MoveRequest(sigma="400counts"), {"left": 0, "right": 0})
+    p = diffdrive.plan_move(cfg, cfg.pairs["diff"], PairTarget(sigma="400counts"), {"left": 0, "right": 0})
     planned = p.profiles
     new = diffdrive.Feedback(p, gain=8.0, limit=0.5).profiles(0.0, {"left": 20, "right": 60})  # b ahead
     # only the motor ahead slows: no motor ever runs faster than planned
@@ -104,7 +106,7 @@ def test_feedback_slows_the_motor_ahead_within_its_bound(cfg):
 
 def test_feedback_velocity_term_sees_a_faster_motor_before_the_positions_drift():
     cfg = load_config(MISMATCHED)
-    p = diffdrive.plan_move(cfg, cfg.pairs["diff"], MoveRequest(sigma="400counts"), {"left": 0, "right": 0})
+    p = diffdrive.plan_move(cfg, cfg.pairs["diff"], PairTarget(sigma="400counts"), {"left": 0, "right": 0})
     fb = diffdrive.Feedback(p, gain=8.0, limit=0.5)
     sp = p.profiles["left"].sp
     same = {"left": 50, "right": 50}
@@ -120,7 +122,7 @@ def test_feedback_velocity_term_sees_a_faster_motor_before_the_positions_drift()
 
 def test_feedback_after_a_stalled_cycle_corrects_less():
     cfg = load_config(MISMATCHED)
-    p = diffdrive.plan_move(cfg, cfg.pairs["diff"], MoveRequest(sigma="400counts"), {"left": 0, "right": 0})
+    p = diffdrive.plan_move(cfg, cfg.pairs["diff"], PairTarget(sigma="400counts"), {"left": 0, "right": 0})
     on_time, stalled = diffdrive.Feedback(p, gain=8.0, limit=0.5), diffdrive.Feedback(p, gain=8.0, limit=0.5)
     ahead = {"left": 100, "right": 96}
     for fb in (on_time, stalled):
@@ -181,7 +183,7 @@ def test_sim_group_id_is_ram_and_ignored_when_zero():
 
 def _run(cfg, **kw):
     with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
-        r = diffdrive.run_move(s, cfg.pairs["diff"], MoveRequest(**kw))
+        r = diffdrive.run_move(s, cfg.pairs["diff"], PairTarget(**kw))
         with s.sim.lock:
             groups = [d.group_id for d in s.sim.drives.values()]
             saves = [d.save_count for d in s.sim.drives.values()]
@@ -210,7 +212,7 @@ def test_delta_move_with_relative_and_the_plot(cfg, tmp_path):
     import matplotlib.pyplot as plt
 
     with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
-        r = diffdrive.run_move(s, cfg.pairs["diff"], MoveRequest(delta="-10deg", relative=True))
+        r = diffdrive.run_move(s, cfg.pairs["diff"], PairTarget(delta="-10deg", relative=True))
     assert abs(r.end[1] - r.target[1]) <= 1 and r.coupling.held == "pitch"
     out = tmp_path / "move.png"
     diffdrive.plot(r, str(out))
@@ -222,10 +224,10 @@ def test_uncalibrated_pair_is_refused_before_anything_moves():
     cfg = load_config(FAST)  # no abs encoder, not homed
     with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
         with pytest.raises(SafetyError, match=r"not|calibrat"):
-            diffdrive.run_move(s, cfg.pairs["diff"], MoveRequest(sigma="100counts"))
+            diffdrive.run_move(s, cfg.pairs["diff"], PairTarget(sigma="100counts"))
         with s.sim.lock:
             assert all(not d.motor_on and not d.od_writes for d in s.sim.drives.values())
-        r = diffdrive.run_move(s, cfg.pairs["diff"], MoveRequest(sigma="100counts", uncalibrated=True))
+        r = diffdrive.run_move(s, cfg.pairs["diff"], PairTarget(sigma="100counts", uncalibrated=True))
         assert abs(r.end[0] - 100) <= 1
 
 
@@ -234,8 +236,8 @@ def test_jog_of_a_pair_joint_starts_both_motors_with_one_group_bg():
 
     cfg = load_config(FAST)
     with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
-        r = joint_jog.run(s, joint_jog.resolve_axis(cfg, "pitch"),
-                          joint_jog.JogRequest(mode="position", to="300counts", uncalibrated=True))
+        r = joint_jog.run(s, resolve_axis(cfg, "pitch"),
+                          parse_request(resolve_axis(cfg, "pitch"), mode="position", to="300counts", uncalibrated=True))
         assert abs(r.end - 300) <= 1
         with s.sim.lock:
             left, right = s.sim.drives["left"], s.sim.drives["right"]
@@ -256,7 +258,7 @@ def test_pair_start_sequential_setting_sends_two_bg(tmp_path):
     path.write_text(text)
     cfg = load_config(path)
     with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
-        r = diffdrive.run_move(s, cfg.pairs["diff"], MoveRequest(delta="100counts", uncalibrated=True))
+        r = diffdrive.run_move(s, cfg.pairs["diff"], PairTarget(delta="100counts", uncalibrated=True))
         assert r.mode == "sequential" and abs(r.end[1] - 100) <= 1
         with s.sim.lock:
             assert not s.sim.drives["left"].od_writes or all(w[1] != 0x2040 for w in s.sim.drives["left"].od_writes)
@@ -296,9 +298,9 @@ def test_a_naive_move_whose_held_joint_leaves_its_full_range_is_stopped_and_brou
     path.write_text(text)
     cfg = load_config(path)
     with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
-        first = diffdrive.run_move(s, cfg.pairs["diff"], MoveRequest(delta="1990counts"))
+        first = diffdrive.run_move(s, cfg.pairs["diff"], PairTarget(delta="1990counts"))
         assert first.ok and abs(first.end[1] - 1990) <= 1, first.as_dict()
-        r = diffdrive.run_move(s, cfg.pairs["diff"], MoveRequest(sigma="-1", naive=True))
+        r = diffdrive.run_move(s, cfg.pairs["diff"], PairTarget(sigma="-1", naive=True))
         assert not r.ok and r.outcome == "limit" and r.breaches[0].joint == "roll", r.as_dict()
         assert -1990 <= r.end[1] <= 1990  # back inside the normal range
         with s.sim.lock:
@@ -333,7 +335,7 @@ def test_the_move_records_both_motors_by_tpdo_on_sync_and_puts_the_pdo_settings_
     sync = CountingSync()
     with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
         before = _pdo(s, cfg)
-        r = diffdrive.run_move(s, cfg.pairs["diff"], MoveRequest(sigma="0.5"),
+        r = diffdrive.run_move(s, cfg.pairs["diff"], PairTarget(sigma="0.5"),
                                recorder_kw={"sync_factory": sync.factory})
         after = _pdo(s, cfg)
         with s.sim.lock:
@@ -353,7 +355,7 @@ def test_the_move_records_both_motors_by_tpdo_on_sync_and_puts_the_pdo_settings_
 
 def test_poll_records_through_the_interpreter_and_changes_no_pdo(cfg):
     with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
-        r = diffdrive.run_move(s, cfg.pairs["diff"], MoveRequest(sigma="0.3", poll=True))
+        r = diffdrive.run_move(s, cfg.pairs["diff"], PairTarget(sigma="0.3", poll=True))
         with s.sim.lock:
             pdo_writes = [w for d in s.sim.drives.values() for w in d.od_writes if 0x1800 <= w[1] <= 0x1AFF]
             syncs = [d.syncs for d in s.sim.drives.values()]
@@ -368,7 +370,7 @@ def test_a_recorder_that_cannot_start_falls_back_to_polling_and_restores_the_pdo
 
     with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
         before = _pdo(s, cfg)
-        r = diffdrive.run_move(s, cfg.pairs["diff"], MoveRequest(delta="100counts", relative=True),
+        r = diffdrive.run_move(s, cfg.pairs["diff"], PairTarget(delta="100counts", relative=True),
                                recorder_kw={"sync_factory": no_sync})
         assert _pdo(s, cfg) == before
     assert r.trace_source == "polled PX (the recorder could not be set up: no SYNC on this bus)"
@@ -388,7 +390,7 @@ def test_an_error_during_the_move_still_puts_the_pdo_settings_back(cfg):
             time.sleep(seconds)
 
         with pytest.raises(Boom):
-            diffdrive.run_move(s, cfg.pairs["diff"], MoveRequest(sigma="0.5"), sleep=sleep)
+            diffdrive.run_move(s, cfg.pairs["diff"], PairTarget(sigma="0.5"), sleep=sleep)
         assert _pdo(s, cfg) == before
         with s.sim.lock:
             assert all(not d.motor_on and d.group_id == 0 for d in s.sim.drives.values())
@@ -545,7 +547,7 @@ def test_pair_start_sync_rpdo_moves_the_mismatched_pair_and_restores_the_rpdo(tm
     peaks = {}
     for name, kw in (("sync", {}), ("feedback", {"feedback": True})):
         with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
-            r = diffdrive.run_move(s, cfg.pairs["diff"], MoveRequest(sigma="1", **kw))
+            r = diffdrive.run_move(s, cfg.pairs["diff"], PairTarget(sigma="1", **kw))
             with s.sim.lock:
                 assert all(d.od_read(0x1401, 2) == 255 and d.save_count == 0 and not d.motor_on
                            for d in s.sim.drives.values())
@@ -566,8 +568,8 @@ def test_jog_of_a_pair_joint_with_sync_rpdo_starts_both_at_one_sync(tmp_path):
     path.write_text(text)
     cfg = load_config(path)
     with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
-        r = joint_jog.run(s, joint_jog.resolve_axis(cfg, "pitch"),
-                          joint_jog.JogRequest(mode="position", to="300counts", uncalibrated=True))
+        r = joint_jog.run(s, resolve_axis(cfg, "pitch"),
+                          parse_request(resolve_axis(cfg, "pitch"), mode="position", to="300counts", uncalibrated=True))
         assert abs(r.end - 300) <= 1
         with s.sim.lock:
             left, right = s.sim.drives["left"], s.sim.drives["right"]

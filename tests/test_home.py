@@ -13,6 +13,7 @@ import pytest
 from sherpa_cli.bus.session import ArmSession
 from sherpa_cli.config import load_config
 from sherpa_cli.errors import SafetyError, UsageError
+from sherpa_cli.motion.axis import resolve_axis
 from sherpa_cli.ops import home
 from sherpa_cli.sim.arm import SimArm
 
@@ -255,12 +256,13 @@ def test_an_encoder_joint_is_refused_in_fault_before_the_encoder_is_read_or_px_s
 
 
 def test_jog_refuses_an_uncalibrated_position_move_and_accepts_it_after_home():
+    from sherpa_cli.motion.request import parse_request
     from sherpa_cli.motion.settings import MotionSettings
-    from sherpa_cli.ops.jog import JogRequest, resolve_jog_target, run_jog
+    from sherpa_cli.ops.jog import run_jog
 
     cfg = load_config(ARM)
-    target = resolve_jog_target(cfg, "yaw")
-    req = JogRequest(mode="position", to=100 * 2 * 3.141592653589793 / 3600)
+    target = resolve_axis(cfg, "yaw")
+    req = parse_request(target, mode="position", to=100 * 2 * 3.141592653589793 / 3600)
     with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
         with pytest.raises(SafetyError, match="not homed since power-up"):
             run_jog(s, target, req, settings=MotionSettings.from_config(cfg))
@@ -270,11 +272,12 @@ def test_jog_refuses_an_uncalibrated_position_move_and_accepts_it_after_home():
 
 
 def test_a_pair_jog_is_refused_uncalibrated_and_accepted_after_homing_the_pair():
+    from sherpa_cli.motion.request import parse_request
     from sherpa_cli.ops import joint_jog
 
     cfg = load_config(ARM)
-    axis = joint_jog.resolve_axis(cfg, "pitch")
-    req = joint_jog.JogRequest(mode="position", to="-400counts")
+    axis = resolve_axis(cfg, "pitch")
+    req = parse_request(axis, mode="position", to="-400counts")
     with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
         with pytest.raises(SafetyError, match="not homed since power-up"):
             joint_jog.run(s, axis, req)

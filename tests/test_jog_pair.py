@@ -15,8 +15,9 @@ from motion_helpers import JOG_CONFIG, calibrate, motors_off
 from sherpa_cli.bus.session import ArmSession
 from sherpa_cli.config import load_config
 from sherpa_cli.errors import SafetyError, UsageError
+from sherpa_cli.motion.axis import resolve_axis
+from sherpa_cli.motion.request import parse_request
 from sherpa_cli.ops import joint_jog
-from sherpa_cli.ops.joint_jog import JogRequest, resolve_axis
 from sherpa_cli.sim.arm import SimArm
 
 CONFIG = JOG_CONFIG
@@ -28,7 +29,8 @@ def cfg():
 
 
 def jog(session, name, **kw):
-    return joint_jog.run(session, resolve_axis(session.cfg, name), JogRequest(**kw))
+    axis = resolve_axis(session.cfg, name)
+    return joint_jog.run(session, axis, parse_request(axis, **kw))
 
 
 @pytest.mark.parametrize("name, to, other", [("pitch", "1000counts", "roll"), ("roll", "-601counts", "pitch"),
@@ -137,11 +139,10 @@ def test_a_pair_motor_alone_is_checked_in_joint_space(cfg):
                                  dict(mode="torque", torque=1.5, duration=3.0)])
 def test_plain_jog_past_the_full_range_is_stopped_and_brought_back(cfg, req):
     from sherpa_cli.motion.settings import MotionSettings
-    from sherpa_cli.ops.jog import JogRequest as PlainRequest
-    from sherpa_cli.ops.jog import resolve_jog_target, run_jog
+    from sherpa_cli.ops.jog import run_jog
 
     with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
-        r = run_jog(s, resolve_jog_target(cfg, "j1"), PlainRequest(**req), settings=MotionSettings.from_config(cfg))
+        r = run_jog(s, resolve_axis(cfg, "j1"), parse_request(resolve_axis(cfg, "j1"), **req), settings=MotionSettings.from_config(cfg))
         assert r.breach is not None and r.breach.joint == "j1"
         edge = 1900 if r.breach.side == "high" else -1900
         assert r.breach.back_to == edge and r.recovered_to == edge and r.end_counts == edge
@@ -152,20 +153,19 @@ def test_plain_jog_past_the_full_range_is_stopped_and_brought_back(cfg, req):
 
 def test_plain_position_refusals_before_anything_is_armed(cfg):
     from sherpa_cli.motion.settings import MotionSettings
-    from sherpa_cli.ops.jog import JogRequest as PlainRequest
-    from sherpa_cli.ops.jog import resolve_jog_target, run_jog
+    from sherpa_cli.ops.jog import run_jog
 
     settings = MotionSettings.from_config(cfg)
     with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
-        target = resolve_jog_target(cfg, "j1")
+        target = resolve_axis(cfg, "j1")
         with pytest.raises(UsageError, match=r"target 7540 counts is outside the joint's normal range \[-1900, 1900\]"):
-            run_jog(s, target, PlainRequest(mode="position", to=11.844), settings=settings)
+            run_jog(s, target, parse_request(target, mode="position", to=11.844), settings=settings)
         with pytest.raises(SafetyError, match=r"not homed since power-up \(yaw UI\[3\]=0\)"):
-            run_jog(s, target, PlainRequest(mode="position", to=0.5), settings=settings)
+            run_jog(s, target, parse_request(target, mode="position", to=0.5), settings=settings)
         with s.sim.lock:
             assert all(d.od_writes == [] for d in s.sim.drives.values())  # the dead-man was never armed
         calibrate(s, "yaw")
-        r = run_jog(s, target, PlainRequest(mode="position", to=0.5), settings=settings)
+        r = run_jog(s, target, parse_request(target, mode="position", to=0.5), settings=settings)
         assert r.calibration.calibrated and abs(r.end_counts - 318) <= 1
 
 
@@ -195,9 +195,8 @@ def test_a_motor_that_trips_during_a_pair_jog_ends_it_with_the_reason(cfg):
 
 
 def test_what_a_pair_jog_takes(cfg):
-    for name in ("j1", "yaw"):
-        with pytest.raises(UsageError, match="not a joint or motor of a differential pair"):
-            resolve_axis(cfg, name)
+    # one resolver for every axis (motion/axis.py): a plain joint is an axis too
+    assert [resolve_axis(cfg, name).kind for name in ("j1", "yaw")] == ["plain", "plain"]
     with pytest.raises(UsageError, match="is a differential pair: name the joint to move"):
         resolve_axis(cfg, "diff")
     with pytest.raises(UsageError, match="unknown target 'pich'"):
@@ -209,7 +208,7 @@ def test_what_a_pair_jog_takes(cfg):
 def test_progress_reports_both_pair_joints(cfg):
     seen = []
     with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
-        joint_jog.run(s, resolve_axis(cfg, "pitch"), JogRequest(mode="velocity", velocity="2000counts",
+        joint_jog.run(s, resolve_axis(cfg, "pitch"), parse_request(resolve_axis(cfg, "pitch"), mode="velocity", velocity="2000counts",
                                                                 duration=0.2), on_progress=seen.append)
     assert seen and all(set(p) == {"pitch", "roll"} for p in seen)
     assert seen[-1]["pitch"] > seen[0]["pitch"]

@@ -13,8 +13,10 @@ from test_motion_guard import ARMED, CONFIG, RESTORED
 from sherpa_cli.bus.session import ArmSession
 from sherpa_cli.config import load_config
 from sherpa_cli.errors import UsageError
+from sherpa_cli.motion.axis import resolve_axis
+from sherpa_cli.motion.request import parse_request
 from sherpa_cli.motion.settings import MotionSettings
-from sherpa_cli.ops.jog import JogRequest, check_request, resolve_jog_target, run_jog
+from sherpa_cli.ops.jog import check_request, run_jog
 from sherpa_cli.sim.arm import SimArm
 
 CPR = 4000
@@ -28,10 +30,10 @@ def cfg(tmp_path):
 
 
 def jog(cfg, name, **req):
-    target = resolve_jog_target(cfg, name)
+    target = resolve_axis(cfg, name)
     progress = []
     with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
-        result = run_jog(s, target, JogRequest(**req), settings=MotionSettings.from_config(cfg),
+        result = run_jog(s, target, parse_request(target, **req), settings=MotionSettings.from_config(cfg),
                          on_progress=progress.append)
         drive = s.sim.drives[target.ref.name]
         with s.sim.lock:
@@ -94,12 +96,12 @@ def test_torque_jog_for_a_time_stops_and_restores_the_unit_mode(cfg):
 ])
 def test_refusals_before_the_bus(cfg, req, match):
     with pytest.raises(UsageError, match=match):
-        check_request(resolve_jog_target(cfg, "j1"), JogRequest(**req))
+        check_request(resolve_axis(cfg, "j1"), parse_request(resolve_axis(cfg, "j1"), **req))
 
 
 def test_a_drive_without_a_plain_joint_needs_counts(cfg):
     with pytest.raises(UsageError, match="no cpr"):
-        check_request(resolve_jog_target(cfg, "drive2"), JogRequest(mode="position", to=1.0))
+        check_request(resolve_axis(cfg, "drive2"), parse_request(resolve_axis(cfg, "drive2"), mode="position", to=1.0))
 
 
 # -- the command ---------------------------------------------------------------------------------
@@ -169,7 +171,7 @@ def test_velocity_jog_without_a_configured_speed_limit_is_refused(tmp_path):
     cfg = load_config(path)
     assert cfg.joints["j1"].vel_limit is None
     with pytest.raises(UsageError, match=r"j1: no speed limit configured \(joints.j1.velocity.limit is missing\)"):
-        check_request(resolve_jog_target(cfg, "j1"), JogRequest(mode="velocity", velocity=0.1, duration=0.2))
+        check_request(resolve_axis(cfg, "j1"), parse_request(resolve_axis(cfg, "j1"), mode="velocity", velocity=0.1, duration=0.2))
 
 
 def test_pair_velocity_jog_without_a_configured_speed_limit_is_refused():
@@ -180,9 +182,9 @@ def test_pair_velocity_jog_without_a_configured_speed_limit_is_refused():
     from sherpa_cli.ops import joint_jog
 
     pair_cfg = load_config(PAIR_CONFIG)
-    axis = dataclasses.replace(joint_jog.resolve_axis(pair_cfg, "pitch"), vel_limit=None)
+    axis = dataclasses.replace(resolve_axis(pair_cfg, "pitch"), vel_limit=None)
     with pytest.raises(UsageError, match="pitch: no speed limit configured"):
-        joint_jog.check_offline(pair_cfg, axis, joint_jog.JogRequest(mode="velocity", velocity="100counts/s",
+        joint_jog.check_offline(pair_cfg, axis, parse_request(axis, mode="velocity", velocity="100counts/s",
                                                                      duration=0.2))
 
 
@@ -208,12 +210,12 @@ def test_ctrl_c_ending_a_velocity_jog_does_not_hide_a_failed_stop(cfg, monkeypat
         calls.append(p)
         if len(calls) == 3:
             raise KeyboardInterrupt  # how an open-ended velocity jog normally ends
-    target = resolve_jog_target(cfg, "j1")
+    target = resolve_axis(cfg, "j1")
     with (
         ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s,
         pytest.raises(SafetyError, match="drive1: not at standstill") as info,
     ):
-        run_jog(s, target, JogRequest(mode="velocity", velocity=0.5),
+        run_jog(s, target, parse_request(target, mode="velocity", velocity=0.5),
                 settings=MotionSettings.from_config(cfg), on_progress=progress)
     assert info.value.motion_report.drives[0].standstill is False
 
@@ -232,12 +234,12 @@ def test_the_limit_watch_stops_with_the_configured_stop_method(tmp_path):
     path.write_text(CONFIG.replace("motion: {consumer_time_ms: 300}", "motion: {consumer_time_ms: 300, stop_method: jv0}"),
                     encoding="utf-8")
     cfg = load_config(path)
-    target = resolve_jog_target(cfg, "j1")
+    target = resolve_axis(cfg, "j1")
     with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
         drive = s.sim.drives["drive1"]
         with s.sim.lock:
             drive.motor.counts = 19950  # 50 counts short of the full range's end (20000)
-        result = run_jog(s, target, JogRequest(mode="velocity", velocity=0.5, duration=3.0),
+        result = run_jog(s, target, parse_request(target, mode="velocity", velocity=0.5, duration=3.0),
                          settings=MotionSettings.from_config(cfg))
         with s.sim.lock:
             executed = [d[:2].decode() for _, cid, d in drive.received if cid == 0x305 and len(d) == 4]
@@ -261,8 +263,8 @@ def test_hold_keeps_the_motor_on_at_the_end_position_until_ctrl_c(cfg):
                 holding_from.append(len(seen))
                 if len(holding_from) > 20:
                     raise KeyboardInterrupt  # how a hold ends
-        result = run_jog(s, resolve_jog_target(cfg, "j1"),
-                         JogRequest(mode="velocity", velocity=0.5, duration=0.2, hold=True),
+        result = run_jog(s, resolve_axis(cfg, "j1"),
+                         parse_request(resolve_axis(cfg, "j1"), mode="velocity", velocity=0.5, duration=0.2, hold=True),
                          settings=MotionSettings.from_config(cfg), on_progress=progress)
         with s.sim.lock:
             off_at_end = not drive.motor_on
@@ -275,15 +277,15 @@ def test_hold_keeps_the_motor_on_at_the_end_position_until_ctrl_c(cfg):
 
 def test_hold_ends_normally_when_sherpa_stop_switches_the_motor_off(cfg):
     with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
-        ref = resolve_jog_target(cfg, "j1").ref
+        ref = resolve_axis(cfg, "j1").ref
         calls = {"n": 0}
 
         def progress(p):
             calls["n"] += 1
             if calls["n"] == 60:
                 s.client(ref).motor_off()  # what `sherpa stop` from a second terminal ends with: MO=0
-        result = run_jog(s, resolve_jog_target(cfg, "j1"),
-                         JogRequest(mode="velocity", velocity=0.5, duration=0.2, hold=True),
+        result = run_jog(s, resolve_axis(cfg, "j1"),
+                         parse_request(resolve_axis(cfg, "j1"), mode="velocity", velocity=0.5, duration=0.2, hold=True),
                          settings=MotionSettings.from_config(cfg), on_progress=progress)
     assert result.ended_by == "held until the motor was switched off (sherpa stop)"
     assert ref.name == "drive1"

@@ -9,14 +9,15 @@ from hypothesis import strategies as st
 
 from sherpa_cli.config import load_config
 from sherpa_cli.joints.diffpair import hold_other, motor_currents, motor_velocities, to_joints
-from sherpa_cli.motion.limit_watch import Breach, WatchedJoint, check, joints_moved_by, recovery_targets, watch
+from sherpa_cli.motion.axis import Axis, joints_moved_by
+from sherpa_cli.motion.limit_watch import Breach, check, recovery_targets, watch
 from sherpa_cli.sim.clock import ManualClock
 
 ARM = "configs/sherpa-arm.yaml"
 
-PLAIN = WatchedJoint("yaw", full=(-1750, 1750), normal=(-1714, 1714), drive_a="m1")
-SIGMA = WatchedJoint("pitch", full=(-1500, 1500), normal=(-1440, 1440), drive_a="a", drive_b="b", sign=1)
-DELTA = WatchedJoint("roll", full=(-1000, 1000), normal=(-950, 950), drive_a="a", drive_b="b", sign=-1)
+PLAIN = Axis("yaw", "plain", full=(-1750, 1750), normal=(-1714, 1714), drive_a="m1")
+SIGMA = Axis("pitch", "sigma", full=(-1500, 1500), normal=(-1440, 1440), drive_a="a", drive_b="b", sign=1)
+DELTA = Axis("roll", "delta", full=(-1000, 1000), normal=(-950, 950), drive_a="a", drive_b="b", sign=-1)
 PAIR = [SIGMA, DELTA]
 
 

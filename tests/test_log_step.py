@@ -12,8 +12,8 @@ import pytest
 
 from sherpa_cli.bus.session import ArmSession
 from sherpa_cli.config import load_config
+from sherpa_cli.motion.axis import resolve_axis
 from sherpa_cli.motion.settings import MotionSettings
-from sherpa_cli.ops.jog import resolve_jog_target
 from sherpa_cli.ops.step import run_step
 from sherpa_cli.sim.arm import SimArm, settings_for
 from sherpa_cli.sim.load import Load
@@ -33,7 +33,7 @@ def arm():
 
 
 def _step(cfg, sim, mode, value, *, before=None, duration=2.0):
-    target = resolve_jog_target(cfg, "elbow_pitch")
+    target = resolve_axis(cfg, "elbow_pitch")
     with ArmSession.open(cfg, sim=sim, buses=["can1"]) as session:
         assert isinstance(sim.drives["elbow_1a"].motor, ServoMotor)
         if before:
@@ -88,7 +88,7 @@ def _stepped_step(cfg, mode, value, *, duration):
     settings = {name: settings_for(cfg, name, **SERVO) for name in cfg.drives if cfg.drives[name].bus == "can1"}
     sim = SimArm(cfg, {"can1": {"interface": "virtual", "channel": f"step-{tag}"}}, settings=settings,
                  clock=stepped.clock)
-    target = resolve_jog_target(cfg, "elbow_pitch")
+    target = resolve_axis(cfg, "elbow_pitch")
     with ArmSession.open(cfg, sim=sim, buses=["can1"]) as session:
         unheard = lambda: (sum(d.unheard for d in sim.drives.values()),  # noqa: E731
                            sum(d.unheard_s for d in sim.drives.values()))
@@ -173,7 +173,7 @@ def test_a_position_step_outside_the_normal_range_is_refused_before_anything_is_
     from sherpa_cli.errors import UsageError
 
     cfg, sim = arm
-    target = resolve_jog_target(cfg, "elbow_pitch")
+    target = resolve_axis(cfg, "elbow_pitch")
     with (
         ArmSession.open(cfg, sim=sim, buses=["can1"]) as session,
         pytest.raises(UsageError, match="outside the joint's normal range"),
@@ -191,7 +191,7 @@ def test_a_position_step_of_an_uncalibrated_joint_needs_the_override(arm):
     from sherpa_cli.errors import SafetyError
 
     cfg, sim = arm
-    target = resolve_jog_target(cfg, "elbow_stiffness")
+    target = resolve_axis(cfg, "elbow_stiffness")
     settings = MotionSettings.from_config(cfg, ["can1"])
     with ArmSession.open(cfg, sim=sim, buses=["can1"]) as session:
         with pytest.raises(SafetyError, match=r"refusing a position move.*not"):
@@ -209,7 +209,7 @@ def test_the_limit_watch_stops_a_step_that_leaves_the_full_range(arm, mode, valu
     stopped at once and brought back to the normal range edge 1314 -- in torque mode too, where
     no drive limit acts."""
     cfg, sim = arm
-    target = resolve_jog_target(cfg, "elbow_pitch")
+    target = resolve_axis(cfg, "elbow_pitch")
     with ArmSession.open(cfg, sim=sim, buses=["can1"]) as session:
         c = session.client(target.ref)
         c.nmt_start()
@@ -255,7 +255,7 @@ def test_on_an_error_the_motor_is_stopped_before_the_recording_is_torn_down(arm)
     import sherpa_cli.ops.step as step_mod
 
     cfg, sim = arm
-    target = resolve_jog_target(cfg, "elbow_pitch")
+    target = resolve_axis(cfg, "elbow_pitch")
     node = cfg.drives["elbow_1a"].node
     after_bg = []
 

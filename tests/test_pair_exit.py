@@ -11,9 +11,11 @@ from motion_helpers import JOG_CONFIG, calibrate, motors_off
 from sherpa_cli.bus.session import ArmSession
 from sherpa_cli.bus.targets import drive_ref
 from sherpa_cli.config import load_config
+from sherpa_cli.motion.axis import resolve_axis
 from sherpa_cli.motion.pair_start import CommonStart
+from sherpa_cli.motion.request import parse_request
 from sherpa_cli.ops import diffdrive, joint_jog
-from sherpa_cli.ops.diffdrive import MoveRequest
+from sherpa_cli.ops.diffdrive import PairTarget
 from sherpa_cli.sim.arm import SimArm
 
 PROFILE = ("SP", "AC", "DC")
@@ -47,7 +49,7 @@ def test_diffdrive_puts_back_the_profile_it_scaled():
     cfg = load_config(JOG_CONFIG)
     with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
         before = {d: _profile(s, d) for d in ("left", "right")}
-        r = diffdrive.run_move(s, cfg.pairs["diff"], MoveRequest(sigma="200counts", delta="200counts",
+        r = diffdrive.run_move(s, cfg.pairs["diff"], PairTarget(sigma="200counts", delta="200counts",
                                                                  relative=True, uncalibrated=True))
         assert r.motor_commands["right"]["AC"] == 1  # it was scaled
         assert {d: _profile(s, d) for d in ("left", "right")} == before
@@ -58,9 +60,9 @@ def test_a_sigma_jog_after_a_diffdrive_move_still_holds_delta():
     cfg = load_config(JOG_CONFIG)
     with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
         calibrate(s, "left", "right")
-        diffdrive.run_move(s, cfg.pairs["diff"], MoveRequest(sigma="200counts", delta="200counts", relative=True))
-        axis = joint_jog.resolve_axis(cfg, "pitch")
-        r = joint_jog.run(s, axis, joint_jog.JogRequest(mode="velocity", velocity="2000counts/s", duration=0.4))
+        diffdrive.run_move(s, cfg.pairs["diff"], PairTarget(sigma="200counts", delta="200counts", relative=True))
+        axis = resolve_axis(cfg, "pitch")
+        r = joint_jog.run(s, axis, parse_request(axis, mode="velocity", velocity="2000counts/s", duration=0.4))
     assert abs(r.joints_end["roll"] - r.joints_start["roll"]) <= 20, (r.joints_start, r.joints_end)
 
 
@@ -85,7 +87,7 @@ def test_ctrl_c_during_a_move_stops_both_motors_before_the_restore_and_restores_
         calibrate(s, "left", "right")
         before = {d: _profile(s, d) for d in ("left", "right")}
         with pytest.raises(KeyboardInterrupt):
-            diffdrive.run_move(s, cfg.pairs["diff"], MoveRequest(sigma="-2000counts", velocity="1000counts/s"),
+            diffdrive.run_move(s, cfg.pairs["diff"], PairTarget(sigma="-2000counts", velocity="1000counts/s"),
                                trace_factory=_CtrlC)
         for d in ("left", "right"):
             st, restore = _stop_and_restore(s, d)
@@ -105,9 +107,9 @@ def test_an_error_during_a_sigma_jog_stops_both_motors_before_the_restore():
             raise RuntimeError("the view went away")
 
     with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
-        axis = joint_jog.resolve_axis(cfg, "pitch")
+        axis = resolve_axis(cfg, "pitch")
         with pytest.raises(RuntimeError):
-            joint_jog.run(s, axis, joint_jog.JogRequest(mode="velocity", velocity="1000counts/s", duration=2.0),
+            joint_jog.run(s, axis, parse_request(axis, mode="velocity", velocity="1000counts/s", duration=2.0),
                           on_progress=progress)
         for d in ("left", "right"):
             st, restore = _stop_and_restore(s, d)
@@ -188,11 +190,11 @@ def test_one_pair_drive_dying_stops_the_partner_at_once_and_ends_the_command_nam
 
         with pytest.raises(CommunicationError, match="right"):
             if how == "diffdrive":
-                diffdrive.run_move(s, cfg.pairs["diff"], MoveRequest(sigma="2500counts", delta="0counts",
+                diffdrive.run_move(s, cfg.pairs["diff"], PairTarget(sigma="2500counts", delta="0counts",
                                                                      relative=True, uncalibrated=True), sleep=sleep)
             else:
-                axis = joint_jog.resolve_axis(cfg, "pitch")
-                joint_jog.run(s, axis, joint_jog.JogRequest(mode="velocity", velocity="1000counts/s", duration=5.0),
+                axis = resolve_axis(cfg, "pitch")
+                joint_jog.run(s, axis, parse_request(axis, mode="velocity", velocity="1000counts/s", duration=5.0),
                               sleep=sleep)
         with s.sim.lock:
             died = [t for t, event in s.sim.drives["right"].events if event == "motor off: the drive died"]

@@ -1,4 +1,4 @@
-"""motion.stop_method everywhere: the jogs' own stops (ops/joint_jog.stop_now: the pair/`jog` limit
+"""motion.stop_method everywhere: the jogs' own stops (motion/recovery.stop_now: the pair/`jog` limit
 stop and end of a velocity/torque jog; ops/live_jog: `s`, Space, expiry, the limit watch) go the
 guard's one stop path (motion/stopping.send_stop), so `st`, `jv0` and `auto` show in the frames each
 simulated drive received: `st` ST only, `jv0` JV=0 + BG (no ST), `auto` ST, and JV=0 + BG where the
@@ -16,8 +16,9 @@ from sherpa_cli.bus.session import ArmSession
 from sherpa_cli.config import load_config
 from sherpa_cli.config.model import SimDriveConfig
 from sherpa_cli.errors import SafetyError
+from sherpa_cli.motion.axis import resolve_axis
+from sherpa_cli.motion.request import parse_request
 from sherpa_cli.ops import joint_jog
-from sherpa_cli.ops.joint_jog import JogRequest, resolve_axis
 from sherpa_cli.ops.live_jog import LiveJog, resolve_axes
 from sherpa_cli.sim.arm import SimArm
 
@@ -115,7 +116,7 @@ def test_live_jog_expiry_stops_with_the_configured_method():
 def test_pair_velocity_jog_ends_with_the_configured_stop_method(method, stop):
     cfg = with_motion(load_config(JOG_CONFIG), stop_method=method)
     with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
-        r = joint_jog.run(s, resolve_axis(cfg, "pitch"), JogRequest(mode="velocity", velocity="2000counts",
+        r = joint_jog.run(s, resolve_axis(cfg, "pitch"), parse_request(resolve_axis(cfg, "pitch"), mode="velocity", velocity="2000counts",
                                                                     duration=0.2))
         assert r.ok
         for drive in ("left", "right"):

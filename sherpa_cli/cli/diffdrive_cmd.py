@@ -193,7 +193,7 @@ def move(
     st = state(ctx)
     cfg = st.load_config()
     p = pair_of(cfg, pair)
-    req = diffdrive.MoveRequest(sigma=sigma, delta=delta, relative=relative, velocity=velocity, naive=naive,
+    req = diffdrive.PairTarget(sigma=sigma, delta=delta, relative=relative, velocity=velocity, naive=naive,
                                 feedback=feedback, uncalibrated=uncalibrated, poll=poll)
     if naive and feedback:
         raise UsageError("--naive and --feedback do not go together: --naive is the seed's way, for comparison")
@@ -240,9 +240,11 @@ def move(
         try:
             result = diffdrive.run_move(session, p, req)
         except BaseException as exc:
-            report = getattr(exc, "motion_report", None)
-            if report is not None and not st.json_mode:
-                for line in report.lines(st.verbose):
+            from sherpa_cli.motion.report import report_of
+
+            stop_report = report_of(exc)
+            if stop_report is not None and not st.json_mode:
+                for line in stop_report.lines(st.verbose):
                     st.out.info(f"stop: {line}")
             raise
     if plot is not None:

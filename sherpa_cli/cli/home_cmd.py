@@ -91,7 +91,9 @@ def home(
             report = ops_home.run_home(session, plan, on_unit=done, on_step=step, report=partial)
         except BaseException as exc:
             st.out.progress(None)
-            motion = getattr(exc, "motion_report", None) or partial.stop
+            from sherpa_cli.motion.report import report_of
+
+            motion = report_of(exc) or partial.stop
             if motion is not None and not st.json_mode:
                 for line in motion.lines(st.verbose):
                     st.out.info(f"stop: {line}")

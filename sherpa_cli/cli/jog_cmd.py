@@ -16,6 +16,8 @@ from sherpa_cli.errors import SherpaError, UsageError
 
 if TYPE_CHECKING:
     from sherpa_cli.config.model import ArmConfig
+    from sherpa_cli.motion.axis import Axis
+    from sherpa_cli.motion.request import MoveRequest
     from sherpa_cli.ops import jog as ops_jog
     from sherpa_cli.ops import joint_jog
 
@@ -91,8 +93,10 @@ def jog(
       sherpa jog shoulder_roll --velocity 5deg/s --for 2 --apply
       sherpa jog elbow_pitch --to 0.5 --hold --apply
     """
+    from sherpa_cli.motion.axis import resolve_axis
+    from sherpa_cli.motion.request import parse_request
     from sherpa_cli.motion.settings import MotionSettings
-    from sherpa_cli.ops.jog import JogRequest, check_request, resolve_jog_target, run_jog
+    from sherpa_cli.ops.jog import check_request, run_jog
 
     st = state(ctx)
     if _live(st, joints or [], interactive, joystick, device, list_joysticks, apply, uncalibrated,
@@ -109,18 +113,23 @@ def jog(
         raise UsageError("give exactly one of --to, --by, --velocity or --torque"
                          + (f" (got {', '.join(given)})" if given else ""))
     mode = "position" if to is not None or by is not None else "velocity" if velocity is not None else "torque"
-    if _is_pair_axis(cfg, joint):
-        if hold:
-            raise UsageError("--hold is for plain joints for now: a Σ/Δ joint is not held after its move",
-                             hint="jog the pair's joint without --hold")
+    target = resolve_axis(cfg, joint)  # the one resolver: plain joint, Σ/Δ joint, pair motor or drive
+    seconds = parse_number(duration, "--for")
+    pair = target.pair is not None  # ops/joint_jog.py moves what involves a pair (both motors, or Σ and Δ)
+    if pair and hold:
+        raise UsageError("--hold is for plain joints for now: a Σ/Δ joint is not held after its move",
+                         hint="jog the pair's joint without --hold")
+    if pair and mode == "velocity" and seconds is None:
+        raise UsageError(f"a velocity jog of {target.name} needs --for SECONDS: a pair jog ends by itself, so the "
+                         "other joint of the pair can be put back where it was",
+                         hint=f"e.g. sherpa jog {target.name} --velocity {velocity} --for 1 --apply")
+    # the one request, parsed once: units -> counts with the axis's cpr (motion/request.py)
+    req = parse_request(target, mode, to=to, by=by, velocity=velocity, torque=torque, duration=seconds,
+                        uncalibrated=uncalibrated, hold=hold)
+    if pair:
         _notice_gravity(st, cfg, joint, hold=False, apply=apply)
-        _jog_pair(st, cfg, joint, mode, to, by, velocity, torque, parse_number(duration, "--for"), uncalibrated, apply)
+        _jog_pair(st, cfg, target, req, to if to is not None else by, apply)
         return
-    target = resolve_jog_target(cfg, joint)
-    req = JogRequest(mode=mode, to=_angle(to, "--to", target.cpr), by=_angle(by, "--by", target.cpr),
-                     velocity=_angle(velocity, "--velocity", target.cpr, speed=True),
-                     torque=_current(torque, "--torque"), duration=parse_number(duration, "--for"),
-                     uncalibrated=uncalibrated, hold=hold)
     check_request(target, req)
     _notice_gravity(st, cfg, target.joint.name if target.joint is not None else None, hold=hold, apply=apply)
     if not apply:
@@ -184,24 +193,15 @@ def _live(st: AppState, joints: list[str], interactive: bool, joystick: bool, de
     return True
 
 
-def _dry_run(st: AppState, target: ops_jog.JogTarget, req: ops_jog.JogRequest, cfg: ArmConfig) -> None:
-    from sherpa_cli.joints.units import rad_per_s_to_counts_per_s, rad_to_counts
-
+def _dry_run(st: AppState, target: Axis, req: MoveRequest, cfg: ArmConfig) -> None:
     ref = target.ref
-    cpr = target.cpr
     if req.mode == "position":
-        assert cpr is not None  # check_request refused position and velocity jogs without a cpr
-        if req.to is not None:
-            plan = f"UM=5, PA={rad_to_counts(req.to, cpr)}, BG"
-        else:
-            assert req.by is not None  # check_request: exactly one of --to and --by
-            plan = f"UM=5, PA=PX{rad_to_counts(req.by, cpr):+d}, BG"
+        plan = f"UM=5, PA=PX{req.counts:+d}, BG" if req.relative else f"UM=5, PA={req.counts}, BG"
     elif req.mode == "velocity":
-        assert cpr is not None and req.velocity is not None  # check_request
         until = f"for {req.duration:g} s" if req.duration is not None else "until Ctrl-C"
-        plan = f"UM={cfg.motion.velocity_unit_mode}, JV={rad_per_s_to_counts_per_s(req.velocity, cpr)}, BG {until}"
+        plan = f"UM={cfg.motion.velocity_unit_mode}, JV={req.velocity}, BG {until}"
     else:
-        plan = f"UM=1, TC={req.torque:g} for {req.duration:g} s"
+        plan = f"UM=1, TC={req.amps:g} for {req.duration:g} s"
     if st.json_mode:
         st.out.json({"target": target.name, "drive": ref.name, "address": ref.address, "mode": req.mode,
                      "applied": False, "plan": plan})
@@ -236,50 +236,13 @@ def _render(st: AppState, name: str, result: ops_jog.JogResult) -> None:
 
 # -- units and differential pairs (wave/jog) ------------------------------------------------------
 
-def _angle(text: str | None, option: str, cpr: int | None, *, speed: bool = False) -> float | None:
-    """rad (rad/s) for ops.jog from "0.5", "10deg", "200counts" ("5deg/s", "300counts/s")."""
-    from sherpa_cli.joints import units
-
-    if text is None:
-        return None
-    q = units.parse_angle(text, what=option, velocity=speed)
-    if q.unit == "rad":
-        return q.value
-    if q.unit == "deg":
-        return units.deg_to_rad(q.value)
-    if cpr is None:
-        raise UsageError(f"{option} {text}: counts need a joint's cpr; name the joint")
-    return units.counts_to_rad(q.value, cpr)  # converted back exactly: counts -> rad -> counts is exact
-
-
-def _current(text: str | None, option: str) -> float | None:
-    from sherpa_cli.joints import units
-
-    return None if text is None else units.parse_current(text, what=option)
-
-
-def _is_pair_axis(cfg: ArmConfig, name: str) -> bool:
-    """A Σ/Δ joint, a pair, or one motor of a pair: jogged through ops/joint_jog.py."""
-    from sherpa_cli.bus import targets
-
-    return targets.resolve_one(cfg, name).pair is not None
-
-
-def _jog_pair(st: AppState, cfg: ArmConfig, name: str, mode: str, to: str | None, by: str | None,
-              velocity: str | None, torque: str | None, duration: float | None, uncalibrated: bool,
+def _jog_pair(st: AppState, cfg: ArmConfig, axis: Axis, req: MoveRequest, position_text: str | None,
               apply: bool) -> None:
     from sherpa_cli.ops import joint_jog
 
-    axis = joint_jog.resolve_axis(cfg, name)
-    req = joint_jog.JogRequest(mode=mode, to=to, by=by, velocity=velocity, torque=torque, duration=duration,
-                               uncalibrated=uncalibrated)
-    if mode == "velocity" and duration is None:
-        raise UsageError(f"a velocity jog of {name} needs --for SECONDS: a pair jog ends by itself, so the "
-                         "other joint of the pair can be put back where it was",
-                         hint=f"e.g. sherpa jog {name} --velocity {velocity} --for 1 --apply")
     offline = joint_jog.check_offline(cfg, axis, req)
     if not apply:
-        _pair_dry_run(st, axis, req, offline)
+        _pair_dry_run(st, axis, req, offline, position_text)
         return
     buses = sorted({cfg.drives[d].bus for d in axis.sensed})
 
@@ -299,7 +262,7 @@ def _jog_pair(st: AppState, cfg: ArmConfig, name: str, mode: str, to: str | None
         raise typer.Exit(1)
 
 
-def _axis_label(axis: joint_jog.Axis) -> str:
+def _axis_label(axis: Axis) -> str:
     pair = axis.pair
     assert pair is not None  # resolve_axis: every axis is a joint or a motor of a pair
     if axis.kind == "motor":
@@ -315,8 +278,8 @@ def _pos(counts: int, cpr: int) -> str:
     return f"{counts_to_rad(counts, cpr):+.4f} rad ({counts} counts)"
 
 
-def _pair_dry_run(st: AppState, axis: joint_jog.Axis, req: joint_jog.JogRequest,
-                  plan: joint_jog.JogPlan | None) -> None:
+def _pair_dry_run(st: AppState, axis: Axis, req: MoveRequest, plan: joint_jog.JogPlan | None,
+                  position_text: str | None) -> None:
     a_b = ", ".join(axis.drives)
     if req.mode == "position":
         if plan is not None and axis.kind in ("sigma", "delta"):
@@ -325,7 +288,7 @@ def _pair_dry_run(st: AppState, axis: joint_jog.Axis, req: joint_jog.JogRequest,
         elif plan is not None:
             what = f"{axis.name} to {plan.target} counts at {plan.speed} counts/s"
         else:
-            what = f"{axis.name} {'to ' + req.to if req.to is not None else 'by ' + str(req.by)} " \
+            what = f"{axis.name} {'by' if req.relative else 'to'} {position_text} " \
                    f"(PA from the present positions)"
         cmds = "UM=5, SP, PA, BG"
     elif req.mode == "velocity":
@@ -379,7 +342,9 @@ def _render_pair(st: AppState, r: joint_jog.JogResult) -> None:
 def _show_stop_report(st: AppState, exc: BaseException) -> None:
     """How the guard stopped the motor, on an error path too: text lines, or with --json an error
     object on stdout (``error``, ``stop``); the error message itself still goes to stderr."""
-    report = getattr(exc, "motion_report", None)
+    from sherpa_cli.motion.report import report_of
+
+    report = report_of(exc)
     if report is None:
         return
     if st.json_mode:

@@ -15,8 +15,8 @@ from sherpa_cli.errors import UsageError
 if TYPE_CHECKING:
     from sherpa_cli.cli.context import AppState
     from sherpa_cli.config.model import ArmConfig
+    from sherpa_cli.motion.axis import Axis
     from sherpa_cli.motion.report import GuardReport
-    from sherpa_cli.ops.live_jog import LiveAxis
 
 
 def list_joysticks(st: AppState) -> None:
@@ -41,7 +41,7 @@ def have_terminal() -> bool:
     return sys.stdin.isatty() and sys.stdout.isatty()
 
 
-def _buses(cfg: ArmConfig, axes: Sequence[LiveAxis]) -> list[str]:
+def _buses(cfg: ArmConfig, axes: Sequence[Axis]) -> list[str]:
     return sorted({cfg.drives[d].bus for a in axes for d in a.drives})
 
 

@@ -234,7 +234,7 @@ class JogView(App):
         return INCREMENTS[mode][self.inc_index[name][mode]]
 
     def _cpr(self, name: str) -> int:
-        return int(self.live.axes[name].cpr)
+        return self.live.axes[name].joint_cpr
 
     def increment_counts(self, name: str) -> int:
         """The position step in counts: at least one."""
@@ -250,7 +250,7 @@ class JogView(App):
         motors = {d: v for d, v in run.motors.items() if d != "target"}
         if run.mode == "position":
             goal = int(run.motors.get("target", 0))
-            return units.counts_to_rad(goal, axis.cpr), ", ".join(f"{d} PA={int(v)}" for d, v in motors.items())
+            return units.counts_to_rad(goal, axis.joint_cpr), ", ".join(f"{d} PA={int(v)}" for d, v in motors.items())
         letters = "TC" if run.mode == "torque" else "JV"
         text = ", ".join(f"{d} {letters}={v:g}" if isinstance(v, float) else f"{d} {letters}={v}"
                          for d, v in motors.items())
@@ -260,7 +260,7 @@ class JogView(App):
                                                           else vals[0] - vals[1])
             return float(value), text
         cps = vals[0] if axis.kind == "plain" else (vals[0] + vals[1] if axis.kind == "sigma" else vals[0] - vals[1])
-        return units.counts_per_s_to_rad_per_s(cps, axis.cpr), text
+        return units.counts_per_s_to_rad_per_s(cps, axis.joint_cpr), text
 
     def _note(self, name: str) -> str:
         """The joint's last note, unless it no longer holds (a calibration refusal once calibrated)."""
@@ -278,7 +278,7 @@ class JogView(App):
 
     def _row(self, i: int, name: str, width: int) -> Text:
         st = self.live.state[name]
-        j = self.live.axes[name].joint
+        j = self.live.axes[name].joint_config
         flag = "!" if st.faults else ("?" if not st.calibrated else " ")
         text = Text()
         text.append("▶ " if i == self.selected else "  ", style="bold")
@@ -322,7 +322,7 @@ class JogView(App):
         name = self.current
         st = self.live.state[name]
         axis = self.live.axes[name]
-        cpr, j = axis.cpr, axis.joint
+        cpr, j = axis.joint_cpr, axis.joint_config
         text = Text()
         text.append(f"{name}", style="bold")
         text.append(f" ({', '.join(axis.drives)}) ")
@@ -503,7 +503,7 @@ class JogView(App):
         axis = self.live.axes[name]
         before = self.live.running.get(name)
         if mode == "velocity":
-            cps = units.rad_per_s_to_counts_per_s(value, axis.cpr)
+            cps = units.rad_per_s_to_counts_per_s(value, axis.joint_cpr)
             ok = self._do(lambda: self.live.set_velocity(name, cps))
         else:
             ok = self._do(lambda: self.live.set_torque(name, value))

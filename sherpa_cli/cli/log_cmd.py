@@ -21,7 +21,7 @@ if TYPE_CHECKING:
     from sherpa_cli.log.capture import CaptureResult
     from sherpa_cli.log.recording import Recording
     from sherpa_cli.log.step_metrics import StepMetrics
-    from sherpa_cli.ops.jog import JogTarget
+    from sherpa_cli.motion.axis import Axis
     from sherpa_cli.sim.arm import SimArm
     from sherpa_cli.sim.stepped import SteppedTime
 
@@ -708,7 +708,7 @@ def _step_compare(st: AppState, runs: Sequence[Path], output: Path) -> None:
         st.out.line(f"png: {output}")
 
 
-def _step_would_refuse(st: AppState, target: JogTarget, req: Any) -> list[str] | None:
+def _step_would_refuse(st: AppState, target: Axis, req: Any) -> list[str] | None:
     """What `--apply` would refuse (ops/dry_check.py), read from the drive; None when the drive
     cannot be read (the dry run then says it did not check)."""
     from sherpa_cli.errors import SherpaError
@@ -722,7 +722,7 @@ def _step_would_refuse(st: AppState, target: JogTarget, req: Any) -> list[str] |
         return None
 
 
-def _step_dry_run(st: AppState, cfg: ArmConfig, target: JogTarget, mode: str, value: float, duration: float,
+def _step_dry_run(st: AppState, cfg: ArmConfig, target: Axis, mode: str, value: float, duration: float,
                   rate: float, *, mode_first: bool = False, hold: float = 0.0,
                   refused: list[str] | None = None) -> None:
     """Without --apply: what the step would send; nothing is sent, no file is written."""

@@ -15,62 +15,16 @@ and a small polling loop (:func:`watch`) whose I/O, time and stop conditions are
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterable, Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 
-from sherpa_cli.config.model import ArmConfig, JointConfig, JointRole
 from sherpa_cli.joints.diffpair import Range, is_reachable, to_motors
+from sherpa_cli.motion.axis import Axis, Motors
 from sherpa_cli.motion.blocked import StallWatch
 
-Motors = Mapping[str, int]  # drive name -> motor position (counts, PX)
 
-
-@dataclass(frozen=True)
-class WatchedJoint:
-    """A joint as a function of motor positions: ``m[drive_a] + sign * m[drive_b]`` (plain: ``m[drive_a]``)."""
-
-    name: str
-    full: Range
-    normal: Range
-    drive_a: str
-    drive_b: str | None = None  # the second motor of a Σ/Δ joint
-    sign: int = 1  # +1 Σ, -1 Δ
-
-    @classmethod
-    def of(cls, cfg: ArmConfig, joint: JointConfig) -> WatchedJoint:
-        if joint.role is JointRole.PLAIN:
-            assert joint.drive is not None
-            return cls(joint.name, joint.full_range, joint.normal_range, joint.drive)
-        pair = cfg.pairs[joint.pair]  # type: ignore[index]
-        return cls(joint.name, joint.full_range, joint.normal_range, pair.drive_a, pair.drive_b,
-                   1 if joint.role is JointRole.SIGMA else -1)
-
-    @property
-    def drives(self) -> tuple[str, ...]:
-        return (self.drive_a,) if self.drive_b is None else (self.drive_a, self.drive_b)
-
-    def position(self, motors: Motors) -> int:
-        p = motors[self.drive_a]
-        return p if self.drive_b is None else p + self.sign * motors[self.drive_b]
-
-
-def joints_moved_by(cfg: ArmConfig, drives: Iterable[str]) -> list[WatchedJoint]:
-    """Every joint the given drives move (a pair drive moves both Σ and Δ), in config order."""
-    wanted = set(drives)
-    out: list[WatchedJoint] = []
-    for joint in cfg.joints.values():
-        if joint.role is JointRole.PLAIN:
-            moved = joint.drive in wanted
-        else:
-            pair = cfg.pairs.get(joint.pair) if joint.pair else None
-            moved = pair is not None and bool(wanted & {pair.drive_a, pair.drive_b})
-        if moved:
-            out.append(WatchedJoint.of(cfg, joint))
-    return out
-
-
-def _clamp(x: int, r: Range) -> int:
-    return min(max(x, r[0]), r[1])
+def _clamp(x: int, r: Range | None) -> int:
+    return x if r is None else min(max(x, r[0]), r[1])
 
 
 @dataclass(frozen=True)
@@ -100,17 +54,17 @@ class Breach:
                 "side": self.side, "back_to": self.back_to}
 
 
-def check(joints: Sequence[WatchedJoint], motors: Motors) -> list[Breach]:
+def check(joints: Sequence[Axis], motors: Motors) -> list[Breach]:
     """The joints outside their full range (inclusive bounds are inside)."""
     out = []
     for j in joints:
         p = j.position(motors)
-        if not j.full[0] <= p <= j.full[1]:
-            out.append(Breach(j.name, p, j.full, j.normal))
+        if j.full is not None and not j.full[0] <= p <= j.full[1]:
+            out.append(Breach(j.name, p, j.full, j.normal or j.full))
     return out
 
 
-def recovery_targets(joints: Sequence[WatchedJoint], motors: Motors, breaches: Sequence[Breach],
+def recovery_targets(joints: Sequence[Axis], motors: Motors, breaches: Sequence[Breach],
                      hold: Mapping[str, int] | None = None) -> dict[str, int]:
     """Motor targets (counts) that bring every breached joint to the nearest edge of its normal range.
 
@@ -125,7 +79,7 @@ def recovery_targets(joints: Sequence[WatchedJoint], motors: Motors, breaches: S
     hold = hold or {}
     breached = {b.joint for b in breaches}
     targets: dict[str, int] = {}
-    pairs: dict[tuple[str, str], dict[int, WatchedJoint]] = {}
+    pairs: dict[tuple[str, str], dict[int, Axis]] = {}
     for j in joints:
         if j.drive_b is None:
             if j.name in breached:
@@ -150,14 +104,14 @@ def recovery_targets(joints: Sequence[WatchedJoint], motors: Motors, breaches: S
     return targets
 
 
-def _give_way(s: int, d: int, sig: WatchedJoint | None, dlt: WatchedJoint | None,
+def _give_way(s: int, d: int, sig: Axis | None, dlt: Axis | None,
               breached: set[str]) -> tuple[int, int]:
     """Move one joint by one count so Σ and Δ share parity: the joint that did not breach gives
     way (Δ when only Σ breached, else Σ), to the side inside its normal range, toward its middle."""
     move_delta = sig is not None and sig.name in breached and not (dlt is not None and dlt.name in breached)
     moving, value = (dlt, d) if move_delta else (sig, s)
     candidates = [value - 1, value + 1]
-    if moving is not None:
+    if moving is not None and moving.normal is not None:
         lo, hi = moving.normal
         candidates.sort(key=lambda v: (not lo <= v <= hi, abs(2 * v - lo - hi)))
     return (s, candidates[0]) if move_delta else (candidates[0], d)
@@ -180,7 +134,7 @@ class WatchResult:
     joints: Mapping[str, int] = field(default_factory=dict)  # joint positions at the last sample
 
 
-def watch(joints: Sequence[WatchedJoint], sample: Callable[[], Motors], *,
+def watch(joints: Sequence[Axis], sample: Callable[[], Motors], *,
           clock: Callable[[], float], sleep: Callable[[float], None], interval: float,
           finished: Callable[[Motors], bool] | None = None, duration: float | None = None,
           check_drives: Callable[[], None] | None = None, stall: StallWatch | None = None) -> WatchResult:

@@ -5,6 +5,8 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any
 
+from sherpa_cli.errors import SherpaError
+
 # how these read without --verbose; any other stop (ST, JV=0 + BG, TC=0 + ST, ...) reads "stopped" (the
 # method is a detail), and "not stopped" / "-" always as they are
 STOPPED_TEXT = {"motor was off": "motor was off", "not moved by this guard": "not moved"}
@@ -76,3 +78,30 @@ class GuardReport:
 
     def as_json(self) -> dict[str, Any]:
         return {"reason": self.reason, "drives": [d.as_json() for d in self.drives]}
+
+
+class MotionInterrupted(KeyboardInterrupt):
+    """Ctrl-C during a motion, with how the guard stopped it (still a KeyboardInterrupt: exit 130)."""
+
+    def __init__(self, motion_report: GuardReport) -> None:
+        super().__init__()
+        self.motion_report = motion_report
+
+
+def with_report(exc: BaseException, report: GuardReport) -> BaseException:
+    """What a mover raises when its guarded motion ended with ``exc``: a SherpaError with the guard's
+    report in its typed ``motion_report`` field, Ctrl-C as :class:`MotionInterrupted` (raise it
+    ``from exc``); anything else (a bug) as it is."""
+    if isinstance(exc, SherpaError):
+        if exc.motion_report is None:
+            exc.motion_report = report
+        return exc
+    if isinstance(exc, KeyboardInterrupt) and not isinstance(exc, MotionInterrupted):
+        return MotionInterrupted(report)
+    return exc
+
+
+def report_of(exc: BaseException) -> GuardReport | None:
+    """The guard's report an error carries (:func:`with_report`), typed; None if it has none."""
+    report = exc.motion_report if isinstance(exc, SherpaError | MotionInterrupted) else None
+    return report if isinstance(report, GuardReport) else None

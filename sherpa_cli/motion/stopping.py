@@ -95,20 +95,27 @@ def send_stop(client: DriveClient, *, unit_mode: int | None, method: str = "auto
     return " + ".join(how) or "-", problems
 
 
+def standstill(client: DriveClient, standstill_velocity: int, pulse: Callable[[], None] | None = None) -> bool | None:
+    """The one standstill rule, one sample: None when the motor is off (no motion left), True when
+    |VX| <= ``standstill_velocity``, else False. ``pulse`` before every request."""
+    beat = pulse or (lambda: None)
+    beat()
+    if not int(client.get("MO")):
+        return None
+    beat()
+    return abs(int(client.get("VX"))) <= standstill_velocity
+
+
 def wait_standstill(client: DriveClient, *, standstill_timeout: float = 2.0, poll_interval: float = 0.01,
                     clock: Callable[[], float] = time.monotonic, sleep: Callable[[float], None] = time.sleep,
                     pulse: Callable[[], None] | None = None, standstill_velocity: int = 0) -> bool | None:
-    """After :func:`send_stop`: True once |VX| <= ``standstill_velocity``, None if the motor went
+    """After :func:`send_stop`: True once at standstill (:func:`standstill`), None if the motor went
     off meanwhile (a trip: no motion left), False when ``standstill_timeout`` s passed first."""
-    beat = pulse or (lambda: None)
     deadline = clock() + standstill_timeout
     while True:
-        beat()
-        if not client.get("MO"):
-            return None
-        beat()
-        if abs(client.get("VX")) <= standstill_velocity:
-            return True
+        now = standstill(client, standstill_velocity, pulse)
+        if now is not False:
+            return now
         if clock() >= deadline:
             return False
         sleep(poll_interval)
@@ -122,17 +129,11 @@ def wait_all_standstill(clients: Mapping[str, DriveClient], *, standstill_timeou
     standstill when |VX| <= ``standstill_velocity`` or its motor is off; bounded by
     ``standstill_timeout``. Returns the names of the drives NOT at standstill when the time was up
     (empty: all stand still). Callers never start a move (a recovery) while this is not empty."""
-    beat = pulse or (lambda: None)
     deadline = clock() + standstill_timeout
     moving = dict(clients)
     while True:
         for name, c in list(moving.items()):
-            beat()
-            if not int(c.get("MO")):
-                del moving[name]
-                continue
-            beat()
-            if abs(int(c.get("VX"))) <= standstill_velocity:
+            if standstill(c, standstill_velocity, pulse) is not False:
                 del moving[name]
         if not moving or clock() >= deadline:
             return sorted(moving)

@@ -32,9 +32,11 @@ from sherpa_cli.config.model import ArmConfig, PairConfig
 from sherpa_cli.elmo.protocol import UM_POSITION
 from sherpa_cli.errors import SafetyError, UsageError
 from sherpa_cli.joints import diffpair, units
-from sherpa_cli.motion import calibration, limit_watch
+from sherpa_cli.motion import calibration, limit_watch, recovery
+from sherpa_cli.motion.axis import joints_moved_by, move_time_bound
 from sherpa_cli.motion.blocked import blocked_text
 from sherpa_cli.motion.pair_start import CommonStart, pair_settings, stop_motors
+from sherpa_cli.motion.report import with_report
 
 if TYPE_CHECKING:
     from sherpa_cli.bus.session import ArmSession
@@ -48,8 +50,13 @@ SETTLE_S = 0.3  # s a finished move may take for PX to reach the target (servo l
 # --------------------------------------------------------------------------- planning (pure)
 
 @dataclass(frozen=True)
-class MoveRequest:
-    """A move as typed: Σ and Δ still text (their units need each joint's cpr); None = hold."""
+class PairTarget:
+    """A `diffdrive move` as typed: Σ and Δ still text (their units need each joint's cpr); None = hold.
+
+    Not the one-axis request (motion/request.MoveRequest): it sets both joints of the pair at once,
+    two targets with one timing and a choice of profile (naive, feedback, the recording), which a
+    request for one axis does not describe; its plan uses the same pair maths (joints/diffpair.py)
+    and the one move-time bound (motion/axis.py)."""
 
     sigma: str | None = None
     delta: str | None = None
@@ -111,7 +118,7 @@ def _value(text: str, cpr: int, what: str) -> int:
     return units.parse_position(text, cpr, what=what)
 
 
-def plan_move(cfg: ArmConfig, pair: PairConfig, request: MoveRequest, motors: Mapping[str, int], *,
+def plan_move(cfg: ArmConfig, pair: PairConfig, request: PairTarget, motors: Mapping[str, int], *,
               accel: int | None = None, decel: int | None = None) -> MovePlan:
     """Motor targets and profiles for ``request`` from the motors' present positions; refuses a
     target outside either joint's normal range or the motor box. ``accel``/``decel``: motor
@@ -174,9 +181,9 @@ def plan_move(cfg: ArmConfig, pair: PairConfig, request: MoveRequest, motors: Ma
     prof = profiles(dist, speed, ac, dc, scaled=not request.naive)
     if request.naive:
         prof = {n: Profile(speed, ac, dc) for n in dist}
-    ramps = speed / ac + speed / dc
+    # the one move-time bound (motion/axis.py): the cruise at speed plus both ramps
     return MovePlan(pair, (s0, d0), (s1, d1), dict(motors), {a: ma, b: mb}, prof, duration,
-                    timeout=2 * (duration + ramps) + 5.0, naive=request.naive)
+                    timeout=move_time_bound(speed * duration, speed, ac, dc), naive=request.naive)
 
 
 # --------------------------------------------------------------------------- coupling (pure)
@@ -361,7 +368,7 @@ def _refs(cfg: ArmConfig, drives: Sequence[str]) -> list[DriveRef]:
     return [DriveRef(d, cfg.drives[d].bus, cfg.drives[d].node, cfg.drives[d]) for d in drives]
 
 
-def prepare(session: ArmSession, pair: PairConfig, request: MoveRequest) -> tuple[MovePlan, list[calibration.Calibration]]:
+def prepare(session: ArmSession, pair: PairConfig, request: PairTarget) -> tuple[MovePlan, list[calibration.Calibration]]:
     """Read positions and calibration, then plan; nothing is written but NMT start."""
     cfg = session.cfg
     refs = _refs(cfg, (pair.drive_a, pair.drive_b))
@@ -444,7 +451,7 @@ class Feedback:
         return {a: scaled(p.profiles[a], k if corr > 0 else 1.0), b: scaled(p.profiles[b], k if corr < 0 else 1.0)}
 
 
-def _open_trace(stack: contextlib.ExitStack, session: ArmSession, refs: Sequence[DriveRef], request: MoveRequest,
+def _open_trace(stack: contextlib.ExitStack, session: ArmSession, refs: Sequence[DriveRef], request: PairTarget,
                 drives: tuple[str, str], recorder_kw: Mapping[str, Any] | None) -> PolledTrace | RecordedTrace:
     """The move's recording: the recorder of `sherpa log` (TPDO on SYNC), or PX polled by the move's
     loop with --poll or when the recorder cannot be set up (its source says which)."""
@@ -465,7 +472,7 @@ def _open_trace(stack: contextlib.ExitStack, session: ArmSession, refs: Sequence
     return RecordedTrace(rec, drives, rate, note)
 
 
-def run_move(session: ArmSession, pair: PairConfig, request: MoveRequest, *,
+def run_move(session: ArmSession, pair: PairConfig, request: PairTarget, *,
              guard_factory: Callable[..., MotionGuard] | None = None,
              clock: Callable[[], float] = time.monotonic, sleep: Callable[[float], None] = time.sleep,
              on_event: Callable[[str], None] | None = None,
@@ -478,7 +485,6 @@ def run_move(session: ArmSession, pair: PairConfig, request: MoveRequest, *,
     ``samples`` and ``source`` (PX is then polled, as with --poll)."""
     from sherpa_cli.motion.guard import MotionGuard
     from sherpa_cli.motion.settings import MotionSettings
-    from sherpa_cli.ops.joint_jog import move_to, recovery_from_standstill, stop_now
 
     cfg = session.cfg
     method, group_id = pair_settings(cfg)
@@ -491,7 +497,7 @@ def run_move(session: ArmSession, pair: PairConfig, request: MoveRequest, *,
     refs = _refs(cfg, drives)
     by_name = {r.name: r for r in refs}
     settings = MotionSettings.from_config(cfg, {r.bus for r in refs})
-    watched = tuple(limit_watch.joints_moved_by(cfg, drives))
+    watched = tuple(joints_moved_by(cfg, drives))
     sj, dj = cfg.joints[pair.sigma], cfg.joints[pair.delta]
     result = MoveResult(pair.name, pair.sigma, pair.delta, drives, "naive" if request.naive else method,
                         request.feedback, p.start, p.target, p.start, sj.cpr, dj.cpr,
@@ -590,12 +596,10 @@ def run_move(session: ArmSession, pair: PairConfig, request: MoveRequest, *,
                 if w.outcome == "breach":
                     result.outcome = "limit"
                     result.breaches = list(w.breaches)
-                    stop_now(clients, "position", settings.stop_method)
-                    recovery_from_standstill(clients, guard, settings, clock, sleep, w.breaches)
-                    now = {d: int(clients[d].get("PX")) for d in drives}
-                    back = limit_watch.recovery_targets(watched, now, w.breaches, hold={})
-                    move_to(guard, by_name, clients, back, settings.recovery_speed_for((sj.vel_limit, dj.vel_limit)),
-                            settings, clock, sleep, "the move back into the normal range")
+                    recovery.recover(guard, by_name, clients, watched, w.breaches,
+                                     lambda: {d: int(clients[d].get("PX")) for d in drives}, settings=settings,
+                                     clock=clock, sleep=sleep, hold={},
+                                     speed=recovery.recovery_speed(settings, watched))
                 elif w.outcome == "stalled":
                     s_now, d_now = w.joints.get(sj.name), w.joints.get(dj.name)
                     raise SafetyError(f"{pair.name}: {blocked_text(session.cfg, clients, drives, settings.stall_time)}; "
@@ -618,8 +622,10 @@ def run_move(session: ArmSession, pair: PairConfig, request: MoveRequest, *,
             if recorded is not None:
                 recorded.collect()  # the recorder has stopped and put the PDO settings back
     except BaseException as exc:
-        exc.motion_report = guard.report  # type: ignore[attr-defined]
-        raise
+        carried = with_report(exc, guard.report)  # the CLI shows how the guard stopped the motors
+        if carried is exc:
+            raise
+        raise carried from exc
     result.motors_end = final
     result.end = diffpair.to_joints(final[pair.drive_a], final[pair.drive_b])
     result.samples = list(trace.samples)

@@ -13,18 +13,18 @@ from __future__ import annotations
 from typing import TYPE_CHECKING
 
 from sherpa_cli.bus.targets import DriveRef
-from sherpa_cli.joints.units import rad_to_counts
 from sherpa_cli.motion import calibration
 from sherpa_cli.motion.stopping import fault_reason
 
 if TYPE_CHECKING:
     from sherpa_cli.bus.session import ArmSession
     from sherpa_cli.config.model import PairConfig
-    from sherpa_cli.ops.diffdrive import MoveRequest
-    from sherpa_cli.ops.jog import JogRequest, JogTarget
+    from sherpa_cli.motion.axis import Axis
+    from sherpa_cli.motion.request import MoveRequest
+    from sherpa_cli.ops.diffdrive import PairTarget
 
 
-def would_refuse(session: ArmSession, target: JogTarget, req: JogRequest) -> list[str]:
+def would_refuse(session: ArmSession, target: Axis, req: MoveRequest) -> list[str]:
     """The reasons the real run would refuse ``req`` (empty: it would go ahead)."""
     reasons: list[str] = []
     c = session.client(target.ref)
@@ -37,7 +37,7 @@ def would_refuse(session: ArmSession, target: JogTarget, req: JogRequest) -> lis
     if joint is None or req.mode != "position":
         return reasons
     px = int(c.get("PX"))
-    goal = rad_to_counts(req.to, joint.cpr) if req.to is not None else px + rad_to_counts(req.by or 0.0, joint.cpr)
+    goal = req.goal(px)
     lo, hi = joint.normal_range
     if not lo <= goal <= hi:
         reasons.append(f"{joint.name}: target {goal} counts (from {px}) is outside the joint's normal range "
@@ -49,7 +49,7 @@ def would_refuse(session: ArmSession, target: JogTarget, req: JogRequest) -> lis
     return reasons
 
 
-def pair_would_refuse(session: ArmSession, pair: PairConfig, request: MoveRequest) -> list[str]:
+def pair_would_refuse(session: ArmSession, pair: PairConfig, request: PairTarget) -> list[str]:
     """`diffdrive move`'s dry run: a motor in fault, and what :func:`ops.diffdrive.prepare` (positions,
     ranges, calibration; it writes nothing but NMT start) refuses."""
     from sherpa_cli.errors import SafetyError, UsageError

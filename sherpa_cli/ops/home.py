@@ -38,6 +38,7 @@ from sherpa_cli.config.model import ArmConfig, JointConfig, JointRole, SwitchCon
 from sherpa_cli.elmo.protocol import UM_POSITION
 from sherpa_cli.errors import SafetyError, UsageError
 from sherpa_cli.motion import calibration
+from sherpa_cli.motion.axis import move_time_bound
 from sherpa_cli.motion.blocked import blocked_text
 from sherpa_cli.motion.guard import MotionGuard
 from sherpa_cli.motion.report import GuardReport
@@ -373,7 +374,7 @@ class _Runner:
         ``one_edge`` (a pair's search): once some drive's event fired, the others' must fire within
         ``homing.pair_edge_window_ms``, else it raises ``one_edge(fired, not_fired)`` (the guard then
         stops every motor)."""
-        bound = 2 * (distance / max(1, speed)) + 5.0
+        bound = move_time_bound(distance, speed)  # the one move-time bound (motion/axis.py)
         t0 = self.clock()
         first_edge: float | None = None
         # a search pushing against an end stop (an interrupted search left the joint past its switch)
@@ -412,10 +413,10 @@ class _Runner:
             self.sleep(self.settings.poll_interval)
 
     def move_to(self, guard: MotionGuard, refs: dict[str, DriveRef], targets: dict[str, int], speed: int, what: str) -> None:
-        from sherpa_cli.ops import joint_jog
+        from sherpa_cli.motion import recovery
 
         clients = {n: guard.client(r) for n, r in refs.items() if n in targets}
-        joint_jog.move_to(guard, refs, clients, targets, max(1, speed), self.settings, self.clock, self.sleep, what)
+        recovery.move_to(guard, refs, clients, targets, max(1, speed), self.settings, self.clock, self.sleep, what)
 
     # kinds ------------------------------------------------------------------------------------
     def check_fault(self, c: DriveClient) -> None:

@@ -12,23 +12,21 @@ rad/s, A) and are converted with the joint's cpr.
 
 from __future__ import annotations
 
-import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
-from sherpa_cli.bus import targets
-from sherpa_cli.bus.targets import DriveRef
-from sherpa_cli.config.model import ArmConfig, JointConfig, JointRole
 from sherpa_cli.elmo.faults import StatusRegister, decode_sr, describe_mf
 from sherpa_cli.elmo.protocol import UM_POSITION, UM_TORQUE
 from sherpa_cli.errors import SafetyError, UsageError
-from sherpa_cli.joints.units import counts_to_rad, rad_per_s_to_counts_per_s, rad_to_counts
-from sherpa_cli.motion import stopping
+from sherpa_cli.joints.units import counts_to_rad
+from sherpa_cli.motion import recovery, stopping
+from sherpa_cli.motion.axis import Axis, profile_speed
 from sherpa_cli.motion.blocked import StallWatch, blocked_text
 from sherpa_cli.motion.guard import MotionGuard
-from sherpa_cli.motion.report import GuardReport
+from sherpa_cli.motion.report import GuardReport, MotionInterrupted, with_report
+from sherpa_cli.motion.request import MoveRequest
 from sherpa_cli.motion.settings import MotionSettings
 
 if TYPE_CHECKING:
@@ -38,31 +36,6 @@ if TYPE_CHECKING:
     from sherpa_cli.motion.limit_watch import Breach
 
 MODES = ("position", "velocity", "torque")
-
-
-@dataclass(frozen=True)
-class JogTarget:
-    """What a name given to `jog` moves: one drive, and the plain joint it drives (if any)."""
-
-    name: str  # as the user gave it
-    ref: DriveRef
-    joint: JointConfig | None
-
-    @property
-    def cpr(self) -> int | None:
-        return self.joint.cpr if self.joint is not None else None
-
-
-@dataclass(frozen=True)
-class JogRequest:
-    mode: str  # position | velocity | torque
-    to: float | None = None  # rad, absolute
-    by: float | None = None  # rad, relative to the position at the start
-    velocity: float | None = None  # rad/s
-    torque: float | None = None  # A
-    duration: float | None = None  # s; velocity: None = until Ctrl-C; torque: required
-    uncalibrated: bool = False  # allow a position move of a joint not homed since power-up (wave/jog)
-    hold: bool = False  # after the move: the motor stays on holding where it ended until Ctrl-C / sherpa stop
 
 
 @dataclass
@@ -114,57 +87,27 @@ class JogResult:
                 "calibration": None if self.calibration is None else self.calibration.as_dict()}
 
 
-def resolve_jog_target(cfg: ArmConfig, text: str) -> JogTarget:
-    """A plain joint, the drive of one, or BUS:NODE (bus/targets.py decides what a name means);
-    a differential pair, its Σ/Δ joints and its motors are refused here."""
-    t = targets.resolve_one(cfg, text)
-    if t.pair is not None:
-        raise UsageError(f"'{text}' moves the differential pair '{t.pair.name}': jogging Σ/Δ joints is not "
-                         "supported here", hint="jog a plain joint or its drive")
-    if len(t.drives) != 1:
-        raise UsageError(f"'{text}' is moved by {len(t.drives)} drives ({', '.join(t.drive_names)}); name one")
-    plain = [j for j in t.joints if j.role is JointRole.PLAIN]
-    return JogTarget(text, t.drives[0], plain[0] if len(plain) == 1 else None)
-
-
-def check_request(target: JogTarget, req: JogRequest) -> None:
-    """Refuse what must not reach a drive, before the bus is even opened."""
-    if req.mode not in MODES:
-        raise UsageError(f"jog mode '{req.mode}': expected one of {', '.join(MODES)}")
-    for what, value in (("--to", req.to), ("--by", req.by), ("--velocity", req.velocity),
-                        ("--torque", req.torque), ("--for", req.duration)):
-        if value is not None and not math.isfinite(value):
-            raise UsageError(f"{what} {value}: expected a finite number")
-    if req.duration is not None and not req.duration > 0:
-        raise UsageError(f"--for {req.duration}: expected a time > 0 s")
+def check_request(target: Axis, req: MoveRequest) -> None:
+    """Refuse what must not reach a drive, before the bus is even opened (the request's own values
+    were checked when it was parsed: motion/request.py)."""
+    if target.pair is not None:  # a Σ/Δ joint or a pair motor: ops/joint_jog.py moves those
+        raise UsageError(f"'{target.name}' moves the differential pair '{target.pair.name}': jogging Σ/Δ joints is "
+                         "not supported here", hint="jog a plain joint or its drive")
     if target.cpr is None and req.mode != "torque":
         raise UsageError(f"{target.name}: no plain joint of the config is driven by {target.ref.name}, so there is "
                          "no cpr to convert rad into counts", hint="name the joint, or a drive that moves a plain joint")
     joint = target.joint
     if req.mode == "position":
-        if (req.to is None) == (req.by is None):
-            raise UsageError("a position jog needs exactly one of --to or --by")
-        if req.duration is not None:
-            raise UsageError("--for applies to --velocity and --torque jogs; a position move ends at its target")
-        if req.to is not None and joint is not None and target.cpr is not None:
-            goal, (lo, hi) = _counts_to(target, req.to), joint.normal_range
-            if not lo <= goal <= hi:  # --by is checked once PX is known (precheck)
+        if not req.relative and joint is not None:  # --by is checked once PX is known (precheck)
+            goal, (lo, hi) = req.counts, joint.normal_range
+            if not lo <= goal <= hi:
                 raise UsageError(f"{joint.name}: target {goal} counts is outside the joint's normal range "
                                   f"[{lo}, {hi}]", hint="jog moves a joint only inside its normal range")
+        if req.speed is not None:
+            _check_speed(target, req.speed, "--velocity")
     elif req.mode == "velocity":
-        assert req.velocity is not None
-        if joint is None or joint.vel_limit is None:  # never an unchecked speed (seed rosparam has no limit)
-            where = f"joints.{joint.name}.velocity.limit" if joint is not None else "velocity.limit of its joint"
-            raise UsageError(f"{target.name}: no speed limit configured ({where} is missing), so a velocity jog "
-                             "cannot be checked", hint="give the joint `velocity: {limit: COUNTS_PER_S}` in the config")
-        else:
-            counts = abs(rad_per_s_to_counts_per_s(req.velocity, joint.cpr))
-            if counts > joint.vel_limit:
-                limit = counts_to_rad(joint.vel_limit, joint.cpr)
-                raise UsageError(f"--velocity {req.velocity} rad/s ({counts} counts/s) is above {joint.name}'s "
-                                 f"velocity limit {limit:.4f} rad/s ({joint.vel_limit} counts/s)")
+        _check_speed(target, req.velocity, "--velocity")
     elif req.mode == "torque":
-        assert req.torque is not None
         if req.duration is None:
             raise UsageError("a torque jog needs --for SECONDS: no position or speed limit of the drive acts in "
                              "torque mode, so it must end by itself")
@@ -172,18 +115,25 @@ def check_request(target: JogTarget, req: JogRequest) -> None:
         if current is None:
             raise UsageError(f"{target.name}: no current limits configured for it, so no torque can be checked",
                              hint="give the joint `current: {continuous: A, peak: A, peak_time: s}`")
-        assert joint is not None and req.torque is not None  # current came from the joint; torque mode has one
-        if abs(req.torque) > current.continuous:
-            raise UsageError(f"--torque {req.torque} A is beyond {joint.name}'s continuous current limit "
+        assert joint is not None  # current came from the joint
+        if abs(req.amps) > current.continuous:
+            raise UsageError(f"--torque {req.amps} A is beyond {joint.name}'s continuous current limit "
                              f"{current.continuous} A (config current.continuous)")
 
 
-def _counts_to(target: JogTarget, rad: float) -> int:
-    assert target.cpr is not None
-    return rad_to_counts(rad, target.cpr)
+def _check_speed(target: Axis, counts: int, option: str) -> None:
+    joint = target.joint
+    if joint is None or joint.vel_limit is None:  # never an unchecked speed (seed rosparam has no limit)
+        where = f"joints.{joint.name}.velocity.limit" if joint is not None else "velocity.limit of its joint"
+        raise UsageError(f"{target.name}: no speed limit configured ({where} is missing), so a velocity jog "
+                         "cannot be checked", hint="give the joint `velocity: {limit: COUNTS_PER_S}` in the config")
+    if abs(counts) > joint.vel_limit:
+        rad, limit = counts_to_rad(abs(counts), joint.cpr), counts_to_rad(joint.vel_limit, joint.cpr)
+        raise UsageError(f"{option} {rad:.4f} rad/s ({abs(counts)} counts/s) is above {joint.name}'s "
+                         f"velocity limit {limit:.4f} rad/s ({joint.vel_limit} counts/s)")
 
 
-def run_jog(session: ArmSession, target: JogTarget, req: JogRequest, *, settings: MotionSettings,
+def run_jog(session: ArmSession, target: Axis, req: MoveRequest, *, settings: MotionSettings,
             clock: Callable[[], float] = time.monotonic, sleep: Callable[[float], None] = time.sleep,
             on_progress: Callable[[JogProgress], None] | None = None,
             on_event: Callable[[str], None] | None = None, keep: bool = False) -> JogResult:
@@ -204,18 +154,18 @@ def run_jog(session: ArmSession, target: JogTarget, req: JogRequest, *, settings
     except KeyboardInterrupt as exc:
         held = req.hold and state.get("holding")
         if not held and not (req.mode == "velocity" and req.duration is None and state["t0"] is not None):
-            exc.motion_report = guard.report  # type: ignore[attr-defined]  # the CLI shows how it stopped
-            raise
+            raise MotionInterrupted(guard.report) from exc  # the CLI shows how it stopped
         interrupted = True  # Ctrl-C is how an open-ended velocity jog is meant to end
         if not guard.report.ok:  # ... but a stop or restore that failed is never hidden behind it
             problems = [f"{d.drive}: {p}" for d in guard.report.drives for p in d.problems]
-            err = SafetyError("the stop after the motion did not go cleanly: " + "; ".join(problems),
-                              hint="check the drives with `sherpa monitor --once`; `sherpa stop` stops them all")
-            err.motion_report = guard.report  # type: ignore[attr-defined]
-            raise err from exc
+            raise SafetyError("the stop after the motion did not go cleanly: " + "; ".join(problems),
+                              hint="check the drives with `sherpa monitor --once`; `sherpa stop` stops them all",
+                              motion_report=guard.report) from exc
     except BaseException as exc:
-        exc.motion_report = guard.report  # type: ignore[attr-defined]
-        raise
+        carried = with_report(exc, guard.report)  # the CLI shows how the guard stopped the motors
+        if carried is exc:
+            raise
+        raise carried from exc
     (stopped,) = guard.report.drives
     return JogResult(target=target.name, drive=ref.name, address=ref.address, mode=req.mode,
                      start_counts=state["start"], end_counts=stopped.position, target_counts=state["target"],
@@ -226,7 +176,7 @@ def run_jog(session: ArmSession, target: JogTarget, req: JogRequest, *, settings
                      breach=state.get("breach"), recovered_to=state.get("recovered_to"), calibration=cal)
 
 
-def precheck(session: ArmSession, target: JogTarget, req: JogRequest) -> Calibration | None:
+def precheck(session: ArmSession, target: Axis, req: MoveRequest) -> Calibration | None:
     """Before anything is armed (wave/jog, docs/motion.md): a position move must stay inside the
     joint's NORMAL range and needs a calibrated joint (or ``uncalibrated``). Reads PX and the
     calibration flag; writes nothing but PX of an absolute-encoder joint whose counter restarted
@@ -251,11 +201,7 @@ def precheck(session: ArmSession, target: JogTarget, req: JogRequest) -> Calibra
     c.nmt_start()
     cal = calibration.read_calibration(session.cfg, joint, lambda name: c, resync=True)
     start = int(c.get("PX"))
-    if req.to is not None:
-        goal = _counts_to(target, req.to)
-    else:
-        assert req.by is not None  # check_request: exactly one of --to and --by
-        goal = start + _counts_to(target, req.by)
+    goal = req.goal(start)
     lo, hi = joint.normal_range
     if not lo <= goal <= hi:
         raise UsageError(f"{joint.name}: target {goal} counts is outside the joint's normal range [{lo}, {hi}]",
@@ -267,7 +213,7 @@ def precheck(session: ArmSession, target: JogTarget, req: JogRequest) -> Calibra
     return cal
 
 
-def _move(guard: MotionGuard, target: JogTarget, req: JogRequest, settings: MotionSettings, state: dict[str, Any],
+def _move(guard: MotionGuard, target: Axis, req: MoveRequest, settings: MotionSettings, state: dict[str, Any],
           clock: Callable[[], float], sleep: Callable[[float], None],
           on_progress: Callable[[JogProgress], None] | None) -> None:
     ref = target.ref
@@ -280,7 +226,7 @@ def _move(guard: MotionGuard, target: JogTarget, req: JogRequest, settings: Moti
         _watch(guard, c, target, clock, sleep, settings, state, on_progress, done=done, limit=limit, stall=stall)
 
     if req.mode == "position":
-        goal = _counts_to(target, req.to) if req.to is not None else start + _counts_to(target, req.by)  # type: ignore[arg-type]  # --to or --by
+        goal = req.goal(start)
         if target.joint is not None:  # again with this PX: the joint may have moved since precheck
             lo, hi = target.joint.normal_range
             if not lo <= goal <= hi:
@@ -290,17 +236,17 @@ def _move(guard: MotionGuard, target: JogTarget, req: JogRequest, settings: Moti
         guard.enable(ref, UM_POSITION)
         # the speed comes from the config, never from whatever SP the drive holds (an unprogrammed
         # drive: 1800 counts/s); the guard puts SP back on the way out
-        c.set("SP", 0, position_speed(target, settings))
-        bound = _move_bound(c, abs(goal - start))
+        speed = profile_speed(target, settings.recovery_fallback_speed, req.speed)
+        c.set("SP", 0, speed)
+        bound = _move_bound(c, target, abs(goal - start), speed)
         c.set("PA", 0, goal)
         state["command"] = f"PA={goal}"
         state["t0"] = clock()
         c.execute("BG")
-        watch(lambda sr: sr.motion_status == 0, bound, settings.stall_watch(position_speed(target, settings)))
+        watch(lambda sr: sr.motion_status == 0, bound, settings.stall_watch(speed))
         state["ended_by"] = state["ended_by"] or "target reached"
     elif req.mode == "velocity":
-        assert req.velocity is not None and target.cpr is not None  # checked when the request was made
-        v = rad_per_s_to_counts_per_s(req.velocity, target.cpr)
+        v = req.velocity
         guard.enable(ref, settings.velocity_unit_mode)
         c.set("JV", 0, v)
         state["command"] = f"JV={v}"
@@ -310,9 +256,8 @@ def _move(guard: MotionGuard, target: JogTarget, req: JogRequest, settings: Moti
         state["ended_by"] = state["ended_by"] or "time up"
     elif req.mode == "torque":
         guard.enable(ref, UM_TORQUE)  # TC=0 before MO=1: no old torque command is applied
-        assert req.torque is not None
-        c.set("TC", 0, float(req.torque))
-        state["command"] = f"TC={req.torque:g}"
+        c.set("TC", 0, req.amps)
+        state["command"] = f"TC={req.amps:g}"
         state["t0"] = clock()
         watch(None, req.duration)
         state["ended_by"] = state["ended_by"] or "time up"
@@ -320,7 +265,7 @@ def _move(guard: MotionGuard, target: JogTarget, req: JogRequest, settings: Moti
         _hold(guard, c, target, req, settings, state, clock, sleep, on_progress)
 
 
-def _hold(guard: MotionGuard, c: DriveClient, target: JogTarget, req: JogRequest, settings: MotionSettings,
+def _hold(guard: MotionGuard, c: DriveClient, target: Axis, req: MoveRequest, settings: MotionSettings,
           state: dict[str, Any], clock: Callable[[], float], sleep: Callable[[float], None],
           on_progress: Callable[[JogProgress], None] | None) -> None:
     """--hold: stop a velocity or torque motion from standstill, then keep the motor on in position
@@ -329,11 +274,7 @@ def _hold(guard: MotionGuard, c: DriveClient, target: JogTarget, req: JogRequest
     ref = target.ref
     if req.mode != "position":
         stopping.send_stop(c, unit_mode=guard.unit_mode(ref), method=settings.stop_method, pulse=guard.check)
-        if stopping.wait_standstill(c, standstill_timeout=settings.standstill_timeout,
-                                    poll_interval=settings.poll_interval, clock=clock, sleep=sleep, pulse=guard.check,
-                                    standstill_velocity=settings.standstill_velocity) is False:
-            raise SafetyError(f"{c.label}: not at standstill {settings.standstill_timeout:g} s after the stop: "
-                              "not held", hint="`sherpa stop` stops every drive")
+        recovery.wait_standstill({ref.name: c}, settings, clock, sleep, guard.check, before="the hold")
         here = int(c.get("PX"))
         guard.enable(ref, UM_POSITION)
         c.set("PA", 0, here)
@@ -353,24 +294,13 @@ def _hold(guard: MotionGuard, c: DriveClient, target: JogTarget, req: JogRequest
         sleep(settings.poll_interval)
 
 
-def position_speed(target: JogTarget, settings: MotionSettings) -> int:
-    """counts/s of a position jog: the joint's velocity.limit, or motion.recovery_fallback_speed for a
-    joint without one (the seed's rosparam format has none)."""
-    joint = target.joint
-    if joint is not None and joint.vel_limit:
-        return abs(int(joint.vel_limit))
-    return settings.recovery_fallback_speed
+def _move_bound(c: DriveClient, target: Axis, distance: int, speed: int) -> float:
+    """The one move-time bound (motion/axis.py) at the speed set, with the ramps the drive will use."""
+    return target.move_time_bound(distance, speed, accel=abs(int(c.get("AC"))) or None,
+                                  decel=abs(int(c.get("DC"))) or None)
 
 
-def _move_bound(c: DriveClient, distance: int) -> float:
-    """A generous bound for a PTP move: twice the profile's time at SP, AC and DC, plus 2 s."""
-    sp = max(abs(int(c.get("SP"))), 1)
-    ac = max(abs(int(c.get("AC"))), 1)
-    dc = max(abs(int(c.get("DC"))), 1)
-    return 2 * (distance / sp + sp / ac + sp / dc) + 2.0
-
-
-def _watch(guard: MotionGuard, c: DriveClient, target: JogTarget, clock: Callable[[], float], sleep: Callable[[float], None],
+def _watch(guard: MotionGuard, c: DriveClient, target: Axis, clock: Callable[[], float], sleep: Callable[[float], None],
            settings: MotionSettings, state: dict[str, Any], on_progress: Callable[[JogProgress], None] | None,
            *, done: Callable[[StatusRegister], bool] | None, limit: float | None,
            stall: StallWatch | None = None) -> None:
@@ -404,34 +334,20 @@ def _watch(guard: MotionGuard, c: DriveClient, target: JogTarget, clock: Callabl
         sleep(settings.poll_interval if limit is None else min(settings.poll_interval, max(limit - elapsed, 0.0)))
 
 
-def limit_breach(guard: MotionGuard, c: DriveClient, target: JogTarget, px: int, settings: MotionSettings,
+def limit_breach(guard: MotionGuard, c: DriveClient, target: Axis, px: int, settings: MotionSettings,
                   clock: Callable[[], float], sleep: Callable[[float], None], state: dict[str, Any]) -> bool:
-    """The joint-limit watch (seed 6.1, motion/limit_watch.py): past the full range, stop at once, send
-    nothing more of the jog, and move the joint back (position mode) to the nearest normal edge."""
-    from sherpa_cli.motion import limit_watch, stopping
-    from sherpa_cli.ops import joint_jog
+    """The joint-limit watch (seed 6.1, motion/limit_watch.py): past the full range, the one recovery
+    (motion/recovery.py): stop at once, nothing more of the jog, standstill, then back (position
+    mode) to the nearest normal edge at motion.recovery_speed."""
+    from sherpa_cli.motion import limit_watch, recovery
 
-    joint = target.joint
-    assert joint is not None
-    watched = [limit_watch.WatchedJoint(joint.name, joint.full_range, joint.normal_range, target.ref.name)]
-    breaches = limit_watch.check(watched, {target.ref.name: px})
+    breaches = limit_watch.check(target.watched, {target.ref.name: px})
     if not breaches:
         return False
-    clients = {target.ref.name: c}
-    # the configured stop (motion.stop_method: ST, or JV=0 + BG where ST must not be used), TC=0 first
-    # in torque mode, then the bounded wait for standstill
-    _how, standstill, problems = stopping.stop_drive(
-        c, unit_mode=guard.unit_mode(target.ref), method=settings.stop_method,
-        standstill_timeout=settings.standstill_timeout, poll_interval=settings.poll_interval, clock=clock,
-        sleep=sleep, pulse=guard.check, standstill_velocity=settings.standstill_velocity)
-    if problems or standstill is False:
-        raise SafetyError(f"{breaches[0].describe()}; the recovery failed: the stop at the joint limit did not go "
-                          "cleanly (" + "; ".join(problems or ["not at standstill"]) + "); the move back was not started",
-                          hint="check the joint; `sherpa stop` stops every drive")
-    back = limit_watch.recovery_targets(watched, {target.ref.name: int(c.get("PX"))}, breaches)
-    speed = settings.recovery_speed_for([joint.vel_limit])
-    joint_jog.move_to(guard, {target.ref.name: target.ref}, clients, back, speed, settings, clock, sleep,
-                       f"{joint.name}: the move back into the normal range")
+    ref = target.ref
+    recovery.recover(guard, {ref.name: ref}, {ref.name: c}, target.watched, breaches,
+                     lambda: {ref.name: int(c.get("PX"))}, settings=settings, clock=clock, sleep=sleep,
+                     torque=guard.unit_mode(ref) == UM_TORQUE, speed=recovery.recovery_speed(settings, [target]))
     state["breach"] = breaches[0]
     state["recovered_to"] = int(c.get("PX"))
     state["ended_by"] = f"left its full range, brought back to {breaches[0].back_to} counts"

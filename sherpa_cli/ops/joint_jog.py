@@ -25,19 +25,20 @@ from __future__ import annotations
 import contextlib
 import math
 import time
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
 from sherpa_cli.bus.targets import DriveRef
-from sherpa_cli.config.model import ArmConfig, JointConfig, PairConfig
+from sherpa_cli.config.model import ArmConfig
 from sherpa_cli.elmo.protocol import UM_POSITION, UM_TORQUE
 from sherpa_cli.errors import SafetyError, UsageError
-from sherpa_cli.joints import diffpair, units
-from sherpa_cli.motion import calibration, limit_watch
+from sherpa_cli.motion import calibration, limit_watch, recovery
+from sherpa_cli.motion.axis import Axis, move_time_bound, profile_speed
 from sherpa_cli.motion.blocked import blocked_text
-from sherpa_cli.motion.limit_watch import Breach, WatchedJoint
-from sherpa_cli.motion.stopping import wait_all_standstill
+from sherpa_cli.motion.limit_watch import Breach
+from sherpa_cli.motion.report import with_report
+from sherpa_cli.motion.request import MoveRequest
 
 if TYPE_CHECKING:
     from sherpa_cli.bus.session import ArmSession
@@ -46,78 +47,6 @@ if TYPE_CHECKING:
     from sherpa_cli.motion.settings import MotionSettings
 
 Range = tuple[int, int]
-MODES = ("position", "velocity", "torque")
-
-
-@dataclass(frozen=True)
-class Axis:
-    """What a jog moves, with the limits that apply to it."""
-
-    name: str  # as the user named it
-    kind: str  # sigma | delta | motor
-    cpr: int
-    drives: tuple[str, ...]  # one drive, or (drive_a, drive_b) of a pair
-    normal: Range | None  # of the moved joint (None for a motor: both pair joints are checked)
-    full: Range | None
-    vel_limit: int | None  # counts/s of the moved joint
-    current_limit: float | None  # A per motor (the configured continuous limit)
-    watched: tuple[WatchedJoint, ...]
-    joints: tuple[JointConfig, ...]  # the joints whose calibration matters
-    pair: PairConfig | None = None
-
-    @property
-    def sensed(self) -> tuple[str, ...]:
-        """Every drive whose position the watch needs (a pair motor alone: both motors of the pair)."""
-        out = list(self.drives)
-        for j in self.watched:
-            out += [d for d in j.drives if d not in out]
-        return tuple(out)
-
-    def position(self, motors: Mapping[str, int]) -> int:
-        if self.kind == "motor":
-            return motors[self.drives[0]]
-        a, b = (motors[d] for d in self.drives)
-        return a + b if self.kind == "sigma" else a - b
-
-
-def resolve_axis(cfg: ArmConfig, name: str) -> Axis:
-    """The axis behind a Σ/Δ joint, or one motor of a pair (by drive name or BUS:NODE); bus/targets.py
-    decides what the name means. Plain joints go through ops/jog.py; a whole pair is refused."""
-    from sherpa_cli.bus import targets
-
-    t = targets.resolve_one(cfg, name)
-    pair = t.pair
-    if pair is None:
-        raise UsageError(f"'{name}' is not a joint or motor of a differential pair; a plain joint is jogged "
-                         "through ops/jog.py")
-    if t.kind is targets.TargetKind.PAIR:
-        raise UsageError(f"'{name}' is a differential pair: name the joint to move ({pair.sigma} or {pair.delta}) "
-                         f"or one motor ({pair.drive_a} or {pair.drive_b})")
-    sigma, delta = cfg.joints[pair.sigma], cfg.joints[pair.delta]
-    cur = pair.current.continuous if pair.current is not None else None
-    if t.kind is not targets.TargetKind.JOINT:  # a drive name or BUS:NODE: one motor of the pair
-        (ref,) = t.drives
-        # one motor at v moves Σ and Δ at v each: the slower joint limit bounds it
-        limits = [v for v in (sigma.vel_limit, delta.vel_limit) if v is not None]
-        return Axis(ref.name, "motor", sigma.cpr, (ref.name,), None, None, min(limits) if limits else None, cur,
-                    tuple(limit_watch.joints_moved_by(cfg, [ref.name])), (sigma, delta), pair)
-    (joint,) = t.joints
-    watched = tuple(limit_watch.joints_moved_by(cfg, (pair.drive_a, pair.drive_b)))
-    return Axis(joint.name, joint.role.value, joint.cpr, (pair.drive_a, pair.drive_b), joint.normal_range,
-                joint.full_range, joint.vel_limit, cur, watched, (joint,), pair)
-
-
-@dataclass(frozen=True)
-class JogRequest:
-    """A jog as the technician typed it (values still text: their units need the joint's cpr)."""
-
-    mode: str  # position | velocity | torque
-    to: str | None = None
-    by: str | None = None
-    velocity: str | None = None  # position: the speed of the move; velocity: the jog speed
-    torque: str | None = None
-    duration: float | None = None  # --for, s
-    uncalibrated: bool = False
 
 
 @dataclass(frozen=True)
@@ -152,10 +81,8 @@ def _check_speed(axis: Axis, speed: int, what: str) -> None:
                           f"{axis.vel_limit} counts/s", hint="ask for less, or raise velocity.limit in the config")
 
 
-def plan(cfg: ArmConfig, axis: Axis, request: JogRequest, motors: Mapping[str, int]) -> JogPlan:
+def plan(cfg: ArmConfig, axis: Axis, request: MoveRequest, motors: Mapping[str, int]) -> JogPlan:
     """Motor commands for ``request`` from the motors' present positions; refuses what is unsafe."""
-    if request.mode not in MODES:
-        raise UsageError(f"unknown jog mode {request.mode!r}")
     start = axis.position(motors)
     if request.mode == "position":
         return _plan_position(cfg, axis, request, motors, start)
@@ -164,21 +91,15 @@ def plan(cfg: ArmConfig, axis: Axis, request: JogRequest, motors: Mapping[str, i
                          + (" (in torque mode no drive limit acts; the time limit is the last guard)"
                             if request.mode == "torque" else ""),
                          hint=f"e.g. sherpa jog {axis.name} --{request.mode} ... --for 1")
-    if not (math.isfinite(request.duration) and request.duration > 0):
-        raise UsageError(f"--for must be a positive number of seconds, got {request.duration!r}")
     if request.mode == "velocity":
-        if request.velocity is None:
-            raise UsageError("a velocity jog needs --velocity")
-        v = units.parse_velocity(request.velocity, axis.cpr, what="--velocity")
+        v = request.velocity
         _check_speed(axis, v, "--velocity")
         return JogPlan(axis, "velocity", start, speed=v, duration=request.duration,
-                       motor_speeds=_motor_speeds(axis, v))
-    if request.torque is None:
-        raise UsageError("a torque jog needs --torque")
-    amps = units.parse_current(request.torque, what="--torque")
+                       motor_speeds=axis.motor_velocities(v))
+    amps = request.amps
     if amps == 0:
         raise UsageError("--torque must not be 0")
-    currents = _motor_currents(axis, amps)
+    currents = axis.motor_currents(amps)
     worst = max(abs(c) for c in currents.values())
     if axis.current_limit is not None and worst > axis.current_limit:
         raise UsageError(f"{axis.name}: --torque {amps:g} A puts {worst:g} A on a motor, above the configured "
@@ -186,30 +107,9 @@ def plan(cfg: ArmConfig, axis: Axis, request: JogRequest, motors: Mapping[str, i
     return JogPlan(axis, "torque", start, current=amps, duration=request.duration, motor_currents=currents)
 
 
-def _motor_speeds(axis: Axis, v: int) -> dict[str, int]:
-    if axis.kind == "motor":
-        return {axis.drives[0]: v}
-    a, b = diffpair.motor_velocities(v, 0) if axis.kind == "sigma" else diffpair.motor_velocities(0, v)
-    return dict(zip(axis.drives, (a, b), strict=True))
-
-
-def _motor_currents(axis: Axis, amps: float) -> dict[str, float]:
-    if axis.kind == "motor":
-        return {axis.drives[0]: amps}
-    a, b = diffpair.motor_currents(amps, 0.0) if axis.kind == "sigma" else diffpair.motor_currents(0.0, amps)
-    return dict(zip(axis.drives, (a, b), strict=True))
-
-
-def _plan_position(cfg: ArmConfig, axis: Axis, request: JogRequest, motors: Mapping[str, int],
+def _plan_position(cfg: ArmConfig, axis: Axis, request: MoveRequest, motors: Mapping[str, int],
                    start: int) -> JogPlan:
-    if (request.to is None) == (request.by is None):
-        raise UsageError("a position jog needs exactly one of --to and --by")
-    if request.duration is not None:
-        raise UsageError("--for applies to --velocity and --torque jogs; a position move ends at its target")
-    if request.to is not None:
-        target = units.parse_position(request.to, axis.cpr, what="--to")
-    else:
-        target = start + units.parse_position(request.by or "", axis.cpr, what="--by")
+    target = request.goal(start)
     if axis.normal is not None and not axis.normal[0] <= target <= axis.normal[1]:
         raise UsageError(f"{axis.name}: target {target} counts is outside the joint's normal range "
                           f"{_fmt_range(axis.normal)}", hint="jog moves a joint only inside its normal range")
@@ -218,11 +118,11 @@ def _plan_position(cfg: ArmConfig, axis: Axis, request: JogRequest, motors: Mapp
         after = {**motors, **targets}
         for j in axis.watched:
             p = j.position(after)
-            if not j.normal[0] <= p <= j.normal[1]:
+            if j.normal is not None and not j.inside_normal(p):
                 raise UsageError(f"{axis.name}: moving this motor to {target} puts joint {j.name} at {p} counts, "
                                   f"outside its normal range {_fmt_range(j.normal)}")
-    if request.velocity is not None:
-        speed = abs(units.parse_velocity(request.velocity, axis.cpr, what="--velocity"))
+    if request.speed is not None:
+        speed = request.speed
         _check_speed(axis, speed, "--velocity")
     elif axis.vel_limit is not None:
         speed = axis.vel_limit
@@ -232,38 +132,27 @@ def _plan_position(cfg: ArmConfig, axis: Axis, request: JogRequest, motors: Mapp
     duration = distance / speed if distance else 0.0
     sp = {d: (max(1, math.ceil(abs(t - motors[d]) / duration)) if duration else speed)
           for d, t in targets.items()}
-    timeout = 2 * duration + 5.0  # ramps and settling; arriving later means something is wrong
+    timeout = move_time_bound(distance, speed)  # the one bound (motion/axis.py)
     return JogPlan(axis, "position", start, target=target, speed=speed, motor_targets=targets, motor_speeds=sp,
                    timeout=timeout)
 
 
 def _motor_targets(axis: Axis, target: int, motors: Mapping[str, int]) -> dict[str, int]:
-    if axis.kind == "motor":
-        return {axis.drives[0]: target}
-    a, b = axis.drives
-    s, d = motors[a] + motors[b], motors[a] - motors[b]
     held = next((j for j in axis.watched if j.name != axis.name and j.drive_b is not None), None)
-    if axis.kind == "sigma":
-        s2, d2 = diffpair.hold_other(target, d, "sigma", held.normal if held else None)
-    else:
-        s2, d2 = diffpair.hold_other(s, target, "delta", held.normal if held else None)
-    return dict(zip(axis.drives, diffpair.to_motors(s2, d2), strict=True))
+    return axis.motor_targets(target, motors, held.normal if held is not None else None)
 
 
-def check_offline(cfg: ArmConfig, axis: Axis, request: JogRequest) -> JogPlan | None:
+def check_offline(cfg: ArmConfig, axis: Axis, request: MoveRequest) -> JogPlan | None:
     """Every refusal that needs no bus (a dry run's checks): the whole plan for velocity and torque
     jogs (they do not depend on where the motors stand), the values and the --to range for a move."""
     zero = {d: 0 for d in axis.sensed}
     if request.mode != "position":
         return plan(cfg, axis, request, zero)
-    if request.to is not None and request.by is None:
+    if not request.relative:
         return plan(cfg, axis, request, zero) if axis.kind != "motor" else None
-    if request.by is not None and request.to is None:
-        units.parse_position(request.by, axis.cpr, what="--by")
-        if request.velocity is not None:
-            _check_speed(axis, abs(units.parse_velocity(request.velocity, axis.cpr, what="--velocity")), "--velocity")
-        return None
-    raise UsageError("a position jog needs exactly one of --to and --by")
+    if request.speed is not None:
+        _check_speed(axis, request.speed, "--velocity")
+    return None
 
 
 # --------------------------------------------------------------------------- running it
@@ -317,7 +206,7 @@ def _refs(cfg: ArmConfig, drives: tuple[str, ...]) -> list[DriveRef]:
     return [DriveRef(d, cfg.drives[d].bus, cfg.drives[d].node, cfg.drives[d]) for d in drives]
 
 
-def prepare(session: ArmSession, axis: Axis, request: JogRequest
+def prepare(session: ArmSession, axis: Axis, request: MoveRequest
             ) -> tuple[JogPlan, dict[str, int], list[calibration.Calibration]]:
     """Read positions (and calibration), then plan; nothing is written to a drive here but NMT start."""
     cfg = session.cfg
@@ -345,7 +234,7 @@ def prepare(session: ArmSession, axis: Axis, request: JogRequest
     return p, motors, cals
 
 
-def run(session: ArmSession, axis: Axis, request: JogRequest, *,
+def run(session: ArmSession, axis: Axis, request: MoveRequest, *,
         guard_factory: Callable[..., MotionGuard] | None = None,
         clock: Callable[[], float] = time.monotonic, sleep: Callable[[float], None] = time.sleep,
         on_event: Callable[[str], None] | None = None,
@@ -364,7 +253,7 @@ def run(session: ArmSession, axis: Axis, request: JogRequest, *,
     settings = MotionSettings.from_config(cfg, {r.bus for r in refs})
     factory = guard_factory or MotionGuard
     joints_start = {j.name: j.position(motors) for j in axis.watched}
-    result = JogResult(axis.name, axis.kind, p.mode, axis.drives, axis.cpr, p.start, p.start, target=p.target,
+    result = JogResult(axis.name, axis.kind, p.mode, axis.drives, axis.joint_cpr, p.start, p.start, target=p.target,
                        speed=p.speed, current=p.current, duration=p.duration, joints_start=joints_start,
                        motors_start=dict(motors), calibration=cals,
                        joint_cpr={j.name: cfg.joints[j.name].cpr for j in axis.watched})
@@ -373,8 +262,10 @@ def run(session: ArmSession, axis: Axis, request: JogRequest, *,
         final = _run_guarded(guard, session, cfg, axis, p, by_name, settings, joints_start, result, clock, sleep,
                              on_progress)
     except BaseException as exc:
-        exc.motion_report = guard.report  # type: ignore[attr-defined]  # the CLI shows how it stopped
-        raise
+        carried = with_report(exc, guard.report)  # the CLI shows how the guard stopped the motors
+        if carried is exc:
+            raise
+        raise carried from exc
     # the guard stopped every motor (ST, MO=0) and put back what it changed
     result.motors_end = final
     result.joints_end = {j.name: j.position(final) for j in axis.watched}
@@ -455,17 +346,16 @@ def _run_guarded(guard: MotionGuard, session: ArmSession, cfg: ArmConfig, axis: 
         if watched.outcome == "breach":
             result.outcome = "limit"
             result.breaches = list(watched.breaches)
-            stop_now(clients, p.mode, settings.stop_method)
-            recovery_from_standstill(clients, guard, settings, clock, sleep, watched.breaches)
-            back = limit_watch.recovery_targets(axis.watched, sample(), watched.breaches, hold=held)
-            move_to(guard, by_name, clients, back, settings.recovery_speed_for([axis.vel_limit, *(j.vel_limit for j in axis.joints)]),
-                    settings, clock, sleep, "the move back into the normal range")
+            recovery.recover(guard, by_name, clients, axis.watched, watched.breaches, sample, settings=settings,
+                             clock=clock, sleep=sleep, torque=p.mode == "torque", hold=held,
+                             speed=recovery.recovery_speed(settings, [axis, *axis.watched]))
             final = sample()
             result.recovered_to = {j.name: j.position(final) for j in axis.watched}
         else:
             if p.mode != "position":
-                stop_now(clients, p.mode, settings.stop_method)
-                wait_standstill(clients, guard, settings, clock, sleep, before="the correction of the held joint")
+                recovery.stop_now(clients, p.mode, settings.stop_method)
+                recovery.wait_standstill(clients, settings, clock, sleep, guard.check,
+                                         before="the correction of the held joint")
             final = sample()
             if held and p.mode != "position":
                 # start and stop skew between the two motors shifts the held joint a little (seed
@@ -474,37 +364,9 @@ def _run_guarded(guard: MotionGuard, session: ArmSession, cfg: ArmConfig, axis: 
     return final
 
 
-def recovery_from_standstill(clients: Mapping[str, DriveClient], guard: MotionGuard, settings: MotionSettings,
-                              clock: Callable[[], float], sleep: Callable[[float], None],
-                              breaches: Sequence[limit_watch.Breach]) -> None:
-    """Before a move back after a breach: standstill, or an error that says the joint left its range
-    first and then why the move back did not start (issue 21 item 7)."""
-    try:
-        wait_standstill(clients, guard, settings, clock, sleep, before="the move back into the normal range")
-    except SafetyError as exc:
-        left = "; ".join(b.describe() for b in breaches)
-        raise SafetyError(f"{left}; the recovery failed: {exc}", hint=exc.hint) from exc
-
-
-def stop_now(clients: Mapping[str, DriveClient], mode: str, method: str = "auto") -> None:
-    """Stop every motor of the jog at once (the stop frames of each, no wait in between); nothing
-    queued is sent after this. The guard's one stop path (motion/stopping.send_stop): TC=0 first in torque
-    mode, then by ``method`` (motion.stop_method: auto, st, jv0). A problem (ST refused with ``st``)
-    is raised once every motor got its stop."""
-    from sherpa_cli.elmo.protocol import UM_TORQUE
-    from sherpa_cli.motion.stopping import send_stop
-
-    problems = []
-    for c in clients.values():
-        _, found = send_stop(c, unit_mode=UM_TORQUE if mode == "torque" else None, method=method)
-        problems += [f"{c.label}: {p}" for p in found]
-    if problems:
-        raise SafetyError("the stop did not go cleanly: " + "; ".join(problems),
-                          hint="check the drives with `sherpa monitor --once`; `sherpa stop` stops them all")
-
-
-def _slow(axis: Axis) -> int:
-    return max(1, (axis.vel_limit or 200) // 2)
+def _slow(axis: Axis, settings: MotionSettings) -> int:
+    """The held joint's correction: half the speed of a move (motion/axis.profile_speed)."""
+    return max(1, profile_speed(axis, settings.recovery_fallback_speed) // 2)
 
 
 def _restore_held(guard: MotionGuard, by_name: Mapping[str, DriveRef], clients: Mapping[str, DriveClient],
@@ -515,49 +377,10 @@ def _restore_held(guard: MotionGuard, by_name: Mapping[str, DriveRef], clients: 
     s, d = now[a] + now[b], now[a] - now[b]
     if (d if axis.kind == "sigma" else s) == value:
         return now
-    if axis.kind == "sigma":
-        s2, d2 = diffpair.hold_other(s, value, "delta")
-    else:
-        s2, d2 = diffpair.hold_other(value, d, "sigma")
-    targets = dict(zip(axis.drives, diffpair.to_motors(s2, d2), strict=True))
+    # the held joint's own axis to its value, the moved joint giving way by a count on a parity clash
+    (other,) = [j for j in axis.watched if j.name == name]
+    targets = other.motor_targets(value, now)
     result.held_correction = {name: {"from": (d if axis.kind == "sigma" else s), "to": value}}
-    move_to(guard, by_name, clients, targets, _slow(axis), settings, clock, sleep,
-             f"the correction of the held joint {name}")
+    recovery.move_to(guard, by_name, clients, targets, _slow(axis, settings), settings, clock, sleep,
+                     f"the correction of the held joint {name}")
     return {**now, **{dr: int(c.get("PX")) for dr, c in clients.items()}}
-
-
-def move_to(guard: MotionGuard, by_name: Mapping[str, DriveRef], clients: Mapping[str, DriveClient],
-             targets: Mapping[str, int], speed: int, settings: MotionSettings, clock: Callable[[], float], sleep: Callable[[float], None],
-             what: str) -> None:
-    """Position mode (UM=5; the guard cycles MO if the mode changes), every motor of ``targets`` to
-    its target with equal-duration profiles, bounded in time."""
-    if not targets:
-        return
-    now = {d: int(clients[d].get("PX")) for d in targets}
-    longest = max(abs(t - now[d]) for d, t in targets.items())
-    duration = longest / speed if longest else 0.0
-    for d, t in targets.items():
-        guard.enable(by_name[d], UM_POSITION)
-        c = clients[d]
-        c.set("SP", 0, max(1, math.ceil(abs(t - now[d]) / duration)) if duration else speed)
-        c.set("PA", 0, t)
-    for d in targets:
-        clients[d].execute("BG")
-    deadline = clock() + 2 * duration + 5.0
-    while not all(int(clients[d].get("MS")) == 0 for d in targets):
-        guard.check()
-        if clock() >= deadline:
-            raise SafetyError(f"{what} did not finish in time", hint="check the joint; `sherpa stop` stops every drive")
-        sleep(settings.poll_interval)
-
-
-def wait_standstill(clients: Mapping[str, DriveClient], guard: MotionGuard, settings: MotionSettings,
-                    clock: Callable[[], float], sleep: Callable[[float], None], *, before: str = "the next move") -> None:
-    """The one standstill rule (motion/stopping.wait_all_standstill), bounded; a drive still moving
-    when the time is up raises: ``before`` (a move back, a correction) is never started from motion."""
-    moving = wait_all_standstill(clients, standstill_timeout=settings.standstill_timeout,
-                                 poll_interval=settings.poll_interval, standstill_velocity=settings.standstill_velocity,
-                                 clock=clock, sleep=sleep, pulse=guard.check)
-    if moving:
-        raise SafetyError(f"{', '.join(moving)}: not at standstill {settings.standstill_timeout:g} s after the stop; "
-                          f"{before} was not started", hint="check the joint; `sherpa stop` stops every drive")

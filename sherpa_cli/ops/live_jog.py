@@ -1,6 +1,6 @@
 """A live jog session: the ops layer under `sherpa jog --interactive` and `sherpa jog --joystick`
 (docs/jog.md). One motion guard (motion/guard.py) around every motor of the chosen joints, the same
-joint limits and limit watch as `sherpa jog` (motion/limit_watch.py, ops/joint_jog.py), and small
+joint limits, limit watch and recovery as `sherpa jog` (motion/limit_watch.py, motion/recovery.py), and small
 commands a user interface calls as keys are pressed or a joystick moves:
 
 - :meth:`LiveJog.step` moves a joint by N counts (position mode, only to a target inside the
@@ -35,14 +35,12 @@ from sherpa_cli.config.model import ArmConfig, JointConfig, JointRole
 from sherpa_cli.elmo.faults import decode_sr, describe_mf, describe_sr, sr_problems
 from sherpa_cli.elmo.protocol import UM_POSITION, UM_TORQUE
 from sherpa_cli.errors import ExitCode, SafetyError, SherpaError, UsageError
-from sherpa_cli.joints import diffpair
 from sherpa_cli.joints.units import counts_to_rad
-from sherpa_cli.motion import calibration, limit_watch
+from sherpa_cli.motion import calibration, limit_watch, recovery
+from sherpa_cli.motion.axis import Axis, joint_axis, joints_moved_by, profile_speed
 from sherpa_cli.motion.guard import MotionGuard
-from sherpa_cli.motion.limit_watch import WatchedJoint
 from sherpa_cli.motion.report import GuardReport
 from sherpa_cli.motion.settings import MotionSettings
-from sherpa_cli.ops import joint_jog
 
 if TYPE_CHECKING:
     from sherpa_cli.bus.session import ArmSession
@@ -60,27 +58,7 @@ class HomingAborted(SherpaError):
 KEEPALIVE_S = 0.5  # a velocity/torque command stops this long after the last key press
 
 
-@dataclass(frozen=True)
-class LiveAxis:
-    """One joint the session can move: a plain joint (one drive) or a Σ/Δ joint of a pair."""
-
-    name: str
-    kind: str  # plain | sigma | delta
-    joint: JointConfig
-    drives: tuple[str, ...]
-    watched: WatchedJoint
-    vel_limit: int | None  # counts/s
-    current_limit: float | None  # A per motor
-
-    @property
-    def cpr(self) -> int:
-        return self.joint.cpr
-
-    def position(self, motors: Mapping[str, int]) -> int:
-        return self.watched.position(motors)
-
-
-def resolve_axes(cfg: ArmConfig, names: Sequence[str] | None) -> list[LiveAxis]:
+def resolve_axes(cfg: ArmConfig, names: Sequence[str] | None) -> list[Axis]:
     """The joints named (a pair means both its joints), or every joint of the config."""
     chosen: list[JointConfig] = []
     if not names:
@@ -93,17 +71,7 @@ def resolve_axes(cfg: ArmConfig, names: Sequence[str] | None) -> list[LiveAxis]:
         if not joints:
             raise UsageError(f"'{text}' moves no configured joint", hint="name a joint, a pair or a drive of the config")
         chosen += [j for j in joints if j not in chosen]
-    out = []
-    for j in chosen:
-        w = WatchedJoint.of(cfg, j)
-        if j.role is JointRole.PLAIN:
-            cur = j.current.continuous if j.current is not None else None
-            out.append(LiveAxis(j.name, "plain", j, w.drives, w, j.vel_limit, cur))
-        else:
-            pair = cfg.pairs[j.pair]  # type: ignore[index]
-            cur = pair.current.continuous if pair.current is not None else None
-            out.append(LiveAxis(j.name, j.role.value, j, (pair.drive_a, pair.drive_b), w, j.vel_limit, cur))
-    return out
+    return [joint_axis(cfg, j) for j in chosen]
 
 
 @dataclass
@@ -143,7 +111,7 @@ class _Running:
 class LiveJog:
     """``with LiveJog(session, axes) as live:`` -- see the module docstring."""
 
-    def __init__(self, session: ArmSession, axes: Sequence[LiveAxis], *, settings: MotionSettings | None = None,
+    def __init__(self, session: ArmSession, axes: Sequence[Axis], *, settings: MotionSettings | None = None,
                  keepalive: float = KEEPALIVE_S, allow_uncalibrated: bool = False, tick_period: float = 0.1,
                  clock: Callable[[], float] = time.monotonic, sleep: Callable[[float], None] = time.sleep,
                  on_event: Callable[[str], None] | None = None) -> None:
@@ -158,7 +126,7 @@ class LiveJog:
         self.drives = tuple(drives)
         self.refs = {d: targets.drive_ref(self.cfg, d) for d in drives}
         # every joint these motors move (a Σ joint alone still moves Δ): the watch covers them all
-        self.watched = limit_watch.joints_moved_by(self.cfg, drives)
+        self.watched = joints_moved_by(self.cfg, drives)
         self.settings = settings or MotionSettings.from_config(self.cfg, {r.bus for r in self.refs.values()})
         self.keepalive = keepalive
         self.tick_period = tick_period  # how often the caller ticks (the edge hold looks this far ahead)
@@ -222,27 +190,22 @@ class LiveJog:
             return self._refuse(name, f"{name} is {st.calibration}: position steps need a calibrated joint "
                                       "(home it, or start with --uncalibrated)")
         self.guard.check()
-        now = self._sample(a.drives + tuple(d for d in a.watched.drives if d not in a.drives))
+        now = self._sample(a.drives)
         start = a.position(now)
         base = self.running[name].motors.get("target", start) if name in self.running and \
             self.running[name].mode == "position" else start
         goal = int(to) if to is not None else int(base) + int(counts)
-        lo, hi = a.joint.normal_range
+        assert a.normal is not None  # a joint's axis (resolve_axes) has its ranges
+        lo, hi = a.normal
         if not lo <= goal <= hi:
             return self._refuse(name, f"{name}: target {goal} counts is outside the normal range [{lo}, {hi}]: "
                                       "not sent")
-        if a.kind == "plain":
-            motor_targets = {a.drives[0]: goal}
-        else:
-            # the other joint of the pair holds; on a parity clash it gives way by one count (joint_jog)
-            pair = self.cfg.pairs[a.joint.pair]  # type: ignore[index]
-            held = self.cfg.joints[pair.delta if a.kind == "sigma" else pair.sigma]
-            ma, mb = (now[d] for d in a.drives)
-            s_now, d_now = ma + mb, ma - mb
-            s2, d2 = (diffpair.hold_other(goal, d_now, "sigma", held.normal_range) if a.kind == "sigma"
-                      else diffpair.hold_other(s_now, goal, "delta", held.normal_range))
-            motor_targets = dict(zip(a.drives, diffpair.to_motors(s2, d2), strict=True))
-        speed = max(1, (a.vel_limit or 400) // 2)
+        # the other joint of a pair holds; on a parity clash it gives way by one count inside its
+        # normal range (Axis.motor_targets, the same map as `jog`)
+        other = next((j for j in joints_moved_by(self.cfg, a.drives) if j.name != a.name), None)
+        motor_targets = a.motor_targets(goal, now, other.normal if other is not None and a.is_pair_joint else None)
+        # half the joint's speed (motion/axis.profile_speed), never the SP the drive holds
+        speed = max(1, profile_speed(a, self.settings.recovery_fallback_speed) // 2)
         distance = max(abs(t - now[d]) for d, t in motor_targets.items())
         duration = distance / speed if distance else 0.0
         self._stop_others_on(a.drives, name)
@@ -270,21 +233,12 @@ class LiveJog:
         if abs(v) > a.vel_limit:
             return self._refuse(name, f"{name}: {abs(v)} counts/s is above the joint's speed limit "
                                       f"{a.vel_limit} counts/s: not sent")
-        if a.kind == "plain":
-            motors = {a.drives[0]: v}
-        else:
-            va, vb = diffpair.motor_velocities(v, 0) if a.kind == "sigma" else diffpair.motor_velocities(0, v)
-            motors = dict(zip(a.drives, (va, vb), strict=True))
-        return self._run(name, "velocity", motors)
+        return self._run(name, "velocity", a.motor_velocities(v))
 
     def set_torque(self, name: str, amps: float) -> str:
         """Apply ``amps`` (per joint; a Σ/Δ joint through the pair's transpose) until ``keepalive`` s pass."""
         a = self._axis(name)
-        if a.kind == "plain":
-            motors = {a.drives[0]: float(amps)}
-        else:
-            ia, ib = diffpair.motor_currents(amps, 0.0) if a.kind == "sigma" else diffpair.motor_currents(0.0, amps)
-            motors = dict(zip(a.drives, (ia, ib), strict=True))
+        motors = a.motor_currents(amps)
         if a.current_limit is None:
             return self._refuse(name, f"{name}: no current limits configured: torque not sent")
         if max(abs(x) for x in motors.values()) > a.current_limit:
@@ -321,7 +275,7 @@ class LiveJog:
         drives = [d for d in a.drives if d not in self.dead]
         if run is not None and drives:
             self.guard.check()
-            joint_jog.stop_now({d: self._client(d) for d in drives}, run.mode, self.settings.stop_method)
+            recovery.stop_now({d: self._client(d) for d in drives}, run.mode, self.settings.stop_method)
         self.state[name].command = "-"
 
     def stop_all(self) -> None:
@@ -335,7 +289,7 @@ class LiveJog:
         if live:
             self.guard.check()
         for d in live:
-            joint_jog.stop_now({d: self._client(d)},
+            recovery.stop_now({d: self._client(d)},
                                "torque" if self.guard.unit_mode(self.refs[d]) == UM_TORQUE else "position",
                                self.settings.stop_method)
 
@@ -428,9 +382,9 @@ class LiveJog:
                 self._read_calibration([a for a in self.axes.values() if set(a.drives) & set(drives)])
         return report
 
-    def _read_calibration(self, axes: Sequence[LiveAxis]) -> None:
+    def _read_calibration(self, axes: Sequence[Axis]) -> None:
         for a in axes:
-            c = calibration.read_calibration(self.cfg, a.joint, lambda d: self._raw(d), resync=True)
+            c = calibration.read_calibration(self.cfg, self._joint(a), lambda d: self._raw(d), resync=True)
             self.state[a.name].calibrated = c.calibrated
             self.state[a.name].calibration = c.reason
 
@@ -476,7 +430,7 @@ class LiveJog:
         for name, a in self.axes.items():
             st = self.state[name]
             st.counts = a.position(motors)
-            st.rad = counts_to_rad(st.counts, a.cpr)
+            st.rad = counts_to_rad(st.counts, self._joint(a).cpr)
             now_running = self.running.get(name)
             if now_running is not None and now_running.mode == "position" and all(
                     int(self._client(d).get("MS")) == 0 for d in a.drives if d not in self.dead):
@@ -493,19 +447,24 @@ class LiveJog:
 
     # -- internals ---------------------------------------------------------------------------------
 
-    def _axis(self, name: str) -> LiveAxis:
+    def _axis(self, name: str) -> Axis:
         try:
             return self.axes[name]
         except KeyError:
             raise UsageError(f"'{name}' is not a joint of this session ({', '.join(self.axes)})") from None
 
-    def _pair_axes(self, a: LiveAxis) -> list[LiveAxis]:
+    @staticmethod
+    def _joint(a: Axis) -> JointConfig:
+        assert a.joint is not None  # the session's axes are joints (resolve_axes)
+        return a.joint
+
+    def _pair_axes(self, a: Axis) -> list[Axis]:
         out = [b for b in self.axes.values() if b.drives == a.drives]
         if a.kind == "plain":
             return [a]
         if len(out) < 2:  # the other joint of the pair is not in the session: still limit it
             for j in (self.cfg.joints[n] for n in self.cfg.joints):
-                if j.pair == a.joint.pair and j.name != a.name:
+                if j.pair == self._joint(a).pair and j.name != a.name:
                     out += resolve_axes(self.cfg, [j.name])
         return out
 
@@ -572,8 +531,8 @@ class LiveJog:
         velocity mode the edge is met early by the distance the joint needs to stop (its configured
         decel) plus one tick of travel, so the stop lands inside the normal range."""
         pos = positions if positions is not None else self.motors
-        for j in limit_watch.joints_moved_by(self.cfg, motors):
-            if any(d not in pos for d in j.drives):
+        for j in joints_moved_by(self.cfg, motors):
+            if any(d not in pos for d in j.drives) or j.normal is None:
                 continue
             rate = float(motors.get(j.drive_a, 0)) + (j.sign * float(motors.get(j.drive_b, 0))
                                                        if j.drive_b is not None else 0.0)
@@ -631,12 +590,9 @@ class LiveJog:
         modes = {run.mode for run in self.running.values()}
         self.running.clear()
         live = {d: self._client(d) for d in self.drives if d not in self.dead}
-        joint_jog.stop_now(live, "torque" if "torque" in modes else "position", self.settings.stop_method)
-        joint_jog.recovery_from_standstill(live, self.guard, self.settings, self.clock, self.sleep, breaches)
-        back = limit_watch.recovery_targets(self.watched, self._sample(self.drives), breaches)
-        speed = self.settings.recovery_speed_for(a.vel_limit for a in self.axes.values())
-        joint_jog.move_to(self.guard, self.refs, live, {d: t for d, t in back.items() if d in live}, speed,
-                           self.settings, self.clock, self.sleep, "the move back into the normal range")
+        recovery.recover(self.guard, self.refs, live, self.watched, breaches, lambda: self._sample(self.drives),
+                         settings=self.settings, clock=self.clock, sleep=self.sleep, torque="torque" in modes,
+                         speed=recovery.recovery_speed(self.settings, self.axes.values()))
         for b in breaches:
             text = (f"limit: {b.joint} left its full range [{b.full[0]}, {b.full[1]}] on the {b.side} side: "
                     f"stopped everything, brought back to {b.back_to} counts")

@@ -35,11 +35,13 @@ from sherpa_cli.log.record import Recorder, bus_budget
 from sherpa_cli.log.recording import Recording
 from sherpa_cli.log.settle import HOLD_S, judged, settled_at_end
 from sherpa_cli.log.step_metrics import StepMetrics, step_metrics
+from sherpa_cli.motion.axis import Axis, resolve_axis
 from sherpa_cli.motion.guard import MotionGuard
 from sherpa_cli.motion.report import GuardReport
+from sherpa_cli.motion.request import MoveRequest, parse_request
 from sherpa_cli.motion.settings import MotionSettings
 from sherpa_cli.motion.stopping import stop_drive
-from sherpa_cli.ops.jog import JogRequest, JogTarget, check_request, limit_breach, precheck, resolve_jog_target
+from sherpa_cli.ops.jog import check_request, limit_breach, precheck
 
 if TYPE_CHECKING:
     import can
@@ -93,7 +95,7 @@ class StepResult:
                 "limit": None if self.breach is None else {**self.breach.as_dict(), "recovered_to": self.recovered_to}}
 
 
-def resolve_step_target(cfg: ArmConfig, text: str) -> JogTarget:
+def resolve_step_target(cfg: ArmConfig, text: str) -> Axis:
     """The joint to step: a plain joint or its drive. A differential pair (its Σ/Δ joints or its
     motors) is refused: a Σ or Δ step moves both motors at once, which is `diffdrive move`'s."""
     from sherpa_cli.bus.targets import resolve_one
@@ -106,7 +108,7 @@ def resolve_step_target(cfg: ArmConfig, text: str) -> JogTarget:
                          f"steps move both motors ({p.drive_a}, {p.drive_b})",
                          hint=f"record the pair (sherpa log record {p.sigma} {p.delta} --for S -o pair.csv) while "
                          "`sherpa diffdrive move` moves it")
-    return resolve_jog_target(cfg, text)
+    return resolve_axis(cfg, text)
 
 
 class SyncSource(Protocol):
@@ -128,14 +130,14 @@ class StepTime(Protocol):
     def follow(self, answered: Callable[[int], bool]) -> None: ...
 
 
-def step_request(target: JogTarget, mode: str, value: float, *, duration: float,
-                 uncalibrated: bool = False) -> JogRequest:
+def step_request(target: Axis, mode: str, value: float, *, duration: float,
+                 uncalibrated: bool = False) -> MoveRequest:
     """The step as a jog request, with every check that needs no bus (`jog`'s); a dry run's checks."""
     if target.joint is None:
         raise UsageError(f"{target.name}: log step needs a plain joint (its cpr converts rad to counts)")
-    req = JogRequest(mode=mode, by=value if mode == "position" else None,
-                     velocity=value if mode == "velocity" else None, torque=value if mode == "torque" else None,
-                     duration=duration if mode != "position" else None, uncalibrated=uncalibrated)
+    req = parse_request(target, mode, by=value if mode == "position" else None,
+                        velocity=value if mode == "velocity" else None, torque=value if mode == "torque" else None,
+                        duration=duration if mode != "position" else None, uncalibrated=uncalibrated)
     check_request(target, req)
     if not (math.isfinite(duration) and duration > 0):
         raise UsageError(f"--for {duration}: expected a time > 0 s")
@@ -152,7 +154,7 @@ def check_mode_first(mode: str, mode_first: bool) -> None:
                          hint="a torque step's own switch is short: leave --mode-first out")
 
 
-def run_step(session: ArmSession, target: JogTarget, mode: str, value: float, *, duration: float, rate: float,
+def run_step(session: ArmSession, target: Axis, mode: str, value: float, *, duration: float, rate: float,
              settings: MotionSettings, sleep: Callable[[float], None] = time.sleep,
              on_event: Callable[[str], None] | None = None, recorder_kw: dict[str, Any] | None = None,
              uncalibrated: bool = False, timebase: StepTime | None = None, mode_first: bool = False,
@@ -289,7 +291,7 @@ def _wait(guard: MotionGuard, clock: Callable[[], float], sleep: Callable[[float
 
 def _until_settled(guard: MotionGuard, rec: Recorder, joint: str, signal: str, t_cmd: float, target: float,
                    duration: float, clock: Callable[[], float], sleep: Callable[[float], None], *, settle: bool,
-                   jog_target: JogTarget,
+                   jog_target: Axis,
                    settings: MotionSettings, state: dict[str, Any], hold: float = 0.0) -> str:
     """Record until the signal has stayed within 2 % of the step around the target for
     SETTLE_HOLD_S (position and velocity steps) and then ``hold`` s more, or until ``duration`` s
