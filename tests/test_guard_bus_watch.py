@@ -78,15 +78,17 @@ def test_a_bus_off_error_frame_trips_at_once_naming_the_bus():
     w.feed(frame("can1", "bus-off", tec=255))  # what the receive thread does
     assert len(trips) == 1 and w.error is trips[0]
     err = w.poll()
-    assert isinstance(err, BusFaultError) and err.exit_code == ExitCode.BUS == 3
-    assert str(err) == ("bus can1 (socketcan:can1): went BUS-OFF during the motion (TEC 255, REC 0; seen in an "
-                        "error frame): stopping every drive of the command, those on the other buses first")
-    assert err.bus == "can1" and err.problem == "bus-off" and "restart-ms" in (err.hint or "")
-    assert w.faults == [BusFault("can1", "BUS-OFF", "an error frame", "stopped the command", 255, 0)]
     w.feed(frame("can1", "bus-off", tec=255))  # the same state again: nothing new
     w.feed(frame("can0", "bus-off"))  # a second dead bus: reported, the first reason stays
     assert len(trips) == 1 and w.poll() is err
     assert [f.action for f in w.faults] == ["stopped the command", "seen while the command stopped"]
+    assert isinstance(err, BusFaultError) and err.exit_code == ExitCode.BUS == 3
+    assert str(err) == ("bus can1 (socketcan:can1): went BUS-OFF during the motion (TEC 255, REC 0; seen in an "
+                        "error frame): stopping every drive of the command, those on the other buses first")
+    assert err.bus == "can1" and err.problem == "bus-off" and "restart-ms" in (err.hint or "")
+    assert w.faults[0] == BusFault("can1", "BUS-OFF", "an error frame", "stopped the command", 255, 0)
+    w.stop()
+    assert w.dead() == {"can0", "can1"} and not w.confirmed_dead("can1")  # the link reports no state: a frame said so
 
 
 def test_the_link_state_is_read_every_interval_and_trips_without_error_frames():
@@ -183,7 +185,7 @@ def test_the_exit_waits_for_the_controllers_restart_once_and_reports_a_bus_still
     links.states["can1"] = "BUS-OFF"
     w2 = watch(links, clock2 := Clock(), [], [])
     w2.stop()
-    assert w2.dead() == {"can1"}
+    assert w2.dead() == {"can1"} and w2.confirmed_dead("can1")
     assert not w2.back("can1", sleep=clock2.sleep, pulse=lambda: None, max_wait=2.0)
     assert clock2.t == pytest.approx(0.3)
     assert not w2.back("can1", sleep=clock2.sleep, pulse=lambda: None, max_wait=2.0)
@@ -406,3 +408,29 @@ def test_a_command_on_two_buses_stops_the_other_bus_first_when_one_goes_bus_off(
         st.time.sleep(0.6)
         assert not st.motor_on("drive1")  # its own consumer: no host heartbeat reached it
         assert s.sim.errors == []
+
+
+def test_a_bus_off_error_frame_alone_stops_the_jog_and_a_bus_that_still_answers_is_stopped_as_usual(cfg):
+    """The error-frame path on its own: another sender's CAN_ERR_BUSOFF frame on the jog's bus while
+    the controller itself stays ERROR-ACTIVE (what the vcan guest test does on kernel vcan)."""
+    import can
+
+    others: list[can.BusABC] = []
+
+    def error_frame(st: Stepped) -> None:
+        other = can.Bus(interface="virtual", channel=st.arm.endpoints["can1"]["channel"])
+        others.append(other)
+        cls, data = encode_error_frame(["bus-off"], tec=255, rec=0)
+        other.send(can.Message(arbitration_id=cls, data=data, is_extended_id=False, is_error_frame=True))
+
+    try:
+        err, _st, _events, after = jog(cfg, "drive1", during=error_frame)
+    finally:
+        for other in others:
+            other.shutdown()
+    assert isinstance(err, BusFaultError), err
+    assert "went BUS-OFF during the motion (TEC 255, REC 0; seen in an error frame)" in str(err)
+    (drive,) = err.motion_report.drives  # type: ignore[attr-defined]
+    # the link reads ERROR-ACTIVE again: the drive is reached, stopped and switched off as on any exit
+    assert drive.stopped_by == "ST" and drive.motor_off and drive.standstill and not drive.problems
+    assert after["drive1"] is False

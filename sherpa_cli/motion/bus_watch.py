@@ -20,8 +20,10 @@ command's own buses are watched: a bus-off on a bus it does not move on leaves i
 A trip cuts short the request the command waits for (as the drive watch does: a bus-off bus answers
 nothing). The guard's exit then stops the drives on the buses that still carry frames first, waits a
 bounded time for a dead bus to come back on its own (the controller's restart-ms), and reports the
-drives of a bus still dead as not reached: their heartbeat consumers switch them off, since no host
-heartbeat reaches them. Nothing here sends a frame.
+drives of a bus whose link still reads dead as not reached: their heartbeat consumers switch them
+off, since no host heartbeat reaches them. Where only an error frame said so (an interface that
+reports no controller state, such as vcan), its drives get one plain request first, as a silent
+drive does, and are stopped as usual if they answer. Nothing here sends a frame.
 """
 
 from __future__ import annotations
@@ -71,6 +73,7 @@ class _Bus:
     rec: int | None = None
     restart_ms: int | None = None
     gave_up: bool = False  # the exit waited for it to come back, in vain
+    reads_state: bool = False  # its link reports a controller state (else only its error frames tell)
 
 
 @dataclass
@@ -216,6 +219,12 @@ class GuardBusWatch:
             pulse()
             sleep(min(self.interval, max(deadline - self._now(), 0.0)))
 
+    def confirmed_dead(self, bus: str) -> bool:
+        """Whether the bus's own link says it is dead (else only an error frame said so, and one
+        request to a drive on it tells: the guard's exit of a silent drive)."""
+        b = self._buses[bus]
+        return b.reads_state and b.state in DEAD_STATES
+
     def unreached(self, name: str, address: str, bus: str, consumer_time_ms: int) -> DriveStop:
         """The report of a drive on a bus that stayed dead: nothing could be sent to it."""
         state = self._buses[bus].state or "dead"
@@ -248,6 +257,7 @@ class GuardBusWatch:
         if status.restart_ms is not None:
             self._buses[bus].restart_ms = status.restart_ms
         state = link_state(status)
+        self._buses[bus].reads_state = state is not None
         if state is not None:
             self._note(bus, state, "the link state", status.tec, status.rec)
 

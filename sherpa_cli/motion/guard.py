@@ -563,9 +563,12 @@ class MotionGuard:
         """The drive's exit; on a bus that went dead and did not come back: not reached (motion/bus_watch.py)."""
         if d.ref.bus in dead and not self._bus.back(d.ref.bus, sleep=self._sleep, pulse=self._step,
                                                     max_wait=self.settings.standstill_timeout):
-            r = self._bus.unreached(d.ref.name, f"{d.ref.bus}:{d.ref.node}", d.ref.bus, self.settings.consumer_time_ms)
-            self._event(r.line())
-            return r
+            if self._bus.confirmed_dead(d.ref.bus):
+                r = self._bus.unreached(d.ref.name, f"{d.ref.bus}:{d.ref.node}", d.ref.bus,
+                                        self.settings.consumer_time_ms)
+                self._event(r.line())
+                return r
+            d.client.silent = True  # only an error frame said so: one plain request tells (as a silent drive)
         return self._exit_drive(d, stop=not entering or d.switched_on)
 
     def _stop_pass(self, entering: bool, skip: set[tuple[str, int]] | None = None) -> None:
