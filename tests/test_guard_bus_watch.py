@@ -91,6 +91,15 @@ def test_a_bus_off_error_frame_trips_at_once_naming_the_bus():
     assert w.dead() == {"can0", "can1"} and not w.confirmed_dead("can1")  # the link reports no state: a frame said so
 
 
+def test_a_bus_already_dead_when_the_watch_starts_trips_at_once():
+    trips: list = []
+    w = GuardBusWatch(["can1"], read=Links(can1="BUS-OFF"), now=Clock(), on_trip=trips.append)
+    w._note("can1", "BUS-OFF", "the link state", 255, 0)  # noted before the start (not active): no trip
+    assert trips == []
+    w.start()
+    assert len(trips) == 1 and w.poll() is trips[0]
+
+
 def test_the_link_state_is_read_every_interval_and_trips_without_error_frames():
     links, clock, trips, events = Links(can0="ERROR-ACTIVE", can1="ERROR-ACTIVE"), Clock(), [], []
     w = watch(links, clock, trips, events)
@@ -149,9 +158,11 @@ def test_error_passive_stops_by_default_and_only_warns_with_the_setting():
 def test_nothing_trips_before_start_or_after_stop_and_other_buses_are_not_watched():
     links, clock, trips = Links(), Clock(), []
     w = GuardBusWatch(["can1"], read=links, now=clock, on_trip=trips.append)
-    w.feed(frame("can1", "bus-off"))  # before start: state noted, no trip
+    links.states["can0"] = "BUS-OFF"  # not a bus of this watch
+    w.feed(frame("can1", "bus-off"))  # before start: no trip
     assert w.error is None and trips == []
     w.start()
+    assert w.poll() is None  # the reading at the start says can1 reports no state: nothing known
     w.feed(frame("can2", "bus-off"))  # not a bus of the command
     w.feed(frame("can1", "crc", "warning", tec=96))  # a warning is no reason to stop
     assert w.poll() is None and w.faults == []

@@ -151,12 +151,14 @@ class GuardBusWatch:
     def start(self) -> None:
         """Listen to the error frames, read every bus once, and trip from now on. Never raises for a
         bus it cannot read (that bus is then watched through its error frames only)."""
+        with self._lock:
+            self._active = True
+            for b in self._buses.values():  # what was noted before counts as news: a dead bus trips now
+                b.state = None
         if self._frames is not None and self._hooked.manager is None:
             manager = self._frames(self.feed)
             self._hooked.collector = manager.__enter__()
             self._hooked.manager = manager
-        with self._lock:
-            self._active = True
         self._read_all()
 
     def stop(self) -> None:
