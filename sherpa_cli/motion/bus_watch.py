@@ -227,13 +227,14 @@ class GuardBusWatch:
         b = self._buses[bus]
         return b.reads_state and b.state in DEAD_STATES
 
-    def unreached(self, name: str, address: str, bus: str, consumer_time_ms: int) -> DriveStop:
+    def unreached(self, name: str, address: str, bus: str, consumer_time_ms: int, *, motor_on: bool = True) -> DriveStop:
         """The report of a drive on a bus that stayed dead: nothing could be sent to it."""
         state = self._buses[bus].state or "dead"
         r = DriveStop(name, address, stopped_by="not reached")
-        r.problems.append(f"bus {bus} is {state}: no frame reaches the drive, not confirmed stopped; its heartbeat "
-                          f"consumer switches the motor off {consumer_time_ms} ms after the last host heartbeat it "
-                          f"heard; `sherpa recover {name} --apply` puts its settings back once the bus is up")
+        how = (f"not confirmed stopped; its heartbeat consumer switches the motor off {consumer_time_ms} ms after "
+               "the last host heartbeat it heard" if motor_on else "its motor was off")
+        r.problems.append(f"bus {bus} is {state}: no frame reaches the drive, {how}; `sherpa recover {name} --apply` "
+                          "puts its settings back once the bus is up")
         r.kept.extend(f"{obj} (bus {state})" for obj in ("0x1016:1", "0x1029:1", "0x6007:0"))
         return r
 

@@ -565,7 +565,7 @@ class MotionGuard:
                                                     max_wait=self.settings.standstill_timeout):
             if self._bus.confirmed_dead(d.ref.bus):
                 r = self._bus.unreached(d.ref.name, f"{d.ref.bus}:{d.ref.node}", d.ref.bus,
-                                        self.settings.consumer_time_ms)
+                                        self.settings.consumer_time_ms, motor_on=bool(d.mo or d.switched_on))
                 self._event(r.line())
                 return r
             d.client.silent = True  # only an error frame said so: one plain request tells (as a silent drive)
