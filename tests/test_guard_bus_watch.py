@@ -204,6 +204,7 @@ def test_the_exit_waits_for_the_controllers_restart_once_and_reports_a_bus_still
     r = w2.unreached("drive1", "can1:6", "can1", 300)
     assert r.stopped_by == "not reached" and "bus can1 is BUS-OFF: no frame reaches the drive" in r.problems[0]
     assert "switches the motor off 300 ms after the last host heartbeat" in r.problems[0]
+    assert r.line().startswith("drive1 (can1:6): NOT reached; kept 0x1016:1 (bus BUS-OFF)")
     off = w2.unreached("drive1", "can1:6", "can1", 300, motor_on=False)
     assert "no frame reaches the drive, its motor was off; `sherpa recover drive1 --apply`" in off.problems[0]
 

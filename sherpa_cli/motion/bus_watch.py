@@ -289,7 +289,8 @@ class GuardBusWatch:
             elif before in DEAD_STATES or before == PASSIVE:
                 text = f"bus {bus}: back to {state} ({seen_in})"
         if text is not None:
-            (log.warning if trip is not None or state == PASSIVE else log.info)("bus watch: %s", text)
+            # a warning only where the motion goes on: a trip is said by the error and the stop report
+            (log.warning if trip is None and state == PASSIVE else log.info)("bus watch: %s", text)
             self._event(text)
 
     def _error(self, b: _Bus, state: str, seen_in: str) -> BusFaultError:

@@ -9,7 +9,7 @@ from typing import Any
 # how these read without --verbose; any other stop (ST, JV=0 + BG, TC=0 + ST, ...) reads "stopped" (the
 # method is a detail), and "not stopped" / "-" always as they are
 STOPPED_TEXT = {"motor was off": "motor was off", "not moved by this guard": "not moved"}
-UNSTOPPED = ("not stopped", "-")
+UNSTOPPED = ("not stopped", "not reached", "-")
 
 
 @dataclass
@@ -33,6 +33,8 @@ class DriveStop:
         report's data (as_json) is the same either way."""
         if self.stopped_by == "not stopped":
             stopped = "NOT stopped"
+        elif self.stopped_by == "not reached":  # a dead or silent drive, a dead bus: nothing confirmed it
+            stopped = "NOT reached"
         elif verbose or self.stopped_by in UNSTOPPED:
             stopped = f"stopped by {self.stopped_by}"
         else:
