@@ -156,9 +156,12 @@ class GuardBusWatch:
             for b in self._buses.values():  # what was noted before counts as news: a dead bus trips now
                 b.state = None
         if self._frames is not None and self._hooked.manager is None:
-            manager = self._frames(self.feed)
-            self._hooked.collector = manager.__enter__()
-            self._hooked.manager = manager
+            try:
+                manager = self._frames(self.feed)
+                self._hooked.collector = manager.__enter__()
+                self._hooked.manager = manager
+            except Exception as exc:  # noqa: BLE001 - the link readings still watch the bus
+                log.warning("bus watch: the error frames cannot be listened to (%s); the link state is still read", exc)
         self._read_all()
 
     def stop(self) -> None:
