@@ -163,6 +163,8 @@ def test_nothing_trips_before_start_or_after_stop_and_other_buses_are_not_watche
     assert w.error is None and trips == []
     w.start()
     assert w.poll() is None  # the reading at the start says can1 reports no state: nothing known
+    clock.t = 1.0
+    assert w.poll() is None and links.reads == ["can1"]  # ... and it is not read again (vcan: nothing to say)
     w.feed(frame("can2", "bus-off"))  # not a bus of the command
     w.feed(frame("can1", "crc", "warning", tec=96))  # a warning is no reason to stop
     assert w.poll() is None and w.faults == []

@@ -9,7 +9,8 @@ both feed:
 - the link's controller state (bus/linkstate.py ``read_link``: netlink for SocketCAN, the simulated
   controller with --sim, python-can's ``state`` where a backend has one), read on the command's
   thread every ``motion.bus_check_interval``: the way to notice it with an adapter that hides error
-  frames (python-can #2040) or while no frame arrives.
+  frames (python-can #2040) or while no frame arrives. A link whose first reading has no controller
+  state (vcan, python-can-remote) is not read again: its error frames are all there is to watch.
 
 A bus that goes BUS-OFF, STOPPED, down or missing cannot carry a frame: the command ends (exit 3,
 :class:`BusFaultError` naming the bus, its state and what to check). ERROR-PASSIVE ends it too with
@@ -74,6 +75,9 @@ class _Bus:
     restart_ms: int | None = None
     gave_up: bool = False  # the exit waited for it to come back, in vain
     reads_state: bool = False  # its link reports a controller state (else only its error frames tell)
+    # up, and no controller state to report (vcan, python-can-remote): not read again while moving --
+    # a reading would say nothing, and netlink parsing costs the command's thread (a slow guest)
+    stateless: bool = False
 
 
 @dataclass
@@ -162,7 +166,7 @@ class GuardBusWatch:
                 self._hooked.manager = manager
             except Exception as exc:  # noqa: BLE001 - the link readings still watch the bus
                 log.warning("bus watch: the error frames cannot be listened to (%s); the link state is still read", exc)
-        self._read_all()
+        self._read_all(first=True)
 
     def stop(self) -> None:
         """No more trips (the guard's exit begins); the error frames are still listened to until
@@ -249,12 +253,13 @@ class GuardBusWatch:
         if state is not None and seen.bus in self._buses:
             self._note(seen.bus, state, "an error frame", seen.frame.tec, seen.frame.rec)
 
-    def _read_all(self) -> None:
+    def _read_all(self, *, first: bool = False) -> None:
         self._next_read = self._now() + self.interval
-        for bus in self._buses:
-            self._read_one(bus)
+        for bus, b in self._buses.items():
+            if first or not b.stateless:
+                self._read_one(bus, first=first)
 
-    def _read_one(self, bus: str) -> None:
+    def _read_one(self, bus: str, *, first: bool = False) -> None:
         try:
             status = self._read(bus)
         except Exception as exc:  # noqa: BLE001 - an unreadable link is no verdict: the error frames still count
@@ -264,6 +269,8 @@ class GuardBusWatch:
             self._buses[bus].restart_ms = status.restart_ms
         state = link_state(status)
         self._buses[bus].reads_state = state is not None
+        if first:
+            self._buses[bus].stateless = state is None
         if state is not None:
             self._note(bus, state, "the link state", status.tec, status.rec)
 
