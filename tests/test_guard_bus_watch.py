@@ -450,3 +450,50 @@ def test_a_bus_off_error_frame_alone_stops_the_jog_and_a_bus_that_still_answers_
     # the link reads ERROR-ACTIVE again: the drive is reached, stopped and switched off as on any exit
     assert drive.stopped_by == "ST" and drive.motor_off and drive.standstill and not drive.problems
     assert after["drive1"] is False
+
+
+def test_on_a_link_without_a_controller_state_an_error_frame_trips_and_the_drive_is_probed_then_stopped():
+    """What the vcan guest test checks, on python-can virtual without --sim: the link reports no
+    controller state (read once, not again), so only the BUS-OFF error frame says the bus is off; the
+    exit probes the drive with one request, it answers, and it is stopped and switched off as usual."""
+    import time
+
+    import can
+
+    from sherpa_cli.config import load_config_text
+
+    channel = f"busw-plain-{uuid.uuid4().hex[:8]}"
+    cfg = load_config_text(f"""\
+name: bus-watch-plain
+protocol: {{mo_settle: 0.05, sv_blackout: 0.2}}
+motion: {{consumer_time_ms: 300, bus_check_interval: 0.05}}
+buses:
+  can0: {{interface: virtual, channel: {channel}}}
+drives:
+  drive1: {{bus: can0, node: 5, model: whistle-10/60}}
+""", "plain.yaml")
+    arm = SimArm(cfg, {"can0": {"interface": "virtual", "channel": channel}}).start()
+    other = can.Bus(interface="virtual", channel=channel)
+    try:
+        with ArmSession.open(cfg) as s:  # no sim: read_link falls back to python-can (virtual: no state)
+            ref = resolve_target(cfg, "drive1")
+            with pytest.raises(BusFaultError) as info, MotionGuard(s, [ref], settings=MotionSettings.from_config(cfg)) as g:
+                g.enable(ref, 5)
+                g.client(ref).set("JV", 0, 2000)
+                g.client(ref).execute("BG")
+                cls, data = encode_error_frame(["bus-off"], tec=255, rec=1)
+                other.send(can.Message(arbitration_id=cls, data=data, is_extended_id=False, is_error_frame=True))
+                deadline = time.monotonic() + 10
+                while time.monotonic() < deadline:
+                    g.check()
+                    g.query(ref, "PX")
+                    time.sleep(0.01)
+                pytest.fail("the guard did not stop the command")
+            assert "bus can0 (virtual:" in str(info.value) and "seen in an error frame" in str(info.value)
+            (drive,) = g.report.drives
+            assert drive.stopped_by not in ("not reached", "not stopped") and drive.motor_off, drive.line()
+            with arm.lock:
+                assert not arm.drives["drive1"].motor_on
+    finally:
+        other.shutdown()
+        arm.stop()
