@@ -31,6 +31,8 @@ def faulty(tmp_path: Path, sim: str) -> str:
     ("  buses:\n    can1: {bitrate: 125000}\n", "bit rate 125000 differs from the config's 1000000",
      "sherpa bus up can1"),
     ("  buses:\n    can1: {up: false}\n", "the link is down", "sherpa bus up can1"),
+    ("  buses:\n    can1: {state: stopped}\n", "the controller is STOPPED", "sherpa bus up can1"),
+    ("  buses:\n    can1: {present: false}\n", "no interface can1", "plug in the adapter"),
 ])
 def test_a_jog_is_refused_on_an_unfit_bus_before_anything_moves(cli, tmp_path, sim, text, hint):
     result = cli("--sim", "--config", faulty(tmp_path, sim), *JOG)

@@ -292,6 +292,8 @@ def test_motion_settings_defaults_and_heartbeat_period():
     ("{velocity_unit_mode: 3}", "velocity_unit_mode 3"),
     ("{standstill_timeout: 0}", "standstill_timeout 0.0 s must be > 0"),
     ("{standstill_velocity: -1}", "standstill_velocity -1 counts/s must be 0..1000"),
+    ("{bus_error_passive: ignore}", "bus_error_passive 'ignore': expected one of stop, warn"),
+    ("{bus_check_interval: 0}", "bus_check_interval 0.0 s must be 0.01..5"),
     ("{hostid: 3}", "hostid"),
 ])
 def test_motion_config_errors_name_the_key(tmp_path, motion, message):

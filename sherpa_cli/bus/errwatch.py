@@ -5,13 +5,14 @@ Network keeps a python-can ``Notifier``; ``add_listener`` / ``remove_listener`` 
 calls), so nothing competes with the drive clients for frames. :meth:`BusWatch.drain` hands over
 the decoded error frames received since the last call (bus/errframes.py); :meth:`BusWatch.traffic`
 the frames and data bytes each bus carried to this host, for a load estimate. `sherpa bus watch`
-shows them live; the motion guard's bus watch can read the same.
+shows them live; the motion guard's bus watch (motion/bus_watch.py) is told of each error frame as it
+arrives (``on_error``).
 """
 
 from __future__ import annotations
 
 import threading
-from collections.abc import Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from contextlib import contextmanager, suppress
 from dataclasses import dataclass
 from typing import Any
@@ -32,9 +33,11 @@ class SeenError:
 
 
 class BusWatch:
-    """What the listeners of :func:`watching` collected; thread-safe."""
+    """What the listeners of :func:`watching` collected; thread-safe. ``on_error``: also called with
+    each error frame as it arrives, on the receive thread (the motion guard's bus watch acts at once)."""
 
-    def __init__(self) -> None:
+    def __init__(self, on_error: Callable[[SeenError], None] | None = None) -> None:
+        self._on_error = on_error
         self._lock = threading.Lock()
         self._errors: list[SeenError] = []
         self._frames: dict[str, int] = {}
@@ -52,12 +55,15 @@ class BusWatch:
 
     def feed(self, bus: str, can_id: int, data: bytes, *, is_error: bool, timestamp: float = 0.0) -> None:
         """One received frame (what a listener does; tests inject frames here)."""
+        seen = SeenError(bus, timestamp, decode_error_frame(can_id, data)) if is_error else None
         with self._lock:
-            if is_error:
-                self._errors.append(SeenError(bus, timestamp, decode_error_frame(can_id, data)))
+            if seen is not None:
+                self._errors.append(seen)
             else:
                 self._frames[bus] = self._frames.get(bus, 0) + 1
                 self._bytes[bus] = self._bytes.get(bus, 0) + len(data)
+        if seen is not None and self._on_error is not None:
+            self._on_error(seen)
 
     def drain(self) -> list[SeenError]:
         with self._lock:
@@ -71,9 +77,11 @@ class BusWatch:
 
 
 @contextmanager
-def watching(session: Any, buses: Iterable[str] | None = None) -> Iterator[BusWatch]:
-    """A :class:`BusWatch` fed by the receive thread of each named bus of an open session (default: all)."""
-    watch = BusWatch()
+def watching(session: Any, buses: Iterable[str] | None = None,
+             on_error: Callable[[SeenError], None] | None = None) -> Iterator[BusWatch]:
+    """A :class:`BusWatch` fed by the receive thread of each named bus of an open session (default: all);
+    ``on_error``: see :class:`BusWatch`."""
+    watch = BusWatch(on_error)
     hooked: list[tuple[Any, Any]] = []
     try:
         for name in buses if buses is not None else list(session.links):

@@ -266,6 +266,7 @@ class HomingConfig:
 
 STOP_METHODS = ("auto", "st", "jv0")
 PAIR_START_METHODS = ("group", "sync_rpdo", "sequential")  # motion.pair_start (docs/diffdrive.md)
+BUS_ERROR_PASSIVE_ACTIONS = ("stop", "warn")  # motion.bus_error_passive (docs/bus.md)
 
 
 @dataclass(frozen=True)
@@ -312,6 +313,10 @@ class MotionConfig:
     emcy_warning_codes: tuple[int, ...] = (0x6300, 0x8110, 0x8140, 0x8200, 0x8210)
     # s between two reads of a moving drive's dead-man entry 0x1016:1 (another node may disarm it)
     deadman_check_interval: float = 0.5
+    # the guard's watch of its buses (docs/bus.md): a bus it moves on that goes BUS-OFF (or down, stopped)
+    # always stops the command; ERROR-PASSIVE stops it too ("stop", issue 24) or only warns ("warn")
+    bus_error_passive: str = "stop"
+    bus_check_interval: float = 0.1  # s between two reads of those buses' controller state (netlink)
 
     @property
     def heartbeat_period_s(self) -> float:

@@ -175,6 +175,13 @@ def _check_motion(cfg: ArmConfig, locs: Locs, r: _Report) -> None:
     if not (math.isfinite(m.deadman_check_interval) and 0.05 <= m.deadman_check_interval <= 10):
         r.error(where("deadman_check_interval"), f"deadman_check_interval {m.deadman_check_interval} s must be "
                 "0.05..10")
+    from sherpa_cli.config.model import BUS_ERROR_PASSIVE_ACTIONS
+
+    if m.bus_error_passive not in BUS_ERROR_PASSIVE_ACTIONS:
+        r.error(where("bus_error_passive"), f"bus_error_passive '{m.bus_error_passive}': expected one of "
+                f"{', '.join(BUS_ERROR_PASSIVE_ACTIONS)}")
+    if not (math.isfinite(m.bus_check_interval) and 0.01 <= m.bus_check_interval <= 5):
+        r.error(where("bus_check_interval"), f"bus_check_interval {m.bus_check_interval} s must be 0.01..5")
     if not 0 <= m.standstill_velocity <= 1000:
         r.error(where("standstill_velocity"), f"standstill_velocity {m.standstill_velocity} counts/s must be 0..1000")
     from sherpa_cli.config.model import PAIR_START_METHODS

@@ -36,6 +36,7 @@ from sherpa_cli.bus.health import preflight
 from sherpa_cli.elmo.faults import decode_sr, describe_mf
 from sherpa_cli.elmo.protocol import UM_TORQUE
 from sherpa_cli.errors import CommunicationError, ExitCode, SafetyError, SherpaError, UsageError
+from sherpa_cli.motion.bus_watch import GuardBusWatch
 from sherpa_cli.motion.deadman import COMM_ERROR, CONSUMER, LOSS_ACTION, OBJECT_NAMES, SIZES, HostHeartbeat
 from sherpa_cli.motion.drive_watch import DriveWatch, DriveWatchError
 from sherpa_cli.motion.lock import DriveLock, HostIdLock, drive_label
@@ -119,6 +120,9 @@ class MotionGuard:
         # the watch of the drives: error EMCYs, NMT commands of other nodes, the drives' heartbeats
         self._watch = DriveWatch(lambda bus: session.links[bus].network, warning_codes=settings.emcy_warning_codes,
                                  min_silence=3 * settings.poll_interval)
+        # the watch of the buses: bus-off / error-passive of a bus the command moves on (motion/bus_watch.py)
+        self._bus = GuardBusWatch.for_session(session, buses, settings, now=clock, on_trip=self._abort_requests,
+                                              on_event=self._event)
         self._next_deadman_check = 0.0
         # signals
         self._signal: str | None = None
@@ -147,6 +151,7 @@ class MotionGuard:
             for d in self._drives.values():
                 self._watch_drive(d)
             self._watch.start()
+            self._bus.start()
             self._next_deadman_check = self._clock() + self.settings.deadman_check_interval
             self._pulse()
         except BaseException:
@@ -227,6 +232,9 @@ class MotionGuard:
         """A sign of life for the heartbeat thread; raises if a signal asked to stop or the dead-man failed."""
         if self._signal is not None:
             raise MotionStopped(f"{self._signal} received: motion stopped")
+        bus_error = None if self._exiting else self._bus.poll()
+        if bus_error is not None:  # before the heartbeat's: a send that failed on a bus-off bus names the bus
+            raise bus_error
         if self._heartbeat.error is not None:
             raise DeadManError(f"host heartbeat failed: {self._heartbeat.error}",
                                hint="the drives stop on their own within the consumer time")
@@ -238,12 +246,18 @@ class MotionGuard:
             self._check_deadman()
 
     def _raise_if_tripped(self) -> None:
-        """The drive watch's reason to stop, raised on the command's thread (motion/drive_watch.py)."""
+        """The bus watch's or the drive watch's reason to stop, raised on the command's thread
+        (motion/bus_watch.py, motion/drive_watch.py). The bus first: a dead bus also silences its drives."""
         if self._exiting:
             return
-        error = self._watch.poll()
+        error = self._bus.poll() or self._watch.poll()
         if error is not None:
             raise error
+
+    def _abort_requests(self, error: SherpaError) -> None:
+        """The bus watch tripped (any thread): the request the command waits for ends now with ``error``."""
+        for d in list(self._drives.values()):
+            d.client.abort_pending(error)
 
     def _check_deadman(self) -> None:
         """Read 0x1016:1 of every drive whose motor is on, at ``deadman_check_interval``: another node
@@ -529,12 +543,16 @@ class MotionGuard:
     def _exit_all(self, reason: str, entering: bool = False) -> None:
         self._exiting = True
         self._watch.stop()  # first: nothing may cut the exit's own requests short
+        self._bus.stop()
         self.report.reason = reason
         try:
-            self._stop_pass(entering)
-            for d in list(self._drives.values()):
+            # a bus that cannot carry frames (bus-off, down) gets nothing yet: the drives on the other
+            # buses are stopped first, then the dead bus is given its restart-ms to come back
+            dead = self._bus.dead()
+            self._stop_pass(entering, skip={k for k in self._drives if k[0] in dead})
+            for d in sorted(self._drives.values(), key=lambda d: d.ref.bus in dead):
                 try:
-                    self.report.drives.append(self._exit_drive(d, stop=not entering or d.switched_on))
+                    self.report.drives.append(self._exit_or_unreached(d, entering, dead))
                 except Exception as exc:  # noqa: BLE001 - reported; never one drive's failure leaves the others unstopped
                     r = DriveStop(d.ref.name, f"{d.ref.bus}:{d.ref.node}", stopped_by="not stopped")
                     r.problems.append(f"stop: {why(exc)}")
@@ -542,7 +560,21 @@ class MotionGuard:
             # drives handed over (release) and not taken back: how they left this guard
             self.report.drives.extend(self._released.values())
         finally:
+            self.report.bus_faults = list(self._bus.faults)
+            self._bus.close()
             self._stop_heartbeat()
+
+    def _exit_or_unreached(self, d: _Drive, entering: bool, dead: set[str]) -> DriveStop:
+        """The drive's exit; on a bus that went dead and did not come back: not reached (motion/bus_watch.py)."""
+        if d.ref.bus in dead and not self._bus.back(d.ref.bus, sleep=self._sleep, pulse=self._step,
+                                                    max_wait=self.settings.standstill_timeout):
+            if self._bus.confirmed_dead(d.ref.bus):
+                r = self._bus.unreached(d.ref.name, f"{d.ref.bus}:{d.ref.node}", d.ref.bus,
+                                        self.settings.consumer_time_ms, motor_on=bool(d.mo or d.switched_on))
+                self._event(r.line())
+                return r
+            d.client.silent = True  # only an error frame said so: one plain request tells (as a silent drive)
+        return self._exit_drive(d, stop=not entering or d.switched_on)
 
     def _stop_pass(self, entering: bool, skip: set[tuple[str, int]] | None = None) -> None:
         """Every drive whose motor is on gets its stop at once, without waiting for replies; the

@@ -1,4 +1,5 @@
-"""What the motion guard did on the way out: one :class:`DriveStop` per drive, in a :class:`GuardReport`."""
+"""What the motion guard did on the way out: one :class:`DriveStop` per drive, in a :class:`GuardReport`,
+and the bus faults that ended or troubled the motion (:class:`BusFault`, motion/bus_watch.py)."""
 
 from __future__ import annotations
 
@@ -10,7 +11,7 @@ from sherpa_cli.errors import SherpaError
 # how these read without --verbose; any other stop (ST, JV=0 + BG, TC=0 + ST, ...) reads "stopped" (the
 # method is a detail), and "not stopped" / "-" always as they are
 STOPPED_TEXT = {"motor was off": "motor was off", "not moved by this guard": "not moved"}
-UNSTOPPED = ("not stopped", "-")
+UNSTOPPED = ("not stopped", "not reached", "-")
 
 
 @dataclass
@@ -34,6 +35,8 @@ class DriveStop:
         report's data (as_json) is the same either way."""
         if self.stopped_by == "not stopped":
             stopped = "NOT stopped"
+        elif self.stopped_by == "not reached":  # a dead or silent drive, a dead bus: nothing confirmed it
+            stopped = "NOT reached"
         elif verbose or self.stopped_by in UNSTOPPED:
             stopped = f"stopped by {self.stopped_by}"
         else:
@@ -59,25 +62,51 @@ class DriveStop:
                 "kept": list(self.kept), "problems": list(self.problems)}
 
 
+@dataclass(frozen=True)
+class BusFault:
+    """A bus of the command that left ERROR-ACTIVE/-WARNING during the motion (motion/bus_watch.py)."""
+
+    bus: str
+    state: str  # BUS-OFF | ERROR-PASSIVE | STOPPED | down | missing
+    seen_in: str  # "an error frame" | "the link state" (netlink, python-can's state)
+    action: str  # "stopped the command" | "warned" (motion.bus_error_passive: warn)
+    tec: int | None = None
+    rec: int | None = None
+
+    def line(self) -> str:
+        """``bus can1: BUS-OFF (TEC 255, REC 0; seen in an error frame): stopped the command``."""
+        counters = f"TEC {self.tec}, REC {self.rec}; " if self.tec is not None else ""
+        return f"bus {self.bus}: {self.state} ({counters}seen in {self.seen_in}): {self.action}"
+
+    def as_json(self) -> dict[str, Any]:
+        return {"bus": self.bus, "state": self.state, "seen_in": self.seen_in, "action": self.action,
+                "tec": self.tec, "rec": self.rec}
+
+
 @dataclass
 class GuardReport:
     drives: list[DriveStop] = field(default_factory=list)
     reason: str = "end"  # end | error | interrupted | SIGTERM | SIGHUP
+    bus_faults: list[BusFault] = field(default_factory=list)  # in the order they were seen
 
     @property
     def ok(self) -> bool:
         return all(not d.problems for d in self.drives)
 
     def lines(self, verbose: bool = False) -> list[str]:
-        return [d.line(verbose) for d in self.drives]
+        return [f.line() for f in self.bus_faults] + [d.line(verbose) for d in self.drives]
 
     @classmethod
     def from_json(cls, data: dict[str, Any]) -> GuardReport:
         """The report back from :meth:`as_json` (a result that kept only that, rendered again)."""
-        return cls([DriveStop(**d) for d in data.get("drives", [])], data.get("reason", "end"))
+        return cls([DriveStop(**d) for d in data.get("drives", [])], data.get("reason", "end"),
+                   [BusFault(**f) for f in data.get("bus_faults", [])])
 
     def as_json(self) -> dict[str, Any]:
-        return {"reason": self.reason, "drives": [d.as_json() for d in self.drives]}
+        out: dict[str, Any] = {"reason": self.reason, "drives": [d.as_json() for d in self.drives]}
+        if self.bus_faults:  # only when there were any: a clean run's JSON stays as it was
+            out["bus_faults"] = [f.as_json() for f in self.bus_faults]
+        return out
 
 
 class MotionInterrupted(KeyboardInterrupt):
