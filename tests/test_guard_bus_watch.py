@@ -23,11 +23,13 @@ from sherpa_cli.bus.session import ArmSession, resolve_target
 from sherpa_cli.config import load_config
 from sherpa_cli.config.model import ArmConfig
 from sherpa_cli.errors import ExitCode
+from sherpa_cli.motion.axis import resolve_axis
 from sherpa_cli.motion.bus_watch import BusFaultError, GuardBusWatch
 from sherpa_cli.motion.guard import MotionGuard
 from sherpa_cli.motion.report import BusFault, GuardReport
+from sherpa_cli.motion.request import parse_request
 from sherpa_cli.motion.settings import MotionSettings
-from sherpa_cli.ops.jog import JogRequest, resolve_jog_target, run_jog
+from sherpa_cli.ops.jog import run_jog
 from sherpa_cli.sim.arm import SimArm
 from sherpa_cli.sim.stepped import SteppedTime
 
@@ -311,7 +313,8 @@ def jog(cfg: ArmConfig, target: str, *, during=None, settings: MotionSettings | 
     with st.session() as s:
         st.prepare(s)
         try:
-            out = run_jog(s, resolve_jog_target(cfg, target), JogRequest(mode="velocity", velocity=2.0, duration=JOG_S),
+            axis = resolve_axis(cfg, target)
+            out = run_jog(s, axis, parse_request(axis, "velocity", velocity=2.0, duration=JOG_S),
                           settings=settings or MotionSettings.from_config(cfg), clock=st.time.now,
                           sleep=st.time.sleep, on_progress=progress, on_event=events.append)
         except BusFaultError as exc:
