@@ -99,3 +99,44 @@ def test_scan_and_program_limits_commands_go_through_the_api(cli, monkeypatch):
     assert cli("--sim", "scan", "--bus", "can0").exit_code in (0, 1)
     assert cli("--sim", "program-limits", "elbow_pitch").exit_code == 0
     assert seen == ["scan", "program"]
+
+
+def test_jog_moves_a_plain_joint_inside_the_guard_and_leaves_the_motor_off():
+    with Arm.open(CONFIG, sim=True) as arm:
+        result = arm.jog("elbow_pitch", velocity=0.3, duration=0.4)  # an absolute joint: no homing needed
+        drive = arm.session.sim.drives["elbow_1a"]
+        assert not drive.motor_on
+    from sherpa_cli.ops.jog import JogResult
+
+    assert isinstance(result, JogResult) and result.breach is None and result.ended_by == "time up"
+    assert result.end_counts is not None and result.end_counts > result.start_counts  # it moved, outward
+    assert result.stop.drives and all(d.motor_off for d in result.stop.drives)
+
+
+def test_jog_moves_a_sigma_joint_with_both_motors():
+    from sherpa_cli.ops.joint_jog import JogResult
+
+    with Arm.open(CONFIG, sim=True) as arm:
+        result = arm.jog("shoulder_pitch", velocity="50counts/s", duration=0.3)
+        motors = [arm.session.sim.drives[d] for d in ("shoulder_2a", "shoulder_2b")]
+        assert not any(m.motor_on for m in motors)
+    assert isinstance(result, JogResult) and result.ok
+
+
+def test_jog_takes_exactly_one_kind_of_move():
+    with Arm.open(CONFIG, sim=True) as arm, pytest.raises(UsageError, match="exactly one"):
+        arm.jog("elbow_pitch", velocity=0.1, torque=0.5, duration=0.2)
+
+
+def test_the_jog_command_is_a_layer_over_the_api(cli, monkeypatch):
+    calls = []
+    real = Arm.move
+
+    def spy(self, axis, request, **kw):
+        calls.append((axis.name, request.mode))
+        return real(self, axis, request, **kw)
+
+    monkeypatch.setattr(Arm, "move", spy)
+    result = cli("--sim", "jog", "elbow_pitch", "--velocity", "0.2", "--for", "0.2", "--apply")
+    assert result.exit_code == 0, result.transcript()
+    assert calls == [("elbow_pitch", "velocity")]

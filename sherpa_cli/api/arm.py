@@ -19,14 +19,22 @@ from sherpa_cli.api import programming
 from sherpa_cli.api.programming import ConfirmSave, ProgramReport, refuse_unconfirmed
 
 if TYPE_CHECKING:
+    from collections.abc import Mapping
+
     from sherpa_cli.bus.session import ArmSession
     from sherpa_cli.config.model import ArmConfig
+    from sherpa_cli.motion.axis import Axis
+    from sherpa_cli.motion.request import MoveRequest, Value
+    from sherpa_cli.motion.settings import MotionSettings
+    from sherpa_cli.ops import jog as plain_jog
+    from sherpa_cli.ops import joint_jog
     from sherpa_cli.ops.program import DrivePlan
     from sherpa_cli.ops.scan import ScanReport
     from sherpa_cli.ops.stop import StopReport
 
 #: per-bus scan progress: (bus, phase, done, total)
 ScanProgress = Callable[[str, str, int, int], None]
+
 
 
 class Arm:
@@ -117,6 +125,50 @@ class Arm:
             raise problem
         return report
 
+    # ------------------------------------------------------------------ moving
+
+    def jog(self, name: str, *, to: Value = None, by: Value = None, velocity: Value = None, torque: Value = None,
+            duration: float | None = None, uncalibrated: bool = False,
+            on_progress: Callable[[object], None] | None = None) -> plain_jog.JogResult | joint_jog.JogResult:
+        """Move one joint, Σ/Δ joint, pair motor or drive (`sherpa jog NAME ... --apply`).
+
+        Exactly one of ``to``/``by`` (position), ``velocity`` (with ``duration`` for a pair) or
+        ``torque`` (with ``duration``); numbers are rad, rad/s and A, text takes units as the
+        command line does (``"10deg"``, ``"300counts/s"``, ``"800mA"``). It runs inside the motion
+        guard: fault check, the dead-man armed, the joint's limits watched, and the motor stopped
+        from standstill and switched off on every way out. A limit breach is a result (``breach``
+        set, the joint brought back), not an exception; a refusal raises.
+        """
+        from sherpa_cli.motion.axis import resolve_axis
+        from sherpa_cli.motion.request import parse_request
+
+        given = [v for v in (to, velocity, torque) if v is not None] + ([by] if by is not None and to is None else [])
+        if len(given) != 1:
+            from sherpa_cli.errors import UsageError
+
+            raise UsageError("give exactly one of to, by, velocity or torque")
+        mode = "position" if to is not None or by is not None else "velocity" if velocity is not None else "torque"
+        axis = resolve_axis(self.config, name)
+        req = parse_request(axis, mode, to=to, by=by, velocity=velocity, torque=torque, duration=duration,
+                            uncalibrated=uncalibrated)
+        return self.move(axis, req, on_progress=on_progress)
+
+    def move(self, axis: Axis, request: MoveRequest, *, settings: MotionSettings | None = None,
+             on_progress: Callable[[object], None] | None = None
+             ) -> plain_jog.JogResult | joint_jog.JogResult:
+        """Run one parsed request on one axis (motion/axis.py, motion/request.py): what :meth:`jog`
+        and the `jog` command both end in. A pair's axis (Σ/Δ joint, pair motor) moves both motors."""
+        from sherpa_cli.motion.settings import MotionSettings
+        from sherpa_cli.ops import jog as plain_jog
+        from sherpa_cli.ops import joint_jog
+
+        if axis.pair is not None:
+            return joint_jog.run(self._session, axis, request, on_progress=_typed_progress(on_progress))
+        plain_jog.check_request(axis, request)
+        if settings is None:
+            settings = MotionSettings.from_config(self.config, [axis.ref.bus])
+        return plain_jog.run_jog(self._session, axis, request, settings=settings, on_progress=on_progress)
+
     # ------------------------------------------------------------------ writing parameters
 
     def program_limits(self, targets: Sequence[str] | None = None, *, apply: bool = False, save: bool = False,
@@ -146,3 +198,10 @@ class Arm:
         if check:
             report.check()
         return report
+
+
+def _typed_progress(on_progress: Callable[[object], None] | None) -> Callable[[Mapping[str, int]], None] | None:
+    """A pair jog reports the watched joints' positions (counts): handed on as they are."""
+    if on_progress is None:
+        return None
+    return lambda joints: on_progress(joints)

@@ -93,10 +93,12 @@ def jog(
       sherpa jog shoulder_roll --velocity 5deg/s --for 2 --apply
       sherpa jog elbow_pitch --to 0.5 --hold --apply
     """
+    from sherpa_cli.api import Arm
     from sherpa_cli.motion.axis import resolve_axis
     from sherpa_cli.motion.request import parse_request
     from sherpa_cli.motion.settings import MotionSettings
-    from sherpa_cli.ops.jog import check_request, run_jog
+    from sherpa_cli.ops import jog as ops_jog
+    from sherpa_cli.ops.jog import check_request
 
     st = state(ctx)
     if _live(st, joints or [], interactive, joystick, device, list_joysticks, apply, uncalibrated,
@@ -138,13 +140,16 @@ def jog(
     settings = MotionSettings.from_config(cfg, [target.ref.bus])
     name = target.joint.name if target.joint is not None else target.ref.name
 
-    def progress(p: ops_jog.JogProgress) -> None:
-        rad = f"{p.rad:+.4f} rad " if p.rad is not None else ""
-        st.out.progress(f"{name}: {rad}({p.counts} counts)  {p.elapsed:5.2f} s")
+    def progress(p: object) -> None:
+        if isinstance(p, ops_jog.JogProgress):
+            rad = f"{p.rad:+.4f} rad " if p.rad is not None else ""
+            st.out.progress(f"{name}: {rad}({p.counts} counts)  {p.elapsed:5.2f} s")
 
     with st.session(buses=[target.ref.bus]) as session:
         try:
-            result = run_jog(session, target, req, settings=settings, on_progress=progress)
+            # the command is a layer over the Python API: the same move, rendered
+            result = Arm(session).move(target, req, settings=settings, on_progress=progress)
+            assert isinstance(result, ops_jog.JogResult)  # a plain joint's or a drive's jog
         except BaseException as exc:
             st.out.progress(None)
             _show_stop_report(st, exc)
@@ -238,6 +243,7 @@ def _render(st: AppState, name: str, result: ops_jog.JogResult) -> None:
 
 def _jog_pair(st: AppState, cfg: ArmConfig, axis: Axis, req: MoveRequest, position_text: str | None,
               apply: bool) -> None:
+    from sherpa_cli.api import Arm
     from sherpa_cli.ops import joint_jog
 
     offline = joint_jog.check_offline(cfg, axis, req)
@@ -246,12 +252,14 @@ def _jog_pair(st: AppState, cfg: ArmConfig, axis: Axis, req: MoveRequest, positi
         return
     buses = sorted({cfg.drives[d].bus for d in axis.sensed})
 
-    def progress(joints: Mapping[str, int]) -> None:  # a live line on a terminal only (Output.progress)
-        st.out.progress("  ".join(f"{j}: {p} counts" for j, p in joints.items()))
+    def progress(joints: object) -> None:  # a live line on a terminal only (Output.progress)
+        if isinstance(joints, Mapping):
+            st.out.progress("  ".join(f"{j}: {p} counts" for j, p in joints.items()))
 
     with st.session(buses=buses) as session:
         try:
-            result = joint_jog.run(session, axis, req, on_progress=progress)
+            result = Arm(session).move(axis, req, on_progress=progress)  # a layer over the Python API
+            assert isinstance(result, joint_jog.JogResult)  # a Σ/Δ joint's or a pair motor's jog
         except BaseException as exc:
             st.out.progress(None)
             _show_stop_report(st, exc)
