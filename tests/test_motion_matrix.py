@@ -63,6 +63,7 @@ SPEED = 400  # counts/s of every motion of the matrix (towards the low side)
 DISTANCE = 200  # counts of every position move
 RUN_FOR = 0.4  # s of every velocity / torque motion
 AMPS = 1.0
+LIVE_FOR = 0.8  # s the live jog and the joystick command: longer than a stall takes to show (stall_time 0.3 s)
 
 
 def jog(mode: str, hold: bool = False) -> Callable[..., Any]:
@@ -92,15 +93,20 @@ def _live(s: ArmSession, name: str, st: SteppedTime) -> Any:
     from sherpa_cli.ops.live_jog import LiveJog, resolve_axes
 
     axes = resolve_axes(s.cfg, [name])
-    with LiveJog(s, axes, clock=st.now, sleep=st.sleep, keepalive=0.3) as live:
-        joint = axes[0].name
-        t0 = st.now()
-        while st.now() - t0 < RUN_FOR:
-            live.set_velocity(joint, -SPEED)
+    live = LiveJog(s, axes, clock=st.now, sleep=st.sleep, keepalive=0.3)
+    try:
+        with live:
+            joint = axes[0].name
+            t0 = st.now()
+            while st.now() - t0 < LIVE_FOR:
+                live.set_velocity(joint, -SPEED)
+                live.tick()
+                st.sleep(0.02)
+            live.stop_all()
             live.tick()
-            st.sleep(0.02)
-        live.stop_all()
-        live.tick()
+    except BaseException as exc:
+        exc.live_report = live.report  # type: ignore[attr-defined]  # as the CLI shows it on every exit
+        raise
     return live
 
 
@@ -115,10 +121,15 @@ def _joystick(s: ArmSession, name: str, st: SteppedTime) -> Any:
     cfg = s.cfg
     assert cfg.joystick is not None
     jcfg = dataclasses.replace(cfg.joystick, axes=(cfg.joystick.axes[mapping],))
-    with LiveJog(s, resolve_axes(cfg, joints_of(cfg, jcfg)), clock=st.now, sleep=st.sleep, keepalive=0.3) as live:
-        src = ScriptedSource([(0.0, "BTN_TRIGGER", 1.0), (0.0, code, -0.8), (RUN_FOR, code, 0.0),
-                              (RUN_FOR + 0.1, "BTN_TRIGGER", 0.0)], st.now)
-        run_joystick(live, cfg, jcfg, src, clock=st.now, sleep=st.sleep, duration=RUN_FOR + 0.2)
+    live = LiveJog(s, resolve_axes(cfg, joints_of(cfg, jcfg)), clock=st.now, sleep=st.sleep, keepalive=0.3)
+    try:
+        with live:
+            src = ScriptedSource([(0.0, "BTN_TRIGGER", 1.0), (0.0, code, -0.8), (LIVE_FOR, code, 0.0),
+                                  (LIVE_FOR + 0.1, "BTN_TRIGGER", 0.0)], st.now)
+            run_joystick(live, cfg, jcfg, src, clock=st.now, sleep=st.sleep, duration=LIVE_FOR + 0.2)
+    except BaseException as exc:
+        exc.live_report = live.report  # type: ignore[attr-defined]  # as the CLI shows it on every exit
+        raise
     return live
 
 
@@ -155,7 +166,7 @@ def _home(s: ArmSession, name: str, st: SteppedTime) -> Any:
 def reports_of(outcome: Any) -> list[dict[str, Any]]:
     """The guard reports (GuardReport.as_json) a command's result or exception carries."""
     found: list[Any] = []
-    for attr in ("motion_report", "stop", "report"):
+    for attr in ("motion_report", "live_report", "stop", "report"):
         value = getattr(outcome, attr, None)
         if value is not None:
             found.append(value)
@@ -215,8 +226,9 @@ ROWS: dict[str, Row] = {
     "jog-velocity": Row(jog("velocity"), MOVING),
     "jog-torque": Row(jog("torque"), MOVING),
     # --hold: the hold ends at Ctrl-C (its normal end) or any other way out; a plain jog's option
+    # (held at standstill, a pressed end switch or a jam changes nothing: no end_switch, no stall)
     "jog-velocity-hold": Row(jog("velocity", hold=True), ("plain", "drive"),
-                             tuple(w for w in WAYS if w != "normal"), hold=True),
+                             tuple(w for w in WAYS if w not in ("normal", "end_switch", "stall")), hold=True),
     "live-jog": Row(_live, ("plain", "sigma", "delta", "drive")),
     "joystick": Row(_joystick, ("plain", "sigma", "delta")),
     "log-step": Row(_log_step, ("plain", "drive")),
@@ -228,8 +240,38 @@ ROWS: dict[str, Row] = {
 }
 
 
+# Known gaps, each failing today for the reason given (strict: a fix makes them pass and must remove the mark).
+KNOWN_GAPS = {
+    ("log-step", way): "ops/step.py run_step attaches no stop report to an exception (jog's run_jog sets "
+    "exc.motion_report = guard.report), and cli/log_cmd.py prints none: `log step` ended by Ctrl-C, SIGTERM, "
+    "an error or a drive fault never says how its drive was stopped"
+    for way in ("error", "ctrl_c", "sigterm", "drive_fault")
+}
+KNOWN_GAPS |= {
+    ("jog-torque", "end_switch"): "ops/jog.py run_jog and ops/joint_jog.py run: a torque jog that the drive stopped at "
+    "a pressed end switch (its IL stop function) runs out its --for and returns normally; the switch is never named "
+    "(issue 21 item 7)",
+    ("jog-torque", "stall"): "ops/jog.py and ops/joint_jog.py: a torque jog has no stall watch: a jammed joint runs out "
+    "its --for and is never called blocked (issue 21 item 7)",
+    ("log-step", "stall"): "ops/step.py run_step has no stall watch: the step of a jammed joint ends 'time up' with "
+    "its metrics, never 'blocked' (issue 21 item 7)",
+}
+KNOWN_GAPS |= {
+    (row, "end_switch"): "ops/live_jog.py LiveJog watches only the normal range (_edge_hold): a motion the drive "
+    "stopped at a pressed end switch is never named, the keys or the stick go on commanding into it (issue 21 item 7)"
+    for row in ("live-jog", "joystick")
+}
+KNOWN_GAPS |= {
+    (row, "stall"): "ops/live_jog.py LiveJog has no stall watch (motion.stall_time): a jammed joint is never called "
+    "blocked (issue 21 item 7)"
+    for row in ("live-jog", "joystick")
+}
+
+
 def _cases() -> list[Any]:
-    return [pytest.param(row, axis, way, id=f"{row}-{axis}-{way}")
+    return [pytest.param(row, axis, way, id=f"{row}-{axis}-{way}",
+                         marks=[pytest.mark.xfail(strict=True, reason=KNOWN_GAPS[(row, way)])]
+                         if (row, way) in KNOWN_GAPS else [])
             for row, spec in ROWS.items() for axis in spec.axes for way in spec.ways]
 
 
@@ -266,7 +308,8 @@ def _ram(drive: Any) -> dict[str, Any]:
 
 def _prepare(s: ArmSession, cfg: ArmConfig) -> None:
     """Every drive Operational and calibrated where it stands (PX = its real position, UI[3]=1), so
-    the tool's joint positions are the simulator's and the limit and switch positions agree."""
+    the tool's joint positions are the simulator's and the limit and switch positions agree; the end
+    switches' stop function in IL[n] (what `program-limits` leaves on a commissioned arm)."""
     for name in cfg.drives:
         c = s.client(drive_ref(cfg, name))
         c.nmt_start()
@@ -274,6 +317,12 @@ def _prepare(s: ArmSession, cfg: ArmConfig) -> None:
             here = s.sim.drives[name].motor.rounded
         c.set("PX", 0, here)
         c.set("UI", 3, 1)
+    for joint in cfg.joints.values():
+        drives = (joint.drive,) if joint.drive is not None else PAIR
+        for sw in joint.switches:
+            if sw.kind.value == "stop":
+                for name in sw.drives or drives:
+                    s.client(drive_ref(cfg, name)).set("IL", sw.input, cfg.il_codes.stop)
 
 
 class Injector:
@@ -434,7 +483,9 @@ def test_every_way_out_stops_from_standstill_switches_off_puts_ram_back_and_repo
     axis = (HOME_AXES if row.home else AXES)[axis_kind]
     t0 = time.monotonic()
     out = run_case(row, axis, way)
-    what = f"{row_name} {axis.name} ({way}): " + (f"raised {out.error!r}" if out.error else f"returned {out.value!r}"[:300])
+    told = f"raised {out.error!r}" if out.error is not None else f"returned {out.value!r}"  # what the command said
+    told += "".join(f"; {m}" for m in getattr(out.value, "messages", None) or ())  # LiveJog's notes
+    what = f"{row_name} {axis.name} ({way}): {told[:400]}"
     assert time.monotonic() - t0 < 60, what
 
     # the way out happened while the command was moving (else the combination tests nothing)
@@ -450,6 +501,13 @@ def test_every_way_out_stops_from_standstill_switches_off_puts_ram_back_and_repo
         assert isinstance(out.error, Terminated), what
     if way == "normal":
         assert out.error is None, what
+    # clear endings (issue 21 item 7, 8): what ended the command is named
+    if way == "end_switch":
+        assert "switch" in told, f"{what}: the end switch is not named"
+    if way == "stall":
+        assert "blocked" in told, f"{what}: the stall is not called blocked"
+    if way == "drive_fault":
+        assert out.error is not None and axis.drives[0] in str(out.error), f"{what}: the faulted drive is not named"
 
     # 1. stopped from standstill: every MO=0 the tool sent found its motor still; no drive stopped itself
     for drive, t, text, v in out.record.offs():

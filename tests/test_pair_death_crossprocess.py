@@ -74,7 +74,7 @@ def _stops_to_partner(frames: list[tuple[float, int, bytes]]) -> list[float]:
 @pytest.mark.parametrize("args", [
     ("diffdrive", "move", "shoulder_diff", "--sigma", "0.3", "--relative", "--uncalibrated", "--apply"),
     ("jog", "shoulder_pitch", "--velocity", "0.2", "--for", "5", "--apply"),
-    ("home", "shoulder_diff", "--apply"),
+    ("home", "shoulder_diff", "--yes"),
 ], ids=["diffdrive-move", "pair-jog", "pair-home"])
 def test_a_pair_drive_dying_stops_the_partner_at_once_and_ends_the_command_naming_it(arm, tmp_path, args):
     target = parse_bus_map([arm.bus_map])["can0"]
