@@ -30,7 +30,6 @@ import dataclasses
 import math
 import signal
 import threading
-import time
 import uuid
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -481,12 +480,10 @@ def run_case(row: Row, axis: AxisKind, way: str) -> Outcome:
 def test_every_way_out_stops_from_standstill_switches_off_puts_ram_back_and_reports(row_name, axis_kind, way):
     row = ROWS[row_name]
     axis = (HOME_AXES if row.home else AXES)[axis_kind]
-    t0 = time.monotonic()
     out = run_case(row, axis, way)
     told = f"raised {out.error!r}" if out.error is not None else f"returned {out.value!r}"  # what the command said
     told += "".join(f"; {m}" for m in getattr(out.value, "messages", None) or ())  # LiveJog's notes
     what = f"{row_name} {axis.name} ({way}): {told[:400]}"
-    assert time.monotonic() - t0 < 60, what
 
     # the way out happened while the command was moving (else the combination tests nothing)
     switched_on = out.record.switched_on()
