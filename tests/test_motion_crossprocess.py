@@ -290,3 +290,37 @@ def test_a_plain_jog_to_sets_the_configured_speed_whatever_sp_the_drive_holds(ar
     assert bg, f"no BG seen: {requests}"
     sp = [r.value for r in requests[:bg[0]] if r.letters == "SP" and r.kind == "set"]
     assert sp and sp[-1] == 400, f"SP before the move's BG: {sp} (the joint's velocity limit is 400 counts/s)"
+
+
+HOME_DRIVE, HOME_JOINT = "elbow_1b", "elbow_stiffness"  # end switches; searches down at 100 counts/s
+SECOND_HOME_S = 8.0  # s of motion for a home that starts at its switch (a push into the end stop: 28.6 s)
+
+
+def test_an_interrupted_home_then_home_finds_the_switch_without_pushing_the_end_stop(arm, tmp_path):
+    """Issue 21 item 13: Ctrl-C just after the search met the switch (the return move had begun) left the
+    joint at or past its switch; the next `home` searched away from it and pushed against the end stop
+    for its whole 28.6 s bound. It must find the switch and end normally, its motion short."""
+    since = time.monotonic()
+    first = sherpa(arm, tmp_path, "home", HOME_JOINT, "--yes")
+    deadline = time.monotonic() + START_TIMEOUT + 30
+    while len([e for e in arm.events(HOME_DRIVE) if e["t"] >= since and e["event"].startswith("BG")]) < 2:
+        if first.poll() is not None or time.monotonic() > deadline:
+            first.kill()
+            out, err = first.communicate(timeout=EXIT_TIMEOUT)
+            raise AssertionError(f"the first home never began its return move:\n{out}\n{err}\n{arm.events(HOME_DRIVE)}")
+        time.sleep(0.005)
+    first.send_signal(signal.SIGINT)  # the wrong moment: at the switch, the return just started
+    code, out, err = finish(first)
+    assert code == 130, f"{out}\n{err}"
+    assert "Traceback" not in err
+    assert HOME_JOINT in err and "not homed" in err, err  # Ctrl-C says which joints are no longer homed
+
+    t_second = time.monotonic()
+    second = sherpa(arm, tmp_path, "home", HOME_JOINT, "--yes")
+    code, out, err = finish(second)
+    assert code == 0, f"the second home failed:\n{out}\n{err}"
+    events = [e for e in arm.events(HOME_DRIVE) if e["t"] >= t_second]
+    ons = [e["t"] for e in events if e["event"].startswith("motor on")]
+    offs = [e["t"] for e in events if e["event"].startswith("motor off")]
+    assert ons and offs, events
+    assert offs[-1] - ons[0] <= SECOND_HOME_S, f"the second home moved {offs[-1] - ons[0]:.1f} s: {events}"
