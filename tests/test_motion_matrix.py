@@ -511,6 +511,13 @@ def test_every_way_out_stops_from_standstill_switches_off_puts_ram_back_and_repo
         assert "heartbeat lost" not in text, f"{what}: {drive} stopped by its own heartbeat consumer at {t:.3f}"
         if text == "motor off: MO=0":
             assert abs(v) <= STANDSTILL, f"{what}: {drive} switched off while moving at {v:.0f} counts/s"
+    # the move back after a limit breach starts only from standstill (issue 21 item 3): every position
+    # move begun after the breach (the recovery: BG with PA/PR; a velocity refresh is not one) found its
+    # motor still
+    if way == "limit_breach" and out.injected is not None:
+        for drive, t, text, v in out.record.events:
+            if text.startswith("BG") and ("PA=" in text or "PR=" in text) and t >= out.injected:
+                assert abs(v) <= STANDSTILL, f"{what}: {drive} {text} at {t:.3f} while moving at {v:.0f} counts/s"
     # 2. off unless held
     assert not out.motors_on, f"{what}: motor still on: {sorted(out.motors_on)}"
     assert not out.moving, f"{what}: still moving: {out.moving}"
