@@ -215,3 +215,112 @@ def test_sigkill_during_hold_leaves_the_motor_stopped_by_the_drives_consumer(arm
     off = arm.wait_event(lambda text: text.startswith("motor off"), 10 * CONSUMER_S, after=on["t"])
     assert off["event"] == "motor off: heartbeat lost, 0x6007=2", arm.events()
     assert 0 < (off["t"] - t_kill) / CONSUMER_S <= 1.5
+
+
+# -- issue 21, Done when: two commands on one bus; the profile a plain `jog --to` sets ---------------
+
+OTHER_DRIVE, OTHER_JOINT = "wrist_1a", "wrist_1"  # a second plain joint on the same bus (can1)
+
+
+@pytest.mark.parametrize("how", [signal.SIGKILL, signal.SIGSTOP])
+def test_two_motion_commands_on_one_bus_a_killed_or_frozen_one_stops_its_drive_the_other_keeps_running(
+        arm, tmp_path, how):
+    """Issue 21 item 9: each command's drives watch that command's heartbeat, so another sherpa motion
+    command on the same bus never keeps a killed (SIGKILL) or frozen (SIGSTOP) command's drive moving
+    (it did for 6.7 s, until the other command ended), and the other command's drive keeps running."""
+    first, t_on = start_jog(arm, tmp_path)  # elbow_pitch on can1
+    since = time.monotonic()
+    second = sherpa(arm, tmp_path, "jog", OTHER_JOINT, "--velocity", "0.05", "--apply")
+    try:
+        deadline = time.monotonic() + START_TIMEOUT
+        while not [e for e in arm.events(OTHER_DRIVE) if e["t"] >= since and e["event"].startswith("BG: UM=5, JV=")]:
+            assert time.monotonic() < deadline, f"the second jog did not start: {arm.events(OTHER_DRIVE)}"
+            assert second.poll() is None, f"the second jog ended: {second.communicate()}"
+            time.sleep(0.02)
+        time.sleep(0.2)
+        t_sig = time.monotonic()
+        os.kill(first.pid, how)
+        off = arm.wait_event(lambda text: text.startswith("motor off"), 10 * CONSUMER_S, after=t_on)
+        assert off["event"] == "motor off: heartbeat lost, 0x6007=2", arm.events()
+        ratio = (off["t"] - t_sig) / CONSUMER_S
+        assert 0 < ratio <= 1.5, f"{DRIVE} went off {off['t'] - t_sig:.3f} s after {how.name} (consumer {CONSUMER_S} s)"
+        time.sleep(3 * CONSUMER_S)  # the other command's drive is still moving well after the kill
+        other_offs = [e for e in arm.events(OTHER_DRIVE) if e["t"] >= since and e["event"].startswith("motor off")]
+        assert not other_offs, f"the other command's drive stopped too: {other_offs}"
+        assert second.poll() is None, "the other command ended"
+    finally:
+        if how == signal.SIGSTOP:
+            os.kill(first.pid, signal.SIGKILL)
+        finish(first)
+        if second.poll() is None:
+            second.send_signal(signal.SIGINT)
+        code, out, err = finish(second)
+    assert code == 0, f"{out}\n{err}"  # Ctrl-C ends an open-ended jog normally
+
+
+def test_a_plain_jog_to_sets_the_configured_speed_whatever_sp_the_drive_holds(arm, tmp_path):
+    """Issue 21 item 12: a position jog on a drive holding SP=100000 (set by another node) moves at the
+    joint's configured velocity limit (400 counts/s), not at what the drive held: the tool writes SP
+    before its BG. Read on the bus, as another node would."""
+    from test_drive_watch_crossprocess import other_node, send
+
+    from sherpa_cli.elmo.codec import decode_request, encode_set
+
+    bus = other_node(arm)
+    frames: list[bytes] = []
+    try:
+        send(bus, 0x000, bytes([0x01, NODE]))  # NMT start: the interpreter listens on RPDO2
+        time.sleep(0.1)
+        send(bus, 0x300 + NODE, encode_set("SP", 0, 100000))
+        time.sleep(0.1)
+        while bus.recv(timeout=0.05) is not None:  # what came before the jog
+            pass
+        proc = sherpa(arm, tmp_path, "jog", JOINT, "--by", "0.2", "--uncalibrated", "--apply")
+        deadline = time.monotonic() + START_TIMEOUT + EXIT_TIMEOUT
+        while proc.poll() is None and time.monotonic() < deadline:
+            msg = bus.recv(timeout=0.05)
+            if msg is not None and msg.arbitration_id == 0x300 + NODE and not msg.is_error_frame:
+                frames.append(bytes(msg.data))
+        code, out, err = finish(proc)
+    finally:
+        bus.shutdown()
+    assert code == 0, f"{out}\n{err}"
+    requests = [decode_request(f) for f in frames]
+    bg = [i for i, r in enumerate(requests) if r.letters == "BG"]
+    assert bg, f"no BG seen: {requests}"
+    sp = [r.value for r in requests[:bg[0]] if r.letters == "SP" and r.kind == "set"]
+    assert sp and sp[-1] == 400, f"SP before the move's BG: {sp} (the joint's velocity limit is 400 counts/s)"
+
+
+HOME_DRIVE, HOME_JOINT = "elbow_1b", "elbow_stiffness"  # end switches; searches down at 100 counts/s
+SECOND_HOME_S = 8.0  # s of motion for a home that starts at its switch (a push into the end stop: 28.6 s)
+
+
+def test_an_interrupted_home_then_home_finds_the_switch_without_pushing_the_end_stop(arm, tmp_path):
+    """Issue 21 item 13: Ctrl-C just after the search met the switch (the return move had begun) left the
+    joint at or past its switch; the next `home` searched away from it and pushed against the end stop
+    for its whole 28.6 s bound. It must find the switch and end normally, its motion short."""
+    since = time.monotonic()
+    first = sherpa(arm, tmp_path, "home", HOME_JOINT, "--yes")
+    deadline = time.monotonic() + START_TIMEOUT + 30
+    while len([e for e in arm.events(HOME_DRIVE) if e["t"] >= since and e["event"].startswith("BG")]) < 2:
+        if first.poll() is not None or time.monotonic() > deadline:
+            first.kill()
+            out, err = first.communicate(timeout=EXIT_TIMEOUT)
+            raise AssertionError(f"the first home never began its return move:\n{out}\n{err}\n{arm.events(HOME_DRIVE)}")
+        time.sleep(0.005)
+    first.send_signal(signal.SIGINT)  # the wrong moment: at the switch, the return just started
+    code, out, err = finish(first)
+    assert code == 130, f"{out}\n{err}"
+    assert "Traceback" not in err
+    assert HOME_JOINT in err and "not homed" in err, err  # Ctrl-C says which joints are no longer homed
+
+    t_second = time.monotonic()
+    second = sherpa(arm, tmp_path, "home", HOME_JOINT, "--yes")
+    code, out, err = finish(second)
+    assert code == 0, f"the second home failed:\n{out}\n{err}"
+    events = [e for e in arm.events(HOME_DRIVE) if e["t"] >= t_second]
+    ons = [e["t"] for e in events if e["event"].startswith("motor on")]
+    offs = [e["t"] for e in events if e["event"].startswith("motor off")]
+    assert ons and offs, events
+    assert offs[-1] - ons[0] <= SECOND_HOME_S, f"the second home moved {offs[-1] - ons[0]:.1f} s: {events}"

@@ -154,20 +154,27 @@ class Arm:
         return self.move(axis, req, on_progress=on_progress)
 
     def move(self, axis: Axis, request: MoveRequest, *, settings: MotionSettings | None = None,
-             on_progress: Callable[[object], None] | None = None
+             on_progress: Callable[[object], None] | None = None,
+             clock: Callable[[], float] | None = None, sleep: Callable[[float], None] | None = None
              ) -> plain_jog.JogResult | joint_jog.JogResult:
         """Run one parsed request on one axis (motion/axis.py, motion/request.py): what :meth:`jog`
-        and the `jog` command both end in. A pair's axis (Σ/Δ joint, pair motor) moves both motors."""
+        and the `jog` command both end in. A pair's axis (Σ/Δ joint, pair motor) moves both motors.
+        ``clock``/``sleep``: the time the move runs on (default wall time; tests step it)."""
+        import time
+
         from sherpa_cli.motion.settings import MotionSettings
         from sherpa_cli.ops import jog as plain_jog
         from sherpa_cli.ops import joint_jog
 
+        now, wait = clock or time.monotonic, sleep or time.sleep
         if axis.pair is not None:
-            return joint_jog.run(self._session, axis, request, on_progress=_typed_progress(on_progress))
+            return joint_jog.run(self._session, axis, request, on_progress=_typed_progress(on_progress),
+                                 clock=now, sleep=wait)
         plain_jog.check_request(axis, request)
         if settings is None:
             settings = MotionSettings.from_config(self.config, [axis.ref.bus])
-        return plain_jog.run_jog(self._session, axis, request, settings=settings, on_progress=on_progress)
+        return plain_jog.run_jog(self._session, axis, request, settings=settings, on_progress=on_progress,
+                                 clock=now, sleep=wait)
 
     # ------------------------------------------------------------------ writing parameters
 

@@ -372,6 +372,7 @@ class SimDriveConfig:
     sdo_latency: float = 0.0  # s added to every SDO answer
     drop_probability: float = 0.0  # chance that a frame to or from the drive is lost
     die_at: float | None = None  # s after start: the drive goes silent for good
+    die_moving_after: float | None = None  # s after its first BG: the drive goes silent for good (mid-move)
     reboot_at: float | None = None  # s after start: the drive reboots once
     speed_gain: float = 1.0  # runs its profiles this much faster (seed Fig. 9.10/9.11 mismatch)
     heartbeat_ms: int = 0  # 0x1017 producer heartbeat at power-up

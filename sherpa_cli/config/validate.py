@@ -670,7 +670,7 @@ def _check_bounds(cfg: ArmConfig, locs: Locs, r: _Report) -> None:
         at_sim = lambda k: locs.get("sim", "drives", name, k)  # noqa: E731, B023  used in this iteration only
         within(sim_drive.reply_latency, 0.0, WAIT_MAX, at_sim("reply_latency"), "reply_latency", " s")
         within(sim_drive.sdo_latency, 0.0, WAIT_MAX, at_sim("sdo_latency"), "sdo_latency", " s")
-        for key in ("die_at", "reboot_at", "limit_trip_at"):
+        for key in ("die_at", "die_moving_after", "reboot_at", "limit_trip_at"):
             within(getattr(sim_drive, key), 0.0, SIM_TIME_MAX, at_sim(key), key, " s")
         within(sim_drive.speed_gain, 0.0, SPEED_GAIN_MAX, at_sim("speed_gain"), "speed_gain")
         within(sim_drive.heartbeat_ms, 0, 0xFFFF, at_sim("heartbeat_ms"), "heartbeat_ms", " ms (0x1017 is u16)")

@@ -35,7 +35,7 @@ from sherpa_cli.bus import journal
 from sherpa_cli.bus.health import preflight
 from sherpa_cli.elmo.faults import decode_sr, describe_mf
 from sherpa_cli.elmo.protocol import UM_TORQUE
-from sherpa_cli.errors import CommunicationError, ExitCode, SafetyError, SherpaError, UsageError
+from sherpa_cli.errors import CommunicationError, ExitCode, SafetyError, SdoError, SherpaError, UsageError
 from sherpa_cli.motion.bus_watch import GuardBusWatch
 from sherpa_cli.motion.deadman import COMM_ERROR, CONSUMER, LOSS_ACTION, OBJECT_NAMES, SIZES, HostHeartbeat
 from sherpa_cli.motion.drive_watch import DriveWatch, DriveWatchError
@@ -270,7 +270,13 @@ class MotionGuard:
             self._pulse()
             try:
                 value = self._sdo_read(d, CONSUMER)
-            except SherpaError:
+            except SherpaError as exc:
+                if isinstance(exc, SdoError) and exc.reason == "timeout":
+                    # no answer: the drive is silent like one that misses an interpreter reply; its partners
+                    # get their stop now and the exit skips it (else: a stop, an MO=0 confirmation of
+                    # mo_confirm_timeout and a restore, each waiting for the dead drive; issue 21 item 8)
+                    d.client.silent = True
+                    self.stop_others(d.ref)
                 self._raise_if_tripped()  # the watch knows why (a silent drive, NMT Stopped): say that
                 raise
             if value != expected:

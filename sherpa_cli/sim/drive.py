@@ -150,6 +150,7 @@ class SimDrive:
         self._rng = random.Random(self.settings.seed)
         self._t = clock.now()
         self._dead = False
+        self._moved = False  # a BG since power-up (die_moving_after)
         # Fault times are seconds after this drive was made (power-up), whatever the clock's origin:
         # a RealClock reads time.monotonic(), which starts long before the simulator does.
         self._die_due = self._after_start(self.settings.die_at)
@@ -339,6 +340,11 @@ class SimDrive:
         """Die now, as ``die_at`` would: silent from the next step on (tests that kill a drive at a
         chosen point of a command)."""
         self._die_due = self._t
+
+    def trip(self) -> None:
+        """Trip now, as ``limit_trip_at`` would: a drive fault (MO=0, MF, EMCY) at the next step
+        (tests that fault a drive at a chosen point of a command)."""
+        self._trip_due = self._t
 
     @property
     def motor_on(self) -> bool:
@@ -785,6 +791,10 @@ class SimDrive:
         self._limit_stop = False
         kind = "JV" if um == 2 else self._target_kind if um == 5 else None
         self._record(f"BG: UM={um}" + (f", {kind}={r[kind]}" if kind else ""))
+        if self.settings.die_moving_after is not None and not self._moved:
+            self._moved = True  # the first motion since power-up arms die_moving_after
+            due = self._t + self.settings.die_moving_after
+            self._die_due = due if self._die_due is None else min(self._die_due, due)
         if um == 2:
             jv = min(max(r["JV"], r["VL[2]"]), r["VH[2]"])
             self.motor.jog(jv * g, r["AC"] * g, r["DC"] * g)

@@ -70,6 +70,9 @@ class SimSettings:
     # Fault injection: at die_at the drive goes silent for good (crashed CPU, power stage off);
     # at reboot_at it resets once as after NMT reset node (brown-out, watchdog).
     die_at: float | None = None
+    # ... or die_moving_after s after its first motion started (BG): mid-move, whatever the host's start-up
+    # time (a process test kills one drive of a pair in the middle of a command)
+    die_moving_after: float | None = None
     reboot_at: float | None = None
     # Fault injection: (parameter key, amount) pairs; a set of that key is echoed as sent but
     # stored off by the amount, as a drive that garbles a value would. Only a read-back shows it.
