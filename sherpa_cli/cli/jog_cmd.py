@@ -138,7 +138,7 @@ def jog(
             result = run_jog(session, target, req, settings=settings, on_progress=progress)
         except BaseException as exc:
             st.out.progress(None)
-            _show_stop_report(st, exc)
+            show_stop_report(st, exc)
             raise
     st.out.progress(None)
     _render(st, name, result)
@@ -291,7 +291,7 @@ def _jog_pair(st: AppState, cfg: ArmConfig, name: str, mode: str, to: str | None
             result = joint_jog.run(session, axis, req, on_progress=progress)
         except BaseException as exc:
             st.out.progress(None)
-            _show_stop_report(st, exc)
+            show_stop_report(st, exc)
             raise
     st.out.progress(None)
     _render_pair(st, result)
@@ -376,7 +376,7 @@ def _render_pair(st: AppState, r: joint_jog.JogResult) -> None:
     st.out.line(text)
 
 
-def _show_stop_report(st: AppState, exc: BaseException) -> None:
+def show_stop_report(st: AppState, exc: BaseException) -> None:
     """How the guard stopped the motor, on an error path too: text lines, or with --json an error
     object on stdout (``error``, ``stop``); the error message itself still goes to stderr."""
     report = getattr(exc, "motion_report", None)

@@ -14,7 +14,7 @@ import typer
 from sherpa_cli.cli.context import AppState, state
 from sherpa_cli.cli.options import ApplyMotion, Targets
 from sherpa_cli.cli.robotics import DEFAULT_AT, AllowRemote, Foxglove, FoxgloveAt
-from sherpa_cli.errors import UsageError
+from sherpa_cli.errors import SherpaError, UsageError
 
 if TYPE_CHECKING:
     from sherpa_cli.config.model import ArmConfig
@@ -373,6 +373,7 @@ def record(
                                 *(t.dev.bus for t in encoder.recorded_encoders(cfg, (r.name for r in refs)))]))
     expected: int | None = None
     late = 0
+    failure: SherpaError | None = None  # found while recording (another SYNC producer): raised once written
     streamed: CsvWriter | None = None
     rec: Recording | None
     loads = {} if poll else {b.bus: round(b.load, 6) for b in budget}
@@ -393,12 +394,13 @@ def record(
                 recorder.sink = streamed = CsvWriter(outputs[".csv"], recorder.columns())
             try:
                 with recorder, extras.feed(cfg, recorder_sample(recorder)):
-                    interrupted = _wait_for(duration)
+                    interrupted = _wait_for(duration, lambda: recorder.failure is not None)
             finally:
                 if streamed is not None:
                     streamed.close()
             rec = recorder.recording() if streamed is None else None
             counts, expected, late = recorder.counts(), recorder.expected(), recorder.late()
+            failure = recorder.failure
             zero_ns = round((recorder.t0 or 0.0) * 1e9)
         extras.read_status()
     if ".csv" in outputs and streamed is None:
@@ -413,6 +415,9 @@ def record(
     output = list(outputs.values())
     rows = streamed.rows if streamed is not None else len(rec.times) if rec is not None else 0
     _render_record(st, output, counts, expected, rows, late)
+    if failure is not None:
+        st.out.warn("the samples up to the stop are written; the drives' PDO settings are restored")
+        raise failure
     if interrupted:
         st.out.warn("interrupted: the samples up to the interruption are written; the drives' PDO settings "
                     "are restored")
@@ -423,8 +428,12 @@ class _Stopped(Exception):
     """SIGTERM or SIGHUP during a recording: ends it like Ctrl-C, so the PDO settings go back."""
 
 
-def _wait_for(duration: float) -> bool:
-    """Sleep while sampling; True when Ctrl-C, SIGTERM or SIGHUP ended it early."""
+WAKE_EVERY_S = 0.1  # how often the wait looks at what the receive threads found
+
+
+def _wait_for(duration: float, failed: Callable[[], bool] = lambda: False) -> bool:
+    """Sleep while sampling; True when Ctrl-C, SIGTERM or SIGHUP ended it early. Ends early (False)
+    once ``failed()`` (the recorder found another SYNC producer)."""
     import signal
 
     def stop(signum: int, frame: FrameType | None) -> NoReturn:
@@ -436,7 +445,9 @@ def _wait_for(duration: float) -> bool:
             if sig is not None:
                 old[sig] = signal.signal(sig, stop)
     try:
-        sleep(duration)
+        end = _time.monotonic() + duration
+        while (rest := end - _time.monotonic()) > 0 and not failed():
+            sleep(min(rest, WAKE_EVERY_S))
     except (KeyboardInterrupt, _Stopped):
         return True
     finally:
@@ -572,8 +583,16 @@ def step(
         extras = RecordExtras(session, [target.ref], mcap=to_mcap, view=None)
         extras.start()
         zero_ns = _time.time_ns()  # t = 0 (the step's command) is placed at the wall time the step began
-        result = run_step(session, target, mode, value, duration=duration, rate=rate, settings=settings,
-                          uncalibrated=uncalibrated, timebase=timebase)
+        try:
+            result = run_step(session, target, mode, value, duration=duration, rate=rate, settings=settings,
+                              uncalibrated=uncalibrated, timebase=timebase)
+        except BaseException as exc:
+            # how the guard stopped the motor, on Ctrl-C, SIGTERM and errors too (issue 22: a Ctrl-C
+            # during `log step` printed nothing)
+            from sherpa_cli.cli.jog_cmd import show_stop_report
+
+            show_stop_report(st, exc)
+            raise
         extras.read_status()
     if to_mcap:
         write_mcap(output, result.recording, cfg, time_zero_ns=zero_ns, extras=extras,

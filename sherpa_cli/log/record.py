@@ -194,6 +194,16 @@ class _Drive:
     written: int = 0  # position samples already handed to the sink (and dropped from pos)
     cur_written: int = 0  # current samples likewise
     late: int = 0  # frames that came after their row was written: not in the file
+    frames: int = 0  # position TPDOs received: one per SYNC on the bus, whoever sent it
+
+
+FOREIGN_SYNC_SLACK = 10  # TPDOs beyond the SYNCs this tool can have sent before it calls that a foreign SYNC
+FOREIGN_SYNC_SHARE = 0.05  # ... or this share of them, whichever is more (jitter at the edges of a span)
+
+
+class ForeignSyncError(CommunicationError):
+    """Another node sends SYNC on a recorded bus: the drives answer both producers, the samples
+    can no longer be placed on this tool's time grid (exit 3; issue 22 item 7)."""
 
 
 class RowSink(Protocol):
@@ -241,6 +251,8 @@ class Recorder:
         self._newest = -1  # newest SYNC index any drive answered
         self._write_lock = threading.Lock()  # keeps batches in order when two receive threads flush
         self.rows_written = 0  # rows handed to the sink (SYNCs with at least one drive's sample)
+        self._sync_start: dict[str, float] = {}  # bus -> when its SYNC source started
+        self.failure: SherpaError | None = None  # set by the receive thread: a second SYNC producer
 
     # -- lifetime -------------------------------------------------------------------------------
     def __enter__(self) -> Recorder:
@@ -253,6 +265,7 @@ class Recorder:
             self.t0 = self._now()
             for bus in dict.fromkeys([*(r.bus for r in self.refs), *(t.dev.bus for t in self.encoders)]):
                 started = self._now()
+                self._sync_start[bus] = started
                 self._syncs.append(self.sync_factory(bus, self.session.links[bus].bus, self.period))
                 self._sync_spans.append([started, None])
         except BaseException:
@@ -333,8 +346,8 @@ class Recorder:
     def _drain(self) -> None:
         """Answers to the last SYNCs may still wait in a loaded receive thread: keep listening until
         no new sample came for a few periods (bounded), so the end of a recording is not cut off."""
-        if not self._subscribed or self.clock is not None:
-            return
+        if not self._subscribed or self.clock is not None or self.failure is not None:
+            return  # (another SYNC producer keeps the answers coming: nothing to wait for)
         quiet_for = max(0.02, 5 * self.period)
         deadline = time.monotonic() + DRAIN_LIMIT_S
         last = self._received()
@@ -448,6 +461,9 @@ class Recorder:
                     d.late += 1
                     return
                 if n == TPDO_POS and len(data) >= 8:
+                    d.frames += 1
+                    if self.failure is None and d.frames > self._sync_bound(d.ref.bus):
+                        self._foreign_sync(d)
                     d.pos[k] = unpack_pos(data)
                     if k > self._newest:
                         self._newest = k
@@ -496,6 +512,31 @@ class Recorder:
             rec.columns.update(encoder_columns)
             sink.write(rec)
             self.rows_written += len(keys)
+
+    # -- another SYNC producer ------------------------------------------------------------------
+    def _sync_bound(self, bus: str) -> float:
+        """The most SYNCs this tool's source on ``bus`` can have sent by now (it never sends ahead of
+        its schedule), with a margin; a drive answering more SYNCs than that answers someone else's."""
+        start = self._sync_start.get(bus)
+        if start is None:  # a frame between the PDO set-up and the source's start: nothing to count yet
+            return math.inf
+        mine = math.floor(max(0.0, self._now() - start) / self.period) + 1
+        return mine + max(FOREIGN_SYNC_SLACK, math.ceil(FOREIGN_SYNC_SHARE * mine))
+
+    def _foreign_sync(self, d: _Drive) -> None:
+        start = self._sync_start[d.ref.bus]
+        mine = math.floor(max(0.0, self._now() - start) / self.period) + 1
+        self.failure = ForeignSyncError(
+            f"bus {d.ref.bus}: {d.ref.name} answered {d.frames} SYNCs in {self._now() - start:.2f} s but this tool "
+            f"sent at most {mine} ({self.rate:g} Hz): another node is sending SYNC (0x080) on this bus; the "
+            "samples cannot be placed in time, the recording is stopped",
+            hint="stop the other SYNC producer (another `sherpa log record`, a master's SYNC) and record again")
+
+    def check(self) -> None:
+        """Raise what the receive thread found wrong (another SYNC producer); a loop calls this
+        beside its guard's check."""
+        if self.failure is not None:
+            raise self.failure
 
     # -- results --------------------------------------------------------------------------------
     def counts(self) -> dict[str, int]:

@@ -20,9 +20,10 @@ never keeps its JV/TC while the recorder drains and restores its PDOs.
 
 from __future__ import annotations
 
+import contextlib
 import math
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from types import TracebackType
 from typing import TYPE_CHECKING, Any, Protocol
@@ -152,7 +153,7 @@ def run_step(session: ArmSession, target: JogTarget, mode: str, value: float, *,
         rec_kw.update(clock=timebase.now, sync_factory=timebase.sync_factory)
     guard = MotionGuard(session, [ref], settings=settings, clock=clock, sleep=sleep, on_event=on_event)
     state: dict[str, Any] = {}
-    with guard:
+    with _report_on_error(guard), guard:
         c = guard.client(ref)
         start_counts = int(c.get("PX"))
         with Recorder(session, [ref], rate, current=current, **rec_kw) as rec, \
@@ -207,6 +208,17 @@ def run_step(session: ArmSession, target: JogTarget, mode: str, value: float, *,
                       breach=state.get("breach"), recovered_to=state.get("recovered_to"))
 
 
+@contextlib.contextmanager
+def _report_on_error(guard: MotionGuard) -> Iterator[None]:
+    """An exception that leaves the guard (Ctrl-C, SIGTERM, an error) carries the guard's stop report,
+    as jog's do: the CLI shows how the motor was stopped."""
+    try:
+        yield
+    except BaseException as exc:
+        exc.motion_report = guard.report  # type: ignore[attr-defined]
+        raise
+
+
 def _wait(guard: MotionGuard, clock: Callable[[], float], sleep: Callable[[float], None], seconds: float) -> None:
     end = clock() + seconds
     while True:
@@ -228,6 +240,7 @@ def _until_settled(guard: MotionGuard, rec: Recorder, joint: str, signal: str, t
     next_settle = 0.0
     while True:
         guard.check()
+        rec.check()  # another SYNC producer on the bus: the samples no longer fit the time grid
         now = rec.now()
         px = int(guard.query(jog_target.ref, "PX"))
         if limit_breach(guard, guard.client(jog_target.ref), jog_target, px, settings, clock, sleep, state):
