@@ -109,6 +109,8 @@ def jog(
         raise UsageError("give exactly one of --to, --by, --velocity or --torque"
                          + (f" (got {', '.join(given)})" if given else ""))
     mode = "position" if to is not None or by is not None else "velocity" if velocity is not None else "torque"
+    if mode == "torque" and duration is not None:
+        check_torque_for(cfg, parse_number(duration, "--for"))
     if _is_pair_axis(cfg, joint):
         if hold:
             raise UsageError("--hold is for plain joints for now: a Σ/Δ joint is not held after its move",
@@ -374,6 +376,15 @@ def _render_pair(st: AppState, r: joint_jog.JogResult) -> None:
     if others:
         text += "; " + ", ".join(others)
     st.out.line(text)
+
+
+def check_torque_for(cfg: ArmConfig, seconds: float) -> None:
+    """A torque jog or step has no drive limit acting: its time is bounded by motion.torque_for_limit."""
+    limit = cfg.motion.torque_for_limit
+    if seconds > limit:  # NaN and <= 0 are refused where the request is planned
+        raise UsageError(f"--for {seconds:g} s: a torque motion runs at most motion.torque_for_limit = {limit:g} s "
+                         "(no drive limit acts in torque mode; the time is the last guard)",
+                         hint="a shorter --for, or raise motion.torque_for_limit in the config (at most 300 s)")
 
 
 def show_stop_report(st: AppState, exc: BaseException) -> None:

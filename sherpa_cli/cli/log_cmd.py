@@ -351,8 +351,9 @@ def record(
         return
     if not 0 < duration <= MAX_RECORD_S:
         raise UsageError(f"--for {duration}: expected seconds > 0 and <= {MAX_RECORD_S:g}")
-    if not (0 < rate <= 10000):
-        raise UsageError(f"--rate {rate}: expected Hz > 0 and <= 10000")
+    if not (MIN_RECORD_RATE <= rate <= 10000):
+        raise UsageError(f"--rate {rate:g}: expected Hz >= {MIN_RECORD_RATE:g} (the recording notices Ctrl-C and "
+                         "its end once a SYNC period) and <= 10000")
     outputs = record_outputs(output)
     check_live(foxglove, foxglove_at, allow_remote)
     cfg = st.load_config()
@@ -428,6 +429,10 @@ class _Stopped(Exception):
     """SIGTERM or SIGHUP during a recording: ends it like Ctrl-C, so the PDO settings go back."""
 
 
+# the lowest --rate of a recording, and of a step (issue 22 item 8: at 0.5 Hz a step's loop stopped
+# showing signs of life between samples and the dead-man tripped)
+MIN_RECORD_RATE = 1.0
+MIN_STEP_RATE = 10.0
 WAKE_EVERY_S = 0.1  # how often the wait looks at what the receive threads found
 
 
@@ -550,14 +555,19 @@ def step(
         raise UsageError(f"--{mode} {value}: expected a finite number")
     if not (math.isfinite(duration) and 0 < duration <= MAX_RECORD_S):
         raise UsageError(f"--for {duration}: expected seconds > 0 and <= {MAX_RECORD_S:g}")
-    if not (0 < rate <= 10000):
-        raise UsageError(f"--rate {rate}: expected Hz > 0 and <= 10000")
+    if not (MIN_STEP_RATE <= rate <= 10000):
+        raise UsageError(f"--rate {rate:g}: expected Hz >= {MIN_STEP_RATE:g} (the step's settling check and the "
+                         "motion guard's watch need a sample at least every 0.1 s) and <= 10000")
     to_mcap = output.suffix.lower() == ".mcap" and not output.is_dir()
     if to_mcap:
         record_outputs([output])  # the directory, the robotics extra
     elif output.exists() and not output.is_dir():
         raise UsageError(f"-o {output}: exists and is not a directory")
     cfg = st.load_config()
+    if mode == "torque":
+        from sherpa_cli.cli.jog_cmd import check_torque_for
+
+        check_torque_for(cfg, duration)
     target = resolve_step_target(cfg, joint)
     step_request(target, mode, value, duration=duration, uncalibrated=uncalibrated)
     if not apply:
