@@ -109,8 +109,9 @@ def jog(
         raise UsageError("give exactly one of --to, --by, --velocity or --torque"
                          + (f" (got {', '.join(given)})" if given else ""))
     mode = "position" if to is not None or by is not None else "velocity" if velocity is not None else "torque"
-    if mode == "torque" and duration is not None:
-        check_torque_for(cfg, parse_number(duration, "--for"))
+    torque_for = parse_number(duration, "--for") if mode == "torque" else None
+    if torque_for is not None:
+        check_torque_for(cfg, torque_for)
     if _is_pair_axis(cfg, joint):
         if hold:
             raise UsageError("--hold is for plain joints for now: a Σ/Δ joint is not held after its move",
