@@ -19,6 +19,7 @@ from sherpa_cli.errors import SherpaError, UsageError
 if TYPE_CHECKING:
     from sherpa_cli.config.model import ArmConfig
     from sherpa_cli.log.capture import CaptureResult
+    from sherpa_cli.log.record import Gaps
     from sherpa_cli.log.recording import Recording
     from sherpa_cli.log.step_metrics import StepMetrics
     from sherpa_cli.ops.jog import JogTarget
@@ -375,6 +376,8 @@ def record(
     expected: int | None = None
     late = 0
     failure: SherpaError | None = None  # found while recording (another SYNC producer): raised once written
+    gaps: Mapping[str, Gaps] | None = None
+    period = 0.0
     streamed: CsvWriter | None = None
     rec: Recording | None
     loads = {} if poll else {b.bus: round(b.load, 6) for b in budget}
@@ -395,13 +398,14 @@ def record(
                 recorder.sink = streamed = CsvWriter(outputs[".csv"], recorder.columns())
             try:
                 with recorder, extras.feed(cfg, recorder_sample(recorder)):
-                    interrupted = _wait_for(duration, lambda: recorder.failure is not None)
+                    interrupted = _wait_for(duration, lambda: recorder.problem() is not None)
             finally:
                 if streamed is not None:
                     streamed.close()
             rec = recorder.recording() if streamed is None else None
             counts, expected, late = recorder.counts(), recorder.expected(), recorder.late()
-            failure = recorder.failure
+            failure = recorder.problem()
+            gaps, period = recorder.gaps(), recorder.period
             zero_ns = round((recorder.t0 or 0.0) * 1e9)
         extras.read_status()
     if ".csv" in outputs and streamed is None:
@@ -415,7 +419,7 @@ def record(
                          **{f"budget_load.{bus}": f"{load:g}" for bus, load in loads.items()}})
     output = list(outputs.values())
     rows = streamed.rows if streamed is not None else len(rec.times) if rec is not None else 0
-    _render_record(st, output, counts, expected, rows, late)
+    _render_record(st, output, counts, expected, rows, late, gaps=gaps, period=period)
     if failure is not None:
         st.out.warn("the samples up to the stop are written; the drives' PDO settings are restored")
         raise failure
@@ -467,21 +471,36 @@ def _percent(part: int, whole: int) -> str:
 
 
 def _render_record(st: AppState, outputs: Sequence[Path], counts: Mapping[str, int], expected: int | None,
-                   rows: int, late: int = 0) -> None:
-    """What is in the file: samples per drive (cells written), rows; SYNCs with no row are gaps."""
-    gaps = max(0, expected - rows) if expected else 0
+                   rows: int, late: int = 0, *, gaps: Mapping[str, Gaps] | None = None, period: float = 0.0) -> None:
+    """What is in the file: samples per drive (cells written), rows; SYNCs with no row are gaps, and
+    per drive where its samples are missing (``gaps``: time_s of the first few runs, as in the file)."""
+    holes = gaps or {}
+    no_row = max(0, expected - rows) if expected else 0
     if st.json_mode:
         extra = {"files": [str(p) for p in outputs]} if len(outputs) > 1 else {}
-        st.out.json({"file": str(outputs[0]), **extra, "rows": rows, "expected": expected, "gaps": gaps,
-                     "late_frames": late, "drives": [{"drive": n, "samples": c} for n, c in counts.items()]})
+
+        def drive(n: str, c: int) -> dict[str, Any]:
+            g = holes.get(n)
+            if g is None:
+                return {"drive": n, "samples": c}
+            return {"drive": n, "samples": c, "missing": g.missing, "more_gaps": g.more_spans,
+                    "gaps": [{"t_s": round(k * period, 6), "syncs": length} for k, length in g.spans]}
+
+        st.out.json({"file": str(outputs[0]), **extra, "rows": rows, "expected": expected, "gaps": no_row,
+                     "late_frames": late, "drives": [drive(n, c) for n, c in counts.items()]})
         return
     for name, c in counts.items():
         share = "" if not expected else f" of {expected} ({_percent(c, expected)})"
         st.out.line(f"{name}: {c} samples{share}")
     for output in outputs:
         st.out.line(f"wrote {output} ({rows} rows)")
-    if gaps:
-        st.out.warn(f"{gaps} of {expected} SYNC(s) have no row: no drive's sample arrived for them")
+    if no_row:
+        st.out.warn(f"{no_row} of {expected} SYNC(s) have no row: no drive's sample arrived for them")
+    for name, g in holes.items():
+        if g.missing:
+            where = ", ".join(f"{k * period:.3f} s ({length} SYNC{'s' if length > 1 else ''})" for k, length in g.spans)
+            more = f" and {g.more_spans} more gap(s)" if g.more_spans else ""
+            st.out.warn(f"{name}: {g.missing} sample(s) missing (empty cells) at time_s {where}{more}")
     if late:
         st.out.warn(f"{late} frame(s) came after their row was written: not in the file")
 

@@ -195,6 +195,35 @@ class _Drive:
     cur_written: int = 0  # current samples likewise
     late: int = 0  # frames that came after their row was written: not in the file
     frames: int = 0  # position TPDOs received: one per SYNC on the bus, whoever sent it
+    gaps: Gaps = field(default_factory=lambda: Gaps())  # SYNCs written without this drive's sample
+
+
+MAX_GAP_SPANS = 5  # gaps a report names by place; the rest are counted
+
+
+@dataclass
+class Gaps:
+    """SYNC indexes with no sample of one drive: how many, and the first few runs of them
+    (first index, length), so a report says where a recording has holes (issue 22 item 8)."""
+
+    missing: int = 0
+    spans: list[tuple[int, int]] = field(default_factory=list)
+    more_spans: int = 0  # runs after the first MAX_GAP_SPANS, counted only
+    last: int = -2  # the newest missing index (a run goes on from it)
+
+    def add(self, k: int) -> None:
+        self.missing += 1
+        if k == self.last + 1 and not self.more_spans and self.spans:
+            self.spans[-1] = (self.spans[-1][0], self.spans[-1][1] + 1)
+        elif k != self.last + 1:
+            if len(self.spans) < MAX_GAP_SPANS:
+                self.spans.append((k, 1))
+            else:
+                self.more_spans += 1
+        self.last = k
+
+    def copy(self) -> Gaps:
+        return Gaps(self.missing, list(self.spans), self.more_spans, self.last)
 
 
 FOREIGN_SYNC_SLACK = 10  # TPDOs beyond the SYNCs this tool can have sent before it calls that a foreign SYNC
@@ -346,7 +375,7 @@ class Recorder:
     def _drain(self) -> None:
         """Answers to the last SYNCs may still wait in a loaded receive thread: keep listening until
         no new sample came for a few periods (bounded), so the end of a recording is not cut off."""
-        if not self._subscribed or self.clock is not None or self.failure is not None:
+        if not self._subscribed or self.clock is not None or self.problem() is not None:
             return  # (another SYNC producer keeps the answers coming: nothing to wait for)
         quiet_for = max(0.02, 5 * self.period)
         deadline = time.monotonic() + DRAIN_LIMIT_S
@@ -493,6 +522,9 @@ class Recorder:
                 for d in self._drives.values():
                     pos = {k: v for k, v in d.pos.items() if k < cut}
                     cur = {k: v for k, v in d.cur.items() if k < cut}
+                    for k in range(self._flushed, cut):
+                        if k not in pos:
+                            d.gaps.add(k)
                     for k in pos:
                         del d.pos[k]
                     for k in cur:
@@ -532,11 +564,23 @@ class Recorder:
             "samples cannot be placed in time, the recording is stopped",
             hint="stop the other SYNC producer (another `sherpa log record`, a master's SYNC) and record again")
 
+    def problem(self) -> SherpaError | None:
+        """What ended the recording early: another SYNC producer (found by the receive thread), or a
+        recorded bus whose connection went away (its network's receive thread ended)."""
+        if self.failure is None:
+            for bus in self._sync_start:
+                lost = getattr(self.session.links[bus].network, "lost_error", None)
+                error = lost() if lost is not None else None
+                if error is not None:
+                    self.failure = error
+                    break
+        return self.failure
+
     def check(self) -> None:
-        """Raise what the receive thread found wrong (another SYNC producer); a loop calls this
-        beside its guard's check."""
-        if self.failure is not None:
-            raise self.failure
+        """Raise :meth:`problem`; a loop calls this beside its guard's check."""
+        problem = self.problem()
+        if problem is not None:
+            raise problem
 
     # -- results --------------------------------------------------------------------------------
     def counts(self) -> dict[str, int]:
@@ -557,6 +601,23 @@ class Recorder:
                     return ((self.t0 or 0.0) + k * self.period,
                             {d.ref.name: (int(d.pos[k][0]), int(d.pos[k][1])) for d in drives})
         return None
+
+    def gaps(self) -> dict[str, Gaps]:
+        """Per drive: the SYNCs of the recording (0 .. expected() - 1) with no sample of it, after the
+        recording (streaming: what went to the file; else what :meth:`recording` holds)."""
+        expected = self.expected()
+        out: dict[str, Gaps] = {}
+        with self._lock:
+            for d in self._drives.values():
+                if self.sink is not None:
+                    gaps, start = d.gaps.copy(), self._flushed
+                else:
+                    gaps, start = Gaps(), 0
+                for k in range(start, expected):
+                    if k not in d.pos:
+                        gaps.add(k)
+                out[d.ref.name] = gaps
+        return out
 
     def late(self) -> int:
         """Frames that came after their row was written (streaming only): not in the file."""
