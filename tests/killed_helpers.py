@@ -74,14 +74,36 @@ def shared_arm(arm_process, tmp_path_factory):
         proc.stop()
 
 
+@pytest.fixture(scope="module")
+def remote_arm(tmp_path_factory):
+    """One `sherpa sim --serve` of the module's own, whatever SHERPA_TEST_BUS says: for tests whose
+    premise is python-can-remote's (the bus goes away with the simulator's process)."""
+    work = tmp_path_factory.mktemp("arm")
+    proc = ArmProcess(TestBus("remote"), ROOT, str(ROOT / "configs/sherpa-arm.yaml"), work)
+    try:
+        proc.start()
+    except RuntimeError as exc:
+        pytest.skip(f"the served simulator did not start: {exc}")
+    try:
+        yield proc
+    finally:
+        proc.stop()
+
+
+def fresh(process: ArmProcess) -> Arm:
+    """The arm as after power-on (RAM, NMT state, latched faults), for one test; a new simulator
+    process if a test killed the last one."""
+    if not process.alive():
+        process.start()
+    process.new_test()
+    process.before_command()
+    return Arm(process.config, process.bus_map, process.event_log)
+
+
 @pytest.fixture
 def arm(shared_arm):
-    """The arm as after power-on (RAM, NMT state, latched faults), for one test."""
-    if not shared_arm.alive():
-        shared_arm.start()
-    shared_arm.new_test()
-    shared_arm.before_command()
-    return Arm(shared_arm.config, shared_arm.bus_map, shared_arm.event_log)
+    """The arm as after power-on, for one test (:func:`fresh`)."""
+    return fresh(shared_arm)
 
 
 def snapshot(arm_: Arm, drives: tuple[str, ...]) -> dict[str, int]:

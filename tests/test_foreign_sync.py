@@ -19,7 +19,9 @@ from killed_helpers import shared_arm as shared_arm
 from test_drive_watch_crossprocess import other_node
 from test_motion_crossprocess import finish, sherpa
 
-pytestmark = [pytest.mark.realbus, pytest.mark.crossprocess]
+# a 100 Hz SYNC producer thread and a 1 kHz step: python-can-remote (the CI tests stage, a simulator of
+# the module's own); not in the 15-20x slower vcan guest, where the producer thread cannot keep its rate
+pytestmark = pytest.mark.crossprocess
 
 FOREIGN_RATE = 100.0  # Hz, as a second `sherpa log record --rate 100` would
 
