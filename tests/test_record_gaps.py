@@ -1,7 +1,8 @@
 """A recording with holes says how many samples are missing and where (issue 22 item 8: a 60 s
 recording reported "100.00 %" while its file had empty rows). SYNCs the test leaves out on simulated
 time (a ManualClock, SYNC in lockstep) are the holes; the report names their times as the file has
-them, streamed (CSV row by row) or kept in memory."""
+them, streamed (CSV row by row) or kept in memory. And a second SYNC producer, found on the same
+simulated time (across processes: tests/test_foreign_sync.py)."""
 
 from __future__ import annotations
 
@@ -114,3 +115,34 @@ def test_the_json_report_lists_the_gaps(tmp_path):
     doc = json.loads(St.out.lines[0])
     assert doc["drives"] == [{"drive": "a", "samples": 97, "missing": 3, "more_gaps": 0,
                               "gaps": [{"t_s": 0.03, "syncs": 2}, {"t_s": 0.09, "syncs": 1}]}]
+
+
+def test_a_second_sync_producer_is_found_on_simulated_time():
+    """The same in lockstep: every period a second SYNC (another producer) besides the recorder's own.
+    The recorder's check raises within its margin (10 SYNCs), naming the bus and both counts."""
+    from sherpa_cli.log.record import ForeignSyncError
+
+    cfg = load_config(ROOT / "configs/sherpa-arm.yaml")
+    clock = ManualClock()
+    lock = Lockstep(clock)
+    with ArmSession.open(cfg, sim=_arm(cfg, clock)) as session, \
+            Recorder(session, drive_refs(cfg, ["elbow_1a"]), 1000, clock=clock.now, sync_factory=lock.factory) as rec:
+        lock.run(rec, 5)
+        rec.check()  # one producer: nothing found
+        found_at = None
+        for k in range(5, 40):
+            clock.advance(lock.period)
+            for _ in range(2):  # ours and the other node's
+                for bus in lock.buses.values():
+                    bus.send(can.Message(arbitration_id=0x080, data=b"", is_extended_id=False))
+            deadline = time.monotonic() + 5
+            while rec.counts()["elbow_1a"] < 5 + 2 * (k - 4) and rec.problem() is None:
+                assert time.monotonic() < deadline, rec.counts()
+                time.sleep(0.0001)
+            if rec.problem() is not None:
+                found_at = k
+                break
+        assert found_at is not None and found_at <= 5 + 12, found_at
+        with pytest.raises(ForeignSyncError, match=r"bus can1: elbow_1a answered \d+ SYNCs in .* but this tool "
+                                                    r"sent at most \d+ \(1000 Hz\): another node is sending SYNC"):
+            rec.check()
