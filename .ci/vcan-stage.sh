@@ -9,10 +9,11 @@
 #                             root, else /work/shared/tools/run-in-vcan-vm.sh)
 #        SHERPA_SKIP_VCAN=1   skip this stage on purpose (a machine without the runner); otherwise a
 #                             missing runner fails the stage
-#        SHERPA_VCAN_TIMEOUT  wall-clock limit of the guest run in seconds (default 1500: 42 realbus tests,
-#                             motion ones with subprocesses, in a 15-20x slower TCG guest)
+#        SHERPA_VCAN_TIMEOUT  wall-clock limit of the guest run in seconds (default 1800: the realbus tests,
+#                             motion ones with subprocesses, and the whole-arm commissioning (about 4 min
+#                             there), in a 15-20x slower TCG guest)
 #        SHERPA_VCAN_CPUS     guest vCPUs (default 2: the simulator and the tests each get one)
-#        SHERPA_VCAN_FULL=1   also run test_commission_whole_arm (about 9 minutes alone in the guest)
+#        SHERPA_VCAN_FULL=1   also run the two cross-process tests deselected below
 set -euo pipefail
 cd "$(dirname "$0")/.."
 root=$PWD
@@ -25,7 +26,7 @@ if [ -z "$vm" ]; then
   done
   vm=${vm:-$root/../shared/tools/run-in-vcan-vm.sh}
 fi
-limit=${SHERPA_VCAN_TIMEOUT:-1500}
+limit=${SHERPA_VCAN_TIMEOUT:-1800}
 cpus=${SHERPA_VCAN_CPUS:-2}
 interfaces=vcan0,vcan1,vcan2
 spare=vcan3  # the `vcan` tests' own interface (tests/test_bus_vcan.py takes it down and up)
@@ -39,10 +40,12 @@ if [ ! -x "$vm" ]; then
   echo "CI: set SHERPA_VCAN_VM to run-in-vcan-vm.sh, or SHERPA_SKIP_VCAN=1 to skip this stage on purpose" >&2
   exit 1
 fi
-# test_commission_whole_arm (apply, save, flash proof by NMT reset of 14 drives) is slow in the 15-20x
-# slower guest (about 9 minutes alone; it passes in the remote stage in 6 s), so it runs here only with
-# SHERPA_VCAN_FULL=1 (docs/testing.md); every motion test runs on vcan.
-deselect=(--deselect tests/test_commission.py::test_commission_whole_arm)
+# test_commission_whole_arm (apply, save, flash proof by NMT reset of 14 drives) runs here too: it
+# never stalled, it is slow in the guest (measured 2026-11-25 alone: scan 51 s, identify 24 s, plan
+# 38 s, apply 38 s, save 27 s, backup 15 s, verify 28 s, flash proof 16 s; 4 min against 6 s over
+# python-can-remote: every step is 14 drives' interpreter traffic through a 15-20x slower Python on
+# both ends), well inside the per-test timeout; the stage's limit above counts it.
+deselect=()
 # Two cross-process tests need the jog's heartbeat thread on time while a third Python process starts
 # (an EMCY flood, program-limits): in the 15-20x slower emulated guest the thread starved past the
 # 500 ms consumer time and the drive's dead-man tripped first (correct dead-man behaviour, but the

@@ -188,6 +188,16 @@ class ArmProcess:
                 self.proc.kill()
                 self.proc.wait(timeout=STOP_TIMEOUT_S)
 
+    def kill(self) -> float:
+        """SIGKILL the simulator (a bus that goes away mid-command); returns when (time.monotonic()).
+        The control connection is closed first, so only the command under test sees the loss."""
+        self._disconnect()
+        assert self.proc is not None
+        self.proc.kill()
+        killed = time.monotonic()
+        self.proc.wait(timeout=STOP_TIMEOUT_S)
+        return killed
+
     # -- the control connection ----------------------------------------------------------------
 
     def bus_kwargs(self) -> list[dict[str, str]]:

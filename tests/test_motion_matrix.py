@@ -14,7 +14,7 @@ Each combination asserts the four safety invariants of docs/motion.md:
 
 Ways out are injected at a fixed simulated time after the first motor went on (``INJECT_AFTER``),
 from the command's own waits (the stepped clock's ``sleep``): an exception (an error), Ctrl-C
-(KeyboardInterrupt), SIGTERM (``cli.entry.Terminated``, what the console script raises for it), a
+(KeyboardInterrupt), SIGTERM (``motion.guard.MotionStopped``, what the guard's handler raises for it), a
 drive fault (the sim drive trips: MO=0, MF, EMCY), a bus error (the host's controller bus-off for a
 moment), a limit breach (the joint pushed past its range), an end switch pressed, a stall (the motors
 jammed). Combinations that do not apply (a homing search has no limit watch to breach; an absolute
@@ -28,7 +28,6 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import signal
 import threading
 import uuid
 from collections.abc import Callable
@@ -40,10 +39,10 @@ import pytest
 
 from sherpa_cli.bus.session import ArmSession
 from sherpa_cli.bus.targets import drive_ref
-from sherpa_cli.cli.entry import Terminated
 from sherpa_cli.config import load_config
 from sherpa_cli.config.model import ArmConfig
 from sherpa_cli.errors import CommunicationError
+from sherpa_cli.motion.guard import MotionStopped
 from sherpa_cli.motion.settings import MotionSettings
 from sherpa_cli.sim.arm import SimArm
 from sherpa_cli.sim.stepped import SteppedTime
@@ -239,12 +238,7 @@ ROWS: dict[str, Row] = {
 
 
 # Known gaps, each failing today for the reason given (strict: a fix makes them pass and must remove the mark).
-KNOWN_GAPS = {
-    ("log-step", way): "ops/step.py run_step attaches no stop report to an exception (jog's run_jog sets "
-    "exc.motion_report = guard.report), and cli/log_cmd.py prints none: `log step` ended by Ctrl-C, SIGTERM, "
-    "an error or a drive fault never says how its drive was stopped"
-    for way in ("error", "ctrl_c", "sigterm", "drive_fault")
-}
+KNOWN_GAPS: dict[tuple[str, str], str] = {}
 KNOWN_GAPS |= {
     ("jog-torque", "end_switch"): "ops/jog.py run_jog and ops/joint_jog.py run: a torque jog that the drive stopped at "
     "a pressed end switch (its IL stop function) runs out its --for and returns normally; the switch is never named "
@@ -370,7 +364,9 @@ class Injector:
         if way == "ctrl_c":
             raise KeyboardInterrupt
         if way == "sigterm":
-            raise Terminated(signal.SIGTERM)
+            # what the guard's own handler raises for SIGTERM while motors may move (motion/guard.py
+            # _on_signal); the real signal is sent across processes in test_signals_crossprocess
+            raise MotionStopped("SIGTERM received: motion stopped")
         with arm.lock:
             drives = [arm.drives[d] for d in self.axis.drives]
             if way == "drive_fault":
@@ -494,9 +490,9 @@ def test_every_way_out_stops_from_standstill_switches_off_puts_ram_back_and_repo
         assert out.injected is not None, f"{what}: the command ended before the way out was injected"
     # the exception a way out raises is never swallowed (Ctrl-C may end an open-ended motion normally)
     if way == "error":
-        assert isinstance(out.error, RuntimeError), what
+        assert isinstance(out.error, CommunicationError), what
     if way == "sigterm":
-        assert isinstance(out.error, Terminated), what
+        assert isinstance(out.error, MotionStopped), what
     if way == "normal":
         assert out.error is None, what
     # clear endings (issue 21 item 7, 8): what ended the command is named

@@ -41,9 +41,33 @@ def answering(can_id: int) -> int | None:
     return None
 
 
+class BusLostError(CommunicationError):
+    """The connection to a bus went away while a command used it: a served simulator killed, an
+    adapter unplugged, an interface deleted (exit 3; issue 22 item 7)."""
+
+
 def _paced_network_class():
     import can
     import canopen
+
+    class _LostListener(can.Listener):
+        """python-can's documented error path (``Listener.on_error``): the receive thread's error is
+        noted on the network and the notifier is told to stop, instead of the thread dying with a
+        traceback on stderr; the command's next frame raises :class:`BusLostError`."""
+
+        def __init__(self, network: Any) -> None:
+            self.network = network
+
+        def on_message_received(self, msg: can.Message) -> None:
+            pass
+
+        def on_error(self, exc: Exception) -> None:
+            if self.network.lost is None:
+                self.network.lost = exc
+            notifier = self.network.notifier
+            if notifier is not None:
+                with contextlib.suppress(Exception):
+                    notifier.stop(timeout=0)  # flags its thread; joins nothing (this is that thread)
 
     class PacedNetwork(canopen.Network):
         """canopen.Network that paces what this tool sends and retries a full socket buffer.
@@ -77,12 +101,48 @@ def _paced_network_class():
         send_attempts: int = 5
         clock: Callable[[], float] = staticmethod(time.monotonic)
         sleep: Callable[[float], None] = staticmethod(time.sleep)
+        #: how messages name this bus ("bus can1 (remote:127.0.0.1:5001)"), set by open_links
+        where: str = "the bus"
 
         def __init__(self, bus: can.BusABC | None = None) -> None:
             super().__init__(bus)
+            self.lost: BaseException | None = None  # the error that ended the receive thread
             self._last_send = float("-inf")
             self._last_to: dict[int, float] = {}  # node -> when the last frame to it went
             self._answered: dict[int, bool] = {}  # node -> it answered since that frame
+
+        def connect(self, *args: Any, **kwargs: Any) -> Any:
+            super().connect(*args, **kwargs)
+            if self.notifier is not None:
+                self.notifier.add_listener(_LostListener(self))
+            return self
+
+        def lost_error(self) -> BusLostError | None:
+            """The bus's connection went away (the receive thread's error), as a message naming the bus."""
+            exc = self.lost or (self.notifier.exception if self.notifier is not None else None)
+            if exc is None:
+                return None
+            return BusLostError(f"{self.where}: the connection to the bus was lost ({_brief(exc)})",
+                                hint="is the adapter plugged in, the interface up, the served simulator running?")
+
+        def check(self) -> None:
+            """canopen's check of the receive thread, its error named as a lost bus (exit 3)."""
+            lost = self.lost_error()
+            if lost is not None:
+                raise lost
+
+        def disconnect(self) -> None:
+            bus = self.bus
+            try:
+                super().disconnect()
+            except Exception:
+                # a bus whose connection is gone may fail to close (python-can-remote: ENOTCONN);
+                # mark it shut down (python-can's base shutdown) so nothing retries it at exit
+                if bus is not None:
+                    with contextlib.suppress(Exception):
+                        can.BusABC.shutdown(bus)
+                self.bus = None
+                raise
 
         def notify(self, can_id: int, data: bytearray, timestamp: float) -> None:
             node = answering(can_id)
@@ -135,6 +195,12 @@ def _paced_network_class():
                 self.bus.send(msg)
             except can.CanOperationError as exc:
                 self._resend(msg, exc)
+            except OSError as exc:  # the connection went away (BrokenPipeError, ENETDOWN, ...)
+                if self.lost is None:
+                    self.lost = exc
+                lost = self.lost_error()
+                assert lost is not None
+                raise lost from exc
 
         def _resend(self, msg: can.Message, exc: can.CanOperationError) -> None:
             for attempt in range(1, self.send_attempts + 1):
@@ -149,6 +215,11 @@ def _paced_network_class():
                     exc = again
 
     return PacedNetwork
+
+
+def _brief(exc: BaseException) -> str:
+    text = str(exc).strip()
+    return f"{type(exc).__name__}: {text}" if text else type(exc).__name__
 
 
 @dataclass
@@ -207,6 +278,7 @@ def open_links(cfg: ArmConfig, names: Iterable[str] | None = None, *,
             network.pacing = cfg.protocol.pacing
             network.floor = cfg.protocol.pacing_floor_us / 1e6
             network.sdo_timeout = cfg.protocol.sdo_timeout
+            network.where = f"bus {name} ({bus_cfg.interface or 'python-can config'}:{bus_cfg.channel or '-'})"
             network.connect()
             links[name] = BusLink(name, bus_cfg, bus, network)
             in_hand = None

@@ -117,6 +117,8 @@ def jog(
     mode = "position" if to is not None or by is not None else "velocity" if velocity is not None else "torque"
     target = resolve_axis(cfg, joint)  # the one resolver: plain joint, Σ/Δ joint, pair motor or drive
     seconds = parse_number(duration, "--for")
+    if mode == "torque" and seconds is not None:
+        check_torque_for(cfg, seconds)  # no drive limit acts in torque mode: a bounded --for
     pair = target.pair is not None  # ops/joint_jog.py moves what involves a pair (both motors, or Σ and Δ)
     if pair and hold:
         raise UsageError("--hold is for plain joints for now: a Σ/Δ joint is not held after its move",
@@ -152,7 +154,7 @@ def jog(
             assert isinstance(result, ops_jog.JogResult)  # a plain joint's or a drive's jog
         except BaseException as exc:
             st.out.progress(None)
-            _show_stop_report(st, exc)
+            show_stop_report(st, exc)
             raise
     st.out.progress(None)
     _render(st, name, result)
@@ -262,7 +264,7 @@ def _jog_pair(st: AppState, cfg: ArmConfig, axis: Axis, req: MoveRequest, positi
             assert isinstance(result, joint_jog.JogResult)  # a Σ/Δ joint's or a pair motor's jog
         except BaseException as exc:
             st.out.progress(None)
-            _show_stop_report(st, exc)
+            show_stop_report(st, exc)
             raise
     st.out.progress(None)
     _render_pair(st, result)
@@ -347,7 +349,16 @@ def _render_pair(st: AppState, r: joint_jog.JogResult) -> None:
     st.out.line(text)
 
 
-def _show_stop_report(st: AppState, exc: BaseException) -> None:
+def check_torque_for(cfg: ArmConfig, seconds: float) -> None:
+    """A torque jog or step has no drive limit acting: its time is bounded by motion.torque_for_limit."""
+    limit = cfg.motion.torque_for_limit
+    if seconds > limit:  # NaN and <= 0 are refused where the request is planned
+        raise UsageError(f"--for {seconds:g} s: a torque motion runs at most motion.torque_for_limit = {limit:g} s "
+                         "(no drive limit acts in torque mode; the time is the last guard)",
+                         hint="a shorter --for, or raise motion.torque_for_limit in the config (at most 300 s)")
+
+
+def show_stop_report(st: AppState, exc: BaseException) -> None:
     """How the guard stopped the motor, on an error path too: text lines, or with --json an error
     object on stdout (``error``, ``stop``); the error message itself still goes to stderr."""
     from sherpa_cli.motion.report import report_of

@@ -14,11 +14,12 @@ import typer
 from sherpa_cli.cli.context import AppState, state
 from sherpa_cli.cli.options import ApplyMotion, Targets
 from sherpa_cli.cli.robotics import DEFAULT_AT, AllowRemote, Foxglove, FoxgloveAt
-from sherpa_cli.errors import UsageError
+from sherpa_cli.errors import SherpaError, UsageError
 
 if TYPE_CHECKING:
     from sherpa_cli.config.model import ArmConfig
     from sherpa_cli.log.capture import CaptureResult
+    from sherpa_cli.log.record import Gaps
     from sherpa_cli.log.recording import Recording
     from sherpa_cli.log.step_metrics import StepMetrics
     from sherpa_cli.motion.axis import Axis
@@ -356,8 +357,9 @@ def record(
         return
     if not 0 < duration <= MAX_RECORD_S:
         raise UsageError(f"--for {duration}: expected seconds > 0 and <= {MAX_RECORD_S:g}")
-    if not (0 < rate <= 10000):
-        raise UsageError(f"--rate {rate}: expected Hz > 0 and <= 10000")
+    if not (MIN_RECORD_RATE <= rate <= 10000):
+        raise UsageError(f"--rate {rate:g}: expected Hz >= {MIN_RECORD_RATE:g} (the recording notices Ctrl-C and "
+                         "its end once a SYNC period) and <= 10000")
     outputs = record_outputs(output)
     check_live(foxglove, foxglove_at, allow_remote)
     cfg = st.load_config()
@@ -378,6 +380,9 @@ def record(
                                 *(t.dev.bus for t in encoder.recorded_encoders(cfg, (r.name for r in refs)))]))
     expected: int | None = None
     late = 0
+    failure: SherpaError | None = None  # found while recording (another SYNC producer): raised once written
+    gaps: Mapping[str, Gaps] | None = None
+    period = 0.0
     streamed: CsvWriter | None = None
     rec: Recording | None
     loads = {} if poll else {b.bus: round(b.load, 6) for b in budget}
@@ -398,12 +403,14 @@ def record(
                 recorder.sink = streamed = CsvWriter(outputs[".csv"], recorder.columns())
             try:
                 with recorder, extras.feed(cfg, recorder_sample(recorder)):
-                    interrupted = _wait_for(duration)
+                    interrupted = _wait_for(duration, lambda: recorder.problem() is not None)
             finally:
                 if streamed is not None:
                     streamed.close()
             rec = recorder.recording() if streamed is None else None
             counts, expected, late = recorder.counts(), recorder.expected(), recorder.late()
+            failure = recorder.problem()
+            gaps, period = recorder.gaps(), recorder.period
             zero_ns = round((recorder.t0 or 0.0) * 1e9)
         extras.read_status()
     if ".csv" in outputs and streamed is None:
@@ -417,7 +424,10 @@ def record(
                          **{f"budget_load.{bus}": f"{load:g}" for bus, load in loads.items()}})
     output = list(outputs.values())
     rows = streamed.rows if streamed is not None else len(rec.times) if rec is not None else 0
-    _render_record(st, output, counts, expected, rows, late)
+    _render_record(st, output, counts, expected, rows, late, gaps=gaps, period=period)
+    if failure is not None:
+        st.out.warn("the samples up to the stop are written; the drives' PDO settings are restored")
+        raise failure
     if interrupted:
         st.out.warn("interrupted: the samples up to the interruption are written; the drives' PDO settings "
                     "are restored")
@@ -428,8 +438,16 @@ class _Stopped(Exception):
     """SIGTERM or SIGHUP during a recording: ends it like Ctrl-C, so the PDO settings go back."""
 
 
-def _wait_for(duration: float) -> bool:
-    """Sleep while sampling; True when Ctrl-C, SIGTERM or SIGHUP ended it early."""
+# the lowest --rate of a recording, and of a step (issue 22 item 8: at 0.5 Hz a step's loop stopped
+# showing signs of life between samples and the dead-man tripped)
+MIN_RECORD_RATE = 1.0
+MIN_STEP_RATE = 10.0
+WAKE_EVERY_S = 0.1  # how often the wait looks at what the receive threads found
+
+
+def _wait_for(duration: float, failed: Callable[[], bool] = lambda: False) -> bool:
+    """Sleep while sampling; True when Ctrl-C, SIGTERM or SIGHUP ended it early. Ends early (False)
+    once ``failed()`` (the recorder found another SYNC producer)."""
     import signal
 
     def stop(signum: int, frame: FrameType | None) -> NoReturn:
@@ -441,7 +459,9 @@ def _wait_for(duration: float) -> bool:
             if sig is not None:
                 old[sig] = signal.signal(sig, stop)
     try:
-        sleep(duration)
+        end = _time.monotonic() + duration
+        while (rest := end - _time.monotonic()) > 0 and not failed():
+            sleep(min(rest, WAKE_EVERY_S))
     except (KeyboardInterrupt, _Stopped):
         return True
     finally:
@@ -456,21 +476,36 @@ def _percent(part: int, whole: int) -> str:
 
 
 def _render_record(st: AppState, outputs: Sequence[Path], counts: Mapping[str, int], expected: int | None,
-                   rows: int, late: int = 0) -> None:
-    """What is in the file: samples per drive (cells written), rows; SYNCs with no row are gaps."""
-    gaps = max(0, expected - rows) if expected else 0
+                   rows: int, late: int = 0, *, gaps: Mapping[str, Gaps] | None = None, period: float = 0.0) -> None:
+    """What is in the file: samples per drive (cells written), rows; SYNCs with no row are gaps, and
+    per drive where its samples are missing (``gaps``: time_s of the first few runs, as in the file)."""
+    holes = gaps or {}
+    no_row = max(0, expected - rows) if expected else 0
     if st.json_mode:
         extra = {"files": [str(p) for p in outputs]} if len(outputs) > 1 else {}
-        st.out.json({"file": str(outputs[0]), **extra, "rows": rows, "expected": expected, "gaps": gaps,
-                     "late_frames": late, "drives": [{"drive": n, "samples": c} for n, c in counts.items()]})
+
+        def drive(n: str, c: int) -> dict[str, Any]:
+            g = holes.get(n)
+            if g is None:
+                return {"drive": n, "samples": c}
+            return {"drive": n, "samples": c, "missing": g.missing, "more_gaps": g.more_spans,
+                    "gaps": [{"t_s": round(k * period, 6), "syncs": length} for k, length in g.spans]}
+
+        st.out.json({"file": str(outputs[0]), **extra, "rows": rows, "expected": expected, "gaps": no_row,
+                     "late_frames": late, "drives": [drive(n, c) for n, c in counts.items()]})
         return
     for name, c in counts.items():
         share = "" if not expected else f" of {expected} ({_percent(c, expected)})"
         st.out.line(f"{name}: {c} samples{share}")
     for output in outputs:
         st.out.line(f"wrote {output} ({rows} rows)")
-    if gaps:
-        st.out.warn(f"{gaps} of {expected} SYNC(s) have no row: no drive's sample arrived for them")
+    if no_row:
+        st.out.warn(f"{no_row} of {expected} SYNC(s) have no row: no drive's sample arrived for them")
+    for name, g in holes.items():
+        if g.missing:
+            where = ", ".join(f"{k * period:.3f} s ({length} SYNC{'s' if length > 1 else ''})" for k, length in g.spans)
+            more = f" and {g.more_spans} more gap(s)" if g.more_spans else ""
+            st.out.warn(f"{name}: {g.missing} sample(s) missing (empty cells) at time_s {where}{more}")
     if late:
         st.out.warn(f"{late} frame(s) came after their row was written: not in the file")
 
@@ -573,8 +608,9 @@ def step(
         raise UsageError(f"--{mode} {value}: expected a finite number")
     if not (math.isfinite(duration) and 0 < duration <= MAX_RECORD_S):
         raise UsageError(f"--for {duration}: expected seconds > 0 and <= {MAX_RECORD_S:g}")
-    if not (0 < rate <= 10000):
-        raise UsageError(f"--rate {rate}: expected Hz > 0 and <= 10000")
+    if not (MIN_STEP_RATE <= rate <= 10000):
+        raise UsageError(f"--rate {rate:g}: expected Hz >= {MIN_STEP_RATE:g} (the step's settling check and the "
+                         "motion guard's watch need a sample at least every 0.1 s) and <= 10000")
     if not (math.isfinite(hold) and 0 <= hold < duration):
         raise UsageError(f"--hold {hold}: expected seconds >= 0 and less than --for {duration:g}")
     to_mcap = output.suffix.lower() == ".mcap" and not output.is_dir()
@@ -588,6 +624,10 @@ def step(
     elif output.exists() and not output.is_dir():
         raise UsageError(f"-o {output}: exists and is not a directory")
     cfg = st.load_config()
+    if mode == "torque":
+        from sherpa_cli.cli.jog_cmd import check_torque_for
+
+        check_torque_for(cfg, duration)
     target = resolve_step_target(cfg, joint)
     req = step_request(target, mode, value, duration=duration, uncalibrated=uncalibrated)
     check_mode_first(mode, mode_first)
@@ -623,8 +663,16 @@ def step(
         extras = RecordExtras(session, [target.ref], mcap=to_mcap, view=None)
         extras.start()
         zero_ns = _time.time_ns()  # t = 0 (the step's command) is placed at the wall time the step began
-        result = run_step(session, target, mode, value, duration=duration, rate=rate, settings=settings,
-                          uncalibrated=uncalibrated, timebase=timebase, mode_first=mode_first, hold=hold)
+        try:
+            result = run_step(session, target, mode, value, duration=duration, rate=rate, settings=settings,
+                              uncalibrated=uncalibrated, timebase=timebase, mode_first=mode_first, hold=hold)
+        except BaseException as exc:
+            # how the guard stopped the motor, on Ctrl-C, SIGTERM and errors too (issue 22: a Ctrl-C
+            # during `log step` printed nothing)
+            from sherpa_cli.cli.jog_cmd import show_stop_report
+
+            show_stop_report(st, exc)
+            raise
         extras.read_status()
     if to_mcap:
         write_mcap(output, result.recording, cfg, time_zero_ns=zero_ns, extras=extras,

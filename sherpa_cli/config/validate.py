@@ -17,6 +17,10 @@ from sherpa_cli.config.yamlnodes import Locs, suggest
 from sherpa_cli.errors import ConfigError, Location
 
 MAX_NODE_ID = 127
+# safe bounds of the dead-man (issue 22 item 8): beyond them a killed or hung tool's motor runs on
+MAX_CONSUMER_TIME_MS = 2000  # ms a drive keeps moving after the tool's last heartbeat
+MAX_LIVENESS_TIMEOUT_S = 10.0  # s a hung command keeps its heartbeat going
+MAX_TORQUE_FOR_S = 300.0  # s: the highest motion.torque_for_limit
 DEFAULT_INPUTS: int = DriveModel.__dataclass_fields__["inputs"].default  # type: ignore[assignment]
 
 
@@ -145,6 +149,9 @@ def _check_motion(cfg: ArmConfig, locs: Locs, r: _Report) -> None:
             r.error(where("host_id_pool"), f"host_id_pool: {hid} is motion.pair_group_id")
     if not 1 <= m.consumer_time_ms <= 0xFFFF:
         r.error(where("consumer_time_ms"), f"consumer_time_ms {m.consumer_time_ms} must be 1..65535 (0x1016:1 is 16 bits)")
+    elif m.consumer_time_ms > MAX_CONSUMER_TIME_MS:
+        r.error(where("consumer_time_ms"), f"consumer_time_ms {m.consumer_time_ms} is above the safe bound "
+                f"{MAX_CONSUMER_TIME_MS} ms: a killed tool's motor would run that long before its drive stops it")
     elif not 0 <= m.heartbeat_period_ms <= m.consumer_time_ms / 2:
         r.error(where("heartbeat_period_ms"), f"heartbeat_period_ms {m.heartbeat_period_ms} must be 0 (a quarter "
                 f"of consumer_time_ms) or at most half of consumer_time_ms ({m.consumer_time_ms})")
@@ -159,7 +166,8 @@ def _check_motion(cfg: ArmConfig, locs: Locs, r: _Report) -> None:
     if not 0 <= m.loss_action <= 3:
         r.error(where("loss_action"), f"loss_action {m.loss_action} must be 0..3 (0x6007)")
     elif m.loss_action == 0:
-        r.warn(where("loss_action"), "loss_action 0: a drive keeps moving when the tool's heartbeat stops")
+        r.error(where("loss_action"), "loss_action 0 is refused (the safe bound is 1..3): a drive would keep "
+                "moving when the tool's heartbeat stops (a killed tool, a pulled cable)")
     if not 0 <= m.comm_error_behaviour <= 2:
         r.error(where("comm_error_behaviour"), f"comm_error_behaviour {m.comm_error_behaviour} must be 0..2 (0x1029:1)")
     from sherpa_cli.config.model import STOP_METHODS
@@ -169,6 +177,12 @@ def _check_motion(cfg: ArmConfig, locs: Locs, r: _Report) -> None:
     for key in ("standstill_timeout", "liveness_timeout"):
         if not getattr(m, key) > 0:
             r.error(where(key), f"{key} {getattr(m, key)} s must be > 0")
+    if m.liveness_timeout > MAX_LIVENESS_TIMEOUT_S or not math.isfinite(m.liveness_timeout):
+        r.error(where("liveness_timeout"), f"liveness_timeout {m.liveness_timeout} s is above the safe bound "
+                f"{MAX_LIVENESS_TIMEOUT_S:g} s: a hung tool would keep its motors going that long")
+    if not (math.isfinite(m.torque_for_limit) and 0 < m.torque_for_limit <= MAX_TORQUE_FOR_S):
+        r.error(where("torque_for_limit"), f"torque_for_limit {m.torque_for_limit} s must be > 0 and at most "
+                f"{MAX_TORQUE_FOR_S:g} s (no drive limit acts in torque mode: the time is the last guard)")
     for code in m.emcy_warning_codes:
         if not 0 <= code <= 0xFFFF:
             r.error(where("emcy_warning_codes"), f"emcy_warning_codes: {code} out of range 0..0xFFFF (an EMCY code)")

@@ -194,6 +194,45 @@ class _Drive:
     written: int = 0  # position samples already handed to the sink (and dropped from pos)
     cur_written: int = 0  # current samples likewise
     late: int = 0  # frames that came after their row was written: not in the file
+    frames: int = 0  # position TPDOs received: one per SYNC on the bus, whoever sent it
+    gaps: Gaps = field(default_factory=lambda: Gaps())  # SYNCs written without this drive's sample
+
+
+MAX_GAP_SPANS = 5  # gaps a report names by place; the rest are counted
+
+
+@dataclass
+class Gaps:
+    """SYNC indexes with no sample of one drive: how many, and the first few runs of them
+    (first index, length), so a report says where a recording has holes (issue 22 item 8)."""
+
+    missing: int = 0
+    spans: list[tuple[int, int]] = field(default_factory=list)
+    more_spans: int = 0  # runs after the first MAX_GAP_SPANS, counted only
+    last: int = -2  # the newest missing index (a run goes on from it)
+
+    def add(self, k: int) -> None:
+        self.missing += 1
+        if k == self.last + 1 and not self.more_spans and self.spans:
+            self.spans[-1] = (self.spans[-1][0], self.spans[-1][1] + 1)
+        elif k != self.last + 1:
+            if len(self.spans) < MAX_GAP_SPANS:
+                self.spans.append((k, 1))
+            else:
+                self.more_spans += 1
+        self.last = k
+
+    def copy(self) -> Gaps:
+        return Gaps(self.missing, list(self.spans), self.more_spans, self.last)
+
+
+FOREIGN_SYNC_SLACK = 10  # TPDOs beyond the SYNCs this tool can have sent before it calls that a foreign SYNC
+FOREIGN_SYNC_SHARE = 0.05  # ... or this share of them, whichever is more (jitter at the edges of a span)
+
+
+class ForeignSyncError(CommunicationError):
+    """Another node sends SYNC on a recorded bus: the drives answer both producers, the samples
+    can no longer be placed on this tool's time grid (exit 3; issue 22 item 7)."""
 
 
 class RowSink(Protocol):
@@ -241,6 +280,8 @@ class Recorder:
         self._newest = -1  # newest SYNC index any drive answered
         self._write_lock = threading.Lock()  # keeps batches in order when two receive threads flush
         self.rows_written = 0  # rows handed to the sink (SYNCs with at least one drive's sample)
+        self._sync_start: dict[str, float] = {}  # bus -> when its SYNC source started
+        self.failure: SherpaError | None = None  # set by the receive thread: a second SYNC producer
 
     # -- lifetime -------------------------------------------------------------------------------
     def __enter__(self) -> Recorder:
@@ -253,6 +294,7 @@ class Recorder:
             self.t0 = self._now()
             for bus in dict.fromkeys([*(r.bus for r in self.refs), *(t.dev.bus for t in self.encoders)]):
                 started = self._now()
+                self._sync_start[bus] = started
                 self._syncs.append(self.sync_factory(bus, self.session.links[bus].bus, self.period))
                 self._sync_spans.append([started, None])
         except BaseException:
@@ -333,8 +375,8 @@ class Recorder:
     def _drain(self) -> None:
         """Answers to the last SYNCs may still wait in a loaded receive thread: keep listening until
         no new sample came for a few periods (bounded), so the end of a recording is not cut off."""
-        if not self._subscribed or self.clock is not None:
-            return
+        if not self._subscribed or self.clock is not None or self.problem() is not None:
+            return  # (another SYNC producer keeps the answers coming: nothing to wait for)
         quiet_for = max(0.02, 5 * self.period)
         deadline = time.monotonic() + DRAIN_LIMIT_S
         last = self._received()
@@ -448,6 +490,9 @@ class Recorder:
                     d.late += 1
                     return
                 if n == TPDO_POS and len(data) >= 8:
+                    d.frames += 1
+                    if self.failure is None and d.frames > self._sync_bound(d.ref.bus):
+                        self._foreign_sync(d)
                     d.pos[k] = unpack_pos(data)
                     if k > self._newest:
                         self._newest = k
@@ -477,6 +522,9 @@ class Recorder:
                 for d in self._drives.values():
                     pos = {k: v for k, v in d.pos.items() if k < cut}
                     cur = {k: v for k, v in d.cur.items() if k < cut}
+                    for k in range(self._flushed, cut):
+                        if k not in pos:
+                            d.gaps.add(k)
                     for k in pos:
                         del d.pos[k]
                     for k in cur:
@@ -497,6 +545,43 @@ class Recorder:
             sink.write(rec)
             self.rows_written += len(keys)
 
+    # -- another SYNC producer ------------------------------------------------------------------
+    def _sync_bound(self, bus: str) -> float:
+        """The most SYNCs this tool's source on ``bus`` can have sent by now (it never sends ahead of
+        its schedule), with a margin; a drive answering more SYNCs than that answers someone else's."""
+        start = self._sync_start.get(bus)
+        if start is None:  # a frame between the PDO set-up and the source's start: nothing to count yet
+            return math.inf
+        mine = math.floor(max(0.0, self._now() - start) / self.period) + 1
+        return mine + max(FOREIGN_SYNC_SLACK, math.ceil(FOREIGN_SYNC_SHARE * mine))
+
+    def _foreign_sync(self, d: _Drive) -> None:
+        start = self._sync_start[d.ref.bus]
+        mine = math.floor(max(0.0, self._now() - start) / self.period) + 1
+        self.failure = ForeignSyncError(
+            f"bus {d.ref.bus}: {d.ref.name} answered {d.frames} SYNCs in {self._now() - start:.2f} s but this tool "
+            f"sent at most {mine} ({self.rate:g} Hz): another node is sending SYNC (0x080) on this bus; the "
+            "samples cannot be placed in time, the recording is stopped",
+            hint="stop the other SYNC producer (another `sherpa log record`, a master's SYNC) and record again")
+
+    def problem(self) -> SherpaError | None:
+        """What ended the recording early: another SYNC producer (found by the receive thread), or a
+        recorded bus whose connection went away (its network's receive thread ended)."""
+        if self.failure is None:
+            for bus in self._sync_start:
+                lost = getattr(self.session.links[bus].network, "lost_error", None)
+                error = lost() if lost is not None else None
+                if error is not None:
+                    self.failure = error
+                    break
+        return self.failure
+
+    def check(self) -> None:
+        """Raise :meth:`problem`; a loop calls this beside its guard's check."""
+        problem = self.problem()
+        if problem is not None:
+            raise problem
+
     # -- results --------------------------------------------------------------------------------
     def counts(self) -> dict[str, int]:
         """Samples received per drive (and recorded encoder) so far."""
@@ -516,6 +601,23 @@ class Recorder:
                     return ((self.t0 or 0.0) + k * self.period,
                             {d.ref.name: (int(d.pos[k][0]), int(d.pos[k][1])) for d in drives})
         return None
+
+    def gaps(self) -> dict[str, Gaps]:
+        """Per drive: the SYNCs of the recording (0 .. expected() - 1) with no sample of it, after the
+        recording (streaming: what went to the file; else what :meth:`recording` holds)."""
+        expected = self.expected()
+        out: dict[str, Gaps] = {}
+        with self._lock:
+            for d in self._drives.values():
+                if self.sink is not None:
+                    gaps, start = d.gaps.copy(), self._flushed
+                else:
+                    gaps, start = Gaps(), 0
+                for k in range(start, expected):
+                    if k not in d.pos:
+                        gaps.add(k)
+                out[d.ref.name] = gaps
+        return out
 
     def late(self) -> int:
         """Frames that came after their row was written (streaming only): not in the file."""

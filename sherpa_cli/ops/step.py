@@ -20,9 +20,10 @@ never keeps its JV/TC while the recorder drains and restores its PDOs.
 
 from __future__ import annotations
 
+import contextlib
 import math
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from types import TracebackType
 from typing import TYPE_CHECKING, Any, Protocol
@@ -37,7 +38,7 @@ from sherpa_cli.log.settle import HOLD_S, judged, settled_at_end
 from sherpa_cli.log.step_metrics import StepMetrics, step_metrics
 from sherpa_cli.motion.axis import Axis, resolve_axis
 from sherpa_cli.motion.guard import MotionGuard
-from sherpa_cli.motion.report import GuardReport
+from sherpa_cli.motion.report import GuardReport, with_report
 from sherpa_cli.motion.request import MoveRequest, parse_request
 from sherpa_cli.motion.settings import MotionSettings
 from sherpa_cli.motion.stopping import stop_drive
@@ -183,7 +184,7 @@ def run_step(session: ArmSession, target: Axis, mode: str, value: float, *, dura
         rec_kw.update(clock=timebase.now, sync_factory=timebase.sync_factory)
     guard = MotionGuard(session, [ref], settings=settings, clock=clock, sleep=sleep, on_event=on_event)
     state: dict[str, Any] = {}
-    with guard:
+    with _report_on_error(guard), guard:
         c = guard.client(ref)
         start_counts = int(c.get("PX"))
         with Recorder(session, [ref], rate, current=current, **rec_kw) as rec, \
@@ -279,6 +280,19 @@ def _switch_steps(guard: MotionGuard, ref: DriveRef, unit_mode: int) -> list[str
     return steps
 
 
+@contextlib.contextmanager
+def _report_on_error(guard: MotionGuard) -> Iterator[None]:
+    """An exception that leaves the guard (Ctrl-C, SIGTERM, an error) carries the guard's stop report,
+    as jog's do: the CLI shows how the motor was stopped."""
+    try:
+        yield
+    except BaseException as exc:
+        carried = with_report(exc, guard.report)  # typed: a SherpaError's field, Ctrl-C as MotionInterrupted
+        if carried is exc:
+            raise
+        raise carried from exc
+
+
 def _wait(guard: MotionGuard, clock: Callable[[], float], sleep: Callable[[float], None], seconds: float) -> None:
     end = clock() + seconds
     while True:
@@ -301,6 +315,7 @@ def _until_settled(guard: MotionGuard, rec: Recorder, joint: str, signal: str, t
     next_settle = 0.0
     while True:
         guard.check()
+        rec.check()  # another SYNC producer on the bus: the samples no longer fit the time grid
         now = rec.now()
         px = int(guard.query(jog_target.ref, "PX"))
         if limit_breach(guard, guard.client(jog_target.ref), jog_target, px, settings, clock, sleep, state):
