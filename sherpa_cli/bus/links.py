@@ -78,11 +78,35 @@ def _paced_network_class():
         clock: Callable[[], float] = staticmethod(time.monotonic)
         sleep: Callable[[float], None] = staticmethod(time.sleep)
 
+        #: ``protocol.caller_reads`` (issue 26 item 2): a caller waiting for a reply reads the bus
+        #: itself (bus/reader.py); False: python-can's Notifier thread reads and hands replies over
+        caller_reads: bool = True
+
         def __init__(self, bus: can.BusABC | None = None) -> None:
             super().__init__(bus)
             self._last_send = float("-inf")
             self._last_to: dict[int, float] = {}  # node -> when the last frame to it went
             self._answered: dict[int, bool] = {}  # node -> it answered since that frame
+
+        def connect(self, *args: Any, **kwargs: Any) -> PacedNetwork:
+            """canopen's ``connect`` with the bus already set; with ``caller_reads`` the notifier is
+            bus/reader.py's CallerReadNotifier (the same interface, installed as ``Network.notifier``)."""
+            if not self.caller_reads or self.bus is None:
+                super().connect(*args, **kwargs)
+                return self
+            from sherpa_cli.bus.reader import CallerReadNotifier
+
+            # the same interface as can.Notifier where canopen and this tool use it
+            self.notifier = CallerReadNotifier(self.bus, self.listeners, self.NOTIFIER_CYCLE)  # type: ignore[assignment]
+            return self
+
+        def wait_for(self, arrived: Any, timeout: float) -> bool:
+            """Wait for a listener to release ``arrived`` (a drive client's reply lock), reading the
+            bus on this thread meanwhile when the notifier allows it (bus/reader.py)."""
+            wait = getattr(self.notifier, "wait_for", None)
+            if wait is None:
+                return bool(arrived.acquire(timeout=timeout))
+            return bool(wait(arrived, timeout))
 
         def notify(self, can_id: int, data: bytearray, timestamp: float) -> None:
             node = answering(can_id)
@@ -207,6 +231,7 @@ def open_links(cfg: ArmConfig, names: Iterable[str] | None = None, *,
             network.pacing = cfg.protocol.pacing
             network.floor = cfg.protocol.pacing_floor_us / 1e6
             network.sdo_timeout = cfg.protocol.sdo_timeout
+            network.caller_reads = cfg.protocol.caller_reads
             network.connect()
             links[name] = BusLink(name, bus_cfg, bus, network)
             in_hand = None

@@ -237,6 +237,9 @@ class ProtocolConfig:
     # per-drive pacing: µs kept between any two frames on a bus (about one worst-case 8-byte frame,
     # 138 bits, at 1 Mbit/s); 0 = none
     pacing_floor_us: int = 140
+    # issue 26 item 2: a caller waiting for a reply reads the bus itself (bus/reader.py); False =
+    # python-can's Notifier thread reads every frame and hands replies over (one more thread switch)
+    caller_reads: bool = True
     # UI[n] that `home` sets to 1 once a joint is homed; RAM only, so a reset clears it (docs/motion.md)
     calibration_flag: int = 3
 
