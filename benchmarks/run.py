@@ -123,7 +123,7 @@ def bench_scan(rounds: int = 5) -> Result:
 
     One SDO timeout is what probing one id costs when nobody answers, and what the scan must
     listen after its last probe; the whole command (Python start-up, config, the simulated
-    arm's power-up, ids 1..127 on 3 buses at once, closing) must stay within two of them.
+    arm's power-up, ids 1..127 on 3 buses at once, closing) must stay within 1.5 of them (issue 26).
     """
     from sherpa_cli.config import load_config
 
@@ -132,7 +132,7 @@ def bench_scan(rounds: int = 5) -> Result:
     _fresh_wall(cmd)  # warm-up
     wall = statistics.median(_fresh_wall(cmd) for _ in range(rounds))
     timeout = cfg.protocol.sdo_timeout
-    goal = "<= 2"
+    goal = "<= 1.5"  # issue 26: was <= 2
     ratio = wall / timeout
     return Result("scan", round(wall * 1000, 1), "ms", round(ratio, 2), goal, _judge(ratio, goal),
                   f"median of {rounds} runs of `sherpa --sim scan` / protocol.sdo_timeout {timeout * 1000:g} ms; "
@@ -366,7 +366,7 @@ def bench_sdo(uploads: int = 1000, rounds: int = 3) -> Result:
                 runs.append(_cpu_per_op(upload, uploads))
     cpu = statistics.median(runs)
     ratio = cpu / BUS_PAIR_S
-    goal = "<= 0.5"
+    goal = "<= 0.35"  # issue 26: was <= 0.5
     return Result("sdo", round(cpu * 1e6, 1), "us CPU", round(ratio, 2), goal, _judge(ratio, goal),
                   f"CPU per upload of 0x1000:0 (ArmSession.sdo(ref).upload) / 222 us bus time; median of "
                   f"{rounds} x {uploads}; bare python-can pair on the same transport: "
@@ -402,13 +402,16 @@ def _program_arm_once(cfg, workers: int) -> tuple[float, float]:
     return wall, max(p.elapsed + o.elapsed for p, o in zip(plans, result.outcomes, strict=True))
 
 
+PROGRAM_SPEEDUP_GOAL = 7  # issue 26: program-limits on 14 drives at least 7x faster than drive after drive
+
+
 def bench_program(rounds: int = 3) -> Result:
     """`program-limits --apply` on the whole simulated arm (14 drives, 3 buses, 1 ms reply latency),
     with the shipped pacing (each bus's send_interval_us) on.
 
     Ratio: wall time / the longest single drive's programming time in the same run (every
     drive in its own worker, so the arm takes as long as its slowest drive). Also the speed-up
-    over programming the drives one after another (goal >= 5).
+    over programming the drives one after another (goal >= 7, issue 26; was >= 5).
     """
     from sherpa_cli.config import load_config
 
@@ -421,9 +424,9 @@ def bench_program(rounds: int = 3) -> Result:
     ratio = wall / longest
     gaps = sorted({bus.send_interval_us for bus in cfg.buses.values()})
     return Result("program", round(wall * 1000, 1), "ms", round(ratio, 2), goal,
-                  _judge(ratio, goal) and speedup >= 5,
+                  _judge(ratio, goal) and speedup >= PROGRAM_SPEEDUP_GOAL,
                   f"wall / longest drive ({longest * 1000:.0f} ms), median of {rounds}; speed-up over one "
-                  f"drive after another ({serial * 1000:.0f} ms): {speedup:.1f}x (goal >= 5); "
+                  f"drive after another ({serial * 1000:.0f} ms): {speedup:.1f}x (goal >= {PROGRAM_SPEEDUP_GOAL}); "
                   f"pacing on (send_interval_us {', '.join(map(str, gaps))})")
 
 

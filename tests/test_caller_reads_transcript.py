@@ -27,25 +27,44 @@ def _reply(letters: str, value: int) -> bytes:
 class ScriptedBus:
     """A python-can bus playing a script; ``log`` is what went over it, in order."""
 
-    def __init__(self, script: list[tuple[str, int, bytes]], now: list[float]) -> None:
+    channel_info = "scripted"
+
+    def __init__(self, script: list[tuple[str, int, bytes]], now: list[float] | None = None) -> None:
+        # now None: a real bus for a background reader (recv blocks until the script has a frame)
         self.script, self.pos, self.now = script, 0, now
         self.log: list[str] = []
+        self.cond = threading.Condition()
+        self.mismatch: list[str] = []
 
     def send(self, msg: can.Message, timeout: float | None = None) -> None:
-        got = frame_text("tx", msg.arbitration_id, bytes(msg.data))
-        want = frame_text(*self.script[self.pos]) if self.pos < len(self.script) else "(script ended)"
-        assert got == want, f"step {self.pos + 1}: expected {want}, got {got}"
-        self.pos += 1
-        self.log.append(got)
+        with self.cond:
+            got = frame_text("tx", msg.arbitration_id, bytes(msg.data))
+            want = frame_text(*self.script[self.pos]) if self.pos < len(self.script) else "(script ended)"
+            if got != want:
+                self.mismatch.append(f"step {self.pos + 1}: expected {want}, got {got}")
+            assert got == want, self.mismatch[-1]
+            self.pos += 1
+            self.log.append(got)
+            self.cond.notify_all()
 
     def recv(self, timeout: float | None = None) -> can.Message | None:
-        if self.pos < len(self.script) and self.script[self.pos][0] == "rx":
-            _, can_id, data = self.script[self.pos]
-            self.pos += 1
-            self.log.append(frame_text("rx", can_id, data))
-            return can.Message(arbitration_id=can_id, data=data, is_extended_id=False, timestamp=self.now[0])
-        self.now[0] += timeout or 0.0  # a silent bus: the receive waits its whole timeout
-        return None
+        with self.cond:
+            if self.now is None and not self._rx_next():
+                self.cond.wait(timeout)
+            if self._rx_next():
+                _, can_id, data = self.script[self.pos]
+                self.pos += 1
+                self.log.append(frame_text("rx", can_id, data))
+                return can.Message(arbitration_id=can_id, data=data, is_extended_id=False)
+            if self.now is not None:
+                self.now[0] += timeout or 0.0  # a silent bus: the receive waits its whole timeout
+            return None
+
+    def _rx_next(self) -> bool:
+        return self.pos < len(self.script) and self.script[self.pos][0] == "rx"
+
+    def fileno(self) -> int:
+        raise NotImplementedError
 
     def shutdown(self) -> None:
         pass
@@ -245,5 +264,86 @@ def test_caller_reads_off_keeps_python_cans_notifier():
         assert isinstance(net.notifier, can.Notifier)
         client = DriveClient(NetworkTransport(net), 10, name="a", timeout=5.0, retries=0)
         assert client.get("PX") == 10001
+    finally:
+        net.notifier.stop(1.0)
+
+
+# -- the expedited-SDO fast path (bus/sdo.py) on the same mechanism -------------------------------
+
+def _sdo(bus, now, timeout: float = 0.3):
+    from sherpa_cli.bus.sdo import DriveSdo
+
+    net = _network(bus, now)
+    return DriveSdo(net, 10, label="a (node 10)", timeout=timeout), net
+
+
+def test_an_expedited_upload_is_one_request_and_its_answer_read_by_the_caller():
+    now = [0.0]
+    bus = ScriptedBus([
+        ("tx", 0x60A, bytes.fromhex("40 18 10 01 00 00 00 00")),
+        ("rx", 0x70B, b"\x05"),  # another drive's heartbeat first
+        ("rx", 0x58A, bytes.fromhex("43 18 10 01 9A 00 00 00")),
+        ("tx", 0x60A, bytes.fromhex("40 17 10 00 00 00 00 00")),
+        ("rx", 0x58A, bytes.fromhex("4B 17 10 00 E8 03 00 00")),  # 2 bytes announced
+    ], now)
+    sdo, net = _sdo(bus, now)
+    assert sdo.upload(0x1018, 1) == bytes.fromhex("9A 00 00 00")
+    assert sdo.upload(0x1017, 0) == bytes.fromhex("E8 03")
+    assert bus.pos == len(bus.script) and now[0] == 0.0
+    assert (net.notifier.caller_reads, net.notifier.background_reads) == (3, 0)
+
+
+def test_an_unanswered_upload_times_out_and_aborts_as_canopen_does():
+    from sherpa_cli.errors import SdoError
+
+    now = [0.0]
+    bus = ScriptedBus([
+        ("tx", 0x60A, bytes.fromhex("40 00 10 00 00 00 00 00")),
+        ("tx", 0x60A, bytes.fromhex("80 00 10 00 00 00 04 05")),  # abort 0x05040000: SDO protocol timed out
+        ("tx", 0x60A, bytes.fromhex("40 18 10 01 00 00 00 00")),
+        ("rx", 0x58A, bytes.fromhex("43 00 10 00 92 01 02 00")),  # the late answer to 0x1000: not 0x1018
+        ("tx", 0x60A, bytes.fromhex("40 18 10 04 00 00 00 00")),
+        ("rx", 0x58A, bytes.fromhex("80 18 10 04 00 00 02 06")),
+    ], now)
+    sdo, _ = _sdo(bus, now)
+    with pytest.raises(SdoError) as info:
+        sdo.upload(0x1000, 0)
+    assert str(info.value) == "a (node 10): no answer to the SDO upload of 0x1000 within 0.3 s"
+    assert info.value.reason == "timeout" and now[0] == pytest.approx(0.3)
+    with pytest.raises(SdoError, match=r"malformed answer \(Node returned a value for 0x1000:00 instead\)"):
+        sdo.upload(0x1018, 1)
+    with pytest.raises(SdoError) as info:
+        sdo.upload(0x1018, 4, name="serial number")
+    assert (info.value.reason, info.value.abort_code) == ("abort", 0x06020000)
+    assert str(info.value) == ("a (node 10): SDO upload of 0x1018:4 (serial number) aborted with 0x06020000 "
+                               "(object does not exist in the object dictionary)")
+    assert bus.pos == len(bus.script)
+
+
+def test_a_segmented_answer_hands_the_object_to_canopen_from_then_on():
+    from sherpa_cli.bus.sdo import DriveSdo
+
+    init = bytes.fromhex("40 00 20 01 00 00 00 00")
+    started = bytes.fromhex("41 00 20 01 07 00 00 00")  # segmented, 7 bytes
+    bus = ScriptedBus([
+        ("tx", 0x60A, init), ("rx", 0x58A, started),  # the fast path learns: segmented
+        ("tx", 0x60A, init), ("rx", 0x58A, started),  # canopen's own transfer
+        ("tx", 0x60A, bytes.fromhex("60 00 00 00 00 00 00 00")), ("rx", 0x58A, b"\x01Whistle"),
+        ("tx", 0x60A, init), ("rx", 0x58A, started),  # next time straight to canopen
+        ("tx", 0x60A, bytes.fromhex("60 00 00 00 00 00 00 00")), ("rx", 0x58A, b"\x01Whistle"),
+        ("tx", 0x60A, bytes.fromhex("40 08 10 00 00 00 00 00")),  # the device name: canopen at once
+        ("rx", 0x58A, bytes.fromhex("41 08 10 00 02 00 00 00")),
+        ("tx", 0x60A, bytes.fromhex("60 00 00 00 00 00 00 00")), ("rx", 0x58A, bytes.fromhex("0B 4F 4B 00 00 00 00 00")),
+    ])
+    net = _paced_network_class()(bus)
+    net.connect()  # canopen's client waits on its queue: the background reader feeds it
+    try:
+        sdo = DriveSdo(net, 10, label="a (node 10)", timeout=5.0)
+        assert sdo.upload(0x2000, 1) == b"Whistle"
+        assert sdo.upload(0x2000, 1) == b"Whistle"
+        assert sdo.upload(0x1008, 0) == b"OK"
+        assert bus.pos == len(bus.script) and not bus.mismatch
+        sdo.close()
+        assert not net.subscribers.get(0x58A)  # neither the fast path nor canopen still listens
     finally:
         net.notifier.stop(1.0)
