@@ -87,6 +87,7 @@ def _paced_network_class():
             self._last_send = float("-inf")
             self._last_to: dict[int, float] = {}  # node -> when the last frame to it went
             self._answered: dict[int, bool] = {}  # node -> it answered since that frame
+            self._messages: dict[tuple[int, bytes, bool], can.Message] = {}
 
         def connect(self, *args: Any, **kwargs: Any) -> PacedNetwork:
             """canopen's ``connect`` with the bus already set; with ``caller_reads`` the notifier is
@@ -131,13 +132,23 @@ def _paced_network_class():
         def send_message(self, can_id: int, data: bytes, remote: bool = False) -> None:
             if not self.bus:
                 raise CommunicationError("bus is closed")
-            msg = can.Message(is_extended_id=can_id > 0x7FF, arbitration_id=can_id, data=data,
-                              is_remote_frame=remote)
+            data = bytes(data)
+            key = (can_id, data, remote)
+            msg = self._messages.get(key)
+            if msg is None:
+                # one Message per distinct frame: a poll loop sends the same few over and over, and
+                # building one costs about as much as the rest of the send (issue 26 item 2).
+                # python-can's buses do not change the Message they send (virtual sends a copy).
+                msg = can.Message(is_extended_id=can_id > 0x7FF, arbitration_id=can_id, data=data,
+                                  is_remote_frame=remote)
+                if len(self._messages) >= 1024:
+                    self._messages.clear()
+                self._messages[key] = msg
             if not (self.gap or self.floor):  # unpaced skips the clock: every round trip passes here
                 with self.send_lock:
                     self._send(msg)
             else:
-                node = destination(can_id, bytes(data))
+                node = destination(can_id, data)
                 while True:
                     with self.send_lock:
                         wait = self._wait(node, self.clock())

@@ -58,7 +58,8 @@ class CallerReadNotifier:
         self.exception: BaseException | None = None
         self._clock = clock
         self._read = threading.RLock()  # held by whoever is in bus.recv and dispatching what it read
-        self._cond = threading.Condition()  # guards the fields below; the background thread parks on it
+        self._mutex = threading.Lock()  # guards the fields below
+        self._cond = threading.Condition(self._mutex)  # the background thread parks on it
         self._waiters = 0
         self._handover = False  # a leader left while others waited: the background thread serves them
         self._idle_since = clock()
@@ -105,50 +106,45 @@ class CallerReadNotifier:
         passes (False), reading and dispatching the bus meanwhile whenever nobody else does."""
         if arrived.acquire(blocking=False):
             return True
-        deadline = self._clock() + timeout
-        with self._cond:
+        clock = self._clock
+        deadline = clock() + timeout
+        led = False
+        with self._mutex:  # a plain lock: this runs on every round trip
             self._waiters += 1
         try:
             while True:
-                remaining = deadline - self._clock()
+                remaining = deadline - clock()
                 if remaining <= 0:
                     return arrived.acquire(blocking=False)
                 if self._read.acquire(blocking=False):
+                    led = True
                     try:
-                        if self._lead(arrived, deadline):
-                            return True
+                        while True:
+                            # at most one receive cycle per recv: a reply lock released from another
+                            # thread (abort_pending) is seen within it even on a silent bus
+                            msg = self._recv(min(remaining, self.timeout))
+                            if msg is not None:
+                                self.caller_reads += 1
+                                self._dispatch(msg)
+                            if arrived.acquire(blocking=False):
+                                return True
+                            remaining = deadline - clock()
+                            if remaining <= 0:
+                                return False
                     finally:
                         self._read.release()
-                        self._leave()
                 elif arrived.acquire(timeout=min(remaining, self.follow_slice)):
                     return True
         finally:
-            with self._cond:
+            with self._mutex:
                 self._waiters -= 1
                 if not self._waiters:
                     self._handover = False
-                    self._idle_since = self._clock()
-
-    def _lead(self, arrived: threading.Lock, deadline: float) -> bool:
-        while True:
-            remaining = deadline - self._clock()
-            if remaining <= 0:
-                return arrived.acquire(blocking=False)
-            # at most one receive cycle per recv: a reply lock released from another thread
-            # (abort_pending) is seen within it even on a silent bus
-            msg = self._recv(min(remaining, self.timeout))
-            if msg is not None:
-                self.caller_reads += 1
-                self._dispatch(msg)
-            if arrived.acquire(blocking=False):
-                return True
-
-    def _leave(self) -> None:
-        # others still wait (this caller's count is taken off by wait_for's finally): serve them now
-        with self._cond:
-            if self._waiters > 1 and not self._handover:
-                self._handover = True
-                self._cond.notify()
+                    self._idle_since = clock()
+                elif led and not self._handover:
+                    # a leader leaves while others wait: the background thread serves them now
+                    self._handover = True
+                    self._cond.notify()
 
     # -- reading and dispatching ----------------------------------------------------------------
 
