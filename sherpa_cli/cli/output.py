@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import sys
 from collections.abc import Iterable, Sequence
 from contextvars import ContextVar
@@ -115,8 +116,15 @@ class Output:
               *, right: Iterable[int] = (), drop: Sequence[int] | None = None, one_line: bool = False) -> None:
         if self.discard_results:
             return  # not even laid out: the table is what costs
-        self.result(make_table(title, columns, rows, right=right, drop=drop,
-                               width=self._console(stderr=False).width, one_line=one_line))
+        console = self._console(stderr=False)
+        rows = list(rows)
+        if title is None and console.color_system is None:
+            text = plain_table(columns, rows, right=right, width=console.width)
+            if text is not None:
+                console.file.write(text)
+                console.file.flush()
+                return
+        self.result(make_table(title, columns, rows, right=right, drop=drop, width=console.width, one_line=one_line))
 
     # diagnostics (stderr)
     def info(self, text: str) -> None:
@@ -157,6 +165,36 @@ class Output:
         err.file.flush()
         answer = sys.stdin.readline().strip().lower()
         return answer in ("y", "yes")
+
+
+_MARKUP = re.compile(r"\[[a-z#/@]|\\")
+
+
+def plain_table(columns: Sequence[str], rows: Iterable[Sequence[Any]], *, right: Iterable[int] = (),
+                width: int) -> str | None:
+    """The text rich prints for :func:`make_table` without a title, colour or anything to fold, at a
+    fraction of its cost (issue 26 item 4: `program-limits` draws a table per drive, a quarter of
+    its time at 126 drives); None when rich must lay it out (a cell it would fold or parse as
+    markup, wide or control characters). tests/test_output_plain_table.py holds it to rich's
+    output."""
+    texts = [["" if v is None else str(v) for v in row] for row in rows]
+    cells = [*columns, *(c for row in texts for c in row)]
+    if any(not c.isascii() or not c.isprintable() or _MARKUP.search(c) for c in cells):
+        return None
+    if any(len(row) != len(columns) for row in texts):
+        return None
+    widths = [max([len(columns[i]), *(len(row[i]) for row in texts)]) for i in range(len(columns))]
+    inner = sum(widths) + 3 * (len(columns) - 1)
+    if inner + 2 > width:
+        return None
+    right_cols = set(right)
+
+    def line(row: Sequence[str]) -> str:
+        return " " + "   ".join(c.rjust(w) if i in right_cols else c.ljust(w)
+                                  for i, (c, w) in enumerate(zip(row, widths, strict=True))) + " \n"
+
+    blank = " " * (inner + 2) + "\n"
+    return "".join([blank, line(columns), " " + "\u2500" * inner + " \n", *map(line, texts), blank])
 
 
 def make_table(title: str | None, columns: Sequence[str], rows: Iterable[Sequence[Any]],
