@@ -4,6 +4,8 @@ and counted, so a tool that paces too fast is caught. Time moves only through a 
 
 from __future__ import annotations
 
+import pytest
+
 from sherpa_cli.elmo.codec import encode_query, encode_set
 from sherpa_cli.sim import ManualClock, SimSettings
 from sherpa_cli.sim.drive import SimDrive
@@ -60,3 +62,22 @@ def test_off_by_default_and_frames_to_other_nodes_do_not_count():
     assert paced.receive(RPDO2, encode_set("AC", 0, 150000))
     assert not paced.receive(RPDO2 + 1, encode_query("AC"))  # not addressed to it: ignored, not an overrun
     assert paced.overruns == [] and drive.overruns == []
+
+
+def test_the_config_sets_a_simulated_drives_receive_buffer(tmp_path):
+    from pathlib import Path
+
+    from sherpa_cli.config import load_config
+    from sherpa_cli.errors import SherpaError
+    from sherpa_cli.sim.arm import SimArm
+
+    text = Path("configs/appendix-c/example1.yaml").read_text(encoding="utf-8")
+    cfg_path = tmp_path / "a.yaml"
+    drive = next(iter(load_config("configs/appendix-c/example1.yaml").drives))
+    cfg_path.write_text(text + f"\nsim: {{drives: {{{drive}: {{rx_buffer: 0.0005}}}}}}\n", encoding="utf-8")
+    cfg = load_config(cfg_path)
+    assert cfg.sim[drive].rx_buffer == 0.0005
+    assert SimArm.in_process(cfg).drives[drive].settings.rx_buffer_s == 0.0005
+    cfg_path.write_text(text + f"\nsim: {{drives: {{{drive}: {{rx_buffer: -1}}}}}}\n", encoding="utf-8")
+    with pytest.raises(SherpaError, match="rx_buffer"):
+        load_config(cfg_path)

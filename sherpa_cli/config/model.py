@@ -368,6 +368,9 @@ class SimDriveConfig:
 
     reply_latency: float = 0.0  # s added to every interpreter reply
     sdo_latency: float = 0.0  # s added to every SDO answer
+    # s the drive's one receive buffer holds a frame unless answered (issue 26): one more frame to it
+    # meanwhile is lost (an overrun), so a tool that paces too fast is caught; 0 = off
+    rx_buffer: float = 0.0
     drop_probability: float = 0.0  # chance that a frame to or from the drive is lost
     die_at: float | None = None  # s after start: the drive goes silent for good
     reboot_at: float | None = None  # s after start: the drive reboots once
