@@ -55,6 +55,8 @@ class CallerReadNotifier:
         self.idle_after = idle_after
         #: how long a follower waits on its own reply before it tries to lead
         self.follow_slice = follow_slice
+        #: how often the parked background thread looks whether callers stopped waiting
+        self.waiting_park = min(timeout, 0.005)
         self.exception: BaseException | None = None
         self._clock = clock
         self._read = threading.RLock()  # held by whoever is in bus.recv and dispatching what it read
@@ -169,7 +171,10 @@ class CallerReadNotifier:
         if self._handover and self._waiters:
             return 0.0
         if self._waiters:
-            return self.timeout
+            # nobody tells this thread when the last waiter leaves (that would cost every round trip
+            # a wake-up): it looks again this often, so a listener's frame waits at most this long
+            # plus idle_after once callers stop
+            return self.waiting_park
         left = self._idle_since + self.idle_after - now
         return 0.0 if left <= 0 else left
 
