@@ -58,3 +58,13 @@ def test_an_expectation_on_stdout_still_sees_it(cli, tmp_path, tables):
     r = cli("recipe", "run", _recipe(tmp_path, text))
     assert r.exit_code == 0, r.stdout + r.stderr
     assert tables
+
+
+def test_checking_a_recipe_leaves_the_shared_command_tree_as_it_was(cli, tmp_path):
+    """The recipe check parses each step on the command tree `run` uses (built once per process);
+    click keeps the first help option it makes for a command, so the check must not change it."""
+    text = "steps:\n  - {run: program-limits elbow_pitch}\n  - {run: log record elbow_pitch --for 1 -o x.csv}\n"
+    r = cli("recipe", "check", _recipe(tmp_path, text))
+    assert r.exit_code == 0, r.stdout + r.stderr
+    for argv in (["program-limits", "--help"], ["log", "record", "--help"]):
+        assert "-h, --help" in cli(*argv).stdout, argv
