@@ -123,7 +123,7 @@ def bench_scan(rounds: int = 5) -> Result:
 
     One SDO timeout is what probing one id costs when nobody answers, and what the scan must
     listen after its last probe; the whole command (Python start-up, config, the simulated
-    arm's power-up, ids 1..127 on 3 buses at once, closing) must stay within two of them.
+    arm's power-up, ids 1..127 on 3 buses at once, closing) must stay within 1.5 of them (issue 26).
     """
     from sherpa_cli.config import load_config
 
@@ -132,7 +132,7 @@ def bench_scan(rounds: int = 5) -> Result:
     _fresh_wall(cmd)  # warm-up
     wall = statistics.median(_fresh_wall(cmd) for _ in range(rounds))
     timeout = cfg.protocol.sdo_timeout
-    goal = "<= 2"
+    goal = "<= 1.5"  # issue 26: was <= 2
     ratio = wall / timeout
     return Result("scan", round(wall * 1000, 1), "ms", round(ratio, 2), goal, _judge(ratio, goal),
                   f"median of {rounds} runs of `sherpa --sim scan` / protocol.sdo_timeout {timeout * 1000:g} ms; "
@@ -366,7 +366,7 @@ def bench_sdo(uploads: int = 1000, rounds: int = 3) -> Result:
                 runs.append(_cpu_per_op(upload, uploads))
     cpu = statistics.median(runs)
     ratio = cpu / BUS_PAIR_S
-    goal = "<= 0.5"
+    goal = "<= 0.35"  # issue 26: was <= 0.5
     return Result("sdo", round(cpu * 1e6, 1), "us CPU", round(ratio, 2), goal, _judge(ratio, goal),
                   f"CPU per upload of 0x1000:0 (ArmSession.sdo(ref).upload) / 222 us bus time; median of "
                   f"{rounds} x {uploads}; bare python-can pair on the same transport: "
@@ -402,13 +402,16 @@ def _program_arm_once(cfg, workers: int) -> tuple[float, float]:
     return wall, max(p.elapsed + o.elapsed for p, o in zip(plans, result.outcomes, strict=True))
 
 
+PROGRAM_SPEEDUP_GOAL = 7  # issue 26: program-limits on 14 drives at least 7x faster than drive after drive
+
+
 def bench_program(rounds: int = 3) -> Result:
     """`program-limits --apply` on the whole simulated arm (14 drives, 3 buses, 1 ms reply latency),
     with the shipped pacing (each bus's send_interval_us) on.
 
     Ratio: wall time / the longest single drive's programming time in the same run (every
     drive in its own worker, so the arm takes as long as its slowest drive). Also the speed-up
-    over programming the drives one after another (goal >= 5).
+    over programming the drives one after another (goal >= 7, issue 26; was >= 5).
     """
     from sherpa_cli.config import load_config
 
@@ -421,10 +424,82 @@ def bench_program(rounds: int = 3) -> Result:
     ratio = wall / longest
     gaps = sorted({bus.send_interval_us for bus in cfg.buses.values()})
     return Result("program", round(wall * 1000, 1), "ms", round(ratio, 2), goal,
-                  _judge(ratio, goal) and speedup >= 5,
+                  _judge(ratio, goal) and speedup >= PROGRAM_SPEEDUP_GOAL,
                   f"wall / longest drive ({longest * 1000:.0f} ms), median of {rounds}; speed-up over one "
-                  f"drive after another ({serial * 1000:.0f} ms): {speedup:.1f}x (goal >= 5); "
+                  f"drive after another ({serial * 1000:.0f} ms): {speedup:.1f}x (goal >= {PROGRAM_SPEEDUP_GOAL}); "
                   f"pacing on (send_interval_us {', '.join(map(str, gaps))})")
+
+
+# -- scaling: 14 / 42 / 126 drives ---------------------------------------------------------------
+
+def scaled_config(cfg, copies: int):
+    """The arm ``copies`` times over: copy k > 0 of every bus, drive, joint and pair gets the suffix
+    ``_k`` (same node ids on its own buses). Simulator faults, devices and power-up positions stay
+    with the original arm only."""
+    import dataclasses
+
+    def tag(name: str | None, k: int) -> str | None:
+        return name if name is None or k == 0 else f"{name}_{k}"
+
+    buses, drives, joints, pairs = {}, {}, {}, {}
+    for k in range(copies):
+        for b in cfg.buses.values():
+            buses[tag(b.name, k)] = dataclasses.replace(b, name=tag(b.name, k), channel=tag(b.channel, k))
+        for d in cfg.drives.values():
+            drives[tag(d.name, k)] = dataclasses.replace(d, name=tag(d.name, k), bus=tag(d.bus, k))
+        for j in cfg.joints.values():
+            joints[tag(j.name, k)] = dataclasses.replace(j, name=tag(j.name, k), drive=tag(j.drive, k),
+                                                         pair=tag(j.pair, k))
+        for p in cfg.pairs.values():
+            pairs[tag(p.name, k)] = dataclasses.replace(p, name=tag(p.name, k), drive_a=tag(p.drive_a, k),
+                                                        drive_b=tag(p.drive_b, k), sigma=tag(p.sigma, k),
+                                                        delta=tag(p.delta, k))
+    return dataclasses.replace(cfg, name=f"{cfg.name}-x{copies}", buses=buses, drives=drives, joints=joints,
+                               pairs=pairs)
+
+
+def _scan_once(cfg) -> float:
+    """ops.scan of every bus of the simulated arm ``cfg`` (in this process): wall time in s."""
+    from sherpa_cli.bus.session import ArmSession
+    from sherpa_cli.ops.scan import PROBLEM_VERDICTS, scan
+    from sherpa_cli.sim.arm import SimArm
+
+    with tempfile.TemporaryDirectory() as state:
+        os.environ["XDG_STATE_HOME"] = state
+        with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as session:
+            start = time.perf_counter()
+            report = scan(session)
+            wall = time.perf_counter() - start
+    found = sum(1 for bus in report.buses for n in bus.nodes if n.drive and n.verdict not in PROBLEM_VERDICTS)
+    if found != len(cfg.drives):
+        raise RuntimeError(f"scaling scan: {found} of {len(cfg.drives)} drives found")
+    return wall
+
+
+def bench_scaling(sizes: tuple[int, ...] = (1, 3, 9)) -> Result:
+    """program-limits --apply and scan on the simulated arm at 14, 42 and 126 drives (the arm 1, 3 and
+    9 times over, each copy on buses of its own), in this process. Printed: the wall time per drive
+    at each size and the linearity, the per-drive time of program-limits at 126 drives / at 14
+    (1 = flat; at most MAX_DRIVE_WORKERS drives are programmed at once, so on few cores it grows)."""
+    from sherpa_cli.config import load_config
+
+    base = load_config(ARM_CONFIG)
+    program_ms, scan_ms = {}, {}
+    for copies in sizes:
+        cfg = scaled_config(base, copies)
+        n = len(cfg.drives)
+        wall, _ = _program_arm_once(cfg, program_workers())
+        program_ms[n] = wall * 1000 / n
+        scan_ms[n] = _scan_once(cfg) * 1000
+    first, last = min(program_ms), max(program_ms)
+    ratio = program_ms[last] / program_ms[first]
+    goal = "printed"  # issue 26 asks for per-drive cost and linearity printed, not a bound
+    per_drive = ", ".join(f"{n}: {v:.1f}" for n, v in program_ms.items())
+    scans = ", ".join(f"{n}: {v:.0f} ms ({v / n:.1f} per drive)" for n, v in scan_ms.items())
+    return Result("scaling", round(program_ms[last], 1), "ms/drive", round(ratio, 2), goal, True,
+                  f"program-limits --apply per drive at {last} / at {first} drives; per drive (ms) {per_drive}; "
+                  f"scan wall {scans}; scan linearity {scan_ms[last] / scan_ms[first]:.2f} for "
+                  f"{last / first:.0f}x the drives (ids 1..127 probed on every bus at once)")
 
 
 DEADMAN_JOINTS = (("elbow_pitch", "elbow_1a"), ("wrist_1", "wrist_1a"), ("wrist_3", "wrist_3a"))
@@ -883,6 +958,7 @@ BENCHMARKS: dict[str, Callable[[], Result]] = {
     "scan": bench_scan,
     "commission": bench_commission,
     "program": bench_program,
+    "scaling": bench_scaling,
     "startup": bench_startup,
     "deadman": bench_deadman,
     "home": bench_home,

@@ -31,7 +31,9 @@ def test_the_command_tree_is_built_once_per_process():
 
 #: what no `--help` may import: typer 0.29's pydantic adapters (pinned below 0.29 in pyproject.toml,
 #: issue 26 item 3), the CAN stack, rich, the plot, the full-screen view and the simulator
-NOT_FOR_HELP = ("pydantic", "can", "canopen", "rich", "matplotlib", "textual", "sherpa_cli.sim")
+NOT_FOR_HELP = ("pydantic", "can", "canopen", "rich", "matplotlib", "textual", "sherpa_cli.sim",
+                # the state files' lock and directory helpers, and the journal (~40 ms together)
+                "filelock", "platformdirs", "sherpa_cli.bus.journal")
 
 
 @pytest.mark.parametrize("argv", [["--help"], ["scan", "--help"], ["jog", "--help"], ["log", "record", "--help"],
@@ -57,3 +59,17 @@ def test_a_bus_command_imports_no_plot_view_or_mcap():
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, check=True)
     assert out.stdout.strip().splitlines()[-1].startswith("[] "), out.stdout
+
+
+@pytest.mark.parametrize("xdg", [None, "", "  ", "/tmp/sherpa-xdg"])
+def test_the_user_config_directory_is_platformdirs_own(monkeypatch, xdg):
+    """cli/app.py spells platformdirs' Linux rule out to spare its import; the two must agree."""
+    from platformdirs import user_config_dir
+
+    from sherpa_cli.cli.app import _user_config_dir
+
+    if xdg is None:
+        monkeypatch.delenv("XDG_CONFIG_HOME", raising=False)
+    else:
+        monkeypatch.setenv("XDG_CONFIG_HOME", xdg)
+    assert str(_user_config_dir()) == user_config_dir("sherpa-cli")

@@ -104,18 +104,40 @@ def _paced_network_class():
         #: how messages name this bus ("bus can1 (remote:127.0.0.1:5001)"), set by open_links
         where: str = "the bus"
 
+        #: ``protocol.caller_reads`` (issue 26 item 2): a caller waiting for a reply reads the bus
+        #: itself (bus/reader.py); False: python-can's Notifier thread reads and hands replies over
+        caller_reads: bool = True
+
         def __init__(self, bus: can.BusABC | None = None) -> None:
             super().__init__(bus)
             self.lost: BaseException | None = None  # the error that ended the receive thread
             self._last_send = float("-inf")
             self._last_to: dict[int, float] = {}  # node -> when the last frame to it went
             self._answered: dict[int, bool] = {}  # node -> it answered since that frame
+            self._messages: dict[tuple[int, bytes, bool], can.Message] = {}
 
-        def connect(self, *args: Any, **kwargs: Any) -> Any:
-            super().connect(*args, **kwargs)
-            if self.notifier is not None:
-                self.notifier.add_listener(_LostListener(self))
+        def connect(self, *args: Any, **kwargs: Any) -> PacedNetwork:
+            """canopen's ``connect`` with the bus already set; with ``caller_reads`` the notifier is
+            bus/reader.py's CallerReadNotifier (the same interface, installed as ``Network.notifier``)."""
+            if not self.caller_reads or self.bus is None:
+                super().connect(*args, **kwargs)
+                if self.notifier is not None:  # python-can's Notifier reports a dead bus through on_error
+                    self.notifier.add_listener(_LostListener(self))
+                return self
+            from sherpa_cli.bus.reader import CallerReadNotifier
+
+            # the same interface as can.Notifier where canopen and this tool use it; a dead bus is kept
+            # in its ``exception`` (lost_error reads it)
+            self.notifier = CallerReadNotifier(self.bus, self.listeners, self.NOTIFIER_CYCLE)  # type: ignore[assignment]
             return self
+
+        def wait_for(self, arrived: Any, timeout: float) -> bool:
+            """Wait for a listener to release ``arrived`` (a drive client's reply lock), reading the
+            bus on this thread meanwhile when the notifier allows it (bus/reader.py)."""
+            wait = getattr(self.notifier, "wait_for", None)
+            if wait is None:
+                return bool(arrived.acquire(timeout=timeout))
+            return bool(wait(arrived, timeout))
 
         def lost_error(self) -> BusLostError | None:
             """The bus's connection went away (the receive thread's error), as a message naming the bus."""
@@ -167,13 +189,23 @@ def _paced_network_class():
         def send_message(self, can_id: int, data: bytes, remote: bool = False) -> None:
             if not self.bus:
                 raise CommunicationError("bus is closed")
-            msg = can.Message(is_extended_id=can_id > 0x7FF, arbitration_id=can_id, data=data,
-                              is_remote_frame=remote)
+            data = bytes(data)
+            key = (can_id, data, remote)
+            msg = self._messages.get(key)
+            if msg is None:
+                # one Message per distinct frame: a poll loop sends the same few over and over, and
+                # building one costs about as much as the rest of the send (issue 26 item 2).
+                # python-can's buses do not change the Message they send (virtual sends a copy).
+                msg = can.Message(is_extended_id=can_id > 0x7FF, arbitration_id=can_id, data=data,
+                                  is_remote_frame=remote)
+                if len(self._messages) >= 1024:
+                    self._messages.clear()
+                self._messages[key] = msg
             if not (self.gap or self.floor):  # unpaced skips the clock: every round trip passes here
                 with self.send_lock:
                     self._send(msg)
             else:
-                node = destination(can_id, bytes(data))
+                node = destination(can_id, data)
                 while True:
                     with self.send_lock:
                         wait = self._wait(node, self.clock())
@@ -279,6 +311,7 @@ def open_links(cfg: ArmConfig, names: Iterable[str] | None = None, *,
             network.floor = cfg.protocol.pacing_floor_us / 1e6
             network.sdo_timeout = cfg.protocol.sdo_timeout
             network.where = f"bus {name} ({bus_cfg.interface or 'python-can config'}:{bus_cfg.channel or '-'})"
+            network.caller_reads = cfg.protocol.caller_reads
             network.connect()
             links[name] = BusLink(name, bus_cfg, bus, network)
             in_hand = None

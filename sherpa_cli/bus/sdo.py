@@ -12,10 +12,13 @@ The CANopen name tables (NMT states, vendor ids, abort codes) live in bus/canope
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import queue
 import struct
 import threading
+from collections.abc import Iterator
+from contextlib import contextmanager
 from typing import TYPE_CHECKING
 
 from sherpa_cli.bus.canopen_names import abort_text
@@ -29,6 +32,11 @@ if TYPE_CHECKING:
 logging.getLogger("canopen.sdo.client").addHandler(logging.NullHandler())
 
 NO_ANSWER_HINT = "check that the drive is powered and on this bus with this node id"
+
+#: CiA 301 VISIBLE_STRING objects (device name, hardware and software version): segmented on every
+#: drive, so they go to canopen's client at once instead of through the expedited fast path first
+SEGMENTED_OBJECTS = frozenset({(0x1008, 0), (0x1009, 0), (0x100A, 0)})
+ABORT_TIMED_OUT = 0x05040000  # what canopen's client sends when an SDO answer does not come
 
 
 def object_text(index: int, sub: int = 0, name: str | None = None) -> str:
@@ -45,14 +53,33 @@ def _transfer_failures() -> tuple[type[BaseException], ...]:
     return (CanopenSdoError, struct.error, can.CanError, OSError)
 
 
+class _Answer:
+    """The one expedited upload of a drive waiting for its answer (``arrived``: held until it is in)."""
+
+    __slots__ = ("arrived", "data")
+
+    def __init__(self) -> None:
+        self.arrived = threading.Lock()
+        self.arrived.acquire()
+        self.data: bytes | None = None
+
+
 class DriveSdo:
-    """One drive's SDO client: upload/download with SdoError on every failure; thread-safe per drive."""
+    """One drive's SDO client: upload/download with SdoError on every failure; thread-safe per drive.
+
+    On a network with ``wait_for`` (the session's PacedNetwork, issue 26 item 2) an upload first
+    goes the expedited fast path: one initiate request, its answer read on the caller's thread
+    (bus/reader.py), no canopen queue. An answer that starts a segmented transfer, and every
+    download, go through canopen's client, which is then associated with the network only for
+    that transfer (so the fast path's answers never pile up in its queue).
+    """
 
     def __init__(self, network: canopen.Network, node: int, *, label: str | None = None, timeout: float | None = None) -> None:
         import canopen
 
         self.node = node
         self.label = label or f"node {node}"
+        self._network = network
         self._remote = canopen.RemoteNode(node, canopen.ObjectDictionary())
         if timeout is None:
             # protocol.sdo_timeout, set on the session's networks (tests pass bare fakes: canopen's default)
@@ -60,9 +87,74 @@ class DriveSdo:
             timeout = found if isinstance(found, (int, float)) and not isinstance(found, bool) else None
         if timeout is not None:
             self._remote.sdo.RESPONSE_TIMEOUT = timeout
-        self._remote.associate_network(network)
+        wait_for = getattr(network, "wait_for", None)
+        self._wait = wait_for if callable(wait_for) else None
+        self._answer: _Answer | None = None
+        self._segmented: set[tuple[int, int]] = set(SEGMENTED_OBJECTS)  # (index, sub) learnt or known
+        if self._wait is None:
+            self._remote.associate_network(network)
+        else:
+            network.subscribe(0x580 + node, self._on_answer)
         self._lock = threading.Lock()
         self._failures = _transfer_failures()
+
+    @contextmanager
+    def _canopen(self) -> Iterator[None]:
+        """canopen's client on the network for one transfer (fast mode), or as it always is."""
+        if self._wait is None:
+            yield
+            return
+        self._remote.associate_network(self._network)
+        try:
+            yield
+        finally:
+            self._remote.remove_network()
+
+    def _on_answer(self, can_id: int, data: bytes | bytearray, timestamp: float) -> None:
+        answer = self._answer
+        if answer is not None and answer.data is None:
+            answer.data = bytes(data)
+            answer.arrived.release()
+
+    def _fast_upload(self, index: int, sub: int, name: str | None) -> bytes | None:
+        """An expedited upload on the caller's thread; None when the drive starts a segmented one."""
+        assert self._wait is not None
+        request = bytes((0x40, index & 0xFF, index >> 8, sub, 0, 0, 0, 0))
+        answer = self._answer = _Answer()
+        try:
+            try:
+                self._network.send_message(0x600 + self.node, request)
+            except self._failures as exc:
+                raise self._error("upload", index, sub, name, exc) from None
+            if not self._wait(answer.arrived, self.timeout):
+                # as canopen's client does: tell the drive the transfer is over
+                with contextlib.suppress(*self._failures):
+                    self._network.send_message(0x600 + self.node, bytes((0x80, index & 0xFF, index >> 8, sub))
+                                               + ABORT_TIMED_OUT.to_bytes(4, "little"))
+                raise self._error("upload", index, sub, name, None, timed_out=True)
+        finally:
+            self._answer = None
+        data = answer.data or b""
+        if len(data) < 4:
+            raise self._error("upload", index, sub, name, None, malformed="too short")
+        command = data[0]
+        if command == 0x80:
+            code = int.from_bytes(data[4:8].ljust(4, b"\0"), "little")
+            raise self._error("upload", index, sub, name, None, aborted=code)
+        if command & 0xE0 != 0x40:
+            raise self._error("upload", index, sub, name, None, malformed=f"Unexpected response 0x{command:02X}")
+        got_index, got_sub = data[1] | data[2] << 8, data[3]
+        if (got_index, got_sub) != (index, sub):
+            raise self._error("upload", index, sub, name, None,
+                              malformed=f"Node returned a value for 0x{got_index:04X}:{got_sub:02X} instead")
+        if not command & 0x02:  # not expedited: a segmented transfer, canopen's business
+            return None
+        size = 4 - (command >> 2 & 0x03) if command & 0x01 else 4
+        value = data[4:4 + size]
+        if len(value) != size:
+            raise self._error("upload", index, sub, name, None,
+                              malformed=f"{len(value)} data byte(s) where the answer announces {size}")
+        return value
 
     @property
     def timeout(self) -> float:
@@ -71,8 +163,13 @@ class DriveSdo:
     def upload(self, index: int, sub: int = 0, *, name: str | None = None) -> bytes:
         """One SDO upload (expedited or segmented); ``name`` words the object in an error."""
         with self._lock:
+            if self._wait is not None and (index, sub) not in self._segmented:
+                fast = self._fast_upload(index, sub, name)
+                if fast is not None:
+                    return fast
+                self._segmented.add((index, sub))  # next time straight to canopen
             try:
-                with self._remote.sdo.open(index, sub, "rb", buffering=0) as fp:
+                with self._canopen(), self._remote.sdo.open(index, sub, "rb", buffering=0) as fp:
                     size = getattr(fp, "size", None)
                     data = bytes(fp.read())
             except self._failures as exc:
@@ -86,18 +183,22 @@ class DriveSdo:
         """One SDO download (expedited or segmented)."""
         with self._lock:
             try:
-                self._remote.sdo.download(index, sub, data)
+                with self._canopen():
+                    self._remote.sdo.download(index, sub, data)
             except self._failures as exc:
                 raise self._error("download", index, sub, name, exc) from None
 
     def close(self) -> None:
         """Stop listening on the network (the session's networks go away with it anyway)."""
-        self._remote.remove_network()
+        if self._wait is None:
+            self._remote.remove_network()
+        else:
+            self._network.unsubscribe(0x580 + self.node, self._on_answer)
 
     # -- errors -----------------------------------------------------------------------------------
 
     def _error(self, op: str, index: int, sub: int, name: str | None, exc: BaseException | None, *,
-               malformed: str | None = None) -> SdoError:
+               malformed: str | None = None, aborted: int | None = None, timed_out: bool = False) -> SdoError:
         from canopen.sdo.exceptions import SdoAbortedError, SdoCommunicationError
 
         what = object_text(index, sub, name)
@@ -105,6 +206,12 @@ class DriveSdo:
         hint = None
         if malformed is not None:
             reason, detail = "malformed", f"SDO {op} of {what}: malformed answer ({malformed})"
+        elif aborted is not None:
+            code = aborted
+            reason, detail = "abort", f"SDO {op} of {what} aborted with 0x{code:08X} ({abort_text(code)})"
+        elif timed_out:
+            reason, detail = "timeout", f"no answer to the SDO {op} of {what} within {self.timeout:g} s"
+            hint = NO_ANSWER_HINT
         elif isinstance(exc, SdoAbortedError):
             code = exc.code
             reason, detail = "abort", f"SDO {op} of {what} aborted with 0x{code:08X} ({abort_text(code)})"

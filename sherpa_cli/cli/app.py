@@ -8,6 +8,7 @@ only inside the functions that need it, so ``sherpa --help`` stays fast.
 from __future__ import annotations
 
 import os
+import sys
 from pathlib import Path
 
 import typer
@@ -47,10 +48,19 @@ def config_candidates() -> list[tuple[Path, str]]:
     env = os.environ.get("SHERPA_CONFIG")
     if env:
         return [(Path(env), "$SHERPA_CONFIG")]
+    return [(_user_config_dir() / CONFIG_NAME, "the user config directory"),
+            (DEFAULT_CONFIG, "the working directory")]
+
+
+def _user_config_dir() -> Path:
+    """platformdirs' user config directory; on Linux its XDG rule without importing it, since every
+    command (`scan --help` too) looks here first (issue 26 item 3: ~7 ms of start-up)."""
+    if sys.platform.startswith("linux"):
+        base = os.environ.get("XDG_CONFIG_HOME", "")
+        return Path(base if base.strip() else os.path.expanduser("~/.config")) / "sherpa-cli"
     from platformdirs import user_config_dir
 
-    return [(Path(user_config_dir("sherpa-cli")) / CONFIG_NAME, "the user config directory"),
-            (DEFAULT_CONFIG, "the working directory")]
+    return Path(user_config_dir("sherpa-cli"))
 
 
 def default_config_path() -> tuple[Path, tuple[str, ...]]:
@@ -90,9 +100,12 @@ def root(
         False, "--allow-user-program", help="Let moving commands move a drive whose user program runs (PS=1); "
         "without it they refuse (SV is refused either way)."),
 ) -> None:
-    from sherpa_cli.bus import journal
+    # the journal (and the state-file modules under it) only when it is asked for or already loaded
+    # (an earlier in-process run): `sherpa scan --help` passes here too (issue 26 item 3, start-up)
+    if recover or "sherpa_cli.bus.journal" in sys.modules:
+        from sherpa_cli.bus import journal
 
-    journal.set_auto_recover(recover)
+        journal.set_auto_recover(recover)
     config_path, looked = (config, ()) if config is not None else default_config_path()
     ctx.obj = context.CURRENT = AppState.create(
         config_path=config_path,

@@ -79,7 +79,11 @@ def run(argv: Sequence[str] | None = None) -> int:
     context.CURRENT = None
     try:
         refuse_non_ascii_numbers(args)
-        code = _root()(args=args, prog_name="sherpa", standalone_mode=False)
+        # the cached click tree, not ``Typer.__call__`` (which rebuilds it on every call: a recipe
+        # runs ~10 commands in one process, issue 26 item 3). The app's pretty exceptions are off,
+        # so typer's except hook would print the standard traceback anyway.
+        command: Any = root_command()
+        code = command(args=args, prog_name="sherpa", standalone_mode=False)
         return int(code) if isinstance(code, int) else int(ExitCode.OK)
     except SherpaError as exc:
         if debug:

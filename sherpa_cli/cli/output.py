@@ -8,8 +8,10 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import sys
 from collections.abc import Iterable, Sequence
+from contextvars import ContextVar
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
@@ -36,6 +38,13 @@ def output_width(stream: Any) -> int | None:
     return None if tty else UNWRAPPED
 
 
+#: Set while a command runs whose results nobody will see or read (a recipe step without --verbose,
+#: a report or an expectation on its stdout, cli/recipe_cmd.py): the Output created for it then
+#: renders no results (issue 26 item 4: commission drew 46 rich tables per run for output shown
+#: only with --verbose). Diagnostics on stderr are kept: warnings and errors are shown.
+DISCARD_RESULTS: ContextVar[bool] = ContextVar("sherpa_discard_results", default=False)
+
+
 def _color_allowed(no_color_flag: bool) -> bool:
     # https://no-color.org: any non-empty NO_COLOR disables colour
     return not no_color_flag and not os.environ.get("NO_COLOR")
@@ -46,12 +55,14 @@ class Output:
     json_mode: bool = False
     color: bool = True
     assume_yes: bool = False
+    #: results (stdout) are neither rendered nor written (DISCARD_RESULTS); stderr is unchanged
+    discard_results: bool = False
     _out: Console | None = field(default=None, repr=False)
     _err: Console | None = field(default=None, repr=False)
 
     @classmethod
     def create(cls, *, json_mode: bool = False, no_color: bool = False) -> Output:
-        return cls(json_mode=json_mode, color=_color_allowed(no_color))
+        return cls(json_mode=json_mode, color=_color_allowed(no_color), discard_results=DISCARD_RESULTS.get())
 
     def _console(self, stderr: bool) -> Console:
         from rich.console import Console
@@ -78,25 +89,42 @@ class Output:
 
     # results (stdout)
     def result(self, renderable: Any) -> None:
+        if self.discard_results:
+            return
         self._console(stderr=False).print(renderable)
 
     def line(self, text: str = "") -> None:
+        if self.discard_results:
+            return
         # soft_wrap: a long line stays one line (the terminal wraps it), so it greps and diffs well
         self._console(stderr=False).print(text, markup=False, soft_wrap=True)
 
     def raw(self, text: str) -> None:
         """Text that must reach stdout byte for byte (YAML, frames): no wrapping, no styling."""
+        if self.discard_results:
+            return
         sys.stdout.write(text)
         sys.stdout.flush()
 
     def json(self, obj: Any) -> None:
+        if self.discard_results:
+            return
         sys.stdout.write(json.dumps(obj, indent=2, ensure_ascii=False) + "\n")
         sys.stdout.flush()
 
     def table(self, title: str | None, columns: Sequence[str], rows: Iterable[Sequence[Any]],
               *, right: Iterable[int] = (), drop: Sequence[int] | None = None, one_line: bool = False) -> None:
-        self.result(make_table(title, columns, rows, right=right, drop=drop,
-                               width=self._console(stderr=False).width, one_line=one_line))
+        if self.discard_results:
+            return  # not even laid out: the table is what costs
+        console = self._console(stderr=False)
+        rows = list(rows)
+        if title is None and console.color_system is None:
+            text = plain_table(columns, rows, right=right, width=console.width)
+            if text is not None:
+                console.file.write(text)
+                console.file.flush()
+                return
+        self.result(make_table(title, columns, rows, right=right, drop=drop, width=console.width, one_line=one_line))
 
     # diagnostics (stderr)
     def info(self, text: str) -> None:
@@ -137,6 +165,36 @@ class Output:
         err.file.flush()
         answer = sys.stdin.readline().strip().lower()
         return answer in ("y", "yes")
+
+
+_MARKUP = re.compile(r"\[[a-z#/@]|\\")
+
+
+def plain_table(columns: Sequence[str], rows: Iterable[Sequence[Any]], *, right: Iterable[int] = (),
+                width: int) -> str | None:
+    """The text rich prints for :func:`make_table` without a title, colour or anything to fold, at a
+    fraction of its cost (issue 26 item 4: `program-limits` draws a table per drive, a quarter of
+    its time at 126 drives); None when rich must lay it out (a cell it would fold or parse as
+    markup, wide or control characters). tests/test_output_plain_table.py holds it to rich's
+    output."""
+    texts = [["" if v is None else str(v) for v in row] for row in rows]
+    cells = [*columns, *(c for row in texts for c in row)]
+    if any(not c.isascii() or not c.isprintable() or _MARKUP.search(c) for c in cells):
+        return None
+    if any(len(row) != len(columns) for row in texts):
+        return None
+    widths = [max([len(columns[i]), *(len(row[i]) for row in texts)]) for i in range(len(columns))]
+    inner = sum(widths) + 3 * (len(columns) - 1)
+    if inner + 2 > width:
+        return None
+    right_cols = set(right)
+
+    def line(row: Sequence[str]) -> str:
+        return " " + "   ".join(c.rjust(w) if i in right_cols else c.ljust(w)
+                                  for i, (c, w) in enumerate(zip(row, widths, strict=True))) + " \n"
+
+    blank = " " * (inner + 2) + "\n"
+    return "".join([blank, line(columns), " " + "\u2500" * inner + " \n", *map(line, texts), blank])
 
 
 def make_table(title: str | None, columns: Sequence[str], rows: Iterable[Sequence[Any]],

@@ -52,13 +52,15 @@ def _parse_sets(values: Sequence[str] | None) -> dict[str, str]:
     return out
 
 
-def _invoker(st: AppState) -> Invoke:
+def _invoker(st: AppState, shown: Callable[[], bool] = lambda: True) -> Invoke:
     """Run one sherpa command line in this process with the runner's global options.
 
     Output is captured (the recipe shows it under the step) and stdin is empty, so a step
-    never waits at a prompt nobody sees: questions belong in `confirm:` steps.
+    never waits at a prompt nobody sees: questions belong in `confirm:` steps. ``shown()`` False:
+    nobody sees or reads the step's stdout, so the command renders no results at all (issue 26 item 4).
     """
     from sherpa_cli.cli.boundary import run
+    from sherpa_cli.cli.output import DISCARD_RESULTS
     from sherpa_cli.recipes.runner import CommandRun
 
     base = ["--config", str(st.config_path), "--no-color"]
@@ -72,10 +74,12 @@ def _invoker(st: AppState) -> Invoke:
         out, err = io.StringIO(), io.StringIO()
         stdin = sys.stdin
         sys.stdin = io.StringIO("")
+        discard = DISCARD_RESULTS.set(not shown())
         try:
             with redirect_stdout(out), redirect_stderr(err):
                 code = run([*base, *argv])
         finally:
+            DISCARD_RESULTS.reset(discard)
             sys.stdin = stdin
             context.CURRENT = outer
         return CommandRun(code, out.getvalue(), err.getvalue())
@@ -191,7 +195,14 @@ def execute(st: AppState, recipe_path: Path, *, apply: bool, yes: bool, start: s
             out.line(recipe.description.strip())
     live = _progress(st)
 
+    # whether the step about to run has readers of its stdout: shown (--verbose), stored (--report,
+    # --junit, the --json document) or checked (stdout_contains, json); otherwise it renders nothing
+    # (issue 26 item 4)
+    needs_stdout = [True]
+
     def on_start(step: Step, dry: bool) -> None:
+        needs_stdout[0] = bool(verbose or st.json_mode or report is not None or junit is not None
+                               or step.expect.stdout_contains or step.expect.json)
         if st.json_mode:
             return
         what = f"confirm: {step.confirm}" if step.kind == "confirm" else step.command_text() if not dry \
@@ -256,7 +267,7 @@ def execute(st: AppState, recipe_path: Path, *, apply: bool, yes: bool, start: s
         return st.out.confirm(_with_drives(question, done))
 
     with context.shared_session(st):
-        rep = run_recipe(recipe, _invoker(st), apply=apply, confirm=confirm, start_at=start_at,
+        rep = run_recipe(recipe, _invoker(st, lambda: needs_stdout[0]), apply=apply, confirm=confirm, start_at=start_at,
                          on_start=on_start, on_end=on_end, clock=clock)
     write_reports(rep, report, junit)
     if st.json_mode:

@@ -58,18 +58,24 @@ def check_step_commands(recipe: Recipe) -> None:
         if digits is not None:
             raise ConfigError(f"step {step.number} '{step.name}': {digits.message}", where, hint=digits.hint)
         cmd, args, words = _root(), list(step.argv), ["sherpa"]
+        # contexts chained from the root's, with its settings: the tree is the one `run` uses (built
+        # once per process), and click keeps the first help option it builds for a command, so a
+        # context without the root's help_option_names (-h) would change every later --help
+        ctx = typer.Context(cmd, info_name="sherpa", **getattr(cmd, "context_settings", {}))
         while isinstance(cmd, TyperGroup):
             if not args or args[0].startswith("-"):
                 raise refuse(f"missing command after '{' '.join(words)}'")
-            sub = cmd.get_command(typer.Context(cmd), args[0])
+            sub = cmd.get_command(ctx, args[0])
             if sub is None:
-                known = ", ".join(sorted(cmd.list_commands(typer.Context(cmd))))
+                known = ", ".join(sorted(cmd.list_commands(ctx)))
                 raise refuse(f"no such command '{' '.join([*words, args[0]])}' (commands: {known})")
             words.append(args.pop(0))
             cmd = sub
+            if isinstance(cmd, TyperGroup):
+                ctx = typer.Context(cmd, parent=ctx, info_name=words[-1], **getattr(cmd, "context_settings", {}))
         try:
             with redirect_stdout(io.StringIO()), redirect_stderr(io.StringIO()):
-                cmd.make_context(" ".join(words), args)  # parses, never runs
+                cmd.make_context(words[-1], args, parent=ctx)  # parses, never runs
         except typer.Exit:
             continue  # --help: harmless, it prints and ends the step
         except typer.TyperException as exc:

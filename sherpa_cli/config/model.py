@@ -237,6 +237,9 @@ class ProtocolConfig:
     # per-drive pacing: µs kept between any two frames on a bus (about one worst-case 8-byte frame,
     # 138 bits, at 1 Mbit/s); 0 = none
     pacing_floor_us: int = 140
+    # issue 26 item 2: a caller waiting for a reply reads the bus itself (bus/reader.py); False =
+    # python-can's Notifier thread reads every frame and hands replies over (one more thread switch)
+    caller_reads: bool = True
     # UI[n] that `home` sets to 1 once a joint is homed; RAM only, so a reset clears it (docs/motion.md)
     calibration_flag: int = 3
 
@@ -372,6 +375,9 @@ class SimDriveConfig:
 
     reply_latency: float = 0.0  # s added to every interpreter reply
     sdo_latency: float = 0.0  # s added to every SDO answer
+    # s the drive's one receive buffer holds a frame unless answered (issue 26): one more frame to it
+    # meanwhile is lost (an overrun), so a tool that paces too fast is caught; 0 = off
+    rx_buffer: float = 0.0
     drop_probability: float = 0.0  # chance that a frame to or from the drive is lost
     die_at: float | None = None  # s after start: the drive goes silent for good
     die_moving_after: float | None = None  # s after its first BG: the drive goes silent for good (mid-move)

@@ -116,6 +116,7 @@ def parse_protocol(top: Section, locs: Locs) -> ProtocolConfig:
         boot_timeout=sec.num("boot_timeout", d.boot_timeout),
         pacing=sec.str("pacing", d.pacing),
         pacing_floor_us=sec.int("pacing_floor_us", d.pacing_floor_us),
+        caller_reads=sec.bool("caller_reads", d.caller_reads),
         calibration_flag=sec.int("calibration_flag", d.calibration_flag),
     )
 

@@ -226,6 +226,8 @@ def _check_sim(cfg: ArmConfig, locs: Locs, r: _Report) -> None:
             r.error(locs.get("sim", "drives", name, "reply_latency"), "reply_latency must be >= 0")
         if faults.sdo_latency < 0:
             r.error(locs.get("sim", "drives", name, "sdo_latency"), "sdo_latency must be >= 0")
+        if faults.rx_buffer < 0:
+            r.error(locs.get("sim", "drives", name, "rx_buffer"), "rx_buffer must be >= 0")
         if not faults.speed_gain > 0:
             r.error(locs.get("sim", "drives", name, "speed_gain"), "speed_gain must be > 0")
         if faults.limit_trip_at is not None and faults.limit_trip_at < 0:
@@ -684,6 +686,7 @@ def _check_bounds(cfg: ArmConfig, locs: Locs, r: _Report) -> None:
         at_sim = lambda k: locs.get("sim", "drives", name, k)  # noqa: E731, B023  used in this iteration only
         within(sim_drive.reply_latency, 0.0, WAIT_MAX, at_sim("reply_latency"), "reply_latency", " s")
         within(sim_drive.sdo_latency, 0.0, WAIT_MAX, at_sim("sdo_latency"), "sdo_latency", " s")
+        within(sim_drive.rx_buffer, 0.0, WAIT_MAX, at_sim("rx_buffer"), "rx_buffer", " s")
         for key in ("die_at", "die_moving_after", "reboot_at", "limit_trip_at"):
             within(getattr(sim_drive, key), 0.0, SIM_TIME_MAX, at_sim(key), key, " s")
         within(sim_drive.speed_gain, 0.0, SPEED_GAIN_MAX, at_sim("speed_gain"), "speed_gain")

@@ -23,7 +23,7 @@ from sherpa_cli.elmo.codec import Reply
 from sherpa_cli.elmo.commands import COMMANDS
 from sherpa_cli.elmo.faults import Emcy, decode_emcy, ec_text
 from sherpa_cli.elmo.protocol import EMCY_BASE, NMT_ID, NMT_START
-from sherpa_cli.elmo.transport import Transport
+from sherpa_cli.elmo.transport import Transport, waiter
 from sherpa_cli.errors import (
     CodecError,
     CommunicationError,
@@ -85,6 +85,19 @@ class _Pending:
 
 
 @functools.lru_cache(maxsize=1024)
+def _cached_query(letters: str, index: int, long: bool) -> bytes:
+    return codec.encode_query(letters, index, long=long)
+
+
+def _query(letters: str, index: int, long: bool) -> bytes:
+    """A query frame, encoded once per (letters, index): a poll loop asks the same few (issue 26
+    item 2 measured ~9 us per encode). Anything but a plain str/int is encoded (and refused) uncached."""
+    if type(letters) is str and type(index) is int:
+        return _cached_query(letters, index, long)
+    return codec.encode_query(letters, index, long=long)
+
+
+@functools.lru_cache(maxsize=1024)
 def _key(letters: str, index: int) -> str:
     spec = COMMANDS.get(letters)
     return f"{letters}[{index}]" if index or (spec is not None and spec.is_array) else letters
@@ -110,9 +123,10 @@ class DriveClient:
     """One drive's binary interpreter. Thread-safe: callers queue on a per-drive lock.
 
     ``timeout`` is the wait for one reply; a request is sent ``1 + retries`` times before
-    :class:`DriveTimeoutError`. That wait is a real-time ``Event.wait``, because replies come
-    from the transport's thread. ``clock`` and ``sleep`` drive every longer wait (MO settle
-    window, SV blackout) so tests can run them on a fake clock.
+    :class:`DriveTimeoutError`. That wait is real time: the transport's ``wait`` (the caller reads
+    the bus itself, bus/reader.py) or a timed lock acquire while another thread delivers.
+    ``clock`` and ``sleep`` drive every longer wait (MO settle window, SV blackout) so tests can
+    run them on a fake clock.
     """
 
     def __init__(self, transport: Transport, node: int, *, name: str, timeout: float = 0.1, retries: int = 1,
@@ -146,6 +160,7 @@ class DriveClient:
         # paths skip a silent drive instead of spending a timeout per step on it
         self.silent = False
         self._boot_listening = False
+        self._wait = waiter(transport)  # resolved once: every round trip waits through it
         transport.subscribe(TPDO2_BASE + node, self._on_reply)
         transport.subscribe(EMCY_BASE + node, self._on_emcy)
 
@@ -163,7 +178,7 @@ class DriveClient:
 
     def get(self, letters: str, index: int = 0) -> int | float:
         """Query ``letters[index]``; the value's type follows the reply's type bit."""
-        frame = codec.encode_query(letters, index, long=self.settings.query_long)
+        frame = _query(letters, index, self.settings.query_long)
         what = _key(letters, index)
         with self._lock:
             reply = self._transact(frame, letters, index, what)
@@ -351,7 +366,7 @@ class DriveClient:
     # -- internals --------------------------------------------------------------------------------
 
     def _query_frame(self, letters: str, index: int) -> bytes:
-        return codec.encode_query(letters, index, long=self.settings.query_long)
+        return _query(letters, index, self.settings.query_long)
 
     def _transact(self, frame: bytes, letters: str, index: int, what: str, *, attempts: int | None = None,
                   before: bytes | None = None) -> Reply:
@@ -382,7 +397,8 @@ class DriveClient:
             for attempt in range(attempts):
                 if frame:  # an empty frame only waits (for a reply already on its way)
                     self.transport.send(RPDO2_BASE + self.node, frame)
-                if pending.arrived.acquire(timeout=self.timeout if wait is None else wait):
+                # the transport may let this thread read the bus itself until the reply is in
+                if self._wait(pending.arrived, self.timeout if wait is None else wait):
                     if pending.error is not None:
                         raise pending.error
                     return pending.reply

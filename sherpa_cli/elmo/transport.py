@@ -21,6 +21,8 @@ class Transport(Protocol):
 
     def send(self, can_id: int, data: bytes) -> None: ...
 
+    # optional: ``wait(arrived, timeout) -> bool`` (see waiter())
+
     def subscribe(self, can_id: int, callback: Callback) -> None: ...
 
 
@@ -29,12 +31,47 @@ class NetworkTransport:
 
     def __init__(self, network: Any) -> None:
         self.network = network
+        #: how a caller waits for its reply on this network, resolved once (see :func:`waiter`)
+        self.reply_waiter: Waiter = self._waiter()
 
     def send(self, can_id: int, data: bytes) -> None:
         self.network.send_message(can_id, bytes(data))
 
     def subscribe(self, can_id: int, callback: Callback) -> None:
         self.network.subscribe(can_id, callback)
+
+    def wait(self, arrived: threading.Lock, timeout: float) -> bool:
+        """Wait until a subscriber callback releases ``arrived`` (True, held again) or ``timeout``.
+
+        A network with ``wait_for`` (bus/links.py PacedNetwork) lets the waiting caller read the bus
+        itself (issue 26 item 2, bus/reader.py); anything else waits on the lock while its own
+        receive thread delivers."""
+        return self.reply_waiter(arrived, timeout)
+
+    def _waiter(self) -> Waiter:
+        # the notifier's own wait_for when it has one: one call per round trip instead of three
+        notifier_wait = getattr(getattr(self.network, "notifier", None), "wait_for", None)
+        if callable(notifier_wait):
+            return notifier_wait
+        network_wait = getattr(self.network, "wait_for", None)
+        if callable(network_wait):
+            return network_wait
+        return _acquire
+
+
+Waiter = Callable[[threading.Lock, float], bool]
+
+
+def _acquire(arrived: threading.Lock, timeout: float) -> bool:
+    return arrived.acquire(timeout=timeout)
+
+
+def waiter(transport: object) -> Waiter:
+    """How a client waits for a reply on ``transport``: its ``wait`` (the caller may read the bus
+    itself) or, for a transport without one (FakeTransport delivers inside ``send``), the lock.
+    ``reply_waiter`` (NetworkTransport: the notifier's own ``wait_for``) skips a call per round trip."""
+    wait = getattr(transport, "reply_waiter", None) or getattr(transport, "wait", None)
+    return wait if callable(wait) else _acquire
 
 
 def frame_text(direction: str, can_id: int, data: bytes) -> str:

@@ -78,6 +78,7 @@ def settings_for(cfg: ArmConfig, drive: str, **overrides: object) -> SimSettings
     faults = cfg.sim.get(drive)
     if faults is not None:
         base.update(reply_latency_s=faults.reply_latency, sdo_latency_s=faults.sdo_latency,
+                    rx_buffer_s=faults.rx_buffer,
                     drop_probability=faults.drop_probability,
                     die_at=faults.die_at, die_moving_after=faults.die_moving_after, reboot_at=faults.reboot_at, heartbeat_ms=faults.heartbeat_ms,
                     seed=faults.seed, limit_trip_at=faults.limit_trip_at,

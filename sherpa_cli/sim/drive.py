@@ -32,6 +32,7 @@ from sherpa_cli.elmo.protocol import (
     NMT_STOPPED,
     RPDO2_BASE,
     SDO_RX_BASE,
+    SDO_TX_BASE,
     SYNC_ID,
     TPDO2_BASE,
 )
@@ -187,6 +188,9 @@ class SimDrive:
         self._hb_last: float | None = None  # the consumed heartbeat's last arrival; None: not armed
         self._settle_until = -math.inf  # the interpreter is deaf until then (MO settle window)
         self._blackout_until = -math.inf  # SV blackout: nothing in or out until then
+        # the receive buffer (settings.rx_buffer_s): holds the last frame to this drive until then
+        self._rx_busy_until = -math.inf
+        self.overruns: list[tuple[float, int, bytes]] = []  # frames that found the buffer still full
         self._next_heartbeat = math.inf
         self._rpdo2_type = 255  # 0x1401:2
         self._rpdo2_buffer: bytes | None = None  # a synchronous RPDO2 waiting for SYNC
@@ -248,6 +252,13 @@ class SimDrive:
         if self._dead or t + TIME_EPS < self._blackout_until or self._dropped():
             self.lost.append((t, can_id, data))
             return False
+        if self.settings.rx_buffer_s and can_id in (RPDO2_BASE + self.node, SDO_RX_BASE + self.node):
+            if t + TIME_EPS < self._rx_busy_until:
+                # a frame before the drive took the last one: a tool that paces too fast (issue 26)
+                self.overruns.append((t, can_id, data))
+                self.lost.append((t, can_id, data))
+                return False
+            self._rx_busy_until = t + self.settings.rx_buffer_s
         if can_id == NMT:
             self._nmt(data[0])
         elif can_id == SYNC_ID:
@@ -275,6 +286,8 @@ class SimDrive:
     def send_later(self, can_id: int, data: bytes, delay: float) -> None:
         """Queue a frame made outside the drive (an SDO answer) to leave ``delay`` s from now, in
         order with the interpreter's replies; lost like them if the drive dies or reboots first."""
+        if can_id == SDO_TX_BASE + self.node:
+            self._rx_busy_until = min(self._rx_busy_until, self._t + delay)  # answered: buffer free
         heapq.heappush(self._replies, (self._t + delay, next(self._seq), (can_id, bytes(data))))
 
     def set_input(self, n: int, active: bool, direction: int = 0) -> None:
@@ -718,6 +731,7 @@ class SimDrive:
             return
         self.last_reply = reply
         release = self._t + self.settings.reply_latency_s
+        self._rx_busy_until = min(self._rx_busy_until, release)  # answered: the buffer is free again
         heapq.heappush(self._replies, (release, next(self._seq), (TPDO2_BASE + self.node, reply)))
         self._fire_events()
 

@@ -28,6 +28,11 @@ class SimSettings:
     reply_latency_s: float = 0.0
     # The same for SDO answers (0x580+node), e.g. a drive busy in its own program; 0 = at once.
     sdo_latency_s: float = 0.0
+    # The drive's one receive buffer (elmo-protocol.md 4.2, issue 26): a frame to this drive (its
+    # RPDO2 or SDO request) is held this long unless answered first; one more frame to the drive
+    # meanwhile is an overrun, lost and counted in ``overruns``. UNCONFIRMED how long a Whistle
+    # takes; 0 = off (every frame is taken at once).
+    rx_buffer_s: float = 0.0
     # Chance that any one frame to or from the drive is lost on the bus; drawn from a
     # random.Random(seed) so a failing run can be replayed.
     drop_probability: float = 0.0
@@ -135,7 +140,8 @@ class SimSettings:
     recorder_upload_fault: str = ""
 
     def __post_init__(self) -> None:
-        for name in ("mo_settle_s", "sv_blackout_s", "reply_latency_s", "sdo_latency_s", "start_skew_s", "lag_s"):
+        for name in ("mo_settle_s", "sv_blackout_s", "reply_latency_s", "sdo_latency_s", "start_skew_s", "lag_s",
+                     "rx_buffer_s"):
             if getattr(self, name) < 0:
                 raise ValueError(f"SimSettings.{name} must be >= 0")
         if not 0.0 <= self.drop_probability <= 1.0:
