@@ -128,7 +128,8 @@ def _paced_network_class():
 
             # the same interface as can.Notifier where canopen and this tool use it; a dead bus is kept
             # in its ``exception`` (lost_error reads it)
-            self.notifier = CallerReadNotifier(self.bus, self.listeners, self.NOTIFIER_CYCLE)  # type: ignore[assignment]
+            self.notifier = CallerReadNotifier(self.bus, self.listeners, self.NOTIFIER_CYCLE,  # type: ignore[assignment]
+                                               lost=self._bus_lost)
             return self
 
         def wait_for(self, arrived: Any, timeout: float) -> bool:
@@ -138,6 +139,12 @@ def _paced_network_class():
             if wait is None:
                 return bool(arrived.acquire(timeout=timeout))
             return bool(wait(arrived, timeout))
+
+        def _bus_lost(self, exc: BaseException) -> BaseException:
+            """A caller's read of the bus failed: the bus is gone (:class:`BusLostError` naming it)."""
+            if self.lost is None:
+                self.lost = exc
+            return self.lost_error() or exc
 
         def lost_error(self) -> BusLostError | None:
             """The bus's connection went away (the receive thread's error), as a message naming the bus."""

@@ -45,8 +45,12 @@ class CallerReadNotifier:
 
     def __init__(self, bus: _Bus, listeners: Iterable[Any], timeout: float = 0.02, *,
                  idle_after: float = 0.002, follow_slice: float = 0.001,
-                 clock: Callable[[], float] = time.monotonic, background: bool = True) -> None:
+                 clock: Callable[[], float] = time.monotonic, background: bool = True,
+                 lost: Callable[[BaseException], BaseException] | None = None) -> None:
         self.bus = bus
+        #: what a caller raises when reading the bus fails on its thread (the bus is gone): the
+        #: network's error naming the bus (bus/links.py); None: the adapter's own exception
+        self.lost = lost
         self.listeners: list[Any] = list(listeners)
         #: the background thread's longest receive (it checks whether to stop this often), as can.Notifier's
         self.timeout = timeout
@@ -155,6 +159,8 @@ class CallerReadNotifier:
             return self.bus.recv(timeout)
         except Exception as exc:  # the adapter went away: canopen's Network.check() raises it later
             self.exception = exc
+            if self.lost is not None and threading.current_thread() is not self._thread:
+                raise self.lost(exc) from exc  # a caller's read: one error naming the bus
             raise
 
     def _dispatch(self, msg: Any) -> None:
