@@ -285,7 +285,11 @@ def test_motion_settings_defaults_and_heartbeat_period():
 @pytest.mark.parametrize("motion,message", [
     ("{host_node_id: 5}", "host_node_id 5 is the node id of drive 'drive1'"),
     ("{host_node_id: 0}", "host_node_id 0 out of range 1..127"),
-    ("{consumer_time_ms: 70000}", "consumer_time_ms 70000 must be 1..65535"),
+    ("{consumer_time_ms: 70000}", "consumer_time_ms 70000 must be 1..5000"),
+    ("{consumer_time_ms: 60000}", "consumer_time_ms 60000 must be 1..5000 (the dead-man"),
+    ("{loss_action: 0}", "loss_action 0: a drive would keep moving"),
+    ("{liveness_timeout: 1.0e+9}", "liveness_timeout 1000000000.0 s must be at most 10 s"),
+    ("{liveness_timeout: .nan}", "liveness_timeout"),
     ("{consumer_time_ms: 200, heartbeat_period_ms: 150}", "at most half of consumer_time_ms"),
     ("{loss_action: 4}", "loss_action 4 must be 0..3"),
     ("{stop_method: brake}", "stop_method 'brake': expected one of auto, st, jv0"),

@@ -121,7 +121,7 @@ def jog(
                      velocity=_angle(velocity, "--velocity", target.cpr, speed=True),
                      torque=_current(torque, "--torque"), duration=parse_number(duration, "--for"),
                      uncalibrated=uncalibrated, hold=hold)
-    check_request(target, req)
+    check_request(target, req, max_torque_for=cfg.motion.max_torque_for)
     _notice_gravity(st, cfg, target.joint.name if target.joint is not None else None, hold=hold, apply=apply)
     if not apply:
         _dry_run(st, target, req, cfg)

@@ -312,6 +312,9 @@ class MotionConfig:
     emcy_warning_codes: tuple[int, ...] = (0x6300, 0x8110, 0x8140, 0x8200, 0x8210)
     # s between two reads of a moving drive's dead-man entry 0x1016:1 (another node may disarm it)
     deadman_check_interval: float = 0.5
+    # s: the longest --for of a torque jog or torque step (no drive limit acts in torque mode; the
+    # time is the last guard, so a typo like --for 1e9 must not be a run until Ctrl-C)
+    max_torque_for: float = 10.0
 
     @property
     def heartbeat_period_s(self) -> float:

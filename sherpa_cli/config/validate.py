@@ -17,6 +17,11 @@ from sherpa_cli.config.yamlnodes import Locs, suggest
 from sherpa_cli.errors import ConfigError, Location
 
 MAX_NODE_ID = 127
+# the dead-man's bounds (issue 22 item 8): past these a motor runs on, after the tool died or hung, longer
+# than the guard's own stop takes by an order of magnitude, which no commissioning step needs
+MAX_CONSUMER_TIME_MS = 5000
+MAX_LIVENESS_TIMEOUT_S = 10.0
+MAX_TORQUE_FOR_LIMIT_S = 60.0  # motion.max_torque_for itself
 DEFAULT_INPUTS: int = DriveModel.__dataclass_fields__["inputs"].default  # type: ignore[assignment]
 
 
@@ -143,8 +148,9 @@ def _check_motion(cfg: ArmConfig, locs: Locs, r: _Report) -> None:
                     f"({used[hid].bus}); a host heartbeat needs an id no device uses")
         elif hid == m.pair_group_id:
             r.error(where("host_id_pool"), f"host_id_pool: {hid} is motion.pair_group_id")
-    if not 1 <= m.consumer_time_ms <= 0xFFFF:
-        r.error(where("consumer_time_ms"), f"consumer_time_ms {m.consumer_time_ms} must be 1..65535 (0x1016:1 is 16 bits)")
+    if not 1 <= m.consumer_time_ms <= MAX_CONSUMER_TIME_MS:
+        r.error(where("consumer_time_ms"), f"consumer_time_ms {m.consumer_time_ms} must be 1..{MAX_CONSUMER_TIME_MS} "
+                f"(the dead-man: a motor runs on this long after the tool dies; 0x1016:1 holds up to 65535)")
     elif not 0 <= m.heartbeat_period_ms <= m.consumer_time_ms / 2:
         r.error(where("heartbeat_period_ms"), f"heartbeat_period_ms {m.heartbeat_period_ms} must be 0 (a quarter "
                 f"of consumer_time_ms) or at most half of consumer_time_ms ({m.consumer_time_ms})")
@@ -159,7 +165,8 @@ def _check_motion(cfg: ArmConfig, locs: Locs, r: _Report) -> None:
     if not 0 <= m.loss_action <= 3:
         r.error(where("loss_action"), f"loss_action {m.loss_action} must be 0..3 (0x6007)")
     elif m.loss_action == 0:
-        r.warn(where("loss_action"), "loss_action 0: a drive keeps moving when the tool's heartbeat stops")
+        r.error(where("loss_action"), "loss_action 0: a drive would keep moving when the tool's heartbeat stops "
+                "(the dead-man disarmed); use 1 (fault), 2 (disable voltage) or 3 (quick stop)")
     if not 0 <= m.comm_error_behaviour <= 2:
         r.error(where("comm_error_behaviour"), f"comm_error_behaviour {m.comm_error_behaviour} must be 0..2 (0x1029:1)")
     from sherpa_cli.config.model import STOP_METHODS
@@ -169,12 +176,18 @@ def _check_motion(cfg: ArmConfig, locs: Locs, r: _Report) -> None:
     for key in ("standstill_timeout", "liveness_timeout"):
         if not getattr(m, key) > 0:
             r.error(where(key), f"{key} {getattr(m, key)} s must be > 0")
+    if m.liveness_timeout > MAX_LIVENESS_TIMEOUT_S:
+        r.error(where("liveness_timeout"), f"liveness_timeout {m.liveness_timeout} s must be at most "
+                f"{MAX_LIVENESS_TIMEOUT_S:g} s (a hung tool keeps the dead-man fed this long)")
     for code in m.emcy_warning_codes:
         if not 0 <= code <= 0xFFFF:
             r.error(where("emcy_warning_codes"), f"emcy_warning_codes: {code} out of range 0..0xFFFF (an EMCY code)")
     if not (math.isfinite(m.deadman_check_interval) and 0.05 <= m.deadman_check_interval <= 10):
         r.error(where("deadman_check_interval"), f"deadman_check_interval {m.deadman_check_interval} s must be "
                 "0.05..10")
+    if not (math.isfinite(m.max_torque_for) and 0 < m.max_torque_for <= MAX_TORQUE_FOR_LIMIT_S):
+        r.error(where("max_torque_for"), f"max_torque_for {m.max_torque_for} s must be > 0 and at most "
+                f"{MAX_TORQUE_FOR_LIMIT_S:g} s")
     if not 0 <= m.standstill_velocity <= 1000:
         r.error(where("standstill_velocity"), f"standstill_velocity {m.standstill_velocity} counts/s must be 0..1000")
     from sherpa_cli.config.model import PAIR_START_METHODS

@@ -29,7 +29,7 @@ from sherpa_cli.motion import stopping
 from sherpa_cli.motion.blocked import StallWatch, blocked_text
 from sherpa_cli.motion.guard import MotionGuard
 from sherpa_cli.motion.report import GuardReport
-from sherpa_cli.motion.settings import MotionSettings
+from sherpa_cli.motion.settings import MotionSettings, check_torque_for
 
 if TYPE_CHECKING:
     from sherpa_cli.bus.session import ArmSession
@@ -127,8 +127,9 @@ def resolve_jog_target(cfg: ArmConfig, text: str) -> JogTarget:
     return JogTarget(text, t.drives[0], plain[0] if len(plain) == 1 else None)
 
 
-def check_request(target: JogTarget, req: JogRequest) -> None:
-    """Refuse what must not reach a drive, before the bus is even opened."""
+def check_request(target: JogTarget, req: JogRequest, *, max_torque_for: float | None = None) -> None:
+    """Refuse what must not reach a drive, before the bus is even opened. ``max_torque_for``:
+    ``motion.max_torque_for`` (default: the setting's default)."""
     if req.mode not in MODES:
         raise UsageError(f"jog mode '{req.mode}': expected one of {', '.join(MODES)}")
     for what, value in (("--to", req.to), ("--by", req.by), ("--velocity", req.velocity),
@@ -168,6 +169,7 @@ def check_request(target: JogTarget, req: JogRequest) -> None:
         if req.duration is None:
             raise UsageError("a torque jog needs --for SECONDS: no position or speed limit of the drive acts in "
                              "torque mode, so it must end by itself")
+        check_torque_for(req.duration, max_torque_for)
         current = joint.current if joint is not None else None
         if current is None:
             raise UsageError(f"{target.name}: no current limits configured for it, so no torque can be checked",
@@ -188,7 +190,7 @@ def run_jog(session: ArmSession, target: JogTarget, req: JogRequest, *, settings
             on_progress: Callable[[JogProgress], None] | None = None,
             on_event: Callable[[str], None] | None = None, keep: bool = False) -> JogResult:
     """Move as asked inside a MotionGuard and return where it ended; every exit path stops the motor."""
-    check_request(target, req)
+    check_request(target, req, max_torque_for=session.cfg.motion.max_torque_for)
     ref = target.ref
     cal = precheck(session, target, req)
     guard = MotionGuard(session, [ref], settings=settings, clock=clock, sleep=sleep, keep=keep, on_event=on_event)

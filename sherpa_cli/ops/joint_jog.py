@@ -37,6 +37,7 @@ from sherpa_cli.joints import diffpair, units
 from sherpa_cli.motion import calibration, limit_watch
 from sherpa_cli.motion.blocked import blocked_text
 from sherpa_cli.motion.limit_watch import Breach, WatchedJoint
+from sherpa_cli.motion.settings import check_torque_for
 from sherpa_cli.motion.stopping import wait_all_standstill
 
 if TYPE_CHECKING:
@@ -175,6 +176,7 @@ def plan(cfg: ArmConfig, axis: Axis, request: JogRequest, motors: Mapping[str, i
                        motor_speeds=_motor_speeds(axis, v))
     if request.torque is None:
         raise UsageError("a torque jog needs --torque")
+    check_torque_for(request.duration, cfg.motion.max_torque_for)
     amps = units.parse_current(request.torque, what="--torque")
     if amps == 0:
         raise UsageError("--torque must not be 0")
