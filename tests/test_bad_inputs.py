@@ -1,8 +1,10 @@
 """Generated bad inputs: 0 tracebacks and 0 hangs (issue 11 item 8).
 
-A seeded generator builds well over 900 bad inputs -- configs (native and rosparam), recipes,
-parameter dumps, command lines of every command, and hostile CAN frames for both ends of the
-bus (the simulated drive and the tool's drive client) -- and feeds them through the same doors
+A seeded generator builds over 1,500 bad inputs -- configs (native and rosparam; wrong types in
+every section; unsafe dead-man settings), recipes (and recipe steps with bad arguments), parameter
+dumps, command lines of every command (Unicode digits and impossible numbers in every numeric
+option, bad bus maps), recordings and captures truncated or garbled for `log plot`/`log decode`,
+and hostile CAN frames for both ends of the bus (the simulated drive and the tool's drive client) -- and feeds them through the same doors
 a user's input takes: ``load_config_text`` / ``load_recipe`` / ``dump_from_text``, the CLI's
 ``run(argv)`` in this process (as the ``cli`` fixture does), ``SimDrive.receive`` with its SDO
 server, and ``DriveClient`` over a transport that answers at once.
@@ -12,7 +14,8 @@ What counts as a failure:
 - a traceback: an exception that is not a SherpaError (or, for the simulated drive, any
   exception at all), or "Traceback" on stderr;
 - a hang: one case taking longer than HANG_S;
-- exit 0 (or no error) for input that is clearly bad (a must-fail case);
+- exit 0 (or no error) for input that is clearly bad (a must-fail case), or a refusal with an
+  exit code docs/exit-codes.md does not list, or one that does not name the bad option;
 - "no answer" for a drive that did answer (a malformed reply must be a ProtocolError);
 - a config that `config check` passes but the derivation or the codec later refuses.
 
@@ -40,7 +43,7 @@ from conftest import ROOT
 
 SEED = 11
 HANG_S = 20.0
-MIN_CASES = 900
+MIN_CASES = 1500
 
 
 @dataclass
@@ -328,7 +331,10 @@ def run_cli(argv: list[str]) -> tuple[int | None, str, str, BaseException | None
     return result[0], result[1], result[2], None, False
 
 
-def check_cli(tally: Tally, kind: str, argv: list[str], *, must_fail: bool) -> None:
+def check_cli(tally: Tally, kind: str, argv: list[str], *, must_fail: bool, names: str | None = None,
+              exits: set[int] | None = None) -> None:
+    """One command line; ``names``: a refusal must name this (the option whose value is bad);
+    ``exits``: the exit codes a refusal may have (default: any documented one)."""
     code, out, err, exc, hung = run_cli(argv)
     what = "sherpa " + shlex.join(argv)
     if hung:
@@ -339,9 +345,14 @@ def check_cli(tally: Tally, kind: str, argv: list[str], *, must_fail: bool) -> N
         tally.fail(kind, what, "traceback in the output:\n" + err[-1500:])
     elif must_fail and code == 0:
         tally.fail(kind, what, "exit 0 on clearly bad input:\n" + out[-500:] + err[-500:])
+    elif must_fail and code not in (exits or DOCUMENTED_EXITS):
+        tally.fail(kind, what, f"exit {code}, not a documented exit code:\n" + err[-500:])
+    elif names is not None and names not in err:
+        tally.fail(kind, what, f"the refusal does not name {names}:\n" + err[-500:])
 
 
 EX1 = ["--config", "configs/appendix-c/example1.yaml"]
+DOCUMENTED_EXITS = {1, 2, 3, 4, 5, 6, 129, 130, 143}  # docs/exit-codes.md
 EX3 = ["--config", "configs/appendix-c/example3.yaml"]
 BAD_WORDS = ["", " ", "-", "--", "nosuch", "joint1x", "can0:0", "can0:128", "can9:1", "can0:", ":1", "a" * 300,
              "\u0394", "--bogus", "-x", "1e400", "nan", "-1", "0", "99999999999999999999999", "../../etc/passwd",
@@ -440,6 +451,289 @@ def cli_cases(rng: random.Random, tally: Tally, tmp: Path) -> None:
     for argv, must_fail in cases:
         tally.case("cli")
         check_cli(tally, "cli", argv, must_fail=must_fail)
+
+
+# ---------------------------------------------------------------------------------------------
+# wrong types in every section of a config (issue 22 "Bad inputs")
+
+TYPED = ["configs/appendix-c/example1.yaml", "configs/appendix-c/example3.yaml", "tests/data/jog-fast-arm.yaml",
+         "tests/data/home-arm.yaml", "tests/data/step-arm.yaml", "tests/data/joystick-arm.yaml"]
+TYPED_PER_SECTION = 4  # leaves per top-level section and file (a config load costs ~50-70 ms)
+# (YAML text, what it is): a value of the wrong type for the leaf it replaces
+NOT_A_NUMBER = [("abc", "a word"), ("[1, 2]", "a list"), ("{a: 1}", "a mapping"), ("'12'", "a quoted number"),
+                ("2021-01-01", "a date")]
+NOT_A_STRING = [("[a, b]", "a list"), ("{a: 1}", "a mapping")]
+NOT_A_CONTAINER = [("7", "a number"), ("word", "a word"), ("[7, 8]", "a list"), ("true", "a boolean")]
+
+
+def _node(data: Any, path: tuple) -> Any:
+    for key in path:
+        data = data[key]
+    return data
+
+
+def config_type_cases(rng: random.Random, tally: Tally) -> None:
+    """Every leaf and every mapping of each config, in every section, given a value of the wrong
+    type: refused (a mapping given a list is left out: some sections take either)."""
+    from sherpa_cli.config import load_config_text
+
+    for rel in TYPED:
+        data = yaml.safe_load((ROOT / rel).read_text())
+        by_section: dict[Any, list[tuple]] = {}
+        for path in all_leaves(data):
+            by_section.setdefault(path[0], []).append(path)
+        chosen = [p for paths in by_section.values() for p in rng.sample(paths, min(TYPED_PER_SECTION, len(paths)))]
+        for path in chosen:
+            value = _node(data, path)
+            if isinstance(value, bool):
+                choices = [*NOT_A_STRING, ("abc", "a word")]
+            elif isinstance(value, (int, float)):
+                choices = NOT_A_NUMBER
+            elif isinstance(value, str):
+                choices = NOT_A_STRING
+            elif isinstance(value, dict):
+                choices = [c for c in NOT_A_CONTAINER if c[1] != "a list"]
+            else:  # a list: a mapping or a word instead
+                choices = [("{a: 1}", "a mapping"), ("word", "a word")]
+            raw, kind = rng.choice(choices)
+            if isinstance(value, str) and path[-1] in ("name", "description", "comment"):
+                continue  # free text: any YAML scalar reads as text there
+            what = f"{rel} {'.'.join(map(str, path))} = {kind}"
+            body = with_value(data, path, raw)
+            judge(tally, "config type", what, lambda body=body: load_config_text(body, "t.yaml"), must_fail=True)
+
+
+# unsafe dead-man settings and other motion values that would make the dead-man meaningless
+UNSAFE_MOTION = [
+    "consumer_time_ms: 0", "consumer_time_ms: -1", "consumer_time_ms: 5001", "consumer_time_ms: 60000",
+    "consumer_time_ms: 65535", "consumer_time_ms: 70000", "consumer_time_ms: 1.0e+9", "consumer_time_ms: .nan",
+    "loss_action: 0", "loss_action: -1", "loss_action: 4", "loss_action: 0.5", "loss_action: '2'",
+    "liveness_timeout: 0", "liveness_timeout: -1", "liveness_timeout: 11", "liveness_timeout: 1.0e+9",
+    "liveness_timeout: .inf", "liveness_timeout: .nan", "heartbeat_period_ms: -1", "heartbeat_period_ms: 400",
+    "heartbeat_period_ms: 1.0e+9", "comm_error_behaviour: 3", "comm_error_behaviour: -1",
+    "deadman_check_interval: 0", "deadman_check_interval: 100", "deadman_check_interval: .nan",
+    "host_node_id: 0", "host_node_id: 128", "host_id_pool: [0]", "host_id_pool: [124, 124]",
+    "max_torque_for: 0", "max_torque_for: 61", "max_torque_for: .inf", "max_torque_for: 1.0e+9",
+    "standstill_timeout: 0", "standstill_timeout: .nan", "stall_time: 31", "recovery_speed: 2",
+]
+
+
+def deadman_cases(rng: random.Random, tally: Tally) -> None:
+    from sherpa_cli.config import load_config_text
+
+    for rel in ("configs/appendix-c/example1.yaml", "tests/data/jog-fast-arm.yaml"):
+        text = (ROOT / rel).read_text()
+        data = yaml.safe_load(text)
+        data.pop("motion", None)
+        base = yaml.safe_dump(data, sort_keys=False, width=10_000)
+        for setting in UNSAFE_MOTION:
+            body = base + f"motion: {{{setting}}}\n"
+            judge(tally, "unsafe motion", f"{rel} motion.{setting}", lambda body=body: load_config_text(body, "m.yaml"),
+                  must_fail=True)
+
+
+# ---------------------------------------------------------------------------------------------
+# numeric options of every command: Unicode digits, NaN/Inf, numbers too big to be one
+
+UNICODE_NUMBERS = ["\uff13", "\u0663", "\u0967", "\uff11.\uff15", "\u00bd", "\u2167", "1\u00b2", "\U0001d7d1"]
+NOT_NUMBERS = ["nan", "inf", "-inf", "1e400", "-1e400", "9" * 400, "0x10", "1,5", "--", "1e", ".", "\u22121"]
+
+
+def numeric_option_cases(rng: random.Random, tally: Tally, tmp: Path) -> None:
+    csv = tmp / "opt-rec.csv"
+    csv.write_text(GOOD_RECORDING)
+    log = tmp / "opt-cap.log"
+    log.write_text(GOOD_CANDUMP)
+    out = str(tmp / "opt-out.csv")
+    png = str(tmp / "opt-out.png")
+    # (command line without the option, the option, the number it takes)
+    options: list[tuple[list[str], str]] = [
+        ([*EX1, "--sim", "monitor", "--once"], "--interval"),
+        ([*EX1, "--sim", "monitor", "--once"], "--heartbeat"),
+        ([*EX1, "--sim", "monitor"], "--for"),
+        (["--bus-map", "can0=virtual:fuzz-serve", *EX1, "sim"], "--duration"),
+        ([*EX1, "--sim", "doctor"], "--window"),
+        ([*EX3, "diffdrive", "convert", "pair1", "--delta", "0"], "--sigma"),
+        ([*EX3, "diffdrive", "convert", "pair1", "--sigma", "0"], "--delta"),
+        ([*EX3, "diffdrive", "convert", "pair1", "--motor-b", "0"], "--motor-a"),
+        ([*EX1, "--sim", "bus", "status"], "--window"),
+        ([*EX1, "--sim", "bus", "watch"], "--for"),
+        ([*EX1, "--sim", "bus", "watch", "--for", "0.05"], "--interval"),
+        ([*EX1, "--sim", "bus", "up"], "--bitrate"),
+        ([*EX1, "--sim", "bus", "up"], "--restart-ms"),
+        ([*EX1, "log", "decode", str(log)], "--node"),
+        (["--bus-map", "can0=virtual:fuzz-capture", *EX1, "log", "capture", "-o", str(tmp / "opt-cap2.log")],
+         "--for"),
+        ([*EX1, "log", "plot", str(csv), "-o", png], "--step-at"),
+        ([*EX1, "log", "plot", str(csv), "-o", png], "--target"),
+        ([*EX1, "--sim", "log", "record", "joint1", "-o", out, "--for", "0.05"], "--rate"),
+        ([*EX1, "--sim", "log", "record", "joint1", "-o", out], "--for"),
+        ([*EX1, "--sim", "log", "step", "joint1", "-o", out, "--apply"], "--position"),
+        ([*EX1, "--sim", "log", "step", "joint1", "-o", out, "--apply"], "--velocity"),
+        ([*EX1, "--sim", "log", "step", "joint1", "-o", out, "--apply"], "--torque"),
+        ([*EX1, "--sim", "log", "step", "joint1", "-o", out, "--torque", "0.1", "--apply"], "--for"),
+        ([*EX1, "--sim", "log", "step", "joint1", "-o", out, "--position", "0.1", "--apply"], "--rate"),
+        ([*EX1, "--sim", "jog", "joint1", "--uncalibrated", "--apply"], "--to"),
+        ([*EX1, "--sim", "jog", "joint1", "--uncalibrated", "--apply"], "--by"),
+        ([*EX1, "--sim", "jog", "joint1", "--for", "0.05", "--uncalibrated", "--apply"], "--velocity"),
+        ([*EX1, "--sim", "jog", "joint1", "--for", "0.05", "--apply"], "--torque"),
+        ([*EX1, "--sim", "jog", "joint1", "--velocity", "0.01", "--uncalibrated", "--apply"], "--for"),
+        ([*EX1, "--sim", "jog", "joint1", "--torque", "0.1", "--apply"], "--for"),
+        ([*EX3, "--sim", "diffdrive", "move", "pair1", "--delta", "0", "--uncalibrated", "--apply"], "--sigma"),
+        ([*EX3, "--sim", "diffdrive", "move", "pair1", "--sigma", "0", "--uncalibrated", "--apply"], "--delta"),
+        ([*EX3, "--sim", "diffdrive", "move", "pair1", "--sigma", "0", "--delta", "0", "--uncalibrated", "--apply"],
+         "--velocity"),
+    ]
+    cases: list[tuple[list[str], str]] = []
+    for argv, option in options:
+        for value in [rng.choice(UNICODE_NUMBERS), *rng.sample(NOT_NUMBERS, 2)]:
+            cases.append(([*argv, f"{option}={value}"], option))
+    # numbers inside other arguments: an interpreter expression, gains, a bus map's port
+    # (0x10 is a number there: the interpreter's hex)
+    for value in rng.sample(UNICODE_NUMBERS, 4) + rng.sample([n for n in NOT_NUMBERS if n != "0x10"], 4):
+        cases.append(([*EX1, "--sim", "cmd", "joint1", f"AC={value}", "--apply"], "AC"))
+        cases.append(([*EX1, "--sim", "tune", "set", "joint1", f"KP[2]={value}", "--apply"], "KP"))
+        cases.append(([*EX1, "--sim", "cmd", "joint1", f"LL[{value}]"], "LL"))
+    for argv, option in cases:
+        tally.case("numeric option")
+        check_cli(tally, "numeric option", argv, must_fail=True, names=option)
+
+
+# ---------------------------------------------------------------------------------------------
+# bus maps (without --sim, which excludes --bus-map: the map itself must be refused)
+
+BAD_BUS_MAPS = [
+    "can0", "can0=", "=socketcan:vcan0", "can0=socketcan", "can0=socketcan:", "can0=:vcan0", "can0==socketcan:x",
+    " =virtual:x", "can9=virtual:x", "CAN0=virtual:x", "can0=nosuchiface:x",
+    "can0=udp_multicast:239.0.0.1", "can0=remote:", "can0=remote:127.0.0.1:99999", "can0=remote:127.0.0.1:-1",
+    "can0=remote:127.0.0.1:\uff15\uff14", "can0=remote:127.0.0.1:abc", "can0=remote:[::1",
+    "can0=virtual:x,can0=virtual:y", "can0=virtual:x,can0=socketcan:vcan0", "\u0441an0=virtual:x",
+    "can0=" + "a" * 300 + ":x", "can0=so cket:x", "can0=socket-can:x", "can0=\u0455ocketcan:x",
+    "can0=remote:host:1e400", "can0=remote:127.0.0.1:0", "can0=remote:127.0.0.1:65536",
+]
+
+
+def bus_map_cases(rng: random.Random, tally: Tally) -> None:
+    """Each through --bus-map and through SHERPA_BUS_MAP: refused as a usage error naming the map."""
+    import os
+
+    from sherpa_cli.bus.busmap import ENV_VAR
+
+    for spec in BAD_BUS_MAPS:
+        tally.case("bus map")
+        check_cli(tally, "bus map", ["--bus-map", spec, *EX1, "scan"], must_fail=True, names="bus", exits={2})
+    for spec in rng.sample(BAD_BUS_MAPS, 8):  # the other door, for a few
+        tally.case("bus map")
+        os.environ[ENV_VAR] = spec
+        try:
+            check_cli(tally, "bus map", [*EX1, "identify"], must_fail=True, names="bus", exits={2})
+        finally:
+            del os.environ[ENV_VAR]
+
+
+# ---------------------------------------------------------------------------------------------
+# recipe steps whose arguments are bad: `recipe check` refuses them before step 1
+
+BAD_STEP_ARGS = [
+    "jog joint1 --to \uff13 --apply", "jog joint1 --by nan --apply", "jog joint1 --to 1e400 --apply",
+    "jog joint1 --velocity 0.1 --for 1e400 --apply", "jog joint1 --torque 0.1 --apply",
+    "jog joint1 --torque \u0663 --for 1 --apply", "jog joint1 --to 0.1 --by 0.1 --apply", "jog nosuch --to 0",
+    "jog joint1 --velocity inf --for 1", "jog joint1 --to", "home nosuch --yes", "home joint1 --bogus",
+    "log record joint1 --rate \uff11\uff10\uff10 --for 1 -o x.csv", "log record joint1 --rate nan -o x.csv",
+    "log record joint1 --rate 100 --for -1 -o x.csv", "log record nosuch -o x.csv", "log record joint1",
+    "log step joint1 --position \u00bd -o x.csv --apply", "log step joint1 --torque 1 --for inf -o x.csv --apply",
+    "log step joint1 -o x.csv", "log step joint1 --position 1 --velocity 1 -o x.csv",
+    "diffdrive move pair1 --sigma \uff10 --delta 0 --apply", "diffdrive move nosuch --sigma 0 --delta 0",
+    "diffdrive convert pair1 --sigma nan --delta 0", "monitor --interval \uff11", "monitor --heartbeat -1",
+    "bus watch --for nan", "bus up --bitrate 1e400", "cmd joint1 AC=\uff11", "cmd joint1 LL[nan]",
+    "tune set joint1 KP[2]=\uff11 --apply", "params restore /nonexistent.yaml", "scan --bus can9",
+    "identify nosuch", "stop nosuch", "program-limits nosuch", "dump-params -o /dev/null/x.yaml",
+    "log plot x.csv", "log decode", "sim --duration \uff11",
+]
+
+
+def recipe_step_cases(rng: random.Random, tally: Tally, tmp: Path) -> None:
+    for i, step in enumerate(BAD_STEP_ARGS):
+        body = f"name: bad step {i}\nconfig: configs/appendix-c/example1.yaml\nsteps:\n" \
+               f"  - name: fine\n    run: limits show\n  - name: bad\n    run: {json_quote(step)}\n"
+        path = tmp / f"bad-step-{i}.yaml"
+        path.write_text(body, encoding="utf-8")
+        tally.case("recipe step")
+        check_cli(tally, "recipe step", [*EX1, "recipe", "check", str(path)], must_fail=True)
+
+
+def json_quote(text: str) -> str:
+    import json
+
+    return json.dumps(text, ensure_ascii=False)
+
+
+# ---------------------------------------------------------------------------------------------
+# recordings and captures handed to `log plot` / `log decode`, truncated or garbled
+
+GOOD_RECORDING = "time_s,joint1.pos_rad,joint1.vel_rad_s,joint1.cur_a,drive1.px,drive1.vx,drive1.iq_a\n" + "".join(
+    f"{k / 100:.6f},{0.01 * k:.5f},{0.5:g},{0.1:g},{k},{50},{0.1:g}\n" for k in range(40))
+GOOD_CANDUMP = "".join(f"({1700000000 + k / 1000:.6f}) can0 {cob:03X}#{data}\n" for k, (cob, data) in enumerate(
+    [(0x080, ""), (0x28A, "50580000E8030000"), (0x30A, "50580000"), (0x701, "05"), (0x60A, "4001140200000000"),
+     (0x58A, "4F011402FF000000"), (0x08A, "1000010000000000"), (0x000, "010A")] * 5))
+
+
+def file_mutation(rng: random.Random, data: bytes) -> tuple[bytes, str]:
+    kind = rng.randrange(9)
+    if kind == 0:
+        cut = rng.randrange(1, max(2, len(data)))
+        return data[:cut], f"truncated at {cut}"
+    if kind == 1:
+        b = bytearray(data)
+        for _ in range(rng.randrange(1, 20)):
+            b[rng.randrange(len(b))] = rng.randrange(256)
+        return bytes(b), "bytes garbled"
+    if kind == 2:
+        lines = data.splitlines(True)
+        rng.shuffle(lines)
+        return b"".join(lines), "lines shuffled"
+    if kind == 3:
+        return data.replace(b",", b";"), "another delimiter"
+    if kind == 4:
+        return b"\xef\xbb\xbf" + data.replace(b"\n", b"\r\n"), "BOM and CRLF"
+    if kind == 5:
+        lines = data.splitlines(True)
+        i = rng.randrange(len(lines))
+        return b"".join([*lines[:i], rng.choice([b"nan,nan,inf\n", b"," * 50 + b"\n", b"1e400," * 7 + b"\n",
+                                                 b"x" * 100_000 + b"\n", b"\x00\x00\n"]), *lines[i:]]), "a bad line"
+    if kind == 6:
+        return data.split(b"\n", 1)[0] + b"\n", "header only"
+    if kind == 7:
+        return data[: len(data) // 2] + b"\x00" * 64 + data[len(data) // 2:], "NUL bytes inside"
+    return data.replace(b".", b"\xd9\xab"), "Unicode decimal points"
+
+
+def log_file_cases(rng: random.Random, tally: Tally, tmp: Path) -> None:
+    recording = GOOD_RECORDING.encode()
+    capture = GOOD_CANDUMP.encode()
+    png = str(tmp / "fuzz-plot.png")
+    junk = [(b"", "empty"), (bytes(rng.randrange(256) for _ in range(4096)), "random bytes"), (b"\x00" * 1000, "NULs"),
+            (b"\x89MCAP0\r\n" + bytes(100), "an MCAP magic then nothing"), (b"PK\x03\x04" + bytes(60), "a zip")]
+    cases: list[tuple[list[str], bytes, str, str, bool]] = []  # (argv before the file, body, suffix, what, must fail)
+    for _ in range(40):
+        body, what = file_mutation(rng, capture)
+        cases.append(([*EX1, "log", "decode"], body, rng.choice([".log", ".txt"]), "capture " + what, False))
+    for _ in range(22):
+        body, what = file_mutation(rng, recording)
+        cases.append(([*EX1, "log", "plot"], body, ".csv", "recording " + what, False))
+    for _ in range(10):
+        body, what = file_mutation(rng, recording)
+        cases.append(([*EX1, "log", "decode"], body, ".csv", "recording as a capture " + what, False))
+    for body, what in junk:  # an empty capture is a quiet bus's: decoded as no frames, exit 0
+        for suffix in (".log", ".csv", ".mcap", ".asc", ".blf", ".trc"):
+            cases.append(([*EX1, "log", "decode"], body, suffix, what, bool(body) or suffix in (".mcap", ".blf")))
+        cases.append(([*EX1, "log", "plot"], body, rng.choice([".csv", ".mcap"]), what, True))
+    for i, (argv, body, suffix, _what, must_fail) in enumerate(cases):
+        path = tmp / f"fuzz-file-{i}{suffix}"
+        path.write_bytes(body)
+        full = [*argv, str(path), *(["-o", png] if "plot" in argv else [])]
+        tally.case("log file")
+        check_cli(tally, "log file", full, must_fail=must_fail)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -567,6 +861,12 @@ def test_bad_input_generator(monkeypatch, tmp_path, request, capsys):
     recipe_cases(rng, tally, tmp_path)
     dump_cases(rng, tally, tmp_path)
     cli_cases(rng, tally, tmp_path)
+    config_type_cases(rng, tally)
+    deadman_cases(rng, tally)
+    numeric_option_cases(rng, tally, tmp_path)
+    bus_map_cases(rng, tally)
+    recipe_step_cases(rng, tally, tmp_path)
+    log_file_cases(rng, tally, tmp_path)
     frame_cases(rng, tally)
     elapsed = time.monotonic() - started
     summary = (f"bad-input generator (seed {SEED}): {tally.count} inputs "

@@ -32,7 +32,7 @@ pytestmark = pytest.mark.vcan
 CONFIG = """\
 name: bus-watch-vcan
 protocol: {{mo_settle: 0.05, sv_blackout: 0.2, reply_timeout: 2.0, retries: 3}}
-motion: {{consumer_time_ms: 3000, liveness_timeout: 5.0, bus_check_interval: 0.1}}
+motion: {{consumer_time_ms: 2000, liveness_timeout: 5.0, bus_check_interval: 0.1}}
 buses:
   can0: {{interface: socketcan, channel: {spare}}}
 drives:

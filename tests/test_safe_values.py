@@ -19,8 +19,8 @@ ARM = ROOT / "configs" / "sherpa-arm.yaml"
     ("{consumer_time_ms: 2001}", "consumer_time_ms 2001 is above the safe bound 2000 ms"),
     ("{liveness_timeout: 1.0e+9}", "liveness_timeout 1000000000.0 s is above the safe bound 10 s"),
     ("{liveness_timeout: .inf}", "liveness_timeout inf s is above the safe bound 10 s"),
-    ("{torque_for_limit: 1000}", "torque_for_limit 1000.0 s must be > 0 and at most 300 s"),
-    ("{torque_for_limit: 0}", "torque_for_limit 0.0 s must be > 0 and at most 300 s"),
+    ("{max_torque_for: 1000}", "max_torque_for 1000.0 s must be > 0 and at most 60 s"),
+    ("{max_torque_for: 0}", "max_torque_for 0.0 s must be > 0 and at most 60 s"),
 ])
 def test_unsafe_dead_man_settings_are_refused_naming_the_bound(tmp_path, motion, message):
     path = tmp_path / "arm.yaml"
@@ -31,7 +31,7 @@ def test_unsafe_dead_man_settings_are_refused_naming_the_bound(tmp_path, motion,
 
 
 @pytest.mark.parametrize("motion", ["{loss_action: 1}", "{consumer_time_ms: 2000}", "{liveness_timeout: 10}",
-                                    "{torque_for_limit: 300}"])
+                                    "{max_torque_for: 60}"])
 def test_the_bounds_themselves_are_accepted(tmp_path, motion):
     path = tmp_path / "arm.yaml"
     path.write_text(ARM.read_text(encoding="utf-8") + f"\nmotion: {motion}\n", encoding="utf-8")
@@ -45,11 +45,11 @@ def test_the_bounds_themselves_are_accepted(tmp_path, motion):
     (["log", "step", "elbow_pitch", "--velocity", "0.1", "--rate", "0.5", "--apply"], "--rate 0.5: expected Hz >= 10"),
     (["log", "step", "elbow_pitch", "--velocity", "0.1", "--rate", "9", "--apply"], "--rate 9: expected Hz >= 10"),
     (["jog", "elbow_pitch", "--torque", "0.1", "--for", "1e9", "--apply"],
-     "--for 1e+09 s: a torque motion runs at most motion.torque_for_limit = 10 s"),
+     "--for 1e+09 s is longer than motion.max_torque_for (10 s)"),
     (["jog", "shoulder_pitch", "--torque", "0.1", "--for", "11", "--apply"],
-     "--for 11 s: a torque motion runs at most motion.torque_for_limit = 10 s"),
+     "--for 11 s is longer than motion.max_torque_for (10 s)"),
     (["log", "step", "elbow_pitch", "--torque", "0.1", "--for", "20", "--apply"],
-     "--for 20 s: a torque motion runs at most motion.torque_for_limit = 10 s"),
+     "--for 20 s is longer than motion.max_torque_for (10 s)"),
     (["log", "record", "elbow_1a", "--for", "1e9"], "--for 1000000000.0: expected seconds > 0 and <= 3600"),
 ])
 def test_low_rates_and_huge_durations_are_refused_before_anything_is_sent(cli, tmp_path, args, message):

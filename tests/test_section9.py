@@ -37,10 +37,10 @@ def test_the_seed_figures_recipe_runs_and_its_numbers_fall_within_the_seed_bands
     # and a patient heartbeat consumer: a starved host heartbeat thread would stop a move (not a figure either)
     text = text.replace("protocol: {mo_settle: 0.5, sv_blackout: 0.5}",
                         "protocol: {mo_settle: 0.5, sv_blackout: 0.5, sdo_timeout: 2.0}")
-    profile.write_text(text.replace("motion: {consumer_time_ms: 1000}", "motion: {consumer_time_ms: 5000}"),
+    profile.write_text(text.replace("motion: {consumer_time_ms: 1000}", "motion: {consumer_time_ms: 2000}"),
                        encoding="utf-8")
     assert "sdo_timeout: 2.0" in profile.read_text(encoding="utf-8")
-    assert "consumer_time_ms: 5000" in profile.read_text(encoding="utf-8")
+    assert "consumer_time_ms: 2000" in profile.read_text(encoding="utf-8")
     result = cli("--config", str(profile), "--sim", "recipe", "run", "recipes/seed-section9.yaml", "--apply",
                  "--set", f"out={out}", *SHORT, "--report", str(report))
     assert result.exit_code == 0, result.transcript() + json.dumps(

@@ -170,7 +170,7 @@ class Arm:
         if axis.pair is not None:
             return joint_jog.run(self._session, axis, request, on_progress=_typed_progress(on_progress),
                                  clock=now, sleep=wait)
-        plain_jog.check_request(axis, request)
+        plain_jog.check_request(axis, request, max_torque_for=self.config.motion.max_torque_for)
         if settings is None:
             settings = MotionSettings.from_config(self.config, [axis.ref.bus])
         return plain_jog.run_jog(self._session, axis, request, settings=settings, on_progress=on_progress,

@@ -9,12 +9,15 @@ type is special-cased anywhere else.
 from __future__ import annotations
 
 import dataclasses
+import difflib
+import re
 from collections.abc import Iterable, Mapping
 
 from sherpa_cli.config.model import ArmConfig, BusConfig
 from sherpa_cli.errors import UsageError
 
 ENV_VAR = "SHERPA_BUS_MAP"
+_INTERFACE_NAME = re.compile(r"[A-Za-z][A-Za-z0-9_]*")  # python-can's interface names (socketcan, pcan, remote, ...)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -40,10 +43,30 @@ def parse_bus_map(specs: Iterable[str]) -> dict[str, BusTarget]:
                 # it sends out of the network interface; a sim or test must stay on loopback
                 raise UsageError("--bus-map: the udp_multicast interface is not supported; "
                                  "use remote (python-can-remote) or socketcan")
+            if not _INTERFACE_NAME.fullmatch(interface.strip()):
+                raise UsageError(f"--bus-map: '{item}': '{interface.strip()}' is not an interface name "
+                                 "(python-can's: letters, digits, _)",
+                                 hint="e.g. --bus-map can0=socketcan:vcan0,can1=remote:127.0.0.1:54702")
+            _check_known_interface(item, interface.strip())
             if interface.strip() == "remote":
                 _check_remote_port(item, channel.strip())
+            if bus.strip() in result:
+                raise UsageError(f"--bus-map: bus {bus.strip()} is mapped twice ('{item}' and "
+                                 f"'{bus.strip()}={result[bus.strip()]}'): map each bus once")
             result[bus.strip()] = BusTarget(interface.strip(), channel.strip())
     return result
+
+
+def _check_known_interface(item: str, interface: str) -> None:
+    """An interface python-can knows (its own and installed plugins): a typo is a usage error, not
+    a bus that cannot open."""
+    from can.interfaces import VALID_INTERFACES
+
+    if interface not in VALID_INTERFACES:
+        close = difflib.get_close_matches(interface, sorted(VALID_INTERFACES), n=1)
+        raise UsageError(f"--bus-map: '{item}': python-can has no interface '{interface}'"
+                         + (f"; did you mean '{close[0]}'?" if close else ""),
+                         hint="interfaces: " + ", ".join(sorted(VALID_INTERFACES)))
 
 
 def _check_remote_port(item: str, channel: str) -> None:

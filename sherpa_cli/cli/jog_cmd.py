@@ -117,8 +117,6 @@ def jog(
     mode = "position" if to is not None or by is not None else "velocity" if velocity is not None else "torque"
     target = resolve_axis(cfg, joint)  # the one resolver: plain joint, Σ/Δ joint, pair motor or drive
     seconds = parse_number(duration, "--for")
-    if mode == "torque" and seconds is not None:
-        check_torque_for(cfg, seconds)  # no drive limit acts in torque mode: a bounded --for
     pair = target.pair is not None  # ops/joint_jog.py moves what involves a pair (both motors, or Σ and Δ)
     if pair and hold:
         raise UsageError("--hold is for plain joints for now: a Σ/Δ joint is not held after its move",
@@ -134,7 +132,7 @@ def jog(
         _notice_gravity(st, cfg, joint, hold=False, apply=apply)
         _jog_pair(st, cfg, target, req, to if to is not None else by, apply)
         return
-    check_request(target, req)
+    check_request(target, req, max_torque_for=cfg.motion.max_torque_for)
     _notice_gravity(st, cfg, target.joint.name if target.joint is not None else None, hold=hold, apply=apply)
     if not apply:
         _dry_run(st, target, req, cfg)
@@ -347,15 +345,6 @@ def _render_pair(st: AppState, r: joint_jog.JogResult) -> None:
     if others:
         text += "; " + ", ".join(others)
     st.out.line(text)
-
-
-def check_torque_for(cfg: ArmConfig, seconds: float) -> None:
-    """A torque jog or step has no drive limit acting: its time is bounded by motion.torque_for_limit."""
-    limit = cfg.motion.torque_for_limit
-    if seconds > limit:  # NaN and <= 0 are refused where the request is planned
-        raise UsageError(f"--for {seconds:g} s: a torque motion runs at most motion.torque_for_limit = {limit:g} s "
-                         "(no drive limit acts in torque mode; the time is the last guard)",
-                         hint="a shorter --for, or raise motion.torque_for_limit in the config (at most 300 s)")
 
 
 def show_stop_report(st: AppState, exc: BaseException) -> None:

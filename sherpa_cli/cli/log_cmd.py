@@ -625,11 +625,12 @@ def step(
         raise UsageError(f"-o {output}: exists and is not a directory")
     cfg = st.load_config()
     if mode == "torque":
-        from sherpa_cli.cli.jog_cmd import check_torque_for
+        from sherpa_cli.motion.settings import check_torque_for
 
-        check_torque_for(cfg, duration)
+        check_torque_for(duration, cfg.motion.max_torque_for)  # no drive limit acts in torque mode
     target = resolve_step_target(cfg, joint)
-    req = step_request(target, mode, value, duration=duration, uncalibrated=uncalibrated)
+    req = step_request(target, mode, value, duration=duration, uncalibrated=uncalibrated,
+                       max_torque_for=cfg.motion.max_torque_for)
     check_mode_first(mode, mode_first)
     if not apply:
         refused = _step_would_refuse(st, target, req)

@@ -2,12 +2,15 @@
 
 from __future__ import annotations
 
+import math
 import threading
 
 import typer
 
 from sherpa_cli.cli.context import state
 from sherpa_cli.errors import UsageError
+
+MAX_SERVE_S = 30 * 24 * 3600.0  # --duration: a month; longer is a typo (leave it out to serve until Ctrl-C)
 
 
 def _stop_on_sigterm(stop: threading.Event) -> None:
@@ -78,8 +81,10 @@ def sim(
                     f"simulated arm '{cfg.name}': was not powered (nothing in {sim_state.ram_path(cfg)})")
         if not serve and not mapping:
             return
-    if duration is not None and duration <= 0:
-        raise UsageError(f"--duration must be > 0 seconds, got {duration}")
+    if duration is not None and not (math.isfinite(duration) and 0 < duration <= MAX_SERVE_S):
+        # inf reached threading's wait as an OverflowError, nan served not at all and exited 0
+        raise UsageError(f"--duration must be > 0 and at most {MAX_SERVE_S:g} seconds, got {duration}",
+                         hint="leave --duration out to serve until Ctrl-C")
     if serve:
         host, port = serving.parse_host_port(serve, len(cfg.buses))
         serving.check_bind_address(host, allow_remote)

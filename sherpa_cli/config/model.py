@@ -320,8 +320,9 @@ class MotionConfig:
     # always stops the command; ERROR-PASSIVE stops it too ("stop", issue 24) or only warns ("warn")
     bus_error_passive: str = "stop"
     bus_check_interval: float = 0.1  # s between two reads of those buses' controller state (netlink)
-    # s: the longest --for a torque jog or torque step may ask (no drive limit acts in torque mode)
-    torque_for_limit: float = 10.0
+    # s: the longest --for of a torque jog or torque step (no drive limit acts in torque mode; the
+    # time is the last guard, so a typo like --for 1e9 must not be a run until Ctrl-C)
+    max_torque_for: float = 10.0
 
     @property
     def heartbeat_period_s(self) -> float:

@@ -20,7 +20,7 @@ MAX_NODE_ID = 127
 # safe bounds of the dead-man (issue 22 item 8): beyond them a killed or hung tool's motor runs on
 MAX_CONSUMER_TIME_MS = 2000  # ms a drive keeps moving after the tool's last heartbeat
 MAX_LIVENESS_TIMEOUT_S = 10.0  # s a hung command keeps its heartbeat going
-MAX_TORQUE_FOR_S = 300.0  # s: the highest motion.torque_for_limit
+MAX_TORQUE_FOR_LIMIT_S = 60.0  # s: the highest motion.max_torque_for
 DEFAULT_INPUTS: int = DriveModel.__dataclass_fields__["inputs"].default  # type: ignore[assignment]
 
 
@@ -180,9 +180,9 @@ def _check_motion(cfg: ArmConfig, locs: Locs, r: _Report) -> None:
     if m.liveness_timeout > MAX_LIVENESS_TIMEOUT_S or not math.isfinite(m.liveness_timeout):
         r.error(where("liveness_timeout"), f"liveness_timeout {m.liveness_timeout} s is above the safe bound "
                 f"{MAX_LIVENESS_TIMEOUT_S:g} s: a hung tool would keep its motors going that long")
-    if not (math.isfinite(m.torque_for_limit) and 0 < m.torque_for_limit <= MAX_TORQUE_FOR_S):
-        r.error(where("torque_for_limit"), f"torque_for_limit {m.torque_for_limit} s must be > 0 and at most "
-                f"{MAX_TORQUE_FOR_S:g} s (no drive limit acts in torque mode: the time is the last guard)")
+    if m.liveness_timeout > MAX_LIVENESS_TIMEOUT_S:
+        r.error(where("liveness_timeout"), f"liveness_timeout {m.liveness_timeout} s must be at most "
+                f"{MAX_LIVENESS_TIMEOUT_S:g} s (a hung tool keeps the dead-man fed this long)")
     for code in m.emcy_warning_codes:
         if not 0 <= code <= 0xFFFF:
             r.error(where("emcy_warning_codes"), f"emcy_warning_codes: {code} out of range 0..0xFFFF (an EMCY code)")

@@ -26,6 +26,7 @@ from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
+from sherpa_cli.bus import syncgate
 from sherpa_cli.bus.targets import DriveRef
 from sherpa_cli.config.model import ArmConfig, DeviceConfig, JointConfig
 from sherpa_cli.devices import CanOpenEncoder
@@ -117,7 +118,7 @@ def read_position(session: ArmSession, dev: DeviceConfig, *, clock: Callable[[],
                     write(TPDO1_COMM, 1, 4, old_cob & ~COB_INVALID & 0xFFFFFFFF)
                 with listener.lock:
                     listener.value, listener.frames = None, 0  # only a frame the SYNC caused counts
-                link.network.send_message(SYNC_ID, b"")
+                syncgate.gate(link.bus).send(lambda: link.network.send_message(SYNC_ID, b""))
                 period = 0.0
             wait = wait_s if wait_s is not None else max(MIN_WAIT_S, WAIT_PERIODS * period,
                                                          session.cfg.protocol.sdo_timeout)

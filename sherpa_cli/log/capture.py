@@ -62,9 +62,11 @@ def read_frames(path: Path, bus_names: Sequence[str] = ()) -> Iterator[Frame]:
                          hint="formats: .log/.txt (candump -L), .asc, .blf, .csv, .trc, .mf4, .mcap") from None
     # python-can's TRC reader numbers channels from 1, its writer took them from 0
     shift = 1 if suffix == ".trc" else 0
+    frames = 0
     try:
         for msg in reader:
             channel = msg.channel - shift if isinstance(msg.channel, int) and msg.channel >= shift else msg.channel
+            frames += 1
             yield Frame(float(msg.timestamp), _bus_name(channel, bus_names), int(msg.arbitration_id),
                         bytes(msg.data), bool(msg.is_extended_id), bool(msg.is_remote_frame),
                         bool(msg.is_error_frame))
@@ -74,6 +76,17 @@ def read_frames(path: Path, bus_names: Sequence[str] = ()) -> Iterator[Frame]:
         stop = getattr(reader, "stop", None)
         if stop is not None:
             stop()
+    if not frames and _has_content(path):
+        # python-can's text readers skip every line they do not understand: a file of anything else
+        # (NUL bytes, a zip, another format) would read as "no frames matched" and exit 0
+        raise UsageError(f"{path}: no CAN frame could be read from it: not a {suffix} capture",
+                         hint="formats: .log/.txt (candump -L), .asc, .blf, .csv, .trc, .mf4, .mcap")
+
+
+def _has_content(path: Path) -> bool:
+    """Whether the file holds anything but blanks (an empty capture of a quiet bus is not an error)."""
+    with path.open("rb") as fh:
+        return bool(fh.read(65536).strip(b" \t\r\n"))
 
 
 def _read_candump(path: Path) -> Iterator[Frame]:

@@ -26,7 +26,7 @@ from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, Protocol
 
-from sherpa_cli.bus import journal
+from sherpa_cli.bus import journal, syncgate
 from sherpa_cli.bus.targets import DriveRef
 from sherpa_cli.config.model import ArmConfig
 from sherpa_cli.devices import encoder
@@ -103,14 +103,26 @@ def bus_budget(cfg: ArmConfig, refs: Sequence[DriveRef], rate: float, *, current
 # -- SYNC -----------------------------------------------------------------------------------------
 
 class PeriodicSync:
-    """SYNC every ``period`` s through python-can's send_periodic (kernel BCM on SocketCAN)."""
+    """SYNC every ``period`` s through python-can's send_periodic (kernel BCM on SocketCAN). The
+    kernel sends without the bus's SYNC gate, so the gate pauses it (stop, then start again) while
+    a synchronous pair start sends its BG frames (bus/syncgate.py)."""
 
     def __init__(self, bus: can.BusABC, period: float) -> None:
         import can
 
         self.task = bus.send_periodic(can.Message(arbitration_id=SYNC_ID, data=b"", is_extended_id=False), period)
+        self._unregister = syncgate.gate(bus).register(self)
+
+    def pause(self) -> None:
+        self.task.stop()
+
+    def resume(self) -> None:
+        start = getattr(self.task, "start", None)  # RestartableCyclicTaskABC (SocketCAN's is one)
+        if start is not None:
+            start()
 
     def stop(self) -> None:
+        self._unregister()
         self.task.stop()
 
 
@@ -127,6 +139,7 @@ class ThreadSync:
 
         self.bus, self.period = bus, period
         self.message = can.Message(arbitration_id=SYNC_ID, data=b"", is_extended_id=False)
+        self.gate = syncgate.gate(bus)  # never between the two BG frames of a synchronous pair start
         self.sent = 0
         self.start = time.perf_counter()
         self._due_total: int | None = None  # set by stop(): send up to this many, then end
@@ -145,10 +158,13 @@ class ThreadSync:
                 if ahead > 0 and limit is None:
                     self._wake.wait(ahead)
                     continue
-                self.bus.send(self.message)
+                self.gate.send(self._send_one)
                 self.sent += 1
         except BaseException as exc:  # noqa: BLE001  a dead bus ends the SYNC; the recording shows the gap
             self.error = exc
+
+    def _send_one(self) -> None:
+        self.bus.send(self.message)
 
     def request_stop(self) -> None:
         """From now on send only the SYNCs already due, then end (:meth:`stop` waits for that)."""

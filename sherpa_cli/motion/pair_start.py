@@ -7,7 +7,7 @@ import functools
 from collections.abc import Callable, Mapping, Sequence
 from typing import TYPE_CHECKING
 
-from sherpa_cli.bus import journal
+from sherpa_cli.bus import journal, syncgate
 from sherpa_cli.config.model import PAIR_START_METHODS, ArmConfig
 from sherpa_cli.elmo.protocol import GROUP_INDEX, RPDO2_BASE, SYNC_ID, TPDO2_BASE
 from sherpa_cli.errors import ConfigError, DriveTimeoutError
@@ -43,8 +43,9 @@ class CommonStart:
     ``method`` (``motion.pair_start``): ``group`` (0x2040 = the group id on both drives, one BG to
     the group id), ``sync_rpdo`` (for each begin RPDO2 is made synchronous on both drives, 0x1401:2
     = 1; BG to each drive is then buffered until one SYNC the tool sends right after them, which
-    both drives execute on the same frame; the old transmission type goes back at once and the BG
-    answers are awaited), ``sequential`` (BG, BG). Use as a context manager inside the motion
+    both drives execute on the same frame -- the BGs and that SYNC are one critical section of the
+    bus's SYNC gate (bus/syncgate.py), so no other SYNC of the tool falls between them; the old
+    transmission type goes back at once and the BG answers are awaited), ``sequential`` (BG, BG). Use as a context manager inside the motion
     guard. ``stop`` (:func:`stop_motors`) runs on the way out before the restore, so no motor keeps
     moving through the restore's SDO timeouts (review R8)."""
 
@@ -131,9 +132,12 @@ class CommonStart:
                 callback = listener(r.name)
                 network.subscribe(TPDO2_BASE + r.node, callback)
                 subscribed.append((TPDO2_BASE + r.node, callback))
-            for r in self.refs:  # buffered by each drive until the SYNC
-                network.send_message(RPDO2_BASE + r.node, codec.encode_execute("BG"))
-            network.send_message(SYNC_ID, b"")
+            # one critical section: no other SYNC of this tool (the recorder's) between the BG frames,
+            # or the first motor would start one SYNC before the second (issue 23)
+            with syncgate.gate(self.session.links[self.bus].bus).exclusive():
+                for r in self.refs:  # buffered by each drive until the SYNC
+                    network.send_message(RPDO2_BASE + r.node, codec.encode_execute("BG"))
+                network.send_message(SYNC_ID, b"")
             wait = 2 * max(getattr(c, "timeout", 0.1) for c in self.clients.values())
             for r in self.refs:
                 arrived[r.name].wait(wait)

@@ -6,6 +6,7 @@ from collections.abc import Iterable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
+from sherpa_cli.errors import UsageError
 from sherpa_cli.motion.blocked import StallWatch, min_progress_for
 from sherpa_cli.motion.drive_watch import DEFAULT_EMCY_WARNING_CODES
 from sherpa_cli.motion.stopping import recovery_speed
@@ -83,3 +84,14 @@ class MotionSettings:
     def stall_watch(self, speed_counts_per_s: float) -> StallWatch:
         """The stall watch of a move at this speed (motion/blocked.py)."""
         return StallWatch(self.stall_time, min_progress_for(speed_counts_per_s, self.stall_time))
+
+
+def check_torque_for(duration: float, limit: float | None = None) -> None:
+    """A torque move's --for within ``motion.max_torque_for`` (issue 22 item 8)."""
+    from sherpa_cli.config.model import MotionConfig
+
+    bound = MotionConfig().max_torque_for if limit is None else limit
+    if duration > bound:
+        raise UsageError(f"--for {duration:g} s is longer than motion.max_torque_for ({bound:g} s): in torque mode "
+                         "no drive limit acts, the time is the last guard", hint="raise motion.max_torque_for in the "
+                         "config (at most 60 s) for a longer torque move")

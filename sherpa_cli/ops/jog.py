@@ -27,7 +27,7 @@ from sherpa_cli.motion.blocked import StallWatch, blocked_text
 from sherpa_cli.motion.guard import MotionGuard
 from sherpa_cli.motion.report import GuardReport, MotionInterrupted, with_report
 from sherpa_cli.motion.request import MoveRequest
-from sherpa_cli.motion.settings import MotionSettings
+from sherpa_cli.motion.settings import MotionSettings, check_torque_for
 
 if TYPE_CHECKING:
     from sherpa_cli.bus.session import ArmSession
@@ -87,9 +87,10 @@ class JogResult:
                 "calibration": None if self.calibration is None else self.calibration.as_dict()}
 
 
-def check_request(target: Axis, req: MoveRequest) -> None:
+def check_request(target: Axis, req: MoveRequest, *, max_torque_for: float | None = None) -> None:
     """Refuse what must not reach a drive, before the bus is even opened (the request's own values
-    were checked when it was parsed: motion/request.py)."""
+    were checked when it was parsed: motion/request.py). ``max_torque_for``: ``motion.max_torque_for``
+    (default: the setting's default)."""
     if target.pair is not None:  # a Σ/Δ joint or a pair motor: ops/joint_jog.py moves those
         raise UsageError(f"'{target.name}' moves the differential pair '{target.pair.name}': jogging Σ/Δ joints is "
                          "not supported here", hint="jog a plain joint or its drive")
@@ -111,6 +112,7 @@ def check_request(target: Axis, req: MoveRequest) -> None:
         if req.duration is None:
             raise UsageError("a torque jog needs --for SECONDS: no position or speed limit of the drive acts in "
                              "torque mode, so it must end by itself")
+        check_torque_for(req.duration, max_torque_for)
         current = joint.current if joint is not None else None
         if current is None:
             raise UsageError(f"{target.name}: no current limits configured for it, so no torque can be checked",
@@ -138,7 +140,7 @@ def run_jog(session: ArmSession, target: Axis, req: MoveRequest, *, settings: Mo
             on_progress: Callable[[JogProgress], None] | None = None,
             on_event: Callable[[str], None] | None = None, keep: bool = False) -> JogResult:
     """Move as asked inside a MotionGuard and return where it ended; every exit path stops the motor."""
-    check_request(target, req)
+    check_request(target, req, max_torque_for=session.cfg.motion.max_torque_for)
     ref = target.ref
     cal = precheck(session, target, req)
     guard = MotionGuard(session, [ref], settings=settings, clock=clock, sleep=sleep, keep=keep, on_event=on_event)

@@ -39,6 +39,7 @@ from sherpa_cli.motion.blocked import blocked_text
 from sherpa_cli.motion.limit_watch import Breach
 from sherpa_cli.motion.report import with_report
 from sherpa_cli.motion.request import MoveRequest
+from sherpa_cli.motion.settings import check_torque_for
 
 if TYPE_CHECKING:
     from sherpa_cli.bus.session import ArmSession
@@ -96,6 +97,8 @@ def plan(cfg: ArmConfig, axis: Axis, request: MoveRequest, motors: Mapping[str, 
         _check_speed(axis, v, "--velocity")
         return JogPlan(axis, "velocity", start, speed=v, duration=request.duration,
                        motor_speeds=axis.motor_velocities(v))
+    if request.duration is not None:
+        check_torque_for(request.duration, cfg.motion.max_torque_for)
     amps = request.amps
     if amps == 0:
         raise UsageError("--torque must not be 0")

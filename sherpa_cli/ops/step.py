@@ -132,14 +132,14 @@ class StepTime(Protocol):
 
 
 def step_request(target: Axis, mode: str, value: float, *, duration: float,
-                 uncalibrated: bool = False) -> MoveRequest:
+                 uncalibrated: bool = False, max_torque_for: float | None = None) -> MoveRequest:
     """The step as a jog request, with every check that needs no bus (`jog`'s); a dry run's checks."""
     if target.joint is None:
         raise UsageError(f"{target.name}: log step needs a plain joint (its cpr converts rad to counts)")
     req = parse_request(target, mode, by=value if mode == "position" else None,
                         velocity=value if mode == "velocity" else None, torque=value if mode == "torque" else None,
                         duration=duration if mode != "position" else None, uncalibrated=uncalibrated)
-    check_request(target, req)
+    check_request(target, req, max_torque_for=max_torque_for)
     if not (math.isfinite(duration) and duration > 0):
         raise UsageError(f"--for {duration}: expected a time > 0 s")
     return req
@@ -167,7 +167,8 @@ def run_step(session: ArmSession, target: Axis, mode: str, value: float, *, dura
     on recording once the step has settled (bounded by ``duration``). ``drive_trace``: the
     drive's own recorder of the same step (ops/drive_step.py, `--source drive`), armed just before
     the command and read once the guard has stopped the motor."""
-    req = step_request(target, mode, value, duration=duration, uncalibrated=uncalibrated)
+    req = step_request(target, mode, value, duration=duration, uncalibrated=uncalibrated,
+                       max_torque_for=session.cfg.motion.max_torque_for)
     if not (math.isfinite(hold) and 0 <= hold < duration):
         raise UsageError(f"--hold {hold}: expected seconds >= 0 and less than --for {duration:g}")
     check_mode_first(mode, mode_first)

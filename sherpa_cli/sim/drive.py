@@ -163,6 +163,9 @@ class SimDrive:
         self.last_request = b""  # the last binary interpreter request (0x2012) and reply (0x2013)
         self.last_reply = b""
         self.syncs = 0  # SYNC frames this drive answered (Operational)
+        # (SYNC number, the frame): each buffered synchronous RPDO2 and the SYNC it ran at, so a test
+        # sees whether two drives started at one SYNC (pair_start: sync_rpdo)
+        self.sync_runs: list[tuple[int, bytes]] = FrameRecord()
         # interpreter requests lost to the MO settle window, and the settle time each had left: what a
         # host waited for them (sim/stepped.py charges it on its clock)
         self.unheard = 0
@@ -558,6 +561,7 @@ class SimDrive:
         self.syncs += 1
         frame, self._rpdo2_buffer = self._rpdo2_buffer, None
         if frame is not None:
+            self.sync_runs.append((self.syncs, frame))
             self._via_group = True
             try:
                 self._interpreter_frame(frame)

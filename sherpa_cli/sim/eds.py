@@ -71,7 +71,19 @@ def eds_text(kind: str) -> str:
     out = io.StringIO()
     name = next(f for f, k in FILES.items() if k == kind)
     eds.export_eds(dictionary(kind), out, file_info={**FILE_INFO, "FileName": name})
-    return out.getvalue()
+    return _sorted_baud_rates(out.getvalue())
+
+
+def _sorted_baud_rates(text: str) -> str:
+    """canopen writes the BaudRate_N lines in the iteration order of a set of floats and ints, which
+    differed between two environments with the same canopen (deps-lowest): sorted by rate, the
+    file is the same everywhere."""
+    lines = text.splitlines(keepends=True)
+    rows = [i for i, line in enumerate(lines) if line.startswith("BaudRate_")]
+    if rows and rows == list(range(rows[0], rows[-1] + 1)):
+        block = sorted((lines[i] for i in rows), key=lambda line: int(line.split("_", 1)[1].split("=", 1)[0]))
+        lines[rows[0]:rows[-1] + 1] = block
+    return "".join(lines)
 
 
 def main(argv: list[str]) -> int:
