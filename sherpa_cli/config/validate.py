@@ -180,9 +180,9 @@ def _check_motion(cfg: ArmConfig, locs: Locs, r: _Report) -> None:
     if m.liveness_timeout > MAX_LIVENESS_TIMEOUT_S or not math.isfinite(m.liveness_timeout):
         r.error(where("liveness_timeout"), f"liveness_timeout {m.liveness_timeout} s is above the safe bound "
                 f"{MAX_LIVENESS_TIMEOUT_S:g} s: a hung tool would keep its motors going that long")
-    if m.liveness_timeout > MAX_LIVENESS_TIMEOUT_S:
-        r.error(where("liveness_timeout"), f"liveness_timeout {m.liveness_timeout} s must be at most "
-                f"{MAX_LIVENESS_TIMEOUT_S:g} s (a hung tool keeps the dead-man fed this long)")
+    if not (math.isfinite(m.max_torque_for) and 0 < m.max_torque_for <= MAX_TORQUE_FOR_LIMIT_S):
+        r.error(where("max_torque_for"), f"max_torque_for {m.max_torque_for} s must be > 0 and at most "
+                f"{MAX_TORQUE_FOR_LIMIT_S:g} s (no drive limit acts in torque mode: the time is the last guard)")
     for code in m.emcy_warning_codes:
         if not 0 <= code <= 0xFFFF:
             r.error(where("emcy_warning_codes"), f"emcy_warning_codes: {code} out of range 0..0xFFFF (an EMCY code)")
