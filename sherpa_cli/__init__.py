@@ -4,9 +4,11 @@ From Python: ``from sherpa_cli import Arm`` (docs/api.md). The API is imported o
 the command line does not pay for it at startup.
 """
 
-from typing import TYPE_CHECKING
-
 from sherpa_cli.version import __version__
+
+# not typing's: the console script imports this package before its signal handlers are in place
+# (cli/entry.py), and typing is not loaded at start-up; mypy treats any TYPE_CHECKING alike
+TYPE_CHECKING = False
 
 __all__ = ["Arm", "__version__"]
 
