@@ -70,6 +70,9 @@ def decode(
     for k in kind or []:
         if k not in KINDS:
             raise UsageError(f"--kind {k}: expected one of {', '.join(KINDS)}")
+    for n in node or []:
+        if not 0 <= n <= 127:  # 0: NMT/SYNC; a CANopen node id is 1..127
+            raise UsageError(f"--node {n}: expected a node id 0..127")
     bus_names, nodes = _names(st)
     decoder = FrameDecoder(nodes)
     wanted_bus, wanted_node, wanted_kind = set(bus or []), set(node or []), set(kind or [])
