@@ -26,6 +26,7 @@ SEED_PROFILE = "configs/sim-profiles/seed-figures.yaml"
 SHORT = ["--set", "step_for=2.5", "--set", "velocity_for=2.5", "--set", "hold=1", "--set", "torque_for=1.5"]
 
 
+@pytest.mark.walltime
 def test_the_seed_figures_recipe_runs_and_its_numbers_fall_within_the_seed_bands(cli, cli_windows, tmp_path):
     cli_windows(False)  # the profile's 500 ms MO settle window: Fig. 9.1's delay is a figure here
     out = tmp_path / "section9"

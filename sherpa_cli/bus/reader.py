@@ -33,6 +33,8 @@ import time
 from collections.abc import Callable, Iterable
 from typing import Any, Protocol
 
+from sherpa_cli.errors import SherpaError
+
 log = logging.getLogger(__name__)
 
 
@@ -157,6 +159,10 @@ class CallerReadNotifier:
     def _recv(self, timeout: float) -> Any:
         try:
             return self.bus.recv(timeout)
+        except SherpaError:
+            # raised in this thread by the tool's own signal handler (the motion guard's SIGTERM stop)
+            # while it waited in recv: the command's end, not the bus's
+            raise
         except Exception as exc:  # the adapter went away: canopen's Network.check() raises it later
             self.exception = exc
             if self.lost is not None and threading.current_thread() is not self._thread:

@@ -7,7 +7,7 @@ from typing import TYPE_CHECKING, Any
 import typer
 
 from sherpa_cli.cli.context import AppState, state
-from sherpa_cli.cli.options import ApplyMatch, ApplyMotion, Save, Yes
+from sherpa_cli.cli.options import ApplyMatch, ApplyMotion, Report, Save, Yes
 from sherpa_cli.cli.output import stop_lines
 from sherpa_cli.errors import UsageError
 
@@ -171,8 +171,7 @@ def move(
     naive: bool = typer.Option(False, "--naive", help="The seed's way, for comparison: two separate BG and "
                                "unscaled profiles."),
     plot: str | None = typer.Option(None, "--plot", metavar="FILE.png", help="Draw both joints during the move."),
-    report: str | None = typer.Option(None, "--report", metavar="FILE.json", help="Also write the move's report "
-                                      "(what --json prints) to FILE, e.g. for `sherpa log section9`."),
+    report: Report = None,
     poll: bool = typer.Option(False, "--poll", help="Record by polling PX through the interpreter instead of "
                               "TPDOs on SYNC (changes no PDO settings; coarser, one motor a round trip after the other)."),
     uncalibrated: bool = typer.Option(False, "--uncalibrated", help="Allow the move although the pair was not "

@@ -513,7 +513,7 @@ def _render_record(st: AppState, outputs: Sequence[Path], counts: Mapping[str, i
         st.out.warn(f"{late} frame(s) came after their row was written: not in the file")
 
 
-def _stepped_sim(st: AppState) -> tuple[SteppedTime | None, Callable[[ArmConfig, Mapping[str, str]], SimArm] | None]:
+def stepped_sim(st: AppState) -> tuple[SteppedTime | None, Callable[[ArmConfig, Mapping[str, str]], SimArm] | None]:
     """With --sim: the in-process arm on stepped time (sim/stepped.py), so a step's figures are the
     simulated drive's and the same on every run and machine; else (None, None)."""
     if not st.sim:
@@ -644,12 +644,12 @@ def step(
     settings = MotionSettings.from_config(cfg, [target.ref.bus])
     if not to_mcap:
         output.mkdir(parents=True, exist_ok=True)
-    stepped, sim_factory = _stepped_sim(st)
+    stepped, sim_factory = stepped_sim(st)
     with st.session(buses=[target.ref.bus], sim_factory=sim_factory) as session:
         timebase = None
         arm = session.sim
         if stepped is not None and arm is not None:
-            from sherpa_cli.sim.arm import SimArm  # only with --sim: `arm` is the SimArm _stepped_sim built
+            from sherpa_cli.sim.arm import SimArm  # only with --sim: `arm` is the SimArm stepped_sim built
 
             assert isinstance(arm, SimArm)
             if arm.clock is stepped.clock:

@@ -103,7 +103,7 @@ def step(
     """
     import math
 
-    from sherpa_cli.cli.log_cmd import _stepped_sim, render_metrics
+    from sherpa_cli.cli.log_cmd import render_metrics, stepped_sim
     from sherpa_cli.motion.settings import MotionSettings
     from sherpa_cli.ops.step import resolve_step_target, run_step, step_request
     from sherpa_cli.ops.tune import parse_assignments
@@ -135,7 +135,7 @@ def step(
         st.out.line("nothing sent; add --apply to move")
         return
     settings = MotionSettings.from_config(cfg, [target.ref.bus])
-    stepped, sim_factory = _stepped_sim(st)
+    stepped, sim_factory = stepped_sim(st)
     with st.session(buses=[target.ref.bus], sim_factory=sim_factory) as session:
         timebase = None
         if stepped is not None and session.sim is not None and getattr(session.sim, "clock", None) is stepped.clock:

@@ -58,7 +58,7 @@ def step_title(joint: str, marks: StepMarks) -> str:
     return f"{joint}: {marks.mode} step {marks.value:+g} {MODE_UNITS.get(marks.mode, '')}; {switch}"
 
 
-def _figure() -> Any:
+def figure() -> Any:
     try:
         import matplotlib
     except ImportError:
@@ -69,7 +69,7 @@ def _figure() -> Any:
     return Figure(figsize=FIG_SIZE, dpi=DPI, layout="constrained")
 
 
-def _plain_axis(ax: Any, values: Sequence[float], min_span: float) -> None:
+def plain_axis(ax: Any, values: Sequence[float], min_span: float) -> None:
     """No offset or scientific notation on y, and at least ``min_span`` shown around the data."""
     ax.ticklabel_format(axis="y", useOffset=False, style="plain")
     finite = [v for v in values if math.isfinite(v)]
@@ -81,7 +81,7 @@ def _plain_axis(ax: Any, values: Sequence[float], min_span: float) -> None:
         ax.set_ylim(mid - min_span / 2, mid + min_span / 2)
 
 
-def _legend_outside(ax: Any) -> None:
+def legend_outside(ax: Any) -> None:
     """The legend right of the axes, in the figure's margin: it never covers the trace."""
     ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0, fontsize="small", frameon=False)
 
@@ -92,7 +92,7 @@ def plot_recording(rec: Recording, joints: list[str], path: Path, *,
     """One column per joint, one row per signal present (position, velocity, current); step
     metrics (keyed by (joint, signal)) drawn on their signal's axes and listed in its legend;
     ``marks``: a step experiment's command and switch window on every axes. Returns the Figure."""
-    fig = _figure()
+    fig = figure()
     signals = [s for s in SIGNALS if any(rec.series(j, s) for j in joints)]
     axes = fig.subplots(max(1, len(signals)), max(1, len(joints)), squeeze=False, sharex=True)
     for col, joint in enumerate(joints):
@@ -106,13 +106,13 @@ def plot_recording(rec: Recording, joints: list[str], path: Path, *,
             ax.plot(series[0], series[1], lw=1.0, label=f"{joint} {SIGNAL_NAMES[signal]}")
             ax.set_ylabel(f"{SIGNAL_NAMES[signal]} [{unit}]")
             ax.grid(True, alpha=0.3)
-            _plain_axis(ax, series[1], MIN_SPAN[signal])
+            plain_axis(ax, series[1], MIN_SPAN[signal])
             if marks is not None:
                 _draw_command(ax, marks)
             m = (metrics or {}).get((joint, signal))
             if m is not None:
                 _draw_metrics(ax, m, unit)
-            _legend_outside(ax)
+            legend_outside(ax)
         axes[-1][col].set_xlabel("time since the command [s]" if marks is not None else "time [s]")
         axes[0][col].set_title(joint)
     if title:
@@ -174,7 +174,7 @@ class PairTrace:
 def plot_pair(trace: PairTrace, path: Path | str) -> Any:
     """Σ above Δ over time, the targets and the command drawn, the held joint with at least
     ``held_span`` of y range and its peak excursion marked. Returns the Figure."""
-    fig = _figure()
+    fig = figure()
     axes = fig.subplots(2, 1, squeeze=False, sharex=True)
     rows = ((trace.sigma, "Σ", trace.sigma_rad, trace.sigma_target),
             (trace.delta, "Δ", trace.delta_rad, trace.delta_target))
@@ -189,15 +189,15 @@ def plot_pair(trace: PairTrace, path: Path | str) -> Any:
             if trace.held_excursion > 0:
                 ax.axhspan(start - trace.held_excursion, start + trace.held_excursion, color="red", alpha=0.12,
                            lw=0, label=f"peak excursion ±{trace.held_excursion:.4f} rad")
-            _plain_axis(ax, [*ys, start - trace.held_excursion, start + trace.held_excursion],
+            plain_axis(ax, [*ys, start - trace.held_excursion, start + trace.held_excursion],
                         max(trace.held_span, 4 * trace.held_excursion))
         else:
             ax.axhline(target, color="grey", lw=0.8, ls="--", label=f"target {target:+.4f} rad")
-            _plain_axis(ax, [*ys, target], MIN_SPAN["pos"])
+            plain_axis(ax, [*ys, target], MIN_SPAN["pos"])
         ax.set_ylabel(f"{symbol} {name} [rad]")
         ax.set_title(f"{symbol} {name}" + (" (held)" if held else ""), fontsize="medium")
         ax.grid(True, alpha=0.3)
-        _legend_outside(ax)
+        legend_outside(ax)
     axes[-1][0].set_xlabel("time since the command [s]")
     what = f"diffdrive move {trace.pair}: Σ {trace.sigma} to {trace.sigma_target:+.4f} rad, " \
            f"Δ {trace.delta} to {trace.delta_target:+.4f} rad"

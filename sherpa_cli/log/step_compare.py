@@ -105,9 +105,9 @@ def compare(paths: Sequence[Path]) -> list[tuple[RunFigures, Recording]]:
 def plot_compare(runs: Sequence[tuple[RunFigures, Recording]], path: Path) -> Any:
     """Every run's position and velocity over time since its command, one line per run, its
     metrics in the legend (outside the data). Returns the matplotlib Figure."""
-    from sherpa_cli.log.plot import _figure, _legend_outside, _plain_axis
+    from sherpa_cli.log.plot import figure, legend_outside, plain_axis
 
-    fig = _figure()
+    fig = figure()
     axes = fig.subplots(2, 1, squeeze=False, sharex=True)
     rows = (("pos", "position change", "rad"), ("vel", "velocity", "rad/s"))
     for row, (signal, label, unit) in enumerate(rows):
@@ -132,8 +132,8 @@ def plot_compare(runs: Sequence[tuple[RunFigures, Recording]], path: Path) -> An
         ax.axvline(0.0, color="black", lw=0.9, ls="--", label="command (t = 0)")
         ax.set_ylabel(f"{label} [{unit}]")
         ax.grid(True, alpha=0.3)
-        _plain_axis(ax, values, 0.02 if signal == "pos" else 0.05)
-        _legend_outside(ax)
+        plain_axis(ax, values, 0.02 if signal == "pos" else 0.05)
+        legend_outside(ax)
     axes[-1][0].set_xlabel("time since the command [s]")
     fig.suptitle("log step: " + ", ".join(f.name for f, _ in runs))
     fig.savefig(str(path), format="png")

@@ -187,7 +187,12 @@ def precheck(session: ArmSession, target: Axis, req: MoveRequest) -> Calibration
     joint = target.joint
     if joint is None:
         return None
+    from sherpa_cli.bus.health import check_buses
     from sherpa_cli.motion import calibration
+
+    # the guard's bus preflight, first: a request on a BUS-OFF or missing bus is a bus problem, named
+    # as one, not a drive that does not answer (the guard checks again on entry)
+    check_buses(session, {target.ref.bus})
 
     if req.mode != "position":
         if calibration.absolute(session.cfg, joint):

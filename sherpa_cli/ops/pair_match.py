@@ -463,9 +463,9 @@ def _put_back(held: Mapping[str, float], client: Any) -> list[str]:
 def plot(result: MatchResult, path: str) -> Any:
     """Before / after: both motors' recorded speed and Δ (m_a - m_b, counts) of the Σ step (the round
     with the drives' own gains and the round whose gains are proposed). PNG, matplotlib (log/plot.py)."""
-    from sherpa_cli.log.plot import _figure
+    from sherpa_cli.log.plot import figure
 
-    fig = _figure()
+    fig = figure()
     axes = fig.subplots(2, 2, sharex=True)
     a, b = result.proposal.drives
     for col, (k, label) in enumerate(((0, "before"), (result.chosen, "after"))):
