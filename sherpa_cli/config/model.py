@@ -238,8 +238,10 @@ class ProtocolConfig:
     # 138 bits, at 1 Mbit/s); 0 = none
     pacing_floor_us: int = 140
     # issue 26 item 2: a caller waiting for a reply reads the bus itself (bus/reader.py); False =
-    # python-can's Notifier thread reads every frame and hands replies over (one more thread switch)
-    caller_reads: bool = True
+    # python-can's Notifier thread reads every frame and hands replies over (one more thread switch).
+    # Off by default: a SIGTERM raised inside a caller's read could leave the reader's bookkeeping
+    # stale, and the stop's SDO writes then waited for frames nobody read (tests/test_signals_moving.py)
+    caller_reads: bool = False
     # UI[n] that `home` sets to 1 once a joint is homed; RAM only, so a reset clears it (docs/motion.md)
     calibration_flag: int = 3
 
