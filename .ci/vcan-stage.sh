@@ -9,11 +9,11 @@
 #                             root, else /work/shared/tools/run-in-vcan-vm.sh)
 #        SHERPA_SKIP_VCAN=1   skip this stage on purpose (a machine without the runner); otherwise a
 #                             missing runner fails the stage
-#        SHERPA_VCAN_TIMEOUT  wall-clock limit of the guest run in seconds (default 1800: the realbus tests,
+#        SHERPA_VCAN_TIMEOUT  wall-clock limit of the guest run in seconds (default 2700: the realbus tests,
 #                             motion ones with subprocesses, and the whole-arm commissioning (about 4 min
 #                             there), in a 15-20x slower TCG guest)
 #        SHERPA_VCAN_CPUS     guest vCPUs (default 2: the simulator and the tests each get one)
-#        SHERPA_VCAN_FULL=1   also run the two cross-process tests deselected below
+#        SHERPA_VCAN_FULL=1   also run the cross-process tests deselected below
 set -euo pipefail
 cd "$(dirname "$0")/.."
 root=$PWD
@@ -26,7 +26,7 @@ if [ -z "$vm" ]; then
   done
   vm=${vm:-$root/../shared/tools/run-in-vcan-vm.sh}
 fi
-limit=${SHERPA_VCAN_TIMEOUT:-1800}
+limit=${SHERPA_VCAN_TIMEOUT:-2700}
 cpus=${SHERPA_VCAN_CPUS:-2}
 interfaces=vcan0,vcan1,vcan2
 spare=vcan3  # the `vcan` tests' own interface (tests/test_bus_vcan.py takes it down and up)
@@ -52,6 +52,13 @@ deselect=()
 # tests' premise gone). Both run in the remote stage (python-can-remote) every CI.
 deselect+=(--deselect tests/test_drive_watch_crossprocess.py::test_an_emcy_flood_from_the_moving_drive_stops_the_jog
            --deselect tests/test_motion_crossprocess.py::test_program_limits_during_a_jog_in_another_process_is_refused_with_exit_5)
+# The same starvation for the tests that run two sherpa processes beside the simulator, or a killed
+# command's successor while the first one's drives still time out (measured in the guest 2026-11-25:
+# "heartbeat lost" before the motor went on). They run in the remote stage every CI.
+deselect+=(--deselect "tests/test_killed_tool.py::test_a_killed_moving_command_is_refused_until_recover_puts_the_drive_back[diffdrive move]"
+           --deselect "tests/test_killed_tool.py::test_a_killed_moving_command_is_refused_until_recover_puts_the_drive_back[log step]"
+           --deselect tests/test_journal_crossprocess.py::test_a_killed_log_record_is_put_back_by_recover
+           --deselect tests/test_motion_crossprocess.py::test_two_motion_commands_on_one_bus_a_killed_or_frozen_one_stops_its_drive_the_other_keeps_running)
 if [ "${SHERPA_VCAN_FULL:-}" = 1 ]; then deselect=(); fi  # everything, the slow-guest ones included
 # the guest sees this machine's files read-only, so the same interpreter and virtualenv work there
 python=$(command -v python)
