@@ -25,8 +25,16 @@ def _counts(rad: float) -> int:
     return round(rad / (2 * math.pi) * CPR)
 
 
+@pytest.fixture
+def back_to_zero(arm_cli):
+    """The served arm keeps where its joints stand between tests (only RAM is power-cycled): put
+    elbow_pitch back at 0, so the next test's relative jog starts where it expects."""
+    yield
+    arm_cli("jog", "elbow_pitch", "--to", "0", "--apply")
+
+
 @pytest.mark.realbus
-def test_a_position_jog_after_a_reset_goes_where_the_encoder_says(arm_cli):
+def test_a_position_jog_after_a_reset_goes_where_the_encoder_says(arm_cli, back_to_zero):
     moved = arm_cli("jog", "elbow_pitch", "--to", "1.2", "--apply")
     assert moved.exit_code == 0, moved.transcript()
     px, py = _px_py(arm_cli)  # a power cycle came between: the counter restarted, the encoder did not
@@ -39,7 +47,7 @@ def test_a_position_jog_after_a_reset_goes_where_the_encoder_says(arm_cli):
 
 
 @pytest.mark.realbus
-def test_the_watch_fires_at_the_encoders_full_range_after_a_reset(arm_cli):
+def test_the_watch_fires_at_the_encoders_full_range_after_a_reset(arm_cli, back_to_zero):
     assert arm_cli("jog", "elbow_pitch", "--to", "1.2", "--apply").exit_code == 0
     # outward at speed: with PX restarted at 0 the watch would let the joint run 1.2 rad past its range
     run = arm_cli("jog", "elbow_pitch", "--velocity", "0.5", "--for", "4", "--apply")
