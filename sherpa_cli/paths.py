@@ -12,7 +12,7 @@ import json
 import os
 import tempfile
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 # filelock and platformdirs are imported where used: the CLI's root callback reaches this module on
 # every command, `--help` included, and they cost ~40 ms of start-up (issue 26 item 3)
@@ -65,7 +65,7 @@ def write_atomic(path: Path, text: str, mode: int | None = None) -> None:
 MAX_STATE_BYTES = 16 * 1024 * 1024  # a state file holds counts and a few flash images
 
 
-def read_json(path: Path, default: Any) -> Any:
+def read_json(path: Path, default: object) -> object:
     """The file's JSON, ``default`` if it does not exist; ValueError says what is wrong with it
     (not JSON, not UTF-8, too large, nested too deeply), OSError that it cannot be read."""
     try:

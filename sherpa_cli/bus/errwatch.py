@@ -15,9 +15,14 @@ import threading
 from collections.abc import Callable, Iterable, Iterator
 from contextlib import contextmanager, suppress
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from sherpa_cli.bus.errframes import ErrorFrame, decode_error_frame
+
+if TYPE_CHECKING:
+    import can
+
+    from sherpa_cli.bus.session import ArmSession
 
 
 @dataclass(frozen=True)
@@ -43,11 +48,11 @@ class BusWatch:
         self._frames: dict[str, int] = {}
         self._bytes: dict[str, int] = {}
 
-    def listener(self, bus: str) -> Any:
+    def listener(self, bus: str) -> Callable[[can.Message], None]:
         self._frames.setdefault(bus, 0)
         self._bytes.setdefault(bus, 0)
 
-        def on_message(msg: Any) -> None:
+        def on_message(msg: can.Message) -> None:
             self.feed(bus, msg.arbitration_id, bytes(msg.data), is_error=bool(msg.is_error_frame),
                       timestamp=float(msg.timestamp or 0.0))
 
@@ -77,7 +82,7 @@ class BusWatch:
 
 
 @contextmanager
-def watching(session: Any, buses: Iterable[str] | None = None,
+def watching(session: ArmSession, buses: Iterable[str] | None = None,
              on_error: Callable[[SeenError], None] | None = None) -> Iterator[BusWatch]:
     """A :class:`BusWatch` fed by the receive thread of each named bus of an open session (default: all);
     ``on_error``: see :class:`BusWatch`."""

@@ -14,10 +14,14 @@ from __future__ import annotations
 
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING
 
 from sherpa_cli.bus.linkstate import BUS_OFF, PASSIVE, STOPPED, LinkStatus, read_link
 from sherpa_cli.errors import CommunicationError
+
+if TYPE_CHECKING:
+    from sherpa_cli.bus.session import ArmSession
+    from sherpa_cli.bus.targets import DriveRef
 
 
 class BusStateError(CommunicationError):
@@ -82,7 +86,7 @@ def check_status(statuses: Iterable[LinkStatus], what: str = "moving") -> None:
                                 bus=s.bus, problem=found[0].problem, hint=found[0].hint)
 
 
-def check_buses(session: Any, buses: Iterable[str] | None = None, what: str = "moving") -> list[LinkStatus]:
+def check_buses(session: ArmSession, buses: Iterable[str] | None = None, what: str = "moving") -> list[LinkStatus]:
     """Read every named bus of an open session (default: all it has open) and refuse an unfit one."""
     names = sorted(buses) if buses is not None else sorted(getattr(session, "links", {}))
     statuses = [read_link(session, b) for b in names if b in session.cfg.buses]
@@ -90,7 +94,7 @@ def check_buses(session: Any, buses: Iterable[str] | None = None, what: str = "m
     return statuses
 
 
-def preflight(session: Any, refs: Sequence[Any]) -> None:
+def preflight(session: ArmSession, refs: Sequence[DriveRef]) -> None:
     """Before motion: the buses of ``refs`` (state, bit rate), then each drive's user program (PS).
 
     The drives are NMT-started for the PS query (the binary interpreter answers in Operational only;

@@ -14,6 +14,8 @@ from sherpa_cli.config.model import ArmConfig, BusConfig
 from sherpa_cli.errors import CommunicationError
 
 if TYPE_CHECKING:
+    import threading
+
     import can
 
 
@@ -55,7 +57,7 @@ def _paced_network_class():
         noted on the network and the notifier is told to stop, instead of the thread dying with a
         traceback on stderr; the command's next frame raises :class:`BusLostError`."""
 
-        def __init__(self, network: Any) -> None:
+        def __init__(self, network: PacedNetwork) -> None:
             self.network = network
 
         def on_message_received(self, msg: can.Message) -> None:
@@ -132,7 +134,7 @@ def _paced_network_class():
                                                lost=self._bus_lost)
             return self
 
-        def wait_for(self, arrived: Any, timeout: float) -> bool:
+        def wait_for(self, arrived: threading.Lock, timeout: float) -> bool:
             """Wait for a listener to release ``arrived`` (a drive client's reply lock), reading the
             bus on this thread meanwhile when the notifier allows it (bus/reader.py)."""
             wait = getattr(self.notifier, "wait_for", None)

@@ -14,10 +14,15 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from sherpa_cli.bus.netlink import Netlink, NetlinkUnavailable, Pyroute2Netlink, unavailable_reason
 from sherpa_cli.config.model import BusConfig
+
+if TYPE_CHECKING:
+    import can
+
+    from sherpa_cli.bus.session import ArmSession
 
 ACTIVE, WARNING, PASSIVE, BUS_OFF, STOPPED, DOWN = (
     "ERROR-ACTIVE", "ERROR-WARNING", "ERROR-PASSIVE", "BUS-OFF", "STOPPED", "down")
@@ -124,7 +129,7 @@ def from_netlink(cfg: BusConfig, figures: Mapping[str, Any] | None, *, source: s
     return status
 
 
-def from_python_can(cfg: BusConfig, bus: Any) -> LinkStatus:
+def from_python_can(cfg: BusConfig, bus: can.BusABC) -> LinkStatus:
     """A LinkStatus from an open python-can bus: its ``state`` only where the backend implements it
     (BusABC's own answers ERROR_ACTIVE whatever the bus does: that would be a guess)."""
     import can
@@ -145,11 +150,12 @@ def from_python_can(cfg: BusConfig, bus: Any) -> LinkStatus:
                       can_state=state, not_reported=missing)
 
 
-def source_for(cfg: BusConfig, sim: Any = None) -> tuple[Netlink | None, str | None, str]:
+def source_for(cfg: BusConfig, sim: object = None) -> tuple[Netlink | None, str | None, str]:
     """(netlink, name to ask it for, source label) for one bus: the simulated arm's controller
     (``sim``: the injected arm, with --sim), pyroute2 for a SocketCAN bus, else (None, None, why not)."""
-    if sim is not None and getattr(sim, "netlink", None) is not None:
-        return sim.netlink, cfg.name, "simulated controller"
+    netlink = getattr(sim, "netlink", None)  # the injected arm's controllers (None: no --sim)
+    if netlink is not None:
+        return netlink, cfg.name, "simulated controller"
     if cfg.interface == "socketcan":
         reason = unavailable_reason()
         if reason is not None:
@@ -158,7 +164,7 @@ def source_for(cfg: BusConfig, sim: Any = None) -> tuple[Netlink | None, str | N
     return None, None, f"not reported by {cfg.interface or 'this interface'}"
 
 
-def link_source(session: Any, bus: str) -> tuple[Netlink | None, str | None, str]:
+def link_source(session: ArmSession, bus: str) -> tuple[Netlink | None, str | None, str]:
     """:func:`source_for` a bus of an open session."""
     return source_for(session.cfg.buses[bus], getattr(session, "sim", None))
 
@@ -175,7 +181,7 @@ def shared_netlink() -> Pyroute2Netlink:
 
 
 def snapshot(cfg: BusConfig, netlink: Netlink | None, name: str | None, label: str,
-             pycan_bus: Any = None) -> LinkStatus:
+             pycan_bus: can.BusABC | None = None) -> LinkStatus:
     """One reading of a bus from the source :func:`source_for` picked, else from an open python-can bus
     (its backend's own state, where it has one). Never raises for a bus it cannot read:
     :attr:`LinkStatus.error` and :attr:`LinkStatus.not_reported` say why."""
@@ -195,7 +201,7 @@ def snapshot(cfg: BusConfig, netlink: Netlink | None, name: str | None, label: s
                       not_reported={k: label for k in FIGURES})
 
 
-def read_link(session: Any, bus: str) -> LinkStatus:
+def read_link(session: ArmSession, bus: str) -> LinkStatus:
     """One snapshot of a bus of an open session (what the preflight and the guard's bus watch read).
     With --sim the simulated controller stands in for the configured adapter, and is named like it."""
     netlink, name, label = link_source(session, bus)

@@ -66,7 +66,7 @@ def unavailable_reason() -> str | None:
     return None
 
 
-def _hex_bytes(value: Any) -> bytes:
+def _hex_bytes(value: object) -> bytes:
     """pyroute2 gives a 'hex' NLA as text like '01:00:00:00'; accept bytes too."""
     if isinstance(value, bytes | bytearray):
         return bytes(value)
@@ -79,7 +79,7 @@ def _hex_bytes(value: Any) -> bytes:
     return b""
 
 
-def parse_device_stats(raw: Any) -> dict[str, int] | None:
+def parse_device_stats(raw: object) -> dict[str, int] | None:
     """struct can_device_stats (six u32, native byte order) from IFLA_INFO_XSTATS."""
     data = _hex_bytes(raw)
     if len(data) < 4 * len(DEVICE_STATS):
@@ -87,7 +87,7 @@ def parse_device_stats(raw: Any) -> dict[str, int] | None:
     return dict(zip(DEVICE_STATS, struct.unpack(f"={len(DEVICE_STATS)}I", data[:4 * len(DEVICE_STATS)]), strict=True))
 
 
-def _state_name(value: Any) -> str | None:
+def _state_name(value: object) -> str | None:
     if value is None:
         return None
     if isinstance(value, int):

@@ -31,21 +31,29 @@ import logging
 import threading
 import time
 from collections.abc import Callable, Iterable
-from typing import Any, Protocol
+from typing import TYPE_CHECKING, Protocol
 
 from sherpa_cli.errors import SherpaError
+
+if TYPE_CHECKING:
+    from typing import TypeAlias
+
+    import can
+
+    #: what a listener may be, as for ``can.Notifier``
+    Recipient: TypeAlias = can.Listener | Callable[[can.Message], None]
 
 log = logging.getLogger(__name__)
 
 
 class _Bus(Protocol):
-    def recv(self, timeout: float | None = None) -> Any: ...
+    def recv(self, timeout: float | None = None) -> can.Message | None: ...
 
 
 class CallerReadNotifier:
     """A ``can.Notifier`` stand-in whose waiting callers read the bus themselves (see the module)."""
 
-    def __init__(self, bus: _Bus, listeners: Iterable[Any], timeout: float = 0.02, *,
+    def __init__(self, bus: _Bus, listeners: Iterable[Recipient], timeout: float = 0.02, *,
                  idle_after: float = 0.002, follow_slice: float = 0.001,
                  clock: Callable[[], float] = time.monotonic, background: bool = True,
                  lost: Callable[[BaseException], BaseException] | None = None) -> None:
@@ -53,7 +61,7 @@ class CallerReadNotifier:
         #: what a caller raises when reading the bus fails on its thread (the bus is gone): the
         #: network's error naming the bus (bus/links.py); None: the adapter's own exception
         self.lost = lost
-        self.listeners: list[Any] = list(listeners)
+        self.listeners: list[Recipient] = list(listeners)
         #: the background thread's longest receive (it checks whether to stop this often), as can.Notifier's
         self.timeout = timeout
         #: seconds without a waiting caller before the background thread reads again: a caller that
@@ -82,10 +90,10 @@ class CallerReadNotifier:
 
     # -- can.Notifier's interface ---------------------------------------------------------------
 
-    def add_listener(self, listener: Any) -> None:
+    def add_listener(self, listener: Recipient) -> None:
         self.listeners.append(listener)
 
-    def remove_listener(self, listener: Any) -> None:
+    def remove_listener(self, listener: Recipient) -> None:
         self.listeners.remove(listener)
 
     @property
@@ -156,7 +164,7 @@ class CallerReadNotifier:
 
     # -- reading and dispatching ----------------------------------------------------------------
 
-    def _recv(self, timeout: float) -> Any:
+    def _recv(self, timeout: float) -> can.Message | None:
         try:
             return self.bus.recv(timeout)
         except SherpaError:
@@ -169,7 +177,7 @@ class CallerReadNotifier:
                 raise self.lost(exc) from exc  # a caller's read: one error naming the bus
             raise
 
-    def _dispatch(self, msg: Any) -> None:
+    def _dispatch(self, msg: can.Message) -> None:
         for listener in list(self.listeners):
             try:
                 listener(msg) if callable(listener) else listener.on_message_received(msg)

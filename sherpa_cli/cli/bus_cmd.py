@@ -6,12 +6,20 @@ import sys
 import time
 from collections.abc import Callable, Iterator
 from contextlib import ExitStack, contextmanager
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import typer
 
 from sherpa_cli.cli.context import AppState, state
 from sherpa_cli.errors import CommunicationError, ExitCode, UsageError
+
+if TYPE_CHECKING:
+    from rich.console import Group
+
+    from sherpa_cli.bus.session import ArmSession, InProcessArm
+    from sherpa_cli.config.model import ArmConfig
+    from sherpa_cli.ops.buslink import LinkChange
+    from sherpa_cli.ops.buswatch import WatchState
 
 app = typer.Typer(no_args_is_help=True, help="The CAN buses: link state, error frames, bring-up (docs/bus.md).")
 
@@ -24,7 +32,7 @@ MAX_WINDOW = 60.0  # s: the longest load window of `bus status`
 Buses = typer.Argument(None, metavar="[BUS]...", help="Configured bus names; default: every bus.")
 
 
-def mapped_config(st: AppState) -> Any:
+def mapped_config(st: AppState) -> ArmConfig:
     """The config as the session sees it: with --bus-map applied (the interfaces actually used)."""
     from sherpa_cli.bus.busmap import apply_bus_map, parse_bus_map
 
@@ -44,7 +52,7 @@ def _seconds(value: float | None, option: str, *, zero_ok: bool = False) -> None
 
 
 @contextmanager
-def _sessions(st: AppState, cfg: Any, names: list[str]) -> Iterator[tuple[Any, dict[str, str]]]:
+def _sessions(st: AppState, cfg: ArmConfig, names: list[str]) -> Iterator[tuple[ArmSession | None, dict[str, str]]]:
     """With --sim: one session (the simulated arm and its controllers). Else: a session for the buses
     netlink cannot read (python-can opens them); buses it could not open map to the error."""
     if st.sim:
@@ -56,7 +64,7 @@ def _sessions(st: AppState, cfg: Any, names: list[str]) -> Iterator[tuple[Any, d
         yield None, {}
         return
     failed: dict[str, str] = {}
-    session: Any
+    session: ArmSession | None
     with ExitStack() as stack:
         try:
             session = stack.enter_context(st.session(buses=others))
@@ -111,7 +119,7 @@ def status_cmd(
         raise typer.Exit(int(ExitCode.PROBLEM))
 
 
-def _cell(value: Any, fmt: Callable[[Any], str] = str) -> str:
+def _cell(value: object, fmt: Callable[[Any], str] = str) -> str:
     return "-" if value is None else fmt(value)
 
 
@@ -220,7 +228,7 @@ class _LinePrinter:
         self.states: dict[str, str] = {}
         self.hinted: set[tuple[str, str]] = set()
 
-    def __call__(self, w: Any) -> None:
+    def __call__(self, w: WatchState) -> None:
         out = self.st.out
         for bus in w.buses:
             s = w.links.get(bus)
@@ -240,17 +248,17 @@ class _LinePrinter:
                     out.line(f"  hint: {hint}")
 
 
-def _summary(st: AppState, w: Any) -> None:
+def _summary(st: AppState, w: WatchState) -> None:
     rows = []
     for bus in w.buses:
         s = w.links.get(bus)
-        counts = w.counts.get(bus, {})
+        counts: dict[str, int] = w.counts.get(bus, {})
         rows.append([bus, s.state if s else "-", f"{s.tec}/{s.rec}" if s is not None and s.tec is not None else "-",
                      ", ".join(f"{k} {n}" for k, n in sorted(counts.items())) or "none"])
     st.out.table("error frames seen", ["bus", "state", "TEC/REC", "error frames"], rows)
 
 
-def _live(st: AppState, session: Any, names: list[str], seconds: float | None, interval: float) -> Any:
+def _live(st: AppState, session: ArmSession, names: list[str], seconds: float | None, interval: float) -> WatchState:
     from rich.live import Live
 
     from sherpa_cli.ops.buswatch import watch
@@ -260,7 +268,7 @@ def _live(st: AppState, session: Any, names: list[str], seconds: float | None, i
                      on_update=lambda w: live.update(_screen(w), refresh=True))
 
 
-def _screen(w: Any) -> Any:
+def _screen(w: WatchState) -> Group:
     from rich.console import Group
     from rich.text import Text
 
@@ -269,7 +277,7 @@ def _screen(w: Any) -> Any:
     rows = []
     for bus in w.buses:
         s = w.links.get(bus)
-        counts = w.counts.get(bus, {})
+        counts: dict[str, int] = w.counts.get(bus, {})
         rows.append([bus, s.state if s else "-", f"{s.tec}/{s.rec}" if s is not None and s.tec is not None else "-",
                      _cell(s.load if s else None, lambda v: f"{v * 100:.1f} %"),
                      ", ".join(f"{k} {n}" for k, n in sorted(counts.items())) or "none"])
@@ -334,7 +342,7 @@ def down_cmd(ctx: typer.Context, buses: list[str] | None = Buses) -> None:
 
 
 @contextmanager
-def _sim_session(st: AppState, names: list[str]) -> Iterator[Any]:
+def _sim_session(st: AppState, names: list[str]) -> Iterator[InProcessArm | None]:
     if not st.sim:
         yield None
         return
@@ -342,7 +350,7 @@ def _sim_session(st: AppState, names: list[str]) -> Iterator[Any]:
         yield session.sim
 
 
-def _render_changes(st: AppState, changes: list[Any]) -> None:
+def _render_changes(st: AppState, changes: list[LinkChange]) -> None:
     if st.json_mode:
         st.out.json({"buses": [c.as_json() for c in changes]})
         return

@@ -12,7 +12,9 @@ from sherpa_cli.cli.output import stop_lines
 from sherpa_cli.errors import UsageError
 
 if TYPE_CHECKING:
-    from sherpa_cli.ops.diffdrive import MoveResult
+    from sherpa_cli.config.model import ArmConfig, PairConfig
+    from sherpa_cli.ops.diffdrive import MoveResult, PairTarget
+    from sherpa_cli.ops.pair_match import MatchResult
 
 app = typer.Typer(no_args_is_help=True, help="Differential pairs: Σ = m_a + m_b, Δ = m_a - m_b.")
 
@@ -260,7 +262,7 @@ def move(
         raise typer.Exit(1)
 
 
-def _pair_would_refuse(st: AppState, cfg: Any, p: Any, req: Any) -> list[str] | None:
+def _pair_would_refuse(st: AppState, cfg: ArmConfig, p: PairConfig, req: PairTarget) -> list[str] | None:
     """What `--apply` would refuse (ops/dry_check.py), read from the drives; None when they cannot
     be read (the dry run then says it did not check)."""
     from sherpa_cli.errors import SherpaError
@@ -402,7 +404,7 @@ def match(
                 need_serial=save, allow_disabled=False, title=lambda drive: drive_moves(cfg, drive))
 
 
-def _render_match(st: AppState, r: Any, plot: str | None) -> None:
+def _render_match(st: AppState, r: MatchResult, plot: str | None) -> None:
     prop = r.proposal
     rows = []
     for k, rnd in enumerate(r.rounds):

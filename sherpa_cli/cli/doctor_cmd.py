@@ -5,12 +5,20 @@ from __future__ import annotations
 import sys
 import time
 from collections.abc import Callable
-from typing import Any
+from typing import TYPE_CHECKING
 
 import typer
 
-from sherpa_cli.cli.context import state
+from sherpa_cli.cli.context import AppState, state
 from sherpa_cli.errors import CommunicationError, ExitCode, SherpaError, UsageError
+
+if TYPE_CHECKING:
+    from types import ModuleType
+
+    from sherpa_cli.bus.health import Finding
+    from sherpa_cli.bus.linkstate import LinkStatus
+    from sherpa_cli.config.model import ArmConfig
+    from sherpa_cli.ops.doctor import DoctorReport
 
 sleep: Callable[[float], None] = time.sleep  # tests run the listening window on their own time
 clock: Callable[[], float] = time.monotonic
@@ -64,7 +72,8 @@ def doctor(
         raise typer.Exit(int(ExitCode.PROBLEM))
 
 
-def _arm(st: Any, report: Any, cfg: Any, buslink: Any, doc: Any, window: float) -> None:
+def _arm(st: AppState, report: DoctorReport, cfg: ArmConfig, buslink: ModuleType, doc: ModuleType,
+         window: float) -> None:
     names = list(cfg.buses)
     load_window = min(window, 0.5)
     if st.sim:
@@ -92,13 +101,13 @@ def _arm(st: Any, report: Any, cfg: Any, buslink: Any, doc: Any, window: float) 
                    exc.hint or "check the adapters with `sherpa bus status`")
 
 
-def _findings(s: Any) -> list[Any]:
+def _findings(s: LinkStatus) -> list[Finding]:
     from sherpa_cli.bus.health import findings
 
     return findings(s)
 
 
-def _render(st: Any, report: Any) -> None:
+def _render(st: AppState, report: DoctorReport) -> None:
     rows = [[c.name, c.result, c.detail] for c in report.checks]
     st.out.table("sherpa doctor", ["check", "result", "detail"], rows)
     for c in report.failed:

@@ -23,6 +23,8 @@ if TYPE_CHECKING:
     from sherpa_cli.log.recording import Recording
     from sherpa_cli.log.step_metrics import StepMetrics
     from sherpa_cli.motion.axis import Axis
+    from sherpa_cli.motion.request import MoveRequest
+    from sherpa_cli.ops.step import StepResult
     from sherpa_cli.sim.arm import SimArm
     from sherpa_cli.sim.stepped import SteppedTime
 
@@ -699,7 +701,7 @@ def step(
     _render_step(st, result, mode, value, files)
 
 
-def _render_step(st: Any, result: Any, mode: str, value: float, files: dict[str, str]) -> None:
+def _render_step(st: AppState, result: StepResult, mode: str, value: float, files: dict[str, str]) -> None:
     if st.json_mode:
         st.out.json({**result.as_json(), "files": files})
         return
@@ -760,7 +762,7 @@ def _step_compare(st: AppState, runs: Sequence[Path], output: Path) -> None:
         st.out.line(f"png: {output}")
 
 
-def _step_would_refuse(st: AppState, target: Axis, req: Any) -> list[str] | None:
+def _step_would_refuse(st: AppState, target: Axis, req: MoveRequest) -> list[str] | None:
     """What `--apply` would refuse (ops/dry_check.py), read from the drive; None when the drive
     cannot be read (the dry run then says it did not check)."""
     from sherpa_cli.errors import SherpaError

@@ -4,10 +4,16 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import Any, Literal, cast
+from typing import TYPE_CHECKING, Any, Literal, cast
 
 from sherpa_cli.cli.context import AppState
 from sherpa_cli.errors import UsageError
+
+if TYPE_CHECKING:
+    from sherpa_cli.bus.session import ArmSession
+    from sherpa_cli.motion.axis import Axis
+    from sherpa_cli.motion.settings import MotionSettings
+    from sherpa_cli.ops.step import StepTime
 
 
 def record_from_drive(st: AppState, targets: Sequence[str] | None, duration: float, output: Sequence[Path], *,
@@ -49,8 +55,8 @@ def record_from_drive(st: AppState, targets: Sequence[str] | None, duration: flo
 
 
 
-def drive_step(st: AppState, session: Any, target: Any, mode: str, value: float, *, duration: float, rate: float,
-               settings: Any, uncalibrated: bool, timebase: Any, output: Path,
+def drive_step(st: AppState, session: ArmSession, target: Axis, mode: str, value: float, *, duration: float,
+               rate: float, settings: MotionSettings, uncalibrated: bool, timebase: StepTime | None, output: Path,
                render_metrics: Callable[[AppState, Any], None]) -> None:
     """`log step --source drive`: the step recorded by the drive's recorder and over the bus at once
     (ops/drive_step.py); both recordings, both metrics and their differences."""

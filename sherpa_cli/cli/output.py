@@ -13,12 +13,12 @@ import sys
 from collections.abc import Iterable, Sequence
 from contextvars import ContextVar
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, TextIO
 
 from sherpa_cli.errors import SafetyError, UsageError
 
 if TYPE_CHECKING:
-    from rich.console import Console
+    from rich.console import Console, RenderableType
     from rich.table import Table
 
 # The width of output that is not a terminal (a pipe, a file, a report): wide enough that nothing is
@@ -26,7 +26,7 @@ if TYPE_CHECKING:
 UNWRAPPED = 10_000
 
 
-def output_width(stream: Any) -> int | None:
+def output_width(stream: TextIO) -> int | None:
     """The width to lay out for on ``stream``: None (the terminal's, or COLUMNS) on a terminal or when
     COLUMNS is set; otherwise UNWRAPPED, so piped output keeps full names and every column."""
     if os.environ.get("COLUMNS", "").strip().isdigit():
@@ -88,7 +88,7 @@ class Output:
         return self._console(stderr=False)
 
     # results (stdout)
-    def result(self, renderable: Any) -> None:
+    def result(self, renderable: RenderableType) -> None:
         if self.discard_results:
             return
         self._console(stderr=False).print(renderable)
@@ -106,7 +106,7 @@ class Output:
         sys.stdout.write(text)
         sys.stdout.flush()
 
-    def json(self, obj: Any) -> None:
+    def json(self, obj: object) -> None:
         if self.discard_results:
             return
         sys.stdout.write(json.dumps(obj, indent=2, ensure_ascii=False) + "\n")
@@ -289,7 +289,7 @@ def min_widths(columns: Sequence[str], rows: Sequence[Sequence[str]], *, one_lin
             for i in range(len(columns))}
 
 
-def stop_lines(st: Any, stop: dict[str, Any] | None, fallback: Sequence[str] = ()) -> list[str]:
+def stop_lines(st: object, stop: dict[str, Any] | None, fallback: Sequence[str] = ()) -> list[str]:
     """A motion's stop lines from the guard's report kept as JSON (GuardReport.as_json): a normal end
     reads "stopped; motor off; settings put back", ``--verbose`` names the objects put back.
     ``fallback``: lines already rendered, for a result without the report."""

@@ -19,9 +19,13 @@ from sherpa_cli.errors import UsageError
 if TYPE_CHECKING:
     from sherpa_cli.bus.session import ArmSession
     from sherpa_cli.bus.targets import DriveRef
+    from sherpa_cli.cli.context import AppState
     from sherpa_cli.config.model import ArmConfig
+    from sherpa_cli.elmo.faults import Emcy
     from sherpa_cli.log.foxglove_live import LiveView
     from sherpa_cli.log.mcap_out import TimedEmcy, TimedStatus
+    from sherpa_cli.log.record import Poller, Recorder
+    from sherpa_cli.log.recording import Recording
 
 Foxglove = Annotated[bool, typer.Option(
     "--foxglove", help="Also publish live to Foxglove: foxglove-sdk's WebSocket server on --foxglove-at "
@@ -72,7 +76,7 @@ def check_live(on: bool, at: str, allow_remote: bool) -> tuple[str, int] | None:
 
 
 @contextmanager
-def live_view(st: Any, on: bool, at: str, allow_remote: bool) -> Iterator[LiveView | None]:
+def live_view(st: AppState, on: bool, at: str, allow_remote: bool) -> Iterator[LiveView | None]:
     """The Foxglove server for the command's lifetime (None without --foxglove); its address is
     printed on stderr."""
     bind = check_live(on, at, allow_remote)
@@ -120,10 +124,10 @@ class RecordExtras:
         if self.view is not None:
             self.view.listen({r.bus: self.session.links[r.bus] for r in self.refs}, self.budget)
 
-    def _on_emcy(self, drive: str) -> Callable[[Any], None]:
+    def _on_emcy(self, drive: str) -> Callable[[Emcy], None]:
         from sherpa_cli.log.mcap_out import TimedEmcy
 
-        def heard(emcy: Any) -> None:
+        def heard(emcy: Emcy) -> None:
             ns = time.time_ns()
             self.emcy.append(TimedEmcy(ns, drive, emcy))
             if self.view is not None:
@@ -142,7 +146,7 @@ class RecordExtras:
             yield
 
 
-def write_mcap(path: Path, rec: Any, cfg: ArmConfig, *, time_zero_ns: int, extras: RecordExtras,
+def write_mcap(path: Path, rec: Recording, cfg: ArmConfig, *, time_zero_ns: int, extras: RecordExtras,
                info: Mapping[str, str], config_file: str, step_metrics: Mapping[str, Any] | None = None) -> None:
     from sherpa_cli.log.mcap_out import write_recording
 
@@ -150,7 +154,7 @@ def write_mcap(path: Path, rec: Any, cfg: ArmConfig, *, time_zero_ns: int, extra
                     step_metrics=step_metrics, config_file=config_file)
 
 
-def poller_sample(poller: Any) -> Callable[[], dict[str, tuple[int, int]] | None]:
+def poller_sample(poller: Poller) -> Callable[[], dict[str, tuple[int, int]] | None]:
     """The newest PX, VX of each drive of a `--poll` recording."""
     def sample() -> dict[str, tuple[int, int]] | None:
         newest: dict[str, tuple[int, int]] = {}
@@ -160,7 +164,7 @@ def poller_sample(poller: Any) -> Callable[[], dict[str, tuple[int, int]] | None
     return sample
 
 
-def recorder_sample(recorder: Any) -> Callable[[], dict[str, tuple[int, int]] | None]:
+def recorder_sample(recorder: Recorder) -> Callable[[], dict[str, tuple[int, int]] | None]:
     def sample() -> dict[str, tuple[int, int]] | None:
         latest = recorder.latest()
         return None if latest is None else latest[1]

@@ -13,7 +13,7 @@ import io
 from contextlib import redirect_stderr, redirect_stdout
 from typing import TYPE_CHECKING, Any
 
-from sherpa_cli.errors import ConfigError, Location
+from sherpa_cli.errors import ConfigError, Location, UsageError
 
 if TYPE_CHECKING:
     from sherpa_cli.recipes.model import Recipe
@@ -27,10 +27,9 @@ def _root() -> Any:
     return root_command()
 
 
-def _non_ascii_number(argv: list[str]) -> Any:
+def _non_ascii_number(argv: list[str]) -> UsageError | None:
     """What the boundary refuses before parsing (a number in other scripts' digits): the UsageError or None."""
     from sherpa_cli.cli.boundary import refuse_non_ascii_numbers
-    from sherpa_cli.errors import UsageError
 
     try:
         refuse_non_ascii_numbers(argv)

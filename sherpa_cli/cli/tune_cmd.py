@@ -2,13 +2,16 @@
 
 from __future__ import annotations
 
-from typing import Any
+from typing import TYPE_CHECKING
 
 import typer
 
 from sherpa_cli.cli.context import state
 from sherpa_cli.cli.options import Apply, ApplyMotion, MotorOff, Save, Yes
 from sherpa_cli.errors import UsageError
+
+if TYPE_CHECKING:
+    from sherpa_cli.ops.step import StepResult
 
 app = typer.Typer(help="Read and write the drives' speed and position loop gains (docs/tune.md).",
                   no_args_is_help=True)
@@ -142,7 +145,7 @@ def step(
             session.client_overrides.update(stepped.client_overrides(cfg.protocol.reply_timeout, cfg.protocol.retries))
             timebase = stepped
 
-        def one(m: str, v: float) -> Any:
+        def one(m: str, v: float) -> StepResult:
             return run_step(session, target, m, v, duration=duration, rate=rate, settings=settings,
                             uncalibrated=uncalibrated, timebase=timebase)
 

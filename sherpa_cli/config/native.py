@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import dataclasses
 from pathlib import PurePath
+from typing import Any
 
 from sherpa_cli.config.catalog import builtin_catalog
 from sherpa_cli.config.model import (
@@ -208,10 +209,11 @@ def parse_sim(top: Section, locs: Locs) -> tuple[dict[str, SimDriveConfig], tupl
             register(locs, ("sim", "drives", dname), d)
             locs.put(("sim", "drives", dname), dnode.loc)
             # every field is a number (the int ones, heartbeat_ms and seed, whole), a bool or a string
-            drives[dname] = SimDriveConfig(**{
+            faults: dict[str, Any] = {
                 f.name: (d.int if f.type == "int" else d.bool if f.type == "bool" else
                          d.str if str(f.type).startswith("str") else d.num)(f.name, f.default)
-                for f in dataclasses.fields(SimDriveConfig)})
+                for f in dataclasses.fields(SimDriveConfig)}
+            drives[dname] = SimDriveConfig(**faults)
     extras = []
     if sec.get("extra_nodes") is not None:
         for i, item in enumerate(as_seq(sec.req("extra_nodes"), "a list like [{bus: can1, node: 99}]")):

@@ -18,7 +18,7 @@ import re
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any, Literal, TypeVar, overload
 
 import yaml
 from yaml.constructor import SafeConstructor
@@ -33,6 +33,14 @@ from yaml.events import (
 from yaml.nodes import MappingNode, ScalarNode, SequenceNode
 
 from sherpa_cli.errors import ConfigError, Location
+
+if TYPE_CHECKING:
+    from typing import TypeAlias
+
+    #: a loader class :func:`compose` and :func:`check_limits` may use
+    Loader: TypeAlias = type[yaml.SafeLoader] | type[yaml.CSafeLoader]
+
+_D = TypeVar("_D")
 
 NAME_RE = re.compile(r"^[A-Za-z_][A-Za-z0-9_.\-]*$")
 
@@ -93,7 +101,7 @@ def describe(node: YNode) -> str:
 
 
 #: libyaml's safe loader where PyYAML has it (about 10x faster composing), else None
-FAST_LOADER: Any = getattr(yaml, "CSafeLoader", None)
+FAST_LOADER: type[yaml.CSafeLoader] | None = getattr(yaml, "CSafeLoader", None)
 
 
 def compose(text: str) -> yaml.Node | None:
@@ -147,13 +155,13 @@ def check_limits(text: str, filename: str) -> None:
     if len(text) > MAX_INPUT_BYTES:
         raise ConfigError(f"text is larger than {MAX_INPUT_BYTES // 1024} KiB, the limit for an input file",
                           Location(filename))
-    loaders = [FAST_LOADER, yaml.SafeLoader] if FAST_LOADER is not None else [yaml.SafeLoader]
+    loaders: list[Loader] = [FAST_LOADER, yaml.SafeLoader] if FAST_LOADER is not None else [yaml.SafeLoader]
     for loader in loaders:
         if _check_events(text, filename, loader):
             return  # this parser reads the whole document: compose() uses it and nothing else
 
 
-def _check_events(text: str, filename: str, loader: Any) -> bool:
+def _check_events(text: str, filename: str, loader: Loader) -> bool:
     """The limits over ``loader``'s events; False when the parser refused the text (a syntax error)."""
     stack: list[list[Any]] = []  # [expanded size so far, anchor]
     anchors: dict[str, int] = {}
@@ -407,20 +415,47 @@ class Section:
         return child.loc if child is not None else self.node.child_loc(key)
 
     # typed accessors: required when default is REQUIRED
-    def int(self, key: str, default: Any = None, *, required: bool = False) -> Any:
+    @overload
+    def int(self, key: str, default: None = None, *, required: Literal[True]) -> builtins.int: ...
+    @overload
+    def int(self, key: str, default: None = None, *, required: bool = False) -> builtins.int | None: ...
+    @overload
+    def int(self, key: str, default: _D, *, required: bool = False) -> builtins.int | _D: ...
+
+    def int(self, key: str, default: object = None, *, required: bool = False) -> object:
         node = self.req(key) if required else self.get(key)
         return default if node is None else as_int(node)
 
-    def num(self, key: str, default: Any = None, *, required: bool = False) -> Any:
+    @overload
+    def num(self, key: str, default: None = None, *, required: Literal[True]) -> float: ...
+    @overload
+    def num(self, key: str, default: None = None, *, required: bool = False) -> float | None: ...
+    @overload
+    def num(self, key: str, default: _D, *, required: bool = False) -> float | _D: ...
+
+    def num(self, key: str, default: object = None, *, required: bool = False) -> object:
         node = self.req(key) if required else self.get(key)
         return default if node is None else as_num(node)
 
-    def bool(self, key: str, default: Any = None) -> Any:
+    @overload
+    def bool(self, key: str, default: None = None) -> builtins.bool | None: ...
+    @overload
+    def bool(self, key: str, default: _D) -> builtins.bool | _D: ...
+
+    def bool(self, key: str, default: object = None) -> object:
         node = self.get(key)
         return default if node is None else as_bool(node)
 
     # past here `str` and `bool` name the accessors above: annotations spell out builtins
-    def str(self, key: builtins.str, default: Any = None, *, required: builtins.bool = False) -> Any:
+    @overload
+    def str(self, key: builtins.str, default: None = None, *, required: Literal[True]) -> builtins.str: ...
+    @overload
+    def str(self, key: builtins.str, default: None = None, *,
+            required: builtins.bool = False) -> builtins.str | None: ...
+    @overload
+    def str(self, key: builtins.str, default: _D, *, required: builtins.bool = False) -> builtins.str | _D: ...
+
+    def str(self, key: builtins.str, default: object = None, *, required: builtins.bool = False) -> object:
         node = self.req(key) if required else self.get(key)
         return default if node is None else as_str(node)
 

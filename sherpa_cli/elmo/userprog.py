@@ -9,7 +9,7 @@ guessed). Pure, except :func:`read_ps`, which asks a drive client.
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Protocol
 
 from sherpa_cli.errors import DriveRefusedError, SafetyError
 
@@ -19,6 +19,15 @@ PS_RUNNING = 1
 PS_TEXT = {PS_IDLE: "idle (no program running)", PS_UNAVAILABLE: "no user program available",
            PS_RUNNING: "a user program is running"}
 ALLOW_OPTION = "--allow-user-program"
+
+
+class PsClient(Protocol):
+    """What these checks use of a drive client (elmo/client.py's ``DriveClient``)."""
+
+    @property
+    def label(self) -> str: ...
+
+    def get(self, letters: str, index: int = 0) -> int | float: ...
 
 
 class UserProgramError(SafetyError):
@@ -43,7 +52,7 @@ def program_running(value: int | None) -> bool | None:
     return None
 
 
-def read_ps(client: Any) -> int | None:
+def read_ps(client: PsClient) -> int | None:
     """PS of one drive; None when the drive refuses the command (a firmware without user programs)."""
     try:
         return int(client.get("PS"))
@@ -51,7 +60,7 @@ def read_ps(client: Any) -> int | None:
         return None
 
 
-def refuse_save_while_running(client: Any) -> None:
+def refuse_save_while_running(client: PsClient) -> None:
     """Before SV: a drive that runs a user program cannot save (it would answer EC 82); say why first."""
     ps = read_ps(client)
     if program_running(ps):
@@ -61,7 +70,7 @@ def refuse_save_while_running(client: Any) -> None:
             hint="stop the user program first (e.g. in Elmo Composer), then save again")
 
 
-def refuse_motion_while_running(client: Any, *, allow: bool) -> int | None:
+def refuse_motion_while_running(client: PsClient, *, allow: bool) -> int | None:
     """Before motion: refuse a drive whose user program runs (or whose PS is unknown) unless ``allow``."""
     ps = read_ps(client)
     running = program_running(ps)

@@ -27,7 +27,7 @@ import threading
 import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any, Protocol
 
 from sherpa_cli import netaddr
 from sherpa_cli.config.model import ArmConfig
@@ -37,6 +37,11 @@ from sherpa_cli.joints.units import counts_per_s_to_rad_per_s, counts_to_rad
 from sherpa_cli.log import ros_msgs
 from sherpa_cli.log.capture import frame_bits
 from sherpa_cli.log.mcap_out import EXTRA, DriveState, diagnostic, emcy_log
+
+if TYPE_CHECKING:
+    import can
+
+    from sherpa_cli.bus.links import BusLink
 
 DEFAULT_BIND = "127.0.0.1:8765"
 
@@ -130,7 +135,7 @@ class HeardLoad:
         self._bits = 0
         self._since = clock()
 
-    def __call__(self, msg: Any) -> None:
+    def __call__(self, msg: can.Message) -> None:
         with self._lock:
             self._frames += 1
             self._bits += frame_bits(int(msg.dlc), bool(msg.is_extended_id))
@@ -145,9 +150,17 @@ class HeardLoad:
         return frames / span, bits / (self.bitrate * span)
 
 
+class _Notifier(Protocol):
+    """What the live view uses of a bus's notifier (python-can's ``Notifier`` or bus/reader.py's)."""
+
+    def add_listener(self, listener: Callable[[can.Message], None]) -> None: ...
+
+    def remove_listener(self, listener: Callable[[can.Message], None]) -> None: ...
+
+
 @dataclass
 class _Listening:
-    notifier: Any
+    notifier: _Notifier
     meter: HeardLoad
 
 
@@ -183,7 +196,7 @@ class LiveView:
     def __enter__(self) -> LiveView:
         return self
 
-    def __exit__(self, *exc: Any) -> None:
+    def __exit__(self, *exc: object) -> None:
         self.close()
 
     def close(self) -> None:
@@ -228,7 +241,7 @@ class LiveView:
         self._log(ros_msgs.TOPIC_LOG, ros_msgs.log(ns, level, name, text), ns)
 
     # -- bus load -------------------------------------------------------------------------------
-    def listen(self, links: Mapping[str, Any], budget: Mapping[str, float] | None = None,
+    def listen(self, links: Mapping[str, BusLink], budget: Mapping[str, float] | None = None,
                clock: Callable[[], float] = time.monotonic) -> None:
         """Count what each bus's receive thread hears (``links``: bus -> BusLink of the session)."""
         self._budget = dict(budget or {})
@@ -265,7 +278,7 @@ class RecorderFeed:
         self._thread.start()
         return self
 
-    def __exit__(self, *exc: Any) -> None:
+    def __exit__(self, *exc: object) -> None:
         self._stop.set()
         self._thread.join(timeout=5)
         self.publish()  # the last sample

@@ -52,6 +52,8 @@ from sherpa_cli.log.candecode import Frame
 from sherpa_cli.log.recording import Recording
 
 if TYPE_CHECKING:
+    import can
+
     from sherpa_cli.bus.session import ArmSession
 
 EXTRA = "pip install 'sherpa-cli[robotics]'"
@@ -302,7 +304,7 @@ class FrameWriter:
             self._sequence[bus] = 0
         return channel
 
-    def on_message_received(self, msg: Any) -> None:
+    def on_message_received(self, msg: can.Message) -> None:
         bus = "-" if msg.channel is None else str(msg.channel)
         channel = self._channel(bus)
         ns = round(float(msg.timestamp) * 1e9)
@@ -325,7 +327,7 @@ class FrameWriter:
     def __enter__(self) -> FrameWriter:
         return self
 
-    def __exit__(self, *exc: Any) -> None:
+    def __exit__(self, *exc: object) -> None:
         self.stop()
 
 

@@ -14,7 +14,7 @@ import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 from sherpa_cli.errors import UsageError
 from sherpa_cli.log.recording import SIGNALS, UNITS, Recording
@@ -22,6 +22,7 @@ from sherpa_cli.log.step_metrics import StepMetrics
 
 if TYPE_CHECKING:
     from matplotlib.axes import Axes
+    from matplotlib.figure import Figure
 
 MISSING = "log plot needs matplotlib, an optional extra of sherpa-cli"
 MISSING_HINT = "pip install 'sherpa-cli[plot]' (or pip install matplotlib)"
@@ -58,7 +59,7 @@ def step_title(joint: str, marks: StepMarks) -> str:
     return f"{joint}: {marks.mode} step {marks.value:+g} {MODE_UNITS.get(marks.mode, '')}; {switch}"
 
 
-def figure() -> Any:
+def figure() -> Figure:
     try:
         import matplotlib
     except ImportError:
@@ -69,7 +70,7 @@ def figure() -> Any:
     return Figure(figsize=FIG_SIZE, dpi=DPI, layout="constrained")
 
 
-def plain_axis(ax: Any, values: Sequence[float], min_span: float) -> None:
+def plain_axis(ax: Axes, values: Sequence[float], min_span: float) -> None:
     """No offset or scientific notation on y, and at least ``min_span`` shown around the data."""
     ax.ticklabel_format(axis="y", useOffset=False, style="plain")
     finite = [v for v in values if math.isfinite(v)]
@@ -81,14 +82,14 @@ def plain_axis(ax: Any, values: Sequence[float], min_span: float) -> None:
         ax.set_ylim(mid - min_span / 2, mid + min_span / 2)
 
 
-def legend_outside(ax: Any) -> None:
+def legend_outside(ax: Axes) -> None:
     """The legend right of the axes, in the figure's margin: it never covers the trace."""
     ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0, fontsize="small", frameon=False)
 
 
 def plot_recording(rec: Recording, joints: list[str], path: Path, *,
                    metrics: Mapping[tuple[str, str], StepMetrics] | None = None, title: str | None = None,
-                   marks: StepMarks | None = None) -> Any:
+                   marks: StepMarks | None = None) -> Figure:
     """One column per joint, one row per signal present (position, velocity, current); step
     metrics (keyed by (joint, signal)) drawn on their signal's axes and listed in its legend;
     ``marks``: a step experiment's command and switch window on every axes. Returns the Figure."""
@@ -171,7 +172,7 @@ class PairTrace:
     subtitle: str = ""  # e.g. "group, feedback"
 
 
-def plot_pair(trace: PairTrace, path: Path | str) -> Any:
+def plot_pair(trace: PairTrace, path: Path | str) -> Figure:
     """Σ above Δ over time, the targets and the command drawn, the held joint with at least
     ``held_span`` of y range and its peak excursion marked. Returns the Figure."""
     fig = figure()

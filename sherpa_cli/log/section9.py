@@ -44,7 +44,7 @@ class Band:
         return value is not None and math.isfinite(value) and self.low <= value <= self.high
 
 
-def _number(value: Any, where: str) -> float:
+def _number(value: object, where: str) -> float:
     if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
         raise UsageError(f"{where}: expected a number, got {value!r}")
     return float(value)

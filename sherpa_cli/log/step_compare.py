@@ -16,10 +16,13 @@ import math
 from collections.abc import Sequence
 from dataclasses import asdict, dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from sherpa_cli.errors import UsageError
 from sherpa_cli.log.recording import Recording, read_csv
+
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
 
 STEADY_SHARE = 0.5  # the last half of what was recorded after the motion began is its steady part
 SLOWING = 0.9  # a move slows down once its speed falls below this share of the peak
@@ -102,7 +105,7 @@ def compare(paths: Sequence[Path]) -> list[tuple[RunFigures, Recording]]:
     return [figures(p) for p in paths]
 
 
-def plot_compare(runs: Sequence[tuple[RunFigures, Recording]], path: Path) -> Any:
+def plot_compare(runs: Sequence[tuple[RunFigures, Recording]], path: Path) -> Figure:
     """Every run's position and velocity over time since its command, one line per run, its
     metrics in the legend (outside the data). Returns the matplotlib Figure."""
     from sherpa_cli.log.plot import figure, legend_outside, plain_axis

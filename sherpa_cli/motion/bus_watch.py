@@ -35,7 +35,7 @@ import time
 from collections.abc import Callable, Iterable, Mapping
 from contextlib import AbstractContextManager
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 from sherpa_cli.bus.errwatch import BusWatch, SeenError, watching
 from sherpa_cli.bus.health import BusStateError, findings
@@ -44,6 +44,7 @@ from sherpa_cli.config.model import BUS_ERROR_PASSIVE_ACTIONS as ERROR_PASSIVE_A
 from sherpa_cli.motion.report import BusFault, DriveStop
 
 if TYPE_CHECKING:
+    from sherpa_cli.bus.session import ArmSession
     from sherpa_cli.errors import SherpaError
     from sherpa_cli.motion.settings import MotionSettings
 
@@ -133,7 +134,7 @@ class GuardBusWatch:
         self.faults: list[BusFault] = []  # every fault seen while watching (the guard's report)
 
     @classmethod
-    def for_session(cls, session: Any, buses: Iterable[str], settings: MotionSettings, *,
+    def for_session(cls, session: ArmSession, buses: Iterable[str], settings: MotionSettings, *,
                     now: Callable[[], float] = time.monotonic, on_trip: Callable[[SherpaError], None] | None = None,
                     on_event: Callable[[str], None] | None = None) -> GuardBusWatch:
         """The watch of ``buses`` of an open session: ``read_link`` and the receive threads' error frames."""

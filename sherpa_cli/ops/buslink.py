@@ -14,13 +14,16 @@ import time
 from collections.abc import Callable, Mapping, Sequence
 from contextlib import nullcontext
 from dataclasses import dataclass, field, replace
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from sherpa_cli.bus.errwatch import watching
 from sherpa_cli.bus.linkstate import LinkStatus, bus_load, frames_load, snapshot, source_for
 from sherpa_cli.bus.netlink import Netlink, NetlinkUnavailable
 from sherpa_cli.config.model import ArmConfig, BusConfig
 from sherpa_cli.errors import CommunicationError, PrivilegeError, UsageError
+
+if TYPE_CHECKING:
+    from sherpa_cli.bus.session import ArmSession
 
 DEFAULT_RESTART_MS = 100
 DEFAULT_WINDOW = 0.5  # s over which `bus status` measures the load
@@ -43,7 +46,7 @@ def select_buses(cfg: ArmConfig, names: Sequence[str] | None) -> list[str]:
     return out
 
 
-def status(cfg: ArmConfig, names: Sequence[str], *, session: Any = None, window: float = DEFAULT_WINDOW,
+def status(cfg: ArmConfig, names: Sequence[str], *, session: ArmSession | None = None, window: float = DEFAULT_WINDOW,
            sleep: Callable[[float], None] = time.sleep) -> list[LinkStatus]:
     """Every named bus: a snapshot, then another ``window`` seconds later for the load.
 
@@ -63,7 +66,8 @@ def status(cfg: ArmConfig, names: Sequence[str], *, session: Any = None, window:
     if window <= 0:
         return [replace(first[b], not_reported={**first[b].not_reported, "load": "no window (--window 0)"})
                 for b in names]
-    with watching(session, listened) if listened else nullcontext() as watch:
+    # listened is empty without a session (no links)
+    with watching(session, listened) if session is not None and listened else nullcontext() as watch:
         sleep(window)
         second = {b: take(b) for b in names}
         traffic = {b: watch.traffic(b) for b in listened} if watch is not None else {}
@@ -118,7 +122,7 @@ def ip_commands(channel: str, *, bitrate: int | None, restart_ms: int | None, be
     return cmds
 
 
-def _require_socketcan(cfg: BusConfig, sim: Any) -> str:
+def _require_socketcan(cfg: BusConfig, sim: object) -> str:
     if sim is not None:
         return cfg.name
     if cfg.interface != "socketcan" or not cfg.channel:
@@ -134,7 +138,7 @@ def _privilege_error(changes: list[LinkChange], what: str) -> PrivilegeError:
                           hint="run those commands with sudo, or run sherpa as root")
 
 
-def netlink_for(cfg: BusConfig, sim: Any) -> Netlink:
+def netlink_for(cfg: BusConfig, sim: object) -> Netlink:
     netlink, _name, label = source_for(cfg, sim)
     if netlink is None:
         raise NetlinkUnavailable(f"bus {cfg.name}: {label}")
@@ -142,7 +146,7 @@ def netlink_for(cfg: BusConfig, sim: Any) -> Netlink:
 
 
 def bring_up(cfg: ArmConfig, names: Sequence[str], *, bitrate: int | None = None,
-             restart_ms: int = DEFAULT_RESTART_MS, berr_reporting: bool = True, sim: Any = None,
+             restart_ms: int = DEFAULT_RESTART_MS, berr_reporting: bool = True, sim: object = None,
              netlink: Netlink | None = None) -> list[LinkChange]:
     """Set each named bus's CAN link: down, bit rate (``bitrate`` or the config's), restart-ms,
     berr-reporting, up. A vcan link takes none of the CAN settings: it is only brought up, and
@@ -191,7 +195,7 @@ def bring_up(cfg: ArmConfig, names: Sequence[str], *, bitrate: int | None = None
     return changes
 
 
-def bring_down(cfg: ArmConfig, names: Sequence[str], *, sim: Any = None,
+def bring_down(cfg: ArmConfig, names: Sequence[str], *, sim: object = None,
                netlink: Netlink | None = None) -> list[LinkChange]:
     """Set each named bus's link down."""
     plans = []

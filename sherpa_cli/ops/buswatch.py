@@ -12,11 +12,14 @@ import time
 from collections import Counter
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from sherpa_cli.bus.errframes import HINTS
 from sherpa_cli.bus.errwatch import BusWatch, SeenError, watching
 from sherpa_cli.bus.linkstate import LinkStatus, read_link
+
+if TYPE_CHECKING:
+    from sherpa_cli.bus.session import ArmSession
 
 DEFAULT_INTERVAL = 0.5
 
@@ -56,7 +59,7 @@ class WatchState:
                 "errors": [e.as_json() for e in self.errors]}
 
 
-def watch(session: Any, buses: Sequence[str], *, duration: float | None, interval: float = DEFAULT_INTERVAL,
+def watch(session: ArmSession, buses: Sequence[str], *, duration: float | None, interval: float = DEFAULT_INTERVAL,
           clock: Callable[[], float] = time.monotonic, sleep: Callable[[float], None] = time.sleep,
           on_update: Callable[[WatchState], None] | None = None, bus_watch: BusWatch | None = None) -> WatchState:
     """Watch ``buses`` of an open session; ``bus_watch``: an existing collector (tests feed it), else
@@ -70,7 +73,7 @@ def watch(session: Any, buses: Sequence[str], *, duration: float | None, interva
     return state
 
 
-def _loop(session: Any, state: WatchState, w: BusWatch, duration: float | None, interval: float,
+def _loop(session: ArmSession, state: WatchState, w: BusWatch, duration: float | None, interval: float,
           clock: Callable[[], float], sleep: Callable[[float], None],
           on_update: Callable[[WatchState], None] | None) -> None:
     start = clock()

@@ -39,6 +39,8 @@ from sherpa_cli.motion.pair_start import CommonStart, pair_settings, stop_motors
 from sherpa_cli.motion.report import with_report
 
 if TYPE_CHECKING:
+    from matplotlib.figure import Figure
+
     from sherpa_cli.bus.session import ArmSession
     from sherpa_cli.log.record import Recorder
     from sherpa_cli.motion.guard import MotionGuard
@@ -640,7 +642,7 @@ def run_move(session: ArmSession, pair: PairConfig, request: PairTarget, *,
 
 # --------------------------------------------------------------------------- plot
 
-def plot(result: MoveResult, path: str) -> Any:
+def plot(result: MoveResult, path: str) -> Figure:
     """Both joints over time (rad), like the seed's Figs. 9.10/9.11 (log/plot.py plot_pair: the
     held joint with a span of at least HELD_SPAN_COUNTS and its peak excursion marked)."""
     from sherpa_cli.log.plot import PairTrace, plot_pair

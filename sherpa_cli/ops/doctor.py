@@ -19,11 +19,14 @@ import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from sherpa_cli.bus.health import findings
 from sherpa_cli.bus.linkstate import LinkStatus
-from sherpa_cli.config.model import ArmConfig
+from sherpa_cli.config.model import ArmConfig, JointConfig
+
+if TYPE_CHECKING:
+    from sherpa_cli.bus.session import ArmSession
 
 OK, FAIL, SKIP = "ok", "FAIL", "skip"
 PACKAGES = ("sherpa-cli", "python-can", "canopen", "typer", "rich", "pyroute2")
@@ -142,7 +145,7 @@ def check_buses(report: DoctorReport, statuses: Sequence[LinkStatus]) -> list[st
 
 # -- drives -----------------------------------------------------------------------------------------
 
-def check_drives(report: DoctorReport, session: Any, buses: Sequence[str], *, window: float = DEFAULT_WINDOW,
+def check_drives(report: DoctorReport, session: ArmSession, buses: Sequence[str], *, window: float = DEFAULT_WINDOW,
                  clock: Callable[[], float] = time.monotonic, sleep: Callable[[float], None] = time.sleep) -> None:
     """Drives, firmware/model, heartbeats, host node id, user programs, calibration (buses: those fit)."""
     from sherpa_cli.bus.targets import DriveRef
@@ -255,7 +258,7 @@ def check_drives(report: DoctorReport, session: Any, buses: Sequence[str], *, wi
                    + ("" if len(homed) == len(cals) else " (`sherpa home` before position moves)"))
 
 
-def _joint_drives(cfg: ArmConfig, joint: Any) -> tuple[str, ...]:
+def _joint_drives(cfg: ArmConfig, joint: JointConfig) -> tuple[str, ...]:
     from sherpa_cli.motion.calibration import joint_drives
 
     return joint_drives(cfg, joint)

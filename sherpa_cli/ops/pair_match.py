@@ -38,8 +38,12 @@ from sherpa_cli.motion import calibration
 from sherpa_cli.motion.pair_start import CommonStart, pair_settings, stop_motors
 
 if TYPE_CHECKING:
+    from matplotlib.figure import Figure
+
     from sherpa_cli.bus.session import ArmSession
+    from sherpa_cli.elmo.client import DriveClient
     from sherpa_cli.elmo.recorder import RecorderSettings
+    from sherpa_cli.log.recording import Recording
     from sherpa_cli.motion.guard import MotionGuard
 
 MATCHED_KEYS = ("KP[2]", "KI[2]", "KP[3]")
@@ -318,7 +322,7 @@ def measure(session: ArmSession, pair: PairConfig, settings: MatchSettings, *,
     return PairStep(list(result.recording.times), data, speed, result.period_s)
 
 
-def _columns(recording: Any, refs: Sequence[DriveRef]) -> dict[str, dict[str, list[float]]]:
+def _columns(recording: Recording, refs: Sequence[DriveRef]) -> dict[str, dict[str, list[float]]]:
     from sherpa_cli.ops.drive_record import COLUMNS
 
     out: dict[str, dict[str, list[float]]] = {}
@@ -446,7 +450,7 @@ def _check_bounds(drive: str, gains: Mapping[str, float], bounds: Mapping[str, t
                               hint="the bounds are the config's `tuning:` section (docs/tune.md)")
 
 
-def _put_back(held: Mapping[str, float], client: Any) -> list[str]:
+def _put_back(held: Mapping[str, float], client: DriveClient) -> list[str]:
     """The trial's gains back to what the drive held; every key is tried. Returns those that failed
     (never raises: on the way out of an error, that error is the one reported)."""
     from sherpa_cli.elmo.commands import parse_param_key
@@ -460,7 +464,7 @@ def _put_back(held: Mapping[str, float], client: Any) -> list[str]:
     return failed
 
 
-def plot(result: MatchResult, path: str) -> Any:
+def plot(result: MatchResult, path: str) -> Figure:
     """Before / after: both motors' recorded speed and Δ (m_a - m_b, counts) of the Σ step (the round
     with the drives' own gains and the round whose gains are proposed). PNG, matplotlib (log/plot.py)."""
     from sherpa_cli.log.plot import figure

@@ -19,6 +19,7 @@ from sherpa_cli.errors import ProtocolError
 
 if TYPE_CHECKING:
     from sherpa_cli.bus.session import ArmSession
+    from sherpa_cli.motion.axis import Axis
     from sherpa_cli.ops.step import StepResult
 
 JOURNAL_OWNER = "tune step"
@@ -36,7 +37,7 @@ class TuneStepResult:
                 "after": self.after.as_json()}
 
 
-def run_tune_step(session: ArmSession, target: Any, mode: str, value: float, trial: Mapping[str, float],
+def run_tune_step(session: ArmSession, target: Axis, mode: str, value: float, trial: Mapping[str, float],
                   step: Callable[[str, float], StepResult]) -> TuneStepResult:
     """``step(mode, value)`` runs one step (ops/step.py run_step with the command's settings)."""
     from sherpa_cli.bus import journal

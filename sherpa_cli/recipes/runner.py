@@ -56,7 +56,7 @@ class StepResult:
     failures: list[str] = field(default_factory=list)
     answer: str | None = None  # confirm steps: how the question was answered
     duration_s: float = 0.0
-    json: Any = None
+    json: object = None  # the step's --json output, parsed
 
     @property
     def ok(self) -> bool:
@@ -202,7 +202,7 @@ def _check(expect: Expect, ran: CommandRun, dry: bool, result: StepResult) -> li
 _MISSING = object()
 
 
-def check_json_path(doc: Any, path: str, wanted: Any) -> list[str]:
+def check_json_path(doc: object, path: str, wanted: object) -> list[str]:
     """Failures of ``path`` (dotted; ``*`` = every element; digits index lists) against ``wanted``."""
     values = _resolve(doc, path.split("."), path)
     if isinstance(values, str):
@@ -212,7 +212,7 @@ def check_json_path(doc: Any, path: str, wanted: Any) -> list[str]:
     return [f"{where}: {json.dumps(got)}, expected {json.dumps(wanted)}" for where, got in values if got != wanted]
 
 
-def _resolve(node: Any, parts: list[str], path: str, prefix: str = "") -> list[tuple[str, Any]] | str:
+def _resolve(node: object, parts: list[str], path: str, prefix: str = "") -> list[tuple[str, object]] | str:
     if not parts:
         return [(prefix or path, node)]
     head, rest = parts[0], parts[1:]
@@ -221,7 +221,7 @@ def _resolve(node: Any, parts: list[str], path: str, prefix: str = "") -> list[t
         items = node.items() if isinstance(node, dict) else enumerate(node) if isinstance(node, list) else None
         if items is None:
             return f"{prefix or path}: not a list or mapping"
-        out: list[tuple[str, Any]] = []
+        out: list[tuple[str, object]] = []
         for key, child in items:
             got = _resolve(child, rest, path, f"{prefix}.{key}" if prefix else str(key))
             if isinstance(got, str):

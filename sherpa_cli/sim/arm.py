@@ -547,7 +547,7 @@ class SimArm:
         return send
 
     @staticmethod
-    def _send_raw(bus: Any, can_id: int, data: bytes, is_error: bool) -> None:
+    def _send_raw(bus: can.BusABC, can_id: int, data: bytes, is_error: bool) -> None:
         """A frame of the bus controller: an error frame (class bits in the id) or another node's frame."""
         import can
 

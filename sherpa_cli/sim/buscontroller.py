@@ -20,9 +20,12 @@ from __future__ import annotations
 
 import errno
 from collections.abc import Mapping
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from sherpa_cli.config.simbus import SimBusConfig
+
+if TYPE_CHECKING:
+    from contextlib import AbstractContextManager
 
 # include/uapi/linux/can/error.h
 ERR_TX_TIMEOUT, ERR_LOSTARB, ERR_CRTL, ERR_PROT, ERR_TRX = 0x001, 0x002, 0x004, 0x008, 0x010
@@ -264,7 +267,7 @@ class BusController:
 class SimNetlink:
     """bus/netlink.py's ``Netlink`` for the simulated buses, by bus name (under the arm's lock)."""
 
-    def __init__(self, controllers: Mapping[str, BusController], lock: Any) -> None:
+    def __init__(self, controllers: Mapping[str, BusController], lock: AbstractContextManager[object]) -> None:
         self.controllers = controllers
         self.lock = lock
 
