@@ -176,6 +176,9 @@ def move(
     report: Report = None,
     poll: bool = typer.Option(False, "--poll", help="Record by polling PX through the interpreter instead of "
                               "TPDOs on SYNC (changes no PDO settings; coarser, one motor a round trip after the other)."),
+    source: str = typer.Option("can", "--source", metavar="can|drive",
+                               help="drive: both motors recorded by the drives' own recorders at the servo rate, "
+                               "started by the move's BG (RAM only, put back after; --poll does not apply)."),
     uncalibrated: bool = typer.Option(False, "--uncalibrated", help="Allow the move although the pair was not "
                                       "homed since power-up (positions relative to power-up)."),
     apply: ApplyMotion = False,
@@ -185,8 +188,8 @@ def move(
     Both motors get profiles of equal duration (SP/AC/DC scaled by each motor's share of the
     distance) and start together (motion.pair_start: one BG to a group id in 0x2040, or BG to
     both executed at one SYNC; RAM only, put back afterwards). Every move records both motors
-    (TPDO on SYNC, or --poll) and reports how far the joint that should hold moved, and how far
-    both left the straight Σ/Δ path (docs/diffdrive.md).
+    (TPDO on SYNC, or --poll; --source drive: the drives' own recorders) and reports how far the
+    joint that should hold moved, and how far both left the straight Σ/Δ path (docs/diffdrive.md).
     """
     from sherpa_cli.bus.targets import pair_of
     from sherpa_cli.ops import diffdrive
@@ -195,7 +198,8 @@ def move(
     cfg = st.load_config()
     p = pair_of(cfg, pair)
     req = diffdrive.PairTarget(sigma=sigma, delta=delta, relative=relative, velocity=velocity, naive=naive,
-                                feedback=feedback, uncalibrated=uncalibrated, poll=poll)
+                                feedback=feedback, uncalibrated=uncalibrated, poll=poll, source=source)
+    diffdrive.check_source(req)
     if naive and feedback:
         raise UsageError("--naive and --feedback do not go together: --naive is the seed's way, for comparison")
     method, _ = diffdrive.pair_settings(cfg)
@@ -219,7 +223,8 @@ def move(
         refused = _pair_would_refuse(st, cfg, p, req)
         if st.json_mode:
             st.out.json({"pair": p.name, "applied": False, "move": what, "holds": held, "start": mode,
-                         "feedback": feedback, "recording": "poll" if poll else "sync",
+                         "feedback": feedback,
+                         "recording": "drive" if source == "drive" else "poll" if poll else "sync",
                          "checked": refused is not None, "would_be_refused": refused or []})
             if refused:
                 raise typer.Exit(1)
@@ -233,8 +238,10 @@ def move(
                     + (f"; {held[0]} holds" if held else ""))
         st.out.line(f"  UM=5, SP/AC/DC of equal duration, PA, {start}"
                     + ("; --feedback slows the motor ahead every cycle" if feedback else "") + ", then stop and switch off")
-        st.out.line("  records both motors: " + ("PX polled (--poll)" if poll else
-                    f"TPDO1 on SYNC at {cfg.motion.pair_record_rate:g} Hz (RAM only, put back after)"))
+        st.out.line("  records both motors: " + (
+            "the drives' own recorders at the servo rate, started by the move's BG (RAM only, put back after)"
+            if source == "drive" else "PX polled (--poll)" if poll else
+            f"TPDO1 on SYNC at {cfg.motion.pair_record_rate:g} Hz (RAM only, put back after)"))
         st.out.line("nothing sent; add --apply to move")
         return
     with st.session(buses=sorted({cfg.drives[d].bus for d in (p.drive_a, p.drive_b)})) as session:

@@ -16,6 +16,10 @@ Recording: both motors are recorded by `sherpa log`'s recorder (log/record.py: T
 ``motion.pair_record_rate``, RAM only, put back on every exit path; :class:`RecordedTrace`), whose
 newest sample also feeds the move's loop (limit watch, ``--feedback``); with ``--poll`` or when the
 recorder cannot be set up, the loop polls PX through the interpreter instead (:class:`PolledTrace`).
+With ``source="drive"`` (``--source drive``) both drives' own recorders (ops/drive_record.py, RAM only,
+put back on every exit path) are armed to start at the move's BG and record PX at the servo rate for
+the move's time bound; the loop polls PX for its own watch, and the coupling figures come from the
+drives' recordings (:func:`recorder_samples`).
 """
 
 from __future__ import annotations
@@ -30,6 +34,7 @@ from typing import TYPE_CHECKING, Any, Protocol
 from sherpa_cli.bus.targets import DriveRef
 from sherpa_cli.config.model import ArmConfig, PairConfig
 from sherpa_cli.elmo.protocol import UM_POSITION
+from sherpa_cli.elmo.recorder import MAX_GAP, RecorderPlan, RecorderSettings, plan_recording
 from sherpa_cli.errors import SafetyError, UsageError
 from sherpa_cli.joints import diffpair, units
 from sherpa_cli.motion import calibration, limit_watch, recovery
@@ -43,8 +48,10 @@ if TYPE_CHECKING:
 
     from sherpa_cli.bus.session import ArmSession
     from sherpa_cli.log.record import Recorder
+    from sherpa_cli.log.recording import Recording
     from sherpa_cli.motion.guard import MotionGuard
     from sherpa_cli.motion.limit_watch import Breach
+    from sherpa_cli.ops.drive_record import DriveRecordResult
 
 SETTLE_S = 0.3  # s a finished move may take for PX to reach the target (servo lag) before it is reported
 
@@ -68,6 +75,7 @@ class PairTarget:
     feedback: bool = False
     uncalibrated: bool = False
     poll: bool = False  # record by polling PX instead of the recorder (TPDO on SYNC)
+    source: str = "can"  # can: recorded over the bus (TPDO on SYNC, or --poll); drive: by the drives' recorders
 
 
 @dataclass(frozen=True)
@@ -453,6 +461,42 @@ class Feedback:
         return {a: scaled(p.profiles[a], k if corr > 0 else 1.0), b: scaled(p.profiles[b], k if corr < 0 else 1.0)}
 
 
+DRIVE_SIGNALS = ("pos",)  # --source drive records PX only: the whole buffer for the finest gap
+
+
+def check_source(request: PairTarget) -> None:
+    """--source can|drive, and --poll only with can (it says how the bus records)."""
+    if request.source not in ("can", "drive"):
+        raise UsageError(f"--source {request.source}: expected can or drive")
+    if request.source == "drive" and request.poll:
+        raise UsageError("--source drive records in the drives, not over the bus: --poll does not apply")
+
+
+def drive_record_length(plan: MovePlan) -> float:
+    """s the drives record from the move's BG: its time bound and the settle window after it."""
+    return plan.timeout + SETTLE_S
+
+
+def plan_drive_recording(length: float, settings: RecorderSettings) -> RecorderPlan:
+    """The drives' recording of a move that may take ``length`` s (:func:`drive_record_length`); a
+    move longer than the recorder holds is refused (UsageError) before anything moves."""
+    longest = MAX_GAP * (settings.capacity // len(DRIVE_SIGNALS)) * settings.sample_time_s
+    if length > longest:
+        raise UsageError(f"--source drive: the move may take up to {length:.1f} s (its time bound); the drive's "
+                         f"recorder holds at most {longest:.1f} s of PX (RG={MAX_GAP})",
+                         hint="a shorter or faster move, or --source can (recorded over the bus)")
+    return plan_recording(length, settings, signals=DRIVE_SIGNALS, trigger="bg")
+
+
+def recorder_samples(rec: Recording, drives: tuple[str, str], *, until: float | None = None
+                     ) -> list[tuple[float, int, int]]:
+    """A drive recording (ops/drive_record.py's columns ``<drive>.px``) as the trace's samples
+    (t, m_a, m_b), up to ``until`` s."""
+    a, b = (rec.columns[f"{d}.px"] for d in drives)
+    return [(t, round(x), round(y)) for t, x, y in zip(rec.times, a, b, strict=True)
+            if x == x and y == y and (until is None or t <= until)]
+
+
 def _open_trace(stack: contextlib.ExitStack, session: ArmSession, refs: Sequence[DriveRef], request: PairTarget,
                 drives: tuple[str, str], recorder_kw: Mapping[str, Any] | None) -> PolledTrace | RecordedTrace:
     """The move's recording: the recorder of `sherpa log` (TPDO on SYNC), or PX polled by the move's
@@ -461,6 +505,8 @@ def _open_trace(stack: contextlib.ExitStack, session: ArmSession, refs: Sequence
         trace = PolledTrace(drives)
         trace.source = "polled PX (--poll)"
         return trace
+    if request.source == "drive":  # the drives record; the loop polls PX for its own watch
+        return PolledTrace(drives)
     from sherpa_cli.log.record import Recorder
 
     rate, note = record_rate(session.cfg, refs)
@@ -479,16 +525,21 @@ def run_move(session: ArmSession, pair: PairConfig, request: PairTarget, *,
              clock: Callable[[], float] = time.monotonic, sleep: Callable[[float], None] = time.sleep,
              on_event: Callable[[str], None] | None = None,
              recorder_kw: Mapping[str, Any] | None = None,
-             trace_factory: Callable[[tuple[str, str]], Trace] | None = None) -> MoveResult:
+             trace_factory: Callable[[tuple[str, str]], Trace] | None = None,
+             drive_recorder: RecorderSettings | None = None) -> MoveResult:
     """Plan, then move both motors inside the motion guard with the limit watch, recording both.
 
     ``recorder_kw`` goes to log/record.py's Recorder (``clock``, ``sync_factory``: tests);
     ``trace_factory(drives)`` replaces the recording with anything that has ``add(t, motors)``,
-    ``samples`` and ``source`` (PX is then polled, as with --poll)."""
+    ``samples`` and ``source`` (PX is then polled, as with --poll). With ``request.source ==
+    "drive"`` both drives' recorders (ops/drive_record.py, ``drive_recorder``: their settings) are
+    armed for the move's BG and the move runs while they record; its coupling figures come from
+    their recordings."""
     from sherpa_cli.motion.guard import MotionGuard
     from sherpa_cli.motion.settings import MotionSettings
 
     cfg = session.cfg
+    check_source(request)
     method, group_id = pair_settings(cfg)
     if request.naive:
         method = "sequential"
@@ -504,9 +555,17 @@ def run_move(session: ArmSession, pair: PairConfig, request: PairTarget, *,
     result = MoveResult(pair.name, pair.sigma, pair.delta, drives, "naive" if request.naive else method,
                         request.feedback, p.start, p.target, p.start, sj.cpr, dj.cpr,
                         motors_start=dict(p.motors_start), calibration=cals)
+    rec_plan: RecorderPlan | None = None
+    rec_length, rec_settings = 0.0, drive_recorder or RecorderSettings()
+    drive_rec: DriveRecordResult | None = None
+    if request.source == "drive":  # a move longer than the drives can record is refused before anything moves
+        rec_length = drive_record_length(p)
+        rec_plan = plan_drive_recording(rec_length, rec_settings)
     guard = (guard_factory or MotionGuard)(session, refs, settings=settings, clock=clock, sleep=sleep,
                                            on_event=on_event)
-    try:
+    box: dict[str, Any] = {}  # what the move leaves for the result
+
+    def moving() -> None:
         with guard:
             clients = {d: guard.client(by_name[d]) for d in drives}
             start = CommonStart(session, refs, clients, method, group_id, stop=stop_motors(guard, refs, settings))
@@ -623,14 +682,35 @@ def run_move(session: ArmSession, pair: PairConfig, request: PairTarget, *,
                 trace.add(clock() - t0, final)
             if recorded is not None:
                 recorded.collect()  # the recorder has stopped and put the PDO settings back
+        box.update(final=final, trace=trace)
+
+    try:
+        if rec_plan is None:
+            moving()
+        else:
+            # every drive armed to start at the move's BG; the guard has stopped the motors
+            # (on every way out of moving()) before the drives' data is uploaded
+            from sherpa_cli.ops.drive_record import record_drives
+
+            drive_rec = record_drives(session, refs, rec_length, trigger="bg", settings=rec_settings,
+                                      signals=DRIVE_SIGNALS, clock=clock, sleep=sleep, on_armed=moving)
     except BaseException as exc:
         carried = with_report(exc, guard.report)  # the CLI shows how the guard stopped the motors
         if carried is exc:
             raise
         raise carried from exc
+    final, trace = box["final"], box["trace"]
     result.motors_end = final
     result.end = diffpair.to_joints(final[pair.drive_a], final[pair.drive_b])
     result.samples = list(trace.samples)
+    if rec_plan is not None:
+        # the coupling figures from the drives' own recordings (t = 0: the move's BG), up to where the
+        # move's loop read the final positions
+        until = trace.samples[-1][0] if trace.samples else None
+        assert drive_rec is not None  # record_drives returned
+        result.samples = recorder_samples(drive_rec.recording, drives, until=until)
+        result.trace_source = (f"drive recorders at {1 / drive_rec.period_s:.0f} Hz (sample time "
+                               f"{rec_settings.sample_time_s * 1e6:.0f} us, RG={drive_rec.plan.gap})")
     result.coupling = measure_coupling(result.samples, p.start, p.target, sigma_name=pair.sigma,
                                        delta_name=pair.delta, sigma_cpr=sj.cpr, delta_cpr=dj.cpr,
                                        held=pair.delta if request.delta is None else

@@ -65,7 +65,11 @@ def pair_would_refuse(session: ArmSession, pair: PairConfig, request: PairTarget
         if fault:
             reasons.append(f"{c.label}: in fault: {fault}")
     try:
-        diffdrive.prepare(session, pair, request)
+        plan, _ = diffdrive.prepare(session, pair, request)
+        if request.source == "drive":
+            from sherpa_cli.elmo.recorder import RecorderSettings
+
+            diffdrive.plan_drive_recording(diffdrive.drive_record_length(plan), RecorderSettings())
     except (UsageError, SafetyError) as exc:
         reasons.append(str(exc))
     return reasons
