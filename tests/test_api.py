@@ -140,3 +140,145 @@ def test_the_jog_command_is_a_layer_over_the_api(cli, monkeypatch):
     result = cli("--sim", "jog", "elbow_pitch", "--velocity", "0.2", "--for", "0.2", "--apply")
     assert result.exit_code == 0, result.transcript()
     assert calls == [("elbow_pitch", "velocity")]
+
+
+# -- home, diffdrive move, log step, the live jog and the joystick (the motion matrix runs them all)
+
+def test_home_reads_an_absolute_encoder_and_marks_the_drive_calibrated():
+    from sherpa_cli.bus.targets import drive_ref
+    from sherpa_cli.ops.home import HomeReport
+
+    with Arm.open(CONFIG, sim=True) as arm:
+        cfg = arm.config
+        drive = arm.session.client(drive_ref(cfg, "elbow_1a"))
+        drive.nmt_start()
+        flag = cfg.protocol.calibration_flag
+        assert int(drive.get("UI", flag)) == 0  # a fresh simulated drive: not marked
+        seen = []
+        report = arm.home(["elbow_pitch"], on_unit=seen.append)
+        marked = int(drive.get("UI", flag))
+    assert isinstance(report, HomeReport) and seen == report.units
+    [unit] = report.units
+    assert (unit.name, unit.kind, unit.drives) == ("elbow_pitch", "abs_encoder", ("elbow_1a",))
+    assert marked == 1
+
+
+def test_home_refuses_what_cannot_be_homed_before_anything_moves():
+    with Arm.open(CONFIG, sim=True) as arm:
+        with pytest.raises(UsageError, match="nope"):
+            arm.home(["nope"])
+        assert not any(d.motor_on for d in arm.session.sim.drives.values())
+
+
+def test_diffdrive_move_moves_both_motors_to_the_target_and_switches_them_off():
+    from sherpa_cli.ops.diffdrive import MoveResult
+
+    with Arm.open(CONFIG, sim=True) as arm:
+        events: list[str] = []
+        r = arm.diffdrive_move("shoulder_pitch", sigma=0.1, relative=True, velocity="200counts/s",
+                               uncalibrated=True, on_event=events.append)  # a Σ joint names its pair; 0.1 rad
+        motors = [arm.session.sim.drives[d] for d in ("shoulder_2a", "shoulder_2b")]
+        assert not any(m.motor_on for m in motors)
+    assert isinstance(r, MoveResult) and r.ok and r.pair == "shoulder_diff"
+    assert r.target[0] == r.start[0] + 95  # 0.1 rad of a 6000-count joint
+    assert abs(r.target[1] - r.start[1]) <= 1  # Δ holds (it gives way a count where Σ's parity needs it)
+    assert r.end == r.target and r.stop["drives"]
+    assert events  # the guard said what it did
+
+
+def test_diffdrive_move_refusals_are_the_documented_errors():
+    with Arm.open(CONFIG, sim=True) as arm:
+        with pytest.raises(SafetyError, match="refusing a move: joint shoulder_pitch is not homed"):
+            arm.diffdrive_move("shoulder_diff", sigma="10counts", relative=True)  # not homed since power-up
+        with pytest.raises(UsageError, match="normal range"):
+            arm.diffdrive_move("shoulder_diff", sigma=3.0, uncalibrated=True)
+        with pytest.raises(UsageError, match="not part of a differential pair"):
+            arm.diffdrive_move("elbow_pitch", sigma=0.1)
+        with pytest.raises(UsageError, match="--naive and --feedback"):
+            arm.diffdrive_move("shoulder_diff", sigma=0.1, naive=True, feedback=True, uncalibrated=True)
+        assert not any(d.motor_on for d in arm.session.sim.drives.values())
+
+
+def test_log_step_records_a_velocity_step_and_its_metrics():
+    from sherpa_cli.ops.step import StepResult
+
+    with Arm.open(CONFIG, sim=True) as arm:
+        step = arm.log_step("elbow_1a", "velocity", 0.1, duration=0.3, rate=200)  # the drive of a plain joint
+        assert not arm.session.sim.drives["elbow_1a"].motor_on
+    assert isinstance(step, StepResult) and (step.joint, step.drive, step.mode) == ("elbow_pitch", "elbow_1a", "velocity")
+    assert step.command.startswith("JV=") and step.samples > 0 and step.breach is None
+    assert step.recording.series("elbow_pitch", "vel") is not None
+    assert step.stop.drives and all(d.motor_off for d in step.stop.drives)
+
+
+def test_log_step_refusals_are_the_documented_errors():
+    with Arm.open(CONFIG, sim=True) as arm:
+        with pytest.raises(UsageError, match="differential pair"):
+            arm.log_step("shoulder_pitch", "velocity", 0.1, duration=0.3)
+        with pytest.raises(UsageError, match=r"longer than motion\.max_torque_for"):
+            arm.log_step("elbow_pitch", "torque", 0.5, duration=60)
+        with pytest.raises(UsageError, match="normal range"):
+            arm.log_step("elbow_pitch", "position", 3.0, duration=0.5)
+        assert not any(d.motor_on for d in arm.session.sim.drives.values())
+
+
+def test_live_jog_is_the_interactive_engine_and_stops_on_leaving():
+    from sherpa_cli.ops.live_jog import LiveJog
+
+    with Arm.open(CONFIG, sim=True) as arm:
+        live = arm.live_jog(["elbow_pitch"], keepalive=0.3)
+        assert isinstance(live, LiveJog) and list(live.axes) == ["elbow_pitch"] and live.drives == ("elbow_1a",)
+        with live:
+            live.set_velocity("elbow_pitch", 200)
+            live.tick()
+            assert arm.session.sim.drives["elbow_1a"].motor_on
+        assert not arm.session.sim.drives["elbow_1a"].motor_on
+    assert [d.drive for d in live.report.drives] == ["elbow_1a"] and live.report.drives[0].motor_off
+    with Arm.open(CONFIG, sim=True) as arm, pytest.raises(UsageError, match="unknown target 'nope'"):
+        arm.live_jog(["nope"])
+
+
+def test_joystick_commands_the_mapped_joint_while_the_deadman_is_held():
+    import time
+
+    from sherpa_cli.ops.joystick import ScriptedSource
+
+    with Arm.open(CONFIG, sim=True) as arm:
+        assert arm.joystick_joints() == ["shoulder_yaw", "shoulder_pitch", "shoulder_roll"]
+        with arm.live_jog(arm.joystick_joints()) as live:
+            stick = ScriptedSource([(0.0, "BTN_TRIGGER", 1.0), (0.0, "ABS_Z", 0.5), (0.2, "BTN_TRIGGER", 0.0)],
+                                   time.monotonic)
+            run = arm.joystick(live, stick, duration=0.3)
+        assert not any(d.motor_on for d in arm.session.sim.drives.values())
+    assert run.ended_by == "time up" and run.commands > 0
+    assert {d.drive for d in live.report.drives} == {"shoulder_1a", "shoulder_2a", "shoulder_2b"}
+
+
+def _spy(monkeypatch, name, calls):
+    real = getattr(Arm, name)
+
+    def spy(self, *args, **kw):
+        calls.append((name, args))
+        return real(self, *args, **kw)
+
+    monkeypatch.setattr(Arm, name, spy)
+
+
+def test_home_diffdrive_move_and_log_step_commands_go_through_the_api(cli, monkeypatch, tmp_path):
+    calls: list[tuple[str, tuple]] = []
+    for name in ("home", "diffdrive_move", "log_step"):
+        _spy(monkeypatch, name, calls)
+    assert cli("--sim", "home", "elbow_pitch").exit_code == 0
+    moved = cli("--config", "tests/data/diffdrive-arm.yaml", "--sim", "diffdrive", "move", "diff", "--sigma", "1",
+                "--apply")
+    assert moved.exit_code == 0, moved.transcript()
+    stepped = cli("--sim", "log", "step", "elbow_pitch", "--velocity", "0.1", "--for", "0.3", "--rate", "200",
+                  "-o", str(tmp_path / "step"), "--apply")
+    assert stepped.exit_code == 0, stepped.transcript()
+    assert calls == [("home", (["elbow_pitch"],)), ("diffdrive_move", ("diff",)),
+                     ("log_step", ("elbow_pitch", "velocity", 0.1))]
+    # the dry runs plan without the session: nothing reaches the API
+    calls.clear()
+    assert cli("--sim", "home", "elbow_pitch", "--dry-run").exit_code == 0
+    assert cli("--sim", "log", "step", "elbow_pitch", "--velocity", "0.1", "-o", str(tmp_path / "dry")).exit_code == 0
+    assert calls == []

@@ -50,8 +50,9 @@ from sherpa_cli.sim.stepped import SteppedTime
 ARM = Path(__file__).resolve().parent / "data" / "matrix-arm.yaml"
 
 # ================================================================================================
-# Adapters: how each command is started (the ops' entry points, with the stepped clock). Each takes
-# the session, the name of the thing moved, and the stepped time; returns what the command returned.
+# Adapters: how each command is started: through the Python API (`sherpa_cli.api.Arm`, what the
+# commands call too), with the stepped clock. Each takes the session, the name of the thing moved, and
+# the stepped time; returns what the command returned.
 
 
 def _rad(counts: float, cpr: int) -> float:
@@ -85,15 +86,14 @@ def jog(mode: str, hold: bool = False) -> Callable[..., Any]:
 
 
 def _live(s: ArmSession, name: str, st: SteppedTime) -> Any:
-    """LiveJog (ops/live_jog.py), as `jog --interactive` drives it: a velocity command refreshed
-    every period, then the keys let go."""
-    from sherpa_cli.ops.live_jog import LiveJog, resolve_axes
+    """`Arm.live_jog` (ops/live_jog.py LiveJog), as `jog --interactive` drives it: a velocity command
+    refreshed every period, then the keys let go."""
+    from sherpa_cli.api import Arm
 
-    axes = resolve_axes(s.cfg, [name])
-    live = LiveJog(s, axes, clock=st.now, sleep=st.sleep, keepalive=0.3)
+    live = Arm(s).live_jog([name], clock=st.now, sleep=st.sleep, keepalive=0.3)
     try:
         with live:
-            joint = axes[0].name
+            joint = next(iter(live.axes))
             t0 = st.now()
             while st.now() - t0 < LIVE_FOR:
                 live.set_velocity(joint, -SPEED)
@@ -111,19 +111,18 @@ JOY_AXIS = {"stiff": ("ABS_Z", 0), "pitch": ("ABS_X", 1), "roll": ("ABS_Y", 1)}
 
 
 def _joystick(s: ArmSession, name: str, st: SteppedTime) -> Any:
-    from sherpa_cli.ops.joystick import ScriptedSource, joints_of, run_joystick
-    from sherpa_cli.ops.live_jog import LiveJog, resolve_axes
+    from sherpa_cli.api import Arm
+    from sherpa_cli.ops.joystick import ScriptedSource
 
     code, mapping = JOY_AXIS[name]
-    cfg = s.cfg
-    assert cfg.joystick is not None
-    jcfg = dataclasses.replace(cfg.joystick, axes=(cfg.joystick.axes[mapping],))
-    live = LiveJog(s, resolve_axes(cfg, joints_of(cfg, jcfg)), clock=st.now, sleep=st.sleep, keepalive=0.3)
+    arm = Arm(s)
+    jcfg = dataclasses.replace(s.cfg.joystick, axes=(s.cfg.joystick.axes[mapping],))
+    live = arm.live_jog(arm.joystick_joints(jcfg), clock=st.now, sleep=st.sleep, keepalive=0.3)
     try:
         with live:
             src = ScriptedSource([(0.0, "BTN_TRIGGER", 1.0), (0.0, code, -0.8), (LIVE_FOR, code, 0.0),
                                   (LIVE_FOR + 0.1, "BTN_TRIGGER", 0.0)], st.now)
-            run_joystick(live, cfg, jcfg, src, clock=st.now, sleep=st.sleep, duration=LIVE_FOR + 0.2)
+            arm.joystick(live, src, mapping=jcfg, clock=st.now, sleep=st.sleep, duration=LIVE_FOR + 0.2)
     except BaseException as exc:
         exc.live_report = live.report  # type: ignore[attr-defined]  # as the CLI shows it on every exit
         raise
@@ -131,29 +130,27 @@ def _joystick(s: ArmSession, name: str, st: SteppedTime) -> Any:
 
 
 def _log_step(s: ArmSession, name: str, st: SteppedTime) -> Any:
-    from sherpa_cli.ops.step import resolve_step_target, run_step
+    from sherpa_cli.api import Arm
 
-    cfg = s.cfg
-    return run_step(s, resolve_step_target(cfg, name), "velocity", _rad(-SPEED, cfg.joints["stiff"].cpr),
-                    duration=RUN_FOR, rate=100, settings=MotionSettings.from_config(cfg), timebase=st)
+    return Arm(s).log_step(name, "velocity", _rad(-SPEED, s.cfg.joints["stiff"].cpr), duration=RUN_FOR, rate=100,
+                           settings=MotionSettings.from_config(s.cfg), timebase=st)
 
 
 def _diffdrive(s: ArmSession, name: str, st: SteppedTime) -> Any:
-    from sherpa_cli.ops import diffdrive
+    from sherpa_cli.api import Arm
 
     sigma, delta = (f"{-DISTANCE}counts", "0counts") if name == "pitch" else ("0counts", f"{-DISTANCE}counts")
-    req = diffdrive.PairTarget(sigma=sigma, delta=delta, relative=True, velocity=f"{SPEED}counts/s")
-    return diffdrive.run_move(s, s.cfg.pairs["diff"], req, clock=st.now, sleep=st.sleep,
-                              recorder_kw={"clock": st.now, "sync_factory": st.sync_factory})
+    return Arm(s).diffdrive_move("diff", sigma=sigma, delta=delta, relative=True, velocity=f"{SPEED}counts/s",
+                                 timebase=st)
 
 
 def _home(s: ArmSession, name: str, st: SteppedTime) -> Any:
-    from sherpa_cli.ops.home import HomeReport, plan_home, run_home
+    from sherpa_cli.api import Arm
+    from sherpa_cli.ops.home import HomeReport
 
     report = HomeReport()
     try:
-        run_home(s, plan_home(s.cfg, [name]), settings=MotionSettings.from_config(s.cfg), clock=st.now,
-                 sleep=st.sleep, report=report)
+        Arm(s).home([name], settings=MotionSettings.from_config(s.cfg), clock=st.now, sleep=st.sleep, report=report)
     except BaseException as exc:
         exc.home_report = report  # type: ignore[attr-defined]  # read by reports_of
         raise

@@ -22,20 +22,23 @@ if TYPE_CHECKING:
     from collections.abc import Mapping
 
     from sherpa_cli.bus.session import ArmSession
-    from sherpa_cli.config.model import ArmConfig
+    from sherpa_cli.config.model import ArmConfig, JoystickConfig
     from sherpa_cli.motion.axis import Axis
     from sherpa_cli.motion.request import MoveRequest, Value
     from sherpa_cli.motion.settings import MotionSettings
     from sherpa_cli.ops import jog as plain_jog
     from sherpa_cli.ops import joint_jog
+    from sherpa_cli.ops.diffdrive import MoveResult
+    from sherpa_cli.ops.home import HomeReport, UnitResult
+    from sherpa_cli.ops.joystick import EventSource, JoystickRun
+    from sherpa_cli.ops.live_jog import LiveJog
     from sherpa_cli.ops.program import DrivePlan
     from sherpa_cli.ops.scan import ScanReport
+    from sherpa_cli.ops.step import StepResult, StepTime
     from sherpa_cli.ops.stop import StopReport
 
 #: per-bus scan progress: (bus, phase, done, total)
 ScanProgress = Callable[[str, str, int, int], None]
-
-
 
 class Arm:
     """An open session with the arm. Build it with :meth:`open` (or wrap a session the caller owns)."""
@@ -175,6 +178,141 @@ class Arm:
             settings = MotionSettings.from_config(self.config, [axis.ref.bus])
         return plain_jog.run_jog(self._session, axis, request, settings=settings, on_progress=on_progress,
                                  clock=now, sleep=wait)
+
+    def home(self, joints: Sequence[str] | None = None, *, measure_range: bool = False,
+             settings: MotionSettings | None = None, on_unit: Callable[[UnitResult], None] | None = None,
+             on_step: Callable[[str], None] | None = None, report: HomeReport | None = None,
+             clock: Callable[[], float] | None = None, sleep: Callable[[float], None] | None = None
+             ) -> HomeReport:
+        """Calibrate joints (`sherpa home JOINT... --yes`): find their switches or read their absolute
+        encoder, set the drive's counter and mark it calibrated. ``joints``: joints, pairs, Σ/Δ joints
+        or drives; none: every joint that can be homed (a named one that cannot is a UsageError).
+
+        Calling it is the confirmation the command asks for: it moves at once, unit by unit, each
+        inside the motion guard, and stops at the first failure (raised). ``on_unit`` sees each
+        unit's result as it is done, ``on_step`` the running step; pass ``report`` to read, after
+        an exception, which unit did not finish, the joints it left un-homed and how it stopped.
+        ``measure_range``: end-switch joints also drive to the other switch and report the travel.
+        """
+        import time
+
+        from sherpa_cli.errors import UsageError
+        from sherpa_cli.ops.home import plan_home, run_home
+
+        plan = plan_home(self.config, joints or None, measure_range=measure_range)
+        if not plan.units:
+            raise UsageError("nothing to home: no configured joint has a switch or an absolute encoder to home with")
+        return run_home(self._session, plan, settings=settings, clock=clock or time.monotonic,
+                        sleep=sleep or time.sleep, on_unit=on_unit, on_step=on_step, report=report)
+
+    def diffdrive_move(self, pair: str, *, sigma: Value = None, delta: Value = None, relative: bool = False,
+                       velocity: Value = None, feedback: bool = False, naive: bool = False,
+                       uncalibrated: bool = False, poll: bool = False, source: str = "can",
+                       on_event: Callable[[str], None] | None = None, timebase: StepTime | None = None
+                       ) -> MoveResult:
+        """Move the Σ and Δ joints of a pair together (`sherpa diffdrive move PAIR ... --apply`).
+
+        ``pair``: the pair, or one of its joints or motors. ``sigma``/``delta``: targets (offsets with
+        ``relative``); a joint left out holds; numbers are rad, text takes units (``"10deg"``,
+        ``"200counts"``). ``velocity``: the speed of the joint that moves farthest (default: the
+        joints' limits). Both motors start together, are recorded (``poll``: PX polled; ``source=
+        "drive"``: the drives' own recorders) and the coupling is measured. A limit breach is a
+        result (``result.ok`` False), a refusal raises. ``timebase``: the clock, waits and SYNC
+        source the move runs on (default wall time; tests step it, sim/stepped.py).
+        """
+
+        from sherpa_cli.bus.targets import pair_of
+        from sherpa_cli.ops import diffdrive
+
+        def text(v: Value) -> str | None:
+            return None if v is None else v if isinstance(v, str) else repr(float(v))
+
+        req = diffdrive.PairTarget(sigma=text(sigma), delta=text(delta), relative=relative, velocity=text(velocity),
+                                   naive=naive, feedback=feedback, uncalibrated=uncalibrated, poll=poll,
+                                   source=source)
+        p = pair_of(self.config, pair)
+        if timebase is None:
+            return diffdrive.run_move(self._session, p, req, on_event=on_event)
+        return diffdrive.run_move(self._session, p, req, clock=timebase.now, sleep=timebase.sleep, on_event=on_event,
+                                  recorder_kw={"clock": timebase.now, "sync_factory": timebase.sync_factory})
+
+    def log_step(self, name: str, mode: str, value: float, *, duration: float = 2.0, rate: float = 1000.0,
+                 uncalibrated: bool = False, mode_first: bool = False, hold: float = 0.0,
+                 settings: MotionSettings | None = None, on_event: Callable[[str], None] | None = None,
+                 timebase: StepTime | None = None) -> StepResult:
+        """The seed's Section 9 step experiment (`sherpa log step NAME --MODE VALUE --apply`, without
+        the files): record, command the step at t = 0 inside the motion guard, record until settled
+        (or ``duration`` s after the step), stop, and compute the step metrics.
+
+        ``name``: a plain joint or its drive (a Σ/Δ joint is refused: that is :meth:`diffdrive_move`).
+        ``mode``: ``"position"`` (a step of ``value`` rad from where the joint stands),
+        ``"velocity"`` (rad/s) or ``"torque"`` (A). ``rate``: samples per second. ``mode_first``,
+        ``hold``: as ``--mode-first``, ``--hold``. ``timebase``: the clock, waits and SYNC source
+        (default wall time; `sherpa --sim log step` runs on the simulator's stepped time). The result
+        holds the recording (``result.recording``) and the metrics; a limit breach is a result
+        (``breach`` set), a refusal raises.
+        """
+        from sherpa_cli.motion.settings import MotionSettings
+        from sherpa_cli.ops.step import resolve_step_target, run_step
+
+        cfg = self.config
+        if mode == "torque":
+            from sherpa_cli.motion.settings import check_torque_for
+
+            check_torque_for(duration, cfg.motion.max_torque_for)  # no drive limit acts in torque mode
+        target = resolve_step_target(cfg, name)
+        if settings is None:
+            settings = MotionSettings.from_config(cfg, [target.ref.bus])
+        return run_step(self._session, target, mode, value, duration=duration, rate=rate, settings=settings,
+                        on_event=on_event, uncalibrated=uncalibrated, timebase=timebase, mode_first=mode_first,
+                        hold=hold)
+
+    # ------------------------------------------------------------------ moving live
+
+    def live_jog(self, joints: Sequence[str] | None = None, *, uncalibrated: bool = False,
+                 keepalive: float | None = None, tick_period: float = 0.1, settings: MotionSettings | None = None,
+                 on_event: Callable[[str], None] | None = None, clock: Callable[[], float] | None = None,
+                 sleep: Callable[[float], None] | None = None) -> LiveJog:
+        """The engine of `sherpa jog --interactive` (ops/live_jog.py), for a program that commands
+        joints continuously: ``with arm.live_jog(["elbow_pitch"]) as live:`` arms one motion guard over
+        every drive of ``joints`` (none: every joint; a pair: both its joints), then
+        ``live.set_velocity(name, counts_per_s)``, ``live.set_torque``, ``live.step``, ``live.stop``,
+        ``live.stop_all`` command them, and ``live.tick()`` (call it every ``tick_period`` s) watches
+        the limits and stops a velocity or torque command not refreshed within ``keepalive`` s.
+        Leaving the ``with`` stops every motor from standstill; ``live.report`` says how.
+        """
+        import time
+
+        from sherpa_cli.ops.live_jog import KEEPALIVE_S, LiveJog, resolve_axes
+
+        return LiveJog(self._session, resolve_axes(self.config, joints), settings=settings,
+                       keepalive=KEEPALIVE_S if keepalive is None else keepalive, allow_uncalibrated=uncalibrated,
+                       tick_period=tick_period, clock=clock or time.monotonic, sleep=sleep or time.sleep,
+                       on_event=on_event)
+
+    def joystick_joints(self, mapping: JoystickConfig | None = None) -> list[str]:
+        """The joints a joystick mapping drives (default: the config's ``joystick:``): what to open
+        :meth:`live_jog` on before :meth:`joystick`."""
+        from sherpa_cli.ops.joystick import joints_of
+
+        return joints_of(self.config, mapping or self.config.joystick)
+
+    def joystick(self, live: LiveJog, source: EventSource, *, mapping: JoystickConfig | None = None,
+                 duration: float | None = None, on_status: Callable[[str], None] | None = None,
+                 clock: Callable[[], float] | None = None, sleep: Callable[[float], None] | None = None
+                 ) -> JoystickRun:
+        """The loop of `sherpa jog --joystick` on an entered :meth:`live_jog`: read ``source``'s events
+        (``ops.joystick.EvdevSource`` for a device, ``ScriptedSource`` for a script) and, while the
+        dead-man is held, command each mapped joint (``mapping``, default the config's ``joystick:``)
+        at its rate; a release stops every joint at once. Ends after ``duration`` s, when the device
+        is gone, or at Ctrl-C (raised; the live jog's guard stops the motors)."""
+        import time
+
+        from sherpa_cli.ops.joystick import run_joystick
+
+        return run_joystick(live, self.config, mapping or self.config.joystick, source,
+                            clock=clock or time.monotonic, sleep=sleep or time.sleep, duration=duration,
+                            on_status=on_status)
 
     # ------------------------------------------------------------------ writing parameters
 

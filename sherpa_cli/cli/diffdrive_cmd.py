@@ -244,9 +244,13 @@ def move(
             f"TPDO1 on SYNC at {cfg.motion.pair_record_rate:g} Hz (RAM only, put back after)"))
         st.out.line("nothing sent; add --apply to move")
         return
+    from sherpa_cli.api import Arm
+
     with st.session(buses=sorted({cfg.drives[d].bus for d in (p.drive_a, p.drive_b)})) as session:
-        try:
-            result = diffdrive.run_move(session, p, req)
+        try:  # a layer over the Python API
+            result = Arm(session).diffdrive_move(p.name, sigma=sigma, delta=delta, relative=relative,
+                                                 velocity=velocity, feedback=feedback, naive=naive,
+                                                 uncalibrated=uncalibrated, poll=poll, source=source)
         except BaseException as exc:
             from sherpa_cli.motion.report import report_of
 

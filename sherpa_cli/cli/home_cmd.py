@@ -85,10 +85,13 @@ def home(
     def step(text: str) -> None:
         st.out.progress(f"home: {text}")  # a live line on a terminal only (never in logs or --json)
 
+    from sherpa_cli.api import Arm
+
     partial = ops_home.HomeReport()
     with st.session(buses=buses) as session:
-        try:
-            report = ops_home.run_home(session, plan, on_unit=done, on_step=step, report=partial)
+        try:  # a layer over the Python API, which plans the same units again from the config
+            report = Arm(session).home(joints or None, measure_range=measure_range, on_unit=done, on_step=step,
+                                       report=partial)
         except BaseException as exc:
             st.out.progress(None)
             from sherpa_cli.motion.report import report_of

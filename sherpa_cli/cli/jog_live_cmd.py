@@ -51,7 +51,7 @@ def _stop_lines(st: AppState, report: GuardReport) -> None:
 
 
 def interactive(st: AppState, names: Sequence[str], *, apply: bool, uncalibrated: bool) -> None:
-    from sherpa_cli.ops.live_jog import LiveJog, resolve_axes
+    from sherpa_cli.ops.live_jog import resolve_axes
 
     cfg = st.load_config()
     axes = resolve_axes(cfg, names)
@@ -65,10 +65,11 @@ def interactive(st: AppState, names: Sequence[str], *, apply: bool, uncalibrated
     if not have_terminal():
         raise UsageError("--interactive needs a terminal (stdin and stdout)",
                          hint="run it in an interactive shell (ssh -t for a remote one)")
+    from sherpa_cli.api import Arm
     from sherpa_cli.cli.jog_view import JogView
 
     with st.session(buses=_buses(cfg, axes)) as session:
-        live = LiveJog(session, axes, allow_uncalibrated=uncalibrated)
+        live = Arm(session).live_jog(names, uncalibrated=uncalibrated)  # a layer over the Python API
         try:
             with live:
                 app = JogView(live)
@@ -94,7 +95,7 @@ def interactive(st: AppState, names: Sequence[str], *, apply: bool, uncalibrated
 
 def joystick(st: AppState, device: str | None, *, apply: bool) -> None:
     from sherpa_cli.ops import joystick as joy
-    from sherpa_cli.ops.live_jog import LiveJog, resolve_axes
+    from sherpa_cli.ops.live_jog import resolve_axes
 
     cfg = st.load_config()
     jcfg = cfg.joystick
@@ -114,13 +115,16 @@ def joystick(st: AppState, device: str | None, *, apply: bool) -> None:
     # a clear message if evdev or the device is missing, or the dead-man is not one of its buttons
     source = joy.EvdevSource(path, jcfg.deadman, where=where)
     keepalive = max(0.25, 5.0 / jcfg.rate_hz)
+    from sherpa_cli.api import Arm
+
     with st.session(buses=_buses(cfg, axes)) as session:
-        live = LiveJog(session, axes, keepalive=keepalive, tick_period=1.0 / jcfg.rate_hz)
+        arm = Arm(session)  # a layer over the Python API
+        live = arm.live_jog(arm.joystick_joints(jcfg), keepalive=keepalive, tick_period=1.0 / jcfg.rate_hz)
         try:
             with live:
                 st.out.info(f"joystick {source.path}: hold {jcfg.deadman} to move; release stops; Ctrl-C ends")
                 st.out.info(live.deadman)
-                run = joy.run_joystick(live, cfg, jcfg, source, on_status=st.out.info)
+                run = arm.joystick(live, source, mapping=jcfg, on_status=st.out.info)
         except KeyboardInterrupt:
             run = None
         finally:

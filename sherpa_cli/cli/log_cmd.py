@@ -591,7 +591,7 @@ def step(
     from sherpa_cli.log.plot import StepMarks, have_matplotlib, plot_recording, step_title
     from sherpa_cli.log.recording import write_csv
     from sherpa_cli.motion.settings import MotionSettings
-    from sherpa_cli.ops.step import check_mode_first, resolve_step_target, run_step, step_request
+    from sherpa_cli.ops.step import check_mode_first, resolve_step_target, step_request
 
     st = state(ctx)
     if compare_runs:
@@ -669,9 +669,12 @@ def step(
         extras = RecordExtras(session, [target.ref], mcap=to_mcap, view=None)
         extras.start()
         zero_ns = _time.time_ns()  # t = 0 (the step's command) is placed at the wall time the step began
-        try:
-            result = run_step(session, target, mode, value, duration=duration, rate=rate, settings=settings,
-                              uncalibrated=uncalibrated, timebase=timebase, mode_first=mode_first, hold=hold)
+        from sherpa_cli.api import Arm
+
+        try:  # a layer over the Python API
+            result = Arm(session).log_step(joint, mode, value, duration=duration, rate=rate, settings=settings,
+                                           uncalibrated=uncalibrated, timebase=timebase, mode_first=mode_first,
+                                           hold=hold)
         except BaseException as exc:
             # how the guard stopped the motor, on Ctrl-C, SIGTERM and errors too (issue 22: a Ctrl-C
             # during `log step` printed nothing)
