@@ -14,7 +14,7 @@ from sherpa_cli.bus.session import ArmSession
 from sherpa_cli.config import load_config
 from sherpa_cli.errors import SafetyError
 from sherpa_cli.motion.axis import resolve_axis
-from sherpa_cli.motion.blocked import StallWatch, min_progress_for
+from sherpa_cli.motion.blocked import StallWatch, min_progress_for, torque_min_progress
 from sherpa_cli.motion.request import parse_request
 from sherpa_cli.motion.settings import MotionSettings
 from sherpa_cli.ops import diffdrive
@@ -70,6 +70,30 @@ def test_a_plain_jog_into_a_pressed_end_switch_ends_blocked_naming_it():
         s.sim.press_switch("stiff_drive", 3, True)  # the low end switch is held
         with pytest.raises(SafetyError, match=r"blocked: no progress for 1 s; stiff low end switch \(input 3\) active"):
             run_jog(s, resolve_axis(cfg, "stiff"), parse_request(resolve_axis(cfg, "stiff"), mode="velocity", velocity=-0.5, duration=10.0),
+                    settings=MotionSettings.from_config(cfg))
+        with s.sim.lock:
+            assert not s.sim.drives["stiff_drive"].motor_on
+
+
+@given(standstill=st.floats(min_value=0, max_value=100), stall=st.floats(min_value=0.01, max_value=30))
+def test_torque_progress_is_a_mean_speed_above_standstill_and_at_least_two_counts(standstill, stall):
+    got = torque_min_progress(standstill, stall)
+    assert got >= 2
+    assert got >= standstill * stall  # slower than standstill over the stall time is no progress
+    assert got <= max(2, standstill * stall + 1)
+
+
+def test_a_torque_jog_into_a_pressed_end_switch_ends_blocked_naming_it():
+    cfg = load_config(ARM.parent / "matrix-arm.yaml")  # stiff has current limits there
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
+        c = s.client(resolve_axis(cfg, "stiff").ref)
+        c.nmt_start()
+        c.set("IL", 3, cfg.il_codes.stop)  # the switch's stop function, as program-limits writes it
+        s.sim.press_switch("stiff_drive", 3, True)  # the low end switch is held
+        axis = resolve_axis(cfg, "stiff")
+        with pytest.raises(SafetyError, match=r"blocked: no progress for 0.3 s; stiff low end switch \(input 3\) "
+                           "active"):
+            run_jog(s, axis, parse_request(axis, mode="torque", torque=-0.3, duration=5.0),
                     settings=MotionSettings.from_config(cfg))
         with s.sim.lock:
             assert not s.sim.drives["stiff_drive"].motor_on

@@ -205,3 +205,37 @@ def test_opening_a_session_moves_nothing_found_outside_its_range(tmp_path):
 def px_of(session, drive):
     with session.sim.lock:
         return session.sim.drives[drive].position
+
+
+def _jam(motor):
+    """The joint is blocked (a collision, a jammed gear): commanded motion makes no progress."""
+    step = motor.step
+
+    def jammed(dt):
+        counts, frac = motor.counts, motor.frac
+        step(dt)
+        motor.counts, motor.frac, motor.v = counts, frac, 0.0
+    motor.step = jammed
+
+
+@pytest.mark.parametrize("mode", ["velocity", "torque"])
+def test_a_blocked_command_is_stopped_named_and_not_sent_again_the_same_way(cfg, mode):
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
+        with LiveJog(s, resolve_axes(cfg, ["j1"]), keepalive=0.3) as live:
+            live.set_mode("j1", mode)
+            send = (lambda sign: live.set_velocity("j1", sign * 1000)) if mode == "velocity" else \
+                (lambda sign: live.set_torque("j1", sign * 0.5))
+            with s.sim.lock:
+                _jam(s.sim.drives[cfg.joints["j1"].drive].motor)
+            end = time.monotonic() + 3 * live.settings.stall_time + 1.0
+            while time.monotonic() < end and not any("blocked" in m for m in live.messages):
+                send(1)  # the key held: the command refreshed
+                live.tick()
+                time.sleep(0.03)
+            (text,) = [m for m in live.messages if "blocked" in m]
+            assert text.startswith("j1: blocked: no progress for") and "no end switch active" in text
+            assert "j1" not in live.running and live.state["j1"].note == text
+            assert send(1) == text and "j1" not in live.running  # still held: refused
+            assert send(-1).startswith("j1: ")  # the other way is sent
+            assert "j1" in live.running
+        assert motors_off(s)

@@ -236,25 +236,6 @@ ROWS: dict[str, Row] = {
 
 # Known gaps, each failing today for the reason given (strict: a fix makes them pass and must remove the mark).
 KNOWN_GAPS: dict[tuple[str, str], str] = {}
-KNOWN_GAPS |= {
-    ("jog-torque", "end_switch"): "ops/jog.py run_jog and ops/joint_jog.py run: a torque jog that the drive stopped at "
-    "a pressed end switch (its IL stop function) runs out its --for and returns normally; the switch is never named "
-    "(issue 21 item 7)",
-    ("jog-torque", "stall"): "ops/jog.py and ops/joint_jog.py: a torque jog has no stall watch: a jammed joint runs out "
-    "its --for and is never called blocked (issue 21 item 7)",
-    ("log-step", "stall"): "ops/step.py run_step has no stall watch: the step of a jammed joint ends 'time up' with "
-    "its metrics, never 'blocked' (issue 21 item 7)",
-}
-KNOWN_GAPS |= {
-    (row, "end_switch"): "ops/live_jog.py LiveJog watches only the normal range (_edge_hold): a motion the drive "
-    "stopped at a pressed end switch is never named, the keys or the stick go on commanding into it (issue 21 item 7)"
-    for row in ("live-jog", "joystick")
-}
-KNOWN_GAPS |= {
-    (row, "stall"): "ops/live_jog.py LiveJog has no stall watch (motion.stall_time): a jammed joint is never called "
-    "blocked (issue 21 item 7)"
-    for row in ("live-jog", "joystick")
-}
 
 
 def _cases() -> list[Any]:

@@ -4,15 +4,21 @@ the end or stop switch that blocks it, named by joint and side (issue 21 item 7)
 A move blocked by an end switch used to run until its time bound (12.6 s for a pair move) and then
 say only that it did not reach its target. The watch loops now end within about ``stall_time`` of
 the last progress, and the message names the active switch read from the drive's inputs (IP).
+
+Every mover uses the one watch (:class:`StallWatch`, made by ``MotionSettings.stall_watch`` for a
+commanded speed or ``MotionSettings.torque_stall_watch`` for a commanded current) and the one
+ending (:func:`blocked_error`, or :func:`blocked_text` where the ending is a note, as in the live jog).
 """
 
 from __future__ import annotations
 
+import math
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 from sherpa_cli.config.model import ArmConfig, SwitchKind
+from sherpa_cli.errors import SafetyError
 
 if TYPE_CHECKING:
     from sherpa_cli.elmo.client import DriveClient
@@ -48,6 +54,12 @@ class StallWatch:
 def min_progress_for(speed_counts_per_s: float, stall_time: float) -> int:
     """The progress a motion at this speed surely makes in ``stall_time`` (a tenth of it), at least 2 counts."""
     return max(2, int(abs(speed_counts_per_s) * stall_time * 0.1))
+
+
+def torque_min_progress(standstill_velocity: float, stall_time: float) -> int:
+    """The progress of a torque move (a current, no commanded speed): a motor whose mean speed over
+    ``stall_time`` stayed at standstill (``motion.standstill_velocity``) made none, at least 2 counts."""
+    return max(2, math.ceil(abs(standstill_velocity) * stall_time))
 
 
 def active_switches(cfg: ArmConfig, drive: str, client: DriveClient) -> list[str]:
@@ -86,3 +98,13 @@ def blocked_text(cfg: ArmConfig, clients: Mapping[str, DriveClient], drives: Ite
     unique = list(dict.fromkeys(switches))
     where = f"; {', '.join(unique)} active" if unique else "; no end switch active (a hard stop or a load?)"
     return f"blocked: no progress for {stall_time:g} s{where}"
+
+
+BLOCKED_HINT = "move the joint away from the switch or the stop, the other way"
+
+
+def blocked_error(cfg: ArmConfig, clients: Mapping[str, DriveClient], drives: Iterable[str], stall_time: float,
+                  *, who: str, at: str = "", hint: str = BLOCKED_HINT) -> SafetyError:
+    """The error a blocked motion ends with: "<who>: blocked: ...; <at>" (``at``: where it stopped)."""
+    tail = f"; {at}" if at else ""
+    return SafetyError(f"{who}: {blocked_text(cfg, clients, drives, stall_time)}{tail}", hint=hint)

@@ -7,7 +7,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 from sherpa_cli.errors import UsageError
-from sherpa_cli.motion.blocked import StallWatch, min_progress_for
+from sherpa_cli.motion.blocked import StallWatch, min_progress_for, torque_min_progress
 from sherpa_cli.motion.drive_watch import DEFAULT_EMCY_WARNING_CODES
 from sherpa_cli.motion.stopping import recovery_speed
 
@@ -84,6 +84,10 @@ class MotionSettings:
     def stall_watch(self, speed_counts_per_s: float) -> StallWatch:
         """The stall watch of a move at this speed (motion/blocked.py)."""
         return StallWatch(self.stall_time, min_progress_for(speed_counts_per_s, self.stall_time))
+
+    def torque_stall_watch(self) -> StallWatch:
+        """The stall watch of a torque move: no motor faster than standstill for the stall time."""
+        return StallWatch(self.stall_time, torque_min_progress(self.standstill_velocity, self.stall_time))
 
 
 def check_torque_for(duration: float, limit: float | None = None) -> None:

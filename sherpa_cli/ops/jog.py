@@ -23,7 +23,7 @@ from sherpa_cli.errors import SafetyError, UsageError
 from sherpa_cli.joints.units import counts_to_rad
 from sherpa_cli.motion import recovery, stopping
 from sherpa_cli.motion.axis import Axis, profile_speed
-from sherpa_cli.motion.blocked import StallWatch, blocked_text
+from sherpa_cli.motion.blocked import StallWatch, blocked_error
 from sherpa_cli.motion.guard import MotionGuard
 from sherpa_cli.motion.report import GuardReport, MotionInterrupted, with_report
 from sherpa_cli.motion.request import MoveRequest
@@ -266,7 +266,7 @@ def _move(guard: MotionGuard, target: Axis, req: MoveRequest, settings: MotionSe
         c.set("TC", 0, req.amps)
         state["command"] = f"TC={req.amps:g}"
         state["t0"] = clock()
-        watch(None, req.duration)
+        watch(None, req.duration, settings.torque_stall_watch())
         state["ended_by"] = state["ended_by"] or "time up"
     if req.hold and not state.get("breach"):
         _hold(guard, c, target, req, settings, state, clock, sleep, on_progress)
@@ -330,9 +330,8 @@ def _watch(guard: MotionGuard, c: DriveClient, target: Axis, clock: Callable[[],
         if done is not None and done(sr):
             return
         if stall is not None and stall.feed({target.ref.name: px}, clock()):
-            blocked = blocked_text(guard.session.cfg, {target.ref.name: c}, [target.ref.name], settings.stall_time)
-            raise SafetyError(f"{c.label}: {blocked}; at {px} counts", hint="move the joint away from the switch "
-                              "or the stop, the other way")
+            raise blocked_error(guard.session.cfg, {target.ref.name: c}, [target.ref.name], settings.stall_time,
+                                who=c.label, at=f"at {px} counts")
         if limit is not None and elapsed >= limit:
             if done is not None:
                 raise SafetyError(f"{c.label}: the move did not reach its target within {limit:.1f} s "

@@ -35,7 +35,7 @@ from sherpa_cli.elmo.protocol import UM_POSITION, UM_TORQUE
 from sherpa_cli.errors import SafetyError, UsageError
 from sherpa_cli.motion import calibration, limit_watch, recovery
 from sherpa_cli.motion.axis import Axis, move_time_bound, profile_speed
-from sherpa_cli.motion.blocked import blocked_text
+from sherpa_cli.motion.blocked import blocked_error
 from sherpa_cli.motion.limit_watch import Breach
 from sherpa_cli.motion.report import with_report
 from sherpa_cli.motion.request import MoveRequest
@@ -339,11 +339,10 @@ def _run_guarded(guard: MotionGuard, session: ArmSession, cfg: ArmConfig, axis: 
                 c.set("TC", 0, p.motor_currents[d])
             watched = limit_watch.watch(axis.watched, sample, clock=clock, sleep=sleep,
                                         interval=settings.poll_interval, duration=p.duration,
-                                        check_drives=check_drives)
+                                        check_drives=check_drives, stall=settings.torque_stall_watch())
         if watched.outcome == "stalled":
-            raise SafetyError(f"{axis.name}: {blocked_text(session.cfg, clients, axis.drives, settings.stall_time)}; "
-                              f"at {axis.position(watched.motors)} counts",
-                              hint="move the joint away from the switch or the stop, the other way")
+            raise blocked_error(session.cfg, clients, axis.drives, settings.stall_time, who=axis.name,
+                                at=f"at {axis.position(watched.motors)} counts")
         held = {j.name: joints_start[j.name] for j in axis.watched
                 if axis.kind in ("sigma", "delta") and j.name != axis.name and j.drive_b is not None}
         if watched.outcome == "breach":

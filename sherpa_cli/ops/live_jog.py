@@ -14,8 +14,11 @@ commands a user interface calls as keys are pressed or a joystick moves:
 - :meth:`LiveJog.stop` / :meth:`LiveJog.stop_all` stop now;
 - :meth:`LiveJog.tick` must be called often (every 0.1 s or faster): it is the guard's sign of
   life, samples every position, stops expired commands, holds a joint at the edge of its normal
-  range (a command driving it further out is not sent), and runs the full-range watch (a breach
-  stops everything and brings the joint back to its normal edge, like `jog`).
+  range (a command driving it further out is not sent), runs the full-range watch (a breach
+  stops everything and brings the joint back to its normal edge, like `jog`) and the stall watch
+  (motion/blocked.py, as every mover: a velocity or torque command that makes no progress for
+  ``motion.stall_time`` -- an end switch pressed, a jam -- is stopped and called "blocked", naming the
+  active switch; the same command is not sent again until the keys or the stick let go of it).
 
 Leaving the ``with`` block (``q``, Ctrl-C, an error) leaves the guard: every motor stopped,
 switched off, what was changed put back.
@@ -38,6 +41,7 @@ from sherpa_cli.errors import ExitCode, SafetyError, SherpaError, UsageError
 from sherpa_cli.joints.units import counts_to_rad
 from sherpa_cli.motion import calibration, limit_watch, recovery
 from sherpa_cli.motion.axis import Axis, joint_axis, joints_moved_by, profile_speed
+from sherpa_cli.motion.blocked import StallWatch, blocked_text
 from sherpa_cli.motion.guard import MotionGuard
 from sherpa_cli.motion.report import GuardReport
 from sherpa_cli.motion.settings import MotionSettings
@@ -108,6 +112,20 @@ class _Running:
     until: float | None  # clock time it expires (velocity/torque)
 
 
+@dataclass
+class _Blocked:
+    """A velocity/torque command the stall watch stopped: the same direction is refused until
+    ``until`` (pushed on by every refused repeat, so a held key or stick stays refused)."""
+
+    direction: dict[str, int]  # sign per motor of the blocked command
+    until: float
+    text: str
+
+
+def _direction(motors: Mapping[str, float]) -> dict[str, int]:
+    return {d: (v > 0) - (v < 0) for d, v in motors.items()}
+
+
 class LiveJog:
     """``with LiveJog(session, axes) as live:`` -- see the module docstring."""
 
@@ -137,6 +155,8 @@ class LiveJog:
         self.state = {a.name: AxisState(a.name) for a in axes}
         self.motors: dict[str, int] = {}
         self.running: dict[str, _Running] = {}  # per axis
+        self.stalls: dict[str, tuple[dict[str, int], StallWatch]] = {}  # per running velocity/torque axis
+        self.blocked: dict[str, _Blocked] = {}  # per axis: a command the stall watch stopped
         self.messages: list[str] = []  # limit breaches and recoveries, oldest first
         self.dead: dict[str, str] = {}  # drive -> why it must not be commanded again in this session
         self.moved: set[str] = set()  # drives this session sent a motion command to (review R4)
@@ -272,6 +292,7 @@ class LiveJog:
     def stop(self, name: str) -> None:
         a = self._axis(name)
         run = self.running.pop(name, None)
+        self.stalls.pop(name, None)
         drives = [d for d in a.drives if d not in self.dead]
         if run is not None and drives:
             self.guard.check()
@@ -283,6 +304,7 @@ class LiveJog:
         started by a command that failed half-way is stopped too (review R3). A drive never commanded
         gets nothing (whether a drive takes ST with its motor off is not confirmed)."""
         self.running.clear()
+        self.stalls.clear()
         for name in self.state:
             self.state[name].command = "-"
         live = [d for d in self.drives if d not in self.dead and d in self.moved]
@@ -397,6 +419,7 @@ class LiveJog:
         for name, run in list(self.running.items()):
             if run.until is not None and now >= run.until:
                 self.stop(name)
+        self.blocked = {n: b for n, b in self.blocked.items() if now < b.until}  # the keys let go of it
         motors = self._sample(self.drives)
         for d in self.drives:
             if d in self.dead:
@@ -420,6 +443,7 @@ class LiveJog:
                     if d in self.dead:
                         st.faults.append(f"{d}: {self.dead[d]}")
         self._edge_hold(motors)
+        self._stall_watch(motors)
         # a joint of a drive not commanded again (tripped, homing failed) cannot be brought back:
         # watching it would stop everything on every tick
         breaches = self._own_breaches(
@@ -498,6 +522,12 @@ class LiveJog:
         if blocked:
             self.stop(name)
             return self._refuse(name, blocked)
+        direction = _direction(motors)
+        stalled = self.blocked.get(name)
+        if stalled is not None and stalled.direction == direction:
+            stalled.until = self.clock() + self.keepalive
+            return self._refuse(name, stalled.text)
+        self.blocked.pop(name, None)
         prev = self.running.get(name)
         if prev is not None and prev.mode != mode:
             self.stop(name)
@@ -506,6 +536,12 @@ class LiveJog:
         # on record before the first write: a command that fails half-way still expires and is
         # stopped by stop / stop_all (review R3)
         self.running[name] = _Running(mode, dict(motors), self.clock() + self.keepalive)
+        watching = self.stalls.get(name)
+        if watching is None or watching[0] != direction:
+            # a new direction starts a new watch; a refresh of the same command keeps it running
+            s = self.settings
+            self.stalls[name] = (direction, s.torque_stall_watch() if mode == "torque" else
+                                 s.stall_watch(max(abs(v) for v in motors.values())))
         self.moved.update(motors)
         for d in motors:
             self._enable(d, um)
@@ -556,6 +592,25 @@ class LiveJog:
                 self._refuse(name, blocked)
                 self.messages.append(blocked)
 
+    def _stall_watch(self, motors: Mapping[str, int]) -> None:
+        """A running velocity/torque command whose motors made no progress for the stall time (an end
+        switch the drive stopped it at, a jam) is stopped and called blocked, naming an active switch."""
+        now = self.clock()
+        for name, (direction, watch) in list(self.stalls.items()):
+            a = self.axes[name]
+            if name not in self.running:  # ended elsewhere (a drive switched off, a breach)
+                del self.stalls[name]
+                continue
+            if not watch.feed({d: motors[d] for d in a.drives if d in motors}, now):
+                continue
+            self.stop(name)
+            clients = {d: self._client(d) for d in a.drives if d not in self.dead}
+            text = (f"{name}: {blocked_text(self.cfg, clients, clients, self.settings.stall_time)}; stopped; "
+                    "not sent again until the key or the stick is let go")
+            self.blocked[name] = _Blocked(direction, now + self.keepalive, text)
+            self._refuse(name, text)
+            self.messages.append(text)
+
     def _sample(self, drives: Sequence[str]) -> dict[str, int]:
         for d in drives:
             if d in self.refs and d not in self.unguarded:
@@ -589,6 +644,7 @@ class LiveJog:
         """Like `jog`: stop every motor at once, then bring the breached joints back to their normal edge."""
         modes = {run.mode for run in self.running.values()}
         self.running.clear()
+        self.stalls.clear()
         live = {d: self._client(d) for d in self.drives if d not in self.dead}
         recovery.recover(self.guard, self.refs, live, self.watched, breaches, lambda: self._sample(self.drives),
                          settings=self.settings, clock=self.clock, sleep=self.sleep, torque="torque" in modes,

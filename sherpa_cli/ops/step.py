@@ -37,6 +37,7 @@ from sherpa_cli.log.recording import Recording
 from sherpa_cli.log.settle import HOLD_S, judged, settled_at_end
 from sherpa_cli.log.step_metrics import StepMetrics, step_metrics
 from sherpa_cli.motion.axis import Axis, resolve_axis
+from sherpa_cli.motion.blocked import StallWatch, blocked_error
 from sherpa_cli.motion.guard import MotionGuard
 from sherpa_cli.motion.report import GuardReport, with_report
 from sherpa_cli.motion.request import MoveRequest, parse_request
@@ -233,9 +234,14 @@ def run_step(session: ArmSession, target: Axis, mode: str, value: float, *, dura
                 c.set("TC", 0, float(value))
                 state["command"], state["target"] = f"TC={value:g}", value
             # --for counts from the step itself, not from the command (a switch may come first)
+            # a blocked velocity or torque step ends within the stall time, naming an active end switch
+            # (a position step ends at its target: no progress there is no stall; not watched here)
+            stall = (settings.torque_stall_watch() if mode == "torque" else
+                     settings.stall_watch(rad_per_s_to_counts_per_s(value, joint.cpr)) if mode == "velocity" else None)
             state["ended_by"] = _until_settled(guard, rec, joint.name, signal, t_cmd, state["target"],
                                                state["switch"] + duration, clock, sleep, settle=mode != "torque",
-                                               jog_target=target, settings=settings, state=state, hold=hold)
+                                               jog_target=target, settings=settings, state=state, hold=hold,
+                                               stall=stall)
         # the step ends where the motor was told to stop: the stop (and a limit recovery) is not the step
         # --mode-first: the switch and its settle window before t = 0 are not the step either
         recording = _cut(rec.recording(t_zero=t_cmd), state["t_stop"] - t_cmd, since=-PRE_S if mode_first else None)
@@ -307,12 +313,14 @@ def _wait(guard: MotionGuard, clock: Callable[[], float], sleep: Callable[[float
 def _until_settled(guard: MotionGuard, rec: Recorder, joint: str, signal: str, t_cmd: float, target: float,
                    duration: float, clock: Callable[[], float], sleep: Callable[[float], None], *, settle: bool,
                    jog_target: Axis,
-                   settings: MotionSettings, state: dict[str, Any], hold: float = 0.0) -> str:
+                   settings: MotionSettings, state: dict[str, Any], hold: float = 0.0,
+                   stall: StallWatch | None = None) -> str:
     """Record until the signal has stayed within 2 % of the step around the target for
     SETTLE_HOLD_S (position and velocity steps) and then ``hold`` s more, or until ``duration`` s
     after the command (whichever comes first; a step cut off by ``duration`` is "not settled").
     Meanwhile the joint-limit watch (jog's, every ``settings.poll_interval``): past the full range
-    the motor is stopped at once and the joint brought back to the nearest edge of its normal range."""
+    the motor is stopped at once and the joint brought back to the nearest edge of its normal range;
+    ``stall``: no progress for the stall time ends the step as blocked (motion/blocked.py)."""
     next_settle = 0.0
     while True:
         guard.check()
@@ -322,6 +330,10 @@ def _until_settled(guard: MotionGuard, rec: Recorder, joint: str, signal: str, t
         if limit_breach(guard, guard.client(jog_target.ref), jog_target, px, settings, clock, sleep, state):
             state["t_stop"] = now  # the watch stopped the motor here; the way back is not the step
             return state["ended_by"]
+        if stall is not None and stall.feed({jog_target.ref.name: px}, clock()):
+            c = guard.client(jog_target.ref)
+            raise blocked_error(guard.session.cfg, {jog_target.ref.name: c}, [jog_target.ref.name],
+                                settings.stall_time, who=c.label, at=f"at {px} counts; the step was not recorded")
         elapsed = now - t_cmd
         settled_at = state.get("settled_at")
         if settled_at is not None and elapsed >= settled_at + hold:
