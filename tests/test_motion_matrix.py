@@ -475,7 +475,7 @@ def test_every_way_out_stops_from_standstill_switches_off_puts_ram_back_and_repo
         assert out.error is None, what
     # clear endings (issue 21 item 7, 8): what ended the command is named
     if way == "end_switch":
-        assert "switch" in told, f"{what}: the end switch is not named"
+        assert "end switch" in told, f"{what}: the end switch is not named"
     if way == "stall":
         assert "blocked" in told, f"{what}: the stall is not called blocked"
     if way == "drive_fault":
