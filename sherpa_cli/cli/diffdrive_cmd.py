@@ -6,7 +6,7 @@ from typing import TYPE_CHECKING, Any
 
 import typer
 
-from sherpa_cli.cli.context import AppState, state
+from sherpa_cli.cli.context import AppState, shared_stepped, state, use_stepped
 from sherpa_cli.cli.options import ApplyMatch, ApplyMotion, Report, Save, Yes
 from sherpa_cli.cli.output import stop_lines
 from sherpa_cli.errors import UsageError
@@ -244,9 +244,12 @@ def move(
             f"TPDO1 on SYNC at {cfg.motion.pair_record_rate:g} Hz (RAM only, put back after)"))
         st.out.line("nothing sent; add --apply to move")
         return
+    # in a recipe with `sim_time: stepped` the shared simulated arm moves only while this command waits
+    stepped = shared_stepped(st) if st.sim else None
     with st.session(buses=sorted({cfg.drives[d].bus for d in (p.drive_a, p.drive_b)})) as session:
+        timebase = stepped if stepped is not None and use_stepped(session, stepped, cfg) else None
         try:
-            result = diffdrive.run_move(session, p, req)
+            result = diffdrive.run_move(session, p, req, timebase=timebase)
         except BaseException as exc:
             from sherpa_cli.motion.report import report_of
 
