@@ -220,18 +220,6 @@ def pytest_configure(config: pytest.Config) -> None:
         raise pytest.UsageError(str(exc)) from None
 
 
-def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
-    """``walltime`` tests measure figures on the wall clock (the Section 9 recipe: its steps run in a
-    recipe's shared session, which has no stepped time yet), so a loaded machine moves them out of
-    their bands: not a check CI can trust. They run only when asked (SHERPA_WALLTIME=1)."""
-    if os.environ.get("SHERPA_WALLTIME") == "1":
-        return
-    skip = pytest.mark.skip(reason="measures on the wall clock: run with SHERPA_WALLTIME=1 (docs/testing.md)")
-    for item in items:
-        if item.get_closest_marker("walltime") is not None:
-            item.add_marker(skip)
-
-
 def pytest_report_header(config: pytest.Config) -> str:
     return f"SHERPA_TEST_BUS: {config.stash[TEST_BUS_KEY].describe()}"
 

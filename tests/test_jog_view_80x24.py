@@ -1,6 +1,7 @@
 """The seed's test GUI (Appendix E) in the terminal, headless at 80x24 (issue 25 item 4):
 the selected joint and the key help always on screen, typed set points in joint units with
-Start/Stop, the set point shown equal to what was sent, Get Status with details on request; and
+Start/Stop, the set point shown equal to what was sent, Get Status with details on request, Calibrate
+(the home plan fits the screen, the joint is homed); and
 the shipped config's `joystick:` section (the seed's Z axis and XY+/XY-) with a scripted device.
 
 The simulated arm runs in-process in real time (the guard's heartbeat thread runs on the wall
@@ -16,13 +17,14 @@ import pytest
 from motion_helpers import JOG_CONFIG
 
 from sherpa_cli.bus.session import ArmSession
-from sherpa_cli.cli.jog_view import KEY_HELP, JogView, SetPointDialog
+from sherpa_cli.cli.jog_view import KEY_HELP, HomeConfirm, JogView, SetPointDialog
 from sherpa_cli.config import load_config
 from sherpa_cli.joints import units
 from sherpa_cli.ops import joystick
 from sherpa_cli.ops.joystick import ScriptedSource, run_joystick
 from sherpa_cli.ops.live_jog import LiveJog, resolve_axes
 from sherpa_cli.sim.arm import SimArm
+from tests.test_jog_view import home_arm, wait_until
 
 SHIPPED = Path(__file__).resolve().parent.parent / "configs" / "sherpa-arm.yaml"
 SIZE = (80, 24)
@@ -211,3 +213,57 @@ def test_the_shipped_joystick_section_is_the_seeds_mapping_and_drives_it(cli_win
         assert moved["shoulder_1a"] == 0, moved
         assert moved["shoulder_2a"] > 20 and moved["shoulder_2b"] < -20, moved
         assert motors_on(s) == set()
+
+
+def test_calibrate_at_80x24_shows_the_whole_plan_and_homes_the_joint(tmp_path):
+    """The seed GUI's Calibrate button at 80x24: the plan dialog and its answer line fit the screen,
+    Enter homes, the joint is calibrated afterwards (no stale "not homed" note) and the key help stays."""
+    cfg = home_arm(tmp_path)
+
+    async def scenario(session) -> dict:
+        seen: dict = {}
+        with LiveJog(session, resolve_axes(cfg, ["yaw"]), keepalive=30.0) as live:
+            app = JogView(live, tick_period=0.2)
+            async with app.run_test(size=SIZE) as pilot:
+                await pilot.pause(0.1)
+                seen["before"] = live.state["yaw"].calibrated
+                await pilot.press("c")
+                await wait_until(pilot, lambda: isinstance(app.screen, HomeConfirm), 10)
+                plan = app.screen.query_one("#plan")
+                r = plan.region
+                seen["plan_fits"] = (r.height > 0 and r.x >= 0 and r.y >= 0 and r.x + r.width <= SIZE[0]
+                                     and r.y + r.height <= SIZE[1])
+                seen["plan"] = str(plan.render())
+                await pilot.press("enter")
+                seen["done"] = await wait_until(pilot, lambda: app.homing is None and "homed" in app.message)
+                seen["message"] = app.message
+                seen["calibrated"] = live.state["yaw"].calibrated
+                await pilot.pause(0.3)
+                seen["detail"] = text_of(app, "#detail")
+                seen["keys_on_screen"] = on_screen(app, "#keys") and text_of(app, "#keys") == KEY_HELP
+                await pilot.press("q")
+        return seen
+
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
+        seen = asyncio.run(scenario(s))
+        assert seen["done"], seen["message"]
+        assert seen["before"] is False and seen["calibrated"] is True
+        assert seen["plan_fits"], seen["plan"]
+        assert "search: yaw up at 1000 counts/s" in seen["plan"] and "Enter/y: home now" in seen["plan"]
+        assert seen["message"].startswith("calibrate: yaw: homed (home switch)"), seen["message"]
+        assert "NOT calibrated" not in seen["detail"] and "yaw (yaw_drive) calibrated" in seen["detail"]
+        assert seen["keys_on_screen"]
+        assert motors_on(s) == set()
+        assert s.sim.errors == []
+
+
+def test_docs_jog_md_shows_the_views_key_help_and_step_sizes():
+    """docs/jog.md's screen and key table are the view's: its key help word for word, and the step sizes
+    in joint units per mode."""
+    from sherpa_cli.cli.jog_view import INCREMENTS, UNITS
+
+    doc = (SHIPPED.parent.parent / "docs" / "jog.md").read_text(encoding="utf-8")
+    assert KEY_HELP in doc
+    for mode, steps in INCREMENTS.items():
+        listed = f"{mode} {', '.join(f'{v:g}' for v in steps)} {UNITS[mode]}"
+        assert listed in doc, listed

@@ -26,22 +26,21 @@ SEED_PROFILE = "configs/sim-profiles/seed-figures.yaml"
 SHORT = ["--set", "step_for=2.5", "--set", "velocity_for=2.5", "--set", "hold=1", "--set", "torque_for=1.5"]
 
 
-@pytest.mark.walltime
 def test_the_seed_figures_recipe_runs_and_its_numbers_fall_within_the_seed_bands(cli, cli_windows, tmp_path):
+    """The recipe's `sim_time: stepped`: every step on the simulator's stepped time, so the figures are
+    the simulated drives' and the same on a loaded CI machine (no wall-time dependence)."""
     cli_windows(False)  # the profile's 500 ms MO settle window: Fig. 9.1's delay is a figure here
     out = tmp_path / "section9"
     report = tmp_path / "report.json"
     # the profile as shipped, but a patient SDO client: on a loaded CI machine the in-process simulator
-    # can take longer than canopen's 0.3 s to answer the guard's SDO reads (none of the figures is an SDO time),
+    # can take longer than canopen's 0.3 s (wall time) to answer the guard's SDO reads (none of the figures
+    # is an SDO time)
     text = (ROOT / SEED_PROFILE).read_text(encoding="utf-8")
     profile = tmp_path / "seed-figures.yaml"
-    # and a patient heartbeat consumer: a starved host heartbeat thread would stop a move (not a figure either)
-    text = text.replace("protocol: {mo_settle: 0.5, sv_blackout: 0.5}",
-                        "protocol: {mo_settle: 0.5, sv_blackout: 0.5, sdo_timeout: 2.0}")
-    profile.write_text(text.replace("motion: {consumer_time_ms: 1000}", "motion: {consumer_time_ms: 2000}"),
+    profile.write_text(text.replace("protocol: {mo_settle: 0.5, sv_blackout: 0.5}",
+                                    "protocol: {mo_settle: 0.5, sv_blackout: 0.5, sdo_timeout: 2.0}"),
                        encoding="utf-8")
     assert "sdo_timeout: 2.0" in profile.read_text(encoding="utf-8")
-    assert "consumer_time_ms: 2000" in profile.read_text(encoding="utf-8")
     result = cli("--config", str(profile), "--sim", "recipe", "run", "recipes/seed-section9.yaml", "--apply",
                  "--set", f"out={out}", *SHORT, "--report", str(report))
     assert result.exit_code == 0, result.transcript() + json.dumps(
@@ -109,3 +108,21 @@ def test_the_recipe_checks_and_its_dry_run_moves_nothing_and_writes_nothing(cli,
     assert dry.exit_code == 0, dry.transcript()
     assert "summary           skipped (dry run: nothing was written)" in dry.stdout
     assert not out.exists()
+
+
+def test_a_stepped_recipe_runs_only_commands_that_wait_on_stepped_time(cli, tmp_path):
+    """`sim_time: stepped` (the seed recipe's): a command that waits on the wall clock would stand the
+    stepped arm still and time out, so `recipe check` refuses it with the step and line; a bad value too."""
+    assert "sim_time: stepped" in (ROOT / "recipes" / "seed-section9.yaml").read_text(encoding="utf-8")
+    recipe = tmp_path / "r.yaml"
+    recipe.write_text("sim_time: stepped\nsteps:\n  - run: cmd shoulder_1a PX\n  - name: jog-it\n"
+                      "    run: jog shoulder_yaw --by 0.1 --apply\n", encoding="utf-8")
+    result = cli("recipe", "check", str(recipe))
+    assert result.exit_code == 2, result.transcript()
+    assert "step 2 'jog-it': 'sherpa jog' does not run on the simulator's stepped time" in result.stderr
+    assert "r.yaml:4: steps[1].run" in result.stderr and "log step" in result.stderr
+    recipe.write_text("sim_time: fast\nsteps:\n  - run: cmd shoulder_1a PX\n", encoding="utf-8")
+    result = cli("recipe", "check", str(recipe))
+    assert result.exit_code == 2 and "sim_time must be one of wall, stepped, got 'fast'" in result.stderr
+    recipe.write_text("steps:\n  - run: jog shoulder_yaw --by 0.1 --apply\n", encoding="utf-8")
+    assert cli("recipe", "check", str(recipe)).exit_code == 0  # wall time (the default) runs anything

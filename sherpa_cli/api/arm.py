@@ -231,10 +231,7 @@ class Arm:
                                    naive=naive, feedback=feedback, uncalibrated=uncalibrated, poll=poll,
                                    source=source)
         p = pair_of(self.config, pair)
-        if timebase is None:
-            return diffdrive.run_move(self._session, p, req, on_event=on_event)
-        return diffdrive.run_move(self._session, p, req, clock=timebase.now, sleep=timebase.sleep, on_event=on_event,
-                                  recorder_kw={"clock": timebase.now, "sync_factory": timebase.sync_factory})
+        return diffdrive.run_move(self._session, p, req, on_event=on_event, timebase=timebase)
 
     def log_step(self, name: str, mode: str, value: float, *, duration: float = 2.0, rate: float = 1000.0,
                  uncalibrated: bool = False, mode_first: bool = False, hold: float = 0.0,

@@ -17,6 +17,7 @@ if TYPE_CHECKING:
     from sherpa_cli.bus.session import ArmSession
     from sherpa_cli.config.model import ArmConfig
     from sherpa_cli.sim.arm import SimArm
+    from sherpa_cli.sim.stepped import SteppedTime
 
 
 @dataclass
@@ -59,8 +60,10 @@ class AppState:
         if shared is not None:
             # a recipe step: the recipe's one session, opened (all buses) at the first step that needs it
             if shared.session is None:
-                shared.session = shared.stack.enter_context(shared.owner.session())
+                shared.session = shared.stack.enter_context(shared.owner.session(sim_factory=shared.sim_factory()))
                 shared.opens += 1
+                if shared.stepped is not None:
+                    use_stepped(shared.session, shared.stepped, shared.config)
                 check_buses(shared.session, what="the recipe")  # bus/health.py: BUS-OFF, passive, bit rate
             yield shared.session
             return
@@ -112,6 +115,17 @@ class SharedSession:
     stack: ExitStack = field(default_factory=ExitStack)
     session: ArmSession | None = None
     opens: int = 0  # sessions opened for the recipe (0 or 1; tests count them)
+    # a recipe with `sim_time: stepped` run with --sim: the shared simulated arm runs on this stepped
+    # time (sim/stepped.py), so the figures its steps measure do not depend on the host's load
+    stepped: SteppedTime | None = None
+
+    def sim_factory(self) -> Callable[[ArmConfig, Mapping[str, str]], SimArm] | None:
+        stepped = self.stepped
+        if stepped is None:
+            return None
+        from sherpa_cli.sim.arm import SimArm
+
+        return lambda cfg, channels: SimArm.for_session(cfg, channels, clock=stepped.clock)
 
     def close(self) -> None:
         self.stack.close()
@@ -131,12 +145,39 @@ def _shared_for(st: AppState) -> SharedSession | None:
     return shared if same else None
 
 
+def shared_stepped(st: AppState) -> SteppedTime | None:
+    """The stepped time of the recipe session ``st`` shares (`sim_time: stepped` with --sim), else None."""
+    shared = _shared_for(st)
+    return shared.stepped if shared is not None else None
+
+
+def use_stepped(session: ArmSession, stepped: SteppedTime, cfg: ArmConfig) -> bool:
+    """Whether ``session``'s simulated arm runs on ``stepped``'s clock; if so its drive clients wait on
+    that clock too (set once, before the first client: a second set would charge a deaf request twice).
+    ``cfg``: the arm config as loaded (a deaf request costs the real bus's reply timeout, not the
+    simulator's patient one the session runs with)."""
+    from sherpa_cli.sim.arm import SimArm
+
+    arm = session.sim
+    if not isinstance(arm, SimArm) or arm.clock is not stepped.clock:
+        return False
+    if session.client_overrides.get("clock") != stepped.now:
+        p = cfg.protocol
+        session.client_overrides.update(stepped.client_overrides(p.reply_timeout, p.retries, arm.unheard))
+    return True
+
+
 @contextmanager
-def shared_session(owner: AppState) -> Iterator[SharedSession]:
-    """Share ``owner``'s config and (lazily opened) session with every command run inside."""
+def shared_session(owner: AppState, *, stepped: bool = False) -> Iterator[SharedSession]:
+    """Share ``owner``'s config and (lazily opened) session with every command run inside;
+    ``stepped`` (with --sim): the shared simulated arm on stepped time."""
     global SHARED
     outer = SHARED
     shared = SharedSession(owner, owner.load_config())
+    if stepped and owner.sim:
+        from sherpa_cli.sim.stepped import SteppedTime
+
+        shared.stepped = SteppedTime()
     SHARED = shared
     try:
         yield shared

@@ -6,7 +6,7 @@ from typing import TYPE_CHECKING, Any
 
 import typer
 
-from sherpa_cli.cli.context import AppState, state
+from sherpa_cli.cli.context import AppState, shared_stepped, state, use_stepped
 from sherpa_cli.cli.options import ApplyMatch, ApplyMotion, Report, Save, Yes
 from sherpa_cli.cli.output import stop_lines
 from sherpa_cli.errors import UsageError
@@ -246,11 +246,15 @@ def move(
         return
     from sherpa_cli.api import Arm
 
+    # in a recipe with `sim_time: stepped` the shared simulated arm moves only while this command waits
+    stepped = shared_stepped(st) if st.sim else None
     with st.session(buses=sorted({cfg.drives[d].bus for d in (p.drive_a, p.drive_b)})) as session:
+        timebase = stepped if stepped is not None and use_stepped(session, stepped, cfg) else None
         try:  # a layer over the Python API
             result = Arm(session).diffdrive_move(p.name, sigma=sigma, delta=delta, relative=relative,
                                                  velocity=velocity, feedback=feedback, naive=naive,
-                                                 uncalibrated=uncalibrated, poll=poll, source=source)
+                                                 uncalibrated=uncalibrated, poll=poll, source=source,
+                                                 timebase=timebase)
         except BaseException as exc:
             from sherpa_cli.motion.report import report_of
 

@@ -11,7 +11,7 @@ from typing import TYPE_CHECKING, Any, NoReturn
 
 import typer
 
-from sherpa_cli.cli.context import AppState, state
+from sherpa_cli.cli.context import AppState, shared_stepped, state, use_stepped
 from sherpa_cli.cli.options import ApplyMotion, Targets
 from sherpa_cli.cli.robotics import DEFAULT_AT, AllowRemote, Foxglove, FoxgloveAt
 from sherpa_cli.errors import SherpaError, UsageError
@@ -517,9 +517,13 @@ def _render_record(st: AppState, outputs: Sequence[Path], counts: Mapping[str, i
 
 def stepped_sim(st: AppState) -> tuple[SteppedTime | None, Callable[[ArmConfig, Mapping[str, str]], SimArm] | None]:
     """With --sim: the in-process arm on stepped time (sim/stepped.py), so a step's figures are the
-    simulated drive's and the same on every run and machine; else (None, None)."""
+    simulated drive's and the same on every run and machine; else (None, None). In a recipe with
+    `sim_time: stepped` the recipe's shared arm already runs on stepped time: that one, no factory."""
     if not st.sim:
         return None, None
+    shared = shared_stepped(st)
+    if shared is not None:
+        return shared, None
     from sherpa_cli.sim.arm import SimArm
     from sherpa_cli.sim.stepped import SteppedTime
 
@@ -648,18 +652,7 @@ def step(
         output.mkdir(parents=True, exist_ok=True)
     stepped, sim_factory = stepped_sim(st)
     with st.session(buses=[target.ref.bus], sim_factory=sim_factory) as session:
-        timebase = None
-        arm = session.sim
-        if stepped is not None and arm is not None:
-            from sherpa_cli.sim.arm import SimArm  # only with --sim: `arm` is the SimArm stepped_sim built
-
-            assert isinstance(arm, SimArm)
-            if arm.clock is stepped.clock:
-                unheard = lambda: (sum(d.unheard for d in arm.drives.values()),  # noqa: E731
-                                   sum(d.unheard_s for d in arm.drives.values()))
-                session.client_overrides.update(stepped.client_overrides(cfg.protocol.reply_timeout,
-                                                                         cfg.protocol.retries, unheard))
-                timebase = stepped
+        timebase = stepped if stepped is not None and use_stepped(session, stepped, cfg) else None
         if source == "drive":
             from sherpa_cli.cli.log_drive import drive_step
 

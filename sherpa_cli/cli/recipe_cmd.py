@@ -266,7 +266,7 @@ def execute(st: AppState, recipe_path: Path, *, apply: bool, yes: bool, start: s
             return True
         return st.out.confirm(_with_drives(question, done))
 
-    with context.shared_session(st):
+    with context.shared_session(st, stepped=recipe.sim_time == "stepped"):
         rep = run_recipe(recipe, _invoker(st, lambda: needs_stdout[0]), apply=apply, confirm=confirm, start_at=start_at,
                          on_start=on_start, on_end=on_end, clock=clock)
     write_reports(rep, report, junit)

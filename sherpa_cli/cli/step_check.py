@@ -19,6 +19,12 @@ if TYPE_CHECKING:
     from sherpa_cli.recipes.model import Recipe
 
 
+# What a recipe with `sim_time: stepped` may run: the commands that wait on the shared simulated arm's
+# stepped clock (or open no session). Any other command would wait on the wall while the stepped arm
+# stands still, and time out.
+STEPPED_COMMANDS = frozenset({("cmd",), ("log", "step"), ("diffdrive", "move"), ("log", "section9")})
+
+
 def _root() -> Any:
     # a click Command of whichever click the installed typer uses (typer >= 0.29 vendors its own;
     # cli/boundary.py returns it as object): no one importable class names it for every typer
@@ -72,6 +78,11 @@ def check_step_commands(recipe: Recipe) -> None:
             cmd = sub
             if isinstance(cmd, TyperGroup):
                 ctx = typer.Context(cmd, parent=ctx, info_name=words[-1], **getattr(cmd, "context_settings", {}))
+        if recipe.sim_time == "stepped" and tuple(words[1:]) not in STEPPED_COMMANDS:
+            raise ConfigError(f"step {step.number} '{step.name}': '{' '.join(words)}' does not run on the simulator's "
+                              "stepped time (sim_time: stepped)", where,
+                              hint="stepped time takes: " + ", ".join(sorted(" ".join(c) for c in STEPPED_COMMANDS))
+                              + "; or leave sim_time out (wall time)")
         try:
             with redirect_stdout(io.StringIO()), redirect_stderr(io.StringIO()):
                 cmd.make_context(words[-1], args, parent=ctx)  # parses, never runs

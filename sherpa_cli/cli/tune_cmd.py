@@ -6,7 +6,7 @@ from typing import TYPE_CHECKING
 
 import typer
 
-from sherpa_cli.cli.context import state
+from sherpa_cli.cli.context import state, use_stepped
 from sherpa_cli.cli.options import Apply, ApplyMotion, MotorOff, Save, Yes
 from sherpa_cli.errors import UsageError
 
@@ -140,10 +140,7 @@ def step(
     settings = MotionSettings.from_config(cfg, [target.ref.bus])
     stepped, sim_factory = stepped_sim(st)
     with st.session(buses=[target.ref.bus], sim_factory=sim_factory) as session:
-        timebase = None
-        if stepped is not None and session.sim is not None and getattr(session.sim, "clock", None) is stepped.clock:
-            session.client_overrides.update(stepped.client_overrides(cfg.protocol.reply_timeout, cfg.protocol.retries))
-            timebase = stepped
+        timebase = stepped if stepped is not None and use_stepped(session, stepped, cfg) else None
 
         def one(m: str, v: float) -> StepResult:
             return run_step(session, target, m, v, duration=duration, rate=rate, settings=settings,

@@ -52,6 +52,7 @@ if TYPE_CHECKING:
     from sherpa_cli.motion.guard import MotionGuard
     from sherpa_cli.motion.limit_watch import Breach
     from sherpa_cli.ops.drive_record import DriveRecordResult
+    from sherpa_cli.ops.step import StepTime
 
 SETTLE_S = 0.3  # s a finished move may take for PX to reach the target (servo lag) before it is reported
 
@@ -526,10 +527,13 @@ def run_move(session: ArmSession, pair: PairConfig, request: PairTarget, *,
              on_event: Callable[[str], None] | None = None,
              recorder_kw: Mapping[str, Any] | None = None,
              trace_factory: Callable[[tuple[str, str]], Trace] | None = None,
-             drive_recorder: RecorderSettings | None = None) -> MoveResult:
+             drive_recorder: RecorderSettings | None = None, timebase: StepTime | None = None) -> MoveResult:
     """Plan, then move both motors inside the motion guard with the limit watch, recording both.
 
     ``recorder_kw`` goes to log/record.py's Recorder (``clock``, ``sync_factory``: tests);
+    ``timebase`` (ops/step.py): the move's clock, waits and SYNC source instead of wall time, ``clock``,
+    ``sleep`` and ``recorder_kw`` (the simulated arm's stepped time; each SYNC's TPDOs are in before
+    the clock moves on);
     ``trace_factory(drives)`` replaces the recording with anything that has ``add(t, motors)``,
     ``samples`` and ``source`` (PX is then polled, as with --poll). With ``request.source ==
     "drive"`` both drives' recorders (ops/drive_record.py, ``drive_recorder``: their settings) are
@@ -540,6 +544,9 @@ def run_move(session: ArmSession, pair: PairConfig, request: PairTarget, *,
 
     cfg = session.cfg
     check_source(request)
+    if timebase is not None:
+        clock, sleep = timebase.now, timebase.sleep
+        recorder_kw = {**(recorder_kw or {}), "clock": timebase.now, "sync_factory": timebase.sync_factory}
     method, group_id = pair_settings(cfg)
     if request.naive:
         method = "sequential"
@@ -574,6 +581,8 @@ def run_move(session: ArmSession, pair: PairConfig, request: PairTarget, *,
                                 _open_trace(stack, session, refs, request, drives, recorder_kw))
                 result.trace_source = getattr(trace, "source", type(trace).__name__)
                 recorded = trace if isinstance(trace, RecordedTrace) else None  # its newest SYNC feeds the loop
+                if timebase is not None and recorded is not None:
+                    timebase.follow(recorded.recorder.answered)
                 # entered after the recorder, so it exits first: the motors stop and the RAM settings go
                 # back before the recorder puts its PDO settings back (review R8: stop before restoring)
                 stack.enter_context(start)

@@ -28,6 +28,7 @@ ON_FAILURE = ("stop", "continue")
 # or `skip` it (a check of what the writes left, which cannot hold when nothing was written).
 # Confirm steps default to skip: a dry run writes nothing, so there is nothing to confirm.
 DRY_RUN = ("run", "skip")
+SIM_TIMES = ("wall", "stepped")
 # Flags that make a step write to drives: without `recipe run --apply` they are removed, so the
 # step runs as the command's own dry run (design.md: every write is a dry run unless --apply).
 # `scan --reset`, `--verify-flash` (NMT reset node) and `monitor --heartbeat MS` (0x1017 := MS) change
@@ -107,6 +108,9 @@ class Recipe:
     description: str = ""
     steps: tuple[Step, ...] = ()
     variables: dict[str, str] = field(default_factory=dict)
+    # `sim_time: stepped`: with --sim the recipe's shared simulated arm runs on stepped time
+    # (sim/stepped.py), for recipes whose steps measure time (the seed's figures); default "wall"
+    sim_time: str = "wall"
 
     def find_step(self, text: str) -> Step:
         """A step by its name or 1-based number (``--from``)."""
@@ -133,9 +137,14 @@ def load_recipe(path: Path, overrides: dict[str, str] | None = None) -> Recipe:
         raise ConfigError(f"cannot read recipe: not UTF-8 text ({exc.reason} at byte {exc.start})",
                           Location(str(path))) from None
     root = parse_yaml(text, str(path))
-    top = Section(root, ["name", "description", "vars", "on_failure", "steps"], what="a recipe mapping")
+    top = Section(root, ["name", "description", "vars", "on_failure", "sim_time", "steps"], what="a recipe mapping")
     name = top.str("name", Path(path).stem)
     description = top.str("description", "")
+    sim_time = "wall"
+    if (tnode := top.get("sim_time")) is not None:
+        sim_time = as_str(tnode)
+        if sim_time not in SIM_TIMES:
+            raise tnode.error(f"sim_time must be one of {', '.join(SIM_TIMES)}, got {sim_time!r}")
     default_failure = _on_failure(top.get("on_failure"), "stop")
     variables = _variables(top.get("vars"), overrides or {}, str(path))
     steps_node = top.req("steps")
@@ -151,7 +160,7 @@ def load_recipe(path: Path, overrides: dict[str, str] | None = None) -> Recipe:
                              hint="step names must be unique: --from and the report refer to them")
         seen[step.name] = i
         steps.append(step)
-    return Recipe(name, str(path), description, tuple(steps), variables)
+    return Recipe(name, str(path), description, tuple(steps), variables, sim_time)
 
 
 def _variables(node: YNode | None, overrides: dict[str, str], file: str) -> dict[str, str]:

@@ -354,6 +354,11 @@ class SimArm:
         self.keep_ram = keep_ram
         self._ram_lock: filelock.BaseFileLock | None = None
 
+    def unheard(self) -> tuple[int, float]:
+        """(requests its drives did not hear in their MO settle windows, the settle time they had left):
+        what a stepped clock charges the clients' waits (sim/stepped.py)."""
+        return (sum(d.unheard for d in self.drives.values()), sum(d.unheard_s for d in self.drives.values()))
+
     def _drive_stepped(self, name: str, drive: SimDrive) -> None:
         """A drive's ``on_step``: the mechanics follow its motor."""
         self._mechanics.update(name)
