@@ -12,6 +12,7 @@ import time
 from pathlib import Path
 
 import pytest
+from motion_helpers import stepped_session
 
 from sherpa_cli.bus.session import ArmSession
 from sherpa_cli.config import load_config
@@ -297,10 +298,11 @@ def test_a_naive_move_whose_held_joint_leaves_its_full_range_is_stopped_and_brou
     path = tmp_path / "tight.yaml"
     path.write_text(text)
     cfg = load_config(path)
-    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
-        first = diffdrive.run_move(s, cfg.pairs["diff"], PairTarget(delta="1990counts"))
+    # on stepped time: on wall time a loaded machine let the first move end a count past 1990
+    with stepped_session(cfg) as (s, stepped):
+        first = diffdrive.run_move(s, cfg.pairs["diff"], PairTarget(delta="1990counts"), timebase=stepped)
         assert first.ok and abs(first.end[1] - 1990) <= 1, first.as_dict()
-        r = diffdrive.run_move(s, cfg.pairs["diff"], PairTarget(sigma="-1", naive=True))
+        r = diffdrive.run_move(s, cfg.pairs["diff"], PairTarget(sigma="-1", naive=True), timebase=stepped)
         assert not r.ok and r.outcome == "limit" and r.breaches[0].joint == "roll", r.as_dict()
         assert -1990 <= r.end[1] <= 1990  # back inside the normal range
         with s.sim.lock:
