@@ -144,3 +144,25 @@ def test_the_dry_run_names_the_drive_recorders_and_what_apply_would_refuse(cli):
     assert "records both motors: the drives' own recorders at the servo rate" in dry.stdout
     js = json.loads(cli(*MIS, "--json", "diffdrive", "move", "diff", "--sigma", "0.3", "--source", "drive").stdout)
     assert js["recording"] == "drive" and js["would_be_refused"] == []
+
+
+def test_a_drive_recorded_move_refused_at_the_lock_sends_nothing_to_the_recorders(cfg):
+    """The recorders are armed inside the motion guard: a pair another command holds is refused at
+    the lock before anything reaches its drives (review: they were armed before the guard's lock)."""
+    from sherpa_cli.bus.targets import drive_ref
+    from sherpa_cli.motion.lock import DriveLock, MotionLockedError
+
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
+        held = DriveLock(drive_ref(cfg, "left"), "another command")
+        held.acquire()
+        try:
+            with s.sim.lock:
+                before = {n: len(d.received) for n, d in s.sim.drives.items()}
+            with pytest.raises(MotionLockedError):
+                diffdrive.run_move(s, cfg.pairs["diff"], PairTarget(sigma="0.5", source="drive", uncalibrated=True))
+            with s.sim.lock:
+                sent = {n: {bytes(f[:2]) for _, _, f in d.received[before[n]:]} for n, d in s.sim.drives.items()}
+        finally:
+            held.release()
+    recorder = {letters.encode() for letters in ("RC", "RG", "RL", "RP", "RV", "RR")}
+    assert all(not (frames & recorder) for frames in sent.values()), sent

@@ -51,7 +51,7 @@ if TYPE_CHECKING:
     from sherpa_cli.log.recording import Recording
     from sherpa_cli.motion.guard import MotionGuard
     from sherpa_cli.motion.limit_watch import Breach
-    from sherpa_cli.ops.drive_record import DriveRecordResult
+    from sherpa_cli.ops.drive_record import DriveRecordings, DriveRecordResult
     from sherpa_cli.ops.step import StepTime
 
 SETTLE_S = 0.3  # s a finished move may take for PX to reach the target (servo lag) before it is reported
@@ -570,6 +570,12 @@ def run_move(session: ArmSession, pair: PairConfig, request: PairTarget, *,
         rec_plan = plan_drive_recording(rec_length, rec_settings)
     guard = (guard_factory or MotionGuard)(session, refs, settings=settings, clock=clock, sleep=sleep,
                                            on_event=on_event)
+    drive_recs: DriveRecordings | None = None
+    if rec_plan is not None:
+        from sherpa_cli.ops.drive_record import DriveRecordings
+
+        # every drive armed (inside the guard) to start at the move's BG, for the move's time bound
+        drive_recs = DriveRecordings(session, refs, rec_plan, rec_settings, clock=clock, sleep=sleep)
     box: dict[str, Any] = {}  # what the move leaves for the result
 
     def moving() -> None:
@@ -655,6 +661,8 @@ def run_move(session: ArmSession, pair: PairConfig, request: PairTarget, *,
                     state["status_due"] = clock() + settings.poll_interval
                     return all(int(c.get("MS")) == 0 for c in clients.values())
 
+                if drive_recs is not None:  # inside the guard (its lock and checks first), just before the BG
+                    drive_recs.arm()
                 t0 = t_begin = clock()
                 if recorded is not None:
                     recorded.t_zero = recorded.recorder.now()
@@ -694,15 +702,13 @@ def run_move(session: ArmSession, pair: PairConfig, request: PairTarget, *,
         box.update(final=final, trace=trace)
 
     try:
-        if rec_plan is None:
+        with contextlib.ExitStack() as recs_stack:
+            if drive_recs is not None:
+                recs_stack.enter_context(drive_recs)  # the recorder settings back on every way out
             moving()
-        else:
-            # every drive armed to start at the move's BG; the guard has stopped the motors
-            # (on every way out of moving()) before the drives' data is uploaded
-            from sherpa_cli.ops.drive_record import record_drives
-
-            drive_rec = record_drives(session, refs, rec_length, trigger="bg", settings=rec_settings,
-                                      signals=DRIVE_SIGNALS, clock=clock, sleep=sleep, on_armed=moving)
+            if drive_recs is not None:
+                # the guard has stopped the motors (on every way out of moving()) before the uploads
+                drive_rec = drive_recs.collect()
     except BaseException as exc:
         carried = with_report(exc, guard.report)  # the CLI shows how the guard stopped the motors
         if carried is exc:

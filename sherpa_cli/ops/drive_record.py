@@ -52,33 +52,69 @@ def record_drives(session: ArmSession, refs: Sequence[DriveRef], duration: float
     stop of a step: the motors do not run on through the uploads)."""
     settings = settings or RecorderSettings()
     plan = plan_recording(duration, settings, signals=signals, trigger=trigger)
-    recorders = {ref.name: DriveRecorder(session.client(ref), _uploader(session, ref), settings,
-                                         clock=clock, sleep=sleep) for ref in refs}
-    saved: dict[str, list[tuple[str, int, int | float]]] = {}
-    data: dict[str, dict[str, list[float]]] = {}
-    wait = wait_s if wait_s is not None else plan.length * plan.period(settings) + WAIT_MARGIN_S
-    for rec in recorders.values():
-        rec.client.nmt_start()  # the binary interpreter answers only in Operational
-    try:
-        for name, rec in recorders.items():
-            saved[name] = rec.snapshot(plan)
-        for rec in recorders.values():
-            rec.configure(plan)
-        for rec in recorders.values():
-            rec.arm(plan)
+    with DriveRecordings(session, refs, plan, settings, clock=clock, sleep=sleep) as recordings:
+        recordings.arm()
         if on_armed is not None:
             on_armed()
-        for rec in recorders.values():
-            rec.wait_ready(wait)
-        if on_ready is not None:
-            on_ready()
-        for name, rec in recorders.items():
-            data[name] = rec.read(plan)  # in memory: nothing is written before every drive is in
-    finally:
-        _restore(recorders, saved)
-    period = plan.period(settings)
-    return DriveRecordResult(to_recording(session.cfg, refs, data, period), plan, period,
-                             {name: len(next(iter(d.values()))) for name, d in data.items()})
+        return recordings.collect(wait_s, on_ready=on_ready)
+
+
+class DriveRecordings:
+    """The recorders of several drives, in steps a moving command can place: :meth:`arm` inside its
+    motion guard (after the guard's lock and checks, just before the BG), :meth:`collect` once the
+    motors have stopped; the settings go back in :meth:`close` (the context's exit) on every path."""
+
+    def __init__(self, session: ArmSession, refs: Sequence[DriveRef], plan: RecorderPlan,
+                 settings: RecorderSettings, *, clock: Callable[[], float] = time.monotonic,
+                 sleep: Callable[[float], None] = time.sleep) -> None:
+        self.session, self.refs, self.plan, self.settings = session, list(refs), plan, settings
+        self.recorders = {ref.name: DriveRecorder(session.client(ref), _uploader(session, ref), settings,
+                                                  clock=clock, sleep=sleep) for ref in refs}
+        self.saved: dict[str, list[tuple[str, int, int | float]]] = {}
+        self.restored = True
+
+    def __enter__(self) -> DriveRecordings:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def arm(self) -> None:
+        """Read every drive's recorder settings, then configure and arm them all."""
+        self.restored = False
+        for rec in self.recorders.values():
+            rec.client.nmt_start()  # the binary interpreter answers only in Operational
+        for name, rec in self.recorders.items():
+            self.saved[name] = rec.snapshot(self.plan)
+        for rec in self.recorders.values():
+            rec.configure(self.plan)
+        for rec in self.recorders.values():
+            rec.arm(self.plan)
+
+    def collect(self, wait_s: float | None = None, *, on_ready: Callable[[], None] | None = None) -> DriveRecordResult:
+        """Wait for every drive's data (``wait_s``, default the recording time plus a margin), run
+        ``on_ready``, upload it all, put the settings back. In memory: a bad upload of any signal of
+        any drive fails the whole recording."""
+        period = self.plan.period(self.settings)
+        wait = wait_s if wait_s is not None else self.plan.length * period + WAIT_MARGIN_S
+        data: dict[str, dict[str, list[float]]] = {}
+        try:
+            for rec in self.recorders.values():
+                rec.wait_ready(wait)
+            if on_ready is not None:
+                on_ready()
+            for name, rec in self.recorders.items():
+                data[name] = rec.read(self.plan)
+        finally:
+            self.close()
+        return DriveRecordResult(to_recording(self.session.cfg, self.refs, data, period), self.plan, period,
+                                 {name: len(next(iter(d.values()))) for name, d in data.items()})
+
+    def close(self) -> None:
+        """Put the recorder settings back (once)."""
+        if not self.restored:
+            self.restored = True
+            _restore(self.recorders, self.saved)
 
 
 def _uploader(session: ArmSession, ref: DriveRef) -> Callable[[int, int], bytes]:
