@@ -239,3 +239,36 @@ def test_a_blocked_command_is_stopped_named_and_not_sent_again_the_same_way(cfg,
             assert send(-1).startswith("j1: ")  # the other way is sent
             assert "j1" in live.running
         assert motors_off(s)
+
+
+def test_a_command_eased_back_the_same_way_asks_only_the_slower_speeds_progress(cfg):
+    """Review: the watch kept the first command's threshold, so a stick eased back to a tenth of its
+    speed was called blocked while the joint moved freely. A faster refresh does not raise it again."""
+    from sherpa_cli.motion.blocked import min_progress_for
+
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
+        with LiveJog(s, resolve_axes(cfg, ["j1"]), keepalive=0.3) as live:
+            stall_time = live.settings.stall_time
+            sign = -1 if live.state["j1"].counts > 0 else 1
+            live.set_velocity("j1", sign * 3000)
+            watch = live.stalls["j1"][1]
+            assert watch.min_progress == min_progress_for(3000, stall_time)
+            live.set_velocity("j1", sign * 100)
+            assert live.stalls["j1"][1] is watch  # the same watch: its timer runs on
+            assert watch.min_progress == min_progress_for(100, stall_time)
+            live.set_velocity("j1", sign * 3000)
+            assert watch.min_progress == min_progress_for(100, stall_time)
+        assert motors_off(s)
+
+
+def test_a_position_step_replacing_a_velocity_command_is_not_stall_watched(cfg):
+    """Review: a step after a velocity command kept that command's stall watch, which a slow step
+    (or a real drive's ~1 s mode switch) could trip as "blocked"."""
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
+        with LiveJog(s, resolve_axes(cfg, ["j1"]), keepalive=0.5, allow_uncalibrated=True) as live:
+            sign = -1 if live.state["j1"].counts > 0 else 1
+            live.set_velocity("j1", sign * 1000)
+            assert "j1" in live.stalls
+            live.step("j1", sign * 5)
+            assert live.running["j1"].mode == "position" and "j1" not in live.stalls
+        assert motors_off(s)

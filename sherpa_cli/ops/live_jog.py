@@ -229,6 +229,7 @@ class LiveJog:
         distance = max(abs(t - now[d]) for d, t in motor_targets.items())
         duration = distance / speed if distance else 0.0
         self._stop_others_on(a.drives, name)
+        self.stalls.pop(name, None)  # a position step ends at its target: no progress there is no stall
         # on record before the first write: a command that fails half-way is still stopped (review R3)
         self.running[name] = _Running("position", {"target": goal, **motor_targets}, None)
         self.moved.update(motor_targets)
@@ -537,11 +538,15 @@ class LiveJog:
         # stopped by stop / stop_all (review R3)
         self.running[name] = _Running(mode, dict(motors), self.clock() + self.keepalive)
         watching = self.stalls.get(name)
+        s = self.settings
+        fresh = s.torque_stall_watch() if mode == "torque" else s.stall_watch(max(abs(v) for v in motors.values()))
         if watching is None or watching[0] != direction:
             # a new direction starts a new watch; a refresh of the same command keeps it running
-            s = self.settings
-            self.stalls[name] = (direction, s.torque_stall_watch() if mode == "torque" else
-                                 s.stall_watch(max(abs(v) for v in motors.values())))
+            self.stalls[name] = (direction, fresh)
+        else:
+            # ...but asks no more progress than the slowest speed since then makes (a stick eased
+            # back is not a jam); a faster command does not raise it (stick jitter would reset it)
+            watching[1].min_progress = min(watching[1].min_progress, fresh.min_progress)
         self.moved.update(motors)
         for d in motors:
             self._enable(d, um)
@@ -598,7 +603,7 @@ class LiveJog:
         now = self.clock()
         for name, (direction, watch) in list(self.stalls.items()):
             a = self.axes[name]
-            if name not in self.running:  # ended elsewhere (a drive switched off, a breach)
+            if name not in self.running or self.running[name].mode == "position":  # ended or replaced
                 del self.stalls[name]
                 continue
             if not watch.feed({d: motors[d] for d in a.drives if d in motors}, now):
