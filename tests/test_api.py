@@ -219,6 +219,11 @@ def test_log_step_refusals_are_the_documented_errors():
             arm.log_step("elbow_pitch", "torque", 0.5, duration=60)
         with pytest.raises(UsageError, match="normal range"):
             arm.log_step("elbow_pitch", "position", 3.0, duration=0.5)
+        # the command's bounds hold for the API too (review: a 1 Hz step reached the drive)
+        with pytest.raises(UsageError, match=r"--rate 1: expected Hz >= 10"):
+            arm.log_step("elbow_pitch", "velocity", 0.1, duration=0.5, rate=1.0)
+        with pytest.raises(UsageError, match=r"--for 7200.0: expected seconds > 0 and <= 3600"):
+            arm.log_step("elbow_pitch", "velocity", 0.1, duration=7200.0)
         assert not any(d.motor_on for d in arm.session.sim.drives.values())
 
 

@@ -445,8 +445,7 @@ class _Stopped(Exception):
 
 # the lowest --rate of a recording, and of a step (issue 22 item 8: at 0.5 Hz a step's loop stopped
 # showing signs of life between samples and the dead-man tripped)
-MIN_RECORD_RATE = 1.0
-MIN_STEP_RATE = 10.0
+MIN_RECORD_RATE = 1.0  # a step's: ops/step.py MIN_STEP_RATE
 WAKE_EVERY_S = 0.1  # how often the wait looks at what the receive threads found
 
 
@@ -615,13 +614,9 @@ def step(
 
     if not math.isfinite(value):
         raise UsageError(f"--{mode} {value}: expected a finite number")
-    if not (math.isfinite(duration) and 0 < duration <= MAX_RECORD_S):
-        raise UsageError(f"--for {duration}: expected seconds > 0 and <= {MAX_RECORD_S:g}")
-    if not (MIN_STEP_RATE <= rate <= 10000):
-        raise UsageError(f"--rate {rate:g}: expected Hz >= {MIN_STEP_RATE:g} (the step's settling check and the "
-                         "motion guard's watch need a sample at least every 0.1 s) and <= 10000")
-    if not (math.isfinite(hold) and 0 <= hold < duration):
-        raise UsageError(f"--hold {hold}: expected seconds >= 0 and less than --for {duration:g}")
+    from sherpa_cli.ops.step import check_step_values
+
+    check_step_values(duration, rate, hold)  # before any bus is opened; run_step checks them again
     to_mcap = output.suffix.lower() == ".mcap" and not output.is_dir()
     if source not in ("can", "drive"):
         raise UsageError(f"--source {source}: expected can or drive")

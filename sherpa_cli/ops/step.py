@@ -156,6 +156,23 @@ def check_mode_first(mode: str, mode_first: bool) -> None:
                          hint="a torque step's own switch is short: leave --mode-first out")
 
 
+# the lowest --rate of a step (issue 22 item 8: at 0.5 Hz a step's loop stopped showing signs of life
+# between samples and the dead-man tripped), and the longest --for (a recording's)
+MIN_STEP_RATE = 10.0
+MAX_STEP_S = 3600.0
+
+
+def check_step_values(duration: float, rate: float, hold: float = 0.0) -> None:
+    """--for, --rate and --hold of a step, for the command and the API alike."""
+    if not (math.isfinite(duration) and 0 < duration <= MAX_STEP_S):
+        raise UsageError(f"--for {duration}: expected seconds > 0 and <= {MAX_STEP_S:g}")
+    if not (MIN_STEP_RATE <= rate <= 10000):
+        raise UsageError(f"--rate {rate:g}: expected Hz >= {MIN_STEP_RATE:g} (the step's settling check and the "
+                         "motion guard's watch need a sample at least every 0.1 s) and <= 10000")
+    if not (math.isfinite(hold) and 0 <= hold < duration):
+        raise UsageError(f"--hold {hold}: expected seconds >= 0 and less than --for {duration:g}")
+
+
 def run_step(session: ArmSession, target: Axis, mode: str, value: float, *, duration: float, rate: float,
              settings: MotionSettings, sleep: Callable[[float], None] = time.sleep,
              on_event: Callable[[str], None] | None = None, recorder_kw: dict[str, Any] | None = None,
@@ -168,10 +185,9 @@ def run_step(session: ArmSession, target: Axis, mode: str, value: float, *, dura
     on recording once the step has settled (bounded by ``duration``). ``drive_trace``: the
     drive's own recorder of the same step (ops/drive_step.py, `--source drive`), armed just before
     the command and read once the guard has stopped the motor."""
+    check_step_values(duration, rate, hold)
     req = step_request(target, mode, value, duration=duration, uncalibrated=uncalibrated,
                        max_torque_for=session.cfg.motion.max_torque_for)
-    if not (math.isfinite(hold) and 0 <= hold < duration):
-        raise UsageError(f"--hold {hold}: expected seconds >= 0 and less than --for {duration:g}")
     check_mode_first(mode, mode_first)
     # jog's checks before anything is armed: a position goal inside the normal range, a calibrated joint
     precheck(session, target, req)
