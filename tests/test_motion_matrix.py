@@ -136,12 +136,14 @@ def _log_step(s: ArmSession, name: str, st: SteppedTime) -> Any:
                            settings=MotionSettings.from_config(s.cfg), timebase=st)
 
 
-def _diffdrive(s: ArmSession, name: str, st: SteppedTime) -> Any:
-    from sherpa_cli.api import Arm
+def diffdrive(hold: bool = False) -> Callable[..., Any]:
+    def run(s: ArmSession, name: str, st: SteppedTime) -> Any:
+        from sherpa_cli.api import Arm
 
-    sigma, delta = (f"{-DISTANCE}counts", "0counts") if name == "pitch" else ("0counts", f"{-DISTANCE}counts")
-    return Arm(s).diffdrive_move("diff", sigma=sigma, delta=delta, relative=True, velocity=f"{SPEED}counts/s",
-                                 timebase=st)
+        sigma, delta = (f"{-DISTANCE}counts", "0counts") if name == "pitch" else ("0counts", f"{-DISTANCE}counts")
+        return Arm(s).diffdrive_move("diff", sigma=sigma, delta=delta, relative=True, velocity=f"{SPEED}counts/s",
+                                     hold=hold, timebase=st)
+    return run
 
 
 def _home(s: ArmSession, name: str, st: SteppedTime) -> Any:
@@ -204,6 +206,7 @@ HOME_AXES = {
 
 WAYS = ("normal", "error", "ctrl_c", "sigterm", "drive_fault", "bus_error", "limit_breach", "end_switch", "stall")
 MOVING = ("plain", "sigma", "delta", "pair_motor", "drive")
+HOLD_WAYS = tuple(w for w in WAYS if w not in ("normal", "end_switch", "stall"))
 
 
 @dataclass(frozen=True)
@@ -219,14 +222,14 @@ ROWS: dict[str, Row] = {
     "jog-position": Row(jog("position"), MOVING),
     "jog-velocity": Row(jog("velocity"), MOVING),
     "jog-torque": Row(jog("torque"), MOVING),
-    # --hold: the hold ends at Ctrl-C (its normal end) or any other way out; a plain jog's option
-    # (held at standstill, a pressed end switch or a jam changes nothing: no end_switch, no stall)
-    "jog-velocity-hold": Row(jog("velocity", hold=True), ("plain", "drive"),
-                             tuple(w for w in WAYS if w not in ("normal", "end_switch", "stall")), hold=True),
+    # --hold: the hold ends at Ctrl-C (its normal end) or any other way out (held at standstill, a
+    # pressed end switch or a jam changes nothing: no end_switch, no stall)
+    "jog-velocity-hold": Row(jog("velocity", hold=True), MOVING, HOLD_WAYS, hold=True),
     "live-jog": Row(_live, ("plain", "sigma", "delta", "drive")),
     "joystick": Row(_joystick, ("plain", "sigma", "delta")),
     "log-step": Row(_log_step, ("plain", "drive")),
-    "diffdrive-move": Row(_diffdrive, ("sigma", "delta")),
+    "diffdrive-move": Row(diffdrive(), ("sigma", "delta")),
+    "diffdrive-move-hold": Row(diffdrive(hold=True), ("sigma", "delta"), HOLD_WAYS, hold=True),
     # a homing search runs into its switch (no end switch to inject) and has no limit watch to breach
     "home": Row(_home, ("home_switch", "end_switches", "pair"),
                 tuple(w for w in WAYS if w not in ("limit_breach", "end_switch")), home=True),
@@ -250,7 +253,9 @@ def _cases() -> list[Any]:
 
 
 INJECT_AFTER = 0.06  # s of simulated time after the first motor went on
-HOLD_INJECT_AFTER = RUN_FOR + 0.3  # well into the hold
+# well into the hold: after a jog's RUN_FOR, the stop and a pair jog's correction of its held joint
+# (about 0.9 s for Δ), and after a `diffdrive move` (about 0.6 s)
+HOLD_INJECT_AFTER = RUN_FOR + 1.5
 HOLD_END_AFTER = 0.3  # s after a way out the hold survived (a bus error, a switch): Ctrl-C ends it
 BUS_OFF_FOR = 0.5  # s of wall time the host's controller is bus-off: longer than one request's wait, shorter
 # than its attempts (sim/stepped.py: STEPPED_REPLY_S x STEPPED_RETRIES); the controller's restart is the
@@ -473,6 +478,9 @@ def test_every_way_out_stops_from_standstill_switches_off_puts_ram_back_and_repo
         assert isinstance(out.error, MotionStopped), what
     if way == "normal":
         assert out.error is None, what
+    # Ctrl-C is how a hold is meant to end: a normal end that says so (and the way out found it holding)
+    if row.hold and way == "ctrl_c":
+        assert out.error is None and "held until Ctrl-C" in told, f"{what}: Ctrl-C did not end the hold normally"
     # clear endings (issue 21 item 7, 8): what ended the command is named
     if way == "end_switch":
         assert "end switch" in told, f"{what}: the end switch is not named"

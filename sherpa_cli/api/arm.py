@@ -131,7 +131,7 @@ class Arm:
     # ------------------------------------------------------------------ moving
 
     def jog(self, name: str, *, to: Value = None, by: Value = None, velocity: Value = None, torque: Value = None,
-            duration: float | None = None, uncalibrated: bool = False,
+            duration: float | None = None, uncalibrated: bool = False, hold: bool = False,
             on_progress: Callable[[object], None] | None = None) -> plain_jog.JogResult | joint_jog.JogResult:
         """Move one joint, Σ/Δ joint, pair motor or drive (`sherpa jog NAME ... --apply`).
 
@@ -140,7 +140,9 @@ class Arm:
         command line does (``"10deg"``, ``"300counts/s"``, ``"800mA"``). It runs inside the motion
         guard: fault check, the dead-man armed, the joint's limits watched, and the motor stopped
         from standstill and switched off on every way out. A limit breach is a result (``breach``
-        set, the joint brought back), not an exception; a refusal raises.
+        set, the joint brought back), not an exception; a refusal raises. ``hold``: afterwards the
+        motors hold where they ended, the dead-man armed, until Ctrl-C (KeyboardInterrupt, a normal
+        end then: ``ended_by`` / ``held_until`` say so) or `sherpa stop`.
         """
         from sherpa_cli.motion.axis import resolve_axis
         from sherpa_cli.motion.request import parse_request
@@ -153,7 +155,7 @@ class Arm:
         mode = "position" if to is not None or by is not None else "velocity" if velocity is not None else "torque"
         axis = resolve_axis(self.config, name)
         req = parse_request(axis, mode, to=to, by=by, velocity=velocity, torque=torque, duration=duration,
-                            uncalibrated=uncalibrated)
+                            uncalibrated=uncalibrated, hold=hold)
         return self.move(axis, req, on_progress=on_progress)
 
     def move(self, axis: Axis, request: MoveRequest, *, settings: MotionSettings | None = None,
@@ -207,9 +209,10 @@ class Arm:
 
     def diffdrive_move(self, pair: str, *, sigma: Value = None, delta: Value = None, relative: bool = False,
                        velocity: Value = None, feedback: bool = False, naive: bool = False,
-                       uncalibrated: bool = False, poll: bool = False, source: str = "can",
-                       on_event: Callable[[str], None] | None = None, timebase: StepTime | None = None
-                       ) -> MoveResult:
+                       uncalibrated: bool = False, poll: bool = False, source: str = "can", hold: bool = False,
+                       on_event: Callable[[str], None] | None = None,
+                       on_progress: Callable[[Mapping[str, int]], None] | None = None,
+                       timebase: StepTime | None = None) -> MoveResult:
         """Move the Σ and Δ joints of a pair together (`sherpa diffdrive move PAIR ... --apply`).
 
         ``pair``: the pair, or one of its joints or motors. ``sigma``/``delta``: targets (offsets with
@@ -217,8 +220,10 @@ class Arm:
         ``"200counts"``). ``velocity``: the speed of the joint that moves farthest (default: the
         joints' limits). Both motors start together, are recorded (``poll``: PX polled; ``source=
         "drive"``: the drives' own recorders) and the coupling is measured. A limit breach is a
-        result (``result.ok`` False), a refusal raises. ``timebase``: the clock, waits and SYNC
-        source the move runs on (default wall time; tests step it, sim/stepped.py).
+        result (``result.ok`` False), a refusal raises. ``hold``: afterwards both motors hold where
+        they ended, the dead-man armed, until Ctrl-C (KeyboardInterrupt, a normal end then) or
+        `sherpa stop`; ``on_progress`` sees Σ and Δ (counts) meanwhile. ``timebase``: the clock, waits
+        and SYNC source the move runs on (default wall time; tests step it, sim/stepped.py).
         """
 
         from sherpa_cli.bus.targets import pair_of
@@ -229,9 +234,10 @@ class Arm:
 
         req = diffdrive.PairTarget(sigma=text(sigma), delta=text(delta), relative=relative, velocity=text(velocity),
                                    naive=naive, feedback=feedback, uncalibrated=uncalibrated, poll=poll,
-                                   source=source)
+                                   source=source, hold=hold)
         p = pair_of(self.config, pair)
-        return diffdrive.run_move(self._session, p, req, on_event=on_event, timebase=timebase)
+        return diffdrive.run_move(self._session, p, req, on_event=on_event, timebase=timebase,
+                                  on_progress=on_progress)
 
     def log_step(self, name: str, mode: str, value: float, *, duration: float = 2.0, rate: float = 1000.0,
                  uncalibrated: bool = False, mode_first: bool = False, hold: float = 0.0,

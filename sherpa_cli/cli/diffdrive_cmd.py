@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from typing import TYPE_CHECKING, Any
 
 import typer
@@ -181,6 +182,8 @@ def move(
                                "started by the move's BG (RAM only, put back after; --poll does not apply)."),
     uncalibrated: bool = typer.Option(False, "--uncalibrated", help="Allow the move although the pair was not "
                                       "homed since power-up (positions relative to power-up)."),
+    hold: bool = typer.Option(False, "--hold", help="After the move keep both motors on, holding where they ended, "
+                              "the dead-man armed and the joints shown, until Ctrl-C or `sherpa stop`."),
     apply: ApplyMotion = False,
 ) -> None:
     """Move the Σ and Δ joints of a pair together, both motors starting at once, and measure the coupling.
@@ -198,7 +201,7 @@ def move(
     cfg = st.load_config()
     p = pair_of(cfg, pair)
     req = diffdrive.PairTarget(sigma=sigma, delta=delta, relative=relative, velocity=velocity, naive=naive,
-                                feedback=feedback, uncalibrated=uncalibrated, poll=poll, source=source)
+                                feedback=feedback, uncalibrated=uncalibrated, poll=poll, source=source, hold=hold)
     diffdrive.check_source(req)
     if naive and feedback:
         raise UsageError("--naive and --feedback do not go together: --naive is the seed's way, for comparison")
@@ -237,7 +240,9 @@ def move(
         st.out.line(f"dry run: would move pair {p.name} ({p.drive_a}, {p.drive_b}): {what}"
                     + (f"; {held[0]} holds" if held else ""))
         st.out.line(f"  UM=5, SP/AC/DC of equal duration, PA, {start}"
-                    + ("; --feedback slows the motor ahead every cycle" if feedback else "") + ", then stop and switch off")
+                    + ("; --feedback slows the motor ahead every cycle" if feedback else "")
+                    + (", then hold where they stand until Ctrl-C or `sherpa stop`" if hold else
+                       ", then stop and switch off"))
         st.out.line("  records both motors: " + (
             "the drives' own recorders at the servo rate, started by the move's BG (RAM only, put back after)"
             if source == "drive" else "PX polled (--poll)" if poll else
@@ -245,6 +250,14 @@ def move(
         st.out.line("nothing sent; add --apply to move")
         return
     from sherpa_cli.api import Arm
+    from sherpa_cli.motion.gravity import gravity_notice
+
+    notice = gravity_notice(cfg, [p.sigma, p.delta], holds=hold)
+    if notice is not None:
+        st.out.warn(notice)
+
+    def progress(joints: Mapping[str, int]) -> None:  # the hold's live line, on a terminal only
+        st.out.progress("  ".join(f"{j}: {c} counts" for j, c in joints.items()))
 
     # in a recipe with `sim_time: stepped` the shared simulated arm moves only while this command waits
     stepped = shared_stepped(st) if st.sim else None
@@ -253,9 +266,10 @@ def move(
         try:  # a layer over the Python API
             result = Arm(session).diffdrive_move(p.name, sigma=sigma, delta=delta, relative=relative,
                                                  velocity=velocity, feedback=feedback, naive=naive,
-                                                 uncalibrated=uncalibrated, poll=poll, source=source,
-                                                 timebase=timebase)
+                                                 uncalibrated=uncalibrated, poll=poll, source=source, hold=hold,
+                                                 on_progress=progress, timebase=timebase)
         except BaseException as exc:
+            st.out.progress(None)
             from sherpa_cli.motion.report import report_of
 
             stop_report = report_of(exc)
@@ -263,6 +277,7 @@ def move(
                 for line in stop_report.lines(st.verbose):
                     st.out.info(f"stop: {line}")
             raise
+    st.out.progress(None)
     if plot is not None:
         diffdrive.plot(result, plot)
     if report is not None:
@@ -327,6 +342,10 @@ def _render_move(st: AppState, r: MoveResult, plot: str | None) -> None:
                     f"({counts_to_rad(c.peak_sigma, c.sigma_cpr):.4f} rad), Δ up to {c.peak_delta:.0f} counts "
                     f"({counts_to_rad(c.peak_delta, c.delta_cpr):.4f} rad)")
     st.out.line(f"recording: {r.trace_source}, {len(r.samples)} samples")
+    if r.held_at is not None:
+        from sherpa_cli.cli.jog_cmd import hold_line
+
+        st.out.line(hold_line(r.held_at, r.held_until))
     if plot is not None:
         st.out.line(f"plot: {plot}")
 

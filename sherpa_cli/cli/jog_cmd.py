@@ -59,7 +59,7 @@ def jog(
     apply: ApplyMotion = False,
     hold: bool = typer.Option(False, "--hold", help="After the move keep the motor on, holding where it ended, "
                               "the dead-man armed and the position shown, until Ctrl-C or `sherpa stop` "
-                              "(plain joints; a gravity-loaded joint then does not fall)."),
+                              "(a pair: both motors; a gravity-loaded joint then does not fall)."),
     interactive: bool = typer.Option(False, "--interactive", help="A full-screen view of the joints with keyboard "
                                      "control (docs/jog.md)."),
     joystick: bool = typer.Option(False, "--joystick", help="Drive the joints from a joystick as the config's "
@@ -118,9 +118,6 @@ def jog(
     target = resolve_axis(cfg, joint)  # the one resolver: plain joint, Σ/Δ joint, pair motor or drive
     seconds = parse_number(duration, "--for")
     pair = target.pair is not None  # ops/joint_jog.py moves what involves a pair (both motors, or Σ and Δ)
-    if pair and hold:
-        raise UsageError("--hold is for plain joints for now: a Σ/Δ joint is not held after its move",
-                         hint="jog the pair's joint without --hold")
     if pair and mode == "velocity" and seconds is None:
         raise UsageError(f"a velocity jog of {target.name} needs --for SECONDS: a pair jog ends by itself, so the "
                          "other joint of the pair can be put back where it was",
@@ -129,11 +126,12 @@ def jog(
     req = parse_request(target, mode, to=to, by=by, velocity=velocity, torque=torque, duration=seconds,
                         uncalibrated=uncalibrated, hold=hold)
     if pair:
-        _notice_gravity(st, cfg, joint, hold=False, apply=apply)
+        # a pair motor moves both joints of the pair: the notice names them (motion/gravity.py)
+        _notice_gravity(st, cfg, [j.name for j in target.watched], hold=hold, apply=apply)
         _jog_pair(st, cfg, target, req, to if to is not None else by, apply)
         return
     check_request(target, req, max_torque_for=cfg.motion.max_torque_for)
-    _notice_gravity(st, cfg, target.joint.name if target.joint is not None else None, hold=hold, apply=apply)
+    _notice_gravity(st, cfg, [target.joint.name] if target.joint is not None else [], hold=hold, apply=apply)
     if not apply:
         _dry_run(st, target, req, cfg)
         return
@@ -160,11 +158,12 @@ def jog(
         raise typer.Exit(1)
 
 
-def _notice_gravity(st: AppState, cfg: ArmConfig, joint: str | None, *, hold: bool, apply: bool) -> None:
-    """Before a gravity-loaded joint moves: what the motor switched off at the end does to it."""
+def _notice_gravity(st: AppState, cfg: ArmConfig, joints: Sequence[str], *, hold: bool, apply: bool) -> None:
+    """Before a gravity-loaded joint moves: what the motor switched off at the end does to it, or
+    that it is held after the move (--hold)."""
     from sherpa_cli.motion.gravity import gravity_notice
 
-    text = gravity_notice(cfg, [joint] if joint else [], holds=hold)
+    text = gravity_notice(cfg, joints, holds=hold)
     if text is not None and apply:
         st.out.warn(text)
 
@@ -211,8 +210,12 @@ def _dry_run(st: AppState, target: Axis, req: MoveRequest, cfg: ArmConfig) -> No
         st.out.json({"target": target.name, "drive": ref.name, "address": ref.address, "mode": req.mode,
                      "applied": False, "plan": plan})
         return
-    st.out.line(f"dry run: would jog {target.name} ({ref.name}, {ref.address}): {plan}, then stop and switch off")
+    st.out.line(f"dry run: would jog {target.name} ({ref.name}, {ref.address}): {plan}, then {_after(req)}")
     st.out.line("nothing sent; add --apply to move")
+
+
+def _after(req: MoveRequest) -> str:
+    return "hold where it stands until Ctrl-C or `sherpa stop`" if req.hold else "stop and switch off"
 
 
 def _render(st: AppState, name: str, result: ops_jog.JogResult) -> None:
@@ -312,7 +315,7 @@ def _pair_dry_run(st: AppState, axis: Axis, req: MoveRequest, plan: joint_jog.Jo
                      "applied": False, "plan": f"{what}: {cmds}"})
         return
     st.out.line(f"dry run: would jog {_axis_label(axis)}")
-    st.out.line(f"  {what}: {cmds}, then stop and switch off")
+    st.out.line(f"  {what}: {cmds}, then {_after(req)}")
     st.out.line("nothing sent; add --apply to move")
 
 
@@ -333,6 +336,8 @@ def _render_pair(st: AppState, r: joint_jog.JogResult) -> None:
     for joint, fix in r.held_correction.items():
         st.out.line(f"held: {joint} was put back from {fix['from']} to {fix['to']} counts "
                     "(start/stop skew between the motors)")
+    if r.held_at is not None:
+        st.out.line(hold_line(r.held_at, r.held_until))
     if r.mode == "position" and r.ok:
         how = "target reached" if r.target is not None and abs(r.end - r.target) <= 1 else \
             f"{r.end - (r.target or 0):+d} counts from the target"
@@ -345,6 +350,12 @@ def _render_pair(st: AppState, r: joint_jog.JogResult) -> None:
     if others:
         text += "; " + ", ".join(others)
     st.out.line(text)
+
+
+def hold_line(held_at: Mapping[str, int], ended_by: str) -> str:
+    """What --hold did, for a pair jog and `diffdrive move`: where each motor held, how it ended."""
+    at = ", ".join(f"{d} PA={pa}" for d, pa in held_at.items())
+    return f"hold: {at}; {ended_by or 'ended by the limit watch'}"
 
 
 def show_stop_report(st: AppState, exc: BaseException) -> None:

@@ -37,8 +37,8 @@ from sherpa_cli.elmo.protocol import UM_POSITION
 from sherpa_cli.elmo.recorder import MAX_GAP, RecorderPlan, RecorderSettings, plan_recording
 from sherpa_cli.errors import SafetyError, UsageError
 from sherpa_cli.joints import diffpair, units
-from sherpa_cli.motion import calibration, limit_watch, recovery
-from sherpa_cli.motion.axis import joints_moved_by, move_time_bound
+from sherpa_cli.motion import calibration, hold, limit_watch, recovery
+from sherpa_cli.motion.axis import Axis, joints_moved_by, move_time_bound
 from sherpa_cli.motion.blocked import blocked_text
 from sherpa_cli.motion.pair_start import CommonStart, pair_settings, stop_motors
 from sherpa_cli.motion.report import with_report
@@ -47,10 +47,12 @@ if TYPE_CHECKING:
     from matplotlib.figure import Figure
 
     from sherpa_cli.bus.session import ArmSession
+    from sherpa_cli.elmo.client import DriveClient
     from sherpa_cli.log.record import Recorder
     from sherpa_cli.log.recording import Recording
     from sherpa_cli.motion.guard import MotionGuard
     from sherpa_cli.motion.limit_watch import Breach
+    from sherpa_cli.motion.settings import MotionSettings
     from sherpa_cli.ops.drive_record import DriveRecordings, DriveRecordResult
     from sherpa_cli.ops.step import StepTime
 
@@ -77,6 +79,7 @@ class PairTarget:
     uncalibrated: bool = False
     poll: bool = False  # record by polling PX instead of the recorder (TPDO on SYNC)
     source: str = "can"  # can: recorded over the bus (TPDO on SYNC, or --poll); drive: by the drives' recorders
+    hold: bool = False  # after the move both motors stay on, holding, until Ctrl-C or `sherpa stop`
 
 
 @dataclass(frozen=True)
@@ -352,6 +355,8 @@ class MoveResult:
     duration: float | None = None
     guard_lines: list[str] = field(default_factory=list)
     stop: dict[str, Any] = field(default_factory=dict)
+    held_at: dict[str, int] | None = None  # --hold: the PA each motor held (None: not held)
+    held_until: str = ""  # --hold: how the hold ended (motion/hold.py)
 
     @property
     def ok(self) -> bool:
@@ -372,7 +377,9 @@ class MoveResult:
                 "recording": {"source": self.trace_source, "samples": len(self.samples)},
                 "feedback_corrections": self.corrections, "duration_s": self.duration,
                 "calibration": [c.as_dict() for c in self.calibration],
-                "limit": [b.as_dict() for b in self.breaches], "stop": dict(self.stop)}
+                "limit": [b.as_dict() for b in self.breaches], "stop": dict(self.stop),
+                **({"hold": {"at": dict(self.held_at), "ended_by": self.held_until}} if self.held_at is not None
+                   else {})}
 
 
 def _refs(cfg: ArmConfig, drives: Sequence[str]) -> list[DriveRef]:
@@ -527,7 +534,8 @@ def run_move(session: ArmSession, pair: PairConfig, request: PairTarget, *,
              on_event: Callable[[str], None] | None = None,
              recorder_kw: Mapping[str, Any] | None = None,
              trace_factory: Callable[[tuple[str, str]], Trace] | None = None,
-             drive_recorder: RecorderSettings | None = None, timebase: StepTime | None = None) -> MoveResult:
+             drive_recorder: RecorderSettings | None = None, timebase: StepTime | None = None,
+             on_progress: Callable[[Mapping[str, int]], None] | None = None) -> MoveResult:
     """Plan, then move both motors inside the motion guard with the limit watch, recording both.
 
     ``recorder_kw`` goes to log/record.py's Recorder (``clock``, ``sync_factory``: tests);
@@ -538,7 +546,8 @@ def run_move(session: ArmSession, pair: PairConfig, request: PairTarget, *,
     ``samples`` and ``source`` (PX is then polled, as with --poll). With ``request.source ==
     "drive"`` both drives' recorders (ops/drive_record.py, ``drive_recorder``: their settings) are
     armed for the move's BG and the move runs while they record; its coupling figures come from
-    their recordings."""
+    their recordings. ``request.hold``: after the move both motors hold where they ended until
+    Ctrl-C or `sherpa stop` (motion/hold.py), ``on_progress`` seeing Σ and Δ (counts) meanwhile."""
     from sherpa_cli.motion.guard import MotionGuard
     from sherpa_cli.motion.settings import MotionSettings
 
@@ -579,6 +588,17 @@ def run_move(session: ArmSession, pair: PairConfig, request: PairTarget, *,
     box: dict[str, Any] = {}  # what the move leaves for the result
 
     def moving() -> None:
+        try:
+            guarded()
+        except KeyboardInterrupt as exc:
+            if result.held_at is None or result.breaches:
+                raise
+            hold.ctrl_c_ends_hold(guard.report, exc)  # how a hold is meant to end
+            result.held_until = hold.HELD_UNTIL_CTRL_C
+            stopped = hold.positions(guard.report)
+            box["final"] = {d: stopped.get(d) if stopped.get(d) is not None else box["final"][d] for d in drives}
+
+    def guarded() -> None:
         with guard:
             clients = {d: guard.client(by_name[d]) for d in drives}
             start = CommonStart(session, refs, clients, method, group_id, stop=stop_motors(guard, refs, settings))
@@ -699,7 +719,11 @@ def run_move(session: ArmSession, pair: PairConfig, request: PairTarget, *,
                 trace.add(clock() - t0, final)
             if recorded is not None:
                 recorded.collect()  # the recorder has stopped and put the PDO settings back
-        box.update(final=final, trace=trace)
+            box.update(final=final, trace=trace)
+            if request.hold and not result.breaches:
+                # after the pair start's exit (its stop frames went out, its RAM is back) and the
+                # recording: the hold is no part of the move's trace
+                box["final"] = _hold(guard, refs, clients, watched, settings, clock, sleep, result, on_progress)
 
     try:
         with contextlib.ExitStack() as recs_stack:
@@ -733,6 +757,33 @@ def run_move(session: ArmSession, pair: PairConfig, request: PairTarget, *,
     result.guard_lines = guard.report.lines()
     result.stop = guard.report.as_json()
     return result
+
+
+def _hold(guard: MotionGuard, refs: Sequence[DriveRef], clients: Mapping[str, DriveClient], watched: Sequence[Axis],
+          settings: MotionSettings, clock: Callable[[], float], sleep: Callable[[float], None],
+          result: MoveResult, on_progress: Callable[[Mapping[str, int]], None] | None) -> dict[str, int]:
+    """--hold: both motors hold where the move ended (motion/hold.py), the limit watch of Σ and Δ on,
+    until Ctrl-C (raised) or `sherpa stop`. Returns the motors' positions at its end."""
+    result.held_at = hold.hold_in_place(guard, refs, settings=settings, clock=clock, sleep=sleep, stop=False)
+
+    def sample() -> dict[str, int]:
+        motors = {r.name: int(guard.query(r, "PX")) for r in refs}
+        if on_progress is not None:
+            on_progress({j.name: j.position(motors) for j in watched})
+        return motors
+
+    def watch() -> bool:
+        breaches = limit_watch.check(watched, sample())
+        if not breaches:
+            return False
+        result.outcome = "limit"
+        result.breaches = list(breaches)
+        recovery.recover(guard, {r.name: r for r in refs}, clients, watched, breaches, sample, settings=settings,
+                         clock=clock, sleep=sleep, hold={}, speed=recovery.recovery_speed(settings, watched))
+        return True
+
+    result.held_until = hold.hold_until_released(guard, refs, settings=settings, sleep=sleep, watch=watch) or ""
+    return sample()
 
 
 # --------------------------------------------------------------------------- plot

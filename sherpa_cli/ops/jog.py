@@ -21,7 +21,7 @@ from sherpa_cli.elmo.faults import StatusRegister, decode_sr, describe_mf
 from sherpa_cli.elmo.protocol import UM_POSITION, UM_TORQUE
 from sherpa_cli.errors import SafetyError, UsageError
 from sherpa_cli.joints.units import counts_to_rad
-from sherpa_cli.motion import recovery, stopping
+from sherpa_cli.motion import hold
 from sherpa_cli.motion.axis import Axis, profile_speed
 from sherpa_cli.motion.blocked import StallWatch, blocked_error
 from sherpa_cli.motion.guard import MotionGuard
@@ -157,12 +157,8 @@ def run_jog(session: ArmSession, target: Axis, req: MoveRequest, *, settings: Mo
         held = req.hold and state.get("holding")
         if not held and not (req.mode == "velocity" and req.duration is None and state["t0"] is not None):
             raise MotionInterrupted(guard.report) from exc  # the CLI shows how it stopped
-        interrupted = True  # Ctrl-C is how an open-ended velocity jog is meant to end
-        if not guard.report.ok:  # ... but a stop or restore that failed is never hidden behind it
-            problems = [f"{d.drive}: {p}" for d in guard.report.drives for p in d.problems]
-            raise SafetyError("the stop after the motion did not go cleanly: " + "; ".join(problems),
-                              hint="check the drives with `sherpa monitor --once`; `sherpa stop` stops them all",
-                              motion_report=guard.report) from exc
+        interrupted = True  # Ctrl-C is how an open-ended velocity jog or a hold is meant to end
+        hold.ctrl_c_ends_hold(guard.report, exc)
     except BaseException as exc:
         carried = with_report(exc, guard.report)  # the CLI shows how the guard stopped the motors
         if carried is exc:
@@ -173,7 +169,7 @@ def run_jog(session: ArmSession, target: Axis, req: MoveRequest, *, settings: Mo
                      start_counts=state["start"], end_counts=stopped.position, target_counts=state["target"],
                      command=state["command"],
                      duration=state["t_end"] - state["t0"] if state["t0"] is not None else 0.0,
-                     ended_by=("held until Ctrl-C" if state.get("holding") else "Ctrl-C") if interrupted
+                     ended_by=(hold.HELD_UNTIL_CTRL_C if state.get("holding") else "Ctrl-C") if interrupted
                      else state["ended_by"], cpr=target.cpr, stop=guard.report,
                      breach=state.get("breach"), recovered_to=state.get("recovered_to"), calibration=cal)
 
@@ -280,25 +276,19 @@ def _hold(guard: MotionGuard, c: DriveClient, target: Axis, req: MoveRequest, se
     ends it (a normal end) or the motor is switched off (`sherpa stop`: also a normal end)."""
     ref = target.ref
     if req.mode != "position":
-        stopping.send_stop(c, unit_mode=guard.unit_mode(ref), method=settings.stop_method, pulse=guard.check)
-        recovery.wait_standstill({ref.name: c}, settings, clock, sleep, guard.check, before="the hold")
-        here = int(c.get("PX"))
-        guard.enable(ref, UM_POSITION)
-        c.set("PA", 0, here)
-        c.execute("BG")
+        here = hold.hold_in_place(guard, [ref], settings=settings, clock=clock, sleep=sleep)[ref.name]
         state["command"] += f", then held at PA={here}"
     state["holding"] = True
-    while True:
-        guard.check()
+
+    def watch() -> bool:
         px = int(guard.query(ref, "PX"))
         if on_progress is not None:
             on_progress(JogProgress(clock() - state["t0"], px, counts_to_rad(px, target.cpr) if target.cpr else None))
-        if target.joint is not None and limit_breach(guard, c, target, px, settings, clock, sleep, state):
-            return
-        if not decode_sr(int(guard.query(ref, "SR"))).motor_on:
-            state["ended_by"] = "held until the motor was switched off (sherpa stop)"
-            return
-        sleep(settings.poll_interval)
+        return target.joint is not None and limit_breach(guard, c, target, px, settings, clock, sleep, state)
+
+    ended = hold.hold_until_released(guard, [ref], settings=settings, sleep=sleep, watch=watch)
+    if ended is not None:
+        state["ended_by"] = ended
 
 
 def _move_bound(c: DriveClient, target: Axis, distance: int, speed: int) -> float:

@@ -33,7 +33,7 @@ from sherpa_cli.bus.targets import DriveRef
 from sherpa_cli.config.model import ArmConfig
 from sherpa_cli.elmo.protocol import UM_POSITION, UM_TORQUE
 from sherpa_cli.errors import SafetyError, UsageError
-from sherpa_cli.motion import calibration, limit_watch, recovery
+from sherpa_cli.motion import calibration, hold, limit_watch, recovery
 from sherpa_cli.motion.axis import Axis, move_time_bound, profile_speed
 from sherpa_cli.motion.blocked import blocked_error
 from sherpa_cli.motion.limit_watch import Breach
@@ -186,6 +186,8 @@ class JogResult:
     guard_lines: list[str] = field(default_factory=list)
     stop: dict[str, Any] = field(default_factory=dict)  # the guard's report (GuardReport.as_json)
     joint_cpr: dict[str, int] = field(default_factory=dict)  # cpr of each watched joint
+    held_at: dict[str, int] | None = None  # --hold: the PA each motor held (None: not held)
+    held_until: str = ""  # --hold: how the hold ended (motion/hold.py)
 
     @property
     def ok(self) -> bool:
@@ -202,6 +204,7 @@ class JogResult:
             "calibration": [c.as_dict() for c in self.calibration],
             "limit": [b.as_dict() for b in self.breaches], "recovered_to": dict(self.recovered_to),
             "held_correction": dict(self.held_correction), "stop": dict(self.stop),
+            **({"hold": {"at": dict(self.held_at), "ended_by": self.held_until}} if self.held_at is not None else {}),
         }
 
 
@@ -245,7 +248,8 @@ def run(session: ArmSession, axis: Axis, request: MoveRequest, *,
     """Plan, then run the jog inside the motion guard with the limit watch; the guard stops every
     motor on the way out. A breach stops the jog at once and brings the joint back (position mode)
     to the nearest edge of its normal range; the result says so (``ok`` False). ``on_progress``
-    gets the watched joints' positions (counts) at every sample."""
+    gets the watched joints' positions (counts) at every sample. ``request.hold``: after the move
+    every motor holds where it stands (motion/hold.py) until Ctrl-C or `sherpa stop`, both normal ends."""
     from sherpa_cli.motion.guard import MotionGuard
     from sherpa_cli.motion.settings import MotionSettings
 
@@ -263,7 +267,7 @@ def run(session: ArmSession, axis: Axis, request: MoveRequest, *,
     guard = factory(session, refs, settings=settings, clock=clock, sleep=sleep, on_event=on_event)
     try:
         final = _run_guarded(guard, session, cfg, axis, p, by_name, settings, joints_start, result, clock, sleep,
-                             on_progress)
+                             on_progress, request.hold)
     except BaseException as exc:
         carried = with_report(exc, guard.report)  # the CLI shows how the guard stopped the motors
         if carried is exc:
@@ -281,10 +285,39 @@ def run(session: ArmSession, axis: Axis, request: MoveRequest, *,
 def _run_guarded(guard: MotionGuard, session: ArmSession, cfg: ArmConfig, axis: Axis, p: JogPlan,
                  by_name: Mapping[str, DriveRef], settings: MotionSettings, joints_start: Mapping[str, int], result: JogResult,
                  clock: Callable[[], float], sleep: Callable[[float], None],
-                 on_progress: Callable[[Mapping[str, int]], None] | None = None) -> dict[str, int]:
+                 on_progress: Callable[[Mapping[str, int]], None] | None = None,
+                 hold_after: bool = False) -> dict[str, int]:
+    """The jog inside the guard, then (``hold_after``, no breach) the hold; a Ctrl-C that ends the
+    hold is a normal end, the positions then read from the guard's stop report."""
+    try:
+        with guard:
+            final = _move_guarded(guard, session, cfg, axis, p, by_name, settings, joints_start, result, clock,
+                                  sleep, on_progress, hold_after)
+    except KeyboardInterrupt as exc:
+        if result.held_at is None or result.breaches:
+            raise
+        hold.ctrl_c_ends_hold(guard.report, exc)  # how a hold is meant to end
+        result.held_until = hold.HELD_UNTIL_CTRL_C
+        stopped = hold.positions(guard.report)
+        final = {d: _px_after(session, cfg, d, stopped.get(d)) for d in axis.sensed}
+    return final
+
+
+def _px_after(session: ArmSession, cfg: ArmConfig, drive: str, known: int | None) -> int:
+    """Where a motor stands after the guard's exit: its stop report's PX, else read again."""
+    if known is not None:
+        return known
+    (ref,) = _refs(cfg, (drive,))
+    return int(session.client(ref).get("PX"))
+
+
+def _move_guarded(guard: MotionGuard, session: ArmSession, cfg: ArmConfig, axis: Axis, p: JogPlan,
+                  by_name: Mapping[str, DriveRef], settings: MotionSettings, joints_start: Mapping[str, int],
+                  result: JogResult, clock: Callable[[], float], sleep: Callable[[float], None],
+                  on_progress: Callable[[Mapping[str, int]], None] | None, hold_after: bool) -> dict[str, int]:
     from sherpa_cli.motion import pair_start
 
-    with guard, contextlib.ExitStack() as stack:
+    with contextlib.ExitStack() as stack:
         clients = {d: guard.client(by_name[d]) for d in axis.drives}
         # a Σ/Δ joint starts both motors together, as `diffdrive move` does (motion.pair_start)
         method = pair_start.pair_settings(cfg)[0] if axis.kind in ("sigma", "delta") else "sequential"
@@ -363,7 +396,34 @@ def _run_guarded(guard: MotionGuard, session: ArmSession, cfg: ArmConfig, axis: 
                 # start and stop skew between the two motors shifts the held joint a little (seed
                 # Fig. 9.10/9.11): put it back, keeping the moved joint where it ended
                 final = _restore_held(guard, by_name, clients, axis, final, held, settings, clock, sleep, result)
+    # held after the pair start's exit: its stop frames (ST) went out and its RAM is back
+    if hold_after and not result.breaches:
+        final = _hold(guard, axis, by_name, clients, sample, held, settings, clock, sleep, result)
     return final
+
+
+def _hold(guard: MotionGuard, axis: Axis, by_name: Mapping[str, DriveRef], clients: Mapping[str, DriveClient],
+          sample: Callable[[], dict[str, int]], held: Mapping[str, int], settings: MotionSettings,
+          clock: Callable[[], float], sleep: Callable[[float], None], result: JogResult) -> dict[str, int]:
+    """--hold: every motor of the jog holds where it stands (motion/hold.py), the limit watch of the
+    Σ/Δ joints on, until Ctrl-C (raised) or `sherpa stop`."""
+    refs = [by_name[d] for d in axis.drives]
+    result.held_at = hold.hold_in_place(guard, refs, settings=settings, clock=clock, sleep=sleep, stop=False)
+
+    def watch() -> bool:
+        motors = sample()  # shows the joints (on_progress)
+        breaches = limit_watch.check(axis.watched, motors)
+        if not breaches:
+            return False
+        result.outcome = "limit"
+        result.breaches = list(breaches)
+        recovery.recover(guard, by_name, clients, axis.watched, breaches, sample, settings=settings, clock=clock,
+                         sleep=sleep, hold=held, speed=recovery.recovery_speed(settings, [axis, *axis.watched]))
+        result.recovered_to = {j.name: j.position(sample()) for j in axis.watched}
+        return True
+
+    result.held_until = hold.hold_until_released(guard, refs, settings=settings, sleep=sleep, watch=watch) or ""
+    return sample()
 
 
 def _slow(axis: Axis, settings: MotionSettings) -> int:
