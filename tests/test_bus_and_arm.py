@@ -61,6 +61,38 @@ def test_run_concurrently_overlaps_and_keeps_order():
     assert isinstance(outcomes["b"].error, RuntimeError) and not outcomes["b"].ok
 
 
+def test_a_signal_while_waiting_for_the_jobs_is_not_a_jobs_error():
+    """A SIGTERM (the entry's Terminated) that lands while the main thread waits for the jobs ends the
+    command; it was recorded as the first job's error and swallowed, so a scan ran on to exit 0
+    (seen under load: `sherpa --sim scan` ignored a SIGHUP at 0.2 s)."""
+    import os
+    import signal
+    import time
+
+    class Stop(BaseException):
+        pass
+
+    released = threading.Event()
+
+    def handler(signum, frame):
+        released.set()
+        raise Stop
+
+    def job():
+        time.sleep(0.2)  # the main thread is waiting for this job by then (else Stop comes from submit)
+        os.kill(os.getpid(), signal.SIGUSR1)
+        released.wait(5)
+        return "done"
+
+    previous = signal.signal(signal.SIGUSR1, handler)
+    try:
+        with pytest.raises(Stop):
+            run_concurrently({"a": job})
+    finally:
+        signal.signal(signal.SIGUSR1, previous)
+    assert released.is_set()
+
+
 def test_paced_network_keeps_the_send_gap():
     import can
 

@@ -46,8 +46,8 @@ def run_concurrently(jobs: Mapping[K, Callable[[], Any]], *, max_workers: int | 
     with ThreadPoolExecutor(max_workers=max_workers or len(jobs), thread_name_prefix="sherpa") as pool:
         futures = {key: pool.submit(job) for key, job in jobs.items()}
         for key, future in futures.items():
-            try:
-                outcomes[key] = Outcome(key, value=future.result())
-            except BaseException as exc:  # noqa: BLE001 - reported per key to the caller
-                outcomes[key] = Outcome(key, error=exc)
+            # what the job raised is its outcome; what this thread's wait raised (a SIGTERM's
+            # Terminated, a Ctrl-C) is not the job's: it propagates once every job has ended
+            error = future.exception()
+            outcomes[key] = Outcome(key, error=error) if error is not None else Outcome(key, value=future.result())
     return outcomes
