@@ -17,7 +17,7 @@ The guard's exit then stops, switches off and restores as on every other way out
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping, Sequence
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Protocol
 
 from sherpa_cli.elmo.faults import decode_sr, describe_mf
 from sherpa_cli.elmo.protocol import UM_POSITION
@@ -28,6 +28,7 @@ from sherpa_cli.motion.stopping import send_stop
 if TYPE_CHECKING:
     from sherpa_cli.bus.targets import DriveRef
     from sherpa_cli.motion.guard import MotionGuard
+    from sherpa_cli.motion.limit_watch import Breach
     from sherpa_cli.motion.report import GuardReport
     from sherpa_cli.motion.settings import MotionSettings
 
@@ -91,6 +92,24 @@ def ctrl_c_ends_hold(report: GuardReport, exc: BaseException) -> None:
         raise SafetyError("the stop after the motion did not go cleanly: " + "; ".join(problems),
                           hint="check the drives with `sherpa monitor --once`; `sherpa stop` stops them all",
                           motion_report=report) from exc
+
+
+class Held(Protocol):
+    """A moving command's result that may end in a hold (ops/joint_jog.py, ops/diffdrive.py)."""
+    held_at: dict[str, int] | None
+    held_until: str
+    breaches: list[Breach]
+
+
+def ended_hold(result: Held, report: GuardReport, exc: KeyboardInterrupt) -> Mapping[str, int | None]:
+    """A Ctrl-C that reached the command: the normal end of its hold (then ``result.held_until`` says
+    so, and where the guard's stop found each motor is returned), else raised again (a Ctrl-C during
+    the move itself, or after a limit breach, ends the command as interrupted)."""
+    if result.held_at is None or result.breaches:
+        raise exc
+    ctrl_c_ends_hold(report, exc)
+    result.held_until = HELD_UNTIL_CTRL_C
+    return positions(report)
 
 
 def positions(report: GuardReport) -> Mapping[str, int | None]:

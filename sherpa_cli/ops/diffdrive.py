@@ -591,11 +591,7 @@ def run_move(session: ArmSession, pair: PairConfig, request: PairTarget, *,
         try:
             guarded()
         except KeyboardInterrupt as exc:
-            if result.held_at is None or result.breaches:
-                raise
-            hold.ctrl_c_ends_hold(guard.report, exc)  # how a hold is meant to end
-            result.held_until = hold.HELD_UNTIL_CTRL_C
-            stopped = hold.positions(guard.report)
+            stopped = hold.ended_hold(result, guard.report, exc)
             box["final"] = {d: stopped.get(d) if stopped.get(d) is not None else box["final"][d] for d in drives}
 
     def guarded() -> None:

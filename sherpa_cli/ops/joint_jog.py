@@ -294,11 +294,7 @@ def _run_guarded(guard: MotionGuard, session: ArmSession, cfg: ArmConfig, axis: 
             final = _move_guarded(guard, session, cfg, axis, p, by_name, settings, joints_start, result, clock,
                                   sleep, on_progress, hold_after)
     except KeyboardInterrupt as exc:
-        if result.held_at is None or result.breaches:
-            raise
-        hold.ctrl_c_ends_hold(guard.report, exc)  # how a hold is meant to end
-        result.held_until = hold.HELD_UNTIL_CTRL_C
-        stopped = hold.positions(guard.report)
+        stopped = hold.ended_hold(result, guard.report, exc)
         final = {d: _px_after(session, cfg, d, stopped.get(d)) for d in axis.sensed}
     return final
 
