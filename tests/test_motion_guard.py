@@ -162,6 +162,48 @@ def test_signal_to_the_process_stops_and_restores(cfg, signum):
     assert signal.getsignal(signum) is signal.SIG_DFL
 
 
+class LateSignal(Exception):
+    pass
+
+
+def test_a_signal_during_the_stop_of_a_motion_that_ended_is_delivered_after_the_stop(cfg):
+    """A SIGTERM that comes while the guard stops a motion that ended by itself must not cut the
+    stop short, nor be lost (an exit 0): once everything is back, it goes to the handler from before
+    the guard. It is sent from another thread, as the kernel may hand it to any thread that does
+    not block it while the main thread's stop sequence does."""
+    def late(signum, frame):
+        raise LateSignal(signal.Signals(signum).name)
+
+    def on_event(text):
+        if not (g._exiting and threading.current_thread() is threading.main_thread()) or sent:
+            return
+        sent.append(text)
+        killer = threading.Thread(target=os.kill, args=(os.getpid(), signal.SIGTERM))
+        killer.start()
+        killer.join()
+        deadline = time.monotonic() + 5
+        while g._late_signal is None:  # the Python handler runs on this thread, between two bytecodes
+            assert time.monotonic() < deadline, "the SIGTERM never reached the guard's handler"
+            time.sleep(0.001)
+
+    sent: list[str] = []
+    previous = signal.signal(signal.SIGTERM, late)
+    try:
+        with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
+            ref = resolve_target(cfg, "drive1")
+            g = MotionGuard(s, [ref], settings=MotionSettings.from_config(cfg), on_event=on_event)
+            with pytest.raises(LateSignal, match="SIGTERM"):
+                with g:
+                    move(g, ref, 2000)
+            assert sent, "the guard's stop sequence reported no event"
+            assert g.report.reason == "end"  # the motion had ended: the signal stopped nothing
+            assert g.report.drives[0].motor_off
+            assert_stopped_and_restored(s)
+            assert signal.getsignal(signal.SIGTERM) is late  # the handler from before is back
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+
+
 def test_a_drive_in_fault_is_refused_with_the_decoded_reason(cfg):
     with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
         with s.sim.lock:

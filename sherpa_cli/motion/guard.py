@@ -127,6 +127,7 @@ class MotionGuard:
         # signals
         self._signal: str | None = None
         self._exiting = False
+        self._late_signal: int | None = None  # arrived while stopping: delivered once everything is back
         self._old_handlers: dict[int, Any] = {}
 
     # -- public API -------------------------------------------------------------------------------
@@ -191,6 +192,11 @@ class MotionGuard:
             finally:
                 self._unblock_signals(blocked)
         problems = [f"{d.drive}: {p}" for d in self.report.drives for p in d.problems]
+        if exc_type is None and not problems and self._late_signal is not None:
+            # the motion ended by itself and a signal came during its stop: the stop was not cut
+            # short, and now the signal is a signal outside the guard (its handler from before,
+            # the CLI's 130/143/129), never a silent exit 0
+            signal.raise_signal(self._late_signal)
         if exc_type is None and problems:
             raise SafetyError("the stop after the motion did not go cleanly: " + "; ".join(problems),
                               hint="check the drives with `sherpa monitor --once`; `sherpa stop` stops them all")
@@ -764,8 +770,12 @@ class MotionGuard:
     def _on_signal(self, signum: int, frame: FrameType | None) -> None:
         name = signal.Signals(signum).name
         if self._exiting:
-            # already stopping: a second Ctrl-C or SIGTERM must not cut the stop sequence short
+            # already stopping: a second Ctrl-C or SIGTERM must not cut the stop sequence short.
+            # Kept for after the stop: blocking the signal in this thread does not stop the kernel
+            # handing it to another thread, whose Python handler still runs here.
             self._event(f"{name} received while stopping: still stopping")
+            if self._late_signal is None:
+                self._late_signal = signum
             return
         if signum == signal.SIGINT:
             raise KeyboardInterrupt
