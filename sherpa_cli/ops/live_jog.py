@@ -170,8 +170,8 @@ class LiveJog:
         self.guard.__enter__()
         try:
             self.tick()
-        except BaseException:
-            self.guard.__exit__(None, None, None)
+        except BaseException as exc:
+            self.guard.__exit__(type(exc), exc, exc.__traceback__)  # the stop says why (error, Ctrl-C)
             raise
         return self
 
