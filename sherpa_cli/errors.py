@@ -141,3 +141,38 @@ class PrivilegeError(SherpaError):
     """The operation needs a privilege this process lacks (CAP_NET_ADMIN); nothing was changed (exit 6)."""
 
     exit_code = ExitCode.PRIVILEGE
+
+
+class Terminated(BaseException):
+    """SIGTERM or SIGHUP while a command runs outside the motion guard (cli/entry.py); BaseException,
+    like KeyboardInterrupt, so no ``except Exception`` swallows it and no recipe step turns it into a result."""
+
+    def __init__(self, signum: int) -> None:
+        import signal
+
+        super().__init__(signal.Signals(signum).name)
+        self.signum = signum
+
+
+# The signal the process entry turned into Terminated. A signal handler's exception can be lost:
+# CPython drops it when the handler runs inside C code that does not pass the signal check's error
+# on (seen: a SIGHUP while the compiler of a module being imported ran; `sherpa --sim scan` then
+# ran to the end and exited 0). The record lets the entry end with the signal's code anyway, and a
+# motion guard refuse to start after a signal that was lost on the way.
+_signal_received: int | None = None
+
+
+def note_signal(signum: int | None) -> None:
+    """The entry's record (None: forget it, for a new command in the same process)."""
+    global _signal_received
+    _signal_received = signum
+
+
+def signal_received() -> int | None:
+    return _signal_received
+
+
+def raise_if_signalled() -> None:
+    """Terminated if the entry received SIGTERM or SIGHUP during this command (before anything moves)."""
+    if _signal_received is not None:
+        raise Terminated(_signal_received)

@@ -132,3 +132,101 @@ def test_a_joint_stops_at_its_hard_stop(tmp_path, monkeypatch):
         time.sleep(0.05)
         assert session.sim.drives["drive1"].position == 240  # overshoot range edge of example 1
         assert client.get("PX") == 240
+
+
+class _Stop(BaseException):
+    pass
+
+
+def _raising(signum, frame):
+    raise _Stop(signum)
+
+
+def test_a_signal_while_the_buses_close_is_delivered_after_every_bus_is_closed():
+    """A SIGTERM half-way through closing left the other buses open (python-can's "VirtualBus was
+    not properly shut down" at exit, seen with `sherpa --sim scan` and SIGHUP): the close runs to
+    its end and the signal goes to the handler from before afterwards."""
+    import os
+    import signal
+    from types import SimpleNamespace
+
+    from sherpa_cli.bus.links import close_links
+
+    closed: list[str] = []
+
+    def network(name, signal_me):
+        def disconnect():
+            if signal_me:
+                os.kill(os.getpid(), signal.SIGTERM)
+                time.sleep(0.05)  # the handler runs on this (the main) thread meanwhile
+            closed.append(name)
+        return SimpleNamespace(notifier=None, disconnect=disconnect)
+
+    links = {name: SimpleNamespace(network=network(name, name == "can0")) for name in ("can0", "can1", "can2")}
+    previous = signal.signal(signal.SIGTERM, _raising)
+    try:
+        with pytest.raises(_Stop):
+            close_links(links)  # type: ignore[arg-type]
+        assert closed == ["can0", "can1", "can2"]
+        assert signal.getsignal(signal.SIGTERM) is _raising
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+
+
+def test_signals_held_leave_an_ignored_signal_ignored_and_deliver_nothing_without_one():
+    import signal
+
+    from sherpa_cli.bus.held_signals import signals_held
+
+    previous = signal.signal(signal.SIGHUP, signal.SIG_IGN)
+    try:
+        with signals_held():
+            assert signal.getsignal(signal.SIGHUP) == signal.SIG_IGN
+            signal.raise_signal(signal.SIGHUP)
+        assert signal.getsignal(signal.SIGHUP) == signal.SIG_IGN
+    finally:
+        signal.signal(signal.SIGHUP, previous)
+
+
+@pytest.mark.parametrize("where", ["building the SDO servers", "waiting for the pumps"])
+def test_a_signal_while_the_in_process_arm_starts_leaves_no_bus_open(monkeypatch, where):
+    """A Terminated half-way through SimArm.start (seen: SIGHUP at 0.5 s of `sherpa --sim scan`) stops
+    the pumps it started and closes every bus it had opened."""
+    import can
+
+    import sherpa_cli.sim.sdo as sim_sdo
+    from sherpa_cli.sim.arm import SimArm
+
+    arm = SimArm.in_process(load_config("configs/sherpa-arm.yaml"))
+    opened: list[can.BusABC] = []
+
+    def factory(**kwargs):
+        opened.append(can.Bus(**kwargs))
+        return opened[-1]
+
+    arm.bus_factory = factory
+    if where == "building the SDO servers":
+        real = sim_sdo.SdoServer
+        built: list[object] = []
+
+        def server(*args, **kwargs):
+            if len(built) == 3:
+                raise _Stop("SIGTERM")
+            built.append(real(*args, **kwargs))
+            return built[-1]
+
+        monkeypatch.setattr(sim_sdo, "SdoServer", server)
+    else:
+        real_wait = threading.Event.wait
+
+        def wait(self, timeout=None):
+            if threading.current_thread() is threading.main_thread():
+                raise _Stop("SIGTERM")
+            return real_wait(self, timeout)
+
+        monkeypatch.setattr(threading.Event, "wait", wait)
+    with pytest.raises(_Stop):
+        arm.start()
+    monkeypatch.undo()
+    assert len(opened) == 3 and all(bus._is_shutdown for bus in opened)
+    assert not [t for t in threading.enumerate() if t.name.startswith("sim-") and t.is_alive()]

@@ -87,3 +87,27 @@ def test_the_entry_installs_its_handlers_before_the_cli_is_imported(tmp_path):
     out = subprocess.run([sys.executable, "-c", code], cwd=ROOT, env=_env(tmp_path), capture_output=True, text=True,
                          timeout=60, check=True)
     assert out.stdout.split("\n")[:2] == ["[]", "True"], out.stdout + out.stderr
+
+
+def test_a_signal_whose_exception_was_lost_still_ends_the_command_with_its_code(tmp_path):
+    """CPython can drop a signal handler's exception (a SIGHUP while a module being imported was
+    compiled: `sherpa --sim scan` ran to the end and exited 0). The entry keeps the signal and ends
+    the command with its code and line even when its Terminated never arrived."""
+    code = ("import os, signal\n"
+            "import sherpa_cli.cli.app as app\n"
+            "from sherpa_cli.cli import entry\n"
+            "def run(args):\n"
+            "    try:\n"
+            "        os.kill(os.getpid(), signal.SIGHUP)\n"
+            "        for _ in range(100000): pass\n"
+            "    except BaseException:\n"
+            "        pass  # as the C code did: the handler's exception is gone\n"
+            "    print('ran to the end')\n"
+            "    return 0\n"
+            "app.run = run\n"
+            "entry.main([])\n")
+    out = subprocess.run([sys.executable, "-c", code], cwd=ROOT, env=_env(tmp_path), capture_output=True, text=True,
+                         timeout=60, check=False)
+    assert out.stdout == "ran to the end\n", out.stdout + out.stderr
+    assert out.returncode == 129, out.stdout + out.stderr
+    assert out.stderr == "error: interrupted by SIGHUP\n"

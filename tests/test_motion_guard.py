@@ -192,9 +192,8 @@ def test_a_signal_during_the_stop_of_a_motion_that_ended_is_delivered_after_the_
         with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
             ref = resolve_target(cfg, "drive1")
             g = MotionGuard(s, [ref], settings=MotionSettings.from_config(cfg), on_event=on_event)
-            with pytest.raises(LateSignal, match="SIGTERM"):
-                with g:
-                    move(g, ref, 2000)
+            with pytest.raises(LateSignal, match="SIGTERM"), g:
+                move(g, ref, 2000)
             assert sent, "the guard's stop sequence reported no event"
             assert g.report.reason == "end"  # the motion had ended: the signal stopped nothing
             assert g.report.drives[0].motor_off
@@ -626,3 +625,22 @@ def test_a_released_drive_not_taken_back_is_in_the_report_and_adopt_refuses_a_fa
         (r,) = g.report.drives
         assert r.drive == "drive1" and r.stopped_by == "motor was off"
         assert writes(s, "drive1") == ARMED + RESTORED  # nothing armed on the faulted drive
+
+
+def test_no_motion_after_a_sigterm_whose_exception_was_lost(cfg):
+    """The entry noted a SIGTERM whose Terminated never arrived (errors.py): a guard that starts after
+    it refuses before anything is sent, so nothing moves after the user asked to stop."""
+    from sherpa_cli.errors import Terminated, note_signal
+
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
+        ref = resolve_target(cfg, "drive1")
+        note_signal(signal.SIGTERM)
+        try:
+            with (pytest.raises(Terminated, match="SIGTERM"),
+                  MotionGuard(s, [ref], settings=MotionSettings.from_config(cfg))):
+                pytest.fail("the body must not run")
+        finally:
+            note_signal(None)
+        assert writes(s, "drive1") == [] and not sim_drive(s, "drive1").motor_on
+        with MotionGuard(s, [ref], settings=MotionSettings.from_config(cfg)):  # nothing left held
+            pass

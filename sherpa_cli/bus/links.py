@@ -10,6 +10,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 from sherpa_cli.bus.busmap import bus_kwargs
+from sherpa_cli.bus.held_signals import signals_held
 from sherpa_cli.config.model import ArmConfig, BusConfig
 from sherpa_cli.errors import CommunicationError
 
@@ -342,6 +343,11 @@ def close_links(links: Mapping[str, BusLink]) -> None:
     thread ending or gone) and shuts its bus down. One receive cycle for the session, not one
     per bus in turn.
     """
+    with signals_held():  # a signal half-way would leave a bus open (bus/held_signals.py)
+        _close_links(links)
+
+
+def _close_links(links: Mapping[str, BusLink]) -> None:
     for link in links.values():
         notifier = getattr(link.network, "notifier", None)
         if notifier is not None:

@@ -16,6 +16,7 @@ from dataclasses import replace
 from typing import TYPE_CHECKING, Any, Protocol
 
 from sherpa_cli.bus.busmap import BusTarget, apply_bus_map
+from sherpa_cli.bus.held_signals import signals_held
 from sherpa_cli.bus.links import BusLink, close_links, open_links
 
 # What a name means is decided in bus/targets.py (DriveRef lives there); ``resolve_target`` is
@@ -95,7 +96,8 @@ class ArmSession:
                 close_links(links)
         finally:
             if sim is not None:
-                sim.stop()
+                with signals_held():  # its pumps and buses: all stopped, whatever signal comes
+                    sim.stop()
 
     def client(self, ref: DriveRef) -> DriveClient:
         """The DriveClient of a drive (one per drive: it owns the drive's one-request-at-a-time lock)."""

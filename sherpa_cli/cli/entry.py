@@ -7,7 +7,7 @@ word. So this module imports nothing heavy and installs its handlers first:
 - while the CLI is imported (nothing was opened, nothing sent): one line and exit 128 + signal number
   at once (SIGINT 130, SIGTERM 143, SIGHUP 129);
 - while a command runs: SIGINT is Python's ``KeyboardInterrupt`` as before (the boundary reports
-  "interrupted", 130), SIGTERM and SIGHUP raise :class:`Terminated`, which unwinds the command through
+  "interrupted", 130), SIGTERM and SIGHUP raise :class:`sherpa_cli.errors.Terminated`, which unwinds the command through
   its ``finally`` blocks (buses closed, files and drives put back) to one line here and 143 / 129.
   The motion guard installs its own handlers while motors may move and puts these back after
   (motion/guard.py); so do ``log record`` and ``sim``.
@@ -23,15 +23,6 @@ import signal  # enum is loaded at start-up already; typing and collections.abc 
 import sys
 
 SIGNALS = tuple(s for s in (signal.SIGINT, signal.SIGTERM, getattr(signal, "SIGHUP", None)) if s is not None)
-
-
-class Terminated(BaseException):
-    """SIGTERM or SIGHUP while a command runs outside the motion guard; BaseException, like
-    KeyboardInterrupt, so no ``except Exception`` swallows it and no recipe step turns it into a result."""
-
-    def __init__(self, signum: int) -> None:
-        super().__init__(signal.Signals(signum).name)
-        self.signum = signum
 
 
 def exit_code(signum: int) -> int:
@@ -56,16 +47,14 @@ def _at_once(signum: int, frame: object) -> None:
     os._exit(exit_code(signum))
 
 
-_terminating = False
-
-
 def _unwind(signum: int, frame: object) -> None:
     """While a command runs: SIGTERM/SIGHUP end it like Ctrl-C does, through its clean-up."""
-    global _terminating
-    if _terminating:
+    from sherpa_cli import errors  # loaded with the CLI before this handler is installed
+
+    if errors.signal_received() is not None:
         return  # the first one is unwinding the command already: let the clean-up finish
-    _terminating = True
-    raise Terminated(signum)
+    errors.note_signal(signum)  # first: the raise below can be lost (errors.py)
+    raise errors.Terminated(signum)
 
 
 def install_at_once() -> None:
@@ -84,11 +73,17 @@ def main(argv: list[str] | None = None) -> None:
     install_at_once()  # first: the imports below take a while
     args = list(sys.argv[1:] if argv is None else argv)
     from sherpa_cli.cli.app import run  # the whole CLI
+    from sherpa_cli.errors import Terminated, note_signal, signal_received
 
     code: int | None = None
+    note_signal(None)
     try:
         install_while_running()
         code = run(args)
+        lost = signal_received()
+        if lost is not None:  # its Terminated never arrived (errors.py): the command still ends with it
+            _say(message(lost))
+            code = exit_code(lost)
     except Terminated as exc:
         if "--debug" in args:
             raise

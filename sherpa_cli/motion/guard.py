@@ -35,7 +35,15 @@ from sherpa_cli.bus import journal
 from sherpa_cli.bus.health import preflight
 from sherpa_cli.elmo.faults import decode_sr, describe_mf
 from sherpa_cli.elmo.protocol import UM_TORQUE
-from sherpa_cli.errors import CommunicationError, ExitCode, SafetyError, SdoError, SherpaError, UsageError
+from sherpa_cli.errors import (
+    CommunicationError,
+    ExitCode,
+    SafetyError,
+    SdoError,
+    SherpaError,
+    UsageError,
+    raise_if_signalled,
+)
 from sherpa_cli.motion.bus_watch import GuardBusWatch
 from sherpa_cli.motion.deadman import COMM_ERROR, CONSUMER, LOSS_ACTION, OBJECT_NAMES, SIZES, HostHeartbeat
 from sherpa_cli.motion.drive_watch import DriveWatch, DriveWatchError
@@ -133,6 +141,7 @@ class MotionGuard:
     # -- public API -------------------------------------------------------------------------------
 
     def __enter__(self) -> MotionGuard:
+        raise_if_signalled()  # a SIGTERM whose exception was lost before the guard (errors.py): no motion
         try:
             self._install_signals()
             for ref in self.refs:  # first, before anything is sent: a second command refuses here

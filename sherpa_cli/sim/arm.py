@@ -18,6 +18,7 @@ import functools
 import logging
 import math
 import threading
+import time
 import uuid
 from collections.abc import Callable, Mapping
 from typing import TYPE_CHECKING, Any, TextIO
@@ -441,27 +442,48 @@ class SimArm:
             self._close_buses()
             self._release_ram()
             raise
-        for name, d in self.cfg.drives.items():
-            if d.bus in self._buses:
-                send = self._sender(self._buses[d.bus])
-                drive = self.drives[name]
-                if drive.settings.sdo_latency_s > 0:
-                    send = functools.partial(_send_after_sdo_latency, drive)
-                self._sdo[name] = SdoServer(d.node, drive, send)
-        for name, (bus_name, drive) in self.extras.items():
-            if bus_name in self._buses:
-                self._sdo[name] = SdoServer(drive.node, drive, self._sender(self._buses[bus_name]))
-        powered = {bus_name: threading.Event() for bus_name in self._buses}
-        for bus_name in self._buses:
-            t = threading.Thread(target=self._pump, args=(bus_name, powered[bus_name]), name=f"sim-{bus_name}",
-                                 daemon=True)
-            self._threads.append(t)
-            t.start()
-        # The arm is powered before anyone connects: its power-up boot-ups are on the bus before
-        # start() returns, so a tool opening the bus next never hears them by the luck of timing.
-        for event in powered.values():
-            event.wait(timeout=2.0)
+        try:
+            for name, d in self.cfg.drives.items():
+                if d.bus in self._buses:
+                    send = self._sender(self._buses[d.bus])
+                    drive = self.drives[name]
+                    if drive.settings.sdo_latency_s > 0:
+                        send = functools.partial(_send_after_sdo_latency, drive)
+                    self._sdo[name] = SdoServer(d.node, drive, send)
+            for name, (bus_name, drive) in self.extras.items():
+                if bus_name in self._buses:
+                    self._sdo[name] = SdoServer(drive.node, drive, self._sender(self._buses[bus_name]))
+            powered = {bus_name: threading.Event() for bus_name in self._buses}
+            for bus_name in self._buses:
+                t = threading.Thread(target=self._pump, args=(bus_name, powered[bus_name]), name=f"sim-{bus_name}",
+                                     daemon=True)
+                self._threads.append(t)
+                t.start()
+            # The arm is powered before anyone connects: its power-up boot-ups are on the bus before
+            # start() returns, so a tool opening the bus next never hears them by the luck of timing.
+            for event in powered.values():
+                event.wait(timeout=2.0)
+        except BaseException:
+            # a signal (the entry's Terminated) or an error half-way: no bus left open, no pump running
+            self._abandon_start()
+            raise
         return self
+
+    def _abandon_start(self) -> None:
+        self._stop.set()
+        for t in self._threads:
+            deadline = time.monotonic() + 2
+            while True:
+                try:
+                    t.join(timeout=max(0.0, deadline - time.monotonic()))
+                    break
+                except RuntimeError:  # interrupted inside its start(): running, not yet marked started
+                    if time.monotonic() >= deadline:
+                        break
+                    time.sleep(0.001)
+        self._threads.clear()
+        self._close_buses()
+        self._release_ram()
 
     def stop(self) -> None:
         self._stop.set()
