@@ -2,10 +2,11 @@
 (ops/drive_record.py), armed for the move's one group BG; the coupling figures come from those recordings.
 
 On the simulated mismatched pair (tests/data/diffdrive-arm.yaml) the drives' recorders sample at the
-simulated drives' own servo instants, from the common BG on, so what they record does not depend on
-how fast the host runs. The moves themselves run in real time like tests/test_diffdrive.py (the guard's
-heartbeat thread is wall-clock); every recording lasts the move's time bound (motion/axis.py) and the
-test waits for it.
+simulated drives' own servo instants, from the common BG on. The moves run on the simulator's stepped
+time (sim/stepped.py; the CLI's through a recipe with `sim_time: stepped`, the others through
+motion_helpers.stepped_session): the simulated drives move only while the command waits, so where they
+end and what they record does not depend on how loaded the host is. Every recording lasts the move's
+time bound (motion/axis.py) of simulated time.
 """
 
 from __future__ import annotations
@@ -13,10 +14,11 @@ from __future__ import annotations
 import itertools
 import json
 import re
-import time
+import threading
 from pathlib import Path
 
 import pytest
+from motion_helpers import stepped_session
 
 from sherpa_cli.bus.session import ArmSession
 from sherpa_cli.config import load_config
@@ -44,17 +46,32 @@ def _ram(session):
                 for n, d in session.sim.drives.items()}
 
 
-def _move(cli, tmp_path, name, *args):
-    report = tmp_path / f"{name}.json"
-    result = cli(*MIS, "diffdrive", "move", "diff", *args, "--report", str(report), "--apply")
-    assert result.exit_code == 0, result.transcript()
-    return result, json.loads(report.read_text())
+# the three moves as one recipe on stepped time (the shared simulated arm moves only while a step waits);
+# each step's stdout is in the recipe's report
+MOVES = """sim_time: stepped
+vars:
+  out: moves-out
+steps:
+  - name: drive
+    run: diffdrive move diff --sigma 0.3 --source drive --report {out}/drive.json --apply
+  - name: back
+    run: diffdrive move diff --sigma 0 --apply
+  - name: can
+    run: diffdrive move diff --sigma 0.3 --report {out}/can.json --apply
+"""
 
 
 def test_a_drive_recorded_move_reports_the_coupling_of_a_can_recorded_one(cli, tmp_path):
-    drive, by_drive = _move(cli, tmp_path, "drive", "--sigma", "0.3", "--source", "drive")
-    m = SOURCE.search(drive.stdout)
-    assert m, drive.stdout
+    recipe, report = tmp_path / "moves.yaml", tmp_path / "recipe.json"
+    recipe.write_text(MOVES)
+    result = cli(*MIS, "recipe", "run", str(recipe), "--apply", "--set", f"out={tmp_path}", "--report", str(report))
+    assert report.exists(), result.transcript()
+    steps = {s["name"]: s for s in json.loads(report.read_text())["steps"]}
+    assert result.exit_code == 0, result.transcript() + json.dumps(steps, indent=1)[:4000]
+    assert all(s["exit_code"] == 0 for s in steps.values()), steps
+    by_drive, by_can = (json.loads((tmp_path / f"{n}.json").read_text()) for n in ("drive", "can"))
+    m = SOURCE.search(steps["drive"]["stdout"])
+    assert m, steps["drive"]["stdout"]
     hz, gap, samples = (int(x) for x in m.groups())
     assert hz == round(1 / (gap * 360e-6)) and by_drive["recording"]["samples"] == samples
     assert by_drive["recording"]["source"].startswith("drive recorders at ")
@@ -62,10 +79,7 @@ def test_a_drive_recorded_move_reports_the_coupling_of_a_can_recorded_one(cli, t
     assert samples >= 0.9 * by_drive["duration_s"] * hz
     assert abs(by_drive["sigma"]["error"]) <= 1 and by_drive["coupling"]["held"] == "roll"
 
-    back = cli(*MIS, "diffdrive", "move", "diff", "--sigma", "0", "--apply")
-    assert back.exit_code == 0, back.transcript()
-    can, by_can = _move(cli, tmp_path, "can", "--sigma", "0.3")
-    assert "recording: TPDO on SYNC at 500 Hz" in can.stdout
+    assert "recording: TPDO on SYNC at 500 Hz" in steps["can"]["stdout"]
     assert by_can["motors_start"] == by_drive["motors_start"] and by_can["motors_end"] == by_drive["motors_end"]
     # the same request on the same pair: the same coupling within a few counts (the TPDO recording
     # samples every 2 ms, the drives' every RG x 360 us)
@@ -76,9 +90,9 @@ def test_a_drive_recorded_move_reports_the_coupling_of_a_can_recorded_one(cli, t
 
 
 def test_the_recorder_settings_are_put_back_and_the_motors_stop_before_the_uploads(cfg):
-    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
+    with stepped_session(cfg) as (s, stepped):
         before = _ram(s)
-        r = diffdrive.run_move(s, cfg.pairs["diff"], PairTarget(delta="-60counts", source="drive"))
+        r = diffdrive.run_move(s, cfg.pairs["diff"], PairTarget(delta="-60counts", source="drive"), timebase=stepped)
         after = _ram(s)
         with s.sim.lock:
             drives = list(s.sim.drives.values())
@@ -98,16 +112,22 @@ def test_an_error_during_the_move_still_puts_the_recorder_settings_back(cfg):
     class Boom(Exception):
         pass
 
-    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
+    with stepped_session(cfg) as (s, stepped):
         before = _ram(s)
+        step, failed = stepped.sleep, []
 
-        def sleep(seconds):
-            if s.sim.drives["left"].motor.v:  # the motors run: fail inside the move's loop
+        def sleep(seconds):  # every wait of the move (the clients' too): the stepped clock's
+            step(seconds)
+            with s.sim.lock:
+                running = s.sim.drives["left"].motor.v != 0
+            if running and not failed and threading.current_thread() is threading.main_thread():
+                # the motors run: fail inside the move's loop, once (the stop waits too)
+                failed.append(seconds)
                 raise Boom()
-            time.sleep(seconds)
 
+        stepped.sleep = sleep
         with pytest.raises(Boom):
-            diffdrive.run_move(s, cfg.pairs["diff"], PairTarget(sigma="0.5", source="drive"), sleep=sleep)
+            diffdrive.run_move(s, cfg.pairs["diff"], PairTarget(sigma="0.5", source="drive"), timebase=stepped)
         assert _ram(s) == before
         with s.sim.lock:
             assert all(not d.motor_on and d.group_id == 0 for d in s.sim.drives.values())

@@ -1,18 +1,16 @@
-"""ops/live_jog.py on the simulated arm (in-process, real time like tests/test_jog_pair.py: the
-guard's dead-man heartbeat runs on a thread in wall-clock time, so the simulated drives do too)."""
+"""ops/live_jog.py on the simulated arm, in-process on stepped time (sim/stepped.py through
+motion_helpers.stepped_session): the live jog's clock and waits are the stepped clock's, so the
+simulated drives move only while a test waits (``run_for``, the stepped clock's ``sleep``) and how far they get, when a
+command expires and when the stall watch calls a joint blocked do not depend on the host's load."""
 
 from __future__ import annotations
 
-import time
-
 import pytest
-from motion_helpers import JOG_CONFIG, calibrate, motors_off
+from motion_helpers import JOG_CONFIG, calibrate, motors_off, stepped_session
 
-from sherpa_cli.bus.session import ArmSession
 from sherpa_cli.config import load_config
 from sherpa_cli.errors import DriveRefusedError
 from sherpa_cli.ops.live_jog import LiveJog, resolve_axes
-from sherpa_cli.sim.arm import SimArm
 
 CONFIG = JOG_CONFIG
 
@@ -22,20 +20,25 @@ def cfg():
     return load_config(CONFIG)
 
 
+def jog_on(stepped, session, axes, **kw):
+    """A LiveJog whose clock and waits are the stepped session's."""
+    return LiveJog(session, axes, clock=stepped.now, sleep=stepped.sleep, **kw)
+
+
 def run_for(live, seconds, every=0.03, until=None):
-    """Tick for ``seconds`` (or, with ``until``, until it holds: at most ``seconds``)."""
-    end = time.monotonic() + seconds
-    while time.monotonic() < end:
+    """Tick for ``seconds`` of simulated time (or, with ``until``, until it holds: at most ``seconds``)."""
+    end = live.clock() + seconds
+    while live.clock() < end:
         live.tick()
         if until is not None and until():
             break
-        time.sleep(every)
+        live.sleep(every)
     return live.tick()
 
 
 def test_velocity_expires_without_a_new_command_and_exit_stops_everything(cfg):
-    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
-        with LiveJog(s, resolve_axes(cfg, ["j1"]), keepalive=0.3) as live:
+    with stepped_session(cfg) as (s, stepped):
+        with jog_on(stepped, s, resolve_axes(cfg, ["j1"]), keepalive=0.3) as live:
             start = live.state["j1"].counts
             live.set_velocity("j1", 2000)
             assert "j1" in live.running
@@ -50,13 +53,13 @@ def test_velocity_expires_without_a_new_command_and_exit_stops_everything(cfg):
 
 
 def test_step_refused_uncalibrated_then_moves_a_pair_joint_and_the_other_holds(cfg):
-    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
-        with LiveJog(s, resolve_axes(cfg, ["diff"])) as live:
+    with stepped_session(cfg) as (s, stepped):
+        with jog_on(stepped, s, resolve_axes(cfg, ["diff"])) as live:
             assert set(live.axes) == {"pitch", "roll"}
             assert "not sent" not in live.step("pitch", 300) and "calibrated" in live.state["pitch"].note
             assert "pitch" not in live.running
         calibrate(s, "left", "right")
-        with LiveJog(s, resolve_axes(cfg, ["pitch", "roll"])) as live:
+        with jog_on(stepped, s, resolve_axes(cfg, ["pitch", "roll"])) as live:
             roll0 = live.state["roll"].counts
             live.step("pitch", 300)
             state = run_for(live, 0.5)
@@ -66,8 +69,8 @@ def test_step_refused_uncalibrated_then_moves_a_pair_joint_and_the_other_holds(c
 
 
 def test_a_command_further_out_than_the_normal_edge_is_not_sent(cfg):
-    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
-        with LiveJog(s, resolve_axes(cfg, ["j1"]), keepalive=5.0) as live:
+    with stepped_session(cfg) as (s, stepped):
+        with jog_on(stepped, s, resolve_axes(cfg, ["j1"]), keepalive=5.0) as live:
             live.set_velocity("j1", 4000)  # toward +1900 (normal high edge: 2000 - 100)
             state = run_for(live, 0.6)
             assert "j1" not in live.running and "edge" in state["j1"].note
@@ -80,8 +83,8 @@ def test_a_command_further_out_than_the_normal_edge_is_not_sent(cfg):
 
 
 def test_the_full_range_watch_stops_everything_and_brings_the_joint_back(cfg):
-    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
-        with LiveJog(s, resolve_axes(cfg, ["j1"]), keepalive=5.0, tick_period=0.0) as live:
+    with stepped_session(cfg) as (s, stepped):
+        with jog_on(stepped, s, resolve_axes(cfg, ["j1"]), keepalive=5.0, tick_period=0.0) as live:
             live.cfg = cfg.__class__(**{**cfg.__dict__, "joints": {**cfg.joints, "j1": cfg.joints["j1"].__class__(
                 **{**cfg.joints["j1"].__dict__, "decel": None})}})  # no stopping distance: the edge hold is late
             live.set_velocity("j1", 1000)
@@ -98,8 +101,8 @@ def test_the_full_range_watch_stops_everything_and_brings_the_joint_back(cfg):
 
 
 def test_torque_runs_until_the_keepalive_and_is_refused_above_the_continuous_limit(cfg):
-    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
-        with LiveJog(s, resolve_axes(cfg, ["j1"]), keepalive=0.4) as live:
+    with stepped_session(cfg) as (s, stepped):
+        with jog_on(stepped, s, resolve_axes(cfg, ["j1"]), keepalive=0.4) as live:
             assert "above the continuous limit" in live.set_torque("j1", 2.5)  # j1: 2.0 A continuous
             assert live.running == {}
             live.set_mode("j1", "torque")
@@ -132,15 +135,15 @@ def _speed(session, drive):
 def test_a_half_sent_velocity_command_is_still_stoppable(cfg, how):
     """Review R3: the second drive's BG of a pair is refused after the first motor started: the
     command is recorded before the first write, so stop, STOP ALL and the keepalive still stop it."""
-    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
+    with stepped_session(cfg) as (s, stepped):
         calibrate(s, "left", "right")
-        with LiveJog(s, resolve_axes(cfg, ["pitch", "roll"]), keepalive=0.3) as live:
+        with jog_on(stepped, s, resolve_axes(cfg, ["pitch", "roll"]), keepalive=0.3) as live:
             right = live._client("right")
             real = _refuse_bg(right)
             with pytest.raises(DriveRefusedError):
                 live.set_velocity("pitch", 2000)
             right.execute = real
-            time.sleep(0.15)
+            stepped.sleep(0.15)
             assert abs(_speed(s, "left")) > 500  # the first motor did start
             if how == "stop_all":
                 live.stop_all()  # Space in the view, a joystick dead-man release
@@ -154,13 +157,13 @@ def test_a_half_sent_velocity_command_is_still_stoppable(cfg, how):
 def test_stop_all_stops_every_guarded_motor_not_only_the_recorded_commands(cfg):
     """Review R3: STOP ALL sends a stop to every live drive of the session, so a motor running with
     no command on record (however it came to) stops too."""
-    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
-        with LiveJog(s, resolve_axes(cfg, ["j1"]), keepalive=5.0) as live:
+    with stepped_session(cfg) as (s, stepped):
+        with jog_on(stepped, s, resolve_axes(cfg, ["j1"]), keepalive=5.0) as live:
             live.set_velocity("j1", 2000)
             run_for(live, 0.3)
             live.running.clear()  # the record lost (the failure R3 was about)
             live.stop_all()
-            time.sleep(0.3)
+            stepped.sleep(0.3)
             assert abs(_speed(s, "yaw")) < 50
         assert motors_off(s)
 
@@ -184,9 +187,10 @@ def test_opening_a_session_moves_nothing_found_outside_its_range(tmp_path):
     brought back (no MO=1, PA, BG nobody asked for); a command further out is not sent, one back
     inward is, and the watch does not take over the joint while it comes back."""
     cfg = _shifted_range_config(tmp_path)
-    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
+    with stepped_session(cfg) as (s, stepped):
+        stepped.sleep(0.01)  # the simulated arm's first step puts the joint against its hard stop (600)
         x0 = px_of(s, "yaw")
-        with LiveJog(s, resolve_axes(cfg, ["j1"]), keepalive=0.3) as live:
+        with jog_on(stepped, s, resolve_axes(cfg, ["j1"]), keepalive=0.3) as live:
             state = run_for(live, 0.3)
             assert not _begins(s, "yaw") and abs(px_of(s, "yaw") - x0) < 1
             assert any("outside its full range" in m and "not brought back" in m for m in live.messages)
@@ -220,18 +224,18 @@ def _jam(motor):
 
 @pytest.mark.parametrize("mode", ["velocity", "torque"])
 def test_a_blocked_command_is_stopped_named_and_not_sent_again_the_same_way(cfg, mode):
-    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
-        with LiveJog(s, resolve_axes(cfg, ["j1"]), keepalive=0.3) as live:
+    with stepped_session(cfg) as (s, stepped):
+        with jog_on(stepped, s, resolve_axes(cfg, ["j1"]), keepalive=0.3) as live:
             live.set_mode("j1", mode)
             send = (lambda sign: live.set_velocity("j1", sign * 1000)) if mode == "velocity" else \
                 (lambda sign: live.set_torque("j1", sign * 0.5))
             with s.sim.lock:
                 _jam(s.sim.drives[cfg.joints["j1"].drive].motor)
-            end = time.monotonic() + 3 * live.settings.stall_time + 1.0
-            while time.monotonic() < end and not any("blocked" in m for m in live.messages):
+            end = live.clock() + 3 * live.settings.stall_time + 1.0
+            while live.clock() < end and not any("blocked" in m for m in live.messages):
                 send(1)  # the key held: the command refreshed
                 live.tick()
-                time.sleep(0.03)
+                live.sleep(0.03)
             (text,) = [m for m in live.messages if "blocked" in m]
             assert text.startswith("j1: blocked: no progress for") and "no end switch active" in text
             assert "j1" not in live.running and live.state["j1"].note == text
@@ -246,8 +250,8 @@ def test_a_command_eased_back_the_same_way_asks_only_the_slower_speeds_progress(
     speed was called blocked while the joint moved freely. A faster refresh does not raise it again."""
     from sherpa_cli.motion.blocked import min_progress_for
 
-    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
-        with LiveJog(s, resolve_axes(cfg, ["j1"]), keepalive=0.3) as live:
+    with stepped_session(cfg) as (s, stepped):
+        with jog_on(stepped, s, resolve_axes(cfg, ["j1"]), keepalive=0.3) as live:
             stall_time = live.settings.stall_time
             sign = -1 if live.state["j1"].counts > 0 else 1
             live.set_velocity("j1", sign * 3000)
@@ -264,8 +268,8 @@ def test_a_command_eased_back_the_same_way_asks_only_the_slower_speeds_progress(
 def test_a_position_step_replacing_a_velocity_command_is_not_stall_watched(cfg):
     """Review: a step after a velocity command kept that command's stall watch, which a slow step
     (or a real drive's ~1 s mode switch) could trip as "blocked"."""
-    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
-        with LiveJog(s, resolve_axes(cfg, ["j1"]), keepalive=0.5, allow_uncalibrated=True) as live:
+    with stepped_session(cfg) as (s, stepped):
+        with jog_on(stepped, s, resolve_axes(cfg, ["j1"]), keepalive=0.5, allow_uncalibrated=True) as live:
             sign = -1 if live.state["j1"].counts > 0 else 1
             live.set_velocity("j1", sign * 1000)
             assert "j1" in live.stalls

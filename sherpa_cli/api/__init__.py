@@ -2,11 +2,37 @@
 
 It sits above the procedures (ops) and below the CLI, whose commands are thin layers over it;
 it may wire in the simulator (``Arm.open(..., sim=True)``), as the CLI does.
+
+Each name is imported on first use: `sherpa scan` reaches ``Arm`` through here, and should not pay
+for the programming engine or the stop procedure it never runs (issue 26, benchmark ``scan``).
 """
 
-from sherpa_cli.api.arm import Arm
-from sherpa_cli.api.programming import ProgramReport
-from sherpa_cli.ops.scan import ScanReport
-from sherpa_cli.ops.stop import StopReport, StopResult
+from typing import TYPE_CHECKING
 
 __all__ = ["Arm", "ProgramReport", "ScanReport", "StopReport", "StopResult"]
+
+if TYPE_CHECKING:
+    from sherpa_cli.api.arm import Arm as Arm
+    from sherpa_cli.api.programming import ProgramReport as ProgramReport
+    from sherpa_cli.ops.scan import ScanReport as ScanReport
+    from sherpa_cli.ops.stop import StopReport as StopReport
+    from sherpa_cli.ops.stop import StopResult as StopResult
+
+#: public name -> the module that defines it
+_HOME = {"Arm": "sherpa_cli.api.arm", "ProgramReport": "sherpa_cli.api.programming",
+         "ScanReport": "sherpa_cli.ops.scan", "StopReport": "sherpa_cli.ops.stop", "StopResult": "sherpa_cli.ops.stop"}
+
+if not TYPE_CHECKING:  # hidden from mypy, which then still refuses a name that is not exported above
+
+    def __getattr__(name: str) -> object:
+        home = _HOME.get(name)
+        if home is None:
+            raise AttributeError(f"module 'sherpa_cli.api' has no attribute {name!r}")
+        import importlib
+
+        value = getattr(importlib.import_module(home), name)
+        globals()[name] = value  # once: later look-ups do not come back here
+        return value
+
+    def __dir__() -> list[str]:
+        return sorted([*globals(), *__all__])

@@ -14,13 +14,12 @@ from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
 from sherpa_cli.errors import SafetyError, SherpaError, UsageError
-from sherpa_cli.ops import program
-from sherpa_cli.ops.save_ledger import SaveLedger
 
 if TYPE_CHECKING:
     from sherpa_cli.bus.session import ArmSession
     from sherpa_cli.errors import Location
     from sherpa_cli.ops.program import ApplyResult, DrivePlan, DriveTarget, FlashProof
+    from sherpa_cli.ops.save_ledger import SaveLedger
 
 #: ``confirm_save(drives, proof)``: may these drives be written and saved (SV)? ``proof``: they are
 #: reset first to prove flash. Return False (or raise) to refuse; nothing is written then.
@@ -80,6 +79,8 @@ def check(targets: Sequence[DriveTarget], warnings: Sequence[str] = (), *, allow
           where: Callable[[str], Location | None] | None = None) -> list[str]:
     """Every value fits its command and nothing switches a protection off (unless allowed): raises
     before any I/O; returns the warnings to show (``warnings`` first)."""
+    from sherpa_cli.ops import program  # here, not above: `Arm` imports this module, `sherpa scan` too
+
     return [*warnings, *program.check_targets(targets, allow_disabled=allow_disabled, where=where)]
 
 
@@ -95,6 +96,9 @@ def run(session: ArmSession, targets: Sequence[DriveTarget], *, apply: bool, sav
     flash holds; the plan is read again from there, so only drives whose flash differs are written
     (and with ``save`` saved, then proven again).
     """
+    from sherpa_cli.ops import program
+    from sherpa_cli.ops.save_ledger import SaveLedger
+
     check_options(apply, save)
     # apply needs the serial too: the ledger remembers drives written but not saved
     plans = program.read_plans(session, targets, need_serial=need_serial or apply)

@@ -53,11 +53,12 @@ class AppState:
         builds the in-process arm instead of the default (SimArm.in_process's ``factory``);
         ``best_effort`` opens what can be opened (ArmSession.open)."""
         from sherpa_cli.bus.busmap import apply_bus_map, parse_bus_map
-        from sherpa_cli.bus.health import check_buses
         from sherpa_cli.bus.session import ArmSession
 
         shared = _shared_for(self)
         if shared is not None:
+            from sherpa_cli.bus.health import check_buses  # only a recipe's session: not `sherpa scan`'s start
+
             # a recipe step: the recipe's one session, opened (all buses) at the first step that needs it
             if shared.session is None:
                 shared.session = shared.stack.enter_context(shared.owner.session(sim_factory=shared.sim_factory()))
