@@ -114,8 +114,16 @@ def test_an_error_emcy_from_a_moving_drive_stops_every_drive_of_the_command(cfg,
         assert_all_stopped(s, g)
 
 
-def test_warning_class_emcys_are_counted_and_a_flood_never_stalls_the_command(cfg, other_node):
+def test_warning_class_emcys_are_counted_and_a_flood_never_stalls_the_command(tmp_path, other_node):
+    # The in-process simulator shares this process: on a loaded machine its pump, busy with the two
+    # floods of 3000 frames, once kept drive1's 20 ms heartbeat away 0.37 s and the silence watch
+    # stopped the command first. Heartbeats of 0.5 s (silent after 1.5 s) leave the floods the test.
+    path = tmp_path / "arm.yaml"
+    path.write_text(CONFIG.replace("drive1: {heartbeat_ms: 20}", "drive1: {heartbeat_ms: 500}\n"
+                                   "    drive2: {heartbeat_ms: 500}"), encoding="utf-8")
+    cfg = load_config(path)
     with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
+        assert [d.settings.heartbeat_ms for d in s.sim.drives.values()] == [500, 500]
         refs = [resolve_target(cfg, "drive1"), resolve_target(cfg, "drive2")]
         other = open_other(s, other_node)
         with pytest.raises(DriveWatchError, match="EMCY 0x2340: short circuit"), \
