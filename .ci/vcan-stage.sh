@@ -13,6 +13,8 @@
 #                             motion ones with subprocesses, and the whole-arm commissioning (about 4 min
 #                             there), in a 15-20x slower TCG guest)
 #        SHERPA_VCAN_CPUS     guest vCPUs (default 2: the simulator and the tests each get one)
+#        SHERPA_TEST_CONSUMER_MS  the commands' dead-man time in the guest (default 2000, the safe bound;
+#                             the bundled config's 500 ms elsewhere): see below
 #        SHERPA_VCAN_FULL=1   also run the cross-process tests deselected below
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -45,29 +47,35 @@ fi
 # 38 s, apply 38 s, save 27 s, backup 15 s, verify 28 s, flash proof 16 s; 4 min against 6 s over
 # python-can-remote: every step is 14 drives' interpreter traffic through a 15-20x slower Python on
 # both ends), well inside the per-test timeout; the stage's limit above counts it.
-deselect=()
-# Two cross-process tests need the jog's heartbeat thread on time while a third Python process starts
-# (an EMCY flood, program-limits): in the 15-20x slower emulated guest the thread starved past the
-# 500 ms consumer time and the drive's dead-man tripped first (correct dead-man behaviour, but the
-# tests' premise gone). Both run in the remote stage (python-can-remote) every CI.
-deselect+=(--deselect tests/test_drive_watch_crossprocess.py::test_an_emcy_flood_from_the_moving_drive_stops_the_jog
-           --deselect tests/test_motion_crossprocess.py::test_program_limits_during_a_jog_in_another_process_is_refused_with_exit_5)
-# The same starvation for the tests that run two sherpa processes beside the simulator, or a killed
-# command's successor while the first one's drives still time out (measured in the guest 2026-11-25:
-# "heartbeat lost" before the motor went on). They run in the remote stage every CI.
-deselect+=(--deselect "tests/test_killed_tool.py::test_a_killed_moving_command_is_refused_until_recover_puts_the_drive_back[diffdrive move]"
-           --deselect "tests/test_killed_tool.py::test_a_killed_moving_command_is_refused_until_recover_puts_the_drive_back[log step]"
-           --deselect tests/test_journal_crossprocess.py::test_a_killed_log_record_is_put_back_by_recover
-           --deselect tests/test_motion_crossprocess.py::test_two_motion_commands_on_one_bus_a_killed_or_frozen_one_stops_its_drive_the_other_keeps_running)
-if [ "${SHERPA_VCAN_FULL:-}" = 1 ]; then deselect=(); fi  # everything, the slow-guest ones included
+# The cross-process tests run a moving command beside the simulator and, meanwhile, start a third
+# Python process (program-limits, a second jog, the successor of a killed command) or flood the bus
+# with EMCYs. In the 15-20x slower guest that starved the moving command's heartbeat thread past the
+# bundled 500 ms consumer time (measured 2026-11-25: "heartbeat lost" before the test had acted), and
+# the drive's dead-man stopped it first: correct dead-man behaviour, but the tests' premise gone. So
+# the commands here arm their drives with a longer dead-man time (tests/conftest.py writes it into the
+# harness's config); the tests that time a trip read it back from that config and scale with it, and
+# the tests wait for the simulator's own "heartbeat lost" events rather than sleep a guessed time.
+consumer_ms=${SHERPA_TEST_CONSUMER_MS:-2000}
+# Still failing in the guest with 2000 ms (measured 2026-11-25 on a loaded 2-core host; they run in the
+# remote stage every CI):
+# - diffdrive move: both drives tripped ("heartbeat lost" twice, 2 s apart) before a motor went on,
+#   then the 0x2040 SDO went unanswered for 3 s (exit 3): no heartbeat at all for >2 s, not yet explained
+# - two motion commands, SIGSTOP: the frozen command's drive went off by MO=0, not by its dead-man
+# - EMCY flood: the 2000-frame flood starved the jog's heartbeat past 2 s; the dead-man tripped first
+# - program-limits: exit 0, it did not see the jog as moving the drive (not yet explained)
+deselect=(--deselect "tests/test_killed_tool.py::test_a_killed_moving_command_is_refused_until_recover_puts_the_drive_back[diffdrive move]"
+          --deselect "tests/test_motion_crossprocess.py::test_two_motion_commands_on_one_bus_a_killed_or_frozen_one_stops_its_drive_the_other_keeps_running[19]"
+          --deselect tests/test_drive_watch_crossprocess.py::test_an_emcy_flood_from_the_moving_drive_stops_the_jog
+          --deselect tests/test_motion_crossprocess.py::test_program_limits_during_a_jog_in_another_process_is_refused_with_exit_5)
+if [ "${SHERPA_VCAN_FULL:-}" = 1 ]; then deselect=(); fi  # everything, the ones above included
 # the guest sees this machine's files read-only, so the same interpreter and virtualenv work there
 python=$(command -v python)
 
 echo "CI: realbus tests on $interfaces in a QEMU guest ($cpus vCPUs, limit ${limit}s)" >&2
 set +e
 "$vm" -c "$cpus" -i "$interfaces,$spare" -t "$limit" -- \
-  env SHERPA_TEST_BUS="socketcan:$interfaces" SHERPA_VCAN_SPARE="$spare" "$python" -m pytest \
-  -m "realbus or vcan" --durations=5 -p no:randomly \
+  env SHERPA_TEST_BUS="socketcan:$interfaces" SHERPA_VCAN_SPARE="$spare" SHERPA_TEST_CONSUMER_MS="$consumer_ms" \
+  "$python" -m pytest -m "realbus or vcan" --durations=5 -p no:randomly \
   -o timeout="${SHERPA_VCAN_TEST_TIMEOUT:-900}" "${deselect[@]}" "$@"
 rc=$?
 set -e

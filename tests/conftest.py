@@ -224,13 +224,24 @@ def pytest_report_header(config: pytest.Config) -> str:
     return f"SHERPA_TEST_BUS: {config.stash[TEST_BUS_KEY].describe()}"
 
 
+# The dead-man time (ms) the commands against a separate simulator arm their drives with, if set; the
+# vcan stage sets it: in its QEMU guest a command's heartbeat thread can starve past the bundled 500 ms
+# while another Python process starts beside it, and the drive then trips before the test has acted.
+# Tests that time the dead-man read it back from the config (test_motion_crossprocess.Arm.consumer_s).
+CONSUMER_MS_ENV = "SHERPA_TEST_CONSUMER_MS"
+
+
 def _patient_config(tmp_dir: Path) -> str:
-    """The arm config with patient interpreter and SDO timeouts: the QEMU guest runs Python 15-20x slower."""
+    """The arm config with patient interpreter and SDO timeouts: the QEMU guest runs Python 15-20x slower;
+    and the dead-man time of SHERPA_TEST_CONSUMER_MS where set."""
     from sherpa_cli.config import dump_native, load_config
 
     cfg = load_config(ROOT / ARM_CONFIG)
     cfg = dataclasses.replace(cfg, protocol=dataclasses.replace(cfg.protocol, reply_timeout=2.0, retries=2,
                                                                 mo_confirm_timeout=20.0, sdo_timeout=3.0))
+    if os.environ.get(CONSUMER_MS_ENV):
+        cfg = dataclasses.replace(cfg, motion=dataclasses.replace(
+            cfg.motion, consumer_time_ms=int(os.environ[CONSUMER_MS_ENV])))
     path = tmp_dir / "arm.yaml"
     path.write_text(dump_native(cfg))
     return str(path)

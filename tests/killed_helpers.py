@@ -13,7 +13,7 @@ from dataclasses import dataclass
 import pytest
 from arm_harness import ArmProcess, TestBus
 from conftest import ROOT
-from test_motion_crossprocess import START_TIMEOUT, Arm
+from test_motion_crossprocess import EXIT_TIMEOUT, START_TIMEOUT, Arm
 
 from sherpa_cli.bus.busmap import apply_bus_map, parse_bus_map
 from sherpa_cli.bus.session import ArmSession, resolve_target
@@ -143,4 +143,8 @@ def wait_moving(arm_: Arm, cmd: Moving, since: float, proc, tmp_path) -> float:
                 if e["t"] >= since and e["event"].startswith("motor on"):
                     return e["t"]
         time.sleep(0.02)
-    raise AssertionError(f"`sherpa {' '.join(cmd.args)}` did not switch a motor on; events: {arm_.events()}")
+    proc.kill()
+    out, err = proc.communicate(timeout=EXIT_TIMEOUT)
+    events = {drive: arm_.events(drive) for drive in cmd.drives}
+    raise AssertionError(f"`sherpa {' '.join(cmd.args)}` did not switch a motor on (exit {proc.returncode}):\n"
+                         f"{out}\n{err}\nevents: {events}")

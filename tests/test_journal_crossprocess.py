@@ -50,9 +50,10 @@ def run(arm_, tmp_path, *args: str) -> tuple[int, str, str]:
 def test_a_killed_velocity_jog_is_refused_until_recover_puts_it_back(arm, tmp_path):
     before = snapshot(arm)
     proc, _ = start_jog(arm, tmp_path)
+    t_kill = time.monotonic()
     os.kill(proc.pid, signal.SIGKILL)
     finish(proc)
-    time.sleep(1.0)  # the drive's consumer trips (0.5 s)
+    arm.wait_trip((DRIVE,), t_kill)  # what `recover` is to report
     code, out, err = run(arm, tmp_path, "jog", JOINT, "--velocity", "0.1", "--for", "0.3", "--apply")
     assert code == 1, f"{out}\n{err}"
     assert f"{DRIVE} (can1:{NODE}): a motion command that did not finish (killed?) left temporary changes" in err

@@ -7,7 +7,6 @@ one simulator process for the module."""
 
 from __future__ import annotations
 
-import os
 import signal
 import time
 
@@ -15,7 +14,7 @@ import pytest
 from killed_helpers import MOVING, snapshot, wait_moving
 from killed_helpers import arm as arm
 from killed_helpers import shared_arm as shared_arm
-from test_motion_crossprocess import CONSUMER_S, finish, sherpa
+from test_motion_crossprocess import finish, sherpa
 
 pytestmark = [pytest.mark.realbus, pytest.mark.crossprocess]
 
@@ -31,9 +30,10 @@ def test_a_killed_moving_command_is_refused_until_recover_puts_the_drive_back(ar
         time.sleep(0.3)  # well into the motion
         assert proc.poll() is None, f"`{name}` ended before the kill:\n{finish(proc)}"
     finally:
-        os.kill(proc.pid, signal.SIGKILL)
+        t_kill = time.monotonic()
+        proc.send_signal(signal.SIGKILL)  # not os.kill: a command that already ended was reaped
         finish(proc)
-    time.sleep(2 * CONSUMER_S)  # the drive's dead-man trips
+    arm.wait_trip(cmd.drives, t_kill)  # what `recover` is to report
     jog = ("jog", cmd.joint, "--velocity", "0.1", "--for", "0.3", "--apply")
     code, out, err = finish(sherpa(arm, tmp_path, *jog))
     assert code == 1, f"{out}\n{err}"
