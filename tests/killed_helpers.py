@@ -12,7 +12,7 @@ from dataclasses import dataclass
 
 import pytest
 from arm_harness import ArmProcess, TestBus
-from conftest import ROOT
+from conftest import ROOT, _patient_config
 from test_motion_crossprocess import EXIT_TIMEOUT, START_TIMEOUT, Arm
 
 from sherpa_cli.bus.busmap import apply_bus_map, parse_bus_map
@@ -63,7 +63,9 @@ def shared_arm(arm_process, tmp_path_factory):
         yield arm_process
         return
     work = tmp_path_factory.mktemp("arm")
-    proc = ArmProcess(TestBus("remote"), ROOT, str(ROOT / "configs/sherpa-arm.yaml"), work)
+    # the harness's patient timeouts: on a loaded machine the served arm once missed the bundled
+    # 0.1 s reply timeout of the jog that follows `recover` (exit 3, not the killed tool's doing)
+    proc = ArmProcess(TestBus("remote"), ROOT, _patient_config(work), work)
     try:
         proc.start()
     except RuntimeError as exc:
