@@ -229,11 +229,15 @@ def pytest_report_header(config: pytest.Config) -> str:
 # while another Python process starts beside it, and the drive then trips before the test has acted.
 # Tests that time the dead-man read it back from the config (test_motion_crossprocess.Arm.consumer_s).
 CONSUMER_MS_ENV = "SHERPA_TEST_CONSUMER_MS"
+# The time (s) a command's loop may go without a sign of life before its heartbeat stops, if set; the
+# vcan stage sets it too: the guest's 1 s of the bundled config is 50-70 ms of a native machine, and a
+# jog whose loop waited that long beside a starting Python process stopped itself (MO=0) first.
+LIVENESS_S_ENV = "SHERPA_TEST_LIVENESS_S"
 
 
 def _patient_config(tmp_dir: Path) -> str:
     """The arm config with patient interpreter and SDO timeouts: the QEMU guest runs Python 15-20x slower;
-    and the dead-man time of SHERPA_TEST_CONSUMER_MS where set."""
+    and the dead-man time of SHERPA_TEST_CONSUMER_MS and the liveness of SHERPA_TEST_LIVENESS_S where set."""
     from sherpa_cli.config import dump_native, load_config
 
     cfg = load_config(ROOT / ARM_CONFIG)
@@ -242,6 +246,9 @@ def _patient_config(tmp_dir: Path) -> str:
     if os.environ.get(CONSUMER_MS_ENV):
         cfg = dataclasses.replace(cfg, motion=dataclasses.replace(
             cfg.motion, consumer_time_ms=int(os.environ[CONSUMER_MS_ENV])))
+    if os.environ.get(LIVENESS_S_ENV):
+        cfg = dataclasses.replace(cfg, motion=dataclasses.replace(
+            cfg.motion, liveness_timeout=float(os.environ[LIVENESS_S_ENV])))
     path = tmp_dir / "arm.yaml"
     path.write_text(dump_native(cfg))
     return str(path)
