@@ -61,10 +61,11 @@ consumer_ms=${SHERPA_TEST_CONSUMER_MS:-2000}
 # and a longer liveness: 1 s in the guest is 50-70 ms native, and a jog whose loop waited that long beside
 # a starting Python process stopped itself (MO=0) before the test acted (SIGKILL of one of two jogs)
 liveness_s=${SHERPA_TEST_LIVENESS_S:-5}
-# Still failing in the guest with 2000 ms (measured 2026-11-25 on a loaded 2-core host; they run in the
-# remote stage every CI):
-# - diffdrive move: both drives tripped ("heartbeat lost" twice, 2 s apart) before a motor went on,
-#   then the 0x2040 SDO went unanswered for 3 s (exit 3): no heartbeat at all for >2 s, not yet explained
+# Still failing in the guest with a 2000 ms dead-man and 5 s liveness (measured 2026-11-27 on a loaded
+# 2-core host; they run in the remote stage every CI):
+# - diffdrive move: "the command showed no sign of life (hung?)": its loop went 5 s of the guest
+#   (~0.3 s native) without a sign of life while both drives were being set up, so the heartbeat
+#   stopped and both drives tripped (EMCY 0x8130) before a motor went on; where it waits is not found yet
 # - two motion commands, SIGSTOP: the frozen command's drive went off by MO=0, not by its dead-man
 # - EMCY flood: the 2000-frame flood starved the jog's heartbeat past 2 s; the dead-man tripped first
 # - program-limits: exit 0, it did not see the jog as moving the drive (not yet explained)
