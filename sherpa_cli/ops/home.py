@@ -478,8 +478,10 @@ class _Runner:
                 assert sw is not None
                 pos = cal_position(joint, d)
             res.set_to[joint.name] = pos
-            if unit.kind == "home_switch" and _pins(c).get(sw.input):
-                # standing on the switch (a re-home ends there): a search from here sees no edge
+            if _pins(c).get(sw.input):
+                # standing on the switch (a re-home ends there), or past an end switch (a search
+                # interrupted at its edge): a search from here sees no edge, and toward an end switch
+                # it pushes into the end stop. Off it first, away from the stop.
                 off = 2 * _backoff(self.cfg, joint)
                 self.start_pr(guard, refs, {name: -d * off}, {name: speed})
                 self.wait(guard, refs, distance=off, speed=speed, homing=False, what=f"{joint.name}: off the switch")
