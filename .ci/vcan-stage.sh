@@ -17,6 +17,7 @@
 #                             the bundled config's 500 ms elsewhere): see below
 #        SHERPA_TEST_LIVENESS_S  the time a command's loop may go without a sign of life before its
 #                             heartbeat stops, in the guest (default 5; the bundled config's 1 s elsewhere)
+#        SHERPA_TEST_PAIR_RECORD_RATE  `diffdrive move`'s recording rate in the guest (default 50 Hz; 500 elsewhere)
 #        SHERPA_VCAN_FULL=1   also run the cross-process tests deselected below
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -61,6 +62,10 @@ consumer_ms=${SHERPA_TEST_CONSUMER_MS:-2000}
 # and a longer liveness: 1 s in the guest is 50-70 ms native, and a jog whose loop waited that long beside
 # a starting Python process stopped itself (MO=0) before the test acted (SIGKILL of one of two jogs)
 liveness_s=${SHERPA_TEST_LIVENESS_S:-5}
+# and `diffdrive move` records its pair at 50 Hz, not the bundled 500: the guest's simulator could not
+# answer 500 SYNCs a second beside the command's requests; its backlog grew until it lost the host's
+# heartbeats, and the drives' dead-man stopped the move before a motor went on (measured 2026-11-28)
+pair_rate=${SHERPA_TEST_PAIR_RECORD_RATE:-50}
 # Still failing in the guest with a 2000 ms dead-man and 5 s liveness (measured 2026-11-27 on a loaded
 # 2-core host; they run in the remote stage every CI):
 # - diffdrive move: "the command showed no sign of life (hung?)": its loop went 5 s of the guest
@@ -83,7 +88,7 @@ echo "CI: realbus tests on $interfaces in a QEMU guest ($cpus vCPUs, limit ${lim
 set +e
 "$vm" -c "$cpus" -i "$interfaces,$spare" -t "$limit" -- \
   env SHERPA_TEST_BUS="socketcan:$interfaces" SHERPA_VCAN_SPARE="$spare" SHERPA_TEST_CONSUMER_MS="$consumer_ms" \
-  SHERPA_TEST_LIVENESS_S="$liveness_s" \
+  SHERPA_TEST_LIVENESS_S="$liveness_s" SHERPA_TEST_PAIR_RECORD_RATE="$pair_rate" \
   "$python" -m pytest -m "realbus or vcan" --durations=5 -p no:randomly \
   -o timeout="${SHERPA_VCAN_TEST_TIMEOUT:-900}" "${deselect[@]}" "$@"
 rc=$?

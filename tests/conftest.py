@@ -233,11 +233,17 @@ CONSUMER_MS_ENV = "SHERPA_TEST_CONSUMER_MS"
 # vcan stage sets it too: the guest's 1 s of the bundled config is 50-70 ms of a native machine, and a
 # jog whose loop waited that long beside a starting Python process stopped itself (MO=0) first.
 LIVENESS_S_ENV = "SHERPA_TEST_LIVENESS_S"
+# The rate (Hz) `diffdrive move` records its pair at, if set (motion.pair_record_rate, 500 Hz bundled);
+# the vcan stage sets it lower: the guest's simulator cannot answer 500 SYNCs a second on top of the
+# command's requests, its backlog grew until it lost the host's heartbeats, and the drives stopped the
+# move before its motors went on.
+PAIR_RECORD_RATE_ENV = "SHERPA_TEST_PAIR_RECORD_RATE"
 
 
 def _patient_config(tmp_dir: Path) -> str:
     """The arm config with patient interpreter and SDO timeouts: the QEMU guest runs Python 15-20x slower;
-    and the dead-man time of SHERPA_TEST_CONSUMER_MS and the liveness of SHERPA_TEST_LIVENESS_S where set."""
+    and the dead-man time of SHERPA_TEST_CONSUMER_MS, the liveness of SHERPA_TEST_LIVENESS_S and the pair
+    recording rate of SHERPA_TEST_PAIR_RECORD_RATE where set."""
     from sherpa_cli.config import dump_native, load_config
 
     cfg = load_config(ROOT / ARM_CONFIG)
@@ -249,6 +255,9 @@ def _patient_config(tmp_dir: Path) -> str:
     if os.environ.get(LIVENESS_S_ENV):
         cfg = dataclasses.replace(cfg, motion=dataclasses.replace(
             cfg.motion, liveness_timeout=float(os.environ[LIVENESS_S_ENV])))
+    if os.environ.get(PAIR_RECORD_RATE_ENV):
+        cfg = dataclasses.replace(cfg, motion=dataclasses.replace(
+            cfg.motion, pair_record_rate=float(os.environ[PAIR_RECORD_RATE_ENV])))
     path = tmp_dir / "arm.yaml"
     path.write_text(dump_native(cfg))
     return str(path)

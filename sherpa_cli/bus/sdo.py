@@ -17,7 +17,7 @@ import logging
 import queue
 import struct
 import threading
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from typing import TYPE_CHECKING
 
@@ -97,6 +97,8 @@ class DriveSdo:
             network.subscribe(0x580 + node, self._on_answer)
         self._lock = threading.Lock()
         self._failures = _transfer_failures()
+        # called on the caller's thread before every upload and download (the session's request watchers)
+        self.on_request: Callable[[], None] | None = None
 
     @contextmanager
     def _canopen(self) -> Iterator[None]:
@@ -162,6 +164,8 @@ class DriveSdo:
 
     def upload(self, index: int, sub: int = 0, *, name: str | None = None) -> bytes:
         """One SDO upload (expedited or segmented); ``name`` words the object in an error."""
+        if self.on_request is not None:
+            self.on_request()
         with self._lock:
             if self._wait is not None and (index, sub) not in self._segmented:
                 fast = self._fast_upload(index, sub, name)
@@ -181,6 +185,8 @@ class DriveSdo:
 
     def download(self, index: int, sub: int, data: bytes, *, name: str | None = None) -> None:
         """One SDO download (expedited or segmented)."""
+        if self.on_request is not None:
+            self.on_request()
         with self._lock:
             try:
                 with self._canopen():

@@ -10,7 +10,7 @@ arm's endpoints, starts it and stops it.
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Iterator, Mapping
+from collections.abc import Callable, Iterable, Iterator, Mapping
 from contextlib import contextmanager
 from dataclasses import replace
 from typing import TYPE_CHECKING, Any, Protocol
@@ -66,6 +66,7 @@ class ArmSession:
         self.client_overrides: dict[str, Any] = {}
         # `sherpa --allow-user-program`: the preflight (bus/health.py) lets motion start while a user program runs
         self.allow_user_program = False
+        self._request_watchers: list[Callable[[], None]] = []
 
     @classmethod
     @contextmanager
@@ -117,6 +118,7 @@ class ArmSession:
             options: dict[str, Any] = {"timeout": p.reply_timeout, "retries": p.retries, **self.client_overrides}
             client = DriveClient(NetworkTransport(self.links[ref.bus].network), ref.node, name=ref.name,
                                  settings=settings, **options)
+            client.on_request = self._request_sent
             self._clients[key] = client
         return client
 
@@ -130,5 +132,22 @@ class ArmSession:
                 raise UsageError(f"{ref.name}: bus {ref.bus} is not open in this session")
             sdo = DriveSdo(self.links[ref.bus].network, ref.node, label=f"{ref.name} (node {ref.node})",
                            timeout=self.cfg.protocol.sdo_timeout)
+            sdo.on_request = self._request_sent
             self._sdo[ref.key] = sdo
         return sdo
+
+    def watch_requests(self, watcher: Callable[[], None]) -> Callable[[], None]:
+        """Call ``watcher`` on the requesting thread before every interpreter request attempt and
+        every SDO transfer of this session's drives; returns the function that stops it. The motion
+        guard's sign of life: a command working through many requests (a recorder's PDO set-up, a
+        restore) is alive, however slow the bus or the machine, without a check between each."""
+        self._request_watchers.append(watcher)
+
+        def stop() -> None:
+            if watcher in self._request_watchers:
+                self._request_watchers.remove(watcher)
+        return stop
+
+    def _request_sent(self) -> None:
+        for watcher in list(self._request_watchers):
+            watcher()

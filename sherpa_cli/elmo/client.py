@@ -159,6 +159,9 @@ class DriveClient:
         # True after a request that got no answer at any attempt, until the next answer: the exit
         # paths skip a silent drive instead of spending a timeout per step on it
         self.silent = False
+        # called on the caller's thread before every attempt of a request (the session's request
+        # watchers: a motion guard takes a request its command's thread sends as a sign of life)
+        self.on_request: Callable[[], None] | None = None
         self._boot_listening = False
         self._wait = waiter(transport)  # resolved once: every round trip waits through it
         transport.subscribe(TPDO2_BASE + node, self._on_reply)
@@ -395,6 +398,8 @@ class DriveClient:
             if before is not None:
                 self.transport.send(RPDO2_BASE + self.node, before)
             for attempt in range(attempts):
+                if self.on_request is not None:
+                    self.on_request()
                 if frame:  # an empty frame only waits (for a reply already on its way)
                     self.transport.send(RPDO2_BASE + self.node, frame)
                 # the transport may let this thread read the bus itself until the reply is in

@@ -137,6 +137,9 @@ class MotionGuard:
         self._exiting = False
         self._late_signal: int | None = None  # arrived while stopping: delivered once everything is back
         self._old_handlers: dict[int, Any] = {}
+        # requests the command's own thread sends are signs of life (ArmSession.watch_requests)
+        self._owner: int | None = None
+        self._unwatch_requests: Callable[[], None] | None = None
 
     # -- public API -------------------------------------------------------------------------------
 
@@ -144,6 +147,7 @@ class MotionGuard:
         raise_if_signalled()  # a SIGTERM whose exception was lost before the guard (errors.py): no motion
         try:
             self._install_signals()
+            self._watch_requests()
             for ref in self.refs:  # first, before anything is sent: a second command refuses here
                 self._lock(ref)
             preflight(self.session, self.refs)  # bus state and bit rate, user programs (bus/health.py)
@@ -173,6 +177,7 @@ class MotionGuard:
                 self._exit_all(reason="error", entering=True)
             finally:
                 try:
+                    self._unwatch()
                     self._unlock_all()
                     self._restore_signals()
                 finally:
@@ -196,6 +201,7 @@ class MotionGuard:
             self._exit_all(reason=reason)
         finally:
             try:
+                self._unwatch()
                 self._unlock_all()
                 self._restore_signals()
             finally:
@@ -536,11 +542,31 @@ class MotionGuard:
 
     # -- dead-man heartbeat (motion/deadman.py) ----------------------------------------------------
 
+    def _allowance(self) -> float:
+        return max(self.settings.liveness_timeout, 3 * self.settings.request_bound)
+
     def _pulse(self, extra: float = 0.0, *, exact: bool = False) -> None:
         """A sign of life: the heartbeat goes on for the allowance (+ ``extra`` s). ``exact``: for the
         next step only, even if an earlier, longer extension is still running (the exit's steps)."""
-        allowance = max(self.settings.liveness_timeout, 3 * self.settings.request_bound) + extra
-        self._heartbeat.pulse(allowance, extend=bool(extra) and not exact)
+        self._heartbeat.pulse(self._allowance() + extra, extend=bool(extra) and not exact)
+
+    def _watch_requests(self) -> None:
+        self._owner = threading.get_ident()
+        self._unwatch_requests = self.session.watch_requests(self._request_sent)
+
+    def _unwatch(self) -> None:
+        if self._unwatch_requests is not None:
+            self._unwatch_requests()
+            self._unwatch_requests = None
+
+    def _request_sent(self) -> None:
+        """A request about to go out. From the command's own thread it is a sign of life, so a step of
+        many requests (a recorder's PDO set-up, its restore, a profile) never outlasts the allowance
+        on a slow bus or machine; it never shortens a longer allowance. A request of another thread
+        (a watch, a receive thread) says nothing about the command's loop: a hung loop still stops
+        the heartbeat."""
+        if threading.get_ident() == self._owner:
+            self._heartbeat.pulse(self._allowance(), extend=True)
 
     def _beat_now(self) -> None:
         self._heartbeat.beat_now()

@@ -50,6 +50,12 @@ HOME_SWITCH_HALF_WIDTH = 0
 ENCODER_VENDOR = 0x0000_0145  # made up: a CiA 406 encoder maker (the sim's, not a real vendor id)
 ENCODER_DEVICE_TYPE = 0x0001_0196  # 0x1000: CiA 406 (0x196), single-turn absolute rotary encoder
 LOOPBACK_ROUNDS = 4  # frames drives send because of other drives' frames, per pump cycle
+# A frame that waited longer than this for its bus's pump (a starved simulator process: a loaded
+# machine, the 15-20x slower vcan guest) reaches the drives at the time it arrived, not when the pump
+# got to it: a real drive hears a frame when it is on the bus. Otherwise a host heartbeat queued
+# behind a backlog looked lost to the consumer, and the drives stopped a command that sent every beat.
+LATE_FRAME_S = 0.05
+LATE_FRAME_MAX_S = 10.0  # older than this: a timestamp from another clock (or none), not a late frame
 SIM_SV_SHARE = 0.6  # the simulated drive is deaf for this share of protocol.sv_blackout (the tool's bound)
 
 
@@ -350,6 +356,7 @@ class SimArm:
         self._buses: dict[str, can.BusABC] = {}
         self._sdo: dict[str, SdoServer] = {}
         self.errors: list[BaseException] = []
+        self.late_frames = 0  # frames a pump got to more than LATE_FRAME_S late (heard when they arrived)
         self.event_log = event_log
         self._event_file: TextIO | None = None
         self.keep_ram = keep_ram
@@ -600,8 +607,15 @@ class SimArm:
             while not self._stop.is_set():
                 msg = bus.recv(timeout=self.tick_s)
                 with self.lock:
-                    # running motors: every drive of the bus up to (almost) now together first
-                    stepped_to = self.clock.now()
+                    if msg is None:  # one may have come while this pump waited for the lock (held up)
+                        msg = bus.recv(timeout=0)
+                    now = self.clock.now()
+                    # a frame the pump got to late is heard when it arrived; the drives catch up to
+                    # now only once the backlog is worked off (no tick to now meanwhile)
+                    at = max(self._arrival(msg, now), last_tick)
+                    behind = at < now
+                    # running motors: every drive of the bus up to (almost) then together first
+                    stepped_to = at
                     self._guarded(bus_name, "a drive", functools.partial(self._lockstep, on_bus, last_tick, stepped_to))
                     last_tick = stepped_to
                     # a frame advances only the drives it reached (their replies go out now);
@@ -613,9 +627,10 @@ class SimArm:
                         if ctrl is not None:
                             ctrl.count(host_sent=1, sent_bytes=len(msg.data))
                         # receive() ran the drives to now: what the frame caused is in their outbox
-                        touched = self._dispatch(msg.arbitration_id, bytes(msg.data), on_bus, by_node, bus_name=bus_name)
+                        touched = self._dispatch(msg.arbitration_id, bytes(msg.data), on_bus, by_node, bus_name=bus_name,
+                                                 at=at if behind else None)
                     now = self.clock.now()
-                    ticking = now >= next_tick
+                    ticking = not behind and now >= next_tick
                     if ticking:
                         touched = names
                         next_tick = now + self.tick_s
@@ -630,7 +645,7 @@ class SimArm:
                             _send(can_id, data)
                             if ctrl is not None:
                                 ctrl.count(host_received=1, received_bytes=len(data))
-                    self._send_out(touched, on_bus, by_node, out, bus_name)
+                    self._send_out(touched, on_bus, by_node, out, bus_name, at=at if behind else None)
                     if ctrl is not None:
                         ctrl.tick(now)
                         for can_id, data, is_error in ctrl.pop_frames():
@@ -640,6 +655,18 @@ class SimArm:
         except BaseException as exc:  # noqa: BLE001 - kept in errors: a dead pump shows in tests and `sim --serve`
             if not self._stop.is_set():
                 self.errors.append(exc)
+
+    def _arrival(self, msg: can.Message | None, now: float) -> float:
+        """When ``msg`` arrived, on the simulator's clock: ``now``, unless the pump got to it more than
+        LATE_FRAME_S late by its receive timestamp (wall time). Only on wall time (RealClock): a
+        stepped or manual clock is the test's, and frames reach it when the test moves it."""
+        if msg is None or type(self.clock) is not RealClock:
+            return now
+        late = time.time() - msg.timestamp
+        if LATE_FRAME_S < late < LATE_FRAME_MAX_S:
+            self.late_frames += 1
+            return now - late
+        return now
 
     def _guarded(self, bus_name: str, name: str, work: Callable[[], object]) -> bool:
         """Run one drive's ``work``; a fault inside the simulator is logged at once and kept in
@@ -653,7 +680,7 @@ class SimArm:
             return False
 
     def _send_out(self, touched: list[str], on_bus: Mapping[str, SimDrive], by_node: Mapping[int, list[str]],
-                  send: Callable[[int, bytes], None], bus_name: str) -> None:
+                  send: Callable[[int, bytes], None], bus_name: str, at: float | None = None) -> None:
         """Send what the ``touched`` drives produced; every frame also reaches the other nodes of the
         bus (a CAN controller does not hear itself), as on a real bus: one drive's heartbeat feeds
         another's consumer. What that makes them send goes out too (a few rounds at most)."""
@@ -666,7 +693,7 @@ class SimArm:
             for sender, can_id, data in frames:
                 send(can_id, data)
                 if len(on_bus) > 1:
-                    for name in self._dispatch(can_id, data, on_bus, by_node, exclude=sender, bus_name=bus_name):
+                    for name in self._dispatch(can_id, data, on_bus, by_node, exclude=sender, bus_name=bus_name, at=at):
                         if name not in reached:
                             reached.append(name)
             pending = reached
@@ -687,9 +714,10 @@ class SimArm:
             t += step
 
     def _dispatch(self, can_id: int, data: bytes, on_bus: Mapping[str, SimDrive],
-                  by_node: Mapping[int, list[str]], exclude: str | None = None, bus_name: str = "") -> list[str]:
-        """Hand a frame to the drive(s) it concerns (not to ``exclude``, the node that sent it);
-        returns their names."""
+                  by_node: Mapping[int, list[str]], exclude: str | None = None, bus_name: str = "",
+                  at: float | None = None) -> list[str]:
+        """Hand a frame to the drive(s) it concerns (not to ``exclude``, the node that sent it), at
+        time ``at`` (default now: see LATE_FRAME_S); returns their names."""
         if can_id in (NMT_ID, SYNC_ID) or 0x700 <= can_id <= 0x77F:
             targets = list(on_bus)  # NMT broadcast / SYNC / host heartbeats: every drive decides for itself
         else:
@@ -701,7 +729,7 @@ class SimArm:
             targets = [name for name in targets if name != exclude]
         sdo = SDO_RX + 1 <= can_id <= SDO_RX + 0x7F
         for name in targets:
-            arrived = self._receive(bus_name, name, on_bus[name], can_id, data)
+            arrived = self._receive(bus_name, name, on_bus[name], can_id, data, at)
             if arrived is None:
                 if sdo and name in self._sdo:
                     self._sdo[name].abort_request(data)  # the client hears an abort, not silence
@@ -709,8 +737,9 @@ class SimArm:
                 self._sdo[name].receive(can_id, data)
         return targets
 
-    def _receive(self, bus_name: str, name: str, drive: SimDrive, can_id: int, data: bytes) -> bool | None:
+    def _receive(self, bus_name: str, name: str, drive: SimDrive, can_id: int, data: bytes,
+                 at: float | None = None) -> bool | None:
         """``drive.receive``; None: it failed inside (logged and kept, see :meth:`_guarded`)."""
         result: list[bool] = []
-        ok = self._guarded(bus_name or "its bus", name, lambda: result.append(drive.receive(can_id, data)))
+        ok = self._guarded(bus_name or "its bus", name, lambda: result.append(drive.receive(can_id, data, at)))
         return result[0] if ok else None

@@ -238,8 +238,9 @@ class SimDrive:
             self._t = nxt
             self._fire_events()
 
-    def receive(self, can_id: int, data: bytes) -> bool:
-        """A frame from the bus; frames for other nodes are ignored and not recorded.
+    def receive(self, can_id: int, data: bytes, at: float | None = None) -> bool:
+        """A frame from the bus; frames for other nodes are ignored and not recorded. ``at``: when it
+        arrived, if earlier than now (a bus pump that runs late, sim/arm.py LATE_FRAME_S).
 
         Returns True if the frame reached the drive's software (False: not addressed to it,
         lost to SV blackout, bus drop or a dead drive, or an SDO request to a node in NMT
@@ -247,7 +248,7 @@ class SimDrive:
         to the SDO server only when this is True.
         """
         data = bytes(data)
-        self.advance_to(self.clock.now())
+        self.advance_to(self.clock.now() if at is None else at)
         if not self._addressed(can_id, data):
             return False
         t = self._t
