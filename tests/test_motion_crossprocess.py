@@ -200,14 +200,18 @@ def test_program_limits_during_a_jog_in_another_process_is_refused_with_exit_5(a
     try:
         programmer = sherpa(arm, tmp_path, "program-limits", JOINT, "--apply", "--motor-off")
         p_code, p_out, p_err = finish(programmer)
-        assert p_code == 5, f"{p_out}\n{p_err}"
-        assert f"{DRIVE} (can1:{NODE}): another sherpa command (pid {proc.pid}) is moving this drive" in p_err
-        assert "Traceback" not in p_err
-        # the jog was not touched: its motor is still on, nobody switched it off
-        assert not motor_offs(arm, t_on), arm.events()
+        offs = motor_offs(arm, t_on)  # before the jog's own stop below
+        jog_ran = proc.poll() is None
     finally:
         proc.send_signal(signal.SIGINT)
         code, out, err = finish(proc)
+    why = f"program-limits (exit {p_code}):\n{p_out}\n{p_err}\nthe jog (exit {code}):\n{out}\n{err}\nevents: {arm.events()}"
+    assert jog_ran, "the jog had ended before program-limits did: " + why
+    assert p_code == 5, why
+    assert f"{DRIVE} (can1:{NODE}): another sherpa command (pid {proc.pid}) is moving this drive" in p_err
+    assert "Traceback" not in p_err
+    # the jog was not touched: its motor is still on, nobody switched it off
+    assert not offs, why
     assert code == 0, f"{out}\n{err}"
 
 
