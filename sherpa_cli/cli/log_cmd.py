@@ -14,7 +14,7 @@ import typer
 from sherpa_cli.cli.context import AppState, shared_stepped, state, use_stepped
 from sherpa_cli.cli.options import ApplyMotion, Targets
 from sherpa_cli.cli.robotics import DEFAULT_AT, AllowRemote, Foxglove, FoxgloveAt
-from sherpa_cli.errors import SherpaError, UsageError
+from sherpa_cli.errors import SherpaError, UsageError, raise_if_signalled
 
 if TYPE_CHECKING:
     from sherpa_cli.config.model import ArmConfig
@@ -457,6 +457,9 @@ def _wait_for(duration: float, failed: Callable[[], bool] = lambda: False) -> bo
     def stop(signum: int, frame: FrameType | None) -> NoReturn:
         raise _Stopped(signal.Signals(signum).name)
 
+    # a SIGTERM whose exception was lost while the session opened (errors.py) would otherwise be
+    # heard by nothing: the recording ran its whole --for, and a second SIGTERM is ignored
+    raise_if_signalled()
     old: dict[signal.Signals, Any] = {}
     if threading.current_thread() is threading.main_thread():
         for sig in (signal.SIGTERM, getattr(signal, "SIGHUP", None)):

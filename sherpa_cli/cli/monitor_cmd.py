@@ -21,7 +21,7 @@ from sherpa_cli.cli.robotics import (
     check_live,
     live_view,
 )
-from sherpa_cli.errors import ExitCode, UsageError
+from sherpa_cli.errors import ExitCode, UsageError, raise_if_signalled
 
 if TYPE_CHECKING:
     from rich.console import Group
@@ -127,6 +127,7 @@ def _live(st: AppState, mon: Monitor, interval: float, *, polls: int | None = No
     if not sys.stdout.isatty():
         # a log, not a screen: one full snapshot per poll
         while True:
+            raise_if_signalled()  # a SIGTERM whose exception was lost (errors.py): no other ear for it
             mon.poll()
             _print(st, *_renderables(snapshot(), mon.cfg, ages=True))
             st.out.line()
@@ -142,6 +143,7 @@ def _live(st: AppState, mon: Monitor, interval: float, *, polls: int | None = No
               auto_refresh=False) as live:
         while polls is None or done < polls:
             sleep(interval)
+            raise_if_signalled()
             mon.poll()
             done += 1
             live.update(_screen(*_renderables(snapshot(), mon.cfg, ages=True)), refresh=True)

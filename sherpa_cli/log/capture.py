@@ -17,7 +17,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Protocol
 
-from sherpa_cli.errors import UsageError
+from sherpa_cli.errors import UsageError, raise_if_signalled
 from sherpa_cli.log.candecode import Frame, parse_candump_line
 
 if TYPE_CHECKING:
@@ -198,6 +198,7 @@ def capture(buses: dict[str, can.BusABC], path: Path, bus_names: Sequence[str], 
     try:
         try:
             while not stop.is_set():
+                raise_if_signalled()  # a SIGTERM whose exception was lost (errors.py): no other ear for it
                 if not _drain(readers, writer, result, suffix, bus_names, wait=0.05, on_frame=on_frame):
                     continue
                 if frame_limit is not None and result.frames >= frame_limit:

@@ -17,6 +17,7 @@ from typing import TYPE_CHECKING, Any
 from sherpa_cli.bus.errframes import HINTS
 from sherpa_cli.bus.errwatch import BusWatch, SeenError, watching
 from sherpa_cli.bus.linkstate import LinkStatus, read_link
+from sherpa_cli.errors import raise_if_signalled
 
 if TYPE_CHECKING:
     from sherpa_cli.bus.session import ArmSession
@@ -78,6 +79,7 @@ def _loop(session: ArmSession, state: WatchState, w: BusWatch, duration: float |
           on_update: Callable[[WatchState], None] | None) -> None:
     start = clock()
     while True:
+        raise_if_signalled()  # a SIGTERM whose exception was lost (errors.py): no other ear for it
         now = clock()
         state.elapsed = now - start
         state.links = {b: read_link(session, b) for b in state.buses}
