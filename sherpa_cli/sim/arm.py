@@ -30,7 +30,7 @@ from sherpa_cli.config.simbus import SimBusConfig
 from sherpa_cli.elmo.protocol import NMT_ID, SDO_RX_BASE, SYNC_ID
 from sherpa_cli.sim import state as sim_state
 from sherpa_cli.sim.buscontroller import BusController, SimNetlink
-from sherpa_cli.sim.clock import Clock, RealClock
+from sherpa_cli.sim.clock import Clock, FrameClock, RealClock
 from sherpa_cli.sim.drive import SimDrive
 from sherpa_cli.sim.encoder import SimEncoder
 from sherpa_cli.sim.settings import SimSettings
@@ -310,6 +310,9 @@ class SimArm:
         self.endpoints = dict(endpoints)
         self.bus_factory = bus_factory
         self.clock = clock or RealClock()
+        # where a late frame is placed in time (RealClock; a test's clock may do it too), else None:
+        # a stepped or manual clock without it is the test's, and frames reach it when the test moves it
+        self._received_at = self.clock.received_at if isinstance(self.clock, FrameClock) else None
         self.persist = persist
         self.tick_s = tick_s
         self.flash = dict(flash) if flash is not None else sim_state.load(cfg) if persist else {
@@ -615,9 +618,8 @@ class SimArm:
                     at = max(self._arrival(msg, now), last_tick)
                     behind = at < now
                     # running motors: every drive of the bus up to (almost) then together first
-                    stepped_to = at
-                    self._guarded(bus_name, "a drive", functools.partial(self._lockstep, on_bus, last_tick, stepped_to))
-                    last_tick = stepped_to
+                    self._guarded(bus_name, "a drive", functools.partial(self._lockstep, on_bus, last_tick, at))
+                    last_tick = at
                     # a frame advances only the drives it reached (their replies go out now);
                     # every drive advances at least once per tick_s (motion, heartbeats, latency)
                     touched: list[str] = []
@@ -658,11 +660,10 @@ class SimArm:
 
     def _arrival(self, msg: can.Message | None, now: float) -> float:
         """When ``msg`` arrived, on the simulator's clock: ``now``, unless the pump got to it more than
-        LATE_FRAME_S late by its receive timestamp (wall time). Only on wall time (RealClock): a
-        stepped or manual clock is the test's, and frames reach it when the test moves it."""
-        if msg is None or type(self.clock) is not RealClock:
+        LATE_FRAME_S late by its receive timestamp (a clock that places frames: FrameClock)."""
+        if msg is None or self._received_at is None:
             return now
-        late = time.time() - msg.timestamp
+        late = now - self._received_at(msg.timestamp)
         if LATE_FRAME_S < late < LATE_FRAME_MAX_S:
             self.late_frames += 1
             return now - late

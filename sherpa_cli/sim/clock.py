@@ -30,8 +30,22 @@ class ManualClock:
         return self._now
 
 
+@runtime_checkable
+class FrameClock(Clock, Protocol):
+    """A clock that can place a received frame on its own scale: a bus pump that got to a frame late
+    hands it to the drives at the time it arrived (sim/arm.py LATE_FRAME_S)."""
+
+    def received_at(self, timestamp: float) -> float:
+        """``timestamp`` (a received can.Message's) on this clock's scale."""
+        ...
+
+
 class RealClock:
     """Wall time; monotonic so a system clock change cannot make the simulated drive jump."""
 
     def now(self) -> float:
         return time.monotonic()
+
+    def received_at(self, timestamp: float) -> float:
+        # python-can stamps received frames with wall time (time.time() based)
+        return time.monotonic() - (time.time() - timestamp)
