@@ -1,6 +1,7 @@
 """`sherpa jog --joystick` (ops/joystick.py) with a scripted event source in place of the device,
-on the simulated arm (in-process, real time: the guard's heartbeat thread runs on the wall clock);
-and with a real uinput virtual joystick where /dev/uinput exists."""
+on the simulated arm in-process on stepped time (sim/stepped.py: the motors move only while the loop
+waits, so how far a joint gets does not depend on the host's load); and with a real uinput virtual
+joystick (wall time) where /dev/uinput exists."""
 
 from __future__ import annotations
 
@@ -11,7 +12,7 @@ import sys
 import time
 
 import pytest
-from motion_helpers import JOG_CONFIG
+from motion_helpers import JOG_CONFIG, stepped_session
 
 from sherpa_cli.bus.session import ArmSession
 from sherpa_cli.config import load_config
@@ -51,12 +52,12 @@ def motors_on(session):
         return {name for name, d in session.sim.drives.items() if d.motor_on}
 
 
-def drive(cfg, session, script, duration, jcfg=None):
+def drive(cfg, session, stepped, script, duration, jcfg=None):
     jcfg = jcfg or cfg.joystick
     axes = resolve_axes(cfg, joystick.joints_of(cfg, jcfg))
-    with LiveJog(session, axes, keepalive=0.3) as live:
-        src = ScriptedSource(script, time.monotonic)
-        run = run_joystick(live, cfg, jcfg, src, duration=duration)
+    with LiveJog(session, axes, keepalive=0.3, clock=stepped.now, sleep=stepped.sleep) as live:
+        src = ScriptedSource(script, stepped.now)
+        run = run_joystick(live, cfg, jcfg, src, clock=stepped.now, sleep=stepped.sleep, duration=duration)
     return run, live
 
 
@@ -65,12 +66,12 @@ def test_deadzone_rescales_and_holds_zero():
 
 
 def test_deflection_moves_the_mapped_joint_only_while_the_deadman_is_held(cfg):
-    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
+    with stepped_session(cfg) as (s, stepped):
         script = [(0.0, "ABS_Z", 1.0),           # deflected, dead-man not held: nothing moves
                   (0.4, "BTN_TRIGGER", 1.0),     # held: j1 runs at 0.25 x 8000 counts/s
                   (2.2, "BTN_TRIGGER", 0.0)]     # released: stop at once (MO=1 takes ~1 s of this)
         start = px(s, "yaw")
-        run, _live = drive(cfg, s, script, 2.6)
+        run, _live = drive(cfg, s, stepped, script, 2.6)
         end = px(s, "yaw")
         assert run.releases == 1 and run.commands > 0
         assert 300 < end - start < 1.8 * 2000 + 300  # forward at 2000 counts/s for at most the 1.8 s held
@@ -79,10 +80,10 @@ def test_deflection_moves_the_mapped_joint_only_while_the_deadman_is_held(cfg):
 
 
 def test_deflection_without_the_deadman_sends_no_motion_command(cfg):
-    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
+    with stepped_session(cfg) as (s, stepped):
         script = [(0.0, "ABS_Z", 1.0), (0.0, "ABS_X", 1.0), (0.0, "ABS_Y", -1.0)]  # never held
         start = {d: px(s, d) for d in ("yaw", "left", "right")}
-        run, _live = drive(cfg, s, script, 0.8)
+        run, _live = drive(cfg, s, stepped, script, 0.8)
         assert run.commands == 0
         with s.sim.lock:  # the simulator's record: no motor switched on, no BG
             assert all(not d.events for d in s.sim.drives.values()), {n: d.events for n, d in s.sim.drives.items()}
@@ -90,16 +91,16 @@ def test_deflection_without_the_deadman_sends_no_motion_command(cfg):
 
 
 def test_release_stops_before_the_keepalive_would(cfg):
-    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
+    with stepped_session(cfg) as (s, stepped):
         script = [(0.0, "BTN_TRIGGER", 1.0), (0.0, "ABS_Z", -1.0), (1.5, "BTN_TRIGGER", 0.0)]
         jcfg = dataclasses.replace(cfg.joystick, axes=cfg.joystick.axes[:1])
         axes = resolve_axes(cfg, ["j1"])
-        with LiveJog(s, axes, keepalive=5.0) as live:  # only the release can stop it in time
-            src = ScriptedSource(script, time.monotonic)
-            run_joystick(live, cfg, jcfg, src, duration=1.55)
+        with LiveJog(s, axes, keepalive=5.0, clock=stepped.now, sleep=stepped.sleep) as live:  # only the release can stop it in time
+            src = ScriptedSource(script, stepped.now)
+            run_joystick(live, cfg, jcfg, src, clock=stepped.now, sleep=stepped.sleep, duration=1.55)
             assert live.running == {}
             a = px(s, "yaw")
-            time.sleep(0.3)
+            stepped.sleep(0.3)
             b = px(s, "yaw")
             assert a < -100 and abs(b - a) < 150  # moved backwards, then stopped (decelerating only)
         assert motors_on(s) == set()
@@ -107,10 +108,10 @@ def test_release_stops_before_the_keepalive_would(cfg):
 
 @pytest.mark.parametrize("x, y, moved, held", [(0.6, 0.0, "pitch", "roll"), (0.0, 0.6, "roll", "pitch")])
 def test_xy_plus_and_minus_drive_the_right_motors_of_the_pair(cfg, x, y, moved, held):
-    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
+    with stepped_session(cfg) as (s, stepped):
         a0, b0 = px(s, "left"), px(s, "right")
         script = [(0.0, "BTN_TRIGGER", 1.0), (0.0, "ABS_X", x), (0.0, "ABS_Y", y), (3.0, "BTN_TRIGGER", 0.0)]
-        run, _live = drive(cfg, s, script, 3.3)  # MO=1 of two drives takes ~2 s of it
+        run, _live = drive(cfg, s, stepped, script, 3.3)  # MO=1 of two drives takes ~2 s of it
         da, db = px(s, "left") - a0, px(s, "right") - b0
         assert da > 100, run.messages  # X+Y > 0 drives motor a forward
         if moved == "pitch":  # X only: X+Y = X-Y, both motors the same way, Δ holds
@@ -122,9 +123,9 @@ def test_xy_plus_and_minus_drive_the_right_motors_of_the_pair(cfg, x, y, moved, 
 
 def test_limits_hold_under_full_deflection(cfg):
     jcfg = dataclasses.replace(cfg.joystick, axes=(JoystickMap(joint="j1", axis="ABS_Z", sensitivity=1.0),))
-    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
+    with stepped_session(cfg) as (s, stepped):
         script = [(0.0, "BTN_TRIGGER", 1.0), (0.0, "ABS_Z", 1.0)]
-        run, _live = drive(cfg, s, script, 2.5, jcfg)
+        run, _live = drive(cfg, s, stepped, script, 2.5, jcfg)
         j1 = cfg.joints["j1"]
         assert px(s, "yaw") <= j1.full_range[1]
         assert any("edge of its normal range" in m or m.startswith("limit:") for m in run.messages)
@@ -164,7 +165,7 @@ def test_a_real_uinput_virtual_joystick_drives_the_joint(cfg):  # pragma: no cov
         time.sleep(0.3)
         path = next(j.path for j in joystick.list_joysticks() if j.name == "sherpa-test-joystick")
         src = joystick.EvdevSource(path)
-        with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
+        with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:  # a real device: wall time
             jcfg = dataclasses.replace(cfg.joystick, axes=cfg.joystick.axes[:1])
             start = px(s, "yaw")
             with LiveJog(s, resolve_axes(cfg, ["j1"]), keepalive=0.3) as live:
@@ -184,16 +185,17 @@ def test_the_joystick_section_survives_config_convert(cfg, tmp_path):
     assert load_config(p).joystick == cfg.joystick
 
 
-def _held_then(cfg, s, duration, **scripted):
+def _held_then(cfg, s, stepped, duration, **scripted):
     """j1 driven backwards with the dead-man held from 0 s; ``scripted``: what else the device does."""
     script = [(0.0, "BTN_TRIGGER", 1.0), (0.0, "ABS_Z", -1.0), *scripted.pop("script", [])]
     jcfg = dataclasses.replace(cfg.joystick, axes=cfg.joystick.axes[:1])
-    with LiveJog(s, resolve_axes(cfg, ["j1"]), keepalive=5.0) as live:  # only the dead-man can stop in time
-        src = ScriptedSource(script, time.monotonic, **scripted)
-        run = run_joystick(live, cfg, jcfg, src, duration=duration)
+    with LiveJog(s, resolve_axes(cfg, ["j1"]), keepalive=5.0, clock=stepped.now,
+                 sleep=stepped.sleep) as live:  # only the dead-man can stop in time
+        src = ScriptedSource(script, stepped.now, **scripted)
+        run = run_joystick(live, cfg, jcfg, src, clock=stepped.now, sleep=stepped.sleep, duration=duration)
         running = dict(live.running)
         a = px(s, "yaw")
-        time.sleep(0.3)
+        stepped.sleep(0.3)
         b = px(s, "yaw")
     return run, running, a, b
 
@@ -201,16 +203,16 @@ def _held_then(cfg, s, duration, **scripted):
 def test_a_lost_release_event_still_stops_by_the_devices_key_state(cfg):
     """Review R11: the release event is lost (the evdev buffer overflowed while the loop stalled):
     every period the device's own key state is asked, and the dead-man is up."""
-    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
-        run, running, a, b = _held_then(cfg, s, 2.4, lost=[(1.8, "BTN_TRIGGER", 0.0)])
+    with stepped_session(cfg) as (s, stepped):
+        run, running, a, b = _held_then(cfg, s, stepped, 2.4, lost=[(1.8, "BTN_TRIGGER", 0.0)])
         assert run.releases == 1 and running == {}
         assert a < -100 and abs(b - a) < 150  # moved backwards, then stopped
         assert motors_on(s) == set()
 
 
 def test_a_failed_key_state_query_counts_as_released(cfg):
-    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
-        run, running, a, b = _held_then(cfg, s, 2.4, keys_fail_at=1.8)
+    with stepped_session(cfg) as (s, stepped):
+        run, running, a, b = _held_then(cfg, s, stepped, 2.4, keys_fail_at=1.8)
         assert run.releases == 1 and running == {}
         assert a < -100 and abs(b - a) < 150
         assert motors_on(s) == set()
@@ -219,8 +221,8 @@ def test_a_failed_key_state_query_counts_as_released(cfg):
 def test_syn_dropped_forgets_the_stale_axis_values(cfg):
     """Review R11: after SYN_DROPPED the axis values read before are stale (the stick's return to
     centre was among the lost events): nothing runs on them; the dead-man state is read again."""
-    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
-        run, running, a, b = _held_then(cfg, s, 2.4, script=[(1.8, "SYN_DROPPED", 1.0)],
+    with stepped_session(cfg) as (s, stepped):
+        run, running, a, b = _held_then(cfg, s, stepped, 2.4, script=[(1.8, "SYN_DROPPED", 1.0)],
                                         lost=[(1.8, "ABS_Z", 0.0)])
         assert run.releases == 0 and running == {}  # still held: stopped by the centred stick
         assert a < -100 and abs(b - a) < 150
