@@ -44,10 +44,12 @@ def _step(cfg, sim, mode, value, *, before=None, duration=2.0):
                         settings=MotionSettings.from_config(cfg, ["can1"]))
 
 
+# The steps below run on stepped time (_stepped_step): on wall time a loaded machine delayed the
+# samples, the switch and the limit watch, and the figures drifted with it.
+
 def test_position_step_after_a_mode_switch(arm):
-    cfg, sim = arm
-    # 3 s: with the load model a 1 rad step settles late in a 2 s window on a loaded machine (wall time)
-    result = _step(cfg, sim, "position", 1.0, before=lambda c: c.set("UM", 0, 2), duration=3.0)
+    cfg, _sim = arm
+    result = _stepped_step(cfg, "position", 1.0, before=lambda c, sim: c.set("UM", 0, 2), duration=3.0)
     m = result.metrics
     assert result.switch_s >= 0.2  # MO=1 (and UM 2 -> 5) before the step: the drive's settle time
     assert m.dead_time >= result.switch_s
@@ -59,28 +61,29 @@ def test_position_step_after_a_mode_switch(arm):
 
 
 def test_position_step_without_a_switch(arm):
-    cfg, sim = arm
+    cfg, _sim = arm
 
-    def ready(c):
+    def ready(c, sim):
         c.set("UM", 0, 5)
         c.motor_on()
 
-    result = _step(cfg, sim, "position", 1.0, before=ready, duration=3.0)
+    result = _stepped_step(cfg, "position", 1.0, before=ready, duration=3.0)
     assert result.switch_s < 0.15  # UM and MO already right: nothing to switch
     assert result.metrics.dead_time < 0.15
     assert result.metrics.final == pytest.approx(1.0, abs=0.02)
 
 
 def test_velocity_step(arm):
-    cfg, sim = arm
-    result = _step(cfg, sim, "velocity", 0.1, duration=1.5)
+    cfg, _sim = arm
+    result = _stepped_step(cfg, "velocity", 0.1, duration=1.5)
     assert result.metrics.final == pytest.approx(0.1, rel=0.05)
     assert result.metrics.rise_time is not None
 
 
-def _stepped_step(cfg, mode, value, *, duration):
+def _stepped_step(cfg, mode, value, *, duration, before=None, sim_out=None):
     """``_step`` on the arm's stepped time (sim/stepped.py), as `sherpa --sim log step` runs it: the
-    simulated joint moves by simulated time, so how far it gets does not depend on the host's load."""
+    simulated joint moves by simulated time, so how far it gets does not depend on the host's load.
+    ``before(client, sim)``: what is done to the drive first; ``sim_out``: a list given the arm."""
     from sherpa_cli.sim.stepped import SteppedTime
 
     stepped = SteppedTime()
@@ -88,12 +91,19 @@ def _stepped_step(cfg, mode, value, *, duration):
     settings = {name: settings_for(cfg, name, **SERVO) for name in cfg.drives if cfg.drives[name].bus == "can1"}
     sim = SimArm(cfg, {"can1": {"interface": "virtual", "channel": f"step-{tag}"}}, settings=settings,
                  clock=stepped.clock)
+    if sim_out is not None:
+        sim_out.append(sim)
     target = resolve_axis(cfg, "elbow_pitch")
     with ArmSession.open(cfg, sim=sim, buses=["can1"]) as session:
+        assert isinstance(sim.drives["elbow_1a"].motor, ServoMotor)
         unheard = lambda: (sum(d.unheard for d in sim.drives.values()),  # noqa: E731
                            sum(d.unheard_s for d in sim.drives.values()))
         session.client_overrides.update(stepped.client_overrides(cfg.protocol.reply_timeout, cfg.protocol.retries,
                                                                  unheard))
+        if before:
+            c = session.client(target.ref)
+            c.nmt_start()
+            before(c, sim)
         return run_step(session, target, mode, value, duration=duration, rate=200,
                         settings=MotionSettings.from_config(cfg, ["can1"]), timebase=stepped)
 
@@ -208,19 +218,19 @@ def test_the_limit_watch_stops_a_step_that_leaves_the_full_range(arm, mode, valu
     """R5: elbow_pitch stands 10 counts inside its full range [-1370, 1370]; the step pushes it out:
     stopped at once and brought back to the normal range edge 1314 -- in torque mode too, where
     no drive limit acts."""
-    cfg, sim = arm
-    target = resolve_axis(cfg, "elbow_pitch")
-    with ArmSession.open(cfg, sim=sim, buses=["can1"]) as session:
-        c = session.client(target.ref)
-        c.nmt_start()
+    cfg, _sim = arm
+
+    def near_the_end(c, sim):
         # the joint stands there (its absolute encoder PY reads it), not only its counter: an absolute
         # joint's PX is re-synced from the encoder when the step starts
         with sim.lock:
             sim.drives["elbow_1a"].motor.counts = 1360
         c.set("PX", 0, 1360)
-        result = run_step(session, target, mode, value, duration=3.0, rate=200,
-                          settings=MotionSettings.from_config(cfg, ["can1"]))
-        px = int(c.get("PX"))
+
+    arms: list[SimArm] = []
+    result = _stepped_step(cfg, mode, value, duration=3.0, before=near_the_end, sim_out=arms)
+    with arms[0].lock:
+        px = arms[0].drives["elbow_1a"].motor.counts
     assert result.breach is not None and result.breach.joint == "elbow_pitch" and result.breach.side == "high"
     assert result.ended_by.startswith("left its full range")
     assert abs(result.recovered_to - 1314) <= 5 and abs(px - 1314) <= 5
