@@ -3,6 +3,8 @@ golden dry runs and refusals, and the interactive view run headless through the 
 
 from __future__ import annotations
 
+import time
+
 import pytest
 
 FAST = "tests/data/jog-fast-arm.yaml"
@@ -45,8 +47,11 @@ def test_interactive_view_through_the_command_leaves_every_motor_off(cli, monkey
         await pilot.pause(0.2)
         seen["start"] = pilot.app.live.state["j2"].counts
         await pilot.press("right")  # j2 has an absolute encoder: calibrated, a +0.05 rad (29 counts) step
-        await pilot.pause(0.5)
-        seen["j2"] = pilot.app.live.state["j2"].counts
+        state = pilot.app.live.state
+        end = time.monotonic() + 10  # the view refreshes its state every tick: wait for the step (bounded)
+        while abs(state["j2"].counts - seen["start"] - 29) > 1 and time.monotonic() < end:
+            await pilot.pause(0.1)
+        seen["j2"] = state["j2"].counts
         await pilot.press("q")
 
     def headless(self, *a, **kw):

@@ -59,7 +59,8 @@ def test_select_step_switch_mode_space_stops_and_q_leaves_with_every_motor_stopp
                 assert app.current == "j2"
                 start = live.state["j2"].counts
                 await pilot.press("right")  # position step: +0.05 rad = 29 counts (the default increment)
-                await pilot.pause(0.4)
+                # the view refreshes its state every tick (0.25 s): wait for the step, do not guess its time
+                await wait_until(pilot, lambda: abs(live.state["j2"].counts - start - 29) <= 1, 10)
                 seen["stepped"] = live.state["j2"].counts - start
                 await pilot.press("m")  # velocity mode
                 assert live.state["j2"].mode == "velocity"
@@ -191,7 +192,8 @@ def test_calibrate_shows_the_plan_cancel_moves_nothing_confirm_homes_and_the_jog
                 start = live.state["yaw"].counts
                 await pilot.press("right")
                 await wait_until(pilot, lambda: "yaw" not in live.running, 10)
-                await pilot.pause(0.3)
+                step = round(0.05 * cpr_of(cfg, "yaw") / (2 * math.pi))
+                await wait_until(pilot, lambda: abs(live.state["yaw"].counts - start - step) <= 1, 10)
                 seen["stepped"] = live.state["yaw"].counts - start
                 seen["note"] = live.state["yaw"].note
                 await pilot.press("q")
