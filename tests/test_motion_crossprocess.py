@@ -39,6 +39,7 @@ class Arm:
     config: str
     bus_map: str
     event_log: Path
+    shared: bool = False  # the realbus harness's simulator, kept from test to test (joints stay where they were)
 
     @cached_property
     def consumer_s(self) -> float:
@@ -74,7 +75,7 @@ def arm(arm_process, tmp_path):
     if arm_process is not None:
         arm_process.new_test()
         arm_process.before_command()
-        yield Arm(arm_process.config, arm_process.bus_map, arm_process.event_log)
+        yield Arm(arm_process.config, arm_process.bus_map, arm_process.event_log, shared=True)
         return
     log = tmp_path / "events.jsonl"
     proc = bus_map = None
@@ -96,11 +97,25 @@ def sherpa(arm: Arm, tmp_path, *args: str, **kwargs) -> subprocess.Popen:
                             stderr=subprocess.PIPE, text=True, **kwargs)
 
 
+def centre(arm: Arm, tmp_path, *joints: str) -> None:
+    """Put ``joints`` back at 0 on a shared simulator. It keeps where earlier tests left a joint, and in
+    the 15-20x slower vcan guest every velocity jog runs seconds before the test acts: elbow_pitch
+    walked to the end of its range within a few tests, and then the limit watch, not the test's
+    signal or second command, ended the jog (measured 2026-11-28: program-limits found nothing moving
+    and wrote its limits; the first of two jogs stopped itself by MO=0)."""
+    if not arm.shared:
+        return  # a simulator of this test's own: its joints start where power-up puts them
+    for joint in joints:
+        code, out, err = finish(sherpa(arm, tmp_path, "jog", joint, "--to", "0", "--uncalibrated", "--apply"))
+        assert code == 0, f"putting {joint} back at 0 failed:\n{out}\n{err}"
+
+
 def start_jog(arm: Arm, tmp_path) -> tuple[subprocess.Popen, float]:
     """`sherpa jog --velocity` until Ctrl-C, in its own process; returns once the motor is on and moving
     (the simulator logged the BG that started the jog). Slow (29 counts/s): in the emulated vcan guest a
     second `sherpa` process takes seconds to start, and the joint must not reach its range meanwhile
     (at 0.3 rad/s it did, and the limit watch, not the stop, ended the jog)."""
+    centre(arm, tmp_path, JOINT)
     since = time.monotonic()
     proc = sherpa(arm, tmp_path, "jog", JOINT, "--velocity", "0.05", "--apply")
     try:
@@ -248,6 +263,7 @@ def test_two_motion_commands_on_one_bus_a_killed_or_frozen_one_stops_its_drive_t
     """Issue 21 item 9: each command's drives watch that command's heartbeat, so another sherpa motion
     command on the same bus never keeps a killed (SIGKILL) or frozen (SIGSTOP) command's drive moving
     (it did for 6.7 s, until the other command ended), and the other command's drive keeps running."""
+    centre(arm, tmp_path, OTHER_JOINT)
     first, t_on = start_jog(arm, tmp_path)  # elbow_pitch on can1
     since = time.monotonic()
     second = sherpa(arm, tmp_path, "jog", OTHER_JOINT, "--velocity", "0.05", "--apply")
