@@ -14,7 +14,7 @@ import time
 from pathlib import Path
 
 import pytest
-from motion_helpers import JOG_CONFIG
+from motion_helpers import JOG_CONFIG, stepped_session
 
 from sherpa_cli.bus.session import ArmSession
 from sherpa_cli.cli.jog_view import KEY_HELP, HomeConfirm, JogView, SetPointDialog
@@ -200,11 +200,13 @@ def test_the_shipped_joystick_section_is_the_seeds_mapping_and_drives_it(cli_win
         axes = resolve_axes(cfg, joystick.joints_of(cfg, j))
         script = [(0.0, "BTN_TRIGGER", 1.0), (0.0, "ABS_X", x), (0.0, "ABS_Y", y), (0.0, "ABS_Z", z),
                   (2.0, "BTN_TRIGGER", 0.0)]
-        with LiveJog(session, axes, keepalive=0.3) as live:
-            run_joystick(live, cfg, j, ScriptedSource(script, time.monotonic), duration=2.2)
+        with LiveJog(session, axes, keepalive=0.3, clock=stepped.now, sleep=stepped.sleep) as live:
+            run_joystick(live, cfg, j, ScriptedSource(script, stepped.now), clock=stepped.now, sleep=stepped.sleep,
+                         duration=2.2)
         return {d: px(session, d) - v for d, v in start.items()}
 
-    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
+    # on stepped time (as tests/test_joystick.py): how far the joints get is the simulated drives', not the load's
+    with stepped_session(cfg) as (s, stepped):
         moved = run(s, x=1.0, y=0.0, z=1.0)  # X alone: XY+ = XY-, both motors forward (Σ); Z: the yaw
         assert moved["shoulder_1a"] > 20, moved
         assert moved["shoulder_2a"] > 20 and abs(moved["shoulder_2a"] - moved["shoulder_2b"]) < 0.2 * moved[
