@@ -8,6 +8,7 @@ import math
 import re
 
 import pytest
+from motion_helpers import stepped_session
 
 from sherpa_cli.bus import journal
 from sherpa_cli.bus.session import ArmSession
@@ -73,8 +74,9 @@ def _gains(session, cfg) -> dict[str, dict[str, float]]:
 
 def test_match_on_the_mismatched_simulated_pair_reaches_the_goal_and_puts_the_trials_back(tmp_path):
     cfg = load_config(MATCH)
-    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
-        result = run_match(s, cfg.pairs["diff"], MatchSettings(), bounds=bounds(cfg))
+    with stepped_session(cfg) as (s, stepped):  # the steps' timing is the simulated pair's, not the load's
+        result = run_match(s, cfg.pairs["diff"], MatchSettings(), bounds=bounds(cfg), clock=stepped.now,
+                           sleep=stepped.sleep)
         after = _gains(s, cfg)
     assert result.reached and list(result.proposal.changes) == ["right"]  # right's loop is the faster one
     first, best = result.rounds[0], result.rounds[result.chosen]
@@ -98,8 +100,9 @@ def test_match_on_a_matched_pair_proposes_no_change_and_tries_nothing():
     text = re.sub(r"lag: [0-9.]+", "lag: 0.05", MATCH.read_text(encoding="utf-8"))  # both loops alike
     assert text.count("lag: 0.05") == 2
     cfg = load_config_text(text, "matched.yaml")
-    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
-        result = run_match(s, cfg.pairs["diff"], MatchSettings(), bounds=bounds(cfg))
+    with stepped_session(cfg) as (s, stepped):
+        result = run_match(s, cfg.pairs["diff"], MatchSettings(), bounds=bounds(cfg), clock=stepped.now,
+                           sleep=stepped.sleep)
     assert result.proposal.changes == {} and len(result.rounds) == 1
 
 
