@@ -17,6 +17,7 @@ import time
 from pathlib import Path
 
 import pytest
+from motion_helpers import stepped_session
 
 from sherpa_cli.bus.session import ArmSession
 from sherpa_cli.bus.targets import drive_ref
@@ -147,17 +148,17 @@ def test_pair_search_stops_both_when_only_one_drive_sees_the_switch(tmp_path):
     cfg = variant(tmp_path, ("buses:", "  wiring: {pair_b: {swap: [[1, 5]]}}\n"
                                        "homing: {pair_edge_window_ms: 50}\nbuses:"))
     assert cfg.homing.pair_edge_window_ms == 50
-    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
+    with stepped_session(cfg) as (s, stepped):  # the 50 ms window and the drift in simulated time
         (a0, _), (b0, _) = motor(s, "pair_a"), motor(s, "pair_b")
         with pytest.raises(SafetyError, match=r"pitch: pair_a saw the switch on input 1 during the search but "
                                               r"pair_b did not within 50 ms.*wiring fault") as info:
-            home.run_home(s, home.plan_home(cfg, ["diff"]))
+            home.run_home(s, home.plan_home(cfg, ["diff"]), clock=stepped.now, sleep=stepped.sleep)
         assert "--check-wiring pitch" in (info.value.hint or "")
         (a, _), (b, _) = motor(s, "pair_a"), motor(s, "pair_b")
         with s.sim.lock:
             assert not s.sim.drives["pair_a"].motor_on and not s.sim.drives["pair_b"].motor_on
         # pair_b was stopped shortly after pair_a's edge, not at the end of its PR (545 counts; before
-        # the fix Δ drifted about 300 counts, into the hard stop): a loose bound against a loaded machine
+        # the fix Δ drifted about 300 counts, into the hard stop)
         assert abs((a - b) - (a0 - b0)) < 200, f"Δ drifted {(a - b) - (a0 - b0):.0f} counts"
         assert ram(s, "pair_a", "HM[1]") == 0 and ram(s, "pair_b", "HM[1]") == 0
 
