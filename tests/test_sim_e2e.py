@@ -35,7 +35,9 @@ from sherpa_cli.sim.clock import ManualClock
 ROOT = Path(__file__).resolve().parent.parent
 EXAMPLES = ROOT / "configs" / "appendix-c"
 
-FAST = "protocol: {mo_settle: 0.05, sv_blackout: 0.2}\n"
+# reply_timeout 0.5 s (the bundled 0.1 s): every request of these tests is on wall time, and a loaded
+# machine that stalled the in-process simulator 0.2 s made two attempts of 0.1 s a DriveTimeoutError
+FAST = "protocol: {mo_settle: 0.05, sv_blackout: 0.2, reply_timeout: 0.5}\n"
 ONE_DRIVE = """\
 name: e2e-one
 buses:
@@ -116,7 +118,7 @@ def test_interpreter_is_deaf_before_nmt_start(tmp_path):
         t0 = time.monotonic()
         with pytest.raises(DriveTimeoutError) as info:
             c.get("AC")
-        assert time.monotonic() - t0 < 1.0
+        assert time.monotonic() - t0 < 5.0  # 2 attempts x reply_timeout 0.5 s, not a hang
         assert "drive1 (node 5)" in str(info.value)
         assert "AC" in str(info.value)
         # the frames did reach the drive (1 + retries of them); it just does not answer in Pre-op
@@ -144,7 +146,7 @@ def test_nmt_reset_loses_unsaved_values_and_keeps_saved_ones(tmp_path):
 
         boot.clear()  # the power-up boot-up may or may not have reached the host
         c.nmt_reset_communication()
-        assert boot.wait(1.0), "no boot-up frame after NMT reset communication"
+        assert boot.wait(10.0), "no boot-up frame after NMT reset communication"
         # Pre-operational again: the binary interpreter needs a new NMT start
         assert s.sim.drives["drive1"].nmt_state == 0x7F
         c.nmt_start()
@@ -199,7 +201,7 @@ def test_dead_node_times_out_quickly_naming_the_drive(tmp_path):
         with pytest.raises(DriveTimeoutError) as info:
             dead.get("AC")
         elapsed = time.monotonic() - t0
-        assert elapsed < 0.5  # 2 attempts x reply_timeout 0.1 s, not a hang
+        assert elapsed < 5.0  # 2 attempts x reply_timeout 0.5 s, not a hang
         assert "drive2 (node 2)" in str(info.value)
         assert s.sim.drives["drive2"].dead
         assert alive.get("AC") == FACTORY_AC  # the other drive on the bus is unaffected
@@ -219,7 +221,7 @@ def test_dead_node_sends_nothing_at_all(tmp_path):
     listener = can.Bus(interface="virtual", channel=channel)
     try:
         with SimArm(cfg, {"can0": {"interface": "virtual", "channel": channel}}) as arm:
-            wait_until(lambda: arm.drives["drive1"].dead, 1.0, "the drive to die")
+            wait_until(lambda: arm.drives["drive1"].dead, 10.0, "the drive to die")
             time.sleep(0.05)
         frames = []
         while (msg := listener.recv(0)) is not None:
@@ -231,7 +233,7 @@ def test_dead_node_sends_nothing_at_all(tmp_path):
 
 # -- (e) reply latency vs. reply timeout ---------------------------------------------------------
 
-@pytest.mark.parametrize("reply_timeout, answers", [(0.02, False), (0.2, True)])
+@pytest.mark.parametrize("reply_timeout, answers", [(0.02, False), (1.0, True)])
 def test_reply_latency_against_reply_timeout(tmp_path, reply_timeout, answers):
     cfg = write_config(tmp_path, ONE_DRIVE + f"protocol: {{reply_timeout: {reply_timeout}, retries: 0}}\n"
                        "sim:\n  drives:\n    drive1: {reply_latency: 0.05}\n")
@@ -263,7 +265,7 @@ def test_stop_switch_stops_a_jog_toward_it_and_lets_it_jog_away(tmp_path):
         c.motor_on()
         c.set("JV", 0, 2000)
         c.execute("BG")
-        wait_until(lambda: c.get("PX") > 100 and c.get("VX") == 0, 1.5, "the jog to stop")
+        wait_until(lambda: c.get("PX") > 100 and c.get("VX") == 0, 10.0, "the jog to stop")
         px = c.get("PX")
         assert 220 <= px <= 230, px
         assert c.get("SR") & SR_LIMIT_STOP
