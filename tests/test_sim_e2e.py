@@ -292,6 +292,17 @@ def pair_positions(s: ArmSession) -> tuple[float, float]:
     return a + b, a - b
 
 
+def tick_pair(s, clock: ManualClock, step_s: float) -> tuple[list, float]:
+    """One step of the ManualClock, both drives of the pair ticked to it (the pumps tick them too, to
+    the same instant: no double step); returns the drives and Δ then."""
+    clock.advance(step_s)
+    with s.sim.lock:
+        drives = [s.sim.drives[n] for n in ("drive1", "drive2")]
+        for drive in drives:
+            drive.tick()
+        return drives, pair_positions(s)[1]
+
+
 def test_pair_jog_both_same_way_moves_sigma_not_delta(tmp_path):
     # On a ManualClock only this test moves (as in the next test): both BGs reach the drives at the
     # same simulated instant and the jog lasts 0.2 s of simulated time, however loaded the machine is
@@ -310,12 +321,7 @@ def test_pair_jog_both_same_way_moves_sigma_not_delta(tmp_path):
         def run(seconds: float, until=lambda: False) -> list[float]:
             deltas: list[float] = []
             for _ in range(round(seconds / step_s)):
-                clock.advance(step_s)
-                with s.sim.lock:  # the pumps tick the drives too, to the same instant: no double step
-                    drives = [s.sim.drives[n] for n in ("drive1", "drive2")]
-                    for drive in drives:
-                        drive.tick()
-                    deltas.append(pair_positions(s)[1])
+                deltas.append(tick_pair(s, clock, step_s)[1])
                 if until():
                     break
             return deltas
@@ -365,14 +371,10 @@ def test_pair_sigma_move_with_speed_mismatch_transiently_moves_delta(tmp_path, g
             b.execute("BG")
             deltas: list[float] = []
             for _ in range(int(2.0 / step_s)):  # both targets are ~0.4 s of simulated time away
-                clock.advance(step_s)
-                with s.sim.lock:  # the pumps tick the drives too, to the same instant: no double step
-                    drives = [s.sim.drives[n] for n in ("drive1", "drive2")]
-                    for drive in drives:
-                        drive.tick()
-                    deltas.append(pair_positions(s)[1])
-                    if all(drive.motor.at_target for drive in drives):
-                        return deltas
+                drives, delta = tick_pair(s, clock, step_s)
+                deltas.append(delta)
+                if all(drive.motor.at_target for drive in drives):
+                    return deltas
             raise AssertionError(f"both motors did not reach their targets in 2 s of simulated time: {deltas[-5:]}")
 
         move(-100)
