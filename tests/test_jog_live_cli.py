@@ -3,9 +3,9 @@ golden dry runs and refusals, and the interactive view run headless through the 
 
 from __future__ import annotations
 
-import time
-
 import pytest
+
+from tests.test_jog_view import wait_until
 
 FAST = "tests/data/jog-fast-arm.yaml"
 JOY = "tests/data/joystick-arm.yaml"
@@ -48,9 +48,8 @@ def test_interactive_view_through_the_command_leaves_every_motor_off(cli, monkey
         seen["start"] = pilot.app.live.state["j2"].counts
         await pilot.press("right")  # j2 has an absolute encoder: calibrated, a +0.05 rad (29 counts) step
         state = pilot.app.live.state
-        end = time.monotonic() + 10  # the view refreshes its state every tick: wait for the step (bounded)
-        while abs(state["j2"].counts - seen["start"] - 29) > 1 and time.monotonic() < end:
-            await pilot.pause(0.1)
+        # the view refreshes its state every tick: wait for the step (bounded)
+        await wait_until(pilot, lambda: abs(state["j2"].counts - seen["start"] - 29) <= 1, 10)
         seen["j2"] = state["j2"].counts
         await pilot.press("q")
 
