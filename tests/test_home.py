@@ -399,3 +399,27 @@ def test_scan_and_identify_show_the_encoder(cli):
     (dev,) = json.loads(ident.stdout)["devices"]
     assert dev["type"] == "canopen-encoder" and dev["position"] == -544 and dev["joint_position"] == -444
     assert dev["device_type"] == 0x00010196
+
+
+def test_every_kind_homed_twice_leaves_an_empty_journal_and_the_encoder_joint_then_jogs():
+    """A finished home puts back all it journaled: an encoder joint's immediate home event left its
+    HM[1] entry behind, and every later command refused to move the joint ("a home that did not
+    finish (killed?) left temporary changes")."""
+    from sherpa_cli.bus import journal
+    from sherpa_cli.motion.request import parse_request
+    from sherpa_cli.motion.settings import MotionSettings
+    from sherpa_cli.ops.jog import run_jog
+
+    cfg = load_config(ARM)
+    names = ["yaw", "stiff", "twist", "elbow", "diff"]
+    plan = home.plan_home(cfg, names)
+    assert {u.kind for u in plan.units} == set(home.KINDS)
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
+        for _ in range(2):
+            home.run_home(s, plan)
+            assert not journal.journal_dir().exists() or sorted(journal.journal_dir().iterdir()) == []
+        target = resolve_axis(cfg, "twist")
+        start = px(s, "twist_drive")
+        req = parse_request(target, mode="position", to=(start + 50) * 2 * 3.141592653589793 / target.cpr)
+        result = run_jog(s, target, req, settings=MotionSettings.from_config(cfg))
+        assert result.end_counts == start + 50

@@ -448,10 +448,13 @@ class _Runner:
                 reading = encoder.read_position(self.session, dev, clock=self.clock, sleep=self.sleep)
                 raw, read_from, res.encoder_via[dev.name] = reading.position, dev.name, reading.via
             value = raw + joint.abs_encoder.offset
-            self.arm_homing(c, event=self.h.event_immediate, value=value, after=self.h.after_nothing)
-            px = int(c.get("PX"))
-            if px != value or int(c.get("HM", 1)) != 0:
-                raise SafetyError(f"{c.label}: the immediate home event did not set PX (PX={px}, wanted {value})")
+            # the immediate event disarms itself; _Disarm still puts HM[1]=0 back and drops the journal
+            # entry, or a finished home would leave an entry that refuses every later move of the joint
+            with _Disarm(self):
+                self.arm_homing(c, event=self.h.event_immediate, value=value, after=self.h.after_nothing)
+                px = int(c.get("PX"))
+                if px != value or int(c.get("HM", 1)) != 0:
+                    raise SafetyError(f"{c.label}: the immediate home event did not set PX (PX={px}, wanted {value})")
             calibration.mark_calibrated(self.cfg, c)
             res.encoder[read_from], res.set_to[jname], res.positions[jname] = raw, value, px
         return res
