@@ -332,6 +332,7 @@ class CountingSync:
         return PeriodicSync(bus, period)
 
 
+@pytest.mark.serial  # the real periodic SYNC thread on wall time (docs/testing.md): run alone by .ci/run
 def test_the_move_records_both_motors_by_tpdo_on_sync_and_puts_the_pdo_settings_back(cfg):
     sync = CountingSync()
     with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:

@@ -23,6 +23,10 @@ from sherpa_cli.motion.guard import MotionGuard
 from sherpa_cli.motion.settings import MotionSettings
 from sherpa_cli.sim.arm import SimArm
 
+# a 200 ms heartbeat, silent after 0.6 s, on wall time (docs/testing.md): .ci/run runs
+# `serial` tests alone, after the parallel run
+pytestmark = pytest.mark.serial
+
 CONFIG = """\
 name: watch-test
 protocol: {mo_settle: 0.05, sv_blackout: 0.2, reply_timeout: 1.0, retries: 2}

@@ -7,6 +7,10 @@ import pytest
 
 from tests.test_jog_view import wait_until
 
+# the interactive view through the command, on textual's real-time event loop (see
+# tests/test_jog_view.py): .ci/run runs `serial` tests alone
+pytestmark = pytest.mark.serial
+
 FAST = "tests/data/jog-fast-arm.yaml"
 JOY = "tests/data/joystick-arm.yaml"
 F = ["--config", FAST, "--sim"]

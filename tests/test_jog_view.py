@@ -18,6 +18,11 @@ from sherpa_cli.ops.live_jog import LiveJog, resolve_axes
 from sherpa_cli.sim.arm import SimArm
 from tests.test_home import physical, px
 
+# the interactive view runs on textual's event loop in real time, its ticks feeding the guard's
+# liveness watch: beside other workers on a loaded machine the watch took the starved loop for a hung
+# command (2026-11-29, 4 workers and 2 busy processes). .ci/run runs `serial` tests alone
+pytestmark = pytest.mark.serial
+
 CONFIG = JOG_CONFIG
 
 

@@ -26,6 +26,10 @@ from sherpa_cli.ops.live_jog import LiveJog, resolve_axes
 from sherpa_cli.sim.arm import SimArm
 from tests.test_jog_view import home_arm, wait_until
 
+# the interactive view on textual's real-time event loop (see tests/test_jog_view.py):
+# .ci/run runs `serial` tests alone, after the parallel run
+pytestmark = pytest.mark.serial
+
 SHIPPED = Path(__file__).resolve().parent.parent / "configs" / "sherpa-arm.yaml"
 SIZE = (80, 24)
 

@@ -21,6 +21,10 @@ from sherpa_cli.motion.guard import MotionGuard, MotionStopped
 from sherpa_cli.motion.settings import MotionSettings
 from sherpa_cli.sim.arm import SimArm
 
+# the guard's own tests run its 300 ms dead-man on wall time (docs/testing.md): .ci/run
+# runs `serial` tests alone, after the parallel run
+pytestmark = pytest.mark.serial
+
 CONFIG = """\
 name: guard-test
 protocol: {mo_settle: 0.05, sv_blackout: 0.2}
