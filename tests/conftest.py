@@ -102,6 +102,13 @@ def _leak_baseline(item: pytest.Item) -> None:
     item.stash[LEAK_BASELINE] = (_open_virtual_buses(), set(threading.enumerate()))
 
 
+@pytest.fixture
+def rebaseline(request: pytest.FixtureRequest) -> Callable[[], None]:
+    """``rebaseline()``: the threads and buses existing now are the session's, not the test's leftovers
+    (a fixture that restarted the session's simulator harness for the test calls it)."""
+    return lambda: _leak_baseline(request.node)
+
+
 @pytest.fixture(autouse=True)
 def _no_leftovers(request: pytest.FixtureRequest) -> Iterator[None]:
     """Fail a test that leaves a python-can virtual bus open or a thread running."""

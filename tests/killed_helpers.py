@@ -103,9 +103,11 @@ def fresh(process: ArmProcess) -> Arm:
 
 
 @pytest.fixture
-def arm(shared_arm):
+def arm(shared_arm, rebaseline):
     """The arm as after power-on, for one test (:func:`fresh`)."""
-    return fresh(shared_arm)
+    arm = fresh(shared_arm)
+    rebaseline()  # a simulator (re)started for this test: its threads are the module's
+    return arm
 
 
 def snapshot(arm_: Arm, drives: tuple[str, ...]) -> dict[str, int]:

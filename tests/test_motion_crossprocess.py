@@ -69,11 +69,12 @@ class Arm:
 
 
 @pytest.fixture
-def arm(arm_process, tmp_path):
+def arm(arm_process, tmp_path, rebaseline):
     """The simulated arm in another process: the realbus harness's, or (SHERPA_TEST_BUS=virtual) our own
     `sherpa sim --serve` with an event log."""
     if arm_process is not None:
         arm_process.new_test()
+        rebaseline()  # a simulator restarted after the last test's SV: its threads are the session's
         arm_process.before_command()
         yield Arm(arm_process.config, arm_process.bus_map, arm_process.event_log, shared=True)
         return
