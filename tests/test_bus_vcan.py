@@ -8,7 +8,8 @@ machine's kernel has no SocketCAN.
 - pyroute2 reads vcan's link: up, frame counters; vcan has no CAN controller, and the status says so;
 - `bus down` / `bus up` as root set what vcan takes (the link) and say what it cannot (the bit rate);
 - error frames injected on vcan (can-utils `cansend` where installed, else python-can sending an error
-  frame) are decoded by `bus watch`.
+  frame) are decoded by `bus watch`;
+- `log capture` keeps the kernel's receive timestamps.
 """
 
 from __future__ import annotations
@@ -128,3 +129,59 @@ def test_error_frames_injected_on_vcan_are_decoded_by_bus_watch(cli, spare, tool
     assert "can0: controller: error-passive (TX) (TEC 136, REC 1)" in out
     assert "can0: bus-off (TEC 255, REC 1)" in out
     assert "error frames seen" in out
+
+
+def _bursts(spare: str, stop: threading.Event, sent: list[tuple[float, float, int]], ready: Path,
+            bursts: int = 5, per_burst: int = 20) -> None:
+    """Bursts of frames on the spare interface with a pause between them, each frame bracketed by
+    time.time() before and after its send: a kernel receive stamp falls inside that bracket."""
+    import time
+
+    import can
+
+    bus = can.Bus(interface="socketcan", channel=spare)
+    try:
+        # the capture's sockets are open once its file is (capture() opens the buses, then the writer)
+        deadline = time.monotonic() + 60
+        while not ready.exists() and time.monotonic() < deadline and not stop.wait(0.05):
+            pass
+        n = 0
+        for _ in range(bursts):
+            if stop.is_set():
+                break
+            for _ in range(per_burst):
+                before = time.time()
+                bus.send(can.Message(arbitration_id=0x5A0, data=n.to_bytes(4, "little"), is_extended_id=False))
+                sent.append((before, time.time(), n))
+                n += 1
+            stop.wait(0.3)
+    finally:
+        bus.shutdown()
+
+
+def test_log_capture_on_vcan_keeps_the_kernels_receive_timestamps(cli, spare, tmp_path):
+    """`log capture` on a socketcan bus writes the kernel's receive time of each frame (SO_TIMESTAMP
+    through python-can), not when the capture got round to it: every frame's stamp lies between the
+    sender's clock readings just before and just after its send, even when the capture reads a burst
+    late. A stamp taken in user space on the capture's side would come after the bracket."""
+    from sherpa_cli.log.capture import read_frames
+
+    stop = threading.Event()
+    sent: list[tuple[float, float, int]] = []
+    out = tmp_path / "burst.log"
+    sender = threading.Thread(target=_bursts, args=(spare, stop, sent, out), name="vcan-bursts", daemon=True)
+    sender.start()
+    try:
+        result = cli(*bus_map(spare), "log", "capture", "--bus", "can0", "-o", str(out), "--for", "10")
+    finally:
+        stop.set()
+        sender.join(timeout=60)
+    assert result.exit_code == 0, result.transcript()
+    frames = [f for f in read_frames(out, ["can0"]) if f.can_id == 0x5A0]
+    assert len(frames) == len(sent) == 100, (len(frames), len(sent))
+    slack = 0.001  # the capture file keeps microseconds
+    for frame, (before, after, n) in zip(frames, sent, strict=True):
+        assert int.from_bytes(frame.data, "little") == n and frame.bus == "can0"
+        assert before - slack <= frame.timestamp <= after + slack, (n, before, frame.timestamp, after)
+    stamps = [f.timestamp for f in frames]
+    assert stamps == sorted(stamps)
