@@ -4,6 +4,11 @@ Ratios compare against a physical limit (the CAN bus) or a baseline measured in 
 run, because absolute times on shared machines move by 20-30 % between runs.
 
     python benchmarks/run.py [NAME ...] [--json]
+    python benchmarks/run.py --smoke [NAME ...]   every benchmark at its smallest size (CI)
+
+`--smoke` proves each benchmark still runs and gives a figure, in under 2 minutes: it fails when
+one raises or gives no finite figure, never because a goal is missed (at these sizes the ratios
+mean little; the goals are judged by full runs, docs/performance.md).
 
 Commands timed as whole processes (startup, scan, commission) run with Python's bytecode
 cache on (in a private PYTHONPYCACHEPREFIX, warmed by an untimed first run), as an installed
@@ -557,7 +562,21 @@ def bench_deadman(rounds: int = 3) -> Result:
                   f"{consumer * 1000:.0f} ms; sim served over python-can-remote on 127.0.0.1")
 
 
-def bench_home() -> Result:
+@contextlib.contextmanager
+def _state_home(path: str) -> Iterator[None]:
+    """XDG_STATE_HOME = ``path`` inside (the simulated flash and the journal), as it was after."""
+    old = os.environ.get("XDG_STATE_HOME")
+    os.environ["XDG_STATE_HOME"] = path
+    try:
+        yield
+    finally:
+        if old is None:
+            os.environ.pop("XDG_STATE_HOME", None)
+        else:
+            os.environ["XDG_STATE_HOME"] = old
+
+
+def bench_home(joints: tuple[str, ...] = ("shoulder_diff", "elbow_pitch", "elbow_stiffness")) -> Result:
     """`home` of the shoulder pair and the elbow (its stiffness joint: end switches; elbow_pitch has an
     absolute encoder, homed without motion) on the simulated sherpa-arm, in process, real time.
     Ratio: wall time of run_home / the time the motors were actually moving (sampled every 2 ms from
@@ -565,7 +584,6 @@ def bench_home() -> Result:
     the overhead -- guard set-up, MO settle, polling, the stops -- is what is judged. Goal <= 1.3.
     The joints power up where the simulator puts them by default (sim/arm.py default_power_up: a
     quarter of the way from the calibration switch toward the far edge of the normal range), PX = 0."""
-    import os
     import tempfile
     import threading
 
@@ -574,10 +592,9 @@ def bench_home() -> Result:
     from sherpa_cli.ops.home import plan_home, run_home
     from sherpa_cli.sim.arm import SimArm
 
-    with tempfile.TemporaryDirectory() as tmp:
-        os.environ["XDG_STATE_HOME"] = tmp
+    with tempfile.TemporaryDirectory() as tmp, _state_home(tmp):
         cfg = load_config(ROOT / "configs" / "sherpa-arm.yaml")
-        plan = plan_home(cfg, ["shoulder_diff", "elbow_pitch", "elbow_stiffness"])
+        plan = plan_home(cfg, list(joints))
         with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as session:
             arm = session.sim
             moving = [0.0]
@@ -604,7 +621,7 @@ def bench_home() -> Result:
     goal = "<= 1.3"
     ratio = wall / moving[0]
     return Result("home", round(wall, 2), "s", round(ratio, 2), goal, _judge(ratio, goal),
-                  f"run_home of shoulder_diff, elbow_pitch, elbow_stiffness: {wall:.1f} s wall, motors moving "
+                  f"run_home of {', '.join(joints)}: {wall:.1f} s wall, motors moving "
                   f"{moving[0]:.1f} s (simulator, in process, real time)")
 
 
@@ -617,14 +634,22 @@ def _coupling_peaks(req_kw: dict, modes: dict[str, dict], rounds: int) -> dict[s
     from sherpa_cli.config import load_config
     from sherpa_cli.ops import diffdrive
     from sherpa_cli.sim.arm import SimArm
+    from sherpa_cli.sim.stepped import SteppedTime
 
     cfg = load_config(COUPLING_CONFIG)
     out = {}
     for name, kw in modes.items():
         peaks = []
-        for _ in range(rounds):
-            with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
-                r = diffdrive.run_move(s, cfg.pairs["diff"], diffdrive.MoveRequest(**req_kw, **kw))
+        for n in range(rounds):
+            # stepped time (sim/stepped.py), as tests/test_diffdrive.py: the coupling is the simulated pair's,
+            # not the host's scheduling; on wall time the simulated skew never showed (every peak 0)
+            stepped = SteppedTime()
+            channels = {b: {"interface": "virtual", "channel": f"bench-coupling-{os.getpid()}-{name}-{n}-{b}"}
+                        for b in cfg.buses}
+            sim = SimArm(cfg, channels, clock=stepped.clock)
+            with ArmSession.open(cfg, sim=sim) as s:
+                s.client_overrides.update(stepped.client_overrides(cfg.protocol.reply_timeout, cfg.protocol.retries))
+                r = diffdrive.run_move(s, cfg.pairs["diff"], diffdrive.PairTarget(**req_kw, **kw), timebase=stepped)
             peaks.append(r.coupling.held_peak)
         out[name] = statistics.median(peaks)
     return out
@@ -638,22 +663,17 @@ def bench_coupling(rounds: int = 3) -> Result:
     import tempfile as _tf
 
     modes = {"naive": {"naive": True}, "group": {}, "feedback": {"feedback": True}}
-    with _tf.TemporaryDirectory(prefix="sherpa-bench-coupling-") as state:
-        old = os.environ.get("XDG_STATE_HOME")
-        os.environ["XDG_STATE_HOME"] = state
-        try:
-            sig = _coupling_peaks({"sigma": "1"}, modes, rounds)
-            dlt = _coupling_peaks({"delta": "1"}, modes, rounds)
-        finally:
-            if old is None:
-                os.environ.pop("XDG_STATE_HOME", None)
-            else:
-                os.environ["XDG_STATE_HOME"] = old
+    with _tf.TemporaryDirectory(prefix="sherpa-bench-coupling-") as state, _state_home(state):
+        sig = _coupling_peaks({"sigma": "1"}, modes, rounds)
+        dlt = _coupling_peaks({"delta": "1"}, modes, rounds)
     best = min(sig["group"], sig["feedback"])
-    ratio_s = best / sig["naive"] if sig["naive"] else 0.0
+    # a naive move that couples nothing measures nothing: no figure (NaN), not a ratio of 0
+    ratio_s = best / sig["naive"] if sig["naive"] else float("nan")
     best_d = min(dlt["group"], dlt["feedback"])
-    ratio_d = best_d / dlt["naive"] if dlt["naive"] else 0.0
+    ratio_d = best_d / dlt["naive"] if dlt["naive"] else float("nan")
     ratio = max(ratio_s, ratio_d)  # the goal holds for both moves
+    if ratio_s != ratio_s or ratio_d != ratio_d:  # NaN: either move measured nothing
+        ratio = float("nan")
     goal = "<= 0.1"
     return Result("coupling", round(best, 1), "counts", round(ratio, 3), goal, _judge(ratio, goal),
                   f"Σ move: held Δ peak naive {sig['naive']:.0f}, group {sig['group']:.0f}, feedback "
@@ -683,36 +703,28 @@ def bench_match(rounds: int = 3) -> Result:
     cfg = load_config(MATCH_CONFIG)
     pair = cfg.pairs["diff"]
     modes = {"naive": {"naive": True}, "group": {}, "feedback": {"feedback": True}}
-    with _tf.TemporaryDirectory(prefix="sherpa-bench-match-") as state:
-        old = os.environ.get("XDG_STATE_HOME")
-        os.environ["XDG_STATE_HOME"] = state
-        try:
-            with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
-                def peaks() -> dict[str, float]:
-                    out = {}
-                    for name, kw in modes.items():
-                        runs = []
-                        for _ in range(rounds):
-                            move = diffdrive.run_move(s, pair, diffdrive.MoveRequest(sigma="1", **kw))
-                            runs.append(move.coupling.held_peak)
-                            diffdrive.run_move(s, pair, diffdrive.MoveRequest(sigma="0"))
-                        out[name] = statistics.median(runs)
-                    return out
+    with _tf.TemporaryDirectory(prefix="sherpa-bench-match-") as state, _state_home(state), \
+            ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
+            def peaks() -> dict[str, float]:
+                out = {}
+                for name, kw in modes.items():
+                    runs = []
+                    for _ in range(rounds):
+                        move = diffdrive.run_move(s, pair, diffdrive.PairTarget(sigma="1", **kw))
+                        runs.append(move.coupling.held_peak)
+                        diffdrive.run_move(s, pair, diffdrive.PairTarget(sigma="0"))
+                    out[name] = statistics.median(runs)
+                return out
 
-                before = peaks()
-                start = time.perf_counter()
-                result = pair_match.run_match(s, pair, pair_match.MatchSettings(), bounds=bounds(cfg))
-                took = time.perf_counter() - start
-                for drive, changes in result.proposal.changes.items():
-                    client = s.client(next(r for r in pair_match._refs(cfg, pair) if r.name == drive))
-                    for key, value in changes.items():
-                        client.set(*parse_param_key(key), value)
-                after = peaks()
-        finally:
-            if old is None:
-                os.environ.pop("XDG_STATE_HOME", None)
-            else:
-                os.environ["XDG_STATE_HOME"] = old
+            before = peaks()
+            start = time.perf_counter()
+            result = pair_match.run_match(s, pair, pair_match.MatchSettings(), bounds=bounds(cfg))
+            took = time.perf_counter() - start
+            for drive, changes in result.proposal.changes.items():
+                client = s.client(next(r for r in pair_match._refs(cfg, pair) if r.name == drive))
+                for key, value in changes.items():
+                    client.set(*parse_param_key(key), value)
+            after = peaks()
     ratio = after["naive"] / before["naive"] if before["naive"] else 0.0
     goal = "<= 0.25"
     changes = "; ".join(f"{d} " + " ".join(f"{k}={v:g}" for k, v in c.items())
@@ -971,6 +983,75 @@ BENCHMARKS: dict[str, Callable[[], Result]] = {
 }
 
 
+# --smoke: each benchmark at its smallest meaningful size (keyword arguments of its function)
+SMOKE: dict[str, dict[str, object]] = {
+    "client": {"pairs": 200, "rounds": 1},
+    "sdo": {"uploads": 200, "rounds": 1},
+    "scan": {"rounds": 1},
+    "commission": {"rounds": 1},
+    "program": {"rounds": 1},
+    "scaling": {"sizes": (1, 3)},
+    "startup": {"rounds": 2},
+    "deadman": {"rounds": 1},
+    "home": {"joints": ("elbow_stiffness",)},
+    "coupling": {"rounds": 1},
+    "record": {"seconds": 0.5},
+    "record_memory": {"long_s": 2.0, "short_s": 1.0},
+    "recorder": {"seconds": 0.1},
+    "match": {"rounds": 1},
+    "capture": {"frames": 300},
+}
+
+
+@dataclass
+class SmokeOutcome:
+    name: str
+    result: Result | None
+    error: str = ""
+    seconds: float = 0.0
+
+    @property
+    def ok(self) -> bool:
+        """Ran and gave a finite figure; whether its goal was met is not judged here."""
+        import math
+
+        return (not self.error and self.result is not None
+                and all(isinstance(v, int | float) and math.isfinite(v)
+                        for v in (self.result.value, self.result.ratio)))
+
+    def line(self) -> str:
+        if self.error:
+            return f"{self.name:13} ERROR {self.error}"
+        r = self.result
+        assert r is not None
+        if not self.ok:
+            return f"{self.name:13} NO FIGURE (value {r.value!r}, ratio {r.ratio!r})"
+        goal = "goal met" if r.passed else "goal missed (not judged in a smoke run)"
+        return f"{self.name:13} {r.value:>12} {r.unit:8} ratio {r.ratio:>8}  goal {r.goal:6} {goal}  [{self.seconds:.1f} s]"
+
+
+def smoke_one(name: str, bench: Callable[..., Result], kwargs: dict[str, object]) -> SmokeOutcome:
+    start = time.perf_counter()
+    try:
+        result = bench(**kwargs)
+    except Exception as exc:  # noqa: BLE001  a smoke run reports every benchmark, the broken ones by name
+        return SmokeOutcome(name, None, f"{type(exc).__name__}: {exc}", time.perf_counter() - start)
+    return SmokeOutcome(name, result, "", time.perf_counter() - start)
+
+
+def smoke(names: list[str]) -> int:
+    start = time.perf_counter()
+    outcomes = []
+    for name in names:
+        outcome = smoke_one(name, BENCHMARKS[name], SMOKE[name])
+        print(outcome.line(), flush=True)
+        outcomes.append(outcome)
+    bad = [o.name for o in outcomes if not o.ok]
+    print(f"smoke: {len(outcomes) - len(bad)} of {len(outcomes)} benchmarks gave a figure in "
+          f"{time.perf_counter() - start:.0f} s" + (f"; broken: {', '.join(bad)}" if bad else ""))
+    return 1 if bad else 0
+
+
 def main(argv: list[str] | None = None) -> int:
     if argv is None and sys.argv[1:] == ["--responder"]:  # the other process of `client` and `sdo`
         _responder_main()
@@ -981,10 +1062,14 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("names", nargs="*", metavar="NAME", help=f"benchmarks to run: {', '.join(BENCHMARKS)}")
     parser.add_argument("--json", action="store_true", help="print a JSON list of results")
+    parser.add_argument("--smoke", action="store_true",
+                        help="every benchmark at its smallest size; fails only on an error or a missing figure")
     args = parser.parse_args(argv)
     unknown = [n for n in args.names if n not in BENCHMARKS]
     if unknown:
         parser.error(f"unknown benchmark(s): {', '.join(unknown)}; known: {', '.join(BENCHMARKS)}")
+    if args.smoke:
+        return smoke(args.names or list(BENCHMARKS))
     results = [BENCHMARKS[name]() for name in (args.names or BENCHMARKS)]
     if args.json:
         print(json.dumps([r.as_json() for r in results], indent=2))
