@@ -276,3 +276,26 @@ def test_the_pair_plot_marks_the_held_joints_excursion_with_a_sensible_span(tmp_
     excursion = f"peak excursion ±{count:.4f} rad"
     assert excursion in bottom["labels"] and _labelled(bottom["ax"], excursion)
     assert all(a["legend_outside"] and a["offset"] == "" for a in (top, bottom))
+
+
+@pytest.mark.parametrize("args", [
+    ("diffdrive", "move", "shoulder_diff", "--sigma", "0.05", "--apply"),
+    ("diffdrive", "match", "shoulder_diff", "--measure"),
+])
+def test_a_plot_that_cannot_be_drawn_is_refused_before_anything_moves(cli, tmp_path, monkeypatch, args):
+    """`diffdrive move --plot` without matplotlib moved the pair, then failed with no result table."""
+    from sherpa_cli.bus.session import ArmSession
+
+    def no_session(*_a, **_k):
+        raise AssertionError("a session was opened: the command went to the bus before refusing its plot")
+
+    monkeypatch.setattr(ArmSession, "open", staticmethod(no_session))
+    monkeypatch.setattr("sherpa_cli.log.plot.have_matplotlib", lambda: False)
+    result = cli("--sim", *args, "--plot", str(tmp_path / "p.png"))
+    assert result.exit_code == 2, result.transcript()
+    assert "--plot needs matplotlib" in result.stderr and "nothing was moved" in result.stderr
+    assert "Traceback" not in result.stderr and result.stdout == ""
+    monkeypatch.setattr("sherpa_cli.log.plot.have_matplotlib", lambda: True)
+    (tmp_path / "dir.png").mkdir()
+    result = cli("--sim", *args, "--plot", str(tmp_path / "dir.png"))
+    assert result.exit_code == 2 and "is a directory" in result.stderr, result.transcript()

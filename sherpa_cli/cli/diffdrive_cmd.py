@@ -206,8 +206,9 @@ def move(
     if naive and feedback:
         raise UsageError("--naive and --feedback do not go together: --naive is the seed's way, for comparison")
     method, _ = diffdrive.pair_settings(cfg)
-    if plot is not None and not plot.lower().endswith(".png"):
-        raise UsageError(f"--plot {plot}: expected a .png file name")
+    from sherpa_cli.log.plot import check_plot_path
+
+    check_plot_path(plot)  # before the move: a plot that cannot be drawn must not cost a motion
     if report is not None:
         from sherpa_cli.output_files import check_output_path
 
@@ -389,8 +390,9 @@ def match(
     check_options(apply, save)
     if rounds < 1:
         raise UsageError(f"--rounds {rounds}: expected 1 or more")
-    if plot is not None and not plot.lower().endswith(".png"):
-        raise UsageError(f"--plot {plot}: expected a .png file name")
+    from sherpa_cli.log.plot import check_plot_path
+
+    check_plot_path(plot)  # before the trial moves
     if apply and st.json_mode:
         raise UsageError("--json with --apply: the proposal and the write would be two reports",
                          hint="--measure --json shows the proposal; write it with `sherpa tune set ... --apply`")

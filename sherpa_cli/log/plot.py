@@ -43,6 +43,21 @@ def have_matplotlib() -> bool:
     return True
 
 
+def check_plot_path(path: str | Path | None, option: str = "--plot") -> None:
+    """Refuse, before anything moves or is measured, a plot that could not be drawn: not a .png name,
+    matplotlib missing, or a path that can never be written (UsageError)."""
+    if path is None:
+        return
+    from sherpa_cli.output_files import check_output_path
+
+    if not str(path).lower().endswith(".png"):
+        raise UsageError(f"{option} {path}: expected a .png file name")
+    if not have_matplotlib():
+        raise UsageError(f"{option} needs matplotlib, an optional extra of sherpa-cli; nothing was moved",
+                         hint=MISSING_HINT)
+    check_output_path(path, option, "the plot")
+
+
 @dataclass(frozen=True)
 class StepMarks:
     """What a step experiment draws on its trace: the command at ``t = 0`` and the MO/UM switch
