@@ -85,3 +85,22 @@ def test_debug_shows_the_traceback(cli):
 
 def test_at_least_forty_distinct_bad_inputs():
     assert len(CASES) + len(ARGUMENTS) >= 40
+
+
+@pytest.mark.parametrize("args,line", [
+    (("scan", "--sim"), "hint: --sim is a global option: it goes before the command, `sherpa --sim scan`"),
+    (("home", "elbow_pitch", "--json"),
+     "hint: --json is a global option: it goes before the command, `sherpa --json home elbow_pitch`"),
+    (("diffdrive", "move", "shoulder_diff", "--config", "configs/sherpa-arm.yaml", "--sigma", "0.1"),
+     "hint: --config is a global option: it goes before the command, "
+     "`sherpa --config configs/sherpa-arm.yaml diffdrive move shoulder_diff --sigma 0.1`"),
+])
+def test_a_global_option_after_the_command_says_where_it_goes(cli, args, line):
+    result = cli(*args)
+    assert result.exit_code == 2 and "No such option" in result.stderr
+    assert line in result.stderr.splitlines(), result.stderr
+
+
+def test_an_unknown_option_gets_no_global_option_hint(cli):
+    result = cli("scan", "--bogus")
+    assert result.exit_code == 2 and "No such option: --bogus" in result.stderr and "hint:" not in result.stderr

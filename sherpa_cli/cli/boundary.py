@@ -106,7 +106,31 @@ def run(argv: Sequence[str] | None = None) -> int:
             show(file=sys.stderr)
         else:
             sys.stderr.write(f"error: {exc.format_message()}\n")
+        hint = _global_option_hint(exc, args)
+        if hint:
+            sys.stderr.write(f"hint: {hint}\n")
         return int(ExitCode.USAGE)
+
+
+def _global_option_hint(exc: Exception, args: Sequence[str]) -> str | None:
+    """For `sherpa scan --sim`: the parser says only "No such option"; a global option goes before
+    the command, so say that, with the line as it should be typed."""
+    name = getattr(exc, "option_name", None)
+    if not isinstance(name, str) or not name.startswith("-"):
+        return None
+    root = root_command()
+    globals_ = {opt for param in getattr(root, "params", ()) for opt in (*param.opts, *param.secondary_opts)}
+    if name not in globals_ or name in ("--help", "-h"):
+        return None
+    at = next((i for i, a in enumerate(args) if a == name or a.startswith(name + "=")), None)
+    if at is None:
+        return None
+    takes_value = next((not p.is_flag and not p.count for p in getattr(root, "params", ())
+                        if name in (*p.opts, *p.secondary_opts)), False)
+    moved = args[at:at + (2 if takes_value and "=" not in args[at] else 1)]
+    rest = [*args[:at], *args[at + len(moved):]]
+    return (f"{name} is a global option: it goes before the command, "
+            f"`sherpa {' '.join([*moved, *rest])}`")
 
 
 # A number as a command line gives it (option values, KEY=VALUE, positional), digits of any script,
