@@ -44,7 +44,11 @@ def check_output_path(path: str | os.PathLike[str] | None, option: str, what: st
     try:
         mode = os.stat(target).st_mode
     except FileNotFoundError:
-        return  # a new file (its directory is created when written)
+        # a new file (its missing directories are created when written): where it would land must
+        # take a file, or the command would fail with a traceback after the work (/dev/full/x.csv,
+        # /proc/self/x.csv)
+        check_output_dir(target.parent, option, what, path=path)
+        return
     except OSError as exc:
         raise UsageError(f"{option} {path}: cannot write {what}: {exc.strerror or exc}",
                          hint="choose a writable file name") from None
@@ -53,6 +57,29 @@ def check_output_path(path: str | os.PathLike[str] | None, option: str, what: st
                          hint=f"name a file, e.g. {option} {Path(path) / 'out'}")
     if stat.S_ISSOCK(mode):
         raise UsageError(f"{option} {path}: is a socket, expected a file name")
+
+
+def check_output_dir(directory: str | os.PathLike[str], option: str, what: str = "the files", *,
+                     path: str | os.PathLike[str] | None = None) -> None:
+    """Refuse, before any work is done, a directory that can never take the output: an existing
+    non-directory on the way, or a place where no file can be created (tried: a probe file made and
+    removed in the nearest directory that exists). Missing directories below it are fine (created)."""
+    shown = os.fspath(path if path is not None else directory)
+    here = Path(os.path.realpath(os.fspath(directory)))
+    while not os.path.lexists(here) and here != here.parent:
+        here = here.parent
+    if not here.is_dir():
+        raise UsageError(f"{option} {shown}: {here} is not a directory, so {what} cannot go there",
+                         hint="choose a writable file name")
+    import tempfile
+
+    try:
+        fd, probe = tempfile.mkstemp(dir=here, prefix=".sherpa-write-probe-")
+        os.close(fd)
+        os.unlink(probe)
+    except OSError as exc:
+        raise UsageError(f"{option} {shown}: cannot write {what} in {here}: {exc.strerror or exc}",
+                         hint="choose a writable file name") from None
 
 
 def write_output(path: str | os.PathLike[str], text: str, option: str, *, what: str = "the file",

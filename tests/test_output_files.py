@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import stat
 import threading
 from pathlib import Path
@@ -170,3 +171,36 @@ def test_both_reports_to_stdout_is_refused(cli, tmp_path):
     r = cli("recipe", "run", str(recipe), "--report", "-", "--junit", "-")
     assert r.exit_code == 2 and "only one report can go to stdout" in r.stderr
     assert "[1/1]" not in r.stdout
+
+
+# -- where no file can go: refused before the work, not a traceback after it -----------------------
+
+@pytest.mark.parametrize("bad", ["/dev/null/x.csv", "/proc/self/x.csv", "/proc/adv/sub/x.csv"])
+def test_a_path_where_no_file_can_be_made_is_refused_up_front(bad):
+    with pytest.raises(UsageError, match=r"^-o " + re.escape(bad) + ": "):
+        check_output_path(bad, "-o", "the recording")
+
+
+def test_check_output_dir_takes_a_new_directory_below_a_writable_one_and_refuses_a_file_on_the_way(tmp_path):
+    from sherpa_cli.output_files import check_output_dir
+
+    check_output_dir(tmp_path / "new" / "deeper", "-o")
+    assert not (tmp_path / "new").exists() and list(tmp_path.iterdir()) == []  # the probe leaves nothing
+    (tmp_path / "f").write_text("x")
+    with pytest.raises(UsageError, match="is not a directory"):
+        check_output_dir(tmp_path / "f" / "sub", "-o")
+    with pytest.raises(UsageError, match="cannot write"):
+        check_output_dir("/proc/adv", "-o", "the step's files")
+
+
+@pytest.mark.parametrize("args", [
+    ("log", "record", "elbow_pitch", "--for", "0.2", "-o", "/dev/null/x.csv"),
+    ("log", "record", "elbow_pitch", "--for", "0.2", "-o", "/proc/self/x.csv"),
+    ("log", "step", "elbow_pitch", "--velocity", "0.1", "--apply", "-o", "/proc/adv"),
+    ("dump-params", "elbow_1a", "-o", "/proc/self/p.json"),
+])
+def test_commands_refuse_an_unwritable_output_with_one_line_and_no_traceback(cli, args):
+    result = cli("--sim", *args)
+    assert result.exit_code == 2, result.transcript()
+    assert "Traceback" not in result.stderr and result.stderr.startswith("error: "), result.transcript()
+    assert "cannot write" in result.stderr and "elbow_1a" not in result.stdout

@@ -630,6 +630,10 @@ def step(
         record_outputs([output])  # the directory, the robotics extra
     elif output.exists() and not output.is_dir():
         raise UsageError(f"-o {output}: exists and is not a directory")
+    else:
+        from sherpa_cli.output_files import check_output_dir
+
+        check_output_dir(output, "-o", "the step's files")  # before the step moves anything
     cfg = st.load_config()
     if mode == "torque":
         from sherpa_cli.motion.settings import check_torque_for

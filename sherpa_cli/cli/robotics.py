@@ -15,6 +15,7 @@ from typing import TYPE_CHECKING, Annotated, Any
 import typer
 
 from sherpa_cli.errors import UsageError
+from sherpa_cli.output_files import check_output_path
 
 if TYPE_CHECKING:
     from sherpa_cli.bus.session import ArmSession
@@ -52,6 +53,7 @@ def record_outputs(outputs: Sequence[Path]) -> dict[str, Path]:
             raise UsageError(f"-o {path}: a {suffix} file is already given ({chosen[suffix]})")
         if not path.parent.exists():
             raise UsageError(f"-o {path}: directory {path.parent} does not exist")
+        check_output_path(path, "-o", "the recording")
         chosen[suffix] = path
     if ".mcap" in chosen:
         from sherpa_cli.log.mcap_out import require_mcap

@@ -135,6 +135,9 @@ def check_output(path: Path) -> str:
         require_mcap(f"-o {path}")
     if not path.parent.exists():
         raise UsageError(f"{path}: directory {path.parent} does not exist")
+    from sherpa_cli.output_files import check_output_path
+
+    check_output_path(path, "-o", "the capture")
     return suffix
 
 
