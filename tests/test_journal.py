@@ -7,6 +7,8 @@ import os
 import subprocess
 import sys
 
+import pytest
+
 from sherpa_cli.bus import journal
 from sherpa_cli.bus.targets import DriveRef
 
@@ -66,3 +68,18 @@ def test_recover_with_nothing_left_says_so(cli):
 def test_recover_of_an_unknown_target_is_a_usage_error(cli):
     result = cli("--sim", "recover", "no_such_joint")
     assert result.exit_code == 2 and "Traceback" not in result.stderr
+
+
+@pytest.mark.parametrize("args", [("jog", "elbow_pitch", "--by", "0.05", "--apply"),
+                                  ("log", "record", "elbow_pitch", "--for", "0.2", "-o", "{tmp}/r.csv")])
+def test_a_journal_that_cannot_be_written_refuses_the_change_with_one_line(cli, tmp_path, args):
+    """The journal's directory taken by a file (or not writable): the command went to a traceback
+    (FileExistsError) mid-way; now the change is not made and one line says where and why."""
+    journal_path = tmp_path / "state" / "sherpa-cli" / "journal"
+    journal_path.parent.mkdir(parents=True)
+    journal_path.write_text("not a directory")
+    result = cli("--sim", *(a.format(tmp=tmp_path) for a in args))
+    assert result.exit_code == 1, result.transcript()
+    assert "Traceback" not in result.stderr
+    assert f"elbow_1a: cannot write the journal {journal_path}/can1-node40.json" in result.stderr
+    assert "was not made" in result.stderr and f"hint: make {journal_path} a directory" in result.stderr

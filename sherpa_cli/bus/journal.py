@@ -136,7 +136,13 @@ def note(ref: DriveRef, *steps: Step) -> None:
         if os.getpid() not in data["pids"]:
             data["pids"].append(os.getpid())
         data["steps"] = [*data.get("steps", []), *(s.as_json() for s in steps)]
-        _write(path, data)
+        try:
+            _write(path, data)
+        except OSError as exc:
+            # without its note a change could not be put back after a crash: it is not made
+            raise SafetyError(f"{ref.name}: cannot write the journal {path}: {exc.strerror or exc}; "
+                              f"the temporary change ({', '.join(s.name for s in steps)}) was not made",
+                              hint=f"make {journal_dir()} a directory this user can write") from None
 
 
 def forget(ref: DriveRef, owner: str, names: set[str] | None = None) -> None:
@@ -148,12 +154,15 @@ def forget(ref: DriveRef, owner: str, names: set[str] | None = None) -> None:
             return
         keep = [s for s in data.get("steps", []) if not (s.get("owner") == owner and
                                                           (names is None or s.get("name") in names))]
-        if keep:
-            data["steps"] = keep
-            _write(path, data)
-        else:
-            with contextlib.suppress(FileNotFoundError):
-                path.unlink()
+        try:
+            if keep:
+                data["steps"] = keep
+                _write(path, data)
+            else:
+                with contextlib.suppress(FileNotFoundError):
+                    path.unlink()
+        except OSError as exc:  # the change is put back; a stale note only makes the next command ask for recover
+            log.warning("journal %s: cannot drop %s's notes: %s", path, owner, exc.strerror or exc)
 
 
 def _alive(pid: int) -> bool:
