@@ -1,22 +1,24 @@
-"""benchmarks/run.py --smoke (the CI's bench stage): every benchmark has a smallest size its function
-accepts, and the smoke verdict fails a benchmark that raises or gives no figure, not one that only
-misses its goal. No benchmark runs here (the bench stage runs them all)."""
+"""benchmarks/run.py --smoke (the CI's bench stage): every benchmark has a smoke size its function
+accepts, and the smoke verdict fails a benchmark that raised or gave no finite figure, never one that
+only missed its goal. No benchmark runs here."""
 
 from __future__ import annotations
 
 import importlib.util
 import inspect
+import math
+import os
 import sys
 from pathlib import Path
 
 import pytest
 
-ROOT = Path(__file__).resolve().parent.parent
+RUN_PY = Path(__file__).resolve().parent.parent / "benchmarks" / "run.py"
 
 
 @pytest.fixture(scope="module")
 def bench():
-    spec = importlib.util.spec_from_file_location("sherpa_benchmarks", ROOT / "benchmarks" / "run.py")
+    spec = importlib.util.spec_from_file_location("sherpa_benchmarks_run", RUN_PY)
     assert spec is not None and spec.loader is not None
     module = importlib.util.module_from_spec(spec)
     sys.modules[spec.name] = module  # dataclasses look their module up by name
@@ -27,41 +29,96 @@ def bench():
         sys.modules.pop(spec.name, None)
 
 
-def test_every_benchmark_has_a_smoke_size_its_function_accepts(bench):
-    assert set(bench.SMOKE) == set(bench.BENCHMARKS)
-    for name, fn in bench.BENCHMARKS.items():
-        inspect.signature(fn).bind(**bench.SMOKE[name])  # TypeError names the argument it does not take
-
-
-def _result(bench, value=1.0, ratio=1.0, passed=True):
+def _result(bench, value=1.0, ratio=0.5, passed=True):
     return bench.Result("x", value, "ms", ratio, "<= 1", passed)
 
 
-def test_a_missed_goal_passes_the_smoke_run(bench):
-    outcome = bench.smoke_one("x", lambda: _result(bench, ratio=9.0, passed=False), {})
-    assert outcome.ok and "goal missed" in outcome.line()
+def test_every_benchmark_has_a_smoke_size_its_function_accepts(bench):
+    assert set(bench.SMOKE) == set(bench.BENCHMARKS)
+    for name, fn in bench.BENCHMARKS.items():
+        inspect.signature(fn).bind(**bench.SMOKE[name])  # raises TypeError on an unknown keyword
 
 
-@pytest.mark.parametrize("value,ratio", [(float("nan"), 1.0), (1.0, float("nan")), (float("inf"), 1.0)])
-def test_no_finite_figure_fails_it(bench, value, ratio):
-    outcome = bench.smoke_one("x", lambda: _result(bench, value=value, ratio=ratio), {})
+def test_a_missed_goal_passes_the_smoke_and_says_so(bench):
+    outcome = bench.smoke_one("slow", lambda **kw: _result(bench, ratio=3.0, passed=False), {})
+    assert outcome.ok
+    assert "goal missed" in outcome.line() and "not judged" in outcome.line()
+    met = bench.smoke_one("fast", lambda **kw: _result(bench), {})
+    assert met.ok and "goal met" in met.line()
+
+
+def test_a_raising_benchmark_fails_the_smoke_with_one_error_line(bench):
+    def broken(rounds: int = 3):
+        raise AttributeError("module has no attribute 'MoveRequest'\nsecond line")
+
+    outcome = bench.smoke_one("coupling", broken, {"rounds": 1})
+    assert not outcome.ok
+    assert outcome.line() == "coupling ERROR AttributeError: module has no attribute 'MoveRequest' second line"
+
+
+@pytest.mark.parametrize("value, ratio", [(1.0, math.nan), (math.nan, 0.5), (1.0, math.inf), (None, 0.5),
+                                          ("12", 0.5)])
+def test_no_finite_figure_fails_the_smoke(bench, value, ratio):
+    result = _result(bench, value=value, ratio=ratio)
+    assert not bench.has_figure(result)
+    outcome = bench.smoke_one("nan", lambda: result, {})
     assert not outcome.ok and "NO FIGURE" in outcome.line()
+    assert not bench.has_figure(None)
 
 
-def test_a_benchmark_that_raises_fails_it_and_the_others_still_run(bench, monkeypatch, capsys):
-    def broken(**_):
-        raise AttributeError("module 'x' has no attribute 'MoveRequest'")
+def test_the_smoke_run_goes_on_after_a_failure_and_exits_1(bench, monkeypatch, capsys):
+    calls = []
 
-    monkeypatch.setattr(bench, "BENCHMARKS", {"broken": broken, "fine": lambda **_: _result(bench)})
-    monkeypatch.setattr(bench, "SMOKE", {"broken": {}, "fine": {}})
-    assert bench.smoke(["broken", "fine"]) == 1
+    def boom():
+        calls.append("boom")
+        raise RuntimeError("no reply")
+
+    def missed():
+        calls.append("missed")
+        return _result(bench, ratio=9.0, passed=False)
+
+    monkeypatch.setattr(bench, "BENCHMARKS", {"boom": boom, "missed": missed})
+    monkeypatch.setattr(bench, "SMOKE", {"boom": {}, "missed": {}})
+    assert bench.smoke(["boom", "missed"]) == 1
+    assert calls == ["boom", "missed"]
     out = capsys.readouterr().out
-    assert "broken        ERROR AttributeError: module 'x' has no attribute 'MoveRequest'" in out
-    assert "fine " in out and "1 of 2 benchmarks gave a figure" in out and "broken: broken" in out
+    assert "boom ERROR RuntimeError: no reply" in out and "wall time" in out and "broken: boom" in out
+    monkeypatch.setattr(bench, "SMOKE", {"boom": {}, "missed": {}})
+    assert bench.smoke(["missed"]) == 0  # a missed goal alone passes
 
 
-def test_all_figures_pass(bench, monkeypatch, capsys):
-    monkeypatch.setattr(bench, "BENCHMARKS", {"fine": lambda **_: _result(bench)})
-    monkeypatch.setattr(bench, "SMOKE", {"fine": {}})
-    assert bench.smoke(["fine"]) == 0
-    assert "1 of 1 benchmarks gave a figure" in capsys.readouterr().out
+def test_a_benchmark_that_changes_the_environment_has_it_put_back(bench, monkeypatch):
+    monkeypatch.delenv("XDG_STATE_HOME", raising=False)
+
+    def leaky():
+        os.environ["XDG_STATE_HOME"] = "/nonexistent/bench-state"
+        return _result(bench)
+
+    outcome = bench.smoke_one("leaky", leaky, {})
+    assert "XDG_STATE_HOME" not in os.environ
+    assert outcome.ok and outcome.changed_env == ("XDG_STATE_HOME",) and "put back" in outcome.line()
+
+
+def test_state_home_puts_the_variable_back(bench, monkeypatch):
+    monkeypatch.setenv("XDG_STATE_HOME", "/before")
+    with bench._state_home("/inside"):
+        assert os.environ["XDG_STATE_HOME"] == "/inside"
+    assert os.environ["XDG_STATE_HOME"] == "/before"
+    monkeypatch.delenv("XDG_STATE_HOME")
+    with pytest.raises(RuntimeError), bench._state_home("/inside"):
+        raise RuntimeError
+    assert "XDG_STATE_HOME" not in os.environ
+
+
+def test_importing_the_benchmarks_makes_no_temporary_directory(tmp_path, monkeypatch):
+    # the helper processes (--responder, --burst) import run.py and end past atexit: nothing at import
+    monkeypatch.setattr("tempfile.tempdir", str(tmp_path))
+    spec = importlib.util.spec_from_file_location("sherpa_benchmarks_run_import", RUN_PY)
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = module
+    try:
+        spec.loader.exec_module(module)
+    finally:
+        sys.modules.pop(spec.name, None)
+    assert list(tmp_path.iterdir()) == []
