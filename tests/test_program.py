@@ -6,6 +6,7 @@ import dataclasses
 import json
 import signal
 import threading
+import time
 from pathlib import Path
 
 import pytest
@@ -325,8 +326,12 @@ def test_sv_only_after_verification_and_values_survive_an_nmt_reset(state_home, 
         c1 = client(session, "drive1")
         boots = d1.boots
         c1.nmt_reset_communication()
-        c1.nmt_start()
+        # the simulated drive handles the reset in its own thread: wait for its boot (bounded), then start it
+        deadline = time.monotonic() + 10
+        while d1.boots == boots and time.monotonic() < deadline:
+            time.sleep(0.01)
         assert d1.boots == boots + 1
+        c1.nmt_start()
         for key, value in targets[0].params.items():
             letters, index = codec.parse_expr(key).letters, codec.parse_expr(key).index
             assert c1.get(letters, index) == value, key
