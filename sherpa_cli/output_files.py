@@ -75,8 +75,10 @@ def check_output_dir(directory: str | os.PathLike[str], option: str, what: str =
 
     try:
         fd, probe = tempfile.mkstemp(dir=here, prefix=".sherpa-write-probe-")
-        os.close(fd)
-        os.unlink(probe)
+        try:
+            os.close(fd)
+        finally:
+            os.unlink(probe)
     except OSError as exc:
         raise UsageError(f"{option} {shown}: cannot write {what} in {here}: {exc.strerror or exc}",
                          hint="choose a writable file name") from None

@@ -104,3 +104,11 @@ def test_a_global_option_after_the_command_says_where_it_goes(cli, args, line):
 def test_an_unknown_option_gets_no_global_option_hint(cli):
     result = cli("scan", "--bogus")
     assert result.exit_code == 2 and "No such option: --bogus" in result.stderr and "hint:" not in result.stderr
+    # a global option in its place but without its value is another mistake: no hint to move it
+    result = cli("--config")
+    assert result.exit_code == 2 and "requires an argument" in result.stderr and "hint:" not in result.stderr
+
+
+def test_the_hint_moves_the_refused_option_not_the_one_already_in_place(cli):
+    result = cli("--json", "scan", "--json")
+    assert "hint: --json is a global option: it goes before the command, `sherpa --json --json scan`" in result.stderr

@@ -28,7 +28,7 @@ def test_the_package_has_its_layers():
     assert len(MODULES) > 100
 
 
-def test_every_module_imports_alone_in_a_fresh_interpreter():
+def test_every_module_imports_in_fresh_interpreters_forty_at_a_time():
     """Fresh interpreters, a chunk of modules each (one interpreter per module would take a minute):
     a module that imports only after a test happened to import something else fails here."""
     failures = []

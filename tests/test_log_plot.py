@@ -299,3 +299,6 @@ def test_a_plot_that_cannot_be_drawn_is_refused_before_anything_moves(cli, tmp_p
     (tmp_path / "dir.png").mkdir()
     result = cli("--sim", *args, "--plot", str(tmp_path / "dir.png"))
     assert result.exit_code == 2 and "is a directory" in result.stderr, result.transcript()
+    # savefig creates no directory: a plot in one that does not exist would fail after the move
+    result = cli("--sim", *args, "--plot", str(tmp_path / "new" / "p.png"))
+    assert result.exit_code == 2 and "does not exist; nothing was moved" in result.stderr, result.transcript()

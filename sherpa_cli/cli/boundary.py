@@ -115,6 +115,8 @@ def run(argv: Sequence[str] | None = None) -> int:
 def _global_option_hint(exc: Exception, args: Sequence[str]) -> str | None:
     """For `sherpa scan --sim`: the parser says only "No such option"; a global option goes before
     the command, so say that, with the line as it should be typed."""
+    if type(exc).__name__ != "NoSuchOption":  # click's, whichever click typer brings
+        return None
     name = getattr(exc, "option_name", None)
     if not isinstance(name, str) or not name.startswith("-"):
         return None
@@ -122,7 +124,8 @@ def _global_option_hint(exc: Exception, args: Sequence[str]) -> str | None:
     globals_ = {opt for param in getattr(root, "params", ()) for opt in (*param.opts, *param.secondary_opts)}
     if name not in globals_ or name in ("--help", "-h"):
         return None
-    at = next((i for i, a in enumerate(args) if a == name or a.startswith(name + "=")), None)
+    # the last one: the parser read the global options before the command, so a refused one is after it
+    at = next((i for i in reversed(range(len(args))) if args[i] == name or args[i].startswith(name + "=")), None)
     if at is None:
         return None
     takes_value = next((not p.is_flag and not p.count for p in getattr(root, "params", ())

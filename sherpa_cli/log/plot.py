@@ -55,6 +55,9 @@ def check_plot_path(path: str | Path | None, option: str = "--plot") -> None:
     if not have_matplotlib():
         raise UsageError(f"{option} needs matplotlib, an optional extra of sherpa-cli; nothing was moved",
                          hint=MISSING_HINT)
+    parent = Path(path).parent
+    if not parent.is_dir():  # matplotlib's savefig creates no directory
+        raise UsageError(f"{option} {path}: directory {parent} does not exist; nothing was moved")
     check_output_path(path, option, "the plot")
 
 
