@@ -299,6 +299,24 @@ def test_a_plot_that_cannot_be_drawn_is_refused_before_anything_moves(cli, tmp_p
     (tmp_path / "dir.png").mkdir()
     result = cli("--sim", *args, "--plot", str(tmp_path / "dir.png"))
     assert result.exit_code == 2 and "is a directory" in result.stderr, result.transcript()
-    # savefig creates no directory: a plot in one that does not exist would fail after the move
-    result = cli("--sim", *args, "--plot", str(tmp_path / "new" / "p.png"))
-    assert result.exit_code == 2 and "does not exist; nothing was moved" in result.stderr, result.transcript()
+    # a file where a directory would have to be made: the plot could never be saved
+    (tmp_path / "f").write_text("x")
+    result = cli("--sim", *args, "--plot", str(tmp_path / "f" / "p.png"))
+    assert result.exit_code == 2 and "cannot write the plot: Not a directory" in result.stderr, result.transcript()
+
+
+def test_a_pair_plot_makes_its_missing_directory(tmp_path):
+    """savefig makes no directory: plot_pair (diffdrive move --plot) makes it, as every written file's
+    missing directories are made (a recipe's dry run passes a plot path whose directory comes later)."""
+    from sherpa_cli.log.plot import save_png
+
+    matplotlib = pytest.importorskip("matplotlib")
+    matplotlib.use("Agg", force=True)
+    import matplotlib.pyplot as plt
+
+    fig = plt.figure()
+    try:
+        save_png(fig, tmp_path / "new" / "deeper" / "p.png")
+    finally:
+        plt.close(fig)
+    assert (tmp_path / "new" / "deeper" / "p.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"

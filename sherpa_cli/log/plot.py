@@ -55,10 +55,13 @@ def check_plot_path(path: str | Path | None, option: str = "--plot") -> None:
     if not have_matplotlib():
         raise UsageError(f"{option} needs matplotlib, an optional extra of sherpa-cli; nothing was moved",
                          hint=MISSING_HINT)
-    parent = Path(path).parent
-    if not parent.is_dir():  # matplotlib's savefig creates no directory
-        raise UsageError(f"{option} {path}: directory {parent} does not exist; nothing was moved")
-    check_output_path(path, option, "the plot")
+    check_output_path(path, option, "the plot")  # a missing directory is made when the plot is saved
+
+
+def save_png(fig: Figure, path: str | Path) -> None:
+    """``fig`` as a PNG at ``path``, its missing directories made first (savefig makes none)."""
+    Path(path).parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(str(path), format="png")
 
 
 @dataclass(frozen=True)
@@ -221,5 +224,5 @@ def plot_pair(trace: PairTrace, path: Path | str) -> Figure:
     what = f"diffdrive move {trace.pair}: Σ {trace.sigma} to {trace.sigma_target:+.4f} rad, " \
            f"Δ {trace.delta} to {trace.delta_target:+.4f} rad"
     fig.suptitle(what + (f" ({trace.subtitle})" if trace.subtitle else ""))
-    fig.savefig(str(path), format="png")
+    save_png(fig, path)
     return fig

@@ -467,7 +467,7 @@ def _put_back(held: Mapping[str, float], client: DriveClient) -> list[str]:
 def plot(result: MatchResult, path: str) -> Figure:
     """Before / after: both motors' recorded speed and Δ (m_a - m_b, counts) of the Σ step (the round
     with the drives' own gains and the round whose gains are proposed). PNG, matplotlib (log/plot.py)."""
-    from sherpa_cli.log.plot import figure
+    from sherpa_cli.log.plot import figure, save_png
 
     fig = figure()
     axes = fig.subplots(2, 2, sharex=True)
@@ -487,5 +487,5 @@ def plot(result: MatchResult, path: str) -> Figure:
         axes[1][col].set_title(f"{label}: Δ drag, peak {rnd.excursion:.0f} counts")
         axes[1][col].set_xlabel("ms from BG")
     fig.suptitle(f"diffdrive match {result.pair}")
-    fig.savefig(path)
+    save_png(fig, path)
     return fig
