@@ -120,16 +120,14 @@ def _global_option_hint(exc: Exception, args: Sequence[str]) -> str | None:
     name = getattr(exc, "option_name", None)
     if not isinstance(name, str) or not name.startswith("-"):
         return None
-    root = root_command()
-    globals_ = {opt for param in getattr(root, "params", ()) for opt in (*param.opts, *param.secondary_opts)}
-    if name not in globals_ or name in ("--help", "-h"):
+    param = next((p for p in getattr(root_command(), "params", ()) if name in (*p.opts, *p.secondary_opts)), None)
+    if param is None or name in ("--help", "-h"):
         return None
     # the last one: the parser read the global options before the command, so a refused one is after it
     at = next((i for i in reversed(range(len(args))) if args[i] == name or args[i].startswith(name + "=")), None)
     if at is None:
         return None
-    takes_value = next((not p.is_flag and not p.count for p in getattr(root, "params", ())
-                        if name in (*p.opts, *p.secondary_opts)), False)
+    takes_value = not param.is_flag and not param.count
     moved = args[at:at + (2 if takes_value and "=" not in args[at] else 1)]
     rest = [*args[:at], *args[at + len(moved):]]
     return (f"{name} is a global option: it goes before the command, "
