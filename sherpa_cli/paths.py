@@ -31,6 +31,26 @@ def state_dir() -> Path:
     return Path(platformdirs.user_state_dir(APP_NAME, appauthor=False))
 
 
+LOCK_DIR_ENV = "SHERPA_LOCK_DIR"
+
+
+def lock_dir() -> Path:
+    """Where the machine-wide locks live: every user's and every state directory's sherpa commands
+    meet there (the dead-man host ids of a bus). ``$SHERPA_LOCK_DIR`` if set (tests, a system that
+    mounts its own), else ``/run/lock/sherpa-cli`` (``/var/lock``, then the temporary directory, where
+    there is no /run/lock). A lock is an flock the kernel drops when its process ends."""
+    env = os.environ.get(LOCK_DIR_ENV)
+    if env:
+        return Path(env)
+    for base in ("/run/lock", "/var/lock"):
+        if os.path.isdir(base) and os.access(base, os.W_OK | os.X_OK):
+            return Path(base) / APP_NAME
+    return Path(tempfile.gettempdir()) / f"{APP_NAME}-locks"
+
+
+LOCK_DIR_HINT = f"check that {LOCK_DIR_ENV} (default /run/lock/sherpa-cli) is a directory every sherpa user can write"
+
+
 def file_lock(path: Path, timeout: float = LOCK_TIMEOUT) -> filelock.BaseFileLock:
     """An inter-process lock for a read-modify-write of ``path`` (held in ``<path>.lock``).
 

@@ -62,6 +62,7 @@ def _user_state_sentinel(tmp_path_factory: pytest.TempPathFactory) -> Iterator[P
     sentinel = tmp_path_factory.mktemp("user-state-sentinel")
     patch = pytest.MonkeyPatch()
     patch.setenv("XDG_STATE_HOME", str(sentinel))
+    patch.setenv("SHERPA_LOCK_DIR", str(sentinel / "machine-locks"))
     try:
         yield sentinel
     finally:
@@ -73,8 +74,11 @@ def _user_state_sentinel(tmp_path_factory: pytest.TempPathFactory) -> Iterator[P
 
 @pytest.fixture(autouse=True)
 def _isolated_state(monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
-    """A state directory (save ledger, simulated flash) of the test's own."""
+    """A state directory (save ledger, simulated flash) and a machine lock directory (the dead-man
+    host ids, motion/lock.py MachineLock) of the test's own: the processes one test starts share it,
+    as the commands of one machine do."""
     monkeypatch.setenv("XDG_STATE_HOME", str(tmp_path / "state"))
+    monkeypatch.setenv("SHERPA_LOCK_DIR", str(tmp_path / "locks"))
 
 
 def _open_virtual_buses() -> dict[object, int]:

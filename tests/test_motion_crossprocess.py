@@ -365,3 +365,136 @@ def test_an_interrupted_home_then_home_finds_the_switch_without_pushing_the_end_
     offs = [e["t"] for e in events if e["event"].startswith("motor off")]
     assert ons and offs, events
     assert offs[-1] - ons[0] <= SECOND_HOME_S, f"the second home moved {offs[-1] - ons[0]:.1f} s: {events}"
+
+
+# -- issue 34 R1: other users and other hosts on the bus ------------------------------------------
+
+PRODUCER = """\
+import sys, time
+from sherpa_cli.bus.busmap import apply_bus_map, parse_bus_map
+from sherpa_cli.bus.links import open_bus
+from sherpa_cli.config import load_config
+import can
+config, bus_map, bus, host_id, seconds = sys.argv[1:6]
+cfg = apply_bus_map(load_config(config), parse_bus_map(bus_map.split(",")))
+link = open_bus(cfg.buses[bus])
+print("sending", flush=True)
+end = time.monotonic() + float(seconds)
+try:
+    while time.monotonic() < end:
+        link.send(can.Message(arbitration_id=0x700 + int(host_id), data=[5], is_extended_id=False))
+        time.sleep(0.05)
+finally:
+    link.shutdown()
+"""
+
+
+def foreign_producer(arm: Arm, tmp_path, host_id: int, seconds: float) -> subprocess.Popen:
+    """Another host's node sending heartbeats as ``host_id`` on can1 (the elbow's and wrist's bus)."""
+    proc = subprocess.Popen([sys.executable, "-c", PRODUCER, arm.config, arm.bus_map, "can1", str(host_id),
+                             str(seconds)], cwd=ROOT, env=_env(tmp_path), stdout=subprocess.PIPE, text=True)
+    line = proc.stdout.readline().strip()
+    assert line == "sending", f"the producer did not start: {line!r}"
+    return proc
+
+
+def sherpa_as(arm: Arm, tmp_path, who: str, *args: str, own_lock_dir: bool) -> subprocess.Popen:
+    """`sherpa` as another user (a state directory of its own) and, with ``own_lock_dir``, as if on
+    another host (a machine lock directory of its own: only the listening can keep the ids apart)."""
+    env = dict(_env(tmp_path), XDG_STATE_HOME=str(tmp_path / f"state-{who}"))
+    if own_lock_dir:
+        env["SHERPA_LOCK_DIR"] = str(tmp_path / f"locks-{who}")
+    return subprocess.Popen([sys.executable, "-m", "sherpa_cli", "--config", arm.config, "--bus-map", arm.bus_map,
+                             *args], cwd=ROOT, env=env, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
+
+
+def wait_jog_running(arm: Arm, proc: subprocess.Popen, drive: str, since: float) -> float:
+    deadline = time.monotonic() + START_TIMEOUT
+    while True:
+        on = [e for e in arm.events(drive) if e["t"] >= since and e["event"].startswith("BG: UM=5, JV=")]
+        if on:
+            return on[0]["t"]
+        if proc.poll() is not None or time.monotonic() > deadline:
+            proc.kill()
+            out, err = proc.communicate(timeout=EXIT_TIMEOUT)
+            raise AssertionError(f"the jog of {drive} did not start:\n{out}\n{err}\n{arm.events(drive)}")
+        time.sleep(0.02)
+
+
+def consumer_entries(arm: Arm, drive: str, since: float) -> list[str]:
+    return [e["event"] for e in arm.events(drive) if e["t"] >= since and "0x1016:1" in e["event"]]
+
+
+@pytest.mark.parametrize("own_lock_dir", [False, True], ids=["two-users", "two-hosts"])
+def test_a_second_user_or_host_never_shares_the_dead_man_id_and_a_killed_jog_stops_by_its_consumer(
+        arm, tmp_path, own_lock_dir):
+    """R1: two sherpa processes with different state directories (another user, sudo) or on different
+    hosts (different lock directories too) jog two joints of one bus; SIGKILL of the first stops its
+    motor within the consumer time, the second keeps running. Before, both took id 126 and the
+    elbow ran on for 6.7 s."""
+    centre(arm, tmp_path, JOINT, OTHER_JOINT)
+    since = time.monotonic()
+    first = sherpa_as(arm, tmp_path, "a", "jog", JOINT, "--velocity", "0.05", "--apply", own_lock_dir=own_lock_dir)
+    second = None
+    try:
+        t_on = wait_jog_running(arm, first, DRIVE, since)
+        since2 = time.monotonic()
+        second = sherpa_as(arm, tmp_path, "b", "jog", OTHER_JOINT, "--velocity", "0.05", "--apply",
+                           own_lock_dir=own_lock_dir)
+        wait_jog_running(arm, second, OTHER_DRIVE, since2)
+        time.sleep(0.2)
+        t_kill = time.monotonic()
+        os.kill(first.pid, signal.SIGKILL)
+        off = arm.wait_event(lambda text: text.startswith("motor off"), 10 * arm.consumer_s, after=t_on)
+        assert off["event"] == "motor off: heartbeat lost, 0x6007=2", arm.events()
+        ratio = (off["t"] - t_kill) / arm.consumer_s
+        assert 0 < ratio <= 1.5, f"{DRIVE} went off {off['t'] - t_kill:.3f} s after SIGKILL"
+        time.sleep(3 * arm.consumer_s)
+        assert second.poll() is None, "the other user's jog ended"
+        assert not [e for e in arm.events(OTHER_DRIVE) if e["t"] >= since2 and e["event"].startswith("motor off")]
+    finally:
+        finish(first) if first.poll() is not None else (first.kill(), finish(first))
+        if second is not None:
+            if second.poll() is None:
+                second.send_signal(signal.SIGINT)
+            code, out, err = finish(second)
+            assert code == 0, f"{out}\n{err}"
+
+
+def test_a_foreign_producer_on_126_is_heard_and_the_jog_takes_another_id_which_its_kill_stops(arm, tmp_path):
+    """R1: a foreign producer on id 126 (another host's tool) started before the jog: the jog listens,
+    takes another id, and a SIGKILL of the jog still stops its motor by the consumer although 126 goes
+    on being sent."""
+    centre(arm, tmp_path, JOINT)
+    producer = foreign_producer(arm, tmp_path, 126, 30)
+    try:
+        since = time.monotonic()
+        proc = sherpa(arm, tmp_path, "jog", JOINT, "--velocity", "0.05", "--apply")
+        t_on = wait_jog_running(arm, proc, DRIVE, since)
+        time.sleep(0.2)
+        t_kill = time.monotonic()
+        os.kill(proc.pid, signal.SIGKILL)
+        finish(proc)
+        off = arm.wait_event(lambda text: text.startswith("motor off"), 10 * arm.consumer_s, after=t_on)
+        assert off["event"] == "motor off: heartbeat lost, 0x6007=2", arm.events()
+        assert 0 < (off["t"] - t_kill) / arm.consumer_s <= 1.5
+        assert producer.poll() is None, "the producer stopped early: the test proves nothing"
+    finally:
+        producer.kill()
+        producer.wait()
+
+
+def test_a_foreign_producer_starting_on_the_jogs_own_id_stops_the_jog(arm, tmp_path):
+    """R1: a heartbeat on the command's own id that it did not send (another host that took it at
+    the same moment) ends the jog with exit 1 and the reason, every motor off."""
+    proc, t_on = start_jog(arm, tmp_path)
+    producer = foreign_producer(arm, tmp_path, 126, 30)
+    try:
+        code, out, err = finish(proc)
+    finally:
+        producer.kill()
+        producer.wait()
+    assert code == 1, f"{out}\n{err}"
+    assert "another node sends heartbeats as 126, this command's dead-man id, on bus can1" in err, err
+    assert [e for e in motor_offs(arm, t_on)], arm.events()

@@ -198,15 +198,16 @@ def test_buses_are_scanned_at_the_same_time():
     cfg = load_config(ARM)
 
     class Link:
-        def __init__(self):
+        def __init__(self, bus):
             self.network = _FakeNetwork(set(), barrier)
+            self.config = cfg.buses[bus]
 
     class Session:
         pass
 
     session = Session()
     session.cfg = cfg
-    session.links = {bus: Link() for bus in cfg.buses}
+    session.links = {bus: Link(bus) for bus in cfg.buses}
     report = scan(session, settings=ScanSettings(sdo_timeout=0.05, quiet_s=0.01))
     assert not barrier.broken
     assert sorted(report.missing) == sorted(cfg.drives)

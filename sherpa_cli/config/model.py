@@ -288,6 +288,9 @@ class MotionConfig:
     host_id_pool: tuple[int, ...] = (124, 123, 122, 121)
     consumer_time_ms: int = 500  # 0x1016:1 time: the drive stops this long after the last host heartbeat
     heartbeat_period_ms: int = 0  # host heartbeat period; 0 = a quarter of consumer_time_ms
+    # how long a command listens to the pool's ids before it takes one: longer than any drive armed on
+    # an id waits for its heartbeat (0 = consumer_time_ms plus one heartbeat period)
+    host_id_listen_ms: int = 0
     loss_action: int = 2  # 0x6007 on heartbeat loss (MF bit 11 names 2; 3 quick stop is UNCONFIRMED)
     comm_error_behaviour: int = 2  # 0x1029:1 (0 pre-operational, 1 no change, 2 stopped) [COB]
     stop_method: str = "auto"  # auto: ST, JV=0 + BG where ST is refused; st; jv0
@@ -329,6 +332,10 @@ class MotionConfig:
     @property
     def heartbeat_period_s(self) -> float:
         return (self.heartbeat_period_ms or self.consumer_time_ms / 4) / 1000
+
+    @property
+    def host_id_listen_s(self) -> float:
+        return (self.host_id_listen_ms or self.consumer_time_ms + self.heartbeat_period_s * 1000) / 1000
 
     @property
     def host_ids(self) -> tuple[int, ...]:

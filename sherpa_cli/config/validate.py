@@ -155,6 +155,10 @@ def _check_motion(cfg: ArmConfig, locs: Locs, r: _Report) -> None:
     elif not 0 <= m.heartbeat_period_ms <= m.consumer_time_ms / 2:
         r.error(where("heartbeat_period_ms"), f"heartbeat_period_ms {m.heartbeat_period_ms} must be 0 (a quarter "
                 f"of consumer_time_ms) or at most half of consumer_time_ms ({m.consumer_time_ms})")
+    if m.host_id_listen_ms and not m.consumer_time_ms <= m.host_id_listen_ms <= 10_000:
+        r.error(where("host_id_listen_ms"), f"host_id_listen_ms {m.host_id_listen_ms} must be 0 (consumer_time_ms plus "
+                f"one heartbeat period) or {m.consumer_time_ms} (consumer_time_ms) .. 10000: a shorter listen could take "
+                "the id of a command killed a moment ago while its drives still watch it")
     if not 0 <= m.stall_time <= 30:
         r.error(where("stall_time"), f"stall_time {m.stall_time} must be 0 (off) .. 30 s")
     if not 0 < m.recovery_speed <= 1:

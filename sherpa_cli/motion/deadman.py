@@ -69,6 +69,7 @@ class HostHeartbeat:
         heartbeat after its 0x1016 entry (CiA 301), so it must come before any MO=1, not a period later."""
         for network in self._networks():
             network.send_message(self.frame_id, bytes([NMT_OPERATIONAL]))
+        self.sent += 1
 
     def start(self) -> None:
         networks = list(self._networks())

@@ -47,7 +47,8 @@ from sherpa_cli.errors import (
 from sherpa_cli.motion.bus_watch import GuardBusWatch
 from sherpa_cli.motion.deadman import COMM_ERROR, CONSUMER, LOSS_ACTION, OBJECT_NAMES, SIZES, HostHeartbeat
 from sherpa_cli.motion.drive_watch import DriveWatch, DriveWatchError
-from sherpa_cli.motion.lock import DriveLock, HostIdLock, drive_label
+from sherpa_cli.motion.host_ids import HostIdListener
+from sherpa_cli.motion.lock import DriveLock, HostIdLock, drive_label, wire_key
 from sherpa_cli.motion.report import DriveStop, GuardReport
 from sherpa_cli.motion.settings import PROFILE_KEYS, MotionSettings
 from sherpa_cli.motion.stopping import ask_patiently, fault_reason, stop_drive, why
@@ -122,8 +123,11 @@ class MotionGuard:
         buses = sorted({ref.bus for ref in self.refs})
         self._heartbeat = HostHeartbeat(lambda: [session.links[b].network for b in buses], settings.host_node_id,
                                         settings.heartbeat_period, settings.liveness_timeout)
-        # the dead-man id of this command alone, taken on entry (motion/lock.py HostIdLock)
-        self._host_lock = HostIdLock(buses, settings.host_ids)
+        # the dead-man id of this command alone, taken on entry after listening (motion/host_ids.py,
+        # motion/lock.py HostIdLock)
+        self._host_lock = HostIdLock({b: wire_key(session.links[b].config.interface, session.links[b].config.channel)
+                                      for b in buses}, settings.host_ids)
+        self._host_ids = HostIdListener({b: session.links[b].network for b in buses}, settings.host_ids)
         self.host_id = settings.host_node_id
         # the watch of the drives: error EMCYs, NMT commands of other nodes, the drives' heartbeats
         self._watch = DriveWatch(lambda bus: session.links[bus].network, warning_codes=settings.emcy_warning_codes,
@@ -150,14 +154,20 @@ class MotionGuard:
             self._watch_requests()
             for ref in self.refs:  # first, before anything is sent: a second command refuses here
                 self._lock(ref)
+            listen_until = self._clock() + self.settings.host_id_listen
+            self._host_ids.start()  # listening to the pool's ids while the drives are read
             preflight(self.session, self.refs)  # bus state and bit rate, user programs (bus/health.py)
-            self.host_id = self._host_lock.acquire()  # before anything is armed: our own heartbeat id
-            self._heartbeat.use_host(self.host_id)
             self._pulse(extra=self._setup_bound())
             for ref in self.refs:
                 self._leftovers(ref)
             for ref in self.refs:
                 self._inspect(ref)
+            while (left := listen_until - self._clock()) > 0:
+                self._sleep(min(left, 0.05))
+                raise_if_signalled()
+            # before anything is armed: an id of our own nobody sends
+            self.host_id = self._host_lock.acquire(self._host_ids.heard())
+            self._heartbeat.use_host(self.host_id)
             self._start_heartbeat()
             for d in self._drives.values():
                 self._arm(d)
@@ -262,9 +272,26 @@ class MotionGuard:
         if self._heartbeat.given_up is not None:
             raise DeadManError(f"host heartbeat stopped: {self._heartbeat.given_up}")
         self._raise_if_tripped()
+        self._check_host_id()
         self._pulse()
         if self._clock() >= self._next_deadman_check:
             self._check_deadman()
+
+    def _check_host_id(self) -> None:
+        """Another node sends heartbeats as this command's own dead-man id (another host that took it
+        at the same moment, a tool that uses it): its heartbeat would keep the drives on after this
+        command ends or dies, so the command stops now."""
+        if self._exiting:
+            return
+        buses = self._host_ids.foreign(self.host_id, self._heartbeat.sent)
+        if buses:
+            raise DriveWatchError(
+                f"another node sends heartbeats as {self.host_id}, this command's dead-man id, on bus "
+                f"{', '.join(buses)} ({max(self._host_ids.count(b, self.host_id) for b in buses)} heard, "
+                f"{self._heartbeat.sent} sent): its heartbeat would keep the drives on; stopping every drive "
+                "of the command",
+                hint="find the other host or tool (`sherpa scan` lists the heartbeats of the pool's ids) and give "
+                     "it ids outside motion.host_id_pool (docs/motion.md \"Heartbeat ids\")")
 
     def _raise_if_tripped(self) -> None:
         """The bus watch's or the drive watch's reason to stop, raised on the command's thread
@@ -555,6 +582,7 @@ class MotionGuard:
         self._unwatch_requests = self.session.watch_requests(self._request_sent)
 
     def _unwatch(self) -> None:
+        self._host_ids.stop()
         if self._unwatch_requests is not None:
             self._unwatch_requests()
             self._unwatch_requests = None

@@ -25,6 +25,7 @@ class MotionSettings:
     host_id_pool: tuple[int, ...] = ()  # more ids a command takes when host_node_id is in use
     consumer_time_ms: int = 500
     heartbeat_period_ms: int = 0  # 0: a quarter of consumer_time_ms
+    host_id_listen_ms: int = 0  # 0: consumer_time_ms plus one heartbeat period (motion/host_ids.py)
     loss_action: int = 2
     comm_error_behaviour: int = 2
     stop_method: str = "auto"  # auto | st | jv0
@@ -47,6 +48,11 @@ class MotionSettings:
         return (self.heartbeat_period_ms or self.consumer_time_ms / 4) / 1000
 
     @property
+    def host_id_listen(self) -> float:
+        """s a command listens to the pool's ids before it takes one (motion/host_ids.py)."""
+        return (self.host_id_listen_ms or self.consumer_time_ms + self.heartbeat_period * 1000) / 1000
+
+    @property
     def host_ids(self) -> tuple[int, ...]:
         """The ids a command may send its heartbeat as, in the order they are taken."""
         return (self.host_node_id, *(i for i in self.host_id_pool if i != self.host_node_id))
@@ -66,7 +72,7 @@ class MotionSettings:
         poll_ms = min((cfg.buses[b].poll_interval_ms for b in names if b in cfg.buses), default=10)
         return cls(host_node_id=m.host_node_id, host_id_pool=tuple(m.host_id_pool),
                    consumer_time_ms=m.consumer_time_ms,
-                   heartbeat_period_ms=m.heartbeat_period_ms, loss_action=m.loss_action,
+                   heartbeat_period_ms=m.heartbeat_period_ms, host_id_listen_ms=m.host_id_listen_ms, loss_action=m.loss_action,
                    comm_error_behaviour=m.comm_error_behaviour, stop_method=m.stop_method,
                    standstill_timeout=m.standstill_timeout, standstill_velocity=m.standstill_velocity,
                    liveness_timeout=m.liveness_timeout,

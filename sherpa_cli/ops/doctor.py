@@ -227,9 +227,17 @@ def check_drives(report: DoctorReport, session: ArmSession, buses: Sequence[str]
                    "moving commands watch the drives themselves")
     taken = sorted(heard)
     ids = ", ".join(map(str, hosts))
+    def who(bus: str, hid: int) -> str:
+        from sherpa_cli.motion.lock import MachineLock, wire_key
+
+        link = session.links[bus]
+        pid = MachineLock(wire_key(link.config.interface, link.config.channel), f"host{hid}").holder()
+        return (f"{hid} (sherpa" + (f" pid {pid}" if pid else "") + " on this machine)" if pid is not None
+                else f"{hid} (not a sherpa command of this machine: another host or tool)")
+
     report.add("host node id", not taken, f"{ids}: free ({window:g} s listened)"
-               if not taken else "; ".join(f"{bus}: heartbeats on host id(s) {', '.join(map(str, sorted(heard[bus])))}"
-                                          for bus in taken),
+               if not taken else "; ".join(f"{bus}: heartbeats on host id(s) "
+                                          + ", ".join(who(bus, hid) for hid in sorted(heard[bus])) for bus in taken),
                "another master (a second sherpa moving drives, a ROS node) uses a host id: stop it, or give "
                "motion.host_node_id / host_id_pool ids no other node uses")
     refs = {d: DriveRef(d, cfg.drives[d].bus, cfg.drives[d].node, cfg.drives[d]) for d in found}

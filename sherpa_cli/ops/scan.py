@@ -46,9 +46,12 @@ UNEXPECTED = "unexpected"
 DUPLICATE = "duplicate id"
 SLOW = "answering slowly"
 NO_SDO = "no SDO answer"
-SHERPA_HOST = "sherpa host"  # only a heartbeat on a motion.host_id_pool id: a sherpa command moving drives
+SHERPA_HOST = "sherpa host"  # only a heartbeat on a motion.host_id_pool id: a sherpa command of this machine moving drives
+# only a heartbeat on a pool id that no sherpa command of this machine holds: another host or tool, whose
+# heartbeat would keep this machine's commands' drives on if they took the id (issue 34 R1)
+FOREIGN_HOST = "foreign host"
 # Verdicts that make `sherpa scan` exit 1: the bus is not wired or numbered as configured.
-PROBLEM_VERDICTS = frozenset({MISSING, UNEXPECTED, DUPLICATE, NO_SDO})
+PROBLEM_VERDICTS = frozenset({MISSING, UNEXPECTED, DUPLICATE, NO_SDO, FOREIGN_HOST})
 
 
 @dataclass(frozen=True)
@@ -339,8 +342,11 @@ def _nmt_text(states: list[int]) -> str | None:
 
 
 def scan_bus(cfg: ArmConfig, bus: str, network: Network, settings: ScanSettings = ScanSettings(), *,
-             reset: bool = False, progress: Callable[[str, int, int], None] | None = None) -> BusScan:
-    """Probe one bus, then read the identity of every node that answered; verdicts per node id."""
+             reset: bool = False, progress: Callable[[str, int, int], None] | None = None,
+             host_holder: Callable[[int], int | None] = lambda host_id: None) -> BusScan:
+    """Probe one bus, then read the identity of every node that answered; verdicts per node id.
+    ``host_holder``: the pid of the sherpa command of this machine holding a pool id on this bus
+    (motion/lock.py MachineLock.holder), None when none does."""
     configured = {d.node: d.name for d in cfg.drives.values() if d.bus == bus}
     configured.update({d.node: d.name for d in cfg.devices.values() if d.bus == bus})  # encoders, ...
     prober = BusProber(network, configured, settings, progress=progress)
@@ -386,8 +392,16 @@ def scan_bus(cfg: ArmConfig, bus: str, network: Network, settings: ScanSettings 
             notes.append(f"{len(h.answers)} nodes answer on id {node}; "
                          "identity not read (the answers would mix)")
         elif drive is None and not h.answers and node in cfg.motion.host_ids:
-            verdict = SHERPA_HOST
-            notes.append("the dead-man heartbeat of a running sherpa motion command (motion.host_id_pool)")
+            pid = host_holder(node)
+            if pid is not None:
+                verdict = SHERPA_HOST
+                notes.append("the dead-man heartbeat of a running sherpa motion command"
+                             + (f" (pid {pid})" if pid else "") + " on this machine (motion.host_id_pool)")
+            else:
+                verdict = FOREIGN_HOST
+                notes.append("a heartbeat on a dead-man id of motion.host_id_pool that no sherpa command of this "
+                             "machine holds: another host or tool; give it ids outside the pool "
+                             "(docs/motion.md \"Heartbeat ids\")")
         elif drive is None:
             verdict = UNEXPECTED
         elif not h.answers:
@@ -404,6 +418,13 @@ def scan_bus(cfg: ArmConfig, bus: str, network: Network, settings: ScanSettings 
     return BusScan(bus, findings, None, median, threshold)
 
 
+def _host_holder(link: BusLink) -> Callable[[int], int | None]:
+    from sherpa_cli.motion.lock import MachineLock, wire_key
+
+    key = wire_key(link.config.interface, link.config.channel)
+    return lambda host_id: MachineLock(key, f"host{host_id}").holder()
+
+
 def scan(session: ArmSession, buses: Iterable[str] | None = None, settings: ScanSettings | None = None, *,
          reset: bool = False, progress: Callable[[str, str, int, int], None] | None = None) -> ScanReport:
     """Scan the named buses of an open session (default: all it has open), all at once."""
@@ -415,7 +436,9 @@ def scan(session: ArmSession, buses: Iterable[str] | None = None, settings: Scan
 
     def job(bus: str) -> Callable[[], BusScan]:
         report = (lambda phase, done, total: progress(bus, phase, done, total)) if progress else None
-        return lambda: scan_bus(cfg, bus, links[bus].network, settings, reset=reset, progress=report)
+        holder = _host_holder(links[bus])
+        return lambda: scan_bus(cfg, bus, links[bus].network, settings, reset=reset, progress=report,
+                                host_holder=holder)
 
     outcomes = run_concurrently({bus: job(bus) for bus in names})
     result = []
