@@ -49,7 +49,8 @@ def test_doctor_passes_on_the_healthy_simulated_arm_80_columns(cli, golden, monk
     ("  drives:\n    elbow_1b: {firmware: 'Whistle 1.0.9.0'}\n", "firmware/model", "firmware 'Whistle 1.0.9.0' differs",
      "sherpa identify"),
     ("  buses:\n    can0: {foreign_heartbeats: [126], heartbeat_period: 0.02}\n", "host node id",
-     "can0: heartbeats on host id(s) 126", "motion.host_node_id / host_id_pool"),
+     "can0: heartbeats on host id(s) 126 (not a sherpa command of this machine: another host or tool)",
+     "motion.host_node_id / host_id_pool"),
     ("  drives:\n    wrist_2a: {user_program: 1}\n", "user programs", "running on wrist_2a (PS=1)",
      "--allow-user-program"),
 ])

@@ -209,3 +209,47 @@ def test_a_sigkilled_holders_id_is_free_at_once_but_the_listen_outlasts_its_driv
     assert MachineLock(KEY, "host126").holder() is None
     m = MotionSettings(consumer_time_ms=500)
     assert m.host_id_listen > m.consumer_time_ms / 1000
+
+
+def test_scan_calls_a_pool_heartbeat_no_sherpa_command_here_holds_a_foreign_host(cli, tmp_path):
+    """R1: the simulated arm's own producer on 126 is nobody's command on this machine: a problem (exit 1)."""
+    from test_doctor import faulty
+
+    result = cli("--sim", "--config", faulty(tmp_path, "  buses:\n    can0: {foreign_heartbeats: [126], "
+                                                       "heartbeat_period: 0.02}\n"), "--json", "scan", "--bus", "can0")
+    assert result.exit_code == 1, result.transcript()
+    import json
+
+    nodes = {n["node"]: n for b in json.loads(result.stdout)["buses"] for n in b["nodes"]}
+    assert nodes[126]["verdict"] == "foreign host", nodes[126]
+    assert "no sherpa command of this machine holds" in " ".join(nodes[126]["notes"])
+
+
+def test_scan_calls_a_pool_heartbeat_a_sherpa_command_here_holds_a_sherpa_host(tmp_path):
+    from sherpa_cli.ops.scan import FOREIGN_HOST, SHERPA_HOST, scan_bus
+
+    class Net:  # a bus on which only a heartbeat on 124 is heard
+        def __init__(self):
+            self.subs = {}
+
+        def subscribe(self, can_id, cb):
+            self.subs.setdefault(can_id, []).append(cb)
+
+        def unsubscribe(self, can_id, cb=None):
+            self.subs.pop(can_id, None)
+
+        def send_message(self, can_id, data, remote=False):
+            if can_id == 0x000:
+                for cb in self.subs.get(0x700 + 124, []):
+                    cb(0x700 + 124, bytearray([5]), 0.0)
+
+    cfg = load_config(ROOT / "configs/sherpa-arm.yaml")
+    from sherpa_cli.ops.scan import ScanSettings
+
+    settings = ScanSettings(sdo_timeout=0.01, quiet_s=0.01)
+    held = scan_bus(cfg, "can0", Net(), settings, reset=True, host_holder=lambda hid: 4242)
+    free = scan_bus(cfg, "can0", Net(), settings, reset=True, host_holder=lambda hid: None)
+    here = {n.node: n for n in held.nodes}[124]
+    there = {n.node: n for n in free.nodes}[124]
+    assert here.verdict == SHERPA_HOST and "pid 4242" in " ".join(here.notes)
+    assert there.verdict == FOREIGN_HOST
