@@ -16,6 +16,8 @@ from killed_helpers import arm as arm
 from killed_helpers import shared_arm as shared_arm
 from test_motion_crossprocess import finish, sherpa
 
+from sherpa_cli.sim.drive import UNGUARDED_MO
+
 pytestmark = [pytest.mark.realbus, pytest.mark.crossprocess]
 
 
@@ -45,8 +47,50 @@ def test_a_killed_moving_command_is_refused_until_recover_puts_the_drive_back(ar
     code, out, err = finish(sherpa(arm, tmp_path, "recover", *cmd.drives, "--apply"))
     assert code == 0, f"{out}\n{err}"
     assert "MF 0x800 cleared" in out, out
+    unguarded = [e for d in cmd.drives for e in arm.events(d) if e["event"].startswith(UNGUARDED_MO)]
+    assert not unguarded, f"a motor went on without an armed dead-man: {unguarded}"
     after = snapshot(arm, cmd.drives)
     assert {k: v for k, v in after.items() if before[k] != v} == {}, "not as before the killed command"
     code, out, err = finish(sherpa(arm, tmp_path, *jog))
     assert code == 0, f"{out}\n{err}"
     assert "Traceback" not in err
+
+
+def test_recover_killed_right_after_its_mo1_leaves_the_motor_to_its_consumer_and_the_journal_to_the_next(
+        arm, tmp_path):
+    """Issue 34 R2: `recover --apply` clears a tripped dead-man with MO=1, MO=0. It used to send MO=1
+    with the consumer already put back (0x1016:1 = 0) and the journal already deleted: killed in that
+    window the motor stayed on, and `recover` then said "nothing to recover". Now it arms a dead-man of
+    its own first and keeps the journal until the drive is back."""
+    cmd = MOVING["jog"]
+    drive = cmd.drives[0]
+    before = snapshot(arm, cmd.drives)
+    since = time.monotonic()
+    proc = sherpa(arm, tmp_path, *cmd.argv(tmp_path))
+    wait_moving(arm, cmd, since, proc, tmp_path)
+    t_kill = time.monotonic()
+    proc.send_signal(signal.SIGKILL)
+    finish(proc)
+    arm.wait_trip(cmd.drives, t_kill)
+    since = time.monotonic()
+    rec = sherpa(arm, tmp_path, "recover", drive, "--apply")
+    try:
+        wait_moving(arm, cmd, since, rec, tmp_path)  # its MO=1; the drive is deaf for its settle window
+    finally:
+        t_kill = time.monotonic()
+        rec.send_signal(signal.SIGKILL)
+        finish(rec)
+    off = arm.wait_event(lambda text: text.startswith("motor off"), 10 * arm.consumer_s, after=since)
+    assert off["event"] == "motor off: heartbeat lost, 0x6007=2", arm.events()
+    assert 0 < (off["t"] - t_kill) / arm.consumer_s <= 1.5, f"{off['t'] - t_kill:.3f} s after the kill"
+    unguarded = [e for e in arm.events(drive) if e["event"].startswith(UNGUARDED_MO)]
+    assert not unguarded, f"a motor went on without an armed dead-man: {unguarded}"
+    code, out, err = finish(sherpa(arm, tmp_path, "recover", drive))
+    assert code == 0 and "left by a command that did not finish" in out, f"{out}\n{err}"
+    assert "its dead-man tripped" in out, out
+    code, out, err = finish(sherpa(arm, tmp_path, "recover", drive, "--apply"))
+    assert code == 0 and "MF 0x800 cleared" in out, f"{out}\n{err}"
+    after = snapshot(arm, cmd.drives)
+    assert {k: v for k, v in after.items() if before[k] != v} == {}, "not as before the killed command"
+    code, out, err = finish(sherpa(arm, tmp_path, "recover", drive))
+    assert code == 0 and "nothing to recover" in out, out

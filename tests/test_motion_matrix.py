@@ -7,6 +7,7 @@ Each combination asserts the four safety invariants of docs/motion.md:
 
 - every motor the tool switched off was at standstill when its MO=0 arrived (the sim drive's motor
   velocity at that instant), and no drive had to stop itself on a lost heartbeat;
+- no motor went on without an armed dead-man (a consumer watching the command's heartbeat);
 - every motor is off at the end, unless held (``--hold``: on while held, off once the hold ends);
 - RAM is put back: the drive's CANopen objects (PDO mapping, heartbeat consumer 0x1016, group id
   0x2040, ...), its TPDO table and its profile/unit mode (UM, SP, AC, DC) equal what they were before;
@@ -45,6 +46,7 @@ from sherpa_cli.errors import CommunicationError
 from sherpa_cli.motion.guard import MotionStopped
 from sherpa_cli.motion.settings import MotionSettings
 from sherpa_cli.sim.arm import SimArm
+from sherpa_cli.sim.drive import UNGUARDED_MO
 from sherpa_cli.sim.stepped import SteppedTime
 
 ARM = Path(__file__).resolve().parent / "data" / "matrix-arm.yaml"
@@ -501,6 +503,10 @@ def test_every_way_out_stops_from_standstill_switches_off_puts_ram_back_and_repo
         for drive, t, text, v in out.record.events:
             if text.startswith("BG") and ("PA=" in text or "PR=" in text) and t >= out.injected:
                 assert abs(v) <= STANDSTILL, f"{what}: {drive} {text} at {t:.3f} while moving at {v:.0f} counts/s"
+    # 1b. no motor went on without an armed dead-man (issue 34 R2; the sim drive records every MO=1
+    # that found no consumer watching, sim/drive.py UNGUARDED_MO)
+    unguarded = [(d, round(t, 3), text) for d, t, text, _ in out.record.events if text.startswith(UNGUARDED_MO)]
+    assert not unguarded, f"{what}: {unguarded}"
     # 2. off unless held
     assert not out.motors_on, f"{what}: motor still on: {sorted(out.motors_on)}"
     assert not out.moving, f"{what}: still moving: {out.moving}"

@@ -20,6 +20,7 @@ import logging
 import os
 import tempfile
 import threading
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -208,15 +209,18 @@ class RecoverResult:
 MF_HEARTBEAT_LOSS = 0x800
 
 
-def restore(session: ArmSession, ref: DriveRef, *, apply: bool) -> RecoverResult:
+def restore(session: ArmSession, ref: DriveRef, *, apply: bool,
+            clear_trip: Callable[[], None] | None = None) -> RecoverResult:
     """Put back what the journal holds for ``ref`` (reverse order), NMT start first (a tripped dead-man
     leaves the drive in NMT Stopped, deaf to the interpreter and SDO), and clear a latched MF 0x800
-    (heartbeat loss) with a confirmed MO=1, MO=0 once the dead-man objects are back. Dry run without
+    (heartbeat loss) once the objects are back with ``clear_trip`` (motion/trip_clear.py: MO=1, MO=0
+    under a dead-man of its own; without it the MF stays and says so). The journal is dropped only
+    when all of it is done: a recover killed half-way leaves it for the next. Dry run without
     ``apply``: only reads MF. Never raises for one step: problems are reported."""
     steps = leftover(ref)
     done: list[str] = []
     problems: list[str] = []
-    res = RecoverResult(ref.name, f"{ref.bus}:{ref.node}", [s.text() for s in reversed(steps)], done=done,
+    res = RecoverResult(ref.name, f"{ref.bus}:{ref.node}", list(dict.fromkeys(s.text() for s in reversed(steps))), done=done,
                         problems=problems)
     client = session.client(ref)
     try:
@@ -247,19 +251,21 @@ def restore(session: ArmSession, ref: DriveRef, *, apply: bool) -> RecoverResult
         except (SherpaError, OverflowError) as exc:
             failed = True
             problems.append(f"{s.text()} not put back: {exc}")
-    if not failed:
-        forget_all(ref)
     if res.tripped and not failed and mf == MF_HEARTBEAT_LOSS:
-        try:
-            if int(client.get("UM")) == 1 and client.get("TC") != 0:
-                client.set("TC", 0, 0.0)
-            client.motor_on()  # MO=1 clears the latched MF; at once off again, confirmed
-            client.motor_off()
-            done.append("MF 0x800 cleared (MO=1, MO=0)")
-        except SherpaError as exc:
-            problems.append(f"MF not cleared: {exc}")
+        if clear_trip is None:
+            failed = True
+            problems.append("MF 0x800 not cleared: nothing to arm a dead-man with here")
+        else:
+            try:
+                clear_trip()  # MO=1 clears the latched MF, under a dead-man of its own; MO=0 confirmed
+                done.append("MF 0x800 cleared (MO=1, MO=0 under a dead-man of its own)")
+            except SherpaError as exc:
+                failed = True
+                problems.append(f"MF not cleared: {exc}")
     elif res.tripped and mf != MF_HEARTBEAT_LOSS:
         problems.append(f"MF=0x{mf:X} has more than the heartbeat loss: not cleared; find the cause first")
+    if not failed:
+        forget_all(ref)
     return res
 
 

@@ -2,11 +2,19 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
+from typing import TYPE_CHECKING
+
 import typer
 
 from sherpa_cli.cli.context import state
 from sherpa_cli.cli.options import ApplyRecover, Targets
 from sherpa_cli.errors import SafetyError
+
+if TYPE_CHECKING:
+    from sherpa_cli.bus.session import ArmSession
+    from sherpa_cli.bus.targets import DriveRef
+    from sherpa_cli.config.model import ArmConfig
 
 
 def recover(ctx: typer.Context, targets: Targets = None, apply: ApplyRecover = False) -> None:
@@ -17,7 +25,9 @@ def recover(ctx: typer.Context, targets: Targets = None, apply: ApplyRecover = F
     in the state directory before it makes it, and clears the note once it is put back. A killed
     command leaves the note: a motion command then refuses the drive (exit 1) until this puts it back.
     With --apply: NMT start, every value put back (last change first), and a dead-man that tripped
-    (MF 0x800, heartbeat lost) cleared with MO=1, MO=0. Exit 1 if something was left and not put back.
+    (MF 0x800, heartbeat lost) cleared with MO=1, MO=0 under a dead-man of its own (the drive's
+    consumer armed first, as in every motion command). The journal is kept until all of it is done.
+    Exit 1 if something was left and not put back.
 
     \b
     Examples:
@@ -38,7 +48,7 @@ def recover(ctx: typer.Context, targets: Targets = None, apply: ApplyRecover = F
         return
     buses = sorted({r.bus for r in refs}, key=list(cfg.buses).index)
     with st.session(buses=buses) as session:
-        results = [journal.restore(session, r, apply=apply) for r in refs]
+        results = [journal.restore(session, r, apply=apply, clear_trip=_trip_clearer(session, cfg, r)) for r in refs]
     if st.json_mode:
         st.out.json({"apply": apply, "drives": [{"drive": r.drive, "address": r.address, "left": r.found,
                                                  "tripped": r.tripped, "put_back": r.done,
@@ -57,3 +67,10 @@ def recover(ctx: typer.Context, targets: Targets = None, apply: ApplyRecover = F
     bad = [r.drive for r in results if r.problems]
     if bad:
         raise SafetyError(f"not recovered: {', '.join(bad)}", hint="see the problems above")
+
+
+def _trip_clearer(session: ArmSession, cfg: ArmConfig, ref: DriveRef) -> Callable[[], None]:
+    from sherpa_cli.motion.settings import MotionSettings
+    from sherpa_cli.motion.trip_clear import clear_heartbeat_trip
+
+    return lambda: clear_heartbeat_trip(session, ref, MotionSettings.from_config(cfg, [ref.bus]))

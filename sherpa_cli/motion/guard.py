@@ -52,6 +52,7 @@ from sherpa_cli.motion.lock import DriveLock, HostIdLock, drive_label, wire_key
 from sherpa_cli.motion.report import DriveStop, GuardReport
 from sherpa_cli.motion.settings import PROFILE_KEYS, MotionSettings
 from sherpa_cli.motion.stopping import ask_patiently, fault_reason, stop_drive, why
+from sherpa_cli.motion.trip_clear import clear_heartbeat_trip
 
 if TYPE_CHECKING:
     from sherpa_cli.bus.session import ArmSession
@@ -497,7 +498,8 @@ class MotionGuard:
             raise journal.LeftoverError(text + "; refusing to move it",
                                         hint=f"`sherpa recover {ref.name}` shows it, `--apply` puts it back; or "
                                              "run this command as `sherpa --recover ...`")
-        res = journal.restore(self.session, ref, apply=True)
+        res = journal.restore(self.session, ref, apply=True, clear_trip=lambda: clear_heartbeat_trip(
+            self.session, ref, self.settings, clock=self._clock, sleep=self._sleep))
         self._event(text)
         if res.tripped:
             self._event(f"{drive_label(ref)}: {res.tripped}")

@@ -67,6 +67,8 @@ ABORT_UNSUPPORTED = 0x06010000
 PRE_OPERATIONAL, OPERATIONAL, STOPPED = NMT_PRE_OPERATIONAL, NMT_OPERATIONAL, NMT_STOPPED  # heartbeat state bytes
 
 MF_HEARTBEAT, MF_SPEED_LIMIT, MF_POSITION_LIMIT = 0x800, 0x20000, 0x400000
+# the event a motor switched on with no dead-man watching records (tests assert it never comes)
+UNGUARDED_MO = "motor on without an armed dead-man"
 EMCY_HEARTBEAT, EMCY_SPEED_LIMIT, EMCY_POSITION_LIMIT = 0x8130, 0x8481, 0x8680
 ERR_REG_GENERIC, ERR_REG_COMMUNICATION = 0x01, 0x11  # 0x1001 values from the 0x2F21 table
 EMCY_FRAME = struct.Struct("<HBBHH")
@@ -140,6 +142,7 @@ class SimDrive:
         self.events: list[tuple[float, str]] = FrameRecord()
         self.flash: dict[str, Value] = parse_flash(flash)
         self.save_count = save_count  # restored by the caller along with flash
+        self.unguarded_motor_on = 0  # MO=1 accepted while no dead-man watched (deadman_watching)
         self.received: list[tuple[float, int, bytes]] = FrameRecord()  # every frame addressed to this drive
         self.lost: list[tuple[float, int, bytes]] = FrameRecord()  # the subset that never reached its software
         self.od_writes: list[tuple[float, int, int, int]] = []  # SDO writes, for "dry run wrote nothing"
@@ -598,6 +601,12 @@ class SimDrive:
         if value > RPDO_SYNC_MAX:
             self._rpdo2_buffer = None
 
+    def deadman_watching(self) -> bool:
+        """Whether a lost host heartbeat would switch the motor off now: a consumer entry with a time,
+        that host heard since the entry was written, and a loss action that acts (1, 2, 3)."""
+        return (self._consumer()[1] > 0 and self._hb_last is not None
+                and self._od.values[(0x6007, 0)] in (1, 2, 3))
+
     def _consumer(self) -> tuple[int, float]:
         """(host node, timeout s) of the 0x1016 sub1 entry; timeout 0 = not monitoring."""
         entry = self._od.values[(0x1016, 1)]
@@ -790,6 +799,13 @@ class SimDrive:
         self._limit_stop = False
         self._quick_stop = False
         self._record("motor on: MO=1" if on else "motor off: MO=0")
+        if on and not self.deadman_watching():
+            # the tool's invariant (docs/motion.md "The dead-man"), checked by the tests over every MO=1
+            self.unguarded_motor_on += 1
+            host, timeout = self._consumer()
+            self._record(f"{UNGUARDED_MO}: 0x1016:1 host {host} {timeout * 1000:.0f} ms, "
+                         f"{'watching' if self._hb_last is not None else 'no heartbeat heard since armed'}, "
+                         f"0x6007={self._od.values[(0x6007, 0)]}")
         if not on:
             self._motor_on = False
             self._begin_due = None
