@@ -175,15 +175,16 @@ def test_ctrl_c_during_a_pair_home_reports_the_stop_and_the_joints_left_unhomed(
     cfg = load_config(ARM)
     pair = next(iter(cfg.pairs))
     calls = {"n": 0}
+    steps: list[str] = []
 
     def sleep(t: float) -> None:
-        calls["n"] += 1
-        if calls["n"] == 3:  # inside the pair's search
-            raise KeyboardInterrupt
+        if steps:  # the search reports its steps: the guard is entered and the motors are on
+            calls["n"] += 1
+            if calls["n"] == 3:  # inside the pair's search
+                raise KeyboardInterrupt
         time.sleep(t)
 
     report = home.HomeReport()
-    steps: list[str] = []
     with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s, pytest.raises(KeyboardInterrupt):
         home.run_home(s, home.plan_home(cfg, [pair]), sleep=sleep, report=report, on_step=steps.append)
     assert report.interrupted == pair

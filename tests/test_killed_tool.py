@@ -94,3 +94,35 @@ def test_recover_killed_right_after_its_mo1_leaves_the_motor_to_its_consumer_and
     assert {k: v for k, v in after.items() if before[k] != v} == {}, "not as before the killed command"
     code, out, err = finish(sherpa(arm, tmp_path, "recover", drive))
     assert code == 0 and "nothing to recover" in out, out
+
+
+@pytest.mark.parametrize("name", ["home", "diffdrive move"])
+def test_sherpa_stop_from_elsewhere_ends_home_and_a_pair_move_normally_with_every_setting_put_back(
+        arm, tmp_path, name):
+    """Issue 34 R4: `sherpa stop` during `home` (4/5) or a pair move ended with "no answer to HM[1]
+    within 0.1 s ... check that the drive is powered" (exit 3) and left UM, SP, HM[1] and the dead-man
+    changed (the indexed query skipped the MO settle wait). Now: exit 1, the stop from elsewhere
+    named, nothing about power, the drives as before, nothing for `recover`."""
+    cmd = MOVING[name]
+    before = snapshot(arm, cmd.drives)
+    since = time.monotonic()
+    proc = sherpa(arm, tmp_path, *cmd.argv(tmp_path))
+    try:
+        t_on = wait_moving(arm, cmd, since, proc, tmp_path)
+        time.sleep(0.3)
+        assert proc.poll() is None, f"`{name}` ended before the stop:\n{finish(proc)}"
+        s_code, s_out, s_err = finish(sherpa(arm, tmp_path, "stop", cmd.joint))
+        assert s_code == 0, f"{s_out}\n{s_err}"
+    finally:
+        if proc.poll() is None:
+            code, out, err = finish(proc)
+        else:
+            code, out, err = proc.returncode, *proc.communicate()
+    assert code == 1, f"{out}\n{err}"
+    assert "from elsewhere (sherpa stop" in err, err
+    assert "powered" not in err and "Traceback" not in err, err
+    assert not [e for d in cmd.drives for e in arm.events(d) if e["t"] >= t_on and "heartbeat lost" in e["event"]]
+    after = snapshot(arm, cmd.drives)
+    assert {k: v for k, v in after.items() if before[k] != v} == {}, "settings not put back"
+    code, out, err = finish(sherpa(arm, tmp_path, "recover", *cmd.drives))
+    assert code == 0 and "nothing to recover" in out, f"{out}\n{err}"

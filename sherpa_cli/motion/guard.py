@@ -370,12 +370,10 @@ class MotionGuard:
             self._pulse()
 
         try:
-            if index:
-                on_try()
-                return c.get(letters, index)
-            # a sign of life per attempt, not one up-front extension for the whole patience
+            # a sign of life per attempt, not one up-front extension for the whole patience; indexed
+            # queries too (HM[1] while `sherpa stop` from elsewhere switched the motor off: home)
             return ask_patiently(c, letters, self._clock, self._sleep, patience, self.settings.poll_interval,
-                                  on_try=on_try)
+                                  on_try=on_try, index=index)
         except CommunicationError:
             if c.silent:
                 self.stop_others(ref)

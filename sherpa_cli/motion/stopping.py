@@ -149,7 +149,8 @@ def recovery_speed(vel_limits: Iterable[int | None], share: float, fallback: int
 
 
 def ask_patiently(client: DriveClient, letters: str, clock: Callable[[], float], sleep: Callable[[float], None],
-                   patience: float, poll_interval: float, on_try: Callable[[], None] | None = None) -> int | float:
+                   patience: float, poll_interval: float, on_try: Callable[[], None] | None = None,
+                   index: int = 0) -> int | float:
     """Query until the drive answers or ``patience`` s have passed (then the timeout propagates);
     ``on_try`` is called before every attempt (the motion guard's sign of life, one request at a time)."""
     deadline = clock() + patience
@@ -157,7 +158,7 @@ def ask_patiently(client: DriveClient, letters: str, clock: Callable[[], float],
         if on_try is not None:
             on_try()
         try:
-            return client.get(letters)
+            return client.get(letters, index)
         except DriveTimeoutError:
             if clock() >= deadline:
                 raise

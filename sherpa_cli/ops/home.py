@@ -35,6 +35,7 @@ from typing import TYPE_CHECKING, Any, Literal
 from sherpa_cli.bus import journal
 from sherpa_cli.bus.targets import DriveRef, drive_ref
 from sherpa_cli.config.model import ArmConfig, JointConfig, JointRole, SwitchConfig, SwitchKind
+from sherpa_cli.elmo.faults import describe_mf
 from sherpa_cli.elmo.protocol import UM_POSITION
 from sherpa_cli.errors import SafetyError, UsageError
 from sherpa_cli.motion import calibration
@@ -390,8 +391,9 @@ class _Runner:
             for r in refs.values():
                 if not int(guard.query(r, "MO")):
                     mf = int(guard.query(r, "MF"))
-                    raise SafetyError(f"{r.name}: the motor was switched off during {what}"
-                                      + (f" (MF=0x{mf:X})" if mf else " (MO=0 from elsewhere)"))
+                    why = (f"MF=0x{mf:X}: " + "; ".join(describe_mf(mf)) if mf
+                           else "MO=0 from elsewhere (sherpa stop, another tool)")
+                    raise SafetyError(f"{r.name}: the motor was switched off during {what}: {why}")
             # MS: 0 at the target, 1 stationary elsewhere (stopped by the home event or a switch), 2 moving
             if fired and all(m != 2 for m in ms):
                 return True
