@@ -83,3 +83,33 @@ def test_a_journal_that_cannot_be_written_refuses_the_change_with_one_line(cli, 
     assert "Traceback" not in result.stderr
     assert f"elbow_1a: cannot write the journal {journal_path}/can1-node40.json" in result.stderr
     assert "was not made" in result.stderr and f"hint: make {journal_path} a directory" in result.stderr
+
+
+def _leave(drive: str, bus: str, node: int, steps: list[journal.Step]) -> None:
+    pid = dead_pid()
+    path = journal.path_for(bus, node)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps({"drive": drive, "bus": bus, "node": node,
+                                "steps": [{**s.as_json(), "pid": pid} for s in steps]}))
+
+
+def test_notes_of_values_the_drive_already_holds_are_dropped_not_refused(cli):
+    """Issue 34 R9: a drive reset since the note holds every noted value again (RAM at flash
+    values): `recover` says so, and a jog goes on instead of refusing."""
+    _leave("elbow_1a", "can1", 40, [journal.interp("motion command", "UM", 0, 5),
+                                    journal.sdo("motion command", 0x1016, 1, 4, 0),
+                                    journal.sdo("motion command", 0x6007, 0, 2, 1)])
+    dry = cli("--sim", "recover", "elbow_1a")
+    assert dry.exit_code == 0 and "already holds every value" in dry.stdout and "--apply drops" in dry.stdout, \
+        dry.transcript()
+    assert journal.path_for("can1", 40).exists()  # a dry run drops nothing
+    jog = cli("--sim", "jog", "elbow_pitch", "--by", "0.01", "--uncalibrated", "--apply")
+    assert jog.exit_code == 0, jog.transcript()
+    assert not journal.path_for("can1", 40).exists()
+
+
+def test_notes_of_values_the_drive_does_not_hold_still_refuse(cli):
+    _leave("elbow_1a", "can1", 40, [journal.interp("motion command", "UM", 0, 2)])  # the drive holds UM=5
+    jog = cli("--sim", "jog", "elbow_pitch", "--by", "0.01", "--uncalibrated", "--apply")
+    assert jog.exit_code == 1 and "UM=2" in jog.stderr and "refusing to move it" in jog.stderr, jog.transcript()
+    assert journal.path_for("can1", 40).exists()

@@ -16,6 +16,7 @@ from killed_helpers import arm as arm
 from killed_helpers import shared_arm as shared_arm
 from test_motion_crossprocess import finish, sherpa
 
+from sherpa_cli.config import load_config
 from sherpa_cli.sim.drive import UNGUARDED_MO
 
 pytestmark = [pytest.mark.realbus, pytest.mark.crossprocess]
@@ -126,3 +127,33 @@ def test_sherpa_stop_from_elsewhere_ends_home_and_a_pair_move_normally_with_ever
     assert {k: v for k, v in after.items() if before[k] != v} == {}, "settings not put back"
     code, out, err = finish(sherpa(arm, tmp_path, "recover", *cmd.drives))
     assert code == 0 and "nothing to recover" in out, f"{out}\n{err}"
+
+
+@pytest.mark.parametrize("name", ["home", "diffdrive move", "log step", "log record"])
+def test_a_drive_reset_during_a_command_leaves_nothing_the_next_command_refuses(arm, tmp_path, name):
+    """Issue 34 R9: NMT reset node from another node while a command runs: its RAM is back at flash
+    values, so no note of it may make the next motion command refuse the drive."""
+    from test_motion_crossprocess import send_frame
+
+    cmd = MOVING[name]
+    since = time.monotonic()
+    proc = sherpa(arm, tmp_path, *cmd.argv(tmp_path))
+    try:
+        wait_moving(arm, cmd, since, proc, tmp_path)
+        time.sleep(0.3)
+        drives = load_config(arm.config).drives
+        for d in cmd.drives:  # every drive of the command reset by another node (a second host's tool)
+            send_frame(arm, tmp_path, drives[d].bus, 0x000, bytes([0x81, drives[d].node]))
+        if name == "log record":
+            time.sleep(1.0)
+            proc.send_signal(signal.SIGINT)
+        code, out, err = finish(proc)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            finish(proc)
+    assert "Traceback" not in err, err
+    jog = ("jog", cmd.joint, "--velocity", "0.03", "--for", "0.3", "--uncalibrated", "--apply")
+    code, out, err = finish(sherpa(arm, tmp_path, *jog))
+    assert code == 0 and "did not finish" not in err, f"{out}\n{err}"
+

@@ -498,3 +498,41 @@ def test_a_foreign_producer_starting_on_the_jogs_own_id_stops_the_jog(arm, tmp_p
     assert code == 1, f"{out}\n{err}"
     assert "another node sends heartbeats as 126, this command's dead-man id, on bus can1" in err, err
     assert [e for e in motor_offs(arm, t_on)], arm.events()
+
+
+SEND = """\
+import sys
+from sherpa_cli.bus.busmap import apply_bus_map, parse_bus_map
+from sherpa_cli.bus.links import open_bus
+from sherpa_cli.config import load_config
+import can
+config, bus_map, bus, can_id, data = sys.argv[1:6]
+cfg = apply_bus_map(load_config(config), parse_bus_map(bus_map.split(",")))
+link = open_bus(cfg.buses[bus])
+try:
+    link.send(can.Message(arbitration_id=int(can_id, 16), data=bytes.fromhex(data), is_extended_id=False))
+finally:
+    link.shutdown()
+"""
+
+
+def send_frame(arm: Arm, tmp_path, bus: str, can_id: int, data: bytes) -> None:
+    """One frame from another node (another host's tool) on ``bus``."""
+    done = subprocess.run([sys.executable, "-c", SEND, arm.config, arm.bus_map, bus, f"{can_id:X}", data.hex()],
+                          cwd=ROOT, env=_env(tmp_path), capture_output=True, text=True, timeout=EXIT_TIMEOUT)
+    assert done.returncode == 0, done.stderr
+
+
+def test_a_drive_reset_during_a_jog_leaves_no_notes_that_make_the_next_command_refuse(arm, tmp_path):
+    """Issue 34 R9: NMT reset node from another node during a jog: the jog stops (exit 1, the reset
+    named); the drive's RAM is back at its flash values, so the next jog does not refuse it for
+    notes of values the reset already put back, and `recover` has nothing to put back."""
+    proc, _ = start_jog(arm, tmp_path)
+    send_frame(arm, tmp_path, "can1", 0x000, bytes([0x81, NODE]))
+    code, out, err = finish(proc)
+    assert code == 1 and "NMT reset node" in err, f"{out}\n{err}"
+    code, out, err = finish(sherpa(arm, tmp_path, "recover", DRIVE))
+    assert code == 0 and ("nothing to recover" in out or "already holds every value" in out), f"{out}\n{err}"
+    code, out, err = finish(sherpa(arm, tmp_path, "jog", JOINT, "--velocity", "0.05", "--for", "0.3", "--apply"))
+    assert code == 0, f"{out}\n{err}"
+    assert "did not finish" not in err, err

@@ -189,6 +189,32 @@ def leftover(ref: DriveRef) -> list[Step]:
     return steps
 
 
+def still_changed(session: ArmSession, ref: DriveRef, steps: list[Step]) -> list[Step] | None:
+    """The steps whose value on the drive is not the one to put back (NMT start first; reads only).
+    Empty: the drive already holds every old value and no tripped dead-man is latched -- a drive
+    reset or power-cycled since the note (its RAM back at flash values) leaves nothing to put back.
+    None: the drive could not be read (a tripped drive, deaf in NMT Stopped until recover)."""
+    client = session.client(ref)
+    out: list[Step] = []
+    try:
+        client.nmt_start()
+        if int(client.get("MF")) & MF_HEARTBEAT_LOSS:
+            return None
+        for s in steps:
+            if s.kind == "interp":
+                now = client.get(s.letters, s.index)
+                if now != s.old:
+                    out.append(s)
+            else:
+                raw = bytes(session.sdo(ref).upload(s.index, s.sub))[:s.size]
+                mask = (1 << (8 * s.size)) - 1
+                if int.from_bytes(raw, "little") & mask != int(s.old) & mask:
+                    out.append(s)
+    except (SherpaError, ValueError):
+        return None
+    return out
+
+
 def leftover_text(ref: DriveRef, steps: list[Step]) -> str:
     owners = sorted({s.owner for s in steps})
     values = ", ".join(dict.fromkeys(s.text() for s in reversed(steps)))
@@ -202,6 +228,7 @@ class RecoverResult:
     address: str
     found: list[str]
     tripped: str | None = None  # the aftermath of a tripped dead-man, when found
+    already_back: bool = False  # the drive holds every noted value already (reset since): nothing to put back
     done: list[str] | None = None
     problems: list[str] | None = None
 
@@ -235,6 +262,11 @@ def restore(session: ArmSession, ref: DriveRef, *, apply: bool,
         res.tripped = ("its dead-man tripped: the drive's heartbeat consumer switched the motor off after the "
                        "command's heartbeat ended (MF 0x800 latched, NMT Stopped" +
                        (", the consumer still armed)" if armed else ")"))
+    if steps and not mf & MF_HEARTBEAT_LOSS and still_changed(session, ref, steps) == []:
+        res.already_back = True
+        if apply:
+            forget_all(ref)
+        return res
     if not apply:
         return res
     if mo and steps:

@@ -51,13 +51,17 @@ def recover(ctx: typer.Context, targets: Targets = None, apply: ApplyRecover = F
         results = [journal.restore(session, r, apply=apply, clear_trip=_trip_clearer(session, cfg, r)) for r in refs]
     if st.json_mode:
         st.out.json({"apply": apply, "drives": [{"drive": r.drive, "address": r.address, "left": r.found,
-                                                 "tripped": r.tripped, "put_back": r.done,
+                                                 "tripped": r.tripped, "already_back": r.already_back, "put_back": r.done,
                                                  "problems": r.problems} for r in results]})
     else:
         for r in results:
             st.out.line(f"{r.drive} ({r.address}): left by a command that did not finish: {', '.join(r.found)}")
             if r.tripped:
                 st.out.line(f"  {r.tripped}")
+            if r.already_back:
+                st.out.line("  the drive already holds every value (reset or power-cycled since?): nothing to put back; "
+                            + ("notes dropped" if apply else "--apply drops the notes"))
+                continue
             if apply:
                 st.out.line(f"  put back: {', '.join(r.done or []) or 'nothing'}")
             for p in r.problems or []:

@@ -492,6 +492,12 @@ class MotionGuard:
         if not steps:
             return
         text = journal.leftover_text(ref, steps)
+        if journal.still_changed(self.session, ref, steps) == []:
+            # every noted value is already back (the drive was reset or power-cycled since, its RAM
+            # at flash values): nothing to put back, and nothing to refuse for
+            journal.forget_all(ref)
+            self._event(f"{text}; the drive already holds every value (reset since?): notes dropped")
+            return
         if not journal.auto_recover():
             raise journal.LeftoverError(text + "; refusing to move it",
                                         hint=f"`sherpa recover {ref.name}` shows it, `--apply` puts it back; or "
