@@ -23,12 +23,13 @@ import can
 import pytest
 from conftest import ROOT
 
+from sherpa_cli.bus.machine_lock import MachineLock, wire_key
 from sherpa_cli.bus.session import ArmSession, resolve_target
 from sherpa_cli.config import load_config
 from sherpa_cli.errors import ExitCode
 from sherpa_cli.motion.drive_watch import DriveWatchError
 from sherpa_cli.motion.guard import MotionGuard
-from sherpa_cli.motion.lock import HostIdLock, MachineLock, MotionLockedError, wire_key
+from sherpa_cli.motion.lock import HostIdLock, MotionLockedError
 from sherpa_cli.motion.settings import MotionSettings
 from sherpa_cli.sim.arm import SimArm
 

@@ -8,6 +8,7 @@ from test_sim_drive import EMCY, HOST, assign, hx, motor_on, new_drive, query, r
 
 from sherpa_cli.elmo.codec import encode_execute
 from sherpa_cli.sim import ManualClock, SimSettings
+from sherpa_cli.sim.drive import UNGUARDED_MO
 from sherpa_cli.sim.interpreter import EC_NOT_IN_THIS_UM
 
 
@@ -77,7 +78,22 @@ def test_motor_events_record_mo_switching_and_bg(clock):
     reply(drive, encode_execute("BG"))
     run(drive, clock, 0.1)
     assign(drive, "MO", 0, 0)
-    assert [text for _, text in drive.events] == ["motor on: MO=1", "BG: UM=5, JV=500", "motor off: MO=0"]
+    assert [text for _, text in drive.events] == [
+        "motor on: MO=1",
+        # the drive itself is not armed here: the simulator says so (the tool's invariant, issue 34 R2)
+        "motor on without an armed dead-man: 0x1016:1 host 0 0 ms, no heartbeat heard since armed, 0x6007=1",
+        "BG: UM=5, JV=500", "motor off: MO=0"]
+    assert drive.unguarded_motor_on == 1
+
+
+def test_a_motor_on_under_an_armed_and_fed_consumer_is_not_flagged(clock):
+    drive = new_drive(clock)
+    drive.od_write(0x1016, 1, 126 << 16 | 500)
+    drive.receive(0x77E, bytes([5]))  # the host's first heartbeat: the consumer watches from here
+    motor_on(drive, clock)
+    assert drive.unguarded_motor_on == 0
+    texts = [text for _, text in drive.events]
+    assert texts[0] == "motor on: MO=1" and not [t for t in texts if t.startswith(UNGUARDED_MO)], texts
 
 
 def test_jog_in_position_mode_then_a_move_again(clock):

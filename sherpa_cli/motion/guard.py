@@ -33,6 +33,7 @@ from typing import TYPE_CHECKING, Any, Literal
 
 from sherpa_cli.bus import journal
 from sherpa_cli.bus.health import preflight
+from sherpa_cli.bus.machine_lock import wire_key
 from sherpa_cli.elmo.faults import decode_sr, describe_mf
 from sherpa_cli.elmo.protocol import UM_TORQUE
 from sherpa_cli.errors import (
@@ -48,7 +49,7 @@ from sherpa_cli.motion.bus_watch import GuardBusWatch
 from sherpa_cli.motion.deadman import COMM_ERROR, CONSUMER, LOSS_ACTION, OBJECT_NAMES, SIZES, HostHeartbeat
 from sherpa_cli.motion.drive_watch import DriveWatch, DriveWatchError
 from sherpa_cli.motion.host_ids import HostIdListener
-from sherpa_cli.motion.lock import DriveLock, HostIdLock, drive_label, wire_key
+from sherpa_cli.motion.lock import DriveLock, HostIdLock, drive_label
 from sherpa_cli.motion.report import DriveStop, GuardReport
 from sherpa_cli.motion.settings import PROFILE_KEYS, MotionSettings
 from sherpa_cli.motion.stopping import ask_patiently, fault_reason, stop_drive, why

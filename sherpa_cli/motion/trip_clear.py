@@ -19,10 +19,11 @@ from collections.abc import Callable
 from typing import TYPE_CHECKING
 
 from sherpa_cli.bus import journal
+from sherpa_cli.bus.machine_lock import wire_key
 from sherpa_cli.errors import SafetyError, SherpaError, raise_if_signalled
 from sherpa_cli.motion.deadman import COMM_ERROR, CONSUMER, LOSS_ACTION, OBJECT_NAMES, SIZES, HostHeartbeat
 from sherpa_cli.motion.host_ids import HostIdListener
-from sherpa_cli.motion.lock import HostIdLock, wire_key
+from sherpa_cli.motion.lock import HostIdLock
 
 if TYPE_CHECKING:
     from sherpa_cli.bus.session import ArmSession

@@ -228,7 +228,7 @@ def check_drives(report: DoctorReport, session: ArmSession, buses: Sequence[str]
     taken = sorted(heard)
     ids = ", ".join(map(str, hosts))
     def who(bus: str, hid: int) -> str:
-        from sherpa_cli.motion.lock import MachineLock, wire_key
+        from sherpa_cli.bus.machine_lock import MachineLock, wire_key
 
         link = session.links[bus]
         pid = MachineLock(wire_key(link.config.interface, link.config.channel), f"host{hid}").holder()

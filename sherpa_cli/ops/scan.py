@@ -419,7 +419,7 @@ def scan_bus(cfg: ArmConfig, bus: str, network: Network, settings: ScanSettings 
 
 
 def _host_holder(link: BusLink) -> Callable[[int], int | None]:
-    from sherpa_cli.motion.lock import MachineLock, wire_key
+    from sherpa_cli.bus.machine_lock import MachineLock, wire_key
 
     key = wire_key(link.config.interface, link.config.channel)
     return lambda host_id: MachineLock(key, f"host{host_id}").holder()
