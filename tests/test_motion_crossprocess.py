@@ -536,3 +536,19 @@ def test_a_drive_reset_during_a_jog_leaves_no_notes_that_make_the_next_command_r
     code, out, err = finish(sherpa(arm, tmp_path, "jog", JOINT, "--velocity", "0.05", "--for", "0.3", "--apply"))
     assert code == 0, f"{out}\n{err}"
     assert "did not finish" not in err, err
+
+
+def test_scan_reset_is_refused_while_a_jog_runs_on_the_bus(arm, tmp_path):
+    """Issue 34 R10: a reset communication during a jog would put the drive's consumer back (its
+    dead-man gone); `scan --reset --apply` refuses with exit 5 before sending, the jog runs on."""
+    proc, t_on = start_jog(arm, tmp_path)
+    try:
+        code, out, err = finish(sherpa(arm, tmp_path, "scan", "--bus", "can1", "--reset", "--apply"))
+        assert code == 5, f"{out}\n{err}"
+        assert "is moving this drive: refused, nothing sent" in err and "Traceback" not in err, err
+        assert proc.poll() is None, "the jog ended"
+        assert not motor_offs(arm, t_on), arm.events()
+    finally:
+        proc.send_signal(signal.SIGINT)
+        code, out, err = finish(proc)
+    assert code == 0, f"{out}\n{err}"

@@ -425,6 +425,28 @@ def _host_holder(link: BusLink) -> Callable[[int], int | None]:
     return lambda host_id: MachineLock(key, f"host{host_id}").holder()
 
 
+def _lock_for_reset(session: ArmSession, buses: Iterable[str]) -> list[Any]:
+    """A reset communication puts back every drive's heartbeat consumer and PDOs: on a drive another
+    command moves, it would drop that command's dead-man. So it takes each configured drive's motion
+    lock first (motion/lock.py DriveLock), and refuses (exit 5, nothing sent) while one is held."""
+    from sherpa_cli.bus.targets import DriveRef
+    from sherpa_cli.motion.lock import DriveLock
+
+    wanted = set(buses)
+    held: list[DriveLock] = []
+    try:
+        for d in session.cfg.drives.values():
+            if d.bus in wanted:
+                lock = DriveLock(DriveRef(d.name, d.bus, d.node, d), purpose="resetting")
+                lock.acquire()
+                held.append(lock)
+    except BaseException:
+        for lock in held:
+            lock.release()
+        raise
+    return held
+
+
 def scan(session: ArmSession, buses: Iterable[str] | None = None, settings: ScanSettings | None = None, *,
          reset: bool = False, progress: Callable[[str, str, int, int], None] | None = None) -> ScanReport:
     """Scan the named buses of an open session (default: all it has open), all at once."""
@@ -440,7 +462,12 @@ def scan(session: ArmSession, buses: Iterable[str] | None = None, settings: Scan
         return lambda: scan_bus(cfg, bus, links[bus].network, settings, reset=reset, progress=report,
                                 host_holder=holder)
 
-    outcomes = run_concurrently({bus: job(bus) for bus in names})
+    held = _lock_for_reset(session, names) if reset else []
+    try:
+        outcomes = run_concurrently({bus: job(bus) for bus in names})
+    finally:
+        for lock in held:
+            lock.release()
     result = []
     for bus, outcome in outcomes.items():
         if outcome.ok:
