@@ -694,6 +694,16 @@ class MotionGuard:
             r.kept.extend(f"{name} (no answer)" for name in ("0x1016:1", "0x1029:1", "0x6007:0"))
             self._event(r.line())
             return r
+        if stop and self._bus_lost(d.ref.bus):
+            # the connection to its bus is gone (the error line names it once): every step would fail
+            # the same way; the drive's own consumer stops it when the heartbeat, on that bus too, ends
+            r.stopped_by = "not reached"
+            r.problems.append(f"bus {d.ref.bus} lost: its heartbeat consumer switches the motor off "
+                              f"{s.consumer_time_ms} ms after the tool's heartbeat ends")
+            r.kept.extend(f"{name} (bus lost)" for name in ("0x1016:1", "0x1029:1", "0x6007:0")
+                          if name in {f"0x{k[0]:04X}:{k[1]}" for k in d.od_before})
+            self._event(r.line())
+            return r
         if not stop:
             r.stopped_by = "not moved by this guard"
             self._restore_dead_man(d, r, stop_failed=False)
@@ -757,6 +767,11 @@ class MotionGuard:
             journal.forget(d.ref, JOURNAL_OWNER, d.put_back)
         self._event(r.line())
         return r
+
+    def _bus_lost(self, bus: str) -> bool:
+        """The connection to ``bus`` went away (its receive thread ended: bus/links.py PacedNetwork.lost)."""
+        link = self.session.links.get(bus)
+        return link is not None and getattr(link.network, "lost", None) is not None
 
     def _answers(self, c: DriveClient) -> bool:
         """One plain request (no patience) to a drive that went silent: True if it answers again (a
