@@ -100,7 +100,8 @@ class ProtocolError(CommunicationError):
 
 class SdoError(CommunicationError):
     """An SDO transfer failed (exit 3): ``reason`` is "timeout", "abort" (``abort_code`` set),
-    "malformed" (an answer that is not a valid SDO reply) or "bus" (the request could not be sent).
+    "malformed" (an answer that is not a valid SDO reply), "bus" (the request could not be sent) or
+    "busy" (another process of this machine kept the drive's SDO channel, bus/machine_lock.py).
 
     ``detail`` is the message without the drive's label, for a note in a row that names the drive.
     """

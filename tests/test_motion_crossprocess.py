@@ -552,3 +552,43 @@ def test_scan_reset_is_refused_while_a_jog_runs_on_the_bus(arm, tmp_path):
         proc.send_signal(signal.SIGINT)
         code, out, err = finish(proc)
     assert code == 0, f"{out}\n{err}"
+
+
+ROUNDS = 20
+
+
+@pytest.fixture
+def long_arm(arm_process, tmp_path, rebaseline):
+    """:func:`arm`, with a served simulator that lives 300 s (the default 60 s is shorter than 20 rounds)."""
+    if arm_process is not None:
+        arm_process.new_test()
+        rebaseline()
+        arm_process.before_command()
+        yield Arm(arm_process.config, arm_process.bus_map, arm_process.event_log, shared=True)
+        return
+    log = tmp_path / "events.jsonl"
+    proc, bus_map, output = _start_sim(tmp_path, "--event-log", str(log), "--duration", "300")
+    assert proc is not None, f"sim did not start:\n{output}"
+    try:
+        yield Arm("configs/sherpa-arm.yaml", bus_map, log)
+    finally:
+        _stop(proc)
+
+
+def test_a_recording_beside_a_jog_on_one_drive_never_takes_the_jogs_sdo_answers(long_arm, tmp_path):
+    """Issue 34 R8: `log record` and a jog on one drive, started together 20 times: their SDO
+    transfers (the recorder's TPDO set-up and restore, the guard's dead-man objects and checks) take
+    turns on the drive's one SDO channel (bus/machine_lock.py TransferLock). Before, one run in a few
+    ended the jog with "SDO upload of 0x1016:1: malformed answer (Node returned a value for 0x1A00:02
+    instead)"."""
+    centre(long_arm, tmp_path, JOINT)
+    for i in range(ROUNDS):
+        rec = sherpa(long_arm, tmp_path, "log", "record", DRIVE, "--rate", "100", "--for", "1", "-o",
+                     str(tmp_path / f"rec-{i}.csv"))
+        direction = "0.05" if i % 2 == 0 else "-0.05"  # back and forth: the joint stays near 0
+        jog = sherpa(long_arm, tmp_path, "jog", JOINT, "--velocity", direction, "--for", "0.3", "--apply")
+        j_code, j_out, j_err = finish(jog)
+        r_code, r_out, r_err = finish(rec)
+        assert "malformed" not in j_err + r_err and "Traceback" not in j_err + r_err, \
+            f"round {i}:\n{j_out}\n{j_err}\n{r_out}\n{r_err}"
+        assert j_code == 0 and r_code == 0, f"round {i}: jog {j_code}, record {r_code}:\n{j_err}\n{r_err}"

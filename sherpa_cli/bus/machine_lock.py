@@ -4,9 +4,12 @@ dead-man host ids of a bus, motion/lock.py HostIdLock)."""
 from __future__ import annotations
 
 import contextlib
+import logging
 import os
 import re
 import threading
+import time
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -15,6 +18,8 @@ from sherpa_cli.errors import UsageError
 
 if TYPE_CHECKING:
     import filelock
+
+log = logging.getLogger(__name__)
 
 _PROCESS_HELD: set[str] = set()  # machine locks of buses private to this process (python-can virtual)
 _PROCESS_HELD_LOCK = threading.Lock()
@@ -142,3 +147,65 @@ def _make_lock_dir(path: Path) -> None:
     except OSError as exc:
         raise UsageError(f"cannot make the lock directory {path}: {exc.strerror or exc}",
                          hint=paths.LOCK_DIR_HINT) from None
+
+
+class TransferLock:
+    """One drive's SDO channel across the processes of this machine: a blocking flock on
+    ``<lock_dir>/<bus>-node<N>-sdo.lock`` held for one transfer (issue 34 R8). A drive has one SDO
+    server channel (0x600 + node / 0x580 + node): two processes that talk to it at once take each
+    other's answers ("Node returned a value for 0x1A00:02 instead"). A bus private to this process
+    needs none (the drive's client serializes its own threads). Where the lock directory cannot be
+    used the transfer goes on unlocked, logged once: a collision then ends in a clear SDO error."""
+
+    POLL = 0.001  # s between two tries while another process holds it
+
+    def __init__(self, key: str, node: int) -> None:
+        self.private = key.startswith("virtual:")
+        safe = re.sub(r"[^A-Za-z0-9_.-]", "_", key)
+        self.path = paths.lock_dir() / f"{safe}-node{int(node)}-sdo.lock"
+        self._fd: int | None = None
+        self._unusable = False
+
+    def _open(self) -> int | None:
+        if self._fd is None and not self._unusable:
+            try:
+                import fcntl  # noqa: F401 - no flock (Windows): unlocked
+
+                _make_lock_dir(self.path.parent)
+                fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o666)
+                with contextlib.suppress(OSError):
+                    os.fchmod(fd, 0o666)
+                self._fd = fd
+            except (ImportError, OSError, UsageError) as exc:
+                self._unusable = True
+                log.warning("SDO lock %s unusable (%s): transfers go on without it", self.path, exc)
+        return self._fd
+
+    @contextlib.contextmanager
+    def held(self, timeout: float, clock: Callable[[], float] = time.monotonic) -> Iterator[None]:
+        """Held for the ``with`` block; TimeoutError when another process kept it ``timeout`` s."""
+        fd = None if self.private else self._open()
+        if fd is None:
+            yield
+            return
+        import fcntl
+
+        deadline = clock() + timeout
+        while True:
+            try:
+                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+                break
+            except BlockingIOError:
+                if clock() >= deadline:
+                    raise TimeoutError(f"another sherpa process kept the drive's SDO channel for {timeout:g} s") \
+                        from None
+                time.sleep(self.POLL)
+        try:
+            yield
+        finally:
+            fcntl.flock(fd, fcntl.LOCK_UN)
+
+    def close(self) -> None:
+        if self._fd is not None:
+            fd, self._fd = self._fd, None
+            os.close(fd)

@@ -27,6 +27,8 @@ from sherpa_cli.errors import SdoError
 if TYPE_CHECKING:
     import canopen
 
+    from sherpa_cli.bus.machine_lock import TransferLock
+
 # canopen logs every SDO it aborts at ERROR; this tool reports each failed transfer itself (as a
 # note or an error naming the drive), so without a handler Python's last resort would print it twice.
 logging.getLogger("canopen.sdo.client").addHandler(logging.NullHandler())
@@ -74,7 +76,8 @@ class DriveSdo:
     that transfer (so the fast path's answers never pile up in its queue).
     """
 
-    def __init__(self, network: canopen.Network, node: int, *, label: str | None = None, timeout: float | None = None) -> None:
+    def __init__(self, network: canopen.Network, node: int, *, label: str | None = None, timeout: float | None = None,
+                 channel_lock: TransferLock | None = None) -> None:
         import canopen
 
         self.node = node
@@ -99,6 +102,27 @@ class DriveSdo:
         self._failures = _transfer_failures()
         # called on the caller's thread before every upload and download (the session's request watchers)
         self.on_request: Callable[[], None] | None = None
+        # the drive's SDO channel across the processes of this machine (bus/machine_lock.py), or None
+        self._channel = channel_lock
+
+    @contextmanager
+    def _transfer(self, op: str, index: int, sub: int, name: str | None) -> Iterator[None]:
+        """One transfer at a time on this drive: this process's threads, then the machine's processes."""
+        with self._lock:
+            if self._channel is None:
+                yield
+                return
+            try:
+                held = self._channel.held(3 * self.timeout + 1.0)
+                held.__enter__()
+            except TimeoutError as exc:
+                raise SdoError(f"{self.label}: SDO {op} of {object_text(index, sub, name)}: {exc}",
+                               detail=str(exc), reason="busy", node=self.node, index=index, sub=sub,
+                               hint="another sherpa command talks to this drive; try again when it ends") from None
+            try:
+                yield
+            finally:
+                held.__exit__(None, None, None)
 
     @contextmanager
     def _canopen(self) -> Iterator[None]:
@@ -166,7 +190,7 @@ class DriveSdo:
         """One SDO upload (expedited or segmented); ``name`` words the object in an error."""
         if self.on_request is not None:
             self.on_request()
-        with self._lock:
+        with self._transfer("upload", index, sub, name):
             if self._wait is not None and (index, sub) not in self._segmented:
                 fast = self._fast_upload(index, sub, name)
                 if fast is not None:
@@ -187,7 +211,7 @@ class DriveSdo:
         """One SDO download (expedited or segmented)."""
         if self.on_request is not None:
             self.on_request()
-        with self._lock:
+        with self._transfer("download", index, sub, name):
             try:
                 with self._canopen():
                     self._remote.sdo.download(index, sub, data)
@@ -198,6 +222,8 @@ class DriveSdo:
         """Stop listening on the network (the session's networks go away with it anyway)."""
         if self._wait is None:
             self._remote.remove_network()
+        if self._channel is not None:
+            self._channel.close()
         else:
             self._network.unsubscribe(0x580 + self.node, self._on_answer)
 

@@ -10,6 +10,7 @@ arm's endpoints, starts it and stops it.
 
 from __future__ import annotations
 
+import contextlib
 from collections.abc import Callable, Iterable, Iterator, Mapping
 from contextlib import contextmanager
 from dataclasses import replace
@@ -91,9 +92,13 @@ class ArmSession:
             links = open_links(wire_cfg, buses, failed=failed)
             if failed and not links:
                 raise next(iter(failed.values()))
+            session = cls(wire_cfg, links, sim, failed)
             try:
-                yield cls(wire_cfg, links, sim, failed)
+                yield session
             finally:
+                for sdo in session._sdo.values():
+                    with contextlib.suppress(Exception):  # its network may be gone already
+                        sdo.close()
                 close_links(links)
         finally:
             if sim is not None:
@@ -130,8 +135,12 @@ class ArmSession:
         if sdo is None:
             if ref.bus not in self.links:
                 raise UsageError(f"{ref.name}: bus {ref.bus} is not open in this session")
-            sdo = DriveSdo(self.links[ref.bus].network, ref.node, label=f"{ref.name} (node {ref.node})",
-                           timeout=self.cfg.protocol.sdo_timeout)
+            from sherpa_cli.bus.machine_lock import TransferLock, wire_key
+
+            link = self.links[ref.bus]
+            sdo = DriveSdo(link.network, ref.node, label=f"{ref.name} (node {ref.node})",
+                           timeout=self.cfg.protocol.sdo_timeout,
+                           channel_lock=TransferLock(wire_key(link.config.interface, link.config.channel), ref.node))
             sdo.on_request = self._request_sent
             self._sdo[ref.key] = sdo
         return sdo
