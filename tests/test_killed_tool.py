@@ -157,3 +157,48 @@ def test_a_drive_reset_during_a_command_leaves_nothing_the_next_command_refuses(
     code, out, err = finish(sherpa(arm, tmp_path, *jog))
     assert code == 0 and "did not finish" not in err, f"{out}\n{err}"
 
+
+
+RECORDER = [("RC", 0), ("RG", 0), ("RL", 0), ("RP", 3), *((("RV", n) for n in range(1, 6)))]
+
+
+def _recorder_settings(arm, drive: str) -> dict[str, int]:
+    from sherpa_cli.bus.busmap import apply_bus_map, parse_bus_map
+    from sherpa_cli.bus.session import ArmSession, resolve_target
+
+    cfg = apply_bus_map(load_config(arm.config), parse_bus_map([arm.bus_map]))
+    ref = resolve_target(cfg, drive)
+    with ArmSession.open(cfg, buses=[ref.bus]) as s:
+        c = s.client(ref)
+        c.nmt_start()
+        return {f"{k}[{i}]": int(c.get(k, i)) for k, i in RECORDER}
+
+
+def test_a_killed_drive_recording_leaves_its_recorder_settings_to_recover(arm, tmp_path):
+    """Issue 34 R7: the drive recorder's settings (RV, RC, RG, RL, RP[3]) are journaled before they
+    change: a SIGKILLed `log record --source drive` leaves them listed by `recover`, which puts them back."""
+    import json
+
+    drive = "elbow_1a"
+    before = _recorder_settings(arm, drive)
+    proc = sherpa(arm, tmp_path, "log", "record", drive, "--source", "drive", "--trigger", "bg", "--for", "2",
+                  "-o", str(tmp_path / "rec.csv"))
+    path = tmp_path / "state" / "sherpa-cli" / "journal" / "can1-node40.json"
+    deadline = time.monotonic() + 60
+    try:
+        while time.monotonic() < deadline and proc.poll() is None:
+            steps = json.loads(path.read_text() or "{}").get("steps", []) if path.exists() else []
+            if any(s["owner"] == "drive recorder" for s in steps):
+                time.sleep(0.3)  # configured and armed, waiting for a BG
+                break
+            time.sleep(0.02)
+        assert proc.poll() is None, f"the recording ended:\n{finish(proc)}"
+    finally:
+        proc.send_signal(signal.SIGKILL)
+        finish(proc)
+    assert _recorder_settings(arm, drive) != before, "the recording changed nothing: the test proves nothing"
+    code, out, err = finish(sherpa(arm, tmp_path, "recover", drive))
+    assert code == 0 and "RC=" in out and "RL=" in out, f"{out}\n{err}"
+    code, out, err = finish(sherpa(arm, tmp_path, "recover", drive, "--apply"))
+    assert code == 0, f"{out}\n{err}"
+    assert _recorder_settings(arm, drive) == before

@@ -16,6 +16,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Literal
 
+from sherpa_cli.bus import journal
 from sherpa_cli.bus.session import ArmSession
 from sherpa_cli.bus.targets import DriveRef
 from sherpa_cli.config.model import ArmConfig
@@ -25,6 +26,7 @@ from sherpa_cli.joints.units import counts_per_s_to_rad_per_s, counts_to_rad
 from sherpa_cli.log.recording import Recording
 
 log = logging.getLogger(__name__)
+JOURNAL_OWNER = "drive recorder"  # the journal's owner of the recorder settings (RV, RC, RG, RL, RP[3])
 
 # recording column suffix per recorder signal (log/recording.py's drive columns, plus two)
 COLUMNS = {"pos": "px", "vel": "vx", "cur": "iq_a", "pos_err": "pe", "vel_cmd": "vcmd"}
@@ -86,6 +88,9 @@ class DriveRecordings:
             rec.client.nmt_start()  # the binary interpreter answers only in Operational
         for name, rec in self.recorders.items():
             self.saved[name] = rec.snapshot(self.plan)
+        for ref in self.refs:  # on disk before anything changes: a killed recording leaves them to `recover`
+            journal.note(ref, *(journal.interp(JOURNAL_OWNER, letters, index, value)
+                                for letters, index, value in self.saved[ref.name]))
         for rec in self.recorders.values():
             rec.configure(self.plan)
         for rec in self.recorders.values():
@@ -114,7 +119,10 @@ class DriveRecordings:
         """Put the recorder settings back (once)."""
         if not self.restored:
             self.restored = True
-            _restore(self.recorders, self.saved)
+            back = _restore(self.recorders, self.saved)
+            for ref in self.refs:
+                if ref.name in back:
+                    journal.forget(ref, JOURNAL_OWNER)
 
 
 def _uploader(session: ArmSession, ref: DriveRef) -> Callable[[int, int], bytes]:
@@ -122,17 +130,20 @@ def _uploader(session: ArmSession, ref: DriveRef) -> Callable[[int, int], bytes]
     return lambda index, sub: sdo.upload(index, sub, name="recorded data")
 
 
-def _restore(recorders: dict[str, DriveRecorder], saved: dict[str, list[tuple[str, int, int | float]]]) -> None:
+def _restore(recorders: dict[str, DriveRecorder], saved: dict[str, list[tuple[str, int, int | float]]]) -> set[str]:
     """Put every drive's recorder settings back; a silent drive is skipped, a failure is logged and
-    does not keep the other drives from theirs."""
+    does not keep the other drives from theirs. Returns the drives put back (their notes can go)."""
+    back: set[str] = set()
     for name, rec in recorders.items():
         if rec.client.silent:
             log.warning("%s: silent, its recorder settings are not restored", rec.client.label)
             continue
         try:
             rec.restore(saved.get(name, []))
+            back.add(name)
         except SherpaError as exc:
             log.warning("%s: recorder settings not restored: %s", rec.client.label, exc)
+    return back
 
 
 def to_recording(cfg: ArmConfig, refs: Sequence[DriveRef], data: dict[str, dict[str, list[float]]],
