@@ -202,3 +202,39 @@ def test_a_killed_drive_recording_leaves_its_recorder_settings_to_recover(arm, t
     code, out, err = finish(sherpa(arm, tmp_path, "recover", drive, "--apply"))
     assert code == 0, f"{out}\n{err}"
     assert _recorder_settings(arm, drive) == before
+
+
+KILLED_AT_SV = """\
+import os, signal, sys
+from sherpa_cli.elmo.client import DriveClient
+DriveClient.save = lambda self: os.kill(os.getpid(), signal.SIGKILL)  # a crash between the writes and the SV
+from sherpa_cli.cli.app import run
+sys.exit(run(sys.argv[1:]))
+"""
+
+
+def test_program_limits_killed_before_its_sv_is_saved_by_the_rerun_and_recover_says_so(arm, tmp_path):
+    """Issue 34 R3: SIGKILL between the last verified write and the SV. The rerun used to say
+    "nothing to change: RAM holds the targets ... no SV sent" and the next power-up lost every value.
+    Now the save ledger is marked before the first write: `recover` lists the drive as SV pending,
+    and the rerun with --save saves (after read-back), counted."""
+    import subprocess
+    import sys
+
+    from conftest import ROOT
+    from test_cross_process import _env
+
+    args = ["--config", arm.config, "--bus-map", arm.bus_map, "program-limits", "elbow_pitch", "--apply", "--save",
+            "--yes"]
+    killed = subprocess.run([sys.executable, "-c", KILLED_AT_SV, *args], cwd=ROOT, env=_env(tmp_path),
+                            capture_output=True, text=True, timeout=120)
+    assert killed.returncode == -signal.SIGKILL, f"{killed.returncode}\n{killed.stdout}\n{killed.stderr}"
+    code, out, err = finish(sherpa(arm, tmp_path, "recover"))
+    assert code == 0 and "elbow_1a: values written and not saved to flash (SV pending)" in out, f"{out}\n{err}"
+    code, out, err = finish(sherpa(arm, tmp_path, *args[4:]))
+    assert code == 0, f"{out}\n{err}"
+    assert "SV due" in out and "saved" in out and "no SV sent" not in out, out
+    code, out, err = finish(sherpa(arm, tmp_path, "recover"))
+    assert "SV pending" not in out, out
+    code, out, err = finish(sherpa(arm, tmp_path, *args[4:]))  # saved: nothing more to do
+    assert code == 0 and "SV due" not in out, out

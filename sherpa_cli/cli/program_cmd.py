@@ -276,7 +276,7 @@ def _plan_line(p: DrivePlan) -> str:
     if p.motor_on:
         text += "; motor is ON"
     if p.save_due:
-        text += "; written by an earlier --apply without --save: SV due"
+        text += "; written earlier and not saved (an --apply without --save, or a run that did not reach its SV): SV due"
     return text
 
 

@@ -7,7 +7,7 @@ from typing import TYPE_CHECKING
 
 import typer
 
-from sherpa_cli.cli.context import state
+from sherpa_cli.cli.context import AppState, state
 from sherpa_cli.cli.options import ApplyRecover, Targets
 from sherpa_cli.errors import SafetyError
 
@@ -39,12 +39,14 @@ def recover(ctx: typer.Context, targets: Targets = None, apply: ApplyRecover = F
 
     st = state(ctx)
     cfg = st.load_config()
+    pending = _sv_pending(st, [r.name for r in drive_refs(cfg, targets)])
     refs = [r for r in drive_refs(cfg, targets) if journal.leftover(r)]
     if not refs:
         if st.json_mode:
-            st.out.json({"drives": []})
+            st.out.json({"drives": [], "sv_pending": pending})
         else:
             st.out.line("nothing to recover: no drive has changes left by a command that did not finish")
+            _show_pending(st, pending)
         return
     buses = sorted({r.bus for r in refs}, key=list(cfg.buses).index)
     with st.session(buses=buses) as session:
@@ -52,7 +54,8 @@ def recover(ctx: typer.Context, targets: Targets = None, apply: ApplyRecover = F
     if st.json_mode:
         st.out.json({"apply": apply, "drives": [{"drive": r.drive, "address": r.address, "left": r.found,
                                                  "tripped": r.tripped, "already_back": r.already_back, "put_back": r.done,
-                                                 "problems": r.problems} for r in results]})
+                                                 "problems": r.problems} for r in results],
+                     "sv_pending": pending})
     else:
         for r in results:
             st.out.line(f"{r.drive} ({r.address}): left by a command that did not finish: {', '.join(r.found)}")
@@ -66,6 +69,7 @@ def recover(ctx: typer.Context, targets: Targets = None, apply: ApplyRecover = F
                 st.out.line(f"  put back: {', '.join(r.done or []) or 'nothing'}")
             for p in r.problems or []:
                 st.out.line(f"  problem: {p}")
+        _show_pending(st, pending)
         if not apply:
             st.out.line("dry run: nothing sent but NMT start and reads; --apply puts it back")
     bad = [r.drive for r in results if r.problems]
@@ -78,3 +82,23 @@ def _trip_clearer(session: ArmSession, cfg: ArmConfig, ref: DriveRef) -> Callabl
     from sherpa_cli.motion.trip_clear import clear_heartbeat_trip
 
     return lambda: clear_heartbeat_trip(session, ref, MotionSettings.from_config(cfg, [ref.bus]))
+
+
+def _sv_pending(st: AppState, drives: list[str]) -> list[str]:
+    """Drives written and not saved to flash (the save ledger): by an --apply without --save, or a
+    programming run killed between its writes and its SV. Nothing to put back: their RAM holds the
+    values; flash does not yet."""
+    from sherpa_cli.errors import ConfigError
+    from sherpa_cli.ops.save_ledger import SaveLedger
+
+    try:
+        marked = SaveLedger().unsaved_drives()
+    except ConfigError:
+        return []  # a damaged ledger is reported by the commands that write it
+    return sorted({name for name, _ in marked if name in drives})
+
+
+def _show_pending(st: AppState, pending: list[str]) -> None:
+    for name in pending:
+        st.out.line(f"{name}: values written and not saved to flash (SV pending): the next power-up loses them; "
+                    "rerun the programming command with --apply --save (it saves although RAM holds the values)")

@@ -449,6 +449,11 @@ def _apply_drive(session: ArmSession, plan: DrivePlan, *, save: bool, ledger: Sa
             client.motor_off()
             out.motor_switched_off = True
             emit(Event(t.drive, EV_MOTOR_OFF))
+        if save and plan.changes and ledger is not None and plan.serial is not None:
+            # before the first write: killed between the writes and the SV, the ledger still says
+            # "written, not saved", and the rerun with --save saves although RAM already holds the
+            # targets (else: "nothing to change", and the next power-up loses them). SV clears it.
+            out.save_warning = ledger.mark_unsaved(plan.serial, t.drive)
         for key in plan.write_order:
             if stop.is_set():
                 return out

@@ -11,6 +11,7 @@ times, so that two identical runs leave identical files.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import threading
 from collections.abc import Callable
@@ -108,6 +109,17 @@ class SaveLedger:
             return self._update(update)[1]
         except ConfigError as exc:
             return f"{drive} not marked as unsaved: {exc}; {exc.hint}"
+
+    def unsaved_drives(self) -> list[tuple[str, int]]:
+        """(drive name, serial) of every drive marked written but not saved (`recover` lists them)."""
+        with self._lock:
+            drives = self._load()
+        out = []
+        for key, entry in drives.items():
+            if isinstance(entry, dict) and entry.get("unsaved"):
+                with contextlib.suppress(ValueError):
+                    out.append((str(entry.get("last_name", "?")), int(key, 0)))
+        return sorted(out)
 
     def unsaved(self, serial: int) -> bool:
         with self._lock:
