@@ -159,7 +159,7 @@ def test_a_drive_reset_during_a_command_leaves_nothing_the_next_command_refuses(
 
 
 
-RECORDER = [("RC", 0), ("RG", 0), ("RL", 0), ("RP", 3), *((("RV", n) for n in range(1, 6)))]
+RECORDER = [("RC", 0), ("RG", 0), ("RL", 0), ("RP", 3), *(("RV", n) for n in range(1, 6))]
 
 
 def _recorder_settings(arm, drive: str) -> dict[str, int]:
