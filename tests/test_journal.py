@@ -113,3 +113,51 @@ def test_notes_of_values_the_drive_does_not_hold_still_refuse(cli):
     jog = cli("--sim", "jog", "elbow_pitch", "--by", "0.01", "--uncalibrated", "--apply")
     assert jog.exit_code == 1 and "UM=2" in jog.stderr and "refusing to move it" in jog.stderr, jog.transcript()
     assert journal.path_for("can1", 40).exists()
+
+
+def test_a_note_whose_pid_a_later_process_reuses_is_still_a_leftover():
+    """Issue 34 R6: the note keeps the process's identity (boot id, start time): a live process that
+    got the same pid later (or this process, for a note of another boot) does not hide the leftover."""
+    r = ref()
+    me = journal.process_identity(os.getpid())
+    if me is None:
+        pytest.skip("no /proc here: the identity cannot be read")
+    live = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(30)"])
+    try:
+        step = journal.Step("motion command", "interp", "UM", 5, "UM", pid=live.pid, proc="0-other-boot:12345")
+        path = journal.path_for("can1", 40)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(json.dumps({"steps": [step.as_json()]}))
+        assert [s.name for s in journal.leftover(r)] == ["UM"]  # the pid lives, but it is another process
+        same = journal.Step("motion command", "interp", "UM", 5, "UM", pid=live.pid,
+                            proc=journal.process_identity(live.pid) or "")
+        path.write_text(json.dumps({"steps": [same.as_json()]}))
+        assert journal.leftover(r) == []  # that very process still runs: its change, not a leftover
+    finally:
+        live.kill()
+        live.wait()
+    journal.note(r, journal.interp("motion command", "UM", 0, 5))
+    assert json.loads(path.read_text())["steps"][-1]["proc"] == me
+
+
+@pytest.mark.parametrize("content", ['{"steps": [{"owner": "motion command", "kind": "sd', "garbage \x00\x01",
+                                     '{"steps": [{"owner": "motion command"}]}', '[1, 2]'],
+                         ids=["truncated", "garbage", "damaged-step", "not-a-journal"])
+def test_a_damaged_journal_is_refused_and_recover_resets_the_drive_from_flash(cli, content):
+    """Issue 34 R6: a damaged journal used to read as "nothing to recover" while the drive kept what a
+    killed command changed. Now the next motion command refuses, `recover` says the journal is
+    damaged and what the drive shows, and `--apply` (motor off) resets the drive (RAM from flash)
+    and moves the journal aside."""
+    path = journal.path_for("can1", 40)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(content)
+    jog = cli("--sim", "jog", "elbow_pitch", "--by", "0.01", "--uncalibrated", "--apply")
+    assert jog.exit_code == 1 and "is damaged" in jog.stderr and "refusing to move it" in jog.stderr, jog.transcript()
+    dry = cli("--sim", "recover", "elbow_pitch")
+    assert dry.exit_code == 0 and "journal damaged" in dry.stdout and "0x1016:1=0x" in dry.stdout, dry.transcript()
+    assert path.exists()
+    fix = cli("--sim", "recover", "elbow_pitch", "--apply")
+    assert fix.exit_code == 0 and "NMT reset node: RAM reloaded from flash" in fix.stdout, fix.transcript()
+    assert not path.exists() and path.with_name(path.name + ".damaged").read_text() == content
+    again = cli("--sim", "jog", "elbow_pitch", "--by", "0.01", "--uncalibrated", "--apply")
+    assert again.exit_code == 0, again.transcript()

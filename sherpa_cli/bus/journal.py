@@ -54,6 +54,7 @@ class Step:
     sub: int = 0
     size: int = 0
     pid: int = 0  # the process that made the change
+    proc: str = ""  # that process's identity (process_identity): a pid reused later is not it
 
     def text(self) -> str:
         return f"{self.name}={self.old:#x}" if self.kind == "sdo" else f"{self.name}={self.old}"
@@ -61,7 +62,7 @@ class Step:
     def as_json(self) -> dict[str, Any]:
         return {"owner": self.owner, "kind": self.kind, "name": self.name, "old": self.old,
                 "letters": self.letters, "index": self.index, "sub": self.sub, "size": self.size,
-                "pid": self.pid or os.getpid()}
+                "pid": self.pid or os.getpid(), "proc": self.proc or (process_identity(os.getpid()) or "")}
 
 
 def set_auto_recover(on: bool) -> None:
@@ -120,7 +121,7 @@ def steps_of(data: dict[str, Any]) -> list[Step]:
         try:
             out.append(Step(str(raw["owner"]), str(raw["kind"]), str(raw["name"]), raw["old"],
                             str(raw.get("letters", "")), int(raw.get("index", 0)), int(raw.get("sub", 0)),
-                            int(raw.get("size", 0)), int(raw.get("pid", 0))))
+                            int(raw.get("size", 0)), int(raw.get("pid", 0)), str(raw.get("proc", ""))))
         except (KeyError, TypeError, ValueError):
             log.warning("journal: a damaged step skipped: %r", raw)
     return out
@@ -166,17 +167,37 @@ def forget(ref: DriveRef, owner: str, names: set[str] | None = None) -> None:
             log.warning("journal %s: cannot drop %s's notes: %s", path, owner, exc.strerror or exc)
 
 
-def _alive(pid: int) -> bool:
+def process_identity(pid: int) -> str | None:
+    """``<boot id>:<start time>`` of a process (Linux /proc): the same pid in another boot, or
+    reused by a later process, reads differently. None where it cannot be read."""
+    try:
+        with open("/proc/sys/kernel/random/boot_id", encoding="ascii") as handle:
+            boot = handle.read().strip()
+        with open(f"/proc/{pid}/stat", encoding="utf-8", errors="replace") as handle:
+            stat = handle.read()
+        start = stat.rsplit(")", 1)[1].split()[19]  # field 22, counted after the command's name
+    except (OSError, IndexError):
+        return None
+    return f"{boot}:{start}"
+
+
+def _alive(pid: int, proc: str = "") -> bool:
+    """Whether the process that made a change still runs: its pid exists and, where the note keeps
+    the process's identity, it is that process (not a later one given the same pid, nor one of
+    another boot)."""
     if pid <= 0:
         return False
-    if pid == os.getpid():  # this process's own change (a guard nested in the interactive view)
-        return True
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except OSError:  # another user's process: it exists
-        return True
+    if pid != os.getpid():
+        try:
+            os.kill(pid, 0)
+        except ProcessLookupError:
+            return False
+        except OSError:  # another user's process: it exists
+            pass
+    if proc:
+        now = process_identity(pid)
+        if now is not None and now != proc:
+            return False  # the pid was reused (or the machine rebooted since)
     return True
 
 
@@ -184,7 +205,7 @@ def leftover(ref: DriveRef) -> list[Step]:
     """What a command that did not finish left on this drive (empty: nothing). A drive another running
     command has changed (its process lives: a recording beside a jog) has no leftover."""
     steps = steps_of(_load(path_for(ref.bus, ref.node)))
-    if any(_alive(s.pid) for s in steps):
+    if any(_alive(s.pid, s.proc) for s in steps):
         return []
     return steps
 
@@ -213,6 +234,79 @@ def still_changed(session: ArmSession, ref: DriveRef, steps: list[Step]) -> list
     except (SherpaError, ValueError):
         return None
     return out
+
+
+def damaged(ref: DriveRef) -> str | None:
+    """What is wrong with the drive's journal file, if it exists and cannot be trusted: not JSON,
+    truncated, not a journal, a step that cannot be read. None: no file, or a whole one. With a
+    damaged file what a killed command changed is unknown: commands refuse the drive, and `recover`
+    checks the drive itself (:func:`restore_damaged`)."""
+    path = path_for(ref.bus, ref.node)
+    if not path.exists():
+        return None
+    try:
+        data = read_json(path, None)
+    except (OSError, ValueError) as exc:
+        return f"unreadable ({exc})"
+    if not isinstance(data, dict) or not isinstance(data.get("steps"), list):
+        return "not a journal (no list of steps)"
+    for raw in data["steps"]:
+        try:
+            Step(str(raw["owner"]), str(raw["kind"]), str(raw["name"]), raw["old"])
+            if raw["kind"] not in ("interp", "sdo") or not isinstance(raw["old"], (int, float)):
+                raise ValueError(raw["kind"])
+        except (KeyError, TypeError, ValueError):
+            return f"a damaged step ({str(raw)[:60]})"
+    return None
+
+
+def damaged_text(ref: DriveRef, why: str) -> str:
+    return (f"{ref.name} ({ref.bus}:{ref.node}): its journal {path_for(ref.bus, ref.node)} is damaged: {why}; "
+            "what a command that did not finish changed is unknown")
+
+
+def restore_damaged(session: ArmSession, ref: DriveRef, why: str, *, apply: bool,
+                    boot_timeout: float = 5.0) -> RecoverResult:
+    """A damaged journal: nothing says what to put back, but the drive's flash holds what the tool
+    never changes for long. With ``apply`` and the motor off: NMT reset node (RAM reloaded from
+    flash: unsaved values, the position counter and a homing mark are lost), then the file is moved
+    aside (``.damaged``) for a look. Dry run: reads MO, MF and 0x1016:1 to say what is visible."""
+    res = RecoverResult(ref.name, f"{ref.bus}:{ref.node}", [f"journal damaged: {why}"], done=[], problems=[])
+    assert res.done is not None and res.problems is not None
+    client = session.client(ref)
+    try:
+        client.nmt_start()
+        mo, mf = int(client.get("MO")), int(client.get("MF"))
+        raw = bytes(session.sdo(ref).upload(0x1016, 1))[:4]
+    except SherpaError as exc:
+        res.problems.append(f"not reached: {exc}")
+        return res
+    entry = int.from_bytes(raw, "little")
+    seen = [f"0x1016:1=0x{entry:08X}" + (f" (watches host {entry >> 16 & 0x7F})" if entry & 0xFFFF else "")]
+    if mf:
+        seen.append(f"MF=0x{mf:X}")
+    res.found.append("on the drive: " + ", ".join(seen))
+    if mf & MF_HEARTBEAT_LOSS:
+        res.tripped = "its dead-man tripped (MF 0x800 latched)"
+    if not apply:
+        return res
+    if mo:
+        res.problems.append("the motor is on (MO=1): not reset; stop it first (`sherpa stop`)")
+        return res
+    try:
+        client.reset_node(boot_timeout)
+    except SherpaError as exc:
+        res.problems.append(f"reset node: {exc}")
+        return res
+    res.done.append("NMT reset node: RAM reloaded from flash (unsaved values, the position counter and a homing "
+                    "mark are lost)")
+    path = path_for(ref.bus, ref.node)
+    try:
+        os.replace(path, path.with_name(path.name + ".damaged"))
+        res.done.append(f"journal moved aside: {path.name}.damaged")
+    except OSError as exc:
+        res.problems.append(f"journal not moved aside: {exc.strerror or exc}")
+    return res
 
 
 def leftover_text(ref: DriveRef, steps: list[Step]) -> str:

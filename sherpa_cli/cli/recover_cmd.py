@@ -40,7 +40,8 @@ def recover(ctx: typer.Context, targets: Targets = None, apply: ApplyRecover = F
     st = state(ctx)
     cfg = st.load_config()
     pending = _sv_pending(st, [r.name for r in drive_refs(cfg, targets)])
-    refs = [r for r in drive_refs(cfg, targets) if journal.leftover(r)]
+    broken = {r.name: why for r in drive_refs(cfg, targets) if (why := journal.damaged(r)) is not None}
+    refs = [r for r in drive_refs(cfg, targets) if r.name in broken or journal.leftover(r)]
     if not refs:
         if st.json_mode:
             st.out.json({"drives": [], "sv_pending": pending})
@@ -50,7 +51,9 @@ def recover(ctx: typer.Context, targets: Targets = None, apply: ApplyRecover = F
         return
     buses = sorted({r.bus for r in refs}, key=list(cfg.buses).index)
     with st.session(buses=buses) as session:
-        results = [journal.restore(session, r, apply=apply, clear_trip=_trip_clearer(session, cfg, r)) for r in refs]
+        results = [journal.restore_damaged(session, r, broken[r.name], apply=apply, boot_timeout=cfg.protocol.boot_timeout)
+                   if r.name in broken else
+                   journal.restore(session, r, apply=apply, clear_trip=_trip_clearer(session, cfg, r)) for r in refs]
     if st.json_mode:
         st.out.json({"apply": apply, "drives": [{"drive": r.drive, "address": r.address, "left": r.found,
                                                  "tripped": r.tripped, "already_back": r.already_back, "put_back": r.done,

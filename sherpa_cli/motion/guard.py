@@ -489,6 +489,11 @@ class MotionGuard:
 
     def _leftovers(self, ref: DriveRef) -> None:
         """What a killed command left on the drive (the journal): refused, or put back with --recover."""
+        why = journal.damaged(ref)
+        if why is not None:
+            raise journal.LeftoverError(journal.damaged_text(ref, why) + "; refusing to move it",
+                                        hint=f"`sherpa recover {ref.name}` shows what the drive says; `--apply` "
+                                             "resets it (RAM from flash) and moves the journal aside")
         steps = journal.leftover(ref)
         if not steps:
             return
