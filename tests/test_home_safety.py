@@ -19,7 +19,7 @@ from pathlib import Path
 import pytest
 from motion_helpers import stepped_session
 
-from sherpa_cli.bus.session import ArmSession
+from sherpa_cli.bus.session import ArmSession, resolve_target
 from sherpa_cli.bus.targets import drive_ref
 from sherpa_cli.config import load_config
 from sherpa_cli.elmo import codec
@@ -211,3 +211,39 @@ def test_cli_home_interrupted_prints_the_stop_report_and_which_joints_are_not_ho
     assert "stop: shoulder_2a (can0:20): stopped" in result.stderr
     assert "not homed: shoulder_pitch, shoulder_roll (shoulder_diff did not finish" in result.stderr
     assert "Traceback" not in result.stderr
+
+
+# -- issue 34 R5: a home that resumes past its switch -------------------------------------------------
+
+def test_a_home_interrupted_past_its_switch_goes_back_before_it_instead_of_into_the_hard_stop():
+    """R5: Ctrl-C after the search met the home switch, the joint then past it (the search's overshoot,
+    a push by hand): the next home searched on, away from the switch, 6.9 s into the hard stop, and
+    ended "blocked". The unfinished home leaves UI[3] = 2 (PX counts from the switch); the next home
+    moves back before the switch first, then finds it."""
+    from sherpa_cli.motion.calibration import SWITCH_SEEN
+
+    cfg = load_config(ROOT / "configs/sherpa-arm.yaml")
+    joint = "shoulder_yaw"  # a home switch at 0, searched upwards at 300 counts/s
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
+        drive = s.sim.drives["shoulder_1a"]
+
+        def sleep(t: float) -> None:
+            if any(text.startswith("home event") for _, text in drive.events):
+                raise KeyboardInterrupt  # the switch was met: PX counts from it
+            time.sleep(t)
+
+        with pytest.raises(KeyboardInterrupt):
+            home.run_home(s, home.plan_home(cfg, [joint]), sleep=sleep)
+        ref = resolve_target(cfg, "shoulder_1a")
+        c = s.client(ref)
+        assert int(c.get("UI", cfg.protocol.calibration_flag)) == SWITCH_SEEN
+        with s.sim.lock:
+            drive.motor.counts += 800  # pushed on, well past the switch (it reads released there)
+        assert not c.get("IP") & 1  # input 1, the home switch: released
+        events_before = len(drive.events)
+        report = home.run_home(s, home.plan_home(cfg, [joint]))
+        assert report.interrupted is None and not report.not_homed, report.as_dict()
+        after = [text for _, text in drive.events[events_before:]]
+        assert not [t for t in after if "blocked" in t or "stall" in t], after
+        assert int(c.get("UI", cfg.protocol.calibration_flag)) == 1
+        assert abs(int(c.get("PX"))) <= 5

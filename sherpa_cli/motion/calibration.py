@@ -25,6 +25,9 @@ if TYPE_CHECKING:
     from sherpa_cli.elmo.client import DriveClient
 
 CALIBRATED = 1
+# a home that saw its switch (PX set from the switch's edge) and did not finish: not calibrated, but
+# the next home may trust PX to know on which side of the switch the joint stands (ops/home.py)
+SWITCH_SEEN = 2
 
 
 @dataclass(frozen=True)
@@ -64,6 +67,8 @@ def judge(cfg: ArmConfig, joint: JointConfig, flags: Mapping[str, int]) -> Calib
     missing = [d for d in joint_drives(cfg, joint) if flags.get(d) != CALIBRATED]
     if missing:
         shown = ", ".join(f"{d} {key}={flags.get(d, '?')}" for d in missing)
+        if any(flags.get(d) == SWITCH_SEEN for d in missing):
+            return Calibration(joint.name, False, f"not homed: a home that met its switch did not finish ({shown})")
         return Calibration(joint.name, False, f"not homed since power-up ({shown})")
     return Calibration(joint.name, True, f"homed since power-up ({key}={CALIBRATED})")
 
@@ -128,6 +133,16 @@ def _resynced(cfg: ArmConfig, joint: JointConfig, client_of: Callable[[str], Dri
 def mark_calibrated(cfg: ArmConfig, client: DriveClient) -> None:
     """For `home`: the drive's position counter now means the joint position, until its next reset."""
     client.set("UI", cfg.protocol.calibration_flag, CALIBRATED)
+
+
+def mark_switch_seen(cfg: ArmConfig, client: DriveClient) -> None:
+    """For `home`, once its search met the switch: PX counts from the switch until the next reset."""
+    client.set("UI", cfg.protocol.calibration_flag, SWITCH_SEEN)
+
+
+def switch_seen(cfg: ArmConfig, client: DriveClient) -> bool:
+    """Whether an unfinished home left :data:`SWITCH_SEEN` (since the drive's last reset)."""
+    return int(client.get("UI", cfg.protocol.calibration_flag)) == SWITCH_SEEN
 
 
 def clear_calibrated(cfg: ArmConfig, client: DriveClient) -> None:

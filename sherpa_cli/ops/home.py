@@ -473,11 +473,21 @@ class _Runner:
                                         sleep=self.sleep) as guard:
             self.guard = guard
             c = guard.client(ref)
+            # an unfinished home that met its switch left PX counting from the switch: it says on which
+            # side of a home switch the joint stands (read before the mark is cleared)
+            seen_px = int(c.get("PX")) if calibration.switch_seen(self.cfg, c) else None
             calibration.clear_calibrated(self.cfg, c)  # a re-home that fails must not leave the old mark
             if unit.kind == "home_switch":
                 sw = _home_switch(joint)
                 assert sw is not None
                 pos = joint.cal_pos if joint.cal_pos is not None else sw.position
+                b = _backoff(self.cfg, joint)
+                if seen_px is not None and (seen_px - pos) * d > b:
+                    # past the switch in the search's direction: a search from here runs into the
+                    # hard stop. Back to the approach side first, a known distance in the switch's
+                    # counts, with the stall watch of a homing move
+                    self.move_to(guard, refs, {name: pos - d * b}, speed,
+                                 f"{joint.name}: back before the switch (an unfinished home left it past)")
             else:
                 sw = _stop_switch(joint, d)
                 assert sw is not None
@@ -502,8 +512,8 @@ class _Runner:
                                   f"search bound ({search} counts {'up' if d > 0 else 'down'} at {speed} counts/s)",
                                   hint="check the switch and its wiring (`sherpa home --check-wiring "
                                        f"{joint.name}`) and where the joint stands")
+            calibration.mark_switch_seen(self.cfg, c)  # PX counts from the switch now; not homed yet
             if unit.kind == "home_switch":
-                b = _backoff(self.cfg, joint)
                 self.move_to(guard, refs, {name: pos - d * b}, speed, f"{joint.name}: the back-off")
                 px0 = int(c.get("PX"))
                 slow = _slow(self.cfg, speed)
