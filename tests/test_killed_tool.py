@@ -11,7 +11,7 @@ import signal
 import time
 
 import pytest
-from killed_helpers import MOVING, snapshot, wait_moving
+from killed_helpers import MOVING, Moving, snapshot, wait_moving
 from killed_helpers import arm as arm
 from killed_helpers import shared_arm as shared_arm
 from test_motion_crossprocess import finish, sherpa
@@ -97,14 +97,18 @@ def test_recover_killed_right_after_its_mo1_leaves_the_motor_to_its_consumer_and
     assert code == 0 and "nothing to recover" in out, out
 
 
-@pytest.mark.parametrize("name", ["home", "diffdrive move"])
+PAIR_JOG = Moving("pair jog", ("jog", "shoulder_pitch", "--velocity", "0.03", "--for", "60", "--apply"),
+                  ("shoulder_2a", "shoulder_2b"), "shoulder_pitch", "motion command")
+
+
+@pytest.mark.parametrize("name", ["home", "diffdrive move", "pair jog"])
 def test_sherpa_stop_from_elsewhere_ends_home_and_a_pair_move_normally_with_every_setting_put_back(
         arm, tmp_path, name):
     """Issue 34 R4: `sherpa stop` during `home` (4/5) or a pair move ended with "no answer to HM[1]
     within 0.1 s ... check that the drive is powered" (exit 3) and left UM, SP, HM[1] and the dead-man
     changed (the indexed query skipped the MO settle wait). Now: exit 1, the stop from elsewhere
     named, nothing about power, the drives as before, nothing for `recover`."""
-    cmd = MOVING[name]
+    cmd = PAIR_JOG if name == "pair jog" else MOVING[name]
     before = snapshot(arm, cmd.drives)
     since = time.monotonic()
     proc = sherpa(arm, tmp_path, *cmd.argv(tmp_path))

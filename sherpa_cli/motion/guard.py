@@ -26,7 +26,7 @@ import signal
 import struct
 import threading
 import time
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
 from types import FrameType, TracebackType
 from typing import TYPE_CHECKING, Any, Literal
@@ -356,6 +356,19 @@ class MotionGuard:
                 mf = int(self.query(ref, "MF"))
                 why = "; ".join(describe_mf(mf)) if mf else "MO=0 from elsewhere (sherpa stop, another tool)"
                 raise SafetyError(f"{self._drive(ref).client.label}: the motor was switched off during {during}: {why}")
+
+    @contextlib.contextmanager
+    def motor_off_explains_failure(self, refs: Iterable[DriveRef], during: str) -> Iterator[None]:
+        """Around the sets right after the motors went on (JV, SP/PA, TC): one that fails because a
+        motor was switched off meanwhile (`sherpa stop` from another terminal, a trip) ends with that
+        reason -- "MO=0 from elsewhere", exit 1 -- not with the set's own failure ("JV=15 not
+        confirmed: JV reads back 0", exit 3)."""
+        refs = list(refs)
+        try:
+            yield
+        except CommunicationError:
+            self.check_motors_on(refs, during)
+            raise
 
     def query(self, ref: DriveRef, letters: str, index: int = 0) -> int | float:
         """A query that waits out a drive deaf for its MO settle window (another host switched the motor:

@@ -240,9 +240,10 @@ def _move(guard: MotionGuard, target: Axis, req: MoveRequest, settings: MotionSe
         # the speed comes from the config, never from whatever SP the drive holds (an unprogrammed
         # drive: 1800 counts/s); the guard puts SP back on the way out
         speed = profile_speed(target, settings.recovery_fallback_speed, req.speed)
-        c.set("SP", 0, speed)
-        bound = _move_bound(c, target, abs(goal - start), speed)
-        c.set("PA", 0, goal)
+        with guard.motor_off_explains_failure([ref], "the jog"):
+            c.set("SP", 0, speed)
+            bound = _move_bound(c, target, abs(goal - start), speed)
+            c.set("PA", 0, goal)
         state["command"] = f"PA={goal}"
         state["t0"] = clock()
         c.execute("BG")
@@ -251,7 +252,8 @@ def _move(guard: MotionGuard, target: Axis, req: MoveRequest, settings: MotionSe
     elif req.mode == "velocity":
         v = req.velocity
         guard.enable(ref, settings.velocity_unit_mode)
-        c.set("JV", 0, v)
+        with guard.motor_off_explains_failure([ref], "the jog"):
+            c.set("JV", 0, v)
         state["command"] = f"JV={v}"
         state["t0"] = clock()
         c.execute("BG")

@@ -340,9 +340,10 @@ def _move_guarded(guard: MotionGuard, session: ArmSession, cfg: ArmConfig, axis:
         for d in axis.drives:
             guard.enable(by_name[d], um)
         if p.mode == "position":
-            for d, c in clients.items():
-                c.set("SP", 0, p.motor_speeds[d])
-                c.set("PA", 0, p.motor_targets[d])
+            with guard.motor_off_explains_failure([by_name[d] for d in clients], "the jog"):
+                for d, c in clients.items():
+                    c.set("SP", 0, p.motor_speeds[d])
+                    c.set("PA", 0, p.motor_targets[d])
             result.motor_commands = {d: {"PA": p.motor_targets[d], "SP": p.motor_speeds[d]} for d in axis.drives}
             start.begin()
             watched = limit_watch.watch(
@@ -354,8 +355,9 @@ def _move_guarded(guard: MotionGuard, session: ArmSession, cfg: ArmConfig, axis:
                                   f"(stopped at {axis.position(watched.motors)})",
                                   hint="check the drives with `sherpa monitor --once`")
         elif p.mode == "velocity":
-            for d, c in clients.items():
-                c.set("JV", 0, p.motor_speeds[d])
+            with guard.motor_off_explains_failure([by_name[d] for d in clients], "the jog"):
+                for d, c in clients.items():
+                    c.set("JV", 0, p.motor_speeds[d])
             result.motor_commands = {d: {"JV": p.motor_speeds[d]} for d in axis.drives}
             start.begin()
             watched = limit_watch.watch(axis.watched, sample, clock=clock, sleep=sleep,
@@ -364,8 +366,9 @@ def _move_guarded(guard: MotionGuard, session: ArmSession, cfg: ArmConfig, axis:
                                         stall=settings.stall_watch(max(map(abs, p.motor_speeds.values()), default=0)))
         else:
             result.motor_commands = {d: {"TC": p.motor_currents[d]} for d in axis.drives}
-            for d, c in clients.items():
-                c.set("TC", 0, p.motor_currents[d])
+            with guard.motor_off_explains_failure([by_name[d] for d in clients], "the jog"):
+                for d, c in clients.items():
+                    c.set("TC", 0, p.motor_currents[d])
             watched = limit_watch.watch(axis.watched, sample, clock=clock, sleep=sleep,
                                         interval=settings.poll_interval, duration=p.duration,
                                         check_drives=check_drives, stall=settings.torque_stall_watch())
