@@ -6,7 +6,6 @@ import dataclasses
 import json
 import signal
 import threading
-import time
 from pathlib import Path
 
 import pytest
@@ -325,13 +324,8 @@ def test_sv_only_after_verification_and_values_survive_an_nmt_reset(state_home, 
         assert last_set < readback < sv[0], "SV only after the last write was read back"
         c1 = client(session, "drive1")
         boots = d1.boots
-        c1.nmt_reset_communication()
-        # the simulated drive handles the reset in its own thread: wait for its boot (bounded), then start it
-        deadline = time.monotonic() + 10
-        while d1.boots == boots and time.monotonic() < deadline:
-            time.sleep(0.01)
+        c1.reset_node(10.0)  # RAM from flash (reset communication would keep RAM: CiA 301)
         assert d1.boots == boots + 1
-        c1.nmt_start()
         for key, value in targets[0].params.items():
             letters, index = codec.parse_expr(key).letters, codec.parse_expr(key).index
             assert c1.get(letters, index) == value, key
@@ -343,8 +337,7 @@ def test_without_save_an_nmt_reset_loses_the_values(state_home, cfg3):
         assert program.apply_plans(session, plans).ok
         c1 = client(session, "drive1")
         assert c1.get("LL", 3) == -205
-        c1.nmt_reset_communication()
-        c1.nmt_start()
+        c1.reset_node(10.0)
         assert c1.get("LL", 3) == -1_000_000_000
 
 

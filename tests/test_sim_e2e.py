@@ -132,28 +132,46 @@ def test_interpreter_is_deaf_before_nmt_start(tmp_path):
 
 # -- (b) NMT reset loses RAM, keeps flash --------------------------------------------------------
 
-def test_nmt_reset_loses_unsaved_values_and_keeps_saved_ones(tmp_path):
+def test_nmt_reset_node_loses_unsaved_values_and_keeps_saved_ones(tmp_path):
     cfg = write_config(tmp_path, ONE_DRIVE + FAST)
     with sim_session(cfg) as s:
         c = client(s, "drive1")
-        boot = threading.Event()
-        s.links["can0"].network.subscribe(0x705, lambda can_id, data, ts: data == b"\x00" and boot.set())
         c.nmt_start()
         c.set("AC", 0, 150_000)
         c.save()
         c.set("DC", 0, 120_000)  # after the save: RAM only
         assert (c.get("AC"), c.get("DC")) == (150_000, 120_000)
-
-        boot.clear()  # the power-up boot-up may or may not have reached the host
-        c.nmt_reset_communication()
-        assert boot.wait(10.0), "no boot-up frame after NMT reset communication"
-        # Pre-operational again: the binary interpreter needs a new NMT start
-        assert s.sim.drives["drive1"].nmt_state == 0x7F
-        c.nmt_start()
+        c.reset_node(10.0)  # waits for the boot-up, then NMT start
         assert c.get("AC") == 150_000  # saved
         assert c.get("DC") == FACTORY_DC  # not saved: gone
         assert s.sim.drives["drive1"].boots == 2
         assert s.sim.drives["drive1"].save_count == 1
+
+
+@pytest.mark.parametrize("reboots", [False, True], ids=["cia301", "reset_comm_reboots"])
+def test_nmt_reset_communication_reloads_the_communication_objects_and_keeps_the_application_ram(
+        tmp_path, reboots):
+    """CiA 301 (issue 35): reset communication puts 0x1000-0x1FFF back to their saved values (the
+    heartbeat consumer a motion command armed is gone) and keeps the application's RAM; the sim
+    setting `reset_comm_reboots: true` plays a drive that reboots instead."""
+    extra = "sim:\n  drives:\n    drive1: {reset_comm_reboots: true}\n" if reboots else ""
+    cfg = write_config(tmp_path, ONE_DRIVE + FAST + extra)
+    with sim_session(cfg) as s:
+        c = client(s, "drive1")
+        boot = threading.Event()
+        s.links["can0"].network.subscribe(0x705, lambda can_id, data, ts: data == b"\x00" and boot.set())
+        c.nmt_start()
+        c.set("DC", 0, 120_000)  # RAM only
+        s.sdo(resolve_target(cfg, "drive1")).download(0x1016, 1, (126 << 16 | 500).to_bytes(4, "little"))
+        boot.clear()  # the power-up boot-up may or may not have reached the host
+        c.nmt_reset_communication()
+        assert boot.wait(10.0), "no boot-up frame after NMT reset communication"
+        assert s.sim.drives["drive1"].nmt_state == 0x7F  # Pre-operational: the interpreter needs NMT start
+        c.nmt_start()
+        consumer = int.from_bytes(s.sdo(resolve_target(cfg, "drive1")).upload(0x1016, 1), "little")
+        assert consumer == 0  # a communication object: back to its saved value either way
+        assert c.get("DC") == (FACTORY_DC if reboots else 120_000)
+        assert s.sim.drives["drive1"].boots == (2 if reboots else 1)
 
 
 # -- (c) power cycle: flash persists between sessions -----------------------------------------

@@ -99,7 +99,9 @@ class Arm:
              progress: ScanProgress | None = None) -> ScanReport:
         """Which node ids answer on each bus (default: every open bus), checked against the config.
 
-        ``reset=True`` first sends NMT reset communication to every node (their unsaved RAM is lost):
+        ``reset=True`` first sends NMT reset communication to every node (their communication objects --
+        PDOs, heartbeat consumer and producer -- back to their saved values; CiA 301 keeps the
+        application's RAM, a drive that reboots instead loses it):
         the API's explicit form of ``sherpa scan --reset --apply``. Findings (missing, unexpected,
         duplicate) are in the report, not raised; a bus that failed is in ``report.bus_errors``.
         """

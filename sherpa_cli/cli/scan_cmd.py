@@ -22,7 +22,7 @@ def scan(
     buses: list[str] | None = typer.Option(None, "--bus", metavar="BUS",
                                               help="Scan only this bus (repeat for several). Default: every bus."),
     reset: bool = typer.Option(False, "--reset", help="With --apply: first send NMT reset communication to "
-                               "every node (unsaved RAM of the drives is lost) and collect their boot-ups. "
+                               "every node (PDOs and heartbeat settings back to their saved values; a drive that reboots loses its unsaved RAM) and collect their boot-ups. "
                                "Nothing is NMT-started. Without --apply the reset is a dry run: shown, not sent."),
     apply: ApplyReset = False,
 ) -> None:
@@ -47,9 +47,9 @@ def scan(
     if unknown:
         raise UsageError(f"no bus '{unknown[0]}' in the config", hint=f"configured buses: {', '.join(cfg.buses)}")
     if reset and not apply:
-        # a reset throws away the drives' unsaved RAM: a write, so a dry run unless --apply
+        # a reset puts the drives' communication settings back (and may drop their RAM): a write, so a dry run unless --apply
         st.out.warn(f"dry run: --reset would send NMT reset communication to every node of "
-                    f"{', '.join(selected)} (unsaved RAM is lost); not sent (add --apply)")
+                    f"{', '.join(selected)} (PDOs and heartbeat settings back to their saved values); not sent (add --apply)")
         reset = False
     with st.session(buses=selected) as session, _progress(st, selected) as progress:
         report = Arm(session).scan(selected, reset=reset, progress=progress)

@@ -406,6 +406,9 @@ class SimDriveConfig:
     lag: float = 0.0  # s time constant of the servo loop (bandwidth mismatch of a pair); 0 = perfect
     user_program: int = -1  # what PS answers: -1 idle, -2 no program, 1 a user program runs (SV refused, EC 82)
     firmware: str | None = None  # 0x100A software version instead of the simulator's (a replaced drive)
+    # NMT reset communication (0x82) as a full reboot (RAM from flash), not as CiA 301 has it (only
+    # 0x1000-0x1FFF from their saved values, the application's RAM kept); Elmo's own is UNCONFIRMED
+    reset_comm_reboots: bool = False
     # the load (sim/load.py), joint side, SI; None: the simulator's default (a shoulder-like joint)
     inertia: float | None = None  # kg m^2
     torque_constant: float | None = None  # N m/A

@@ -93,7 +93,8 @@ def settings_for(cfg: ArmConfig, drive: str, **overrides: object) -> SimSettings
                     start_skew_s=faults.start_skew, lag_s=faults.lag,
                     servo_bandwidth_hz=faults.servo_bandwidth, servo_damping=faults.servo_damping,
                     servo_current_limit=faults.servo_current_limit,
-                    supply_current_limit=faults.supply_current_limit, user_program=faults.user_program)
+                    supply_current_limit=faults.supply_current_limit, user_program=faults.user_program,
+                    reset_comm_reboots=faults.reset_comm_reboots)
         if faults.firmware is not None:
             base["sw_version"] = faults.firmware
         base.update({key: getattr(faults, key) for key in LOAD_KEYS if getattr(faults, key) is not None})

@@ -508,11 +508,7 @@ class SimDrive:
         self.last_error = 0
         self._load_ram()
         self._error_field = 0
-        live: dict[tuple[int, int], Callable[[], OdValue]] = {
-            (0x1001, 0): lambda: self._error_register, (0x1002, 0): lambda: self._sr() & 0xFFFFFFFF,
-            (0x1003, 0): lambda: int(self._error_field != 0), (0x1003, 1): lambda: self._error_field,
-            **self._od_live}
-        self._od = build_od(self.settings, self.serial, self.flash, live)
+        self._od = build_od(self.settings, self.serial, self.flash, self._od_live_all())
         self._motor_on = False
         self.motor.off()
         self._px_offset = -self.motor.rounded
@@ -536,6 +532,11 @@ class SimDrive:
         self.recorder.reset()  # the recorder is RAM
         self._send(HEARTBEAT_BASE + self.node, b"\x00")
 
+    def _od_live_all(self) -> dict[tuple[int, int], Callable[[], OdValue]]:
+        return {(0x1001, 0): lambda: self._error_register, (0x1002, 0): lambda: self._sr() & 0xFFFFFFFF,
+                (0x1003, 0): lambda: int(self._error_field != 0), (0x1003, 1): lambda: self._error_field,
+                **self._od_live}
+
     def _nmt(self, cs: int) -> None:
         before = self._nmt_state
         self._nmt_command(cs)
@@ -552,10 +553,26 @@ class SimDrive:
             self._nmt_state = STOPPED
         elif cs == NMT_PRE_OP:
             self._nmt_state = PRE_OPERATIONAL
-        elif cs in (NMT_RESET_NODE, NMT_RESET_COMM):
-            # Reset communication should only reload 0x1000-0x1FFF; the sim reboots fully for
-            # both, which is the stricter case for a tool (unsaved RAM is gone either way).
+        elif cs == NMT_RESET_NODE or (cs == NMT_RESET_COMM and self.settings.reset_comm_reboots):
             self._boot()
+        elif cs == NMT_RESET_COMM:
+            self._reset_communication()
+
+    def _reset_communication(self) -> None:
+        """CiA 301 reset communication: the communication objects 0x1000-0x1FFF back to their saved
+        values (the heartbeat consumer and producer, 0x1029, the PDOs), Pre-operational, a boot-up
+        frame; the application keeps its RAM (interpreter values, 0x2000+, the motor, PX)."""
+        kept = {key: value for key, value in self._od.values.items() if not 0x1000 <= key[0] <= 0x1FFF}
+        self._od = build_od(self.settings, self.serial, self.flash, self._od_live_all())
+        self._od.values.update(kept)
+        self._nmt_state = PRE_OPERATIONAL
+        self._hb_last = None
+        period = self._od.values[(0x1017, 0)]
+        self._next_heartbeat = self._t + period / 1000 if period else math.inf
+        self.tpdo.reset()
+        self._rpdo2_type = 255
+        self._rpdo2_buffer = None
+        self._send(HEARTBEAT_BASE + self.node, b"\x00")
 
     def _sync(self) -> None:
         """SYNC: a buffered synchronous RPDO2 runs now (every drive that has one, on the same frame:

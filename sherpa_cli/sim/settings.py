@@ -48,6 +48,10 @@ class SimSettings:
     device_name: str = "Whistle"
     hw_version: int = 0x1FF6B  # WS[30]; 0x1009 shows it as hex text
     sw_version: str = "Whistle 1.1.10.4 SIM"
+    # NMT reset communication (0x82): CiA 301 reloads only the communication objects 0x1000-0x1FFF
+    # from their saved values and keeps the application's RAM (False); True plays a full reboot
+    # like reset node. Elmo's own behaviour is UNCONFIRMED.
+    reset_comm_reboots: bool = False
     # Digital inputs IL[1..inputs]; the catalog's Whistle models have 6.
     inputs: int = 6
     # MC (A, read-only): the whistle-10/60's peak current. CL[1] may be at most MC/2 and
