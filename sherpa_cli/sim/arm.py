@@ -454,16 +454,17 @@ class SimArm:
             self._release_ram()
             raise
         try:
+            # an SDO answer leaves through its drive's one outbox, in the order the drive produced its
+            # frames (a TPDO made before the request goes out before the answer), as on a real node
             for name, d in self.cfg.drives.items():
                 if d.bus in self._buses:
-                    send = self._sender(self._buses[d.bus])
                     drive = self.drives[name]
-                    if drive.settings.sdo_latency_s > 0:
-                        send = functools.partial(_send_after_sdo_latency, drive)
+                    send = functools.partial(_send_after_sdo_latency, drive) if drive.settings.sdo_latency_s > 0 \
+                        else drive.send_now
                     self._sdo[name] = SdoServer(d.node, drive, send)
             for name, (bus_name, drive) in self.extras.items():
                 if bus_name in self._buses:
-                    self._sdo[name] = SdoServer(drive.node, drive, self._sender(self._buses[bus_name]))
+                    self._sdo[name] = SdoServer(drive.node, drive, drive.send_now)
             powered = {bus_name: threading.Event() for bus_name in self._buses}
             for bus_name in self._buses:
                 t = threading.Thread(target=self._pump, args=(bus_name, powered[bus_name]), name=f"sim-{bus_name}",

@@ -290,6 +290,14 @@ class SimDrive:
             self._hb_last = t
         return True
 
+    def send_now(self, can_id: int, data: bytes) -> None:
+        """A frame made outside the drive (an SDO answer) leaving now, through the one outbox: after
+        every frame the drive produced before it (a TPDO of the event timer), never before."""
+        if can_id == SDO_TX_BASE + self.node:
+            self._rx_busy_until = min(self._rx_busy_until, self._t)  # answered: the buffer is free
+        if not self._dead:
+            self._outbox.append((can_id, bytes(data)))
+
     def send_later(self, can_id: int, data: bytes, delay: float) -> None:
         """Queue a frame made outside the drive (an SDO answer) to leave ``delay`` s from now, in
         order with the interpreter's replies; lost like them if the drive dies or reboots first."""
