@@ -279,6 +279,9 @@ class FakeClient:
     def abort_pending(self, error):
         self.aborted.append(error)
 
+    def clear_abort(self):
+        self.cleared = True
+
 
 def make_watch():
     now = [0.0]
@@ -315,6 +318,7 @@ def test_after_stop_nothing_trips_and_every_subscription_is_undone():
     assert all(not cbs for cbs in net.subs.values()) and not client.emcy_cbs
     net.deliver(0x705, b"\x04")
     assert w.poll() is None and not client.aborted
+    assert client.cleared  # the guard's exit requests wait for their answers again
 
 
 def test_warning_codes_and_error_reset_never_trip_a_moving_drive():

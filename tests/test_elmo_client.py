@@ -562,3 +562,4 @@ def test_network_transport_over_canopen_virtual_bus():
         notifier.stop()
         drive_side.shutdown()
         network.disconnect()
+

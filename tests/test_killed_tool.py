@@ -157,6 +157,9 @@ def test_a_drive_reset_during_a_command_leaves_nothing_the_next_command_refuses(
             proc.kill()
             finish(proc)
     assert "Traceback" not in err, err
+    # the reset named, exit 1 (Ctrl-C ends the recording: 130); not a confirmation polling a deaf drive
+    assert code == (130 if name == "log record" else 1), f"{out}\n{err}"
+    assert "not confirmed" not in err and "NOT reached" not in err, err
     jog = ("jog", cmd.joint, "--velocity", "0.03", "--for", "0.3", "--uncalibrated", "--apply")
     code, out, err = finish(sherpa(arm, tmp_path, *jog))
     assert code == 0 and "did not finish" not in err, f"{out}\n{err}"

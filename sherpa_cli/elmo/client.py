@@ -152,6 +152,7 @@ class DriveClient:
         # Guards what the receive thread touches; never held while sending or waiting.
         self._state = threading.Lock()
         self._pending: _Pending | None = None
+        self._aborted: SherpaError | None = None  # abort_pending since the last clear_abort
         self._emcy_callbacks: list[Callable[[Emcy], None]] = []
         self._last_emcy: Emcy | None = None
         self._emcy_count = 0
@@ -293,6 +294,10 @@ class DriveClient:
             deaf_until = start + self.settings.mo_settle
             last: int | float | None = None
             while True:
+                with self._state:
+                    aborted = self._aborted
+                if aborted is not None:
+                    raise aborted  # the guard's watch ended the motion (a reset drive, an EMCY)
                 # One attempt per poll: the poll loop is the retry, bounded by the deadline. While the
                 # drive may still be settling (deaf), a poll waits only until the window ends, not a
                 # whole reply timeout: the next poll, sent then, is the one it can hear.
@@ -476,11 +481,17 @@ class DriveClient:
         drive watch: a drive that left Operational is deaf, and its command must not wait out the
         reply timeouts). No request pending: nothing happens. Sends nothing."""
         with self._state:
+            self._aborted = error  # also ends a motor switch's confirmation between two polls
             pending = self._pending
             if pending is None or pending.reply is not None or pending.error is not None:
                 return
             pending.error = error
         pending.arrived.release()
+
+    def clear_abort(self) -> None:
+        """The watch that called :meth:`abort_pending` has stopped (a guard's exit): requests wait again."""
+        with self._state:
+            self._aborted = None
 
     def _emcy_seen(self) -> int:
         with self._state:

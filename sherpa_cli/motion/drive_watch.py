@@ -117,6 +117,7 @@ class DriveWatch:
             w = self._drives.pop((bus, node), None)
         if w is not None:
             self._unsubscribe(w)
+            w.client.clear_abort()
 
     def set_moving(self, bus: str, node: int, moving: bool) -> None:
         w = self._drives.get((bus, node))
@@ -138,6 +139,7 @@ class DriveWatch:
             self._nmt_subs.clear()
         for w in drives:
             self._unsubscribe(w)
+            w.client.clear_abort()  # the guard's own exit requests must wait for their answers again
         for network, cb in subs:
             try:
                 network.unsubscribe(NMT_ID, cb)

@@ -796,9 +796,13 @@ class MotionGuard:
         passing fault or a loaded bus), then its exit goes on as usual."""
         try:
             self._step()
+            # a drive reset by another node is back in Pre-operational, deaf to the interpreter until
+            # started: the same start every exit gives a tripped drive (it moves nothing)
+            c.nmt_start()
             c.get("MO")
         except Exception:  # noqa: BLE001 - any failure means: still silent
             return False
+        c.silent = False
         return True
 
     def _restore_profile(self, d: _Drive, r: DriveStop) -> None:

@@ -240,6 +240,9 @@ def stop_motors(guard: MotionGuard, refs: Sequence[DriveRef], settings: MotionSe
             if r.name in deaf:
                 continue
             try:
+                # a drive reset by another node is in Pre-operational, deaf to the stop until started
+                # (it moves nothing: a reset drive's motor is off)
+                guard.client(r).nmt_start()
                 stop_drive(guard.client(r), unit_mode=guard.unit_mode(r), method=settings.stop_method,
                            standstill_timeout=0.0, poll_interval=settings.poll_interval,
                            standstill_velocity=settings.standstill_velocity)
