@@ -166,6 +166,28 @@ def test_the_command_listens_at_least_the_listen_window_before_it_takes_an_id(cf
         ref = resolve_target(cfg, "drive1")
         with MotionGuard(s, [ref], settings=settings, clock=lambda: t[0], sleep=sleep) as g:
             assert g.host_id == 126
+    # the in-process arm's bus is private to this process: two heartbeat periods hear its producers
+    assert settings.host_id_listen_private == pytest.approx(2 * 0.075)
+    assert settings.host_id_listen_private <= sum(slept) < settings.host_id_listen
+
+
+def test_on_a_bus_other_processes_share_the_command_listens_the_whole_window(cfg):
+    """A served or kernel bus: a command killed a moment ago may have drives still watching an id."""
+    settings = MotionSettings.from_config(cfg)
+    t = [0.0]
+    slept: list[float] = []
+
+    def sleep(dt: float) -> None:
+        slept.append(dt)
+        t[0] += dt
+        time.sleep(0.001)
+
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
+        ref = resolve_target(cfg, "drive1")
+        guard = MotionGuard(s, [ref], settings=settings, clock=lambda: t[0], sleep=sleep)
+        guard._host_lock.buses = {"can0": wire_key("remote", "127.0.0.1:1/can0")}  # as another process sees it
+        with guard:
+            pass
     assert sum(slept) >= settings.host_id_listen
 
 

@@ -53,6 +53,13 @@ class MotionSettings:
         return (self.host_id_listen_ms or self.consumer_time_ms + self.heartbeat_period * 1000) / 1000
 
     @property
+    def host_id_listen_private(self) -> float:
+        """s on buses private to this process (the in-process simulated arm's): no other process or
+        host is there, so no command killed before can have armed a drive on them; what is left to
+        hear is a producer of the simulated arm itself, which two heartbeat periods do."""
+        return min(self.host_id_listen, 2 * self.heartbeat_period)
+
+    @property
     def host_ids(self) -> tuple[int, ...]:
         """The ids a command may send its heartbeat as, in the order they are taken."""
         return (self.host_node_id, *(i for i in self.host_id_pool if i != self.host_node_id))
