@@ -151,28 +151,9 @@ def test_a_command_takes_an_id_nobody_sends_and_arms_its_drives_with_it(cfg):
             other.shutdown()
 
 
-def test_the_command_listens_at_least_the_listen_window_before_it_takes_an_id(cfg):
-    settings = MotionSettings.from_config(cfg)
-    assert settings.host_id_listen == pytest.approx(0.3 + 0.075)  # consumer time + one heartbeat period
-    t = [0.0]
-    slept: list[float] = []
-
-    def sleep(dt: float) -> None:
-        slept.append(dt)
-        t[0] += dt
-        time.sleep(0.001)
-
-    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
-        ref = resolve_target(cfg, "drive1")
-        with MotionGuard(s, [ref], settings=settings, clock=lambda: t[0], sleep=sleep) as g:
-            assert g.host_id == 126
-    # the in-process arm's bus is private to this process: two heartbeat periods hear its producers
-    assert settings.host_id_listen_private == pytest.approx(2 * 0.075)
-    assert settings.host_id_listen_private <= sum(slept) < settings.host_id_listen
-
-
-def test_on_a_bus_other_processes_share_the_command_listens_the_whole_window(cfg):
-    """A served or kernel bus: a command killed a moment ago may have drives still watching an id."""
+def _listened(cfg, *, shared: bool) -> float:
+    """Seconds a guard's entry slept (on a stepped clock) before it took its id; ``shared``: its bus
+    as another process sees it (a served or kernel bus) instead of the in-process arm's private one."""
     settings = MotionSettings.from_config(cfg)
     t = [0.0]
     slept: list[float] = []
@@ -185,10 +166,22 @@ def test_on_a_bus_other_processes_share_the_command_listens_the_whole_window(cfg
     with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
         ref = resolve_target(cfg, "drive1")
         guard = MotionGuard(s, [ref], settings=settings, clock=lambda: t[0], sleep=sleep)
-        guard._host_lock.buses = {"can0": wire_key("remote", "127.0.0.1:1/can0")}  # as another process sees it
-        with guard:
-            pass
-    assert sum(slept) >= settings.host_id_listen
+        if shared:
+            guard._host_lock.buses = {"can0": wire_key("remote", "127.0.0.1:1/can0")}
+        with guard as g:
+            assert g.host_id == 126
+    return sum(slept)
+
+
+def test_the_command_listens_the_whole_window_on_a_shared_bus_and_two_periods_on_a_private_one(cfg):
+    """On a bus other processes share, a command killed a moment ago may have drives still watching an
+    id: the whole window (consumer time + one period). The in-process arm's bus is this process's
+    alone: two heartbeat periods hear its producers."""
+    settings = MotionSettings.from_config(cfg)
+    assert settings.host_id_listen == pytest.approx(0.3 + 0.075)
+    assert settings.host_id_listen_private == pytest.approx(2 * 0.075)
+    assert _listened(cfg, shared=True) >= settings.host_id_listen
+    assert settings.host_id_listen_private <= _listened(cfg, shared=False) < settings.host_id_listen
 
 
 def test_a_foreign_heartbeat_on_the_commands_own_id_stops_the_command(cfg):
