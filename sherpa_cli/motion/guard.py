@@ -156,9 +156,7 @@ class MotionGuard:
             self._watch_requests()
             for ref in self.refs:  # first, before anything is sent: a second command refuses here
                 self._lock(ref)
-            private = all(key.startswith("virtual:") for key in self._host_lock.buses.values())
-            listen_until = self._clock() + (self.settings.host_id_listen_private if private
-                                            else self.settings.host_id_listen)
+            listen_until = self._clock() + self.settings.host_id_listen_for(self._host_lock.private)
             self._host_ids.start()  # listening to the pool's ids while the drives are read
             preflight(self.session, self.refs)  # bus state and bit rate, user programs (bus/health.py)
             self._pulse(extra=self._setup_bound())

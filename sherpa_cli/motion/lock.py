@@ -96,6 +96,11 @@ class HostIdLock:
         self.host_id: int | None = None
         self._held: list[MachineLock] = []
 
+    @property
+    def private(self) -> bool:
+        """Every bus of the command is private to this process (the in-process simulated arm's)."""
+        return all(key.startswith("virtual:") for key in self.buses.values())
+
     def lock_for(self, bus: str, host_id: int) -> MachineLock:
         return MachineLock(self.buses[bus], f"host{int(host_id)}")
 

@@ -52,6 +52,10 @@ class MotionSettings:
         """s a command listens to the pool's ids before it takes one (motion/host_ids.py)."""
         return (self.host_id_listen_ms or self.consumer_time_ms + self.heartbeat_period * 1000) / 1000
 
+    def host_id_listen_for(self, private: bool) -> float:
+        """s to listen before taking an id, on buses private to this process or shared."""
+        return self.host_id_listen_private if private else self.host_id_listen
+
     @property
     def host_id_listen_private(self) -> float:
         """s on buses private to this process (the in-process simulated arm's): no other process or

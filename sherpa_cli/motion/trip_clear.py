@@ -58,8 +58,7 @@ def clear_heartbeat_trip(session: ArmSession, ref: DriveRef, settings: MotionSet
 
     listener.start()
     try:
-        private = all(key.startswith("virtual:") for key in ids.buses.values())
-        end = clock() + (settings.host_id_listen_private if private else settings.host_id_listen)
+        end = clock() + settings.host_id_listen_for(ids.private)
         while (left := end - clock()) > 0:
             sleep(min(left, 0.05))
             raise_if_signalled()
