@@ -251,11 +251,10 @@ def damaged(ref: DriveRef) -> str | None:
     if not isinstance(data, dict) or not isinstance(data.get("steps"), list):
         return "not a journal (no list of steps)"
     for raw in data["steps"]:
-        try:
-            Step(str(raw["owner"]), str(raw["kind"]), str(raw["name"]), raw["old"])
-            if raw["kind"] not in ("interp", "sdo") or not isinstance(raw["old"], (int, float)):
-                raise ValueError(raw["kind"])
-        except (KeyError, TypeError, ValueError):
+        whole = (isinstance(raw, dict) and isinstance(raw.get("owner"), str) and isinstance(raw.get("name"), str)
+                 and raw.get("kind") in ("interp", "sdo") and isinstance(raw.get("old"), (int, float))
+                 and not isinstance(raw.get("old"), bool))
+        if not whole:
             return f"a damaged step ({str(raw)[:60]})"
     return None
 
