@@ -136,8 +136,47 @@ def test_bad_inputs_are_one_clear_message(cli, tmp_path):
 
 def test_decoder_never_raises_on_garbage():
     decoder = FrameDecoder()
-    for cob, data in ((0x328, b"\x01"), (0x2A8, b"zz"), (0x0A8, b"\x00"), (0x5A8, b""), (0x628, b"\x20")):
-        assert decoder.decode(Frame(0.0, "can0", cob, data)).kind in ("interp", "emcy", "sdo", "other")
+    for cob, data in ((0x328, b"\x01"), (0x2A8, b"zz")):
+        assert decoder.decode(Frame(0.0, "can0", cob, data)).kind in ("interp", "other")
+    for cob, data in ((0x0A8, b"\x00"), (0x5A8, b""), (0x628, b"\x20")):  # too short for an EMCY / SDO frame
+        assert decoder.decode(Frame(0.0, "can0", cob, data)).kind == "malformed"
+
+
+@pytest.mark.parametrize(("cob", "text"), [
+    (0x70A, "remote request (RTR) for node 10's heartbeat (node guarding)"),
+    (0x080, "remote request (RTR) for the SYNC id"),
+    (0x1A8, "remote request (RTR) for node 40's TPDO1"),
+])
+def test_a_remote_frame_is_a_remote_request_not_what_it_would_be_with_data(cob, text):
+    """Issue 35 item 6: `70A#R` read as "heartbeat (empty)", `080#R` as a SYNC, a TPDO RTR as that TPDO."""
+    d = FrameDecoder().decode(Frame(0.0, "can0", cob, b"", is_remote=True))
+    assert (d.kind, d.text) == ("remote", text)
+    assert d.as_json(0.0)["remote"] is True
+
+
+@pytest.mark.parametrize(("cob", "data", "why"), [
+    (0x60A, "4000100000", "SDO request with 5 byte(s) (an SDO frame has 8)"),
+    (0x58A, "43001000", "SDO response with 4 byte(s)"),
+    (0x000, "01", "NMT command with 1 byte(s) (an NMT command has 2)"),
+    (0x080, "0102", "SYNC with 2 bytes"),
+    (0x08A, "1081", "EMCY with 2 byte(s) (an EMCY has 8)"),
+    (0x70A, "0505", "heartbeat with 2 byte(s) (a heartbeat has 1)"),
+    (0x70A, "", "heartbeat with 0 byte(s)"),
+])
+def test_a_malformed_frame_is_flagged_with_what_is_wrong_never_shown_as_a_valid_request(cob, data, why):
+    """Issue 35 item 6: `60A#4000100000` was shown as "SDO read 0x1000:0"."""
+    d = FrameDecoder().decode(Frame(0.0, "can0", cob, bytes.fromhex(data)))
+    assert d.kind == "malformed" and why in d.text, (d.kind, d.text)
+    assert d.as_json(0.0)["remote"] is False and d.fields["malformed"].startswith(why.split(" (")[0])
+
+
+def test_log_decode_filters_remote_and_malformed_frames(cli, tmp_path):
+    path = tmp_path / "odd.log"
+    path.write_text("(1.0) can0 70A#R\n(1.1) can0 60A#4000100000\n(1.2) can0 70A#05\n")
+    remote = cli("log", "decode", str(path), "--kind", "remote")
+    assert remote.exit_code == 0 and remote.stdout.count("\n") == 1 and "remote request (RTR)" in remote.stdout
+    bad = cli("log", "decode", str(path), "--kind", "malformed")
+    assert bad.exit_code == 0 and "SDO request with 5 byte(s)" in bad.stdout and "SDO read" not in bad.stdout
 
 
 def test_candump_parser_reads_extended_remote_and_fd():

@@ -20,7 +20,7 @@ from sherpa_cli.elmo.commands import format_value, lookup
 from sherpa_cli.elmo.faults import decode_emcy
 from sherpa_cli.errors import CodecError
 
-KINDS = ("nmt", "sync", "emcy", "heartbeat", "sdo", "interp", "pdo", "other")
+KINDS = ("nmt", "sync", "emcy", "heartbeat", "sdo", "interp", "pdo", "remote", "malformed", "other")
 
 NMT_COMMANDS = {0x01: "start", 0x02: "stop", 0x80: "enter pre-operational", 0x81: "reset node",
                 0x82: "reset communication"}
@@ -85,8 +85,9 @@ class Decoded:
 
     def as_json(self, t0: float) -> dict[str, Any]:
         return {"time": round(self.frame.timestamp - t0, 6), "bus": self.frame.bus,
-                "id": self.frame.can_id, "data": self.frame.data.hex(), "kind": self.kind,
-                "node": self.node, "text": self.text, **({"fields": self.fields} if self.fields else {})}
+                "id": self.frame.can_id, "remote": self.frame.is_remote, "data": self.frame.data.hex(),
+                "kind": self.kind, "node": self.node, "text": self.text,
+                **({"fields": self.fields} if self.fields else {})}
 
 
 @dataclass
@@ -165,6 +166,13 @@ class FrameDecoder:
             return Decoded(frame, "other", None, "error frame")
         if frame.is_extended:
             return Decoded(frame, "other", None, "extended id (not CANopen)")
+        if frame.is_remote:
+            return self._remote(frame)
+        wrong = _malformed(cid, data)
+        if wrong is not None:
+            node = cid & 0x7F if cid > 0x80 else None
+            who = f"{self._who(frame.bus, node)} " if node else ""
+            return Decoded(frame, "malformed", node, f"{who}malformed: {wrong}", {"malformed": wrong})
         if cid == 0x000:
             cmd = NMT_COMMANDS.get(data[0], f"command 0x{data[0]:02X}") if data else "(empty)"
             target = data[1] if len(data) > 1 else 0
@@ -215,11 +223,28 @@ class FrameDecoder:
                            {"reply": rep.letters, "index": rep.index, "value": rep.value,
                             "error_code": rep.error_code})
         if func in (0x180, 0x200, 0x380, 0x400, 0x480, 0x500) and node:
-            pdo_name = {0x180: "TPDO1", 0x200: "RPDO1", 0x380: "TPDO3", 0x400: "RPDO3", 0x480: "TPDO4",
-                        0x500: "RPDO4"}[func]
+            pdo_name = PDO_NAMES[func]
             return Decoded(frame, "pdo", node, f"{self._who(frame.bus, node)} {pdo_name} {data.hex(' ')}"
                            " (mapping not in the capture)")
         return Decoded(frame, "other", None, f"{len(data)} bytes")
+
+    def _remote(self, frame: Frame) -> Decoded:
+        """A remote (RTR) frame asks a producer for the frame of that id; it is no SYNC, heartbeat or
+        PDO itself (CiA 301: the Whistle's PDOs are not RTR-requestable)."""
+        cid, node = frame.can_id, frame.can_id & 0x7F
+        func = cid & 0x780
+        if cid == 0x000:
+            asked = "the NMT id"
+        elif cid == 0x080:
+            asked = "the SYNC id"
+        elif func == 0x700 and node:
+            asked = f"{self._who(frame.bus, node)}'s heartbeat (node guarding)"
+        elif func in PDO_NAMES and node:
+            asked = f"{self._who(frame.bus, node)}'s {PDO_NAMES[func]}"
+        else:
+            asked = f"id 0x{cid:03X}"
+        return Decoded(frame, "remote", node if cid > 0x80 else None, f"remote request (RTR) for {asked}",
+                       {"remote": True})
 
     # -- SDO ----------------------------------------------------------------------------------
     def _sdo_request(self, frame: Frame, node: int) -> Decoded:
@@ -359,6 +384,29 @@ class FrameDecoder:
             return Decoded(frame, "pdo", node, f"{self._who(bus, node)} {kind}PDO{number + 1} "
                            + ", ".join(parts), {"values": values})
         return None
+
+
+PDO_NAMES = {0x180: "TPDO1", 0x200: "RPDO1", 0x280: "TPDO2", 0x300: "RPDO2", 0x380: "TPDO3", 0x400: "RPDO3",
+             0x480: "TPDO4", 0x500: "RPDO4"}
+
+
+def _malformed(cid: int, data: bytes) -> str | None:
+    """What is wrong with a CANopen frame's length for its id (CiA 301), None when it can be one:
+    NMT 2 bytes, SYNC 0 or 1, EMCY and SDO 8, heartbeat 1."""
+    n = len(data)
+    func, node = cid & 0x780, cid & 0x7F
+    if cid == 0x000 and n != 2:
+        return f"NMT command with {n} byte(s) (an NMT command has 2)"
+    if cid == 0x080 and n > 1:
+        return f"SYNC with {n} bytes (a SYNC has none, or a 1-byte counter)"
+    if 0x081 <= cid <= 0x0FF and n != 8:
+        return f"EMCY with {n} byte(s) (an EMCY has 8)"
+    if func in (0x580, 0x600) and node and n != 8:
+        what = "request" if func == 0x600 else "response"
+        return f"SDO {what} with {n} byte(s) (an SDO frame has 8)"
+    if func == 0x700 and node and n != 1:
+        return f"heartbeat with {n} byte(s) (a heartbeat has 1)"
+    return None
 
 
 def _named(index: int, sub: int) -> str:
