@@ -311,10 +311,16 @@ def test_leaving_hl3_trips_with_mf_and_emcy(clock):
     assert 1000 < query(drive, "PX") < 1100
     assert query(drive, "PA") == 5000
     assert drive.od_read(0x1001, 0) == 0x01
-    motor_on(drive, clock)  # still beyond HL[3]: trips again at once
+    # still beyond HL[3]: MO=1 clears the fault (CiA 301: EMCY 0x0000 "error reset", before the
+    # MO reply), then it trips again at once
+    frames = send(drive, encode_set("MO", 0, 1))
+    assert frames[0] == (EMCY, hx("00 00 00 00 00 00 00 00")) and frames[1][0] == TPDO2, frames
+    run(drive, clock, 0.5)
     assert drive.pop_frames() == [(EMCY, hx("80 86 01 00 00 00 00 00"))]
     assign(drive, "HL", 3, 2000)
-    motor_on(drive, clock)  # MO=1 clears MF
+    frames = send(drive, encode_set("MO", 0, 1))  # MO=1 clears MF (and says so)
+    assert [f[0] for f in frames] == [EMCY, TPDO2], frames
+    run(drive, clock, 0.5)
     assert query(drive, "MF") == 0 and query(drive, "MO") == 1
 
 
@@ -572,3 +578,22 @@ def test_the_frame_record_stays_bounded(monkeypatch):
     for i in range(25):
         record.append(i)
     assert len(record) <= 10 and record[-1] == 24 and record == list(range(record[0], 25))
+
+
+def test_a_stopped_node_sends_no_emcy_and_0x1003_0_written_0_clears_the_history(clock):
+    """CiA 301 (issue 35): no EMCY in NMT Stopped (the error is still stored); 0x1003:0 := 0 deletes
+    the stored errors, any other value is refused."""
+    from sherpa_cli.sim.od import ODError
+
+    drive = new_drive(clock)
+    assign(drive, "HL", 3, 1000)
+    motor_on(drive, clock)
+    drive.receive(0x000, bytes([0x02, NODE]))  # NMT Stopped
+    drive.pop_frames()
+    drive._emcy(0x8680, 0x01)  # a trip while Stopped
+    assert drive.pop_frames() == []  # stored, not sent
+    assert drive.od_read(0x1003, 0) == 1
+    with pytest.raises(ODError):
+        drive.od_write(0x1003, 0, 1)
+    drive.od_write(0x1003, 0, 0)
+    assert drive.od_read(0x1003, 0) == 0

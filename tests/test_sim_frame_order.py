@@ -73,3 +73,30 @@ def test_no_tpdo_leaves_after_the_answer_that_disabled_it():
         finally:
             observer.shutdown()
 
+
+
+def test_a_remote_frame_on_the_sync_id_is_no_sync():
+    """CiA 301 (issue 35): an RTR frame on 0x080 requests a frame; it is no SYNC. Five of them made
+    five synchronous TPDOs."""
+    cfg = load_config(ROOT / "configs/sherpa-arm.yaml")
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg), buses=[BUS]) as s:
+        ref = resolve_target(cfg, DRIVE)
+        s.client(ref).nmt_start()
+        _enable_tpdo1(s, ref)
+        _w(s, ref, 0x1800, 1, "<I", 0x80000000 | (0x180 + NODE))
+        _w(s, ref, 0x1800, 2, "<B", 1)  # at every SYNC
+        _w(s, ref, 0x1800, 1, "<I", 0x180 + NODE)
+        observer = can.Bus(interface="virtual", channel=s.sim.endpoints[BUS]["channel"])
+        try:
+            for _ in range(5):
+                observer.send(can.Message(arbitration_id=0x080, is_remote_frame=True, is_extended_id=False))
+            observer.send(can.Message(arbitration_id=0x080, data=b"", is_extended_id=False))
+            seen = []
+            deadline = time.monotonic() + 1.0
+            while time.monotonic() < deadline:
+                msg = observer.recv(timeout=0.05)
+                if msg is not None and msg.arbitration_id == 0x180 + NODE:
+                    seen.append(msg)
+            assert len(seen) == 1, f"{len(seen)} TPDO1 for 5 RTR frames and 1 SYNC"
+        finally:
+            observer.shutdown()

@@ -627,7 +627,10 @@ class SimArm:
                     touched: list[str] = []
                     # frames pass only while the host's controller runs (not bus-off, down or missing)
                     passing = ctrl is None or ctrl.running
-                    if msg is not None and not msg.is_error_frame and not msg.is_extended_id and passing:
+                    # a remote (RTR) frame requests a frame; it is none itself (an RTR on 0x080 is no
+                    # SYNC), and the drives offer no RTR-requestable PDO or node guarding
+                    if msg is not None and not msg.is_error_frame and not msg.is_extended_id and \
+                            not msg.is_remote_frame and passing:
                         if ctrl is not None:
                             ctrl.count(host_sent=1, sent_bytes=len(msg.data))
                         # receive() ran the drives to now: what the frame caused is in their outbox

@@ -339,6 +339,12 @@ class SimDrive:
             return
         if index in (INTERPRETER_IN, INTERPRETER_OUT):
             raise ODError(f"0x{index:04X}: the binary interpreter is reached by RPDO2 only", ABORT_UNSUPPORTED)
+        if (index, sub) == (0x1003, 0):
+            if value != 0:
+                raise ODError("0x1003:0: only 0 may be written (it clears the error history)", ABORT_RANGE)
+            self._error_field = 0  # CiA 301: writing 0 deletes the stored errors
+            self.od_writes.append((self._t, index, sub, value))
+            return
         if index in (RPDO2_COMM, RPDO2_MAP):
             self._rpdo2_write(index, sub, value)
             self.od_writes.append((self._t, index, sub, value))
@@ -753,8 +759,10 @@ class SimDrive:
 
     def _emcy(self, code: int, register: int, elmo_code: int = 0) -> None:
         self._error_register = register
-        self._error_field = encode_error_field(code, register, elmo_code)
-        self._send(EMCY_BASE + self.node, EMCY_FRAME.pack(code, register, elmo_code, 0, 0))
+        if code:
+            self._error_field = encode_error_field(code, register, elmo_code)
+        if self._nmt_state != STOPPED:  # CiA 301: a Stopped node sends no EMCY (the error is still stored)
+            self._send(EMCY_BASE + self.node, EMCY_FRAME.pack(code, register, elmo_code, 0, 0))
 
     def _interpreter_frame(self, data: bytes) -> None:
         # PDOs only live in Operational; during the MO settle window the interpreter is deaf.
@@ -838,6 +846,8 @@ class SimDrive:
             return
         self._motor_on = True
         self._mf = 0  # MF is latched until the next MO=1 ([CR MF])
+        if self._error_register:
+            self._emcy(0x0000, 0)  # CiA 301: the error is gone -- EMCY "error reset / no error"
         self._error_register = 0
         self.motor.off()  # hold the current position until BG
         if self.ram["UM"] == 1:

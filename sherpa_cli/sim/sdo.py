@@ -72,8 +72,9 @@ def build_object_dictionary(extra: tuple[ObjectSpec, ...] = DRIVE_OBJECTS, tpdos
         record = records.get(index)
         if record is None:
             record = records[index] = od.ODRecord(_RECORD_NAMES[index], index)
-            count = od.ODVariable("Highest sub-index supported", index, 0)
-            count.data_type, count.access_type = od.UNSIGNED8, "ro"
+            count = od.ODVariable("Number of errors" if index == 0x1003 else "Highest sub-index supported", index, 0)
+            # 0x1003:0 := 0 clears the error history (CiA 301); every other count is read-only
+            count.data_type, count.access_type = od.UNSIGNED8, "rw" if index == 0x1003 else "ro"
             record.add_member(count)
             dictionary.add_object(record)
         record.add_member(var)
