@@ -159,3 +159,15 @@ def test_cli_stop_reports_partly_stopped_naming_the_unreached_drives(cli, monkey
     assert "partly stopped" in result.stderr and "not reached (bus could not be opened)" in result.stderr
     assert "NOT REACHED" in result.stdout and "motor off" in result.stdout
     assert "Traceback" not in result.stderr
+
+
+def test_stop_with_no_bus_reachable_says_nothing_was_stopped_names_every_bus_and_the_power(cli):
+    """Issue 41 item 5: it printed only the socket error (exit 3), not that nothing was stopped, nor
+    the other buses, nor what is left to do."""
+    closed = ",".join(f"{bus}=remote:127.0.0.1:1" for bus in ("can0", "can1", "can2"))
+    result = cli("--bus-map", closed, "stop")
+    assert result.exit_code == 3, result.transcript()
+    err = result.stderr
+    assert "NOTHING WAS STOPPED: no bus could be opened (can0, can1, can2)" in err, err
+    assert all(f"bus {bus}: not reached" in err for bus in ("can0", "can1", "can2")), err
+    assert "cut the motor power" in err and "Traceback" not in err, err

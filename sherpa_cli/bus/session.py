@@ -50,6 +50,18 @@ class InProcessArm(Protocol):
     def stop(self) -> None: ...
 
 
+class NoBusError(CommunicationError):
+    """Not one of the buses a best-effort session wanted could be opened (exit 3); ``failed`` names
+    each with why."""
+
+    def __init__(self, failed: Mapping[str, CommunicationError]) -> None:
+        self.failed = dict(failed)
+        first = next(iter(self.failed.values()))
+        super().__init__(first.message if len(self.failed) == 1 else
+                         "no bus could be opened: " + "; ".join(e.message for e in self.failed.values()),
+                         hint=first.hint)
+
+
 class ArmSession:
     """Open buses plus a DriveClient per drive; build with :meth:`open`."""
 
@@ -91,7 +103,7 @@ class ArmSession:
             failed: dict[str, CommunicationError] | None = {} if best_effort else None
             links = open_links(wire_cfg, buses, failed=failed)
             if failed and not links:
-                raise next(iter(failed.values()))
+                raise NoBusError(failed)
             session = cls(wire_cfg, links, sim, failed)
             try:
                 yield session

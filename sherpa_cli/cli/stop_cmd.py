@@ -27,9 +27,22 @@ def stop(ctx: typer.Context, targets: Targets = None) -> None:
     st = state(ctx)
     cfg = st.load_config()
     buses = Arm.buses_of(cfg, targets)
+    from sherpa_cli.bus.session import NoBusError
+    from sherpa_cli.errors import CommunicationError
+
     # best effort: a bus that cannot be opened never keeps the drives of the others from being stopped
-    with st.session(buses=buses, best_effort=True) as session:
-        report = Arm(session).stop(targets, check=False)
+    try:
+        with st.session(buses=buses, best_effort=True) as session:
+            report = Arm(session).stop(targets, check=False)
+    except NoBusError as exc:
+        # nothing could be sent: say so plainly, bus by bus, and what is left to the technician
+        for bus, why in exc.failed.items():
+            st.out.error(f"bus {bus}: not reached: {why.message}")
+        raise CommunicationError(
+            f"NOTHING WAS STOPPED: no bus could be opened ({', '.join(exc.failed)}); a motor that moves goes "
+            "on until its drive's own dead-man (if a sherpa command armed it) or the motor power stops it",
+            hint="cut the motor power (the emergency stop) if anything may be moving; then check the "
+                 "adapters and links (`sherpa bus status`)") from None
     if st.json_mode:
         st.out.json({"drives": [r.as_json() for r in report.drives]})
     else:
