@@ -113,6 +113,7 @@ def test_plot_writes_a_png_with_the_metrics(cli, tmp_path):
     result = cli("log", "plot", str(tmp_path / "run.csv"), "-o", str(tmp_path / "run.png"), "--target", "1.2")
     assert result.exit_code == 0, result.stderr
     assert "elbow_pitch" in result.stdout and "overshoot" in result.stdout
+    assert "not stepped: none" in result.stdout and "[]" not in result.stdout  # words, not a Python list
     with Image.open(tmp_path / "run.png") as img:
         assert img.format == "PNG" and img.size == (1000, 600)  # fits a screen, whatever the joints
         assert sum(1 for count in img.convert("L").histogram() if count) > 10  # not a blank canvas
@@ -122,6 +123,8 @@ def test_plot_writes_a_png_with_the_metrics(cli, tmp_path):
 
     data = json.loads(js.stdout)
     assert data["metrics"] == [] and data["not_stepped"] == ["elbow_pitch.vel"]
+    plain = cli("log", "plot", str(tmp_path / "run.csv"), "-o", str(tmp_path / "w.png"), "--signal", "vel")
+    assert "not stepped: elbow_pitch.vel" in plain.stdout, plain.stdout
 
 
 def test_plot_refuses_bad_input(cli, tmp_path):

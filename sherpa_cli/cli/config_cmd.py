@@ -43,8 +43,11 @@ def check(ctx: typer.Context, file: Path | None = FileArg) -> None:
 
 def _render(out: Output, s: dict[str, Any]) -> None:
     out.line(f"config {s['source']}: {s['name']} -- valid")
-    out.line(f"  {len(s['buses'])} buses, {len(s['drives'])} drives, {len(s['joints'])} joints, "
-             f"{len(s['pairs'])} differential pairs")
+    def n(count: int, word: str) -> str:
+        return f"{count} {word}" + ("" if count == 1 else "s")
+
+    out.line(f"  {n(len(s['buses']), 'bus').replace('buss', 'buses')}, {n(len(s['drives']), 'drive')}, "
+             f"{n(len(s['joints']), 'joint')}, {n(len(s['pairs']), 'differential pair')}")
     out.line()
     out.table("Buses", ["bus", "interface", "channel", "bitrate", "send gap µs", "poll ms", "drives"],
               [[b["name"], b["interface"] or "(python-can config)", b["channel"] or "-", b["bitrate"] or "-",

@@ -280,7 +280,9 @@ def render_metrics(st: AppState, metrics: Mapping[tuple[str, str], StepMetrics],
                     f"rise (10-90 %) {_ms(m.rise_time)}, overshoot {m.overshoot:.1f} %, "
                     f"settling (2 %) {_ms(m.settling_time)}{sse}")
     for key, value in (extra or {}).items():
-        st.out.line(f"{key}: {value}")
+        if isinstance(value, (list, tuple)):  # a list reads as words, never as Python's repr
+            value = ", ".join(map(str, value)) or "none"
+        st.out.line(f"{key.replace('_', ' ')}: {value}")
 
 
 # Seconds to wait while recording; tests replace it (the recorder's SYNC runs on its own).
