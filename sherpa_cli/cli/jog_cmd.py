@@ -104,6 +104,13 @@ def jog(
     if _live(st, joints or [], interactive, joystick, device, list_joysticks, apply, uncalibrated,
              [to, by, velocity, torque, duration]):
         return
+    units = {"rad", "deg", "counts", "rad/s", "deg/s", "counts/s", "a"}
+    stray = [j for j in (joints or [])[1:] if j.lower() in units]
+    if stray:  # `--to 0.1 rad`: the shell split the value from its unit
+        option = "--velocity" if stray[0].lower().endswith("/s") else "--torque" if stray[0].lower() == "a" else "--to"
+        raise UsageError(f"'{stray[0]}' after the value is its unit: write it without a space "
+                         f"({option} 0.1{stray[0]})",
+                         hint="sherpa jog JOINT --to 0.1rad --apply")
     if len(joints or []) != 1:
         raise UsageError("name one JOINT to jog" + (f" (got {len(joints)})" if joints else ""),
                          hint="sherpa jog JOINT --to/--by/--velocity/--torque ...; several joints: --interactive")
