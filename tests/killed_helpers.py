@@ -92,6 +92,24 @@ def remote_arm(tmp_path_factory):
         proc.stop()
 
 
+@pytest.fixture
+def own_arm(tmp_path_factory, rebaseline):
+    """A simulated arm of the test's own, just powered up (joints where power-up puts them), whatever
+    SHERPA_TEST_BUS says: for a test whose premise is where a joint starts (a home's search side),
+    which a simulator shared from test to test does not keep."""
+    work = tmp_path_factory.mktemp("own-arm")
+    proc = ArmProcess(TestBus("remote"), ROOT, _patient_config(work), work)
+    try:
+        proc.start()
+    except RuntimeError as exc:
+        pytest.skip(f"the served simulator did not start: {exc}")
+    try:
+        rebaseline()
+        yield fresh(proc)
+    finally:
+        proc.stop()
+
+
 def fresh(process: ArmProcess) -> Arm:
     """The arm as after power-on (RAM, NMT state, latched faults), for one test; a new simulator
     process if a test killed the last one."""

@@ -13,6 +13,7 @@ import time
 import pytest
 from killed_helpers import MOVING, Moving, snapshot, wait_moving
 from killed_helpers import arm as arm
+from killed_helpers import own_arm as own_arm
 from killed_helpers import shared_arm as shared_arm
 from test_motion_crossprocess import finish, sherpa
 
@@ -103,11 +104,12 @@ PAIR_JOG = Moving("pair jog", ("jog", "shoulder_pitch", "--velocity", "0.03", "-
 
 @pytest.mark.parametrize("name", ["home", "diffdrive move", "pair jog"])
 def test_sherpa_stop_from_elsewhere_ends_home_and_a_pair_move_normally_with_every_setting_put_back(
-        arm, tmp_path, name):
+        own_arm, tmp_path, name):
     """Issue 34 R4: `sherpa stop` during `home` (4/5) or a pair move ended with "no answer to HM[1]
     within 0.1 s ... check that the drive is powered" (exit 3) and left UM, SP, HM[1] and the dead-man
     changed (the indexed query skipped the MO settle wait). Now: exit 1, the stop from elsewhere
     named, nothing about power, the drives as before, nothing for `recover`."""
+    arm = own_arm  # the home must start on its search side of the switch: a just powered-up arm
     cmd = PAIR_JOG if name == "pair jog" else MOVING[name]
     before = snapshot(arm, cmd.drives)
     since = time.monotonic()
@@ -134,11 +136,12 @@ def test_sherpa_stop_from_elsewhere_ends_home_and_a_pair_move_normally_with_ever
 
 
 @pytest.mark.parametrize("name", ["home", "diffdrive move", "log step", "log record"])
-def test_a_drive_reset_during_a_command_leaves_nothing_the_next_command_refuses(arm, tmp_path, name):
+def test_a_drive_reset_during_a_command_leaves_nothing_the_next_command_refuses(own_arm, tmp_path, name):
     """Issue 34 R9: NMT reset node from another node while a command runs: its RAM is back at flash
     values, so no note of it may make the next motion command refuse the drive."""
     from test_motion_crossprocess import send_frame
 
+    arm = own_arm  # where a home's joint starts matters: a just powered-up arm
     cmd = MOVING[name]
     since = time.monotonic()
     proc = sherpa(arm, tmp_path, *cmd.argv(tmp_path))
