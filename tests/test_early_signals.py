@@ -111,3 +111,21 @@ def test_a_signal_whose_exception_was_lost_still_ends_the_command_with_its_code(
     assert out.stdout == "ran to the end\n", out.stdout + out.stderr
     assert out.returncode == 129, out.stdout + out.stderr
     assert out.stderr == "error: interrupted by SIGHUP\n"
+
+
+def test_a_ctrl_c_wrapped_by_a_dataclass_built_during_a_lazy_import_is_still_an_interrupt(monkeypatch, capsys):
+    """Ctrl-C landing while a lazily imported module builds a dataclass: Python 3.11 wraps the
+    KeyboardInterrupt raised in __set_name__ in a RuntimeError (a loaded CI run caught it as a
+    traceback, exit 1). It is the user's Ctrl-C: one line, exit 130."""
+    from sherpa_cli.cli import boundary
+
+    def interrupted_import(*args, **kwargs):
+        try:
+            raise KeyboardInterrupt
+        except KeyboardInterrupt as exc:
+            raise RuntimeError("Error calling __set_name__ on 'Field' instance 'where' in 'PairConfig'") from exc
+
+    monkeypatch.setattr(boundary, "root_command", interrupted_import)
+    assert boundary.run(["scan"]) == 130
+    err = capsys.readouterr().err
+    assert err.strip() == "error: interrupted" and "Traceback" not in err

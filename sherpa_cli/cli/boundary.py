@@ -97,6 +97,13 @@ def run(argv: Sequence[str] | None = None) -> int:
         return int(ExitCode.INTERRUPTED)
     except typer.Exit as exc:
         return int(exc.exit_code)
+    except RuntimeError as exc:
+        # Ctrl-C during a lazy import that builds a dataclass: Python wraps the KeyboardInterrupt
+        # raised in __set_name__ in a RuntimeError; it is still the user's Ctrl-C
+        if debug or not isinstance(exc.__cause__, KeyboardInterrupt):
+            raise
+        _report("interrupted", None)
+        return int(ExitCode.INTERRUPTED)
     except SystemExit as exc:  # shell completion (_SHERPA_COMPLETE, --show-completion) ends with sys.exit
         return exc.code if isinstance(exc.code, int) else int(ExitCode.OK if exc.code is None else ExitCode.USAGE)
     except typer.TyperException as exc:
