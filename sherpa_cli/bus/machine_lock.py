@@ -151,7 +151,7 @@ def _make_lock_dir(path: Path) -> None:
 
 class TransferLock:
     """One drive's SDO channel across the processes of this machine: a blocking flock on
-    ``<lock_dir>/<bus>-node<N>-sdo.lock`` held for one transfer (issue 34 R8). A drive has one SDO
+    ``<lock_dir>/<bus>-node<N>-sdo.lock`` held for one transfer. A drive has one SDO
     server channel (0x600 + node / 0x580 + node): two processes that talk to it at once take each
     other's answers ("Node returned a value for 0x1A00:02 instead"). A bus private to this process
     needs none (the drive's client serializes its own threads). Where the lock directory cannot be

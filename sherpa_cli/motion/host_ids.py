@@ -1,4 +1,4 @@
-"""Listening to the dead-man host ids before taking one, and while it is used (issue 34 R1).
+"""Listening to the dead-man host ids before taking one, and while it is used.
 
 A drive armed by a command watches ``0x700 + host id``; any node that sends that heartbeat keeps the
 drive's motor on. So a command takes an id only after listening on every bus it will move for

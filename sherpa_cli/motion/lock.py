@@ -81,7 +81,7 @@ class DriveLock:
 
 
 class HostIdLock:
-    """A dead-man host id of its own for one motion command (issue 21 item 9, issue 34 R1).
+    """A dead-man host id of its own for one motion command.
 
     Every drive a command moves watches the heartbeat ``0x700 + host id`` of that command alone: two
     commands on one bus never share an id, so a killed or hung command's drives stop by their own

@@ -48,7 +48,7 @@ SLOW = "answering slowly"
 NO_SDO = "no SDO answer"
 SHERPA_HOST = "sherpa host"  # only a heartbeat on a motion.host_id_pool id: a sherpa command of this machine moving drives
 # only a heartbeat on a pool id that no sherpa command of this machine holds: another host or tool, whose
-# heartbeat would keep this machine's commands' drives on if they took the id (issue 34 R1)
+# heartbeat would keep this machine's commands' drives on if they took the id
 FOREIGN_HOST = "foreign host"
 # Verdicts that make `sherpa scan` exit 1: the bus is not wired or numbered as configured.
 PROBLEM_VERDICTS = frozenset({MISSING, UNEXPECTED, DUPLICATE, NO_SDO, FOREIGN_HOST})
