@@ -11,6 +11,7 @@ another process on the served simulator (tests/test_motion_crossprocess.py).
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import signal
 import struct
@@ -214,6 +215,65 @@ def test_a_foreign_heartbeat_on_the_commands_own_id_stops_the_command(cfg):
             if producer is not None:
                 producer.join()
             other.shutdown()
+
+
+TWO_DRIVES = CONFIG + "  drive2: {bus: can0, node: 6, model: whistle-10/60}\n"
+
+
+@pytest.fixture
+def cfg2(tmp_path):
+    path = tmp_path / "arm2.yaml"
+    path.write_text(TWO_DRIVES, encoding="utf-8")
+    return load_config(path)
+
+
+def _arm_consumer(s: ArmSession, ref, host_id: int, ms: int = 300) -> None:
+    """What another host (or a tool killed after arming) leaves: the drive watches ``host_id``."""
+    s.sdo(ref).download(0x1016, 1, struct.pack("<I", host_id << 16 | ms), name="consumer")
+
+
+def test_an_id_a_drive_the_command_does_not_arm_watches_is_not_taken(cfg2):
+    """drive2 watches 126 (armed by a tool that died, or another host whose heartbeat has not started):
+    a command on drive1 sending 126 would switch that watch on. It takes 124, and with no other id
+    in the pool it refuses before anything is armed, naming the drive."""
+    with ArmSession.open(cfg2, sim=SimArm.in_process(cfg2)) as s:
+        ref1, ref2 = resolve_target(cfg2, "drive1"), resolve_target(cfg2, "drive2")
+        _arm_consumer(s, ref2, 126)
+        settings = MotionSettings.from_config(cfg2)
+        with MotionGuard(s, [ref1], settings=settings) as g:
+            assert g.host_id == 124
+            assert _consumer(s, ref1) == 124 << 16 | 300
+        only_126 = dataclasses.replace(settings, host_id_pool=())
+        with pytest.raises(MotionLockedError) as info, MotionGuard(s, [ref1], settings=only_126):
+            pass
+        assert "126: watched by drive2 (0x1016:1 of a drive this command does not arm" in str(info.value)
+        assert _consumer(s, ref1) == 0  # nothing armed
+        assert _consumer(s, ref2) == 126 << 16 | 300  # another's drive: never written
+
+
+def test_a_drive_the_command_does_not_arm_that_starts_watching_its_id_stops_the_command(cfg2):
+    """During the motion another node arms drive2 on this command's id: its heartbeat would keep
+    drive2's motor on after that node dies. The command stops every drive it moves, exit 1."""
+    with ArmSession.open(cfg2, sim=SimArm.in_process(cfg2)) as s:
+        ref1, ref2 = resolve_target(cfg2, "drive1"), resolve_target(cfg2, "drive2")
+        with pytest.raises(DriveWatchError) as info, \
+                MotionGuard(s, [ref1], settings=MotionSettings.from_config(cfg2)) as g:
+            g.enable(ref1, 5)
+            g.client(ref1).set("JV", 0, 3000)
+            g.client(ref1).execute("BG")
+            for _ in range(10):
+                g.check()
+                time.sleep(0.01)
+            _arm_consumer(s, ref2, g.host_id)
+            deadline = time.monotonic() + 5
+            while time.monotonic() < deadline:
+                g.check()
+                time.sleep(0.01)
+        msg = str(info.value)
+        assert msg.startswith("drive2 (can0:6), a drive this command does not arm, watches its dead-man id 126"), msg
+        assert info.value.exit_code == ExitCode.PROBLEM
+        assert not s.sim.drives["drive1"].motor_on
+        assert _consumer(s, ref1) == 0  # put back
 
 
 def test_a_sigkilled_holders_id_is_free_at_once_but_the_listen_outlasts_its_drives_consumer(tmp_path):

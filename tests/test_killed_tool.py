@@ -58,6 +58,42 @@ def test_a_killed_moving_command_is_refused_until_recover_puts_the_drive_back(ar
     assert "Traceback" not in err
 
 
+def test_a_journal_deleted_by_hand_blinds_recover_but_check_drives_reads_the_drive_and_resets_it(arm, tmp_path):
+    """The journal knows only what it holds: deleted by hand, `recover` finds nothing. `--check-drives`
+    reads the drive itself (the killed jog's dead-man on a pool id nobody holds, tripped), and
+    `--apply` resets it (RAM from flash): the drive reads as before the jog, and the next jog runs."""
+    cmd = MOVING["jog"]
+    drive = cmd.drives[0]
+    before = snapshot(arm, cmd.drives)
+    since = time.monotonic()
+    proc = sherpa(arm, tmp_path, *cmd.argv(tmp_path))
+    try:
+        wait_moving(arm, cmd, since, proc, tmp_path)
+    finally:
+        t_kill = time.monotonic()
+        proc.send_signal(signal.SIGKILL)
+        finish(proc)
+    arm.wait_trip(cmd.drives, t_kill)
+    notes = list((tmp_path / "state" / "sherpa-cli" / "journal").glob("*.json"))
+    assert notes, "the killed jog left no journal"
+    for path in notes:
+        path.unlink()
+    code, out, err = finish(sherpa(arm, tmp_path, "recover", drive))
+    assert code == 0 and "nothing to recover" in out, f"{out}\n{err}"
+    code, out, err = finish(sherpa(arm, tmp_path, "recover", drive, "--check-drives"))
+    assert code == 0, f"{out}\n{err}"
+    assert f"{drive} (" in out and "0x1016:1=0x00" in out and "no sherpa command of this machine holds" in out, out
+    assert "MF=0x800: its dead-man tripped" in out and "dry run" in out, out
+    code, out, err = finish(sherpa(arm, tmp_path, "recover", drive, "--check-drives", "--apply"))
+    assert code == 0, f"{out}\n{err}"
+    assert "NMT reset node: RAM reloaded from flash" in out and "after the reset: at rest" in out, out
+    after = snapshot(arm, cmd.drives)
+    assert {k: v for k, v in after.items() if before[k] != v} == {}, "not as before the killed command"
+    jog = ("jog", cmd.joint, "--velocity", "0.1", "--for", "0.3", "--apply")
+    code, out, err = finish(sherpa(arm, tmp_path, *jog))
+    assert code == 0 and "Traceback" not in err, f"{out}\n{err}"
+
+
 def test_recover_killed_right_after_its_mo1_leaves_the_motor_to_its_consumer_and_the_journal_to_the_next(
         arm, tmp_path):
     """Issue 34 R2: `recover --apply` clears a tripped dead-man with MO=1, MO=0. It used to send MO=1

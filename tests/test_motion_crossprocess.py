@@ -500,6 +500,33 @@ def test_a_foreign_producer_starting_on_the_jogs_own_id_stops_the_jog(arm, tmp_p
     assert [e for e in motor_offs(arm, t_on)], arm.events()
 
 
+def test_a_drive_another_host_arms_on_the_jogs_own_id_stops_the_jog(arm, tmp_path):
+    """R1: during the jog another host arms a drive the jog does not move (wrist_1a) to watch the jog's
+    id: the jog's heartbeat would keep that drive's motor on after the other host dies. The jog ends
+    with exit 1 naming the drive, its motor off; the other drive is never written by the jog."""
+    from sherpa_cli.bus.busmap import apply_bus_map, parse_bus_map
+    from sherpa_cli.bus.session import ArmSession, resolve_target
+
+    proc, t_on = start_jog(arm, tmp_path)
+    cfg = apply_bus_map(load_config(ROOT / arm.config), parse_bus_map([arm.bus_map]))
+    ref = resolve_target(cfg, OTHER_DRIVE)
+    entry = (126 << 16 | 500).to_bytes(4, "little")
+    try:
+        with ArmSession.open(cfg, buses=[ref.bus]) as s:
+            s.sdo(ref).download(0x1016, 1, entry)
+        code, out, err = finish(proc)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            finish(proc)
+        with ArmSession.open(cfg, buses=[ref.bus]) as s:
+            s.sdo(ref).download(0x1016, 1, bytes(4))
+    assert code == 1, f"{out}\n{err}"
+    assert f"{OTHER_DRIVE} (can1:50), a drive this command does not arm, watches its dead-man id 126" in err, err
+    assert "Traceback" not in err
+    assert [e for e in motor_offs(arm, t_on)], arm.events()
+
+
 SEND = """\
 import sys
 from sherpa_cli.bus.busmap import apply_bus_map, parse_bus_map

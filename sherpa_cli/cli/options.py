@@ -50,6 +50,10 @@ VerifyFlash = Annotated[bool, typer.Option(
 ApplyRecover = Annotated[bool, typer.Option(
     "--apply", help="Put back what a killed command left (NMT start, the journal's values, a tripped dead-man's MF "
     "cleared); without it only shown.")]
+CheckDrives = Annotated[bool, typer.Option(
+    "--check-drives", help="Also read every target drive's RAM for what a command leaves behind (a dead-man on a "
+    "pool id nobody holds, HM[1], the pair's group id, RPDO2 synchronous, the recorder armed): no journal needed. "
+    "With --apply, a drive with a finding gets a reset node (RAM from flash) and is read again.")]
 ApplyMotion = Annotated[bool, typer.Option(
     "--apply", help="Move the motor; without it only show what would be sent (nothing is written).")]
 ApplyMatch = Annotated[bool, typer.Option(

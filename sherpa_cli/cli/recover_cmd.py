@@ -8,16 +8,18 @@ from typing import TYPE_CHECKING
 import typer
 
 from sherpa_cli.cli.context import AppState, state
-from sherpa_cli.cli.options import ApplyRecover, Targets
+from sherpa_cli.cli.options import ApplyRecover, CheckDrives, Targets
 from sherpa_cli.errors import SafetyError
 
 if TYPE_CHECKING:
     from sherpa_cli.bus.session import ArmSession
     from sherpa_cli.bus.targets import DriveRef
     from sherpa_cli.config.model import ArmConfig
+    from sherpa_cli.ops.drive_rest import DriveRest
 
 
-def recover(ctx: typer.Context, targets: Targets = None, apply: ApplyRecover = False) -> None:
+def recover(ctx: typer.Context, targets: Targets = None, apply: ApplyRecover = False,
+            check_drives: CheckDrives = False) -> None:
     """Show, and with --apply put back, what a command that did not finish left on the drives.
 
     A moving command or a recording notes every temporary change (UM, SP/AC/DC, the dead-man objects
@@ -27,12 +29,20 @@ def recover(ctx: typer.Context, targets: Targets = None, apply: ApplyRecover = F
     With --apply: NMT start, every value put back (last change first), and a dead-man that tripped
     (MF 0x800, heartbeat lost) cleared with MO=1, MO=0 under a dead-man of its own (the drive's
     consumer armed first, as in every motion command). The journal is kept until all of it is done.
+    A damaged journal: the drive is reset (RAM from flash) and the file moved aside.
+
+    The journal knows only this state directory's commands. --check-drives reads the drives themselves
+    (a journal deleted by hand, another user's or host's command): a dead-man on a pool id no sherpa
+    command holds, a tripped dead-man, HM[1] armed, the pair's group id or RPDO2 left synchronous,
+    the recorder armed. With --apply such a drive (motor off) gets a reset node and is read again;
+    what survives the reset is held by the flash and said so.
     Exit 1 if something was left and not put back.
 
     \b
     Examples:
       sherpa recover
       sherpa recover elbow_pitch --apply
+      sherpa recover --check-drives
     """
     from sherpa_cli.bus import journal
     from sherpa_cli.bus.targets import drive_refs
@@ -42,6 +52,9 @@ def recover(ctx: typer.Context, targets: Targets = None, apply: ApplyRecover = F
     pending = _sv_pending(st, [r.name for r in drive_refs(cfg, targets)])
     broken = {r.name: why for r in drive_refs(cfg, targets) if (why := journal.damaged(r)) is not None}
     refs = [r for r in drive_refs(cfg, targets) if r.name in broken or journal.leftover(r)]
+    if check_drives:
+        _check_drives(st, cfg, targets, apply, journal_refs=refs, broken=broken)
+        return
     if not refs:
         if st.json_mode:
             st.out.json({"drives": [], "sv_pending": pending})
@@ -105,3 +118,63 @@ def _show_pending(st: AppState, pending: list[str]) -> None:
     for name in pending:
         st.out.line(f"{name}: values written and not saved to flash (SV pending): the next power-up loses them; "
                     "rerun the programming command with --apply --save (it saves although RAM holds the values)")
+
+
+def _check_drives(st: AppState, cfg: ArmConfig, targets: list[str] | None, apply: bool, *,
+                  journal_refs: list[DriveRef], broken: dict[str, str]) -> None:
+    """--check-drives: the journal's drives as without it, then every other target drive read."""
+    from sherpa_cli.bus import journal
+    from sherpa_cli.bus.targets import drive_refs
+    from sherpa_cli.ops.drive_rest import check_drive
+
+    noted = {r.name for r in journal_refs}
+    others = [r for r in drive_refs(cfg, targets) if r.name not in noted]
+    buses = sorted({r.bus for r in [*journal_refs, *others]}, key=list(cfg.buses).index)
+    with st.session(buses=buses) as session:
+        results = [journal.restore_damaged(session, r, broken[r.name], apply=apply, boot_timeout=cfg.protocol.boot_timeout)
+                   if r.name in broken else
+                   journal.restore(session, r, apply=apply, clear_trip=_trip_clearer(session, cfg, r))
+                   for r in journal_refs]
+        checks = [check_drive(session, cfg, r, apply=apply, boot_timeout=cfg.protocol.boot_timeout) for r in others]
+    if st.json_mode:
+        st.out.json({"apply": apply,
+                     "drives": [{"drive": r.drive, "address": r.address, "left": r.found, "tripped": r.tripped,
+                                 "already_back": r.already_back, "put_back": r.done, "problems": r.problems}
+                                for r in results],
+                     "checked": [{"drive": c.drive, "address": c.address, "in_use": c.in_use,
+                                  "found": [{"object": f.what, "value": f.value, "meaning": f.meaning}
+                                            for f in c.findings],
+                                  "done": c.done,
+                                  "after_reset": None if c.after_reset is None else
+                                  [{"object": f.what, "value": f.value} for f in c.after_reset],
+                                  "problems": c.problems} for c in checks]})
+    else:
+        for r in results:
+            st.out.line(f"{r.drive} ({r.address}): left by a command that did not finish: {', '.join(r.found)}")
+            if apply:
+                st.out.line(f"  put back: {', '.join(r.done or []) or 'nothing'}")
+            for p in r.problems or []:
+                st.out.line(f"  problem: {p}")
+        for c in checks:
+            _show_check(st, c)
+        if not apply:
+            st.out.line("dry run: nothing sent but NMT start and reads; --apply resets each drive with a finding")
+    bad = [r.drive for r in results if r.problems] + [c.drive for c in checks if c.problems]
+    if bad:
+        raise SafetyError(f"not recovered: {', '.join(bad)}", hint="see the problems above")
+
+
+def _show_check(st: AppState, c: DriveRest) -> None:
+    head = f"{c.drive} ({c.address}): "
+    if c.in_use:
+        st.out.line(head + f"in use: {c.in_use}; not judged")
+    elif not c.findings and not c.problems:
+        st.out.line(head + "at rest: nothing a command leaves behind")
+    for f in c.findings:
+        st.out.line(head + f.text())
+    for d in c.done:
+        st.out.line(f"  {d}")
+    if c.after_reset == []:
+        st.out.line("  after the reset: at rest")
+    for p in c.problems:
+        st.out.line(f"  problem: {p}")

@@ -34,6 +34,7 @@ from typing import TYPE_CHECKING, Any, Literal
 from sherpa_cli.bus import journal
 from sherpa_cli.bus.health import preflight
 from sherpa_cli.bus.machine_lock import wire_key
+from sherpa_cli.bus.targets import drive_refs
 from sherpa_cli.elmo.faults import decode_sr, describe_mf
 from sherpa_cli.elmo.protocol import UM_TORQUE
 from sherpa_cli.errors import (
@@ -48,7 +49,7 @@ from sherpa_cli.errors import (
 from sherpa_cli.motion.bus_watch import GuardBusWatch
 from sherpa_cli.motion.deadman import COMM_ERROR, CONSUMER, LOSS_ACTION, OBJECT_NAMES, SIZES, HostHeartbeat
 from sherpa_cli.motion.drive_watch import DriveWatch, DriveWatchError
-from sherpa_cli.motion.host_ids import HostIdListener
+from sherpa_cli.motion.host_ids import HostIdListener, OtherConsumers
 from sherpa_cli.motion.lock import DriveLock, HostIdLock, drive_label
 from sherpa_cli.motion.report import DriveStop, GuardReport
 from sherpa_cli.motion.settings import PROFILE_KEYS, MotionSettings
@@ -130,6 +131,9 @@ class MotionGuard:
         self._host_lock = HostIdLock({b: wire_key(session.links[b].config.interface, session.links[b].config.channel)
                                       for b in buses}, settings.host_ids)
         self._host_ids = HostIdListener({b: session.links[b].network for b in buses}, settings.host_ids)
+        mine = {ref.key for ref in self.refs}
+        self._others = OtherConsumers([r for r in drive_refs(session.cfg, None) if r.bus in buses and r.key not in mine],
+                                      settings.host_ids, lambda r: self._read_consumer(r))
         self.host_id = settings.host_node_id
         # the watch of the drives: error EMCYs, NMT commands of other nodes, the drives' heartbeats
         self._watch = DriveWatch(lambda bus: session.links[bus].network, warning_codes=settings.emcy_warning_codes,
@@ -164,11 +168,12 @@ class MotionGuard:
                 self._leftovers(ref)
             for ref in self.refs:
                 self._inspect(ref)
+            self._others.read_all(between=self._pulse)
             while (left := listen_until - self._clock()) > 0:
                 self._sleep(min(left, 0.05))
                 raise_if_signalled()
             # before anything is armed: an id of our own nobody sends
-            self.host_id = self._host_lock.acquire(self._host_ids.heard())
+            self.host_id = self._host_lock.acquire(self._host_ids.heard(), self._others.watched())
             self._heartbeat.use_host(self.host_id)
             self._start_heartbeat()
             for d in self._drives.values():
@@ -311,8 +316,14 @@ class MotionGuard:
 
     def _check_deadman(self) -> None:
         """Read 0x1016:1 of every drive whose motor is on, at ``deadman_check_interval``: another node
-        that changed it (disarmed the dead-man, or pointed it elsewhere) stops the command."""
+        that changed it (disarmed the dead-man, or pointed it elsewhere) stops the command. One drive
+        the command does not arm is read too: one that watches this command's id stops it."""
         self._next_deadman_check = self._clock() + self.settings.deadman_check_interval
+        self._pulse()
+        foreign = self._others.check_one(self.host_id)
+        if foreign is not None:
+            raise DriveWatchError(foreign, hint="find the tool or host that armed that drive's heartbeat consumer; "
+                                  "`sherpa recover --check-drives` reads every drive's entry")
         expected = self.settings.consumer_entry_for(self.host_id)
         for d in list(self._drives.values()):
             if not d.mo or d.client.silent:
@@ -553,6 +564,10 @@ class MotionGuard:
         d.profile_before = {key: int(client.get(key)) for key in PROFILE_KEYS}
         # on disk before anything changes them (the journal, issue 22 item 3; the dead-man objects follow)
         journal.note(ref, *(journal.interp(JOURNAL_OWNER, k, 0, v) for k, v in d.profile_before.items()))
+
+    def _read_consumer(self, ref: DriveRef) -> int:
+        raw = self.session.sdo(ref).upload(*CONSUMER, name=OBJECT_NAMES[CONSUMER])
+        return int.from_bytes((bytes(raw) + bytes(4))[:4], "little")
 
     def _sdo_read(self, d: _Drive, key: tuple[int, int]) -> int:
         """An SDO upload through the session's client of the drive (SdoError names drive and object)."""

@@ -13,10 +13,14 @@ from __future__ import annotations
 import contextlib
 import logging
 import threading
-from collections.abc import Callable, Iterable, Mapping
-from typing import Any
+from collections.abc import Callable, Iterable, Mapping, Sequence
+from typing import TYPE_CHECKING, Any
 
 from sherpa_cli.elmo.protocol import HEARTBEAT_BASE
+from sherpa_cli.errors import SherpaError
+
+if TYPE_CHECKING:
+    from sherpa_cli.bus.targets import DriveRef
 
 log = logging.getLogger(__name__)
 
@@ -69,3 +73,65 @@ class HostIdListener:
         with self._lock:
             return sorted(bus for (bus, hid), n in self._counts.items()
                           if hid == host_id and n > sent + ECHO_SLACK)
+
+
+def watched_host(entry: int) -> int | None:
+    """The node a consumer heartbeat entry (0x1016:n) watches, or None for a disabled entry (time 0)."""
+    return (entry >> 16) & 0x7F if entry & 0xFFFF else None
+
+
+class OtherConsumers:
+    """The dead-man entries (0x1016:1) of the drives on a command's buses that it does not arm.
+
+    A drive that watches a pool id is kept on by any heartbeat on that id: the entry of a tool that
+    armed it and died, or another host's command. So an id one of them watches is not taken (read
+    once on entry, during the listening), and while the command runs one of them is read again at
+    each dead-man check: a drive that starts watching the command's own id is one its heartbeat
+    would keep on, and the command stops. A drive that does not answer on entry (powered off, not
+    on the bus) is left out, so it costs one SDO timeout once, not one per check.
+    """
+
+    def __init__(self, refs: Sequence[DriveRef], ids: Iterable[int], read: Callable[[DriveRef], int]) -> None:
+        self.refs = list(refs)
+        self.ids = {i & 0x7F for i in ids}
+        self._read = read
+        self._by_key = {ref.key: ref for ref in self.refs}
+        self.entries: dict[tuple[str, int], int] = {}  # (bus, node) -> the entry last read
+        self._turn = 0
+
+    def read_all(self, between: Callable[[], None] = lambda: None) -> None:
+        for ref in self.refs:
+            between()
+            try:
+                self.entries[ref.key] = self._read(ref)
+            except (SherpaError, ValueError, OSError) as exc:
+                log.info("%s (%s): 0x1016:1 not read: %s", ref.name, ref.address, exc)
+
+    def watched(self) -> dict[str, dict[int, list[str]]]:
+        """Per bus, the pool ids a drive not armed by the command watches, with the drives' names."""
+        out: dict[str, dict[int, list[str]]] = {}
+        for key, entry in self.entries.items():
+            ref = self._by_key[key]
+            host = watched_host(entry)
+            if host is not None and host in self.ids:
+                out.setdefault(ref.bus, {}).setdefault(host, []).append(ref.name)
+        return out
+
+    def check_one(self, host_id: int) -> str | None:
+        """Read the next drive's entry again (round robin); a message if it now watches ``host_id``."""
+        answered = list(self.entries)
+        if not answered:
+            return None
+        ref = self._by_key[answered[self._turn % len(answered)]]
+        self._turn += 1
+        try:
+            entry = self._read(ref)
+        except (SherpaError, ValueError, OSError) as exc:
+            log.info("%s (%s): 0x1016:1 not read again: %s", ref.name, ref.address, exc)
+            return None
+        self.entries[ref.key] = entry
+        if watched_host(entry) == host_id & 0x7F:
+            return (f"{ref.name} ({ref.address}), a drive this command does not arm, watches its dead-man id "
+                    f"{host_id} (0x1016:1 = 0x{entry:08X}): this command's heartbeat would keep that drive's "
+                    "motor on; stopping every drive of the command")
+        return None

@@ -104,14 +104,21 @@ class HostIdLock:
     def lock_for(self, bus: str, host_id: int) -> MachineLock:
         return MachineLock(self.buses[bus], f"host{int(host_id)}")
 
-    def acquire(self, heard: Mapping[str, Iterable[int]] | None = None) -> int:
-        """Take the first free id. ``heard``: per bus, the ids another node was heard sending."""
+    def acquire(self, heard: Mapping[str, Iterable[int]] | None = None,
+                watched: Mapping[str, Mapping[int, Sequence[str]]] | None = None) -> int:
+        """Take the first free id. ``heard``: per bus, the ids another node was heard sending;
+        ``watched``: per bus, the ids drives the command does not arm watch (0x1016:1), with their names."""
         heard_on = {bus: set(ids) for bus, ids in (heard or {}).items()}
         busy: list[str] = []
         for host_id in self.ids:
             senders = [bus for bus in self.buses if host_id in heard_on.get(bus, set())]
             if senders:
                 busy.append(f"{host_id}: heard on {', '.join(senders)} (another host or tool)")
+                continue
+            watchers = [name for bus in self.buses for name in (watched or {}).get(bus, {}).get(host_id, ())]
+            if watchers:
+                busy.append(f"{host_id}: watched by {', '.join(watchers)} (0x1016:1 of a drive this command "
+                            "does not arm: a tool that armed it and did not finish, or another host)")
                 continue
             taken: list[MachineLock] = []
             try:
