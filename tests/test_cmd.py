@@ -8,7 +8,9 @@ import pytest
 
 from sherpa_cli.bus.session import ArmSession, resolve_target
 from sherpa_cli.config import load_config
-from sherpa_cli.ops.raw import run_raw
+from sherpa_cli.errors import SafetyError, SherpaError
+from sherpa_cli.motion.settings import MotionSettings
+from sherpa_cli.ops.raw import run_raw, run_raw_guarded, starts_motion
 from sherpa_cli.sim.arm import SimArm
 
 # Meaningful on a real bus: run through arm_cli, so also over python-can-remote and vcan.
@@ -93,3 +95,48 @@ def test_mo1_then_a_move_in_one_cmd_goes_through_the_confirmed_motor_switch(arm_
     assert [r["sent"] for r in json.loads(result.stdout)["results"]] == [True, True, True]
     dry = arm_cli("cmd", "elbow_1a", "MO=1", "PA=300", "BG")  # the dry-run rule stays
     assert dry.exit_code == 0 and "not sent (dry run)" in dry.stdout and "3 command(s) not sent" in dry.stdout
+
+
+def _guarded(exprs: list[str], *, fault: int = 0):
+    """``cmd elbow_1a EXPRS --apply`` through its engine on an in-process arm: the results, the guard's
+    exit lines and the simulated drive (its MO=1 without a dead-man counted)."""
+    cfg = load_config("configs/sherpa-arm.yaml")
+    ref = resolve_target(cfg, "elbow_1a")
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg), buses=["can1"]) as session:
+        drive = session.sim.drives["elbow_1a"]
+        if fault:
+            drive._mf = fault
+        session.client(ref).nmt_start()
+        on_exit: list[str] = []
+        results: list = []
+        error = None
+        try:
+            run_raw_guarded(session, ref, exprs, MotionSettings.from_config(cfg, ["can1"]), results=results,
+                            on_exit=on_exit)
+        except SherpaError as exc:
+            error = exc
+        consumer = bytes(session.sdo(ref).upload(0x1016, 1))
+        return results, on_exit, drive, consumer, error
+
+
+def test_mo1_in_cmd_runs_under_an_armed_dead_man_and_the_motor_is_off_when_cmd_ends():
+    """Never a motor on without an armed dead-man: `cmd DRIVE MO=1 --apply` used to switch the motor on
+    and leave it on with nothing watching the tool."""
+    assert starts_motion(["MO=1"]) and starts_motion(["PA=3", "BG"]) and not starts_motion(["MO=0", "PX", "AC=5"])
+    results, on_exit, drive, consumer, error = _guarded(["MO=1", "MO", "PA=300", "BG"])
+    assert error is None
+    assert [(r.text, r.sent) for r in results] == [("MO=1", True), ("MO", True), ("PA=300", True), ("BG", True)]
+    assert results[1].value == 1
+    assert drive.unguarded_motor_on == 0
+    assert not drive.motor_on
+    assert consumer == bytes(4)  # the dead-man put back
+    assert on_exit == ["elbow_1a (can1:40): stopped; motor off; settings put back: `cmd` keeps no motor on after "
+                       "it ends (its dead-man ends with it); `sherpa jog JOINT --hold` holds a joint"]
+
+
+def test_mo1_mo0_in_cmd_clears_a_latched_fault_under_the_dead_man_but_a_bg_on_a_faulted_drive_is_refused():
+    results, _, drive, _, error = _guarded(["MO=1", "MO=0", "MF"], fault=0x800)
+    assert error is None and results[-1].value == 0 and drive.unguarded_motor_on == 0
+    results, _, drive, _, error = _guarded(["MO=1", "PA=300", "BG"], fault=0x800)
+    assert isinstance(error, SafetyError) and "in fault, refusing to move it" in str(error)
+    assert results == [] and not drive.motor_on

@@ -37,6 +37,13 @@ def cmd(
       sherpa cmd can0:10 SV --apply --raw-save    # one flash write, counted in the save ledger
 
     \b
+    MO=1 or BG with --apply run inside the motion guard, as every moving command: the drive's
+    dead-man is armed first (heartbeat consumer, this command's own heartbeat id), and when the
+    command ends the motor is stopped and switched off (MO=0). Nothing keeps a motor on after
+    `cmd` returns; `sherpa jog JOINT --hold` holds a joint. A drive in fault is refused when the
+    run has a BG; `cmd DRIVE MO=1 MO=0 --apply` clears its MF (under the dead-man too).
+
+    \b
     SV writes the drive's flash (it endures about 100,000 saves): it is refused unless
     --apply and --raw-save are given, at most one SV per invocation, and each one is
     counted per drive serial number in the save ledger (as program-limits --save).
@@ -44,7 +51,8 @@ def cmd(
     from sherpa_cli.bus.targets import single_drive
     from sherpa_cli.errors import SherpaError
     from sherpa_cli.joints.limits import il_roles
-    from sherpa_cli.ops.raw import check_raw_save, parse_all, run_raw
+    from sherpa_cli.motion.settings import MotionSettings
+    from sherpa_cli.ops.raw import check_raw_save, parse_all, run_raw, run_raw_guarded, starts_motion
 
     st = state(ctx)
     cfg = st.load_config()
@@ -54,17 +62,24 @@ def cmd(
     done: list[RawResult] = []
     error: SherpaError | None = None
     warnings: list[str] = []
+    guarded = apply and starts_motion(exprs)
+    stopped: list[str] = []
     with st.session(buses=[ref.bus]) as session:
         client = session.client(ref)
         try:
             on_save = _ledger_counter(session, ref, warnings) if saving else None
             client.nmt_start()
-            run_raw(client, ref.node, exprs, apply=apply, query_long=cfg.protocol.query_long, results=done,
-                    on_save=on_save, il_roles=il_roles(cfg))
+            if guarded:
+                run_raw_guarded(session, ref, exprs, MotionSettings.from_config(cfg, [ref.bus]),
+                                query_long=cfg.protocol.query_long, results=done, on_save=on_save,
+                                il_roles=il_roles(cfg), on_exit=stopped)
+            else:
+                run_raw(client, ref.node, exprs, apply=apply, query_long=cfg.protocol.query_long, results=done,
+                        on_save=on_save, il_roles=il_roles(cfg))
         except SherpaError as exc:
             error = exc
     if done or error is None:
-        _render(st, ref, apply, done)
+        _render(st, ref, apply, done, stopped)
     for w in warnings:
         st.out.warn(w)
     if error is not None:
@@ -91,10 +106,10 @@ def _ledger_counter(session: ArmSession, ref: DriveRef, warnings: list[str]) -> 
 REGISTERS = ("SR", "MF", "IP")
 
 
-def _render(st: AppState, ref: DriveRef, apply: bool, done: list[RawResult]) -> None:
+def _render(st: AppState, ref: DriveRef, apply: bool, done: list[RawResult], stopped: list[str]) -> None:
     if st.json_mode:
         st.out.json({"drive": ref.name, "bus": ref.bus, "node": ref.node, "applied": apply,
-                     "results": [r.as_json() for r in done]})
+                     "results": [r.as_json() for r in done], "on_exit": stopped})
         return
     rows = []
     for r in done:
@@ -113,3 +128,5 @@ def _render(st: AppState, ref: DriveRef, apply: bool, done: list[RawResult]) -> 
     unsent = sum(1 for r in done if not r.sent)
     if unsent:
         st.out.line(f"dry run: {unsent} command(s) not sent; add --apply to send them")
+    for line in stopped:
+        st.out.line(line)

@@ -100,7 +100,8 @@ class MotionGuard:
 
     def __init__(self, session: ArmSession, refs: Sequence[DriveRef], *, settings: MotionSettings,
                  clock: Callable[[], float] = time.monotonic, sleep: Callable[[float], None] = time.sleep,
-                 keep: bool = False, on_event: Callable[[str], None] | None = None) -> None:
+                 keep: bool = False, on_event: Callable[[str], None] | None = None,
+                 clears_fault: bool = False) -> None:
         seen: set[tuple[str, int]] = set()
         self.refs: list[DriveRef] = []
         for ref in refs:
@@ -115,6 +116,7 @@ class MotionGuard:
         self.session = session
         self.settings = settings
         self.keep = keep
+        self.clears_fault = clears_fault  # `cmd DRIVE MO=1 MO=0`: MO=1 to clear MF, no motion; not refused
         self._clock = clock
         self._sleep = sleep
         self._on_event = on_event
@@ -555,7 +557,9 @@ class MotionGuard:
         sr = int(client.get("SR"))
         mf = int(client.get("MF"))
         reason = fault_reason(mf, sr)
-        if reason is not None:
+        if reason is not None and self.clears_fault:
+            self._event(f"{client.label}: in fault ({reason}); MO=1 is sent to clear it, under the dead-man")
+        elif reason is not None:
             raise SafetyError(f"{client.label}: in fault, refusing to move it: {reason}",
                               hint=f"find the cause first; MO=1 clears MF: `sherpa cmd {ref.name} MO=1 MO=0 --apply`")
         self._event(f"{client.label}: MO={d.mo} UM={d.um} SR=0x{sr & 0xFFFFFFFF:08X} MF=0x{mf & 0xFFFFFFFF:08X}")

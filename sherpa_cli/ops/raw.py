@@ -21,7 +21,10 @@ from sherpa_cli.elmo.userprog import refuse_save_while_running
 from sherpa_cli.errors import DriveRefusedError, SafetyError, SherpaError, UsageError
 
 if TYPE_CHECKING:
+    from sherpa_cli.bus.session import ArmSession
+    from sherpa_cli.bus.targets import DriveRef
     from sherpa_cli.elmo.client import DriveClient
+    from sherpa_cli.motion.settings import MotionSettings
 
 RPDO2_BASE = 0x300
 
@@ -98,16 +101,30 @@ def decode_value(letters: str, value: int | float | None, il_roles: Mapping[int,
     return []
 
 
+def starts_motion(exprs: Sequence[str]) -> bool:
+    """Whether the expressions switch a motor on or begin a motion (MO=1, BG): such a run goes
+    inside the motion guard, so no motor is on without an armed dead-man and none outlives it."""
+    return any((request.kind == "set" and request.letters == "MO" and request.value == 1)
+               or (request.kind == "execute" and request.letters == "BG") for request, _ in parse_all(exprs))
+
+
+def begins_motion(exprs: Sequence[str]) -> bool:
+    """BG among the expressions (a motion, not only a motor switched on to clear a fault)."""
+    return any(request.kind == "execute" and request.letters == "BG" for request, _ in parse_all(exprs))
+
+
 def run_raw(client: DriveClient, node: int, exprs: Sequence[str], *, apply: bool, query_long: bool = False,
             results: list[RawResult] | None = None,
             on_save: Callable[[RawResult], None] | None = None,
-            il_roles: Mapping[int, str] | None = None) -> list[RawResult]:
+            il_roles: Mapping[int, str] | None = None,
+            motor_on: Callable[[], None] | None = None) -> list[RawResult]:
     """Run the expressions in order on one drive; stop at the first error (it propagates).
 
     ``results`` collects what was done before an error, so the caller can still show it.
     SV goes through ``client.save()`` (sent once, blackout waited out); ``on_save(result)`` is
     called once the drive accepted it (the caller counts it in the save ledger). Callers
-    check :func:`check_raw_save` first.
+    check :func:`check_raw_save` first. ``motor_on``: how MO=1 is sent (the motion guard's enable,
+    which records the motor as on so that its exit switches it off); default the client's.
     """
     done = results if results is not None else []
     for request, frame in parse_all(exprs, query_long):
@@ -121,7 +138,7 @@ def run_raw(client: DriveClient, node: int, exprs: Sequence[str], *, apply: bool
             if request.kind == "set" and request.letters == "MO" and request.value in (0, 1):
                 # the confirmed motor switch: MO=1/0, then MO polled until it reads back (the drive is
                 # deaf while it settles, so a PA or BG right after a bare MO=1 would go unanswered)
-                client.motor_on() if request.value == 1 else client.motor_off()
+                (motor_on or client.motor_on)() if request.value == 1 else client.motor_off()
             elif request.kind == "set":
                 assert request.value is not None  # a set request carries its value
                 client.set(request.letters, request.index, request.value)
@@ -153,3 +170,29 @@ class RawCommandError(SherpaError):
         self.exit_code = cause.exit_code
         self.cause = cause
         self.done = done
+
+
+def run_raw_guarded(session: ArmSession, ref: DriveRef, exprs: Sequence[str], settings: MotionSettings, *,
+                    query_long: bool = False, results: list[RawResult] | None = None,
+                    on_save: Callable[[RawResult], None] | None = None,
+                    il_roles: Mapping[int, str] | None = None, on_exit: list[str] | None = None) -> list[RawResult]:
+    """:func:`run_raw` with ``apply`` inside the motion guard, for expressions that switch a motor on or
+    begin a motion (:func:`starts_motion`): the dead-man is armed before anything is sent, MO=1 goes
+    through the guard's enable (in the drive's present UM) so that the guard's exit stops the motor
+    from standstill and switches it off. MO=1 clears a latched MF (Elmo), so a drive in fault is
+    refused only when the run also begins a motion (BG). ``on_exit`` collects the guard's line for
+    each motor it switched off."""
+    from sherpa_cli.motion.guard import MotionGuard
+
+    done = results if results is not None else []
+    guard = MotionGuard(session, [ref], settings=settings, clears_fault=not begins_motion(exprs))
+    try:
+        with guard as g:
+            run_raw(g.client(ref), ref.node, exprs, apply=True, query_long=query_long, results=done,
+                    on_save=on_save, il_roles=il_roles, motor_on=lambda: g.enable(ref, g.unit_mode(ref)))
+            g.check()
+    finally:
+        if on_exit is not None:
+            on_exit.extend(f"{d.line()}: `cmd` keeps no motor on after it ends (its dead-man ends with it); "
+                           "`sherpa jog JOINT --hold` holds a joint" for d in guard.report.drives if d.motor_off)
+    return done
