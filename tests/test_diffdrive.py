@@ -17,7 +17,7 @@ from motion_helpers import stepped_session
 from sherpa_cli.bus.session import ArmSession
 from sherpa_cli.config import load_config
 from sherpa_cli.elmo.codec import encode_execute, encode_set
-from sherpa_cli.errors import SafetyError, UsageError
+from sherpa_cli.errors import SafetyError, SherpaError, UsageError
 from sherpa_cli.motion import pair_start
 from sherpa_cli.motion.axis import resolve_axis
 from sherpa_cli.motion.request import parse_request
@@ -151,6 +151,10 @@ def test_sim_group_id_runs_one_bg_on_both_drives_without_skew():
     for d in (a, b):
         d.od_write(0x2040, 0, 125)
     for d in (a, b):
+        d.receive(0x000, bytes([0x82, d.node]))  # Elmo's guide: the group id takes effect after reset comm
+        d.receive(0x000, bytes([0x01, d.node]))
+        d.pop_frames()
+    for d in (a, b):
         assert d.receive(0x300 + 125, encode_execute("BG"))
     assert [f[0] for f in a.pop_frames()] == [0x280 + 10]  # each answers with its own id
     clock.advance(0.2)
@@ -171,6 +175,21 @@ def test_sim_start_skew_delays_a_separately_received_bg():
     assert a.px == b.px == 500
 
 
+@pytest.mark.parametrize("needs_reset", [True, False], ids=["as-documented", "at-once"])
+def test_sim_group_id_takes_effect_after_reset_communication_unless_set_otherwise(needs_reset):
+    """`group_id_needs_reset_comm` (default true, Elmo's guide 13-10): a group BG reaches no motor
+    until a reset communication, which keeps the application's RAM (the motor stays on, PA kept)."""
+    clock = ManualClock()
+    d = _drive(clock, 10, group_id_needs_reset_comm=needs_reset)
+    d.od_write(0x2040, 0, 125)
+    assert d.group_id_written == 125
+    assert bool(d.receive(0x300 + 125, encode_execute("BG"))) is not needs_reset
+    assert d.group_id == (0 if needs_reset else 125)
+    d.receive(0x000, bytes([0x82, 10]))
+    d.receive(0x000, bytes([0x01, 10]))
+    assert d.group_id == 125 and d.motor_on
+
+
 def test_sim_group_id_is_ram_and_ignored_when_zero():
     clock = ManualClock()
     a = _drive(clock, 10)
@@ -188,7 +207,7 @@ def _run(cfg, **kw):
     with stepped_session(cfg) as (s, stepped):
         r = diffdrive.run_move(s, cfg.pairs["diff"], PairTarget(**kw), timebase=stepped)
         with s.sim.lock:
-            groups = [d.group_id for d in s.sim.drives.values()]
+            groups = [d.group_id_written for d in s.sim.drives.values()]
             saves = [d.save_count for d in s.sim.drives.values()]
             on = [d.motor_on for d in s.sim.drives.values()]
         assert s.sim.errors == []
@@ -231,6 +250,55 @@ def test_uncalibrated_pair_is_refused_before_anything_moves():
         assert abs(r.end[0] - 100) <= 1
 
 
+def _nmt_reset_comms(drive) -> list[float]:
+    return [t for t, can_id, data in drive.received if can_id == 0x000 and data[:2] == bytes([0x82, drive.node])]
+
+
+def _consumer_writes(drive) -> list[float]:
+    return [t for t, can_id, data in drive.received
+            if can_id == 0x600 + drive.node and data[:4] == bytes([0x23, 0x16, 0x10, 0x01])]
+
+
+def test_a_group_start_resets_communication_with_the_motors_off_and_arms_the_dead_man_again():
+    """Elmo's guide (13-10): 0x2040 acts after a reset communication, which also puts back the
+    heartbeat consumer the guard armed. So: group id on both drives, reset communication (motors
+    off), the dead-man written again and read back, then MO=1 and the one group BG."""
+    from sherpa_cli.ops import joint_jog
+
+    cfg = load_config(FAST)
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
+        r = joint_jog.run(s, resolve_axis(cfg, "pitch"),
+                          parse_request(resolve_axis(cfg, "pitch"), mode="position", to="300counts", uncalibrated=True))
+        assert abs(r.end - 300) <= 1
+        with s.sim.lock:
+            for d in (s.sim.drives["left"], s.sim.drives["right"]):
+                resets = _nmt_reset_comms(d)
+                on = [t for t, text in d.events if text.startswith("motor on")]
+                assert len(resets) == 1 and on and resets[0] < on[0], (resets, on)
+                assert [t for t in _consumer_writes(d) if resets[0] < t < on[0]], "not armed again before MO=1"
+                assert d.unguarded_motor_on == 0
+                assert d.group_id == 125 and d.group_id_written == 0  # in effect until the next reset
+
+
+def test_without_the_reset_communication_a_group_start_on_a_documented_drive_moves_nothing(tmp_path):
+    """`motion.pair_group_reset_comm: false` on a drive that needs it (the simulator's default): the
+    group BG reaches no motor. The setting is for a drive on which 0x2040 acts at once."""
+    from sherpa_cli.ops import joint_jog
+
+    text = FAST.read_text(encoding="utf-8").replace("motion: {consumer_time_ms: 1000}",
+                                                    "motion: {consumer_time_ms: 1000, pair_group_reset_comm: false}")
+    assert "pair_group_reset_comm: false" in text
+    path = tmp_path / "arm.yaml"
+    path.write_text(text, encoding="utf-8")
+    cfg = load_config(path)
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
+        with pytest.raises(SherpaError):
+            joint_jog.run(s, resolve_axis(cfg, "pitch"),
+                          parse_request(resolve_axis(cfg, "pitch"), mode="position", to="300counts", uncalibrated=True))
+        with s.sim.lock:
+            assert all(not _nmt_reset_comms(d) and d.px == 0 for d in s.sim.drives.values())
+
+
 def test_jog_of_a_pair_joint_starts_both_motors_with_one_group_bg():
     from sherpa_cli.ops import joint_jog
 
@@ -246,7 +314,7 @@ def test_jog_of_a_pair_joint_starts_both_motors_with_one_group_bg():
             assert group_bg == [(0x300 + 125, encode_execute("BG"))]
             assert group_bg == [f[1:] for f in right.received if f[1] == 0x300 + 125]
             assert not own_bg  # the move's begin went to the group only
-            assert left.group_id == right.group_id == 0  # put back (RAM)
+            assert left.group_id_written == right.group_id_written == 0  # put back (RAM)
             writes = [w for w in left.od_writes if w[1] == 0x2040]
             assert [w[3] for w in writes] == [125, 0]
 
@@ -395,7 +463,7 @@ def test_an_error_during_the_move_still_puts_the_pdo_settings_back(cfg):
             diffdrive.run_move(s, cfg.pairs["diff"], PairTarget(sigma="0.5"), sleep=sleep)
         assert _pdo(s, cfg) == before
         with s.sim.lock:
-            assert all(not d.motor_on and d.group_id == 0 for d in s.sim.drives.values())
+            assert all(not d.motor_on and d.group_id_written == 0 for d in s.sim.drives.values())
             for d in s.sim.drives.values():
                 # review R8: each motor got its stop before the recorder put its PDO settings back
                 st = [t for t, i, f in d.received if i == 0x300 + d.node and f[:2] == b"ST"]
@@ -553,7 +621,7 @@ def test_pair_start_sync_rpdo_moves_the_mismatched_pair_and_restores_the_rpdo(tm
             with s.sim.lock:
                 assert all(d.od_read(0x1401, 2) == 255 and d.save_count == 0 and not d.motor_on
                            for d in s.sim.drives.values())
-                assert all(d.group_id == 0 for d in s.sim.drives.values())
+                assert all(d.group_id_written == 0 for d in s.sim.drives.values())
         assert r.mode == "sync_rpdo" and abs(r.end[0] - r.target[0]) <= 1 and abs(r.end[1] - r.target[1]) <= 1
         peaks[name] = r.coupling.held_peak
     # no start skew (a separately received BG would start motor a 40 ms late: ~64 counts, naive);

@@ -96,7 +96,7 @@ def test_the_recorder_settings_are_put_back_and_the_motors_stop_before_the_uploa
         after = _ram(s)
         with s.sim.lock:
             drives = list(s.sim.drives.values())
-            assert all(not d.motor_on and d.group_id == 0 and d.save_count == 0 for d in drives)
+            assert all(not d.motor_on and d.group_id_written == 0 and d.save_count == 0 for d in drives)
             for d in drives:
                 st = [t for t, i, f in d.received if i == 0x300 + d.node and f[:2] == b"ST"]
                 uploads = [t for t, i, f in d.received if i == 0x600 + d.node and f[1:3] == b"\x30\x20"]
@@ -130,7 +130,7 @@ def test_an_error_during_the_move_still_puts_the_recorder_settings_back(cfg):
             diffdrive.run_move(s, cfg.pairs["diff"], PairTarget(sigma="0.5", source="drive"), timebase=stepped)
         assert _ram(s) == before
         with s.sim.lock:
-            assert all(not d.motor_on and d.group_id == 0 for d in s.sim.drives.values())
+            assert all(not d.motor_on and d.group_id_written == 0 for d in s.sim.drives.values())
 
 
 def test_source_drive_with_poll_is_a_usage_error(cli):

@@ -305,12 +305,16 @@ class MotionConfig:
     stall_time: float = 1.0
     recovery_fallback_speed: int = 100
     # differential pairs (docs/diffdrive.md): how both motors start together. "group": one BG to the
-    # group id pair_group_id written to 0x2040 of both drives (RAM, restored afterwards; that it acts
-    # without an NMT reset communication is UNCONFIRMED); "sync_rpdo": BG to each drive's RPDO2 made
+    # group id pair_group_id written to 0x2040 of both drives (RAM, restored afterwards; made effective
+    # by a reset communication, pair_group_reset_comm); "sync_rpdo": BG to each drive's RPDO2 made
     # synchronous (0x1401:2 = 1, RAM, for the begin only), executed at one SYNC the tool sends
     # (UNCONFIRMED on the Whistle); "sequential": two BG back to back (no common start)
     pair_start: str = "group"
     pair_group_id: int = 125  # a 7-bit id no device on the pair's bus uses (126 is the host heartbeat)
+    # "group": the group id takes effect after an NMT reset communication of both drives, as Elmo's
+    # guide (13-10) says; the tool sends it (motors off) and arms the dead-man again, read back.
+    # false: a drive on which 0x2040 acts at once
+    pair_group_reset_comm: bool = True
     feedback_gain: float = 16.0  # --feedback: SP correction per unit of progress difference between the motors
     feedback_limit: float = 0.5  # --feedback: the correction never changes a motor's SP by more than this share
     # diffdrive move records both motors by TPDO on SYNC (log/record.py) at this rate (Hz, capped to
@@ -409,6 +413,9 @@ class SimDriveConfig:
     # NMT reset communication (0x82) as a full reboot (RAM from flash), not as CiA 301 has it (only
     # 0x1000-0x1FFF from their saved values, the application's RAM kept); Elmo's own is UNCONFIRMED
     reset_comm_reboots: bool = False
+    # a group id written to 0x2040 takes effect only after NMT reset communication, as Elmo's guide
+    # (13-10) says (True); False: at once
+    group_id_needs_reset_comm: bool = True
     # the load (sim/load.py), joint side, SI; None: the simulator's default (a shoulder-like joint)
     inertia: float | None = None  # kg m^2
     torque_constant: float | None = None  # N m/A

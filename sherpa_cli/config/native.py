@@ -152,7 +152,8 @@ def parse_motion(top: Section, locs: Locs) -> MotionConfig:
         return MotionConfig()
     register(locs, ("motion",), sec)
     d = MotionConfig()
-    values = {f.name: (sec.str if f.type == "str" else sec.num if f.type == "float" else sec.int)(
+    values = {f.name: (sec.str if f.type == "str" else sec.num if f.type == "float" else
+                       sec.bool if f.type == "bool" else sec.int)(
         f.name, getattr(d, f.name)) for f in dataclasses.fields(MotionConfig) if f.name not in ("host_id_pool", "emcy_warning_codes")}
     pool = sec.get("host_id_pool")
     if pool is not None:

@@ -336,6 +336,17 @@ class DriveClient:
         its flash holds. Its position counter starts again and the motor is off. Raises
         DriveTimeoutError when no boot-up (0x700+node, byte 0 = 0x00) comes within ``boot_timeout``.
         """
+        self._reset(NMT_RESET_NODE, "NMT reset node", boot_timeout)
+
+    def reset_communication(self, boot_timeout: float) -> None:
+        """NMT reset communication, wait for the boot-up, then NMT start again.
+
+        CiA 301: the communication objects (0x1000-0x1FFF: heartbeat consumer and producer, 0x1029,
+        the PDOs) go back to their saved values; the application keeps its RAM. What a command armed
+        there (the dead-man) must be armed again by the caller."""
+        self._reset(NMT_RESET_COMMUNICATION, "NMT reset communication", boot_timeout)
+
+    def _reset(self, command: int, name: str, boot_timeout: float) -> None:
         with self._state:
             if not self._boot_listening:
                 self._boot_listening = True
@@ -343,14 +354,14 @@ class DriveClient:
         with self._lock:
             with self._state:
                 seen = self._boots
-            self.transport.send(NMT_COB_ID, bytes([NMT_RESET_NODE, self.node]))
+            self.transport.send(NMT_COB_ID, bytes([command, self.node]))
             deadline = self._clock() + boot_timeout
             while True:
                 with self._state:
                     if self._boots > seen:
                         break
                 if self._clock() >= deadline:
-                    raise DriveTimeoutError(f"{self.label}: no boot-up within {boot_timeout:g} s after NMT reset node",
+                    raise DriveTimeoutError(f"{self.label}: no boot-up within {boot_timeout:g} s after {name}",
                                             hint="check the drive's power and CAN wiring; protocol.boot_timeout "
                                             "sets the wait")
                 self._sleep(0.005)

@@ -414,6 +414,48 @@ class MotionGuard:
         self._event(f"{drive_label(dead)}: no answer; stopping every other drive of the command now")
         self._stop_pass(entering=False, skip={(dead.bus, dead.node)})
 
+    def reset_communication(self, refs: Iterable[DriveRef], boot_timeout: float, why: str) -> None:
+        """NMT reset communication of ``refs``, their motors off, then the dead-man armed again.
+
+        CiA 301 puts the communication objects (0x1000-0x1FFF) back to their saved values: the
+        heartbeat consumer 0x1016:1 and 0x1029:1 the guard armed are gone, so no motor may be on
+        (refused otherwise), and each drive is armed again and read back before this returns; one
+        heartbeat follows before anything else is sent. The journal's notes stay right: what the
+        reset brought back is what they say to put back. The drive watch lets the expected boot-up
+        and Pre-operational pass (the drive leaves the watch until it is Operational again)."""
+        refs = list(refs)
+        self.check()
+        on = [drive_label(r) for r in refs if self._drive(r).mo]
+        if on:
+            raise SafetyError(f"{', '.join(on)}: motor on: no NMT reset communication ({why}); nothing was reset")
+        for ref in refs:
+            self._watch.remove(ref.bus, ref.node)
+        for ref in refs:
+            d = self._drive(ref)
+            self._pulse(extra=boot_timeout + self.settings.request_bound)
+            self._event(f"{d.client.label}: NMT reset communication ({why})")
+            d.client.reset_communication(boot_timeout)
+        for ref in refs:
+            d = self._drive(ref)
+            self._pulse()
+            self._rearm(d)
+        self._beat_now()
+        for ref in refs:
+            self._watch_drive(self._drive(ref))
+        self._pulse()
+
+    def _rearm(self, d: _Drive) -> None:
+        """The dead-man objects written again after a reset communication, each read back."""
+        s = self.settings
+        for key, value in ((LOSS_ACTION, s.loss_action), (COMM_ERROR, s.comm_error_behaviour),
+                           (CONSUMER, s.consumer_entry_for(self.host_id))):
+            self._sdo_write(d, key, value)
+            back = self._sdo_read(d, key)
+            if back != value:
+                raise SafetyError(f"{d.client.label}: {OBJECT_NAMES[key]} reads {back:#x} after it was armed again "
+                                  f"with {value:#x}: the dead-man is not armed; nothing moves")
+        self._event(f"{d.client.label}: dead-man armed again: host {self.host_id}, {s.consumer_time_ms} ms")
+
     def unit_mode(self, ref: DriveRef) -> int:
         return self._drive(ref).um
 

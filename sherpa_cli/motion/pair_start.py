@@ -25,6 +25,14 @@ SYNC_RPDO_TYPE = 1  # synchronous: executed at the next SYNC ([IG] 5-4)
 RPDO2_TYPE_NAME = "RPDO2 transmission type"
 
 
+def group_reset(guard: MotionGuard, cfg: ArmConfig) -> Callable[[Sequence[DriveRef]], None] | None:
+    """The reset communication a ``group`` start needs (``motion.pair_group_reset_comm``), under ``guard``."""
+    if not cfg.motion.pair_group_reset_comm:
+        return None
+    return lambda refs: guard.reset_communication(refs, cfg.protocol.boot_timeout,
+                                                  "the pair's group id 0x2040 takes effect")
+
+
 def pair_settings(cfg: ArmConfig) -> tuple[str, int]:
     """(pair_start, pair_group_id) from ``motion:``, checked."""
     m = cfg.motion
@@ -50,8 +58,13 @@ class CommonStart:
     moving through the restore's SDO timeouts (review R8)."""
 
     def __init__(self, session: ArmSession, refs: Sequence[DriveRef], clients: Mapping[str, DriveClient], method: str,
-                 group_id: int, stop: Callable[[], Sequence[str] | None] | None = None) -> None:
+                 group_id: int, stop: Callable[[], Sequence[str] | None] | None = None,
+                 reset_comm: Callable[[Sequence[DriveRef]], None] | None = None) -> None:
         self.session, self.refs, self.clients, self.method, self.group_id = session, list(refs), clients, method, group_id
+        # group: the NMT reset communication that makes 0x2040 take effect and arms the dead-man again
+        # (MotionGuard.reset_communication); None where the drive needs none (motion.pair_group_reset_comm)
+        self.reset_comm = reset_comm
+        self._prepared = False
         self._old: dict[str, int] = {}
         self._rpdo_type: dict[str, int] = {}  # sync_rpdo: each drive's own 0x1401:2
         self._synchronous: set[str] = set()  # drives whose RPDO2 is synchronous right now
@@ -60,6 +73,17 @@ class CommonStart:
         self.bus = refs[0].bus
 
     def __enter__(self) -> CommonStart:
+        self.prepare()
+        return self
+
+    def prepare(self) -> None:
+        """What the start needs on the drives before any motor is on: the group id written (and, with
+        ``reset_comm``, made effective by a reset communication, which puts back the communication
+        objects -- so it comes before a recording's PDO set-up), or RPDO2's own type read. Once; a
+        caller that prepares early registers :meth:`close` for every way out."""
+        if self._prepared:
+            return
+        self._prepared = True
         if self.method in ("group", "sync_rpdo") and len({r.bus for r in self.refs}) != 1:
             raise ConfigError(f"motion.pair_start={self.method} needs both drives of the pair on one bus; "
                               "use pair_start: sequential")
@@ -80,10 +104,11 @@ class CommonStart:
                         self._old[r.name] = old
                 elif self.method == "sync_rpdo":
                     self._rpdo_type[r.name] = (bytes(sdo.upload(RPDO2_COMM, 2, name=RPDO2_TYPE_NAME)) + b"\0")[0]
+            if self.method == "group" and self.reset_comm is not None:
+                self.reset_comm(self.refs)
         except BaseException:
             self.close()
             raise
-        return self
 
     def begin(self, drives: Sequence[str] | None = None) -> None:
         """BG for the named drives (default both): one group frame, two BG executed at one SYNC, or

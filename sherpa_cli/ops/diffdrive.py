@@ -40,7 +40,7 @@ from sherpa_cli.joints import diffpair, units
 from sherpa_cli.motion import calibration, hold, limit_watch, recovery
 from sherpa_cli.motion.axis import Axis, joints_moved_by, move_time_bound
 from sherpa_cli.motion.blocked import blocked_text
-from sherpa_cli.motion.pair_start import CommonStart, pair_settings, stop_motors
+from sherpa_cli.motion.pair_start import CommonStart, group_reset, pair_settings, stop_motors
 from sherpa_cli.motion.report import with_report
 
 if TYPE_CHECKING:
@@ -597,8 +597,12 @@ def run_move(session: ArmSession, pair: PairConfig, request: PairTarget, *,
     def guarded() -> None:
         with guard:
             clients = {d: guard.client(by_name[d]) for d in drives}
-            start = CommonStart(session, refs, clients, method, group_id, stop=stop_motors(guard, refs, settings))
+            start = CommonStart(session, refs, clients, method, group_id, stop=stop_motors(guard, refs, settings),
+                                reset_comm=group_reset(guard, session.cfg))
             with contextlib.ExitStack() as stack:
+                stack.callback(start.close)  # the group id put back on every way out (close runs once)
+                # before the recording: a reset communication would put its PDO settings back
+                start.prepare()
                 trace: Trace = (trace_factory(drives) if trace_factory is not None else
                                 _open_trace(stack, session, refs, request, drives, recorder_kw))
                 result.trace_source = getattr(trace, "source", type(trace).__name__)

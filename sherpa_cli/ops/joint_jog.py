@@ -319,7 +319,8 @@ def _move_guarded(guard: MotionGuard, session: ArmSession, cfg: ArmConfig, axis:
         method = pair_start.pair_settings(cfg)[0] if axis.kind in ("sigma", "delta") else "sequential"
         refs = [by_name[d] for d in axis.drives]
         start = stack.enter_context(pair_start.CommonStart(session, refs, clients, method, cfg.motion.pair_group_id,
-                                                          stop=pair_start.stop_motors(guard, refs, settings)))
+                                                          stop=pair_start.stop_motors(guard, refs, settings),
+                                                          reset_comm=pair_start.group_reset(guard, cfg)))
 
         def check_drives() -> None:
             """The guard's sign of life, and every moving motor still on (a trip ends the jog)."""

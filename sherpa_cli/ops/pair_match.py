@@ -35,7 +35,7 @@ from sherpa_cli.elmo.protocol import UM_POSITION
 from sherpa_cli.errors import ProtocolError, SafetyError, UsageError
 from sherpa_cli.joints import diffpair
 from sherpa_cli.motion import calibration
-from sherpa_cli.motion.pair_start import CommonStart, pair_settings, stop_motors
+from sherpa_cli.motion.pair_start import CommonStart, group_reset, pair_settings, stop_motors
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
@@ -290,7 +290,8 @@ def measure(session: ArmSession, pair: PairConfig, settings: MatchSettings, *,
         def stop_before_upload() -> None:
             stop()  # a drive that does not answer: the guard's exit stops it and reports
 
-        with CommonStart(session, refs, {r.name: guard.client(r) for r in refs}, method, group_id, stop=stop) as begin:
+        with CommonStart(session, refs, {r.name: guard.client(r) for r in refs}, method, group_id, stop=stop,
+                         reset_comm=group_reset(guard, session.cfg)) as begin:
             for r in refs:
                 guard.enable(r, motion.velocity_unit_mode)
                 guard.client(r).set("JV", 0, speed)

@@ -363,7 +363,16 @@ class SimDrive:
 
     @property
     def group_id(self) -> int:
-        """Object 0x2040 ([IG] 13-10): 0 = no group; binary interpreter frames to 0x300 + id reach this drive."""
+        """The group id in effect ([IG] 13-10): 0 = no group; binary interpreter frames to 0x300 + id reach
+        this drive. What is written to 0x2040 takes effect at the next reset communication (or boot),
+        or at once with ``group_id_needs_reset_comm`` off."""
+        if self.settings.group_id_needs_reset_comm:
+            return self._group_active
+        return self._od.values[(0x2040, 0)]
+
+    @property
+    def group_id_written(self) -> int:
+        """What 0x2040 holds (RAM), whether or not it has taken effect yet (:attr:`group_id`)."""
         return self._od.values[(0x2040, 0)]
 
     @property
@@ -523,6 +532,7 @@ class SimDrive:
         self._load_ram()
         self._error_field = 0
         self._od = build_od(self.settings, self.serial, self.flash, self._od_live_all())
+        self._group_active = self._od.values[(0x2040, 0)]
         self._motor_on = False
         self.motor.off()
         self._px_offset = -self.motor.rounded
@@ -579,6 +589,7 @@ class SimDrive:
         kept = {key: value for key, value in self._od.values.items() if not 0x1000 <= key[0] <= 0x1FFF}
         self._od = build_od(self.settings, self.serial, self.flash, self._od_live_all())
         self._od.values.update(kept)
+        self._group_active = self._od.values[(0x2040, 0)]  # a group id written since takes effect now
         self._nmt_state = PRE_OPERATIONAL
         self._hb_last = None
         period = self._od.values[(0x1017, 0)]

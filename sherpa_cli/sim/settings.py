@@ -52,6 +52,9 @@ class SimSettings:
     # from their saved values and keeps the application's RAM (False); True plays a full reboot
     # like reset node. Elmo's own behaviour is UNCONFIRMED.
     reset_comm_reboots: bool = False
+    # Elmo's implementation guide (13-10): a group id written to 0x2040 takes effect after an NMT
+    # reset communication (True); False makes it effective at once. Default as documented.
+    group_id_needs_reset_comm: bool = True
     # Digital inputs IL[1..inputs]; the catalog's Whistle models have 6.
     inputs: int = 6
     # MC (A, read-only): the whistle-10/60's peak current. CL[1] may be at most MC/2 and
