@@ -724,8 +724,10 @@ class SimArm:
                   at: float | None = None) -> list[str]:
         """Hand a frame to the drive(s) it concerns (not to ``exclude``, the node that sent it), at
         time ``at`` (default now: see LATE_FRAME_S); returns their names."""
-        if can_id in (NMT_ID, SYNC_ID) or 0x700 <= can_id <= 0x77F:
-            targets = list(on_bus)  # NMT broadcast / SYNC / host heartbeats: every drive decides for itself
+        if can_id in (NMT_ID, SYNC_ID) or 0x700 <= can_id <= 0x77F or any(d.sync_id == can_id for d in on_bus.values()):
+            # NMT broadcast / SYNC (0x080 or what a node's 0x1005 names) / host heartbeats: every drive
+            # decides for itself
+            targets = list(on_bus)
         else:
             targets = by_node.get(can_id & 0x7F, [])
             if 0x301 <= can_id <= 0x37F:  # RPDO2 of a group id (0x2040): every drive of the group
