@@ -8,7 +8,7 @@ import threading
 import typer
 
 from sherpa_cli.cli.context import state
-from sherpa_cli.errors import UsageError
+from sherpa_cli.errors import SherpaError, UsageError
 
 MAX_SERVE_S = 30 * 24 * 3600.0  # --duration: a month; longer is a typo (leave it out to serve until Ctrl-C)
 
@@ -128,4 +128,8 @@ def sim(
     finally:
         stopper()  # saves the drives' flash: a service manager's SIGTERM must not lose an SV
     if arm.errors:
-        raise arm.errors[0]
+        # each was logged with its traceback when it happened; the exit says so in one line, as every
+        # other error of the CLI (a signal's stop must not end in a traceback)
+        first = arm.errors[0]
+        raise SherpaError(f"the simulated arm had {len(arm.errors)} internal fault(s); the first: "
+                          f"{type(first).__name__}: {first}", hint="the log above shows where each happened")

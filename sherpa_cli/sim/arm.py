@@ -301,13 +301,14 @@ class SimArm:
                  clock: Clock | None = None, flash: Mapping[str, sim_state.DriveFlash] | None = None,
                  settings: Mapping[str, SimSettings] | None = None, persist: bool = False,
                  tick_s: float = 0.002, bus_factory: Callable[..., can.BusABC] | None = None,
-                 event_log: str | None = None, keep_ram: bool = False) -> None:
+                 event_log: str | None = None, keep_ram: bool = False, link_retry_s: float = 0.5) -> None:
         """``endpoints``: bus name -> keyword arguments for ``can.Bus`` (interface, channel);
         ``bus_factory`` opens them instead of ``can.Bus``; ``event_log``: a file that gets one JSON
         line per motor on/off and dead-man event (appended, flushed at once), so another process can
         tell when a motor went off; ``keep_ram``: the arm stays powered between runs (`--sim`): its RAM
         is loaded from the state directory by :meth:`start` and saved by :meth:`stop`, under a lock
-        held meanwhile (sim/state.py)."""
+        held meanwhile (sim/state.py); ``link_retry_s``: how often a pump whose bus failed under it (a
+        kernel interface set down) reopens it."""
         self.cfg = cfg
         self.endpoints = dict(endpoints)
         self.bus_factory = bus_factory
@@ -317,6 +318,8 @@ class SimArm:
         self._received_at = self.clock.received_at if isinstance(self.clock, FrameClock) else None
         self.persist = persist
         self.tick_s = tick_s
+        self.link_retry_s = link_retry_s
+        self.link_outages: dict[str, int] = dict.fromkeys(cfg.buses, 0)  # times each bus's link failed under its pump
         self.flash = dict(flash) if flash is not None else sim_state.load(cfg) if persist else {
             name: sim_state.DriveFlash(sim_state.default_serial(cfg, name)) for name in cfg.drives}
         self.drives: dict[str, SimDrive] = {}
@@ -578,28 +581,14 @@ class SimArm:
                 bus.shutdown()
         self._buses.clear()
 
-    @staticmethod
-    def _sender(bus: can.BusABC) -> Callable[[int, bytes], None]:
-        import can
-
-        def send(can_id: int, data: bytes) -> None:
-            bus.send(can.Message(arbitration_id=can_id, data=data, is_extended_id=False))
-        return send
-
-    @staticmethod
-    def _send_raw(bus: can.BusABC, can_id: int, data: bytes, is_error: bool) -> None:
-        """A frame of the bus controller: an error frame (class bits in the id) or another node's frame."""
-        import can
-
-        bus.send(can.Message(arbitration_id=can_id, data=data, is_extended_id=False, is_error_frame=is_error))
-
     def bus_controller(self, bus: str) -> BusController:
         """The host's controller on ``bus`` (a test control: take ``self.lock`` to call it)."""
         return self.controllers[bus]
 
     def _pump(self, bus_name: str, powered: threading.Event | None = None) -> None:
+        import can
+
         bus = self._buses[bus_name]
-        send = self._sender(bus)
         on_bus = {n: self.drives[n] for n, d in self.cfg.drives.items() if d.bus == bus_name}
         on_bus.update((n, drive) for n, (b, drive) in self.extras.items() if b == bus_name)
         names = list(on_bus)
@@ -609,12 +598,41 @@ class SimArm:
         next_tick = 0.0
         last_tick = self.clock.now()
         ctrl = self.controllers.get(bus_name)
+        failed: list[Exception] = []  # what the link raised in this pass (a send); the pass itself goes on
+        down = False  # in an outage: logged once, not once per retry
+        sent: list[bool] = []  # a frame went out in this pass: the link works
+
+        def send_raw(can_id: int, data: bytes, is_error: bool = False) -> None:
+            # a frame lost to a link that is down is lost as on the wire; the pass goes on without it
+            try:
+                bus.send(can.Message(arbitration_id=can_id, data=data, is_extended_id=False, is_error_frame=is_error))
+                sent.append(True)
+            except (can.CanError, OSError) as exc:
+                failed.append(exc)
+
+        def send(can_id: int, data: bytes) -> None:
+            send_raw(can_id, data)
+
         try:
             while not self._stop.is_set():
-                msg = bus.recv(timeout=self.tick_s)
+                if failed:
+                    reopened = self._relink(bus_name, bus, failed[0], logged=down)
+                    failed.clear()
+                    if reopened is None:
+                        break
+                    bus, down = reopened, True
+                try:
+                    msg = bus.recv(timeout=self.tick_s)
+                except (can.CanError, OSError) as exc:
+                    failed.append(exc)
+                    continue
+                sent.clear()
                 with self.lock:
                     if msg is None:  # one may have come while this pump waited for the lock (held up)
-                        msg = bus.recv(timeout=0)
+                        try:
+                            msg = bus.recv(timeout=0)
+                        except (can.CanError, OSError) as exc:
+                            failed.append(exc)
                     now = self.clock.now()
                     # a frame the pump got to late is heard when it arrived; the drives catch up to
                     # now only once the backlog is worked off (no tick to now meanwhile)
@@ -646,23 +664,46 @@ class SimArm:
                         for name in touched:
                             self._guarded(bus_name, name, on_bus[name].tick)
 
-                    def out(can_id: int, data: bytes, _send: Callable[[int, bytes], None] = send,
-                            _passing: bool = passing) -> None:
+                    def out(can_id: int, data: bytes, _passing: bool = passing) -> None:
                         # frames pass only while the host's controller runs (not bus-off, down or missing)
                         if _passing:
-                            _send(can_id, data)
+                            send(can_id, data)
                             if ctrl is not None:
                                 ctrl.count(host_received=1, received_bytes=len(data))
                     self._send_out(touched, on_bus, by_node, out, bus_name, at=at if behind else None)
                     if ctrl is not None:
                         ctrl.tick(now)
                         for can_id, data, is_error in ctrl.pop_frames():
-                            self._send_raw(bus, can_id, data, is_error)
+                            send_raw(can_id, data, is_error)
+                if down and not failed and (msg is not None or sent):
+                    down = False  # frames pass again (a socket that is down only times out on receive)
+                    log.info("simulated bus %s: link back, serving again", bus_name)
                 if powered is not None and touched is names:
                     powered.set()
         except BaseException as exc:  # noqa: BLE001 - kept in errors: a dead pump shows in tests and `sim --serve`
             if not self._stop.is_set():
                 self.errors.append(exc)
+
+    def _relink(self, bus_name: str, bus: can.BusABC, exc: Exception, *, logged: bool) -> can.BusABC | None:
+        """The bus failed under the pump (python-can's CanOperationError, OSError ENETDOWN: `ip link set
+        vcanN down`): every ``link_retry_s`` close it and open it again, until that works (a link that is
+        still down fails the next receive and comes back here) or the arm stops (None). One log line per
+        outage, not one per retry."""
+        import can
+
+        if not logged:
+            self.link_outages[bus_name] = self.link_outages.get(bus_name, 0) + 1
+            log.warning("simulated bus %s: link down (%s); reopening every %g s", bus_name, exc, self.link_retry_s)
+        while not self._stop.wait(self.link_retry_s):
+            with contextlib.suppress(Exception):  # a bus that failed may fail to close as well
+                bus.shutdown()
+            try:
+                bus = (self.bus_factory or can.Bus)(**self.endpoints[bus_name])
+            except (can.CanError, OSError):
+                continue  # the interface is gone for now (deleted, not yet back)
+            self._buses[bus_name] = bus  # stop() closes what is open now
+            return bus
+        return None
 
     def _arrival(self, msg: can.Message | None, now: float) -> float:
         """When ``msg`` arrived, on the simulator's clock: ``now``, unless the pump got to it more than
@@ -725,8 +766,10 @@ class SimArm:
                   at: float | None = None) -> list[str]:
         """Hand a frame to the drive(s) it concerns (not to ``exclude``, the node that sent it), at
         time ``at`` (default now: see LATE_FRAME_S); returns their names."""
-        if can_id in (NMT_ID, SYNC_ID) or 0x700 <= can_id <= 0x77F:
-            targets = list(on_bus)  # NMT broadcast / SYNC / host heartbeats: every drive decides for itself
+        if can_id in (NMT_ID, SYNC_ID) or 0x700 <= can_id <= 0x77F or any(d.sync_id == can_id for d in on_bus.values()):
+            # NMT broadcast / SYNC (0x080 or what a node's 0x1005 names) / host heartbeats: every drive
+            # decides for itself
+            targets = list(on_bus)
         else:
             targets = by_node.get(can_id & 0x7F, [])
             if 0x301 <= can_id <= 0x37F:  # RPDO2 of a group id (0x2040): every drive of the group

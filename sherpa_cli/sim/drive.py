@@ -33,7 +33,6 @@ from sherpa_cli.elmo.protocol import (
     RPDO2_BASE,
     SDO_RX_BASE,
     SDO_TX_BASE,
-    SYNC_ID,
     TPDO2_BASE,
 )
 from sherpa_cli.sim import interpreter
@@ -45,6 +44,7 @@ from sherpa_cli.sim.od import (
     ABORT_NO_SUBINDEX,
     ABORT_RANGE,
     ABORT_READ_ONLY,
+    SYNC_CAN_ID,
     ObjectDictionary,
     ODError,
     OdValue,
@@ -268,7 +268,7 @@ class SimDrive:
             self._rx_busy_until = t + self.settings.rx_buffer_s
         if can_id == NMT:
             self._nmt(data[0])
-        elif can_id == SYNC_ID:
+        elif can_id == self.sync_id:
             self._sync()
         elif can_id == SDO_RX_BASE + self.node:
             # CiA 301: a Stopped node serves only NMT and error control (its heartbeat goes on)
@@ -360,6 +360,11 @@ class SimDrive:
     @property
     def nmt_state(self) -> int:
         return self._nmt_state
+
+    @property
+    def sync_id(self) -> int:
+        """The CAN-ID this node takes as SYNC: 0x1005's bits 0..10 (CiA 301; 0x080 by default)."""
+        return self._od.values[(0x1005, 0)] & SYNC_CAN_ID
 
     @property
     def group_id(self) -> int:
@@ -746,7 +751,7 @@ class SimDrive:
     def _addressed(self, can_id: int, data: bytes) -> bool:
         if can_id == NMT:
             return len(data) == 2 and data[1] in (0, self.node)
-        if can_id == SYNC_ID:
+        if can_id == self.sync_id:
             return True
         if can_id in (RPDO2_BASE + self.node, SDO_RX_BASE + self.node):
             return True

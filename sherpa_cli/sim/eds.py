@@ -14,6 +14,7 @@ from pathlib import Path
 from canopen import objectdictionary as od
 from canopen.objectdictionary import eds
 
+from sherpa_cli.elmo.protocol import SYNC_ID
 from sherpa_cli.sim.encoder import ENCODER_OBJECTS, POSITION_ENTRY, SimEncoder
 from sherpa_cli.sim.pdo import COB_INVALID, COB_NO_RTR, TPDO_BASES
 from sherpa_cli.sim.sdo import DRIVE_OBJECTS, build_object_dictionary
@@ -60,6 +61,9 @@ def dictionary(kind: str) -> od.ObjectDictionary:
             _sub(d, 0x1A00 + n, 0).default, _sub(d, 0x1A00 + n, 1).default = 1, POSITION_ENTRY
     else:
         raise ValueError(f"no simulated node '{kind}' (whistle, encoder)")
+    sync = d[0x1005]
+    assert isinstance(sync, od.ODVariable)
+    sync.default = SYNC_ID
     d.device_information.vendor_number = s.vendor_id if kind == "whistle" else None
     for bitrate in (125_000, 250_000, 500_000, 1_000_000):
         d.device_information.allowed_baudrates.add(bitrate)

@@ -202,6 +202,7 @@ class SimEncoder(SimDrive):
         if self._nmt_state == OPERATIONAL and before != OPERATIONAL and self.tpdo.sending(0) \
                 and self.tpdo.read(0x1800, 2) >= 254:
             self._send_pdo(*self.tpdo.frame(0, self._pdo_values()))  # CiA 406: TPDO1 on entering Operational
+            self.tpdo.note_sent(0, self._t)  # an event-driven send: the next waits out the inhibit time
 
     @property
     def cyclic_ms(self) -> int:

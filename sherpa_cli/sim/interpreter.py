@@ -6,7 +6,15 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING, Protocol
 
-from sherpa_cli.elmo.codec import decode_request, encode_error_reply, encode_reply
+from sherpa_cli.elmo.codec import (
+    FLAG_ERROR,
+    FRAME,
+    HEADER,
+    INDEX_MASK,
+    decode_request,
+    encode_error_reply,
+    encode_reply,
+)
 from sherpa_cli.elmo.commands import COMMANDS, CommandSpec
 from sherpa_cli.errors import CodecError
 from sherpa_cli.sim.params import coerce, in_range, is_float
@@ -50,13 +58,13 @@ class Refused(Exception):
 def handle(drive: InterpretedDrive, data: bytes) -> bytes | None:
     """The TPDO2 reply to one RPDO2 frame, or None when the drive stays silent.
 
-    Frames that cannot even be decoded (bad length, lower-case or non-ASCII letters) get no
-    reply: an error reply must repeat the letters, and the real drive's answer is unknown.
+    A frame that cannot be decoded (lower-case or non-ASCII letters, a length other than 4 or 8, a
+    float that is no number) gets the error reply with ``settings.malformed_command_error``.
     """
     try:
         request = decode_request(data)
     except CodecError:
-        return None
+        return _malformed(drive, data)
     letters, index = request.letters, request.index
     try:
         key, spec = _resolve(drive, letters, index)
@@ -82,6 +90,17 @@ def handle(drive: InterpretedDrive, data: bytes) -> bytes | None:
     except Refused as refused:
         drive.last_error = refused.code
         return encode_error_reply(letters, index, refused.code)
+
+
+def _malformed(drive: InterpretedDrive, data: bytes) -> bytes | None:
+    """The error reply to a frame the interpreter cannot parse: it repeats the frame's two command bytes
+    and index as they came (the host matches replies on them, even lower-case ones), error bit set."""
+    if len(data) < HEADER.size:
+        return None  # no letters and index to repeat: whatever a real drive does, no reply can match
+    code = drive.settings.malformed_command_error
+    drive.last_error = code
+    letters, word = HEADER.unpack_from(data)
+    return FRAME.pack(letters, (word & INDEX_MASK) | FLAG_ERROR, bytes([code, 0, 0, 0]))
 
 
 _RESOLVED: dict[tuple[str, int], tuple[str, CommandSpec]] = {}  # every frame asks; the table never changes

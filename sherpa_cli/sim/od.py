@@ -10,6 +10,8 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
+from sherpa_cli.elmo.protocol import SYNC_ID
+
 if TYPE_CHECKING:
     from sherpa_cli.sim.settings import SimSettings
 
@@ -34,6 +36,20 @@ class ODError(LookupError):
         self.abort_code = abort_code
 
 
+def is_restricted(can_id: int) -> bool:
+    """CiA 301's restricted CAN-IDs (NMT, SYNC/EMCY, TIME, SDO, LSS, heartbeat, ...): no PDO and no
+    SYNC may use them (7.3.5)."""
+    return (can_id <= 0x7F or 0x101 <= can_id <= 0x180 or 0x581 <= can_id <= 0x5FF or 0x601 <= can_id <= 0x67F
+            or 0x6E0 <= can_id <= 0x6FF or can_id >= 0x701)
+
+
+# 0x1005 COB-ID SYNC (CiA 301 7.5.2.5): bits 0..10 the CAN-ID, 29 frame (29-bit ids), 30 gen (this node
+# produces SYNC), 31 "do not care". The node is a SYNC consumer with 11-bit ids only, so bits 11..30 are
+# refused (CiA 301 names 0x06090030 for the frame bit; CANopenNode's OD_write_1005 uses it for all of them).
+SYNC_CAN_ID = 0x7FF
+SYNC_REFUSED_BITS = 0x7FFFF800
+
+
 @dataclass(frozen=True)
 class Entry:
     writable: bool
@@ -47,6 +63,7 @@ WRITABLE: Mapping[tuple[int, int], Entry] = {
     (0x1017, 0): Entry(True, 0, 0xFFFF),
     (0x1029, 1): Entry(True, 0, 2),
     (0x6007, 0): Entry(True, 0, 3),
+    (0x1005, 0): Entry(True, 0, 0xFFFFFFFF),  # COB-ID SYNC: checked in check_value
     (0x2040, 0): Entry(True, 0, 127),  # group id ([IG] 13-10): 0 none; a frame to 0x300+id reaches the group
 }
 
@@ -94,6 +111,12 @@ def check_value(index: int, sub: int, value: object) -> int:
         raise ODError(f"object 0x{index:04X}:{sub} takes an integer, got {value!r}", ABORT_TYPE)
     if not entry.lo <= value <= entry.hi:
         raise ODError(f"object 0x{index:04X}:{sub}: {value} outside {entry.lo}..{entry.hi}", ABORT_RANGE)
+    if (index, sub) == (0x1005, 0):
+        if value & SYNC_REFUSED_BITS:
+            raise ODError(f"0x1005: 0x{value:08X}: the node consumes SYNC on an 11-bit id only (bits 11..30 must be 0)",
+                          ABORT_RANGE)
+        if is_restricted(value & SYNC_CAN_ID):
+            raise ODError(f"0x1005: CAN-ID 0x{value & SYNC_CAN_ID:03X} is restricted (CiA 301)", ABORT_RANGE)
     return value
 
 
@@ -104,6 +127,7 @@ def build_od(settings: SimSettings, serial: int, flash: Mapping[str, object],
     defaults[(0x1017, 0)] = settings.heartbeat_ms
     # DS402 default 1 ("fault"): any non-zero value makes heartbeat loss shut the motor down.
     defaults[(0x6007, 0)] = 1
+    defaults[(0x1005, 0)] = SYNC_ID  # CiA 301's default COB-ID SYNC
     writable = {}
     for key, default in defaults.items():
         value = flash.get(flash_key(*key), default)

@@ -108,6 +108,11 @@ _RANGES: Mapping[str, Callable[[Value], bool]] = MappingProxyType({
     "AC": _between(1, INT32_MAX), "DC": _between(1, INT32_MAX), "SD": _between(1, INT32_MAX),
     "SP": _between(0, INT32_MAX), "IL": _between(0, 23),
     "TR": _between(0, INT32_MAX), "ER": _between(0, INT32_MAX),
+    # [IG] 9-4's worked error example: `CA[1]=4` is answered EC 21. The guide gives no range for CA[1]
+    # ([TUM]'s EC texts make CA[1..6] the Hall sensor mapping, so 1..3 are believed to name Hall inputs);
+    # only CA[1] is checked, as narrowly as the example allows: above 3 (or negative) is refused, and 0,
+    # what CA[1] reads until written, stays accepted.
+    "CA[1]": _between(0, 3),
     "CL[2]": _between(0.0, 100.0), "CL[3]": _between(0, INT32_MAX), "PL[2]": _between(0, 60),
 })
 _CURRENT_RANGES = {"CL[1]": 0.5, "PL[1]": 1.0, "TC": 1.0}  # fraction of MC

@@ -23,7 +23,9 @@ the defaults back; :meth:`TpdoTable.snapshot` / :meth:`TpdoTable.restore` carry 
 
 Transmission types: 0 (acyclic synchronous: at a SYNC if the mapped values changed since the last
 one sent), 1..240 (every n-th SYNC), 254/255 (event-driven: every event timer period, if the timer
-is not 0), only while the node is Operational (its owner asks).
+is not 0), only while the node is Operational (its owner asks). The inhibit time (sub 3, 100 us)
+holds an event-driven TPDO back until that long after its last send (CiA 301 applies it to types
+254/255 only); a timer that came due meanwhile sends once when it ends, as CANopenNode does.
 """
 
 from __future__ import annotations
@@ -33,7 +35,7 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
-from sherpa_cli.sim.od import ABORT_NO_OBJECT, ABORT_NO_SUBINDEX, ABORT_RANGE, ABORT_READ_ONLY, ODError
+from sherpa_cli.sim.od import ABORT_NO_OBJECT, ABORT_NO_SUBINDEX, ABORT_RANGE, ABORT_READ_ONLY, ODError, is_restricted
 
 ABORT_UNSUPPORTED = 0x06010000  # unsupported access to an object
 ABORT_NOT_MAPPABLE = 0x06040041
@@ -51,12 +53,6 @@ HIGHEST_COMM_SUB = 5
 DRIVE_MAPPABLE: Mapping[tuple[int, int], int] = {(0x6064, 0): 32, (0x6069, 0): 32, (0x606C, 0): 32, (0x6078, 0): 16}
 MAPPABLE = {(i, s, bits) for (i, s), bits in DRIVE_MAPPABLE.items()}  # the drive's, as (index, sub, bits)
 TPDO_BASES = {0: 0x180, 1: 0x280, 2: 0x380, 3: 0x480}  # TPDO number - 1 -> function code
-
-
-def is_restricted(can_id: int) -> bool:
-    """CiA 301's restricted CAN-IDs (NMT, SYNC/EMCY, TIME, SDO, LSS, heartbeat, ...)."""
-    return (can_id <= 0x7F or 0x101 <= can_id <= 0x180 or 0x581 <= can_id <= 0x5FF or 0x601 <= can_id <= 0x67F
-            or 0x6E0 <= can_id <= 0x6FF or can_id >= 0x701)
 
 
 def is_pdo_object(index: int) -> bool:
@@ -86,13 +82,18 @@ class _Tpdo:
     syncs: int = 0  # SYNCs counted toward the next synchronous send
     next_event: float = math.inf  # the event timer's next send
     last: bytes | None = None  # the last payload sent (type 0 sends only a change)
+    sent_at: float = -math.inf  # when it was last sent event-driven (the inhibit time counts from it)
+
+    @property
+    def inhibit_s(self) -> float:
+        return self.inhibit / 10_000  # 0x1800+n:3 counts 100 us
 
     def reset(self) -> None:
         d = self.default
         self.cob, self.ttype, self.inhibit, self.event_ms = d.cob, d.ttype, 0, d.event_ms
         self.count = len(d.entries)
         self.entries = [*d.entries, *[0] * (MAX_ENTRIES - len(d.entries))]
-        self.syncs, self.next_event, self.last = 0, math.inf, None
+        self.syncs, self.next_event, self.last, self.sent_at = 0, math.inf, None, -math.inf
 
     @property
     def valid(self) -> bool:
@@ -179,7 +180,7 @@ class TpdoTable:
             was = pdo.valid
             pdo.cob = value
             if valid and not was:
-                pdo.syncs, pdo.last = 0, None
+                pdo.syncs, pdo.last, pdo.sent_at = 0, None, -math.inf
                 self._arm_timer(pdo, now)
             elif not valid:
                 pdo.next_event = math.inf
@@ -273,15 +274,26 @@ class TpdoTable:
         return min((p.next_event for n, p in self.pdos.items() if self._sendable(n, p)), default=math.inf)
 
     def on_timers(self, now: float, values: Mapping[int, Callable[[], int]], eps: float = 1e-9) -> list[tuple[int, bytes]]:
-        """Frames of the event timers due by ``now`` (each timer sends once and re-arms)."""
+        """Frames of the event timers due by ``now`` (each timer sends once and re-arms). A timer due
+        within its PDO's inhibit time waits for its end: the node wakes then (:meth:`next_due`)."""
         frames = []
         for n, pdo in self.pdos.items():
             if self._sendable(n, pdo) and pdo.next_event <= now + eps:
+                free = pdo.sent_at + pdo.inhibit_s
+                if now + eps < free:
+                    pdo.next_event = free  # due, but held back: one send when the inhibit time ends
+                    continue
                 frames.append(self._frame(pdo, values))
+                pdo.sent_at = now
                 period = pdo.event_ms / 1000
                 while pdo.next_event <= now + eps:
                     pdo.next_event += period
         return frames
+
+    def note_sent(self, n: int, now: float) -> None:
+        """TPDO ``n`` (number - 1) went out event-driven outside the timer (the CiA 406 encoder's send on
+        entering Operational): its inhibit time counts from ``now``."""
+        self.pdos[n].sent_at = now
 
     def start_timers(self, now: float) -> None:
         """The node entered Operational: event timers count from now."""
@@ -319,4 +331,4 @@ class TpdoTable:
                 raise ValueError(f"TPDO {key}: damaged")
             pdo.cob, pdo.ttype, pdo.inhibit, pdo.event_ms, pdo.count = cob, ttype, inhibit, event_ms, count
             pdo.entries = [int(e) for e in entries]
-            pdo.syncs, pdo.last, pdo.next_event = 0, None, math.inf
+            pdo.syncs, pdo.last, pdo.next_event, pdo.sent_at = 0, None, math.inf, -math.inf

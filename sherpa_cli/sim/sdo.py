@@ -28,6 +28,7 @@ _OBJECTS: list[ObjectSpec] = [
     (0x1000, None, "Device type", od.UNSIGNED32, "ro"),
     (0x1001, None, "Error register", od.UNSIGNED8, "ro"),
     (0x1003, 1, "Standard error field", od.UNSIGNED32, "ro"),
+    (0x1005, None, "COB-ID SYNC message", od.UNSIGNED32, "rw"),
     (0x1008, None, "Manufacturer device name", od.VISIBLE_STRING, "const"),
     (0x1009, None, "Manufacturer hardware version", od.VISIBLE_STRING, "const"),
     (0x100A, None, "Manufacturer software version", od.VISIBLE_STRING, "const"),
@@ -150,6 +151,7 @@ CCS_DOWNLOAD_SEGMENT, CCS_DOWNLOAD, CCS_UPLOAD, CCS_UPLOAD_SEGMENT, CCS_ABORT, C
     CCS_BLOCK_DOWNLOAD = 0, 1, 2, 3, 4, 5, 6
 ABORT_COMMAND = 0x05040001  # "client/server command specifier not valid or unknown"
 ABORT_GENERAL = 0x08000000
+ABORT_TOO_LONG = 0x06070012  # "data type does not match, length of service parameter too high"
 
 
 class ServedDrive(Protocol):
@@ -177,7 +179,9 @@ class SdoServer:
     abort (sent or received) or a finished transfer a stray segment request is aborted instead
     of continuing the old one; block transfers, which the drive does not offer, are aborted
     (LocalNode would answer a block upload with a plain upload response); frames that are
-    not 8 bytes long are not SDO requests and get no answer.
+    not 8 bytes long are not SDO requests and get no answer; a segmented download that brings more
+    data than its initiate request indicated is aborted (0x06070012) at the segment that overflows,
+    not taken on for as long as the client sends.
     """
 
     def __init__(self, node: int, drive: ServedDrive, send: Callable[[int, bytes], None]) -> None:
@@ -187,6 +191,8 @@ class SdoServer:
         self._sent: list[bytes] = []
         self._transfer: str | None = None  # "upload" / "download" while a segmented transfer runs
         self._where = (0, 0)  # index, sub-index of the last initiated transfer
+        self._indicated: int | None = None  # the size a segmented download's initiate request gave
+        self._downloaded = 0  # bytes its segments brought so far
         self.shim = NetworkShim(self._send)
         self.local = canopen.LocalNode(node, dictionary_of(drive))
         self.local.add_read_callback(self._read)
@@ -252,6 +258,15 @@ class SdoServer:
             return
         if ccs in (CCS_UPLOAD, CCS_DOWNLOAD):
             self._where = (index, sub)
+        if ccs == CCS_DOWNLOAD:
+            # bit 0 (s): bytes 4..7 give the size; bit 1 (e): expedited, no segments follow
+            self._indicated = struct.unpack_from("<L", data, 4)[0] if data[0] & 0x03 == 0x01 else None
+            self._downloaded = 0
+        elif ccs == CCS_DOWNLOAD_SEGMENT:
+            self._downloaded += 7 - (data[0] >> 1 & 0x07)  # bits 3..1 (n): bytes that carry no data
+            if self._indicated is not None and self._downloaded > self._indicated:
+                self._abort(*self._where, ABORT_TOO_LONG)
+                return
         self._sent.clear()
         try:
             for callback in self.shim.subscribers.get(can_id, ()):

@@ -125,6 +125,11 @@ class SimSettings:
     user_program: int = -1
     user_program_running: int = 1
     sv_program_error: int = 82
+    # [IG] 9-2: the command letters "must be upper-case". What a SimplIQ answers a frame whose letters
+    # are lower case, not letters or not ASCII (or that cannot be parsed otherwise) is UNCONFIRMED; the
+    # guide's error reply (9-4) with EC 2 "bad command", its code for a command it does not know, is
+    # the documented reading. Frames too short to carry letters and index (< 4 bytes) stay unanswered.
+    malformed_command_error: int = 2
 
     def load(self) -> Load:
         """The load this drive's motor drives (sim/load.py)."""
@@ -155,6 +160,8 @@ class SimSettings:
             raise ValueError("SimSettings.drop_probability must be within 0..1")
         if not 0 <= self.heartbeat_ms <= 0xFFFF:
             raise ValueError("SimSettings.heartbeat_ms must fit u16 (0x1017)")
+        if not 0 <= self.malformed_command_error <= 0xFF:
+            raise ValueError("SimSettings.malformed_command_error must be an Elmo error code 0..255")
         if not 1 <= self.inputs <= 10:
             raise ValueError("SimSettings.inputs must be 1..10 (IL index range)")
         if self.model_step_s <= 0:
