@@ -527,7 +527,7 @@ def test_recorder_latest_is_the_newest_sync_both_drives_answered():
 def test_sim_synchronous_rpdo2_runs_the_buffered_frame_at_the_next_sync_without_skew():
     clock = ManualClock()
     a, b = _drive(clock, 10, start_skew_s=0.05), _drive(clock, 11)
-    assert a.od_read(0x1401, 2) == 255 and a.od_read(0x1401, 1) == 0x30A
+    assert a.od_read(0x1401, 2) == 255 and a.od_read(0x1401, 1) == 0x4000030A
     for d in (a, b):
         d.od_write(0x1401, 2, 1)
         assert d.receive(0x300 + d.node, encode_execute("BG"))

@@ -191,7 +191,7 @@ def test_stock_canopen_client_gets_no_sdo_answer_from_a_stopped_node(served_sim)
 
 ROOT = Path(__file__).resolve().parent.parent
 ARM = ROOT / "tests" / "data" / "home-arm.yaml"
-WHISTLE_EDS = ROOT / "configs" / "eds" / "whistle-sim.eds"
+WHISTLE_EDS = ROOT / "configs" / "eds" / "whistle.eds"
 W, OTHER = 10, 11  # yaw_drive and stiff_drive on can0
 INVALID, TOO_LONG = 0x06090030, 0x06070012
 WAIT_S = 5.0  # wall time for an SDO answer from the simulator's thread (a loaded machine)

@@ -19,7 +19,6 @@ from typing import TypeVar
 
 from sherpa_cli.elmo.faults import encode_error_field
 from sherpa_cli.elmo.protocol import (
-    EMCY_BASE,
     HEARTBEAT_BASE,
     NMT_ID,
     NMT_OPERATIONAL,
@@ -44,6 +43,7 @@ from sherpa_cli.sim.od import (
     ABORT_NO_SUBINDEX,
     ABORT_RANGE,
     ABORT_READ_ONLY,
+    COB_INVALID,
     SYNC_CAN_ID,
     ObjectDictionary,
     ODError,
@@ -52,7 +52,7 @@ from sherpa_cli.sim.od import (
     flash_key,
 )
 from sherpa_cli.sim.params import Value, factory_ram, is_persistent, parse_flash, wrap_int32
-from sherpa_cli.sim.pdo import TpdoTable
+from sherpa_cli.sim.pdo import COB_NO_RTR, DRIVE_MAPPABLE, TpdoTable
 from sherpa_cli.sim.recorder import SDO_ENTRIES, SimRecorder
 from sherpa_cli.sim.servo import ServoMotor
 from sherpa_cli.sim.settings import SimSettings
@@ -207,7 +207,7 @@ class SimDrive:
 
     def _make_tpdo_table(self, node: int) -> TpdoTable:
         """TPDO1/3/4 free to map, TPDO2 the interpreter's reply channel (sim/pdo.py)."""
-        return TpdoTable(node)
+        return TpdoTable(node, mappable={**DRIVE_MAPPABLE, (0x1002, 0): 32})  # 0x1002 is mappable ([IG] 12-3)
 
     def _after_start(self, seconds: float | None) -> float | None:
         return None if seconds is None else self._t + seconds
@@ -350,6 +350,7 @@ class SimDrive:
             self.od_writes.append((self._t, index, sub, value))
             return
         value = self._od.check_write(index, sub, value)
+        self._od.check_change(index, sub, value)
         self.od_writes.append((self._t, index, sub, value))
         self._od.values[(index, sub)] = value
         if (index, sub) == (0x1016, 1):
@@ -536,7 +537,7 @@ class SimDrive:
         self.last_error = 0
         self._load_ram()
         self._error_field = 0
-        self._od = build_od(self.settings, self.serial, self.flash, self._od_live_all())
+        self._od = build_od(self.settings, self.serial, self.flash, self._od_live_all(), self.node)
         self._group_active = self._od.values[(0x2040, 0)]
         self._motor_on = False
         self.motor.off()
@@ -592,7 +593,7 @@ class SimDrive:
         values (the heartbeat consumer and producer, 0x1029, the PDOs), Pre-operational, a boot-up
         frame; the application keeps its RAM (interpreter values, 0x2000+, the motor, PX)."""
         kept = {key: value for key, value in self._od.values.items() if not 0x1000 <= key[0] <= 0x1FFF}
-        self._od = build_od(self.settings, self.serial, self.flash, self._od_live_all())
+        self._od = build_od(self.settings, self.serial, self.flash, self._od_live_all(), self.node)
         self._od.values.update(kept)
         self._group_active = self._od.values[(0x2040, 0)]  # a group id written since takes effect now
         self._nmt_state = PRE_OPERATIONAL
@@ -624,14 +625,15 @@ class SimDrive:
     def _pdo_values(self) -> dict[int, Callable[[], int]]:
         values = self._pdo_sources
         if values is None:
-            values = self._pdo_sources = {0x6064: lambda: self.px, 0x6069: self._vx, 0x606C: self._vx,
+            values = self._pdo_sources = {0x1002: lambda: self._sr() & 0xFFFFFFFF, 0x6064: lambda: self.px, 0x6069: self._vx, 0x606C: self._vx,
                                           0x6078: lambda: max(-32768, min(32767, round(self._iq() * 1000)))}
         return values
 
     def _rpdo2_read(self, index: int, sub: int) -> int:
         """RPDO2, the binary interpreter's: 0x1401 communication parameter (COB-ID, transmission type)
         and 0x1601 its fixed mapping (0x2012, 64 bits)."""
-        values = {0: 2, 1: RPDO2_BASE + self.node, 2: self._rpdo2_type} if index == RPDO2_COMM else \
+        # bit 30 set as the guide prints it (0x4000037F for node 127)
+        values = {0: 2, 1: COB_NO_RTR | RPDO2_BASE + self.node, 2: self._rpdo2_type} if index == RPDO2_COMM else \
             {0: 1, 1: INTERPRETER_IN << 16 | 64}
         if sub in values:
             return values[sub]
@@ -777,8 +779,10 @@ class SimDrive:
         self._error_register = register
         if code:
             self._error_field = encode_error_field(code, register, elmo_code)
-        if self._nmt_state != STOPPED:  # CiA 301: a Stopped node sends no EMCY (the error is still stored)
-            self._send(EMCY_BASE + self.node, EMCY_FRAME.pack(code, register, elmo_code, 0, 0))
+        cob = self._od.values[(0x1014, 0)]
+        # CiA 301: a Stopped node sends no EMCY, nor one whose COB-ID is not valid (the error is still stored)
+        if self._nmt_state != STOPPED and not cob & COB_INVALID:
+            self._send(cob & 0x7FF, EMCY_FRAME.pack(code, register, elmo_code, 0, 0))
 
     def _interpreter_frame(self, data: bytes) -> None:
         # PDOs only live in Operational; during the MO settle window the interpreter is deaf.

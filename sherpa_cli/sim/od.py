@@ -1,4 +1,5 @@
-"""The few CANopen objects a simulated Whistle serves, for an SDO server added on top later.
+"""The CANopen objects of a simulated Whistle that are not PDO parameters (sim/pdo.py) or the
+recorder's (sim/recorder.py); configs/eds/whistle.eds describes them all, tests/test_eds.py keeps the two equal.
 
 Values are Python ints or str; an SDO layer encodes them. Errors carry the CiA abort code the
 SDO server must send, so the simulator and a real drive fail the same way.
@@ -10,7 +11,7 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
-from sherpa_cli.elmo.protocol import SYNC_ID
+from sherpa_cli.elmo.protocol import EMCY_BASE, SYNC_ID
 
 if TYPE_CHECKING:
     from sherpa_cli.sim.settings import SimSettings
@@ -55,10 +56,15 @@ class Entry:
     writable: bool
     lo: int = 0
     hi: int = 0xFFFFFFFF
+    reserved: int = 0  # bits that must stay 0 (a COB-ID's)
+
+
+COB_INVALID = 0x80000000  # bit 31 of a COB-ID object: the service is off
 
 
 # Entries a host may write and SV saves (section 3.5: "Persist with SV if wanted").
 WRITABLE: Mapping[tuple[int, int], Entry] = {
+    (0x1014, 0): Entry(True, reserved=0x7FFFF800),  # EMCY COB-ID ([IG] 12-11): bit 31 off, 11-bit CAN-ID only
     (0x1016, 1): Entry(True, 0, 0x00FFFFFF),  # bits 31..24 must be 0 ([IG 12-12])
     (0x1017, 0): Entry(True, 0, 0xFFFF),
     (0x1029, 1): Entry(True, 0, 2),
@@ -102,6 +108,15 @@ class ObjectDictionary:
         self._known(index, sub)
         return check_value(index, sub, value)
 
+    def check_change(self, index: int, sub: int, value: int) -> None:
+        """CiA 301's rule for a COB-ID object: the CAN-ID of a valid service does not change in one
+        write (a master sets bit 31 first), so no frame ever goes out on a half-changed id."""
+        if (index, sub) != (0x1014, 0):
+            return
+        old = self.values[(index, sub)]
+        if not old & COB_INVALID and not value & COB_INVALID and (old ^ value) & 0x7FF:
+            raise ODError(f"0x{index:04X}: the CAN-ID of a valid EMCY cannot change; set bit 31 first", ABORT_RANGE)
+
 
 def check_value(index: int, sub: int, value: object) -> int:
     entry = WRITABLE.get((index, sub))
@@ -111,6 +126,8 @@ def check_value(index: int, sub: int, value: object) -> int:
         raise ODError(f"object 0x{index:04X}:{sub} takes an integer, got {value!r}", ABORT_TYPE)
     if not entry.lo <= value <= entry.hi:
         raise ODError(f"object 0x{index:04X}:{sub}: {value} outside {entry.lo}..{entry.hi}", ABORT_RANGE)
+    if value & entry.reserved:
+        raise ODError(f"object 0x{index:04X}:{sub}: 0x{value:08X} sets reserved bits", ABORT_RANGE)
     if (index, sub) == (0x1005, 0):
         if value & SYNC_REFUSED_BITS:
             raise ODError(f"0x1005: 0x{value:08X}: the node consumes SYNC on an 11-bit id only (bits 11..30 must be 0)",
@@ -121,9 +138,10 @@ def check_value(index: int, sub: int, value: object) -> int:
 
 
 def build_od(settings: SimSettings, serial: int, flash: Mapping[str, object],
-             live: Mapping[tuple[int, int], Callable[[], OdValue]]) -> ObjectDictionary:
+             live: Mapping[tuple[int, int], Callable[[], OdValue]], node: int = 0) -> ObjectDictionary:
     """The dictionary after a boot: constants from settings, writable entries from flash."""
     defaults = {key: 0 for key in WRITABLE}
+    defaults[(0x1014, 0)] = EMCY_BASE + node  # the predefined connection set's id
     defaults[(0x1017, 0)] = settings.heartbeat_ms
     # DS402 default 1 ("fault"): any non-zero value makes heartbeat loss shut the motor down.
     defaults[(0x6007, 0)] = 1
@@ -137,7 +155,7 @@ def build_od(settings: SimSettings, serial: int, flash: Mapping[str, object],
             raise ValueError(f"flash key {flash_key(*key)!r}: {exc}") from None
     constants: dict[tuple[int, int], OdValue] = {
         (0x1000, 0): DEVICE_TYPE, (0x1008, 0): settings.device_name, (0x1009, 0): f"0x{settings.hw_version:X}",
-        (0x100A, 0): settings.sw_version, (0x1016, 0): 1, (0x1018, 0): 4, (0x1018, 1): settings.vendor_id,
+        (0x100A, 0): settings.sw_version, (0x100B, 0): node, (0x1016, 0): 1, (0x1018, 0): 4, (0x1018, 1): settings.vendor_id,
         (0x1018, 2): settings.product_code, (0x1018, 3): settings.revision, (0x1018, 4): serial, (0x1029, 0): 1,
     }
     return ObjectDictionary(constants, live, writable)

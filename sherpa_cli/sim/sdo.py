@@ -42,8 +42,12 @@ _OBJECTS: list[ObjectSpec] = [
     (0x6007, None, "Abort connection option code", od.INTEGER16, "rw"),
     (0x2040, None, "Group ID", od.UNSIGNED8, "rw"),
 ]
-# a Whistle's: the binary interpreter's RPDO2/TPDO2 objects and the mappable DS402 values (sim/pdo.py)
+# a Whistle's (configs/eds/whistle.eds): the status register, node id and EMCY COB-ID, the binary
+# interpreter's RPDO2/TPDO2 objects and the mappable DS402 values (sim/pdo.py)
 DRIVE_OBJECTS: tuple[ObjectSpec, ...] = (
+    (0x1002, None, "Manufacturer status register", od.UNSIGNED32, "ro"),
+    (0x100B, None, "Node-ID", od.UNSIGNED8, "ro"),
+    (0x1014, None, "COB-ID EMCY", od.UNSIGNED32, "rw"),
     (0x2012, None, "Binary interpreter input", od.UNSIGNED64, "ro"),
     (0x2013, None, "Binary interpreter output", od.UNSIGNED64, "ro"),
     (0x6064, None, "Position actual value", od.INTEGER32, "ro"),
@@ -51,7 +55,7 @@ DRIVE_OBJECTS: tuple[ObjectSpec, ...] = (
     (0x606C, None, "Velocity actual value", od.INTEGER32, "ro"),
     (0x6078, None, "Current actual value", od.INTEGER16, "ro"),
 )
-MAPPABLE_OBJECTS = frozenset({0x2012, 0x2013, 0x6004, 0x6064, 0x6069, 0x606C, 0x6078})
+MAPPABLE_OBJECTS = frozenset({0x1002, 0x2012, 0x2013, 0x6004, 0x6064, 0x6069, 0x606C, 0x6078})
 _RECORD_NAMES = {0x2030: "Bring recorded data", 0x1003: "Pre-defined error field", 0x1016: "Consumer heartbeat time", 0x1018: "Identity object", 0x1029: "Error behaviour"}
 
 
