@@ -185,3 +185,53 @@ def test_log_capture_on_vcan_keeps_the_kernels_receive_timestamps(cli, spare, tm
         assert before - slack <= frame.timestamp <= after + slack, (n, before, frame.timestamp, after)
     stamps = [f.timestamp for f in frames]
     assert stamps == sorted(stamps)
+
+
+def test_the_simulator_serves_again_after_its_vcan_link_went_down_and_up(spare, tmp_path):
+    """`ip link set vcanN down` under `sherpa sim`, then up: the simulator's pump reopens the bus and
+    answers SDO again (a stock canopen master on the kernel bus), and SIGTERM ends it without a
+    traceback. Before, the pump thread died with the link and SIGTERM printed a traceback."""
+    import signal
+    import sys
+    import time
+
+    import canopen
+
+    root = ARM.parent.parent
+    env = dict(os.environ, XDG_STATE_HOME=str(tmp_path / "state"))
+    sim = subprocess.Popen([sys.executable, "-m", "sherpa_cli", "--config", str(ARM), "--bus-map",
+                            f"can0=socketcan:{spare}", "sim"], cwd=root, env=env, stdin=subprocess.DEVNULL,
+                           stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    network = canopen.Network()
+    try:
+        network.connect(interface="socketcan", channel=spare)
+        node = network.add_node(10, canopen.ObjectDictionary())  # shoulder_1a on can0
+        node.sdo.RESPONSE_TIMEOUT = 2.0
+
+        def answers(within: float) -> bool:
+            deadline = time.monotonic() + within
+            while time.monotonic() < deadline:
+                try:
+                    node.sdo.upload(0x1000, 0)
+                    return True
+                except (canopen.SdoCommunicationError, canopen.SdoAbortedError, OSError):
+                    time.sleep(0.2)
+            return False
+
+        assert answers(60), "the simulator never answered on the kernel bus"
+        network.disconnect()
+        subprocess.run(["ip", "link", "set", spare, "down"], check=True, timeout=30)
+        time.sleep(2)  # the pump meets the outage and retries meanwhile
+        subprocess.run(["ip", "link", "set", spare, "up"], check=True, timeout=30)
+        network = canopen.Network()
+        network.connect(interface="socketcan", channel=spare)
+        node = network.add_node(10, canopen.ObjectDictionary())
+        node.sdo.RESPONSE_TIMEOUT = 2.0
+        assert answers(60), "the simulator did not serve again after the link came back"
+    finally:
+        network.disconnect()
+        subprocess.run(["ip", "link", "set", spare, "up"], timeout=30)
+        sim.send_signal(signal.SIGTERM)
+        _, err = sim.communicate(timeout=120)
+    assert "Traceback" not in err, err
+    assert "link down" in err, err  # the warning; "link back" is logged at info level

@@ -38,6 +38,17 @@ def test_a_killed_moving_command_is_refused_until_recover_puts_the_drive_back(ar
         proc.send_signal(signal.SIGKILL)  # not os.kill: a command that already ended was reaped
         finish(proc)
     arm.wait_trip(cmd.drives, t_kill)  # what `recover` is to report
+    if name == "diffdrive move":
+        # the group start's reset communication came before any motor went on: the consumer that
+        # stopped them is the one armed again after it
+        ons = 0
+        for d in cmd.drives:
+            texts = [e["event"] for e in arm.events(d) if e["t"] >= since]
+            reset = [i for i, t in enumerate(texts) if t.startswith("NMT reset communication: group id 125")]
+            on = [i for i, t in enumerate(texts) if t.startswith("motor on")]
+            assert reset and (not on or reset[0] < on[0]), texts
+            ons += bool(on)
+        assert ons, "no motor of the pair went on before the kill"
     jog = ("jog", cmd.joint, "--velocity", "0.1", "--for", "0.3", "--apply")
     code, out, err = finish(sherpa(arm, tmp_path, *jog))
     assert code == 1, f"{out}\n{err}"

@@ -29,7 +29,7 @@ from canopen.sdo.exceptions import SdoAbortedError
 from test_cross_process import served_sim  # noqa: F401  (the fixture: `sherpa sim --serve` in a subprocess)
 
 from sherpa_cli.config import load_config
-from sherpa_cli.elmo.codec import decode_reply, encode_query, encode_set
+from sherpa_cli.elmo.codec import decode_reply, encode_execute, encode_query, encode_set
 from sherpa_cli.sim import ManualClock, SimSettings
 from sherpa_cli.sim.arm import SimArm
 from sherpa_cli.sim.drive import STOPPED, SimDrive
@@ -438,3 +438,17 @@ def test_no_emcy_while_stopped_the_error_is_stored_and_clearing_it_sends_0000(ma
     master.write(0x1003, 0, 0, size=1)
     assert master.read(0x1003, 0) == 0
     master.network.unsubscribe(emcy)
+
+
+def test_a_group_id_acts_only_after_reset_communication_as_the_guide_says(master):
+    """Elmo's guide (13-10): write 0x2040, then reset communication. Before it a BG to 0x300 + group
+    id reaches no drive (no reply); after it the same frame reaches the drive, which answers on its
+    own TPDO2 (here the guide's own example: EC 58, the motor is off). 0x2040 is application RAM:
+    the reset keeps it."""
+    master.nmt(0x01)
+    master.write(0x2040, 0, 125, size=1)
+    assert master.heard(0x280 + W, (0x300 + 125, encode_execute("BG"))) == []
+    assert master.heard(0x700 + W, (0x000, bytes([0x82, W]))) == [b"\x00"]
+    assert master.read(0x2040, 0) == 125
+    master.nmt(0x01)
+    assert master.heard(0x280 + W, (0x300 + 125, encode_execute("BG"))) == [bytes.fromhex("424700403A000000")]

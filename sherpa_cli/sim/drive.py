@@ -596,6 +596,7 @@ class SimDrive:
         self._od = build_od(self.settings, self.serial, self.flash, self._od_live_all(), self.node)
         self._od.values.update(kept)
         self._group_active = self._od.values[(0x2040, 0)]  # a group id written since takes effect now
+        self._record(f"NMT reset communication: group id {self._group_active}")
         self._nmt_state = PRE_OPERATIONAL
         self._hb_last = None
         period = self._od.values[(0x1017, 0)]
