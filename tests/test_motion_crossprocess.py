@@ -462,6 +462,29 @@ def test_a_second_user_or_host_never_shares_the_dead_man_id_and_a_killed_jog_sto
             assert code == 0, f"{out}\n{err}"
 
 
+def test_a_second_user_on_the_same_drive_is_refused_before_anything_is_sent(arm, tmp_path):
+    """The drive lock is machine-wide: a jog of another user (another state directory) on the drive a
+    jog moves is refused (exit 5) and the first jog goes on. Before, both took the drive, and the
+    second cleared the first's dead-man entry as a leftover."""
+    centre(arm, tmp_path, JOINT)
+    since = time.monotonic()
+    first = sherpa_as(arm, tmp_path, "a", "jog", JOINT, "--velocity", "0.05", "--apply", own_lock_dir=False)
+    try:
+        wait_jog_running(arm, first, DRIVE, since)
+        code, out, err = finish(sherpa_as(arm, tmp_path, "b", "jog", JOINT, "--velocity", "0.05", "--for", "0.3",
+                                          "--apply", own_lock_dir=False))
+        assert code == 5, f"{out}\n{err}"
+        assert f"another sherpa command (pid {first.pid}, another user or state directory) is using this drive" \
+            in err, err
+        assert first.poll() is None, "the first user's jog ended"
+        assert not consumer_entries(arm, DRIVE, since)[1:], consumer_entries(arm, DRIVE, since)
+    finally:
+        if first.poll() is None:
+            first.send_signal(signal.SIGINT)
+        code, out, err = finish(first)
+    assert code == 0, f"{out}\n{err}"
+
+
 def test_a_foreign_producer_on_126_is_heard_and_the_jog_takes_another_id_which_its_kill_stops(arm, tmp_path):
     """R1: a foreign producer on id 126 (another host's tool) started before the jog: the jog listens,
     takes another id, and a SIGKILL of the jog still stops its motor by the consumer although 126 goes

@@ -534,7 +534,8 @@ class MotionGuard:
         key = (ref.bus, ref.node)
         if key in self._locks:
             return
-        lock = DriveLock(ref)
+        link = self.session.links[ref.bus].config
+        lock = DriveLock(ref, key=wire_key(link.interface, link.channel))
         lock.acquire()
         self._locks[key] = lock
 

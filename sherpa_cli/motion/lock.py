@@ -33,11 +33,17 @@ class DriveLock:
     the kernel releases it when its process ends, even by SIGKILL. The holder's pid is written beside
     it (``.pid``) for the refusal's message. Two motion commands on one drive would disarm each other's
     dead-man (both use the host id and put 0x1016:1 back when the first ends). `sherpa stop` takes no
-    lock: it is the emergency path."""
+    lock: it is the emergency path.
 
-    def __init__(self, ref: DriveRef, purpose: str = "moving") -> None:
+    With ``key`` (the bus as every process names it, bus/machine_lock.py wire_key) the drive is also
+    locked machine-wide (:class:`MachineLock` ``<bus>-node<N>``): a command of another user or state
+    directory (sudo, a second login) on the same drive is refused too, not only this state
+    directory's."""
+
+    def __init__(self, ref: DriveRef, purpose: str = "moving", key: str | None = None) -> None:
         self.label = drive_label(ref)
         self.purpose = purpose  # what the holder does with the drive, for the other command's refusal
+        self._machine = MachineLock(key, f"node{int(ref.node)}") if key is not None else None
         safe = re.sub(r"[^A-Za-z0-9_.-]", "_", str(ref.bus))
         self.path = paths.state_dir() / "motion" / f"{safe}-node{int(ref.node)}.lock"
         self.pid_path = self.path.with_suffix(".pid")
@@ -58,10 +64,26 @@ class DriveLock:
         except OSError as exc:
             raise UsageError(f"{self.label}: cannot take the motion lock {self.path}: {exc}",
                              hint=paths.STATE_DIR_HINT) from None
+        if self._machine is not None:
+            try:
+                taken = self._machine.try_acquire()
+            except OSError as exc:
+                self._lock.release(force=True)
+                raise UsageError(f"{self.label}: cannot take the machine-wide drive lock {self._machine.path}: "
+                                 f"{exc.strerror or exc}", hint=paths.LOCK_DIR_HINT) from None
+            if not taken:
+                self._lock.release(force=True)
+                pid = self._machine.holder()
+                who = f" (pid {pid}, another user or state directory)" if pid else " (another user or state directory)"
+                raise MotionLockedError(
+                    f"{self.label}: another sherpa command{who} is using this drive: refused, nothing sent",
+                    hint="wait until it ends, or stop it (`sherpa stop` needs no lock)")
         with contextlib.suppress(OSError):  # the pid is only for a message
             self.pid_path.write_text(f"{os.getpid()} {self.purpose}\n", encoding="utf-8")
 
     def release(self) -> None:
+        if self._machine is not None:
+            self._machine.release()
         if not self._lock.is_locked:
             return
         with contextlib.suppress(OSError):

@@ -31,6 +31,7 @@ from enum import StrEnum
 from types import MappingProxyType
 from typing import TYPE_CHECKING, Any, TypeVar
 
+from sherpa_cli.bus.machine_lock import wire_key
 from sherpa_cli.bus.parallel import Outcome, run_concurrently
 from sherpa_cli.bus.targets import DriveRef
 from sherpa_cli.elmo import codec
@@ -530,14 +531,17 @@ def _apply_drive(session: ArmSession, plan: DrivePlan, *, save: bool, ledger: Sa
 
 
 @contextlib.contextmanager
-def write_locks(plans: Sequence[DrivePlan]) -> Iterator[None]:
+def write_locks(plans: Sequence[DrivePlan], session: ArmSession | None = None) -> Iterator[None]:
     """The drive lock of every planned drive for the writes (motion/lock.py DriveLock): a jog,
     home or another programming command on one of them refuses (exit 5), and the writes here are
     refused while such a command runs -- before anything is sent. Released on every exit path."""
     taken: list[DriveLock] = []
     try:
         for p in plans:
-            lock = DriveLock(DriveRef(p.drive, p.target.bus, p.target.node), purpose="writing parameters to")
+            link = session.links[p.target.bus].config if session is not None and p.target.bus in session.links \
+                else None
+            lock = DriveLock(DriveRef(p.drive, p.target.bus, p.target.node), purpose="writing parameters to",
+                             key=None if link is None else wire_key(link.interface, link.channel))
             lock.acquire()
             taken.append(lock)
         yield
@@ -557,7 +561,7 @@ def apply_plans(session: ArmSession, plans: Sequence[DrivePlan], *, save: bool =
     stop = stop or threading.Event()
     jobs = {p.drive: (lambda p=p: _apply_drive(session, p, save=save, ledger=ledger, stop=stop,
                                                on_event=on_event)) for p in plans}
-    with write_locks([p for p in plans if p.changes or p.needs_save]):
+    with write_locks([p for p in plans if p.changes or p.needs_save], session):
         outcomes = run_concurrently(jobs, max_workers=max(1, max_workers), on_interrupt=stop.set)
     result = _in_plan_order(plans, outcomes, lambda t, message: DriveOutcome(t.drive, t.bus, t.node, status=FAILED,
                                                                             error=message))
@@ -665,7 +669,7 @@ def prove_flash(session: ArmSession, plans: Sequence[DrivePlan], *, boot_timeout
     """Reset every planned drive, wait for its boot-up and read every target back (call check_proof first)."""
     stop = stop or threading.Event()
     jobs = {p.drive: (lambda p=p: _prove_drive(session, p, boot_timeout=boot_timeout, stop=stop)) for p in plans}
-    with write_locks(plans):  # an NMT reset of a drive another command moves: refused
+    with write_locks(plans, session):  # an NMT reset of a drive another command moves: refused
         outcomes = run_concurrently(jobs, max_workers=max(1, max_workers), on_interrupt=stop.set)
     proofs = _in_plan_order(plans, outcomes, lambda t, message: FlashProof(t.drive, t.bus, t.node,
                                                                            status=PROOF_FAILED, error=message))

@@ -429,6 +429,7 @@ def _lock_for_reset(session: ArmSession, buses: Iterable[str]) -> list[Any]:
     """A reset communication puts back every drive's heartbeat consumer and PDOs: on a drive another
     command moves, it would drop that command's dead-man. So it takes each configured drive's motion
     lock first (motion/lock.py DriveLock), and refuses (exit 5, nothing sent) while one is held."""
+    from sherpa_cli.bus.machine_lock import wire_key
     from sherpa_cli.bus.targets import DriveRef
     from sherpa_cli.motion.lock import DriveLock
 
@@ -437,7 +438,9 @@ def _lock_for_reset(session: ArmSession, buses: Iterable[str]) -> list[Any]:
     try:
         for d in session.cfg.drives.values():
             if d.bus in wanted:
-                lock = DriveLock(DriveRef(d.name, d.bus, d.node, d), purpose="resetting")
+                link = session.links[d.bus].config
+                lock = DriveLock(DriveRef(d.name, d.bus, d.node, d), purpose="resetting",
+                                 key=wire_key(link.interface, link.channel))
                 lock.acquire()
                 held.append(lock)
     except BaseException:
