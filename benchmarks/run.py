@@ -128,7 +128,7 @@ def _fresh_wall(cmd: list[str], cwd: Path | str = ROOT) -> float:
 
 def bench_startup(rounds: int = 15) -> Result:
     """`sherpa scan --help` wall time over `python -c pass`, medians of interleaved runs; the top-level
-    `sherpa --help` is timed beside it and must meet the same goal (issue 26 item 3)."""
+    `sherpa --help` is timed beside it and must meet the same goal."""
     base_cmd = [sys.executable, "-c", "pass"]
     scan_cmd = [*_sherpa(), "scan", "--help"]
     top_cmd = [*_sherpa(), "--help"]
@@ -153,7 +153,7 @@ def bench_scan(rounds: int = 5) -> Result:
 
     One SDO timeout is what probing one id costs when nobody answers, and what the scan must
     listen after its last probe; the whole command (Python start-up, config, the simulated
-    arm's power-up, ids 1..127 on 3 buses at once, closing) must stay within 1.5 of them (issue 26).
+    arm's power-up, ids 1..127 on 3 buses at once, closing) must stay within 1.5 of them.
     """
     from sherpa_cli.config import load_config
 
@@ -162,7 +162,7 @@ def bench_scan(rounds: int = 5) -> Result:
     _fresh_wall(cmd)  # warm-up
     wall = statistics.median(_fresh_wall(cmd) for _ in range(rounds))
     timeout = cfg.protocol.sdo_timeout
-    goal = "<= 1.5"  # issue 26: was <= 2
+    goal = "<= 1.5"
     ratio = wall / timeout
     return Result("scan", round(wall * 1000, 1), "ms", round(ratio, 2), goal, _judge(ratio, goal),
                   f"median of {rounds} runs of `sherpa --sim scan` / protocol.sdo_timeout {timeout * 1000:g} ms; "
@@ -396,7 +396,7 @@ def bench_sdo(uploads: int = 1000, rounds: int = 3) -> Result:
                 runs.append(_cpu_per_op(upload, uploads))
     cpu = statistics.median(runs)
     ratio = cpu / BUS_PAIR_S
-    goal = "<= 0.35"  # issue 26: was <= 0.5
+    goal = "<= 0.35"
     return Result("sdo", round(cpu * 1e6, 1), "us CPU", round(ratio, 2), goal, _judge(ratio, goal),
                   f"CPU per upload of 0x1000:0 (ArmSession.sdo(ref).upload) / 222 us bus time; median of "
                   f"{rounds} x {uploads}; bare python-can pair on the same transport: "
@@ -431,7 +431,7 @@ def _program_arm_once(cfg, workers: int) -> tuple[float, float]:
     return wall, max(p.elapsed + o.elapsed for p, o in zip(plans, result.outcomes, strict=True))
 
 
-PROGRAM_SPEEDUP_GOAL = 7  # issue 26: program-limits on 14 drives at least 7x faster than drive after drive
+PROGRAM_SPEEDUP_GOAL = 7  # program-limits on 14 drives at least 7x faster than drive after drive
 
 
 def bench_program(rounds: int = 3, serial_rounds: int = 2) -> Result:
@@ -440,7 +440,7 @@ def bench_program(rounds: int = 3, serial_rounds: int = 2) -> Result:
 
     Ratio: wall time / the longest single drive's programming time in the same run (every
     drive in its own worker, so the arm takes as long as its slowest drive). Also the speed-up
-    over programming the drives one after another (goal >= 7, issue 26; was >= 5).
+    over programming the drives one after another (goal >= 7).
     """
     from sherpa_cli.config import load_config
 
@@ -521,7 +521,7 @@ def bench_scaling(sizes: tuple[int, ...] = (1, 3, 9)) -> Result:
         scan_ms[n] = _scan_once(cfg) * 1000
     first, last = min(program_ms), max(program_ms)
     ratio = program_ms[last] / program_ms[first]
-    goal = "printed"  # issue 26 asks for per-drive cost and linearity printed, not a bound
+    goal = "printed"  # per-drive cost and linearity are printed, not held to a bound
     per_drive = ", ".join(f"{n}: {v:.1f}" for n, v in program_ms.items())
     scans = ", ".join(f"{n}: {v:.0f} ms ({v / n:.1f} per drive)" for n, v in scan_ms.items())
     return Result("scaling", round(program_ms[last], 1), "ms/drive", round(ratio, 2), goal, True,
@@ -794,7 +794,7 @@ def program_workers() -> int:
     return MAX_DRIVE_WORKERS
 
 
-# -- log: record and capture (issue 13) ----------------------------------------------------------
+# -- log: record and capture ---------------------------------------------------------------------
 
 def bench_record(seconds: float = 5.0, rate: float = 1000.0) -> Result:
     """`log record`'s Recorder on the whole simulated arm (14 drives, 3 buses, in-process, wall time):
@@ -846,7 +846,7 @@ def bench_record_memory(long_s: float = 60.0, short_s: float = 5.0) -> Result:
     """Peak RSS of `sherpa log record` of all 14 joints at 1 kHz (PX+VX, no current) for 60 s over the
     same for 5 s, each as its own process, the simulated arm served in another process (`sherpa sim
     --serve`, python-can-remote on 127.0.0.1), so only the tool's memory is measured. Goal <= 1.1:
-    rows go to the CSV as they come (issue 26 item 5); also judged: the 60 s peak < 100 MB."""
+    rows go to the CSV as they come; also judged: the 60 s peak < 100 MB."""
     with tempfile.TemporaryDirectory(prefix="sherpa-bench-recmem-") as tmp:
         env = _env(tmp)
         sim, bus_map = _serve_sim(env, Path(tmp) / "events.jsonl")

@@ -1,6 +1,6 @@
 """Every file the tool writes for the user (`dump-params -o`, `--report`, `--junit`, ...) goes through here.
 
-Rules (issue 11, item 4), the same for every writer:
+Rules, the same for every writer:
 
 - ``-`` means standard output.
 - A symlink is followed: its target is what gets written (atomically replaced), the link stays.

@@ -15,7 +15,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 # filelock and platformdirs are imported where used: the CLI's root callback reaches this module on
-# every command, `--help` included, and they cost ~40 ms of start-up (issue 26 item 3)
+# every command, `--help` included, and they cost ~40 ms of start-up
 if TYPE_CHECKING:
     import filelock
 

@@ -1,4 +1,4 @@
-"""Shared by the killed-tool and signal tests (issue 22): one simulated arm in its own process per
+"""Shared by the killed-tool and signal tests: one simulated arm in its own process per
 test module (the realbus harness's when SHERPA_TEST_BUS selects one, else our own `sherpa sim --serve`
 on 127.0.0.1, power-cycled before every test as the harness does), and the moving commands as a
 user runs them in another process."""
@@ -19,7 +19,7 @@ from sherpa_cli.bus.busmap import apply_bus_map, parse_bus_map
 from sherpa_cli.bus.session import ArmSession, resolve_target
 from sherpa_cli.config import load_config
 
-# what the moving commands change on a drive (the journal's objects; issue 22 item 3)
+# what the moving commands change on a drive (the journal's objects)
 SDO_OBJECTS = [(0x1016, 1, "<I"), (0x1029, 1, "<B"), (0x6007, 0, "<h"), (0x2040, 0, "<B"), (0x1401, 2, "<B"),
                (0x1800, 1, "<I"), (0x1800, 2, "<B"), (0x1A00, 0, "<B"), (0x1A00, 1, "<I"), (0x1A00, 2, "<I"),
                (0x1802, 1, "<I"), (0x1802, 2, "<B"), (0x1A02, 0, "<B"), (0x1A02, 1, "<I")]

@@ -1,4 +1,4 @@
-"""Issue 21 item 11, across every transport: an absolute-encoder joint's counter PX restarts at 0 when
+"""Across every transport: an absolute-encoder joint's counter PX restarts at 0 when
 its drive is reset (the harness power-cycles the arm before every command), wherever the joint
 stands. The next moving command re-syncs PX from the encoder (drive:PY) with the motor off before
 it plans, so targets and the limit watch mean the joint's real position."""

@@ -1,4 +1,4 @@
-"""The Python API (issue 28 item 3): `sherpa_cli.Arm`, typed, and the CLI commands as thin layers over it."""
+"""The Python API: `sherpa_cli.Arm`, typed, and the CLI commands as thin layers over it."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""docs/api.md's examples run as written, on the simulated arm (issue 28 item 3)."""
+"""docs/api.md's examples run as written, on the simulated arm."""
 
 from __future__ import annotations
 

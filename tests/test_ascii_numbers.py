@@ -1,4 +1,4 @@
-"""Numbers are ASCII (issue 22 item 8): Python's float() and int() read the digits of every script
+"""Numbers are ASCII: Python's float() and int() read the digits of every script
 (a fullwidth 3 is 3, Arabic-Indic 12 is 12), so `--to` with a fullwidth 3 moved a joint by 3 rad. Every number parser of the CLI
 (the boundary, typer's options, units, raw commands, targets, recipes, recordings) and of the
 config refuses them with one message; nothing is sent."""

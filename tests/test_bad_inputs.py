@@ -1,4 +1,4 @@
-"""Generated bad inputs: 0 tracebacks and 0 hangs (issue 11 item 8).
+"""Generated bad inputs: 0 tracebacks and 0 hangs.
 
 A seeded generator builds over 1,500 bad inputs -- configs (native and rosparam; wrong types in
 every section; unsafe dead-man settings), recipes (and recipe steps with bad arguments), parameter
@@ -454,7 +454,7 @@ def cli_cases(rng: random.Random, tally: Tally, tmp: Path) -> None:
 
 
 # ---------------------------------------------------------------------------------------------
-# wrong types in every section of a config (issue 22 "Bad inputs")
+# wrong types in every section of a config
 
 TYPED = ["configs/appendix-c/example1.yaml", "configs/appendix-c/example3.yaml", "tests/data/jog-fast-arm.yaml",
          "tests/data/home-arm.yaml", "tests/data/step-arm.yaml", "tests/data/joystick-arm.yaml"]

@@ -1,5 +1,5 @@
 """A commanded move that stops progressing ends as "blocked" within about motion.stall_time, naming
-the end switch that blocks it (issue 21 item 7): a pair move into a pressed Σ end switch ran for its
+the end switch that blocks it: a pair move into a pressed Σ end switch ran for its
 whole time bound (12.6 s) and then said only that it did not reach its target."""
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""A bus that goes away mid-command (issue 22 item 7): the served simulator is killed (SIGKILL) while
+"""A bus that goes away mid-command: the served simulator is killed (SIGKILL) while
 `jog`, `home` or `log record` runs in another process. The command ends with one `error:` line naming
 the bus, exit 3, and no thread traceback from the CAN library (python-can's Listener.on_error path)."""
 
@@ -42,7 +42,7 @@ def test_the_simulator_killed_mid_command_gives_one_line_and_exit_3(remote_arm, 
     assert len(errors) == 1 and errors[0].startswith(f"error: bus {BUS_OF[name]} (") and \
         "the connection to the bus was lost" in errors[0], why
     assert ended < 30, why  # not the recording's 60 s
-    # issue 34 R10: one short line per drive not reached (it repeated the connection error per object,
+    # one short line per drive not reached (it repeated the connection error per object,
     # 750-970 characters), saying "not reached" as the docs do
     for line in err.splitlines():
         assert len(line) <= LONGEST_LINE, f"{len(line)} characters: {line}"

@@ -145,7 +145,7 @@ def elbow_session(tmp_path, monkeypatch, cfg):
 
 
 def test_an_absolute_joint_whose_counter_restarted_is_not_calibrated_when_only_looked_at(elbow_session, cfg):
-    """Issue 21 item 11: after a drive reset PX restarts at 0 while the joint stands elsewhere, and
+    """After a drive reset PX restarts at 0 while the joint stands elsewhere, and
     the limits and the watch read PX: never assumed calibrated; a looking command writes nothing."""
     from sherpa_cli.bus.targets import drive_ref
 

@@ -1,4 +1,4 @@
-"""Byte-exact transcripts of the caller-read path (issue 26 item 2, bus/reader.py): a DriveClient
+"""Byte-exact transcripts of the caller-read path (bus/reader.py): a DriveClient
 waiting for its reply reads the bus itself and dispatches every other frame it reads in bus order.
 
 The bus is scripted: each ``send`` must be the next ``tx`` step byte for byte; ``recv`` returns the

@@ -115,7 +115,7 @@ def test_the_hint_moves_the_refused_option_not_the_one_already_in_place(cli):
 
 
 def test_a_unit_split_from_its_value_is_named_not_taken_for_a_second_joint(cli):
-    """Issue 41 item 7: `jog elbow_pitch --to 0.1 rad` said "name one JOINT to jog (got 2)"."""
+    """`jog elbow_pitch --to 0.1 rad` used to say "name one JOINT to jog (got 2)"."""
     result = cli("--sim", "jog", "elbow_pitch", "--to", "0.1", "rad", "--apply")
     assert result.exit_code == 2, result.transcript()
     assert "'rad' after the value is its unit: write it without a space (--to 0.1rad" in result.stderr

@@ -124,7 +124,7 @@ def test_commission_stops_at_a_missing_drive_and_says_where_to_resume(cli, tmp_p
 
 
 def test_after_commissioning_one_changed_value_is_the_only_difference(cli, tmp_path):
-    # Issue 4's check after commissioning: the dump of a commissioned drive matches the config;
+    # The check after commissioning: the dump of a commissioned drive matches the config;
     # change one value and the diff shows exactly that one. With --sim a change must be saved
     # (SV) to outlive the invocation, exactly like a real arm that is power-cycled.
     r = cli("--config", EXAMPLE3, "--sim", "commission", "--apply", "--yes",

@@ -1,4 +1,4 @@
-"""Issue 11 items 10-11 and issue 10 item 4: a `commission` a technician reads in one screen,
+"""A `commission` a technician reads in one screen,
 a dry run that exits 0 on a fresh arm, and recipes that run in one session."""
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""Issue 25 item 4a: one wording for one thing across commands.
+"""One wording for one thing across commands.
 
 - IL values: `cmd DRIVE "IL[n]"` and `limits show` decode them with one decoder (elmo-protocol.md's
   IL table: 5 is "ignore, active high"; the config's il_codes name what the tool uses it for);
@@ -127,7 +127,7 @@ def test_check_wiring_of_an_absolute_encoder_joint_says_there_is_nothing_to_chec
 
 
 def test_a_log_step_dry_run_says_what_apply_would_refuse(cli, tmp_path):
-    """Issue 25: the dry run said "would move" and --apply then refused the joint as not homed."""
+    """The dry run used to say "would move" and --apply then refused the joint as not homed."""
     out = tmp_path / "step"
     dry = cli("--sim", "log", "step", "shoulder_yaw", "--position", "0.1", "-o", str(out))
     assert not out.exists()  # a dry run writes nothing
@@ -161,7 +161,7 @@ def test_a_log_step_dry_run_names_a_drive_in_fault(cli, tmp_path, monkeypatch):
 
 
 def test_a_diffdrive_move_dry_run_says_what_apply_would_refuse(cli):
-    """Issue 25: `diffdrive move`'s dry run said "would move" where --apply refused an un-homed pair."""
+    """`diffdrive move`'s dry run used to say "would move" where --apply refused an un-homed pair."""
     fast = ["--config", "tests/data/jog-fast-arm.yaml", "--sim"]
     dry = cli(*fast, "diffdrive", "move", "diff", "--sigma", "100counts")
     real = cli(*fast, "diffdrive", "move", "diff", "--sigma", "100counts", "--apply")

@@ -376,7 +376,7 @@ def test_a_naive_move_whose_held_joint_leaves_its_full_range_is_stopped_and_brou
             assert all(not d.motor_on for d in s.sim.drives.values())
 
 
-# --------------------------------------------------------------------------- recording (issue 15 item 2)
+# --------------------------------------------------------------------------- recording
 
 PDO_OBJECTS = [(0x1800, 1, 4), (0x1800, 2, 1), (0x1A00, 0, 1), (0x1A00, 1, 4), (0x1A00, 2, 4)]
 

@@ -1,4 +1,4 @@
-"""The guard's watch of its drives (issue 21 item 10, issue 22 item 7) on the simulated arm, in process:
+"""The guard's watch of its drives on the simulated arm, in process:
 an error EMCY from a moving drive, an NMT command another node sends, a drive's heartbeat that goes
 silent, and a foreign SDO write that disarms the dead-man each stop every drive of the command.
 

@@ -1,4 +1,4 @@
-"""Signals from the first instruction (issue 22 item 4): before a motion guard exists there is nothing
+"""Signals from the first instruction: before a motion guard exists there is nothing
 to stop, so SIGINT, SIGTERM and SIGHUP end `sherpa` with one line and 130 / 143 / 129, no traceback
 (docs/exit-codes.md). The CLI in its own process, as a user or a service manager starts it."""
 

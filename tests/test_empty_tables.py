@@ -1,4 +1,4 @@
-"""Empty is a normal case: every table renders with zero rows (issue 22 item 2).
+"""Empty is a normal case: every table renders with zero rows.
 
 A table with no rows crashed the renderer (``max()`` of a single int in ``fit_columns``); configs
 whose sections end up empty through YAML tags (``!foo``, ``!!set``) or merge keys reached it.

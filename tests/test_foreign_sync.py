@@ -1,4 +1,4 @@
-"""A second SYNC producer on a recorded bus (issue 22 item 7): another node (the test, on the served
+"""A second SYNC producer on a recorded bus: another node (the test, on the served
 bus) sends SYNC while `log record` or `log step` records. The drives answer both producers, so the
 samples no longer fit the tool's time grid: the command stops with one message naming the bus (exit
 3), after writing what it has and putting the PDO settings back (and, for `log step`, after the

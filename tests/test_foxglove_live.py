@@ -1,4 +1,4 @@
-"""`monitor --foxglove` (issue 28 item 2): a WebSocket client subscribes to /joint_states of the
+"""`monitor --foxglove`: a WebSocket client subscribes to /joint_states of the
 live view on the simulated arm and sees the positions follow the joint; the server binds to the
 loopback address unless told otherwise. The monitor's polls are stepped by the test (its `sleep`
 hook), so what each message holds does not depend on the machine's speed."""

@@ -1,5 +1,5 @@
-"""The motion guard's watch of its buses (motion/bus_watch.py; issue 24 item 4, issue 21 item 2 "bus
-errors"): a bus the command moves on that goes BUS-OFF (or ERROR-PASSIVE, `motion.bus_error_passive`)
+"""The motion guard's watch of its buses (motion/bus_watch.py): a bus the command moves on
+that goes BUS-OFF (or ERROR-PASSIVE, `motion.bus_error_passive`)
 ends the command, every drive that can still be reached is stopped -- those on the other buses first --
 and the report names the bus and its state (exit 3). A bus-off on a bus the command does not move on
 leaves it running.
@@ -344,7 +344,7 @@ def test_a_bus_off_during_a_jog_on_its_bus_stops_it_and_names_the_bus(cfg):
 
 
 def test_a_bus_off_on_another_bus_leaves_the_jog_running(cfg):
-    """Issue 24: the guard stops on bus-off "of any bus it moves on"; can0 is not the jog's bus."""
+    """The guard stops on bus-off of any bus it moves on; can0 is not the jog's bus."""
     result, _st, events, _after = jog(cfg, "drive1", during=lambda st: st.set_state("can0", "BUS-OFF"))
     assert not isinstance(result, BaseException), result
     assert result.ended_by == "time up" and result.duration >= JOG_S

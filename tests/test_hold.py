@@ -1,4 +1,4 @@
-"""`--hold` of a pair's Σ/Δ joint, a pair motor and `diffdrive move` (issue 21 item 5; motion/hold.py),
+"""`--hold` of a pair's Σ/Δ joint, a pair motor and `diffdrive move` (motion/hold.py),
 on the matrix's simulated arm running on stepped time (sim/stepped.py): during the hold every motor
 of the command is on and stands at the PA the hold gave it; MO=0 from elsewhere (what `sherpa stop`
 ends with) ends the hold normally, Ctrl-C too; a fault ends it with an error naming the drive. The

@@ -124,8 +124,8 @@ def test_end_switches_set_the_low_end_and_measure_the_range():
 def test_end_switches_starting_past_the_switch_move_off_it_first(tmp_path):
     # A home interrupted just after its search met the end switch (the return had begun) leaves the
     # joint past the switch edge, its input pressed: a search from there sees no edge and pushed into
-    # the end stop until the stall watch called it blocked (a flaky cross-process test in CI, issue 21
-    # item 13). The home moves off the switch first, as for a home switch, and finds the edge.
+    # the end stop until the stall watch called it blocked (a flaky cross-process test in CI).
+    # The home moves off the switch first, as for a home switch, and finds the edge.
     cfg = variant(tmp_path, ("stiff: 120", "stiff: -308"))
     plan, ctx = homed(cfg, ["stiff"])
     with ctx as s:

@@ -169,7 +169,7 @@ def test_pair_edge_window_is_validated(tmp_path):
     assert load_config(ARM).homing.pair_edge_window_ms == 100
 
 
-# -- issue 21 item 6: an interrupted home says what it left ------------------------------------------
+# -- an interrupted home says what it left -----------------------------------------------------------
 
 def test_ctrl_c_during_a_pair_home_reports_the_stop_and_the_joints_left_unhomed():
     cfg = load_config(ARM)
@@ -213,7 +213,7 @@ def test_cli_home_interrupted_prints_the_stop_report_and_which_joints_are_not_ho
     assert "Traceback" not in result.stderr
 
 
-# -- issue 34 R5: a home that resumes past its switch -------------------------------------------------
+# -- a home that resumes past its switch --------------------------------------------------------------
 
 def test_a_home_interrupted_past_its_switch_goes_back_before_it_instead_of_into_the_hard_stop():
     """R5: Ctrl-C after the search met the home switch, the joint then past it (the search's overshoot,

@@ -1,4 +1,4 @@
-"""Dead-man host ids safe across users and hosts (issue 34 R1), in process and across processes.
+"""Dead-man host ids safe across users and hosts, in process and across processes.
 
 - the machine lock of an id (motion/lock.py MachineLock) is seen by every process whatever its state
   directory, and the kernel drops it with its process, even by SIGKILL;

@@ -1,4 +1,4 @@
-"""Parsers with limits and damaged state files (issue 11 item 6).
+"""Parsers with limits and damaged state files.
 
 YAML inputs (configs, recipes, parameter dumps) refuse alias bombs, deep nesting, numbers of
 thousands of digits and files above the size cap, each with one located message. A damaged

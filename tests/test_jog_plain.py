@@ -247,7 +247,7 @@ def test_the_limit_watch_stops_with_the_configured_stop_method(tmp_path):
     assert "ST" not in executed and "BG" in executed  # motion.stop_method jv0: JV=0 + BG, never ST
 
 
-# -- --hold and gravity-loaded joints (issue 21 item 5) ----------------------------------------------
+# -- --hold and gravity-loaded joints ----------------------------------------------------------------
 
 def test_hold_keeps_the_motor_on_at_the_end_position_until_ctrl_c(cfg):
     seen: list[tuple[bool, int]] = []

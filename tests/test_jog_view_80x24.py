@@ -1,4 +1,4 @@
-"""The seed's test GUI (Appendix E) in the terminal, headless at 80x24 (issue 25 item 4):
+"""The seed's test GUI (Appendix E) in the terminal, headless at 80x24:
 the selected joint and the key help always on screen, typed set points in joint units with
 Start/Stop, the set point shown equal to what was sent, Get Status with details on request, Calibrate
 (the home plan fits the screen, the joint is homed); and

@@ -94,7 +94,7 @@ def _leave(drive: str, bus: str, node: int, steps: list[journal.Step]) -> None:
 
 
 def test_notes_of_values_the_drive_already_holds_are_dropped_not_refused(cli):
-    """Issue 34 R9: a drive reset since the note holds every noted value again (RAM at flash
+    """A drive reset since the note holds every noted value again (RAM at flash
     values): `recover` says so, and a jog goes on instead of refusing."""
     _leave("elbow_1a", "can1", 40, [journal.interp("motion command", "UM", 0, 5),
                                     journal.sdo("motion command", 0x1016, 1, 4, 0),
@@ -116,7 +116,7 @@ def test_notes_of_values_the_drive_does_not_hold_still_refuse(cli):
 
 
 def test_a_note_whose_pid_a_later_process_reuses_is_still_a_leftover():
-    """Issue 34 R6: the note keeps the process's identity (boot id, start time): a live process that
+    """The note keeps the process's identity (boot id, start time): a live process that
     got the same pid later (or this process, for a note of another boot) does not hide the leftover."""
     r = ref()
     me = journal.process_identity(os.getpid())
@@ -144,7 +144,7 @@ def test_a_note_whose_pid_a_later_process_reuses_is_still_a_leftover():
                                      '{"steps": [{"owner": "motion command"}]}', '[1, 2]'],
                          ids=["truncated", "garbage", "damaged-step", "not-a-journal"])
 def test_a_damaged_journal_is_refused_and_recover_resets_the_drive_from_flash(cli, content):
-    """Issue 34 R6: a damaged journal used to read as "nothing to recover" while the drive kept what a
+    """A damaged journal used to read as "nothing to recover" while the drive kept what a
     killed command changed. Now the next motion command refuses, `recover` says the journal is
     damaged and what the drive shows, and `--apply` (motor off) resets the drive (RAM from flash)
     and moves the journal aside."""

@@ -1,4 +1,4 @@
-"""The journal of temporary drive changes across processes (issue 22 item 3): SIGKILL a `jog
+"""The journal of temporary drive changes across processes: SIGKILL a `jog
 --velocity` or a `log record` in its own process; the next motion command refuses the drive and says
 what was left; `sherpa recover --apply` puts it back (the touched objects read exactly as before the
 killed command); a jog then works.

@@ -1,5 +1,5 @@
-"""A moving command killed (SIGKILL) in its own process, the simulated arm in another (issue 22 "Killed
-tool"): the next motion command refuses the drive and says what a killed command left; `sherpa
+"""A moving command killed (SIGKILL) in its own process, the simulated arm in another: the
+next motion command refuses the drive and says what a killed command left; `sherpa
 recover` says what happened and, with --apply, puts it back so that the drive reads exactly as before
 the killed command (SDO and interpreter snapshot); a jog then works. `jog --velocity` and `log record`
 are also covered by tests/test_journal_crossprocess.py; here `home`, `diffdrive move` and `log step`,
@@ -107,7 +107,7 @@ def test_a_journal_deleted_by_hand_blinds_recover_but_check_drives_reads_the_dri
 
 def test_recover_killed_right_after_its_mo1_leaves_the_motor_to_its_consumer_and_the_journal_to_the_next(
         arm, tmp_path):
-    """Issue 34 R2: `recover --apply` clears a tripped dead-man with MO=1, MO=0. It used to send MO=1
+    """`recover --apply` clears a tripped dead-man with MO=1, MO=0. It used to send MO=1
     with the consumer already put back (0x1016:1 = 0) and the journal already deleted: killed in that
     window the motor stayed on, and `recover` then said "nothing to recover". Now it arms a dead-man of
     its own first and keeps the journal until the drive is back."""
@@ -152,7 +152,7 @@ PAIR_JOG = Moving("pair jog", ("jog", "shoulder_pitch", "--velocity", "0.03", "-
 @pytest.mark.parametrize("name", ["home", "diffdrive move", "pair jog"])
 def test_sherpa_stop_from_elsewhere_ends_home_and_a_pair_move_normally_with_every_setting_put_back(
         own_arm, tmp_path, name):
-    """Issue 34 R4: `sherpa stop` during `home` (4/5) or a pair move ended with "no answer to HM[1]
+    """`sherpa stop` during `home` (4/5) or a pair move ended with "no answer to HM[1]
     within 0.1 s ... check that the drive is powered" (exit 3) and left UM, SP, HM[1] and the dead-man
     changed (the indexed query skipped the MO settle wait). Now: exit 1, the stop from elsewhere
     named, nothing about power, the drives as before, nothing for `recover`."""
@@ -184,7 +184,7 @@ def test_sherpa_stop_from_elsewhere_ends_home_and_a_pair_move_normally_with_ever
 
 @pytest.mark.parametrize("name", ["home", "diffdrive move", "log step", "log record"])
 def test_a_drive_reset_during_a_command_leaves_nothing_the_next_command_refuses(own_arm, tmp_path, name):
-    """Issue 34 R9: NMT reset node from another node while a command runs: its RAM is back at flash
+    """NMT reset node from another node while a command runs: its RAM is back at flash
     values, so no note of it may make the next motion command refuse the drive."""
     from test_motion_crossprocess import send_frame
 
@@ -232,7 +232,7 @@ def _recorder_settings(arm, drive: str) -> dict[str, int]:
 
 
 def test_a_killed_drive_recording_leaves_its_recorder_settings_to_recover(arm, tmp_path):
-    """Issue 34 R7: the drive recorder's settings (RV, RC, RG, RL, RP[3]) are journaled before they
+    """The drive recorder's settings (RV, RC, RG, RL, RP[3]) are journaled before they
     change: a SIGKILLed `log record --source drive` leaves them listed by `recover`, which puts them back."""
     import json
 
@@ -271,7 +271,7 @@ sys.exit(run(sys.argv[1:]))
 
 
 def test_program_limits_killed_before_its_sv_is_saved_by_the_rerun_and_recover_says_so(arm, tmp_path):
-    """Issue 34 R3: SIGKILL between the last verified write and the SV. The rerun used to say
+    """SIGKILL between the last verified write and the SV. The rerun used to say
     "nothing to change: RAM holds the targets ... no SV sent" and the next power-up lost every value.
     Now the save ledger is marked before the first write: `recover` lists the drive as SV pending,
     and the rerun with --save saves (after read-back), counted."""

@@ -148,7 +148,7 @@ def test_decoder_never_raises_on_garbage():
     (0x1A8, "remote request (RTR) for node 40's TPDO1"),
 ])
 def test_a_remote_frame_is_a_remote_request_not_what_it_would_be_with_data(cob, text):
-    """Issue 35 item 6: `70A#R` read as "heartbeat (empty)", `080#R` as a SYNC, a TPDO RTR as that TPDO."""
+    """`70A#R` used to read as "heartbeat (empty)", `080#R` as a SYNC, a TPDO RTR as that TPDO."""
     d = FrameDecoder().decode(Frame(0.0, "can0", cob, b"", is_remote=True))
     assert (d.kind, d.text) == ("remote", text)
     assert d.as_json(0.0)["remote"] is True
@@ -164,7 +164,7 @@ def test_a_remote_frame_is_a_remote_request_not_what_it_would_be_with_data(cob, 
     (0x70A, "", "heartbeat with 0 byte(s)"),
 ])
 def test_a_malformed_frame_is_flagged_with_what_is_wrong_never_shown_as_a_valid_request(cob, data, why):
-    """Issue 35 item 6: `60A#4000100000` was shown as "SDO read 0x1000:0"."""
+    """`60A#4000100000` used to be shown as "SDO read 0x1000:0"."""
     d = FrameDecoder().decode(Frame(0.0, "can0", cob, bytes.fromhex(data)))
     assert d.kind == "malformed" and why in d.text, (d.kind, d.text)
     assert d.as_json(0.0)["remote"] is False and d.fields["malformed"].startswith(why.split(" (")[0])

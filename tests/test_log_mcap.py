@@ -1,4 +1,4 @@
-"""MCAP (issue 28 items 1 and 4): a `log record` MCAP read back with the mcap reader and decoded
+"""MCAP: a `log record` MCAP read back with the mcap reader and decoded
 with mcap-ros2-support equals the CSV of the same run; a `log capture` MCAP decodes like the
 candump .log of the same frames; without the robotics extra, one line says what to install."""
 

@@ -156,7 +156,7 @@ def test_plot_and_step_refuse_non_finite_numbers(cli, tmp_path):
     assert r.exit_code == 2 and "--position inf" in r.stderr
 
 
-# -- plots a technician reads at a glance (issue 25 item 2): pixel-free, through the artist tree --------
+# -- plots a technician reads at a glance: pixel-free, through the artist tree --------------------------
 
 def _artists(fig):
     """Per axes (visible ones, top to bottom): title, labels, legend texts and the legend's placement."""

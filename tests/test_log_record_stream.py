@@ -1,4 +1,4 @@
-"""`log record` in constant memory (issue 26 item 5): each completed SYNC row goes to the CSV as it
+"""`log record` in constant memory: each completed SYNC row goes to the CSV as it
 comes, only a short window stays in memory; what is reported is what is in the file."""
 
 from __future__ import annotations

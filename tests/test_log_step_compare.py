@@ -1,4 +1,4 @@
-"""Issue 25 item 1: `log step` reports metrics only for a settled step (log/settle.py), and
+"""`log step` reports metrics only for a settled step (log/settle.py), and
 `log step --compare RUN...` overlays earlier runs with their figures (log/step_compare.py).
 The plots are checked through matplotlib's artist tree, not pixels."""
 

@@ -1,4 +1,4 @@
-"""`sherpa --sim log step --source drive` (issue 27): one step recorded by the drive's own recorder and
+"""`sherpa --sim log step --source drive`: one step recorded by the drive's own recorder and
 over CAN at once, golden reports on stepped time (tests/test_log_step_golden.py explains it), and the
 two recordings' step metrics agree within one CAN sample period. Also: the recorder settings are put
 back, the drive's recording is at the servo rate, and --source drive refuses an MCAP output."""

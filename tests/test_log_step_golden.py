@@ -1,4 +1,4 @@
-"""Golden outputs of `sherpa --sim log step` (issue 13: a position step of 1 rad with the MO/UM
+"""Golden outputs of `sherpa --sim log step` (a position step of 1 rad with the MO/UM
 switch's delay when the drive was in another mode and none when it was not, a velocity step of
 0.1 rad/s, a torque step of 1 A).
 
@@ -25,7 +25,7 @@ CASES = [
     ("log-step-position-no-switch", ["--position", "1"], (5, 1)),  # already position mode, motor on
     ("log-step-velocity", ["--velocity", "0.1", "--for", "1"], None),
     ("log-step-torque", ["--torque", "1", "--for", "0.3"], None),
-    # issue 25 item 1: cut off before it settles -> "not settled within 0.2 s", no overshoot or error
+    # cut off before it settles -> "not settled within 0.2 s", no overshoot or error
     ("log-step-position-not-settled", ["--position", "1", "--for", "0.2"], None),
     # Fig. 9.2: the drive put in position mode before t = 0, so the step has no switch
     ("log-step-position-mode-first", ["--position", "1", "--mode-first"], None),

@@ -1,5 +1,5 @@
 """The one axis (motion/axis.py): the joint <-> motor maps of every kind, the one move-time bound,
-and the one resolver (issue 21 item 1)."""
+and the one resolver."""
 
 from __future__ import annotations
 

@@ -233,7 +233,7 @@ def test_program_limits_during_a_jog_in_another_process_is_refused_with_exit_5(a
 
 def test_sigkill_during_hold_leaves_the_motor_stopped_by_the_drives_consumer(arm, tmp_path):
     """`jog --hold`: after its short velocity move the joint is held in position mode; a SIGKILL of
-    the holding tool leaves the drive's own consumer to switch the motor off (issue 21 item 5)."""
+    the holding tool leaves the drive's own consumer to switch the motor off."""
     since = time.monotonic()
     proc = sherpa(arm, tmp_path, "jog", JOINT, "--velocity", "0.2", "--for", "0.3", "--hold", "--apply")
     try:
@@ -253,7 +253,7 @@ def test_sigkill_during_hold_leaves_the_motor_stopped_by_the_drives_consumer(arm
     assert 0 < (off["t"] - t_kill) / arm.consumer_s <= 1.5
 
 
-# -- issue 21, Done when: two commands on one bus; the profile a plain `jog --to` sets ---------------
+# -- two commands on one bus; the profile a plain `jog --to` sets ------------------------------------
 
 OTHER_DRIVE, OTHER_JOINT = "wrist_1a", "wrist_1"  # a second plain joint on the same bus (can1)
 
@@ -261,7 +261,7 @@ OTHER_DRIVE, OTHER_JOINT = "wrist_1a", "wrist_1"  # a second plain joint on the 
 @pytest.mark.parametrize("how", [signal.SIGKILL, signal.SIGSTOP])
 def test_two_motion_commands_on_one_bus_a_killed_or_frozen_one_stops_its_drive_the_other_keeps_running(
         arm, tmp_path, how):
-    """Issue 21 item 9: each command's drives watch that command's heartbeat, so another sherpa motion
+    """Each command's drives watch that command's heartbeat, so another sherpa motion
     command on the same bus never keeps a killed (SIGKILL) or frozen (SIGSTOP) command's drive moving
     (it did for 6.7 s, until the other command ended), and the other command's drive keeps running."""
     centre(arm, tmp_path, OTHER_JOINT)
@@ -296,7 +296,7 @@ def test_two_motion_commands_on_one_bus_a_killed_or_frozen_one_stops_its_drive_t
 
 
 def test_a_plain_jog_to_sets_the_configured_speed_whatever_sp_the_drive_holds(arm, tmp_path):
-    """Issue 21 item 12: a position jog on a drive holding SP=100000 (set by another node) moves at the
+    """A position jog on a drive holding SP=100000 (set by another node) moves at the
     joint's configured velocity limit (400 counts/s), not at what the drive held: the tool writes SP
     before its BG. Read on the bus, as another node would."""
     from test_drive_watch_crossprocess import other_node, send
@@ -338,7 +338,7 @@ SECOND_HOME_S = 8.0  # s of motion for a home that starts at its switch (a push 
 
 
 def test_an_interrupted_home_then_home_finds_the_switch_without_pushing_the_end_stop(arm, tmp_path):
-    """Issue 21 item 13: Ctrl-C just after the search met the switch (the return move had begun) left the
+    """Ctrl-C just after the search met the switch (the return move had begun) left the
     joint at or past its switch; the next `home` searched away from it and pushed against the end stop
     for its whole 28.6 s bound. It must find the switch and end normally, its motion short."""
     since = time.monotonic()
@@ -367,7 +367,7 @@ def test_an_interrupted_home_then_home_finds_the_switch_without_pushing_the_end_
     assert offs[-1] - ons[0] <= SECOND_HOME_S, f"the second home moved {offs[-1] - ons[0]:.1f} s: {events}"
 
 
-# -- issue 34 R1: other users and other hosts on the bus ------------------------------------------
+# -- other users and other hosts on the bus -------------------------------------------------------
 
 PRODUCER = """\
 import sys, time
@@ -574,7 +574,7 @@ def send_frame(arm: Arm, tmp_path, bus: str, can_id: int, data: bytes) -> None:
 
 
 def test_a_drive_reset_during_a_jog_leaves_no_notes_that_make_the_next_command_refuse(arm, tmp_path):
-    """Issue 34 R9: NMT reset node from another node during a jog: the jog stops (exit 1, the reset
+    """NMT reset node from another node during a jog: the jog stops (exit 1, the reset
     named); the drive's RAM is back at its flash values, so the next jog does not refuse it for
     notes of values the reset already put back, and `recover` has nothing to put back."""
     proc, _ = start_jog(arm, tmp_path)
@@ -589,7 +589,7 @@ def test_a_drive_reset_during_a_jog_leaves_no_notes_that_make_the_next_command_r
 
 
 def test_scan_reset_is_refused_while_a_jog_runs_on_the_bus(arm, tmp_path):
-    """Issue 34 R10: a reset communication during a jog would put the drive's consumer back (its
+    """A reset communication during a jog would put the drive's consumer back (its
     dead-man gone); `scan --reset --apply` refuses with exit 5 before sending, the jog runs on."""
     proc, t_on = start_jog(arm, tmp_path)
     try:
@@ -626,7 +626,7 @@ def long_arm(arm_process, tmp_path, rebaseline):
 
 
 def test_a_recording_beside_a_jog_on_one_drive_never_takes_the_jogs_sdo_answers(long_arm, tmp_path):
-    """Issue 34 R8: `log record` and a jog on one drive, started together 20 times: their SDO
+    """`log record` and a jog on one drive, started together 20 times: their SDO
     transfers (the recorder's TPDO set-up and restore, the guard's dead-man objects and checks) take
     turns on the drive's one SDO channel (bus/machine_lock.py TransferLock). Before, one run in a few
     ended the jog with "SDO upload of 0x1016:1: malformed answer (Node returned a value for 0x1A00:02

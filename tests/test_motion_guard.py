@@ -364,7 +364,7 @@ def test_motion_config_round_trips_through_convert(tmp_path, cfg):
     assert again.motion == cfg.motion and again.motion.consumer_time_ms == 300
 
 
-# -- review of issue 12: the exit's safety defects ---------------------------------------------------
+# -- the exit's safety defects -----------------------------------------------------------------------
 
 def test_a_failed_mo0_keeps_the_dead_man_armed_and_says_so(cfg, monkeypatch):
     from sherpa_cli.errors import CommunicationError

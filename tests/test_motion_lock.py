@@ -160,7 +160,7 @@ def test_jog_on_a_drive_another_process_moves_exits_5_with_one_line(cli, golden,
     golden("jog-motion-locked.txt", result.transcript().replace(str(holder.pid), "PID"))
 
 
-# -- one write lock per drive for every command that writes to it (issue 21 item 14) -------------------
+# -- one write lock per drive for every command that writes to it --------------------------------------
 
 def test_program_limits_is_refused_while_another_command_moves_the_drive(cli):
     from sherpa_cli.bus.targets import drive_ref

@@ -1,4 +1,4 @@
-"""The invariant matrix of issue 21: every moving command x every axis kind it accepts x every way
+"""The safety-invariant matrix: every moving command x every axis kind it accepts x every way
 out, on the in-process simulated arm running on stepped time (sim/stepped.py: the simulated drives
 move only while the command waits, so how far a motor got when a way out is injected does not
 depend on the host's load).
@@ -483,7 +483,7 @@ def test_every_way_out_stops_from_standstill_switches_off_puts_ram_back_and_repo
     # Ctrl-C is how a hold is meant to end: a normal end that says so (and the way out found it holding)
     if row.hold and way == "ctrl_c":
         assert out.error is None and "held until Ctrl-C" in told, f"{what}: Ctrl-C did not end the hold normally"
-    # clear endings (issue 21 item 7, 8): what ended the command is named
+    # clear endings: what ended the command is named
     if way == "end_switch":
         assert "end switch" in told, f"{what}: the end switch is not named"
     if way == "stall":
@@ -496,14 +496,14 @@ def test_every_way_out_stops_from_standstill_switches_off_puts_ram_back_and_repo
         assert "heartbeat lost" not in text, f"{what}: {drive} stopped by its own heartbeat consumer at {t:.3f}"
         if text == "motor off: MO=0":
             assert abs(v) <= STANDSTILL, f"{what}: {drive} switched off while moving at {v:.0f} counts/s"
-    # the move back after a limit breach starts only from standstill (issue 21 item 3): every position
+    # the move back after a limit breach starts only from standstill: every position
     # move begun after the breach (the recovery: BG with PA/PR; a velocity refresh is not one) found its
     # motor still
     if way == "limit_breach" and out.injected is not None:
         for drive, t, text, v in out.record.events:
             if text.startswith("BG") and ("PA=" in text or "PR=" in text) and t >= out.injected:
                 assert abs(v) <= STANDSTILL, f"{what}: {drive} {text} at {t:.3f} while moving at {v:.0f} counts/s"
-    # 1b. no motor went on without an armed dead-man (issue 34 R2; the sim drive records every MO=1
+    # 1b. no motor went on without an armed dead-man (the sim drive records every MO=1
     # that found no consumer watching, sim/drive.py UNGUARDED_MO)
     unguarded = [(d, round(t, 3), text) for d, t, text, _ in out.record.events if text.startswith(UNGUARDED_MO)]
     assert not unguarded, f"{what}: {unguarded}"

@@ -1,5 +1,5 @@
 """The one recovery (motion/recovery.py): breach -> stop -> standstill -> move back, and its one
-outcome when standstill does not come (issue 21 item 3). Fakes with a stepped clock: no bus."""
+outcome when standstill does not come. Fakes with a stepped clock: no bus."""
 
 from __future__ import annotations
 

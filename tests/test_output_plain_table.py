@@ -1,5 +1,5 @@
 """cli/output.py plain_table: the text rich prints for make_table (no title, no colour), byte for byte,
-on random tables; and None wherever rich must lay the table out itself (issue 26 item 4)."""
+on random tables; and None wherever rich must lay the table out itself."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Per-drive pacing of bus/links.py PacedNetwork (issue 26 item 1; elmo-protocol.md §4.2): frames to
+"""Per-drive pacing of bus/links.py PacedNetwork (elmo-protocol.md §4.2): frames to
 one drive keep the bus's send gap unless that drive answered the previous one; any two frames on
 the bus keep the floor; `protocol.pacing: per-bus` keeps today's gap between any two frames.
 Time is injected: a clock that only the network's own sleeps move."""

@@ -1,4 +1,4 @@
-"""One drive of the differential pair dies in the middle of a command (issue 21 item 8), across
+"""One drive of the differential pair dies in the middle of a command, across
 processes: the simulated arm served over python-can-remote by `sherpa sim --serve` with
 ``sim: drives: shoulder_2b: {die_moving_after: S}`` (the drive goes silent S s after its first BG, so in
 the middle of the move whatever the host's start-up time), the command in a process of its own, and

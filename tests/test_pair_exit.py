@@ -156,7 +156,7 @@ def test_a_second_ctrl_c_during_the_restore_does_not_skip_the_rest_of_it(interru
 
 @pytest.mark.parametrize("how", ["diffdrive", "sigma_jog"])
 def test_one_pair_drive_dying_stops_the_partner_at_once_and_ends_the_command_naming_it(tmp_path, how, monkeypatch):
-    """Issue 21 item 8: `right` dies mid-move. Its partner gets its stop after at most one request to
+    """`right` dies mid-move. Its partner gets its stop after at most one request to
     the dead drive (the request's attempts), never after the dead drive's timeouts of every exit step;
     the command ends with an error naming the dead drive, and the dead drive costs no more requests
     in the exit (the guard, the common start's restore and the recorder skip a silent drive)."""

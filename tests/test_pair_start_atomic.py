@@ -1,5 +1,5 @@
 """`motion.pair_start: sync_rpdo` is atomic: both BG frames go out before one SYNC, whatever other
-SYNC source of the tool runs meanwhile (issue 23 item 2; bus/syncgate.py).
+SYNC source of the tool runs meanwhile (bus/syncgate.py).
 
 The other source is the recorder's own SYNC thread (log/record.py ThreadSync) at 500 Hz. The
 network keeps a 5 ms floor between any two frames it sends (``protocol.pacing_floor_us``, what a

@@ -1,4 +1,4 @@
-"""Ports are range-checked where they are parsed (issue 22 item 2): `sim --serve HOST:PORT` serves
+"""Ports are range-checked where they are parsed: `sim --serve HOST:PORT` serves
 bus i on PORT + i, so PORT plus the number of buses must fit in 1..65535; a remote bus of
 --bus-map names a port 1..65535. One message naming the option and the bound, exit 2."""
 

@@ -1,4 +1,4 @@
-"""Issue 26 item 4: a recipe step's results are rendered only when someone sees or reads them
+"""A recipe step's results are rendered only when someone sees or reads them
 (--verbose, --report/--junit, --json, an expectation on stdout); otherwise no table is laid out."""
 
 from __future__ import annotations

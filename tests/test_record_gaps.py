@@ -1,4 +1,4 @@
-"""A recording with holes says how many samples are missing and where (issue 22 item 8: a 60 s
+"""A recording with holes says how many samples are missing and where (a 60 s
 recording reported "100.00 %" while its file had empty rows). SYNCs the test leaves out on simulated
 time (a ManualClock, SYNC in lockstep) are the holes; the report names their times as the file has
 them, streamed (CSV row by row) or kept in memory. And a second SYNC producer, found on the same

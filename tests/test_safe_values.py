@@ -1,4 +1,4 @@
-"""Safe values (issue 22 item 8): rates, durations and dead-man settings outside the bounds that keep
+"""Safe values: rates, durations and dead-man settings outside the bounds that keep
 the tool alive and the dead-man meaningful are refused, naming the bound (exit 2), before anything
 is sent. Unicode digits: tests/test_ascii_numbers.py."""
 

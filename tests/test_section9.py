@@ -1,4 +1,4 @@
-"""Issue 25 item 3: recipes/seed-section9.yaml reproduces the seed's Section 9 on the simulator's seed
+"""recipes/seed-section9.yaml reproduces the seed's Section 9 on the simulator's seed
 profile, and its summary's numbers fall within the bands of docs/section9.md.
 
 The bands live in one place, docs/section9/bands.yaml: the summary command checks them, this test

@@ -1,4 +1,4 @@
-"""Issue 11 item 14: shell completion, and the default config found outside the repository."""
+"""Shell completion, and the default config found outside the repository."""
 
 from __future__ import annotations
 

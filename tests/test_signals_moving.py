@@ -1,5 +1,5 @@
 """SIGINT and SIGTERM to every moving command (jog, home, diffdrive move, log step, log record) at
-0.05 s, at 0.2 s and mid-move (issue 22 "Signals"), each in its own process with the simulated arm in
+0.05 s, at 0.2 s and mid-move, each in its own process with the simulated arm in
 another (one simulator for the module): the documented exit code (docs/exit-codes.md "Signals"), one
 `error:` line and no traceback, the stop report when a motor was on, and nothing left in the journal."""
 

@@ -1,4 +1,4 @@
-"""CiA 301 conformance of the simulated drive (issue 11 item 9).
+"""CiA 301 conformance of the simulated drive.
 
 - NMT Stopped: only NMT and error control (heartbeat) work; no SDO answer, no interpreter.
 - SDO: after an abort (either side) or a finished transfer a stray segment request is aborted,

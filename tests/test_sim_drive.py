@@ -581,7 +581,7 @@ def test_the_frame_record_stays_bounded(monkeypatch):
 
 
 def test_a_stopped_node_sends_no_emcy_and_0x1003_0_written_0_clears_the_history(clock):
-    """CiA 301 (issue 35): no EMCY in NMT Stopped (the error is still stored); 0x1003:0 := 0 deletes
+    """CiA 301: no EMCY in NMT Stopped (the error is still stored); 0x1003:0 := 0 deletes
     the stored errors, any other value is refused."""
     from sherpa_cli.sim.od import ODError
 

@@ -151,7 +151,7 @@ def test_nmt_reset_node_loses_unsaved_values_and_keeps_saved_ones(tmp_path):
 @pytest.mark.parametrize("reboots", [False, True], ids=["cia301", "reset_comm_reboots"])
 def test_nmt_reset_communication_reloads_the_communication_objects_and_keeps_the_application_ram(
         tmp_path, reboots):
-    """CiA 301 (issue 35): reset communication puts 0x1000-0x1FFF back to their saved values (the
+    """CiA 301: reset communication puts 0x1000-0x1FFF back to their saved values (the
     heartbeat consumer a motion command armed is gone) and keeps the application's RAM; the sim
     setting `reset_comm_reboots: true` plays a drive that reboots instead."""
     extra = "sim:\n  drives:\n    drive1: {reset_comm_reboots: true}\n" if reboots else ""

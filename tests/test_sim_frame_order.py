@@ -1,4 +1,4 @@
-"""One outbox, in order (issue 35 item 4): every frame a simulated drive sends, SDO answers included,
+"""One outbox, in order: every frame a simulated drive sends, SDO answers included,
 leaves in the order it was produced. A TPDO the drive produced before an SDO request is never sent
 after the answer to that request. Before, SDO answers went straight to the bus while the drive's
 other frames waited in its outbox: with a 1 ms event timer, 56 of 60 tries showed a TPDO after the
@@ -76,7 +76,7 @@ def test_no_tpdo_leaves_after_the_answer_that_disabled_it():
 
 
 def test_a_remote_frame_on_the_sync_id_is_no_sync():
-    """CiA 301 (issue 35): an RTR frame on 0x080 requests a frame; it is no SYNC. Five of them made
+    """CiA 301: an RTR frame on 0x080 requests a frame; it is no SYNC. Five of them made
     five synchronous TPDOs."""
     cfg = load_config(ROOT / "configs/sherpa-arm.yaml")
     with ArmSession.open(cfg, sim=SimArm.in_process(cfg), buses=[BUS]) as s:

@@ -80,7 +80,7 @@ def test_motor_events_record_mo_switching_and_bg(clock):
     assign(drive, "MO", 0, 0)
     assert [text for _, text in drive.events] == [
         "motor on: MO=1",
-        # the drive itself is not armed here: the simulator says so (the tool's invariant, issue 34 R2)
+        # the drive itself is not armed here: the simulator says so (the tool's invariant)
         "motor on without an armed dead-man: 0x1016:1 host 0 0 ms, no heartbeat heard since armed, 0x6007=1",
         "BG: UM=5, JV=500", "motor off: MO=0"]
     assert drive.unguarded_motor_on == 1

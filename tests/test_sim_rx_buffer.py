@@ -1,4 +1,4 @@
-"""The simulated drive's one receive buffer (SimSettings.rx_buffer_s, issue 26 item 1): a frame to
+"""The simulated drive's one receive buffer (SimSettings.rx_buffer_s): a frame to
 the drive before it took (answered, or held for rx_buffer_s) the previous one is an overrun, lost
 and counted, so a tool that paces too fast is caught. Time moves only through a ManualClock."""
 

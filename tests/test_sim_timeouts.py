@@ -1,4 +1,4 @@
-"""Issue 11 item 16: with --sim the reply timeout is the simulator's (patient), real-bus defaults stay."""
+"""With --sim the reply timeout is the simulator's (patient), real-bus defaults stay."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Issue 11 items 13 and 15: tables at 80 columns; Appendix C's software side (Tables C.1/C.2) and a
+"""Tables at 80 columns; Appendix C's software side (Tables C.1/C.2) and a
 config written back in the seed's D.1 format."""
 
 from __future__ import annotations

@@ -29,8 +29,8 @@ def test_the_command_tree_is_built_once_per_process():
     assert root_command() is root_command()
 
 
-#: what no `--help` may import: typer 0.29's pydantic adapters (pinned below 0.29 in pyproject.toml,
-#: issue 26 item 3), the CAN stack, rich, the plot, the full-screen view and the simulator
+#: what no `--help` may import: typer 0.29's pydantic adapters (pinned below 0.29 in pyproject.toml),
+#: the CAN stack, rich, the plot, the full-screen view and the simulator
 NOT_FOR_HELP = ("pydantic", "can", "canopen", "rich", "matplotlib", "textual", "sherpa_cli.sim",
                 # the state files' lock and directory helpers, and the journal (~40 ms together)
                 "filelock", "platformdirs", "sherpa_cli.bus.journal")
@@ -49,7 +49,7 @@ def test_help_imports_neither_pydantic_nor_anything_heavy(argv):
     assert out.stdout.strip().splitlines()[-1] == "[] 0", out.stdout
 
 
-#: what `sherpa --sim scan` never runs, so never imports (issue 26, benchmark `scan`): the plot, the
+#: what `sherpa --sim scan` never runs, so never imports (benchmark `scan`): the plot, the
 #: full-screen view, the MCAP writer; the programming engine and the flash ledger (`sherpa_cli.api`
 #: reaches `Arm` without them), the stop procedure, the motion core, recording, recipes, the
 #: journal, and the preflight only recipes and moving commands run

@@ -162,7 +162,7 @@ def test_cli_stop_reports_partly_stopped_naming_the_unreached_drives(cli, monkey
 
 
 def test_stop_with_no_bus_reachable_says_nothing_was_stopped_names_every_bus_and_the_power(cli):
-    """Issue 41 item 5: it printed only the socket error (exit 3), not that nothing was stopped, nor
+    """It used to print only the socket error (exit 3), not that nothing was stopped, nor
     the other buses, nor what is left to do."""
     closed = ",".join(f"{bus}=remote:127.0.0.1:1" for bus in ("can0", "can1", "can2"))
     result = cli("--bus-map", closed, "stop")

@@ -1,4 +1,4 @@
-"""YAML nesting limits hold whatever PyYAML and libyaml refuse first (issue 22 item 1).
+"""YAML nesting limits hold whatever PyYAML and libyaml refuse first.
 
 PyYAML 6.0.4's libyaml scanner refuses deep flow nesting while scanning ahead, before the
 parser yields the events the project's depth check counts; the pure loader that composes

@@ -4,7 +4,7 @@ It sits above the procedures (ops) and below the CLI, whose commands are thin la
 it may wire in the simulator (``Arm.open(..., sim=True)``), as the CLI does.
 
 Each name is imported on first use: `sherpa scan` reaches ``Arm`` through here, and should not pay
-for the programming engine or the stop procedure it never runs (issue 26, benchmark ``scan``).
+for the programming engine or the stop procedure it never runs (benchmark ``scan``).
 """
 
 from typing import TYPE_CHECKING

@@ -1,4 +1,4 @@
-"""The journal of temporary drive changes (issue 22 item 3, docs/motion.md "After a crash").
+"""The journal of temporary drive changes (docs/motion.md "After a crash").
 
 Before a command changes a drive's RAM for its own use (the guard's UM, SP/AC/DC and dead-man objects,
 the pair start's group id and RPDO2 type, homing's HM[1], the recorder's TPDO settings) it notes here

@@ -20,8 +20,8 @@ if TYPE_CHECKING:
     import can
 
 
-#: ``protocol.pacing`` (docs/config.md): the gap between frames to the same drive, or (today's
-#: behaviour until issue 26) between any two frames on the bus
+#: ``protocol.pacing`` (docs/config.md): the gap between frames to the same drive, or (the tool's
+#: earlier behaviour) between any two frames on the bus
 PACING_MODES = ("per-drive", "per-bus")
 
 
@@ -46,7 +46,7 @@ def answering(can_id: int) -> int | None:
 
 class BusLostError(CommunicationError):
     """The connection to a bus went away while a command used it: a served simulator killed, an
-    adapter unplugged, an interface deleted (exit 3; issue 22 item 7)."""
+    adapter unplugged, an interface deleted (exit 3)."""
 
 
 def _paced_network_class():
@@ -81,7 +81,7 @@ def _paced_network_class():
         - ``per-drive``: frames to one drive keep ``gap`` between them, unless the drive has
           answered (interpreter reply or SDO response) since the previous one; frames to other
           drives go meanwhile. A frame to every drive (NMT to all) waits for every drive's gap.
-        - ``per-bus``: ``gap`` between any two frames on the bus (the tool until issue 26).
+        - ``per-bus``: ``gap`` between any two frames on the bus (the tool's earlier behaviour).
 
         Either way ``floor`` (``protocol.pacing_floor_us``, about one frame time) is kept between
         any two frames on the bus. Overriding send_message and notify is canopen's documented seam
@@ -107,7 +107,7 @@ def _paced_network_class():
         #: how messages name this bus ("bus can1 (remote:127.0.0.1:5001)"), set by open_links
         where: str = "the bus"
 
-        #: ``protocol.caller_reads`` (issue 26 item 2): a caller waiting for a reply reads the bus
+        #: ``protocol.caller_reads``: a caller waiting for a reply reads the bus
         #: itself (bus/reader.py); False: python-can's Notifier thread reads and hands replies over
         caller_reads: bool = True
 
@@ -204,7 +204,7 @@ def _paced_network_class():
             msg = self._messages.get(key)
             if msg is None:
                 # one Message per distinct frame: a poll loop sends the same few over and over, and
-                # building one costs about as much as the rest of the send (issue 26 item 2).
+                # building one costs about as much as the rest of the send.
                 # python-can's buses do not change the Message they send (virtual sends a copy).
                 msg = can.Message(is_extended_id=can_id > 0x7FF, arbitration_id=can_id, data=data,
                                   is_remote_frame=remote)

@@ -1,6 +1,6 @@
 """Who reads a bus: the caller that waits for a reply, or a background thread while nobody waits.
 
-Issue 26 item 2. With python-can's ``Notifier`` every reply is received on its thread and handed
+With python-can's ``Notifier`` every reply is received on its thread and handed
 to the waiting caller through a lock: two thread switches and cold caches per request. Here the
 caller that waits for a reply reads the bus itself (leader/follower) and dispatches every frame
 it reads to all listeners -- its own reply, and frames for other drives, heartbeats, EMCY, PDOs

@@ -69,7 +69,7 @@ class _Answer:
 class DriveSdo:
     """One drive's SDO client: upload/download with SdoError on every failure; thread-safe per drive.
 
-    On a network with ``wait_for`` (the session's PacedNetwork, issue 26 item 2) an upload first
+    On a network with ``wait_for`` (the session's PacedNetwork) an upload first
     goes the expedited fast path: one initiate request, its answer read on the caller's thread
     (bus/reader.py), no canopen queue. An answer that starts a segmented transfer, and every
     download, go through canopen's client, which is then associated with the network only for

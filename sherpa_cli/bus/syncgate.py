@@ -3,7 +3,7 @@
 ``motion.pair_start: sync_rpdo`` sends BG to each drive of a pair (a synchronous RPDO2, buffered
 by each drive) and then one SYNC that both execute. A SYNC from another source of this tool -- the
 recorder's SYNC thread of `log record`, `log step`, `diffdrive move --record` -- that falls between
-the two BG frames starts the first motor one SYNC before the second (issue 23: 4 of 4 runs under
+the two BG frames starts the first motor one SYNC before the second (it did in 4 of 4 runs under
 load). Every SYNC producer of the tool therefore sends through the bus's :class:`SyncGate`, and the
 pair start holds it (:meth:`SyncGate.exclusive`) from the first BG to its own SYNC.
 

@@ -29,7 +29,7 @@ app = typer.Typer(
     "4 drive refused, 5 drive busy (another command moves it), 6 privilege missing (bus up/down), "
     "130 interrupted (docs/exit-codes.md).",
     no_args_is_help=True,
-    add_completion=True,  # --install-completion / --show-completion (typer's; issue 11 item 14)
+    add_completion=True,  # --install-completion / --show-completion (typer's)
     rich_markup_mode=None,  # plain click help: rich's help formatter doubles start-up time
     pretty_exceptions_enable=False,
     context_settings={"help_option_names": ["-h", "--help"]},
@@ -54,7 +54,7 @@ def config_candidates() -> list[tuple[Path, str]]:
 
 def _user_config_dir() -> Path:
     """platformdirs' user config directory; on Linux its XDG rule without importing it, since every
-    command (`scan --help` too) looks here first (issue 26 item 3: ~7 ms of start-up)."""
+    command (`scan --help` too) looks here first (~7 ms of start-up)."""
     if sys.platform.startswith("linux"):
         base = os.environ.get("XDG_CONFIG_HOME", "")
         return Path(base if base.strip() else os.path.expanduser("~/.config")) / "sherpa-cli"
@@ -101,7 +101,7 @@ def root(
         "without it they refuse (SV is refused either way)."),
 ) -> None:
     # the journal (and the state-file modules under it) only when it is asked for or already loaded
-    # (an earlier in-process run): `sherpa scan --help` passes here too (issue 26 item 3, start-up)
+    # (an earlier in-process run): `sherpa scan --help` passes here too (start-up time)
     if recover or "sherpa_cli.bus.journal" in sys.modules:
         from sherpa_cli.bus import journal
 

@@ -80,7 +80,7 @@ def run(argv: Sequence[str] | None = None) -> int:
     try:
         refuse_non_ascii_numbers(args)
         # the cached click tree, not ``Typer.__call__`` (which rebuilds it on every call: a recipe
-        # runs ~10 commands in one process, issue 26 item 3). The app's pretty exceptions are off,
+        # runs ~10 commands in one process). The app's pretty exceptions are off,
         # so typer's except hook would print the standard traceback anyway.
         command: Any = root_command()
         code = command(args=args, prog_name="sherpa", standalone_mode=False)

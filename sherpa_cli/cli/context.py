@@ -105,7 +105,7 @@ class AppState:
 
 @dataclass
 class SharedSession:
-    """What a recipe's steps share: the config loaded once and the buses opened once (issue 10 item 4).
+    """What a recipe's steps share: the config loaded once and the buses opened once.
 
     ``owner`` is the recipe command's own state; a step whose global options are the owner's
     (the runner passes them) uses its config and session instead of loading and opening again.

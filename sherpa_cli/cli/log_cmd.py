@@ -445,7 +445,7 @@ class _Stopped(Exception):
     """SIGTERM or SIGHUP during a recording: ends it like Ctrl-C, so the PDO settings go back."""
 
 
-# the lowest --rate of a recording, and of a step (issue 22 item 8: at 0.5 Hz a step's loop stopped
+# the lowest --rate of a recording, and of a step (at 0.5 Hz a step's loop stopped
 # showing signs of life between samples and the dead-man tripped)
 MIN_RECORD_RATE = 1.0  # a step's: ops/step.py MIN_STEP_RATE
 WAKE_EVERY_S = 0.1  # how often the wait looks at what the receive threads found
@@ -673,8 +673,8 @@ def step(
                                            uncalibrated=uncalibrated, timebase=timebase, mode_first=mode_first,
                                            hold=hold)
         except BaseException as exc:
-            # how the guard stopped the motor, on Ctrl-C, SIGTERM and errors too (issue 22: a Ctrl-C
-            # during `log step` printed nothing)
+            # how the guard stopped the motor, on Ctrl-C, SIGTERM and errors too (without it a
+            # Ctrl-C during `log step` printed nothing)
             from sherpa_cli.cli.jog_cmd import show_stop_report
 
             show_stop_report(st, exc)

@@ -73,7 +73,7 @@ FromStep = Annotated[str | None, typer.Option(
     "--from", metavar="STEP", help="Start at this step (name or number).")]
 Report = Annotated[Path | None, typer.Option("--report", metavar="FILE.json", help="Write a JSON report.")]
 Junit = Annotated[Path | None, typer.Option("--junit", metavar="FILE.xml", help="Write a JUnit XML report.")]
-# one line per step is the default now (issue 11 item 10); --quiet stays accepted for old scripts
+# one line per step is the default now; --quiet stays accepted for old scripts
 Quiet = Annotated[bool, typer.Option("--quiet", "-q", hidden=True, help="The default now: one line per step.")]
 Verbose = Annotated[bool, typer.Option("--verbose", "-v", help="Show every step's command and output (default: "
                                        "one line per step; the output is in the --report file).")]

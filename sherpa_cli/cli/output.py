@@ -40,7 +40,7 @@ def output_width(stream: TextIO) -> int | None:
 
 #: Set while a command runs whose results nobody will see or read (a recipe step without --verbose,
 #: a report or an expectation on its stdout, cli/recipe_cmd.py): the Output created for it then
-#: renders no results (issue 26 item 4: commission drew 46 rich tables per run for output shown
+#: renders no results (else commission draws 46 rich tables per run for output shown
 #: only with --verbose). Diagnostics on stderr are kept: warnings and errors are shown.
 DISCARD_RESULTS: ContextVar[bool] = ContextVar("sherpa_discard_results", default=False)
 
@@ -173,7 +173,7 @@ _MARKUP = re.compile(r"\[[a-z#/@]|\\")
 def plain_table(columns: Sequence[str], rows: Iterable[Sequence[Any]], *, right: Iterable[int] = (),
                 width: int) -> str | None:
     """The text rich prints for :func:`make_table` without a title, colour or anything to fold, at a
-    fraction of its cost (issue 26 item 4: `program-limits` draws a table per drive, a quarter of
+    fraction of its cost (`program-limits` draws a table per drive, a quarter of
     its time at 126 drives); None when rich must lay it out (a cell it would fold or parse as
     markup, wide or control characters). tests/test_output_plain_table.py holds it to rich's
     output."""

@@ -57,7 +57,7 @@ def _invoker(st: AppState, shown: Callable[[], bool] = lambda: True) -> Invoke:
 
     Output is captured (the recipe shows it under the step) and stdin is empty, so a step
     never waits at a prompt nobody sees: questions belong in `confirm:` steps. ``shown()`` False:
-    nobody sees or reads the step's stdout, so the command renders no results at all (issue 26 item 4).
+    nobody sees or reads the step's stdout, so the command renders no results at all.
     """
     from sherpa_cli.cli.boundary import run
     from sherpa_cli.cli.output import DISCARD_RESULTS
@@ -124,7 +124,7 @@ def _duration(seconds: float) -> str:
 
 
 class _Warnings:
-    """Warnings the steps printed, each shown once with how often it came (issue 11 item 10)."""
+    """Warnings the steps printed, each shown once with how often it came."""
 
     def __init__(self) -> None:
         self.counts: dict[str, int] = {}
@@ -156,7 +156,7 @@ class _Warnings:
 
 
 def _progress(st: AppState) -> Live | None:
-    """A spinner on stderr while a step runs: only on a terminal, never with --json (issue 11 item 13)."""
+    """A spinner on stderr while a step runs: only on a terminal, never with --json."""
     if st.json_mode or not sys.stderr.isatty():
         return None
     from rich.live import Live
@@ -197,7 +197,6 @@ def execute(st: AppState, recipe_path: Path, *, apply: bool, yes: bool, start: s
 
     # whether the step about to run has readers of its stdout: shown (--verbose), stored (--report,
     # --junit, the --json document) or checked (stdout_contains, json); otherwise it renders nothing
-    # (issue 26 item 4)
     needs_stdout = [True]
 
     def on_start(step: Step, dry: bool) -> None:

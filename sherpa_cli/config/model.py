@@ -229,15 +229,15 @@ class ProtocolConfig:
     sv_blackout: float = 0.5  # s the drive's CAN is deaf after SV ("a few hundred ms")
     sdo_timeout: float = 0.3  # s to wait for one SDO answer (canopen's default); also scan's listening time
     boot_timeout: float = 2.0  # s to wait for a drive's boot-up after NMT reset node (Elmo gives no boot time)
-    # what each bus's send_interval_us is kept between (issue 26; the Whistle's limit is UNCONFIRMED,
+    # what each bus's send_interval_us is kept between (the Whistle's limit is UNCONFIRMED,
     # elmo-protocol.md §4.2 puts it in each drive's receive buffer): "per-drive" = frames to the same
     # drive, skipped once that drive has answered the previous frame; "per-bus" = any two frames on the
-    # bus (the tool before issue 26)
+    # bus (the tool's earlier behaviour)
     pacing: str = "per-drive"
     # per-drive pacing: µs kept between any two frames on a bus (about one worst-case 8-byte frame,
     # 138 bits, at 1 Mbit/s); 0 = none
     pacing_floor_us: int = 140
-    # issue 26 item 2: a caller waiting for a reply reads the bus itself (bus/reader.py); False =
+    # a caller waiting for a reply reads the bus itself (bus/reader.py); False =
     # python-can's Notifier thread reads every frame and hands replies over (one more thread switch).
     # Off by default: a SIGTERM raised inside a caller's read could leave the reader's bookkeeping
     # stale, and the stop's SDO writes then waited for frames nobody read (tests/test_signals_moving.py)
@@ -326,7 +326,7 @@ class MotionConfig:
     # s between two reads of a moving drive's dead-man entry 0x1016:1 (another node may disarm it)
     deadman_check_interval: float = 0.5
     # the guard's watch of its buses (docs/bus.md): a bus it moves on that goes BUS-OFF (or down, stopped)
-    # always stops the command; ERROR-PASSIVE stops it too ("stop", issue 24) or only warns ("warn")
+    # always stops the command; ERROR-PASSIVE stops it too ("stop") or only warns ("warn")
     bus_error_passive: str = "stop"
     bus_check_interval: float = 0.1  # s between two reads of those buses' controller state (netlink)
     # s: the longest --for of a torque jog or torque step (no drive limit acts in torque mode; the
@@ -389,7 +389,7 @@ class SimDriveConfig:
 
     reply_latency: float = 0.0  # s added to every interpreter reply
     sdo_latency: float = 0.0  # s added to every SDO answer
-    # s the drive's one receive buffer holds a frame unless answered (issue 26): one more frame to it
+    # s the drive's one receive buffer holds a frame unless answered: one more frame to it
     # meanwhile is lost (an overrun), so a tool that paces too fast is caught; 0 = off
     rx_buffer: float = 0.0
     drop_probability: float = 0.0  # chance that a frame to or from the drive is lost

@@ -17,7 +17,7 @@ from sherpa_cli.config.yamlnodes import Locs, suggest
 from sherpa_cli.errors import ConfigError, Location
 
 MAX_NODE_ID = 127
-# safe bounds of the dead-man (issue 22 item 8): beyond them a killed or hung tool's motor runs on
+# safe bounds of the dead-man: beyond them a killed or hung tool's motor runs on
 MAX_CONSUMER_TIME_MS = 2000  # ms a drive keeps moving after the tool's last heartbeat
 MAX_LIVENESS_TIMEOUT_S = 10.0  # s a hung command keeps its heartbeat going
 MAX_TORQUE_FOR_LIMIT_S = 60.0  # s: the highest motion.max_torque_for

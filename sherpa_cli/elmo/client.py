@@ -90,8 +90,8 @@ def _cached_query(letters: str, index: int, long: bool) -> bytes:
 
 
 def _query(letters: str, index: int, long: bool) -> bytes:
-    """A query frame, encoded once per (letters, index): a poll loop asks the same few (issue 26
-    item 2 measured ~9 us per encode). Anything but a plain str/int is encoded (and refused) uncached."""
+    """A query frame, encoded once per (letters, index): a poll loop asks the same few (an
+    encode costs ~9 us). Anything but a plain str/int is encoded (and refused) uncached."""
     if type(letters) is str and type(index) is int:
         return _cached_query(letters, index, long)
     return codec.encode_query(letters, index, long=long)

@@ -44,7 +44,7 @@ class NetworkTransport:
         """Wait until a subscriber callback releases ``arrived`` (True, held again) or ``timeout``.
 
         A network with ``wait_for`` (bus/links.py PacedNetwork) lets the waiting caller read the bus
-        itself (issue 26 item 2, bus/reader.py); anything else waits on the lock while its own
+        itself (bus/reader.py); anything else waits on the lock while its own
         receive thread delivers."""
         return self.reply_waiter(arrived, timeout)
 

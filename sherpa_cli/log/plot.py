@@ -1,6 +1,6 @@
 """PNG plots of a recording (matplotlib, Agg backend, imported only here and only when plotting).
 
-Plots a technician reads at a glance (issue 25): joint units in titles and axes (never a raw drive
+Plots a technician reads at a glance: joint units in titles and axes (never a raw drive
 command like ``JV=57``); the command time, the MO/UM switch window and the settling time drawn on
 the trace; the legend beside the data, never over it; a fixed figure size that fits a screen
 (:data:`FIG_SIZE`); plain tick labels (no ``1e-16`` offset) and a minimum span per signal

@@ -220,7 +220,7 @@ MAX_GAP_SPANS = 5  # gaps a report names by place; the rest are counted
 @dataclass
 class Gaps:
     """SYNC indexes with no sample of one drive: how many, and the first few runs of them
-    (first index, length), so a report says where a recording has holes (issue 22 item 8)."""
+    (first index, length), so a report says where a recording has holes."""
 
     missing: int = 0
     spans: list[tuple[int, int]] = field(default_factory=list)
@@ -248,7 +248,7 @@ FOREIGN_SYNC_SHARE = 0.05  # ... or this share of them, whichever is more (jitte
 
 class ForeignSyncError(CommunicationError):
     """Another node sends SYNC on a recorded bus: the drives answer both producers, the samples
-    can no longer be placed on this tool's time grid (exit 3; issue 22 item 7)."""
+    can no longer be placed on this tool's time grid (exit 3)."""
 
 
 class RowSink(Protocol):
@@ -289,7 +289,7 @@ class Recorder:
         self.t_end: float | None = None
         self._sync_spans: list[list[Any]] = []  # per SYNC source: [started, stopped]
         # streaming (``sink``): each completed row is handed to the sink as the recording goes, only a
-        # short window stays in memory (constant memory whatever the duration; issue 26 item 5)
+        # short window stays in memory (constant memory whatever the duration)
         self.sink = sink
         self.window = max(LATE_WINDOW_MIN, math.ceil(LATE_WINDOW_S * self.rate))
         self._flushed = 0  # rows (SYNC indexes) below this one are written
@@ -440,7 +440,7 @@ class Recorder:
         old_entries = [read(mapping, sub, 4) for sub in range(1, len(entries) + 1)]
         # restored in reverse: PDO off, count 0, entries, count, transmission type, COB-ID last
         d.saved.append((comm, 1, 4, old_cob))
-        journal.note(d.ref, *(journal.sdo("log record", i, s, n, v) for i, s, n, v in  # issue 22 item 3
+        journal.note(d.ref, *(journal.sdo("log record", i, s, n, v) for i, s, n, v in  # before any change
                               [(comm, 1, 4, old_cob), (comm, 2, 1, old_type), (mapping, 0, 1, old_count),
                                *((mapping, sub, 4, v) for sub, v in enumerate(old_entries, 1)),
                                (mapping, 0, 1, 0), (comm, 1, 4, old_cob | 0x80000000)]))

@@ -1,4 +1,4 @@
-"""When a step experiment has settled, and what may be reported when it has not (issue 25 item 1).
+"""When a step experiment has settled, and what may be reported when it has not.
 
 A step is *settled* when its signal has stayed within ``BAND`` (2 %) of the step around the
 target for ``hold`` seconds at the end of what was recorded. Only a settled step has an

@@ -1,4 +1,4 @@
-"""`sherpa log step --compare RUN...`: several `log step` runs side by side (issue 25 item 1).
+"""`sherpa log step --compare RUN...`: several `log step` runs side by side.
 
 A run is the directory `log step -o DIR` wrote (metrics.json and recording.csv). Each run gets
 its step metrics as recorded and the figures the seed's Section 9 reads off its plots

@@ -190,7 +190,7 @@ class Axis:
 
 
 def profile_speed(axis: Axis, fallback: int, requested: int | None = None) -> int:
-    """counts/s of a position move of ``axis`` (issue 21 item 12): the requested speed, else the
+    """counts/s of a position move of ``axis``: the requested speed, else the
     joint's configured speed limit, else ``fallback`` (motion.recovery_fallback_speed) -- never the
     SP the drive happens to hold. The motion guard puts the drive's SP back afterwards."""
     if requested:

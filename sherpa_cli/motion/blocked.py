@@ -1,5 +1,5 @@
 """Why a commanded motion does not progress: a stall (no progress for ``motion.stall_time``) and
-the end or stop switch that blocks it, named by joint and side (issue 21 item 7).
+the end or stop switch that blocks it, named by joint and side.
 
 A move blocked by an end switch used to run until its time bound (12.6 s for a pair move) and then
 say only that it did not reach its target. The watch loops now end within about ``stall_time`` of

@@ -1,4 +1,4 @@
-"""The motion guard's watch of its buses (issue 24 item 4; issue 21 item 2, "bus errors").
+"""The motion guard's watch of its buses.
 
 While the guard holds its drives, every bus they are on is watched through the two sources of the
 bus layer, which the simulated arm's controllers (sim/buscontroller.py) and a real SocketCAN adapter
@@ -14,8 +14,8 @@ both feed:
 
 A bus that goes BUS-OFF, STOPPED, down or missing cannot carry a frame: the command ends (exit 3,
 :class:`BusFaultError` naming the bus, its state and what to check). ERROR-PASSIVE ends it too with
-``motion.bus_error_passive: stop`` (the default, as issue 24 asks: "on bus-off or error-passive of
-any bus it moves on, it stops the motion on all buses"), or is a warning with ``warn``. Only the
+``motion.bus_error_passive: stop`` (the default: on bus-off or error-passive of any
+bus it moves on, the motion stops on all buses), or is a warning with ``warn``. Only the
 command's own buses are watched: a bus-off on a bus it does not move on leaves it running.
 
 A trip cuts short the request the command waits for (as the drive watch does: a bus-off bus answers

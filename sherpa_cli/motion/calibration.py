@@ -80,7 +80,7 @@ def read_calibration(cfg: ArmConfig, joint: JointConfig, client_of: Callable[[st
     An absolute joint read by its drive's auxiliary counter (``drive:PY``) is checked instead: its
     motor counter PX must mean the encoder's position, because the limits and the watch use PX, and
     PX restarts at 0 when the drive resets (a flash proof, a power cycle, an NMT reset) wherever the
-    joint stands. It is never assumed (issue 21 item 11): a moving command's entry passes ``resync``
+    joint stands. It is never assumed: a moving command's entry passes ``resync``
     and PX is set from the encoder with the motor off (read back); a looking command (monitor,
     doctor) only says it does not match.
     """

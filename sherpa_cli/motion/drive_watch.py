@@ -1,4 +1,4 @@
-"""The guard's watch of its drives (issue 21 item 10, issue 22 item 7): what the drives and the other
+"""The guard's watch of its drives: what the drives and the other
 nodes of the bus say while a command moves them.
 
 - an EMCY of an error class from a drive whose motor the guard has on (warning-class codes, the

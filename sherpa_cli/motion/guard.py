@@ -337,7 +337,7 @@ class MotionGuard:
                 if isinstance(exc, SdoError) and exc.reason == "timeout":
                     # no answer: the drive is silent like one that misses an interpreter reply; its partners
                     # get their stop now and the exit skips it (else: a stop, an MO=0 confirmation of
-                    # mo_confirm_timeout and a restore, each waiting for the dead drive; issue 21 item 8)
+                    # mo_confirm_timeout and a restore, each waiting for the dead drive)
                     d.client.silent = True
                     self.stop_others(d.ref)
                 self._raise_if_tripped()  # the watch knows why (a silent drive, NMT Stopped): say that
@@ -389,7 +389,7 @@ class MotionGuard:
         d = self._drive(ref)
         c = d.client
         # patient for the settle window only: one request's attempts already span it, so a drive that
-        # stays silent costs one request, not the whole mo_confirm_timeout (issue 21 item 8)
+        # stays silent costs one request, not the whole mo_confirm_timeout
         patience = c.settings.mo_settle
 
         def on_try() -> None:
@@ -609,7 +609,7 @@ class MotionGuard:
         # motion commands scale SP/AC/DC (pair profiles, limit recovery): RAM changes put back on
         # exit, so a later SV never flashes a jog's speed
         d.profile_before = {key: int(client.get(key)) for key in PROFILE_KEYS}
-        # on disk before anything changes them (the journal, issue 22 item 3; the dead-man objects follow)
+        # on disk before anything changes them (the journal; the dead-man objects follow)
         journal.note(ref, *(journal.interp(JOURNAL_OWNER, k, 0, v) for k, v in d.profile_before.items()))
 
     def _read_consumer(self, ref: DriveRef) -> int:

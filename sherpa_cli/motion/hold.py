@@ -1,4 +1,4 @@
-"""`--hold` (issue 21 item 5): after a move the motors stay on, holding, until Ctrl-C or `sherpa stop`.
+"""`--hold`: after a move the motors stay on, holding, until Ctrl-C or `sherpa stop`.
 
 One hold for every command that offers it (`jog` of a plain joint, a drive, a Σ/Δ joint or a pair
 motor; `diffdrive move`), for any number of drives at once:

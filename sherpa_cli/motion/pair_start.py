@@ -158,7 +158,7 @@ class CommonStart:
                 network.subscribe(TPDO2_BASE + r.node, callback)
                 subscribed.append((TPDO2_BASE + r.node, callback))
             # one critical section: no other SYNC of this tool (the recorder's) between the BG frames,
-            # or the first motor would start one SYNC before the second (issue 23)
+            # or the first motor would start one SYNC before the second
             with syncgate.gate(self.session.links[self.bus].bus).exclusive():
                 for r in self.refs:  # buffered by each drive until the SYNC
                     network.send_message(RPDO2_BASE + r.node, codec.encode_execute("BG"))

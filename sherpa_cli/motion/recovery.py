@@ -1,4 +1,4 @@
-"""The one stop-and-recover path of every mover (issue 21 item 3).
+"""The one stop-and-recover path of every mover.
 
 A joint that leaves its full range (motion/limit_watch.py) is handled the same way by `jog`, the
 pair jog, the live jog and joystick, `log step` and `diffdrive move`:
@@ -12,7 +12,7 @@ pair jog, the live jog and joystick, `log step` and `diffdrive move`:
    (motion/axis.move_time_bound).
 
 :func:`recover` runs the three; any failure is a :class:`RecoveryFailed` that says the joint left its
-range first and then why the way back failed (issue 21 item 7). ``home`` uses :func:`move_to` for its
+range first and then why the way back failed. ``home`` uses :func:`move_to` for its
 own position moves (back-off, return), so every position move of the tool has the same bound.
 """
 

@@ -108,7 +108,7 @@ class MotionSettings:
 
 
 def check_torque_for(duration: float, limit: float | None = None) -> None:
-    """A torque move's --for within ``motion.max_torque_for`` (issue 22 item 8)."""
+    """A torque move's --for within ``motion.max_torque_for``."""
     from sherpa_cli.config.model import MotionConfig
 
     bound = MotionConfig().max_torque_for if limit is None else limit

@@ -1,4 +1,4 @@
-"""What a moving command's real run would refuse, judged in its dry run (issue 25 item 4a).
+"""What a moving command's real run would refuse, judged in its dry run.
 
 A dry run used to say "would move" and `--apply` then refused the joint as not homed. The dry run
 now reads, without writing anything to the drive's settings, what the real run checks before it

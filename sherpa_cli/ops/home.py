@@ -352,7 +352,7 @@ class _Runner:
         c.set("HM", 4, after)
         c.set("HM", 5, self.h.px_absolute if update is None else update)
         c.set("HM", 2, value)
-        journal.note(drive_ref(self.cfg, c.name), journal.interp("home", "HM", 1, 0))  # issue 22 item 3
+        journal.note(drive_ref(self.cfg, c.name), journal.interp("home", "HM", 1, 0))  # before the arming
         c.set("HM", 1, 1)
 
     def input_event(self, sw: SwitchConfig) -> int:
@@ -379,7 +379,7 @@ class _Runner:
         t0 = self.clock()
         first_edge: float | None = None
         # a search pushing against an end stop (an interrupted search left the joint past its switch)
-        # ends within motion.stall_time instead of at its time bound (issue 21 item 13)
+        # ends within motion.stall_time instead of at its time bound
         stall = self.settings.stall_watch(speed)
         while True:
             guard.check()

@@ -156,7 +156,7 @@ def check_mode_first(mode: str, mode_first: bool) -> None:
                          hint="a torque step's own switch is short: leave --mode-first out")
 
 
-# the lowest --rate of a step (issue 22 item 8: at 0.5 Hz a step's loop stopped showing signs of life
+# the lowest --rate of a step (at 0.5 Hz a step's loop stopped showing signs of life
 # between samples and the dead-man tripped), and the longest --for (a recording's)
 MIN_STEP_RATE = 10.0
 MAX_STEP_S = 3600.0
@@ -292,7 +292,7 @@ def run_step(session: ArmSession, target: Axis, mode: str, value: float, *, dura
 def _switch_steps(guard: MotionGuard, ref: DriveRef, unit_mode: int) -> list[str]:
     """What :meth:`MotionGuard.enable` will send before the step: a UM change needs the motor off
     first, so a drive whose motor is on in another mode pays the drive's MO settle window twice
-    (MO=0 and MO=1: the 1026 ms of issue 25 on a 500 ms window), a drive whose motor is off once."""
+    (MO=0 and MO=1: 1026 ms were seen on a 500 ms window), a drive whose motor is off once."""
     steps = []
     if guard.unit_mode(ref) != unit_mode:
         if guard.motor_on(ref):

@@ -261,7 +261,7 @@ class SimDrive:
             return False
         if self.settings.rx_buffer_s and can_id in (RPDO2_BASE + self.node, SDO_RX_BASE + self.node):
             if t + TIME_EPS < self._rx_busy_until:
-                # a frame before the drive took the last one: a tool that paces too fast (issue 26)
+                # a frame before the drive took the last one: a tool that paces too fast
                 self.overruns.append((t, can_id, data))
                 self.lost.append((t, can_id, data))
                 return False

@@ -28,7 +28,7 @@ class SimSettings:
     reply_latency_s: float = 0.0
     # The same for SDO answers (0x580+node), e.g. a drive busy in its own program; 0 = at once.
     sdo_latency_s: float = 0.0
-    # The drive's one receive buffer (elmo-protocol.md 4.2, issue 26): a frame to this drive (its
+    # The drive's one receive buffer (elmo-protocol.md 4.2): a frame to this drive (its
     # RPDO2 or SDO request) is held this long unless answered first; one more frame to the drive
     # meanwhile is an overrun, lost and counted in ``overruns``. UNCONFIRMED how long a Whistle
     # takes; 0 = off (every frame is taken at once).
