@@ -86,9 +86,31 @@ def test_a_second_sim_command_waits_for_the_first_and_is_refused_after_the_wait(
     try:
         refused = cli("--sim", "cmd", "shoulder_1a", "PX")
     finally:
-        holder.release()
+        sim_state.release_ram_lock(cfg, holder)
     assert refused.exit_code == 5 and "another `--sim` command is using it" in refused.stderr, refused.transcript()
+    # said at once, with the holder and the way to a second terminal, before the wait
+    assert f"warning: simulated arm 'sherpa-arm': another `--sim` command (pid {os.getpid()}) is using it; " \
+           "waiting up to 0.3 s" in refused.stderr, refused.transcript()
+    assert "`sherpa sim --serve`" in refused.stderr
     assert cli("--sim", "cmd", "shoulder_1a", "PX").exit_code == 0
+
+
+def test_a_sim_stop_that_cannot_reach_the_arm_says_nothing_was_stopped_at_once(cli, monkeypatch):
+    """`sherpa --sim stop` in a second terminal while a `--sim` jog runs in the first: the motor lives
+    in the jog's process. It used to wait for the jog to end and report "motor was off" for every
+    drive; now it is refused at once, exit 5, saying nothing was stopped and where the arm is."""
+    cfg = load_config(ARM)
+    monkeypatch.setattr(SimArm, "RAM_LOCK_TIMEOUT", 30.0)  # a wait would outlast the test's bound
+    holder = sim_state.ram_lock(cfg, 1.0)
+    try:
+        refused = cli("--sim", "stop")
+    finally:
+        sim_state.release_ram_lock(cfg, holder)
+    assert refused.exit_code == 5, refused.transcript()
+    assert refused.stderr.startswith(f"error: NOTHING WAS STOPPED: simulated arm 'sherpa-arm': another `--sim` "
+                                     f"command (pid {os.getpid()}) is using it"), refused.transcript()
+    assert "motor was off" not in refused.stdout and "waiting" not in refused.stderr
+    assert cli("--sim", "stop").exit_code == 0
 
 
 def test_two_sim_commands_at_once_are_serialised_and_the_state_stays_whole(tmp_path):

@@ -48,10 +48,11 @@ class AppState:
     @contextmanager
     def session(self, buses: Iterable[str] | None = None,
                 sim_factory: Callable[[ArmConfig, Mapping[str, str]], SimArm] | None = None,
-                best_effort: bool = False) -> Iterator[ArmSession]:
+                best_effort: bool = False, sim_wait: float | None = None) -> Iterator[ArmSession]:
         """Open the arm's buses (or the simulated arm with --sim) for one command; ``sim_factory``
         builds the in-process arm instead of the default (SimArm.in_process's ``factory``);
-        ``best_effort`` opens what can be opened (ArmSession.open)."""
+        ``best_effort`` opens what can be opened (ArmSession.open); ``sim_wait``: how long a `--sim`
+        command waits for another that holds the in-process arm (None: the simulator's default)."""
         from sherpa_cli.bus.busmap import apply_bus_map, parse_bus_map
         from sherpa_cli.bus.session import ArmSession
 
@@ -80,6 +81,8 @@ class AppState:
             from sherpa_cli.sim.arm import SimArm
 
             arm = SimArm.in_process(cfg, sim_factory)  # injected: ops never import the simulator
+            arm.ram_wait = sim_wait
+            arm.on_busy = self.out.warn
         with ArmSession.open(cfg, sim=arm, buses=buses, best_effort=best_effort) as session:
             session.allow_user_program = self.allow_user_program
             yield session

@@ -368,6 +368,10 @@ class SimArm:
         self.event_log = event_log
         self._event_file: TextIO | None = None
         self.keep_ram = keep_ram
+        # another `--sim` command holds the arm: how long to wait (None: RAM_LOCK_TIMEOUT; 0: refused at
+        # once, `sherpa stop`) and where to say so at once (the CLI's stderr)
+        self.ram_wait: float | None = None
+        self.on_busy: Callable[[str], None] | None = None
         self._ram_lock: filelock.BaseFileLock | None = None
 
     def unheard(self) -> tuple[int, float]:
@@ -531,7 +535,8 @@ class SimArm:
     def _power_on(self) -> None:
         """Take the arm's lock and put back what it held when the last command left it (positions only
         after `sim --power-cycle`; nothing after `--reset-state` or the first time)."""
-        self._ram_lock = sim_state.ram_lock(self.cfg, self.RAM_LOCK_TIMEOUT)
+        wait = self.RAM_LOCK_TIMEOUT if self.ram_wait is None else self.ram_wait
+        self._ram_lock = sim_state.ram_lock(self.cfg, wait, self.on_busy)
         try:
             saved = sim_state.load_ram(self.cfg)
             if saved is None:
@@ -560,7 +565,7 @@ class SimArm:
     def _release_ram(self) -> None:
         lock, self._ram_lock = self._ram_lock, None
         if lock is not None:
-            lock.release()
+            sim_state.release_ram_lock(self.cfg, lock)
 
     def save_state(self) -> None:
         with self.lock:

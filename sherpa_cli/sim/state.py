@@ -12,8 +12,11 @@ joints do), `--reset-state` drops RAM and flash.
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import json
+import os
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -170,20 +173,62 @@ def ram_path(cfg: ArmConfig) -> Path:
     return state_dir() / "sim" / f"{arm_key(cfg)}.ram.json"
 
 
-def ram_lock(cfg: ArmConfig, timeout: float) -> filelock.BaseFileLock:
-    """Held by an in-process `--sim` arm from loading its RAM to saving it: two commands are serialised
-    (the second waits up to ``timeout`` s, then :class:`SimArmBusyError`)."""
+SECOND_TERMINAL_HINT = ("an in-process `--sim` arm lives in the process of the command that opened it; for "
+                        "commands from a second terminal run `sherpa sim --serve` once and give every command its "
+                        "--bus-map (docs/simulator.md)")
+
+
+def ram_holder(cfg: ArmConfig) -> int | None:
+    """The pid of the `--sim` command holding the arm, if it wrote one and still runs."""
+    try:
+        pid = int(ram_path(cfg).with_suffix(".pid").read_text(encoding="ascii").split()[0])
+    except (OSError, ValueError, IndexError):
+        return None
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return None
+    except OSError:
+        pass  # another user's process: it runs
+    return pid
+
+
+def ram_lock(cfg: ArmConfig, timeout: float,
+             on_wait: Callable[[str], None] | None = None) -> filelock.BaseFileLock:
+    """Held by an in-process `--sim` arm from loading its RAM to saving it: two commands are serialised.
+    A second command says at once who holds the arm (``on_wait``) and waits up to ``timeout`` s, then
+    :class:`SimArmBusyError`; with ``timeout`` 0 (`sherpa stop`: it cannot reach a motor moved in
+    another process) it is refused at once."""
     target = ram_path(cfg)
     lock = file_lock(target, timeout=timeout)
     try:
-        lock.acquire()
+        try:
+            lock.acquire(timeout=0)
+        except filelock.Timeout:
+            holder = ram_holder(cfg)
+            busy = (f"simulated arm '{cfg.name}': another `--sim` command" + (f" (pid {holder})" if holder else "")
+                    + " is using it")
+            if timeout <= 0:
+                raise SimArmBusyError(busy + ": this command cannot reach a motor that process moves",
+                                      hint=SECOND_TERMINAL_HINT) from None
+            if on_wait is not None:
+                on_wait(f"{busy}; waiting up to {timeout:g} s for it to end ({SECOND_TERMINAL_HINT})")
+            lock.acquire()
     except filelock.Timeout:
         raise SimArmBusyError(f"simulated arm '{cfg.name}': another `--sim` command is using it (waited {timeout:g} s)",
-                              hint=f"wait for it to end; its state is {target}") from None
+                              hint=SECOND_TERMINAL_HINT) from None
     except OSError as exc:
         raise SherpaError(f"{target}: cannot lock the simulated arm's state: {exc.strerror or exc}",
                           hint=STATE_DIR_HINT) from None
+    with contextlib.suppress(OSError):  # the pid is only for the other command's message
+        target.with_suffix(".pid").write_text(f"{os.getpid()}\n", encoding="ascii")
     return lock
+
+
+def release_ram_lock(cfg: ArmConfig, lock: filelock.BaseFileLock) -> None:
+    with contextlib.suppress(OSError):
+        ram_path(cfg).with_suffix(".pid").unlink()
+    lock.release()
 
 
 def load_ram(cfg: ArmConfig, path: Path | None = None) -> dict[str, Any] | None:
