@@ -129,3 +129,33 @@ def test_a_ctrl_c_wrapped_by_a_dataclass_built_during_a_lazy_import_is_still_an_
     assert boundary.run(["scan"]) == 130
     err = capsys.readouterr().err
     assert err.strip() == "error: interrupted" and "Traceback" not in err
+
+
+def test_a_background_threads_exception_is_one_line_and_nothing_after_a_signal(capfd, monkeypatch):
+    """A library's receive thread that meets a bus closed under it (the command unwinding after a
+    Ctrl-C) printed a traceback. The entry's thread hook says it in one line, and nothing at all
+    once a signal ends the command (its own line says why)."""
+    import threading
+
+    from sherpa_cli import errors
+    from sherpa_cli.cli import entry
+
+    monkeypatch.setattr(threading, "excepthook", entry._thread_ended)
+
+    def fail() -> None:
+        raise OSError(9, "Bad file descriptor")
+
+    errors.note_signal(None)
+    t = threading.Thread(target=fail, name="can.notifier")
+    t.start()
+    t.join()
+    err = capfd.readouterr().err
+    assert err == "warning: background thread can.notifier ended: OSError: [Errno 9] Bad file descriptor\n"
+    errors.note_signal(signal.SIGINT)
+    try:
+        t = threading.Thread(target=fail, name="can.notifier")
+        t.start()
+        t.join()
+    finally:
+        errors.note_signal(None)
+    assert capfd.readouterr().err == ""

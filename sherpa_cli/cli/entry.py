@@ -57,6 +57,25 @@ def _unwind(signum: int, frame: object) -> None:
     raise errors.Terminated(signum)
 
 
+def _thread_ended(args: object) -> None:
+    """A background thread's exception (a library's receive thread meeting a bus closed under it,
+    typically while the command unwinds after a signal): one line on stderr, never a traceback.
+    After a signal nothing is said: the command's own line says why it ended. --debug keeps
+    Python's own report."""
+    from sherpa_cli.errors import signal_received
+
+    exc_type = getattr(args, "exc_type", None)
+    if exc_type is None or issubclass(exc_type, SystemExit) or signal_received() is not None:
+        return
+    thread = getattr(args, "thread", None)
+    name = getattr(thread, "name", "?")
+    try:
+        os.write(2, f"warning: background thread {name} ended: {exc_type.__name__}: "
+                    f"{getattr(args, 'exc_value', '')}\n".encode(errors="replace"))
+    except OSError:
+        return
+
+
 def install_at_once() -> None:
     for signum in SIGNALS:
         signal.signal(signum, _at_once)
@@ -77,6 +96,10 @@ def main(argv: list[str] | None = None) -> None:
 
     code: int | None = None
     note_signal(None)
+    if "--debug" not in args:
+        import threading  # loaded with the CLI already
+
+        threading.excepthook = _thread_ended
     try:
         install_while_running()
         code = run(args)
