@@ -135,10 +135,18 @@ def _fmt(value: float | None, note: str | None) -> str:
 
 
 def _render(st: AppState, report: DiffReport, only_differences: bool) -> None:
+    from sherpa_cli.words import plural
+
     a, b = report.a.label, report.b.label
     # labels in a legend, not in the column headers: a long file path must not widen every table
     st.out.line(f"A: {a}")
     st.out.line(f"B: {b}")
+    n, count = report.differences, len(report.drives)
+    if not n:
+        # the sets agree: a table of hundreds of equal rows would bury that; --json still has them
+        compared = sum(len(d.rows) for d in report.drives)
+        st.out.line(f"no difference: {plural(count, 'drive')}, {plural(compared, 'parameter')} compared")
+        return
     for d in report.drives:
         if d.only_in:
             side = a if d.only_in == "A" else b
@@ -148,14 +156,10 @@ def _render(st: AppState, report: DiffReport, only_differences: bool) -> None:
                 for r in d.rows if not only_differences or r.status != "same"]
         if only_differences and not rows:
             continue
-        n = d.differences
-        title = f"{d.drive} ({d.bus}:{d.node}) - " + (f"{n} difference(s)" if n else "same")
+        title = f"{d.drive} ({d.bus}:{d.node}) - " + (plural(d.differences, "difference") if d.differences
+                                                      else "same")
         st.out.table(title, ["param", "A", "B", ""], rows, right=(1, 2))
-    n, count = report.differences, len(report.drives)
-    if n:
-        st.out.line(f"{n} difference(s) in {report.drives_differing} of {count} drive(s)")
-    else:
-        st.out.line(f"no differences in {count} drive(s)")
+    st.out.line(f"{plural(n, 'difference')} in {report.drives_differing} of {plural(count, 'drive')}")
 
 
 # `params restore` lives with program-limits: both run the same plan / apply / verify / save engine.
