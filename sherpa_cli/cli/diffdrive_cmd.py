@@ -11,6 +11,7 @@ from sherpa_cli.cli.context import AppState, shared_stepped, state, use_stepped
 from sherpa_cli.cli.options import ApplyMatch, ApplyMotion, Report, Save, Yes
 from sherpa_cli.cli.output import stop_lines
 from sherpa_cli.errors import UsageError
+from sherpa_cli.words import plural
 
 if TYPE_CHECKING:
     from sherpa_cli.config.model import ArmConfig, PairConfig
@@ -424,7 +425,7 @@ def match(
     if not changes:
         return
     if not result.reached:
-        st.out.warn(f"the delays still differ by more than {result.proposal.tolerance:.0%} after {rounds} trial(s): "
+        st.out.warn(f"the delays still differ by more than {result.proposal.tolerance:.0%} after {plural(rounds, 'trial')}: "
                     f"the best trial is proposed")
     if not apply:
         drive, values = next(iter(changes.items()))

@@ -13,6 +13,7 @@ import typer
 
 from sherpa_cli.cli.context import AppState, state
 from sherpa_cli.cli.options import Targets
+from sherpa_cli.words import plural
 
 if TYPE_CHECKING:
     from sherpa_cli.ops.params_diff import DiffReport
@@ -61,7 +62,7 @@ def dump_params(
         st.out.json({"file": str(output) if output is not None else None, "meta": dump.meta,
                      "drives": {name: drive_block(d) for name, d in dump.drives.items()}})
     elif output is not None:
-        st.out.line(f"wrote {len(dump.drives)} drive(s) to {output}")
+        st.out.line(f"wrote {plural(len(dump.drives), 'drive')} to {output}")
     else:
         st.out.raw(dump_to_text(dump))
 
@@ -135,8 +136,6 @@ def _fmt(value: float | None, note: str | None) -> str:
 
 
 def _render(st: AppState, report: DiffReport, only_differences: bool) -> None:
-    from sherpa_cli.words import plural
-
     a, b = report.a.label, report.b.label
     # labels in a legend, not in the column headers: a long file path must not widen every table
     st.out.line(f"A: {a}")

@@ -24,6 +24,7 @@ from typing import TYPE_CHECKING, Any
 from sherpa_cli.bus.health import findings
 from sherpa_cli.bus.linkstate import SIMULATED, LinkStatus
 from sherpa_cli.config.model import ArmConfig, JointConfig
+from sherpa_cli.words import plural
 
 if TYPE_CHECKING:
     from sherpa_cli.bus.session import ArmSession
@@ -226,12 +227,12 @@ def check_drives(report: DoctorReport, session: ArmSession, buses: Sequence[str]
     if unread:
         text = "; ".join(filter(None, [text, "identity unreadable: " + ", ".join(unread)]))
     report.add("firmware/model", not mism and not unread,
-               text or f"{len(found)} drives as configured; firmware {', '.join(firmwares) or 'not reported'}",
+               text or f"{plural(len(found), 'drive')} as configured; firmware {', '.join(firmwares) or 'not reported'}",
                "a replaced drive with other firmware or model: check it with `sherpa identify`, correct the "
                "config's model or update the drive")
     if beats:
         states = sorted(set(beats.values()))
-        report.add("heartbeats", True, f"{len(beats)} of {len(found)} drives heard: {', '.join(states)}")
+        report.add("heartbeats", True, f"{len(beats)} of {plural(len(found), 'drive')} heard: {', '.join(states)}")
     else:
         report.add("heartbeats", True, "no drive sends a heartbeat (0x1017 = 0, the default); "
                    "moving commands watch the drives themselves")
@@ -261,7 +262,7 @@ def check_drives(report: DoctorReport, session: ArmSession, buses: Sequence[str]
             unknown.append(f"{d}: {describe_ps(ps)}")
     report.add("user programs", not running,
                "running on " + ", ".join(running) if running else
-               (f"none running; {'; '.join(unknown)}" if unknown else f"none running ({len(refs)} drives)"),
+               (f"none running; {'; '.join(unknown)}" if unknown else f"none running ({plural(len(refs), 'drive')})"),
                "stop the user program (e.g. in Elmo Composer): SV is refused while it runs, and it fights "
                "moving commands (`--allow-user-program` lets them run anyway)")
     joints = [j for j in cfg.joints.values()
@@ -272,7 +273,7 @@ def check_drives(report: DoctorReport, session: ArmSession, buses: Sequence[str]
         report.add("calibration", False, f"not readable: {exc}", "check the drives with `sherpa monitor --once`")
     else:
         homed = [c.joint for c in cals if c.calibrated]
-        report.add("calibration", True, f"{len(homed)} of {len(cals)} joints calibrated"
+        report.add("calibration", True, f"{len(homed)} of {plural(len(cals), 'joint')} calibrated"
                    + ("" if len(homed) == len(cals) else " (`sherpa home` before position moves)"))
 
 
