@@ -94,7 +94,7 @@ def test_mo1_then_a_move_in_one_cmd_goes_through_the_confirmed_motor_switch(arm_
     assert result.exit_code == 0, result.transcript()
     assert [r["sent"] for r in json.loads(result.stdout)["results"]] == [True, True, True]
     dry = arm_cli("cmd", "elbow_1a", "MO=1", "PA=300", "BG")  # the dry-run rule stays
-    assert dry.exit_code == 0 and "not sent (dry run)" in dry.stdout and "3 command(s) not sent" in dry.stdout
+    assert dry.exit_code == 0 and "not sent (dry run)" in dry.stdout and "3 commands not sent" in dry.stdout
 
 
 def _guarded(exprs: list[str], *, fault: int = 0):

@@ -77,7 +77,7 @@ def test_identify_ends_with_one_line_per_drive_and_the_detail_is_behind_verbose(
     short = cli("--sim", "identify")
     assert short.exit_code == 0, short.transcript()
     lines = short.stdout.splitlines()
-    assert lines[-1].startswith("14 of 14 drive(s) identified")
+    assert lines[-1].startswith("14 of 14 drives identified")
     assert sum(1 for line in lines if line.split()[:1] and line.split()[0] in (
         "shoulder_1a", "shoulder_1b", "shoulder_2a", "shoulder_2b", "shoulder_3a", "shoulder_3b", "elbow_1a",
         "elbow_1b", "wrist_1a", "wrist_1b", "wrist_2a", "wrist_2b", "wrist_3a", "wrist_3b")) == 14
@@ -86,7 +86,7 @@ def test_identify_ends_with_one_line_per_drive_and_the_detail_is_behind_verbose(
         full = cli("--sim", *verbose, "elbow_1a")
         assert full.exit_code == 0, full.transcript()
         assert "software version" in full.stdout and full.stdout.rstrip().endswith(
-            "1 of 1 drive(s) identified, no mismatch in model or firmware")
+            "1 of 1 drive identified, no mismatch in model or firmware")
 
 
 def test_a_normal_end_reads_stopped_motor_off_settings_put_back(cli):

@@ -138,3 +138,82 @@ def test_reset_state(cli):
     result = cli("sim", "--reset-state")
     assert result.exit_code == 0 and "factory flash" in result.stdout
     assert json.loads(cli("--sim", "--json", "cmd", "shoulder_1a", "AC").stdout)["results"][0]["value"] == 100000
+
+
+CLIENT = """
+import sys, can
+bus = can.Bus(interface="remote", channel=sys.argv[1])
+for node in (10, 11):  # heartbeats every 5 ms (0x1017): the server keeps sending to this client
+    bus.send(can.Message(arbitration_id=0x600 + node, data=[0x2B, 0x17, 0x10, 0, 5, 0, 0, 0],
+                         is_extended_id=False))
+print("connected", flush=True)
+while True:
+    bus.recv(0.1)
+"""
+
+
+def _lines(stream, into: queue.Queue) -> None:
+    for line in stream:
+        into.put(line)
+    into.put(None)
+
+
+def _wait_for(lines: queue.Queue, marker: str, timeout: float) -> str | None:
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        try:
+            line = lines.get(timeout=0.5)
+        except queue.Empty:
+            continue
+        if line is None:
+            return None
+        if marker in line:
+            return line
+    return None
+
+
+def test_a_client_killed_mid_traffic_and_ctrl_c_leave_no_traceback(tmp_path):
+    # python-can-remote printed tracebacks (BrokenPipeError, ConnectionResetError, ENOTCONN) for a
+    # client that vanished while frames flowed to it, and python-can warned at exit that its bus was
+    # not shut down
+    try:
+        port = free_base_port(3)
+    except RuntimeError:
+        pytest.skip("no three consecutive free ports on 127.0.0.1")
+    server = subprocess.Popen(
+        [sys.executable, "-m", "sherpa_cli", "sim", "--serve", f"127.0.0.1:{port}", "--duration", "120"],
+        cwd=ROOT, env=_env(tmp_path), stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+        text=True)
+    out: queue.Queue[str | None] = queue.Queue()
+    err: list[str] = []
+    threading.Thread(target=_lines, args=(server.stdout, out), daemon=True).start()
+    err_thread = threading.Thread(target=lambda: err.extend(server.stderr), daemon=True)
+    err_thread.start()
+    client = None
+    try:
+        line = _wait_for(out, "export SHERPA_BUS_MAP=", 30)
+        if line is None:
+            pytest.skip("the served sim did not start (a port taken meanwhile?)")
+        channel = line.split("can0=remote:", 1)[1].split(",", 1)[0].strip()
+        client = subprocess.Popen([sys.executable, "-c", CLIENT, channel], cwd=ROOT, env=_env(tmp_path),
+                                  stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL,
+                                  text=True)
+        client_out: queue.Queue[str | None] = queue.Queue()
+        threading.Thread(target=_lines, args=(client.stdout, client_out), daemon=True).start()
+        assert _wait_for(client_out, "connected", 30) is not None, "the client did not connect"
+        time.sleep(0.3)  # heartbeats flowing to the client
+        client.send_signal(signal.SIGKILL)
+        client.wait(timeout=10)
+        time.sleep(1.0)  # the server's next sends find the client gone
+        server.send_signal(signal.SIGINT)
+        assert server.wait(timeout=30) == 0
+    finally:
+        if client is not None and client.poll() is None:
+            client.kill()
+            client.wait(timeout=10)
+        _stop(server)
+    err_thread.join(timeout=10)
+    stderr = "".join(err)
+    assert "stopping the simulated arm" in stderr
+    assert "Traceback" not in stderr, stderr
+    assert "not properly shut down" not in stderr, stderr

@@ -147,7 +147,7 @@ def test_cli_records_on_the_simulated_arm(cli, tmp_path):
     out = tmp_path / "r.csv"
     result = cli("--sim", "log", "record", "elbow_1a", "--rate", "50", "--for", "0.3", "-o", str(out))
     assert result.exit_code == 0, result.stderr
-    assert "bus can1: 1 drive(s) at 50 Hz with current" in result.stderr
+    assert "bus can1: 1 drive at 50 Hz with current" in result.stderr
     rec = read_csv(out)
     assert "elbow_1a.px" in rec.columns and len(rec.times) >= 2
     poll = cli("--sim", "log", "record", "elbow_1a", "--poll", "--for", "0.2", "-o", str(tmp_path / "p.csv"))

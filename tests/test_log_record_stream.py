@@ -115,5 +115,5 @@ def test_the_report_counts_gaps_and_never_rounds_up_to_100(cli, tmp_path):
 
     log_cmd._render_record(St, [tmp_path / "r.csv"], {"a": 90}, 100, 95, 3)
     assert St.out.lines[0] == "a: 90 samples of 100 (90.00 %)"
-    assert St.out.warns == ["5 of 100 SYNC(s) have no row: no drive's sample arrived for them",
-                            "3 frame(s) came after their row was written: not in the file"]
+    assert St.out.warns == ["5 of 100 SYNCs have no row: no drive's sample arrived for them",
+                            "3 frames came after their row was written: not in the file"]

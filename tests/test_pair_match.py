@@ -4,6 +4,7 @@ the trial gains put back on every exit path, and the command's dry run / --apply
 
 from __future__ import annotations
 
+import json
 import math
 import re
 
@@ -149,3 +150,35 @@ def test_save_needs_apply_and_is_refused_without_a_terminal(cli):
     base = ("--config", str(MATCH), "--sim")
     result = cli(*base, "diffdrive", "match", "diff", "--save")
     assert result.exit_code == 2 and "--save needs --apply" in result.stderr
+
+
+def test_a_delay_shorter_than_one_sample_gives_no_infinite_bandwidth():
+    times = [k * 0.0005 for k in range(200)]
+    m = identify(times, [100.0] * 200, [100.0] * 200)  # an ideal loop: the speed is the command at once
+    assert m.delay_s == 0.0 and m.sample_s == pytest.approx(0.0005)
+    assert m.bandwidth_hz is None
+    assert m.bandwidth_above_hz == pytest.approx(2 / 0.0005 / (2 * math.pi))
+    assert m.bandwidth_text() == "> 637"
+    data = m.as_dict()
+    assert data["bandwidth_hz"] is None and "shorter than one sample (0.50 ms)" in data["bandwidth_note"]
+    assert not any(isinstance(v, float) and not math.isfinite(v) for v in data.values())
+
+
+def test_a_measured_delay_gives_its_bandwidth():
+    m = identify(*_first_order(0.02))
+    assert m.bandwidth_hz == pytest.approx(2 / 0.02 / (2 * math.pi), rel=0.03)
+    assert m.as_dict()["bandwidth_note"] is None
+    assert m.bandwidth_text() == f"{m.bandwidth_hz:.1f}"
+
+
+def test_the_ideal_simulated_pair_prints_no_inf(cli):
+    result = cli("--sim", "diffdrive", "match", "shoulder_diff", "--measure", "--uncalibrated")
+    assert result.exit_code == 0, result.stderr
+    assert not re.search(r"\binf\b|\bnan\b", result.stdout, re.IGNORECASE)
+    assert re.search(r"shoulder_2a .*> \d+ ", result.stdout)
+    assert "bandwidth: the delay is shorter than one sample" in result.stdout
+    data = cli("--sim", "--json", "diffdrive", "match", "shoulder_diff", "--measure", "--uncalibrated")
+    assert data.exit_code == 0, data.stderr
+    assert "Infinity" not in data.stdout and "NaN" not in data.stdout
+    models = json.loads(data.stdout)["proposal"]["models"]
+    assert models["shoulder_2a"]["bandwidth_hz"] is None and models["shoulder_2a"]["bandwidth_note"]

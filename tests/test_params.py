@@ -291,7 +291,7 @@ def test_params_diff_file_vs_live_golden(arm_cli, golden, dump_date, tmp_path, j
     path = tmp_path / "arm.yaml"
     first = arm_cli("dump-params", "-o", str(path), "elbow_1a", "elbow_1b")
     assert first.exit_code == 0, first.stderr
-    assert first.stdout == f"wrote 2 drive(s) to {path}\n"
+    assert first.stdout == f"wrote 2 drives to {path}\n"
     result = arm_cli(*(["--json"] if json_flag else []), "params", "diff", str(path), "live")
     assert result.exit_code == 0
     golden(f"params-diff-file-live{'-json' if json_flag else ''}.txt", _clean(result.transcript(), tmp_path))

@@ -92,9 +92,9 @@ def test_the_report_names_where_the_samples_are_missing(tmp_path):
                            gaps={"a": many, "b": Gaps()}, period=0.001)
     assert St.out.lines[0] == "a: 488 samples of 500 (97.60 %)"
     assert St.out.warns == [
-        "5 of 500 SYNC(s) have no row: no drive's sample arrived for them",
-        "a: 12 sample(s) missing (empty cells) at time_s 0.005 s (3 SYNCs), 0.020 s (1 SYNC), 0.040 s (2 SYNCs), "
-        "0.060 s (1 SYNC), 0.080 s (3 SYNCs) and 2 more gap(s)"]
+        "5 of 500 SYNCs have no row: no drive's sample arrived for them",
+        "a: 12 samples missing (empty cells) at time_s 0.005 s (3 SYNCs), 0.020 s (1 SYNC), 0.040 s (2 SYNCs), "
+        "0.060 s (1 SYNC), 0.080 s (3 SYNCs) and 2 more gaps"]
 
 
 def test_the_json_report_lists_the_gaps(tmp_path):

@@ -171,5 +171,5 @@ def test_sherpa_sim_reports_internal_faults_in_one_line(cli, monkeypatch):
     result = cli("--bus-map", "can0=socketcan:vcan0", "sim", "--duration", "0.001")
     assert result.exit_code == 1
     assert "Traceback" not in result.stderr
-    assert "error: the simulated arm had 1 internal fault(s); the first: CanOperationError: Network is down" \
+    assert "error: the simulated arm had 1 internal fault; the first: CanOperationError: Network is down" \
         in result.stderr

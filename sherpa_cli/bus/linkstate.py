@@ -150,12 +150,16 @@ def from_python_can(cfg: BusConfig, bus: can.BusABC) -> LinkStatus:
                       can_state=state, not_reported=missing)
 
 
+#: :attr:`LinkStatus.source` of a bus of the --sim arm: its controller is simulated in this process
+SIMULATED = "simulated controller"
+
+
 def source_for(cfg: BusConfig, sim: object = None) -> tuple[Netlink | None, str | None, str]:
     """(netlink, name to ask it for, source label) for one bus: the simulated arm's controller
     (``sim``: the injected arm, with --sim), pyroute2 for a SocketCAN bus, else (None, None, why not)."""
     netlink = getattr(sim, "netlink", None)  # the injected arm's controllers (None: no --sim)
     if netlink is not None:
-        return netlink, cfg.name, "simulated controller"
+        return netlink, cfg.name, SIMULATED
     if cfg.interface == "socketcan":
         reason = unavailable_reason()
         if reason is not None:
@@ -208,7 +212,7 @@ def read_link(session: ArmSession, bus: str) -> LinkStatus:
     link = getattr(session, "links", {}).get(bus)
     cfg: BusConfig = session.cfg.buses[bus]
     sim_cfg = getattr(getattr(session, "sim", None), "cfg", None)
-    if label == "simulated controller" and sim_cfg is not None and bus in sim_cfg.buses:
+    if label == SIMULATED and sim_cfg is not None and bus in sim_cfg.buses:
         cfg = sim_cfg.buses[bus]
     return snapshot(cfg, netlink, name, label, link.bus if link is not None else None)
 

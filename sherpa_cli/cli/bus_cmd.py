@@ -129,6 +129,8 @@ NAMES = {"state": "controller state", "counters": "error counters", "bitrate": "
 
 
 def render_status(st: AppState, statuses: list[Any], problems: dict[str, list[Any]]) -> None:
+    from sherpa_cli.bus.linkstate import SIMULATED
+
     rows = []
     for s in statuses:
         rate = _cell(s.bitrate)
@@ -160,7 +162,7 @@ def render_status(st: AppState, statuses: list[Any], problems: dict[str, list[An
             why.setdefault(reason, []).append(NAMES.get(key, key))
         for reason, keys in why.items():
             st.out.line(f"{s.bus}: {', '.join(keys)}: {reason}")
-    if any(s.source == "simulated controller" for s in statuses):
+    if any(s.source == SIMULATED for s in statuses):
         st.out.line("(--sim: the figures are the simulated arm's CAN controllers)")
     for s in statuses:
         for f in problems.get(s.bus, []):

@@ -10,6 +10,7 @@ import typer
 from sherpa_cli.cli.context import AppState, state
 from sherpa_cli.cli.options import ApplyRaw, RawSave
 from sherpa_cli.cli.output import fmt_value
+from sherpa_cli.words import plural
 
 if TYPE_CHECKING:
     from sherpa_cli.bus.session import ArmSession
@@ -127,6 +128,6 @@ def _render(st: AppState, ref: DriveRef, apply: bool, done: list[RawResult], sto
         st.out.line("SV also needs --raw-save (one flash write, counted in the save ledger)")
     unsent = sum(1 for r in done if not r.sent)
     if unsent:
-        st.out.line(f"dry run: {unsent} command(s) not sent; add --apply to send them")
+        st.out.line(f"dry run: {plural(unsent, 'command')} not sent; add --apply to send them")
     for line in stopped:
         st.out.line(line)

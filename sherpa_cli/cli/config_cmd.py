@@ -9,6 +9,7 @@ import typer
 
 from sherpa_cli.cli.context import state
 from sherpa_cli.errors import ExitCode
+from sherpa_cli.words import plural
 
 if TYPE_CHECKING:
     from sherpa_cli.cli.output import Output
@@ -43,11 +44,8 @@ def check(ctx: typer.Context, file: Path | None = FileArg) -> None:
 
 def _render(out: Output, s: dict[str, Any]) -> None:
     out.line(f"config {s['source']}: {s['name']} -- valid")
-    def n(count: int, word: str) -> str:
-        return f"{count} {word}" + ("" if count == 1 else "s")
-
-    out.line(f"  {n(len(s['buses']), 'bus').replace('buss', 'buses')}, {n(len(s['drives']), 'drive')}, "
-             f"{n(len(s['joints']), 'joint')}, {n(len(s['pairs']), 'differential pair')}")
+    out.line(f"  {plural(len(s['buses']), 'bus', 'buses')}, {plural(len(s['drives']), 'drive')}, "
+             f"{plural(len(s['joints']), 'joint')}, {plural(len(s['pairs']), 'differential pair')}")
     out.line()
     out.table("Buses", ["bus", "interface", "channel", "bitrate", "send gap µs", "poll ms", "drives"],
               [[b["name"], b["interface"] or "(python-can config)", b["channel"] or "-", b["bitrate"] or "-",

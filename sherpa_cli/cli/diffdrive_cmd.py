@@ -11,6 +11,7 @@ from sherpa_cli.cli.context import AppState, shared_stepped, state, use_stepped
 from sherpa_cli.cli.options import ApplyMatch, ApplyMotion, Report, Save, Yes
 from sherpa_cli.cli.output import stop_lines
 from sherpa_cli.errors import UsageError
+from sherpa_cli.words import plural
 
 if TYPE_CHECKING:
     from sherpa_cli.config.model import ArmConfig, PairConfig
@@ -424,7 +425,7 @@ def match(
     if not changes:
         return
     if not result.reached:
-        st.out.warn(f"the delays still differ by more than {result.proposal.tolerance:.0%} after {rounds} trial(s): "
+        st.out.warn(f"the delays still differ by more than {result.proposal.tolerance:.0%} after {plural(rounds, 'trial')}: "
                     f"the best trial is proposed")
     if not apply:
         drive, values = next(iter(changes.items()))
@@ -448,10 +449,13 @@ def _render_match(st: AppState, r: MatchResult, plot: str | None) -> None:
             m = rnd.models[drive]
             rows.append([("own gains" if k == 0 else f"trial {k}") + (" *" if k == r.chosen and k else ""), drive,
                          f"{m.delay_s * 1e3:.1f}", f"{m.rise_s * 1e3:.1f}", f"{m.overshoot:.1%}",
-                         f"{m.bandwidth_hz:.1f}", f"{m.zeta:.2f}", f"{rnd.excursion:.0f}"])
+                         m.bandwidth_text(), f"{m.zeta:.2f}", f"{rnd.excursion:.0f}"])
     st.out.line(f"pair {r.pair}: Σ step, each motor {prop.speed:g} counts/s, recorded by the drives")
     st.out.table(None, ["round", "drive", "delay ms", "rise ms", "overshoot", "bandwidth Hz", "damping", "Δ peak"],
                  rows, right=(2, 3, 4, 5, 6, 7))
+    notes = sorted({note for rnd in r.rounds for m in rnd.models.values() if (note := m.bandwidth_note)})
+    for note in notes:
+        st.out.line(f"bandwidth: {note}")
     before, after = r.rounds[0], r.rounds[r.chosen]
     st.out.line(f"Δ excursion of the Σ step (counts): predicted {prop.predicted_excursion(False):.1f} -> "
                 f"{prop.predicted_excursion(True):.1f}, measured {before.excursion:.0f} -> {after.excursion:.0f}")

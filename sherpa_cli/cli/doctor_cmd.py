@@ -11,6 +11,7 @@ import typer
 
 from sherpa_cli.cli.context import AppState, state
 from sherpa_cli.errors import CommunicationError, ExitCode, SherpaError, UsageError
+from sherpa_cli.words import plural
 
 if TYPE_CHECKING:
     from types import ModuleType
@@ -57,8 +58,8 @@ def doctor(
     except SherpaError as exc:
         report.add("config", False, str(exc), exc.hint or "`sherpa config check FILE` shows every problem")
     if cfg is not None:
-        report.add("config", True, f"{cfg.source}: {len(cfg.buses)} buses, {len(cfg.drives)} drives, "
-                   f"{len(cfg.joints)} joints" + (f", {len(cfg.warnings)} warnings" if cfg.warnings else ""))
+        report.add("config", True, f"{cfg.source}: {plural(len(cfg.buses), 'bus', 'buses')}, {plural(len(cfg.drives), 'drive')}, "
+                   + plural(len(cfg.joints), "joint") + (f", {plural(len(cfg.warnings), 'warning')}" if cfg.warnings else ""))
         _arm(st, report, cfg, buslink, doc, window)
     else:
         for name in ("buses", "drives"):

@@ -11,6 +11,7 @@ from sherpa_cli.cli.context import AppState, state
 from sherpa_cli.cli.options import YesMotion
 from sherpa_cli.cli.output import stop_lines
 from sherpa_cli.errors import SafetyError, UsageError
+from sherpa_cli.words import plural
 
 if TYPE_CHECKING:
     from sherpa_cli.config.model import ArmConfig
@@ -110,7 +111,7 @@ def home(
     if st.json_mode:
         st.out.json(report.as_dict())
     else:
-        st.out.line(f"homed {len(report.units)} unit(s); marked calibrated until the drives reset "
+        st.out.line(f"homed {plural(len(report.units), 'unit')}; marked calibrated until the drives reset "
                     f"(UI[{cfg.protocol.calibration_flag}]=1)")
 
 
@@ -201,7 +202,7 @@ def _check_wiring(st: AppState, name: str) -> None:
         for f in report.findings:
             st.out.line(f"  {f.line()}")
         bad = sum(1 for f in report.findings if not f.ok)
-        st.out.line(f"{len(report.findings) - bad} ok, {bad} fault(s)")
+        st.out.line(f"{len(report.findings) - bad} ok, {plural(bad, 'fault')}")
     if not report.ok:
         raise typer.Exit(1)
 

@@ -10,6 +10,7 @@ import typer
 from sherpa_cli.cli.context import AppState, state
 from sherpa_cli.cli.options import Targets
 from sherpa_cli.cli.output import fmt_value
+from sherpa_cli.words import plural
 
 if TYPE_CHECKING:
     from sherpa_cli.ops.identify import DeviceIdentity, IdentifyReport
@@ -102,8 +103,8 @@ def _render(st: AppState, report: IdentifyReport, *, verbose: bool = False) -> N
     read = len(report.drives) - len(failed)
     for drive, finding in findings:
         st.out.line(f"{drive}: {finding}")
-    summary = f"{read} of {len(report.drives)} drive(s) identified"
-    summary += f", {len(findings)} finding(s)" if findings else ", no mismatch in model or firmware"
+    summary = f"{read} of {plural(len(report.drives), 'drive')} identified"
+    summary += f", {plural(len(findings), 'finding')}" if findings else ", no mismatch in model or firmware"
     if failed:
         summary += f"; not answering: {', '.join(failed)}"
     if not verbose:
@@ -132,10 +133,10 @@ def _render_summary(st: AppState, report: IdentifyReport) -> None:
             where = f"{d.joint.joint} {d.joint.rad:.4f} rad"
         elif st.load_config().pair_of_drive(d.drive) is not None:
             where = "pair motor"
-        check = f"{len(d.findings)} finding(s)" if d.findings else "ok"
+        check = plural(len(d.findings), "finding") if d.findings else "ok"
         rows.append([d.drive, f"{d.bus}:{d.node}", str(d.identity.get("device_name") or "-"),
                      str(d.identity.get("software_version") or "-"), motor, status, where, check])
-    st.out.table(f"{len(rows)} drive(s)", ["drive", "address", "device", "firmware", "motor", "faults", "joint",
+    st.out.table(plural(len(rows), "drive"), ["drive", "address", "device", "firmware", "motor", "faults", "joint",
                                             "check"], rows, drop=(3, 2, 4, 6, 5), one_line=True)
 
 

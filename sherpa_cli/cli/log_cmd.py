@@ -15,6 +15,7 @@ from sherpa_cli.cli.context import AppState, shared_stepped, state, use_stepped
 from sherpa_cli.cli.options import ApplyMotion, Targets
 from sherpa_cli.cli.robotics import DEFAULT_AT, AllowRemote, Foxglove, FoxgloveAt
 from sherpa_cli.errors import SherpaError, UsageError, raise_if_signalled
+from sherpa_cli.words import plural
 
 if TYPE_CHECKING:
     from sherpa_cli.config.model import ArmConfig
@@ -378,7 +379,7 @@ def record(
             current = all(b.fits for b in bus_budget(cfg, refs, rate, current=True, encoders=encoders))
         budget = bus_budget(cfg, refs, rate, current=current, encoders=encoders)
         for b in budget:
-            st.out.info(f"bus {b.bus}: {b.drives} drive(s) at {rate:g} Hz"
+            st.out.info(f"bus {b.bus}: {plural(b.drives, 'drive')} at {rate:g} Hz"
                         f"{' with current' if b.current else ''}: {100 * b.load:.1f} % of "
                         f"{b.bitrate / 1e6:g} Mbit/s{' (assumed)' if b.bitrate_assumed else ''} "
                         f"(limit {100 * MAX_LOAD:.0f} %, highest rate {b.max_rate} Hz)")
@@ -509,14 +510,15 @@ def _render_record(st: AppState, outputs: Sequence[Path], counts: Mapping[str, i
     for output in outputs:
         st.out.line(f"wrote {output} ({rows} rows)")
     if no_row:
-        st.out.warn(f"{no_row} of {expected} SYNC(s) have no row: no drive's sample arrived for them")
+        st.out.warn(f"{no_row} of {expected} SYNCs {'has' if no_row == 1 else 'have'} no row: no drive's sample "
+                    f"arrived for {'it' if no_row == 1 else 'them'}")
     for name, g in holes.items():
         if g.missing:
             where = ", ".join(f"{k * period:.3f} s ({length} SYNC{'s' if length > 1 else ''})" for k, length in g.spans)
-            more = f" and {g.more_spans} more gap(s)" if g.more_spans else ""
-            st.out.warn(f"{name}: {g.missing} sample(s) missing (empty cells) at time_s {where}{more}")
+            more = f" and {g.more_spans} more {'gap' if g.more_spans == 1 else 'gaps'}" if g.more_spans else ""
+            st.out.warn(f"{name}: {plural(g.missing, 'sample')} missing (empty cells) at time_s {where}{more}")
     if late:
-        st.out.warn(f"{late} frame(s) came after their row was written: not in the file")
+        st.out.warn(f"{plural(late, 'frame')} came after their row was written: not in the file")
 
 
 def stepped_sim(st: AppState) -> tuple[SteppedTime | None, Callable[[ArmConfig, Mapping[str, str]], SimArm] | None]:
@@ -852,6 +854,6 @@ def section9(
         st.out.table(None, ["figure", "number", "value", "band (seed's text)", "check"], rows, right=(2,))
         st.out.line(f"summary: {folder / 'summary.json'}, {folder / 'summary.md'}")
         if failed:
-            st.out.line(f"{len(failed)} of {len(checked)} figure(s) outside the seed's band: {', '.join(failed)}")
+            st.out.line(f"{len(failed)} of {plural(len(checked), 'figure')} outside the seed's band: {', '.join(failed)}")
     if failed:
         raise typer.Exit(1)

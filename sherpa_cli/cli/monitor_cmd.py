@@ -22,6 +22,7 @@ from sherpa_cli.cli.robotics import (
     live_view,
 )
 from sherpa_cli.errors import ExitCode, UsageError, raise_if_signalled
+from sherpa_cli.words import plural
 
 if TYPE_CHECKING:
     from rich.console import Group
@@ -92,7 +93,7 @@ def monitor(
     if heartbeat is not None and not apply:
         # setting 0x1017 is a write: a dry run says what it would do and only listens
         st.out.warn(f"dry run: --heartbeat {heartbeat} would set the producer heartbeat (0x1017) of "
-                    f"{len(refs)} drive(s) to {heartbeat} ms in RAM; nothing is written (add --apply)")
+                    f"{plural(len(refs), 'drive')} to {heartbeat} ms in RAM; nothing is written (add --apply)")
         heartbeat = None
     with live_view(st, foxglove, foxglove_at, allow_remote) as view, st.session(buses=buses) as session, \
             Monitor(session, refs, heartbeat_ms=heartbeat) as mon:

@@ -10,7 +10,7 @@ import json
 import os
 import re
 import sys
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Iterator, Sequence
 from contextvars import ContextVar
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, TextIO
@@ -18,8 +18,10 @@ from typing import TYPE_CHECKING, Any, TextIO
 from sherpa_cli.errors import SafetyError, UsageError
 
 if TYPE_CHECKING:
-    from rich.console import Console, RenderableType
+    from rich.console import Console, ConsoleOptions, RenderableType
+    from rich.segment import Segment
     from rich.table import Table
+    from rich.text import Text
 
 # The width of output that is not a terminal (a pipe, a file, a report): wide enough that nothing is
 # wrapped and no column dropped. Tables never grow to it (they take their natural width).
@@ -124,7 +126,9 @@ class Output:
                 console.file.write(text)
                 console.file.flush()
                 return
-        self.result(make_table(title, columns, rows, right=right, drop=drop, width=console.width, one_line=one_line))
+        # not cropped to the terminal: a title wider than the terminal is folded by it, never cut off
+        console.print(make_table(title, columns, rows, right=right, drop=drop, width=console.width,
+                                 one_line=one_line), crop=False)
 
     # diagnostics (stderr)
     def info(self, text: str) -> None:
@@ -223,7 +227,8 @@ def make_table(title: str | None, columns: Sequence[str], rows: Iterable[Sequenc
     left_out = [columns[i] for i in range(len(columns)) if i not in keep]
     if left_out and title is not None:
         title = f"{title} (not shown: {', '.join(left_out)}; wider terminal or --json)"
-    table = Table(title=title, box=box.SIMPLE_HEAD, title_justify="left", pad_edge=False)
+    heading = None if title is None else _title(title)
+    table = Table(title=heading, box=box.SIMPLE_HEAD, title_justify="left", pad_edge=False)
     right_cols = set(right)
     for i in keep:
         # a technician must see the whole name or number:
@@ -235,6 +240,23 @@ def make_table(title: str | None, columns: Sequence[str], rows: Iterable[Sequenc
     for row in texts:
         table.add_row(*(row[i] for i in keep))
     return table
+
+
+def _title(text: str) -> Text:
+    """A table title on one line, whatever the table's width: rich wraps a title to the width of its
+    table, so a narrow table read "(both" / "motors)". Padded to the table's width as rich pads it;
+    longer, it runs past the table (and a terminal narrower than it folds it like any long line)."""
+    from rich.text import Text
+
+    class Title(Text):
+        def __rich_console__(self, console: Console, options: ConsoleOptions) -> Iterator[Segment]:
+            line = self.copy()
+            line.no_wrap, line.overflow = True, "ignore"
+            if line.cell_len < options.max_width:
+                line.pad_right(options.max_width - line.cell_len)
+            yield from console.render(line, options)
+
+    return Title(text, style="table.title")
 
 
 def fit_columns(columns: Sequence[str], rows: Sequence[Sequence[str]], width: int,

@@ -13,6 +13,7 @@ import typer
 
 from sherpa_cli.cli.context import AppState, state
 from sherpa_cli.cli.options import Targets
+from sherpa_cli.words import plural
 
 if TYPE_CHECKING:
     from sherpa_cli.ops.params_diff import DiffReport
@@ -61,7 +62,7 @@ def dump_params(
         st.out.json({"file": str(output) if output is not None else None, "meta": dump.meta,
                      "drives": {name: drive_block(d) for name, d in dump.drives.items()}})
     elif output is not None:
-        st.out.line(f"wrote {len(dump.drives)} drive(s) to {output}")
+        st.out.line(f"wrote {plural(len(dump.drives), 'drive')} to {output}")
     else:
         st.out.raw(dump_to_text(dump))
 
@@ -139,6 +140,12 @@ def _render(st: AppState, report: DiffReport, only_differences: bool) -> None:
     # labels in a legend, not in the column headers: a long file path must not widen every table
     st.out.line(f"A: {a}")
     st.out.line(f"B: {b}")
+    n, count = report.differences, len(report.drives)
+    if not n:
+        # the sets agree: a table of hundreds of equal rows would bury that; --json still has them
+        compared = sum(len(d.rows) for d in report.drives)
+        st.out.line(f"no difference: {plural(count, 'drive')}, {plural(compared, 'parameter')} compared")
+        return
     for d in report.drives:
         if d.only_in:
             side = a if d.only_in == "A" else b
@@ -148,14 +155,10 @@ def _render(st: AppState, report: DiffReport, only_differences: bool) -> None:
                 for r in d.rows if not only_differences or r.status != "same"]
         if only_differences and not rows:
             continue
-        n = d.differences
-        title = f"{d.drive} ({d.bus}:{d.node}) - " + (f"{n} difference(s)" if n else "same")
+        title = f"{d.drive} ({d.bus}:{d.node}) - " + (plural(d.differences, "difference") if d.differences
+                                                      else "same")
         st.out.table(title, ["param", "A", "B", ""], rows, right=(1, 2))
-    n, count = report.differences, len(report.drives)
-    if n:
-        st.out.line(f"{n} difference(s) in {report.drives_differing} of {count} drive(s)")
-    else:
-        st.out.line(f"no differences in {count} drive(s)")
+    st.out.line(f"{plural(n, 'difference')} in {report.drives_differing} of {plural(count, 'drive')}")
 
 
 # `params restore` lives with program-limits: both run the same plan / apply / verify / save engine.

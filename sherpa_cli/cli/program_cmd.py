@@ -12,6 +12,7 @@ from sherpa_cli.cli.context import AppState, state
 from sherpa_cli.cli.limits_cmd import drive_moves
 from sherpa_cli.cli.options import Apply, MotorOff, Save, Targets, VerifyFlash, Yes
 from sherpa_cli.cli.output import fmt_value
+from sherpa_cli.words import plural
 
 if TYPE_CHECKING:
     from sherpa_cli.errors import Location
@@ -238,7 +239,7 @@ def _render(st: AppState, command: str, plans: Sequence[DrivePlan], result: Appl
         drives = sum(1 for p in plans if p.ok and p.changes)
         reset = "; no drive was reset" if verify_flash else ""
         if changes:
-            st.out.line(f"dry run: nothing was written{reset}; {changes} change(s) on {drives} drive(s) "
+            st.out.line(f"dry run: nothing was written{reset}; {plural(changes, 'change')} on {plural(drives, 'drive')} "
                         f"-- add --apply to write them")
         else:
             st.out.line(f"dry run: nothing was written{reset}; nothing to change")
@@ -272,7 +273,7 @@ def _plan_line(p: DrivePlan) -> str:
         return f"{p.drive}: cannot be written: " + "; ".join(p.problems)
     n, c = len(p.params), len(p.changes)
     serial = f" (serial 0x{p.serial:08X})" if p.serial is not None else ""
-    text = f"{p.drive}{serial}: {n} parameter(s), {c} to change, {n - c} already set"
+    text = f"{p.drive}{serial}: {plural(n, 'parameter')}, {c} to change, {n - c} already set"
     if p.motor_on:
         text += "; motor is ON"
     if p.save_due:

@@ -26,6 +26,7 @@ from sherpa_cli.cli.options import (
 )
 from sherpa_cli.cli.step_check import check_step_commands
 from sherpa_cli.errors import UsageError
+from sherpa_cli.words import plural
 
 if TYPE_CHECKING:
     from rich.live import Live
@@ -413,7 +414,7 @@ def _commission_summary(st: AppState, rep: RecipeReport) -> None:
         st.out.table("commissioning plan (dry run)", ["drive", "bus:node", "would write", "would save", "problems"],
                      rows)
         if complete:
-            st.out.line(f"dry run: nothing was written ({len(rows)} drives); add --apply to program and save")
+            st.out.line(f"dry run: nothing was written ({plural(len(rows), 'drive')}); add --apply to program and save")
         else:
             st.out.line("dry run: some drives have problems (see the table); nothing was written")
         return
@@ -434,7 +435,7 @@ def _commission_summary(st: AppState, rep: RecipeReport) -> None:
     st.out.table("commissioning result", ["drive", "bus:node", "programmed", "verified", "saved"], rows)
     diff_ok = verify is not None and verify.status == "passed"
     if complete and diff_ok and save.status == "passed":
-        st.out.line(f"every drive is programmed, verified and saved ({len(rows)} drives); "
+        st.out.line(f"every drive is programmed, verified and saved ({plural(len(rows), 'drive')}); "
                     "the live values match the config")
     else:
         st.out.line("commissioning is NOT complete: see the failed step above")

@@ -12,6 +12,7 @@ import typer
 from sherpa_cli.cli.context import AppState, state
 from sherpa_cli.cli.options import ApplyReset
 from sherpa_cli.errors import ExitCode, UsageError
+from sherpa_cli.words import plural
 
 if TYPE_CHECKING:
     from sherpa_cli.ops.scan import NodeFinding, ScanReport
@@ -121,7 +122,7 @@ def _render(st: AppState, report: ScanReport) -> None:
                          _device(n), n.drive or "-", n.joint or "-",
                          *([n.nmt_state or "-"] if with_nmt else []), n.verdict])
         answered = sum(1 for n in bus.nodes if n.answer_s is not None)
-        st.out.table(f"bus {bus.bus}: {answered} node(s) answered",
+        st.out.table(f"bus {bus.bus}: {plural(answered, 'node')} answered",
                      ["node", "device type", "device", "drive", "joint",
                       *(["NMT"] if with_nmt else []), "verdict"], rows, right=(0,))
         for n in bus.nodes:

@@ -9,6 +9,7 @@ import typer
 
 from sherpa_cli.cli.context import state
 from sherpa_cli.errors import SherpaError, UsageError
+from sherpa_cli.words import plural
 
 MAX_SERVE_S = 30 * 24 * 3600.0  # --duration: a month; longer is a typo (leave it out to serve until Ctrl-C)
 
@@ -91,7 +92,7 @@ def sim(
         served = serving.serve(cfg, host, port, event_log=event_log)
         bus_map = ",".join(f"{bus}={target}" for bus, target in served.bus_map.items())
         lines = [
-            f"simulated arm '{cfg.name}': {len(cfg.drives)} drives on {len(cfg.buses)} buses, "
+            f"simulated arm '{cfg.name}': {plural(len(cfg.drives), 'drive')} on {plural(len(cfg.buses), 'bus', 'buses')}, "
             f"served over python-can-remote on {host}:{port}..{port + len(cfg.buses) - 1}",
             "in another terminal:",
             f"  export SHERPA_BUS_MAP={bus_map}",
@@ -131,5 +132,5 @@ def sim(
         # each was logged with its traceback when it happened; the exit says so in one line, as every
         # other error of the CLI (a signal's stop must not end in a traceback)
         first = arm.errors[0]
-        raise SherpaError(f"the simulated arm had {len(arm.errors)} internal fault(s); the first: "
+        raise SherpaError(f"the simulated arm had {plural(len(arm.errors), 'internal fault')}; the first: "
                           f"{type(first).__name__}: {first}", hint="the log above shows where each happened")

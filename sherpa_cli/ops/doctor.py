@@ -22,8 +22,9 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from sherpa_cli.bus.health import findings
-from sherpa_cli.bus.linkstate import LinkStatus
+from sherpa_cli.bus.linkstate import SIMULATED, LinkStatus
 from sherpa_cli.config.model import ArmConfig, JointConfig
+from sherpa_cli.words import plural
 
 if TYPE_CHECKING:
     from sherpa_cli.bus.session import ArmSession
@@ -94,12 +95,22 @@ def check_environment(report: DoctorReport, versions: Mapping[str, str | None], 
 # -- buses ----------------------------------------------------------------------------------------
 
 def check_buses(report: DoctorReport, statuses: Sequence[LinkStatus]) -> list[str]:
-    """Five rows per bus; returns the buses fit to talk on (present, up, not bus-off or stopped)."""
+    """Five rows per bus; returns the buses fit to talk on (present, up, not bus-off or stopped).
+
+    A bus of the --sim arm is named like the configured adapter, but its link, bit rate, state and
+    load are the simulated controller's: its rows say so, lest they read as the kernel's."""
     usable = []
     for s in statuses:
         found = {f.problem: f for f in findings(s)}
         who = f"bus {s.bus}"
         where = f"{s.interface or 'python-can config'}:{s.channel or '-'}"
+        simulated = s.source == SIMULATED
+        if simulated:
+            where += " (simulated in this process)"
+
+        def said(text: str, simulated: bool = simulated) -> str:
+            return f"simulated: {text}" if simulated else text
+
         if s.error and s.present is None:
             report.add(f"{who} interface", False, f"{where}: {s.error}",
                        "on Linux install pyroute2 (a dependency of sherpa-cli); see docs/bus.md")
@@ -113,30 +124,30 @@ def check_buses(report: DoctorReport, statuses: Sequence[LinkStatus]) -> list[st
             continue
         report.add(f"{who} interface", True, where + (f" ({s.kind})" if s.kind and s.kind != "can" else ""))
         if "down" in found:
-            report.add(f"{who} link", False, found["down"].text, found["down"].hint)
+            report.add(f"{who} link", False, said(found["down"].text), found["down"].hint)
             for row in ("bit rate", "state", "load"):
                 report.skip(f"{who} {row}", "the link is down")
             continue
-        report.add(f"{who} link", True, "up" if s.up else "open (the interface reports no link flag)")
+        report.add(f"{who} link", True, said("up" if s.up else "open (the interface reports no link flag)"))
         if "bitrate" in found:
-            report.add(f"{who} bit rate", False, found["bitrate"].text, found["bitrate"].hint)
+            report.add(f"{who} bit rate", False, said(found["bitrate"].text), found["bitrate"].hint)
         elif s.bitrate is not None:
-            report.add(f"{who} bit rate", True, f"{s.bitrate} as configured" if s.configured_bitrate else
-                       f"{s.bitrate} (the config names none)")
+            report.add(f"{who} bit rate", True, said(f"{s.bitrate} as configured" if s.configured_bitrate else
+                                                     f"{s.bitrate} (the config names none)"))
         else:
             report.add(f"{who} bit rate", True, s.not_reported.get("bitrate", "not reported"))
         bad = [f for k, f in found.items() if k in ("bus-off", "error-passive", "stopped")]
         if bad:
-            report.add(f"{who} state", False, bad[0].text, bad[0].hint)
+            report.add(f"{who} state", False, said(bad[0].text), bad[0].hint)
         elif s.can_state is not None:
             counters = f" (TEC {s.tec}, REC {s.rec})" if s.tec is not None else ""
-            report.add(f"{who} state", True, s.can_state + counters)
+            report.add(f"{who} state", True, said(s.can_state + counters))
         else:
             report.add(f"{who} state", True, s.not_reported.get("state", "not reported"))
         if s.load is None:
             report.add(f"{who} load", True, s.not_reported.get("load", "not measured"))
         else:
-            report.add(f"{who} load", s.load < HIGH_LOAD, f"{s.load * 100:.1f} % over {s.load_window:g} s",
+            report.add(f"{who} load", s.load < HIGH_LOAD, said(f"{s.load * 100:.1f} % over {s.load_window:g} s"),
                        "a node is flooding the bus: `sherpa log capture` shows which ids")
         if not any(k in found for k in ("bus-off", "stopped")):
             usable.append(s.bus)
@@ -216,12 +227,12 @@ def check_drives(report: DoctorReport, session: ArmSession, buses: Sequence[str]
     if unread:
         text = "; ".join(filter(None, [text, "identity unreadable: " + ", ".join(unread)]))
     report.add("firmware/model", not mism and not unread,
-               text or f"{len(found)} drives as configured; firmware {', '.join(firmwares) or 'not reported'}",
+               text or f"{plural(len(found), 'drive')} as configured; firmware {', '.join(firmwares) or 'not reported'}",
                "a replaced drive with other firmware or model: check it with `sherpa identify`, correct the "
                "config's model or update the drive")
     if beats:
         states = sorted(set(beats.values()))
-        report.add("heartbeats", True, f"{len(beats)} of {len(found)} drives heard: {', '.join(states)}")
+        report.add("heartbeats", True, f"{len(beats)} of {plural(len(found), 'drive')} heard: {', '.join(states)}")
     else:
         report.add("heartbeats", True, "no drive sends a heartbeat (0x1017 = 0, the default); "
                    "moving commands watch the drives themselves")
@@ -251,7 +262,7 @@ def check_drives(report: DoctorReport, session: ArmSession, buses: Sequence[str]
             unknown.append(f"{d}: {describe_ps(ps)}")
     report.add("user programs", not running,
                "running on " + ", ".join(running) if running else
-               (f"none running; {'; '.join(unknown)}" if unknown else f"none running ({len(refs)} drives)"),
+               (f"none running; {'; '.join(unknown)}" if unknown else f"none running ({plural(len(refs), 'drive')})"),
                "stop the user program (e.g. in Elmo Composer): SV is refused while it runs, and it fights "
                "moving commands (`--allow-user-program` lets them run anyway)")
     joints = [j for j in cfg.joints.values()
@@ -262,7 +273,7 @@ def check_drives(report: DoctorReport, session: ArmSession, buses: Sequence[str]
         report.add("calibration", False, f"not readable: {exc}", "check the drives with `sherpa monitor --once`")
     else:
         homed = [c.joint for c in cals if c.calibrated]
-        report.add("calibration", True, f"{len(homed)} of {len(cals)} joints calibrated"
+        report.add("calibration", True, f"{len(homed)} of {plural(len(cals), 'joint')} calibrated"
                    + ("" if len(homed) == len(cals) else " (`sherpa home` before position moves)"))
 
 

@@ -64,15 +64,50 @@ class LoopModel:
     overshoot: float
     zeta: float
     speed: float  # counts/s the step settled at (the command)
+    sample_s: float = 0.0  # the recording's sample period (0: not known)
 
     @property
-    def bandwidth_hz(self) -> float:
-        return 2 * self.zeta / self.delay_s / (2 * math.pi) if self.delay_s > 0 else math.inf
+    def resolved(self) -> bool:
+        """Whether the delay is long enough to give a bandwidth: a delay shorter than one sample (an
+        ideal simulated loop: 0) is below what the recording resolves, and 2 zeta / delay would be
+        infinite or noise."""
+        return self.delay_s > 0 and self.delay_s >= self.sample_s
 
-    def as_dict(self) -> dict[str, float]:
+    @property
+    def bandwidth_hz(self) -> float | None:
+        """wn in Hz; None when not :attr:`resolved` (:attr:`bandwidth_above_hz` bounds it then)."""
+        return 2 * self.zeta / self.delay_s / (2 * math.pi) if self.resolved else None
+
+    @property
+    def bandwidth_above_hz(self) -> float | None:
+        """The bandwidth an unresolved loop exceeds: the model's at a delay of one sample."""
+        if self.resolved or self.sample_s <= 0:
+            return None
+        return 2 * self.zeta / self.sample_s / (2 * math.pi)
+
+    @property
+    def bandwidth_note(self) -> str | None:
+        if self.resolved:
+            return None
+        if self.sample_s <= 0:
+            return "no delay measured: the bandwidth is beyond what the step resolves"
+        return (f"the delay is shorter than one sample ({self.sample_s * 1e3:.2f} ms): the bandwidth is above "
+                f"{self.bandwidth_above_hz:.0f} Hz, more than the recording resolves")
+
+    def bandwidth_text(self) -> str:
+        """The bandwidth as a table shows it: "12.5", "> 418" (unresolved, :attr:`bandwidth_note`) or "-"."""
+        if self.bandwidth_hz is not None:
+            return f"{self.bandwidth_hz:.1f}"
+        above = self.bandwidth_above_hz
+        return "-" if above is None else f"> {above:.0f}"
+
+    def as_dict(self) -> dict[str, float | str | None]:
+        bandwidth, above = self.bandwidth_hz, self.bandwidth_above_hz
         return {"delay_ms": round(self.delay_s * 1e3, 3), "rise_ms": round(self.rise_s * 1e3, 3),
                 "overshoot": round(self.overshoot, 4), "damping": round(self.zeta, 3),
-                "bandwidth_hz": round(self.bandwidth_hz, 2), "speed": round(self.speed, 1)}
+                "bandwidth_hz": None if bandwidth is None else round(bandwidth, 2),
+                "bandwidth_above_hz": None if above is None else round(above, 2),
+                "bandwidth_note": self.bandwidth_note, "speed": round(self.speed, 1)}
 
 
 @dataclass
@@ -190,7 +225,7 @@ def identify(times: Sequence[float], vel: Sequence[float], vel_cmd: Sequence[flo
         zeta = -ln / math.sqrt(math.pi ** 2 + ln * ln)
     else:
         zeta = 1.0
-    return LoopModel(delay, rise, overshoot, zeta, speed)
+    return LoopModel(delay, rise, overshoot, zeta, speed, (times[-1] - times[0]) / (n - 1))
 
 
 def propose(drives: tuple[str, str], models: Mapping[str, LoopModel], gains: Mapping[str, Mapping[str, float]],
