@@ -131,7 +131,9 @@ class CallerReadNotifier:
             while True:
                 remaining = deadline - clock()
                 if remaining <= 0:
-                    return arrived.acquire(blocking=False)
+                    # a thread the host kept off the CPU past its deadline finds its answer waiting
+                    # in the socket: read what is there before calling the drive silent
+                    return arrived.acquire(blocking=False) or self._drain(arrived)
                 if self._read.acquire(blocking=False):
                     led = True
                     try:
@@ -146,7 +148,7 @@ class CallerReadNotifier:
                                 return True
                             remaining = deadline - clock()
                             if remaining <= 0:
-                                return False
+                                break
                     finally:
                         self._read.release()
                 elif arrived.acquire(timeout=min(remaining, self.follow_slice)):
@@ -161,6 +163,24 @@ class CallerReadNotifier:
                     # a leader leaves while others wait: the background thread serves them now
                     self._handover = True
                     self._cond.notify()
+
+    def _drain(self, arrived: threading.Lock, limit: int = 64) -> bool:
+        """Read and dispatch what the bus already holds (no wait), if nobody else reads; True once
+        ``arrived`` was released."""
+        if not self._read.acquire(blocking=False):
+            return arrived.acquire(blocking=False)
+        try:
+            for _ in range(limit):
+                msg = self._recv(0.0)
+                if msg is None:
+                    break
+                self.caller_reads += 1
+                self._dispatch(msg)
+                if arrived.acquire(blocking=False):
+                    return True
+        finally:
+            self._read.release()
+        return arrived.acquire(blocking=False)
 
     # -- reading and dispatching ----------------------------------------------------------------
 

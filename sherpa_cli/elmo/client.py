@@ -164,6 +164,7 @@ class DriveClient:
         # watchers: a motion guard takes a request its command's thread sends as a sign of life)
         self.on_request: Callable[[], None] | None = None
         self._boot_listening = False
+        self._late = 0.0  # how much later than asked the last request's waits came back (s)
         self._wait = waiter(transport)  # resolved once: every round trip waits through it
         transport.subscribe(TPDO2_BASE + node, self._on_reply)
         transport.subscribe(EMCY_BASE + node, self._on_emcy)
@@ -394,8 +395,15 @@ class DriveClient:
         self.silent = reply is None
         if reply is None:
             tries = f" ({attempts} attempts)" if attempts > 1 else ""
-            raise DriveTimeoutError(f"{self.label}: no answer to {what} within {self.timeout:g} s{tries}",
-                                    hint=self.settings.timeout_hint)
+            busy = ""
+            if self._late > self.timeout / 4:
+                # the waiting thread itself came back that much later than it asked: the host was
+                # too busy to tell a silent drive from its own scheduling
+                busy = (f"; this computer was too busy: the tool's own thread came back {self._late * 1000:.0f} ms "
+                        "late while it waited, so the drive may well be fine")
+            raise DriveTimeoutError(f"{self.label}: no answer to {what} within {self.timeout:g} s{tries}{busy}",
+                                    hint="close what loads this computer and try again" if busy
+                                    else self.settings.timeout_hint)
         return reply
 
     def _exchange(self, frame: bytes, letters: str, index: int, *, attempts: int,
@@ -407,6 +415,7 @@ class DriveClient:
         long each attempt waits for its reply (default: the reply timeout).
         """
         pending = _Pending(letters, index)
+        self._late = 0.0
         # Registered before sending: with a synchronous transport the reply arrives inside send().
         with self._state:
             self._pending = pending
@@ -419,7 +428,17 @@ class DriveClient:
                 if frame:  # an empty frame only waits (for a reply already on its way)
                     self.transport.send(RPDO2_BASE + self.node, frame)
                 # the transport may let this thread read the bus itself until the reply is in
-                if self._wait(pending.arrived, self.timeout if wait is None else wait):
+                asked = self.timeout if wait is None else wait
+                began = self._clock()
+                arrived = self._wait(pending.arrived, asked)
+                late = self._clock() - began - asked
+                if not arrived and late > asked / 4:
+                    # this thread came back late (the host ran something else): the answer may be on
+                    # its way through a receive thread just as late, so the wait gets that lateness
+                    # once more (at most its own length) before the request counts as unanswered
+                    arrived = self._wait(pending.arrived, min(late, asked))
+                self._late = max(self._late, late)
+                if arrived:
                     if pending.error is not None:
                         raise pending.error
                     return pending.reply
