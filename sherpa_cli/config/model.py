@@ -315,6 +315,9 @@ class MotionConfig:
     # guide (13-10) says; the tool sends it (motors off) and arms the dead-man again, read back.
     # false: a drive on which 0x2040 acts at once
     pair_group_reset_comm: bool = True
+    # the host heartbeat's thread asks for real-time priority (SCHED_FIFO) where the OS permits, so a
+    # loaded computer keeps its period (docs/motion.md "A busy computer"); false: a normal thread
+    heartbeat_realtime: bool = True
     feedback_gain: float = 16.0  # --feedback: SP correction per unit of progress difference between the motors
     feedback_limit: float = 0.5  # --feedback: the correction never changes a motor's SP by more than this share
     # diffdrive move records both motors by TPDO on SYNC (log/record.py) at this rate (Hz, capped to

@@ -7,6 +7,7 @@ The consumer entry 0x1016:1 watches the host's heartbeat (``0x700 + host id``); 
 from __future__ import annotations
 
 import logging
+import os
 import threading
 import time
 from collections.abc import Callable, Sequence
@@ -15,7 +16,7 @@ from typing import Protocol
 from sherpa_cli.elmo.protocol import COMM_ERROR, CONSUMER, HEARTBEAT_BASE, LOSS_ACTION, NMT_OPERATIONAL
 
 __all__ = ["COMM_ERROR", "CONSUMER", "HEARTBEAT_BASE", "LOSS_ACTION", "NMT_OPERATIONAL", "OBJECT_NAMES", "SIZES",
-           "HostHeartbeat"]
+           "HostHeartbeat", "raise_priority"]
 
 log = logging.getLogger(__name__)
 
@@ -30,6 +31,24 @@ class Sender(Protocol):
     def send_message(self, can_id: int, data: bytes) -> None: ...
 
 
+RT_PRIORITY = 10  # SCHED_FIFO priority of the heartbeat thread: above every normal thread, low among RT ones
+
+
+def raise_priority(priority: int = RT_PRIORITY) -> str:
+    """Real-time (SCHED_FIFO) priority for the calling thread where the OS permits it (Linux, as root,
+    with CAP_SYS_NICE or an rtprio limit), so its heartbeats keep their period on a loaded host; the
+    thread sleeps between frames, so it never holds a CPU. What it got: ``"SCHED_FIFO 10"`` or
+    ``"normal (why)"``."""
+    setter = getattr(os, "sched_setscheduler", None)
+    if setter is None or not hasattr(os, "SCHED_FIFO"):
+        return "normal (no real-time scheduling on this system)"
+    try:
+        setter(0, os.SCHED_FIFO, os.sched_param(priority))  # 0: the calling thread (Linux)
+    except OSError as exc:
+        return f"normal (real-time priority not permitted: {exc.strerror or exc})"
+    return f"SCHED_FIFO {priority}"
+
+
 class HostHeartbeat:
     """The host heartbeat (``0x700 + host id``, state Operational) from a thread of this process.
 
@@ -41,8 +60,10 @@ class HostHeartbeat:
     """
 
     def __init__(self, networks: Callable[[], Sequence[Sender]], host_node_id: int, period: float,
-                 first_allowance: float) -> None:
+                 first_allowance: float, *, realtime: bool = True) -> None:
         self._networks = networks
+        self.realtime = realtime  # ask for SCHED_FIFO for the sending thread (motion.heartbeat_realtime)
+        self.priority = "normal"  # what the thread got (raise_priority), once it runs
         self.frame_id = HEARTBEAT_BASE + host_node_id
         self.period = period
         self._stop = threading.Event()
@@ -75,7 +96,12 @@ class HostHeartbeat:
         networks = list(self._networks())
         main = threading.main_thread()
 
+        started = threading.Event()
+
         def loop() -> None:
+            if self.realtime:
+                self.priority = raise_priority()
+            started.set()
             while True:
                 with self._alive_lock:
                     alive_until = self._alive_until
@@ -98,6 +124,7 @@ class HostHeartbeat:
 
         self.thread = threading.Thread(target=loop, name="sherpa-deadman", daemon=True)
         self.thread.start()
+        started.wait(1.0)  # its priority is known before the first motor goes on
 
     def stop(self) -> None:
         self._stop.set()

@@ -127,7 +127,8 @@ class MotionGuard:
         # dead-man loop
         buses = sorted({ref.bus for ref in self.refs})
         self._heartbeat = HostHeartbeat(lambda: [session.links[b].network for b in buses], settings.host_node_id,
-                                        settings.heartbeat_period, settings.liveness_timeout)
+                                        settings.heartbeat_period, settings.liveness_timeout,
+                                        realtime=settings.heartbeat_realtime)
         # the dead-man id of this command alone, taken on entry after listening (motion/host_ids.py,
         # motion/lock.py HostIdLock)
         self._host_lock = HostIdLock({b: wire_key(session.links[b].config.interface, session.links[b].config.channel)
@@ -178,6 +179,7 @@ class MotionGuard:
             self.host_id = self._host_lock.acquire(self._host_ids.heard(), self._others.watched())
             self._heartbeat.use_host(self.host_id)
             self._start_heartbeat()
+            self._event(f"heartbeat thread: {self._heartbeat.priority}, every {self.settings.heartbeat_period * 1000:g} ms")
             for d in self._drives.values():
                 self._arm(d)
             self._beat_now()

@@ -42,6 +42,7 @@ class MotionSettings:
     deadman_check_interval: float = 0.5  # s between reads of a moving drive's 0x1016:1
     bus_error_passive: str = "stop"  # stop | warn: an ERROR-PASSIVE bus during motion (motion/bus_watch.py)
     bus_check_interval: float = 0.1  # s between reads of the command's buses' controller state
+    heartbeat_realtime: bool = True  # SCHED_FIFO for the heartbeat thread where the OS permits (deadman.py)
 
     @property
     def heartbeat_period(self) -> float:
@@ -91,7 +92,8 @@ class MotionSettings:
                    recovery_fallback_speed=m.recovery_fallback_speed, stall_time=m.stall_time, poll_interval=poll_ms / 1000,
                    request_bound=p.reply_timeout * (1 + p.retries),
                    emcy_warning_codes=tuple(m.emcy_warning_codes), deadman_check_interval=m.deadman_check_interval,
-                   bus_error_passive=m.bus_error_passive, bus_check_interval=m.bus_check_interval)
+                   bus_error_passive=m.bus_error_passive, bus_check_interval=m.bus_check_interval,
+                   heartbeat_realtime=m.heartbeat_realtime)
 
 
     def recovery_speed_for(self, vel_limits: Iterable[int | None]) -> int:
