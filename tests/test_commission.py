@@ -46,12 +46,12 @@ def test_commission_example3_applies_saves_and_the_numbers_arrive(cli, golden, t
     assert save["dry_run"] is False and save["command"][-3:] == ["--apply", "--save", "--yes"]
     suite = ET.parse(junit).getroot().find("testsuite")
     assert (suite.get("tests"), suite.get("failures")) == ("9", "0")
-    # the backup holds the Appendix C numbers
+    # the backup was taken before anything was written: it holds what the drives held before (the
+    # simulator's delivered values), not the Appendix C numbers
     dumped = yaml.safe_load(backup.read_text())["drives"]
     for drive in ("drive1", "drive2"):
         params = dumped[drive]["params"]
-        assert (params["VL[3]"], params["VH[3]"], params["LL[3]"], params["HL[3]"]) == (-190, 190, -205, 205)
-        assert [params[f"IL[{n}]"] for n in (1, 2, 3, 4)] == [21, 21, 21, 21]
+        assert (params["VL[3]"], params["VH[3]"], params["LL[3]"], params["HL[3]"]) != (-190, 190, -205, 205)
     # ... and a new invocation (a power cycle: RAM from flash) reads them back from the drives
     for drive in ("drive1", "drive2"):
         r = cli("--config", EXAMPLE3, "--sim", "--json", "cmd", drive, "VL[3]", "VH[3]", "LL[3]", "HL[3]",
@@ -62,6 +62,14 @@ def test_commission_example3_applies_saves_and_the_numbers_arrive(cli, golden, t
     r = cli("--config", EXAMPLE3, "--sim", "commission", "--apply", "--yes", "--set", f"backup={backup}")
     golden("commission-example3-again.txt", normalized(r, tmp_path))
     assert r.exit_code == 0 and r.stdout.count("held already, no SV needed") == 2
+    # ... whose backup, taken before it, holds the Appendix C numbers the first one programmed
+    dumped = yaml.safe_load(backup.read_text())["drives"]
+    for drive in ("drive1", "drive2"):
+        params = dumped[drive]["params"]
+        assert (params["VL[3]"], params["VH[3]"], params["LL[3]"], params["HL[3]"]) == (-190, 190, -205, 205)
+        assert [params[f"IL[{n}]"] for n in (1, 2, 3, 4)] == [21, 21, 21, 21]
+    assert f"backup of every drive's parameters from before this run: {backup}" in r.stdout
+    assert "homing marks are cleared; home the arm next" in r.stdout
 
 
 @pytest.mark.golden
@@ -89,8 +97,9 @@ def test_commission_dry_run_writes_nothing(cli, golden, tmp_path, monkeypatch):
     golden("commission-example3-dry-run.txt", normalized(r, tmp_path))
     # nothing is wrong: the dry run shows its plan, asks nothing and does not verify what it did not write
     assert r.exit_code == 0, r.stdout
-    assert "[5/9] confirm-save  skipped (dry run: nothing to confirm)" in r.stdout
-    assert "[6/9] save          passed (dry run)" in r.stdout
+    assert "[6/9] confirm-save  skipped (dry run: nothing to confirm)" in r.stdout
+    assert "[4/9] backup        skipped (dry run: nothing was written)" in r.stdout
+    assert "[7/9] save          passed (dry run)" in r.stdout
     assert "[8/9] verify        skipped (dry run: nothing was written)" in r.stdout
     assert "dry run: nothing was written (2 drives)" in r.stdout
     r = cli("--config", EXAMPLE3, "--sim", "--json", "cmd", "drive1", "LL[3]")

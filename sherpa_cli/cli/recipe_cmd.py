@@ -439,3 +439,12 @@ def _commission_summary(st: AppState, rep: RecipeReport) -> None:
                     "the live values match the config")
     else:
         st.out.line("commissioning is NOT complete: see the failed step above")
+    backup = rep.result_of("backup")
+    argv = list(backup.argv) if backup is not None and backup.argv else []
+    if backup is not None and backup.status == "passed" and "-o" in argv[:-1]:
+        st.out.line(f"backup of every drive's parameters from before this run: {argv[argv.index('-o') + 1]} "
+                    "(replaced on the next run; --set backup=FILE keeps another)")
+    proof = rep.result_of("flash-proof")
+    if proof is not None and proof.status == "passed":
+        st.out.line("the flash proof reset every drive: positions and homing marks are cleared; home the arm "
+                    "next (`sherpa home --yes`)")
