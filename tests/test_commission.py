@@ -68,8 +68,8 @@ def test_commission_example3_applies_saves_and_the_numbers_arrive(cli, golden, t
         params = dumped[drive]["params"]
         assert (params["VL[3]"], params["VH[3]"], params["LL[3]"], params["HL[3]"]) == (-190, 190, -205, 205)
         assert [params[f"IL[{n}]"] for n in (1, 2, 3, 4)] == [21, 21, 21, 21]
-    assert f"backup of every drive's parameters from before this run: {backup}" in r.stdout
-    assert "homing marks are cleared; home the arm next" in r.stdout
+    assert f"backup from before this run: {backup}\n" in r.stdout
+    assert "homing marks are cleared;\n  home the arm next" in r.stdout
 
 
 @pytest.mark.golden

@@ -134,7 +134,7 @@ def test_the_save_question_goes_to_the_terminal_and_lists_the_drives(cli, monkey
     question = "Save the verified limits to flash (SV) on every drive that changed? (would save: drive1, drive2)"
     assert f"{question} [y/N]" in err, err
     assert "Save the verified" not in out  # `| tee log` shows results; the question stays on the terminal
-    assert "[5/9] confirm-save  declined (answer: no)" in out
+    assert "[6/9] confirm-save  declined (answer: no)" in out
 
 
 def test_program_limits_save_question_goes_to_stderr(cli, monkeypatch):

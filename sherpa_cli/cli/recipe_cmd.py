@@ -442,9 +442,9 @@ def _commission_summary(st: AppState, rep: RecipeReport) -> None:
     backup = rep.result_of("backup")
     argv = list(backup.argv) if backup is not None and backup.argv else []
     if backup is not None and backup.status == "passed" and "-o" in argv[:-1]:
-        st.out.line(f"backup of every drive's parameters from before this run: {argv[argv.index('-o') + 1]} "
-                    "(replaced on the next run; --set backup=FILE keeps another)")
+        st.out.line(f"backup from before this run: {argv[argv.index('-o') + 1]}")
+        st.out.line("  (the next run replaces it; --set backup=FILE keeps another)")
     proof = rep.result_of("flash-proof")
     if proof is not None and proof.status == "passed":
-        st.out.line("the flash proof reset every drive: positions and homing marks are cleared; home the arm "
-                    "next (`sherpa home --yes`)")
+        st.out.line("the flash proof reset every drive: positions and homing marks are cleared;")
+        st.out.line("  home the arm next (`sherpa home --yes`)")

@@ -49,6 +49,7 @@ from sherpa_cli.errors import ConfigError, Location, UsageError
 from sherpa_cli.joints.currents import Finding, check_currents, validate_params
 from sherpa_cli.joints.diffpair import MotorBox, motor_box
 from sherpa_cli.joints.params import PARAM_ORDER, DriveParams, ParamValue
+from sherpa_cli.words import plural
 
 
 @dataclass(frozen=True)
@@ -352,8 +353,27 @@ def derive_checked(cfg: ArmConfig, drives: Sequence[str] | None = None) -> tuple
         more = len(errors) - 1
         raise ConfigError(errors[0].message, errors[0].location,
                           hint=f"{more} more error(s) follow once this is fixed" if more else None)
-    warnings.extend(f.message for f in findings if f.level == "warning")
+    warnings.extend(_grouped_warnings([f.message for f in findings if f.level == "warning"]))
     return derived, warnings
+
+
+def _grouped_warnings(messages: Sequence[str]) -> list[str]:
+    """A rating check skipped for many drives (the shipped config names no motors) is one line
+    naming them all, not one line per drive on every command."""
+    groups: dict[str, list[str]] = {}
+    out: list[str] = []
+    for m in messages:
+        who, _, what = m.partition(": ")
+        if "rating check skipped" in what and who.startswith("joint ") and ", drive " in who:
+            joint, _, drive = who[len("joint "):].partition(", drive ")
+            if what not in groups:
+                groups[what] = []
+                out.append(what)  # its place among the others: where its first drive was
+            groups[what].append(f"{drive} ({joint})")
+        else:
+            out.append(m)
+    # "SUBJECT: MESSAGE", as every warning: a recipe's summary groups them by the message
+    return [f"{plural(len(groups[m]), 'drive')} ({', '.join(groups[m])}): {m}" if m in groups else m for m in out]
 
 
 def config_findings(cfg: ArmConfig) -> list:
