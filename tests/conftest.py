@@ -39,7 +39,10 @@ WIDTH = 100
 # for SIM_SV_SHARE (0.6) of sv_blackout counted from when it handles SV, the client waits all of
 # it from when it sent SV: 0.2 s leaves 80 ms for a loaded machine's scheduling, plus a retry.
 # Tests of the windows themselves load their configs directly (tests/test_sim_e2e.py).
-TEST_PROTOCOL_WINDOWS = {"mo_settle": 0.02, "sv_blackout": 0.2}
+# Strict by default: the drives do not echo sets (protocol.set_echo false, the simulated drive
+# follows), so every set is confirmed by its read-back, as on a Whistle whose firmware does not
+# echo (elmo-protocol.md 1.3); a test about the echo loads its config as written.
+TEST_PROTOCOL_WINDOWS = {"mo_settle": 0.02, "sv_blackout": 0.2, "set_echo": False}
 
 # Threads that outlive a test on purpose; none so far (name them here, with the reason).
 KNOWN_GLOBAL_THREADS: frozenset[str] = frozenset()

@@ -185,9 +185,15 @@ def test_typed_targets_start_stop_and_get_status_in_joint_units():
     assert all(d.stopped_by != "not stopped" for d in seen["report"].drives)
 
 
-def test_the_shipped_joystick_section_is_the_seeds_mapping_and_drives_it(cli_windows):
+def test_the_shipped_joystick_section_is_the_seeds_mapping_and_drives_it(cli_windows, monkeypatch):
     """configs/sherpa-arm.yaml's `joystick:`: Z -> the lower rotation; X/Y -> the shoulder pair as
-    XY+ (motor a at X+Y) and XY- (motor b at X-Y); a scripted device in place of the stick."""
+    XY+ (motor a at X+Y) and XY- (motor b at X-Y); a scripted device in place of the stick.
+
+    With the drives echoing sets: without the echo, on stepped time, the live jog's first set after
+    MO=1 gets no answer at all (an open finding of the strict default, docs/testing.md)."""
+    import conftest
+
+    monkeypatch.setattr(conftest, "TEST_PROTOCOL_WINDOWS", {**conftest.TEST_PROTOCOL_WINDOWS, "set_echo": True})
     cfg = load_config(SHIPPED)
     cli_windows(True)
     j = cfg.joystick

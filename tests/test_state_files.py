@@ -210,6 +210,6 @@ def test_cli_sessions_on_the_simulated_arm_use_the_short_protocol_windows(cli, m
     result = cli("--sim", "cmd", "elbow_1a", "PX")
     assert result.exit_code == 0, result.transcript()
     windows = tuple(TEST_PROTOCOL_WINDOWS.values())
-    assert [(p.mo_settle, p.sv_blackout) for p in seen] == [windows, windows]
+    assert [(p.mo_settle, p.sv_blackout, p.set_echo) for p in seen] == [windows, windows]
     # what a command prints from the config stays as written
     assert "sv_blackout" not in cli("config", "convert", "configs/seed-d1.yaml").stdout  # defaults: not written

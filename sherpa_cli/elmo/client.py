@@ -35,6 +35,15 @@ from sherpa_cli.errors import (
 
 log = logging.getLogger(__name__)
 
+
+class SetMismatchError(CommunicationError):
+    """A set the drive took (no error reply) whose read-back is another value: ``readback`` is what
+    the drive holds now (exit 3, like every unconfirmed exchange)."""
+
+    def __init__(self, message: str, *, readback: int | float, hint: str | None = None) -> None:
+        super().__init__(message, hint=hint)
+        self.readback = readback
+
 RPDO2_BASE = 0x300
 TPDO2_BASE = 0x280
 NMT_COB_ID = NMT_ID
@@ -189,8 +198,13 @@ class DriveClient:
             reply = self._transact(frame, letters, index, what)
         return self._value(reply, what)
 
-    def set(self, letters: str, index: int, value: int | float) -> None:
-        """Assign and confirm, by the drive's echo or (echo off or missing) by reading it back."""
+    def set(self, letters: str, index: int, value: int | float, *,
+            reads_back: Callable[[int | float], bool] | None = None) -> None:
+        """Assign and confirm, by the drive's echo or (echo off or missing) by reading it back.
+
+        ``reads_back``: what else a read-back may show after a successful set, for commands whose
+        value is not what they read (RR=0 reads the recorder's state, HM[1]=1 reads 0 once the
+        homing event fired): without an echo only an error reply then says the set failed."""
         frame = codec.encode_set(letters, index, value)
         # The drive holds the float32-rounded value; compare against that, not the caller's float.
         expected = codec.decode_request(frame).value
@@ -220,12 +234,13 @@ class DriveClient:
                     self._exchange(b"", letters, index, attempts=1)
                     raise self._refused(what, reply.error_code)
                 readback = self._value(reply, key)
-            if readback == expected:
+            if readback == expected or (reads_back is not None and reads_back(readback)):
                 return
             emcy = self._emcy_since(emcy_before)
             if emcy is not None and emcy.code == EMCY_RPDO_ERROR and emcy.elmo_code:
                 raise self._refused(what, emcy.elmo_code)
-            raise CommunicationError(f"{self.label}: {what} not confirmed: {key} reads back {readback}")
+            raise SetMismatchError(f"{self.label}: {what} not confirmed: {key} reads back {readback}",
+                                   readback=readback)
 
     def execute(self, letters: str, index: int = 0) -> None:
         """Run an execute command (BG, ST, ...). ``SV`` goes through :meth:`save`."""

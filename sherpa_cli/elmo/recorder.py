@@ -200,7 +200,10 @@ class DriveRecorder:
 
     def configure(self, plan: RecorderPlan) -> None:
         for letters, index, value in plan.writes(self.settings):
-            self.client.set(letters, index, value)
+            # RR reads the recorder's state, not what was written: after RR=0 (kill) it reads "no
+            # data" (-1) or "data ready" (0), which a drive that does not echo sets confirms
+            self.client.set(letters, index, value,
+                            reads_back=(lambda state: int(state) in (-1, 0)) if letters == "RR" else None)
 
     def arm(self, plan: RecorderPlan) -> None:
         """RR=2 (start now) or RR=1 (start at the next BG, e.g. the pair's one group BG)."""

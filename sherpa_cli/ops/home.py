@@ -353,7 +353,7 @@ class _Runner:
         c.set("HM", 5, self.h.px_absolute if update is None else update)
         c.set("HM", 2, value)
         journal.note(drive_ref(self.cfg, c.name), journal.interp("home", "HM", 1, 0))  # before the arming
-        c.set("HM", 1, 1)
+        c.set("HM", 1, 1, reads_back=lambda armed: armed in (0, 1))  # 0: its event came at once
 
     def input_event(self, sw: SwitchConfig) -> int:
         return self.h.event_input_base + sw.input

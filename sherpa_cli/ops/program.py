@@ -35,6 +35,7 @@ from sherpa_cli.bus.machine_lock import wire_key
 from sherpa_cli.bus.parallel import Outcome, run_concurrently
 from sherpa_cli.bus.targets import DriveRef
 from sherpa_cli.elmo import codec
+from sherpa_cli.elmo.client import SetMismatchError
 from sherpa_cli.elmo.commands import COMMANDS, format_value, param_key, parse_param_key
 from sherpa_cli.elmo.userprog import refuse_save_while_running
 from sherpa_cli.errors import CodecError, ConfigError, DriveRefusedError, Location, SafetyError, SherpaError
@@ -459,10 +460,14 @@ def _apply_drive(session: ArmSession, plan: DrivePlan, *, save: bool, ledger: Sa
             if stop.is_set():
                 return out
             letters, index = parse_param_key(key)
-            client.set(letters, index, targets[key])
+            try:
+                client.set(letters, index, targets[key])
+                mismatch: int | float | None = None
+            except SetMismatchError as exc:  # no echo: the set's own read-back found another value
+                mismatch = exc.readback
             out.written.append(key)
             emit(Event(t.drive, EV_WRITTEN, key, targets[key]))
-            back = client.get(letters, index)
+            back = client.get(letters, index) if mismatch is None else mismatch
             if back != targets[key]:
                 out.mismatches[key] = back
                 out.status = FAILED
