@@ -138,6 +138,24 @@ def test_step_writes_one_mcap_with_the_metrics(cli, tmp_path):
     assert metrics[0][2] == zero and first < zero
 
 
+def test_step_mcap_counts_agree_everywhere(cli, tmp_path):
+    """`log step -o x.mcap`: the samples the report prints are the /joint_states messages the file
+    holds, and its metadata and embedded metrics say the same (they counted the whole recording,
+    the stop and standstill after the step included, while the file holds the step only)."""
+    out = tmp_path / "step.mcap"
+    result = cli("--sim", "--config", "tests/data/step-arm.yaml", "log", "step", "arm", "--position", "0.2",
+                 "--rate", "500", "--for", "0.5", "-o", str(out), "--apply")
+    assert result.exit_code == 0, result.transcript()
+    messages, metadata, _ = _decoded(out)
+    states = [m for m in messages if m[0] == "/joint_states"]
+    motors = [m for m in messages if m[0] == "/sherpa/motor_counts"]
+    body = json.loads(next(m for m in messages if m[0] == "/sherpa/step_metrics")[3].data)
+    line = next(x for x in result.stdout.splitlines() if x.startswith("arm (elbow)"))
+    printed, of = (int(v) for v in line.rsplit("; ", 1)[1].removesuffix(" samples").split(" of "))
+    assert printed == of == len(states) == len(motors), line  # nothing missing on stepped time
+    assert int(metadata["sherpa.recording"]["samples"]) == body["samples"] == body["expected"] == len(states)
+
+
 # -- log capture / decode ----------------------------------------------------------------------------
 
 def _write_known(path) -> None:

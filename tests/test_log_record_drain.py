@@ -126,7 +126,8 @@ def test_the_drain_is_bounded(fake, monkeypatch):
         pass
     took = time.monotonic() - t
     assert DRAIN_LIMIT_S <= took < DRAIN_LIMIT_S + 2.0
-    assert rec.counts()[ref.name] > 10
+    # it kept the recorder busy; only the SYNCs that were sent hold a sample, the rest answer none
+    assert rec.counts()[ref.name] == rec.expected() and rec.unplaced() > 10
 
 
 def _endless_stop(self: LateSync) -> None:

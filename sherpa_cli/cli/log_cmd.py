@@ -387,7 +387,7 @@ def record(
     buses = list(dict.fromkeys([*(r.bus for r in refs),  # and the buses of the joints' encoders
                                 *(t.dev.bus for t in encoder.recorded_encoders(cfg, (r.name for r in refs)))]))
     expected: int | None = None
-    late = 0
+    late = unplaced = 0
     failure: SherpaError | None = None  # found while recording (another SYNC producer): raised once written
     gaps: Mapping[str, Gaps] | None = None
     period = 0.0
@@ -419,7 +419,8 @@ def record(
             counts, expected, late = recorder.counts(), recorder.expected(), recorder.late()
             failure = recorder.problem()
             gaps, period = recorder.gaps(), recorder.period
-            zero_ns = round((recorder.t0 or 0.0) * 1e9)
+            zero_ns = round(recorder.time_zero() * 1e9)  # the first SYNC's: time_s 0 of the rows
+            unplaced = recorder.unplaced()
         extras.read_status()
     if ".csv" in outputs and streamed is None:
         assert rec is not None
@@ -433,6 +434,8 @@ def record(
     output = list(outputs.values())
     rows = streamed.rows if streamed is not None else len(rec.times) if rec is not None else 0
     _render_record(st, output, counts, expected, rows, late, gaps=gaps, period=period)
+    if unplaced:
+        st.out.warn(f"{unplaced} frame(s) answered no SYNC this tool sent: not in the file")
     if failure is not None:
         st.out.warn("the samples up to the stop are written; the drives' PDO settings are restored")
         raise failure

@@ -232,10 +232,9 @@ class EncoderTrack:
         _restore(session.sdo(device_ref(self.dev)), saved)
 
     def add(self, k: int, data: bytes) -> None:
-        """One TPDO1 frame answering SYNC number ``k`` (the caller holds the recorder's lock)."""
+        """One TPDO1 frame answering SYNC number ``k``, as the recorder matched it (it holds its lock)."""
         if len(data) >= 4:
-            k = max(k, self.last + 1)
-            self.last = k
+            self.last = max(self.last, k)
             self.samples[k] = CanOpenEncoder.position_from_tpdo(bytes(data))
 
     def columns(self, keys: Sequence[int]) -> dict[str, list[float]]:

@@ -17,12 +17,14 @@ before it stops; tests inject their own (``sync_factory``) and a clock.
 
 from __future__ import annotations
 
+import bisect
 import contextlib
+import functools
 import math
 import struct
 import threading
 import time
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, Protocol
 
@@ -59,6 +61,9 @@ RESTORE_WINDOW_S = 3.0  # ... but a drive silent this long is dead: its other ob
 #: arrive late (a loaded receive thread) and for latest(); older rows go to the sink and are dropped
 LATE_WINDOW_S = 0.2
 LATE_WINDOW_MIN = 50  # ... and at least this many SYNCs (latest() looks back 50)
+#: a frame's receive timestamp further than this from the host's wall time is on another clock (an
+#: interface's own): the frame is then placed by when the recorder heard it
+STAMP_PLAUSIBLE_S = 10.0
 
 
 # -- the bus budget ---------------------------------------------------------------------------------
@@ -102,44 +107,151 @@ def bus_budget(cfg: ArmConfig, refs: Sequence[DriveRef], rate: float, *, current
 
 # -- SYNC -----------------------------------------------------------------------------------------
 
+def wall_time() -> float:
+    """The clock of the frames' receive timestamps (SocketCAN's kernel stamps, python-can's virtual
+    and remote interfaces): the host's wall time."""
+    return time.time()
+
+
+class SyncLog:
+    """The SYNCs this tool sent on one bus, in order: SYNC n's send time on the recorder's clock
+    (``at``) and on the clock of the frames' receive timestamps (``stamp``, taken just before the
+    send, so an answer is never stamped before its SYNC). A recorded TPDO is matched to the SYNC it
+    answers through it, and a sample is placed at its SYNC's ``at``.
+
+    A source that notes every SYNC it sends (:meth:`sent`: the tool's thread, stepped time) gives
+    the exact log. The kernel's broadcast manager sends on its own, as exactly as the kernel's
+    timer: its log is the schedule (:meth:`scheduled`: SYNC n at the start + n periods, none while
+    paused), and so is that of a source that keeps no log (a test's)."""
+
+    def __init__(self, period: float) -> None:
+        self.period = period
+        self.at: list[float] = []
+        self.stamps: list[float] = []
+        self._lock = threading.Lock()
+        # a schedule: segments (start on the recorder's clock, start stamp or None, first index)
+        self._segments: list[tuple[float, float | None, int]] | None = None
+        self._end: float | None = None  # the schedule's pause or stop on the recorder's clock
+        self._now: Callable[[], float] = wall_time
+
+    @classmethod
+    def scheduled(cls, period: float, start: float, *, now: Callable[[], float] = wall_time,
+                  stamped: bool = True) -> SyncLog:
+        """SYNC n at ``start`` + n periods (``start`` on ``now``'s clock); ``stamped``: that clock is
+        the frames' timestamps' (wall time), else frames are placed by when the recorder heard them."""
+        log = cls(period)
+        log._segments, log._now = [(start, start if stamped else None, 0)], now
+        return log
+
+    @property
+    def stamped(self) -> bool:
+        return self._segments is None or self._segments[-1][1] is not None
+
+    def sent(self, at: float, stamp: float) -> None:
+        """One SYNC about to go out (called by its source just before the send)."""
+        with self._lock:
+            self.at.append(at)
+            self.stamps.append(stamp)
+
+    def retract(self) -> None:
+        """The SYNC just noted did not go out (its send failed): the log holds only what was sent."""
+        with self._lock:
+            self.at.pop()
+            self.stamps.pop()
+
+    def pause(self) -> None:
+        """A scheduled source stopped (the SYNC gate, its end): no SYNC after now."""
+        if self._segments is not None and self._end is None:
+            self._end = self._now()
+
+    def resume(self) -> None:
+        """A paused scheduled source started again: its first SYNC goes out now."""
+        if self._segments is not None and self._end is not None:
+            first = self.count()
+            now = self._now()
+            self._segments.append((now, now if self._segments[-1][1] is not None else None, first))
+            self._end = None
+
+    def count(self) -> int:
+        """SYNCs sent so far."""
+        if self._segments is None:
+            return len(self.at)
+        start, _, first = self._segments[-1]
+        until = self._now() if self._end is None else self._end
+        return first + max(0, math.floor((until - start) / self.period + 1e-6) + 1)
+
+    def time_of(self, n: int) -> float:
+        """SYNC ``n``'s send time on the recorder's clock."""
+        if self._segments is None:
+            return self.at[n]
+        for start, _, first in reversed(self._segments):
+            if n >= first:
+                return start + (n - first) * self.period
+        raise IndexError(n)
+
+    def sent_by(self, stamp: float | None) -> int:
+        """How many SYNCs had been sent when a frame stamped ``stamp`` arrived (None: now)."""
+        if stamp is None:
+            return self.count()
+        if self._segments is None:
+            with self._lock:
+                return bisect.bisect_right(self.stamps, stamp)
+        count = self.count()
+        for _start, start_stamp, first in reversed(self._segments):
+            if start_stamp is not None and stamp >= start_stamp:
+                return min(count, first + math.floor((stamp - start_stamp) / self.period + 1e-6) + 1)
+        return 0
+
+
 class PeriodicSync:
     """SYNC every ``period`` s through python-can's send_periodic (kernel BCM on SocketCAN). The
     kernel sends without the bus's SYNC gate, so the gate pauses it (stop, then start again) while
-    a synchronous pair start sends its BG frames (bus/syncgate.py)."""
+    a synchronous pair start sends its BG frames (bus/syncgate.py); its log is the kernel's
+    schedule, paused likewise."""
 
     def __init__(self, bus: can.BusABC, period: float) -> None:
         import can
 
+        self.log = SyncLog.scheduled(period, wall_time())
         self.task = bus.send_periodic(can.Message(arbitration_id=SYNC_ID, data=b"", is_extended_id=False), period)
         self._unregister = syncgate.gate(bus).register(self)
 
     def pause(self) -> None:
         self.task.stop()
+        self.log.pause()
 
     def resume(self) -> None:
         start = getattr(self.task, "start", None)  # RestartableCyclicTaskABC (SocketCAN's is one)
         if start is not None:
+            self.log.resume()
             start()
 
     def stop(self) -> None:
         self._unregister()
         self.task.stop()
+        self.log.pause()
 
 
 class ThreadSync:
     """SYNC every ``period`` s from a thread of the tool, for interfaces without a kernel periodic
-    task (python-can would use a thread there too). Unlike python-can's, it counts what it sent and
-    on :meth:`stop` first sends the SYNCs already due (a thread behind on a busy interpreter would
-    otherwise drop them, and with them the samples of the recording's last milliseconds)."""
+    task (python-can would use a thread there too). One thread serves every such bus of a
+    recording, sending each SYNC on all of them back to back, so a row's SYNCs go out together
+    however late a loaded interpreter runs the thread. It notes each SYNC in its bus's log
+    (``logs``) just before sending it, and on :meth:`stop` first sends the SYNCs already due (a
+    thread behind on a busy interpreter would otherwise drop them, and with them the samples of the
+    recording's last milliseconds)."""
 
     CATCH_UP_LIMIT_S = 0.2  # longest wait at stop for the SYNCs already due
 
-    def __init__(self, bus: can.BusABC, period: float) -> None:
+    def __init__(self, bus: can.BusABC | Sequence[can.BusABC], period: float) -> None:
         import can
 
-        self.bus, self.period = bus, period
+        self.buses = list(bus) if isinstance(bus, Sequence) else [bus]
+        self.period = period
         self.message = can.Message(arbitration_id=SYNC_ID, data=b"", is_extended_id=False)
-        self.gate = syncgate.gate(bus)  # never between the two BG frames of a synchronous pair start
+        # never between the two BG frames of a synchronous pair start
+        self.gates = [syncgate.gate(b) for b in self.buses]
+        self.logs = [SyncLog(period) for _ in self.buses]
         self.sent = 0
         self.start = time.perf_counter()
         self._due_total: int | None = None  # set by stop(): send up to this many, then end
@@ -147,6 +259,11 @@ class ThreadSync:
         self.error: BaseException | None = None
         self._thread = threading.Thread(target=self._run, name="sherpa-sync", daemon=True)
         self._thread.start()
+
+    @property
+    def log(self) -> SyncLog:
+        """The log of the first bus (a source made for one bus has only that)."""
+        return self.logs[0]
 
     def _run(self) -> None:
         try:
@@ -158,13 +275,20 @@ class ThreadSync:
                 if ahead > 0 and limit is None:
                     self._wake.wait(ahead)
                     continue
-                self.gate.send(self._send_one)
+                for bus, gate, log in zip(self.buses, self.gates, self.logs, strict=True):
+                    gate.send(functools.partial(self._send_one, bus, log))
                 self.sent += 1
         except BaseException as exc:  # noqa: BLE001  a dead bus ends the SYNC; the recording shows the gap
             self.error = exc
 
-    def _send_one(self) -> None:
-        self.bus.send(self.message)
+    def _send_one(self, bus: can.BusABC, log: SyncLog) -> None:
+        now = wall_time()
+        log.sent(now, now)
+        try:
+            bus.send(self.message)
+        except BaseException:
+            log.retract()
+            raise
 
     def request_stop(self) -> None:
         """From now on send only the SYNCs already due, then end (:meth:`stop` waits for that)."""
@@ -182,16 +306,22 @@ class ThreadSync:
 
 class SyncSource(Protocol):
     """A running SYNC source (PeriodicSync, ThreadSync, the simulator's stepped source): stop() ends it;
-    one with ``request_stop()`` is first told to send only the SYNCs already due."""
+    one with ``request_stop()`` is first told to send only the SYNCs already due. One with a ``log``
+    (:class:`SyncLog`, or anything with its ``count``/``time_of``/``sent_by``/``stamped``) says which
+    SYNCs it sent; without one the recorder takes the schedule for them."""
 
     def stop(self) -> None: ...
 
 
 def default_sync(bus: can.BusABC, period: float) -> PeriodicSync | ThreadSync:
     """The kernel's broadcast manager on SocketCAN, else a counted thread of the tool."""
-    if type(bus).__name__ == "SocketcanBus":
+    if _has_bcm(bus):
         return PeriodicSync(bus, period)
     return ThreadSync(bus, period)
+
+
+def _has_bcm(bus: can.BusABC) -> bool:
+    return type(bus).__name__ == "SocketcanBus"
 
 
 SyncFactory = Callable[[str, "can.BusABC", float], SyncSource]  # (bus name, python-can bus, period)
@@ -205,11 +335,12 @@ class _Drive:
     cobs: dict[int, int] = field(default_factory=dict)  # TPDO -> COB-ID in use
     saved: list[tuple[int, int, int, int]] = field(default_factory=list)  # (index, sub, size, value) to restore
     pos: dict[int, tuple[int, int]] = field(default_factory=dict)  # sample -> (px, vx)
-    cur: dict[int, float] = field(default_factory=dict)  # sample -> A
-    last: dict[int, int] = field(default_factory=dict)  # TPDO -> last sample index
+    cur: dict[int, float] = field(default_factory=dict)  # current frame j (rows j*2, j*2 + 1) -> A
+    last: dict[int, int] = field(default_factory=dict)  # TPDO -> newest SYNC (current: frame) index answered
     written: int = 0  # position samples already handed to the sink (and dropped from pos)
     cur_written: int = 0  # current samples likewise
     late: int = 0  # frames that came after their row was written: not in the file
+    unplaced: int = 0  # frames that answer no SYNC this tool sent (another SYNC producer): not in the file
     frames: int = 0  # position TPDOs received: one per SYNC on the bus, whoever sent it
     gaps: Gaps = field(default_factory=lambda: Gaps())  # SYNCs written without this drive's sample
 
@@ -257,6 +388,29 @@ class RowSink(Protocol):
     def write(self, rec: Recording) -> None: ...
 
 
+def answer_slot(taken: dict[int, Any], prev: int, newest: int, lowest: int) -> int | None:
+    """The SYNC (the slot of ``taken``: SYNC index -> sample) a drive's next answer belongs to.
+    ``prev``: the newest SYNC it answered before; ``newest``: the newest SYNC sent before the
+    answer arrived; ``lowest``: the first SYNC whose row is not written yet.
+
+    A drive answers each SYNC once, in order, so the answer belongs to ``newest`` unless that one
+    is answered already: then answers bunched up (a drive or simulator that answered late), and by
+    their order the ones since the last free SYNC answered the SYNCs before -- that run moves back
+    by one (into ``taken``) and this answer takes ``prev``. None: no SYNC sent and not written is
+    free for it (a frame of another SYNC producer, or one whose row is in the file). Never a SYNC
+    that was not sent, never one of a later sample."""
+    if newest > prev:
+        return newest if newest >= lowest else None
+    free = prev
+    while free in taken:
+        free -= 1
+    if free < lowest or free == prev:
+        return None
+    for k in range(free, prev):
+        taken[k] = taken.pop(k + 1)
+    return prev
+
+
 class Recorder:
     """Sample PX, VX (and current) of ``refs`` at ``rate`` Hz; a context manager."""
 
@@ -280,14 +434,15 @@ class Recorder:
         if enforce_budget:
             check_budget(self.budget)
         self.clock = clock
-        self.sync_factory = sync_factory or (lambda name, bus, period: default_sync(bus, period))
+        self.sync_factory = sync_factory
         self._drives = {r.key: _Drive(r) for r in self.refs}
         self._subscribed: list[tuple[Any, int, Callable]] = []
         self._syncs: list[SyncSource] = []
         self._lock = threading.Lock()
         self.t0: float | None = None
         self.t_end: float | None = None
-        self._sync_spans: list[list[Any]] = []  # per SYNC source: [started, stopped]
+        self._logs: dict[str, Any] = {}  # bus -> the SYNCs sent on it (SyncLog or a source's own log)
+        self._schedules: list[SyncLog] = []  # the logs the recorder keeps for sources without one
         # streaming (``sink``): each completed row is handed to the sink as the recording goes, only a
         # short window stays in memory (constant memory whatever the duration)
         self.sink = sink
@@ -296,7 +451,6 @@ class Recorder:
         self._newest = -1  # newest SYNC index any drive answered
         self._write_lock = threading.Lock()  # keeps batches in order when two receive threads flush
         self.rows_written = 0  # rows handed to the sink (SYNCs with at least one drive's sample)
-        self._sync_start: dict[str, float] = {}  # bus -> when its SYNC source started
         self.failure: SherpaError | None = None  # set by the receive thread: a second SYNC producer
 
     # -- lifetime -------------------------------------------------------------------------------
@@ -308,15 +462,35 @@ class Recorder:
                 track.configure(self.session)
             self._listen()
             self.t0 = self._now()
-            for bus in dict.fromkeys([*(r.bus for r in self.refs), *(t.dev.bus for t in self.encoders)]):
-                started = self._now()
-                self._sync_start[bus] = started
-                self._syncs.append(self.sync_factory(bus, self.session.links[bus].bus, self.period))
-                self._sync_spans.append([started, None])
+            self._start_syncs(list(dict.fromkeys([*(r.bus for r in self.refs), *(t.dev.bus for t in self.encoders)])))
         except BaseException:
             self._finish()
             raise
         return self
+
+    def _start_syncs(self, buses: list[str]) -> None:
+        links = self.session.links
+        if self.sync_factory is None:
+            threaded = [b for b in buses if not _has_bcm(links[b].bus)]
+            for bus in buses:
+                if bus not in threaded:
+                    source = PeriodicSync(links[bus].bus, self.period)
+                    self._syncs.append(source)
+                    self._logs[bus] = source.log
+            if threaded:
+                thread = ThreadSync([links[b].bus for b in threaded], self.period)
+                self._syncs.append(thread)
+                self._logs.update(zip(threaded, thread.logs, strict=True))
+            return
+        for bus in buses:
+            started = self._now()
+            made = self.sync_factory(bus, links[bus].bus, self.period)
+            self._syncs.append(made)
+            log = getattr(made, "log", None)
+            if log is None:  # the source says nothing of what it sent: its schedule stands for it
+                log = SyncLog.scheduled(self.period, started, now=self._now, stamped=self.clock is None)
+                self._schedules.append(log)
+            self._logs[bus] = log
 
     def __exit__(self, *exc: object) -> None:
         self._finish(quiet=exc[0] is not None)
@@ -331,8 +505,9 @@ class Recorder:
     def _finish(self, quiet: bool = False) -> None:
         # every source's end first (the SYNCs due until then are expected; a ThreadSync still sends
         # them), then the stops, so one bus's catching up does not lengthen another's span
-        for sync, span in zip(self._syncs, self._sync_spans, strict=True):
-            span[1] = self._now()
+        for log in self._schedules:
+            log.pause()
+        for sync in self._syncs:
             request = getattr(sync, "request_stop", None)
             if request is not None:
                 with contextlib.suppress(Exception):
@@ -407,7 +582,8 @@ class Recorder:
 
     def _received(self) -> int:
         with self._lock:
-            return sum(d.written + len(d.pos) + d.late + d.cur_written + len(d.cur) for d in self._drives.values())
+            return sum(d.written + len(d.pos) + d.late + d.unplaced + d.cur_written + len(d.cur)
+                       for d in self._drives.values())
 
     def answered(self, syncs: int) -> bool:
         """Whether every TPDO the first ``syncs`` SYNCs ask for has arrived (position of every
@@ -415,7 +591,7 @@ class Recorder:
         waits for this before it moves the clock on."""
         with self._lock:
             return all(d.written + len(d.pos) >= syncs and (not self.current or d.cur_written + len(d.cur)
-                                                             >= CURRENT_DIVIDER * (syncs // CURRENT_DIVIDER))
+                                                             >= syncs // CURRENT_DIVIDER)
                        for d in self._drives.values())
 
     # -- PDO set-up (RAM only) ------------------------------------------------------------------
@@ -474,52 +650,70 @@ class Recorder:
             network.subscribe(track.cob, callback)
             self._subscribed.append((network, track.cob, callback))
 
+    def _answered_by(self, bus: str, timestamp: float) -> int:
+        """How many of this tool's SYNCs on ``bus`` had been sent when a frame stamped ``timestamp``
+        arrived: its receive timestamp against the SYNC log's send stamps, so a frame that waited in
+        a loaded receive thread still counts from when it was on the bus. A log on another clock
+        than the frames' (an injected clock with a schedule), or a timestamp from another clock,
+        counts from when the recorder hears the frame."""
+        log = self._logs.get(bus)
+        if log is None:
+            return 0
+        plausible = log.stamped and abs(timestamp - wall_time()) < STAMP_PLAUSIBLE_S
+        return int(log.sent_by(timestamp if plausible else None))
+
     def _encoder_callback(self, track: encoder.EncoderTrack) -> Callable[[int, bytes, float], None]:
         def on_frame(can_id: int, data: bytes, timestamp: float) -> None:
-            t0 = self.t0
-            if t0 is None:
+            sent = self._answered_by(track.dev.bus, timestamp)
+            if sent == 0 or len(data) < 4:
                 return
-            t = self.clock() if self.clock is not None else timestamp
             with self._lock:
-                track.add(math.floor((t - t0) / self.period + 1e-6), data)
-                if track.last < self._flushed:  # its row is written already: not in the file
-                    track.samples.pop(track.last, None)
+                k = answer_slot(track.samples, track.last, sent - 1, self._flushed)
+                if k is not None:  # else: its row is written already, or it answers no SYNC of ours
+                    track.add(k, data)
         return on_frame
 
     def _callback(self, d: _Drive, n: int) -> Callable[[int, bytes, float], None]:
         unpack_pos, unpack_cur = struct.Struct("<ii").unpack_from, struct.Struct("<h").unpack_from
+        divider = CURRENT_DIVIDER if n == TPDO_CUR else 1
 
         def on_frame(can_id: int, data: bytes, timestamp: float) -> None:
-            t0 = self.t0
-            if t0 is None:
-                return
-            t = self.clock() if self.clock is not None else timestamp
-            step = self.period * (CURRENT_DIVIDER if n == TPDO_CUR else 1)
-            # the SYNC this answers: the last one at or before the frame (a reply comes within a
-            # period); frames that bunched up in a loaded receive thread take the next ones in order
-            k = math.floor((t - t0) / step + 1e-6)
+            sent = self._answered_by(d.ref.bus, timestamp)
+            if sent == 0:
+                return  # before this tool's first SYNC: no answer to it
+            # the newest SYNC sent before the frame arrived (current: the frame of every 2nd SYNC)
+            newest = (sent - 1) // divider
             with self._lock:
-                k = max(k, d.last.get(n, -1) + 1)
-                d.last[n] = k
-                first = k * CURRENT_DIVIDER if n == TPDO_CUR else k
-                if first < self._flushed:  # streaming: its row is in the file already
-                    d.late += 1
-                    return
+                taken: dict[int, Any] = d.pos if n == TPDO_POS else d.cur
+                lowest = -(-self._flushed // divider)  # the first slot whose rows are not written yet
+                prev = d.last.get(n, -1)
                 if n == TPDO_POS and len(data) >= 8:
                     d.frames += 1
                     if self.failure is None and d.frames > self._sync_bound(d.ref.bus):
                         self._foreign_sync(d)
+                k = answer_slot(taken, prev, newest, lowest)
+                if k is None:
+                    if max(newest, prev) < lowest:
+                        d.late += 1  # streaming: its row is in the file already
+                    else:
+                        d.unplaced += 1
+                    return
+                d.last[n] = max(prev, k)
+                if n == TPDO_POS and len(data) >= 8:
                     d.pos[k] = unpack_pos(data)
                     if k > self._newest:
                         self._newest = k
                 elif n == TPDO_CUR and len(data) >= 2:
-                    value = unpack_cur(data)[0] * CURRENT_SCALE_A
-                    for j in range(CURRENT_DIVIDER):
-                        d.cur[k * CURRENT_DIVIDER + j] = value
+                    d.cur[k] = unpack_cur(data)[0] * CURRENT_SCALE_A
                 due = self.sink is not None and self._newest - self._flushed >= 2 * self.window
             if due:
                 self._flush()
         return on_frame
+
+    @staticmethod
+    def _current_rows(cur: Mapping[int, float], rows: Iterable[int]) -> dict[int, float]:
+        """Current frames (one per CURRENT_DIVIDER SYNCs) as the rows they fill."""
+        return {r: cur[r // CURRENT_DIVIDER] for r in rows if r // CURRENT_DIVIDER in cur}
 
     def _flush(self, *, final: bool = False) -> None:
         """Hand the rows older than the late-frame window (``final``: all) to the sink and forget
@@ -537,16 +731,17 @@ class Recorder:
                 keys_set: set[int] = set()
                 for d in self._drives.values():
                     pos = {k: v for k, v in d.pos.items() if k < cut}
-                    cur = {k: v for k, v in d.cur.items() if k < cut}
+                    cur = self._current_rows(d.cur, range(self._flushed, cut))
                     for k in range(self._flushed, cut):
                         if k not in pos:
                             d.gaps.add(k)
                     for k in pos:
                         del d.pos[k]
-                    for k in cur:
-                        del d.cur[k]
+                    done = [j for j in d.cur if CURRENT_DIVIDER * (j + 1) <= cut]
+                    for j in done:
+                        del d.cur[j]
                     d.written += len(pos)
-                    d.cur_written += len(cur)
+                    d.cur_written += len(done)
                     keys_set.update(pos)
                     taken[d.ref.name] = (pos, cur)
                 keys = sorted(keys_set)
@@ -563,19 +758,20 @@ class Recorder:
 
     # -- another SYNC producer ------------------------------------------------------------------
     def _sync_bound(self, bus: str) -> float:
-        """The most SYNCs this tool's source on ``bus`` can have sent by now (it never sends ahead of
-        its schedule), with a margin; a drive answering more SYNCs than that answers someone else's."""
-        start = self._sync_start.get(bus)
-        if start is None:  # a frame between the PDO set-up and the source's start: nothing to count yet
+        """The SYNCs this tool's source on ``bus`` has sent by now (its log), with a margin; a drive
+        answering more SYNCs than that answers someone else's."""
+        log = self._logs.get(bus)
+        if log is None:  # a frame between the PDO set-up and the source's start: nothing to count yet
             return math.inf
-        mine = math.floor(max(0.0, self._now() - start) / self.period) + 1
+        mine = int(log.count())
         return mine + max(FOREIGN_SYNC_SLACK, math.ceil(FOREIGN_SYNC_SHARE * mine))
 
     def _foreign_sync(self, d: _Drive) -> None:
-        start = self._sync_start[d.ref.bus]
-        mine = math.floor(max(0.0, self._now() - start) / self.period) + 1
+        log = self._logs[d.ref.bus]
+        mine = int(log.count())
+        took = self._now() - log.time_of(0) if mine else 0.0
         self.failure = ForeignSyncError(
-            f"bus {d.ref.bus}: {d.ref.name} answered {d.frames} SYNCs in {self._now() - start:.2f} s but this tool "
+            f"bus {d.ref.bus}: {d.ref.name} answered {d.frames} SYNCs in {took:.2f} s but this tool "
             f"sent at most {mine} ({self.rate:g} Hz): another node is sending SYNC (0x080) on this bus; the "
             "samples cannot be placed in time, the recording is stopped",
             hint="stop the other SYNC producer (another `sherpa log record`, a master's SYNC) and record again")
@@ -584,7 +780,7 @@ class Recorder:
         """What ended the recording early: another SYNC producer (found by the receive thread), or a
         recorded bus whose connection went away (its network's receive thread ended)."""
         if self.failure is None:
-            for bus in self._sync_start:
+            for bus in self._logs:
                 lost = getattr(self.session.links[bus].network, "lost_error", None)
                 error = lost() if lost is not None else None
                 if error is not None:
@@ -600,7 +796,8 @@ class Recorder:
 
     # -- results --------------------------------------------------------------------------------
     def counts(self) -> dict[str, int]:
-        """Samples received per drive (and recorded encoder) so far."""
+        """Samples per drive (and recorded encoder) so far, each placed on a SYNC this tool sent:
+        what the file holds (a late or unplaced frame is not counted)."""
         with self._lock:
             return {**{d.ref.name: d.written + len(d.pos) for d in self._drives.values()},
                     **{t.dev.name: len(t.samples) for t in self.encoders}}
@@ -614,7 +811,7 @@ class Recorder:
             newest = min(d.last.get(TPDO_POS, -1) for d in drives)
             for k in range(newest, max(newest - 50, -1), -1):  # a lost frame: the SYNC before it
                 if all(k in d.pos for d in drives):
-                    return ((self.t0 or 0.0) + k * self.period,
+                    return (self._row_time(k),
                             {d.ref.name: (int(d.pos[k][0]), int(d.pos[k][1])) for d in drives})
         return None
 
@@ -640,22 +837,40 @@ class Recorder:
         with self._lock:
             return sum(d.late for d in self._drives.values())
 
+    def unplaced(self) -> int:
+        """Frames that answered no SYNC this tool sent (more answers than SYNCs): not in the file."""
+        with self._lock:
+            return sum(d.unplaced for d in self._drives.values())
+
     def expected(self) -> int:
-        """SYNCs (samples per drive) the longest-running SYNC source gave the chance to send: each
-        bus's source is timed from its own start to its own stop, so starting and stopping the
-        other buses' sources is not counted as missed samples."""
-        if self.t0 is None:
-            return 0
-        now = self._now()
-        spans = [(start, now if end is None else end) for start, end in self._sync_spans] or \
-            [(self.t0, self.t_end if self.t_end is not None else now)]
-        return max(math.floor((end - start) / self.period + 1e-6) + 1 for start, end in spans)
+        """SYNCs (samples per drive) this tool sent, on the bus whose source sent the most (each
+        bus's SYNC log: sent, not merely due)."""
+        return max((int(log.count()) for log in self._logs.values()), default=0)
+
+    def _row_time(self, k: int) -> float:
+        """When SYNC ``k`` went out, on the recorder's clock: on the first bus that sent it (a
+        recording's buses get their k-th SYNCs together: one thread sends them back to back, the
+        kernel's timers start together, stepped time sends them at one instant)."""
+        for log in self._logs.values():
+            if log.count() > k:
+                return float(log.time_of(k))
+        return (self.t0 or 0.0) + k * self.period  # not sent: no sample is ever placed there
+
+    def time_zero(self) -> float:
+        """The recording's time 0 on the recorder's clock: its first SYNC (before it, the start)."""
+        return self._row_time(0) if self.expected() else (self.t0 or 0.0)
+
+    def sync_times(self, *, t_zero: float | None = None) -> list[float]:
+        """The times of every SYNC sent (a row each when a drive answered it), as :meth:`recording`
+        gives them."""
+        zero = self.time_zero() if t_zero is None else t_zero
+        return [self._row_time(k) - zero for k in range(self.expected())]
 
     def recording(self, *, t_zero: float | None = None) -> Recording:
         """Samples in joint units; ``t_zero`` (same clock as the recorder) becomes time 0."""
         with self._lock:
             keys = sorted({k for d in self._drives.values() for k in d.pos})
-            by_name = {d.ref.name: (dict(d.pos), dict(d.cur)) for d in self._drives.values()}
+            by_name = {d.ref.name: (dict(d.pos), self._current_rows(d.cur, keys)) for d in self._drives.values()}
         rec = self._build(keys, by_name, t_zero)
         with self._lock:
             for track in self.encoders:
@@ -672,8 +887,8 @@ class Recorder:
     def _build(self, keys: list[int], by_name: dict[str, tuple[dict[int, tuple[int, int]], dict[int, float]]],
                t_zero: float | None) -> Recording:
         """Rows ``keys`` (SYNC indexes) in joint units, from each drive's (positions, currents)."""
-        shift = 0.0 if t_zero is None or self.t0 is None else self.t0 - t_zero
-        rec = Recording(times=[shift + k * self.period for k in keys])
+        zero = self.time_zero() if t_zero is None else t_zero
+        rec = Recording(times=[self._row_time(k) - zero for k in keys])
         nan = math.nan
 
         def motor(name: str, which: int) -> list[float]:

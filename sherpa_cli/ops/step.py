@@ -260,8 +260,11 @@ def run_step(session: ArmSession, target: Axis, mode: str, value: float, *, dura
                                                stall=stall)
         # the step ends where the motor was told to stop: the stop (and a limit recovery) is not the step
         # --mode-first: the switch and its settle window before t = 0 are not the step either
-        recording = _cut(rec.recording(t_zero=t_cmd), state["t_stop"] - t_cmd, since=-PRE_S if mode_first else None)
-        samples, expected = min(rec.counts().values()), rec.expected()
+        until, since = state["t_stop"] - t_cmd, -PRE_S if mode_first else None
+        recording = _cut(rec.recording(t_zero=t_cmd), until, since=since)
+        # what the files hold: the samples of the cut recording, of the SYNCs sent within its span
+        samples = sum(1 for v in recording.columns[f"{ref.name}.px"] if v == v)
+        expected = len(_cut(Recording(times=rec.sync_times(t_zero=t_cmd)), until, since=since).times)
     # position: the recorded start is the reference (PX may not have been exactly 0)
     series = recording.series(joint.name, signal)
     if series is None or len(series[0]) < 2:
@@ -398,7 +401,10 @@ class _StopFirst:
 
 
 def _cut(recording: Recording, until: float, since: float | None = None) -> Recording:
-    """The samples taken before ``until`` (and from ``since`` on, when given; s, the recording's time)."""
-    keep = [i for i, t in enumerate(recording.times) if t < until and (since is None or t >= since - 1e-9)]
+    """The samples taken before ``until`` (and from ``since`` on, when given; s, the recording's time).
+    A SYNC at the very instant of the stop (stepped time stops on SYNC instants) is not the step's:
+    the current it reports on every 2nd SYNC may be after the stop; float dust decides nothing."""
+    keep = [i for i, t in enumerate(recording.times)
+            if t < until - 1e-9 and (since is None or t >= since - 1e-9)]
     return Recording(times=[recording.times[i] for i in keep],
                      columns={name: [values[i] for i in keep] for name, values in recording.columns.items()})

@@ -26,6 +26,7 @@ answers within milliseconds; retries cover a loaded machine).
 
 from __future__ import annotations
 
+import bisect
 import threading
 import time
 from collections.abc import Callable
@@ -65,6 +66,7 @@ class SteppedTime:
         self._t0 = 0.0
         self._syncs = 0  # SYNCs sent since the SYNC source started
         self._answered: Callable[[int], bool] = lambda n: True
+        self._sources: dict[str, _Source] = {}
         self._lock = threading.Lock()  # one sleeper at a time (the command's thread)
 
     def now(self) -> float:
@@ -95,7 +97,8 @@ class SteppedTime:
         elif self._period is not None and abs(period - self._period) > _EPS:
             raise ValueError(f"SteppedTime: one SYNC period for all buses ({self._period} s, asked {period} s)")
         self._buses[name] = bus
-        return _Source(self, name)
+        self._sources[name] = _Source(self, name, period)
+        return self._sources[name]
 
     def follow(self, answered: Callable[[int], bool]) -> None:
         """``answered(n)``: whether every answer to the first n SYNCs has arrived (Recorder.answered)."""
@@ -103,6 +106,7 @@ class SteppedTime:
 
     def _stop(self, name: str) -> None:
         self._buses.pop(name, None)
+        self._sources.pop(name, None)
         if not self._buses:
             self._period, self._answered = None, (lambda n: True)
 
@@ -138,7 +142,9 @@ class SteppedTime:
             if due > self.clock.now():
                 ahead += due - self.clock.now()
                 self.clock.advance(due - self.clock.now())
-            for bus in list(self._buses.values()):
+            for name, bus in list(self._buses.items()):
+                # noted before the send: its answer's receive timestamp is never earlier
+                self._sources[name].log.sent(self.clock.now(), time.time())
                 bus.send(can.Message(arbitration_id=SYNC_ID, data=b"", is_extended_id=False))
             self._syncs += 1
             deadline = time.monotonic() + self.answer_timeout
@@ -151,9 +157,40 @@ class SteppedTime:
         return ahead
 
 
+class SentSyncs:
+    """The SYNCs a stepped source sent (the Recorder's SYNC log, log/record.py SyncLog, which the
+    simulator cannot import): each one's simulated time and the wall time (the frames' receive
+    timestamps' clock) just before it went out."""
+
+    stamped = True
+
+    def __init__(self) -> None:
+        self.at: list[float] = []
+        self.stamps: list[float] = []
+        self._lock = threading.Lock()
+
+    def sent(self, at: float, stamp: float) -> None:
+        with self._lock:
+            self.at.append(at)
+            self.stamps.append(stamp)
+
+    def count(self) -> int:
+        return len(self.at)
+
+    def time_of(self, n: int) -> float:
+        return self.at[n]
+
+    def sent_by(self, stamp: float | None) -> int:
+        if stamp is None:
+            return len(self.at)
+        with self._lock:
+            return bisect.bisect_right(self.stamps, stamp)
+
+
 class _Source:
-    def __init__(self, owner: SteppedTime, name: str) -> None:
+    def __init__(self, owner: SteppedTime, name: str, period: float) -> None:
         self.owner, self.name = owner, name
+        self.log = SentSyncs()
 
     def stop(self) -> None:
         self.owner._stop(self.name)
