@@ -250,6 +250,14 @@ def test_uncalibrated_pair_is_refused_before_anything_moves():
         assert abs(r.end[0] - 100) <= 1
 
 
+def _pitch_to_300(s: ArmSession, cfg):
+    """A position jog of the pair's Σ joint to 300 counts (one group start)."""
+    from sherpa_cli.ops import joint_jog
+
+    return joint_jog.run(s, resolve_axis(cfg, "pitch"),
+                         parse_request(resolve_axis(cfg, "pitch"), mode="position", to="300counts", uncalibrated=True))
+
+
 def _nmt_reset_comms(drive) -> list[float]:
     return [t for t, can_id, data in drive.received if can_id == 0x000 and data[:2] == bytes([0x82, drive.node])]
 
@@ -263,12 +271,10 @@ def test_a_group_start_resets_communication_with_the_motors_off_and_arms_the_dea
     """Elmo's guide (13-10): 0x2040 acts after a reset communication, which also puts back the
     heartbeat consumer the guard armed. So: group id on both drives, reset communication (motors
     off), the dead-man written again and read back, then MO=1 and the one group BG."""
-    from sherpa_cli.ops import joint_jog
 
     cfg = load_config(FAST)
     with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
-        r = joint_jog.run(s, resolve_axis(cfg, "pitch"),
-                          parse_request(resolve_axis(cfg, "pitch"), mode="position", to="300counts", uncalibrated=True))
+        r = _pitch_to_300(s, cfg)
         assert abs(r.end - 300) <= 1
         with s.sim.lock:
             for d in (s.sim.drives["left"], s.sim.drives["right"]):
@@ -283,7 +289,6 @@ def test_a_group_start_resets_communication_with_the_motors_off_and_arms_the_dea
 def test_without_the_reset_communication_a_group_start_on_a_documented_drive_moves_nothing(tmp_path):
     """`motion.pair_group_reset_comm: false` on a drive that needs it (the simulator's default): the
     group BG reaches no motor. The setting is for a drive on which 0x2040 acts at once."""
-    from sherpa_cli.ops import joint_jog
 
     text = FAST.read_text(encoding="utf-8").replace("motion: {consumer_time_ms: 1000}",
                                                     "motion: {consumer_time_ms: 1000, pair_group_reset_comm: false}")
@@ -293,19 +298,16 @@ def test_without_the_reset_communication_a_group_start_on_a_documented_drive_mov
     cfg = load_config(path)
     with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
         with pytest.raises(SherpaError):
-            joint_jog.run(s, resolve_axis(cfg, "pitch"),
-                          parse_request(resolve_axis(cfg, "pitch"), mode="position", to="300counts", uncalibrated=True))
+            _pitch_to_300(s, cfg)
         with s.sim.lock:
             assert all(not _nmt_reset_comms(d) and d.px == 0 for d in s.sim.drives.values())
 
 
 def test_jog_of_a_pair_joint_starts_both_motors_with_one_group_bg():
-    from sherpa_cli.ops import joint_jog
 
     cfg = load_config(FAST)
     with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
-        r = joint_jog.run(s, resolve_axis(cfg, "pitch"),
-                          parse_request(resolve_axis(cfg, "pitch"), mode="position", to="300counts", uncalibrated=True))
+        r = _pitch_to_300(s, cfg)
         assert abs(r.end - 300) <= 1
         with s.sim.lock:
             left, right = s.sim.drives["left"], s.sim.drives["right"]
@@ -630,7 +632,6 @@ def test_pair_start_sync_rpdo_moves_the_mismatched_pair_and_restores_the_rpdo(tm
 
 
 def test_jog_of_a_pair_joint_with_sync_rpdo_starts_both_at_one_sync(tmp_path):
-    from sherpa_cli.ops import joint_jog
 
     text = FAST.read_text().replace("motion: {consumer_time_ms: 1000}",
                                     "motion: {consumer_time_ms: 1000, pair_start: sync_rpdo}")
@@ -638,8 +639,7 @@ def test_jog_of_a_pair_joint_with_sync_rpdo_starts_both_at_one_sync(tmp_path):
     path.write_text(text)
     cfg = load_config(path)
     with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
-        r = joint_jog.run(s, resolve_axis(cfg, "pitch"),
-                          parse_request(resolve_axis(cfg, "pitch"), mode="position", to="300counts", uncalibrated=True))
+        r = _pitch_to_300(s, cfg)
         assert abs(r.end - 300) <= 1
         with s.sim.lock:
             left, right = s.sim.drives["left"], s.sim.drives["right"]

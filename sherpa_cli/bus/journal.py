@@ -31,6 +31,7 @@ from sherpa_cli.paths import read_json, state_dir
 if TYPE_CHECKING:
     from sherpa_cli.bus.session import ArmSession
     from sherpa_cli.bus.targets import DriveRef
+    from sherpa_cli.elmo.client import DriveClient
 
 log = logging.getLogger(__name__)
 _lock = threading.Lock()  # one read-modify-write of a drive's file at a time in this process
@@ -289,16 +290,11 @@ def restore_damaged(session: ArmSession, ref: DriveRef, why: str, *, apply: bool
         res.tripped = "its dead-man tripped (MF 0x800 latched)"
     if not apply:
         return res
-    if mo:
-        res.problems.append("the motor is on (MO=1): not reset; stop it first (`sherpa stop`)")
+    problem = reset_to_flash(client, mo, boot_timeout)
+    if problem is not None:
+        res.problems.append(problem)
         return res
-    try:
-        client.reset_node(boot_timeout)
-    except SherpaError as exc:
-        res.problems.append(f"reset node: {exc}")
-        return res
-    res.done.append("NMT reset node: RAM reloaded from flash (unsaved values, the position counter and a homing "
-                    "mark are lost)")
+    res.done.append(RESET_DONE)
     path = path_for(ref.bus, ref.node)
     try:
         os.replace(path, path.with_name(path.name + ".damaged"))
@@ -306,6 +302,21 @@ def restore_damaged(session: ArmSession, ref: DriveRef, why: str, *, apply: bool
     except OSError as exc:
         res.problems.append(f"journal not moved aside: {exc.strerror or exc}")
     return res
+
+
+RESET_DONE = "NMT reset node: RAM reloaded from flash (unsaved values, the position counter and a homing mark are lost)"
+
+
+def reset_to_flash(client: DriveClient, mo: int, boot_timeout: float) -> str | None:
+    """NMT reset node of a drive whose motor is off (``mo`` as read): None once it booted again, else
+    the problem (the motor on: a reset would drop a load; no boot-up)."""
+    if mo:
+        return "the motor is on (MO=1): not reset; stop it first (`sherpa stop`)"
+    try:
+        client.reset_node(boot_timeout)
+    except SherpaError as exc:
+        return f"reset node: {exc}"
+    return None
 
 
 def leftover_text(ref: DriveRef, steps: list[Step]) -> str:

@@ -145,16 +145,11 @@ def check_drive(session: ArmSession, cfg: ArmConfig, ref: DriveRef, *, apply: bo
     except SherpaError as exc:
         res.problems.append(f"not reached: {exc}")
         return res
-    if mo:
-        res.problems.append("the motor is on (MO=1): not reset; stop it first (`sherpa stop`)")
+    problem = journal.reset_to_flash(client, mo, boot_timeout)
+    if problem is not None:
+        res.problems.append(problem)
         return res
-    try:
-        client.reset_node(boot_timeout)
-    except SherpaError as exc:
-        res.problems.append(f"reset node: {exc}")
-        return res
-    res.done.append("NMT reset node: RAM reloaded from flash (unsaved values, the position counter and a homing "
-                    "mark are lost)")
+    res.done.append(journal.RESET_DONE)
     try:
         res.after_reset, _ = read(session, cfg, ref)
     except SherpaError as exc:
