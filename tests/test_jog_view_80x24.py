@@ -279,3 +279,18 @@ def test_docs_jog_md_shows_the_views_key_help_and_step_sizes():
     for mode, steps in INCREMENTS.items():
         listed = f"{mode} {', '.join(f'{v:g}' for v in steps)} {UNITS[mode]}"
         assert listed in doc, listed
+
+
+def test_the_running_torque_of_a_sigma_joint_is_its_set_point_not_the_sum_of_its_motors():
+    """A 0.1 A torque on the Σ joint sends about 0.1 A to each motor; "running:" said +0.2 A (their
+    sum). It says the joint's current now, IΣ = (Ia + Ib) / 2 (docs/motion.md)."""
+    cfg = load_config(JOG_CONFIG)
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s, \
+            LiveJog(s, resolve_axes(cfg, ["pitch"]), keepalive=30.0) as live:
+        message = live.set_torque("pitch", 0.1)
+        assert "pitch" in live.running, message
+        app = JogView(live, tick_period=0.2)
+        value, text = app.sent("pitch")
+        live.stop_all()
+    assert value == pytest.approx(0.1)
+    assert text.startswith("left TC=") and ", right TC=" in text

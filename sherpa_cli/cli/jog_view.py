@@ -256,9 +256,9 @@ class JogView(App):
                          for d, v in motors.items())
         vals = [motors[d] for d in axis.drives if d in motors]
         if run.mode == "torque":
-            value = vals[0] if axis.kind == "plain" else (vals[0] + vals[1] if axis.kind == "sigma"
-                                                          else vals[0] - vals[1])
-            return float(value), text
+            # the joint's current from its motors' (the inverse of the transpose the set point went
+            # through): a Σ joint's is their mean, IΣ = (Ia + Ib) / 2, not their sum
+            return axis.current({d: float(v) for d, v in motors.items()}), text
         cps = vals[0] if axis.kind == "plain" else (vals[0] + vals[1] if axis.kind == "sigma" else vals[0] - vals[1])
         return units.counts_per_s_to_rad_per_s(cps, axis.joint_cpr), text
 
