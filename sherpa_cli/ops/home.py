@@ -398,7 +398,12 @@ class _Runner:
             if fired and all(m != 2 for m in ms):
                 return True
             if all(m != 2 for m in ms):
-                return bool(homing and all(int(guard.query(r, "HM", 1)) == 0 for r in refs.values()))
+                if homing and all(int(guard.query(r, "HM", 1)) == 0 for r in refs.values()):
+                    return True
+                # a drive standing short of its target whose event did not fire: stopped by another node
+                if homing and any(m == 1 and not on.get(n) for n, m in zip(refs, ms, strict=True)):
+                    self._stopped_short(guard, refs, what)
+                return False
             if one_edge is not None and any(on.values()) and not fired:
                 if first_edge is None:
                     first_edge = self.clock()
@@ -412,6 +417,26 @@ class _Runner:
                 clients = {n: guard.client(r) for n, r in refs.items()}
                 raise SafetyError(f"{what}: {blocked_text(self.cfg, clients, list(refs), self.settings.stall_time)}",
                                   hint="move the joint off the stop toward its switch (`sherpa jog`), then home again")
+            self.sleep(self.settings.poll_interval)
+
+    def _stopped_short(self, guard: MotionGuard, refs: dict[str, DriveRef], what: str) -> None:
+        """A search that stands short of its bound without its home event (MS 1) was stopped by
+        something else: `sherpa stop` from elsewhere sends ST, waits for standstill, then MO=0, so
+        its MO=0 may come a moment after the motion ended. Wait for it (standstill_timeout) and
+        say so; never report the bound."""
+        deadline = self.clock() + self.settings.standstill_timeout
+        while True:
+            guard.check()
+            for r in refs.values():
+                if not int(guard.query(r, "MO")):
+                    mf = int(guard.query(r, "MF"))
+                    why = (f"MF=0x{mf:X}: " + "; ".join(describe_mf(mf)) if mf
+                           else "MO=0 from elsewhere (sherpa stop, another tool)")
+                    raise SafetyError(f"{r.name}: the motor was switched off during {what}: {why}")
+            if self.clock() >= deadline:
+                raise SafetyError(f"{what}: stopped short of its bound without the home event (ST from another "
+                                  "node, or an end switch)",
+                                  hint="check what stopped the joint (`sherpa monitor --once`), then home again")
             self.sleep(self.settings.poll_interval)
 
     def move_to(self, guard: MotionGuard, refs: dict[str, DriveRef], targets: dict[str, int], speed: int, what: str) -> None:
