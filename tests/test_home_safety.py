@@ -25,6 +25,7 @@ from sherpa_cli.config import load_config
 from sherpa_cli.elmo import codec
 from sherpa_cli.errors import ConfigError, SafetyError
 from sherpa_cli.motion import calibration
+from sherpa_cli.motion.settings import MotionSettings
 from sherpa_cli.ops import home
 from sherpa_cli.sim.arm import SimArm
 
@@ -247,3 +248,48 @@ def test_a_home_interrupted_past_its_switch_goes_back_before_it_instead_of_into_
         assert not [t for t in after if "blocked" in t or "stall" in t], after
         assert int(c.get("UI", cfg.protocol.calibration_flag)) == 1
         assert abs(int(c.get("PX"))) <= 5
+
+
+class _StoppedFromElsewhere:
+    """A guard over one drive whose search was stopped by `sherpa stop` from another terminal: the
+    drive stands (MS 1) short of its target, no home event (HM[1] 1), and the stop's MO=0 comes a few
+    polls after its ST, as `sherpa stop` waits for standstill between them."""
+
+    def __init__(self, mo_off_after: int | None) -> None:
+        self.polls, self.mo_off_after = 0, mo_off_after
+
+    def check(self) -> None:
+        self.polls += 1
+
+    def query(self, ref, letters: str, index: int = 0) -> int:
+        if letters == "HM":
+            return 1
+        if letters == "MS":
+            return 1
+        if letters == "MO":
+            return 0 if self.mo_off_after is not None and self.polls > self.mo_off_after else 1
+        return 0  # MF, PX
+
+
+def test_a_search_stopped_from_elsewhere_is_never_reported_as_the_search_bound():
+    """`sherpa stop` sends ST, waits for standstill, then MO=0: a search that saw the motion end before
+    the MO=0 used to say "the switch never triggered: stopped at the search bound"."""
+    cfg = load_config(ARM)
+    t = [0.0]
+
+    def sleep(dt: float) -> None:
+        t[0] += dt
+
+    runner = home._Runner(None, cfg,  # type: ignore[arg-type]  # the session is never used here
+                           MotionSettings(standstill_timeout=1.0, poll_interval=0.01), lambda: t[0], sleep)
+    refs = {"yaw_drive": resolve_target(cfg, "yaw_drive")}
+    with pytest.raises(SafetyError) as info:
+        runner.wait(_StoppedFromElsewhere(mo_off_after=5), refs, distance=1000, speed=300, homing=True,
+                    what="yaw: the search")
+    assert str(info.value) == ("yaw_drive: the motor was switched off during yaw: the search: MO=0 from elsewhere "
+                               "(sherpa stop, another tool)")
+    with pytest.raises(SafetyError) as info:
+        runner.wait(_StoppedFromElsewhere(mo_off_after=None), refs, distance=1000, speed=300, homing=True,
+                    what="yaw: the search")
+    assert str(info.value).startswith("yaw: the search: stopped short of its bound without the home event")
+    assert t[0] >= 1.0  # it waited the standstill timeout for an MO=0 that never came
