@@ -388,12 +388,7 @@ class _Runner:
             on = {n: int(guard.query(r, "HM", 1)) == 0 for n, r in refs.items()} if homing else {}
             fired = homing and all(on.values())
             ms = [int(guard.query(r, "MS")) for r in refs.values()]
-            for r in refs.values():
-                if not int(guard.query(r, "MO")):
-                    mf = int(guard.query(r, "MF"))
-                    why = (f"MF=0x{mf:X}: " + "; ".join(describe_mf(mf)) if mf
-                           else "MO=0 from elsewhere (sherpa stop, another tool)")
-                    raise SafetyError(f"{r.name}: the motor was switched off during {what}: {why}")
+            self._raise_if_switched_off(guard, refs, what)
             # MS: 0 at the target, 1 stationary elsewhere (stopped by the home event or a switch), 2 moving
             if fired and all(m != 2 for m in ms):
                 return True
@@ -419,6 +414,15 @@ class _Runner:
                                   hint="move the joint off the stop toward its switch (`sherpa jog`), then home again")
             self.sleep(self.settings.poll_interval)
 
+    @staticmethod
+    def _raise_if_switched_off(guard: MotionGuard, refs: dict[str, DriveRef], what: str) -> None:
+        for r in refs.values():
+            if not int(guard.query(r, "MO")):
+                mf = int(guard.query(r, "MF"))
+                why = (f"MF=0x{mf:X}: " + "; ".join(describe_mf(mf)) if mf
+                       else "MO=0 from elsewhere (sherpa stop, another tool)")
+                raise SafetyError(f"{r.name}: the motor was switched off during {what}: {why}")
+
     def _stopped_short(self, guard: MotionGuard, refs: dict[str, DriveRef], what: str) -> None:
         """A search that stands short of its bound without its home event (MS 1) was stopped by
         something else: `sherpa stop` from elsewhere sends ST, waits for standstill, then MO=0, so
@@ -427,12 +431,7 @@ class _Runner:
         deadline = self.clock() + self.settings.standstill_timeout
         while True:
             guard.check()
-            for r in refs.values():
-                if not int(guard.query(r, "MO")):
-                    mf = int(guard.query(r, "MF"))
-                    why = (f"MF=0x{mf:X}: " + "; ".join(describe_mf(mf)) if mf
-                           else "MO=0 from elsewhere (sherpa stop, another tool)")
-                    raise SafetyError(f"{r.name}: the motor was switched off during {what}: {why}")
+            self._raise_if_switched_off(guard, refs, what)
             if self.clock() >= deadline:
                 raise SafetyError(f"{what}: stopped short of its bound without the home event (ST from another "
                                   "node, or an end switch)",
