@@ -18,7 +18,7 @@ from sherpa_cli.bus.session import ArmSession, resolve_target
 from sherpa_cli.config import load_config
 from sherpa_cli.elmo.faults import decode_emcy
 from sherpa_cli.errors import CommunicationError, ExitCode, SafetyError
-from sherpa_cli.motion.drive_watch import DriveSilentError, DriveWatch, DriveWatchError
+from sherpa_cli.motion.drive_watch import DriveRestartedError, DriveSilentError, DriveWatch, DriveWatchError
 from sherpa_cli.motion.guard import MotionGuard
 from sherpa_cli.motion.settings import MotionSettings
 from sherpa_cli.sim.arm import SimArm
@@ -191,6 +191,87 @@ def test_an_nmt_command_from_another_node_ends_the_command_at_once(cfg, other_no
         assert_all_stopped(s, g)
 
 
+def slow_boot_cfg(tmp_path):
+    """drive1 takes 0.3 s to boot after a reset, deaf meanwhile (a real drive is not instant)."""
+    path = tmp_path / "arm.yaml"
+    path.write_text(CONFIG.replace("{heartbeat_ms: 200}", "{heartbeat_ms: 200, boot_ms: 300}"), encoding="utf-8")
+    return load_config(path)
+
+
+def test_a_drive_another_node_resets_is_started_after_its_boot_up_and_stopped_cleanly(tmp_path, other_node):
+    """The exit's NMT start sent while the drive still boots is lost: the drive would come up in
+    Pre-operational, deaf to every exit step ("MO=0 not confirmed", nothing put back)."""
+    cfg = slow_boot_cfg(tmp_path)
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
+        refs = [resolve_target(cfg, "drive1"), resolve_target(cfg, "drive2")]
+        other = open_other(s, other_node)
+        reset = can.Message(arbitration_id=0, data=bytes([0x81, NODE1]), is_extended_id=False)
+        with pytest.raises(DriveWatchError, match="another node sent NMT reset node"), \
+                MotionGuard(s, refs, settings=MotionSettings.from_config(cfg)) as g:
+            start_both(g, refs)
+            run_until_stopped(g, refs, during=lambda: other.send(reset))
+        assert_all_stopped(s, g)
+        assert s.sim.drives["drive1"].boots == 2
+        assert [r.line() for r in g.report.drives if r.problems] == []
+
+
+def test_a_trip_between_two_requests_is_raised_by_the_next_request_not_its_timeout(tmp_path, other_node):
+    """The watch cuts short the request the command waits for; one sent after the trip went to a
+    deaf drive, waited out its attempts and ended the command with "no answer" (exit 3), the reset
+    unnamed. The inner clean-up's requests after it are not cut short."""
+    cfg = slow_boot_cfg(tmp_path)
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
+        refs = [resolve_target(cfg, "drive1"), resolve_target(cfg, "drive2")]
+        other = open_other(s, other_node)
+        with pytest.raises(DriveWatchError, match="another node sent NMT reset node") as info, \
+                MotionGuard(s, refs, settings=MotionSettings.from_config(cfg)) as g:
+            start_both(g, refs)
+            other.send(can.Message(arbitration_id=0, data=bytes([0x81, NODE1]), is_extended_id=False))
+            deadline = time.monotonic() + BOUND
+            while g._watch.error is None and time.monotonic() < deadline:
+                time.sleep(0.005)  # no request meanwhile: the trip falls between two
+            try:
+                g.client(refs[0]).set("SP", 0, 1000)
+            finally:
+                assert g.client(refs[1]).get("SP") > 0  # the next request goes out again
+        assert isinstance(info.value, DriveWatchError)
+        assert_all_stopped(s, g)
+
+
+def test_a_drive_reset_during_its_own_stop_is_stopped_once_more_once_it_booted(tmp_path, other_node):
+    """A reset that lands in the middle of the exit (here: right before its MO=0): the step it
+    cuts short and every later one would wait out their reply timeouts on a deaf drive."""
+    cfg = slow_boot_cfg(tmp_path)
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
+        refs = [resolve_target(cfg, "drive1"), resolve_target(cfg, "drive2")]
+        other = open_other(s, other_node)
+        with MotionGuard(s, refs, settings=MotionSettings.from_config(cfg)) as g:
+            start_both(g, refs)
+            client = g.client(refs[0])
+            motor_off = client.motor_off
+
+            def reset_then_motor_off(*args, **kwargs):
+                client.motor_off = motor_off  # once
+                other.send(can.Message(arbitration_id=0, data=bytes([0x81, NODE1]), is_extended_id=False))
+                deadline = time.monotonic() + BOUND
+                while not g._watch.resetting("can0", NODE1) and time.monotonic() < deadline:
+                    time.sleep(0.005)  # the MO=0 goes out while the drive boots
+                return motor_off(*args, **kwargs)
+
+            client.motor_off = reset_then_motor_off
+            for _ in range(10):
+                g.check()
+                time.sleep(0.01)
+            started = time.monotonic()
+        took = time.monotonic() - started
+        assert_all_stopped(s, g)
+        by = {r.drive: r for r in g.report.drives}
+        assert by["drive1"].stopped_by == "reset during its stop" and by["drive1"].motor_off, by["drive1"].line()
+        assert g.report.ok, [r.line() for r in g.report.drives]
+        # one MO confirmation waits 20 s and each later step 2 x 1 s on a deaf drive; a loaded machine's margin
+        assert took < 10, f"{took:.1f} s"
+
+
 def test_a_drive_whose_heartbeat_goes_silent_stops_the_others(tmp_path):
     # the guard's re-read of drive1's dead-man entry would find the dead drive first (an SDO timeout):
     # here only its heartbeat may tell
@@ -312,13 +393,30 @@ def test_silence_is_three_heartbeat_periods_on_the_watch_clock():
     assert isinstance(w.poll(), DriveSilentError) and client.silent
 
 
-def test_after_stop_nothing_trips_and_every_subscription_is_undone():
+def test_after_stop_nothing_trips_and_after_close_every_subscription_is_undone():
     w, net, client, _ = make_watch()
     w.stop()
-    assert all(not cbs for cbs in net.subs.values()) and not client.emcy_cbs
     net.deliver(0x705, b"\x04")
+    net.deliver(0x000, bytes([0x02, 5]))
     assert w.poll() is None and not client.aborted
     assert client.cleared  # the guard's exit requests wait for their answers again
+    w.close()
+    assert all(not cbs for cbs in net.subs.values()) and not client.emcy_cbs
+
+
+def test_after_stop_a_reset_is_followed_and_its_boot_up_ends_the_pending_request():
+    """The guard's exit must know a drive another node reset: deaf until its boot-up, then in
+    Pre-operational (the request it waited for is cut short, the exit starts it again)."""
+    w, net, client, _ = make_watch()
+    w.stop()
+    net.deliver(0x000, bytes([0x81, 6]))  # another drive
+    assert not w.resetting("can0", 5)
+    net.deliver(0x000, bytes([0x81, 0]))  # every node
+    assert w.resetting("can0", 5) and w.boots("can0", 5) == 0 and not client.aborted
+    net.deliver(0x705, b"\x00")
+    assert not w.resetting("can0", 5) and w.boots("can0", 5) == 1
+    assert len(client.aborted) == 1 and isinstance(client.aborted[0], DriveRestartedError)
+    assert w.poll() is None  # no trip: the exit is already under way
 
 
 def test_warning_codes_and_error_reset_never_trip_a_moving_drive():

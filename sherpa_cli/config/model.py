@@ -416,6 +416,7 @@ class SimDriveConfig:
     # NMT reset communication (0x82) as a full reboot (RAM from flash), not as CiA 301 has it (only
     # 0x1000-0x1FFF from their saved values, the application's RAM kept); Elmo's own is UNCONFIRMED
     reset_comm_reboots: bool = False
+    boot_ms: float = 0.0  # from an NMT reset to the boot-up frame, deaf meanwhile; Elmo's is UNCONFIRMED
     # a group id written to 0x2040 takes effect only after NMT reset communication, as Elmo's guide
     # (13-10) says (True); False: at once
     group_id_needs_reset_comm: bool = True

@@ -694,6 +694,7 @@ def _check_bounds(cfg: ArmConfig, locs: Locs, r: _Report) -> None:
         for key in ("die_at", "die_moving_after", "reboot_at", "limit_trip_at"):
             within(getattr(sim_drive, key), 0.0, SIM_TIME_MAX, at_sim(key), key, " s")
         within(sim_drive.speed_gain, 0.0, SPEED_GAIN_MAX, at_sim("speed_gain"), "speed_gain")
+        within(sim_drive.boot_ms, 0.0, 1000 * WAIT_MAX, at_sim("boot_ms"), "boot_ms", " ms")
         within(sim_drive.heartbeat_ms, 0, 0xFFFF, at_sim("heartbeat_ms"), "heartbeat_ms", " ms (0x1017 is u16)")
         within(sim_drive.seed, 0, 2**32 - 1, at_sim("seed"), "seed")
         within(sim_drive.servo_bandwidth, 0.0, SERVO_BANDWIDTH_MAX, at_sim("servo_bandwidth"), "servo_bandwidth",

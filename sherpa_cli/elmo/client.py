@@ -521,17 +521,18 @@ class DriveClient:
             if callback in self._emcy_callbacks:
                 self._emcy_callbacks.remove(callback)
 
-    def abort_pending(self, error: SherpaError) -> None:
+    def abort_pending(self, error: SherpaError) -> bool:
         """End the request a caller is waiting for now, raising ``error`` there (the motion guard's
         drive watch: a drive that left Operational is deaf, and its command must not wait out the
-        reply timeouts). No request pending: nothing happens. Sends nothing."""
+        reply timeouts). True if a request was waiting; none: nothing happens. Sends nothing."""
         with self._state:
             self._aborted = error  # also ends a motor switch's confirmation between two polls
             pending = self._pending
             if pending is None or pending.reply is not None or pending.error is not None:
-                return
+                return False
             pending.error = error
         pending.arrived.release()
+        return True
 
     def clear_abort(self) -> None:
         """The watch that called :meth:`abort_pending` has stopped (a guard's exit): requests wait again."""

@@ -8,6 +8,13 @@ nodes of the bus say while a command moves them.
 - the drive's own heartbeat (when it produces one, 0x1017): a state other than Operational, a
   boot-up, or silence for three of its periods.
 
+Once the guard's exit begins (:meth:`DriveWatch.stop`) nothing trips any more, but resets are
+still followed: an NMT reset another node sends, and the boot-up that ends it. A drive that
+reboots during its own stop is in Pre-operational, deaf to the interpreter, and a real drive is
+deaf for its whole boot: the exit waits for the boot-up (:meth:`DriveWatch.resetting`), starts the
+drive again and does the step once more (:meth:`DriveWatch.boots`), instead of spending a reply
+timeout on every step left. A boot-up ends the request the exit waits for at once.
+
 The receive thread only notes the first reason and cuts short the request the command is waiting
 for (``DriveClient.abort_pending``): a deaf drive (NMT Stopped) would otherwise keep the command
 waiting a whole reply timeout per attempt while the other drives move on. The command's thread then
@@ -41,6 +48,8 @@ EMCY_ERROR_RESET = 0x0000  # "error reset / no error": never an error
 
 NMT_COMMANDS = {0x02: "NMT Stopped", 0x80: "NMT Pre-operational", 0x81: "NMT reset node",
                 0x82: "NMT reset communication"}
+NMT_RESETS = frozenset({0x81, 0x82})
+NMT_BOOT_UP = 0x00
 HB_STATES = {0x00: "boot-up (the drive restarted)", 0x04: "Stopped", 0x05: "Operational",
              0x7F: "Pre-operational"}
 SILENT_PERIODS = 3  # heartbeats missed before the drive counts as silent
@@ -49,6 +58,11 @@ SILENT_PERIODS = 3  # heartbeats missed before the drive counts as silent
 class DriveWatchError(SafetyError):
     """A drive of the command sent an error EMCY, left Operational, or its dead-man entry was
     changed by another node: the command was stopped (exit 1)."""
+
+
+class DriveRestartedError(CommunicationError):
+    """A drive of the command booted again (reset by another node, or power) while the guard's exit
+    waited for its answer: the exit starts it again and repeats the step."""
 
 
 class DriveSilentError(CommunicationError):
@@ -65,6 +79,8 @@ class _Watched:
     last_beat: float | None = None
     period: float | None = None
     warnings: int = 0
+    boots: int = 0  # boot-ups heard since the watch began
+    reset_at: float | None = None  # an NMT reset of it was seen and its boot-up not yet heard
     callbacks: list[tuple[Any, int, Callable[..., None]]] = field(default_factory=list)
 
 
@@ -82,6 +98,9 @@ class DriveWatch:
         self._nmt_subs: dict[str, tuple[Any, Callable[..., None]]] = {}
         self._active = False
         self.error: SherpaError | None = None  # the first reason to stop, once found
+        # the command learnt of it: a request it waited for raised it, or the guard did (a trip
+        # between two requests is raised by the guard at the command's next request instead)
+        self.told = False
         self.emcy_errors = 0  # error EMCYs seen after the first (a flood is counted, not acted on twice)
 
     # -- set-up -----------------------------------------------------------------------------------
@@ -129,8 +148,26 @@ class DriveWatch:
             self._active = True
 
     def stop(self) -> None:
-        """No more trips (the guard's exit begins: its own requests must never be cut short), and every
-        subscription undone."""
+        """No more trips: the guard's exit begins, and its own requests wait for their answers again --
+        except across a boot-up of their drive. Resets are followed until :meth:`close`."""
+        with self._lock:
+            self._active = False
+            drives = list(self._drives.values())
+        for w in drives:
+            w.client.clear_abort()
+
+    def boots(self, bus: str, node: int) -> int:
+        """Boot-ups of the drive heard since it was added (0 for a drive not watched)."""
+        w = self._drives.get((bus, node))
+        return 0 if w is None else w.boots
+
+    def resetting(self, bus: str, node: int) -> bool:
+        """An NMT reset of the drive was seen and its boot-up not yet heard: it is deaf until then."""
+        w = self._drives.get((bus, node))
+        return w is not None and w.reset_at is not None
+
+    def close(self) -> None:
+        """Every subscription undone (the guard's exit is over)."""
         with self._lock:
             self._active = False
             drives = list(self._drives.values())
@@ -139,7 +176,7 @@ class DriveWatch:
             self._nmt_subs.clear()
         for w in drives:
             self._unsubscribe(w)
-            w.client.clear_abort()  # the guard's own exit requests must wait for their answers again
+            w.client.clear_abort()
         for network, cb in subs:
             try:
                 network.unsubscribe(NMT_ID, cb)
@@ -201,6 +238,10 @@ class DriveWatch:
             return
         node = data[1]
         targets = [w for w in list(self._drives.values()) if w.bus == bus and (node == 0 or w.node == node)]
+        if data[0] in NMT_RESETS:
+            now = self._now()
+            for w in targets:
+                w.reset_at = now
         if targets:
             who = "every node" if node == 0 else targets[0].label
             self._trip(DriveWatchError(
@@ -217,6 +258,14 @@ class DriveWatch:
             w.period = gap if w.period is None else min(max(w.period, gap), 10 * w.period)
         w.last_beat = now
         state = data[0] & 0x7F
+        if state == NMT_BOOT_UP:
+            with self._lock:
+                w.boots += 1
+                w.reset_at = None
+                tripping = self._active and self.error is None
+            if not tripping:  # a request to a drive that just booted gets no answer: end it now
+                w.client.abort_pending(DriveRestartedError(f"{w.label}: booted again (boot-up heard): it is deaf until started"))
+                return
         if state != NMT_OPERATIONAL:
             self._trip(DriveWatchError(
                 f"{w.label}: left Operational: its heartbeat says {HB_STATES.get(state, f'state 0x{state:02X}')}; "
@@ -229,5 +278,5 @@ class DriveWatch:
                 return
             self.error = error
             for w in self._drives.values():  # the request the command waits for ends now, with this reason
-                w.client.abort_pending(error)
+                self.told = w.client.abort_pending(error) or self.told
         log.warning("drive watch: %s", error)

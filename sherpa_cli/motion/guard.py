@@ -51,7 +51,7 @@ from sherpa_cli.motion.deadman import COMM_ERROR, CONSUMER, LOSS_ACTION, OBJECT_
 from sherpa_cli.motion.drive_watch import DriveWatch, DriveWatchError
 from sherpa_cli.motion.host_ids import HostIdListener, OtherConsumers
 from sherpa_cli.motion.lock import DriveLock, HostIdLock, drive_label
-from sherpa_cli.motion.report import DriveStop, GuardReport
+from sherpa_cli.motion.report import RESET_DURING_STOP, DriveStop, GuardReport
 from sherpa_cli.motion.settings import PROFILE_KEYS, MotionSettings
 from sherpa_cli.motion.stopping import ask_patiently, fault_reason, stop_drive, why
 from sherpa_cli.motion.trip_clear import clear_heartbeat_trip
@@ -153,6 +153,8 @@ class MotionGuard:
         # requests the command's own thread sends are signs of life (ArmSession.watch_requests)
         self._owner: int | None = None
         self._unwatch_requests: Callable[[], None] | None = None
+        self._exit_of: _Drive | None = None  # the drive whose exit runs now (_exit_drive)
+        self._exit_boots = 0
 
     # -- public API -------------------------------------------------------------------------------
 
@@ -311,6 +313,8 @@ class MotionGuard:
             return
         error = self._bus.poll() or self._watch.poll()
         if error is not None:
+            if error is self._watch.error:
+                self._watch.told = True
             raise error
 
     def _abort_requests(self, error: SherpaError) -> None:
@@ -683,6 +687,12 @@ class MotionGuard:
         (a watch, a receive thread) says nothing about the command's loop: a hung loop still stops
         the heartbeat."""
         if threading.get_ident() == self._owner:
+            error = self._watch.error
+            if error is not None and not self._watch.told and not self._exiting:
+                # the watch tripped between two requests: this one would wait out its reply timeouts
+                # on a deaf drive (one reset by another node) and its timeout would hide the reason
+                self._watch.told = True
+                raise error
             self._heartbeat.pulse(self._allowance(), extend=True)
 
     def _beat_now(self) -> None:
@@ -706,7 +716,7 @@ class MotionGuard:
 
     def _exit_all(self, reason: str, entering: bool = False) -> None:
         self._exiting = True
-        self._watch.stop()  # first: nothing may cut the exit's own requests short
+        self._watch.stop()  # first: nothing may cut the exit's own requests short (but a boot-up)
         self._bus.stop()
         self.report.reason = reason
         try:
@@ -725,6 +735,7 @@ class MotionGuard:
             self.report.drives.extend(self._released.values())
         finally:
             self.report.bus_faults = list(self._bus.faults)
+            self._watch.close()
             self._bus.close()
             self._stop_heartbeat()
 
@@ -760,10 +771,47 @@ class MotionGuard:
                 log.debug("motion guard: first stop pass to %s: %s", d.ref.name, exc)
 
     def _step(self, extra: float = 0.0) -> None:
-        """A sign of life before one exit step, bounded by that step (not by the whole exit)."""
+        """A sign of life before one exit step, bounded by that step (not by the whole exit); and an NMT
+        start for the drive being stopped if it booted again since (:meth:`_exit_drive`)."""
         self._pulse(extra, exact=True)
+        d = self._exit_of
+        if d is not None and (boots := self._watch.boots(d.ref.bus, d.ref.node)) != self._exit_boots:
+            self._exit_boots = boots
+            self._await_boot(d)
+            d.client.clear_abort()  # the boot-up ended the request it cut short, not the ones to come
+            try:
+                d.client.nmt_start()
+            except Exception as exc:  # noqa: BLE001 - the step that follows fails and says why
+                log.debug("motion guard: NMT start of %s after its boot-up: %s", d.ref.name, exc)
+
+    def _await_boot(self, d: _Drive) -> None:
+        """Until the boot-up of a drive another node reset (bounded by protocol.boot_timeout): it
+        hears nothing while it boots, an NMT start included."""
+        deadline = self._clock() + self.session.cfg.protocol.boot_timeout
+        while self._watch.resetting(d.ref.bus, d.ref.node) and self._clock() < deadline:
+            self._pulse(exact=True)
+            self._sleep(0.01)
 
     def _exit_drive(self, d: _Drive, stop: bool = True) -> DriveStop:
+        """The drive's exit (:meth:`_exit_drive_once`). A drive that boots again during it (reset by
+        another node) heard none of the steps after its boot-up until the next step's NMT start: its
+        exit runs once more, on a drive whose motor its reset switched off."""
+        start = self._watch.boots(d.ref.bus, d.ref.node)
+        self._exit_of, self._exit_boots = d, start
+        try:
+            self._await_boot(d)
+            r = self._exit_drive_once(d, stop)
+            if r.problems and self._watch.boots(d.ref.bus, d.ref.node) != start:
+                self._event(f"{d.client.label}: booted again during its stop ({'; '.join(r.problems)}): "
+                            "its stop once more")
+                r = self._exit_drive_once(d, stop)
+                if r.stopped_by == "motor was off":
+                    r.stopped_by = RESET_DURING_STOP
+            return r
+        finally:
+            self._exit_of = None
+
+    def _exit_drive_once(self, d: _Drive, stop: bool) -> DriveStop:
         c, s = d.client, self.settings
         r = DriveStop(d.ref.name, f"{d.ref.bus}:{d.ref.node}")
         motor_confirmed_off = False

@@ -94,7 +94,7 @@ def settings_for(cfg: ArmConfig, drive: str, **overrides: object) -> SimSettings
                     servo_bandwidth_hz=faults.servo_bandwidth, servo_damping=faults.servo_damping,
                     servo_current_limit=faults.servo_current_limit,
                     supply_current_limit=faults.supply_current_limit, user_program=faults.user_program,
-                    reset_comm_reboots=faults.reset_comm_reboots,
+                    reset_comm_reboots=faults.reset_comm_reboots, boot_s=faults.boot_ms / 1000,
                     group_id_needs_reset_comm=faults.group_id_needs_reset_comm)
         if faults.firmware is not None:
             base["sw_version"] = faults.firmware

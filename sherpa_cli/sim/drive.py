@@ -584,9 +584,26 @@ class SimDrive:
         elif cs == NMT_PRE_OP:
             self._nmt_state = PRE_OPERATIONAL
         elif cs == NMT_RESET_NODE or (cs == NMT_RESET_COMM and self.settings.reset_comm_reboots):
-            self._boot()
+            if self.settings.boot_s > 0:
+                self._start_booting()
+            else:
+                self._boot()
         elif cs == NMT_RESET_COMM:
             self._reset_communication()
+
+    def _start_booting(self) -> None:
+        """A reset that takes ``boot_s``: the motor off now, nothing heard or sent until :meth:`_boot`."""
+        if self._motor_on:
+            self._record("motor off: reset")
+        self._motor_on = False
+        self.motor.off()
+        self._nmt_state = PRE_OPERATIONAL
+        self._hb_last = None
+        self._next_heartbeat = math.inf
+        self._begin_due = None
+        self._replies.clear()
+        self._blackout_until = self._t + self.settings.boot_s
+        self._reboot_due = self._t + self.settings.boot_s
 
     def _reset_communication(self) -> None:
         """CiA 301 reset communication: the communication objects 0x1000-0x1FFF back to their saved

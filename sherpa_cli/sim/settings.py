@@ -52,6 +52,10 @@ class SimSettings:
     # from their saved values and keeps the application's RAM (False); True plays a full reboot
     # like reset node. Elmo's own behaviour is UNCONFIRMED.
     reset_comm_reboots: bool = False
+    # Time from an NMT reset (node, or communication played as a reboot) to the boot-up frame: the
+    # motor goes off at once and the drive hears nothing until it has booted. Elmo gives no boot
+    # time (UNCONFIRMED); 0 boots at once.
+    boot_s: float = 0.0
     # Elmo's implementation guide (13-10): a group id written to 0x2040 takes effect after an NMT
     # reset communication (True); False makes it effective at once. Default as documented.
     group_id_needs_reset_comm: bool = True
