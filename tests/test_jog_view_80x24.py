@@ -179,10 +179,86 @@ def test_typed_targets_start_stop_and_get_status_in_joint_units():
     assert seen["sigma_sent"][0] == pytest.approx(units.counts_per_s_to_rad_per_s(a + b, sigma_cpr))
     assert abs(seen["sigma_sent"][0] - 0.1) < 2 * 2 * 3.1416 / sigma_cpr  # the joint's speed, to a count
     assert f"left JV={a}, right JV={b}" in seen["sigma_panel"] and "rad/s" in seen["sigma_panel"]
-    assert seen["status"][0] == "pitch: status OK" and "status: OK" in seen["status"][1]
+    # the status once: in the panel; the message only says it was read (it said "status OK" twice)
+    assert seen["status"][0] == "pitch: status read" and "status: OK" in seen["status"][1]
     assert "SR 0x" in seen["details"] and "MF 0x" in seen["details"] and "left:" in seen["details"]
     assert seen["keys_visible"]
     assert all(d.stopped_by != "not stopped" for d in seen["report"].drives)
+
+
+def test_an_expired_velocity_set_point_goes_back_to_0_on_screen():
+    """docs/jog.md: a velocity or torque command that expires sets its set point back to 0, so the
+    next press starts small; the panel kept showing the expired +0.1 rad/s. On stepped time, the
+    view's ticks called by hand: the expiry comes when the test moves the clock, whatever the load."""
+    cfg = load_config(JOG_CONFIG)
+
+    async def scenario(session, stepped) -> dict:
+        seen: dict = {}
+        with LiveJog(session, resolve_axes(cfg, ["j2"]), keepalive=0.3, clock=stepped.now,
+                     sleep=stepped.sleep) as live:
+            app = JogView(live, tick_period=3600.0)  # no tick of its own: app.tick() below
+            async with app.run_test(size=SIZE) as pilot:
+                await pilot.pause(0.1)
+                await pilot.press("m", "right")  # velocity, +0.1 rad/s, for the keepalive
+                app.tick()
+                seen["running"] = "j2" in live.running
+                seen["during"] = text_of(app, "#detail")
+                stepped.sleep(0.5)  # past the keepalive
+                app.tick()
+                seen["expired"] = "j2" not in live.running
+                await pilot.pause(0.05)
+                seen["after"] = text_of(app, "#detail")
+                seen["typed"] = app.typed["j2"].get("velocity")
+                await pilot.press("right")  # starts small again: one step, not two
+                seen["again"] = app.setpoint["j2"]
+                await pilot.press("space")
+                await pilot.press("q")
+        return seen
+
+    with stepped_session(cfg) as (s, stepped):
+        seen = asyncio.run(scenario(s, stepped))
+    assert seen["running"] and "set point +0.1 rad/s" in seen["during"], seen["during"]
+    assert seen["expired"]
+    assert "set point +0 rad/s" in seen["after"] and seen["typed"] == 0.0, seen["after"]
+    assert seen["again"] == pytest.approx(0.1)
+
+
+@pytest.mark.parametrize("size", [(80, 24), (120, 40)])
+def test_a_taller_wider_terminal_lists_every_joint_and_gives_the_rest_to_the_panel(size):
+    """At 120x40 the shipped arm's list kept 16 blank lines and the bars 16 columns; at 80x24 the
+    list scrolls as before and the detail keeps its six lines."""
+    cfg = load_config(SHIPPED)
+    names = list(cfg.joints)
+
+    async def scenario(session) -> dict:
+        seen: dict = {}
+        with LiveJog(session, resolve_axes(cfg, names), keepalive=30.0) as live:
+            app = JogView(live, tick_period=0.2)
+            async with app.run_test(size=size) as pilot:
+                await pilot.pause(0.2)
+                await pilot.press("g")
+                base = app.screen_stack[0]
+                seen["regions"] = {w: base.query_one(w).region for w in ("#list", "#detail", "#status", "#keys")}
+                seen["list"] = text_of(app, "#list")
+                seen["detail"] = text_of(app, "#detail")
+                await pilot.press("q")
+        return seen
+
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
+        seen = asyncio.run(scenario(s))
+    r = seen["regions"]
+    # no blank band: the panels follow each other down to the key help on the last lines
+    assert r["#list"].y == 0 and r["#detail"].y == r["#list"].bottom and r["#status"].y == r["#detail"].bottom
+    assert r["#keys"].bottom == size[1]
+    bar = max(len(part) for line in seen["list"].splitlines() for part in line.split() if part.startswith("["))
+    if size == (120, 40):
+        assert r["#list"].height == len(names) and "above" not in seen["list"]
+        assert "SR 0x" in seen["detail"] and "(d: details)" not in seen["detail"]  # room: shown without d
+        assert bar > 16 + 2
+    else:
+        assert r["#list"].height < len(names) and "below" in seen["list"]
+        assert r["#detail"].height == 7 and "(d: details)" in seen["detail"] and "SR 0x" not in seen["detail"]
+        assert bar == 16 + 2
 
 
 def test_the_shipped_joystick_section_is_the_seeds_mapping_and_drives_it(cli_windows, monkeypatch):

@@ -36,6 +36,7 @@ UNITS = {"position": "rad", "velocity": "rad/s", "torque": "A"}
 TYPED_EXAMPLES = {"position": "0.5, -10deg, 200counts", "velocity": "0.2, 5deg/s, 300counts/s",
                   "torque": "0.5, 0.5A, 800mA"}
 BAR = 36
+DETAIL_LINES = 7  # the detail panel's border and its six lines
 LIST_BAR = 16  # the joint list's bars: one line per joint fits 80 columns
 KEY_HELP = ("↑↓ joint  ←→ step/set  t type set point  Enter start  s stop  Space STOP ALL\n"
             "m mode  +/- step size  c calibrate  g get status  d details  q quit")
@@ -218,11 +219,27 @@ class JogView(App):
 
     def on_mount(self) -> None:
         self.title = "sherpa jog --interactive"
+        self._fit_layout()
         self.tick()  # a sign of life for the guard's dead-man as soon as the view is up
         self.set_interval(self.tick_period, self.tick)
 
     def on_resize(self) -> None:
+        self._fit_layout()
         self.call_after_refresh(self.render_state)
+
+    def _fit_layout(self) -> None:
+        """Every joint listed once the terminal has the lines for it (and the detail its own): then
+        the list takes no more lines than it has joints and the detail the rest, where SR/MF show
+        decoded without the d key. A short terminal scrolls the list instead."""
+        listing = self.query_one("#list", Static)
+        detail = self.query_one("#detail", Static)
+        spare = self.size.height - len(self.names) - DETAIL_LINES - 4  # the status and key lines: 2 each
+        if spare >= 0:
+            listing.styles.height = len(self.names)
+            detail.styles.height = "1fr"
+        else:
+            listing.styles.height = "1fr"
+            detail.styles.height = "auto"
 
     @property
     def current(self) -> str:
@@ -285,12 +302,24 @@ class JogView(App):
         text.append(f"{name:<{width}}", style="bold reverse" if i == self.selected else "")
         text.append(f" {flag}", style="bold red" if flag == "!" else "yellow")
         text.append(f" {st.rad:+8.4f} rad " if st.rad is not None else "        ? rad ")
-        text.append(bar(st.counts, j.full_range, j.normal_range, LIST_BAR))
+        text.append(bar(st.counts, j.full_range, j.normal_range, self._bar_width()))
         text.append(f" {st.mode:<8} {st.command}")
         room = self.size.width - 2  # the list's padding; one line per joint, what does not fit is cut
         if room > 20:
             text.truncate(room, overflow="ellipsis")
         return text
+
+    def _bar_width(self) -> int:
+        """The list's bars: LIST_BAR fits 80 columns; a wider terminal gives half its extra columns
+        to them (finer positions), the rest to the command column."""
+        return LIST_BAR + max(0, (self.size.width - 80) // 2)
+
+    def _room_for_details(self) -> bool:
+        """The detail panel is tall enough to show SR/MF decoded without the d key."""
+        try:
+            return self.screen_stack[0].query_one("#detail", Static).size.height >= 10
+        except Exception:  # noqa: BLE001 - not laid out yet
+            return False
 
     def render_state(self) -> None:
         base = self.screen_stack[0]  # the joints' screen, also under a dialog
@@ -359,8 +388,10 @@ class JogView(App):
             text.append("OK" if ok else "Fail", style="bold green" if ok else "bold red")
             if not ok:
                 text.append(": " + "; ".join(f"{d.drive}: {', '.join(d.problems)}" for d in got if not d.ok))
-            text.append("  (d: hide details)" if self.show_details else "  (d: details)")
-            if self.show_details:
+            shown = self.show_details or self._room_for_details()
+            if not self._room_for_details():
+                text.append("  (d: hide details)" if self.show_details else "  (d: details)")
+            if shown:
                 for d in got:
                     text.append(f"\n  {d.drive}: SR 0x{d.sr & 0xFFFFFFFF:08X}, MF 0x{d.mf & 0xFFFFFFFF:08X}: "
                                 + "; ".join(d.details))
@@ -387,7 +418,10 @@ class JogView(App):
             self.exit()
             return
         for name in self.names:  # an expired command resets its set point: a new press starts small
-            if name not in self.live.running:
+            if name not in self.live.running and self.setpoint[name] != 0.0:
+                mode = self.live.state[name].mode
+                if self.typed[name].get(mode) == self.setpoint[name]:
+                    self.typed[name][mode] = 0.0  # the set point shown goes back to 0 with it (docs/jog.md)
                 self.setpoint[name] = 0.0
         if len(self.live.messages) > self.seen_messages:  # a limit or trip: shown until the next key
             self.message = self.live.messages[-1]
@@ -547,8 +581,8 @@ class JogView(App):
         def get() -> str:
             self.status[name] = self.live.status(name)
             bad = [d for d in self.status[name] if not d.ok]
-            return f"{name}: status OK" if not bad else \
-                f"{name}: status Fail: " + "; ".join(f"{d.drive}: {', '.join(d.problems)}" for d in bad)
+            # the detail panel shows the status itself ("status: OK"): the message only says it was read
+            return f"{name}: status read" + (f": {len(bad)} drive(s) Fail" if bad else "")
 
         self._do(get)
 
