@@ -63,7 +63,7 @@ def test_a_silent_drive_makes_stop_exit_1(cli, tmp_path, monkeypatch):
     path.write_text(yaml.safe_dump(data, sort_keys=False))
     result = cli("--sim", "--config", str(path), "stop", "elbow_1a", "elbow_1b")
     assert result.exit_code == 1, result.transcript()
-    assert "1 drive(s) not confirmed stopped: elbow_1b" in result.stderr
+    assert "1 drive not confirmed stopped: elbow_1b" in result.stderr
     assert "elbow_1a" in result.stdout and "motor off" in result.stdout
 
 

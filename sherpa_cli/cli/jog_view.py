@@ -20,6 +20,7 @@ from textual.widgets import Input, Static
 
 from sherpa_cli.errors import SherpaError
 from sherpa_cli.joints import units
+from sherpa_cli.words import plural
 
 if TYPE_CHECKING:
     from sherpa_cli.ops.home import HomePlan, HomeReport
@@ -582,7 +583,7 @@ class JogView(App):
             self.status[name] = self.live.status(name)
             bad = [d for d in self.status[name] if not d.ok]
             # the detail panel shows the status itself ("status: OK"): the message only says it was read
-            return f"{name}: status read" + (f": {len(bad)} drive(s) Fail" if bad else "")
+            return f"{name}: status read" + (f": {plural(len(bad), 'drive')} Fail" if bad else "")
 
         self._do(get)
 

@@ -15,6 +15,7 @@ from dataclasses import replace
 from sherpa_cli.config.model import ArmConfig, CurrentLimits, DriveModel, JointConfig, JointRole, SwitchKind
 from sherpa_cli.config.yamlnodes import Locs, suggest
 from sherpa_cli.errors import ConfigError, Location
+from sherpa_cli.words import plural
 
 MAX_NODE_ID = 127
 # safe bounds of the dead-man: beyond them a killed or hung tool's motor runs on
@@ -58,7 +59,7 @@ class _Report:
         ordered = sorted(unique.values(), key=lambda e: (e.location.line is None, e.location.line or 0))
         first = ordered[0]
         if len(ordered) > 1:
-            more = f"{len(ordered) - 1} more problem(s) found in this file after this one"
+            more = f"{plural(len(ordered) - 1, 'more problem')} found in this file after this one"
             first.hint = f"{first.hint}; {more}" if first.hint else more
         raise first
 

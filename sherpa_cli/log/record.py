@@ -37,6 +37,7 @@ from sherpa_cli.errors import CommunicationError, SdoError, SherpaError, UsageEr
 from sherpa_cli.joints.units import counts_per_s_to_rad_per_s, counts_to_rad
 from sherpa_cli.log.capture import frame_bits
 from sherpa_cli.log.recording import Recording
+from sherpa_cli.words import plural
 
 if TYPE_CHECKING:
     import can
@@ -929,7 +930,7 @@ def check_budget(budget: Sequence[BusBudget]) -> None:
         if not b.fits:
             what = "PX+VX" + (" and current" if b.current else "")
             raise UsageError(
-                f"--rate {b.rate:g}: {what} of {b.drives} drive(s) on bus {b.bus} needs {100 * b.load:.0f} % of "
+                f"--rate {b.rate:g}: {what} of {plural(b.drives, 'drive')} on bus {b.bus} needs {100 * b.load:.0f} % of "
                 f"{b.bitrate / 1e6:g} Mbit/s (at most {100 * MAX_LOAD:.0f} %); the highest rate it can carry is "
                 f"{b.max_rate} Hz", hint=f"use --rate {min(x.max_rate for x in budget)}"
                 + ("" if not b.current else " or --no-current"))

@@ -41,6 +41,7 @@ from sherpa_cli.elmo.userprog import refuse_save_while_running
 from sherpa_cli.errors import CodecError, ConfigError, DriveRefusedError, Location, SafetyError, SherpaError
 from sherpa_cli.motion import calibration
 from sherpa_cli.motion.lock import DriveLock
+from sherpa_cli.words import plural
 
 if TYPE_CHECKING:
     from sherpa_cli.bus.session import ArmSession
@@ -413,7 +414,7 @@ def plan_error(plans: Sequence[DrivePlan], *, suffix: str = "", hint: str | None
     if not bad:
         return None
     first = bad[0]
-    more = f" (and {len(bad) - 1} more drive(s))" if len(bad) > 1 else ""
+    more = f" (and {plural(len(bad) - 1, 'more drive')})" if len(bad) > 1 else ""
     err = SafetyError(f"{first.drive}: {first.problems[0]}{more}{suffix}", hint=hint)
     if first.error is not None:
         err.exit_code = first.error.exit_code  # e.g. 3 when a drive did not answer
@@ -687,7 +688,7 @@ def proof_problem(proofs: Sequence[FlashProof], *, after_save: bool = False) -> 
     """The error to end with when a proof failed or flash differs (exit 1; 3 when a drive did not answer)."""
     failed = [p for p in proofs if p.status == PROOF_FAILED]
     if failed:
-        more = f" (and {len(failed) - 1} more drive(s))" if len(failed) > 1 else ""
+        more = f" (and {plural(len(failed) - 1, 'more drive')})" if len(failed) > 1 else ""
         err = SafetyError(f"{failed[0].drive}: flash not proven: {failed[0].error}{more}")
         if failed[0].exit_code is not None:
             err.exit_code = failed[0].exit_code  # type: ignore[assignment]  # an ExitCode's value

@@ -21,6 +21,7 @@ from sherpa_cli.elmo.protocol import UM_TORQUE
 from sherpa_cli.errors import SafetyError
 from sherpa_cli.motion.settings import MotionSettings
 from sherpa_cli.motion.stopping import ask_patiently, stop_drive, why
+from sherpa_cli.words import plural
 
 if TYPE_CHECKING:
     from sherpa_cli.bus.session import ArmSession
@@ -139,10 +140,10 @@ class StopReport:
             return None
         parts = []
         if self.unconfirmed:
-            parts.append(f"{len(self.unconfirmed)} drive(s) not confirmed stopped: {', '.join(self.unconfirmed)}")
+            parts.append(f"{plural(len(self.unconfirmed), 'drive')} not confirmed stopped: {', '.join(self.unconfirmed)}")
         if self.not_reached:
-            parts.append(f"{len(self.not_reached)} drive(s) not reached (bus could not be opened): "
+            parts.append(f"{plural(len(self.not_reached), 'drive')} not reached (bus could not be opened): "
                          f"{', '.join(self.not_reached)}")
         stopped = sum(1 for r in self.drives if r.ok)
-        return SafetyError(f"partly stopped ({stopped} of {len(self.drives)} drive(s) stopped): " + "; ".join(parts),
+        return SafetyError(f"partly stopped ({stopped} of {plural(len(self.drives), 'drive')} stopped): " + "; ".join(parts),
                            hint="check them with `sherpa monitor --once`; cut the motor power if they still move")
