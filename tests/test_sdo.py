@@ -146,3 +146,60 @@ def test_identify_and_dump_read_identity_through_the_session_clients():
         live = read_live(session, list(cfg.drives))
         assert set(session._sdo) == {(d.bus, d.node) for d in cfg.drives.values()}
         assert all(d.identity["serial"] for d in live.values())
+
+
+class SteppingClock:
+    def __init__(self, step: float) -> None:
+        self.t, self.step = 0.0, step
+
+    def __call__(self) -> float:
+        self.t += self.step
+        return self.t
+
+
+def test_a_read_whose_wait_overran_on_a_starved_host_is_asked_once_more():
+    """A wait that came back late (the host ran something else) gave up on an answer that may have been
+    on its way: a read asks once more; one that came back on time is a drive that did not answer."""
+    replies = iter([None, bytes.fromhex("43 18 10 04 28 01 00 5A")])
+    net = ScriptedNetwork(lambda can_id, req: next(replies))
+    sdo = DriveSdo(net, 10, label="drive1 (node 10)", clock=SteppingClock(0.02))  # each wait 2 x 0.01 s
+    assert sdo.upload(0x1018, 4) == bytes.fromhex("28 01 00 5A")
+    asked = [d for i, d in net.sent if d[0] == 0x40]
+    assert len(asked) == 2
+
+    net = ScriptedNetwork(lambda can_id, req: None)
+    sdo = DriveSdo(net, 10, label="drive1 (node 10)", clock=SteppingClock(0.0))  # on time: no second ask
+    with pytest.raises(SdoError, match=r"no answer to the SDO upload of 0x1018:4 within 0\.01 s"):
+        sdo.upload(0x1018, 4)
+    assert len([d for i, d in net.sent if d[0] == 0x40]) == 1
+
+
+class LateNetwork(ScriptedNetwork):
+    """A session network (``wait_for``: the fast path) whose first wait comes back ``late`` s late and
+    finds the answer only after it gave up."""
+
+    def __init__(self, clock: SteppingClock, late: float) -> None:
+        super().__init__()
+        self.clock, self.late, self.waits = clock, late, 0
+
+    def wait_for(self, lock, timeout: float) -> bool:
+        self.waits += 1
+        if self.waits == 1:
+            self.clock.t += timeout + self.late
+            for callback in list(self.subscribers.get(0x58A, [])):  # the answer, after the wait gave up
+                callback(0x58A, bytes.fromhex("43 18 10 04 28 01 00 5A"), 0.0)
+            return False
+        return lock.acquire(timeout=0)
+
+
+@pytest.mark.parametrize("late,answered", [(0.02, True), (0.001, False)])
+def test_an_expedited_read_whose_wait_came_back_late_waits_once_more(late, answered):
+    clock = SteppingClock(0.0)
+    net = LateNetwork(clock, late)
+    sdo = DriveSdo(net, 10, label="drive1 (node 10)", clock=clock)
+    if answered:
+        assert sdo.upload(0x1018, 4) == bytes.fromhex("28 01 00 5A") and net.waits == 2
+    else:  # a quarter of the timeout late at most: the drive's silence, not the host's
+        with pytest.raises(SdoError, match="no answer"):
+            sdo.upload(0x1018, 4)
+        assert net.waits == 1
