@@ -125,3 +125,43 @@ def test_limits_are_the_config_in_joint_units():
 def test_state_takes_the_time_it_is_given():
     with Arm.open(CONFIG, sim=True) as arm:
         assert arm.state(["wrist_3"], clock=lambda: 42.0).at == 42.0
+
+
+# -- identify and dump_params: the commands' results, from Python
+
+def test_identify_reads_who_each_drive_is_and_where_its_joint_stands():
+    with Arm.open(CONFIG, sim=True) as arm:
+        arm.jog("elbow_pitch", by=0.1)
+        report = arm.identify(["elbow_pitch", "shoulder_diff"])
+        px = arm.session.sim.drives["elbow_1a"].px
+    assert [d.drive for d in report.drives] == ["elbow_1a", "shoulder_2a", "shoulder_2b"]
+    elbow = report.drives[0]
+    assert elbow.error is None and report.errors == () and report.findings == []
+    assert elbow.identity["device_name"] and elbow.identity["vendor_id"] == 0x9A  # Elmo's CiA vendor id
+    assert elbow.state["PX"] == px and elbow.joint is not None
+    assert elbow.joint.joint == "elbow_pitch" and elbow.joint.rad == pytest.approx(0.1, abs=0.005)
+    assert report.drives[1].joint is not None and report.drives[1].joint.formula == "Σ = shoulder_2a + shoulder_2b"
+
+
+def test_dump_params_returns_what_it_writes(tmp_path):
+    from sherpa_cli.ops.params_file import read_dump
+
+    path = tmp_path / "arm.yaml"
+    with Arm.open(CONFIG, sim=True) as arm:
+        arm.program_limits(["elbow_pitch"], apply=True)
+        dump = arm.dump_params(path, ["elbow_pitch"])
+        in_memory = arm.dump_params(targets=["wrist_3"])
+    assert list(dump.drives) == ["elbow_1a"] and list(in_memory.drives) == ["wrist_3a"]
+    params = dump.drives["elbow_1a"].params
+    assert params["CL[1]"] == pytest.approx(3.0) and params["UM"] == 5  # the limit just programmed
+    assert read_dump(path).drives == dump.drives  # the file holds what was returned
+
+
+def test_the_identify_and_dump_params_commands_call_the_api(cli, monkeypatch):
+    seen = []
+    real_identify, real_dump = Arm.identify, Arm.dump_params
+    monkeypatch.setattr(Arm, "identify", lambda self, *a, **k: seen.append("identify") or real_identify(self, *a, **k))
+    monkeypatch.setattr(Arm, "dump_params", lambda self, *a, **k: seen.append("dump") or real_dump(self, *a, **k))
+    assert cli("--sim", "identify", "elbow_1a").exit_code == 0
+    assert cli("--sim", "dump-params", "elbow_1a").exit_code == 0
+    assert seen == ["identify", "dump"]
