@@ -165,3 +165,23 @@ def test_the_identify_and_dump_params_commands_call_the_api(cli, monkeypatch):
     assert cli("--sim", "identify", "elbow_1a").exit_code == 0
     assert cli("--sim", "dump-params", "elbow_1a").exit_code == 0
     assert seen == ["identify", "dump"]
+
+
+def test_the_docs_examples_of_reading_the_arm_pass_mypy_strict(tmp_path):
+    """What a user copies from docs/api.md's reading sections type-checks as it is written."""
+    import re
+    import subprocess
+    import sys
+
+    text = (ROOT / "docs" / "api.md").read_text(encoding="utf-8")
+    wanted = ("## Read the arm", "## Identify the drives and dump their parameters", "## From moteus, ODrive or canopen")
+    files = []
+    for title in wanted:
+        section = text.split(title, 1)[1].split("\n## ", 1)[0]
+        (block,) = re.findall(r"```python\n(.*?)```", section, flags=re.S)
+        files.append(tmp_path / f"example_{len(files)}.py")
+        files[-1].write_text(block, encoding="utf-8")
+    out = subprocess.run([sys.executable, "-m", "mypy", "--strict", "--follow-imports=silent",
+                          "--cache-dir", str(tmp_path / "cache"), *map(str, files)],
+                         cwd=ROOT, capture_output=True, text=True, timeout=600)
+    assert out.returncode == 0, out.stdout + out.stderr
