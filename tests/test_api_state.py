@@ -55,6 +55,7 @@ def test_a_sigma_and_delta_joint_follow_from_both_motors():
     with Arm.open(CONFIG, sim=True) as arm:
         arm.jog("shoulder_pitch", velocity="250counts/s", duration=0.4, uncalibrated=True)
         state = arm.state(["shoulder_diff"])
+        by_motor = arm.state(["shoulder_2b"])
         a, b = (arm.session.sim.drives[d].px for d in ("shoulder_2a", "shoulder_2b"))
     assert [j.name for j in state] == ["shoulder_pitch", "shoulder_roll"]
     sigma, delta = state["shoulder_pitch"], state["shoulder_roll"]
@@ -63,6 +64,9 @@ def test_a_sigma_and_delta_joint_follow_from_both_motors():
     cpr = load_config(CONFIG).joints["shoulder_pitch"].cpr
     assert sigma.position == pytest.approx((a + b) * TAU / cpr)
     assert sigma.drives == delta.drives == ("shoulder_2a", "shoulder_2b")
+    assert [j.name for j in by_motor] == ["shoulder_pitch", "shoulder_roll"]  # one motor named: both joints
+    assert by_motor["shoulder_roll"].position_counts == a - b
+    assert [d.drive for d in by_motor.drives] == ["shoulder_2a", "shoulder_2b"]
 
 
 def test_velocity_while_a_joint_moves():

@@ -15,7 +15,7 @@ from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
-from sherpa_cli.bus.targets import DriveRef, resolve, unique_drives
+from sherpa_cli.bus.targets import DriveRef, drive_ref, resolve
 from sherpa_cli.config.model import ArmConfig, CurrentLimits, JointConfig, JointRole
 from sherpa_cli.elmo.faults import UNIT_MODES
 from sherpa_cli.errors import CommunicationError, UsageError
@@ -138,9 +138,9 @@ def joints_of(cfg: ArmConfig, targets: Sequence[str] | None) -> tuple[list[Joint
     joints = [j for j in cfg.joints.values() if j.name in named]
     if not joints:
         raise UsageError(f"no joint among {', '.join(targets or [])}: the drives named move no configured joint")
+    # a pair motor named alone still needs the other motor: its joints are Σ and Δ of both
     wanted = {d for j in joints for d in joint_drives(cfg, j)}
-    refs = [r for r in unique_drives(resolved) if r.name in wanted]
-    return joints, refs
+    return joints, [drive_ref(cfg, d) for d in cfg.drives if d in wanted]
 
 
 def read_state(session: ArmSession, targets: Sequence[str] | None = None, *,
@@ -168,11 +168,12 @@ def read_state(session: ArmSession, targets: Sequence[str] | None = None, *,
                           int(values["MO"]) == 1, int(values["UM"]), sr, mf, faults)
 
     outcomes = per_bus(session, [r.name for r in refs], read)
-    failed = [o for o in outcomes.values() if not o.ok]
-    if failed:
-        if len(failed) == 1 and failed[0].error is not None:
-            raise failed[0].error
-        raise CommunicationError("; ".join(str(o.error) for o in failed))
+    errors = [o.error for o in outcomes.values() if o.error is not None]
+    if errors:
+        unexpected = [e for e in errors if not isinstance(e, CommunicationError)]
+        if len(errors) == 1 or unexpected:
+            raise (unexpected or errors)[0]
+        raise CommunicationError("; ".join(map(str, errors)))  # every silent drive named at once
     drives: dict[str, DriveState] = {name: o.value for name, o in outcomes.items()}
     at = clock()
 
