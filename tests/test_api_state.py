@@ -66,7 +66,7 @@ def test_a_sigma_and_delta_joint_follow_from_both_motors():
     assert sigma.drives == delta.drives == ("shoulder_2a", "shoulder_2b")
     assert [j.name for j in by_motor] == ["shoulder_pitch", "shoulder_roll"]  # one motor named: both joints
     assert by_motor["shoulder_roll"].position_counts == a - b
-    assert [d.drive for d in by_motor.drives] == ["shoulder_2a", "shoulder_2b"]
+    assert [(d.drive, d.position_counts) for d in by_motor.drives] == [("shoulder_2a", a), ("shoulder_2b", b)]
 
 
 def test_velocity_while_a_joint_moves():
