@@ -9,18 +9,29 @@ for the programming engine or the stop procedure it never runs (benchmark ``scan
 
 from typing import TYPE_CHECKING
 
-__all__ = ["Arm", "ProgramReport", "ScanReport", "StopReport", "StopResult"]
+__all__ = ["Arm", "ArmState", "DriveState", "IdentifyReport", "JointHandle", "JointLimits", "JointState", "ParamDump",
+           "ProgramReport", "ScanReport", "StopReport", "StopResult"]
 
 if TYPE_CHECKING:
     from sherpa_cli.api.arm import Arm as Arm
+    from sherpa_cli.api.joint import JointHandle as JointHandle
     from sherpa_cli.api.programming import ProgramReport as ProgramReport
+    from sherpa_cli.ops.identify import IdentifyReport as IdentifyReport
+    from sherpa_cli.ops.params_file import ParamDump as ParamDump
     from sherpa_cli.ops.scan import ScanReport as ScanReport
+    from sherpa_cli.ops.state import ArmState as ArmState
+    from sherpa_cli.ops.state import DriveState as DriveState
+    from sherpa_cli.ops.state import JointLimits as JointLimits
+    from sherpa_cli.ops.state import JointState as JointState
     from sherpa_cli.ops.stop import StopReport as StopReport
     from sherpa_cli.ops.stop import StopResult as StopResult
 
 #: public name -> the module that defines it
 _HOME = {"Arm": "sherpa_cli.api.arm", "ProgramReport": "sherpa_cli.api.programming",
-         "ScanReport": "sherpa_cli.ops.scan", "StopReport": "sherpa_cli.ops.stop", "StopResult": "sherpa_cli.ops.stop"}
+         "ScanReport": "sherpa_cli.ops.scan", "StopReport": "sherpa_cli.ops.stop", "StopResult": "sherpa_cli.ops.stop",
+         "JointHandle": "sherpa_cli.api.joint", "IdentifyReport": "sherpa_cli.ops.identify",
+         "ParamDump": "sherpa_cli.ops.params_file", "ArmState": "sherpa_cli.ops.state",
+         "DriveState": "sherpa_cli.ops.state", "JointLimits": "sherpa_cli.ops.state", "JointState": "sherpa_cli.ops.state"}
 
 if not TYPE_CHECKING:  # hidden from mypy, which then still refuses a name that is not exported above
 

@@ -20,7 +20,9 @@ from sherpa_cli.api.programming import ConfirmSave, ProgramReport, refuse_unconf
 
 if TYPE_CHECKING:
     from collections.abc import Mapping
+    from datetime import datetime
 
+    from sherpa_cli.api.joint import JointHandle
     from sherpa_cli.bus.session import ArmSession
     from sherpa_cli.config.model import ArmConfig, JoystickConfig
     from sherpa_cli.motion.axis import Axis
@@ -30,10 +32,13 @@ if TYPE_CHECKING:
     from sherpa_cli.ops import joint_jog
     from sherpa_cli.ops.diffdrive import MoveResult
     from sherpa_cli.ops.home import HomeReport, UnitResult
+    from sherpa_cli.ops.identify import IdentifyReport
     from sherpa_cli.ops.joystick import EventSource, JoystickRun
     from sherpa_cli.ops.live_jog import LiveJog
+    from sherpa_cli.ops.params_file import ParamDump
     from sherpa_cli.ops.program import DrivePlan
     from sherpa_cli.ops.scan import ScanReport
+    from sherpa_cli.ops.state import ArmState
     from sherpa_cli.ops.step import StepResult, StepTime
     from sherpa_cli.ops.stop import StopReport
 
@@ -108,6 +113,60 @@ class Arm:
         from sherpa_cli.ops.scan import scan
 
         return scan(self._session, buses, reset=reset, progress=progress)
+
+    def state(self, targets: Sequence[str] | None = None, *,
+              clock: Callable[[], float] | None = None) -> ArmState:
+        """Where the joints are and what their drives are doing, in joint units: one snapshot.
+
+        ``targets``: joints, pairs or drives (none: every joint); a drive means the joints its motor
+        moves, a Σ/Δ joint is computed from both motors of its pair. Per joint: position (rad),
+        velocity (rad/s), current (A), calibrated, motor on, unit mode and the faults decoded
+        (``state["elbow_pitch"].position``; ``state.drives`` holds each drive in counts). The drives
+        are NMT-started first, as the commands do; nothing is written. A drive that does not answer
+        raises CommunicationError. ``clock``: what ``state.at`` is read from (default monotonic).
+        """
+        import time
+
+        from sherpa_cli.ops.state import read_state
+
+        return read_state(self._session, targets, clock=clock or time.monotonic)
+
+    def joint(self, name: str) -> JointHandle:
+        """A handle on one joint (a plain or Σ/Δ joint): ``.position`` (rad), ``.velocity`` (rad/s),
+        ``.status`` (its :class:`~sherpa_cli.ops.state.JointState`) and ``.limits`` (the configured
+        limits in joint units). Each read asks the drives again."""
+        from sherpa_cli.api.joint import JointHandle
+
+        return JointHandle(self, name)
+
+    def identify(self, targets: Sequence[str] | None = None, *,
+                 progress: Callable[[str, str], None] | None = None) -> IdentifyReport:
+        """Who each drive is and what state it is in (`sherpa identify`): identity over SDO (0x1000,
+        0x1008-0x100A, 0x1018), MO, UM, SR, MF, PX and PS, each drive's joint position, and findings
+        (a device name that is not the config's model, firmware or product code that differs from the
+        other drives of that model). ``targets``: drives, joints or pairs (none: every drive). A drive
+        that does not answer is in ``report.errors`` (and its row's ``error``), not raised."""
+        from sherpa_cli.bus.targets import drive_names
+        from sherpa_cli.ops.identify import identify
+
+        return identify(self._session, drive_names(self.config, targets), progress)
+
+    def dump_params(self, path: str | Path | None = None, targets: Sequence[str] | None = None, *,
+                    progress: Callable[[str, str], None] | None = None,
+                    now: Callable[[], datetime] | None = None) -> ParamDump:
+        """Read the parameters commissioning touches and the identity of each drive (`sherpa
+        dump-params`); with ``path`` also write the YAML file (atomically; the file `params restore`
+        and `params diff` read). ``targets``: drives, joints or pairs (none: every drive). A drive
+        that does not answer raises before anything is written. ``now``: the dump's date (UTC;
+        ``$SHERPA_DUMP_DATE`` wins, as on the command line)."""
+        from sherpa_cli.bus.targets import drive_names
+        from sherpa_cli.ops.params_file import write_dump
+        from sherpa_cli.ops.params_read import dump_params
+
+        dump = dump_params(self._session, drive_names(self.config, targets), progress, now)
+        if path is not None:
+            write_dump(Path(path), dump, "path")
+        return dump
 
     # ------------------------------------------------------------------ stopping
 

@@ -36,10 +36,10 @@ def identify(
       sherpa identify --verbose elbow_1a
       sherpa identify shoulder_diff elbow_1a --json
     """
+    from sherpa_cli.api import Arm
     from sherpa_cli.bus.targets import drive_names
     from sherpa_cli.errors import ExitCode
-    from sherpa_cli.ops.identify import identify as run_identify
-    from sherpa_cli.ops.identify import identify_devices
+    from sherpa_cli.ops.identify import IdentifyReport, identify_devices
 
     st = state(ctx)
     cfg = st.load_config()
@@ -50,7 +50,7 @@ def identify(
     drives = drive_names(cfg, rest) if rest or not targets else []
     buses = sorted({cfg.drives[d].bus for d in drives} | {cfg.devices[d].bus for d in devices})
     with st.session(buses=buses) as session:
-        report = run_identify(session, drives)
+        report = Arm(session).identify(drives) if drives else IdentifyReport(())  # only devices named
         found = identify_devices(session, devices) if devices else []
     if st.json_mode and found:
         st.out.json({**report.as_json(), "devices": [d.as_json() for d in found]})

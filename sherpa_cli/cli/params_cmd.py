@@ -39,9 +39,9 @@ def dump_params(
       sherpa dump-params -o arm-2024-05-02.yaml
       sherpa dump-params shoulder_diff
     """
+    from sherpa_cli.api import Arm
     from sherpa_cli.bus.targets import drive_names
     from sherpa_cli.ops.params_file import drive_block, dump_to_text, write_dump
-    from sherpa_cli.ops.params_read import dump_params as read_dump_params
     from sherpa_cli.output_files import check_output_path, is_stdout
 
     st = state(ctx)
@@ -52,7 +52,7 @@ def dump_params(
     check_output_path(output, "--output", "the dump")  # a directory is refused before the drives are read
     buses = sorted({cfg.drives[d].bus for d in drives})
     with st.session(buses=buses) as session:
-        dump = read_dump_params(session, drives)
+        dump = Arm(session).dump_params(None, drives)
     for d in dump.drives.values():
         for key, why in d.unreadable.items():
             st.out.warn(f"{d.name}: {key} unreadable ({why})")

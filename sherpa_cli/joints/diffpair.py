@@ -176,6 +176,12 @@ def motor_currents(sigma_current: float, delta_current: float) -> tuple[float, f
     return sigma_current + delta_current, sigma_current - delta_current
 
 
+def joint_currents(current_a: float, current_b: float) -> tuple[float, float]:
+    """Motor currents (A) -> the joints' torques as current: ``IΣ = (I_a + I_b)/2``,
+    ``IΔ = (I_a - I_b)/2``, the inverse of :func:`motor_currents`."""
+    return (current_a + current_b) / 2, (current_a - current_b) / 2
+
+
 def hold_other(sigma: int, delta: int, moving: str, held_range: Range | None = None) -> tuple[int, int]:
     """(Σ, Δ) for a move of one joint while the other holds: the moving joint's value is kept
     exactly; when the pair has no whole motor position (mixed parity) the held joint gives way

@@ -36,6 +36,7 @@ from sherpa_cli.ops.identify import JointPosition, joint_positions, row_joint
 
 if TYPE_CHECKING:
     from sherpa_cli.bus.session import ArmSession
+    from sherpa_cli.elmo.client import DriveClient
 
 POLLED = ("MO", "UM", "PX", "SR", "MF")
 PRODUCER_HEARTBEAT = (0x1017, 0)
@@ -238,14 +239,7 @@ class Monitor:
         client = self.session.client(w.ref)
         if w.polled and not w.answering:
             client.nmt_start()  # it may have rebooted into Pre-operational
-        values: dict[str, int | float] = {}
-        problem = None
-        for letters in POLLED:
-            try:
-                values[letters] = client.get(letters)
-            except SherpaError as exc:
-                problem = str(exc).removeprefix(f"{client.label}: ")  # the row already names the drive
-                break  # one silent query is enough: do not wait out the others
+        values, problem = query(client, POLLED)
         with self._lock:
             w.polled = True
             w.problem = problem
@@ -291,8 +285,7 @@ class Monitor:
             silent_for=None if w.answering or w.answered_at is None else max(0.0, now - w.answered_at),
             mo=_int(v.get("MO")), um=_int(v.get("UM")), px=_int(v.get("PX")), sr=_int(sr), mf=_int(mf),
             joint=joint, position_rad=rad,
-            sr_problems=tuple(sr_problems(sr)) if isinstance(sr, int) else (),
-            mf_faults=decode_mf(mf).faults if isinstance(mf, int) else (),
+            sr_problems=decoded_sr(sr), mf_faults=decoded_mf(mf),
             emcy=w.emcy, emcy_age=None if w.emcy_at is None else max(0.0, now - w.emcy_at),
             emcy_before_start=w.emcy is not None and w.emcy_at is None, problem=w.problem)
 
@@ -304,6 +297,29 @@ class Monitor:
             return "unknown"
         # no heartbeat to tell: the interpreter answers only in Operational
         return NMT_STATES[0x05] if w.answering else NO_ANSWER
+
+
+def query(client: DriveClient, keys: Sequence[str]) -> tuple[dict[str, int | float], str | None]:
+    """Query ``keys`` of one drive in order: (values, None), or (what was read, the problem) when a
+    query fails -- one silent query is enough, the others are not waited out. The problem's text
+    leaves out the drive's name: whoever shows it names the drive already."""
+    values: dict[str, int | float] = {}
+    for letters in keys:
+        try:
+            values[letters] = client.get(letters)
+        except SherpaError as exc:
+            return values, str(exc).removeprefix(f"{client.label}: ")
+    return values, None
+
+
+def decoded_sr(sr: object) -> tuple[Fault, ...]:
+    """What in a status register (SR) needs a look; nothing when SR was not read."""
+    return tuple(sr_problems(sr)) if isinstance(sr, int) else ()
+
+
+def decoded_mf(mf: object) -> tuple[Fault, ...]:
+    """The motor failures latched in MF; nothing when MF was not read."""
+    return decode_mf(mf).faults if isinstance(mf, int) else ()
 
 
 def _int(value: object) -> int | None:
