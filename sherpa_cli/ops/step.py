@@ -263,7 +263,7 @@ def run_step(session: ArmSession, target: Axis, mode: str, value: float, *, dura
         until, since = state["t_stop"] - t_cmd, -PRE_S if mode_first else None
         recording = _cut(rec.recording(t_zero=t_cmd), until, since=since)
         # what the files hold: the samples of the cut recording, of the SYNCs sent within its span
-        samples = sum(1 for v in recording.columns[f"{ref.name}.px"] if v == v)
+        samples = len(recording.sample_rows())
         expected = len(_cut(Recording(times=rec.sync_times(t_zero=t_cmd)), until, since=since).times)
     # position: the recorded start is the reference (PX may not have been exactly 0)
     series = recording.series(joint.name, signal)
