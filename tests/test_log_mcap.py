@@ -156,6 +156,41 @@ def test_step_mcap_counts_agree_everywhere(cli, tmp_path):
     assert int(metadata["sherpa.recording"]["samples"]) == body["samples"] == body["expected"] == len(states)
 
 
+def test_the_metadata_counts_the_joint_states_the_file_holds_from_the_one_rule(tmp_path):
+    """A row with a drive's current but no position (its TPDO3 came, its TPDO1 did not) has no
+    /joint_states message: the metadata counted it all the same (the rows), log step's report
+    counted PX cells -- three rules for one number. Now all take Recording.sample_rows."""
+    from sherpa_cli.log.mcap_out import write_recording
+    from sherpa_cli.log.recording import Recording
+
+    cfg = load_config(ROOT / "tests" / "data" / "step-arm.yaml")
+    nan = math.nan
+    rec = Recording(times=[0.0, 0.002, 0.004], columns={
+        "arm.pos_rad": [0.0, nan, 0.01], "arm.vel_rad_s": [0.0, nan, 0.1], "arm.cur_a": [0.5, 0.6, nan],
+        "elbow.px": [0.0, nan, 10.0], "elbow.vx": [0.0, nan, 100.0], "elbow.iq_a": [0.5, 0.6, nan]})
+    assert rec.sample_rows() == [0, 2]
+    write_recording(tmp_path / "r.mcap", rec, cfg, time_zero_ns=10**18)
+    messages, metadata, _ = _decoded(tmp_path / "r.mcap")
+    states = [m for m in messages if m[0] == "/joint_states"]
+    assert len(states) == int(metadata["sherpa.recording"]["samples"]) == 2
+
+
+@pytest.mark.parametrize("args", [("--torque", "1", "--for", "1"), ("--velocity", "0.1", "--for", "1.5", "--hold", "0.5")])
+def test_step_mcap_counts_agree_for_a_step_cut_by_time_and_one_held(cli, tmp_path, args):
+    """The count printed, the /joint_states messages, the metadata and the embedded metrics, for a
+    torque step that runs its time out and a velocity step held after settling (the bundled config's
+    0.5 s settle window: the switch is in the file too)."""
+    out = tmp_path / "step.mcap"
+    result = cli("--sim", "log", "step", "elbow_pitch", *args, "--rate", "500", "-o", str(out), "--apply")
+    assert result.exit_code == 0, result.transcript()
+    messages, metadata, _ = _decoded(out)
+    states = [m for m in messages if m[0] == "/joint_states"]
+    body = json.loads(next(m for m in messages if m[0] == "/sherpa/step_metrics")[3].data)
+    line = next(x for x in result.stdout.splitlines() if x.startswith("elbow_pitch (elbow_1a)"))
+    printed = int(line.rsplit("; ", 1)[1].split(" of ")[0])
+    assert printed == len(states) == int(metadata["sherpa.recording"]["samples"]) == body["samples"], line
+
+
 # -- log capture / decode ----------------------------------------------------------------------------
 
 def _write_known(path) -> None:

@@ -200,7 +200,7 @@ def test_a_step_plot_has_units_the_command_the_switch_window_and_settling_with_t
     assert fig.get_suptitle() == "elbow_pitch: velocity step +0.1 rad/s; MO/UM switch 30 ms"
     pos, vel = _artists(fig)
     assert pos["ylabel"] == "position [rad]" and vel["ylabel"] == "velocity [rad/s]"
-    assert vel["xlabel"] == "time since the command [s]" and pos["title"] == "elbow_pitch"
+    assert vel["xlabel"] == "time since the command [s]" and pos["title"] == ""  # named once: in the suptitle
     for axes in (pos, vel):
         assert axes["legend_outside"] and axes["offset"] == ""
         assert "command (t = 0)" in axes["labels"] and "MO/UM switch 30 ms" in axes["labels"]
@@ -270,9 +270,10 @@ def test_the_pair_plot_marks_the_held_joints_excursion_with_a_sensible_span(tmp_
                       held_span=20 * count, subtitle="group")
     fig = plot_pair(trace, tmp_path / "pair.png")
     assert tuple(fig.get_size_inches() * fig.dpi) == (1000, 600)
-    assert fig.get_suptitle() == ("diffdrive move diff: Σ pitch to +0.5000 rad, Δ roll to +0.1000 rad (group)")
+    assert fig.get_suptitle() == ("diffdrive move diff: Σ target +0.5000 rad, Δ held at +0.1000 rad (group)")
     top, bottom = _artists(fig)
-    assert top["title"] == "Σ pitch" and top["ylabel"] == "Σ pitch [rad]" and "target +0.5000 rad" in top["labels"]
+    assert top["title"] == "Σ pitch" and top["ylabel"] == "Σ position [rad]" and "target +0.5000 rad" in top["labels"]
+    assert "held at +0.1000 rad" in bottom["labels"]
     assert bottom["title"] == "Δ roll (held)" and bottom["xlabel"] == "time since the command [s]"
     lo, hi = bottom["ylim"]
     assert hi - lo >= 20 * count * 0.999  # not autoscaled to ±1 count
@@ -284,6 +285,7 @@ def test_the_pair_plot_marks_the_held_joints_excursion_with_a_sensible_span(tmp_
 @pytest.mark.parametrize("args", [
     ("diffdrive", "move", "shoulder_diff", "--sigma", "0.05", "--apply"),
     ("diffdrive", "match", "shoulder_diff", "--measure"),
+    ("tune", "step", "elbow_pitch", "--velocity", "0.1", "KP[2]=0.8", "--apply"),
 ])
 def test_a_plot_that_cannot_be_drawn_is_refused_before_anything_moves(cli, tmp_path, monkeypatch, args):
     """`diffdrive move --plot` without matplotlib moved the pair, then failed with no result table."""
@@ -323,3 +325,24 @@ def test_a_pair_plot_makes_its_missing_directory(tmp_path):
     finally:
         plt.close(fig)
     assert (tmp_path / "new" / "deeper" / "p.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+@pytest.mark.parametrize("source", ["can", "drive"])
+def test_log_step_says_it_draws_no_png_before_the_step_moves(cli, tmp_path, monkeypatch, source):
+    """Without matplotlib `log step` writes its CSV and metrics and no PNG: it says so before the bus
+    is opened (it said so after the step had moved), for --source drive as for can."""
+    import sys
+
+    from sherpa_cli.bus.session import ArmSession
+
+    said: list[str] = []
+
+    def no_session(*_a, **_k):
+        said.append(sys.stderr.getvalue())  # the cli fixture's captured stderr so far
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(ArmSession, "open", staticmethod(no_session))
+    monkeypatch.setattr("sherpa_cli.log.plot.have_matplotlib", lambda: False)
+    cli("--sim", "log", "step", "elbow_pitch", "--velocity", "0.1", "-o", str(tmp_path / "s"), "--source", source,
+        "--apply")
+    assert said and "no PNG: matplotlib is not installed" in said[0]

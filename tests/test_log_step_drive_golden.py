@@ -43,6 +43,9 @@ def test_drive_and_can_recordings_of_one_step_agree_within_one_sample(cli, golde
         can_rows = list(csv.DictReader(f))
     t0 = float(drive_rows[0]["time_s"])
     assert len(drive_rows) > len([r for r in can_rows if float(r["time_s"]) >= t0])  # over the same span
+    from sherpa_cli.log.plot import have_matplotlib
+
+    assert (out / "step.png").is_file() == have_matplotlib()  # the drive's recording, the bus's beside it
 
 
 def test_the_recorder_settings_are_put_back(cli, tmp_path):

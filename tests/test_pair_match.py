@@ -93,8 +93,8 @@ def test_match_on_the_mismatched_simulated_pair_reaches_the_goal_and_puts_the_tr
         fig = pair_match.plot(result, str(tmp_path / "match.png"))
         assert (tmp_path / "match.png").stat().st_size > 0
         titles = [ax.get_title() for ax in fig.axes]
-        assert f"before: Δ drag, peak {first.excursion:.0f} counts" in titles
-        assert f"after: Δ drag, peak {best.excursion:.0f} counts" in titles
+        assert f"before (own gains): Δ drag, peak {first.excursion:.0f} counts" in titles
+        assert f"after (trial {result.chosen}): Δ drag, peak {best.excursion:.0f} counts" in titles
 
 
 def test_match_on_a_matched_pair_proposes_no_change_and_tries_nothing():

@@ -42,6 +42,25 @@ def test_the_trial_gain_changes_the_simulated_step_and_is_put_back(cli):
     assert _kp2(cli) == "0.5"
 
 
+def test_tune_step_draws_both_steps_with_the_gains_in_the_legend(cli, tmp_path, monkeypatch):
+    pytest.importorskip("matplotlib")
+    from sherpa_cli.log import plot as log_plot
+
+    drawn = []
+    draw = log_plot.plot_step_runs
+    monkeypatch.setattr(log_plot, "plot_step_runs", lambda *a, **k: drawn.append(draw(*a, **k)) or drawn[-1])
+    out = tmp_path / "tune.png"
+    result = cli(*ARM, "tune", "step", "arm", "--position", "0.2", "--for", "1", "KP[3]=40", "--plot", str(out),
+                 "--apply")
+    assert result.exit_code == 0, result.transcript()
+    assert out.read_bytes()[:4] == b"\x89PNG" and f"plot: {out}" in result.stdout
+    (fig,) = drawn
+    labels = [t.get_text() for t in fig.axes[0].get_legend().get_texts()]
+    assert labels[0].startswith("own gains (KP[3]=") and labels[1].startswith("trial (KP[3]=40)")
+    assert fig.get_suptitle().startswith("tune step arm: position +0.2 rad with own gains (KP[3]=")
+    assert "-0.2 rad with trial (KP[3]=40)" in fig.get_suptitle()
+
+
 def test_bad_trial_gains_are_refused_before_the_bus(cli):
     result = cli(*ARM, "tune", "step", "arm", "--velocity", "0.1", "KP[2]=-1", "--apply")
     assert result.exit_code == 2 and "outside its bounds" in result.stderr

@@ -601,7 +601,7 @@ def step(
     import json
 
     from sherpa_cli.cli.robotics import RecordExtras, record_outputs, write_mcap
-    from sherpa_cli.log.plot import StepMarks, have_matplotlib, plot_recording, step_title
+    from sherpa_cli.log.plot import have_matplotlib, plot_recording, step_title
     from sherpa_cli.log.recording import write_csv
     from sherpa_cli.motion.settings import MotionSettings
     from sherpa_cli.ops.step import check_mode_first, resolve_step_target, step_request
@@ -659,6 +659,10 @@ def step(
     settings = MotionSettings.from_config(cfg, [target.ref.bus])
     if not to_mcap:
         output.mkdir(parents=True, exist_ok=True)
+    # said before the step moves, not after it: the plot is decided while nothing has moved yet
+    png = not to_mcap and have_matplotlib()
+    if not to_mcap and not png:
+        st.out.warn(NO_PNG)
     stepped, sim_factory = stepped_sim(st)
     with st.session(buses=[target.ref.bus], sim_factory=sim_factory) as session:
         timebase = stepped if stepped is not None and use_stepped(session, stepped, cfg) else None
@@ -666,7 +670,8 @@ def step(
             from sherpa_cli.cli.log_drive import drive_step
 
             drive_step(st, session, target, mode, value, duration=duration, rate=rate, settings=settings,
-                       uncalibrated=uncalibrated, timebase=timebase, output=output, render_metrics=render_metrics)
+                       uncalibrated=uncalibrated, timebase=timebase, output=output, render_metrics=render_metrics,
+                       png=png)
             return
         extras = RecordExtras(session, [target.ref], mcap=to_mcap, view=None)
         extras.start()
@@ -695,15 +700,19 @@ def step(
     write_csv(result.recording, output / "recording.csv")
     (output / "metrics.json").write_text(json.dumps(result.as_json(), indent=2) + "\n", encoding="utf-8")
     files = {"csv": str(output / "recording.csv"), "metrics": str(output / "metrics.json")}
-    if have_matplotlib():
-        marks = StepMarks(mode, value, result.switch_s)
+    if png:
+        from sherpa_cli.cli.log_drive import step_marks
+
+        marks = step_marks(result)
         plot_recording(result.recording, [result.joint], output / "step.png",
                        metrics={(result.joint, result.signal): result.metrics}, marks=marks,
                        title=step_title(result.joint, marks))
         files["png"] = str(output / "step.png")
-    else:
-        st.out.warn("no PNG: matplotlib is not installed (pip install 'sherpa-cli[plot]')")
     _render_step(st, result, mode, value, files)
+
+
+NO_PNG = "no PNG: matplotlib is not installed (pip install 'sherpa-cli[plot]')"
+
 
 
 def _render_step(st: AppState, result: StepResult, mode: str, value: float, files: dict[str, str]) -> None:
@@ -745,7 +754,7 @@ def _step_compare(st: AppState, runs: Sequence[Path], output: Path) -> None:
         plot_compare(loaded, output)
         written = True
     elif not st.json_mode:
-        st.out.warn("no PNG: matplotlib is not installed (pip install 'sherpa-cli[plot]')")
+        st.out.warn(NO_PNG)
     if st.json_mode:
         st.out.json({"runs": [f.as_json() for f, _ in loaded], "png": str(output) if written else None})
         return

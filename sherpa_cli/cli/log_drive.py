@@ -11,9 +11,10 @@ from sherpa_cli.errors import UsageError
 
 if TYPE_CHECKING:
     from sherpa_cli.bus.session import ArmSession
+    from sherpa_cli.log.plot import StepMarks
     from sherpa_cli.motion.axis import Axis
     from sherpa_cli.motion.settings import MotionSettings
-    from sherpa_cli.ops.step import StepTime
+    from sherpa_cli.ops.step import StepResult, StepTime
 
 
 def record_from_drive(st: AppState, targets: Sequence[str] | None, duration: float, output: Sequence[Path], *,
@@ -57,9 +58,11 @@ def record_from_drive(st: AppState, targets: Sequence[str] | None, duration: flo
 
 def drive_step(st: AppState, session: ArmSession, target: Axis, mode: str, value: float, *, duration: float,
                rate: float, settings: MotionSettings, uncalibrated: bool, timebase: StepTime | None, output: Path,
-               render_metrics: Callable[[AppState, Any], None]) -> None:
+               render_metrics: Callable[[AppState, Any], None], png: bool = False) -> None:
     """`log step --source drive`: the step recorded by the drive's recorder and over the bus at once
-    (ops/drive_step.py); both recordings, both metrics and their differences."""
+    (ops/drive_step.py); both recordings, both metrics and their differences; ``png``: also
+    step.png, the drive's recording with the bus's drawn beside it (matplotlib was checked before
+    the step moved)."""
     import json
     import time
 
@@ -84,6 +87,16 @@ def drive_step(st: AppState, session: ArmSession, target: Axis, mode: str, value
     (output / "metrics.json").write_text(json.dumps(report, indent=2) + "\n", encoding="utf-8")
     files = {"csv": str(output / "recording.csv"), "can csv": str(output / "can-recording.csv"),
              "metrics": str(output / "metrics.json")}
+    if png:
+        from sherpa_cli.log.plot import plot_recording, step_title
+
+        marks = step_marks(result)
+        plot_recording(drive.recording, [result.joint], output / "step.png",
+                       metrics={(result.joint, result.signal): drive.metrics}, marks=marks,
+                       title=step_title(result.joint, marks),
+                       label=f"drive recorder ({drive.period_s * 1e6:.0f} us)", overlay=(f"CAN ({rate:g} Hz)",
+                                                                                         result.recording))
+        files["png"] = str(output / "step.png")
     if st.json_mode:
         st.out.json({**report, "files": files})
         return
@@ -100,6 +113,14 @@ def drive_step(st: AppState, session: ArmSession, target: Axis, mode: str, value
         st.out.line(line)
     for key, path in files.items():
         st.out.line(f"{key}: {path}")
+
+
+def step_marks(result: StepResult) -> StepMarks:
+    """What a step's plot draws and its title says, from the step's own result: the value asked,
+    the switch, and where it went (the target the legend's line shows)."""
+    from sherpa_cli.log.plot import StepMarks
+
+    return StepMarks(result.mode, result.value, result.switch_s, target=result.target)
 
 
 def _diff(a: float | None, b: float | None) -> float | None:

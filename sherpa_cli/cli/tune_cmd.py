@@ -11,7 +11,9 @@ from sherpa_cli.cli.options import Apply, ApplyMotion, MotorOff, Save, Yes
 from sherpa_cli.errors import UsageError
 
 if TYPE_CHECKING:
+    from sherpa_cli.log.plot import StepRun
     from sherpa_cli.ops.step import StepResult
+    from sherpa_cli.ops.tune_step import TuneStepResult
 
 app = typer.Typer(help="Read and write the drives' speed and position loop gains (docs/tune.md).",
                   no_args_is_help=True)
@@ -94,6 +96,8 @@ def step(
     rate: float = typer.Option(500.0, "--rate", metavar="HZ", help="Samples per second."),
     uncalibrated: bool = typer.Option(False, "--uncalibrated", help="Allow a position step of a joint that was "
                                       "not homed since power-up."),
+    plot: str | None = typer.Option(None, "--plot", metavar="FILE.png", help="Draw both steps on one axes, "
+                                    "each with its figures (needs matplotlib)."),
     apply: ApplyMotion = False,
 ) -> None:
     """Step JOINT with the gains its drive holds, then with trial gains (RAM only, put back on every
@@ -102,7 +106,7 @@ def step(
     \b
     Examples:
       sherpa tune step elbow_pitch --velocity 0.1 KP[2]=0.8 --apply
-      sherpa tune step elbow_pitch --position 0.2 KP[3]=40 --apply
+      sherpa tune step elbow_pitch --position 0.2 KP[3]=40 --plot tune.png --apply
     """
     import math
 
@@ -123,6 +127,9 @@ def step(
         raise UsageError(f"--for {duration}: expected seconds > 0 and <= 60")
     if not (0 < rate <= 10000):
         raise UsageError(f"--rate {rate}: expected Hz > 0 and <= 10000")
+    from sherpa_cli.log.plot import check_plot_path
+
+    check_plot_path(plot)  # before the steps: a plot that cannot be drawn must not cost two motions
     cfg = st.load_config()
     trial = parse_assignments(cfg, gains)
     target = resolve_step_target(cfg, joint)
@@ -147,11 +154,30 @@ def step(
                             uncalibrated=uncalibrated, timebase=timebase)
 
         result = run_tune_step(session, target, mode, value, trial, one)
-    if st.json_mode:
-        st.out.json(result.as_json())
-        return
     held = " ".join(f"{k}={v:g}" for k, v in result.held.items())
     text = " ".join(f"{k}={v:g}" for k, v in result.trial.items())
+    if plot is not None:
+        from sherpa_cli.log.plot import plot_step_runs
+
+        plot_step_runs(target.name, mode, result.before.signal, tune_runs(result), plot)
+    if st.json_mode:
+        st.out.json({**result.as_json(), **({"plot": plot} if plot else {})})
+        return
     render_metrics(st, {(f"{result.before.joint} ({held})", result.before.signal): result.before.metrics})
     render_metrics(st, {(f"{result.after.joint} ({text})", result.after.signal): result.after.metrics})
     st.out.line(f"{target.ref.name}: the trial gains were RAM only and are put back ({held})")
+    if plot is not None:
+        st.out.line(f"plot: {plot}")
+
+
+def tune_runs(result: TuneStepResult) -> list[StepRun]:
+    """Both steps of `tune step` as the plot's runs, labelled with the gains each ran with."""
+    from sherpa_cli.log.plot import StepRun
+
+    held = " ".join(f"{k}={v:g}" for k, v in result.held.items())
+    text = " ".join(f"{k}={v:g}" for k, v in result.trial.items())
+    runs = []
+    for label, step in ((f"own gains ({held})", result.before), (f"trial ({text})", result.after)):
+        series = step.recording.series(step.joint, step.signal) or ([], [])
+        runs.append(StepRun(label, step.value, series[0], series[1], step.metrics))
+    return runs

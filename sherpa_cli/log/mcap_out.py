@@ -231,7 +231,8 @@ def write_recording(path: Path, rec: Recording, cfg: ArmConfig, *, time_zero_ns:
         writer = Writer(fh)
         schemas = {name: writer.register_msgdef(name, text) for name, text in ros_msgs.DEFINITIONS.items()}
         js = schemas[ros_msgs.JOINT_STATE]
-        meta = {"time_zero_ns": str(time_zero_ns), "samples": str(len(rec.times)), **(info or {})}
+        samples = set(rec.sample_rows())  # the /joint_states messages, and the count the metadata gives
+        meta = {"time_zero_ns": str(time_zero_ns), "samples": str(len(samples)), **(info or {})}
         writer.add_metadata("sherpa.recording", meta)
         writer.add_metadata("sherpa.config", {"file": config_file, "joints": ",".join(cfg.joints),
                                               "recorded_joints": ",".join(joints), "drives": ",".join(drives)})
@@ -254,8 +255,8 @@ def write_recording(path: Path, rec: Recording, cfg: ArmConfig, *, time_zero_ns:
             while nxt is not None and nxt[0] <= ns:
                 writer.write_message(nxt[2], nxt[3], nxt[4], log_time=nxt[0], publish_time=nxt[0])
                 nxt = next(pending, None)
-            pos = [_pick(cols.get(f"{j}.pos_rad"), i) for j in joints]
-            if joints and not all(math.isnan(v) for v in pos):
+            if joints and i in samples:
+                pos = [_pick(cols.get(f"{j}.pos_rad"), i) for j in joints]
                 vel = [_pick(cols.get(f"{j}.vel_rad_s"), i) for j in joints]
                 eff = [_pick(cols.get(f"{j}.cur_a"), i) for j in joints] if with_current else []
                 writer.write_message(ros_msgs.TOPIC_JOINTS, js, ros_msgs.joint_state(ns, joints, pos, vel, eff),

@@ -30,6 +30,14 @@ class Recording:
         return list(dict.fromkeys(name.split(".", 1)[0] for name in self.columns
                                   if name.split(".", 1)[1] in UNITS))
 
+    def sample_rows(self) -> list[int]:
+        """The rows that hold a sample: a position of a recorded joint (the rows an MCAP's
+        /joint_states has), or of a drive when no joint is recorded. The one count of a recording's
+        samples: the report, the MCAP's metadata and a step's metrics all take it from here."""
+        names = [f"{j}.pos_rad" for j in self.joints()] or [n for n in self.columns if n.endswith(".px")]
+        columns = [self.columns[n] for n in names if n in self.columns]
+        return [i for i in range(len(self.times)) if any(not math.isnan(c[i]) for c in columns)]
+
     def series(self, joint: str, signal: str) -> tuple[list[float], list[float]] | None:
         values = self.columns.get(f"{joint}.{SIGNALS[signal]}")
         if values is None:

@@ -31,7 +31,29 @@ log = logging.getLogger(__name__)
 WAIT_MARGIN_S = 2.0
 # a step's signals: the three the CAN recording has, so the recorder's capacity gives the finest gap
 STEP_SIGNALS = ("pos", "vel", "cur")
-PRE_MARGIN_S = 0.2  # a torque step's recording starts when armed: ops/step.py PRE_S and the switch before it
+PRE_S = 0.1  # s a step records before its command (ops/step.py takes it from here: one number for both)
+# each switch request also costs interpreter round trips and the read-back of MO; on a loaded bus
+# a few tens of ms, so one allowance per request beside the drive's settle window
+SWITCH_STEP_S = 0.05
+# the step loop notices its end up to one poll later than the time it was given, and the stop is
+# sent after that: the CAN recording ends there, so the drive's must reach it too
+TAIL_S = 0.1
+WORST_SWITCH = ("MO=0", "UM=1", "MO=1")  # a drive on in another unit mode: its motor off, UM, on again
+
+
+def switch_time(steps: Sequence[str], mo_settle: float) -> float:
+    """The longest a MO/UM switch of ``steps`` (ops/step.py ``switch_steps``) may take: the drive's
+    settle window after every MO it is sent, plus an allowance per request."""
+    return sum(mo_settle for s in steps if s.startswith("MO=")) + SWITCH_STEP_S * len(steps)
+
+
+def record_length(trigger: str, duration: float, switch_s: float) -> float:
+    """s the drive's recorder must hold for a step of ``duration`` s (``--for``, counted from the
+    step itself): a ``"bg"`` recording starts at the step's BG, after the switch; a ``"now"`` one (a
+    torque step, which has no BG) starts when armed, ``PRE_S`` before the command, and so must also
+    hold the switch of up to ``switch_s`` before the step is sent."""
+    lead = 0.0 if trigger == "bg" else PRE_S + switch_s
+    return lead + duration + TAIL_S
 
 
 @dataclass
@@ -54,7 +76,10 @@ class DriveTrace:
         self.settings = settings or RecorderSettings()
         self.signals = tuple(signals)
         self.clock, self.sleep = clock, sleep
-        plan_recording(duration + PRE_MARGIN_S, self.settings, signals=self.signals)  # refused before anything moves
+        self.mo_settle = session.cfg.protocol.mo_settle
+        # the longest recording the step may need, refused before anything moves
+        plan_recording(record_length("now", duration, switch_time(WORST_SWITCH, self.mo_settle)), self.settings,
+                       signals=self.signals)
         self._rec: DriveRecorder | None = None
         self._plan: RecorderPlan | None = None
         self._saved: list[tuple[str, int, int | float]] | None = None
@@ -67,12 +92,13 @@ class DriveTrace:
     def __exit__(self, *exc: object) -> None:
         self.close()
 
-    def arm(self, trigger: str) -> None:
-        """Configure and arm, just before the command: ``"bg"`` for a BG step, ``"now"`` for a torque step."""
+    def arm(self, trigger: str, switch_steps: Sequence[str] = ()) -> None:
+        """Configure and arm, just before the command: ``"bg"`` for a BG step, ``"now"`` for a torque
+        step; ``switch_steps``: what the MO/UM switch will send before the step (it may come after
+        the arming, inside the recording)."""
         sdo = self.session.sdo(self.ref)
         client = self.session.client(self.ref)
-        # armed before t = 0: a torque step's recording (no BG to wait for) starts PRE_S early
-        length = self.duration + (0.0 if trigger == "bg" else PRE_MARGIN_S)
+        length = record_length(trigger, self.duration, switch_time(switch_steps, self.mo_settle))
         self._plan = plan_recording(length, self.settings, signals=self.signals,
                                     trigger="bg" if trigger == "bg" else "now")
         self._rec = DriveRecorder(client, lambda index, sub: sdo.upload(index, sub, name="recorded data"),

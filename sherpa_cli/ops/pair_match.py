@@ -500,28 +500,72 @@ def _put_back(held: Mapping[str, float], client: DriveClient) -> list[str]:
     return failed
 
 
+@dataclass(frozen=True)
+class MatchPanel:
+    """One round's column of the match plot: its words and what it draws, from one set of values."""
+
+    round: int
+    label: str  # "before (own gains)" | "after (round N)"
+    times_ms: list[float]
+    speeds: dict[str, list[float]]  # drive -> counts/s
+    command: list[float]
+    drag: list[float]  # Δ - Δ0, counts
+    legends: dict[str, str]  # drive -> its legend entry
+    speed_title: str
+    drag_title: str
+
+
+def delta_drag(step: PairStep, drives: tuple[str, str]) -> list[float]:
+    """Δ - Δ0 (motor counts, Δ = m_a - m_b) over the step: what :meth:`PairStep.delta_excursion` peaks."""
+    a, b = step.data[drives[0]]["pos"], step.data[drives[1]]["pos"]
+    d0 = a[0] - b[0]
+    return [x - y - d0 for x, y in zip(a, b, strict=False)]
+
+
+def match_panels(result: MatchResult) -> list[MatchPanel]:
+    """Before (the drives' own gains) and after (the round whose gains are proposed); a pair that
+    needed no trial has the one round. Each drive's delay is written once, for its legend entry;
+    the drag title's peak is the plotted trace's."""
+    drives = result.proposal.drives
+    panels = []
+    rounds = [(0, "before (own gains)"), (result.chosen, f"after (trial {result.chosen})")] if result.chosen else \
+        [(0, "own gains (no change proposed)")]
+    for k, label in rounds:
+        step, rnd = result.steps[k], result.rounds[k]
+        drag = delta_drag(step, drives)
+        peak = max((abs(v) for v in drag), default=0.0)
+        legends = {d: f"{d}, delay {rnd.models[d].delay_s * 1e3:.1f} ms" for d in drives}
+        panels.append(MatchPanel(k, label, [x * 1e3 for x in step.times],
+                                 {d: list(step.data[d]["vel"]) for d in drives}, list(step.data[drives[0]]["vel_cmd"]),
+                                 drag, legends, f"{label}: both motors' speed",
+                                 f"{label}: Δ drag, peak {peak:.0f} counts"))
+    return panels
+
+
 def plot(result: MatchResult, path: str) -> Figure:
     """Before / after: both motors' recorded speed and Δ (m_a - m_b, counts) of the Σ step (the round
-    with the drives' own gains and the round whose gains are proposed). PNG, matplotlib (log/plot.py)."""
-    from sherpa_cli.log.plot import figure, save_png
+    with the drives' own gains and the round whose gains are proposed), each row on one y scale so
+    the columns compare at a glance. PNG, matplotlib (log/plot.py)."""
+    from sherpa_cli.log.plot import figure, legend_outside, save_png
 
     fig = figure()
-    axes = fig.subplots(2, 2, sharex=True)
-    a, b = result.proposal.drives
-    for col, (k, label) in enumerate(((0, "before"), (result.chosen, "after"))):
-        step, rnd = result.steps[k], result.rounds[k]
-        t = [x * 1e3 for x in step.times]
+    panels = match_panels(result)
+    axes = fig.subplots(2, len(panels), sharex=True, sharey="row", squeeze=False)
+    for col, panel in enumerate(panels):
         ax = axes[0][col]
-        for drive in (a, b):
-            ax.plot(t, step.data[drive]["vel"], label=f"{drive} ({rnd.models[drive].delay_s * 1e3:.1f} ms)")
-        ax.plot(t, step.data[a]["vel_cmd"], "k:", linewidth=0.8, label="command")
-        ax.set_title(f"{label}: speed (counts/s)")
-        ax.legend(fontsize="small")
-        pa, pb = step.data[a]["pos"], step.data[b]["pos"]
-        d0 = pa[0] - pb[0]
-        axes[1][col].plot(t, [x - y - d0 for x, y in zip(pa, pb, strict=False)])
-        axes[1][col].set_title(f"{label}: Δ drag, peak {rnd.excursion:.0f} counts")
-        axes[1][col].set_xlabel("ms from BG")
-    fig.suptitle(f"diffdrive match {result.pair}")
+        for drive, speed in panel.speeds.items():
+            ax.plot(panel.times_ms, speed, label=panel.legends[drive])
+        ax.plot(panel.times_ms, panel.command, "k:", linewidth=0.8, label="speed command")
+        ax.set_title(panel.speed_title, fontsize="medium")
+        ax.set_ylabel("speed [counts/s]")
+        ax.grid(True, alpha=0.3)
+        legend_outside(ax)
+        drag = axes[1][col]
+        drag.plot(panel.times_ms, panel.drag, label="Δ - Δ at BG")
+        drag.set_title(panel.drag_title, fontsize="medium")
+        drag.set_ylabel("Δ drag [counts]")
+        drag.set_xlabel("time since BG [ms]")
+        drag.grid(True, alpha=0.3)
+    fig.suptitle(f"diffdrive match {result.pair}: Σ step, each motor {result.steps[0].speed} counts/s")
     save_png(fig, path)
     return fig

@@ -43,6 +43,7 @@ from sherpa_cli.motion.report import GuardReport, with_report
 from sherpa_cli.motion.request import MoveRequest, parse_request
 from sherpa_cli.motion.settings import MotionSettings
 from sherpa_cli.motion.stopping import stop_drive
+from sherpa_cli.ops.drive_step import PRE_S  # s recorded before the command
 from sherpa_cli.ops.jog import check_request, limit_breach, precheck
 
 if TYPE_CHECKING:
@@ -54,7 +55,6 @@ if TYPE_CHECKING:
     from sherpa_cli.ops.drive_step import DriveTrace
 
 SIGNAL = {"position": "pos", "velocity": "vel", "torque": "cur"}
-PRE_S = 0.1  # s recorded before the command
 SETTLE_HOLD_S = HOLD_S  # s the response must stay within 2 % of the step to count as settled (log/settle.py)
 UM_OF = {"position": UM_POSITION, "torque": UM_TORQUE}  # velocity: motion.velocity_unit_mode
 CHECK_EVERY_S = 0.05
@@ -216,7 +216,7 @@ def run_step(session: ArmSession, target: Axis, mode: str, value: float, *, dura
                 _wait(guard, clock, sleep, session.cfg.protocol.mo_settle)
             state["switch_steps"] = _switch_steps(guard, ref, um)
             if drive_trace is not None:  # armed before t = 0: its set-up is not in the step's dead time
-                drive_trace.arm("now" if mode == "torque" else "bg")
+                drive_trace.arm("now" if mode == "torque" else "bg", state["switch_steps"])
                 t_armed = rec.now()
             _wait(guard, clock, sleep, PRE_S)
             t_cmd = rec.now()
@@ -263,7 +263,7 @@ def run_step(session: ArmSession, target: Axis, mode: str, value: float, *, dura
         until, since = state["t_stop"] - t_cmd, -PRE_S if mode_first else None
         recording = _cut(rec.recording(t_zero=t_cmd), until, since=since)
         # what the files hold: the samples of the cut recording, of the SYNCs sent within its span
-        samples = sum(1 for v in recording.columns[f"{ref.name}.px"] if v == v)
+        samples = len(recording.sample_rows())
         expected = len(_cut(Recording(times=rec.sync_times(t_zero=t_cmd)), until, since=since).times)
     # position: the recorded start is the reference (PX may not have been exactly 0)
     series = recording.series(joint.name, signal)
