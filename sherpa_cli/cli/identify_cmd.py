@@ -44,7 +44,7 @@ def identify(
     st = state(ctx)
     cfg = st.load_config()
     # `devices:` (a CANopen encoder, ...) by name or BUS:NODE; the rest resolve as drives
-    devices = [d.name for d in cfg.devices.values()] if not targets else \
+    devices = [d.name for d in cfg.devices.values() if d.canopen] if not targets else \
         [cfg.device_by_source(t).name for t in targets if cfg.device_by_source(t) is not None]  # type: ignore[union-attr]
     rest = [t for t in targets or [] if cfg.device_by_source(t) is None]
     drives = drive_names(cfg, rest) if rest or not targets else []

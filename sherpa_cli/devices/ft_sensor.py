@@ -227,6 +227,9 @@ class FtReader:
     request, or one that began before we asked) is dropped and the wait goes on.
     """
 
+    type = "ft_sensor"
+    profile = None  # no CANopen device profile
+
     def __init__(self, port: FramePort, base_id: int, cal: Calibration, *, frame: str = "", wait_s: float = 0.1,
                  clock: Callable[[], float] = time.monotonic, name: str = "F/T sensor") -> None:
         self.port, self.base_id, self.cal, self.frame = port, base_id, cal, frame
