@@ -19,14 +19,21 @@ The codec is pure; :class:`FtReader` is the one part that talks to a bus, throug
 
 from __future__ import annotations
 
+import contextlib
 import math
+import queue
 import struct
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
-from typing import Protocol
+from types import TracebackType
+from typing import TYPE_CHECKING, Protocol
 
-from sherpa_cli.errors import DriveTimeoutError, ProtocolError
+from sherpa_cli.config.model import ArmConfig, DeviceConfig
+from sherpa_cli.errors import DriveTimeoutError, ProtocolError, UsageError
+
+if TYPE_CHECKING:
+    from sherpa_cli.bus.session import ArmSession
 
 REQUEST_SHORT = 0x02  # opcode: send the present data in short (16-bit) format
 BIAS = 0x04  # opcode: zero the readings at the present load
@@ -264,3 +271,86 @@ class FtReader:
             elif forces is not None:
                 return to_wrench(decode_reply(self.base_id, forces, got_frame), self.cal, frame=self.frame)
 
+
+
+class Network(Protocol):
+    """What :class:`NetworkPort` needs of a bus link's canopen Network (bus/links.py)."""
+
+    def subscribe(self, can_id: int, callback: Callable[[int, bytes, float], None]) -> None: ...
+
+    def unsubscribe(self, can_id: int, callback: Callable[[int, bytes, float], None] | None = None) -> None: ...
+
+    def send_message(self, can_id: int, data: bytes, remote: bool = False) -> None: ...
+
+
+class NetworkPort:
+    """A :class:`FramePort` on a session's bus: it listens on the sensor's reply ids from the moment it
+    is opened (a context manager) and sends through the network's pacing."""
+
+    def __init__(self, network: Network, ids: tuple[int, ...]) -> None:
+        self.network, self.listen = network, ids
+        self.frames: queue.Queue[Frame] = queue.Queue()
+
+    def _heard(self, can_id: int, data: bytes, timestamp: float) -> None:
+        self.frames.put(Frame(can_id, bytes(data)))
+
+    def __enter__(self) -> NetworkPort:
+        for can_id in self.listen:
+            self.network.subscribe(can_id, self._heard)
+        return self
+
+    def __exit__(self, kind: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None) -> None:
+        for can_id in self.listen:
+            with contextlib.suppress(Exception):  # unsubscribing must not hide why we stop
+                self.network.unsubscribe(can_id, self._heard)
+
+    def send(self, frame: Frame) -> None:
+        # what was heard before this frame answers an older request: never taken for its answer
+        with contextlib.suppress(queue.Empty):
+            while True:
+                self.frames.get_nowait()
+        self.network.send_message(frame.can_id, frame.data)
+
+    def receive(self, ids: frozenset[int], timeout: float) -> Frame | None:
+        deadline = time.monotonic() + max(0.0, timeout)
+        while True:
+            try:
+                frame = self.frames.get(timeout=max(0.0, deadline - time.monotonic()))
+            except queue.Empty:
+                return None
+            if frame.can_id in ids:
+                return frame
+
+
+def calibration(dev: DeviceConfig) -> Calibration:
+    ft = dev.ft
+    if ft is None or ft.counts_per_force is None or ft.counts_per_torque is None:
+        raise UsageError(f"{dev.name} is no F/T sensor with its calibration (counts_per_force, counts_per_torque)")
+    return Calibration(ft.counts_per_force, ft.counts_per_torque)
+
+
+@contextlib.contextmanager
+def open_reader(session: ArmSession, dev: DeviceConfig, *, clock: Callable[[], float] = time.monotonic,
+                wait_s: float | None = None) -> Iterator[FtReader]:
+    """A reader of sensor ``dev`` on its bus of ``session``, listening while the block runs."""
+    cal = calibration(dev)
+    assert dev.ft is not None
+    with NetworkPort(session.links[dev.bus].network, reply_ids(dev.ft.base_id)) as port:
+        yield FtReader(port, dev.ft.base_id, cal, frame=dev.ft.frame, clock=clock, name=f"F/T sensor {dev.name}",
+                       wait_s=wait_s if wait_s is not None else dev.ft.reply_ms / 1000)
+
+
+def sensor_named(cfg: ArmConfig, name: str | None) -> DeviceConfig:
+    """The F/T sensor ``name`` (None: the only one); a clear error when there is none or it is ambiguous."""
+    sensors = cfg.ft_sensors()
+    if name is None:
+        if len(sensors) == 1:
+            return sensors[0]
+        if not sensors:
+            raise UsageError("this arm has no F/T sensor (no device of type ft_sensor in the config)",
+                             hint="add one under devices: (docs/devices.md)")
+        raise UsageError(f"this arm has {len(sensors)} F/T sensors: name one of {', '.join(d.name for d in sensors)}")
+    dev = cfg.devices.get(name)
+    if dev is None or dev.ft is None:
+        raise UsageError(f"'{name}' is no F/T sensor; F/T sensors: {', '.join(d.name for d in sensors) or 'none'}")
+    return dev
