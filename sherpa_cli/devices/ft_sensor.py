@@ -335,9 +335,13 @@ def open_reader(session: ArmSession, dev: DeviceConfig, *, clock: Callable[[], f
     """A reader of sensor ``dev`` on its bus of ``session``, listening while the block runs."""
     cal = calibration(dev)
     assert dev.ft is not None
+    if wait_s is None:
+        wait_s = dev.ft.reply_ms / 1000
+        if session.sim is not None:  # an in-process simulator on a possibly loaded machine: its patient timeout
+            wait_s = max(wait_s, session.cfg.sim_reply_timeout)
     with NetworkPort(session.links[dev.bus].network, reply_ids(dev.ft.base_id)) as port:
         yield FtReader(port, dev.ft.base_id, cal, frame=dev.ft.frame, clock=clock, name=f"F/T sensor {dev.name}",
-                       wait_s=wait_s if wait_s is not None else dev.ft.reply_ms / 1000)
+                       wait_s=wait_s)
 
 
 def sensor_named(cfg: ArmConfig, name: str | None) -> DeviceConfig:
