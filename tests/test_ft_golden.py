@@ -75,3 +75,27 @@ def test_a_silent_sensor_is_a_bus_error_not_a_traceback(cli, tmp_path):
     assert result.exit_code == 3, result.stderr
     assert "F/T sensor wrist_ft (base 0x010): no reply within 200 ms" in result.stderr
     assert "Traceback" not in result.stderr
+
+
+@pytest.mark.parametrize(("name", "args", "code"), [
+    ("monitor-once", ["monitor", "--once"], 0),
+    ("monitor-once-json", ["--json", "monitor", "--once"], 0),
+    ("identify-sensor", ["identify", "wrist_ft"], 0),
+    ("identify-sensor-json", ["--json", "identify", "wrist_ft"], 0),
+])
+def test_status_views_show_the_sensor(cli, golden, name, args, code):
+    result = cli("--config", ARM, "--sim", *args)
+    assert result.exit_code == code, result.stderr
+    assert "wrist_ft" in result.stdout
+    golden(f"ft/{name}.txt", result.transcript())
+
+
+def test_monitor_once_names_a_silent_sensor_and_exits_1(cli, tmp_path):
+    text = (ROOT / ARM).read_text(encoding="utf-8").replace("      seed: 7\n", "      seed: 7\n      silent_at: 0\n")
+    text = text.replace("sim:\n", "sim:\n  reply_timeout: 0.2\n")
+    path = tmp_path / "silent.yaml"
+    path.write_text(text, encoding="utf-8")
+    result = cli("--config", str(path), "--sim", "monitor", "--once")
+    assert result.exit_code == 1, result.stderr
+    assert "wrist_ft (can0 base 0x010): F/T sensor wrist_ft (base 0x010): no reply within 200 ms" in result.stdout
+    assert "no answer" in result.stdout

@@ -57,3 +57,36 @@ def bias(session: ArmSession, dev: DeviceConfig, *, apply: bool,
             return BiasResult(dev.name, False, before, None, frame)
         reader.bias()
         return BiasResult(dev.name, True, before, reader.read(), frame)
+
+
+@dataclass(frozen=True)
+class SensorReading:
+    """One sample of a sensor for a status view (monitor, identify): the wrench, or why there is none."""
+
+    device: str
+    bus: str
+    base_id: int
+    wrench: Wrench | None
+    problem: str | None = None
+
+    def as_json(self) -> dict[str, object]:
+        w = self.wrench
+        return {"device": self.device, "bus": self.bus, "base_id": self.base_id,
+                "wrench": None if w is None else {k: round(v, 4) for k, v in w.axes().items()},
+                "status": None if w is None else w.status.raw, "sample": None if w is None else w.sample,
+                "problem": self.problem}
+
+
+def read_sensors(session: ArmSession, devs: list[DeviceConfig]) -> list[SensorReading]:
+    """One sample of each sensor; a sensor that does not answer is a reading with its problem."""
+    from sherpa_cli.errors import CommunicationError
+
+    out = []
+    for dev in devs:
+        assert dev.ft is not None
+        try:
+            with open_reader(session, dev) as reader:
+                out.append(SensorReading(dev.name, dev.bus, dev.ft.base_id, reader.read()))
+        except CommunicationError as exc:
+            out.append(SensorReading(dev.name, dev.bus, dev.ft.base_id, None, exc.message))
+    return out
