@@ -132,3 +132,25 @@ def test_a_silent_simulated_sensor_times_out():
             ft.open_reader(session, cfg.devices["wrist_ft"], wait_s=0.3) as reader, \
             pytest.raises(DriveTimeoutError, match=r"F/T sensor wrist_ft \(base 0x010\): no reply within 300 ms"):
         reader.read()
+
+
+def test_the_force_watch_sees_the_wrist_press_into_the_simulated_wall():
+    """The chain the guard will use, without the guard: the simulated wrist stands past the wall, the
+    tool's reader asks the simulated sensor on the bus, the watch names the force."""
+    from sherpa_cli.motion.force_watch import ForceLimitError, ForceWatch
+
+    cfg = load_config(ARM)
+    dev = cfg.devices["wrist_ft"]
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as session, \
+            ft.open_reader(session, dev, wait_s=2.0) as reader:
+        watch = ForceWatch.for_device(reader, dev, silent_s=5.0)
+        with session.sim.lock:
+            session.sim.drives["wrist_drive"].restore_position(280.0)  # 20 counts short of the wall
+        assert watch.check() is None
+        with session.sim.lock:
+            session.sim.drives["wrist_drive"].restore_position(500.0)  # 200 counts past it: about 35 N along z
+        err = watch.check()
+    assert isinstance(err, ForceLimitError) and err.axis == "Fz"
+    tilt = 500 * 2 * math.pi / CPR
+    assert err.value == pytest.approx(100 * 200 * 2 * math.pi / CPR - 9.81 * math.cos(tilt), abs=0.1)
+    assert err.message.startswith("force limit: F/T sensor wrist_ft read |F| ") and "> 20 N (mostly Fz +" in err.message
