@@ -82,9 +82,10 @@ def test_a_silent_sensor_is_a_bus_error_not_a_traceback(cli, tmp_path):
     ("monitor-once-json", ["--json", "monitor", "--once"], 0),
     ("identify-sensor", ["identify", "wrist_ft"], 0),
     ("identify-sensor-json", ["--json", "identify", "wrist_ft"], 0),
+    ("config-check", ["config", "check"], 0),
 ])
 def test_status_views_show_the_sensor(cli, golden, name, args, code):
-    result = cli("--config", ARM, "--sim", *args)
+    result = cli("--config", ARM, *(["--sim"] if args[0] != "config" else []), *args)
     assert result.exit_code == code, result.stderr
     assert "wrist_ft" in result.stdout
     golden(f"ft/{name}.txt", result.transcript())
