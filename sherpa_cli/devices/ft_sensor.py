@@ -20,6 +20,7 @@ The codec is pure; :class:`FtReader` is the one part that talks to a bus, throug
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import math
 import queue
 import struct
@@ -358,3 +359,29 @@ def sensor_named(cfg: ArmConfig, name: str | None) -> DeviceConfig:
     if dev is None or dev.ft is None:
         raise UsageError(f"'{name}' is no F/T sensor; F/T sensors: {', '.join(d.name for d in sensors) or 'none'}")
     return dev
+
+
+# -- recording (log/record.py Recorder) ---------------------------------------------------------------
+
+FT_COLUMNS = (("fx", "fx_n"), ("fy", "fy_n"), ("fz", "fz_n"), ("tx", "tx_nm"), ("ty", "ty_nm"), ("tz", "tz_nm"))
+
+
+@dataclass
+class FtTrack:
+    """An F/T sensor in a recording: one sample per SYNC slot at most, placed on the newest SYNC sent
+    before its request. Columns ``<device>.fx_n`` ... ``<device>.tz_nm`` (N, N·m; NaN: no sample)."""
+
+    dev: DeviceConfig
+    samples: dict[int, Wrench] = dataclasses.field(default_factory=dict)
+    last: int = -1
+    misses: int = 0  # requests without an answer in time
+    written: int = 0  # samples handed to a streaming sink (and forgotten)
+
+    def add(self, k: int, wrench: Wrench) -> None:
+        self.last = max(self.last, k)
+        self.samples[k] = wrench
+
+    def columns(self, keys: list[int]) -> dict[str, list[float]]:
+        return {f"{self.dev.name}.{column}": [float(getattr(self.samples[k], attr)) if k in self.samples else math.nan
+                                              for k in keys]
+                for attr, column in FT_COLUMNS}
