@@ -269,6 +269,11 @@ def _pair_reading(a: SimDrive, b: SimDrive, sign: int, offset: int) -> int:
     return round(a.position + sign * b.position) - offset
 
 
+def _answer_ft(sensor: SimFtSensor, can_id: int, data: bytes, out: list[tuple[int, bytes]]) -> None:
+    """An F/T sensor hears a frame; what it answers goes to ``out`` (sent by the pump)."""
+    out.extend(sensor.receive(can_id, data))
+
+
 def _send_after_sdo_latency(drive: SimDrive, can_id: int, data: bytes) -> None:
     """An SDO answer through the drive's reply queue, so a late answer leaves on a later tick."""
     drive.send_later(can_id, data, drive.settings.sdo_latency_s)
@@ -680,8 +685,8 @@ class SimArm:
                         touched = self._dispatch(msg.arbitration_id, bytes(msg.data), on_bus, by_node, bus_name=bus_name,
                                                  at=at if behind else None)
                         for sensor in sensors:
-                            answer = sensor.receive(msg.arbitration_id, bytes(msg.data))
-                            ft_frames.extend(answer)
+                            self._guarded(bus_name, sensor.name, functools.partial(
+                                _answer_ft, sensor, msg.arbitration_id, bytes(msg.data), ft_frames))
                     now = self.clock.now()
                     ticking = not behind and now >= next_tick
                     if ticking:
