@@ -132,3 +132,26 @@ def test_config_check_prints_one_clear_line(cli, tmp_path, case):
     assert result.exit_code == 2, result.stderr
     assert errors == [f"error: {file}:{_line_of(text, marker)}: {path}: " + errors[0].split(f"{path}: ", 1)[1]]
     assert phrase in errors[0] and "Traceback" not in result.stderr
+
+
+PAIR = """\
+  pa: {bus: can1, node: 40}
+  pb: {bus: can1, node: 41}
+"""
+PAIR_JOINTS = """\
+pairs:
+  wrist_diff:
+    drives: [pa, pb]
+    sigma: {name: s, cpr: 3600, range: {min: -100, max: 100}}
+    delta: {name: d, cpr: 3600, range: {min: -100, max: 100}}
+"""
+
+
+def test_a_pair_on_the_bus_reserves_the_group_ids_rpdo2():
+    text = edit("  wrist_a: {bus: can1, node: 30}\n", "  wrist_a: {bus: can1, node: 30}\n" + PAIR)
+    text = text.replace("sim:\n", PAIR_JOINTS + "sim:\n")
+    load_config_text(text, "ft.yaml")  # base 0x010: clear
+    with pytest.raises(ConfigError, match="its base\\+6 id 0x37D is RPDO2 0x37D of the pairs' group id "
+                                          "\\(node 125\\) on can1"):
+        load_config_text(text.replace("base_id: 0x010", "base_id: 0x377"), "ft.yaml")
+    load_config_text(BASE.replace("base_id: 0x010", "base_id: 0x377"), "ft.yaml")  # no pair: the id is free

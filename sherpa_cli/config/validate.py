@@ -314,9 +314,13 @@ def _ids_in_use(cfg: ArmConfig, bus: str, skip: str) -> dict[int, str]:
     nodes = [(f"drive {d.name}", d.node) for d in cfg.drives.values() if d.bus == bus]
     nodes += [(f"device {d.name}", d.node) for d in cfg.devices.values() if d.bus == bus and d.canopen]
     nodes += [("the tool's heartbeat", h) for h in cfg.motion.host_ids]
+    if any(d.bus == bus for p in cfg.pairs.values() for d in (cfg.drives.get(p.drive_a), cfg.drives.get(p.drive_b))
+           if d is not None):
+        nodes.append(("the pairs' group id", cfg.motion.pair_group_id))  # a pair's BG goes to its RPDO2
+    only = {"the tool's heartbeat": "heartbeat", "the pairs' group id": "RPDO2"}
     for who, node in nodes:
         for base, what in _NODE_ID_BASES:
-            if who.startswith("the tool") and what != "heartbeat":
+            if who in only and what != only[who]:
                 continue
             used.setdefault(base + node, f"{what} 0x{base + node:03X} of {who} (node {node})")
     for d in cfg.devices.values():
