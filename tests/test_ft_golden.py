@@ -55,6 +55,7 @@ def test_bias_is_a_dry_run_without_apply_and_zeroes_with_it(cli, golden):
     (["ft", "show", "--rate", "0"], "--rate 0.0: expected samples per second > 0 and <= 200"),
     (["ft", "show", "--for", "-1"], "--for -1.0: expected seconds > 0"),
     (["ft", "show", "elbow_drive"], "'elbow_drive' is no F/T sensor; F/T sensors: wrist_ft"),
+    (["--json", "ft", "show"], "--json needs --for"),
 ])
 def test_bad_arguments_are_one_line(cli, args, said):
     result = cli("--config", ARM, "--sim", *args)

@@ -71,6 +71,9 @@ def show(
         raise UsageError(f"--rate {rate}: expected samples per second > 0 and <= {MAX_RATE:g}")
     if duration is not None and not 0 < duration <= 86400:
         raise UsageError(f"--for {duration}: expected seconds > 0 and <= 86400")
+    if st.json_mode and duration is None:  # the JSON is written at the end: an endless stream has none
+        raise UsageError("--json needs --for: the samples are written as one document at the end",
+                         hint="sherpa --json ft show --for 1")
     cfg = st.load_config()
     dev = sensor_named(cfg, sensor)
     count = None if duration is None else max(1, round(duration * rate))
