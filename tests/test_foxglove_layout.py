@@ -56,3 +56,14 @@ def test_monitor_publishes_the_joints_in_the_layouts_order(cli, monkeypatch):
         mon.poll()
         robotics.MonitorFeed(View(), cfg).publish(mon.snapshot())
     assert published == [list(cfg.joints)]
+
+
+def test_an_arm_with_an_ft_sensor_gets_a_wrench_plot():
+    layout = json.loads(dumps(load_config(ROOT / "tests/data/ft-arm.yaml")))
+    panels = layout["configById"]
+    plot = panels["Plot!ft_wrist_ft"]
+    assert [p["value"] for p in plot["paths"]] == [
+        "/sherpa/wrench/wrist_ft.wrench.force.x", "/sherpa/wrench/wrist_ft.wrench.force.y",
+        "/sherpa/wrench/wrist_ft.wrench.force.z", "/sherpa/wrench/wrist_ft.wrench.torque.x",
+        "/sherpa/wrench/wrist_ft.wrench.torque.y", "/sherpa/wrench/wrist_ft.wrench.torque.z"]
+    assert sorted(_leaves(layout["layout"])) == sorted(panels)  # on the screen too

@@ -25,6 +25,7 @@ if TYPE_CHECKING:
     from sherpa_cli.api.joint import JointHandle
     from sherpa_cli.bus.session import ArmSession
     from sherpa_cli.config.model import ArmConfig, JoystickConfig
+    from sherpa_cli.devices.ft_sensor import Wrench
     from sherpa_cli.motion.axis import Axis
     from sherpa_cli.motion.request import MoveRequest, Value
     from sherpa_cli.motion.settings import MotionSettings
@@ -167,6 +168,19 @@ class Arm:
         if path is not None:
             write_dump(Path(path), dump, "path")
         return dump
+
+    def wrench(self, name: str | None = None, *, wait_s: float | None = None) -> Wrench:
+        """One reading of the F/T sensor ``name`` (None: the arm's only one): force in N and torque in
+        N·m in the sensor frame, with the sample's status word and number. Only reads (one request frame).
+
+        Raises UsageError when the arm has no such sensor and DriveTimeoutError (a CommunicationError)
+        when it does not answer within ``wait_s`` (default: the sensor's ``reply_ms``).
+        """
+        from sherpa_cli.devices.ft_sensor import open_reader, sensor_named
+
+        dev = sensor_named(self.config, name)
+        with open_reader(self._session, dev, wait_s=wait_s) as reader:
+            return reader.read()
 
     # ------------------------------------------------------------------ stopping
 

@@ -130,6 +130,7 @@ def _register() -> None:
         config_cmd,
         diffdrive_cmd,
         doctor_cmd,
+        ft_cmd,
         home_cmd,
         identify_cmd,
         jog_cmd,
@@ -163,6 +164,7 @@ def _register() -> None:
     app.add_typer(recipe_cmd.app, name="recipe")
     app.add_typer(config_cmd.app, name="config")
     app.add_typer(bus_cmd.app, name="bus")
+    app.add_typer(ft_cmd.app, name="ft")
 
     from sherpa_cli.cli import log_cmd, tune_cmd
 

@@ -66,6 +66,13 @@ def _render(out: Output, s: dict[str, Any]) -> None:
     if s["pairs"]:
         out.table("Differential pairs", ["pair", "drive a (lower id)", "drive b", "Σ joint", "Δ joint"],
                   [[p["name"], p["drive_a"], p["drive_b"], p["sigma"], p["delta"]] for p in s["pairs"]])
+    if s.get("ft_sensors"):
+        out.table("F/T sensors", ["sensor", "bus:base", "frame", "counts/N", "counts/N·m", "force limit",
+                                  "torque limit"],
+                  [[f["name"], f"{f['bus']}:0x{f['base_id']:03X}", f["frame"], f"{f['counts_per_force']:g}",
+                    f"{f['counts_per_torque']:g}", "-" if f["force_limit"] is None else f"{f['force_limit']:g} N",
+                    "-" if f["torque_limit"] is None else f"{f['torque_limit']:g} N·m"] for f in s["ft_sensors"]],
+                  right=(3, 4, 5, 6))
     if s["warnings"]:
         out.line("Warnings:")
         for w in s["warnings"]:

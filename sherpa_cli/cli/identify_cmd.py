@@ -13,6 +13,7 @@ from sherpa_cli.cli.output import fmt_value
 from sherpa_cli.words import plural
 
 if TYPE_CHECKING:
+    from sherpa_cli.ops.ft import SensorReading
     from sherpa_cli.ops.identify import DeviceIdentity, IdentifyReport
 
 
@@ -39,26 +40,35 @@ def identify(
     from sherpa_cli.api import Arm
     from sherpa_cli.bus.targets import drive_names
     from sherpa_cli.errors import ExitCode
+    from sherpa_cli.ops.ft import read_sensors
     from sherpa_cli.ops.identify import IdentifyReport, identify_devices
 
     st = state(ctx)
     cfg = st.load_config()
     # `devices:` (a CANopen encoder, ...) by name or BUS:NODE; the rest resolve as drives
-    devices = [d.name for d in cfg.devices.values()] if not targets else \
+    named = [d.name for d in cfg.devices.values()] if not targets else \
         [cfg.device_by_source(t).name for t in targets if cfg.device_by_source(t) is not None]  # type: ignore[union-attr]
+    devices = [n for n in named if cfg.devices[n].canopen]
+    sensors = [cfg.devices[n] for n in named if not cfg.devices[n].canopen]  # F/T sensors: a reading, no SDO
     rest = [t for t in targets or [] if cfg.device_by_source(t) is None]
     drives = drive_names(cfg, rest) if rest or not targets else []
-    buses = sorted({cfg.drives[d].bus for d in drives} | {cfg.devices[d].bus for d in devices})
+    buses = sorted({cfg.drives[d].bus for d in drives} | {cfg.devices[d].bus for d in devices}
+                   | {d.bus for d in sensors})
     with st.session(buses=buses) as session:
         report = Arm(session).identify(drives) if drives else IdentifyReport(())  # only devices named
         found = identify_devices(session, devices) if devices else []
-    if st.json_mode and found:
-        st.out.json({**report.as_json(), "devices": [d.as_json() for d in found]})
+        readings = read_sensors(session, sensors) if sensors else []
+    if st.json_mode and (found or readings):
+        extra: dict[str, object] = {"devices": [d.as_json() for d in found]}
+        if readings:
+            extra["ft_sensors"] = [r.as_json() for r in readings]
+        st.out.json({**report.as_json(), **extra})
     else:
-        if drives or not found:
+        if drives or not (found or readings):
             _render(st, report, verbose=verbose or st.verbose)
         _render_devices(st, found)
-    if any(d.error for d in found) and not report.errors:
+        _render_sensors(st, readings)
+    if (any(d.error for d in found) or any(r.wrench is None for r in readings)) and not report.errors:
         raise typer.Exit(int(ExitCode.PROBLEM))
     if report.errors:
         first = report.errors[0]
@@ -84,6 +94,29 @@ def _render_devices(st: AppState, found: Sequence[DeviceIdentity]) -> None:
             meaning = f"{d.joint} = {d.joint_position} with its offset" if d.joint else "no joint uses it"
             rows.append(["position", str(d.position), f"0x6004; {meaning}"])
         st.out.table(title, ["field", "value", "meaning"], rows)
+
+
+def _render_sensors(st: AppState, readings: Sequence[SensorReading]) -> None:
+    """An F/T sensor has no identity objects: its protocol, ids and calibration, and one reading."""
+    if st.json_mode:
+        return
+    cfg = st.load_config()
+    for r in readings:
+        ft = cfg.devices[r.device].ft
+        assert ft is not None
+        rows = [["protocol", "ATI Net F/T CAN", "short data: request 0x02, bias 0x04"],
+                ["ids", f"0x{r.base_id:03X}", f"replies on 0x{r.base_id + 5:03X} and 0x{r.base_id + 6:03X}"],
+                ["calibration", f"{ft.counts_per_force:g} / {ft.counts_per_torque:g}", "counts per N / per N·m (config)"]]
+        w = r.wrench
+        if w is None:
+            rows.append(["reading", "no answer", r.problem or ""])
+        else:
+            rows.append(["force", " ".join(f"{round(v, 2) + 0.0:.2f}" for v in (w.fx, w.fy, w.fz)),
+                         f"Fx Fy Fz N, |F| {w.force:.2f}"])  # + 0.0: never "-0.00"
+            rows.append(["torque", " ".join(f"{round(v, 3) + 0.0:.3f}" for v in (w.tx, w.ty, w.tz)),
+                         f"Tx Ty Tz N·m, |T| {w.torque:.3f}"])
+            rows.append(["status", str(w.status), f"sample {w.sample}"])
+        st.out.table(f"{r.device} ({r.bus}:0x{r.base_id:03X}) - ft_sensor", ["field", "value", "meaning"], rows)
 
 
 def _hex(value: float | None, width: int = 8) -> str:

@@ -29,6 +29,7 @@ if TYPE_CHECKING:
     from rich.table import Table
 
     from sherpa_cli.config.model import ArmConfig
+    from sherpa_cli.ops.ft import SensorReading
     from sherpa_cli.ops.monitor import DriveStatus, Monitor
 
 # Seconds between polls in the live view; the CLI's sleep goes through here so tests can stop it.
@@ -98,12 +99,16 @@ def monitor(
     with live_view(st, foxglove, foxglove_at, allow_remote) as view, st.session(buses=buses) as session, \
             Monitor(session, refs, heartbeat_ms=heartbeat) as mon:
         if once:
+            from sherpa_cli.ops.ft import read_sensors
+
             mon.poll()
             mon.wait_for_heartbeats()
             rows = mon.snapshot()
-            _render_once(st, rows)
-            if any(not r.answering or r.mf for r in rows):
-                raise typer.Exit(int(ExitCode.PROBLEM))  # a silent drive or a latched motor failure
+            # the F/T sensors on the monitored buses: one sample each (a whole-arm view only)
+            sensors = read_sensors(session, [d for d in cfg.ft_sensors() if d.bus in buses]) if not targets else []
+            _render_once(st, rows, sensors)
+            if any(not r.answering or r.mf for r in rows) or any(s.wrench is None for s in sensors):
+                raise typer.Exit(int(ExitCode.PROBLEM))  # a silent drive or sensor, or a latched motor failure
             return
         after_poll = None
         if view is not None:
@@ -150,11 +155,33 @@ def _live(st: AppState, mon: Monitor, interval: float, *, polls: int | None = No
             live.update(_screen(*_renderables(snapshot(), mon.cfg, ages=True)), refresh=True)
 
 
-def _render_once(st: AppState, rows: Sequence[DriveStatus]) -> None:
+def _render_once(st: AppState, rows: Sequence[DriveStatus], sensors: Sequence[SensorReading] = ()) -> None:
     if st.json_mode:
-        st.out.json({"drives": [r.as_json(ages=False) for r in rows]})
+        body: dict[str, Any] = {"drives": [r.as_json(ages=False) for r in rows]}
+        if sensors:
+            body["ft_sensors"] = [s.as_json() for s in sensors]
+        st.out.json(body)
         return
-    _print(st, *_renderables(rows, st.load_config(), ages=False))
+    tables, notes = _renderables(rows, st.load_config(), ages=False)
+    if sensors:
+        tables.append(_sensor_table(sensors))
+        notes.extend(f"{s.device} ({s.bus} base 0x{s.base_id:03X}): {s.problem}" for s in sensors if s.problem)
+    _print(st, tables, notes)
+
+
+def _sensor_table(sensors: Sequence[SensorReading]) -> Table:
+    """Fx Fy Fz in N, Tx Ty Tz in N·m; whether the sensor is biased is not known over CAN."""
+    from sherpa_cli.cli.output import make_table
+
+    rows = []
+    for s in sensors:
+        w = s.wrench
+        values = ["-"] * 6 if w is None else [f"{round(v, 2) + 0.0:.2f}" for v in (w.fx, w.fy, w.fz)] + \
+            [f"{round(v, 3) + 0.0:.3f}" for v in (w.tx, w.ty, w.tz)]
+        rows.append([s.device, f"{s.bus}:0x{s.base_id:03X}", *values,
+                     "no answer" if w is None else str(w.status)])
+    return make_table("F/T sensors", ["sensor", "base", "Fx N", "Fy N", "Fz N", "Tx N·m", "Ty N·m", "Tz N·m",
+                                      "status"], rows, right=(2, 3, 4, 5, 6, 7))
 
 
 def _print(st: AppState, tables: list[Table], notes: list[str]) -> None:

@@ -29,6 +29,7 @@ from sherpa_cli.config.model import (
     SimDriveConfig,
 )
 from sherpa_cli.config.simbus import dump_sim_buses
+from sherpa_cli.config.simft import dump_sim_ft
 
 
 def dump_native(cfg: ArmConfig) -> str:
@@ -65,6 +66,8 @@ def dump_native(cfg: ArmConfig) -> str:
                          for name, w in cfg.sim_wiring.items()}
     if cfg.sim_buses:
         sim["buses"] = dump_sim_buses(cfg.sim_buses)
+    if cfg.sim_ft:
+        sim["ft_sensors"] = dump_sim_ft(cfg.sim_ft)
     if sim:
         sections.append({"sim": sim})
     sections.append({"buses": {b.name: _bus(b) for b in cfg.buses.values()}})
@@ -72,8 +75,7 @@ def dump_native(cfg: ArmConfig) -> str:
                                                     "motor": d.motor})
                                 for d in cfg.drives.values()}})
     if cfg.devices:
-        sections.append({"devices": {d.name: {"type": d.type, "bus": d.bus, "node": d.node, **_device_options(d)}
-                                     for d in cfg.devices.values()}})
+        sections.append({"devices": {d.name: _device(d) for d in cfg.devices.values()}})
     plain = {j.name: {"drive": j.drive, **_joint_body(j)} for j in cfg.joints.values() if j.role is JointRole.PLAIN}
     for name, j in ((j.name, j) for j in cfg.joints.values() if j.role is JointRole.PLAIN):
         if j.current is not None:
@@ -167,6 +169,15 @@ def _catalog_diff(cfg: ArmConfig) -> dict[str, Any]:
 
 def _drop_default(values: dict[str, Any], default: object) -> dict[str, Any]:
     return {k: v for k, v in values.items() if v != getattr(default, k)}
+
+
+def _device(d: DeviceConfig) -> dict[str, Any]:
+    if d.ft is None:
+        return {"type": d.type, "bus": d.bus, "node": d.node, **_device_options(d)}
+    ft = d.ft
+    return _drop_none({"type": d.type, "bus": d.bus, "base_id": ft.base_id, "counts_per_force": ft.counts_per_force,
+                       "counts_per_torque": ft.counts_per_torque, "frame": ft.frame, "force_limit": ft.force_limit,
+                       "torque_limit": ft.torque_limit, "reply_ms": ft.reply_ms})
 
 
 def _device_options(d: DeviceConfig) -> dict[str, Any]:

@@ -92,9 +92,28 @@ class DriveConfig:
 # The seed's dev_type selected device-specific code; here a device type names a class in the
 # registry of sherpa_cli/devices (the way python-can maps interface names to bus classes).
 # "elmo" is every entry of `drives:`; `devices:` holds the other types.
-DEVICE_TYPES = ("elmo", "canopen-encoder")
+DEVICE_TYPES = ("elmo", "canopen-encoder", "ft_sensor")
+FT_SENSOR = "ft_sensor"  # an ATI Net F/T on CAN: no CANopen node, a base id of its own (devices/ft_sensor.py)
 ENCODER_POSITION_FROM = ("tpdo", "sdo")
 ENCODER_TPDO_TRIGGERS = ("cyclic", "sync")
+
+
+@dataclass(frozen=True)
+class FtSensorConfig:
+    """An ATI Net F/T force/torque sensor's CAN settings (docs/devices.md).
+
+    The counts per unit are the calibration sheet's; over CAN the sensor cannot be asked for them,
+    so they are required here (None = missing, which `config check` refuses). A limit of None is no
+    limit of that kind; the force watch checks the ones given.
+    """
+
+    base_id: int  # the DIP-switch base address: requests go here, replies come on base+5 and base+6
+    counts_per_force: float | None = None  # counts per N
+    counts_per_torque: float | None = None  # counts per N·m
+    frame: str = "ft_sensor"  # the sensor frame's name (recordings' frame_id)
+    force_limit: float | None = None  # N: |F| beyond this stops a guarded move
+    torque_limit: float | None = None  # N·m: |T| beyond this stops a guarded move
+    reply_ms: float = 20.0  # how long to wait for both reply frames after a request
 
 
 @dataclass(frozen=True)
@@ -104,18 +123,26 @@ class DeviceConfig:
     name: str
     type: str  # a key of DEVICE_TYPES other than "elmo"
     bus: str
-    node: int
+    node: int  # the CANopen node id; 0 for a device that is no CANopen node (ft_sensor)
     # canopen-encoder (docs/home.md): read 0x6004 from the encoder's TPDO1 ("tpdo"; SDO is the fallback)
     # or by SDO only ("sdo"). CiA 406 hard-wires TPDO1's event timer to the cyclic timer 0x6200 ("cyclic");
     # that a given encoder's TPDO1 also takes transmission type 1 (on SYNC, "sync") is UNCONFIRMED.
     position_from: str = "tpdo"
     tpdo_trigger: str = "cyclic"
     cyclic_ms: int = 10  # 0x6200 (ms) written to RAM while reading, when the encoder's own is 0
+    ft: FtSensorConfig | None = None  # the ft_sensor settings (type ft_sensor only)
     where: Location = field(default_factory=Location, compare=False)
 
     @property
     def address(self) -> str:
+        if self.ft is not None:
+            return f"{self.bus}:0x{self.ft.base_id:03X}"
         return f"{self.bus}:{self.node}"
+
+    @property
+    def canopen(self) -> bool:
+        """A CANopen node (NMT, SDO, identity): every type but the F/T sensor."""
+        return self.type != FT_SENSOR
 
 
 @dataclass(frozen=True)
@@ -440,6 +467,35 @@ class SimWiring:
 
 
 @dataclass(frozen=True)
+class SimFtConfig:
+    """`sim: ft_sensors:` what a simulated F/T sensor feels (sim/ft_sensor.py); only the simulator reads it.
+
+    Gravity: a payload of ``payload_kg`` whose centre of mass sits ``payload_com`` (m, sensor frame)
+    from the sensor, tilted about the sensor's x axis by the sum of the ``wrist`` joints' angles.
+    Contact: past ``wall_position`` (counts of ``wall_joint``, on ``wall_side``) a spring of
+    ``wall_stiffness`` N/rad pushes along ``wall_axis``. Noise is seeded; the bias drifts linearly.
+    """
+
+    payload_kg: float = 0.0
+    payload_com: tuple[float, float, float] = (0.0, 0.0, 0.05)
+    wrist: tuple[str, ...] = ()
+    wall_joint: str | None = None
+    wall_position: int = 0
+    wall_side: str = "high"  # "high": contact above wall_position; "low": below it
+    wall_stiffness: float = 500.0  # N per rad of the wall joint past the wall
+    wall_axis: str = "Fz"
+    noise_force: float = 0.02  # N, standard deviation on each force axis
+    noise_torque: float = 0.002  # N·m, on each torque axis
+    drift_force: float = 0.01  # N/s on each force axis
+    drift_torque: float = 0.001  # N·m/s on each torque axis
+    seed: int = 0
+    silent_at: float | None = None  # s after start: the sensor stops answering
+
+
+SIM_FT_WALL_SIDES = ("high", "low")
+
+
+@dataclass(frozen=True)
 class SimExtraNode:
     """A node the simulator puts on a bus although the config names no drive there (a stray device)."""
 
@@ -473,6 +529,7 @@ class ArmConfig:
     # the in-process simulator shares a possibly loaded machine, so it is given patient timeouts
     sim_reply_timeout: float = 1.0
     sim_buses: Mapping[str, SimBusConfig] = field(default_factory=dict)  # `sim: buses:` controller faults
+    sim_ft: Mapping[str, SimFtConfig] = field(default_factory=dict)  # `sim: ft_sensors:` device name -> what it feels
     # `tuning:` gain key ("KP[2]") -> (low, high) that `tune set` accepts; ops/tune.py has the defaults
     tuning: Mapping[str, tuple[float, float]] = field(default_factory=dict)
     source: str | None = None  # file the config came from
@@ -490,6 +547,10 @@ class ArmConfig:
         if source in self.devices:
             return self.devices[source]
         return next((d for d in self.devices.values() if d.address == source), None)
+
+    def ft_sensors(self) -> list[DeviceConfig]:
+        """The configured F/T sensors, in config order."""
+        return [d for d in self.devices.values() if d.ft is not None]
 
     def pair_of_drive(self, drive: str) -> PairConfig | None:
         for pair in self.pairs.values():

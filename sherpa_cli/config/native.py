@@ -13,6 +13,8 @@ from typing import Any
 
 from sherpa_cli.config.catalog import builtin_catalog
 from sherpa_cli.config.model import (
+    DEVICE_TYPES,
+    FT_SENSOR,
     AbsEncoderConfig,
     ArmConfig,
     BusConfig,
@@ -21,6 +23,7 @@ from sherpa_cli.config.model import (
     DeviceConfig,
     DriveConfig,
     DriveModel,
+    FtSensorConfig,
     HomingConfig,
     ILCodes,
     JointConfig,
@@ -38,6 +41,7 @@ from sherpa_cli.config.model import (
     SwitchKind,
 )
 from sherpa_cli.config.simbus import parse_sim_buses
+from sherpa_cli.config.simft import parse_sim_ft
 from sherpa_cli.config.yamlnodes import (
     Locs,
     Section,
@@ -60,7 +64,9 @@ TUNING_KEYS = [f"{g}[{n}]" for g in ("KP", "KI", "FF") for n in (1, 2, 3)]  # `t
 IL_KEYS = ["stop", "home", "unused"]
 BUS_KEYS = ["interface", "channel", "bitrate", "send_interval_us", "poll_interval_ms", "options"]
 DRIVE_KEYS = ["bus", "node", "model", "motor"]
-DEVICE_KEYS = ["type", "bus", "node", "position_from", "tpdo_trigger", "cyclic_ms"]
+DEVICE_KEYS = ["type", "bus", "node", "position_from", "tpdo_trigger", "cyclic_ms", "base_id", "counts_per_force",
+               "counts_per_torque", "frame", "force_limit", "torque_limit", "reply_ms"]
+FT_KEYS = ("base_id", "counts_per_force", "counts_per_torque", "frame", "force_limit", "torque_limit", "reply_ms")
 JOINT_BODY_KEYS = ["cpr", "range", "velocity", "acceleration", "switches", "calibration", "abs_encoder", "gravity"]
 JOINT_KEYS = ["drive", *JOINT_BODY_KEYS, "current"]
 PAIR_JOINT_KEYS = ["name", *JOINT_BODY_KEYS]
@@ -94,6 +100,27 @@ def register(locs: Locs, prefix: tuple[str, ...], sec: Section) -> None:
     locs.put(prefix, sec.node.loc)
     for key, child in sec.node.value.items():
         locs.put((*prefix, key), child.loc)
+
+
+def parse_ft_sensor(sec: Section, name: str, dtype: str) -> FtSensorConfig | None:
+    """An ft_sensor's settings; its base id replaces the node id. Other types may not use these keys."""
+    if dtype not in DEVICE_TYPES or dtype == "elmo":
+        others = [t for t in DEVICE_TYPES if t != "elmo"]
+        raise ConfigError(f"device {name}: unknown type '{dtype}'; known: {', '.join(others)} (Elmo drives go "
+                          "under drives:)", sec.loc("type"))
+    if dtype != FT_SENSOR:
+        extra = next((k for k in FT_KEYS if sec.get(k) is not None), None)
+        if extra is not None:
+            raise ConfigError(f"'{extra}' is a key of ft_sensor devices, not of type '{dtype}'", sec.loc(extra))
+        return None
+    if sec.get("node") is not None:
+        raise ConfigError("an ft_sensor is no CANopen node: give its base_id (the DIP-switch base address), "
+                          "not a node", sec.loc("node"))
+    d = FtSensorConfig(0)
+    return FtSensorConfig(base_id=sec.int("base_id", required=True),
+                          counts_per_force=sec.num("counts_per_force"), counts_per_torque=sec.num("counts_per_torque"),
+                          frame=sec.str("frame", d.frame), force_limit=sec.num("force_limit"),
+                          torque_limit=sec.num("torque_limit"), reply_ms=sec.num("reply_ms", d.reply_ms))
 
 
 PROTOCOL_KEYS = [f.name for f in dataclasses.fields(ProtocolConfig)]
@@ -193,7 +220,7 @@ def parse_joystick(top: Section, locs: Locs) -> JoystickConfig:
 
 SIM_DRIVE_KEYS = [f.name for f in dataclasses.fields(SimDriveConfig)]
 SIM_EXTRA_KEYS = [f.name for f in dataclasses.fields(SimExtraNode)]
-SIM_KEYS = ["drives", "extra_nodes", "reply_timeout", "power_up", "wiring", "buses"]
+SIM_KEYS = ["drives", "extra_nodes", "reply_timeout", "power_up", "wiring", "buses", "ft_sensors"]
 
 
 def parse_sim(top: Section, locs: Locs) -> tuple[dict[str, SimDriveConfig], tuple[SimExtraNode, ...]]:
@@ -323,11 +350,13 @@ def load_native(root: YNode, filename: str) -> tuple[ArmConfig, Locs, list[str]]
         for dname, dnode in named_items(top.req("devices"), "device"):
             sec = Section(dnode, DEVICE_KEYS, what="a device mapping like {type: canopen-encoder, bus: can1, node: 45}")
             register(locs, ("device", dname), sec)
-            devices[dname] = DeviceConfig(name=dname, type=as_str(sec.req("type")), bus=as_str(sec.req("bus")),
-                                          node=as_int(sec.req("node")),
+            dtype = as_str(sec.req("type"))
+            ft = parse_ft_sensor(sec, dname, dtype)
+            devices[dname] = DeviceConfig(name=dname, type=dtype, bus=as_str(sec.req("bus")),
+                                          node=0 if ft is not None else as_int(sec.req("node")),
                                           position_from=sec.str("position_from", "tpdo"),
                                           tpdo_trigger=sec.str("tpdo_trigger", "cyclic"),
-                                          cyclic_ms=sec.int("cyclic_ms", 10), where=sec.node.loc)
+                                          cyclic_ms=sec.int("cyclic_ms", 10), ft=ft, where=sec.node.loc)
 
     joints: dict[str, JointConfig] = {}
     joints_node = top.get("joints")
@@ -370,10 +399,11 @@ def load_native(root: YNode, filename: str) -> tuple[ArmConfig, Locs, list[str]]
                                       delta=names[1], current=current, where=sec.node.loc)
 
     sim_buses = parse_sim_buses(top, locs, buses, SIM_KEYS)
+    sim_ft = parse_sim_ft(top, locs, SIM_KEYS)
     cfg = ArmConfig(name=name, buses=buses, drives=drives, joints=joints, pairs=pairs, catalog=catalog, devices=devices,
                     il_codes=il, protocol=protocol, motion=motion, joystick=joystick, sim=sim,
                     sim_extra_nodes=sim_extra_nodes, sim_reply_timeout=sim_reply_timeout, homing=homing,
-                    sim_power_up=sim_power_up, sim_wiring=sim_wiring, sim_buses=sim_buses, tuning=tuning,
+                    sim_power_up=sim_power_up, sim_wiring=sim_wiring, sim_buses=sim_buses, sim_ft=sim_ft, tuning=tuning,
                     source=filename)
     return cfg, locs, []
 

@@ -24,7 +24,7 @@ def summarize(cfg: ArmConfig, findings: Iterable[Any] = ()) -> dict[str, Any]:
     for pair in cfg.pairs.values():
         moves[pair.drive_a] = f"pair {pair.name}, motor a"
         moves[pair.drive_b] = f"pair {pair.name}, motor b"
-    return {
+    out = {
         "name": cfg.name,
         "source": cfg.source,
         "buses": [
@@ -53,3 +53,11 @@ def summarize(cfg: ArmConfig, findings: Iterable[Any] = ()) -> dict[str, Any]:
         "warnings": list(cfg.warnings),
         "findings": [{"level": f.level, "message": f.message} for f in findings],
     }
+    sensors = cfg.ft_sensors()
+    if sensors:  # only then: a config without one summarizes as before
+        out["ft_sensors"] = [
+            {"name": d.name, "bus": d.bus, "base_id": d.ft.base_id, "frame": d.ft.frame,
+             "counts_per_force": d.ft.counts_per_force, "counts_per_torque": d.ft.counts_per_torque,
+             "force_limit": d.ft.force_limit, "torque_limit": d.ft.torque_limit}
+            for d in sensors if d.ft is not None]
+    return out

@@ -12,7 +12,15 @@ import math
 import re
 from dataclasses import replace
 
-from sherpa_cli.config.model import ArmConfig, CurrentLimits, DriveModel, JointConfig, JointRole, SwitchKind
+from sherpa_cli.config.model import (
+    ArmConfig,
+    CurrentLimits,
+    DeviceConfig,
+    DriveModel,
+    JointConfig,
+    JointRole,
+    SwitchKind,
+)
 from sherpa_cli.config.yamlnodes import Locs, suggest
 from sherpa_cli.errors import ConfigError, Location
 from sherpa_cli.words import plural
@@ -83,6 +91,7 @@ def validate(cfg: ArmConfig, locs: Locs, warnings: list[str] | None = None, *,
     _check_buses(cfg, locs, r)
     _check_drives(cfg, locs, r)
     _check_devices(cfg, locs, r)
+    _check_sim_ft(cfg, locs, r)
     _check_names(cfg, locs, r)
     _check_usage(cfg, locs, r)
     for joint in cfg.joints.values():
@@ -261,6 +270,9 @@ def _check_devices(cfg: ArmConfig, locs: Locs, r: _Report) -> None:
         if dev.bus not in cfg.buses:
             r.error(locs.get(*where, "bus"), f"device {dev.name} on unknown bus '{dev.bus}'; "
                     f"configured buses: {', '.join(cfg.buses)}")
+        if dev.ft is not None:
+            _check_ft_sensor(cfg, dev, locs, r)
+            continue
         if not 1 <= dev.node <= 127:
             r.error(locs.get(*where, "node"), f"device {dev.name}: node id {dev.node} out of range 1..127")
         other = taken.get((dev.bus, dev.node))
@@ -286,6 +298,95 @@ def _check_devices(cfg: ArmConfig, locs: Locs, r: _Report) -> None:
             r.error(locs.get("joint", joint.name, "abs_encoder", "source"),
                     f"{joint.name}: abs_encoder source '{enc.source}' names no configured device "
                     f"(devices: {', '.join(cfg.devices) or 'none'})")
+
+
+# CiA 301's predefined connection set: the ids a CANopen node with id n uses (the F/T sensor's base id
+# and its replies must stay clear of them on its bus). Written here again: config sits below elmo.
+_FIXED_IDS = {0x000: "NMT", 0x080: "SYNC", 0x100: "TIME", 0x7E4: "LSS", 0x7E5: "LSS"}
+_NODE_ID_BASES = ((0x080, "EMCY"), (0x180, "TPDO1"), (0x200, "RPDO1"), (0x280, "TPDO2"), (0x300, "RPDO2"),
+                  (0x380, "TPDO3"), (0x400, "RPDO3"), (0x480, "TPDO4"), (0x500, "RPDO4"), (0x580, "SDO tx"),
+                  (0x600, "SDO rx"), (0x700, "heartbeat"))
+MAX_FT_BASE_ID = 0x7FF - 6
+
+
+def _ids_in_use(cfg: ArmConfig, bus: str, skip: str) -> dict[int, str]:
+    """Every 11-bit id another configured node on ``bus`` uses, and whose it is."""
+    used = dict(_FIXED_IDS)
+    nodes = [(f"drive {d.name}", d.node) for d in cfg.drives.values() if d.bus == bus]
+    nodes += [(f"device {d.name}", d.node) for d in cfg.devices.values() if d.bus == bus and d.canopen]
+    nodes += [("the tool's heartbeat", h) for h in cfg.motion.host_ids]
+    if any(d.bus == bus for p in cfg.pairs.values() for d in (cfg.drives.get(p.drive_a), cfg.drives.get(p.drive_b))
+           if d is not None):
+        nodes.append(("the pairs' group id", cfg.motion.pair_group_id))  # a pair's BG goes to its RPDO2
+    only = {"the tool's heartbeat": "heartbeat", "the pairs' group id": "RPDO2"}
+    for who, node in nodes:
+        for base, what in _NODE_ID_BASES:
+            if who in only and what != only[who]:
+                continue
+            used.setdefault(base + node, f"{what} 0x{base + node:03X} of {who} (node {node})")
+    for d in cfg.devices.values():
+        if d.ft is not None and d.bus == bus and d.name != skip:
+            for i, cob in enumerate((d.ft.base_id, d.ft.base_id + 5, d.ft.base_id + 6)):
+                used.setdefault(cob, f"0x{cob:03X} of F/T sensor {d.name} ({('base', 'base+5', 'base+6')[i]})")
+    return used
+
+
+def _check_ft_sensor(cfg: ArmConfig, dev: DeviceConfig, locs: Locs, r: _Report) -> None:
+    """An ft_sensor: base id and its reply ids free on its bus, calibration given, limits > 0."""
+    ft = dev.ft
+    assert ft is not None
+    where = ("device", dev.name)
+    if not 0 < ft.base_id <= MAX_FT_BASE_ID:
+        r.error(locs.get(*where, "base_id"), f"device {dev.name}: base_id 0x{ft.base_id:X} out of range "
+                f"0x001..0x{MAX_FT_BASE_ID:03X} (the replies come on base+5 and base+6, 11-bit ids)")
+    elif dev.bus in cfg.buses:
+        used = _ids_in_use(cfg, dev.bus, dev.name)
+        for offset, label in ((0, "base"), (5, "base+5"), (6, "base+6")):
+            other = used.get(ft.base_id + offset)
+            if other is not None:
+                r.error(locs.get(*where, "base_id"), f"device {dev.name}: base_id 0x{ft.base_id:03X}: its {label} "
+                        f"id 0x{ft.base_id + offset:03X} is {other} on {dev.bus}",
+                        hint="set the sensor's base address switches to ids no node on the bus uses")
+                break
+    for key in ("counts_per_force", "counts_per_torque"):
+        value = getattr(ft, key)
+        if value is None:
+            r.error(locs.get(*where), f"device {dev.name}: {key} missing; take it from the sensor's calibration "
+                    "sheet (counts per N / per N·m)")
+        elif not value > 0:
+            r.error(locs.get(*where, key), f"device {dev.name}: {key} {value:g} must be > 0")
+    for key, unit in (("force_limit", "N"), ("torque_limit", "N·m")):
+        value = getattr(ft, key)
+        if value is not None and not value > 0:
+            r.error(locs.get(*where, key), f"device {dev.name}: {key} {value:g} {unit} must be > 0")
+    if not 1 <= ft.reply_ms <= 1000:
+        r.error(locs.get(*where, "reply_ms"), f"device {dev.name}: reply_ms {ft.reply_ms} must be 1..1000")
+    if not ft.frame.strip():
+        r.error(locs.get(*where, "frame"), f"device {dev.name}: frame must name the sensor frame")
+
+
+def _check_sim_ft(cfg: ArmConfig, locs: Locs, r: _Report) -> None:
+    from sherpa_cli.config.model import SIM_FT_WALL_SIDES
+
+    axes = ("Fx", "Fy", "Fz", "Tx", "Ty", "Tz")
+    for name, sim in cfg.sim_ft.items():
+        where = ("sim", "ft_sensors", name)
+        dev = cfg.devices.get(name)
+        if dev is None or dev.ft is None:
+            r.error(locs.get(*where), f"sim ft_sensors: '{name}' is no ft_sensor device "
+                    f"(ft_sensors: {', '.join(d.name for d in cfg.ft_sensors()) or 'none'})")
+        for joint in (*sim.wrist, *((sim.wall_joint,) if sim.wall_joint else ())):
+            if joint not in cfg.joints:
+                r.error(locs.get(*where), f"sim ft_sensors: {name}: unknown joint '{joint}'{_did_you_mean(joint, list(cfg.joints))}")
+        if sim.wall_side not in SIM_FT_WALL_SIDES:
+            r.error(locs.get(*where, "wall_side"), f"sim ft_sensors: {name}: wall_side '{sim.wall_side}'; expected "
+                    "high or low")
+        if sim.wall_axis not in axes:
+            r.error(locs.get(*where, "wall_axis"), f"sim ft_sensors: {name}: wall_axis '{sim.wall_axis}'; expected "
+                    f"one of {', '.join(axes)}")
+        for key in ("payload_kg", "wall_stiffness", "noise_force", "noise_torque"):
+            if getattr(sim, key) < 0:
+                r.error(locs.get(*where, key), f"sim ft_sensors: {name}: {key} {getattr(sim, key)} is negative")
 
 
 def _check_il_codes(cfg: ArmConfig, locs: Locs, r: _Report) -> None:

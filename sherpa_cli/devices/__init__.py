@@ -1,5 +1,6 @@
 """Device types: the registry from a config type name to the class that talks to it, and reading the
-CiA 406 encoder's position (encoder.py: TPDO1 with SDO as the fallback).
+CiA 406 encoder's position (encoder.py: TPDO1 with SDO as the fallback); the ATI F/T sensor's CAN
+protocol is ft_sensor.py.
 
 The seed's ``dev_type`` selected device-specific code (1 = Elmo was the only one). Here the
 config's type name picks a class from :data:`REGISTRY`, the way python-can maps interface names
@@ -15,6 +16,7 @@ import struct
 from typing import Protocol
 
 from sherpa_cli.config.model import DEVICE_TYPES
+from sherpa_cli.devices.ft_sensor import FtReader
 from sherpa_cli.errors import UsageError
 
 CIA406_DEVICE_PROFILE = 406
@@ -61,7 +63,8 @@ class CanOpenEncoder:
         return struct.unpack_from("<i", bytes(data), 0)[0]
 
 
-REGISTRY: dict[str, type] = {"elmo": ElmoDrive, "canopen-encoder": CanOpenEncoder}
+# the F/T sensor is no CANopen node: its class is built on a frame port, not an SDO client
+REGISTRY: dict[str, type] = {"elmo": ElmoDrive, "canopen-encoder": CanOpenEncoder, "ft_sensor": FtReader}
 assert tuple(REGISTRY) == DEVICE_TYPES, "config.model.DEVICE_TYPES and the registry must list the same types"
 
 

@@ -1,5 +1,6 @@
 """The Foxglove layout of docs/foxglove/sherpa.json: one plot per joint (position and velocity of
-``/joint_states``), the drives' status table (``/diagnostics``), the log panel (``/rosout``: EMCY)
+``/joint_states``), one plot per F/T sensor (``/sherpa/wrench/<device>``, in recordings), the drives'
+status table (``/diagnostics``), the log panel (``/rosout``: EMCY)
 and the bus load. It serves the live view and an MCAP recording alike (same topics and fields).
 
 Plots address a joint by its index in ``/joint_states``: the config's joint order with every joint
@@ -48,6 +49,13 @@ def layout(cfg: ArmConfig, *, columns: int = 2) -> dict[str, Any]:
         panel = f"Plot!{name}"
         config[panel] = _plot(name, [(f"{ros_msgs.TOPIC_JOINTS}.position[{i}]", f"{name} rad"),
                                      (f"{ros_msgs.TOPIC_JOINTS}.velocity[{i}]", f"{name} rad/s")])
+        plots.append(panel)
+    for dev in cfg.ft_sensors():  # recordings only: the live view does not publish the wrench
+        panel = f"Plot!ft_{dev.name}"
+        topic = ros_msgs.TOPIC_WRENCH + dev.name
+        config[panel] = _plot(f"{dev.name} (N, N·m)", [
+            *((f"{topic}.wrench.force.{a}", f"F{a} N") for a in "xyz"),
+            *((f"{topic}.wrench.torque.{a}", f"T{a} N·m") for a in "xyz")])
         plots.append(panel)
     config["Plot!bus_load"] = _plot("bus load", [
         (f'{ros_msgs.TOPIC_BUS_LOAD}.buses[:]{{bus=="{bus}"}}.heard_load', f"{bus} heard") for bus in cfg.buses])

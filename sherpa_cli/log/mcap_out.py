@@ -11,6 +11,9 @@ them without a ROS installation or extra schemas:
   without any joint value gets no message.
 - ``/sherpa/motor_counts`` sensor_msgs/JointState of the drives (``frame_id`` ``counts``): PX in
   counts, VX in counts/s, current in A.
+- ``/sherpa/wrench/<device>`` geometry_msgs/WrenchStamped per sample of each recorded F/T sensor
+  (``frame_id`` its config ``frame``): force in N, torque in N·m (columns ``<device>.fx_n`` ..
+  ``<device>.tz_nm``); a sample the sensor did not answer gets no message.
 - ``/sherpa/abs_encoders`` sensor_msgs/JointState of the joints whose CANopen encoder was recorded:
   the encoder's reading in rad (with ``abs_encoder.offset``).
 - ``/diagnostics`` diagnostic_msgs/DiagnosticArray: per drive MO, UM, SR and MF decoded, as read
@@ -44,6 +47,7 @@ from typing import TYPE_CHECKING, Any
 
 from sherpa_cli.bus.targets import DriveRef
 from sherpa_cli.config.model import ArmConfig, JointConfig
+from sherpa_cli.devices.ft_sensor import FT_COLUMNS
 from sherpa_cli.elmo.faults import Emcy, decode_mf, sr_problems
 from sherpa_cli.errors import SherpaError, UsageError
 from sherpa_cli.joints.units import counts_per_s_to_rad_per_s, counts_to_rad
@@ -226,6 +230,8 @@ def write_recording(path: Path, rec: Recording, cfg: ArmConfig, *, time_zero_ns:
     with_current = any(f"{j}.cur_a" in rec.columns for j in joints)
     with_iq = any(f"{d}.iq_a" in rec.columns for d in drives)
     cols = {name: _column(rec, name) for name in rec.columns}
+    # the F/T sensors whose columns the recording holds: (device, sensor frame)
+    sensors = [(d.name, d.ft.frame) for d in cfg.ft_sensors() if d.ft is not None and f"{d.name}.fx_n" in rec.columns]
 
     with path.open("wb") as fh:
         writer = Writer(fh)
@@ -268,6 +274,12 @@ def write_recording(path: Path, rec: Recording, cfg: ArmConfig, *, time_zero_ns:
                 writer.write_message(ros_msgs.TOPIC_MOTORS, js,
                                      ros_msgs.joint_state(ns, drives, px, vx, iq, frame_id="counts"),
                                      log_time=ns, publish_time=ns)
+            for name, frame_id in sensors:
+                values = [_pick(cols.get(f"{name}.{column}"), i) for _, column in FT_COLUMNS]
+                if not any(math.isnan(v) for v in values):
+                    writer.write_message(ros_msgs.TOPIC_WRENCH + name, schemas[ros_msgs.WRENCH_STAMPED],
+                                         ros_msgs.wrench_stamped(ns, frame_id, values[:3], values[3:]),
+                                         log_time=ns, publish_time=ns)
             ext = [_pick(cols.get(f"{j}.ext_pos_rad"), i) for j in encoders]
             if encoders and not all(math.isnan(v) for v in ext):
                 writer.write_message("/sherpa/abs_encoders", js, ros_msgs.joint_state(ns, encoders, ext),

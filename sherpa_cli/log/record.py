@@ -32,6 +32,7 @@ from sherpa_cli.bus import journal, syncgate
 from sherpa_cli.bus.targets import DriveRef
 from sherpa_cli.config.model import ArmConfig
 from sherpa_cli.devices import encoder
+from sherpa_cli.devices.ft_sensor import FtReader, FtTrack, Wrench, open_reader
 from sherpa_cli.elmo.protocol import SYNC_ID
 from sherpa_cli.errors import CommunicationError, SdoError, SherpaError, UsageError
 from sherpa_cli.joints.units import counts_per_s_to_rad_per_s, counts_to_rad
@@ -93,15 +94,17 @@ class BusBudget:
 
 
 def bus_budget(cfg: ArmConfig, refs: Sequence[DriveRef], rate: float, *, current: bool,
-               encoders: Sequence[Any] = ()) -> list[BusBudget]:
+               encoders: Sequence[Any] = (), ft_sensors: Sequence[Any] = ()) -> list[BusBudget]:
     """Per bus: SYNC + one 8-byte TPDO per drive per SYNC (+ a 2-byte current TPDO every 2nd)
-    (+ a 4-byte TPDO per recorded encoder, ``encoders``: DeviceConfig, devices/encoder.py)."""
+    (+ a 4-byte TPDO per recorded encoder, ``encoders``: DeviceConfig, devices/encoder.py)
+    (+ a 1-byte request and two 8-byte replies per recorded F/T sensor, ``ft_sensors``)."""
     out = []
     for bus in dict.fromkeys([*(r.bus for r in refs), *(e.bus for e in encoders)]):
         n = sum(1 for r in refs if r.bus == bus)
         configured = cfg.buses[bus].bitrate if bus in cfg.buses else None
         bits = frame_bits(0) + n * frame_bits(8) + (n * frame_bits(2) / CURRENT_DIVIDER if current else 0)
         bits += sum(frame_bits(4) for e in encoders if e.bus == bus)
+        bits += sum(frame_bits(1) + 2 * frame_bits(8) for f in ft_sensors if f.bus == bus)
         out.append(BusBudget(bus, n, configured or DEFAULT_BITRATE, not configured, bits, rate, current))
     return out
 
@@ -430,8 +433,16 @@ class Recorder:
         self.current = current
         # CANopen encoders of the recorded joints, recorded beside them (devices/encoder.py)
         self.encoders = encoder.recorded_encoders(self.cfg, (r.name for r in self.refs))
+        # F/T sensors on the recorded buses, asked once per period beside the SYNCs (a real-time
+        # recording only: the sensor answers requests, not SYNC, so an injected clock cannot pace it)
+        recorded_buses = {r.bus for r in self.refs}
+        self.ft_tracks = [FtTrack(d) for d in self.cfg.ft_sensors() if d.bus in recorded_buses] \
+            if clock is None else []
+        self._ft_stop = threading.Event()
+        self._ft_threads: list[threading.Thread] = []
+        self._ft_ports = contextlib.ExitStack()
         self.budget = bus_budget(self.cfg, self.refs, self.rate, current=current,
-                                 encoders=[t.dev for t in self.encoders])
+                                 encoders=[t.dev for t in self.encoders], ft_sensors=[t.dev for t in self.ft_tracks])
         if enforce_budget:
             check_budget(self.budget)
         self.clock = clock
@@ -464,10 +475,45 @@ class Recorder:
             self._listen()
             self.t0 = self._now()
             self._start_syncs(list(dict.fromkeys([*(r.bus for r in self.refs), *(t.dev.bus for t in self.encoders)])))
+            self._start_ft()
         except BaseException:
             self._finish()
             raise
         return self
+
+    def _start_ft(self) -> None:
+        """One thread per recorded F/T sensor: a request per period, its sample placed on the newest
+        SYNC sent before the request (its row), unless that row has a sample or is written already."""
+        for track in self.ft_tracks:
+            reader = self._ft_ports.enter_context(open_reader(self.session, track.dev))
+            thread = threading.Thread(target=self._poll_ft, args=(track, reader), daemon=True,
+                                      name=f"log-record-ft-{track.dev.name}")
+            self._ft_threads.append(thread)
+            thread.start()
+
+    def _poll_ft(self, track: FtTrack, reader: FtReader) -> None:
+        due = time.monotonic()
+        while not self._ft_stop.is_set():
+            sent = self._answered_by(track.dev.bus, wall_time())
+            if sent:
+                try:
+                    sample: Wrench | None = reader.read()
+                except CommunicationError:
+                    sample = None
+                with self._lock:
+                    if sample is None:
+                        track.misses += 1
+                    elif sent - 1 >= self._flushed and sent - 1 not in track.samples:
+                        track.add(sent - 1, sample)
+            due = max(due + self.period, time.monotonic() - self.period)  # behind: no burst to catch up
+            self._ft_stop.wait(max(0.0, due - time.monotonic()))
+
+    def _stop_ft(self) -> None:
+        self._ft_stop.set()
+        for thread in self._ft_threads:
+            thread.join(timeout=5)
+        self._ft_threads.clear()
+        self._ft_ports.close()
 
     def _start_syncs(self, buses: list[str]) -> None:
         links = self.session.links
@@ -504,6 +550,7 @@ class Recorder:
         return self._now()
 
     def _finish(self, quiet: bool = False) -> None:
+        self._stop_ft()  # before the SYNCs end: no request whose row no SYNC stands for
         # every source's end first (the SYNCs due until then are expected; a ThreadSync still sends
         # them), then the stops, so one bus's catching up does not lengthen another's span
         for log in self._schedules:
@@ -724,8 +771,8 @@ class Recorder:
             return
         with self._write_lock:
             with self._lock:
-                cut = (max(self._newest, *(t.last for t in self.encoders), -1) + 1 if final
-                       else self._newest - self.window + 1)
+                cut = (max(self._newest, *(t.last for t in self.encoders), *(t.last for t in self.ft_tracks), -1) + 1
+                       if final else self._newest - self.window + 1)
                 if cut <= self._flushed:
                     return
                 taken: dict[str, tuple[dict[int, tuple[int, int]], dict[int, float]]] = {}
@@ -751,6 +798,11 @@ class Recorder:
                     encoder_columns.update(track.columns(keys))
                     for k in [k for k in track.samples if k < cut]:
                         del track.samples[k]
+                for ft_track in self.ft_tracks:
+                    encoder_columns.update(ft_track.columns(keys))
+                    ft_track.written += sum(1 for k in keys if k in ft_track.samples)
+                    for k in [k for k in ft_track.samples if k < cut]:
+                        del ft_track.samples[k]
                 self._flushed = cut
             rec = self._build(keys, taken, None)
             rec.columns.update(encoder_columns)
@@ -801,7 +853,8 @@ class Recorder:
         what the file holds (a late or unplaced frame is not counted)."""
         with self._lock:
             return {**{d.ref.name: d.written + len(d.pos) for d in self._drives.values()},
-                    **{t.dev.name: len(t.samples) for t in self.encoders}}
+                    **{t.dev.name: len(t.samples) for t in self.encoders},
+                    **{t.dev.name: t.written + len(t.samples) for t in self.ft_tracks}}
 
     def latest(self) -> tuple[float, dict[str, tuple[int, int]]] | None:
         """The newest SYNC every drive has answered: (its time on the recorder's clock, drive ->
@@ -876,6 +929,8 @@ class Recorder:
         with self._lock:
             for track in self.encoders:
                 rec.columns.update(track.columns(keys))
+            for ft_track in self.ft_tracks:
+                rec.columns.update(ft_track.columns(keys))
         return rec
 
     def columns(self) -> list[str]:
@@ -883,6 +938,8 @@ class Recorder:
         rec = self._build([], {d.ref.name: ({}, {}) for d in self._drives.values()}, None)
         for track in self.encoders:
             rec.columns.update(track.columns([]))
+        for ft_track in self.ft_tracks:
+            rec.columns.update(ft_track.columns([]))
         return list(rec.columns)
 
     def _build(self, keys: list[int], by_name: dict[str, tuple[dict[int, tuple[int, int]], dict[int, float]]],

@@ -2,7 +2,7 @@
 
 The definitions are the standard ones of ROS 2's ``common_interfaces`` and ``rcl_interfaces``
 (``sensor_msgs/msg/JointState``, ``diagnostic_msgs/msg/DiagnosticArray``, ``rcl_interfaces/msg/Log``,
-``std_msgs/msg/String``), written the way rosbag2 stores them in an MCAP schema (``ros2msg``: the
+``std_msgs/msg/String``, ``geometry_msgs/msg/WrenchStamped``), written the way rosbag2 stores them in an MCAP schema (``ros2msg``: the
 message, then each nested type after a line of ``=``), so ``ros2 bag``, the ``rosbags`` library and
 Foxglove read the files without extra schemas. The builders return plain dicts (the field names
 of the messages), which ``mcap-ros2-support`` encodes to CDR and the live view sends as JSON.
@@ -43,8 +43,15 @@ LOG_DEF = (
 STRING = "std_msgs/msg/String"
 STRING_DEF = "string data\n"
 
+_VECTOR3 = "MSG: geometry_msgs/Vector3\nfloat64 x\nfloat64 y\nfloat64 z\n"
+WRENCH_STAMPED = "geometry_msgs/msg/WrenchStamped"
+WRENCH_STAMPED_DEF = (
+    "std_msgs/Header header\nWrench wrench\n"
+    + _SEP + _HEADER + _SEP + _TIME + _SEP
+    + "MSG: geometry_msgs/Wrench\nVector3 force\nVector3 torque\n" + _SEP + _VECTOR3)
+
 DEFINITIONS = {JOINT_STATE: JOINT_STATE_DEF, DIAGNOSTIC_ARRAY: DIAGNOSTIC_ARRAY_DEF, LOG: LOG_DEF,
-               STRING: STRING_DEF}
+               STRING: STRING_DEF, WRENCH_STAMPED: WRENCH_STAMPED_DEF}
 
 # diagnostic_msgs/DiagnosticStatus levels and rcl_interfaces/Log levels
 OK, WARN, ERROR, STALE = 0, 1, 2, 3
@@ -57,6 +64,7 @@ TOPIC_STATUS = "/diagnostics"  # one DiagnosticStatus per drive: MO, SR and MF d
 TOPIC_LOG = "/rosout"  # EMCY and notes
 TOPIC_STEP = "/sherpa/step_metrics"  # std_msgs/String holding the metrics JSON of `log step`
 TOPIC_BUS_LOAD = "/sherpa/bus_load"  # live only (JSON)
+TOPIC_WRENCH = "/sherpa/wrench/"  # + the F/T sensor's device name: WrenchStamped, N and N·m in its frame
 
 
 def stamp(ns: int) -> dict[str, int]:
@@ -71,6 +79,14 @@ def joint_state(ns: int, names: Sequence[str], position: Sequence[float], veloci
     return {"header": {"stamp": stamp(ns), "frame_id": frame_id}, "name": list(names),
             "position": [float(v) for v in position], "velocity": [float(v) for v in velocity],
             "effort": [float(v) for v in effort]}
+
+
+def wrench_stamped(ns: int, frame_id: str, force: Sequence[float], torque: Sequence[float]) -> dict[str, Any]:
+    """geometry_msgs/WrenchStamped: force (N) and torque (N·m) as x, y, z in ``frame_id``."""
+    def vector(v: Sequence[float]) -> dict[str, float]:
+        return {"x": float(v[0]), "y": float(v[1]), "z": float(v[2])}
+    return {"header": {"stamp": stamp(ns), "frame_id": frame_id}, "wrench": {"force": vector(force),
+                                                                             "torque": vector(torque)}}
 
 
 def key_values(pairs: Sequence[tuple[str, str]]) -> list[dict[str, str]]:

@@ -348,7 +348,7 @@ def scan_bus(cfg: ArmConfig, bus: str, network: Network, settings: ScanSettings 
     ``host_holder``: the pid of the sherpa command of this machine holding a pool id on this bus
     (motion/lock.py MachineLock.holder), None when none does."""
     configured = {d.node: d.name for d in cfg.drives.values() if d.bus == bus}
-    configured.update({d.node: d.name for d in cfg.devices.values() if d.bus == bus})  # encoders, ...
+    configured.update({d.node: d.name for d in cfg.devices.values() if d.bus == bus and d.canopen})  # encoders, ...
     prober = BusProber(network, configured, settings, progress=progress)
     heard = prober.run(reset=reset)
 

@@ -25,7 +25,7 @@ from typing import TYPE_CHECKING, Any, TextIO
 
 import filelock
 
-from sherpa_cli.config.model import ArmConfig, JointConfig, PairConfig, SwitchConfig, SwitchKind
+from sherpa_cli.config.model import ArmConfig, JointConfig, PairConfig, SimFtConfig, SwitchConfig, SwitchKind
 from sherpa_cli.config.simbus import SimBusConfig
 from sherpa_cli.elmo.protocol import NMT_ID, SDO_RX_BASE, SYNC_ID
 from sherpa_cli.sim import state as sim_state
@@ -33,6 +33,7 @@ from sherpa_cli.sim.buscontroller import BusController, SimNetlink
 from sherpa_cli.sim.clock import Clock, FrameClock, RealClock
 from sherpa_cli.sim.drive import SimDrive
 from sherpa_cli.sim.encoder import SimEncoder
+from sherpa_cli.sim.ft_sensor import SimFtSensor
 from sherpa_cli.sim.settings import SimSettings
 
 if TYPE_CHECKING:
@@ -268,6 +269,11 @@ def _pair_reading(a: SimDrive, b: SimDrive, sign: int, offset: int) -> int:
     return round(a.position + sign * b.position) - offset
 
 
+def _answer_ft(sensor: SimFtSensor, can_id: int, data: bytes, out: list[tuple[int, bytes]]) -> None:
+    """An F/T sensor hears a frame; what it answers goes to ``out`` (sent by the pump)."""
+    out.extend(sensor.receive(can_id, data))
+
+
 def _send_after_sdo_latency(drive: SimDrive, can_id: int, data: bytes) -> None:
     """An SDO answer through the drive's reply queue, so a late answer leaves on a later tick."""
     drive.send_later(can_id, data, drive.settings.sdo_latency_s)
@@ -354,6 +360,12 @@ class SimArm:
                     dev.node, position=reading, clock=self.clock, serial=0x7E100000 + dev.node, resolution=resolution,
                     settings=SimSettings(vendor_id=ENCODER_VENDOR, device_name="CANopen encoder", inputs=1),
                     od_live={(0x1000, 0): lambda: ENCODER_DEVICE_TYPE}))
+        # `devices:` of type ft_sensor: no CANopen node; the pump hands it the frames on its base id and
+        # sends its two reply frames (sim/ft_sensor.py: payload gravity through the wrist, a wall, noise, drift)
+        self.ft_sensors: dict[str, tuple[str, SimFtSensor]] = {
+            dev.name: (dev.bus, SimFtSensor(dev, cfg.sim_ft.get(dev.name, SimFtConfig()), self.clock, cfg.joints,
+                                            self.joint_position))
+            for dev in cfg.ft_sensors()}
         self.lock = threading.RLock()  # held by the pumps while they touch drives; tests take it too
         # the host's CAN controller on each bus (`sim: buses:`), read like netlink (bus/linkstate.py)
         self.controllers = {name: BusController(name, cfg.sim_buses.get(name, SimBusConfig()), bus.bitrate,
@@ -432,6 +444,15 @@ class SimArm:
             sign = 1 if joint.name == pair.sigma else -1
             return functools.partial(_pair_reading, a, b, sign, enc.offset), joint.cpr
         return (lambda: 0), 4096  # an encoder no joint uses reads 0
+
+    def joint_position(self, joint: str) -> float:
+        """A joint's real position (counts): its motor's, or a pair's Σ (a + b) or Δ (a - b)."""
+        j = self.cfg.joints[joint]
+        if j.drive is not None:
+            return self.drives[j.drive].position
+        pair = _pair_of(self.cfg, j)
+        a, b = self.drives[pair.drive_a], self.drives[pair.drive_b]
+        return _sigma_position(a, b) if joint == pair.sigma else _delta_position(a, b)
 
     def press_switch(self, drive: str, switch_input: int, pressed: bool | None) -> None:
         """A technician holds (True), lets go of (False) or leaves (None) the switch wired to
@@ -527,9 +548,10 @@ class SimArm:
     # -- RAM between runs ----------------------------------------------------------------------------
     RAM_LOCK_TIMEOUT = 30.0  # s a `--sim` command waits for another to leave the arm (then exit 5)
 
-    def _ram_nodes(self) -> dict[str, SimDrive]:
-        nodes = dict(self.drives)
+    def _ram_nodes(self) -> dict[str, SimDrive | SimFtSensor]:
+        nodes: dict[str, SimDrive | SimFtSensor] = dict(self.drives)
         nodes.update((name, node) for name, (_, node) in self.extras.items() if isinstance(node, SimEncoder))
+        nodes.update((name, sensor) for name, (_, sensor) in self.ft_sensors.items())
         return nodes
 
     def _power_on(self) -> None:
@@ -597,6 +619,7 @@ class SimArm:
         on_bus = {n: self.drives[n] for n, d in self.cfg.drives.items() if d.bus == bus_name}
         on_bus.update((n, drive) for n, (b, drive) in self.extras.items() if b == bus_name)
         names = list(on_bus)
+        sensors = [sensor for b, sensor in self.ft_sensors.values() if b == bus_name]
         by_node: dict[int, list[str]] = {}
         for n, drive in on_bus.items():
             by_node.setdefault(drive.node, []).append(n)  # two entries: a duplicate node id
@@ -651,6 +674,7 @@ class SimArm:
                     touched: list[str] = []
                     # frames pass only while the host's controller runs (not bus-off, down or missing)
                     passing = ctrl is None or ctrl.running
+                    ft_frames: list[tuple[int, bytes]] = []  # what an F/T sensor answers to this frame
                     # a remote (RTR) frame requests a frame; it is none itself (an RTR on 0x080 is no
                     # SYNC), and the drives offer no RTR-requestable PDO or node guarding
                     if msg is not None and not msg.is_error_frame and not msg.is_extended_id and \
@@ -660,6 +684,9 @@ class SimArm:
                         # receive() ran the drives to now: what the frame caused is in their outbox
                         touched = self._dispatch(msg.arbitration_id, bytes(msg.data), on_bus, by_node, bus_name=bus_name,
                                                  at=at if behind else None)
+                        for sensor in sensors:
+                            self._guarded(bus_name, sensor.name, functools.partial(
+                                _answer_ft, sensor, msg.arbitration_id, bytes(msg.data), ft_frames))
                     now = self.clock.now()
                     ticking = not behind and now >= next_tick
                     if ticking:
@@ -675,6 +702,8 @@ class SimArm:
                             send(can_id, data)
                             if ctrl is not None:
                                 ctrl.count(host_received=1, received_bytes=len(data))
+                    for can_id, data in ft_frames:
+                        out(can_id, data)
                     self._send_out(touched, on_bus, by_node, out, bus_name, at=at if behind else None)
                     if ctrl is not None:
                         ctrl.tick(now)

@@ -1,0 +1,119 @@
+"""motion/force_watch.py on a fake reader and a fake clock: the limit names the axis and value,
+a bad status stops, a silent sensor stops only after its bound, a command may only tighten."""
+
+from __future__ import annotations
+
+import pytest
+
+from sherpa_cli.config import load_config
+from sherpa_cli.devices.ft_sensor import FtReader, StatusWord, Wrench
+from sherpa_cli.errors import CommunicationError, DriveTimeoutError, SafetyError, UsageError
+from sherpa_cli.motion.force_watch import (
+    ForceLimitError,
+    ForceWatch,
+    SensorSilentError,
+    SensorStatusError,
+    WrenchSource,
+    tightened,
+)
+from tests.test_ft_sensor import BASE, CAL, FakeClock, ScriptedPort
+
+ARM = "tests/data/ft-arm.yaml"
+
+
+class FakeReader:
+    """Plays a script: a Wrench is a sample, None is no answer; each read takes 10 ms of fake time."""
+
+    def __init__(self, clock: FakeClock, script: list[Wrench | None]) -> None:
+        self.clock, self.script = clock, list(script)
+
+    def read(self) -> Wrench:
+        self.clock.t += 0.01
+        item = self.script.pop(0)
+        if item is None:
+            raise DriveTimeoutError("F/T sensor: no reply within 10 ms of the request")
+        return item
+
+
+def w(fx=0.0, fy=0.0, fz=0.0, tx=0.0, ty=0.0, tz=0.0, status=0, sample=0) -> Wrench:
+    return Wrench(fx, fy, fz, tx, ty, tz, StatusWord(status), sample)
+
+
+def watch(script, clock=None, **kw) -> tuple[ForceWatch, FakeClock]:
+    clock = clock or FakeClock()
+    kw.setdefault("force_limit", 20.0)
+    kw.setdefault("torque_limit", 2.0)
+    kw.setdefault("silent_s", 0.05)
+    return ForceWatch(FakeReader(clock, script), clock=clock, name="F/T sensor wrist_ft", **kw), clock
+
+
+def test_under_the_limits_nothing_stops():
+    fw, _ = watch([w(fz=-9.8), w(fx=19.9), w(tx=1.99)])
+    assert [fw.check() for _ in range(3)] == [None, None, None]
+    assert fw.last is not None and fw.last.tx == 1.99
+
+
+def test_the_force_limit_names_the_axis_and_the_value():
+    fw, _ = watch([w(fz=-9.8), w(fx=3.0, fz=-21.5, sample=42)])
+    assert fw.check() is None
+    err = fw.check()
+    assert isinstance(err, ForceLimitError) and isinstance(err, SafetyError)
+    assert (err.axis, err.value, err.limit) == ("Fz", -21.5, 20.0)
+    assert err.message == ("force limit: F/T sensor wrist_ft read |F| 21.71 N > 20 N (mostly Fz -21.50 N) "
+                           "in sample 42")
+
+
+def test_the_torque_limit_on_its_own():
+    err = watch([w(ty=-2.5, tz=0.5)], force_limit=None)[0].check()
+    assert isinstance(err, ForceLimitError) and err.axis == "Ty" and "|T| 2.55 N·m > 2 N·m" in err.message
+    assert watch([w(fx=100.0)], force_limit=None)[0].check() is None  # no force limit: forces are not watched
+
+
+def test_a_status_word_not_zero_stops():
+    err = watch([w(status=0x8001, sample=5)])[0].check()
+    assert isinstance(err, SensorStatusError) and "status 0x8001 (bits 0,15) in sample 5" in err.message
+
+
+def test_a_silent_sensor_stops_only_after_its_bound():
+    fw, _ = watch([w(), None, None, None, None, None, None, w()], silent_s=0.045)
+    assert fw.check() is None  # t = 0.01: a sample
+    results = [fw.check() for _ in range(6)]  # t = 0.02 .. 0.07: silent
+    assert results[:4] == [None] * 4  # silent 10..40 ms: within the 45 ms bound
+    err = results[4]
+    assert isinstance(err, SensorSilentError) and isinstance(err, CommunicationError)
+    assert err.message.startswith("F/T sensor wrist_ft silent for 50 ms (bound 45 ms): the force limit cannot be "
+                                  "watched; last: F/T sensor: no reply within 10 ms")
+    assert fw.misses == 6
+
+
+def test_the_bound_counts_from_the_start_of_the_watch():
+    clock = FakeClock()
+    clock.t = 5.0
+    fw, _ = watch([None] * 10, clock=clock)
+    errors = [fw.check() for _ in range(6)]
+    assert errors[:4] == [None] * 4 and isinstance(errors[5], SensorSilentError)
+
+
+def test_a_command_may_only_tighten_the_configured_limit():
+    assert tightened(20.0, None, "--force-limit") == 20.0
+    assert tightened(20.0, 5.0, "--force-limit") == 5.0
+    assert tightened(20.0, 50.0, "--force-limit") == 20.0
+    assert tightened(None, 5.0, "--force-limit") == 5.0
+    with pytest.raises(UsageError, match="--force-limit -1: expected a number > 0"):
+        tightened(20.0, -1.0, "--force-limit")
+    dev = load_config(ARM).devices["wrist_ft"]
+    fw = ForceWatch.for_device(FakeReader(FakeClock(), []), dev, silent_s=0.1, force_limit=8.0, clock=FakeClock())
+    assert (fw.force_limit, fw.torque_limit, fw.name) == (8.0, 2.0, "F/T sensor wrist_ft")
+
+
+def test_a_watch_without_limits_is_refused():
+    with pytest.raises(UsageError, match="needs a force_limit or a torque_limit"):
+        watch([], force_limit=None, torque_limit=None)
+
+
+def test_the_real_reader_is_a_wrench_source():
+    clock = FakeClock()
+    reader: WrenchSource = FtReader(ScriptedPort(clock, []), BASE, CAL, wait_s=0.02, clock=clock)
+    fw = ForceWatch(reader, force_limit=20.0, torque_limit=None, silent_s=0.03, clock=clock)
+    assert fw.check() is None  # 20 ms without a reply: inside the bound
+    assert isinstance(fw.check(), SensorSilentError)
