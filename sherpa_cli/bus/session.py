@@ -79,6 +79,10 @@ class ArmSession:
         self.client_overrides: dict[str, Any] = {}
         # `sherpa --allow-user-program`: the preflight (bus/health.py) lets motion start while a user program runs
         self.allow_user_program = False
+        # a command's own F/T limits (`--force-limit`, `force_limit=`): every motion guard of the session
+        # watches the arm's F/T sensors with these, which only tighten the sensors' own (motion/force_watch.py)
+        self.force_limit: float | None = None  # N
+        self.torque_limit: float | None = None  # N·m
         self._request_watchers: list[Callable[[], None]] = []
 
     @classmethod
@@ -116,6 +120,13 @@ class ArmSession:
             if sim is not None:
                 with signals_held():  # its pumps and buses: all stopped, whatever signal comes
                     sim.stop()
+
+    def open_bus(self, name: str) -> None:
+        """Open one more configured bus in this session (a no-op when it is open): the motion guard's
+        F/T sensor may sit on a bus the command's drives do not. Closed with the others."""
+        if name in self.links:
+            return
+        self.links.update(open_links(self.cfg, [name]))
 
     def client(self, ref: DriveRef) -> DriveClient:
         """The DriveClient of a drive (one per drive: it owns the drive's one-request-at-a-time lock)."""

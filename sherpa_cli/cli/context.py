@@ -32,6 +32,7 @@ class AppState:
     bus_map_from_env: bool = False
     config_looked: tuple[str, ...] = ()  # where the default config was looked for (no --config)
     allow_user_program: bool = False  # --allow-user-program: motion may start while a drive's program runs
+    force_limit: float | None = None  # a moving command's --force-limit (N): the session's guards watch it
     verbose: bool = False  # --verbose: the details (each drive's identity, the objects a guard put back)
     _config: ArmConfig | None = field(default=None, repr=False)
 
@@ -44,6 +45,15 @@ class AppState:
                    debug=debug, out=Output.create(json_mode=json_mode, no_color=no_color),
                    sim=sim, bus_map=list(bus_map or []), bus_map_from_env=bus_map_from_env,
                    config_looked=config_looked, verbose=verbose)
+
+    def use_force_limit(self, value: float | None) -> None:
+        """A moving command's --force-limit, checked before anything else (the guards of its session
+        watch it: motion/guard.py)."""
+        import math
+
+        if value is not None and not (value > 0 and math.isfinite(value)):
+            raise UsageError(f"--force-limit {value:g}: expected a force in N, > 0")
+        self.force_limit = value
 
     @contextmanager
     def session(self, buses: Iterable[str] | None = None,
@@ -85,6 +95,7 @@ class AppState:
             arm.on_busy = self.out.warn
         with ArmSession.open(cfg, sim=arm, buses=buses, best_effort=best_effort) as session:
             session.allow_user_program = self.allow_user_program
+            session.force_limit = self.force_limit
             yield session
 
     def load_config(self, path: Path | None = None) -> ArmConfig:

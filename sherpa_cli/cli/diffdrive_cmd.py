@@ -185,6 +185,9 @@ def move(
                                       "homed since power-up (positions relative to power-up)."),
     hold: bool = typer.Option(False, "--hold", help="After the move keep both motors on, holding where they ended, "
                               "the dead-man armed and the joints shown, until Ctrl-C or `sherpa stop`."),
+    force_limit: float | None = typer.Option(None, "--force-limit", metavar="N",
+                                             help="Stop the motion when the F/T sensor reads a force above N "
+                                                  "newtons (tightens the sensor's configured force_limit)."),
     apply: ApplyMotion = False,
 ) -> None:
     """Move the Σ and Δ joints of a pair together, both motors starting at once, and measure the coupling.
@@ -199,6 +202,7 @@ def move(
     from sherpa_cli.ops import diffdrive
 
     st = state(ctx)
+    st.use_force_limit(force_limit)
     cfg = st.load_config()
     p = pair_of(cfg, pair)
     req = diffdrive.PairTarget(sigma=sigma, delta=delta, relative=relative, velocity=velocity, naive=naive,

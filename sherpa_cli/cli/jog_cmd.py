@@ -56,6 +56,9 @@ def jog(
                                            "jog runs."),
     uncalibrated: bool = typer.Option(False, "--uncalibrated", help="Allow a position move of a joint that has no "
                                       "absolute encoder and was not homed since power-up."),
+    force_limit: float | None = typer.Option(None, "--force-limit", metavar="N",
+                                             help="Stop the motion when the F/T sensor reads a force above N "
+                                                  "newtons (tightens the sensor's configured force_limit)."),
     apply: ApplyMotion = False,
     hold: bool = typer.Option(False, "--hold", help="After the move keep the motor on, holding where it ended, "
                               "the dead-man armed and the position shown, until Ctrl-C or `sherpa stop` "
@@ -101,6 +104,7 @@ def jog(
     from sherpa_cli.ops.jog import check_request
 
     st = state(ctx)
+    st.use_force_limit(force_limit)
     if _live(st, joints or [], interactive, joystick, device, list_joysticks, apply, uncalibrated,
              [to, by, velocity, torque, duration]):
         return

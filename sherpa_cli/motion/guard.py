@@ -35,6 +35,7 @@ from sherpa_cli.bus import journal
 from sherpa_cli.bus.health import preflight
 from sherpa_cli.bus.machine_lock import wire_key
 from sherpa_cli.bus.targets import drive_refs
+from sherpa_cli.devices.ft_sensor import open_reader
 from sherpa_cli.elmo.faults import decode_sr, describe_mf
 from sherpa_cli.elmo.protocol import UM_TORQUE
 from sherpa_cli.errors import (
@@ -49,6 +50,7 @@ from sherpa_cli.errors import (
 from sherpa_cli.motion.bus_watch import GuardBusWatch
 from sherpa_cli.motion.deadman import COMM_ERROR, CONSUMER, LOSS_ACTION, OBJECT_NAMES, SIZES, HostHeartbeat
 from sherpa_cli.motion.drive_watch import DriveWatch, DriveWatchError
+from sherpa_cli.motion.force_watch import ForceWatch, SensorSilentError, tightened
 from sherpa_cli.motion.host_ids import HostIdListener, OtherConsumers
 from sherpa_cli.motion.lock import DriveLock, HostIdLock, drive_label
 from sherpa_cli.motion.report import RESET_DURING_STOP, DriveStop, GuardReport
@@ -154,6 +156,9 @@ class MotionGuard:
         self._owner: int | None = None
         self._unwatch_requests: Callable[[], None] | None = None
         self._exit_of: _Drive | None = None  # the drive whose exit runs now (_exit_drive)
+        self._forces: list[ForceWatch] = []  # the F/T sensors watched (_watch_forces)
+        self._force_readers = contextlib.ExitStack()
+        self._next_force_check = 0.0
         self._exit_boots = 0
 
     # -- public API -------------------------------------------------------------------------------
@@ -174,6 +179,7 @@ class MotionGuard:
             for ref in self.refs:
                 self._inspect(ref)
             self._others.read_all(between=self._pulse)
+            self._watch_forces()
             while (left := listen_until - self._clock()) > 0:
                 self._sleep(min(left, 0.05))
                 raise_if_signalled()
@@ -316,6 +322,43 @@ class MotionGuard:
             if error is self._watch.error:
                 self._watch.told = True
             raise error
+        if self._forces and self._clock() >= self._next_force_check:
+            self._next_force_check = self._clock() + self.settings.force_check_interval
+            for watch in self._forces:
+                error = watch.check()
+                if error is not None:
+                    raise error
+
+    def _watch_forces(self) -> None:
+        """Every F/T sensor of the arm with a limit (its own, or the command's tighter one) is
+        watched while the command runs: its bus opened if the command's drives are elsewhere, and
+        one sample read now -- a sensor that does not answer, or already reads past its limit,
+        refuses the motion before anything moved."""
+        s = self.session
+        for dev in s.cfg.ft_sensors():
+            assert dev.ft is not None
+            if tightened(dev.ft.force_limit, s.force_limit, "--force-limit") is None and \
+                    tightened(dev.ft.torque_limit, s.torque_limit, "--torque-limit") is None:
+                continue
+            s.open_bus(dev.bus)
+            # the reader's wait is bounded in wall time: it waits on frames, not on the command's clock
+            reader = self._force_readers.enter_context(open_reader(s, dev))
+            watch = ForceWatch.for_device(reader, dev, force_limit=s.force_limit, torque_limit=s.torque_limit,
+                                          silent_s=max(5 * self.settings.force_check_interval, 3 * reader.wait_s),
+                                          clock=self._clock)
+            error = watch.check()
+            if error is None and watch.last is None:
+                error = SensorSilentError(f"{watch.name} does not answer: no motion without its force watch",
+                                          hint="check the sensor's power and its CAN base address (sherpa ft show)")
+            if error is not None:
+                raise error
+            assert watch.last is not None
+            self._forces.append(watch)
+            self._event(f"{watch.name}: watched: |F| {watch.last.force:.2f} N of {watch.force_limit} N, "
+                        f"|T| {watch.last.torque:.3f} N·m of {watch.torque_limit} N·m")
+        if (s.force_limit is not None or s.torque_limit is not None) and not self._forces:
+            raise UsageError("--force-limit: this arm has no F/T sensor to watch (no device of type ft_sensor)",
+                             hint="docs/devices.md says how to configure one")
 
     def _abort_requests(self, error: SherpaError) -> None:
         """The bus watch tripped (any thread): the request the command waits for ends now with ``error``."""
@@ -736,6 +779,7 @@ class MotionGuard:
         finally:
             self.report.bus_faults = list(self._bus.faults)
             self._watch.close()
+            self._force_readers.close()
             self._bus.close()
             self._stop_heartbeat()
 

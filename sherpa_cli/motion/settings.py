@@ -43,6 +43,7 @@ class MotionSettings:
     bus_error_passive: str = "stop"  # stop | warn: an ERROR-PASSIVE bus during motion (motion/bus_watch.py)
     bus_check_interval: float = 0.1  # s between reads of the command's buses' controller state
     heartbeat_realtime: bool = True  # SCHED_FIFO for the heartbeat thread where the OS permits (deadman.py)
+    force_check_interval: float = 0.02  # s between samples of each F/T sensor a guarded move watches
 
     @property
     def heartbeat_period(self) -> float:

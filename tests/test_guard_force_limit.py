@@ -1,0 +1,120 @@
+"""The motion guard watches the arm's F/T sensor (motion/force_watch.py through motion/guard.py):
+a jog of the simulated wrist into the simulated wall (tests/data/ft-arm.yaml: a spring at +300
+counts, 100 N/rad, force limit 20 N) stops once |F| crosses the limit, within one check period
+plus the stop, and names the force; a sensor that is silent refuses the motion before anything moves;
+a command's own --force-limit only tightens; without a sensor nothing changes."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from pathlib import Path
+
+import pytest
+from motion_helpers import stepped_session
+
+from sherpa_cli.api import Arm
+from sherpa_cli.config import load_config
+from sherpa_cli.motion.axis import resolve_axis
+from sherpa_cli.motion.force_watch import ForceLimitError, SensorSilentError
+from sherpa_cli.motion.request import parse_request
+from sherpa_cli.motion.settings import MotionSettings
+
+ARM = Path(__file__).resolve().parent / "data" / "ft-arm.yaml"
+CPR = 3600
+WALL = 300  # counts
+STIFFNESS = 100.0  # N/rad past the wall
+
+
+def wall_force(counts: float) -> float:
+    """|F| the simulated sensor reads with the wrist at ``counts`` (no noise: the payload's gravity and the wall)."""
+    tilt = counts * 2 * math.pi / CPR
+    push = STIFFNESS * max(0.0, counts - WALL) * 2 * math.pi / CPR
+    fx, fz = 9.81 * math.sin(tilt), push - 9.81 * math.cos(tilt)
+    return math.hypot(fx, fz)
+
+
+def quiet(cfg):
+    return dataclasses.replace(cfg, sim_ft={"wrist_ft": dataclasses.replace(
+        cfg.sim_ft["wrist_ft"], noise_force=0.0, noise_torque=0.0)})
+
+
+def jog_into_the_wall(cfg, *, force_limit: float | None = None, to_counts: int = 800):
+    with stepped_session(cfg) as (session, stepped):
+        session.force_limit = force_limit
+        axis = resolve_axis(cfg, "wrist")
+        req = parse_request(axis, "position", to=to_counts * 2 * math.pi / CPR, uncalibrated=True)
+        events: list[str] = []
+        try:
+            Arm(session).move(axis, req, settings=MotionSettings.from_config(cfg, ["can0"]),
+                              clock=stepped.now, sleep=stepped.sleep)
+            error = None
+        except (ForceLimitError, SensorSilentError) as exc:
+            error = exc
+        with session.sim.lock:
+            end = session.sim.drives["wrist_drive"].motor.counts
+            on = session.sim.drives["wrist_drive"].motor_on
+        return error, end, on, events
+
+
+def crossing(limit: float) -> int:
+    return next(c for c in range(0, 900) if wall_force(c) > limit)
+
+
+def test_a_jog_into_the_wall_stops_once_the_force_crosses_the_limit_and_names_it():
+    cfg = quiet(load_config(ARM))
+    error, end, on, _ = jog_into_the_wall(cfg)
+    assert isinstance(error, ForceLimitError), error
+    assert error.axis == "Fz" and "force limit: F/T sensor wrist_ft read |F|" in error.message and "> 20 N" in error.message
+    assert not on
+    j = cfg.joints["wrist"]
+    speed, decel = j.vel_limit, j.decel  # counts/s, counts/s^2
+    bound = crossing(20.0) + speed * MotionSettings.from_config(cfg).force_check_interval + speed ** 2 / (2 * decel)
+    assert crossing(20.0) <= end <= bound + 10, (end, crossing(20.0), bound)
+
+
+def test_a_command_limit_tightens_and_stops_earlier():
+    cfg = quiet(load_config(ARM))
+    error, end, _, _ = jog_into_the_wall(cfg, force_limit=12.0)
+    assert isinstance(error, ForceLimitError) and "> 12 N" in error.message
+    assert end < crossing(20.0)
+
+
+def test_a_silent_sensor_refuses_the_motion_before_anything_moves():
+    cfg = load_config(ARM)
+    cfg = dataclasses.replace(cfg, sim_ft={"wrist_ft": dataclasses.replace(cfg.sim_ft["wrist_ft"], silent_at=0.0)})
+    error, end, on, _ = jog_into_the_wall(cfg)
+    assert isinstance(error, SensorSilentError) and "does not answer" in error.message
+    assert end == 0 and not on
+
+
+def test_without_a_limit_short_of_the_wall_the_jog_ends_normally():
+    cfg = quiet(load_config(ARM))
+    error, end, on, _ = jog_into_the_wall(cfg, to_counts=250)
+    assert error is None and abs(end - 250) <= 2 and not on
+
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+def test_the_jog_command_stops_at_its_force_limit_and_says_so(cli):
+    """`sherpa jog ... --force-limit N --apply` on the arm with the sensor: exit 1, the force named,
+    the motor off; the wall at 300 counts is never reached with a limit the payload alone crosses."""
+    result = cli("--config", str(ROOT / "tests" / "data" / "ft-arm.yaml"), "--sim", "jog", "wrist", "--to",
+                 "800counts", "--uncalibrated", "--force-limit", "15", "--apply")
+    assert result.exit_code == 1, result.stdout + result.stderr
+    assert "force limit: F/T sensor wrist_ft read |F|" in result.stderr and "> 15 N" in result.stderr
+    assert "Traceback" not in result.stderr
+
+
+@pytest.mark.parametrize("value", ["0", "-3", "nan"])
+def test_a_force_limit_that_is_no_force_is_refused_before_anything_moves(cli, value):
+    result = cli("--config", str(ROOT / "tests" / "data" / "ft-arm.yaml"), "--sim", "jog", "wrist", "--by",
+                 "0.1", "--uncalibrated", "--force-limit", value, "--apply")
+    assert result.exit_code == 2 and "--force-limit" in result.stderr and "expected a force in N" in result.stderr
+
+
+def test_a_force_limit_on_an_arm_without_a_sensor_is_refused_before_anything_moves(cli):
+    result = cli("--sim", "jog", "elbow_pitch", "--by", "0.05", "--force-limit", "10", "--apply")
+    assert result.exit_code == 2 and "this arm has no F/T sensor" in result.stderr, result.stderr
+    assert "motor on" not in result.stderr
