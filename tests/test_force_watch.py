@@ -81,8 +81,8 @@ def test_a_silent_sensor_stops_only_after_its_bound():
     assert results[:4] == [None] * 4  # silent 10..40 ms: within the 45 ms bound
     err = results[4]
     assert isinstance(err, SensorSilentError) and isinstance(err, CommunicationError)
-    assert err.message.startswith("F/T sensor wrist_ft silent for 50 ms (bound 45 ms): the force limit cannot be "
-                                  "watched; last: F/T sensor: no reply within 10 ms")
+    assert err.message.startswith("F/T sensor wrist_ft silent for 50 ms, 5 requests unanswered (bound 45 ms): the "
+                                  "force limit cannot be watched; last: F/T sensor: no reply within 10 ms")
     assert fw.misses == 6
 
 
@@ -117,3 +117,12 @@ def test_the_real_reader_is_a_wrench_source():
     fw = ForceWatch(reader, force_limit=20.0, torque_limit=None, silent_s=0.03, clock=clock)
     assert fw.check() is None  # 20 ms without a reply: inside the bound
     assert isinstance(fw.check(), SensorSilentError)
+
+
+def test_a_count_of_unanswered_requests_in_a_row_is_silence_on_any_clock():
+    """Each unanswered request waits on the bus in wall time while the command's clock may stand
+    (stepped time): ``max_misses`` in a row is silence, whatever the clock says; a sample resets it."""
+    fw, _clock = watch([None, None, w(), None, None, None], silent_s=100.0, max_misses=3)
+    assert [fw.check() for _ in range(5)] == [None] * 5
+    error = fw.check()
+    assert isinstance(error, SensorSilentError) and "3 requests unanswered" in error.message

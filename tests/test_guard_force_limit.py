@@ -118,3 +118,21 @@ def test_a_force_limit_on_an_arm_without_a_sensor_is_refused_before_anything_mov
     result = cli("--sim", "jog", "elbow_pitch", "--by", "0.05", "--force-limit", "10", "--apply")
     assert result.exit_code == 2 and "this arm has no F/T sensor" in result.stderr, result.stderr
     assert "motor on" not in result.stderr
+
+
+def test_a_sensor_that_goes_silent_during_the_motion_stops_it():
+    """A watch that cannot see is no watch: the sensor stops answering mid-jog (simulated time
+    0.5 s), the jog stops within the silence bound (SensorSilentError, exit 3) short of its end."""
+    cfg = quiet(load_config(ARM))
+    cfg = dataclasses.replace(cfg, sim_ft={"wrist_ft": dataclasses.replace(cfg.sim_ft["wrist_ft"], silent_at=0.5)},
+                              sim_reply_timeout=0.05)  # each unanswered request waits 50 ms of wall time
+    with stepped_session(cfg) as (session, stepped):
+        axis = resolve_axis(cfg, "wrist")
+        req = parse_request(axis, "velocity", velocity=100 * 2 * math.pi / CPR, duration=3.0)
+        with pytest.raises(SensorSilentError, match=r"F/T sensor wrist_ft silent for \d+ ms, 5 requests unanswered"):
+            Arm(session).move(axis, req, settings=MotionSettings.from_config(cfg, ["can0"]),
+                              clock=stepped.now, sleep=stepped.sleep)
+        with session.sim.lock:
+            end = session.sim.drives["wrist_drive"].motor.counts
+            on = session.sim.drives["wrist_drive"].motor_on
+    assert not on and 0 < end < 250, end  # 3 s at 100 counts/s would end at 300

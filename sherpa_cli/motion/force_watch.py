@@ -9,7 +9,8 @@ the caller (the motion guard) stops the drives first and reports after:
 - :class:`SensorStatusError` (a SafetyError) when the sensor's status word is not 0 (it says its
   own readings are not to be trusted);
 - :class:`SensorSilentError` (a CommunicationError) when no sample arrived for longer than
-  ``silent_s``: a watch that cannot see is no watch.
+  ``silent_s``, or for ``max_misses`` requests in a row (a count: the same on any clock, where each
+  unanswered request waits on the bus in wall time): a watch that cannot see is no watch.
 
 A missed sample inside ``silent_s`` is no stop: one late reply on a busy bus must not end a move.
 The clock is injected.
@@ -68,7 +69,8 @@ class ForceWatch:
     """Checks one sample against the limits; see the module's docstring."""
 
     def __init__(self, source: WrenchSource, *, force_limit: float | None, torque_limit: float | None,
-                 silent_s: float, name: str = "F/T sensor", clock: Callable[[], float] = time.monotonic) -> None:
+                 silent_s: float, name: str = "F/T sensor", clock: Callable[[], float] = time.monotonic,
+                 max_misses: int | None = None) -> None:
         if force_limit is None and torque_limit is None:
             raise UsageError(f"{name}: a force watch needs a force_limit or a torque_limit")
         self.source, self.force_limit, self.torque_limit = source, force_limit, torque_limit
@@ -76,31 +78,37 @@ class ForceWatch:
         self.last_sample_at = clock()  # the bound counts from the start of the watch
         self.last: Wrench | None = None
         self.misses = 0
+        self.max_misses = max_misses
+        self.misses_in_row = 0
 
     @classmethod
     def for_device(cls, source: WrenchSource, dev: DeviceConfig, *, silent_s: float,
                    force_limit: float | None = None, torque_limit: float | None = None,
-                   clock: Callable[[], float] = time.monotonic) -> ForceWatch:
+                   clock: Callable[[], float] = time.monotonic, max_misses: int | None = None) -> ForceWatch:
         """A watch with the device's limits, tightened by a command's own (never loosened)."""
         if dev.ft is None:
             raise UsageError(f"{dev.name} is no F/T sensor")
         return cls(source, force_limit=tightened(dev.ft.force_limit, force_limit, "--force-limit"),
                    torque_limit=tightened(dev.ft.torque_limit, torque_limit, "--torque-limit"), silent_s=silent_s,
-                   name=f"F/T sensor {dev.name}", clock=clock)
+                   name=f"F/T sensor {dev.name}", clock=clock, max_misses=max_misses)
 
     def check(self) -> SherpaError | None:
         try:
             w = self.source.read()
         except CommunicationError as exc:
             self.misses += 1
+            self.misses_in_row += 1
             silent_for = self.clock() - self.last_sample_at
-            if silent_for > self.silent_s:
-                return SensorSilentError(f"{self.name} silent for {silent_for * 1000:.0f} ms (bound "
-                                         f"{self.silent_s * 1000:.0f} ms): the force limit cannot be watched; "
-                                         f"last: {exc.message}",
+            too_many = self.max_misses is not None and self.misses_in_row >= self.max_misses
+            if silent_for > self.silent_s or too_many:
+                return SensorSilentError(f"{self.name} silent for {silent_for * 1000:.0f} ms, {self.misses_in_row} "
+                                         f"requests unanswered (bound {self.silent_s * 1000:.0f} ms"
+                                         + (f" or {self.max_misses} requests" if self.max_misses else "")
+                                         + f"): the force limit cannot be watched; last: {exc.message}",
                                          hint="check the sensor's cable and power before moving with it again")
             return None
         self.last_sample_at = self.clock()
+        self.misses_in_row = 0
         self.last = w
         if not w.status.ok:
             return SensorStatusError(f"{self.name} reports status {w.status} in sample {w.sample}: its readings "

@@ -64,6 +64,9 @@ if TYPE_CHECKING:
     from sherpa_cli.elmo.client import DriveClient
 
 log = logging.getLogger(__name__)
+
+# an F/T sensor unanswered this many requests in a row is silent: the force limit cannot be watched
+FORCE_SILENT_CHECKS = 5
 MS_PROFILER_ACTIVE = 2
 JOURNAL_OWNER = "motion command"
 
@@ -156,7 +159,7 @@ class MotionGuard:
         self._owner: int | None = None
         self._unwatch_requests: Callable[[], None] | None = None
         self._exit_of: _Drive | None = None  # the drive whose exit runs now (_exit_drive)
-        self._forces: list[ForceWatch] = []  # the F/T sensors watched (_watch_forces)
+        self._forces: list[tuple[ForceWatch, float]] = []  # the F/T sensors watched and their reply waits
         self._force_readers = contextlib.ExitStack()
         self._next_force_check = 0.0
         self._exit_boots = 0
@@ -324,7 +327,8 @@ class MotionGuard:
             raise error
         if self._forces and self._clock() >= self._next_force_check:
             self._next_force_check = self._clock() + self.settings.force_check_interval
-            for watch in self._forces:
+            for watch, wait_s in self._forces:
+                self._pulse(extra=wait_s)  # an unanswered request waits on the bus: the loop is alive meanwhile
                 error = watch.check()
                 if error is not None:
                     raise error
@@ -344,8 +348,10 @@ class MotionGuard:
             # the reader's wait is bounded in wall time: it waits on frames, not on the command's clock
             reader = self._force_readers.enter_context(open_reader(s, dev))
             watch = ForceWatch.for_device(reader, dev, force_limit=s.force_limit, torque_limit=s.torque_limit,
-                                          silent_s=max(5 * self.settings.force_check_interval, 3 * reader.wait_s),
-                                          clock=self._clock)
+                                          silent_s=max(FORCE_SILENT_CHECKS * self.settings.force_check_interval,
+                                                       FORCE_SILENT_CHECKS * reader.wait_s),
+                                          clock=self._clock, max_misses=FORCE_SILENT_CHECKS)
+            self._pulse(extra=reader.wait_s)
             error = watch.check()
             if error is None and watch.last is None:
                 error = SensorSilentError(f"{watch.name} does not answer: no motion without its force watch",
@@ -353,7 +359,7 @@ class MotionGuard:
             if error is not None:
                 raise error
             assert watch.last is not None
-            self._forces.append(watch)
+            self._forces.append((watch, reader.wait_s))
             self._event(f"{watch.name}: watched: |F| {watch.last.force:.2f} N of {watch.force_limit} N, "
                         f"|T| {watch.last.torque:.3f} N·m of {watch.torque_limit} N·m")
         if (s.force_limit is not None or s.torque_limit is not None) and not self._forces:
