@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 import subprocess
 import sys
 from math import tau as TAU
@@ -142,6 +143,20 @@ def test_every_kind_of_axis_jogs_into_the_one_result_in_rad_and_counts(name, kin
     assert {d: result.motors_end[d] for d in drives} == after
     assert result.ok and result.ended_by == "time up" and result.duration > 0.0
     assert result.stop.drives and all(d.motor_off for d in result.stop.drives)
+
+
+def test_the_docs_jog_example_passes_mypy_strict_as_written(tmp_path):
+    """What a user copies from docs/api.md's jog section type-checks: one result type, whatever the axis."""
+    text = (ROOT / "docs" / "api.md").read_text(encoding="utf-8")
+    section = text.split("\n## Jog\n", 1)[1].split("\n## ", 1)[0]
+    (block,) = re.findall(r"```python\n(.*?)```", section, flags=re.S)
+    assert "start_rad" in block and "end_rad" in block  # the example reads joint units
+    example = tmp_path / "jog_example.py"
+    example.write_text(block, encoding="utf-8")
+    out = subprocess.run([sys.executable, "-m", "mypy", "--strict", "--follow-imports=silent",
+                          "--cache-dir", str(tmp_path / "cache"), str(example)],
+                         cwd=ROOT, capture_output=True, text=True, timeout=600)
+    assert out.returncode == 0, out.stdout + out.stderr
 
 
 def test_jog_takes_exactly_one_kind_of_move():
