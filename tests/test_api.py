@@ -2,14 +2,16 @@
 
 from __future__ import annotations
 
+import re
 import subprocess
 import sys
+from math import tau as TAU
 from pathlib import Path
 
 import pytest
 
 import sherpa_cli
-from sherpa_cli.api import Arm
+from sherpa_cli.api import Arm, JogResult
 from sherpa_cli.errors import SafetyError, UsageError
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -106,21 +108,55 @@ def test_jog_moves_a_plain_joint_inside_the_guard_and_leaves_the_motor_off():
         result = arm.jog("elbow_pitch", velocity=0.3, duration=0.4)  # an absolute joint: no homing needed
         drive = arm.session.sim.drives["elbow_1a"]
         assert not drive.motor_on
-    from sherpa_cli.ops.jog import JogResult
-
-    assert isinstance(result, JogResult) and result.breach is None and result.ended_by == "time up"
+    assert isinstance(result, JogResult) and result.ok and not result.breaches and result.ended_by == "time up"
     assert result.end_counts is not None and result.end_counts > result.start_counts  # it moved, outward
     assert result.stop.drives and all(d.motor_off for d in result.stop.drives)
 
 
 def test_jog_moves_a_sigma_joint_with_both_motors():
-    from sherpa_cli.ops.joint_jog import JogResult
-
     with Arm.open(CONFIG, sim=True) as arm:
         result = arm.jog("shoulder_pitch", velocity="50counts/s", duration=0.3)
         motors = [arm.session.sim.drives[d] for d in ("shoulder_2a", "shoulder_2b")]
         assert not any(m.motor_on for m in motors)
     assert isinstance(result, JogResult) and result.ok
+    assert [d.drive for d in result.stop.drives] == ["shoulder_2a", "shoulder_2b"]  # the typed report
+
+
+@pytest.mark.parametrize("name,kind,drives,cpr", [("elbow_pitch", "plain", ("elbow_1a",), 3600),
+                                                  ("shoulder_pitch", "sigma", ("shoulder_2a", "shoulder_2b"), 6000),
+                                                  ("shoulder_2a", "motor", ("shoulder_2a",), 6000)])
+def test_every_kind_of_axis_jogs_into_the_one_result_in_rad_and_counts(name, kind, drives, cpr):
+    """A plain joint, a Σ joint and one motor of a pair: the one JogResult, its positions in rad the
+    simulated drives' counts (Σ = a + b) over the joint's cpr."""
+    with Arm.open(CONFIG, sim=True) as arm:
+        sim = arm.session.sim.drives
+        before = {d: sim[d].px for d in drives}
+        result = arm.jog(name, velocity="200counts/s", duration=0.3)
+        after = {d: sim[d].px for d in drives}
+    start, end = sum(before.values()), sum(after.values())
+    assert type(result) is JogResult
+    assert (result.axis, result.kind, result.drives, result.cpr) == (name, kind, drives, cpr)
+    assert result.start_counts == start and result.end_counts == end and end > start  # it moved, the asked way
+    assert result.start_rad == pytest.approx(start * TAU / cpr)
+    assert result.end_rad == pytest.approx(end * TAU / cpr) and result.end_rad > result.start_rad
+    assert result.speed_rad_s == pytest.approx(200 * TAU / cpr) and result.target_rad is None
+    assert {d: result.motors_end[d] for d in drives} == after
+    assert result.ok and result.ended_by == "time up" and result.duration > 0.0
+    assert result.stop.drives and all(d.motor_off for d in result.stop.drives)
+
+
+def test_the_docs_jog_example_passes_mypy_strict_as_written(tmp_path):
+    """What a user copies from docs/api.md's jog section type-checks: one result type, whatever the axis."""
+    text = (ROOT / "docs" / "api.md").read_text(encoding="utf-8")
+    section = text.split("\n## Jog\n", 1)[1].split("\n## ", 1)[0]
+    (block,) = re.findall(r"```python\n(.*?)```", section, flags=re.S)
+    assert "start_rad" in block and "end_rad" in block  # the example reads joint units
+    example = tmp_path / "jog_example.py"
+    example.write_text(block, encoding="utf-8")
+    out = subprocess.run([sys.executable, "-m", "mypy", "--strict", "--follow-imports=silent",
+                          "--cache-dir", str(tmp_path / "cache"), str(example)],
+                         cwd=ROOT, capture_output=True, text=True, timeout=600)
+    assert out.returncode == 0, out.stdout + out.stderr
 
 
 def test_jog_takes_exactly_one_kind_of_move():

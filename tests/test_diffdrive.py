@@ -275,7 +275,7 @@ def test_a_group_start_resets_communication_with_the_motors_off_and_arms_the_dea
     cfg = load_config(FAST)
     with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
         r = _pitch_to_300(s, cfg)
-        assert abs(r.end - 300) <= 1
+        assert abs(r.end_counts - 300) <= 1
         with s.sim.lock:
             for d in (s.sim.drives["left"], s.sim.drives["right"]):
                 resets = _nmt_reset_comms(d)
@@ -308,7 +308,7 @@ def test_jog_of_a_pair_joint_starts_both_motors_with_one_group_bg():
     cfg = load_config(FAST)
     with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
         r = _pitch_to_300(s, cfg)
-        assert abs(r.end - 300) <= 1
+        assert abs(r.end_counts - 300) <= 1
         with s.sim.lock:
             left, right = s.sim.drives["left"], s.sim.drives["right"]
             group_bg = [f[1:] for f in left.received if f[1] == 0x300 + 125]
@@ -640,7 +640,7 @@ def test_jog_of_a_pair_joint_with_sync_rpdo_starts_both_at_one_sync(tmp_path):
     cfg = load_config(path)
     with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
         r = _pitch_to_300(s, cfg)
-        assert abs(r.end - 300) <= 1
+        assert abs(r.end_counts - 300) <= 1
         with s.sim.lock:
             left, right = s.sim.drives["left"], s.sim.drives["right"]
             writes = [w[3] for w in left.od_writes if w[1] == 0x1401]

@@ -22,7 +22,7 @@ def test_read_arm_prints_positions_identity_and_dumps_the_parameters(tmp_path):
     # moved here is where the example, a process of its own, must find it
     with Arm.open(ROOT / "configs" / "sherpa-arm.yaml", sim=True) as arm:
         moved = arm.jog("elbow_pitch", by=0.25)
-        assert moved.breach is None
+        assert moved.ok
         drives = len(arm.config.drives)
         joints = list(arm.config.joints)
     dump = tmp_path / "dump.yaml"

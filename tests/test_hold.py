@@ -21,6 +21,7 @@ from sherpa_cli.bus.targets import drive_ref
 from sherpa_cli.config import load_config
 from sherpa_cli.errors import SafetyError
 from sherpa_cli.motion.hold import HELD_UNTIL_CTRL_C, HELD_UNTIL_STOPPED
+from sherpa_cli.ops.jog_result import JogResult
 from sherpa_cli.sim.arm import SimArm
 from sherpa_cli.sim.stepped import SteppedTime
 
@@ -107,7 +108,7 @@ def test_while_held_every_motor_is_on_and_stands_at_its_target_and_mo0_ends_the_
         assert on and um == 5 and pa == held_at[d], (d, seen["at"][d])  # held in position mode at its PA
         assert abs(position - held_at[d]) <= 1 and abs(v) <= 2.0, (d, seen["at"][d])  # standing there
     assert all(off.values())  # the guard's exit switched every motor off
-    data = value.as_dict()
+    data = value.as_json() if isinstance(value, JogResult) else value.as_dict()  # a jog, or diffdrive move
     assert data["hold"] == {"at": held_at, "ended_by": HELD_UNTIL_STOPPED}
     json.dumps(data)
 

@@ -300,7 +300,7 @@ def test_a_pair_jog_is_refused_uncalibrated_and_accepted_after_homing_the_pair()
             joint_jog.run(s, axis, req)
         home.run_home(s, home.plan_home(cfg, ["diff"]))
         r = joint_jog.run(s, axis, req)
-        assert r.ok and abs(r.end + 400) <= 1
+        assert r.ok and abs(r.end_counts + 400) <= 1
         a, b = physical(s, "pair_a"), physical(s, "pair_b")
         assert abs((a + b) + 400) <= 2  # Σ where it was sent, in the real joint (not only in PX)
 

@@ -41,7 +41,7 @@ def test_position_jog_of_a_pair_joint_ends_where_asked_and_the_other_holds(cfg, 
         r = jog(s, name, mode="position", to=to)
         target = int(to.removesuffix("counts"))
         assert r.ok and r.outcome == "done"
-        assert abs(r.joints_end[name] - target) <= 1 and r.end == r.joints_end[name]
+        assert abs(r.joints_end[name] - target) <= 1 and r.end_counts == r.joints_end[name]
         assert abs(r.joints_end[other] - r.joints_start[other]) <= 1
         assert motors_off(s)
         assert s.sim.errors == []
@@ -115,7 +115,7 @@ def test_refusals_outside_the_normal_range_and_uncalibrated(cfg):
         with pytest.raises(SafetyError, match=r"not homed since power-up \(left UI\[3\]=0, right UI\[3\]=0\)"):
             jog(s, "roll", mode="position", to="10counts")
         r = jog(s, "roll", mode="position", to="10counts", uncalibrated=True)
-        assert r.ok and abs(r.end - 10) <= 1
+        assert r.ok and abs(r.end_counts - 10) <= 1
         with pytest.raises(UsageError, match="above the joint's speed limit 8000"):
             jog(s, "pitch", mode="velocity", velocity="9000counts", duration=0.1)
         with pytest.raises(UsageError, match="above the configured continuous limit 3 A"):
@@ -143,9 +143,10 @@ def test_plain_jog_past_the_full_range_is_stopped_and_brought_back(cfg, req):
 
     with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
         r = run_jog(s, resolve_axis(cfg, "j1"), parse_request(resolve_axis(cfg, "j1"), **req), settings=MotionSettings.from_config(cfg))
-        assert r.breach is not None and r.breach.joint == "j1"
-        edge = 1900 if r.breach.side == "high" else -1900
-        assert r.breach.back_to == edge and r.recovered_to == edge and r.end_counts == edge
+        (b,) = r.breaches  # a plain jog stops at its first
+        assert b.joint == "j1" and not r.ok
+        edge = 1900 if b.side == "high" else -1900
+        assert b.back_to == edge and r.recovered_to == {"j1": edge} and r.end_counts == edge
         assert r.ended_by == f"left its full range, brought back to {edge} counts"
         assert r.as_json()["ok"] is False and r.as_json()["limit"]["recovered_to"] == edge
         assert motors_off(s)
@@ -166,7 +167,8 @@ def test_plain_position_refusals_before_anything_is_armed(cfg):
             assert all(d.od_writes == [] for d in s.sim.drives.values())  # the dead-man was never armed
         calibrate(s, "yaw")
         r = run_jog(s, target, parse_request(target, mode="position", to=0.5), settings=settings)
-        assert r.calibration.calibrated and abs(r.end_counts - 318) <= 1
+        (cal,) = r.calibrations
+        assert cal.calibrated and abs(r.end_counts - 318) <= 1
 
 
 def test_a_motor_that_trips_during_a_pair_jog_ends_it_with_the_reason(cfg):

@@ -243,7 +243,7 @@ def test_the_limit_watch_stops_with_the_configured_stop_method(tmp_path):
                          settings=MotionSettings.from_config(cfg))
         with s.sim.lock:
             executed = [d[:2].decode() for _, cid, d in drive.received if cid == 0x305 and len(d) == 4]
-    assert result.breach is not None
+    assert not result.ok and len(result.breaches) == 1
     assert "ST" not in executed and "BG" in executed  # motion.stop_method jv0: JV=0 + BG, never ST
 
 

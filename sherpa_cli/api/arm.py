@@ -29,11 +29,10 @@ if TYPE_CHECKING:
     from sherpa_cli.motion.axis import Axis
     from sherpa_cli.motion.request import MoveRequest, Value
     from sherpa_cli.motion.settings import MotionSettings
-    from sherpa_cli.ops import jog as plain_jog
-    from sherpa_cli.ops import joint_jog
     from sherpa_cli.ops.diffdrive import MoveResult
     from sherpa_cli.ops.home import HomeReport, UnitResult
     from sherpa_cli.ops.identify import IdentifyReport
+    from sherpa_cli.ops.jog_result import JogResult
     from sherpa_cli.ops.joystick import EventSource, JoystickRun
     from sherpa_cli.ops.live_jog import LiveJog
     from sherpa_cli.ops.params_file import ParamDump
@@ -207,17 +206,20 @@ class Arm:
 
     def jog(self, name: str, *, to: Value = None, by: Value = None, velocity: Value = None, torque: Value = None,
             duration: float | None = None, uncalibrated: bool = False, hold: bool = False,
-            on_progress: Callable[[object], None] | None = None) -> plain_jog.JogResult | joint_jog.JogResult:
+            on_progress: Callable[[object], None] | None = None) -> JogResult:
         """Move one joint, Σ/Δ joint, pair motor or drive (`sherpa jog NAME ... --apply`).
 
         Exactly one of ``to``/``by`` (position), ``velocity`` (with ``duration`` for a pair) or
         ``torque`` (with ``duration``); numbers are rad, rad/s and A, text takes units as the
         command line does (``"10deg"``, ``"300counts/s"``, ``"800mA"``). It runs inside the motion
         guard: fault check, the dead-man armed, the joint's limits watched, and the motor stopped
-        from standstill and switched off on every way out. A limit breach is a result (``breach``
-        set, the joint brought back), not an exception; a refusal raises. ``hold``: afterwards the
-        motors hold where they ended, the dead-man armed, until Ctrl-C (KeyboardInterrupt, a normal
-        end then: ``ended_by`` / ``held_until`` say so) or `sherpa stop`.
+        from standstill and switched off on every way out. A limit breach is a result (``ok``
+        False, ``breaches`` set, the joint brought back), not an exception; a refusal raises.
+        ``hold``: afterwards the motors hold where they ended, the dead-man armed, until Ctrl-C
+        (KeyboardInterrupt, a normal end then: ``ended_by`` / ``held_until`` say so) or `sherpa stop`.
+        Every kind of axis returns the one :class:`~sherpa_cli.ops.jog_result.JogResult`: counts as
+        the drives count them (``start_counts``, ``end_counts``) and rad beside them (``start_rad``,
+        ``end_rad``).
         """
         from sherpa_cli.motion.axis import resolve_axis
         from sherpa_cli.motion.request import parse_request
@@ -236,7 +238,7 @@ class Arm:
     def move(self, axis: Axis, request: MoveRequest, *, settings: MotionSettings | None = None,
              on_progress: Callable[[object], None] | None = None,
              clock: Callable[[], float] | None = None, sleep: Callable[[float], None] | None = None
-             ) -> plain_jog.JogResult | joint_jog.JogResult:
+             ) -> JogResult:
         """Run one parsed request on one axis (motion/axis.py, motion/request.py): what :meth:`jog`
         and the `jog` command both end in. A pair's axis (Σ/Δ joint, pair motor) moves both motors.
         ``clock``/``sleep``: the time the move runs on (default wall time; tests step it)."""

@@ -1,5 +1,6 @@
 """`sherpa jog JOINT`: move one joint inside the motion guard (ops/jog.py does the work for a plain
-joint, ops/joint_jog.py for a Σ/Δ joint or one motor of a pair)."""
+joint, ops/joint_jog.py for a Σ/Δ joint or one motor of a pair; both return ops/jog_result.py's
+JogResult, rendered here)."""
 
 from __future__ import annotations
 
@@ -11,15 +12,14 @@ import typer
 
 from sherpa_cli.cli.context import AppState, state
 from sherpa_cli.cli.options import ApplyMotion
-from sherpa_cli.cli.output import stop_lines
 from sherpa_cli.errors import SherpaError, UsageError
 
 if TYPE_CHECKING:
     from sherpa_cli.config.model import ArmConfig
     from sherpa_cli.motion.axis import Axis
     from sherpa_cli.motion.request import MoveRequest
-    from sherpa_cli.ops import jog as ops_jog
     from sherpa_cli.ops import joint_jog
+    from sherpa_cli.ops.jog_result import JogResult
 
 
 def parse_number(text: str | None, option: str) -> float | None:
@@ -158,14 +158,13 @@ def jog(
         try:
             # the command is a layer over the Python API: the same move, rendered
             result = Arm(session).move(target, req, settings=settings, on_progress=progress)
-            assert isinstance(result, ops_jog.JogResult)  # a plain joint's or a drive's jog
         except BaseException as exc:
             st.out.progress(None)
             show_stop_report(st, exc)
             raise
     st.out.progress(None)
     _render(st, name, result)
-    if result.breach is not None:
+    if not result.ok:
         raise typer.Exit(1)
 
 
@@ -229,28 +228,62 @@ def _after(req: MoveRequest) -> str:
     return "hold where it stands until Ctrl-C or `sherpa stop`" if req.hold else "stop and switch off"
 
 
-def _render(st: AppState, name: str, result: ops_jog.JogResult) -> None:
+def _render(st: AppState, name: str, r: JogResult) -> None:
+    """Any jog's result: how the guard stopped the motors, what a pair's motors were sent, the limit
+    watch, a pair's hold, then where it ended. ``name``: the joint a one-drive jog moved."""
+    from sherpa_cli.motion.axis import DRIVE, PLAIN
+
     if st.json_mode:
-        st.out.json(result.as_json())
+        st.out.json(r.as_json())
         return
-    for line in result.stop.lines(st.verbose):
+    for line in r.stop.lines(st.verbose):
         st.out.line(f"stop: {line}")
-    b = result.breach
-    if b is not None:
+    one_drive = r.kind in (PLAIN, DRIVE)
+    if r.command and not one_drive:  # a one-drive jog's command is in its --json
+        st.out.line(f"sent: {r.command}")
+    for b in r.breaches:
         st.out.line(f"limit: {b.joint} left its full range [{b.full[0]}, {b.full[1]}] on the {b.side} side: "
-                    f"stopped, nothing more sent, brought back to {result.recovered_to} counts "
+                    f"stopped, nothing more sent, brought back to {r.recovered_to.get(b.joint)} counts "
                     f"(normal range edge {b.back_to})")
-    where = result.end_counts
-    rad = result.rad(where)
-    at = (f"{rad:+.4f} rad ({where} counts)" if rad is not None else f"{where} counts") if where is not None \
-        else "an unknown position (PX unreadable)"
+    for joint, fix in r.held_correction.items():
+        st.out.line(f"held: {joint} was put back from {fix['from']} to {fix['to']} counts "
+                    "(start/stop skew between the motors)")
+    if r.held_at is not None and not one_drive:
+        st.out.line(hold_line(r.held_at, r.held_until))
+    st.out.line(_one_drive_end(name, r) if one_drive else _pair_end(r))
+
+
+def _where(r: JogResult) -> str:
+    rad, counts = r.end_rad, r.end_counts
+    if counts is None:
+        return "an unknown position (PX unreadable)"
+    return f"{rad:+.4f} rad ({counts} counts)" if rad is not None else f"{counts} counts"
+
+
+def _one_drive_end(name: str, r: JogResult) -> str:
     # no duration in the text: it varies from run to run (it is in --json as duration_s)
-    text = f"{name} ({result.drive}, {result.address}): stopped at {at}, {result.ended_by}"
-    err = result.error_counts
+    text = f"{name} ({r.drives[0]}, {r.addresses[0]}): stopped at {_where(r)}, {r.ended_by}"
+    err = r.error_counts
     if err is not None:
-        err_rad = result.rad(err)
+        err_rad = r.error_rad
         text += f"; error to target {err:+d} counts" + (f" ({err_rad:+.4f} rad)" if err_rad is not None else "")
-    st.out.line(text)
+    return text
+
+
+def _pair_end(r: JogResult) -> str:
+    err = r.error_counts
+    if r.mode == "position" and r.ok:
+        how = "target reached" if err is not None and abs(err) <= 1 else \
+            f"{(r.end_counts or 0) - (r.target_counts or 0):+d} counts from the target"
+    elif r.ok:
+        how = f"after {r.for_s:g} s" if r.for_s is not None else "stopped"
+    else:
+        how = "the jog was stopped by the joint-limit watch"
+    others = [f"{j} at {_pos(p, r.joint_cpr[j])}" for j, p in r.joints_end.items() if j != r.axis]
+    text = f"{r.axis}: at {_where(r)}, {how}"
+    if others:
+        text += "; " + ", ".join(others)
+    return text
 
 
 # -- units and differential pairs (wave/jog) ------------------------------------------------------
@@ -273,13 +306,12 @@ def _jog_pair(st: AppState, cfg: ArmConfig, axis: Axis, req: MoveRequest, positi
     with st.session(buses=buses) as session:
         try:
             result = Arm(session).move(axis, req, on_progress=progress)  # a layer over the Python API
-            assert isinstance(result, joint_jog.JogResult)  # a Σ/Δ joint's or a pair motor's jog
         except BaseException as exc:
             st.out.progress(None)
             show_stop_report(st, exc)
             raise
     st.out.progress(None)
-    _render_pair(st, result)
+    _render(st, axis.name, result)
     if not result.ok:
         raise typer.Exit(1)
 
@@ -328,39 +360,6 @@ def _pair_dry_run(st: AppState, axis: Axis, req: MoveRequest, plan: joint_jog.Jo
     st.out.line(f"dry run: would jog {_axis_label(axis)}")
     st.out.line(f"  {what}: {cmds}, then {_after(req)}")
     st.out.line("nothing sent; add --apply to move")
-
-
-def _render_pair(st: AppState, r: joint_jog.JogResult) -> None:
-    if st.json_mode:
-        st.out.json(r.as_dict())
-        return
-    for line in stop_lines(st, r.stop, r.guard_lines):
-        st.out.line(f"stop: {line}")
-    cmds = "; ".join(f"{d} " + " ".join(f"{k}={v:g}" if isinstance(v, float) else f"{k}={v}" for k, v in c.items())
-                     for d, c in r.motor_commands.items())
-    if cmds:
-        st.out.line(f"sent: {cmds}")
-    for b in r.breaches:
-        st.out.line(f"limit: {b.joint} left its full range [{b.full[0]}, {b.full[1]}] on the {b.side} side: "
-                    f"stopped, nothing more sent, brought back to {r.recovered_to.get(b.joint)} counts "
-                    f"(normal range edge {b.back_to})")
-    for joint, fix in r.held_correction.items():
-        st.out.line(f"held: {joint} was put back from {fix['from']} to {fix['to']} counts "
-                    "(start/stop skew between the motors)")
-    if r.held_at is not None:
-        st.out.line(hold_line(r.held_at, r.held_until))
-    if r.mode == "position" and r.ok:
-        how = "target reached" if r.target is not None and abs(r.end - r.target) <= 1 else \
-            f"{r.end - (r.target or 0):+d} counts from the target"
-    elif r.ok:
-        how = f"after {r.duration:g} s" if r.duration is not None else "stopped"
-    else:
-        how = "the jog was stopped by the joint-limit watch"
-    others = [f"{j} at {_pos(p, r.joint_cpr[j])}" for j, p in r.joints_end.items() if j != r.axis]
-    text = f"{r.axis}: at {_pos(r.end, r.cpr)}, {how}"
-    if others:
-        text += "; " + ", ".join(others)
-    st.out.line(text)
 
 
 def hold_line(held_at: Mapping[str, int], ended_by: str) -> str:

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 from sherpa_cli.elmo.faults import StatusRegister, decode_sr, describe_mf
@@ -28,6 +28,7 @@ from sherpa_cli.motion.guard import MotionGuard
 from sherpa_cli.motion.report import GuardReport, MotionInterrupted, with_report
 from sherpa_cli.motion.request import MoveRequest
 from sherpa_cli.motion.settings import MotionSettings, check_torque_for
+from sherpa_cli.ops.jog_result import JogResult
 
 if TYPE_CHECKING:
     from sherpa_cli.bus.session import ArmSession
@@ -43,48 +44,6 @@ class JogProgress:
     elapsed: float
     counts: int
     rad: float | None
-
-
-@dataclass
-class JogResult:
-    target: str
-    drive: str
-    address: str
-    mode: str
-    start_counts: int
-    end_counts: int | None
-    target_counts: int | None  # position moves
-    command: str  # what was commanded, e.g. "PA=286", "JV=573", "TC=0.5"
-    duration: float  # s from BG until the guard had stopped the motor
-    ended_by: str  # "target reached", "time up", "Ctrl-C"
-    cpr: int | None
-    stop: GuardReport = field(default_factory=GuardReport)
-    breach: Breach | None = None  # when the joint left its full range (the jog then failed)
-    recovered_to: int | None = None  # where the limit recovery brought the joint (counts)
-    calibration: Calibration | None = None  # of a position move
-
-    @property
-    def error_counts(self) -> int | None:
-        if self.target_counts is None or self.end_counts is None:
-            return None
-        return self.end_counts - self.target_counts
-
-    def rad(self, counts: int | None) -> float | None:
-        return None if counts is None or self.cpr is None else counts_to_rad(counts, self.cpr)
-
-    def as_json(self) -> dict[str, Any]:
-        return {"target": self.target, "drive": self.drive, "address": self.address, "mode": self.mode,
-                "command": self.command, "ended_by": self.ended_by,
-                "start": {"counts": self.start_counts, "rad": self.rad(self.start_counts)},
-                "end": {"counts": self.end_counts, "rad": self.rad(self.end_counts)},
-                "target_position": None if self.target_counts is None else
-                {"counts": self.target_counts, "rad": self.rad(self.target_counts)},
-                "error": None if self.error_counts is None else
-                {"counts": self.error_counts, "rad": self.rad(self.error_counts)},
-                "duration_s": round(self.duration, 3), "stop": self.stop.as_json(),
-                "ok": self.breach is None,
-                "limit": None if self.breach is None else {**self.breach.as_dict(), "recovered_to": self.recovered_to},
-                "calibration": None if self.calibration is None else self.calibration.as_dict()}
 
 
 def check_request(target: Axis, req: MoveRequest, *, max_torque_for: float | None = None) -> None:
@@ -165,13 +124,34 @@ def run_jog(session: ArmSession, target: Axis, req: MoveRequest, *, settings: Mo
             raise
         raise carried from exc
     (stopped,) = guard.report.drives
-    return JogResult(target=target.name, drive=ref.name, address=ref.address, mode=req.mode,
-                     start_counts=state["start"], end_counts=stopped.position, target_counts=state["target"],
-                     command=state["command"],
-                     duration=state["t_end"] - state["t0"] if state["t0"] is not None else 0.0,
-                     ended_by=(hold.HELD_UNTIL_CTRL_C if state.get("holding") else "Ctrl-C") if interrupted
-                     else state["ended_by"], cpr=target.cpr, stop=guard.report,
-                     breach=state.get("breach"), recovered_to=state.get("recovered_to"), calibration=cal)
+    return _result(target, req, state, stopped.position, guard.report, cal, interrupted)
+
+
+def _result(target: Axis, req: MoveRequest, state: dict[str, Any], end: int | None, report: GuardReport,
+            cal: Calibration | None, interrupted: bool) -> JogResult:
+    """The one jog result from what the move kept in ``state``; the joint, if any, is the only one moved."""
+    ref, start = target.ref, state["start"]
+    breach: Breach | None = state.get("breach")
+    joint = target.joint.name if target.joint is not None else None
+    held_until: str = state.get("held_until", "")
+    if interrupted:  # Ctrl-C is how a hold or an open-ended velocity jog ends
+        held_until = hold.HELD_UNTIL_CTRL_C if state.get("holding") else ""
+    sent: dict[str, int | float] | None = state.get("motor_commands")
+    return JogResult(
+        axis=target.name, kind=target.kind, mode=req.mode, drives=(ref.name,), addresses=(ref.address,),
+        cpr=target.cpr, start_counts=start, end_counts=end, target_counts=state["target"],
+        speed=state.get("speed"), current=req.amps if req.mode == "torque" else None, for_s=req.duration,
+        command=state["command"], ended_by=(held_until or "Ctrl-C") if interrupted else state["ended_by"],
+        duration=state["t_end"] - state["t0"] if state["t0"] is not None else 0.0,
+        breaches=[breach] if breach is not None else [],
+        recovered_to={breach.joint: state["recovered_to"]} if breach is not None else {},
+        calibrations=[cal] if cal is not None else [], stop=report,
+        joints_start={joint: start} if joint is not None else {},
+        joints_end={joint: end} if joint is not None and end is not None else {},
+        joint_cpr={joint: target.cpr} if joint is not None and target.cpr is not None else {},
+        motors_start={ref.name: start}, motors_end={ref.name: end} if end is not None else {},
+        motor_commands={ref.name: sent} if sent is not None else {},
+        held_at=state.get("held_at"), held_until=held_until)
 
 
 def precheck(session: ArmSession, target: Axis, req: MoveRequest) -> Calibration | None:
@@ -245,6 +225,7 @@ def _move(guard: MotionGuard, target: Axis, req: MoveRequest, settings: MotionSe
             bound = _move_bound(c, target, abs(goal - start), speed)
             c.set("PA", 0, goal)
         state["command"] = f"PA={goal}"
+        state["speed"], state["motor_commands"] = speed, {"PA": goal, "SP": speed}
         state["t0"] = clock()
         c.execute("BG")
         watch(lambda sr: sr.motion_status == 0, bound, settings.stall_watch(speed))
@@ -255,6 +236,7 @@ def _move(guard: MotionGuard, target: Axis, req: MoveRequest, settings: MotionSe
         with guard.motor_off_explains_failure([ref], "the jog"):
             c.set("JV", 0, v)
         state["command"] = f"JV={v}"
+        state["speed"], state["motor_commands"] = v, {"JV": v}
         state["t0"] = clock()
         c.execute("BG")
         watch(None, req.duration, settings.stall_watch(abs(v)))
@@ -263,6 +245,7 @@ def _move(guard: MotionGuard, target: Axis, req: MoveRequest, settings: MotionSe
         guard.enable(ref, UM_TORQUE)  # TC=0 before MO=1: no old torque command is applied
         c.set("TC", 0, req.amps)
         state["command"] = f"TC={req.amps:g}"
+        state["motor_commands"] = {"TC": req.amps}
         state["t0"] = clock()
         watch(None, req.duration, settings.torque_stall_watch())
         state["ended_by"] = state["ended_by"] or "time up"
@@ -280,6 +263,9 @@ def _hold(guard: MotionGuard, c: DriveClient, target: Axis, req: MoveRequest, se
     if req.mode != "position":
         here = hold.hold_in_place(guard, [ref], settings=settings, clock=clock, sleep=sleep)[ref.name]
         state["command"] += f", then held at PA={here}"
+        state["held_at"] = {ref.name: here}
+    else:  # a move holds where it was sent, in the mode it moved in
+        state["held_at"] = {ref.name: state["target"]}
     state["holding"] = True
 
     def watch() -> bool:
@@ -290,7 +276,7 @@ def _hold(guard: MotionGuard, c: DriveClient, target: Axis, req: MoveRequest, se
 
     ended = hold.hold_until_released(guard, [ref], settings=settings, sleep=sleep, watch=watch)
     if ended is not None:
-        state["ended_by"] = ended
+        state["ended_by"] = state["held_until"] = ended
 
 
 def _move_bound(c: DriveClient, target: Axis, distance: int, speed: int) -> float:

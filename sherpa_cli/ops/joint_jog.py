@@ -27,7 +27,7 @@ import math
 import time
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 from sherpa_cli.bus.targets import DriveRef
 from sherpa_cli.config.model import ArmConfig
@@ -36,10 +36,10 @@ from sherpa_cli.errors import SafetyError, UsageError
 from sherpa_cli.motion import calibration, hold, limit_watch, recovery
 from sherpa_cli.motion.axis import Axis, move_time_bound, profile_speed
 from sherpa_cli.motion.blocked import blocked_error
-from sherpa_cli.motion.limit_watch import Breach
 from sherpa_cli.motion.report import with_report
-from sherpa_cli.motion.request import MoveRequest
+from sherpa_cli.motion.request import Mode, MoveRequest
 from sherpa_cli.motion.settings import check_torque_for
+from sherpa_cli.ops.jog_result import JogResult, letters
 
 if TYPE_CHECKING:
     from sherpa_cli.bus.session import ArmSession
@@ -55,7 +55,7 @@ class JogPlan:
     """Motor commands for one jog (pure result of :func:`plan`)."""
 
     axis: Axis
-    mode: str
+    mode: Mode
     start: int  # axis position at the start (counts)
     target: int | None = None  # position moves: where the axis ends
     speed: int | None = None  # counts/s of the axis
@@ -160,54 +160,6 @@ def check_offline(cfg: ArmConfig, axis: Axis, request: MoveRequest) -> JogPlan |
 
 # --------------------------------------------------------------------------- running it
 
-@dataclass
-class JogResult:
-    axis: str
-    kind: str
-    mode: str
-    drives: tuple[str, ...]
-    cpr: int
-    start: int
-    end: int
-    target: int | None = None
-    speed: int | None = None
-    current: float | None = None
-    duration: float | None = None
-    joints_start: dict[str, int] = field(default_factory=dict)
-    joints_end: dict[str, int] = field(default_factory=dict)
-    motors_start: dict[str, int] = field(default_factory=dict)
-    motors_end: dict[str, int] = field(default_factory=dict)
-    motor_commands: dict[str, dict[str, int | float]] = field(default_factory=dict)  # drive -> letters -> value
-    calibration: list[calibration.Calibration] = field(default_factory=list)
-    breaches: list[Breach] = field(default_factory=list)
-    recovered_to: dict[str, int] = field(default_factory=dict)  # joint positions after the recovery
-    outcome: str = "done"  # done | limit
-    held_correction: dict[str, dict[str, int]] = field(default_factory=dict)  # the held pair joint put back
-    guard_lines: list[str] = field(default_factory=list)
-    stop: dict[str, Any] = field(default_factory=dict)  # the guard's report (GuardReport.as_json)
-    joint_cpr: dict[str, int] = field(default_factory=dict)  # cpr of each watched joint
-    held_at: dict[str, int] | None = None  # --hold: the PA each motor held (None: not held)
-    held_until: str = ""  # --hold: how the hold ended (motion/hold.py)
-
-    @property
-    def ok(self) -> bool:
-        return not self.breaches
-
-    def as_dict(self) -> dict[str, Any]:
-        return {
-            "axis": self.axis, "kind": self.kind, "mode": self.mode, "drives": list(self.drives),
-            "ok": self.ok, "outcome": self.outcome, "start": self.start, "end": self.end,
-            "target": self.target, "speed": self.speed, "current": self.current, "for_s": self.duration,
-            "joints_start": dict(self.joints_start), "joints_end": dict(self.joints_end),
-            "motors_start": dict(self.motors_start), "motors_end": dict(self.motors_end),
-            "motor_commands": dict(self.motor_commands),
-            "calibration": [c.as_dict() for c in self.calibration],
-            "limit": [b.as_dict() for b in self.breaches], "recovered_to": dict(self.recovered_to),
-            "held_correction": dict(self.held_correction), "stop": dict(self.stop),
-            **({"hold": {"at": dict(self.held_at), "ended_by": self.held_until}} if self.held_at is not None else {}),
-        }
-
-
 def _refs(cfg: ArmConfig, drives: tuple[str, ...]) -> list[DriveRef]:
     return [DriveRef(d, cfg.drives[d].bus, cfg.drives[d].node, cfg.drives[d]) for d in drives]
 
@@ -260,10 +212,11 @@ def run(session: ArmSession, axis: Axis, request: MoveRequest, *,
     settings = MotionSettings.from_config(cfg, {r.bus for r in refs})
     factory = guard_factory or MotionGuard
     joints_start = {j.name: j.position(motors) for j in axis.watched}
-    result = JogResult(axis.name, axis.kind, p.mode, axis.drives, axis.joint_cpr, p.start, p.start, target=p.target,
-                       speed=p.speed, current=p.current, duration=p.duration, joints_start=joints_start,
-                       motors_start=dict(motors), calibration=cals,
-                       joint_cpr={j.name: cfg.joints[j.name].cpr for j in axis.watched})
+    result = JogResult(axis=axis.name, kind=axis.kind, mode=p.mode, drives=axis.drives,
+                       addresses=tuple(by_name[d].address for d in axis.drives), cpr=axis.joint_cpr,
+                       start_counts=p.start, end_counts=p.start, target_counts=p.target, speed=p.speed,
+                       current=p.current, for_s=p.duration, joints_start=joints_start, motors_start=dict(motors),
+                       calibrations=cals, joint_cpr={j.name: cfg.joints[j.name].cpr for j in axis.watched})
     guard = factory(session, refs, settings=settings, clock=clock, sleep=sleep, on_event=on_event)
     try:
         final = _run_guarded(guard, session, cfg, axis, p, by_name, settings, joints_start, result, clock, sleep,
@@ -276,10 +229,20 @@ def run(session: ArmSession, axis: Axis, request: MoveRequest, *,
     # the guard stopped every motor (ST, MO=0) and put back what it changed
     result.motors_end = final
     result.joints_end = {j.name: j.position(final) for j in axis.watched}
-    result.end = axis.position(final)
-    result.guard_lines = guard.report.lines()
-    result.stop = guard.report.as_json()
+    result.end_counts = axis.position(final)
+    result.stop = guard.report
+    result.command = letters(result.motor_commands)
+    result.ended_by = _ended_by(result)
     return result
+
+
+def _ended_by(result: JogResult) -> str:
+    """How the jog ended, in the words of a plain joint's jog."""
+    if result.breaches:
+        return f"left its full range, brought back to {result.breaches[0].back_to} counts"
+    if result.held_until:
+        return result.held_until
+    return "target reached" if result.mode == "position" else "time up"
 
 
 def _run_guarded(guard: MotionGuard, session: ArmSession, cfg: ArmConfig, axis: Axis, p: JogPlan,
@@ -313,92 +276,99 @@ def _move_guarded(guard: MotionGuard, session: ArmSession, cfg: ArmConfig, axis:
                   on_progress: Callable[[Mapping[str, int]], None] | None, hold_after: bool) -> dict[str, int]:
     from sherpa_cli.motion import pair_start
 
-    with contextlib.ExitStack() as stack:
-        clients = {d: guard.client(by_name[d]) for d in axis.drives}
-        # a Σ/Δ joint starts both motors together, as `diffdrive move` does (motion.pair_start)
-        method = pair_start.pair_settings(cfg)[0] if axis.kind in ("sigma", "delta") else "sequential"
-        refs = [by_name[d] for d in axis.drives]
-        start = stack.enter_context(pair_start.CommonStart(session, refs, clients, method, cfg.motion.pair_group_id,
-                                                          stop=pair_start.stop_motors(guard, refs, settings),
-                                                          reset_comm=pair_start.group_reset(guard, cfg)))
+    began: float | None = None  # the start command: what the result's duration counts from
+    try:
+        with contextlib.ExitStack() as stack:
+            clients = {d: guard.client(by_name[d]) for d in axis.drives}
+            # a Σ/Δ joint starts both motors together, as `diffdrive move` does (motion.pair_start)
+            method = pair_start.pair_settings(cfg)[0] if axis.kind in ("sigma", "delta") else "sequential"
+            refs = [by_name[d] for d in axis.drives]
+            start = stack.enter_context(pair_start.CommonStart(session, refs, clients, method, cfg.motion.pair_group_id,
+                                                              stop=pair_start.stop_motors(guard, refs, settings),
+                                                              reset_comm=pair_start.group_reset(guard, cfg)))
 
-        def check_drives() -> None:
-            """The guard's sign of life, and every moving motor still on (a trip ends the jog)."""
-            guard.check_motors_on([by_name[d] for d in clients], "the jog")
-        others = {r.name: session.client(r) for r in _refs(cfg, axis.sensed) if r.name not in clients}
+            def check_drives() -> None:
+                """The guard's sign of life, and every moving motor still on (a trip ends the jog)."""
+                guard.check_motors_on([by_name[d] for d in clients], "the jog")
+            others = {r.name: session.client(r) for r in _refs(cfg, axis.sensed) if r.name not in clients}
 
-        def sample() -> dict[str, int]:
-            # guarded drives through guard.query: it waits out a drive deaf in its MO settle window
-            # (`sherpa stop` from another terminal), so the jog ends with the reason, not a timeout
-            motors = {d: int(guard.query(by_name[d], "PX")) for d in clients}
-            motors.update((d, int(c.get("PX"))) for d, c in others.items())
-            if on_progress is not None:
-                on_progress({j.name: j.position(motors) for j in axis.watched})
-            return {d: motors[d] for d in axis.sensed}
+            def sample() -> dict[str, int]:
+                # guarded drives through guard.query: it waits out a drive deaf in its MO settle window
+                # (`sherpa stop` from another terminal), so the jog ends with the reason, not a timeout
+                motors = {d: int(guard.query(by_name[d], "PX")) for d in clients}
+                motors.update((d, int(c.get("PX"))) for d, c in others.items())
+                if on_progress is not None:
+                    on_progress({j.name: j.position(motors) for j in axis.watched})
+                return {d: motors[d] for d in axis.sensed}
 
-        um = UM_TORQUE if p.mode == "torque" else (settings.velocity_unit_mode if p.mode == "velocity"
-                                                   else UM_POSITION)
-        for d in axis.drives:
-            guard.enable(by_name[d], um)
-        if p.mode == "position":
-            with guard.motor_off_explains_failure([by_name[d] for d in clients], "the jog"):
-                for d, c in clients.items():
-                    c.set("SP", 0, p.motor_speeds[d])
-                    c.set("PA", 0, p.motor_targets[d])
-            result.motor_commands = {d: {"PA": p.motor_targets[d], "SP": p.motor_speeds[d]} for d in axis.drives}
-            start.begin()
-            watched = limit_watch.watch(
-                axis.watched, sample, clock=clock, sleep=sleep, interval=settings.poll_interval,
-                finished=lambda m: all(int(c.get("MS")) == 0 for c in clients.values()), duration=p.timeout,
-                check_drives=check_drives, stall=settings.stall_watch(max(p.motor_speeds.values(), default=0)))
-            if watched.outcome == "elapsed":
-                raise SafetyError(f"{axis.name}: did not reach {p.target} within {p.timeout:g} s "
-                                  f"(stopped at {axis.position(watched.motors)})",
-                                  hint="check the drives with `sherpa monitor --once`")
-        elif p.mode == "velocity":
-            with guard.motor_off_explains_failure([by_name[d] for d in clients], "the jog"):
-                for d, c in clients.items():
-                    c.set("JV", 0, p.motor_speeds[d])
-            result.motor_commands = {d: {"JV": p.motor_speeds[d]} for d in axis.drives}
-            start.begin()
-            watched = limit_watch.watch(axis.watched, sample, clock=clock, sleep=sleep,
-                                        interval=settings.poll_interval, duration=p.duration,
-                                        check_drives=check_drives,
-                                        stall=settings.stall_watch(max(map(abs, p.motor_speeds.values()), default=0)))
-        else:
-            result.motor_commands = {d: {"TC": p.motor_currents[d]} for d in axis.drives}
-            with guard.motor_off_explains_failure([by_name[d] for d in clients], "the jog"):
-                for d, c in clients.items():
-                    c.set("TC", 0, p.motor_currents[d])
-            watched = limit_watch.watch(axis.watched, sample, clock=clock, sleep=sleep,
-                                        interval=settings.poll_interval, duration=p.duration,
-                                        check_drives=check_drives, stall=settings.torque_stall_watch())
-        if watched.outcome == "stalled":
-            raise blocked_error(session.cfg, clients, axis.drives, settings.stall_time, who=axis.name,
-                                at=f"at {axis.position(watched.motors)} counts")
-        held = {j.name: joints_start[j.name] for j in axis.watched
-                if axis.kind in ("sigma", "delta") and j.name != axis.name and j.drive_b is not None}
-        if watched.outcome == "breach":
-            result.outcome = "limit"
-            result.breaches = list(watched.breaches)
-            recovery.recover(guard, by_name, clients, axis.watched, watched.breaches, sample, settings=settings,
-                             clock=clock, sleep=sleep, torque=p.mode == "torque", hold=held,
-                             speed=recovery.recovery_speed(settings, [axis, *axis.watched]))
-            final = sample()
-            result.recovered_to = {j.name: j.position(final) for j in axis.watched}
-        else:
-            if p.mode != "position":
-                recovery.stop_now(clients, p.mode, settings.stop_method)
-                recovery.wait_standstill(clients, settings, clock, sleep, guard.check,
-                                         before="the correction of the held joint")
-            final = sample()
-            if held and p.mode != "position":
-                # start and stop skew between the two motors shifts the held joint a little (seed
-                # Fig. 9.10/9.11): put it back, keeping the moved joint where it ended
-                final = _restore_held(guard, by_name, clients, axis, final, held, settings, clock, sleep, result)
-    # held after the pair start's exit: its stop frames (ST) went out and its RAM is back
-    if hold_after and not result.breaches:
-        final = _hold(guard, axis, by_name, clients, sample, held, settings, clock, sleep, result)
+            um = UM_TORQUE if p.mode == "torque" else (settings.velocity_unit_mode if p.mode == "velocity"
+                                                       else UM_POSITION)
+            for d in axis.drives:
+                guard.enable(by_name[d], um)
+            if p.mode == "position":
+                with guard.motor_off_explains_failure([by_name[d] for d in clients], "the jog"):
+                    for d, c in clients.items():
+                        c.set("SP", 0, p.motor_speeds[d])
+                        c.set("PA", 0, p.motor_targets[d])
+                result.motor_commands = {d: {"PA": p.motor_targets[d], "SP": p.motor_speeds[d]} for d in axis.drives}
+                start.begin()
+                began = clock()
+                watched = limit_watch.watch(
+                    axis.watched, sample, clock=clock, sleep=sleep, interval=settings.poll_interval,
+                    finished=lambda m: all(int(c.get("MS")) == 0 for c in clients.values()), duration=p.timeout,
+                    check_drives=check_drives, stall=settings.stall_watch(max(p.motor_speeds.values(), default=0)))
+                if watched.outcome == "elapsed":
+                    raise SafetyError(f"{axis.name}: did not reach {p.target} within {p.timeout:g} s "
+                                      f"(stopped at {axis.position(watched.motors)})",
+                                      hint="check the drives with `sherpa monitor --once`")
+            elif p.mode == "velocity":
+                with guard.motor_off_explains_failure([by_name[d] for d in clients], "the jog"):
+                    for d, c in clients.items():
+                        c.set("JV", 0, p.motor_speeds[d])
+                result.motor_commands = {d: {"JV": p.motor_speeds[d]} for d in axis.drives}
+                start.begin()
+                began = clock()
+                watched = limit_watch.watch(axis.watched, sample, clock=clock, sleep=sleep,
+                                            interval=settings.poll_interval, duration=p.duration,
+                                            check_drives=check_drives,
+                                            stall=settings.stall_watch(max(map(abs, p.motor_speeds.values()),
+                                                                           default=0)))
+            else:
+                result.motor_commands = {d: {"TC": p.motor_currents[d]} for d in axis.drives}
+                with guard.motor_off_explains_failure([by_name[d] for d in clients], "the jog"):
+                    for d, c in clients.items():
+                        c.set("TC", 0, p.motor_currents[d])
+                began = clock()  # a current acts once it is set
+                watched = limit_watch.watch(axis.watched, sample, clock=clock, sleep=sleep,
+                                            interval=settings.poll_interval, duration=p.duration,
+                                            check_drives=check_drives, stall=settings.torque_stall_watch())
+            if watched.outcome == "stalled":
+                raise blocked_error(session.cfg, clients, axis.drives, settings.stall_time, who=axis.name,
+                                    at=f"at {axis.position(watched.motors)} counts")
+            held = {j.name: joints_start[j.name] for j in axis.watched
+                    if axis.kind in ("sigma", "delta") and j.name != axis.name and j.drive_b is not None}
+            if watched.outcome == "breach":
+                result.breaches = list(watched.breaches)
+                recovery.recover(guard, by_name, clients, axis.watched, watched.breaches, sample, settings=settings,
+                                 clock=clock, sleep=sleep, torque=p.mode == "torque", hold=held,
+                                 speed=recovery.recovery_speed(settings, [axis, *axis.watched]))
+                final = sample()
+                result.recovered_to = {j.name: j.position(final) for j in axis.watched}
+            else:
+                if p.mode != "position":
+                    recovery.stop_now(clients, p.mode, settings.stop_method)
+                    recovery.wait_standstill(clients, settings, clock, sleep, guard.check,
+                                             before="the correction of the held joint")
+                final = sample()
+                if held and p.mode != "position":
+                    # start and stop skew between the two motors shifts the held joint a little (seed
+                    # Fig. 9.10/9.11): put it back, keeping the moved joint where it ended
+                    final = _restore_held(guard, by_name, clients, axis, final, held, settings, clock, sleep, result)
+        # held after the pair start's exit: its stop frames (ST) went out and its RAM is back
+        if hold_after and not result.breaches:
+            final = _hold(guard, axis, by_name, clients, sample, held, settings, clock, sleep, result)
+    finally:
+        result.duration = clock() - began if began is not None else 0.0
     return final
 
 
@@ -415,7 +385,6 @@ def _hold(guard: MotionGuard, axis: Axis, by_name: Mapping[str, DriveRef], clien
         breaches = limit_watch.check(axis.watched, motors)
         if not breaches:
             return False
-        result.outcome = "limit"
         result.breaches = list(breaches)
         recovery.recover(guard, by_name, clients, axis.watched, breaches, sample, settings=settings, clock=clock,
                          sleep=sleep, hold=held, speed=recovery.recovery_speed(settings, [axis, *axis.watched]))
