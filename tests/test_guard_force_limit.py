@@ -136,3 +136,17 @@ def test_a_sensor_that_goes_silent_during_the_motion_stops_it():
             end = session.sim.drives["wrist_drive"].motor.counts
             on = session.sim.drives["wrist_drive"].motor_on
     assert not on and 0 < end < 250, end  # 3 s at 100 counts/s would end at 300
+
+
+def test_the_api_takes_a_force_limit_per_call_and_puts_the_sessions_back():
+    from sherpa_cli.bus.session import ArmSession
+    from sherpa_cli.sim.arm import SimArm
+
+    cfg = quiet(load_config(ARM))
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as session:
+        arm = Arm(session)
+        with pytest.raises(ForceLimitError, match=r"> 12 N"):
+            arm.jog("wrist", to=800 * 2 * math.pi / CPR, uncalibrated=True, force_limit=12.0)
+        assert session.force_limit is None  # one call's, not the session's from now on
+        with pytest.raises(Exception, match="expected a force in N"):
+            arm.jog("wrist", by=0.01, uncalibrated=True, force_limit=-1.0)

@@ -10,6 +10,7 @@ and a ``confirm_save`` that says yes -- as ``--apply``, ``--save`` and ``--yes``
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from contextlib import contextmanager
 from pathlib import Path
@@ -206,7 +207,7 @@ class Arm:
 
     def jog(self, name: str, *, to: Value = None, by: Value = None, velocity: Value = None, torque: Value = None,
             duration: float | None = None, uncalibrated: bool = False, hold: bool = False,
-            on_progress: Callable[[object], None] | None = None) -> JogResult:
+            on_progress: Callable[[object], None] | None = None, force_limit: float | None = None) -> JogResult:
         """Move one joint, Σ/Δ joint, pair motor or drive (`sherpa jog NAME ... --apply`).
 
         Exactly one of ``to``/``by`` (position), ``velocity`` (with ``duration`` for a pair) or
@@ -219,7 +220,8 @@ class Arm:
         (KeyboardInterrupt, a normal end then: ``ended_by`` / ``held_until`` say so) or `sherpa stop`.
         Every kind of axis returns the one :class:`~sherpa_cli.ops.jog_result.JogResult`: counts as
         the drives count them (``start_counts``, ``end_counts``) and rad beside them (``start_rad``,
-        ``end_rad``).
+        ``end_rad``). ``force_limit`` (N): tighter than the F/T sensor's own for this move
+        (`--force-limit`); crossing it raises ForceLimitError with every motor stopped (docs/motion.md).
         """
         from sherpa_cli.motion.axis import resolve_axis
         from sherpa_cli.motion.request import parse_request
@@ -233,15 +235,39 @@ class Arm:
         axis = resolve_axis(self.config, name)
         req = parse_request(axis, mode, to=to, by=by, velocity=velocity, torque=torque, duration=duration,
                             uncalibrated=uncalibrated, hold=hold)
-        return self.move(axis, req, on_progress=on_progress)
+        return self.move(axis, req, on_progress=on_progress, force_limit=force_limit)
 
     def move(self, axis: Axis, request: MoveRequest, *, settings: MotionSettings | None = None,
              on_progress: Callable[[object], None] | None = None,
-             clock: Callable[[], float] | None = None, sleep: Callable[[float], None] | None = None
-             ) -> JogResult:
+             clock: Callable[[], float] | None = None, sleep: Callable[[float], None] | None = None,
+             force_limit: float | None = None) -> JogResult:
         """Run one parsed request on one axis (motion/axis.py, motion/request.py): what :meth:`jog`
         and the `jog` command both end in. A pair's axis (Σ/Δ joint, pair motor) moves both motors.
-        ``clock``/``sleep``: the time the move runs on (default wall time; tests step it)."""
+        ``clock``/``sleep``: the time the move runs on (default wall time; tests step it).
+        ``force_limit``: as :meth:`jog`'s."""
+        with self._force_limit(force_limit):
+            return self._move(axis, request, settings=settings, on_progress=on_progress, clock=clock, sleep=sleep)
+
+    @contextmanager
+    def _force_limit(self, value: float | None) -> Iterator[None]:
+        """The session's F/T force limit for one call (every motion guard of the session watches it);
+        None leaves the session's as it is (the `--force-limit` of a command)."""
+        if value is None:
+            yield
+            return
+        if not (value > 0 and math.isfinite(value)):
+            from sherpa_cli.errors import UsageError
+
+            raise UsageError(f"force_limit {value:g}: expected a force in N, > 0")
+        before, self._session.force_limit = self._session.force_limit, value
+        try:
+            yield
+        finally:
+            self._session.force_limit = before
+
+    def _move(self, axis: Axis, request: MoveRequest, *, settings: MotionSettings | None,
+              on_progress: Callable[[object], None] | None,
+              clock: Callable[[], float] | None, sleep: Callable[[float], None] | None) -> JogResult:
         import time
 
         from sherpa_cli.motion.settings import MotionSettings
@@ -289,7 +315,7 @@ class Arm:
                        uncalibrated: bool = False, poll: bool = False, source: str = "can", hold: bool = False,
                        on_event: Callable[[str], None] | None = None,
                        on_progress: Callable[[Mapping[str, int]], None] | None = None,
-                       timebase: StepTime | None = None) -> MoveResult:
+                       timebase: StepTime | None = None, force_limit: float | None = None) -> MoveResult:
         """Move the Σ and Δ joints of a pair together (`sherpa diffdrive move PAIR ... --apply`).
 
         ``pair``: the pair, or one of its joints or motors. ``sigma``/``delta``: targets (offsets with
@@ -301,6 +327,7 @@ class Arm:
         they ended, the dead-man armed, until Ctrl-C (KeyboardInterrupt, a normal end then) or
         `sherpa stop`; ``on_progress`` sees Σ and Δ (counts) meanwhile. ``timebase``: the clock, waits
         and SYNC source the move runs on (default wall time; tests step it, sim/stepped.py).
+        ``force_limit``: as :meth:`jog`'s.
         """
 
         from sherpa_cli.bus.targets import pair_of
@@ -313,8 +340,9 @@ class Arm:
                                    naive=naive, feedback=feedback, uncalibrated=uncalibrated, poll=poll,
                                    source=source, hold=hold)
         p = pair_of(self.config, pair)
-        return diffdrive.run_move(self._session, p, req, on_event=on_event, timebase=timebase,
-                                  on_progress=on_progress)
+        with self._force_limit(force_limit):
+            return diffdrive.run_move(self._session, p, req, on_event=on_event, timebase=timebase,
+                                      on_progress=on_progress)
 
     def log_step(self, name: str, mode: str, value: float, *, duration: float = 2.0, rate: float = 1000.0,
                  uncalibrated: bool = False, mode_first: bool = False, hold: float = 0.0,
