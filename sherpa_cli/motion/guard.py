@@ -837,6 +837,8 @@ class MotionGuard:
     def _await_boot(self, d: _Drive) -> None:
         """Until the boot-up of a drive another node reset (bounded by protocol.boot_timeout): it
         hears nothing while it boots, an NMT start included."""
+        if not self._watch.resetting(d.ref.bus, d.ref.node):
+            return
         deadline = self._clock() + self.session.cfg.protocol.boot_timeout
         while self._watch.resetting(d.ref.bus, d.ref.node) and self._clock() < deadline:
             self._pulse(exact=True)
