@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import sys
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
 from typing import TYPE_CHECKING
 
@@ -15,6 +15,7 @@ from sherpa_cli.errors import ExitCode, UsageError
 from sherpa_cli.words import plural
 
 if TYPE_CHECKING:
+    from sherpa_cli.ops.ft import SensorReading
     from sherpa_cli.ops.scan import NodeFinding, ScanReport
 
 
@@ -40,6 +41,7 @@ def scan(
       sherpa scan --bus can1 --reset --apply
     """
     from sherpa_cli.api import Arm
+    from sherpa_cli.ops.ft import read_sensors
 
     st = state(ctx)
     cfg = st.load_config()
@@ -52,14 +54,17 @@ def scan(
         st.out.warn(f"dry run: --reset would send NMT reset communication to every node of "
                     f"{', '.join(selected)} (PDOs and heartbeat settings back to their saved values); not sent (add --apply)")
         reset = False
+    sensors = [d for d in cfg.ft_sensors() if d.bus in selected]
     with st.session(buses=selected) as session, _progress(st, selected) as progress:
         report = Arm(session).scan(selected, reset=reset, progress=progress)
-    _render(st, report)
+        # an F/T sensor is no CANopen node (no SDO, no node id): one request on its base id says it is there
+        readings = read_sensors(session, [d for d in sensors if d.bus in session.links]) if sensors else []
+    _render(st, report, readings)
     if report.bus_errors:
         first = report.bus_errors[0]
         code = getattr(first.error, "exit_code", ExitCode.BUS)
         raise typer.Exit(int(code) if code != ExitCode.PROBLEM else int(ExitCode.BUS))
-    if report.problems:
+    if report.problems or any(r.wrench is None for r in readings):
         raise typer.Exit(int(ExitCode.PROBLEM))
 
 
@@ -105,10 +110,10 @@ def _warn_host_id(st: AppState, report: ScanReport) -> None:
                             "from tripping; give the tool ids no device uses")
 
 
-def _render(st: AppState, report: ScanReport) -> None:
+def _render(st: AppState, report: ScanReport, readings: Sequence[SensorReading] = ()) -> None:
     _warn_host_id(st, report)
     if st.json_mode:
-        st.out.json(report.as_json())
+        st.out.json({**report.as_json(), **({"ft_sensors": [r.as_json() for r in readings]} if readings else {})})
         return
     for bus in report.buses:
         if bus.error is not None:
@@ -138,6 +143,13 @@ def _render(st: AppState, report: ScanReport) -> None:
     if report.slow:
         summary.append(f"answering slowly: {', '.join(report.slow)} (over {report.settings.slow_factor:g}x the bus's "
                        f"median answer time and over {report.settings.slow_floor_s * 1000:g} ms)")
+    for r in readings:
+        where = (f"F/T sensor {r.device} ({r.bus}, base 0x{r.base_id:03X}, replies on "
+                 f"0x{r.base_id + 5:03X}/0x{r.base_id + 6:03X})")
+        if r.wrench is None:
+            summary.append(f"{where}: no answer: {r.problem}")
+        else:
+            st.out.line(f"{where}: answered, |F| {r.wrench.force:.2f} N, status {r.wrench.status}")
     if summary:
         for line in summary:
             st.out.line(line)
