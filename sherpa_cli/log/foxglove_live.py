@@ -33,6 +33,7 @@ from sherpa_cli import netaddr
 from sherpa_cli.config.model import ArmConfig
 from sherpa_cli.elmo.faults import Emcy
 from sherpa_cli.errors import UsageError
+from sherpa_cli.joints.jointmap import joint_maps
 from sherpa_cli.joints.units import counts_per_s_to_rad_per_s, counts_to_rad
 from sherpa_cli.log import ros_msgs
 from sherpa_cli.log.capture import frame_bits
@@ -104,23 +105,13 @@ def joint_states_from_counts(cfg: ArmConfig, counts: Mapping[str, tuple[int, int
     names: list[str] = []
     pos: list[float] = []
     vel: list[float] = []
-    for joint in cfg.joints.values():
-        if joint.drive is not None:
-            if joint.drive not in counts:
-                continue
-            px, vx = counts[joint.drive]
-        elif joint.pair is not None:
-            pair = cfg.pairs[joint.pair]
-            if pair.drive_a not in counts or pair.drive_b not in counts:
-                continue
-            sign = 1 if joint.name == pair.sigma else -1
-            (pa, va), (pb, vb) = counts[pair.drive_a], counts[pair.drive_b]
-            px, vx = pa + sign * pb, va + sign * vb
-        else:
+    for m in joint_maps(cfg):
+        if not all(d in counts for d in m.drives):
             continue
-        names.append(joint.name)
-        pos.append(counts_to_rad(px, joint.cpr))
-        vel.append(counts_per_s_to_rad_per_s(vx, joint.cpr))
+        (pa, va), (pb, vb) = counts[m.a], (counts[m.b] if m.b is not None else (None, None))
+        names.append(m.joint)
+        pos.append(counts_to_rad(m.value(pa, pb), m.cpr))
+        vel.append(counts_per_s_to_rad_per_s(m.value(va, vb), m.cpr))
     return names, pos, vel
 
 

@@ -35,6 +35,7 @@ from sherpa_cli.devices import encoder
 from sherpa_cli.devices.ft_sensor import FtReader, FtTrack, Wrench, open_reader
 from sherpa_cli.elmo.protocol import SYNC_ID
 from sherpa_cli.errors import CommunicationError, SdoError, SherpaError, UsageError
+from sherpa_cli.joints.jointmap import JointMap, joint_map, joint_maps
 from sherpa_cli.joints.units import counts_per_s_to_rad_per_s, counts_to_rad
 from sherpa_cli.log.capture import frame_bits
 from sherpa_cli.log.recording import Recording
@@ -957,23 +958,18 @@ class Recorder:
             cur = by_name[name][1]
             return [cur.get(k, nan) for k in keys]
 
-        for joint in self.cfg.joints.values():
-            if joint.drive is not None and joint.drive in by_name:
-                px, vx = motor(joint.drive, 0), motor(joint.drive, 1)
-                rec.columns[f"{joint.name}.pos_rad"] = [counts_to_rad(v, joint.cpr) if v == v else nan for v in px]
-                rec.columns[f"{joint.name}.vel_rad_s"] = [counts_per_s_to_rad_per_s(v, joint.cpr) if v == v else nan
-                                                          for v in vx]
-                if self.current:
-                    rec.columns[f"{joint.name}.cur_a"] = amps(joint.drive)
-            elif joint.pair is not None:
-                pair = self.cfg.pairs[joint.pair]
-                if pair.drive_a not in by_name or pair.drive_b not in by_name:
-                    continue
-                sign = 1 if joint.name == pair.sigma else -1
-                for col, which, conv in (("pos_rad", 0, counts_to_rad), ("vel_rad_s", 1, counts_per_s_to_rad_per_s)):
-                    a, b = motor(pair.drive_a, which), motor(pair.drive_b, which)
-                    rec.columns[f"{joint.name}.{col}"] = [conv(x + sign * y, joint.cpr) if x == x and y == y else nan
-                                                          for x, y in zip(a, b, strict=True)]  # a sample one drive missed
+        for m in joint_maps(self.cfg):
+            if not all(d in by_name for d in m.drives):
+                continue
+            for col, which, conv in (("pos_rad", 0, counts_to_rad), ("vel_rad_s", 1, counts_per_s_to_rad_per_s)):
+                if m.b is None:
+                    rec.columns[f"{m.joint}.{col}"] = [conv(v, m.cpr) if v == v else nan for v in motor(m.a, which)]
+                else:
+                    a, b = motor(m.a, which), motor(m.b, which)
+                    rec.columns[f"{m.joint}.{col}"] = [conv(m.value(x, y), m.cpr) if x == x and y == y else nan
+                                                       for x, y in zip(a, b, strict=True)]  # a sample one drive missed
+            if self.current and m.b is None:
+                rec.columns[f"{m.joint}.cur_a"] = amps(m.a)
         for ref in self.refs:
             rec.columns[f"{ref.name}.px"] = motor(ref.name, 0)
             rec.columns[f"{ref.name}.vx"] = motor(ref.name, 1)
@@ -1065,17 +1061,16 @@ class Poller:
                                                         for v in rec.columns[f"{joint.drive}.px"]]
                 rec.columns[f"{joint.name}.vel_rad_s"] = [counts_per_s_to_rad_per_s(v, joint.cpr) if v == v else nan
                                                           for v in rec.columns[f"{joint.drive}.vx"]]
-            elif joint.pair is not None:
-                pair = cfg.pairs[joint.pair]
-                if f"{pair.drive_a}.px" in rec.columns and f"{pair.drive_b}.px" in rec.columns:
-                    sign = 1 if joint.name == pair.sigma else -1
-                    rec.columns[f"{joint.name}.pos_rad"], rec.columns[f"{joint.name}.vel_rad_s"] = \
-                        self._pair_columns(pair.drive_a, pair.drive_b, sign, joint.cpr)
+            elif (m := joint_map(cfg, joint)) is not None and m.b is not None \
+                    and f"{m.a}.px" in rec.columns and f"{m.b}.px" in rec.columns:
+                rec.columns[f"{joint.name}.pos_rad"], rec.columns[f"{joint.name}.vel_rad_s"] = self._pair_columns(m)
         return rec
 
-    def _pair_columns(self, a: str, b: str, sign: int, cpr: int) -> tuple[list[float], list[float]]:
+    def _pair_columns(self, m: JointMap) -> tuple[list[float], list[float]]:
         """A bus's poll thread reads its drives in the same order every round, so the pair's rows
         alternate: each second reading completes a round with the other motor's reading before it."""
+        a, b = m.a, m.b
+        assert b is not None  # a pair joint's map
         pos, vel = [math.nan] * len(self.rows), [math.nan] * len(self.rows)
         first: dict[str, tuple[int, int]] = {}
         for i, (_, name, px, vx, _iq) in enumerate(self.rows):
@@ -1086,7 +1081,7 @@ class Poller:
                 first = {name: (px, vx)}
                 continue
             (pa, va), (pb, vb) = ((px, vx), first[b]) if name == a else (first[a], (px, vx))
-            pos[i] = counts_to_rad(pa + sign * pb, cpr)
-            vel[i] = counts_per_s_to_rad_per_s(va + sign * vb, cpr)
+            pos[i] = counts_to_rad(m.value(pa, pb), m.cpr)
+            vel[i] = counts_per_s_to_rad_per_s(m.value(va, vb), m.cpr)
             first = {}
         return pos, vel

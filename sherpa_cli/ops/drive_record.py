@@ -22,6 +22,7 @@ from sherpa_cli.bus.targets import DriveRef
 from sherpa_cli.config.model import ArmConfig
 from sherpa_cli.elmo.recorder import SIGNALS, DriveRecorder, RecorderPlan, RecorderSettings, plan_recording
 from sherpa_cli.errors import SherpaError
+from sherpa_cli.joints.jointmap import joint_map
 from sherpa_cli.joints.units import counts_per_s_to_rad_per_s, counts_to_rad
 from sherpa_cli.log.recording import Recording
 
@@ -160,15 +161,13 @@ def to_recording(cfg: ArmConfig, refs: Sequence[DriveRef], data: dict[str, dict[
                 rec.columns[f"{joint.name}.vel_rad_s"] = [counts_per_s_to_rad_per_s(v, joint.cpr) for v in d["vel"][:n]]
             if "cur" in d:
                 rec.columns[f"{joint.name}.cur_a"] = list(d["cur"][:n])
-        elif joint.pair is not None:
-            pair = cfg.pairs[joint.pair]
-            a, b = data.get(pair.drive_a), data.get(pair.drive_b)
+        elif (m := joint_map(cfg, joint)) is not None and m.b is not None:
+            a, b = data.get(m.a), data.get(m.b)
             if a is None or b is None:
                 continue
-            sign = 1 if joint.name == pair.sigma else -1
             for signal, col, conv in (("pos", "pos_rad", counts_to_rad), ("vel", "vel_rad_s", counts_per_s_to_rad_per_s)):
                 if signal in a and signal in b:
-                    rec.columns[f"{joint.name}.{col}"] = [conv(x + sign * y, joint.cpr)
+                    rec.columns[f"{joint.name}.{col}"] = [conv(m.value(x, y), m.cpr)
                                                           for x, y in zip(a[signal][:n], b[signal][:n], strict=True)]
     for ref in refs:
         d = data.get(ref.name, {})
