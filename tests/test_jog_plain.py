@@ -88,7 +88,7 @@ def test_torque_jog_for_a_time_stops_and_restores_the_unit_mode(cfg):
 @pytest.mark.parametrize("req,match", [
     (dict(mode="torque", torque=0.5), "needs --for"),
     (dict(mode="torque", torque=2.5, duration=1), "continuous current limit 2.0 A"),
-    (dict(mode="velocity", velocity=20.0), "above j1's velocity limit"),
+    (dict(mode="velocity", velocity=20.0), r"j1: --velocity 19.9994 rad/s \(12732 counts/s\) is above the joint's speed limit "),
     (dict(mode="position", to=1.0, by=1.0), "exactly one of --to or --by"),
     (dict(mode="position", to=1.0, duration=1.0), "--for applies to"),
     (dict(mode="velocity", velocity=1.0, duration=0.0), "--for 0.0"),

@@ -31,6 +31,7 @@ from sherpa_cli.config.model import ArmConfig, JointConfig, JointRole, PairConfi
 from sherpa_cli.errors import UsageError
 from sherpa_cli.joints import diffpair
 from sherpa_cli.joints.diffpair import Range
+from sherpa_cli.joints.units import counts_to_rad
 
 Motors = Mapping[str, int]  # drive name -> motor position (counts, PX)
 
@@ -55,6 +56,28 @@ def move_time_bound(distance: float, speed: float, accel: float | None = None, d
     v = max(abs(speed), 1.0)
     ramps = (v / abs(accel) if accel else 0.0) + (v / abs(decel) if decel else 0.0)
     return 2 * (abs(distance) / v + ramps) + MOVE_SLACK_S
+
+
+def speed_refusal(axis: Axis, counts_per_s: int, what: str) -> UsageError | None:
+    """The one speed check of every mover (jog, a pair's jog, the live jog): why ``counts_per_s``
+    may not be sent on ``axis``, or None. A joint without a configured speed limit is refused too:
+    never an unchecked speed (the seed's rosparam format has no limit)."""
+    joint = axis.joint
+    limit = axis.vel_limit  # a pair motor's: the slower of its pair's joints
+    if limit is None:
+        where = f"joints.{joint.name}.velocity.limit" if joint is not None else "velocity.limit of its joint"
+        return UsageError(f"{axis.name}: no speed limit configured ({where} is missing), so {what} cannot be checked",
+                          hint="give the joint `velocity: {limit: COUNTS_PER_S}` in the config")
+    if abs(counts_per_s) <= limit:
+        return None
+    cpr = axis.cpr
+    if cpr is None:
+        asked, allowed = f"{abs(counts_per_s)} counts/s", f"{limit} counts/s"
+    else:
+        asked = f"{counts_to_rad(abs(counts_per_s), cpr):.4f} rad/s ({abs(counts_per_s)} counts/s)"
+        allowed = f"{counts_to_rad(limit, cpr):.4f} rad/s ({limit} counts/s)"
+    return UsageError(f"{axis.name}: {what} {asked} is above the joint's speed limit {allowed}",
+                      hint="ask for less, or raise velocity.limit in the config")
 
 
 @dataclass(frozen=True)

@@ -22,7 +22,7 @@ from sherpa_cli.elmo.protocol import UM_POSITION, UM_TORQUE
 from sherpa_cli.errors import SafetyError, UsageError
 from sherpa_cli.joints.units import counts_to_rad
 from sherpa_cli.motion import hold
-from sherpa_cli.motion.axis import Axis, profile_speed
+from sherpa_cli.motion.axis import Axis, profile_speed, speed_refusal
 from sherpa_cli.motion.blocked import StallWatch, blocked_error
 from sherpa_cli.motion.guard import MotionGuard
 from sherpa_cli.motion.report import GuardReport, MotionInterrupted, with_report
@@ -83,15 +83,9 @@ def check_request(target: Axis, req: MoveRequest, *, max_torque_for: float | Non
 
 
 def _check_speed(target: Axis, counts: int, option: str) -> None:
-    joint = target.joint
-    if joint is None or joint.vel_limit is None:  # never an unchecked speed (seed rosparam has no limit)
-        where = f"joints.{joint.name}.velocity.limit" if joint is not None else "velocity.limit of its joint"
-        raise UsageError(f"{target.name}: no speed limit configured ({where} is missing), so a velocity jog "
-                         "cannot be checked", hint="give the joint `velocity: {limit: COUNTS_PER_S}` in the config")
-    if abs(counts) > joint.vel_limit:
-        rad, limit = counts_to_rad(abs(counts), joint.cpr), counts_to_rad(joint.vel_limit, joint.cpr)
-        raise UsageError(f"{option} {rad:.4f} rad/s ({abs(counts)} counts/s) is above {joint.name}'s "
-                         f"velocity limit {limit:.4f} rad/s ({joint.vel_limit} counts/s)")
+    refusal = speed_refusal(target, counts, option)
+    if refusal is not None:
+        raise refusal
 
 
 def run_jog(session: ArmSession, target: Axis, req: MoveRequest, *, settings: MotionSettings,

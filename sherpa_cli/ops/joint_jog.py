@@ -34,7 +34,7 @@ from sherpa_cli.config.model import ArmConfig
 from sherpa_cli.elmo.protocol import UM_POSITION, UM_TORQUE
 from sherpa_cli.errors import SafetyError, UsageError
 from sherpa_cli.motion import calibration, hold, limit_watch, recovery
-from sherpa_cli.motion.axis import Axis, move_time_bound, profile_speed
+from sherpa_cli.motion.axis import Axis, move_time_bound, profile_speed, speed_refusal
 from sherpa_cli.motion.blocked import blocked_error
 from sherpa_cli.motion.report import with_report
 from sherpa_cli.motion.request import Mode, MoveRequest
@@ -74,12 +74,9 @@ def _fmt_range(r: Range) -> str:
 def _check_speed(axis: Axis, speed: int, what: str) -> None:
     if speed == 0:
         raise UsageError(f"{what} must not be 0")
-    if axis.vel_limit is None:  # never an unchecked speed (the seed's rosparam format has no limit)
-        raise UsageError(f"{axis.name}: no speed limit configured (velocity.limit of the joint is missing), so "
-                         f"{what} cannot be checked", hint="give the joint `velocity: {limit: COUNTS_PER_S}`")
-    if abs(speed) > axis.vel_limit:
-        raise UsageError(f"{axis.name}: {what} {abs(speed)} counts/s is above the joint's speed limit "
-                          f"{axis.vel_limit} counts/s", hint="ask for less, or raise velocity.limit in the config")
+    refusal = speed_refusal(axis, speed, what)
+    if refusal is not None:
+        raise refusal
 
 
 def plan(cfg: ArmConfig, axis: Axis, request: MoveRequest, motors: Mapping[str, int]) -> JogPlan:

@@ -40,7 +40,7 @@ from sherpa_cli.elmo.protocol import UM_POSITION, UM_TORQUE
 from sherpa_cli.errors import ExitCode, SafetyError, SherpaError, UsageError
 from sherpa_cli.joints.units import counts_to_rad
 from sherpa_cli.motion import calibration, limit_watch, recovery
-from sherpa_cli.motion.axis import Axis, joint_axis, joints_moved_by, profile_speed
+from sherpa_cli.motion.axis import Axis, joint_axis, joints_moved_by, profile_speed, speed_refusal
 from sherpa_cli.motion.blocked import StallWatch, blocked_text
 from sherpa_cli.motion.guard import MotionGuard
 from sherpa_cli.motion.report import GuardReport
@@ -248,12 +248,9 @@ class LiveJog:
         """Run the joint at ``counts_per_s`` until ``keepalive`` s without a new command (0 stops)."""
         a = self._axis(name)
         v = int(counts_per_s)
-        if a.vel_limit is None:  # never an unchecked speed, as on the command line (jog --velocity)
-            return self._refuse(name, f"{name}: no speed limit configured (velocity.limit), so a velocity "
-                                      "command cannot be checked: not sent")
-        if abs(v) > a.vel_limit:
-            return self._refuse(name, f"{name}: {abs(v)} counts/s is above the joint's speed limit "
-                                      f"{a.vel_limit} counts/s: not sent")
+        refusal = speed_refusal(a, v, "the set point")  # as on the command line (jog --velocity)
+        if refusal is not None:
+            return self._refuse(name, f"{refusal.message}: not sent")
         return self._run(name, "velocity", a.motor_velocities(v))
 
     def set_torque(self, name: str, amps: float) -> str:
