@@ -351,6 +351,19 @@ def test_wiring_check_reports_a_switch_that_changes_nothing():
     assert "no input changed" in report.findings[0].line()
 
 
+def test_wiring_check_of_a_joint_standing_on_its_switch_says_not_checked_not_broken_wire():
+    """After `home` the joint stands on its home switch: the input is active before the press and
+    stays so. That is no broken wire (the newcomer's run said FAULT); the check cannot tell, and says so."""
+    cfg = load_config(ARM)
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
+        drive = cfg.joints["stiff"].drive
+        s.sim.press_switch(drive, 3, True)  # the joint stands on input 3
+        report = home.check_wiring(s, "stiff", lambda p: None)
+    assert [(f.input, f.verdict) for f in report.findings] == [(3, "already active"), (4, "no change")]
+    assert report.findings[0].line().startswith("NOT CHECKED: ") and "jog it off the switch" in report.findings[0].line()
+    assert not report.ok
+
+
 # -- a second device type: the CANopen absolute encoder (CiA 406) -------------------------------------
 
 def test_device_registry_matches_the_config_types():

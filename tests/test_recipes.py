@@ -268,3 +268,18 @@ def test_cli_unreadable_recipe_and_unwritable_reports_exit_2_no_traceback(cli, t
     r = cli("recipe", "run", str(path), "--report", str(blocker / "report.json"))
     assert r.exit_code == 2 and "Traceback" not in r.stderr
     assert f"--report {blocker / 'report.json'}: cannot write the report" in r.stderr
+
+
+def test_recipe_dir_points_at_the_recipes_own_directory_from_any_working_directory(tmp_path, monkeypatch):
+    """The Section 9 recipe's bands table is found from any directory (run from /tmp its last step
+    failed after every figure: "--bands docs/section9/bands.yaml: cannot read it"); outputs stay
+    relative to where it runs."""
+    from sherpa_cli.recipes.model import load_recipe
+
+    root = Path(__file__).resolve().parent.parent
+    monkeypatch.chdir(tmp_path)
+    recipe = load_recipe(root / "recipes" / "seed-section9.yaml")
+    summary = next(s for s in recipe.steps if "section9" in " ".join(s.argv) and "--bands" in s.argv)
+    bands = Path(summary.argv[summary.argv.index("--bands") + 1])
+    assert bands.is_absolute() and bands.resolve() == root / "docs" / "section9" / "bands.yaml" and bands.exists()
+    assert recipe.variables["out"] == "section9-out"  # an output: the working directory's

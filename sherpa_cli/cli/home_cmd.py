@@ -201,8 +201,10 @@ def _check_wiring(st: AppState, name: str) -> None:
         st.out.line(f"wiring check of {name}:")
         for f in report.findings:
             st.out.line(f"  {f.line()}")
-        bad = sum(1 for f in report.findings if not f.ok)
-        st.out.line(f"{len(report.findings) - bad} ok, {plural(bad, 'fault')}")
+        unchecked = sum(1 for f in report.findings if f.verdict == "already active")
+        bad = sum(1 for f in report.findings if not f.ok) - unchecked
+        st.out.line(f"{len(report.findings) - bad - unchecked} ok, {plural(bad, 'fault')}"
+                    + (f", {unchecked} not checked" if unchecked else ""))
     if not report.ok:
         raise typer.Exit(1)
 

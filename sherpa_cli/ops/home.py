@@ -734,7 +734,7 @@ class WiringFinding:
     switch: str
     drive: str
     input: int
-    verdict: str  # "ok", "no change", "wrong input", "inverted", "wrong input, inverted"
+    verdict: str  # "ok", "no change", "already active", "wrong input", "inverted", "wrong input, inverted"
     seen_input: int | None = None
 
     @property
@@ -747,6 +747,9 @@ class WiringFinding:
             return f"ok: {where}: input {self.input} goes active when pressed"
         if self.verdict == "no change":
             return f"FAULT: {where}: no input changed when it was pressed (broken wire, switch or supply)"
+        if self.verdict == "already active":
+            return (f"NOT CHECKED: {where}: input {self.input} was active before the press and stayed so "
+                    "(the joint stands on its switch, as after `home`?): jog it off the switch and check again")
         if self.verdict == "inverted":
             return (f"FAULT: {where}: input {self.input} is active while released and goes inactive when "
                     "pressed (inverted: normally-closed contact or polarity)")
@@ -844,6 +847,10 @@ def check_wiring(session: ArmSession, name: str, ask: Callable[[WiringPrompt], N
             elif changed:
                 seen = changed[0]
                 verdict = "wrong input, inverted" if before[d][seen] else "wrong input"
+            elif before[d][sw.input]:
+                # held active the whole time: a switch the joint stands on (or one stuck closed), which
+                # a press cannot show -- not a broken wire
+                verdict, seen = "already active", None
             else:
                 verdict, seen = "no change", None
             report.findings.append(WiringFinding(joint.name, label, d, sw.input, verdict, seen))

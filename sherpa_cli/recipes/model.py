@@ -147,6 +147,11 @@ def load_recipe(path: Path, overrides: dict[str, str] | None = None) -> Recipe:
             raise tnode.error(f"sim_time must be one of {', '.join(SIM_TIMES)}, got {sim_time!r}")
     default_failure = _on_failure(top.get("on_failure"), "stop")
     variables = _variables(top.get("vars"), overrides or {}, str(path))
+    # {recipe_dir}: the recipe file's own directory, so a file the recipe brings (a bands table) is
+    # found from any working directory; outputs stay where the user runs it
+    recipe_dir = str(Path(path).resolve().parent)
+    variables = {k: v.replace("{recipe_dir}", recipe_dir) for k, v in variables.items()}
+    in_steps = {"recipe_dir": recipe_dir, **variables}
     steps_node = top.req("steps")
     items = as_seq(steps_node, "a list of steps")
     if not items:
@@ -154,7 +159,7 @@ def load_recipe(path: Path, overrides: dict[str, str] | None = None) -> Recipe:
     steps: list[Step] = []
     seen: dict[str, int] = {}
     for i, item in enumerate(items, start=1):
-        step = _step(item, i, default_failure, variables)
+        step = _step(item, i, default_failure, in_steps)
         if step.name in seen:
             raise item.error(f"step name '{step.name}' is used twice (also step {seen[step.name]})",
                              hint="step names must be unique: --from and the report refer to them")
