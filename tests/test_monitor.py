@@ -173,7 +173,8 @@ def test_monitor_writes_nothing_unless_asked(tmp_path, monkeypatch):
     assert {can_id for _, can_id, _ in frames} <= {0x000, 0x328, 0x628}
     assert [data for _, can_id, data in frames if can_id == 0] == [bytes([0x01, 40])], "one NMT start"
     queries = [data[:2].decode() for _, can_id, data in frames if can_id == 0x328]
-    assert queries == ["MO", "UM", "PX", "SR", "MF"] and all(
+    # elbow_1a reads elbow_pitch's absolute encoder: PY too, to tell a counter that restarted
+    assert queries == ["MO", "UM", "PX", "SR", "MF", "PY"] and all(
         len(data) == 4 for _, can_id, data in frames if can_id == 0x328), "queries only, no set"
     assert all(data[0] in (0x40, 0x60, 0x70) for _, can_id, data in frames if can_id == 0x628), "SDO reads only"
 

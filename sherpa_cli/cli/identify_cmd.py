@@ -163,7 +163,8 @@ def _render_summary(st: AppState, report: IdentifyReport) -> None:
         status = ("MF " + _hex(mf)) if isinstance(mf, int) and mf else ("SR: check" if problems else "ok")
         where = "-"
         if d.joint is not None:
-            where = f"{d.joint.joint} {d.joint.rad:.4f} rad"
+            where = f"{d.joint.joint} {d.joint.rad:.4f} rad" if d.joint.uncalibrated is None else \
+                f"{d.joint.joint} ? (not calibrated)"
         elif st.load_config().pair_of_drive(d.drive) is not None:
             where = "pair motor"
         check = plural(len(d.findings), "finding") if d.findings else "ok"
@@ -171,6 +172,9 @@ def _render_summary(st: AppState, report: IdentifyReport) -> None:
                      str(d.identity.get("software_version") or "-"), motor, status, where, check])
     st.out.table(plural(len(rows), "drive"), ["drive", "address", "device", "firmware", "motor", "faults", "joint",
                                             "check"], rows, drop=(3, 2, 4, 6, 5), one_line=True)
+    for d in report.drives:
+        if d.joint is not None and d.joint.uncalibrated is not None:
+            st.out.line(f"{d.drive}: {d.joint.joint} {d.joint.uncalibrated}")
 
 
 def _render_details(st: AppState, report: IdentifyReport) -> None:
@@ -225,5 +229,7 @@ def _render_details(st: AppState, report: IdentifyReport) -> None:
             where = f"{d.joint.joint} at {d.joint.counts} counts = {d.joint.rad:.4f} rad"
             if d.joint.formula:
                 where += f" ({d.joint.formula})"
+            if d.joint.uncalibrated:
+                where = f"{d.joint.joint} {d.joint.uncalibrated}"
         rows.append(["PX", f"{fmt_value(px)} counts", where])
         st.out.table(title, ["field", "value", "meaning"], rows)

@@ -214,6 +214,8 @@ def _heartbeat(r: DriveStatus, ages: bool) -> str:
 
 def _position(r: DriveStatus, cfg: ArmConfig) -> str:
     """Radians of the drive's joint; a pair's drive a shows the Σ joint, drive b the Δ joint."""
+    if r.uncalibrated is not None:
+        return "?"  # the counter is not the joint's position: the note says both numbers
     if r.position_rad is None:
         return "-"
     pair = cfg.pair_of_drive(r.drive)
@@ -249,6 +251,8 @@ def _renderables(rows: Sequence[DriveStatus], cfg: ArmConfig, *, ages: bool) -> 
         if r.mf:
             notes.extend(f"{who}: MF: {f.line()}" for f in r.mf_faults)
         notes.extend(f"{who}: SR: {f.line()}" for f in r.sr_problems)
+        if r.uncalibrated is not None:
+            notes.append(f"{who}: {r.joint} {r.uncalibrated}")
         if r.emcy is not None:
             when = "raised before the monitor started" if r.emcy_before_start else (
                 _age(r.emcy_age) if ages else "heard while monitoring")

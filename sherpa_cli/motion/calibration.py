@@ -100,15 +100,33 @@ def read_calibration(cfg: ArmConfig, joint: JointConfig, client_of: Callable[[st
 SYNC_TOLERANCE = 2  # counts PX may differ from the encoder's reading (a motor holding position)
 
 
+def encoder_on_drive(joint: JointConfig) -> bool:
+    """The joint is a plain one whose absolute encoder its own drive reads (``drive:PY``)."""
+    enc = joint.abs_encoder
+    return joint.role is JointRole.PLAIN and enc is not None and enc.source.upper() == "DRIVE:PY" \
+        and joint.drive is not None
+
+
+def counter_mismatch_text(joint: JointConfig, px: int, py: int) -> str | None:
+    """Why the joint's counter ``px`` does not mean its encoder (``py`` + offset), or None when it does
+    (within SYNC_TOLERANCE): for the looking commands, which show it and write nothing."""
+    assert joint.abs_encoder is not None
+    expected = py + joint.abs_encoder.offset
+    if abs(px - expected) <= SYNC_TOLERANCE:
+        return None
+    return (f"not calibrated: its counter PX={px} does not match its absolute encoder ({expected} counts); a "
+            "moving command or `sherpa home` re-syncs it")
+
+
 def _counter_mismatch(cfg: ArmConfig, joint: JointConfig,
                       client_of: Callable[[str], DriveClient]) -> tuple[int, int] | None:
     """(PX, the encoder's position) when a plain joint's counter does not mean its drive's absolute
     encoder (``drive:PY``), else None. An encoder on the bus (CiA 406) is read by `sherpa home`."""
-    enc = joint.abs_encoder
-    if joint.role is not JointRole.PLAIN or enc is None or enc.source.upper() != "DRIVE:PY" or joint.drive is None:
+    if not encoder_on_drive(joint):
         return None
+    assert joint.drive is not None and joint.abs_encoder is not None
     c = client_of(joint.drive)
-    px, expected = int(c.get("PX")), int(c.get("PY")) + enc.offset
+    px, expected = int(c.get("PX")), int(c.get("PY")) + joint.abs_encoder.offset
     return None if abs(px - expected) <= SYNC_TOLERANCE else (px, expected)
 
 

@@ -11,13 +11,14 @@ from __future__ import annotations
 
 from collections import Counter
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING, Any
 
-from sherpa_cli.config.model import ArmConfig
+from sherpa_cli.config.model import ArmConfig, JointConfig
 from sherpa_cli.elmo.userprog import program_running, read_ps
 from sherpa_cli.joints.diffpair import to_joints
 from sherpa_cli.joints.units import counts_to_rad
+from sherpa_cli.motion.calibration import counter_mismatch_text, encoder_on_drive
 from sherpa_cli.ops.params_read import Progress, open_drive, per_bus
 
 if TYPE_CHECKING:
@@ -34,9 +35,21 @@ class JointPosition:
     counts: int
     rad: float
     formula: str | None = None  # how a pair joint follows from the two motors
+    # an absolute-encoder joint whose counter does not mean its encoder (a power cycle): why, with both
+    # numbers; the position is then not the joint's
+    uncalibrated: str | None = None
 
     def as_json(self) -> dict[str, Any]:
-        return {"joint": self.joint, "counts": self.counts, "rad": self.rad, "formula": self.formula}
+        out: dict[str, Any] = {"joint": self.joint, "counts": self.counts, "rad": self.rad, "formula": self.formula}
+        if self.uncalibrated is not None:
+            out["uncalibrated"] = self.uncalibrated
+        return out
+
+    def with_encoder(self, joint: JointConfig, py: int | None) -> JointPosition:
+        """This position checked against the joint's encoder reading ``py`` (None: not read)."""
+        if py is None or not encoder_on_drive(joint):
+            return self
+        return replace(self, uncalibrated=counter_mismatch_text(joint, self.counts, py))
 
 
 @dataclass(frozen=True)
@@ -51,6 +64,7 @@ class DriveIdentity:
     joint: JointPosition | None = None
     error: str | None = None  # the drive could not be read (it is then also in IdentifyReport.failed)
     findings: tuple[str, ...] = ()
+    encoder: int | None = None  # PY of a drive that reads its joint's absolute encoder
 
     def as_json(self) -> dict[str, Any]:
         from sherpa_cli.elmo import faults
@@ -93,7 +107,9 @@ def _read_one(session: ArmSession, drive: str, progress: Progress | None) -> Dri
     ps = read_ps(client)  # user program (elmo/userprog.py); absent when the drive refuses PS
     if ps is not None:
         state["PS"] = ps
-    return DriveIdentity(drive, d.bus, d.node, d.model, identity, notes, state)
+    joint = session.cfg.joint_of_drive(drive)
+    encoder = int(client.get("PY")) if joint is not None and encoder_on_drive(joint) else None
+    return DriveIdentity(drive, d.bus, d.node, d.model, identity, notes, state, encoder=encoder)
 
 
 def identify(session: ArmSession, drives: Sequence[str], progress: Progress | None = None) -> IdentifyReport:
@@ -116,9 +132,15 @@ def identify(session: ArmSession, drives: Sequence[str], progress: Progress | No
             findings.setdefault(r.drive, []).append(
                 f"a user program is running (PS={ps}): SV is refused and it can fight moving commands")
     out = tuple(DriveIdentity(r.drive, r.bus, r.node, r.model, r.identity, r.identity_notes, r.state,
-                              positions.get(r.drive), r.error, tuple(findings.get(r.drive, ())))
+                              _checked(cfg, positions.get(r.drive), r.drive, r.encoder), r.error,
+                              tuple(findings.get(r.drive, ())), r.encoder)
                 for r in read)
     return IdentifyReport(out, tuple(errors))
+
+
+def _checked(cfg: ArmConfig, position: JointPosition | None, drive: str, py: int | None) -> JointPosition | None:
+    joint = cfg.joint_of_drive(drive)
+    return position if position is None or joint is None else position.with_encoder(joint, py)
 
 
 def joint_positions(cfg: ArmConfig, px: dict[str, int]) -> dict[str, JointPosition]:

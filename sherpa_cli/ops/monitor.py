@@ -32,6 +32,7 @@ from sherpa_cli.config.model import ArmConfig
 from sherpa_cli.elmo.faults import Emcy, Fault, decode_error_field, decode_mf, sr_problems
 from sherpa_cli.elmo.protocol import HEARTBEAT_BASE
 from sherpa_cli.errors import SdoError, SherpaError, UsageError
+from sherpa_cli.motion.calibration import encoder_on_drive
 from sherpa_cli.ops.identify import JointPosition, joint_positions, row_joint
 
 if TYPE_CHECKING:
@@ -87,6 +88,7 @@ class DriveStatus:
     emcy_age: float | None
     emcy_before_start: bool
     problem: str | None
+    uncalibrated: str | None = None  # its joint's counter does not mean the joint's absolute encoder
 
     @property
     def address(self) -> str:
@@ -111,6 +113,8 @@ class DriveStatus:
             "sr_problems": [f.line() for f in self.sr_problems], "mf_faults": [f.line() for f in self.mf_faults],
             "last_emcy": emcy, "problem": self.problem,
         }
+        if self.uncalibrated is not None:
+            out["uncalibrated"] = self.uncalibrated
         if ages:
             out["heartbeat_age_s"] = self.heartbeat_age
             out["silent_for_s"] = self.silent_for
@@ -239,7 +243,9 @@ class Monitor:
         client = self.session.client(w.ref)
         if w.polled and not w.answering:
             client.nmt_start()  # it may have rebooted into Pre-operational
-        values, problem = query(client, POLLED)
+        joint = self.cfg.joint_of_drive(w.ref.name)
+        # a drive that reads its joint's absolute encoder: PY too, to tell a counter that restarted
+        values, problem = query(client, (*POLLED, "PY") if joint is not None and encoder_on_drive(joint) else POLLED)
         with self._lock:
             w.polled = True
             w.problem = problem
@@ -274,7 +280,11 @@ class Monitor:
         v = w.values if w.answering else {}
         sr, mf = v.get("SR"), v.get("MF")
         position = positions.get(w.ref.name)
-        joint, rad = (position.joint, position.rad) if position else (None, None)
+        configured = self.cfg.joint_of_drive(w.ref.name)
+        if position is not None and configured is not None:
+            position = position.with_encoder(configured, _int(v.get("PY")))
+        uncalibrated = position.uncalibrated if position is not None else None
+        joint, rad = (position.joint, None if uncalibrated else position.rad) if position else (None, None)
         if joint is None and w.ref.config is not None:
             joint = row_joint(self.cfg, w.ref.name)
         return DriveStatus(
@@ -287,7 +297,8 @@ class Monitor:
             joint=joint, position_rad=rad,
             sr_problems=decoded_sr(sr), mf_faults=decoded_mf(mf),
             emcy=w.emcy, emcy_age=None if w.emcy_at is None else max(0.0, now - w.emcy_at),
-            emcy_before_start=w.emcy is not None and w.emcy_at is None, problem=w.problem)
+            emcy_before_start=w.emcy is not None and w.emcy_at is None, problem=w.problem,
+            uncalibrated=uncalibrated)
 
     @staticmethod
     def _nmt_text(w: _Watch) -> str:
