@@ -150,10 +150,11 @@ class _Warnings:
         for message, items in groups.items():
             counts = {n for _, n in items}
             times = sum(n for _, n in items)
-            count = "" if times == 1 else f" ({counts.pop()} times each)" if len(counts) == 1 and len(items) > 1 \
-                else f" ({times} times)"
+            # the count goes last: "(5 times)" beside "9 drives" read as a count of drives
+            count = "" if times == 1 else f" (said {counts.pop()} times each)" if len(counts) == 1 and len(items) > 1 \
+                else f" (said {times} times)"
             subjects = [s for s, _ in items if s]
-            out.warn(f"{message}{count}: {'; '.join(subjects)}" if subjects else f"{message}{count}")
+            out.warn(f"{message}: {'; '.join(subjects)}{count}" if subjects else f"{message}{count}")
 
 
 def _progress(st: AppState) -> Live | None:
