@@ -648,3 +648,18 @@ def test_jog_of_a_pair_joint_with_sync_rpdo_starts_both_at_one_sync(tmp_path):
             assert not any(f[1] == 0x300 + 125 for f in left.received)  # no group frame
             begins = [[t for t, text in d.events if text.startswith("BG")] for d in (left, right)]
             assert len(begins[0]) == len(begins[1]) == 1 and abs(begins[0][0] - begins[1][0]) < 0.02
+
+
+def test_convert_takes_positions_with_their_unit_as_move_does(cli):
+    """`diffdrive convert --sigma 10deg` was "not a valid float"; a bare number stays in --unit."""
+    import json
+    import math
+
+    bare = cli("--json", "diffdrive", "convert", "shoulder_diff", "--sigma", "200", "--delta", "0")
+    counts = cli("--json", "diffdrive", "convert", "shoulder_diff", "--sigma", "200counts", "--delta", "0counts")
+    assert bare.exit_code == counts.exit_code == 0 and json.loads(bare.stdout) == json.loads(counts.stdout)
+    deg = cli("--json", "diffdrive", "convert", "shoulder_diff", "--sigma", "10deg", "--delta", "0")
+    assert deg.exit_code == 0, deg.stderr
+    out = json.loads(deg.stdout)
+    assert abs(out["sigma"]["rad"] - math.radians(10)) < 0.003  # to a count or two (the nearest reachable)
+    assert "nearest reachable" in deg.stderr  # 10deg is an odd Σ with Δ=0: one count away, said

@@ -68,16 +68,18 @@ def _opt(v: int | None) -> str:
 def convert(
     ctx: typer.Context,
     pair: str = PairArg,
-    sigma: float | None = typer.Option(None, "--sigma", help="Σ joint position."),
-    delta: float | None = typer.Option(None, "--delta", help="Δ joint position."),
+    sigma: str | None = typer.Option(None, "--sigma", help="Σ joint position: a number in --unit, or with its "
+                                     "unit as elsewhere (0.5rad, 10deg, 200counts)."),
+    delta: str | None = typer.Option(None, "--delta", help="Δ joint position (as --sigma)."),
     motor_a: float | None = typer.Option(None, "--motor-a", help="Motor a position (counts)."),
     motor_b: float | None = typer.Option(None, "--motor-b", help="Motor b position (counts)."),
     unit: str = typer.Option("counts", "--unit", help="Unit of --sigma/--delta and of the output: counts or rad."),
 ) -> None:
     """Convert Σ/Δ joint positions to motor positions, or motor positions to Σ/Δ.
 
-    Give either --sigma and --delta, or --motor-a and --motor-b. Joint positions may be in
-    counts or radians (--unit rad, each joint's own cpr); motor positions are always counts.
+    Give either --sigma and --delta, or --motor-a and --motor-b. A bare joint position is in
+    --unit (counts, or rad: each joint's own cpr); one with its unit (0.5rad, 10deg, 200counts)
+    means what it says, as in `diffdrive move`. Motor positions are always counts.
     """
     from sherpa_cli.bus.targets import pair_of
     from sherpa_cli.joints import diffpair, units
@@ -88,25 +90,36 @@ def convert(
     ex = explain_pair(cfg, pair_of(cfg, pair))
     if unit not in ("counts", "rad"):
         raise UsageError(f"--unit: '{unit}' is not a unit here; expected 'counts' or 'rad'")
-    for option, value in (("--sigma", sigma), ("--delta", delta), ("--motor-a", motor_a), ("--motor-b", motor_b)):
+    s_cpr, d_cpr = cfg.joints[ex.sigma].cpr, cfg.joints[ex.delta].cpr
+    sigma_counts = _joint_counts(sigma, "--sigma", s_cpr, unit)
+    delta_counts = _joint_counts(delta, "--delta", d_cpr, unit)
+    # an angle given with its unit (rad, deg) is rounded to counts like --unit rad; 200counts is exact
+    angles = any(t is not None and c is not None and not t.strip().lower().endswith("counts")
+                 for t, c in ((sigma, sigma_counts), (delta, delta_counts)))
+    if sigma_counts is not None or delta_counts is not None:
+        unit = "counts"  # a position given with its unit: converted once, in whole counts
+        sigma = None if sigma is None else str(sigma_counts if sigma_counts is not None else sigma)
+        delta = None if delta is None else str(delta_counts if delta_counts is not None else delta)
+    sigma_v, delta_v = _bare(sigma, "--sigma"), _bare(delta, "--delta")
+    for option, value in (("--sigma", sigma_v), ("--delta", delta_v), ("--motor-a", motor_a), ("--motor-b", motor_b)):
         _finite(value, option, unit if option in ("--sigma", "--delta") else "counts")
     joint_given = sigma is not None or delta is not None
     motor_given = motor_a is not None or motor_b is not None
     if joint_given == motor_given:
         raise UsageError("diffdrive convert: give either --sigma and --delta, or --motor-a and --motor-b")
-    s_cpr, d_cpr = cfg.joints[ex.sigma].cpr, cfg.joints[ex.delta].cpr
     if joint_given:
-        if sigma is None or delta is None:
+        if sigma_v is None or delta_v is None:
             raise UsageError("diffdrive convert: --sigma and --delta go together")
-        if unit == "rad":
-            s_exact, d_exact = units.rad_to_counts(sigma, s_cpr), units.rad_to_counts(delta, d_cpr)
-            # radians rarely land on a Σ/Δ pair of equal parity; take the nearest reachable one
+        if unit == "rad" or angles:
+            s_exact, d_exact = (units.rad_to_counts(sigma_v, s_cpr), units.rad_to_counts(delta_v, d_cpr)) \
+                if unit == "rad" else (_whole(sigma_v, "--sigma"), _whole(delta_v, "--delta"))
+            # angles rarely land on a Σ/Δ pair of equal parity; take the nearest reachable one
             s_counts, d_counts = diffpair.nearest_reachable(s_exact, d_exact)
             if (s_counts, d_counts) != (s_exact, d_exact):
                 st.out.warn(f"Σ={s_exact}, Δ={d_exact} counts differ in parity (no whole motor positions); "
                             f"using the nearest reachable Σ={s_counts}, Δ={d_counts}")
         else:
-            s_counts, d_counts = _whole(sigma, "--sigma"), _whole(delta, "--delta")
+            s_counts, d_counts = _whole(sigma_v, "--sigma"), _whole(delta_v, "--delta")
         m_a, m_b = diffpair.to_motors(s_counts, d_counts)
     else:
         if motor_a is None or motor_b is None:
@@ -138,6 +151,32 @@ def convert(
 
 
 POSITION_LIMIT = 2**31  # counts: a drive position is a 32-bit integer
+
+
+def _bare(text: str | None, option: str) -> float | None:
+    """A joint position without a unit, as a number (None: not given)."""
+    if text is None:
+        return None
+    try:
+        return float(text)
+    except ValueError:
+        raise UsageError(f"{option}: {text!r} is not a number; write a number in --unit, or one with its unit "
+                         "(0.5rad, 10deg, 200counts)") from None
+
+
+def _joint_counts(text: str | None, option: str, cpr: int, unit: str) -> int | None:
+    """Whole counts of a joint position given with its unit (``10deg``, ``0.5rad``, ``200counts``);
+    None for a bare number (it is in --unit) or no value."""
+    from sherpa_cli.joints import units
+
+    if text is None:
+        return None
+    try:
+        float(text)
+        return None
+    except ValueError:
+        pass
+    return units.parse_position(text, cpr, what=option)
 
 
 def _finite(value: float | None, option: str, unit: str) -> None:
