@@ -276,7 +276,9 @@ def render_metrics(st: AppState, metrics: Mapping[tuple[str, str], StepMetrics],
             st.out.line(f"{j} {s}: not settled: {m.initial:.4f} -> {m.final:.4f} {unit} at the end; dead time "
                         f"{_ms(m.dead_time)}, rise (10-90 %) {_ms(m.rise_time)}; no overshoot or steady-state error")
             continue
-        sse = "" if m.steady_state_error is None else f", steady-state error {m.steady_state_error:.4f} {unit}"
+        # round + 0.0: a rounding's -0.00001 reads 0.0000, never "-0.0000"
+        sse = "" if m.steady_state_error is None else \
+            f", steady-state error {round(m.steady_state_error, 4) + 0.0:.4f} {unit}"
         st.out.line(f"{j} {s}: {m.initial:.4f} -> {m.final:.4f} {unit}; dead time {_ms(m.dead_time)}, "
                     f"rise (10-90 %) {_ms(m.rise_time)}, overshoot {m.overshoot:.1f} %, "
                     f"settling (2 %) {_ms(m.settling_time)}{sse}")

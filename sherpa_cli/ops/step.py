@@ -31,7 +31,7 @@ from typing import TYPE_CHECKING, Any, Protocol
 from sherpa_cli.config.model import ArmConfig
 from sherpa_cli.elmo.protocol import UM_POSITION, UM_TORQUE
 from sherpa_cli.errors import UsageError
-from sherpa_cli.joints.units import counts_to_rad, rad_per_s_to_counts_per_s, rad_to_counts
+from sherpa_cli.joints.units import counts_per_s_to_rad_per_s, counts_to_rad, rad_per_s_to_counts_per_s, rad_to_counts
 from sherpa_cli.log.record import Recorder, bus_budget
 from sherpa_cli.log.recording import Recording
 from sherpa_cli.log.settle import HOLD_S, judged, settled_at_end
@@ -243,7 +243,8 @@ def run_step(session: ArmSession, target: Axis, mode: str, value: float, *, dura
                 if drive_trace is not None:
                     drive_trace.started(state["switch"])
                 c.execute("BG")
-                state["command"], state["target"] = f"JV={v}", value
+                # the target is what was sent: JV is whole counts/s, and its rounding is no error of the drive's
+                state["command"], state["target"] = f"JV={v}", counts_per_s_to_rad_per_s(v, joint.cpr)
             else:
                 guard.enable(ref, UM_TORQUE)
                 state["switch"] = rec.now() - t_cmd
