@@ -22,7 +22,12 @@ ARM_CASES = [
 @pytest.mark.golden
 @pytest.mark.realbus
 @pytest.mark.parametrize("name,args", ARM_CASES, ids=[c[0] for c in ARM_CASES])
-def test_identify_on_the_arm_golden(arm_golden, name, args):
+def test_identify_on_the_arm_golden(arm_golden, arm_process, name, args):
+    if arm_process is not None and name == "identify-sim":  # elbow_pitch: an absolute-encoder joint
+        # one served arm for every test of the run: earlier tests moved elbow_pitch and reset its drive,
+        # so its counter no longer means its absolute encoder and identify says so (not calibrated,
+        # both numbers: tests/test_looking_uncalibrated.py) -- an output no golden of a fresh arm holds
+        pytest.skip("elbow_pitch's state on the shared served arm depends on the tests before")
     arm_golden(name, args, exit_code=0)
 
 

@@ -31,7 +31,12 @@ ARM_CASES = [
 @pytest.mark.golden
 @pytest.mark.realbus
 @pytest.mark.parametrize("name,args", ARM_CASES, ids=[c[0] for c in ARM_CASES])
-def test_monitor_once_on_the_arm_golden(arm_golden, name, args):
+def test_monitor_once_on_the_arm_golden(arm_golden, arm_process, name, args):
+    if arm_process is not None and name in ("monitor-once", "monitor-once-json"):
+        # absolute-encoder joints on the one served arm of the run: earlier tests moved them and reset
+        # their drives, so whether a counter still means its encoder (the row's `?` and its note,
+        # tests/test_looking_uncalibrated.py) depends on the tests before -- no golden of a fresh arm
+        pytest.skip("the shared served arm's encoder joints stand where the tests before left them")
     arm_golden(name, args, exit_code=0)
 
 
