@@ -203,3 +203,26 @@ def test_an_expedited_read_whose_wait_came_back_late_waits_once_more(late, answe
         with pytest.raises(SdoError, match="no answer"):
             sdo.upload(0x1018, 4)
         assert net.waits == 1
+
+
+class StrayAnswerNetwork(ScriptedNetwork):
+    """A session network whose wait first hears another transfer's late answer (a download's 0x60 of the
+    same object, from another process on the drive), then the upload's own."""
+
+    def __init__(self, stray: bytes) -> None:
+        super().__init__()
+        self.stray = stray
+
+    def wait_for(self, lock, timeout: float) -> bool:
+        for frame in (self.stray, bytes.fromhex("43 16 10 01 2C 01 7E 00")):
+            for callback in list(self.subscribers.get(0x58A, [])):
+                callback(0x58A, frame, 0.0)
+        return lock.acquire(timeout=0)
+
+
+@pytest.mark.parametrize("stray", ["60 16 10 01 00 00 00 00", "43 17 10 00 01 00 00 00"])
+def test_a_late_answer_of_another_transfer_is_never_taken_for_the_uploads(stray):
+    """A jog's read of 0x1016:1 took a recording's download answer (0x60) for its own and failed as
+    "malformed answer (Unexpected response 0x60)"; nor is another object's upload answer ours."""
+    sdo = DriveSdo(StrayAnswerNetwork(bytes.fromhex(stray)), 10, label="drive1 (node 10)")
+    assert sdo.upload(0x1016, 1) == bytes.fromhex("2C 01 7E 00")

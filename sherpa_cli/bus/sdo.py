@@ -61,12 +61,22 @@ def _transfer_failures() -> tuple[type[BaseException], ...]:
 class _Answer:
     """The one expedited upload of a drive waiting for its answer (``arrived``: held until it is in)."""
 
-    __slots__ = ("arrived", "data")
+    __slots__ = ("arrived", "data", "index", "sub")
 
-    def __init__(self) -> None:
+    def __init__(self, index: int, sub: int) -> None:
         self.arrived = threading.Lock()
         self.arrived.acquire()
         self.data: bytes | None = None
+        self.index, self.sub = index, sub
+
+    def answers(self, data: bytes) -> bool:
+        """Whether ``data`` can be this upload's answer: an upload response or an abort of its object.
+        A frame too short to tell is taken (and refused as malformed); anything else is the late answer
+        of another transfer (another process's on this drive, one that timed out before), never ours."""
+        if len(data) < 4:
+            return True
+        command, index, sub = data[0], data[1] | data[2] << 8, data[3]
+        return (index, sub) == (self.index, self.sub) and (command == 0x80 or command & 0xE0 == 0x40)
 
 
 class DriveSdo:
@@ -142,15 +152,20 @@ class DriveSdo:
 
     def _on_answer(self, can_id: int, data: bytes | bytearray, timestamp: float) -> None:
         answer = self._answer
-        if answer is not None and answer.data is None:
-            answer.data = bytes(data)
-            answer.arrived.release()
+        if answer is None or answer.data is not None:
+            return
+        if not answer.answers(bytes(data)):
+            log.debug("%s: SDO answer %s is not the upload's of 0x%04X:%d: another transfer's, ignored",
+                      self.label, bytes(data).hex(" "), answer.index, answer.sub)
+            return
+        answer.data = bytes(data)
+        answer.arrived.release()
 
     def _fast_upload(self, index: int, sub: int, name: str | None) -> bytes | None:
         """An expedited upload on the caller's thread; None when the drive starts a segmented one."""
         assert self._wait is not None
         request = bytes((0x40, index & 0xFF, index >> 8, sub, 0, 0, 0, 0))
-        answer = self._answer = _Answer()
+        answer = self._answer = _Answer(index, sub)
         try:
             try:
                 self._network.send_message(0x600 + self.node, request)
