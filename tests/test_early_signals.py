@@ -131,6 +131,24 @@ def test_a_ctrl_c_wrapped_by_a_dataclass_built_during_a_lazy_import_is_still_an_
     assert err.strip() == "error: interrupted" and "Traceback" not in err
 
 
+def test_a_sigterm_wrapped_by_a_dataclass_built_during_a_lazy_import_is_still_that_signal(monkeypatch):
+    """The same for SIGTERM (a loaded CI run: `diffdrive move` terminated while it imported
+    motion/limit_watch.py printed a traceback): the boundary hands the signal on, unwrapped, to the
+    entry, which ends it with its own line and exit code."""
+    from sherpa_cli import errors
+    from sherpa_cli.cli import boundary
+
+    def terminated_import(*args, **kwargs):
+        try:
+            raise errors.Terminated(15)
+        except errors.Terminated as exc:
+            raise RuntimeError("Error calling __set_name__ on 'Field' instance 'joints' in 'WatchResult'") from exc
+
+    monkeypatch.setattr(boundary, "root_command", terminated_import)
+    with pytest.raises(errors.Terminated):
+        boundary.run(["scan"])
+
+
 def test_a_background_threads_exception_is_one_line_and_nothing_after_a_signal(capfd, monkeypatch):
     """A library's receive thread that meets a bus closed under it (the command unwinding after a
     Ctrl-C) printed a traceback. The entry's thread hook says it in one line, and nothing at all

@@ -69,14 +69,18 @@ def test_record_mcap_equals_the_csv_of_the_same_run(cli, tmp_path):
     col = {name: i for i, name in enumerate(header)}
     # the recording's timestamps: time zero + time_s (the CSV's 6 decimals); a wall-time recording on a
     # loaded machine may miss a sample: a row with no joint (drive) value has no message, else one
-    joints = {f"{(m[2] - zero) / 1e9:.6f}": m for m in messages if m[0] == "/joint_states"}
-    motors = {f"{(m[2] - zero) / 1e9:.6f}": m for m in messages if m[0] == "/sherpa/motor_counts"}
+    # (matched to a microsecond: the CSV's 6 decimals and the MCAP's nanoseconds round a time that ends
+    # in ...5 each their own way)
+    joints = [m for m in messages if m[0] == "/joint_states"]
+    motors = [m for m in messages if m[0] == "/sherpa/motor_counts"]
     with_joint = [r for r in rows if any(r[col[f"{j}.pos_rad"]] for j in names)]
     with_drive = [r for r in rows if any(r[col[f"{d}.px"]] for d in drives)]
-    assert [r[0] for r in with_joint] == list(joints) and [r[0] for r in with_drive] == list(motors)
+    assert len(with_joint) == len(joints) and len(with_drive) == len(motors)
+    for kept, written in ((with_joint, joints), (with_drive, motors)):
+        assert all(abs(float(r[0]) - (m[2] - zero) / 1e9) <= 1.5e-6 for r, m in zip(kept, written, strict=True))
     assert len(joints) > 0.5 * len(rows) > 0
-    for row in with_joint:
-        _, schema, log_time, msg = joints[row[0]]
+    for row, message in zip(with_joint, joints, strict=True):
+        _, schema, log_time, msg = message
         assert schema == "sensor_msgs/msg/JointState"
         assert msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec == log_time
         assert list(msg.name) == names
@@ -84,8 +88,8 @@ def test_record_mcap_equals_the_csv_of_the_same_run(cli, tmp_path):
         assert [_cell(v) for v in msg.velocity] == [row[col[f"{j}.vel_rad_s"]] for j in names]
         # current of the plain joint; none for the Σ/Δ joints of a pair (NaN)
         assert _cell(msg.effort[0]) == row[col["elbow_pitch.cur_a"]] and all(math.isnan(v) for v in msg.effort[1:])
-    for row in with_drive:
-        motor = motors[row[0]][3]
+    for row, message in zip(with_drive, motors, strict=True):
+        motor = message[3]
         assert motor.header.frame_id == "counts" and list(motor.name) == drives
         assert [_cell(v, counts=True) for v in motor.position] == [row[col[f"{d}.px"]] for d in drives]
     joints_in_order = [m for m in messages if m[0] == "/joint_states"]

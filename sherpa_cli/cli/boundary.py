@@ -17,7 +17,7 @@ import typer
 from typer.core import TyperGroup
 
 from sherpa_cli.cli import context
-from sherpa_cli.errors import ExitCode, SherpaError, UsageError
+from sherpa_cli.errors import ExitCode, SherpaError, Terminated, UsageError
 
 _ROOT: typer.Typer | None = None
 
@@ -99,7 +99,10 @@ def run(argv: Sequence[str] | None = None) -> int:
         return int(exc.exit_code)
     except RuntimeError as exc:
         # Ctrl-C during a lazy import that builds a dataclass: Python wraps the KeyboardInterrupt
-        # raised in __set_name__ in a RuntimeError; it is still the user's Ctrl-C
+        # raised in __set_name__ in a RuntimeError; it is still the user's Ctrl-C, and a SIGTERM or
+        # SIGHUP there is still that signal (cli/entry.py ends it with its own exit code)
+        if not debug and isinstance(exc.__cause__, Terminated):
+            raise exc.__cause__ from None
         if debug or not isinstance(exc.__cause__, KeyboardInterrupt):
             raise
         _report("interrupted", None)
