@@ -30,7 +30,7 @@ from sherpa_cli.config.simbus import SimBusConfig
 from sherpa_cli.elmo.protocol import NMT_ID, SDO_RX_BASE, SYNC_ID
 from sherpa_cli.sim import state as sim_state
 from sherpa_cli.sim.buscontroller import BusController, SimNetlink
-from sherpa_cli.sim.clock import Clock, FrameClock, RealClock
+from sherpa_cli.sim.clock import Clock, FrameClock, PausingClock, RealClock
 from sherpa_cli.sim.drive import SimDrive
 from sherpa_cli.sim.encoder import SimEncoder
 from sherpa_cli.sim.ft_sensor import SimFtSensor
@@ -410,9 +410,10 @@ class SimArm:
     @classmethod
     def for_session(cls, cfg: ArmConfig, channels: Mapping[str, str], *, clock: Clock | None = None) -> SimArm:
         """The in-process arm of ``--sim``: virtual channels, flash kept in the state directory;
-        ``clock``: its time (default wall time; `log step` gives it a stepped clock)."""
+        ``clock``: its time (default wall time that stands still while this process does not run,
+        PausingClock; `log step` gives it a stepped clock)."""
         return cls(cfg, {bus: {"interface": "virtual", "channel": ch} for bus, ch in channels.items()},
-                   persist=True, clock=clock, keep_ram=True)
+                   persist=True, clock=clock or PausingClock(), keep_ram=True)
 
     def _log_event(self, name: str, node: int, t: float, text: str) -> None:
         """One JSON line per event: ``t`` is the drive's clock (time.monotonic() for a RealClock,
@@ -494,12 +495,11 @@ class SimArm:
             for name, (bus_name, drive) in self.extras.items():
                 if bus_name in self._buses:
                     self._sdo[name] = SdoServer(drive.node, drive, drive.send_now)
+            if isinstance(self.clock, PausingClock):
+                self._start_thread(self.clock.keep_time, (self._stop,), "sim-clock")
             powered = {bus_name: threading.Event() for bus_name in self._buses}
             for bus_name in self._buses:
-                t = threading.Thread(target=self._pump, args=(bus_name, powered[bus_name]), name=f"sim-{bus_name}",
-                                     daemon=True)
-                self._threads.append(t)
-                t.start()
+                self._start_thread(self._pump, (bus_name, powered[bus_name]), f"sim-{bus_name}")
             # The arm is powered before anyone connects: its power-up boot-ups are on the bus before
             # start() returns, so a tool opening the bus next never hears them by the luck of timing.
             for event in powered.values():
@@ -509,6 +509,11 @@ class SimArm:
             self._abandon_start()
             raise
         return self
+
+    def _start_thread(self, target: Callable[..., None], args: tuple[object, ...], name: str) -> None:
+        t = threading.Thread(target=target, args=args, name=name, daemon=True)
+        self._threads.append(t)
+        t.start()
 
     def _abandon_start(self) -> None:
         self._stop.set()
