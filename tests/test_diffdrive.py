@@ -467,7 +467,7 @@ def test_an_error_during_the_move_still_puts_the_pdo_settings_back(cfg):
         with s.sim.lock:
             assert all(not d.motor_on and d.group_id_written == 0 for d in s.sim.drives.values())
             for d in s.sim.drives.values():
-                # review R8: each motor got its stop before the recorder put its PDO settings back
+                # each motor got its stop before the recorder put its PDO settings back
                 st = [t for t, i, f in d.received if i == 0x300 + d.node and f[:2] == b"ST"]
                 bg = [t for t, i, f in d.received if i in (0x300 + d.node, 0x300 + 125) and f[:2] == b"BG"]
                 pdo_back = [t for t, i, _, _ in d.od_writes if i in (0x1800, 0x1A00) and t > bg[-1]]

@@ -171,7 +171,7 @@ def test_the_config_sim_section_turns_the_servo_model_on(tmp_path):
                           ServoMotor)
 
 
-# -- review R5: jog's checks (normal range, calibration, the joint-limit watch) -------------------
+# -- jog's checks (normal range, calibration, the joint-limit watch) -------------------
 
 def _frames(sim, drive):
     with sim.lock:
@@ -241,7 +241,7 @@ def test_the_limit_watch_stops_a_step_that_leaves_the_full_range(arm, mode, valu
     assert max(pos) < 1370 / 3600 * 2 * 3.141593 + 0.05
 
 
-# -- review R6: the motor is stopped before the recording is torn down ---------------------------
+# -- the motor is stopped before the recording is torn down ---------------------------
 
 def _st_before_pdo_restore(sim, drive):
     node = sim.drives[drive].node

@@ -1,4 +1,4 @@
-"""How `diffdrive move` and the Σ/Δ jog leave the drives (review R7, R8): the scaled SP/AC/DC are
+"""How `diffdrive move` and the Σ/Δ jog leave the drives: the scaled SP/AC/DC are
 put back like the group id 0x2040, and every motor is stopped before CommonStart's restore (SDO,
 which can take sdo_timeout per drive that stops answering), on the end, an error and Ctrl-C; a
 second Ctrl-C during the restore does not skip the rest of it."""

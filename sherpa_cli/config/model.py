@@ -292,7 +292,7 @@ class HomingConfig:
     backoff: int = 0  # counts to back off the switch before the re-approach; 0 = the joint's margin (at least 10)
     search_margin: int = 0  # the bounded search goes the full range plus this; 0 = the joint's margin
     # a pair search: once one drive's home event fired, the other's must fire within this many ms,
-    # else both motors are stopped and `home` reports a wiring fault (review R10)
+    # else both motors are stopped and `home` reports a wiring fault
     pair_edge_window_ms: int = 100
 
 

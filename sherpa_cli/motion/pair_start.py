@@ -55,7 +55,7 @@ class CommonStart:
     bus's SYNC gate (bus/syncgate.py), so no other SYNC of the tool falls between them; the old
     transmission type goes back at once and the BG answers are awaited), ``sequential`` (BG, BG). Use as a context manager inside the motion
     guard. ``stop`` (:func:`stop_motors`) runs on the way out before the restore, so no motor keeps
-    moving through the restore's SDO timeouts (review R8)."""
+    moving through the restore's SDO timeouts."""
 
     def __init__(self, session: ArmSession, refs: Sequence[DriveRef], clients: Mapping[str, DriveClient], method: str,
                  group_id: int, stop: Callable[[], Sequence[str] | None] | None = None,
@@ -195,8 +195,8 @@ class CommonStart:
         self._synchronous.discard(ref.name)
 
     def keep_profile(self, drive: str) -> None:
-        """Read ``drive``'s SP/AC/DC before they are changed; :meth:`close` puts them back (review R7:
-        a scaled profile -- SP=AC=DC=1 for a motor with no share -- must not outlive the command)."""
+        """Read ``drive``'s SP/AC/DC before they are changed; :meth:`close` puts them back:
+        a scaled profile (SP=AC=DC=1 for a motor with no share) must not outlive the command."""
         if drive not in self._profiles:
             c = self.clients[drive]
             self._profiles[drive] = {k: int(c.get(k)) for k in PROFILE_KEYS}
@@ -205,7 +205,7 @@ class CommonStart:
         """Put back everything changed, drive by drive. A failure skips only that write (a drive
         that does not answer: the rest of that drive; ``deaf``, drives that did not answer the stop:
         all of it); a second Ctrl-C does not skip the rest of the restore, it is raised once the
-        restore is done (review R8)."""
+        restore is done."""
         interrupted: BaseException | None = None
         for r in self.refs:
             writes: list[Callable[[], None]] = []
@@ -239,7 +239,7 @@ class CommonStart:
         deaf: Sequence[str] = ()
         try:
             if self.stop is not None:
-                deaf = self.stop() or ()  # every motor stopped before the restore (review R8)
+                deaf = self.stop() or ()  # every motor stopped before the restore
         finally:
             self.close(deaf)
 

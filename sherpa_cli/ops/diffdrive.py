@@ -610,12 +610,12 @@ def run_move(session: ArmSession, pair: PairConfig, request: PairTarget, *,
                 if timebase is not None and recorded is not None:
                     timebase.follow(recorded.recorder.answered)
                 # entered after the recorder, so it exits first: the motors stop and the RAM settings go
-                # back before the recorder puts its PDO settings back (review R8: stop before restoring)
+                # back before the recorder puts its PDO settings back
                 stack.enter_context(start)
                 for d in drives:
                     guard.enable(by_name[d], UM_POSITION)
                 for d, c in clients.items():
-                    start.keep_profile(d)  # SP/AC/DC put back on every way out, like 0x2040 (review R7)
+                    start.keep_profile(d)  # SP/AC/DC put back on every way out, like 0x2040
                     pr = p.profiles[d]
                     c.set("SP", 0, pr.sp)
                     c.set("AC", 0, pr.ac)

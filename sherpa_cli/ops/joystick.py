@@ -331,7 +331,7 @@ def run_joystick(live: LiveJog, cfg: ArmConfig, jcfg: JoystickConfig, source: Ev
             run.ended_by = "the joystick is gone"
             break
         for ev in events:
-            if ev.code == SYN_DROPPED:  # events were lost: the axes read so far are stale (review R11)
+            if ev.code == SYN_DROPPED:  # events were lost: the axes read so far are stale
                 values.clear()
                 deadman(_deadman_down(source, jcfg.deadman))
             elif ev.code == jcfg.deadman:

@@ -159,7 +159,7 @@ class LiveJog:
         self.blocked: dict[str, _Blocked] = {}  # per axis: a command the stall watch stopped
         self.messages: list[str] = []  # limit breaches and recoveries, oldest first
         self.dead: dict[str, str] = {}  # drive -> why it must not be commanded again in this session
-        self.moved: set[str] = set()  # drives this session sent a motion command to (review R4)
+        self.moved: set[str] = set()  # drives this session sent a motion command to
         self.outside: set[str] = set()  # joints found outside their full range, not by this session's motion
         self.unguarded: set[str] = set()  # drives the guard could not take back after homing (read raw)
 
@@ -230,7 +230,7 @@ class LiveJog:
         duration = distance / speed if distance else 0.0
         self._stop_others_on(a.drives, name)
         self.stalls.pop(name, None)  # a position step ends at its target: no progress there is no stall
-        # on record before the first write: a command that fails half-way is still stopped (review R3)
+        # on record before the first write: a command that fails half-way is still stopped
         self.running[name] = _Running("position", {"target": goal, **motor_targets}, None)
         self.moved.update(motor_targets)
         for d, t in motor_targets.items():
@@ -299,7 +299,7 @@ class LiveJog:
 
     def stop_all(self) -> None:
         """Stop every live drive this session has commanded, not only the commands on record: a motor
-        started by a command that failed half-way is stopped too (review R3). A drive never commanded
+        started by a command that failed half-way is stopped too. A drive never commanded
         gets nothing (whether a drive takes ST with its motor off is not confirmed)."""
         self.running.clear()
         self.stalls.clear()
@@ -532,7 +532,7 @@ class LiveJog:
         self._stop_others_on(a.drives, name)
         um = UM_TORQUE if mode == "torque" else self.settings.velocity_unit_mode
         # on record before the first write: a command that fails half-way still expires and is
-        # stopped by stop / stop_all (review R3)
+        # stopped by stop / stop_all
         self.running[name] = _Running(mode, dict(motors), self.clock() + self.keepalive)
         watching = self.stalls.get(name)
         s = self.settings
@@ -622,7 +622,7 @@ class LiveJog:
         return dict(self.motors)
 
     def _own_breaches(self, breaches: Sequence[limit_watch.Breach]) -> list[limit_watch.Breach]:
-        """The breaches this session's motion made: only those are brought back (review R4). A joint
+        """The breaches this session's motion made: only those are brought back. A joint
         found outside its full range with no command of this session on its motors (uncalibrated at
         power-up, pushed by hand) is reported once and left where it is; commands further out are
         not sent (the edge hold), commands back inward are, and once inside it is watched as usual."""

@@ -14,7 +14,7 @@ The checks are `jog`'s (ops/jog.py): a position goal outside the joint's normal 
 and so is a position step of a joint that is not calibrated unless ``uncalibrated``; while it waits
 for the response, the joint-limit watch (motion/limit_watch.py) stops the step and brings the joint
 back into its normal range when it leaves its full range -- in torque mode too, where no drive
-limit acts. The motor is stopped before the recording is torn down (review R6), so the drive
+limit acts. The motor is stopped before the recording is torn down, so the drive
 never keeps its JV/TC while the recorder drains and restores its PDOs.
 """
 
@@ -375,7 +375,7 @@ class _StopFirst:
     """Entered just inside the Recorder, so it exits first: on every way out (the end, an error,
     Ctrl-C) the motor is stopped -- the guard's stop (TC=0 in torque mode, ST or JV=0 + BG as
     motion.stop_method says, then standstill) -- before the Recorder drains and restores its PDOs
-    (review R6). The guard's own stop and switch-off follow as before."""
+   . The guard's own stop and switch-off follow as before."""
 
     def __init__(self, guard: MotionGuard, ref: DriveRef, settings: MotionSettings, rec: Recorder,
                  state: dict[str, Any], clock: Callable[[], float], sleep: Callable[[float], None]) -> None:
