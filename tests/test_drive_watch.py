@@ -427,3 +427,85 @@ def test_warning_codes_and_error_reset_never_trip_a_moving_drive():
     assert w.poll() is None
     client.emcy_cbs[0](decode_emcy(struct.pack("<HBBHH", 0x8130, 0x11, 0, 0, 0)))
     assert isinstance(w.poll(), SafetyError) and "EMCY 0x8130: heartbeat event" in str(w.error)
+
+
+def test_a_trip_of_the_outer_guard_leaves_a_drive_released_to_an_inner_guard_to_that_guard(cfg, other_node):
+    """The live view hands a joint to `home`'s own guard while it keeps watching the others. A trip
+    of the outer watch (an EMCY from drive2) must not cut short the inner guard's exit of drive1:
+    it raised at the inner exit's first request, MO=0 went out without a stop from standstill and
+    the dead-man stayed armed ("stop failed")."""
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
+        refs = [resolve_target(cfg, "drive1"), resolve_target(cfg, "drive2")]
+        other = open_other(s, other_node)
+        settings = MotionSettings.from_config(cfg)
+        with pytest.raises(DriveWatchError, match=r"drive2 .*EMCY 0x8611"), MotionGuard(s, refs, settings=settings) as outer:
+            start_both(outer, refs[1:])
+            outer.release(refs[:1])
+            with MotionGuard(s, refs[:1], settings=settings) as inner:
+                start_both(inner, refs[:1])
+                other.send(emcy_frame(NODE2, 0x8611))
+                deadline = time.monotonic() + BOUND
+                while outer._watch.error is None and time.monotonic() < deadline:
+                    time.sleep(0.005)
+                assert outer._watch.error is not None
+            outer.check()
+        (stop,) = inner.report.drives
+        assert stop.motor_off and stop.standstill is not False and not stop.problems, stop.line()
+        assert not any("stop failed" in k for k in stop.kept), stop.line()
+        assert_all_stopped_drives(s)
+
+
+def assert_all_stopped_drives(s):
+    with s.sim.lock:
+        assert not any(d.motor_on for d in s.sim.drives.values())
+
+
+def test_without_set_echoes_a_set_after_a_trip_never_reaches_the_drive(tmp_path, other_node):
+    """A drive that does not echo sets: the set went out first and the trip was raised after it."""
+    path = tmp_path / "arm.yaml"
+    path.write_text(CONFIG.replace("protocol: {", "protocol: {set_echo: false, "), encoding="utf-8")
+    cfg = load_config(path)
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
+        refs = [resolve_target(cfg, "drive1"), resolve_target(cfg, "drive2")]
+        other = open_other(s, other_node)
+        with pytest.raises(DriveWatchError, match="EMCY 0x8611"), \
+                MotionGuard(s, refs, settings=MotionSettings.from_config(cfg)) as g:
+            start_both(g, refs)
+            other.send(emcy_frame(NODE2, 0x8611))
+            deadline = time.monotonic() + BOUND
+            while g._watch.error is None and time.monotonic() < deadline:
+                time.sleep(0.005)  # no request meanwhile: the trip falls between two
+            g.client(refs[0]).set("JV", 0, 9000)
+        with s.sim.lock:
+            assert s.sim.drives["drive1"].ram["JV"] == 3000
+        assert_all_stopped(s, g)
+
+
+def test_drives_that_all_boot_again_before_their_turn_in_the_exit_are_stopped_cleanly(tmp_path, other_node):
+    """NMT reset node to every node (node 0) during the first drive's stop: the second drive's
+    boot-up, heard then, left its requests refused when its own turn came ("MO=0: ... booted
+    again", the dead-man kept as "stop failed")."""
+    path = tmp_path / "arm.yaml"
+    path.write_text(CONFIG.replace("drive1: {heartbeat_ms: 200}", "drive1: {heartbeat_ms: 200, boot_ms: 300}\n"
+                                   "    drive2: {boot_ms: 300}"), encoding="utf-8")
+    cfg = load_config(path)
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
+        refs = [resolve_target(cfg, "drive1"), resolve_target(cfg, "drive2")]
+        other = open_other(s, other_node)
+        with MotionGuard(s, refs, settings=MotionSettings.from_config(cfg)) as g:
+            start_both(g, refs)
+            client = g.client(refs[0])
+            motor_off = client.motor_off
+
+            def reset_all_then_motor_off(*args, **kwargs):
+                client.motor_off = motor_off  # once
+                other.send(can.Message(arbitration_id=0, data=bytes([0x81, 0]), is_extended_id=False))
+                deadline = time.monotonic() + BOUND
+                while g._watch.boots("can0", NODE2) == 0 and time.monotonic() < deadline:
+                    time.sleep(0.005)  # drive2 boots while drive1's stop goes on
+                return motor_off(*args, **kwargs)
+
+            client.motor_off = reset_all_then_motor_off
+            g.check()
+        assert_all_stopped(s, g)
+        assert [r.line() for r in g.report.drives if r.problems or "stop failed" in " ".join(r.kept)] == []

@@ -11,6 +11,7 @@ arm's endpoints, starts it and stops it.
 from __future__ import annotations
 
 import contextlib
+import functools
 from collections.abc import Callable, Iterable, Iterator, Mapping
 from contextlib import contextmanager
 from dataclasses import replace
@@ -83,7 +84,7 @@ class ArmSession:
         # watches the arm's F/T sensors with these, which only tighten the sensors' own (motion/force_watch.py)
         self.force_limit: float | None = None  # N
         self.torque_limit: float | None = None  # N·m
-        self._request_watchers: list[Callable[[], None]] = []
+        self._request_watchers: list[Callable[[tuple[str, int]], None]] = []
 
     @classmethod
     @contextmanager
@@ -146,7 +147,7 @@ class ArmSession:
             options: dict[str, Any] = {"timeout": p.reply_timeout, "retries": p.retries, **self.client_overrides}
             client = DriveClient(NetworkTransport(self.links[ref.bus].network), ref.node, name=ref.name,
                                  settings=settings, **options)
-            client.on_request = self._request_sent
+            client.on_request = functools.partial(self._request_sent, key)
             self._clients[key] = client
         return client
 
@@ -164,13 +165,14 @@ class ArmSession:
             sdo = DriveSdo(link.network, ref.node, label=f"{ref.name} (node {ref.node})",
                            timeout=self.cfg.protocol.sdo_timeout,
                            channel_lock=TransferLock(wire_key(link.config.interface, link.config.channel), ref.node))
-            sdo.on_request = self._request_sent
+            sdo.on_request = functools.partial(self._request_sent, ref.key)
             self._sdo[ref.key] = sdo
         return sdo
 
-    def watch_requests(self, watcher: Callable[[], None]) -> Callable[[], None]:
-        """Call ``watcher`` on the requesting thread before every interpreter request attempt and
-        every SDO transfer of this session's drives; returns the function that stops it. The motion
+    def watch_requests(self, watcher: Callable[[tuple[str, int]], None]) -> Callable[[], None]:
+        """Call ``watcher((bus, node))`` on the requesting thread before every interpreter request
+        attempt and every SDO transfer of this session's drives, before a frame of it goes out;
+        returns the function that stops it. The motion
         guard's sign of life: a command working through many requests (a recorder's PDO set-up, a
         restore) is alive, however slow the bus or the machine, without a check between each."""
         self._request_watchers.append(watcher)
@@ -180,6 +182,6 @@ class ArmSession:
                 self._request_watchers.remove(watcher)
         return stop
 
-    def _request_sent(self) -> None:
+    def _request_sent(self, key: tuple[str, int]) -> None:
         for watcher in list(self._request_watchers):
-            watcher()
+            watcher(key)

@@ -303,6 +303,8 @@ class DriveClient:
                 if echo is not None and not echo.ok:
                     raise self._refused(what, echo.error_code)
             else:
+                if self.on_request is not None:
+                    self.on_request()
                 self.transport.send(RPDO2_BASE + self.node, frame)
             query = self._query_frame("MO", 0)
             start = self._clock()
@@ -435,11 +437,11 @@ class DriveClient:
         with self._state:
             self._pending = pending
         try:
-            if before is not None:
-                self.transport.send(RPDO2_BASE + self.node, before)
             for attempt in range(attempts):
                 if self.on_request is not None:
-                    self.on_request()
+                    self.on_request()  # first: it may refuse the request (the guard's watch tripped)
+                if before is not None and attempt == 0:
+                    self.transport.send(RPDO2_BASE + self.node, before)
                 if frame:  # an empty frame only waits (for a reply already on its way)
                     self.transport.send(RPDO2_BASE + self.node, frame)
                 # the transport may let this thread read the bus itself until the reply is in

@@ -98,8 +98,8 @@ class DriveWatch:
         self._nmt_subs: dict[str, tuple[Any, Callable[..., None]]] = {}
         self._active = False
         self.error: SherpaError | None = None  # the first reason to stop, once found
-        # the command learnt of it: a request it waited for raised it, or the guard did (a trip
-        # between two requests is raised by the guard at the command's next request instead)
+        # the command learnt of it: a request it waited for raised it (a trip between two requests
+        # is raised by the guard at the command's next request to one of its drives instead)
         self.told = False
         self.emcy_errors = 0  # error EMCYs seen after the first (a flood is counted, not acted on twice)
 

@@ -729,20 +729,24 @@ class MotionGuard:
             self._unwatch_requests()
             self._unwatch_requests = None
 
-    def _request_sent(self) -> None:
-        """A request about to go out. From the command's own thread it is a sign of life, so a step of
-        many requests (a recorder's PDO set-up, its restore, a profile) never outlasts the allowance
-        on a slow bus or machine; it never shortens a longer allowance. A request of another thread
-        (a watch, a receive thread) says nothing about the command's loop: a hung loop still stops
-        the heartbeat."""
-        if threading.get_ident() == self._owner:
-            error = self._watch.error
-            if error is not None and not self._watch.told and not self._exiting:
-                # the watch tripped between two requests: this one would wait out its reply timeouts
-                # on a deaf drive (one reset by another node) and its timeout would hide the reason
-                self._watch.told = True
-                raise error
-            self._heartbeat.pulse(self._allowance(), extend=True)
+    def _request_sent(self, key: tuple[str, int]) -> None:
+        """A request to drive ``key`` about to go out. From the command's own thread it is a sign of
+        life, so a step of many requests (a recorder's PDO set-up, its restore, a profile) never
+        outlasts the allowance on a slow bus or machine; it never shortens a longer allowance. A
+        request of another thread (a watch, a receive thread) says nothing about the command's loop:
+        a hung loop still stops the heartbeat."""
+        if threading.get_ident() != self._owner:
+            return
+        error = self._watch.error
+        if error is not None and not self._watch.told and not self._exiting and key in self._drives:
+            # the watch tripped between two requests: this one, to one of this guard's drives, would
+            # go out after the reason to stop is known and wait out its reply timeouts on a deaf
+            # drive (one reset by another node), its timeout hiding the reason. Once: the clean-up
+            # that follows (a recorder's restore) must reach the drives. A drive released to another
+            # guard (a home inside the live view) is that guard's to stop, not this one's.
+            self._watch.told = True
+            raise error
+        self._heartbeat.pulse(self._allowance(), extend=True)
 
     def _beat_now(self) -> None:
         self._heartbeat.beat_now()
@@ -852,6 +856,9 @@ class MotionGuard:
         self._exit_of, self._exit_boots = d, start
         try:
             self._await_boot(d)
+            # a boot-up heard after the watch stopped, before this drive's turn, cut short a request
+            # of another drive's exit, not the ones to come (its first step starts it again)
+            d.client.clear_abort()
             r = self._exit_drive_once(d, stop)
             if r.problems and self._watch.boots(d.ref.bus, d.ref.node) != start:
                 self._event(f"{d.client.label}: booted again during its stop ({'; '.join(r.problems)}): "
