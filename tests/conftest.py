@@ -25,6 +25,13 @@ from pathlib import Path
 
 import pytest
 from arm_harness import ArmProcess, TestBus, parse_test_bus
+from hypothesis import HealthCheck, settings
+
+# How fast examples are made and run depends on the machine's load, not on the code under test: a
+# busy CI host failed a codec round trip on "data generation is extremely slow". Properties are
+# judged, their speed is not (benchmarks/run.py measures speed).
+settings.register_profile("sherpa", deadline=None, suppress_health_check=[HealthCheck.too_slow])
+settings.load_profile("sherpa")
 
 pytest_plugins = ["pytester"]  # tests/test_state_files.py runs the isolation fixtures on leaky tests
 

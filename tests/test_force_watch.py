@@ -3,6 +3,8 @@ a bad status stops, a silent sensor stops only after its bound, a command may on
 
 from __future__ import annotations
 
+import dataclasses
+
 import pytest
 
 from sherpa_cli.config import load_config
@@ -64,7 +66,9 @@ def test_the_force_limit_names_the_axis_and_the_value():
 
 
 def test_the_torque_limit_on_its_own():
-    err = watch([w(ty=-2.5, tz=0.5)], force_limit=None)[0].check()
+    fw, _ = watch([w(), w(ty=-2.5, tz=0.5)], force_limit=None)
+    assert fw.check() is None
+    err = fw.check()
     assert isinstance(err, ForceLimitError) and err.axis == "Ty" and "|T| 2.55 N·m > 2 N·m" in err.message
     assert watch([w(fx=100.0)], force_limit=None)[0].check() is None  # no force limit: forces are not watched
 
@@ -126,3 +130,56 @@ def test_a_count_of_unanswered_requests_in_a_row_is_silence_on_any_clock():
     assert [fw.check() for _ in range(5)] == [None] * 5
     error = fw.check()
     assert isinstance(error, SensorSilentError) and "3 requests unanswered" in error.message
+
+
+def test_a_saturated_axis_is_taken_as_past_the_limit_at_the_start_and_during_the_motion():
+    """A count at the end of INT16 says only "at least this much": 86 N on an axis that saturates at
+    32.77 N read 32.77 N, under a 40 N limit, and the jog pressed on."""
+    top = 32767 / 1000
+    for script in ([w(fx=top, sample=3)], [w(), w(fx=-32768 / 1000, sample=3)]):
+        fw, _ = watch([dataclasses.replace(x, saturated=("Fx",) if abs(x.fx) >= top else ()) for x in script],
+                      force_limit=40.0)
+        errors = [fw.check() for _ in script]
+        err = errors[-1]
+        assert isinstance(err, ForceLimitError) and err.axis == "Fx", errors
+        assert "reads Fx at the end of its range" in err.message and "taken as over 40 N" in err.message
+    fw, _ = watch([dataclasses.replace(w(tx=32.767), saturated=("Tx",))], torque_limit=None)
+    assert fw.check() is None  # torque is not watched: its saturation is no stop
+
+
+def test_the_real_reader_marks_the_saturated_axes():
+    from sherpa_cli.devices.ft_sensor import RawSample, to_wrench
+
+    got = to_wrench(RawSample(fx=32767, tx=5, fy=-32767, ty=0, fz=-32768, tz=0, status=0, sample=1), CAL)
+    assert got.saturated == ("Fx", "Fz")
+
+
+def test_a_watch_that_begins_past_its_limit_lets_the_arm_move_away_and_stops_it_pressing_harder():
+    """After a force stop the arm still presses where it stopped: every motion was refused, the
+    one that moves it away included."""
+    fw, _ = watch([w(fz=-22.0), w(fz=-21.0), w(fz=-22.9), w(fz=-23.2)], force_limit=20.0)
+    assert fw.check() is None and fw.past_at_start == {"force": 22.0}
+    assert fw.check() is None and fw.limit_now("force", 20.0) == pytest.approx(23.0)  # lowest 21 + 2
+    assert fw.check() is None  # 22.9: under the lowest reading + 10 % of the limit
+    err = fw.check()
+    assert isinstance(err, ForceLimitError) and err.limit == pytest.approx(23.0)
+    assert "|F| 23.20 N > 23.00 N (it began past its 20 N limit: lowest reading + 10%)" in err.message
+
+
+def test_once_clear_of_the_contact_the_configured_limit_holds_again():
+    fw, _ = watch([w(fz=-25.0), w(fz=-19.0), w(fz=-20.5)], force_limit=20.0)
+    assert fw.check() is None and fw.check() is None
+    assert fw.past_at_start == {}
+    err = fw.check()
+    assert isinstance(err, ForceLimitError) and "> 20 N (mostly Fz" in err.message
+
+
+def test_silence_counts_from_the_first_unanswered_request_not_from_the_last_sample():
+    """The guard's entry takes longer than the silence bound between its first sample and the
+    loop's first check: one missed reply then ended the move."""
+    fw, clock = watch([w(), None, None, None, None, None, None], silent_s=0.045)
+    assert fw.check() is None
+    clock.t += 0.7  # the command's own steps: no check meanwhile
+    results = [fw.check() for _ in range(6)]
+    assert results[:4] == [None] * 4
+    assert isinstance(results[4], SensorSilentError) and "silent for 50 ms" in results[4].message

@@ -22,7 +22,7 @@ devices:
     type: ft_sensor
     bus: can1
     base_id: 0x010
-    counts_per_force: 1000000
+    counts_per_force: 500
     counts_per_torque: 1000
     frame: wrist_ft_link
     force_limit: 40
@@ -52,7 +52,7 @@ def test_a_sensor_parses_into_its_settings():
     dev = cfg.devices["wrist_ft"]
     assert dev.type == "ft_sensor" and dev.bus == "can1" and not dev.canopen and dev.address == "can1:0x010"
     assert dev.ft is not None
-    assert (dev.ft.base_id, dev.ft.counts_per_force, dev.ft.counts_per_torque) == (0x10, 1e6, 1000)
+    assert (dev.ft.base_id, dev.ft.counts_per_force, dev.ft.counts_per_torque) == (0x10, 500, 1000)
     assert (dev.ft.frame, dev.ft.force_limit, dev.ft.torque_limit, dev.ft.reply_ms) == ("wrist_ft_link", 40, 4, 20)
     assert cfg.ft_sensors() == [dev]
     sim = cfg.sim_ft["wrist_ft"]
@@ -88,7 +88,7 @@ BAD = [
      "its base+6 id 0x77E is heartbeat 0x77E of the tool's heartbeat (node 126)"),
     ("base-out-of-range", "base_id: 0x010", "base_id: 0x7FA", "base_id:", "devices.wrist_ft.base_id",
      "base_id 0x7FA out of range 0x001..0x7F9"),
-    ("missing-counts-per-force", "    counts_per_force: 1000000\n", "", "  wrist_ft:", "devices.wrist_ft",
+    ("missing-counts-per-force", "    counts_per_force: 500\n", "", "  wrist_ft:", "devices.wrist_ft",
      "counts_per_force missing; take it from the sensor's calibration sheet"),
     ("missing-counts-per-torque", "    counts_per_torque: 1000\n", "", "  wrist_ft:", "devices.wrist_ft",
      "counts_per_torque missing"),
@@ -98,6 +98,11 @@ BAD = [
      "force_limit 0 N must be > 0"),
     ("torque-limit-negative", "torque_limit: 4", "torque_limit: -1", "torque_limit:",
      "devices.wrist_ft.torque_limit", "torque_limit -1 N·m must be > 0"),
+    # one axis saturates at 32767 / 500 = 65.53 N: a push along it past that is never seen
+    ("force-limit-past-the-range", "force_limit: 40", "force_limit: 70", "force_limit:", "devices.wrist_ft.force_limit",
+     "force_limit 70 N is beyond what the sensor reports on one axis (32767 counts / counts_per_force 500 = 65.53 N)"),
+    ("torque-limit-past-the-range", "torque_limit: 4", "torque_limit: 32.767", "torque_limit:",
+     "devices.wrist_ft.torque_limit", "torque_limit 32.767 N·m is beyond what the sensor reports on one axis"),
     ("node-instead-of-base", "    base_id: 0x010\n", "    node: 16\n", "node: 16", "devices.wrist_ft.node",
      "an ft_sensor is no CANopen node: give its base_id"),
     ("ft-key-on-an-encoder", "    type: ft_sensor\n    bus: can1\n", "    type: canopen-encoder\n    bus: can1\n"

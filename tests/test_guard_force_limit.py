@@ -150,3 +150,28 @@ def test_the_api_takes_a_force_limit_per_call_and_puts_the_sessions_back():
         assert session.force_limit is None  # one call's, not the session's from now on
         with pytest.raises(Exception, match="expected a force in N"):
             arm.jog("wrist", by=0.01, uncalibrated=True, force_limit=-1.0)
+
+
+def test_after_a_force_stop_the_arm_can_be_moved_away_and_pressing_harder_stops_again():
+    """The stop leaves the wrist pressing on the wall, past the limit: the next jog was refused
+    ("|F| 22.62 N > 20 N"), the jog away from the contact too."""
+    cfg = quiet(load_config(ARM))
+    settings = MotionSettings.from_config(cfg, ["can0"])
+    with stepped_session(cfg) as (session, stepped):
+        axis = resolve_axis(cfg, "wrist")
+        arm = Arm(session)
+
+        def move_to(counts: int) -> None:
+            arm.move(axis, parse_request(axis, "position", to=counts * 2 * math.pi / CPR, uncalibrated=True),
+                     settings=settings, clock=stepped.now, sleep=stepped.sleep)
+
+        with pytest.raises(ForceLimitError):
+            move_to(800)
+        with session.sim.lock:
+            stopped_at = session.sim.drives["wrist_drive"].motor.counts
+        assert wall_force(stopped_at) > 20.0  # still pressing past the limit
+        with pytest.raises(ForceLimitError, match=r"it began past its 20 N limit"):
+            move_to(stopped_at + 40)  # harder into the wall: stopped again
+        move_to(0)  # away from the wall: allowed
+        with session.sim.lock:
+            assert abs(session.sim.drives["wrist_drive"].motor.counts) <= 2

@@ -307,6 +307,7 @@ _NODE_ID_BASES = ((0x080, "EMCY"), (0x180, "TPDO1"), (0x200, "RPDO1"), (0x280, "
                   (0x380, "TPDO3"), (0x400, "RPDO3"), (0x480, "TPDO4"), (0x500, "RPDO4"), (0x580, "SDO tx"),
                   (0x600, "SDO rx"), (0x700, "heartbeat"))
 MAX_FT_BASE_ID = 0x7FF - 6
+FT_COUNT_MAX = 0x7FFF  # the F/T short format's INT16: an axis reads no more than this
 
 
 def _ids_in_use(cfg: ArmConfig, bus: str, skip: str) -> dict[int, str]:
@@ -355,10 +356,16 @@ def _check_ft_sensor(cfg: ArmConfig, dev: DeviceConfig, locs: Locs, r: _Report) 
                     "sheet (counts per N / per N·m)")
         elif not value > 0:
             r.error(locs.get(*where, key), f"device {dev.name}: {key} {value:g} must be > 0")
-    for key, unit in (("force_limit", "N"), ("torque_limit", "N·m")):
+    for key, unit, per_key in (("force_limit", "N", "counts_per_force"), ("torque_limit", "N·m", "counts_per_torque")):
+        per = getattr(ft, per_key)
         value = getattr(ft, key)
         if value is not None and not value > 0:
             r.error(locs.get(*where, key), f"device {dev.name}: {key} {value:g} {unit} must be > 0")
+        elif value is not None and per is not None and per > 0 and value * per >= FT_COUNT_MAX:
+            # one axis saturates below the limit: a push along it could never be seen to cross it
+            r.error(locs.get(*where, key), f"device {dev.name}: {key} {value:g} {unit} is beyond what the sensor "
+                    f"reports on one axis ({FT_COUNT_MAX} counts / {per_key} {per:g} = {FT_COUNT_MAX / per:.4g} {unit})",
+                    hint="set a lower limit, or the sensor's calibration for a larger range")
     if not 1 <= ft.reply_ms <= 1000:
         r.error(locs.get(*where, "reply_ms"), f"device {dev.name}: reply_ms {ft.reply_ms} must be 1..1000")
     if not ft.frame.strip():

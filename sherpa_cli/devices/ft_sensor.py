@@ -185,6 +185,8 @@ class Wrench:
     status: StatusWord = StatusWord(0)
     sample: int = 0
     frame: str = ""  # the sensor frame's name (config)
+    # axes whose count sits at an end of INT16: the real value may be anywhere beyond it
+    saturated: tuple[str, ...] = ()
 
     @property
     def force(self) -> float:
@@ -202,8 +204,10 @@ class Wrench:
 
 def to_wrench(raw: RawSample, cal: Calibration, *, frame: str = "") -> Wrench:
     f, t = cal.counts_per_force, cal.counts_per_torque
+    counts = {"Fx": raw.fx, "Fy": raw.fy, "Fz": raw.fz, "Tx": raw.tx, "Ty": raw.ty, "Tz": raw.tz}
     return Wrench(raw.fx / f, raw.fy / f, raw.fz / f, raw.tx / t, raw.ty / t, raw.tz / t,
-                  StatusWord(raw.status), raw.sample, frame)
+                  StatusWord(raw.status), raw.sample, frame,
+                  saturated=tuple(n for n, c in counts.items() if c in (INT16_MIN, INT16_MAX)))
 
 
 def _counts(value: float, per_unit: float) -> int:

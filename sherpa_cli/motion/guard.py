@@ -336,8 +336,9 @@ class MotionGuard:
     def _watch_forces(self) -> None:
         """Every F/T sensor of the arm with a limit (its own, or the command's tighter one) is
         watched while the command runs: its bus opened if the command's drives are elsewhere, and
-        one sample read now -- a sensor that does not answer, or already reads past its limit,
-        refuses the motion before anything moved."""
+        one sample read now -- a sensor that does not answer, or saturates, refuses the motion
+        before anything moved; one that reads past its limit holds the motion to that reading
+        (motion/force_watch.py ENTRY_MARGIN)."""
         s = self.session
         for dev in s.cfg.ft_sensors():
             assert dev.ft is not None
@@ -362,6 +363,14 @@ class MotionGuard:
             self._forces.append((watch, reader.wait_s))
             self._event(f"{watch.name}: watched: |F| {watch.last.force:.2f} N of {watch.force_limit} N, "
                         f"|T| {watch.last.torque:.3f} N·m of {watch.torque_limit} N·m")
+            for label, low in watch.past_at_start.items():
+                limit = watch.force_limit if label == "force" else watch.torque_limit
+                unit = "N" if label == "force" else "N·m"
+                assert limit is not None
+                self._event(f"{watch.name}: begins past its {label} limit ({low:.2f} {unit} > {limit:g} {unit}; "
+                            f"still in contact?): held to its lowest reading + {watch.entry_margin:.0%} of the "
+                            f"limit until it reads below {limit:g} {unit}: moving away is allowed, pressing harder "
+                            "stops")
         if (s.force_limit is not None or s.torque_limit is not None) and not self._forces:
             raise UsageError("--force-limit: this arm has no F/T sensor to watch (no device of type ft_sensor)",
                              hint="docs/devices.md says how to configure one")
