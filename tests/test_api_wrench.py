@@ -31,3 +31,19 @@ def test_wrench_names_a_missing_sensor_and_a_silent_one():
     silent = dataclasses.replace(cfg, sim_ft={"wrist_ft": dataclasses.replace(cfg.sim_ft["wrist_ft"], silent_at=0)})
     with Arm.open(silent, sim=True) as arm, pytest.raises(DriveTimeoutError, match="no reply within 100 ms"):
         arm.wrench(wait_s=0.1)
+
+
+def test_a_sensor_on_a_bus_the_arm_was_not_opened_on_is_read_after_its_bus_is_opened():
+    """`Arm.open(..., buses=["can0"])` with the sensor on can1 raised a bare KeyError."""
+    from test_ft_config import BASE
+
+    from sherpa_cli.config import load_config_text
+    from sherpa_cli.devices.ft_sensor import open_reader
+
+    cfg = load_config_text(BASE, "ft.yaml")
+    with Arm.open(cfg, sim=True, buses=["can0"]) as arm:
+        with pytest.raises(UsageError, match="F/T sensor wrist_ft: bus can1 is not open in this session"), \
+                open_reader(arm.session, cfg.devices["wrist_ft"]):
+            pass
+        w = arm.wrench()
+    assert isinstance(w, Wrench) and w.status.ok

@@ -663,3 +663,19 @@ def test_convert_takes_positions_with_their_unit_as_move_does(cli):
     out = json.loads(deg.stdout)
     assert abs(out["sigma"]["rad"] - math.radians(10)) < 0.003  # to a count or two (the nearest reachable)
     assert "nearest reachable" in deg.stderr  # 10deg is an odd Σ with Δ=0: one count away, said
+
+
+def test_convert_reads_a_bare_number_beside_one_with_its_unit_in_unit(cli):
+    """`--unit rad --sigma 0.5rad --delta 1` gave Δ = 1 count (0.001 rad), exit 0: the bare number
+    was read as counts once the other carried its unit."""
+    import json
+
+    def convert(*args: str) -> dict:
+        result = cli("--json", "diffdrive", "convert", "shoulder_diff", *args)
+        assert result.exit_code == 0, result.stderr
+        return json.loads(result.stdout)
+
+    mixed = convert("--sigma", "0.5rad", "--delta", "1", "--unit", "rad")
+    assert mixed == convert("--sigma", "0.5rad", "--delta", "1rad")
+    assert abs(mixed["delta"]["rad"] - 1.0) < 0.003, mixed
+    assert convert("--sigma", "200counts", "--delta", "4")["delta"]["counts"] == 4  # --unit counts: 4 counts

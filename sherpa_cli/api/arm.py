@@ -179,6 +179,7 @@ class Arm:
         from sherpa_cli.devices.ft_sensor import open_reader, sensor_named
 
         dev = sensor_named(self.config, name)
+        self._session.open_bus(dev.bus)  # an arm opened on other buses: its bus too, as the guard does
         with open_reader(self._session, dev, wait_s=wait_s) as reader:
             return reader.read()
 

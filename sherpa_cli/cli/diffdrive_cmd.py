@@ -97,9 +97,17 @@ def convert(
     angles = any(t is not None and c is not None and not t.strip().lower().endswith("counts")
                  for t, c in ((sigma, sigma_counts), (delta, delta_counts)))
     if sigma_counts is not None or delta_counts is not None:
-        unit = "counts"  # a position given with its unit: converted once, in whole counts
-        sigma = None if sigma is None else str(sigma_counts if sigma_counts is not None else sigma)
-        delta = None if delta is None else str(delta_counts if delta_counts is not None else delta)
+        def in_unit(text: str, option: str, cpr: int) -> int:
+            # a bare number beside one with its unit is still in --unit
+            value = _bare(text, option)
+            assert value is not None
+            _finite(value, option, unit)
+            return units.rad_to_counts(value, cpr) if unit == "rad" else _whole(value, option)
+
+        angles = angles or unit == "rad"
+        sigma = None if sigma is None else str(sigma_counts if sigma_counts is not None else in_unit(sigma, "--sigma", s_cpr))
+        delta = None if delta is None else str(delta_counts if delta_counts is not None else in_unit(delta, "--delta", d_cpr))
+        unit = "counts"  # every position now in whole counts, converted once
     sigma_v, delta_v = _bare(sigma, "--sigma"), _bare(delta, "--delta")
     for option, value in (("--sigma", sigma_v), ("--delta", delta_v), ("--motor-a", motor_a), ("--motor-b", motor_b)):
         _finite(value, option, unit if option in ("--sigma", "--delta") else "counts")

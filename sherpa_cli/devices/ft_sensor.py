@@ -344,7 +344,10 @@ def open_reader(session: ArmSession, dev: DeviceConfig, *, clock: Callable[[], f
         wait_s = dev.ft.reply_ms / 1000
         if session.sim is not None:  # an in-process simulator on a possibly loaded machine: its patient timeout
             wait_s = max(wait_s, session.cfg.sim_reply_timeout)
-    with NetworkPort(session.links[dev.bus].network, reply_ids(dev.ft.base_id)) as port:
+    link = session.links.get(dev.bus)
+    if link is None:
+        raise UsageError(f"F/T sensor {dev.name}: bus {dev.bus} is not open in this session")
+    with NetworkPort(link.network, reply_ids(dev.ft.base_id)) as port:
         yield FtReader(port, dev.ft.base_id, cal, frame=dev.ft.frame, clock=clock, name=f"F/T sensor {dev.name}",
                        wait_s=wait_s)
 
