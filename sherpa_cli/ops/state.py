@@ -16,10 +16,10 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 from sherpa_cli.bus.targets import DriveRef, drive_ref, resolve
-from sherpa_cli.config.model import ArmConfig, CurrentLimits, JointConfig, JointRole
+from sherpa_cli.config.model import ArmConfig, CurrentLimits, JointConfig
 from sherpa_cli.elmo.faults import UNIT_MODES
 from sherpa_cli.errors import CommunicationError, UsageError
-from sherpa_cli.joints.diffpair import joint_currents, to_joints
+from sherpa_cli.joints.jointmap import joint_map
 from sherpa_cli.joints.units import counts_per_s2_to_rad_per_s2, counts_per_s_to_rad_per_s, counts_to_rad
 from sherpa_cli.motion.calibration import Calibration, joint_drives, read_calibration
 from sherpa_cli.ops.monitor import POLLED, decoded_mf, decoded_sr, query
@@ -187,18 +187,15 @@ def read_state(session: ArmSession, targets: Sequence[str] | None = None, *,
 def joint_state(cfg: ArmConfig, joint: JointConfig, drives: Mapping[str, DriveState],
                  calibration: Calibration) -> JointState:
     """One joint from its drives' states (read already) and its calibration: pure."""
-    names = joint_drives(cfg, joint)
+    jm = joint_map(cfg, joint)
+    if jm is None:
+        raise UsageError(f"{joint.name}: no drive and no pair: nothing to read")
+    names = jm.drives
     mine = [drives[d] for d in names]
-    if joint.role is JointRole.PLAIN:
-        d = mine[0]
-        px, vx, amps = d.position_counts, d.velocity_counts, d.current
-    else:
-        a, b = mine
-        sigma = joint.role is JointRole.SIGMA
-        pick = 0 if sigma else 1
-        px = to_joints(a.position_counts, b.position_counts)[pick]
-        vx = to_joints(a.velocity_counts, b.velocity_counts)[pick]
-        amps = joint_currents(a.current, b.current)[pick]
+    b = mine[1] if len(mine) > 1 else None
+    px = int(jm.value(mine[0].position_counts, None if b is None else b.position_counts))
+    vx = int(jm.value(mine[0].velocity_counts, None if b is None else b.velocity_counts))
+    amps = jm.current(mine[0].current, None if b is None else b.current)
     modes = {d.unit_mode for d in mine}
     return JointState(
         name=joint.name, position=counts_to_rad(px, joint.cpr), velocity=counts_per_s_to_rad_per_s(vx, joint.cpr),
