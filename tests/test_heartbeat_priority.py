@@ -54,3 +54,32 @@ def test_where_it_is_not_permitted_the_thread_runs_normally_and_says_why(monkeyp
 def test_motion_heartbeat_realtime_false_never_asks(monkeypatch):
     hb, calls = _run(monkeypatch, lambda pid, policy, param: None, realtime=False)
     assert calls == [] and hb.priority == "normal"
+
+
+def test_a_machine_that_holds_the_whole_process_up_is_no_hung_command_but_a_hang_still_stops_it():
+    """A loaded host descheduled the command's process for longer than its allowance: on waking,
+    the heartbeat thread took the command for hung and stopped, and the drives' consumers switched
+    a healthy command's motors off. The thread's own lateness is the machine's, and the command's
+    thread was held up no less: it is given back. A command that hangs while it runs still stops."""
+    import time
+
+    offset = [0.0]
+    net = Net()
+    hb = deadman.HostHeartbeat(lambda: [net], 126, 0.01, 1.0, realtime=False,
+                               clock=lambda: time.monotonic() + offset[0])
+    hb.start()
+    try:
+        while hb.sent < 2:  # hang guard only: the thread sends at once
+            time.sleep(0.001)
+        offset[0] += 5.0  # five seconds the process did not run, the thread's wait included
+        sent = hb.sent
+        guard = time.monotonic() + 10
+        while hb.sent < sent + 3 and hb.given_up is None and time.monotonic() < guard:
+            time.sleep(0.001)
+        assert hb.given_up is None and hb.sent >= sent + 3
+        assert hb.held_up >= 4.9
+        while hb.given_up is None and time.monotonic() < guard:  # no pulse: the command hangs
+            time.sleep(0.005)
+        assert hb.given_up == "the command showed no sign of life (hung?)"
+    finally:
+        hb.stop()

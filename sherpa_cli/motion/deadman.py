@@ -60,8 +60,11 @@ class HostHeartbeat:
     """
 
     def __init__(self, networks: Callable[[], Sequence[Sender]], host_node_id: int, period: float,
-                 first_allowance: float, *, realtime: bool = True) -> None:
+                 first_allowance: float, *, realtime: bool = True,
+                 clock: Callable[[], float] = time.monotonic) -> None:
         self._networks = networks
+        self._clock = clock
+        self.held_up = 0.0  # s this thread woke late beyond a period (a loaded machine held it up)
         self.realtime = realtime  # ask for SCHED_FIFO for the sending thread (motion.heartbeat_realtime)
         self.priority = "normal"  # what the thread got (raise_priority), once it runs
         self.frame_id = HEARTBEAT_BASE + host_node_id
@@ -70,7 +73,7 @@ class HostHeartbeat:
         self.thread: threading.Thread | None = None
         self.error: BaseException | None = None  # the send that failed (a dead bus)
         self.given_up: str | None = None  # why the thread stopped sending on its own
-        self._alive_until = time.monotonic() + first_allowance
+        self._alive_until = clock() + first_allowance
         self._alive_lock = threading.Lock()
         self.sent = 0
 
@@ -82,8 +85,18 @@ class HostHeartbeat:
         """A sign of life: keep sending for ``allowance`` s from now; ``extend`` never shortens an
         earlier, longer allowance."""
         with self._alive_lock:
-            until = time.monotonic() + allowance
+            until = self._clock() + allowance
             self._alive_until = max(self._alive_until, until) if extend else until
+
+    def _allow_held_up(self, late: float) -> None:
+        """This thread woke ``late`` s after its period. Beyond a period, the machine held it up (a
+        loaded host, the whole process descheduled), and the command's thread no less: that time is
+        no sign of a hung command, so its allowance gets it back. A command that hangs while the
+        machine runs it gets none, and its heartbeat still stops after the allowance."""
+        if late > self.period:
+            self.held_up += late
+            with self._alive_lock:
+                self._alive_until += late
 
     def beat_now(self) -> None:
         """One heartbeat at once after arming: a drive's consumer starts watching on the first
@@ -102,13 +115,15 @@ class HostHeartbeat:
             if self.realtime:
                 self.priority = raise_priority()
             started.set()
+            due = self._clock()
             while True:
+                self._allow_held_up(self._clock() - due)
                 with self._alive_lock:
                     alive_until = self._alive_until
                 if not main.is_alive():
                     self.given_up = "the command's main thread ended"
                     return
-                if time.monotonic() > alive_until:
+                if self._clock() > alive_until:
                     self.given_up = "the command showed no sign of life (hung?)"
                     log.warning("motion guard: %s; heartbeat stopped, drives stop on their own", self.given_up)
                     return
@@ -119,6 +134,7 @@ class HostHeartbeat:
                 except BaseException as exc:  # noqa: BLE001 - a dead bus: recorded for check(); the drives' consumers will stop them
                     self.error = exc
                     return
+                due = self._clock() + self.period
                 if self._stop.wait(self.period):
                     return
 

@@ -7,7 +7,7 @@ May import elmo, joints, config, errors and paths only; never bus, devices, moti
 recipes or cli (import-linter checks it). Only the CLI wires it in (--sim, `sherpa sim`).
 """
 
-from sherpa_cli.sim.clock import Clock, ManualClock, PausingClock, RealClock
+from sherpa_cli.sim.clock import Clock, ManualClock, RealClock, StallMeter
 from sherpa_cli.sim.settings import SimSettings
 
-__all__ = ["Clock", "ManualClock", "PausingClock", "RealClock", "SimSettings"]
+__all__ = ["Clock", "ManualClock", "RealClock", "SimSettings", "StallMeter"]

@@ -30,7 +30,7 @@ from sherpa_cli.config.simbus import SimBusConfig
 from sherpa_cli.elmo.protocol import NMT_ID, SDO_RX_BASE, SYNC_ID
 from sherpa_cli.sim import state as sim_state
 from sherpa_cli.sim.buscontroller import BusController, SimNetlink
-from sherpa_cli.sim.clock import Clock, FrameClock, PausingClock, RealClock
+from sherpa_cli.sim.clock import Clock, FrameClock, RealClock, StallMeter
 from sherpa_cli.sim.drive import SimDrive
 from sherpa_cli.sim.encoder import SimEncoder
 from sherpa_cli.sim.ft_sensor import SimFtSensor
@@ -307,15 +307,18 @@ class SimArm:
                  clock: Clock | None = None, flash: Mapping[str, sim_state.DriveFlash] | None = None,
                  settings: Mapping[str, SimSettings] | None = None, persist: bool = False,
                  tick_s: float = 0.002, bus_factory: Callable[..., can.BusABC] | None = None,
-                 event_log: str | None = None, keep_ram: bool = False, link_retry_s: float = 0.5) -> None:
+                 event_log: str | None = None, keep_ram: bool = False, link_retry_s: float = 0.5,
+                 stalls: StallMeter | None = None) -> None:
         """``endpoints``: bus name -> keyword arguments for ``can.Bus`` (interface, channel);
         ``bus_factory`` opens them instead of ``can.Bus``; ``event_log``: a file that gets one JSON
         line per motor on/off and dead-man event (appended, flushed at once), so another process can
         tell when a motor went off; ``keep_ram``: the arm stays powered between runs (`--sim`): its RAM
         is loaded from the state directory by :meth:`start` and saved by :meth:`stop`, under a lock
         held meanwhile (sim/state.py); ``link_retry_s``: how often a pump whose bus failed under it (a
-        kernel interface set down) reopens it."""
+        kernel interface set down) reopens it; ``stalls``: an in-process arm's meter of the time its
+        process did not run, which the drives' heartbeat consumers leave out (sim/clock.py)."""
         self.cfg = cfg
+        self.stalls = stalls
         self.endpoints = dict(endpoints)
         self.bus_factory = bus_factory
         self.clock = clock or RealClock()
@@ -338,7 +341,8 @@ class SimArm:
                 serial=saved.serial, flash=saved.flash, save_count=saved.save_count,
                 speed_gain=cfg.sim[name].speed_gain if name in cfg.sim else 1.0, position=start.get(name, 0),
                 on_step=functools.partial(self._drive_stepped, name),
-                on_event=functools.partial(self._drive_event, name))
+                on_event=functools.partial(self._drive_event, name),
+                stalled=None if stalls is None else stalls.read)
         self._mechanics = _Mechanics(cfg, self.drives)
         for name, w in cfg.sim_wiring.items():
             if name in self.drives:
@@ -410,10 +414,10 @@ class SimArm:
     @classmethod
     def for_session(cls, cfg: ArmConfig, channels: Mapping[str, str], *, clock: Clock | None = None) -> SimArm:
         """The in-process arm of ``--sim``: virtual channels, flash kept in the state directory;
-        ``clock``: its time (default wall time that stands still while this process does not run,
-        PausingClock; `log step` gives it a stepped clock)."""
+        ``clock``: its time (default wall time; `log step` gives it a stepped clock). Its drives'
+        heartbeat consumers leave out the time this process did not run (sim/clock.py StallMeter)."""
         return cls(cfg, {bus: {"interface": "virtual", "channel": ch} for bus, ch in channels.items()},
-                   persist=True, clock=clock or PausingClock(), keep_ram=True)
+                   persist=True, clock=clock, keep_ram=True, stalls=StallMeter())
 
     def _log_event(self, name: str, node: int, t: float, text: str) -> None:
         """One JSON line per event: ``t`` is the drive's clock (time.monotonic() for a RealClock,
@@ -495,8 +499,8 @@ class SimArm:
             for name, (bus_name, drive) in self.extras.items():
                 if bus_name in self._buses:
                     self._sdo[name] = SdoServer(drive.node, drive, drive.send_now)
-            if isinstance(self.clock, PausingClock):
-                self._start_thread(self.clock.keep_time, (self._stop,), "sim-clock")
+            if self.stalls is not None:
+                self._start_thread(self.stalls.keep_time, (self._stop,), "sim-stalls")
             powered = {bus_name: threading.Event() for bus_name in self._buses}
             for bus_name in self._buses:
                 self._start_thread(self._pump, (bus_name, powered[bus_name]), f"sim-{bus_name}")

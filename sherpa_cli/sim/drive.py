@@ -126,7 +126,8 @@ class SimDrive:
                  flash: Mapping[str, Value] | None = None, save_count: int = 0, speed_gain: float = 1.0,
                  position: int = 0, on_step: Callable[[SimDrive], None] | None = None,
                  on_event: Callable[[SimDrive, float, str], None] | None = None,
-                 od_live: Mapping[tuple[int, int], Callable[[], OdValue]] | None = None) -> None:
+                 od_live: Mapping[tuple[int, int], Callable[[], OdValue]] | None = None,
+                 stalled: Callable[[], float] | None = None) -> None:
         if isinstance(node, bool) or not isinstance(node, int) or not 1 <= node <= 127:
             raise ValueError(f"node id must be 1..127, got {node!r}")
         if not speed_gain > 0:
@@ -192,6 +193,10 @@ class SimDrive:
         self._via_group = False  # the frame being handled reached the drive on its group id or at SYNC
         self._nmt_state = PRE_OPERATIONAL
         self._hb_last: float | None = None  # the consumed heartbeat's last arrival; None: not armed
+        # seconds the simulator's own process did not run (sim/clock.py StallMeter), and their count
+        # at the last heartbeat: the consumer leaves them out, they were no silence of the host
+        self._stalled = stalled or (lambda: 0.0)
+        self._hb_stalled = 0.0
         self._settle_until = -math.inf  # the interpreter is deaf until then (MO settle window)
         self._blackout_until = -math.inf  # SV blackout: nothing in or out until then
         # the receive buffer (settings.rx_buffer_s): holds the last frame to this drive until then
@@ -287,7 +292,7 @@ class SimDrive:
             finally:
                 self._via_group = False
         elif can_id == HEARTBEAT_BASE + self._consumer()[0]:
-            self._hb_last = t
+            self._hb_last, self._hb_stalled = t, self._stalled()
         return True
 
     def send_now(self, can_id: int, data: bytes) -> None:
@@ -674,6 +679,14 @@ class SimDrive:
         return (self._consumer()[1] > 0 and self._hb_last is not None
                 and self._od.values[(0x6007, 0)] in (1, 2, 3))
 
+    def _consumer_due(self) -> float | None:
+        """When the consumer acts if no heartbeat comes: the last one plus its time, plus what the
+        simulator's process did not run since (None: not watching)."""
+        timeout = self._consumer()[1]
+        if self._hb_last is None or not timeout:
+            return None
+        return self._hb_last + timeout + (self._stalled() - self._hb_stalled)
+
     def _consumer(self) -> tuple[int, float]:
         """(host node, timeout s) of the 0x1016 sub1 entry; timeout 0 = not monitoring."""
         entry = self._od.values[(0x1016, 1)]
@@ -712,9 +725,9 @@ class SimDrive:
         if self._begin_due is not None:
             times.append(self._begin_due)
         if self._hb_last is not None:  # checked first: _consumer() is a lookup on every step
-            timeout = self._consumer()[1]
-            if timeout:
-                times.append(self._hb_last + timeout)
+            due = self._consumer_due()
+            if due is not None:
+                times.append(due)
         if self._replies:
             times.append(self._replies[0][0])
         if self._nmt_state == OPERATIONAL:
@@ -751,8 +764,8 @@ class SimDrive:
             self._shut_down(MF_POSITION_LIMIT, "position limit (injected trip)")
             self._emcy(EMCY_POSITION_LIMIT, ERR_REG_GENERIC)
         if self._hb_last is not None:
-            timeout = self._consumer()[1]
-            if timeout and t >= self._hb_last + timeout:
+            due = self._consumer_due()
+            if due is not None and t >= due:
                 self._heartbeat_lost()
         while self._replies and self._replies[0][0] <= t:
             _, _, (can_id, data) = heapq.heappop(self._replies)

@@ -1,7 +1,8 @@
-"""The in-process simulator's time stands still while its process does not run (sim/clock.py
-PausingClock): a loaded machine that deschedules a `--sim` command stalls the simulated drives and
-the tool's heartbeat together, and the drives' consumers no longer stop a command that sent every
-beat ("EMCY 0x8130: heartbeat event" in a CI run on a loaded machine)."""
+"""The in-process simulator's heartbeat consumers leave out the time their process did not run
+(sim/clock.py StallMeter): a loaded machine that deschedules a `--sim` command stalls the simulated
+drives and the tool's heartbeat thread together, and the consumers no longer stop a command that
+sent every beat ("EMCY 0x8130: heartbeat event" in a CI run on a loaded machine). The motors keep
+wall time: the tool sees the progress a real drive makes while it is held up."""
 
 from __future__ import annotations
 
@@ -20,7 +21,8 @@ from hypothesis import strategies as st
 
 from sherpa_cli.config import load_config
 from sherpa_cli.sim.arm import SimArm
-from sherpa_cli.sim.clock import PausingClock
+from sherpa_cli.sim.clock import ManualClock, StallMeter
+from sherpa_cli.sim.drive import SimDrive
 
 ARM = Path(__file__).resolve().parent / "data" / "home-arm.yaml"
 
@@ -33,52 +35,79 @@ class Wall:
         return self.t
 
 
-def test_gaps_up_to_max_gap_are_wall_time_and_a_longer_one_counts_as_max_gap():
+def test_gaps_up_to_max_gap_are_no_stall_and_a_longer_one_counts_beyond_max_gap():
     wall = Wall()
-    clock = PausingClock(0.1, wall=wall)
-    assert clock.now() == 100.0
+    meter = StallMeter(0.1, wall=wall)
+    assert meter.read() == 0.0
     wall.t = 100.1
-    assert clock.now() == pytest.approx(100.1)  # a gap of max_gap: wall time
+    assert meter.read() == 0.0  # a gap of max_gap: the process ran
     wall.t = 101.1  # nobody read it for 1 s: the process did not run
-    assert clock.now() == pytest.approx(100.2)
-    assert clock.paused == pytest.approx(0.9)
+    assert meter.read() == pytest.approx(0.9)
     wall.t = 101.15
-    assert clock.now() == pytest.approx(100.25)  # after the stall it runs at wall speed again
+    assert meter.read() == pytest.approx(0.9)
 
 
 @given(steps=st.lists(st.floats(min_value=0, max_value=5, allow_nan=False), max_size=50),
        max_gap=st.floats(min_value=0.001, max_value=1))
-def test_the_clock_never_goes_back_and_advances_at_most_max_gap_per_reading(steps, max_gap):
+def test_the_stalled_time_never_decreases_and_grows_by_a_gap_beyond_max_gap(steps, max_gap):
     wall = Wall()
-    clock = PausingClock(max_gap, wall=wall)
-    last = clock.now()
+    meter = StallMeter(max_gap, wall=wall)
+    last = meter.read()
     for dt in steps:
         wall.t += dt
-        got = clock.now()
-        assert last <= got <= last + min(dt, max_gap) + 1e-9
-        assert got == pytest.approx(wall.t - clock.paused)
+        got = meter.read()
+        assert got == pytest.approx(last + max(0.0, dt - max_gap))
         last = got
 
 
 def test_a_max_gap_that_is_not_positive_is_refused():
     with pytest.raises(ValueError, match="max_gap must be positive"):
-        PausingClock(0)
+        StallMeter(0)
 
 
-def test_the_in_process_arm_keeps_its_clock_read_while_it_runs_and_stops_the_reader_with_it():
+def consumer_drive(stalled):
+    clock = ManualClock()
+    drive = SimDrive(5, clock=clock, stalled=stalled)
+    drive.od_write(0x1016, 1, 126 << 16 | 500)  # host 126, 500 ms
+    drive.receive(0x77E, bytes([5]))  # the host's first heartbeat arms the consumer
+    return drive, clock
+
+
+def test_the_consumer_leaves_out_the_stalled_time_and_still_acts_on_a_silent_host():
+    stalled = [0.0]
+    drive, clock = consumer_drive(lambda: stalled[0])
+    clock.advance(0.45)
+    stalled[0] = 0.3  # the process did not run for 0.3 s of that
+    drive.tick()
+    clock.advance(0.3)  # 0.75 s since the heartbeat, 0.45 s of it the host's
+    drive.tick()
+    assert not any("heartbeat lost" in text for _, text in drive.events)
+    clock.advance(0.1)  # 0.55 s of the host's own silence
+    drive.tick()
+    assert any("heartbeat lost" in text for _, text in drive.events)
+
+
+def test_without_a_meter_the_consumer_counts_wall_time():
+    drive, clock = consumer_drive(None)
+    clock.advance(0.55)
+    drive.tick()
+    assert any("heartbeat lost" in text for _, text in drive.events)
+
+
+def test_the_in_process_arm_reads_its_meter_while_it_runs_and_stops_the_reader_with_it():
     cfg = load_config(ARM)
     arm = SimArm.in_process(cfg)
-    assert isinstance(arm.clock, PausingClock)
+    assert isinstance(arm.stalls, StallMeter)
     arm.start()
     try:
-        assert any(t.name == "sim-clock" and t.is_alive() for t in threading.enumerate())
+        assert any(t.name == "sim-stalls" and t.is_alive() for t in threading.enumerate())
     finally:
         arm.stop()
-    assert not any(t.name == "sim-clock" and t.is_alive() for t in threading.enumerate())
+    assert not any(t.name == "sim-stalls" and t.is_alive() for t in threading.enumerate())
 
 
 CHILD = textwrap.dedent("""
-    import dataclasses, sys, threading, time
+    import sys, threading, time
     from pathlib import Path
     from sherpa_cli.bus.session import ArmSession
     from sherpa_cli.config import load_config
@@ -104,7 +133,7 @@ CHILD = textwrap.dedent("""
         threading.Thread(target=tell_when_moving, daemon=True).start()
         try:
             r = run_jog(s, axis, parse_request(axis, mode="velocity", velocity=0.2, duration=2.0),
-                        settings=dataclasses.replace(MotionSettings.from_config(cfg), stall_time=0.0))
+                        settings=MotionSettings.from_config(cfg))
         except SherpaError as exc:
             print(f"error: {exc}", flush=True)
             sys.exit(3)
@@ -124,8 +153,7 @@ def test_a_jog_whose_whole_process_is_stopped_for_longer_than_the_consumer_time_
         assert ready, "the child never started moving"
         assert proc.stdout.readline().strip() == "moving"
         # the whole process, simulated drives and heartbeat thread, does not run for 0.8 s: more
-        # than the consumer's 500 ms (the child's stall watch is off: its wall-time view sees no
-        # progress meanwhile, however long a loaded machine takes to deliver the SIGCONT)
+        # than the consumer's 500 ms
         proc.send_signal(signal.SIGSTOP)
         threading.Event().wait(0.8)
         proc.send_signal(signal.SIGCONT)
