@@ -302,8 +302,12 @@ def decode_device_type(frame: bytes) -> tuple[int | None, str | None]:
 
 # -- identity -------------------------------------------------------------------------------------
 
-def _read_identity(network: Network, node: int) -> tuple[int | None, str | None, list[str]]:
+def _read_identity(network: Network, node: int,
+                   clock: Callable[[], float] = time.monotonic) -> tuple[int | None, str | None, list[str], float | None]:
+    """Vendor id, device name, what could not be read, and how long the first read took to be
+    answered (None: not answered)."""
     vendor_id = name = None
+    answered: float | None = None
     notes: list[str] = []
     # canopen's SdoClient needs the whole Network (its notifier and subscriptions), not only the
     # three calls the probe makes: in a session it is one; a test's fake network never gets here
@@ -311,7 +315,9 @@ def _read_identity(network: Network, node: int) -> tuple[int | None, str | None,
     sdo = DriveSdo(cast("canopen.Network", network), node)
     try:
         try:
+            began = clock()
             vendor_id = int.from_bytes(sdo.upload(0x1018, 1)[:4], "little")
+            answered = clock() - began
         except SdoError as exc:
             notes.append(exc.detail)
         try:
@@ -320,7 +326,7 @@ def _read_identity(network: Network, node: int) -> tuple[int | None, str | None,
             notes.append(exc.detail)
     finally:
         sdo.close()
-    return vendor_id, name, notes
+    return vendor_id, name, notes, answered
 
 
 # -- putting it together --------------------------------------------------------------------------
@@ -354,8 +360,6 @@ def scan_bus(cfg: ArmConfig, bus: str, network: Network, settings: ScanSettings 
 
     answer_times = {n: max(0.0, h.answers[0][0] - h.sent_at) for n, h in heard.items()
                     if h.answers and h.sent_at is not None}
-    median = statistics.median(answer_times.values()) if answer_times else None
-    threshold = max(settings.slow_factor * median, settings.slow_floor_s) if median is not None else None
 
     present = sorted(n for n, h in heard.items() if h.answers or h.nmt)
     # Two answers to one request mean two nodes share the id. (Two boot-ups do not: a node that
@@ -366,7 +370,14 @@ def scan_bus(cfg: ArmConfig, bus: str, network: Network, settings: ScanSettings 
     for i, node in enumerate(readable):
         if progress:
             progress("reading identity", i, len(readable))
-        identity[node] = _read_identity(network, node)
+        vendor, name, why, answered = _read_identity(network, node)
+        identity[node] = (vendor, name, why)
+        if answered is not None and node in answer_times:
+            # a node is as quick as its quicker answer: a slow drive is slow every time, while a
+            # loaded host delays one answer now and then (its thread waited for the CPU)
+            answer_times[node] = min(answer_times[node], answered)
+    median = statistics.median(answer_times.values()) if answer_times else None
+    threshold = max(settings.slow_factor * median, settings.slow_floor_s) if median is not None else None
 
     findings = []
     for node in sorted(set(present) | set(configured)):
