@@ -370,8 +370,8 @@ def scan_bus(cfg: ArmConfig, bus: str, network: Network, settings: ScanSettings 
     for i, node in enumerate(readable):
         if progress:
             progress("reading identity", i, len(readable))
-        vendor, name, why, answered = _read_identity(network, node)
-        identity[node] = (vendor, name, why)
+        vendor_read, name_read, notes_read, answered = _read_identity(network, node)
+        identity[node] = (vendor_read, name_read, notes_read)
         if answered is not None and node in answer_times:
             # a node is as quick as its quicker answer: a slow drive is slow every time, while a
             # loaded host delays one answer now and then (its thread waited for the CPU)
