@@ -10,12 +10,14 @@ for the programming engine or the stop procedure it never runs (benchmark ``scan
 from typing import TYPE_CHECKING
 
 __all__ = ["Arm", "ArmState", "DriveState", "IdentifyReport", "JogResult", "JointHandle", "JointLimits", "JointState",
-           "ParamDump", "ProgramReport", "ScanReport", "StopReport", "StopResult"]
+           "ParamDump", "ProgramReport", "RecordResult", "Recording", "ScanReport", "StopReport", "StopResult"]
 
 if TYPE_CHECKING:
     from sherpa_cli.api.arm import Arm as Arm
     from sherpa_cli.api.joint import JointHandle as JointHandle
     from sherpa_cli.api.programming import ProgramReport as ProgramReport
+    from sherpa_cli.log.record_run import RecordResult as RecordResult
+    from sherpa_cli.log.recording import Recording as Recording
     from sherpa_cli.ops.identify import IdentifyReport as IdentifyReport
     from sherpa_cli.ops.jog_result import JogResult as JogResult
     from sherpa_cli.ops.params_file import ParamDump as ParamDump
@@ -32,7 +34,8 @@ _HOME = {"Arm": "sherpa_cli.api.arm", "ProgramReport": "sherpa_cli.api.programmi
          "ScanReport": "sherpa_cli.ops.scan", "StopReport": "sherpa_cli.ops.stop", "StopResult": "sherpa_cli.ops.stop",
          "JointHandle": "sherpa_cli.api.joint", "IdentifyReport": "sherpa_cli.ops.identify",
          "JogResult": "sherpa_cli.ops.jog_result",
-         "ParamDump": "sherpa_cli.ops.params_file", "ArmState": "sherpa_cli.ops.state",
+         "ParamDump": "sherpa_cli.ops.params_file", "RecordResult": "sherpa_cli.log.record_run",
+         "Recording": "sherpa_cli.log.recording", "ArmState": "sherpa_cli.ops.state",
          "DriveState": "sherpa_cli.ops.state", "JointLimits": "sherpa_cli.ops.state", "JointState": "sherpa_cli.ops.state"}
 
 if not TYPE_CHECKING:  # hidden from mypy, which then still refuses a name that is not exported above

@@ -27,6 +27,8 @@ if TYPE_CHECKING:
     from sherpa_cli.bus.session import ArmSession
     from sherpa_cli.config.model import ArmConfig, JoystickConfig
     from sherpa_cli.devices.ft_sensor import Wrench
+    from sherpa_cli.log.foxglove_live import LiveView
+    from sherpa_cli.log.record_run import RecordPlan, RecordResult, RecordTime, Wait
     from sherpa_cli.motion.axis import Axis
     from sherpa_cli.motion.request import MoveRequest, Value
     from sherpa_cli.motion.settings import MotionSettings
@@ -168,6 +170,41 @@ class Arm:
         if path is not None:
             write_dump(Path(path), dump, "path")
         return dump
+
+    def record(self, targets: Sequence[str] | None = None, rate: float = 100.0, duration: float = 1.0, *,
+               current: bool | None = None, poll: bool = False, status: bool = True,
+               stream_to: str | Path | None = None, view: LiveView | None = None,
+               timebase: RecordTime | None = None, wait: Wait | None = None,
+               plan: RecordPlan | None = None, check: bool = True) -> RecordResult:
+        """Record position and velocity (and current) of ``targets`` (joints, pairs, drives, an encoder
+        device; none: every drive) at ``rate`` Hz for ``duration`` s, into memory (`sherpa log record`
+        without the files): TPDOs on SYNC, the drives' PDO settings RAM only and put back on every way
+        out, never saved. A rate the bus cannot carry is refused (UsageError) before anything is sent.
+
+        The result holds the samples with their timestamps (``result.recording``: ``.times`` in s,
+        ``.joint(name)`` in rad, rad/s and A, ``.drive(name)`` in counts) and what arrived per drive;
+        ``result.write_csv(path)`` and ``result.write_mcap(path)`` write the files the command writes.
+        ``current``: also sample the current (None: when the bus budget allows). ``poll``: through the
+        interpreter instead (changes nothing on the drives, slow). ``status``: the drives' status read
+        before and after, the EMCYs heard (the MCAP's). ``stream_to``: a CSV file the rows go to as they
+        come instead of memory. ``view``: a Foxglove live view to feed. ``timebase``: the clock, sleep
+        and SYNC source (default wall time; sim/stepped.py steps it). ``wait``: how to wait for the end
+        (default: sleep on the timebase; Ctrl-C ends it early, ``result.interrupted``). ``plan``: the
+        plan a caller already made with ``log.record_run.plan_record`` for these arguments.
+        Another SYNC producer on the bus ends the recording early: raised (CommunicationError) after the
+        drives are restored, unless ``check=False`` (then ``result.failure``, the samples so far kept).
+        """
+        from sherpa_cli.log.record_run import check_budget, check_record_values, plan_record, run_record
+
+        check_record_values(duration, rate)
+        if plan is None:
+            plan = plan_record(self.config, targets, rate, current=current, poll=poll)
+            check_budget(plan)
+        result = run_record(self._session, plan, duration, wait=wait, status=status, view=view, timebase=timebase,
+                            stream_to=None if stream_to is None else Path(stream_to))
+        if check:
+            result.check()
+        return result
 
     def wrench(self, name: str | None = None, *, wait_s: float | None = None) -> Wrench:
         """One reading of the F/T sensor ``name`` (None: the arm's only one): force in N and torque in
