@@ -10,7 +10,7 @@ for the programming engine or the stop procedure it never runs (benchmark ``scan
 from typing import TYPE_CHECKING
 
 __all__ = ["Arm", "ArmState", "DriveState", "IdentifyReport", "JogResult", "JointHandle", "JointLimits", "JointState",
-           "ParamDump", "ProgramReport", "RecordResult", "Recording", "ScanReport", "StopReport", "StopResult"]
+           "MonitorSnapshot", "ParamDump", "ProgramReport", "RecordResult", "Recording", "ScanReport", "StopReport", "StopResult"]
 
 if TYPE_CHECKING:
     from sherpa_cli.api.arm import Arm as Arm
@@ -20,6 +20,7 @@ if TYPE_CHECKING:
     from sherpa_cli.log.recording import Recording as Recording
     from sherpa_cli.ops.identify import IdentifyReport as IdentifyReport
     from sherpa_cli.ops.jog_result import JogResult as JogResult
+    from sherpa_cli.ops.monitor import MonitorSnapshot as MonitorSnapshot
     from sherpa_cli.ops.params_file import ParamDump as ParamDump
     from sherpa_cli.ops.scan import ScanReport as ScanReport
     from sherpa_cli.ops.state import ArmState as ArmState
@@ -34,7 +35,7 @@ _HOME = {"Arm": "sherpa_cli.api.arm", "ProgramReport": "sherpa_cli.api.programmi
          "ScanReport": "sherpa_cli.ops.scan", "StopReport": "sherpa_cli.ops.stop", "StopResult": "sherpa_cli.ops.stop",
          "JointHandle": "sherpa_cli.api.joint", "IdentifyReport": "sherpa_cli.ops.identify",
          "JogResult": "sherpa_cli.ops.jog_result",
-         "ParamDump": "sherpa_cli.ops.params_file", "RecordResult": "sherpa_cli.log.record_run",
+         "ParamDump": "sherpa_cli.ops.params_file", "MonitorSnapshot": "sherpa_cli.ops.monitor", "RecordResult": "sherpa_cli.log.record_run",
          "Recording": "sherpa_cli.log.recording", "ArmState": "sherpa_cli.ops.state",
          "DriveState": "sherpa_cli.ops.state", "JointLimits": "sherpa_cli.ops.state", "JointState": "sherpa_cli.ops.state"}
 

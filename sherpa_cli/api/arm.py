@@ -38,6 +38,7 @@ if TYPE_CHECKING:
     from sherpa_cli.ops.jog_result import JogResult
     from sherpa_cli.ops.joystick import EventSource, JoystickRun
     from sherpa_cli.ops.live_jog import LiveJog
+    from sherpa_cli.ops.monitor import MonitorStream
     from sherpa_cli.ops.params_file import ParamDump
     from sherpa_cli.ops.program import DrivePlan
     from sherpa_cli.ops.scan import ScanReport
@@ -205,6 +206,36 @@ class Arm:
         if check:
             result.check()
         return result
+
+    def monitor(self, targets: Sequence[str] | None = None, *, interval: float = 0.5, count: int | None = None,
+                duration: float | None = None, heartbeat_ms: int | None = None, apply: bool = False,
+                wait_for_heartbeats: bool = False, clock: Callable[[], float] | None = None,
+                sleep: Callable[[float], None] | None = None) -> MonitorStream:
+        """What the drives are doing, as `sherpa monitor` shows it: an iterator of
+        :class:`~sherpa_cli.ops.monitor.MonitorSnapshot`, one per poll, ``interval`` s apart.
+
+        ``targets``: drives, joints or pairs (none: every drive). Each snapshot holds per drive the NMT
+        state and heartbeat, MO, UM, PX (counts) and its joint's position (rad), SR and MF decoded and
+        the last EMCY; a drive that does not answer is ``answering=False``, never its old values.
+        Bounded by ``count`` snapshots or ``duration`` s on ``clock`` (the first at once, none started
+        after that); with neither it runs until the caller stops. Use it in a ``with`` (or exhaust it):
+        leaving stops the polling. The drives are NMT-started, then only read, unless
+        ``heartbeat_ms`` with ``apply=True`` sets their producer heartbeat (0x1017, RAM only, put back
+        at the end). ``wait_for_heartbeats``: the first snapshot waits until each drive that produces a
+        heartbeat was heard. ``clock``/``sleep``: the time it runs on (default wall time).
+        """
+        import time
+
+        from sherpa_cli.bus.targets import drive_refs
+        from sherpa_cli.errors import UsageError
+        from sherpa_cli.ops.monitor import MonitorStream
+
+        if heartbeat_ms is not None and not apply:
+            raise UsageError(f"heartbeat_ms={heartbeat_ms} writes 0x1017: give apply=True to write it",
+                             hint="without it the monitor only listens to the heartbeat the drives already send")
+        return MonitorStream(self._session, drive_refs(self.config, targets), interval=interval, count=count,
+                             duration=duration, heartbeat_ms=heartbeat_ms, clock=clock or time.monotonic,
+                             sleep=sleep or time.sleep, first_waits_for_heartbeats=wait_for_heartbeats)
 
     def wrench(self, name: str | None = None, *, wait_s: float | None = None) -> Wrench:
         """One reading of the F/T sensor ``name`` (None: the arm's only one): force in N and torque in
