@@ -11,7 +11,7 @@ and a ``confirm_save`` that says yes -- as ``--apply``, ``--save`` and ``--yes``
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Iterable, Iterator, Sequence
+from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -20,7 +20,6 @@ from sherpa_cli.api import programming
 from sherpa_cli.api.programming import ConfirmSave, ProgramReport, refuse_unconfirmed
 
 if TYPE_CHECKING:
-    from collections.abc import Mapping
     from datetime import datetime
 
     from sherpa_cli.api.joint import JointHandle
@@ -39,12 +38,14 @@ if TYPE_CHECKING:
     from sherpa_cli.ops.joystick import EventSource, JoystickRun
     from sherpa_cli.ops.live_jog import LiveJog
     from sherpa_cli.ops.monitor import MonitorStream
+    from sherpa_cli.ops.pair_match import MatchResult
     from sherpa_cli.ops.params_file import ParamDump
-    from sherpa_cli.ops.program import DrivePlan
+    from sherpa_cli.ops.program import DrivePlan, DriveTarget
     from sherpa_cli.ops.scan import ScanReport
     from sherpa_cli.ops.state import ArmState
     from sherpa_cli.ops.step import StepResult, StepTime
     from sherpa_cli.ops.stop import StopReport
+    from sherpa_cli.ops.tune import GainReading
 
 #: per-bus scan progress: (bus, phase, done, total)
 ScanProgress = Callable[[str, str, int, int], None]
@@ -519,6 +520,75 @@ class Arm:
         if check:
             report.check()
         return report
+
+    # ------------------------------------------------------------------ tuning
+
+    def tune_show(self, target: str) -> list[GainReading]:
+        """The loop gains of the drives of ``target`` (a joint, pair or drive; `sherpa tune show`):
+        KP[], KI[], FF[] per drive as the drive holds them (``reading.values["KP[2]"]``). What each one
+        means, and which meanings the sources do not confirm, is ``ops.tune.GAINS``. Only reads."""
+        from sherpa_cli.bus.targets import drive_refs
+        from sherpa_cli.ops.tune import read_gains
+
+        return read_gains(self._session, drive_refs(self.config, [target], configured_only=True))
+
+    def tune_set(self, target: str, gains: Mapping[str, float] | Sequence[str], *, apply: bool = False,
+                 save: bool = False, motor_off: bool = False, confirm_save: ConfirmSave = refuse_unconfirmed,
+                 on_plan: Callable[[Sequence[DrivePlan]], None] | None = None, check: bool = True) -> ProgramReport:
+        """Write loop gains to the drives of ``target`` (`sherpa tune set`): ``gains`` as
+        ``{"KP[2]": 0.8}`` or ``["KP[2]=0.8"]``, each checked against its bounds (the config's
+        ``tuning:``) before anything is sent. A dry run unless ``apply`` (the report's plans say now /
+        target per drive); ``apply`` writes and reads back; ``save`` (with ``apply``) saves with SV once
+        every value is verified, counted in the save ledger, and only if ``confirm_save`` says yes --
+        the path of :meth:`program_limits`. ``check``: raise the problem the run ended with."""
+        from sherpa_cli.bus.targets import drive_refs
+        from sherpa_cli.ops.program import DriveTarget
+        from sherpa_cli.ops.tune import parse_assignments
+
+        programming.check_options(apply, save)
+        cfg = self.config
+        texts = [f"{k}={v!r}" for k, v in gains.items()] if isinstance(gains, Mapping) else \
+            [gains] if isinstance(gains, str) else list(gains)
+        values = parse_assignments(cfg, texts)
+        refs = drive_refs(cfg, [target], configured_only=True)
+        return self._program([DriveTarget(r.name, r.bus, r.node, values) for r in refs], apply=apply, save=save,
+                             motor_off=motor_off, confirm_save=confirm_save, on_plan=on_plan, check=check)
+
+    def _program(self, drives: Sequence[DriveTarget], *, apply: bool, save: bool, motor_off: bool,
+                 confirm_save: ConfirmSave, on_plan: Callable[[Sequence[DrivePlan]], None] | None,
+                 check: bool) -> ProgramReport:
+        warnings = programming.check(drives)
+        report = programming.run(self._session, drives, apply=apply, save=save, motor_off=motor_off,
+                                 need_serial=save, warnings=warnings, confirm_save=confirm_save, on_plan=on_plan)
+        if check:
+            report.check()
+        return report
+
+    def match_pair(self, pair: str, *, speed: int | None = None, rounds: int = 5, uncalibrated: bool = False,
+                   tolerance: float | None = None, clock: Callable[[], float] | None = None,
+                   sleep: Callable[[float], None] | None = None) -> MatchResult:
+        """Make both speed loops of a differential pair equally fast (`sherpa diffdrive match PAIR
+        --measure`): small Σ velocity steps of both motors from one common BG, inside the motion guard,
+        recorded by the drives' own recorders; each loop's delay identified; the faster motor's KP[2],
+        KP[3] x s and KI[2] x s² proposed and tried in RAM (put back on every way out) until both delays
+        agree within ``tolerance`` (default 5 %) or ``rounds`` trials. Moves the motors, writes nothing
+        lasting: the result's ``proposal.changes`` (drive -> gains) is what to write with
+        :meth:`tune_set`. ``speed``: counts/s per motor (default a quarter of the Σ joint's limit).
+        ``clock``/``sleep``: the time the steps run on (default wall time; tests step it)."""
+        import time
+
+        from sherpa_cli.bus.targets import pair_of
+        from sherpa_cli.ops import pair_match
+        from sherpa_cli.ops.tune import bounds
+
+        cfg = self.config
+        p = pair_of(cfg, pair)
+        settings = pair_match.MatchSettings(speed=pair_match.step_speed(cfg, p, speed), uncalibrated=uncalibrated)
+        if tolerance is not None:
+            settings.tolerance = tolerance
+        return pair_match.run_match(self._session, p, settings, rounds=rounds, bounds=bounds(cfg),
+                                    clock=clock or time.monotonic, sleep=sleep or time.sleep)
+
 
 
 def _typed_progress(on_progress: Callable[[object], None] | None) -> Callable[[Mapping[str, int]], None] | None:

@@ -15,8 +15,13 @@ from sherpa_cli.cli.output import fmt_value
 from sherpa_cli.words import plural
 
 if TYPE_CHECKING:
+    from sherpa_cli.api import Arm
+    from sherpa_cli.api.programming import ConfirmSave, ProgramReport
     from sherpa_cli.errors import Location
     from sherpa_cli.ops.program import ApplyResult, DriveOutcome, DrivePlan, DriveTarget, FlashProof
+
+#: a command's call of the `Arm` method it is a layer over: (arm, confirm_save, on_plan) -> report
+ArmCall = Callable[["Arm", "ConfirmSave", Callable[[Sequence["DrivePlan"]], None]], "ProgramReport"]
 
 
 def program_limits(
@@ -118,12 +123,14 @@ def check_options(apply: bool, save: bool) -> None:
 def run_program(st: AppState, command: str, targets: Sequence[DriveTarget], warnings: Sequence[str], *,
                 apply: bool, save: bool, yes: bool, motor_off: bool, need_serial: bool, allow_disabled: bool,
                 title: Callable[[str], str], where: Callable[[str], Location | None] | None = None,
-                source: Path | None = None, verify_flash: bool = False, note: str | None = None) -> None:
+                source: Path | None = None, verify_flash: bool = False, note: str | None = None,
+                via: ArmCall | None = None) -> None:
     """The plan/apply/save engine (api/programming.py) with the plan shown before any question and
     the outcome after; raises the error to exit with.
 
     Callers run :func:`check_options` first, before they read files or derive targets, so a
-    bad option combination is reported ahead of any other problem.
+    bad option combination is reported ahead of any other problem. ``via(arm, confirm_save,
+    on_plan)``: the `Arm` method the command is a layer over (default: the engine on ``targets``).
     """
     from sherpa_cli.api import programming
 
@@ -149,9 +156,14 @@ def run_program(st: AppState, command: str, targets: Sequence[DriveTarget], warn
         return True
 
     with st.session(buses=buses) as session:
-        report = programming.run(session, targets, apply=apply, save=save, motor_off=motor_off,
-                                 need_serial=need_serial, verify_flash=verify_flash, warnings=warnings,
-                                 confirm_save=confirm, on_plan=show_plan)
+        if via is not None:
+            from sherpa_cli.api import Arm
+
+            report = via(Arm(session), confirm, show_plan)
+        else:
+            report = programming.run(session, targets, apply=apply, save=save, motor_off=motor_off,
+                                     need_serial=need_serial, verify_flash=verify_flash, warnings=warnings,
+                                     confirm_save=confirm, on_plan=show_plan)
     _render(st, command, report.plans, report.result, apply=apply, save=save and apply, source=source,
             verify_flash=verify_flash, proofs=report.proofs, after=report.after)
     if report.result is not None:

@@ -29,15 +29,16 @@ def show(ctx: typer.Context,
       sherpa tune show elbow_pitch
       sherpa tune show shoulder_diff
     """
+    from sherpa_cli.api import Arm
     from sherpa_cli.bus.targets import drive_refs
     from sherpa_cli.elmo.commands import format_value
-    from sherpa_cli.ops.tune import GAINS, read_gains
+    from sherpa_cli.ops.tune import GAINS
 
     st = state(ctx)
     cfg = st.load_config()
     refs = drive_refs(cfg, [target], configured_only=True)
     with st.session(buses=list(dict.fromkeys(r.bus for r in refs))) as session:
-        readings = read_gains(session, refs)
+        readings = Arm(session).tune_show(target)  # a layer over the Python API
     if st.json_mode:
         st.out.json({"drives": [{"drive": r.drive, "gains": r.values} for r in readings],
                      "unconfirmed": [k for k, (_, ok) in GAINS.items() if not ok]})
@@ -81,7 +82,10 @@ def set_gains(
     refs = drive_refs(cfg, [target], configured_only=True)
     targets = [DriveTarget(r.name, r.bus, r.node, values) for r in refs]
     run_program(st, "tune set", targets, [], apply=apply, save=save, yes=yes, motor_off=motor_off,
-                need_serial=save, allow_disabled=False, title=lambda drive: drive_moves(cfg, drive))
+                need_serial=save, allow_disabled=False, title=lambda drive: drive_moves(cfg, drive),
+                via=lambda arm, confirm, on_plan: arm.tune_set(target, values, apply=apply, save=save,
+                                                               motor_off=motor_off, confirm_save=confirm,
+                                                               on_plan=on_plan, check=False))
 
 
 @app.command("step")
