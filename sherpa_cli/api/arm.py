@@ -32,6 +32,7 @@ if TYPE_CHECKING:
     from sherpa_cli.motion.request import MoveRequest, Value
     from sherpa_cli.motion.settings import MotionSettings
     from sherpa_cli.ops.diffdrive import MoveResult
+    from sherpa_cli.ops.ft import BiasResult
     from sherpa_cli.ops.home import HomeReport, UnitResult
     from sherpa_cli.ops.identify import IdentifyReport
     from sherpa_cli.ops.jog_result import JogResult
@@ -46,6 +47,7 @@ if TYPE_CHECKING:
     from sherpa_cli.ops.step import StepResult, StepTime
     from sherpa_cli.ops.stop import StopReport
     from sherpa_cli.ops.tune import GainReading
+    from sherpa_cli.ops.tune_step import TuneStepResult
 
 #: per-bus scan progress: (bus, phase, done, total)
 ScanProgress = Callable[[str, str, int, int], None]
@@ -250,6 +252,31 @@ class Arm:
         dev = sensor_named(self.config, name)
         with open_reader(self._session, dev, wait_s=wait_s) as reader:
             return reader.read()
+
+    def wrenches(self, name: str | None = None, *, count: int | None = None, rate: float = 10.0,
+                 sleep: Callable[[float], None] | None = None) -> Iterator[Wrench]:
+        """Readings of the F/T sensor ``name`` (None: the arm's only one), one every 1/``rate`` s on
+        ``sleep`` (`sherpa ft show`): ``count`` of them, or until the caller stops. Only reads."""
+        import time
+
+        from sherpa_cli.devices.ft_sensor import sensor_named
+        from sherpa_cli.ops.ft import MAX_RATE_HZ, stream
+
+        if not (0 < rate <= MAX_RATE_HZ):
+            from sherpa_cli.errors import UsageError
+
+            raise UsageError(f"--rate {rate}: expected samples per second > 0 and <= {MAX_RATE_HZ:g}")
+        return stream(self._session, sensor_named(self.config, name), count=count, period=1 / rate,
+                      sleep=sleep or time.sleep)
+
+    def ft_bias(self, name: str | None = None, *, apply: bool = False) -> BiasResult:
+        """Zero the F/T sensor ``name`` (None: the arm's only one) at its present load (`sherpa ft
+        bias`): a reading, then with ``apply`` the bias command and a reading after it. Without
+        ``apply`` a dry run: the result says the frame that would be sent."""
+        from sherpa_cli.devices.ft_sensor import sensor_named
+        from sherpa_cli.ops.ft import bias
+
+        return bias(self._session, sensor_named(self.config, name), apply=apply)
 
     # ------------------------------------------------------------------ stopping
 
@@ -521,6 +548,31 @@ class Arm:
             report.check()
         return report
 
+    def restore(self, path: str | Path, *, apply: bool = False, save: bool = False, motor_off: bool = False,
+                other_serial: bool = False, verify_flash: bool = False,
+                confirm_save: ConfirmSave = refuse_unconfirmed,
+                on_plan: Callable[[Sequence[DrivePlan]], None] | None = None, check: bool = True) -> ProgramReport:
+        """Write a parameter dump (:meth:`dump_params`' file) back into its drives (`sherpa params
+        restore`): every writable setting of the dump, never the identity block, read-only values or
+        moment state. A dump from a drive with another serial number is refused unless
+        ``other_serial``. Plan, dry run unless ``apply``, read-back, ``save`` only with
+        ``confirm_save`` saying yes and counted in the save ledger, as :meth:`program_limits`."""
+        from sherpa_cli.errors import Location
+        from sherpa_cli.ops.params_file import read_dump
+        from sherpa_cli.ops.restore import restore_targets
+
+        programming.check_options(apply, save)
+        file = Path(path)
+        drives, warnings = restore_targets(self.config, read_dump(file), file, other_serial=other_serial)
+        warnings = programming.check(drives, warnings, allow_disabled=True,
+                                     where=lambda drive: Location(str(file), None, f"drives.{drive}.params"))
+        report = programming.run(self._session, drives, apply=apply, save=save, motor_off=motor_off,
+                                 need_serial=True, verify_flash=verify_flash, warnings=warnings,
+                                 confirm_save=confirm_save, on_plan=on_plan)
+        if check:
+            report.check()
+        return report
+
     # ------------------------------------------------------------------ tuning
 
     def tune_show(self, target: str) -> list[GainReading]:
@@ -563,6 +615,37 @@ class Arm:
         if check:
             report.check()
         return report
+
+    def tune_step(self, joint: str, mode: str, value: float, gains: Mapping[str, float] | Sequence[str], *,
+                  duration: float = 2.0, rate: float = 500.0, uncalibrated: bool = False,
+                  settings: MotionSettings | None = None, timebase: StepTime | None = None) -> TuneStepResult:
+        """Step ``joint`` (a plain joint or its drive) with the gains its drive holds, then with the
+        trial ``gains`` (RAM only, journaled, put back on every way out), and return both steps with
+        their metrics (`sherpa tune step ... --apply`). ``mode``: ``"position"`` (``value`` rad, then
+        back by -``value`` with the trial gains) or ``"velocity"`` (rad/s). Each step runs in the
+        motion guard as :meth:`log_step`'s; nothing is saved. ``timebase``: as :meth:`log_step`'s."""
+        from sherpa_cli.errors import UsageError
+        from sherpa_cli.motion.settings import MotionSettings
+        from sherpa_cli.ops.step import resolve_step_target, run_step, step_request
+        from sherpa_cli.ops.tune import parse_assignments
+        from sherpa_cli.ops.tune_step import run_tune_step
+
+        if mode not in ("position", "velocity"):
+            raise UsageError(f"mode {mode!r}: expected position or velocity")
+        cfg = self.config
+        texts = [f"{k}={v!r}" for k, v in gains.items()] if isinstance(gains, Mapping) else \
+            [gains] if isinstance(gains, str) else list(gains)
+        trial = parse_assignments(cfg, texts)
+        target = resolve_step_target(cfg, joint)
+        step_request(target, mode, value, duration=duration, uncalibrated=uncalibrated)
+        chosen = settings or MotionSettings.from_config(cfg, [target.ref.bus])
+        session = self._session
+
+        def one(m: str, v: float) -> StepResult:
+            return run_step(session, target, m, v, duration=duration, rate=rate, settings=chosen,
+                            uncalibrated=uncalibrated, timebase=timebase)
+
+        return run_tune_step(session, target, mode, value, trial, one)
 
     def match_pair(self, pair: str, *, speed: int | None = None, rounds: int = 5, uncalibrated: bool = False,
                    tolerance: float | None = None, clock: Callable[[], float] | None = None,

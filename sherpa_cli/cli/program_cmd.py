@@ -70,7 +70,10 @@ def program_limits(
     targets = [DriveTarget(d.drive, d.bus, d.node, d.params) for d in derived]
     run_program(st, "program-limits", targets, warnings, apply=apply, save=save, yes=yes, motor_off=motor_off,
                 need_serial=save, allow_disabled=False, title=lambda drive: drive_moves(cfg, drive),
-                verify_flash=verify_flash, note=left_as_they_are(derived))
+                verify_flash=verify_flash, note=left_as_they_are(derived),
+                via=lambda arm, confirm, on_plan: arm.program_limits(
+                    names, apply=apply, save=save, verify_flash=verify_flash, motor_off=motor_off,
+                    confirm_save=confirm, on_plan=on_plan, check=False))
 
 
 def params_restore(
@@ -109,7 +112,10 @@ def params_restore(
 
     run_program(st, "params restore", targets, warnings, apply=apply, save=save, yes=yes, motor_off=motor_off,
                 need_serial=True, allow_disabled=True, title=lambda drive: drive_moves(cfg, drive), source=file,
-                where=lambda drive: Location(str(file), None, f"drives.{drive}.params"), verify_flash=verify_flash)
+                where=lambda drive: Location(str(file), None, f"drives.{drive}.params"), verify_flash=verify_flash,
+                via=lambda arm, confirm, on_plan: arm.restore(
+                    file, apply=apply, save=save, motor_off=motor_off, other_serial=other_serial,
+                    verify_flash=verify_flash, confirm_save=confirm, on_plan=on_plan, check=False))
 
 
 def check_options(apply: bool, save: bool) -> None:

@@ -12,7 +12,6 @@ from sherpa_cli.errors import UsageError
 
 if TYPE_CHECKING:
     from sherpa_cli.log.plot import StepRun
-    from sherpa_cli.ops.step import StepResult
     from sherpa_cli.ops.tune_step import TuneStepResult
 
 app = typer.Typer(help="Read and write the drives' speed and position loop gains (docs/tune.md).",
@@ -116,9 +115,8 @@ def step(
 
     from sherpa_cli.cli.log_cmd import render_metrics, stepped_sim
     from sherpa_cli.motion.settings import MotionSettings
-    from sherpa_cli.ops.step import resolve_step_target, run_step, step_request
+    from sherpa_cli.ops.step import resolve_step_target, step_request
     from sherpa_cli.ops.tune import parse_assignments
-    from sherpa_cli.ops.tune_step import run_tune_step
 
     st = state(ctx)
     given = [(m, v) for m, v in (("position", position), ("velocity", velocity)) if v is not None]
@@ -148,16 +146,15 @@ def step(
                     f"then {'back ' if mode == 'position' else ''}with {text} (RAM only, put back after)")
         st.out.line("nothing sent; add --apply to move")
         return
+    from sherpa_cli.api import Arm
+
     settings = MotionSettings.from_config(cfg, [target.ref.bus])
     stepped, sim_factory = stepped_sim(st)
     with st.session(buses=[target.ref.bus], sim_factory=sim_factory) as session:
         timebase = stepped if stepped is not None and use_stepped(session, stepped, cfg) else None
-
-        def one(m: str, v: float) -> StepResult:
-            return run_step(session, target, m, v, duration=duration, rate=rate, settings=settings,
-                            uncalibrated=uncalibrated, timebase=timebase)
-
-        result = run_tune_step(session, target, mode, value, trial, one)
+        # a layer over the Python API
+        result = Arm(session).tune_step(joint, mode, value, trial, duration=duration, rate=rate,
+                                        uncalibrated=uncalibrated, settings=settings, timebase=timebase)
     held = " ".join(f"{k}={v:g}" for k, v in result.held.items())
     text = " ".join(f"{k}={v:g}" for k, v in result.trial.items())
     if plot is not None:
