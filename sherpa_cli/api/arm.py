@@ -42,6 +42,8 @@ if TYPE_CHECKING:
     from sherpa_cli.ops.pair_match import MatchResult
     from sherpa_cli.ops.params_file import ParamDump
     from sherpa_cli.ops.program import DrivePlan, DriveTarget
+    from sherpa_cli.ops.raw import RawRun
+    from sherpa_cli.ops.recover import RecoverReport
     from sherpa_cli.ops.scan import ScanReport
     from sherpa_cli.ops.state import ArmState
     from sherpa_cli.ops.step import StepResult, StepTime
@@ -278,6 +280,66 @@ class Arm:
 
         return bias(self._session, sensor_named(self.config, name), apply=apply)
 
+    def command(self, target: str, exprs: Sequence[str], *, apply: bool = False, raw_save: bool = False,
+                check: bool = True) -> RawRun:
+        """Raw interpreter commands to one drive (`sherpa cmd DRIVE EXPR...`): queries (``"PX"``) are
+        sent; sets and executes (``"LL[3]=-240"``, ``"BG"``) only with ``apply`` (else the result says
+        the frame that would go). Every expression is parsed before anything is sent. MO=1 or BG with
+        ``apply`` run inside the motion guard (dead-man armed, the motor stopped and off at the end);
+        SV only with ``apply`` and ``raw_save``, once, counted in the save ledger. ``check``: raise the
+        error that ended the run (else ``run.error``, with the results up to it)."""
+        from sherpa_cli.bus.targets import single_drive
+        from sherpa_cli.errors import SherpaError
+        from sherpa_cli.joints.limits import il_roles
+        from sherpa_cli.motion.settings import MotionSettings
+        from sherpa_cli.ops.raw import (
+            RawResult,
+            RawRun,
+            check_raw_save,
+            parse_all,
+            run_raw,
+            run_raw_guarded,
+            starts_motion,
+        )
+
+        cfg = self.config
+        ref = single_drive(cfg, target)
+        parse_all(exprs)  # a typo must not reach the bus, not even the NMT start
+        saving = check_raw_save(exprs, apply=apply, raw_save=raw_save)  # before anything is sent
+        run = RawRun(ref.name, apply)
+        session = self._session
+        client = session.client(ref)
+        try:
+            on_save: Callable[[RawResult], None] | None = None
+            if saving:
+                from sherpa_cli.ops.program import DriveTarget, read_serial
+                from sherpa_cli.ops.save_ledger import SaveLedger
+
+                # the serial number is read before SV goes out (a save that cannot be counted is not sent)
+                serial = read_serial(session, DriveTarget(ref.name, ref.bus, ref.node, {}))
+                ledger = SaveLedger()
+
+                def counted(result: RawResult) -> None:
+                    record = ledger.record(serial, ref.name)
+                    result.decoded = [f"saved (save {record.count} of this drive by this tool)"]
+                    if record.warning:
+                        run.warnings.append(record.warning)
+
+                on_save = counted
+            client.nmt_start()
+            if apply and starts_motion(exprs):
+                run_raw_guarded(session, ref, exprs, MotionSettings.from_config(cfg, [ref.bus]),
+                                query_long=cfg.protocol.query_long, results=run.results, on_save=on_save,
+                                il_roles=il_roles(cfg), on_exit=run.stopped)
+            else:
+                run_raw(client, ref.node, exprs, apply=apply, query_long=cfg.protocol.query_long,
+                        results=run.results, on_save=on_save, il_roles=il_roles(cfg))
+        except SherpaError as exc:
+            run.error = exc
+        if check and run.error is not None:
+            raise run.error
+        return run
+
     # ------------------------------------------------------------------ stopping
 
     def stop(self, targets: Sequence[str] | None = None, *, check: bool = True) -> StopReport:
@@ -298,6 +360,19 @@ class Arm:
         if check and problem is not None:
             raise problem
         return report
+
+    def recover(self, targets: Sequence[str] | None = None, *, apply: bool = False,
+                check_drives: bool = False) -> RecoverReport:
+        """Put back what commands that did not finish left on the drives (`sherpa recover`): every
+        temporary change the journal in the state directory notes (UM, SP/AC/DC, the dead-man objects,
+        the pair's group id, TPDO settings, ...), last change first, and a tripped dead-man cleared
+        under a dead-man of its own. A dry run (NMT start and reads only) unless ``apply``.
+        ``check_drives``: also read every other target drive for what a command leaves (a journal
+        deleted by hand, another host's command); with ``apply`` a drive with a finding is reset.
+        ``report.not_recovered`` names the drives still not as they should be."""
+        from sherpa_cli.ops.recover import plan_recover, recover
+
+        return recover(self._session, plan_recover(self.config, targets), apply=apply, check_drives=check_drives)
 
     # ------------------------------------------------------------------ moving
 
