@@ -32,6 +32,7 @@ if TYPE_CHECKING:
     from sherpa_cli.motion.request import MoveRequest, Value
     from sherpa_cli.motion.settings import MotionSettings
     from sherpa_cli.ops.diffdrive import MoveResult
+    from sherpa_cli.ops.doctor import DoctorReport
     from sherpa_cli.ops.ft import BiasResult
     from sherpa_cli.ops.home import HomeReport, UnitResult
     from sherpa_cli.ops.identify import IdentifyReport
@@ -241,6 +242,23 @@ class Arm:
         return MonitorStream(self._session, drive_refs(self.config, targets), interval=interval, count=count,
                              duration=duration, heartbeat_ms=heartbeat_ms, clock=clock or time.monotonic,
                              sleep=sleep or time.sleep, first_waits_for_heartbeats=wait_for_heartbeats)
+
+    def doctor(self, buses: Sequence[str] | None = None, *, report: DoctorReport | None = None,
+               window: float = 1.0, clock: Callable[[], float] | None = None,
+               sleep: Callable[[float], None] | None = None) -> DoctorReport:
+        """The drive checks of `sherpa doctor` on ``buses`` (default: every open bus): every configured
+        drive answers, model and firmware, heartbeats, nobody else on the host's node id (listened to
+        for ``window`` s on ``clock``/``sleep``), user programs, calibration. Each check is a row of the
+        report (``report.failed`` lists what failed, with its fix); ``report``: add to this one. Only
+        reads."""
+        import time
+
+        from sherpa_cli.ops import doctor
+
+        out = report if report is not None else doctor.DoctorReport()
+        doctor.check_drives(out, self._session, list(buses) if buses is not None else list(self._session.links),
+                            window=window, clock=clock or time.monotonic, sleep=sleep or time.sleep)
+        return out
 
     def wrench(self, name: str | None = None, *, wait_s: float | None = None) -> Wrench:
         """One reading of the F/T sensor ``name`` (None: the arm's only one): force in N and torque in
