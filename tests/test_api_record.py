@@ -105,3 +105,14 @@ def test_the_log_record_command_is_a_layer_over_the_api(cli, monkeypatch, tmp_pa
     assert result.exit_code == 0, result.transcript()
     assert calls == [(["elbow_pitch"], 50.0, 0.2)]
     assert len(read_csv(out).times) >= 2
+
+
+def test_the_drives_own_recorders_record_at_the_servo_rate_and_refuse_bad_values():
+    cfg = load_config(CONFIG)
+    with stepped_session(cfg, ["can1"]) as (session, stepped):
+        arm = Arm(session)
+        with pytest.raises(UsageError, match="--trigger soon"):
+            arm.record_drives(["elbow_pitch"], 0.05, trigger="soon")
+        result = arm.record_drives(["elbow_pitch"], 0.05, clock=stepped.now, sleep=stepped.sleep)
+    assert result.samples["elbow_1a"] > 10 and result.period_s < 0.005  # far above a SYNC recording's rate
+    assert len(_present(result.recording.joint("elbow_pitch").position)) > 10

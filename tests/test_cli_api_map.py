@@ -49,6 +49,12 @@ WIRED: dict[str, tuple[str, tuple[str, ...]]] = {
                                 "--for", "0.3", "--rate", "200", "--apply")),
 }
 
+# an option that takes a command down another path: that path's Arm method
+VARIANTS: dict[str, tuple[str, tuple[str, ...]]] = {
+    "log record --source drive": ("record_drives", ("--sim", "log", "record", "elbow_pitch", "--source", "drive",
+                                                    "--for", "0.05", "-o", "{tmp}/d.csv")),
+}
+
 # commands that do not act on the arm's drives, and why
 NOT_THE_ARM: dict[str, str] = {
     "bus up": "brings a CAN interface up (netlink); no drive is addressed",
@@ -102,7 +108,7 @@ def test_every_command_is_in_the_table_and_every_entry_is_a_command():
 
 
 def test_every_method_named_is_a_public_method_of_arm():
-    for command, (method, _) in WIRED.items():
+    for command, (method, _) in {**WIRED, **VARIANTS}.items():
         assert not method.startswith("_") and callable(getattr(Arm, method, None)), f"{command}: Arm.{method}"
 
 
@@ -119,9 +125,9 @@ def _spy_every_method(monkeypatch: pytest.MonkeyPatch, calls: list[str]) -> None
         monkeypatch.setattr(Arm, name, spy)
 
 
-@pytest.mark.parametrize("command", sorted(WIRED))
+@pytest.mark.parametrize("command", [*sorted(WIRED), *sorted(VARIANTS)])
 def test_the_command_calls_its_arm_method_on_the_simulator(cli, monkeypatch, tmp_path, command):
-    method, argv = WIRED[command]
+    method, argv = {**WIRED, **VARIANTS}[command]
     import sherpa_cli.cli.ft_cmd as ft_cmd
 
     monkeypatch.setattr(ft_cmd, "sleep", lambda s: None)  # the stream's pacing: no wall time

@@ -33,6 +33,7 @@ if TYPE_CHECKING:
     from sherpa_cli.motion.settings import MotionSettings
     from sherpa_cli.ops.diffdrive import MoveResult
     from sherpa_cli.ops.doctor import DoctorReport
+    from sherpa_cli.ops.drive_record import DriveRecordResult
     from sherpa_cli.ops.ft import BiasResult
     from sherpa_cli.ops.home import HomeReport, UnitResult
     from sherpa_cli.ops.identify import IdentifyReport
@@ -212,6 +213,29 @@ class Arm:
         if check:
             result.check()
         return result
+
+    def record_drives(self, targets: Sequence[str] | None = None, duration: float = 0.5, *, trigger: str = "now",
+                      clock: Callable[[], float] | None = None,
+                      sleep: Callable[[float], None] | None = None) -> DriveRecordResult:
+        """Record with the drives' own recorders at the servo rate (`sherpa log record --source drive`):
+        position, velocity, active current, position error and speed command of every drive of
+        ``targets`` (both motors of a pair with the same settings), started now or (``trigger="bg"``)
+        at the next BG of a move started elsewhere. The recorder settings are RAM only and put back on
+        every way out. A time the recorder cannot hold is refused before anything is sent. The result's
+        ``recording`` is in joint units with counts beside, as :meth:`record`'s."""
+        import time
+
+        from sherpa_cli.bus.targets import drive_refs
+        from sherpa_cli.elmo.recorder import RecorderSettings, plan_recording
+        from sherpa_cli.errors import UsageError
+        from sherpa_cli.ops.drive_record import record_drives
+
+        if trigger not in ("now", "bg"):
+            raise UsageError(f"--trigger {trigger}: expected now or bg")
+        plan_recording(duration, RecorderSettings())  # a time the recorder cannot hold: refused before the bus
+        refs = drive_refs(self.config, targets, configured_only=True)
+        return record_drives(self._session, refs, duration, trigger="bg" if trigger == "bg" else "now",
+                             clock=clock or time.monotonic, sleep=sleep or time.sleep)
 
     def monitor(self, targets: Sequence[str] | None = None, *, interval: float = 0.5, count: int | None = None,
                 duration: float | None = None, heartbeat_ms: int | None = None, apply: bool = False,

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Literal, cast
+from typing import TYPE_CHECKING, Any
 
 from sherpa_cli.cli.context import AppState
 from sherpa_cli.errors import UsageError
@@ -20,10 +20,10 @@ if TYPE_CHECKING:
 def record_from_drive(st: AppState, targets: Sequence[str] | None, duration: float, output: Sequence[Path], *,
                       source: str, trigger: str, poll: bool, live: bool) -> None:
     """Check the options, record, write the CSV only once every drive's upload is in."""
+    from sherpa_cli.api import Arm
     from sherpa_cli.bus.targets import drive_refs
     from sherpa_cli.elmo.recorder import RecorderSettings, plan_recording
     from sherpa_cli.log.recording import write_csv
-    from sherpa_cli.ops.drive_record import record_drives
 
     if source != "drive":
         raise UsageError(f"--source {source}: expected can or drive")
@@ -42,7 +42,7 @@ def record_from_drive(st: AppState, targets: Sequence[str] | None, duration: flo
     with st.session(buses=list(dict.fromkeys(r.bus for r in refs))) as session:
         if trigger == "bg":
             st.out.info("armed: waiting for the next BG (start the move now)")
-        result = record_drives(session, refs, duration, trigger=cast(Literal["now", "bg"], trigger))
+        result = Arm(session).record_drives(targets, duration, trigger=trigger)  # a layer over the Python API
     write_csv(result.recording, paths[0])
     rate = 1.0 / result.period_s
     if st.json_mode:
