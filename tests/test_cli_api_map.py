@@ -53,6 +53,9 @@ WIRED: dict[str, tuple[str, tuple[str, ...]]] = {
 VARIANTS: dict[str, tuple[str, tuple[str, ...]]] = {
     "log record --source drive": ("record_drives", ("--sim", "log", "record", "elbow_pitch", "--source", "drive",
                                                     "--for", "0.05", "-o", "{tmp}/d.csv")),
+    "log step --source drive": ("log_step_with_drive", ("--sim", "log", "step", "elbow_pitch", "--velocity", "0.1",
+                                                        "--for", "0.3", "--rate", "200", "--source", "drive",
+                                                        "-o", "{tmp}/ds", "--apply")),
 }
 
 # commands that do not act on the arm's drives, and why

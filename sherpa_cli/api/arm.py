@@ -34,6 +34,7 @@ if TYPE_CHECKING:
     from sherpa_cli.ops.diffdrive import MoveResult
     from sherpa_cli.ops.doctor import DoctorReport
     from sherpa_cli.ops.drive_record import DriveRecordResult
+    from sherpa_cli.ops.drive_step import DriveStep
     from sherpa_cli.ops.ft import BiasResult
     from sherpa_cli.ops.home import HomeReport, UnitResult
     from sherpa_cli.ops.identify import IdentifyReport
@@ -587,6 +588,31 @@ class Arm:
         return run_step(self._session, target, mode, value, duration=duration, rate=rate, settings=settings,
                         on_event=on_event, uncalibrated=uncalibrated, timebase=timebase, mode_first=mode_first,
                         hold=hold)
+
+    def log_step_with_drive(self, name: str, mode: str, value: float, *, duration: float = 2.0, rate: float = 1000.0,
+                            uncalibrated: bool = False, settings: MotionSettings | None = None,
+                            timebase: StepTime | None = None) -> tuple[StepResult, DriveStep]:
+        """:meth:`log_step` recorded twice at once (`sherpa log step --source drive`): over the bus at
+        ``rate`` and by the drive's own recorder at the servo rate (armed just before the command, read
+        once the guard has stopped the motor; its settings RAM only and put back on every way out).
+        Returns the bus's step result and the drive's (``DriveStep``: its recording and metrics)."""
+        import time
+
+        from sherpa_cli.motion.settings import MotionSettings
+        from sherpa_cli.ops.drive_step import DriveTrace
+        from sherpa_cli.ops.step import resolve_step_target, run_step
+
+        cfg = self.config
+        target = resolve_step_target(cfg, name)
+        if settings is None:
+            settings = MotionSettings.from_config(cfg, [target.ref.bus])
+        clock, sleep = (timebase.now, timebase.sleep) if timebase is not None else (time.monotonic, time.sleep)
+        with DriveTrace(self._session, target.ref, duration, clock=clock, sleep=sleep) as trace:
+            result = run_step(self._session, target, mode, value, duration=duration, rate=rate, settings=settings,
+                              uncalibrated=uncalibrated, timebase=timebase, drive_trace=trace)
+        drive = trace.result
+        assert drive is not None  # run_step collects it or raises
+        return result, drive
 
     # ------------------------------------------------------------------ moving live
 

@@ -64,18 +64,14 @@ def drive_step(st: AppState, session: ArmSession, target: Axis, mode: str, value
     step.png, the drive's recording with the bus's drawn beside it (matplotlib was checked before
     the step moved)."""
     import json
-    import time
 
+    from sherpa_cli.api import Arm
     from sherpa_cli.log.recording import write_csv
-    from sherpa_cli.ops.drive_step import DriveTrace
-    from sherpa_cli.ops.step import run_step
 
-    clock, sleep = (timebase.now, timebase.sleep) if timebase is not None else (time.monotonic, time.sleep)
-    with DriveTrace(session, target.ref, duration, clock=clock, sleep=sleep) as trace:
-        result = run_step(session, target, mode, value, duration=duration, rate=rate, settings=settings,
-                          uncalibrated=uncalibrated, timebase=timebase, drive_trace=trace)
-    drive = trace.result
-    assert drive is not None  # run_step collects it or raises
+    # a layer over the Python API
+    result, drive = Arm(session).log_step_with_drive(target.name, mode, value, duration=duration, rate=rate,
+                                                     uncalibrated=uncalibrated, settings=settings,
+                                                     timebase=timebase)
     write_csv(drive.recording, output / "recording.csv")
     write_csv(result.recording, output / "can-recording.csv")
     keys = ("dead_time", "rise_time", "settling_time")
