@@ -23,3 +23,24 @@ def test_example_runs(code, monkeypatch, capsys):
     # every example that prints, prints something real (not an empty list or None)
     out = capsys.readouterr().out
     assert "None" not in out
+
+
+# the sections whose examples call what the API grew for the rest of the command line
+TYPED_SECTIONS = ("Record", "Monitor", "Tune the loops, match a pair", "Raw commands, recovery, the doctor")
+
+
+def test_the_record_monitor_tune_and_raw_examples_pass_mypy_strict(tmp_path):
+    import subprocess
+    import sys
+
+    text = DOC.read_text(encoding="utf-8")
+    files = []
+    for k, title in enumerate(TYPED_SECTIONS):
+        section = text.split(f"\n## {title}\n", 1)[1].split("\n## ", 1)[0]
+        (block,) = re.findall(r"```python\n(.*?)```", section, flags=re.S)
+        files.append(tmp_path / f"example_{k}.py")
+        files[-1].write_text(block, encoding="utf-8")
+    out = subprocess.run([sys.executable, "-m", "mypy", "--strict", "--follow-imports=silent",
+                          "--cache-dir", str(tmp_path / "cache"), *map(str, files)],
+                         cwd=ROOT, capture_output=True, text=True, timeout=600)
+    assert out.returncode == 0, out.stdout + out.stderr

@@ -11,7 +11,7 @@ and a ``confirm_save`` that says yes -- as ``--apply``, ``--save`` and ``--yes``
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Iterable, Iterator, Sequence
+from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -20,28 +20,39 @@ from sherpa_cli.api import programming
 from sherpa_cli.api.programming import ConfirmSave, ProgramReport, refuse_unconfirmed
 
 if TYPE_CHECKING:
-    from collections.abc import Mapping
     from datetime import datetime
 
     from sherpa_cli.api.joint import JointHandle
     from sherpa_cli.bus.session import ArmSession
     from sherpa_cli.config.model import ArmConfig, JoystickConfig
     from sherpa_cli.devices.ft_sensor import Wrench
+    from sherpa_cli.log.foxglove_live import LiveView
+    from sherpa_cli.log.record_run import RecordPlan, RecordResult, RecordTime, Wait
     from sherpa_cli.motion.axis import Axis
     from sherpa_cli.motion.request import MoveRequest, Value
     from sherpa_cli.motion.settings import MotionSettings
     from sherpa_cli.ops.diffdrive import MoveResult
+    from sherpa_cli.ops.doctor import DoctorReport
+    from sherpa_cli.ops.drive_record import DriveRecordResult
+    from sherpa_cli.ops.drive_step import DriveStep
+    from sherpa_cli.ops.ft import BiasResult
     from sherpa_cli.ops.home import HomeReport, UnitResult
     from sherpa_cli.ops.identify import IdentifyReport
     from sherpa_cli.ops.jog_result import JogResult
     from sherpa_cli.ops.joystick import EventSource, JoystickRun
     from sherpa_cli.ops.live_jog import LiveJog
+    from sherpa_cli.ops.monitor import MonitorStream
+    from sherpa_cli.ops.pair_match import MatchResult
     from sherpa_cli.ops.params_file import ParamDump
-    from sherpa_cli.ops.program import DrivePlan
+    from sherpa_cli.ops.program import DrivePlan, DriveTarget
+    from sherpa_cli.ops.raw import RawRun
+    from sherpa_cli.ops.recover import RecoverReport
     from sherpa_cli.ops.scan import ScanReport
     from sherpa_cli.ops.state import ArmState
     from sherpa_cli.ops.step import StepResult, StepTime
     from sherpa_cli.ops.stop import StopReport
+    from sherpa_cli.ops.tune import GainReading
+    from sherpa_cli.ops.tune_step import TuneStepResult
 
 #: per-bus scan progress: (bus, phase, done, total)
 ScanProgress = Callable[[str, str, int, int], None]
@@ -169,6 +180,111 @@ class Arm:
             write_dump(Path(path), dump, "path")
         return dump
 
+    def record(self, targets: Sequence[str] | None = None, rate: float = 100.0, duration: float = 1.0, *,
+               current: bool | None = None, poll: bool = False, status: bool = True,
+               stream_to: str | Path | None = None, view: LiveView | None = None,
+               timebase: RecordTime | None = None, wait: Wait | None = None,
+               plan: RecordPlan | None = None, check: bool = True) -> RecordResult:
+        """Record position and velocity (and current) of ``targets`` (joints, pairs, drives, an encoder
+        device; none: every drive) at ``rate`` Hz for ``duration`` s, into memory (`sherpa log record`
+        without the files): TPDOs on SYNC, the drives' PDO settings RAM only and put back on every way
+        out, never saved. A rate the bus cannot carry is refused (UsageError) before anything is sent.
+
+        The result holds the samples with their timestamps (``result.recording``: ``.times`` in s,
+        ``.joint(name)`` in rad, rad/s and A, ``.drive(name)`` in counts) and what arrived per drive;
+        ``result.write_csv(path)`` and ``result.write_mcap(path)`` write the files the command writes.
+        ``current``: also sample the current (None: when the bus budget allows). ``poll``: through the
+        interpreter instead (changes nothing on the drives, slow). ``status``: the drives' status read
+        before and after, the EMCYs heard (the MCAP's). ``stream_to``: a CSV file the rows go to as they
+        come instead of memory. ``view``: a Foxglove live view to feed. ``timebase``: the clock, sleep
+        and SYNC source (default wall time; sim/stepped.py steps it). ``wait``: how to wait for the end
+        (default: sleep on the timebase; Ctrl-C ends it early, ``result.interrupted``). ``plan``: the
+        plan a caller already made with ``log.record_run.plan_record`` for these arguments.
+        Another SYNC producer on the bus ends the recording early: raised (CommunicationError) after the
+        drives are restored, unless ``check=False`` (then ``result.failure``, the samples so far kept).
+        """
+        from sherpa_cli.log.record_run import check_budget, check_record_values, plan_record, run_record
+
+        check_record_values(duration, rate)
+        if plan is None:
+            plan = plan_record(self.config, targets, rate, current=current, poll=poll)
+            check_budget(plan)
+        result = run_record(self._session, plan, duration, wait=wait, status=status, view=view, timebase=timebase,
+                            stream_to=None if stream_to is None else Path(stream_to))
+        if check:
+            result.check()
+        return result
+
+    def record_drives(self, targets: Sequence[str] | None = None, duration: float = 0.5, *, trigger: str = "now",
+                      clock: Callable[[], float] | None = None,
+                      sleep: Callable[[float], None] | None = None) -> DriveRecordResult:
+        """Record with the drives' own recorders at the servo rate (`sherpa log record --source drive`):
+        position, velocity, active current, position error and speed command of every drive of
+        ``targets`` (both motors of a pair with the same settings), started now or (``trigger="bg"``)
+        at the next BG of a move started elsewhere. The recorder settings are RAM only and put back on
+        every way out. A time the recorder cannot hold is refused before anything is sent. The result's
+        ``recording`` is in joint units with counts beside, as :meth:`record`'s."""
+        import time
+
+        from sherpa_cli.bus.targets import drive_refs
+        from sherpa_cli.elmo.recorder import RecorderSettings, plan_recording
+        from sherpa_cli.errors import UsageError
+        from sherpa_cli.ops.drive_record import record_drives
+
+        if trigger not in ("now", "bg"):
+            raise UsageError(f"--trigger {trigger}: expected now or bg")
+        plan_recording(duration, RecorderSettings())  # a time the recorder cannot hold: refused before the bus
+        refs = drive_refs(self.config, targets, configured_only=True)
+        return record_drives(self._session, refs, duration, trigger="bg" if trigger == "bg" else "now",
+                             clock=clock or time.monotonic, sleep=sleep or time.sleep)
+
+    def monitor(self, targets: Sequence[str] | None = None, *, interval: float = 0.5, count: int | None = None,
+                duration: float | None = None, heartbeat_ms: int | None = None, apply: bool = False,
+                wait_for_heartbeats: bool = False, clock: Callable[[], float] | None = None,
+                sleep: Callable[[float], None] | None = None) -> MonitorStream:
+        """What the drives are doing, as `sherpa monitor` shows it: an iterator of
+        :class:`~sherpa_cli.ops.monitor.MonitorSnapshot`, one per poll, ``interval`` s apart.
+
+        ``targets``: drives, joints or pairs (none: every drive). Each snapshot holds per drive the NMT
+        state and heartbeat, MO, UM, PX (counts) and its joint's position (rad), SR and MF decoded and
+        the last EMCY; a drive that does not answer is ``answering=False``, never its old values.
+        Bounded by ``count`` snapshots or ``duration`` s on ``clock`` (the first at once, none started
+        after that); with neither it runs until the caller stops. Use it in a ``with`` (or exhaust it):
+        leaving stops the polling. The drives are NMT-started, then only read, unless
+        ``heartbeat_ms`` with ``apply=True`` sets their producer heartbeat (0x1017, RAM only, put back
+        at the end). ``wait_for_heartbeats``: the first snapshot waits until each drive that produces a
+        heartbeat was heard. ``clock``/``sleep``: the time it runs on (default wall time).
+        """
+        import time
+
+        from sherpa_cli.bus.targets import drive_refs
+        from sherpa_cli.errors import UsageError
+        from sherpa_cli.ops.monitor import MonitorStream
+
+        if heartbeat_ms is not None and not apply:
+            raise UsageError(f"heartbeat_ms={heartbeat_ms} writes 0x1017: give apply=True to write it",
+                             hint="without it the monitor only listens to the heartbeat the drives already send")
+        return MonitorStream(self._session, drive_refs(self.config, targets), interval=interval, count=count,
+                             duration=duration, heartbeat_ms=heartbeat_ms, clock=clock or time.monotonic,
+                             sleep=sleep or time.sleep, first_waits_for_heartbeats=wait_for_heartbeats)
+
+    def doctor(self, buses: Sequence[str] | None = None, *, report: DoctorReport | None = None,
+               window: float = 1.0, clock: Callable[[], float] | None = None,
+               sleep: Callable[[float], None] | None = None) -> DoctorReport:
+        """The drive checks of `sherpa doctor` on ``buses`` (default: every open bus): every configured
+        drive answers, model and firmware, heartbeats, nobody else on the host's node id (listened to
+        for ``window`` s on ``clock``/``sleep``), user programs, calibration. Each check is a row of the
+        report (``report.failed`` lists what failed, with its fix); ``report``: add to this one. Only
+        reads."""
+        import time
+
+        from sherpa_cli.ops import doctor
+
+        out = report if report is not None else doctor.DoctorReport()
+        doctor.check_drives(out, self._session, list(buses) if buses is not None else list(self._session.links),
+                            window=window, clock=clock or time.monotonic, sleep=sleep or time.sleep)
+        return out
+
     def wrench(self, name: str | None = None, *, wait_s: float | None = None) -> Wrench:
         """One reading of the F/T sensor ``name`` (None: the arm's only one): force in N and torque in
         N·m in the sensor frame, with the sample's status word and number. Only reads (one request frame).
@@ -182,6 +298,91 @@ class Arm:
         self._session.open_bus(dev.bus)  # an arm opened on other buses: its bus too, as the guard does
         with open_reader(self._session, dev, wait_s=wait_s) as reader:
             return reader.read()
+
+    def wrenches(self, name: str | None = None, *, count: int | None = None, rate: float = 10.0,
+                 sleep: Callable[[float], None] | None = None) -> Iterator[Wrench]:
+        """Readings of the F/T sensor ``name`` (None: the arm's only one), one every 1/``rate`` s on
+        ``sleep`` (`sherpa ft show`): ``count`` of them, or until the caller stops. Only reads."""
+        import time
+
+        from sherpa_cli.devices.ft_sensor import sensor_named
+        from sherpa_cli.ops.ft import MAX_RATE_HZ, stream
+
+        if not (0 < rate <= MAX_RATE_HZ):
+            from sherpa_cli.errors import UsageError
+
+            raise UsageError(f"--rate {rate}: expected samples per second > 0 and <= {MAX_RATE_HZ:g}")
+        return stream(self._session, sensor_named(self.config, name), count=count, period=1 / rate,
+                      sleep=sleep or time.sleep)
+
+    def ft_bias(self, name: str | None = None, *, apply: bool = False) -> BiasResult:
+        """Zero the F/T sensor ``name`` (None: the arm's only one) at its present load (`sherpa ft
+        bias`): a reading, then with ``apply`` the bias command and a reading after it. Without
+        ``apply`` a dry run: the result says the frame that would be sent."""
+        from sherpa_cli.devices.ft_sensor import sensor_named
+        from sherpa_cli.ops.ft import bias
+
+        return bias(self._session, sensor_named(self.config, name), apply=apply)
+
+    def command(self, target: str, exprs: Sequence[str], *, apply: bool = False, raw_save: bool = False,
+                check: bool = True) -> RawRun:
+        """Raw interpreter commands to one drive (`sherpa cmd DRIVE EXPR...`): queries (``"PX"``) are
+        sent; sets and executes (``"LL[3]=-240"``, ``"BG"``) only with ``apply`` (else the result says
+        the frame that would go). Every expression is parsed before anything is sent. MO=1 or BG with
+        ``apply`` run inside the motion guard (dead-man armed, the motor stopped and off at the end);
+        SV only with ``apply`` and ``raw_save``, once, counted in the save ledger. ``check``: raise the
+        error that ended the run (else ``run.error``, with the results up to it)."""
+        from sherpa_cli.bus.targets import single_drive
+        from sherpa_cli.errors import SherpaError
+        from sherpa_cli.joints.limits import il_roles
+        from sherpa_cli.motion.settings import MotionSettings
+        from sherpa_cli.ops.raw import (
+            RawResult,
+            RawRun,
+            check_raw_save,
+            parse_all,
+            run_raw,
+            run_raw_guarded,
+            starts_motion,
+        )
+
+        cfg = self.config
+        ref = single_drive(cfg, target)
+        parse_all(exprs)  # a typo must not reach the bus, not even the NMT start
+        saving = check_raw_save(exprs, apply=apply, raw_save=raw_save)  # before anything is sent
+        run = RawRun(ref.name, apply)
+        session = self._session
+        client = session.client(ref)
+        try:
+            on_save: Callable[[RawResult], None] | None = None
+            if saving:
+                from sherpa_cli.ops.program import DriveTarget, read_serial
+                from sherpa_cli.ops.save_ledger import SaveLedger
+
+                # the serial number is read before SV goes out (a save that cannot be counted is not sent)
+                serial = read_serial(session, DriveTarget(ref.name, ref.bus, ref.node, {}))
+                ledger = SaveLedger()
+
+                def counted(result: RawResult) -> None:
+                    record = ledger.record(serial, ref.name)
+                    result.decoded = [f"saved (save {record.count} of this drive by this tool)"]
+                    if record.warning:
+                        run.warnings.append(record.warning)
+
+                on_save = counted
+            client.nmt_start()
+            if apply and starts_motion(exprs):
+                run_raw_guarded(session, ref, exprs, MotionSettings.from_config(cfg, [ref.bus]),
+                                query_long=cfg.protocol.query_long, results=run.results, on_save=on_save,
+                                il_roles=il_roles(cfg), on_exit=run.stopped)
+            else:
+                run_raw(client, ref.node, exprs, apply=apply, query_long=cfg.protocol.query_long,
+                        results=run.results, on_save=on_save, il_roles=il_roles(cfg))
+        except SherpaError as exc:
+            run.error = exc
+        if check and run.error is not None:
+            raise run.error
+        return run
 
     # ------------------------------------------------------------------ stopping
 
@@ -203,6 +404,19 @@ class Arm:
         if check and problem is not None:
             raise problem
         return report
+
+    def recover(self, targets: Sequence[str] | None = None, *, apply: bool = False,
+                check_drives: bool = False) -> RecoverReport:
+        """Put back what commands that did not finish left on the drives (`sherpa recover`): every
+        temporary change the journal in the state directory notes (UM, SP/AC/DC, the dead-man objects,
+        the pair's group id, TPDO settings, ...), last change first, and a tripped dead-man cleared
+        under a dead-man of its own. A dry run (NMT start and reads only) unless ``apply``.
+        ``check_drives``: also read every other target drive for what a command leaves (a journal
+        deleted by hand, another host's command); with ``apply`` a drive with a finding is reset.
+        ``report.not_recovered`` names the drives still not as they should be."""
+        from sherpa_cli.ops.recover import plan_recover, recover
+
+        return recover(self._session, plan_recover(self.config, targets), apply=apply, check_drives=check_drives)
 
     # ------------------------------------------------------------------ moving
 
@@ -376,6 +590,31 @@ class Arm:
                         on_event=on_event, uncalibrated=uncalibrated, timebase=timebase, mode_first=mode_first,
                         hold=hold)
 
+    def log_step_with_drive(self, name: str, mode: str, value: float, *, duration: float = 2.0, rate: float = 1000.0,
+                            uncalibrated: bool = False, settings: MotionSettings | None = None,
+                            timebase: StepTime | None = None) -> tuple[StepResult, DriveStep]:
+        """:meth:`log_step` recorded twice at once (`sherpa log step --source drive`): over the bus at
+        ``rate`` and by the drive's own recorder at the servo rate (armed just before the command, read
+        once the guard has stopped the motor; its settings RAM only and put back on every way out).
+        Returns the bus's step result and the drive's (``DriveStep``: its recording and metrics)."""
+        import time
+
+        from sherpa_cli.motion.settings import MotionSettings
+        from sherpa_cli.ops.drive_step import DriveTrace
+        from sherpa_cli.ops.step import resolve_step_target, run_step
+
+        cfg = self.config
+        target = resolve_step_target(cfg, name)
+        if settings is None:
+            settings = MotionSettings.from_config(cfg, [target.ref.bus])
+        clock, sleep = (timebase.now, timebase.sleep) if timebase is not None else (time.monotonic, time.sleep)
+        with DriveTrace(self._session, target.ref, duration, clock=clock, sleep=sleep) as trace:
+            result = run_step(self._session, target, mode, value, duration=duration, rate=rate, settings=settings,
+                              uncalibrated=uncalibrated, timebase=timebase, drive_trace=trace)
+        drive = trace.result
+        assert drive is not None  # run_step collects it or raises
+        return result, drive
+
     # ------------------------------------------------------------------ moving live
 
     def live_jog(self, joints: Sequence[str] | None = None, *, uncalibrated: bool = False,
@@ -452,6 +691,131 @@ class Arm:
         if check:
             report.check()
         return report
+
+    def restore(self, path: str | Path, *, apply: bool = False, save: bool = False, motor_off: bool = False,
+                other_serial: bool = False, verify_flash: bool = False,
+                confirm_save: ConfirmSave = refuse_unconfirmed,
+                on_plan: Callable[[Sequence[DrivePlan]], None] | None = None, check: bool = True) -> ProgramReport:
+        """Write a parameter dump (:meth:`dump_params`' file) back into its drives (`sherpa params
+        restore`): every writable setting of the dump, never the identity block, read-only values or
+        moment state. A dump from a drive with another serial number is refused unless
+        ``other_serial``. Plan, dry run unless ``apply``, read-back, ``save`` only with
+        ``confirm_save`` saying yes and counted in the save ledger, as :meth:`program_limits`."""
+        from sherpa_cli.errors import Location
+        from sherpa_cli.ops.params_file import read_dump
+        from sherpa_cli.ops.restore import restore_targets
+
+        programming.check_options(apply, save)
+        file = Path(path)
+        drives, warnings = restore_targets(self.config, read_dump(file), file, other_serial=other_serial)
+        warnings = programming.check(drives, warnings, allow_disabled=True,
+                                     where=lambda drive: Location(str(file), None, f"drives.{drive}.params"))
+        report = programming.run(self._session, drives, apply=apply, save=save, motor_off=motor_off,
+                                 need_serial=True, verify_flash=verify_flash, warnings=warnings,
+                                 confirm_save=confirm_save, on_plan=on_plan)
+        if check:
+            report.check()
+        return report
+
+    # ------------------------------------------------------------------ tuning
+
+    def tune_show(self, target: str) -> list[GainReading]:
+        """The loop gains of the drives of ``target`` (a joint, pair or drive; `sherpa tune show`):
+        KP[], KI[], FF[] per drive as the drive holds them (``reading.values["KP[2]"]``). What each one
+        means, and which meanings the sources do not confirm, is ``ops.tune.GAINS``. Only reads."""
+        from sherpa_cli.bus.targets import drive_refs
+        from sherpa_cli.ops.tune import read_gains
+
+        return read_gains(self._session, drive_refs(self.config, [target], configured_only=True))
+
+    def tune_set(self, target: str, gains: Mapping[str, float] | Sequence[str], *, apply: bool = False,
+                 save: bool = False, motor_off: bool = False, confirm_save: ConfirmSave = refuse_unconfirmed,
+                 on_plan: Callable[[Sequence[DrivePlan]], None] | None = None, check: bool = True) -> ProgramReport:
+        """Write loop gains to the drives of ``target`` (`sherpa tune set`): ``gains`` as
+        ``{"KP[2]": 0.8}`` or ``["KP[2]=0.8"]``, each checked against its bounds (the config's
+        ``tuning:``) before anything is sent. A dry run unless ``apply`` (the report's plans say now /
+        target per drive); ``apply`` writes and reads back; ``save`` (with ``apply``) saves with SV once
+        every value is verified, counted in the save ledger, and only if ``confirm_save`` says yes --
+        the path of :meth:`program_limits`. ``check``: raise the problem the run ended with."""
+        from sherpa_cli.bus.targets import drive_refs
+        from sherpa_cli.ops.program import DriveTarget
+        from sherpa_cli.ops.tune import parse_assignments
+
+        programming.check_options(apply, save)
+        cfg = self.config
+        texts = [f"{k}={v!r}" for k, v in gains.items()] if isinstance(gains, Mapping) else \
+            [gains] if isinstance(gains, str) else list(gains)
+        values = parse_assignments(cfg, texts)
+        refs = drive_refs(cfg, [target], configured_only=True)
+        return self._program([DriveTarget(r.name, r.bus, r.node, values) for r in refs], apply=apply, save=save,
+                             motor_off=motor_off, confirm_save=confirm_save, on_plan=on_plan, check=check)
+
+    def _program(self, drives: Sequence[DriveTarget], *, apply: bool, save: bool, motor_off: bool,
+                 confirm_save: ConfirmSave, on_plan: Callable[[Sequence[DrivePlan]], None] | None,
+                 check: bool) -> ProgramReport:
+        warnings = programming.check(drives)
+        report = programming.run(self._session, drives, apply=apply, save=save, motor_off=motor_off,
+                                 need_serial=save, warnings=warnings, confirm_save=confirm_save, on_plan=on_plan)
+        if check:
+            report.check()
+        return report
+
+    def tune_step(self, joint: str, mode: str, value: float, gains: Mapping[str, float] | Sequence[str], *,
+                  duration: float = 2.0, rate: float = 500.0, uncalibrated: bool = False,
+                  settings: MotionSettings | None = None, timebase: StepTime | None = None) -> TuneStepResult:
+        """Step ``joint`` (a plain joint or its drive) with the gains its drive holds, then with the
+        trial ``gains`` (RAM only, journaled, put back on every way out), and return both steps with
+        their metrics (`sherpa tune step ... --apply`). ``mode``: ``"position"`` (``value`` rad, then
+        back by -``value`` with the trial gains) or ``"velocity"`` (rad/s). Each step runs in the
+        motion guard as :meth:`log_step`'s; nothing is saved. ``timebase``: as :meth:`log_step`'s."""
+        from sherpa_cli.errors import UsageError
+        from sherpa_cli.motion.settings import MotionSettings
+        from sherpa_cli.ops.step import resolve_step_target, run_step, step_request
+        from sherpa_cli.ops.tune import parse_assignments
+        from sherpa_cli.ops.tune_step import run_tune_step
+
+        if mode not in ("position", "velocity"):
+            raise UsageError(f"mode {mode!r}: expected position or velocity")
+        cfg = self.config
+        texts = [f"{k}={v!r}" for k, v in gains.items()] if isinstance(gains, Mapping) else \
+            [gains] if isinstance(gains, str) else list(gains)
+        trial = parse_assignments(cfg, texts)
+        target = resolve_step_target(cfg, joint)
+        step_request(target, mode, value, duration=duration, uncalibrated=uncalibrated)
+        chosen = settings or MotionSettings.from_config(cfg, [target.ref.bus])
+        session = self._session
+
+        def one(m: str, v: float) -> StepResult:
+            return run_step(session, target, m, v, duration=duration, rate=rate, settings=chosen,
+                            uncalibrated=uncalibrated, timebase=timebase)
+
+        return run_tune_step(session, target, mode, value, trial, one)
+
+    def match_pair(self, pair: str, *, speed: int | None = None, rounds: int = 5, uncalibrated: bool = False,
+                   tolerance: float | None = None, clock: Callable[[], float] | None = None,
+                   sleep: Callable[[float], None] | None = None) -> MatchResult:
+        """Make both speed loops of a differential pair equally fast (`sherpa diffdrive match PAIR
+        --measure`): small Σ velocity steps of both motors from one common BG, inside the motion guard,
+        recorded by the drives' own recorders; each loop's delay identified; the faster motor's KP[2],
+        KP[3] x s and KI[2] x s² proposed and tried in RAM (put back on every way out) until both delays
+        agree within ``tolerance`` (default 5 %) or ``rounds`` trials. Moves the motors, writes nothing
+        lasting: the result's ``proposal.changes`` (drive -> gains) is what to write with
+        :meth:`tune_set`. ``speed``: counts/s per motor (default a quarter of the Σ joint's limit).
+        ``clock``/``sleep``: the time the steps run on (default wall time; tests step it)."""
+        import time
+
+        from sherpa_cli.bus.targets import pair_of
+        from sherpa_cli.ops import pair_match
+        from sherpa_cli.ops.tune import bounds
+
+        cfg = self.config
+        p = pair_of(cfg, pair)
+        settings = pair_match.MatchSettings(speed=pair_match.step_speed(cfg, p, speed), uncalibrated=uncalibrated)
+        if tolerance is not None:
+            settings.tolerance = tolerance
+        return pair_match.run_match(self._session, p, settings, rounds=rounds, bounds=bounds(cfg),
+                                    clock=clock or time.monotonic, sleep=sleep or time.sleep)
+
 
 
 def _typed_progress(on_progress: Callable[[object], None] | None) -> Callable[[Mapping[str, int]], None] | None:

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from typing import TYPE_CHECKING
 
 import typer
@@ -13,7 +12,6 @@ from sherpa_cli.cli.output import fmt_value
 from sherpa_cli.words import plural
 
 if TYPE_CHECKING:
-    from sherpa_cli.bus.session import ArmSession
     from sherpa_cli.bus.targets import DriveRef
     from sherpa_cli.ops.raw import RawResult
 
@@ -49,59 +47,23 @@ def cmd(
     --apply and --raw-save are given, at most one SV per invocation, and each one is
     counted per drive serial number in the save ledger (as program-limits --save).
     """
+    from sherpa_cli.api import Arm
     from sherpa_cli.bus.targets import single_drive
-    from sherpa_cli.errors import SherpaError
-    from sherpa_cli.joints.limits import il_roles
-    from sherpa_cli.motion.settings import MotionSettings
-    from sherpa_cli.ops.raw import check_raw_save, parse_all, run_raw, run_raw_guarded, starts_motion
+    from sherpa_cli.ops.raw import check_raw_save, parse_all
 
     st = state(ctx)
     cfg = st.load_config()
     ref = single_drive(cfg, target)
     parse_all(exprs)  # a typo must not reach the bus, not even the NMT start
-    saving = check_raw_save(exprs, apply=apply, raw_save=raw_save)  # before anything is sent
-    done: list[RawResult] = []
-    error: SherpaError | None = None
-    warnings: list[str] = []
-    guarded = apply and starts_motion(exprs)
-    stopped: list[str] = []
+    check_raw_save(exprs, apply=apply, raw_save=raw_save)  # before anything is sent
     with st.session(buses=[ref.bus]) as session:
-        client = session.client(ref)
-        try:
-            on_save = _ledger_counter(session, ref, warnings) if saving else None
-            client.nmt_start()
-            if guarded:
-                run_raw_guarded(session, ref, exprs, MotionSettings.from_config(cfg, [ref.bus]),
-                                query_long=cfg.protocol.query_long, results=done, on_save=on_save,
-                                il_roles=il_roles(cfg), on_exit=stopped)
-            else:
-                run_raw(client, ref.node, exprs, apply=apply, query_long=cfg.protocol.query_long, results=done,
-                        on_save=on_save, il_roles=il_roles(cfg))
-        except SherpaError as exc:
-            error = exc
-    if done or error is None:
-        _render(st, ref, apply, done, stopped)
-    for w in warnings:
+        run = Arm(session).command(target, exprs, apply=apply, raw_save=raw_save, check=False)  # the Python API
+    if run.results or run.error is None:
+        _render(st, ref, apply, run.results, run.stopped)
+    for w in run.warnings:
         st.out.warn(w)
-    if error is not None:
-        raise error
-
-
-def _ledger_counter(session: ArmSession, ref: DriveRef, warnings: list[str]) -> Callable[[RawResult], None]:
-    """The serial number is read before SV goes out (a save that cannot be counted is not sent)."""
-    from sherpa_cli.ops.program import DriveTarget, read_serial
-    from sherpa_cli.ops.save_ledger import SaveLedger
-
-    serial = read_serial(session, DriveTarget(ref.name, ref.bus, ref.node, {}))
-    ledger = SaveLedger()
-
-    def counted(result: RawResult) -> None:
-        record = ledger.record(serial, ref.name)
-        result.decoded = [f"saved (save {record.count} of this drive by this tool)"]
-        if record.warning:
-            warnings.append(record.warning)
-
-    return counted
+    if run.error is not None:
+        raise run.error
 
 
 REGISTERS = ("SR", "MF", "IP")

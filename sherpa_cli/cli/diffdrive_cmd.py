@@ -436,7 +436,6 @@ def match(
     from sherpa_cli.bus.targets import pair_of
     from sherpa_cli.cli.program_cmd import check_options
     from sherpa_cli.ops import pair_match
-    from sherpa_cli.ops.tune import bounds
 
     st = state(ctx)
     check_options(apply, save)
@@ -464,8 +463,11 @@ def match(
                     f"(put back after), until both delays agree within {settings.tolerance:.0%}")
         st.out.line("nothing sent; add --measure to step and see the proposal, --apply to also write it")
         return
+    from sherpa_cli.api import Arm
+
     with st.session(buses=sorted({cfg.drives[d].bus for d in (p.drive_a, p.drive_b)})) as session:
-        result = pair_match.run_match(session, p, settings, rounds=rounds, bounds=bounds(cfg))
+        # a layer over the Python API
+        result = Arm(session).match_pair(p.name, speed=speed, rounds=rounds, uncalibrated=uncalibrated)
     if plot is not None:
         pair_match.plot(result, plot)
     if st.json_mode:
@@ -488,8 +490,11 @@ def match(
     from sherpa_cli.ops.program import DriveTarget
 
     targets = [DriveTarget(d, cfg.drives[d].bus, cfg.drives[d].node, dict(values)) for d, values in changes.items()]
+    (drive, values), = changes.items()  # the proposal changes the faster motor only
     run_program(st, "diffdrive match", targets, [], apply=True, save=save, yes=yes, motor_off=False,
-                need_serial=save, allow_disabled=False, title=lambda drive: drive_moves(cfg, drive))
+                need_serial=save, allow_disabled=False, title=lambda drive: drive_moves(cfg, drive),
+                via=lambda arm, confirm, on_plan: arm.tune_set(drive, values, apply=True, save=save,
+                                                               confirm_save=confirm, on_plan=on_plan, check=False))
 
 
 def _render_match(st: AppState, r: MatchResult, plot: str | None) -> None:

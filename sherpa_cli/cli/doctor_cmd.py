@@ -75,13 +75,15 @@ def doctor(
 
 def _arm(st: AppState, report: DoctorReport, cfg: ArmConfig, buslink: ModuleType, doc: ModuleType,
          window: float) -> None:
+    from sherpa_cli.api import Arm
+
     names = list(cfg.buses)
     load_window = min(window, 0.5)
     if st.sim:
         with st.session() as session:
             statuses = buslink.status(cfg, names, session=session, window=load_window, sleep=sleep)
             usable = doc.check_buses(report, statuses)
-            doc.check_drives(report, session, usable, window=window, clock=clock, sleep=sleep)
+            Arm(session).doctor(usable, report=report, window=window, clock=clock, sleep=sleep)  # the Python API
         return
     netlinked = [b for b in names if cfg.buses[b].interface == "socketcan"]
     statuses = {s.bus: s for s in buslink.status(cfg, netlinked, session=None, window=load_window, sleep=sleep)}
@@ -93,7 +95,7 @@ def _arm(st: AppState, report: DoctorReport, cfg: ArmConfig, buslink: ModuleType
             for s in buslink.status(cfg, others, session=session, window=load_window, sleep=sleep):
                 statuses[s.bus] = s
             usable = doc.check_buses(report, [statuses[b] for b in names])
-            doc.check_drives(report, session, usable, window=window, clock=clock, sleep=sleep)
+            Arm(session).doctor(usable, report=report, window=window, clock=clock, sleep=sleep)  # the Python API
     except CommunicationError as exc:
         if any(c.name.startswith("bus ") for c in report.checks):
             raise

@@ -21,7 +21,7 @@ app = typer.Typer(help="The force/torque sensor: stream its readings, zero it (b
 
 # between samples; tests replace it so no test waits on wall time
 sleep: Callable[[float], None] = time.sleep
-MAX_RATE = 200.0  # Hz: a sample is a request and two frames, a few ms on a busy bus
+MAX_RATE = 200.0  # Hz: ops/ft.py MAX_RATE_HZ (not imported here: `sherpa --help` stays fast)
 HEADER = f"{'Fx':>8} {'Fy':>8} {'Fz':>8} N  {'Tx':>8} {'Ty':>8} {'Tz':>8} N·m  {'sample':>6}  status"
 
 Sensor = typer.Argument(None, metavar="[SENSOR]", help="The ft_sensor device (default: the arm's only one).",
@@ -63,8 +63,8 @@ def show(
       sherpa ft show --for 2
       sherpa ft show wrist_ft --rate 50
     """
+    from sherpa_cli.api import Arm
     from sherpa_cli.devices.ft_sensor import sensor_named
-    from sherpa_cli.ops.ft import stream
 
     st = state(ctx)
     if not 0 < rate <= MAX_RATE:
@@ -83,7 +83,8 @@ def show(
             st.out.line(describe(dev))
             st.out.line(HEADER)
         with contextlib.suppress(KeyboardInterrupt):  # Ctrl-C is how an endless stream ends
-            for w in stream(session, dev, count=count, period=1 / rate, sleep=sleep):
+            # a layer over the Python API; the module's sleep is looked up at each wait (tests step it)
+            for w in Arm(session).wrenches(dev.name, count=count, rate=rate, sleep=lambda t: sleep(t)):
                 if st.json_mode:
                     samples.append({**{k: round(v, 4) for k, v in w.axes().items()}, "sample": w.sample,
                                     "status": w.status.raw})
@@ -106,14 +107,14 @@ def bias(ctx: typer.Context, sensor: str | None = Sensor, apply: Apply = False) 
       sherpa ft bias
       sherpa ft bias wrist_ft --apply
     """
+    from sherpa_cli.api import Arm
     from sherpa_cli.devices.ft_sensor import sensor_named
-    from sherpa_cli.ops.ft import bias as run_bias
 
     st = state(ctx)
     cfg = st.load_config()
     dev = sensor_named(cfg, sensor)
     with st.session(buses=[dev.bus]) as session:
-        result = run_bias(session, dev, apply=apply)
+        result = Arm(session).ft_bias(dev.name, apply=apply)  # a layer over the Python API
     if st.json_mode:
         st.out.json(result.as_json())
         return

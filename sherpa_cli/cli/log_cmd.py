@@ -292,7 +292,6 @@ def render_metrics(st: AppState, metrics: Mapping[tuple[str, str], StepMetrics],
 import time as _time  # noqa: E402
 
 sleep = _time.sleep
-MAX_RECORD_S = 3600.0
 
 
 @app.command("record")
@@ -345,19 +344,10 @@ def record(
     active current, position error, speed command), both motors of a pair with the same settings;
     the recorder settings are RAM only and restored on every exit path (docs/log.md).
     """
-    from sherpa_cli.bus.targets import drive_refs
-    from sherpa_cli.cli.robotics import (
-        RecordExtras,
-        check_live,
-        live_view,
-        poller_sample,
-        record_outputs,
-        recorder_sample,
-        write_mcap,
-    )
-    from sherpa_cli.devices import encoder
-    from sherpa_cli.log.record import MAX_LOAD, Poller, Recorder, bus_budget, check_budget
-    from sherpa_cli.log.recording import CsvWriter, write_csv
+    from sherpa_cli.api import Arm
+    from sherpa_cli.cli.robotics import check_live, live_view, record_outputs
+    from sherpa_cli.log.record import MAX_LOAD
+    from sherpa_cli.log.record_run import check_budget, check_record_values, plan_record
 
     st = state(ctx)
     if source != "can":
@@ -365,83 +355,40 @@ def record(
 
         record_from_drive(st, targets, duration, output, source=source, trigger=trigger, poll=poll, live=foxglove)
         return
-    if not 0 < duration <= MAX_RECORD_S:
-        raise UsageError(f"--for {duration}: expected seconds > 0 and <= {MAX_RECORD_S:g}")
-    if not (MIN_RECORD_RATE <= rate <= 10000):
-        raise UsageError(f"--rate {rate:g}: expected Hz >= {MIN_RECORD_RATE:g} (the recording notices Ctrl-C and "
-                         "its end once a SYNC period) and <= 10000")
+    check_record_values(duration, rate)
     outputs = record_outputs(output)
     check_live(foxglove, foxglove_at, allow_remote)
     cfg = st.load_config()
-    # an encoder device stands for the joint it measures (recorded beside it: devices/encoder.py)
-    refs = drive_refs(cfg, encoder.targets_with_encoders(cfg, targets), configured_only=True)
-    if not poll:
-        encoders = [t.dev for t in encoder.recorded_encoders(cfg, (r.name for r in refs))]
-        if current is None:
-            current = all(b.fits for b in bus_budget(cfg, refs, rate, current=True, encoders=encoders))
-        budget = bus_budget(cfg, refs, rate, current=current, encoders=encoders)
-        for b in budget:
-            st.out.info(f"bus {b.bus}: {plural(b.drives, 'drive')} at {rate:g} Hz"
-                        f"{' with current' if b.current else ''}: {100 * b.load:.1f} % of "
-                        f"{b.bitrate / 1e6:g} Mbit/s{' (assumed)' if b.bitrate_assumed else ''} "
-                        f"(limit {100 * MAX_LOAD:.0f} %, highest rate {b.max_rate} Hz)")
-        check_budget(budget)
-    buses = list(dict.fromkeys([*(r.bus for r in refs),  # and the buses of the joints' encoders
-                                *(t.dev.bus for t in encoder.recorded_encoders(cfg, (r.name for r in refs)))]))
-    expected: int | None = None
-    late = unplaced = 0
-    failure: SherpaError | None = None  # found while recording (another SYNC producer): raised once written
-    gaps: Mapping[str, Gaps] | None = None
-    period = 0.0
-    streamed: CsvWriter | None = None
-    rec: Recording | None
-    loads = {} if poll else {b.bus: round(b.load, 6) for b in budget}
-    with live_view(st, foxglove, foxglove_at, allow_remote) as view, st.session(buses=buses) as session:
-        extras = RecordExtras(session, refs, mcap=".mcap" in outputs, view=view, budget=loads)
-        extras.start()
-        if poll:
-            poller = Poller(session, refs, current=bool(current))
-            zero_ns = _time.time_ns()
-            with poller, extras.feed(cfg, poller_sample(poller)):
-                interrupted = _wait_for(duration)
-            rec, counts = poller.recording(cfg), poller.counts()
-        else:
-            recorder = Recorder(session, refs, rate, current=bool(current))
-            # a CSV-only recording goes to the file row by row as it comes (constant memory; a killed
-            # recording leaves its rows so far); the MCAP writer is given the whole recording at the end
-            if ".csv" in outputs and ".mcap" not in outputs:
-                recorder.sink = streamed = CsvWriter(outputs[".csv"], recorder.columns())
-            try:
-                with recorder, extras.feed(cfg, recorder_sample(recorder)):
-                    interrupted = _wait_for(duration, lambda: recorder.problem() is not None)
-            finally:
-                if streamed is not None:
-                    streamed.close()
-            rec = recorder.recording() if streamed is None else None
-            counts, expected, late = recorder.counts(), recorder.expected(), recorder.late()
-            failure = recorder.problem()
-            gaps, period = recorder.gaps(), recorder.period
-            zero_ns = round(recorder.time_zero() * 1e9)  # the first SYNC's: time_s 0 of the rows
-            unplaced = recorder.unplaced()
-        extras.read_status()
-    if ".csv" in outputs and streamed is None:
-        assert rec is not None
-        write_csv(rec, outputs[".csv"])
+    plan = plan_record(cfg, targets, rate, current=current, poll=poll)
+    for b in plan.budget:
+        st.out.info(f"bus {b.bus}: {plural(b.drives, 'drive')} at {rate:g} Hz"
+                    f"{' with current' if b.current else ''}: {100 * b.load:.1f} % of "
+                    f"{b.bitrate / 1e6:g} Mbit/s{' (assumed)' if b.bitrate_assumed else ''} "
+                    f"(limit {100 * MAX_LOAD:.0f} %, highest rate {b.max_rate} Hz)")
+    check_budget(plan)
+    # a CSV-only recording goes to the file row by row as it comes (constant memory; a killed
+    # recording leaves its rows so far); the MCAP writer is given the whole recording at the end
+    stream_to = outputs[".csv"] if ".csv" in outputs and ".mcap" not in outputs and not poll else None
+    with live_view(st, foxglove, foxglove_at, allow_remote) as view, st.session(buses=list(plan.buses)) as session:
+        # a layer over the Python API; the wait is the command's, which a SIGTERM or SIGHUP ends too
+        result = Arm(session).record(targets, rate, duration, current=plan.current, poll=poll, plan=plan,
+                                     stream_to=stream_to, status=".mcap" in outputs, view=view,
+                                     wait=lambda d, failed: _wait_for(d, failed), check=False)
+    if ".csv" in outputs and result.streamed is None:
+        result.write_csv(outputs[".csv"])
     if ".mcap" in outputs:
-        assert rec is not None  # never streamed with an MCAP output
-        write_mcap(outputs[".mcap"], rec, cfg, time_zero_ns=zero_ns, extras=extras, config_file=str(st.config_path),
-                   info={"command": "log record", "source": "poll" if poll else "TPDO on SYNC",
-                         "rate_hz": "" if poll else f"{rate:g}", "current": str(bool(current)).lower(),
-                         **{f"budget_load.{bus}": f"{load:g}" for bus, load in loads.items()}})
-    output = list(outputs.values())
-    rows = streamed.rows if streamed is not None else len(rec.times) if rec is not None else 0
-    _render_record(st, output, counts, expected, rows, late, gaps=gaps, period=period)
-    if unplaced:
-        st.out.warn(f"{unplaced} frame(s) answered no SYNC this tool sent: not in the file")
-    if failure is not None:
+        result.write_mcap(outputs[".mcap"], config_file=str(st.config_path),
+                          info={"command": "log record", "source": "poll" if poll else "TPDO on SYNC",
+                                "rate_hz": "" if poll else f"{rate:g}", "current": str(plan.current).lower(),
+                                **{f"budget_load.{bus}": f"{load:g}" for bus, load in plan.loads().items()}})
+    _render_record(st, list(outputs.values()), result.samples, result.expected, result.rows, result.late,
+                   gaps=None if poll else result.gaps, period=result.period)
+    if result.unplaced:
+        st.out.warn(f"{result.unplaced} frame(s) answered no SYNC this tool sent: not in the file")
+    if result.failure is not None:
         st.out.warn("the samples up to the stop are written; the drives' PDO settings are restored")
-        raise failure
-    if interrupted:
+        raise result.failure
+    if result.interrupted:
         st.out.warn("interrupted: the samples up to the interruption are written; the drives' PDO settings "
                     "are restored")
         raise typer.Exit(130)
@@ -451,9 +398,6 @@ class _Stopped(Exception):
     """SIGTERM or SIGHUP during a recording: ends it like Ctrl-C, so the PDO settings go back."""
 
 
-# the lowest --rate of a recording, and of a step (at 0.5 Hz a step's loop stopped
-# showing signs of life between samples and the dead-man tripped)
-MIN_RECORD_RATE = 1.0  # a step's: ops/step.py MIN_STEP_RATE
 WAKE_EVERY_S = 0.1  # how often the wait looks at what the receive threads found
 
 
@@ -602,8 +546,9 @@ def step(
     """
     import json
 
-    from sherpa_cli.cli.robotics import RecordExtras, record_outputs, write_mcap
+    from sherpa_cli.cli.robotics import record_outputs, write_mcap
     from sherpa_cli.log.plot import have_matplotlib, plot_recording, step_title
+    from sherpa_cli.log.record_extras import RecordExtras
     from sherpa_cli.log.recording import write_csv
     from sherpa_cli.motion.settings import MotionSettings
     from sherpa_cli.ops.step import check_mode_first, resolve_step_target, step_request
@@ -781,7 +726,6 @@ def _step_compare(st: AppState, runs: Sequence[Path], output: Path) -> None:
 def _step_would_refuse(st: AppState, target: Axis, req: MoveRequest) -> list[str] | None:
     """What `--apply` would refuse (ops/dry_check.py), read from the drive; None when the drive
     cannot be read (the dry run then says it did not check)."""
-    from sherpa_cli.errors import SherpaError
     from sherpa_cli.ops.dry_check import would_refuse
 
     try:

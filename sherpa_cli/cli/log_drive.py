@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Literal, cast
+from typing import TYPE_CHECKING, Any
 
 from sherpa_cli.cli.context import AppState
 from sherpa_cli.errors import UsageError
@@ -20,10 +20,10 @@ if TYPE_CHECKING:
 def record_from_drive(st: AppState, targets: Sequence[str] | None, duration: float, output: Sequence[Path], *,
                       source: str, trigger: str, poll: bool, live: bool) -> None:
     """Check the options, record, write the CSV only once every drive's upload is in."""
+    from sherpa_cli.api import Arm
     from sherpa_cli.bus.targets import drive_refs
     from sherpa_cli.elmo.recorder import RecorderSettings, plan_recording
     from sherpa_cli.log.recording import write_csv
-    from sherpa_cli.ops.drive_record import record_drives
 
     if source != "drive":
         raise UsageError(f"--source {source}: expected can or drive")
@@ -42,7 +42,7 @@ def record_from_drive(st: AppState, targets: Sequence[str] | None, duration: flo
     with st.session(buses=list(dict.fromkeys(r.bus for r in refs))) as session:
         if trigger == "bg":
             st.out.info("armed: waiting for the next BG (start the move now)")
-        result = record_drives(session, refs, duration, trigger=cast(Literal["now", "bg"], trigger))
+        result = Arm(session).record_drives(targets, duration, trigger=trigger)  # a layer over the Python API
     write_csv(result.recording, paths[0])
     rate = 1.0 / result.period_s
     if st.json_mode:
@@ -64,18 +64,14 @@ def drive_step(st: AppState, session: ArmSession, target: Axis, mode: str, value
     step.png, the drive's recording with the bus's drawn beside it (matplotlib was checked before
     the step moved)."""
     import json
-    import time
 
+    from sherpa_cli.api import Arm
     from sherpa_cli.log.recording import write_csv
-    from sherpa_cli.ops.drive_step import DriveTrace
-    from sherpa_cli.ops.step import run_step
 
-    clock, sleep = (timebase.now, timebase.sleep) if timebase is not None else (time.monotonic, time.sleep)
-    with DriveTrace(session, target.ref, duration, clock=clock, sleep=sleep) as trace:
-        result = run_step(session, target, mode, value, duration=duration, rate=rate, settings=settings,
-                          uncalibrated=uncalibrated, timebase=timebase, drive_trace=trace)
-    drive = trace.result
-    assert drive is not None  # run_step collects it or raises
+    # a layer over the Python API
+    result, drive = Arm(session).log_step_with_drive(target.name, mode, value, duration=duration, rate=rate,
+                                                     uncalibrated=uncalibrated, settings=settings,
+                                                     timebase=timebase)
     write_csv(drive.recording, output / "recording.csv")
     write_csv(result.recording, output / "can-recording.csv")
     keys = ("dead_time", "rise_time", "settling_time")

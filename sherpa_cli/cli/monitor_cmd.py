@@ -5,7 +5,7 @@ from __future__ import annotations
 import contextlib
 import sys
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from typing import TYPE_CHECKING, Any
 
 import typer
@@ -21,7 +21,7 @@ from sherpa_cli.cli.robotics import (
     check_live,
     live_view,
 )
-from sherpa_cli.errors import ExitCode, UsageError, raise_if_signalled
+from sherpa_cli.errors import ExitCode, UsageError
 from sherpa_cli.words import plural
 
 if TYPE_CHECKING:
@@ -30,11 +30,10 @@ if TYPE_CHECKING:
 
     from sherpa_cli.config.model import ArmConfig
     from sherpa_cli.ops.ft import SensorReading
-    from sherpa_cli.ops.monitor import DriveStatus, Monitor
+    from sherpa_cli.ops.monitor import DriveStatus, MonitorSnapshot
 
 # Seconds between polls in the live view; the CLI's sleep goes through here so tests can stop it.
 sleep: Callable[[float], None] = time.sleep
-MAX_INTERVAL = 3600.0  # s between polls of the live view
 
 
 def monitor(
@@ -74,13 +73,13 @@ def monitor(
       sherpa monitor --foxglove
     """
     from sherpa_cli.bus.targets import drive_refs
-    from sherpa_cli.ops.monitor import Monitor
+    from sherpa_cli.ops.monitor import MAX_INTERVAL_S
 
     st = state(ctx)
     if st.json_mode and not once:
         raise UsageError("--json needs --once: the live view is for a terminal", hint="sherpa --json monitor --once")
-    if not 0 < interval <= MAX_INTERVAL:  # also refuses nan and inf (time.sleep(inf) overflows)
-        raise UsageError(f"--interval {interval}: expected a number of seconds > 0 and <= {MAX_INTERVAL:g}")
+    if not 0 < interval <= MAX_INTERVAL_S:  # also refuses nan and inf (time.sleep(inf) overflows)
+        raise UsageError(f"--interval {interval}: expected a number of seconds > 0 and <= {MAX_INTERVAL_S:g}")
     if duration is not None and not 0 < duration <= 86400:
         raise UsageError(f"--for {duration}: expected seconds > 0 and <= 86400")
     if once and (foxglove or duration is not None):
@@ -96,16 +95,19 @@ def monitor(
         st.out.warn(f"dry run: --heartbeat {heartbeat} would set the producer heartbeat (0x1017) of "
                     f"{plural(len(refs), 'drive')} to {heartbeat} ms in RAM; nothing is written (add --apply)")
         heartbeat = None
-    with live_view(st, foxglove, foxglove_at, allow_remote) as view, st.session(buses=buses) as session, \
-            Monitor(session, refs, heartbeat_ms=heartbeat) as mon:
+    from sherpa_cli.api import Arm
+
+    with live_view(st, foxglove, foxglove_at, allow_remote) as view, st.session(buses=buses) as session:
+        arm = Arm(session)  # a layer over the Python API
         if once:
             from sherpa_cli.ops.ft import read_sensors
 
-            mon.poll()
-            mon.wait_for_heartbeats()
-            rows = mon.snapshot()
-            # the F/T sensors on the monitored buses: one sample each (a whole-arm view only)
-            sensors = read_sensors(session, [d for d in cfg.ft_sensors() if d.bus in buses]) if not targets else []
+            with arm.monitor(targets, count=1, heartbeat_ms=heartbeat, apply=heartbeat is not None,
+                             wait_for_heartbeats=True) as stream:
+                rows = list(next(stream))
+                # the F/T sensors on the monitored buses: one sample each (a whole-arm view only)
+                sensors = read_sensors(session, [d for d in cfg.ft_sensors() if d.bus in buses]) if not targets \
+                    else []
             _render_once(st, rows, sensors)
             if any(not r.answering or r.mf for r in rows) or any(s.wrench is None for s in sensors):
                 raise typer.Exit(int(ExitCode.PROBLEM))  # a silent drive or sensor, or a latched motor failure
@@ -115,44 +117,38 @@ def monitor(
             view.listen(session.links)
             after_poll = MonitorFeed(view, cfg).publish
         polls = None if duration is None else max(1, round(duration / interval))
+        # the module's sleep is looked up at each wait: tests step it
+        stream = arm.monitor(targets, interval=interval, count=polls, heartbeat_ms=heartbeat,
+                             apply=heartbeat is not None, sleep=lambda s: sleep(s))
         # Ctrl-C is how a live view ends: exit 0 after the monitor restores 0x1017
-        with contextlib.suppress(KeyboardInterrupt):
-            _live(st, mon, interval, polls=polls, after_poll=after_poll)
+        with stream, contextlib.suppress(KeyboardInterrupt):
+            _live(st, stream, cfg, after_poll=after_poll)
 
 
-def _live(st: AppState, mon: Monitor, interval: float, *, polls: int | None = None,
+def _live(st: AppState, stream: Iterator[MonitorSnapshot], cfg: ArmConfig, *,
           after_poll: Callable[[list[Any]], None] | None = None) -> None:
-    """Poll every ``interval`` s until Ctrl-C, or ``polls`` times; ``after_poll(rows)`` sees each snapshot."""
-    def snapshot() -> list[Any]:
-        rows = mon.snapshot()
+    """Show each snapshot of ``stream`` as it comes; ``after_poll(rows)`` sees each one."""
+    def rows_of(snap: MonitorSnapshot) -> list[Any]:
+        rows = list(snap)
         if after_poll is not None:
             after_poll(rows)
         return rows
 
-    done = 0
     if not sys.stdout.isatty():
         # a log, not a screen: one full snapshot per poll
-        while True:
-            raise_if_signalled()  # a SIGTERM whose exception was lost (errors.py): no other ear for it
-            mon.poll()
-            _print(st, *_renderables(snapshot(), mon.cfg, ages=True))
+        for snap in stream:
+            _print(st, *_renderables(rows_of(snap), cfg, ages=True))
             st.out.line()
-            done += 1
-            if polls is not None and done >= polls:
-                return
-            sleep(interval)
+        return
     from rich.live import Live
 
-    mon.poll()
-    done = 1
-    with Live(_screen(*_renderables(snapshot(), mon.cfg, ages=True)), console=st.out.console,
+    first = next(stream, None)
+    if first is None:
+        return
+    with Live(_screen(*_renderables(rows_of(first), cfg, ages=True)), console=st.out.console,
               auto_refresh=False) as live:
-        while polls is None or done < polls:
-            sleep(interval)
-            raise_if_signalled()
-            mon.poll()
-            done += 1
-            live.update(_screen(*_renderables(snapshot(), mon.cfg, ages=True)), refresh=True)
+        for snap in stream:
+            live.update(_screen(*_renderables(rows_of(snap), cfg, ages=True)), refresh=True)
 
 
 def _render_once(st: AppState, rows: Sequence[DriveStatus], sensors: Sequence[SensorReading] = ()) -> None:

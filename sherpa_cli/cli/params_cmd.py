@@ -111,11 +111,11 @@ def diff(
         sides[pd.CONFIG], w = pd.config_side(cfg, drives)
         warnings.extend(w)
     if pd.LIVE in (a, b):
+        from sherpa_cli.api import Arm
         from sherpa_cli.ops.params_file import ParamDump
-        from sherpa_cli.ops.params_read import read_live
 
         with st.session(buses=sorted({cfg.drives[d].bus for d in drives})) as session:
-            live = read_live(session, drives)
+            live = Arm(session).dump_params(None, drives).drives  # a layer over the Python API
         sides[pd.LIVE] = pd.dump_side(pd.LIVE, ParamDump(meta={}, drives=live), kind="live")
     report = pd.diff_sides(sides[a], sides[b], drives, warnings)
     for warning in report.warnings:

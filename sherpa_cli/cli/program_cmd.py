@@ -15,8 +15,13 @@ from sherpa_cli.cli.output import fmt_value
 from sherpa_cli.words import plural
 
 if TYPE_CHECKING:
+    from sherpa_cli.api import Arm
+    from sherpa_cli.api.programming import ConfirmSave, ProgramReport
     from sherpa_cli.errors import Location
     from sherpa_cli.ops.program import ApplyResult, DriveOutcome, DrivePlan, DriveTarget, FlashProof
+
+#: a command's call of the `Arm` method it is a layer over: (arm, confirm_save, on_plan) -> report
+ArmCall = Callable[["Arm", "ConfirmSave", Callable[[Sequence["DrivePlan"]], None]], "ProgramReport"]
 
 
 def program_limits(
@@ -65,7 +70,10 @@ def program_limits(
     targets = [DriveTarget(d.drive, d.bus, d.node, d.params) for d in derived]
     run_program(st, "program-limits", targets, warnings, apply=apply, save=save, yes=yes, motor_off=motor_off,
                 need_serial=save, allow_disabled=False, title=lambda drive: drive_moves(cfg, drive),
-                verify_flash=verify_flash, note=left_as_they_are(derived))
+                verify_flash=verify_flash, note=left_as_they_are(derived),
+                via=lambda arm, confirm, on_plan: arm.program_limits(
+                    names, apply=apply, save=save, verify_flash=verify_flash, motor_off=motor_off,
+                    confirm_save=confirm, on_plan=on_plan, check=False))
 
 
 def params_restore(
@@ -104,7 +112,10 @@ def params_restore(
 
     run_program(st, "params restore", targets, warnings, apply=apply, save=save, yes=yes, motor_off=motor_off,
                 need_serial=True, allow_disabled=True, title=lambda drive: drive_moves(cfg, drive), source=file,
-                where=lambda drive: Location(str(file), None, f"drives.{drive}.params"), verify_flash=verify_flash)
+                where=lambda drive: Location(str(file), None, f"drives.{drive}.params"), verify_flash=verify_flash,
+                via=lambda arm, confirm, on_plan: arm.restore(
+                    file, apply=apply, save=save, motor_off=motor_off, other_serial=other_serial,
+                    verify_flash=verify_flash, confirm_save=confirm, on_plan=on_plan, check=False))
 
 
 def check_options(apply: bool, save: bool) -> None:
@@ -118,12 +129,14 @@ def check_options(apply: bool, save: bool) -> None:
 def run_program(st: AppState, command: str, targets: Sequence[DriveTarget], warnings: Sequence[str], *,
                 apply: bool, save: bool, yes: bool, motor_off: bool, need_serial: bool, allow_disabled: bool,
                 title: Callable[[str], str], where: Callable[[str], Location | None] | None = None,
-                source: Path | None = None, verify_flash: bool = False, note: str | None = None) -> None:
+                source: Path | None = None, verify_flash: bool = False, note: str | None = None,
+                via: ArmCall | None = None) -> None:
     """The plan/apply/save engine (api/programming.py) with the plan shown before any question and
     the outcome after; raises the error to exit with.
 
     Callers run :func:`check_options` first, before they read files or derive targets, so a
-    bad option combination is reported ahead of any other problem.
+    bad option combination is reported ahead of any other problem. ``via(arm, confirm_save,
+    on_plan)``: the `Arm` method the command is a layer over (default: the engine on ``targets``).
     """
     from sherpa_cli.api import programming
 
@@ -149,9 +162,14 @@ def run_program(st: AppState, command: str, targets: Sequence[DriveTarget], warn
         return True
 
     with st.session(buses=buses) as session:
-        report = programming.run(session, targets, apply=apply, save=save, motor_off=motor_off,
-                                 need_serial=need_serial, verify_flash=verify_flash, warnings=warnings,
-                                 confirm_save=confirm, on_plan=show_plan)
+        if via is not None:
+            from sherpa_cli.api import Arm
+
+            report = via(Arm(session), confirm, show_plan)
+        else:
+            report = programming.run(session, targets, apply=apply, save=save, motor_off=motor_off,
+                                     need_serial=need_serial, verify_flash=verify_flash, warnings=warnings,
+                                     confirm_save=confirm, on_plan=show_plan)
     _render(st, command, report.plans, report.result, apply=apply, save=save and apply, source=source,
             verify_flash=verify_flash, proofs=report.proofs, after=report.after)
     if report.result is not None:

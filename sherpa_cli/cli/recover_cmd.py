@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from typing import TYPE_CHECKING
 
 import typer
@@ -12,10 +11,8 @@ from sherpa_cli.cli.options import ApplyRecover, CheckDrives, Targets
 from sherpa_cli.errors import SafetyError
 
 if TYPE_CHECKING:
-    from sherpa_cli.bus.session import ArmSession
-    from sherpa_cli.bus.targets import DriveRef
-    from sherpa_cli.config.model import ArmConfig
     from sherpa_cli.ops.drive_rest import DriveRest
+    from sherpa_cli.ops.recover import RecoverReport
 
 
 def recover(ctx: typer.Context, targets: Targets = None, apply: ApplyRecover = False,
@@ -44,29 +41,27 @@ def recover(ctx: typer.Context, targets: Targets = None, apply: ApplyRecover = F
       sherpa recover elbow_pitch --apply
       sherpa recover --check-drives
     """
-    from sherpa_cli.bus import journal
+    from sherpa_cli.api import Arm
     from sherpa_cli.bus.targets import drive_refs
+    from sherpa_cli.ops.recover import plan_recover
 
     st = state(ctx)
     cfg = st.load_config()
     pending = _sv_pending(st, [r.name for r in drive_refs(cfg, targets)])
-    broken = {r.name: why for r in drive_refs(cfg, targets) if (why := journal.damaged(r)) is not None}
-    refs = [r for r in drive_refs(cfg, targets) if r.name in broken or journal.leftover(r)]
+    plan = plan_recover(cfg, targets)
     if check_drives:
-        _check_drives(st, cfg, targets, apply, journal_refs=refs, broken=broken)
+        with st.session(buses=plan.buses(cfg, True)) as session:
+            _show_checked(st, Arm(session).recover(targets, apply=apply, check_drives=True), apply)
         return
-    if not refs:
+    if not plan.refs:
         if st.json_mode:
             st.out.json({"drives": [], "sv_pending": pending})
         else:
             st.out.line("nothing to recover: no drive has changes left by a command that did not finish")
             _show_pending(st, pending)
         return
-    buses = sorted({r.bus for r in refs}, key=list(cfg.buses).index)
-    with st.session(buses=buses) as session:
-        results = [journal.restore_damaged(session, r, broken[r.name], apply=apply, boot_timeout=cfg.protocol.boot_timeout)
-                   if r.name in broken else
-                   journal.restore(session, r, apply=apply, clear_trip=_trip_clearer(session, cfg, r)) for r in refs]
+    with st.session(buses=plan.buses(cfg, False)) as session:
+        results = Arm(session).recover(targets, apply=apply).results  # a layer over the Python API
     if st.json_mode:
         st.out.json({"apply": apply, "drives": [{"drive": r.drive, "address": r.address, "left": r.found,
                                                  "tripped": r.tripped, "already_back": r.already_back, "put_back": r.done,
@@ -93,13 +88,6 @@ def recover(ctx: typer.Context, targets: Targets = None, apply: ApplyRecover = F
         raise SafetyError(f"not recovered: {', '.join(bad)}", hint="see the problems above")
 
 
-def _trip_clearer(session: ArmSession, cfg: ArmConfig, ref: DriveRef) -> Callable[[], None]:
-    from sherpa_cli.motion.settings import MotionSettings
-    from sherpa_cli.motion.trip_clear import clear_heartbeat_trip
-
-    return lambda: clear_heartbeat_trip(session, ref, MotionSettings.from_config(cfg, [ref.bus]))
-
-
 def _sv_pending(st: AppState, drives: list[str]) -> list[str]:
     """Drives written and not saved to flash (the save ledger): by an --apply without --save, or a
     programming run killed between its writes and its SV. Nothing to put back: their RAM holds the
@@ -120,22 +108,9 @@ def _show_pending(st: AppState, pending: list[str]) -> None:
                     "rerun the programming command with --apply --save (it saves although RAM holds the values)")
 
 
-def _check_drives(st: AppState, cfg: ArmConfig, targets: list[str] | None, apply: bool, *,
-                  journal_refs: list[DriveRef], broken: dict[str, str]) -> None:
+def _show_checked(st: AppState, report: RecoverReport, apply: bool) -> None:
     """--check-drives: the journal's drives as without it, then every other target drive read."""
-    from sherpa_cli.bus import journal
-    from sherpa_cli.bus.targets import drive_refs
-    from sherpa_cli.ops.drive_rest import check_drive
-
-    noted = {r.name for r in journal_refs}
-    others = [r for r in drive_refs(cfg, targets) if r.name not in noted]
-    buses = sorted({r.bus for r in [*journal_refs, *others]}, key=list(cfg.buses).index)
-    with st.session(buses=buses) as session:
-        results = [journal.restore_damaged(session, r, broken[r.name], apply=apply, boot_timeout=cfg.protocol.boot_timeout)
-                   if r.name in broken else
-                   journal.restore(session, r, apply=apply, clear_trip=_trip_clearer(session, cfg, r))
-                   for r in journal_refs]
-        checks = [check_drive(session, cfg, r, apply=apply, boot_timeout=cfg.protocol.boot_timeout) for r in others]
+    results, checks = report.results, report.checks
     if st.json_mode:
         st.out.json({"apply": apply,
                      "drives": [{"drive": r.drive, "address": r.address, "left": r.found, "tripped": r.tripped,
@@ -159,7 +134,7 @@ def _check_drives(st: AppState, cfg: ArmConfig, targets: list[str] | None, apply
             _show_check(st, c)
         if not apply:
             st.out.line("dry run: nothing sent but NMT start and reads; --apply resets each drive with a finding")
-    bad = [r.drive for r in results if r.problems] + [c.drive for c in checks if c.problems]
+    bad = report.not_recovered
     if bad:
         raise SafetyError(f"not recovered: {', '.join(bad)}", hint="see the problems above")
 

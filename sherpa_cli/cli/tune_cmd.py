@@ -12,7 +12,6 @@ from sherpa_cli.errors import UsageError
 
 if TYPE_CHECKING:
     from sherpa_cli.log.plot import StepRun
-    from sherpa_cli.ops.step import StepResult
     from sherpa_cli.ops.tune_step import TuneStepResult
 
 app = typer.Typer(help="Read and write the drives' speed and position loop gains (docs/tune.md).",
@@ -29,15 +28,16 @@ def show(ctx: typer.Context,
       sherpa tune show elbow_pitch
       sherpa tune show shoulder_diff
     """
+    from sherpa_cli.api import Arm
     from sherpa_cli.bus.targets import drive_refs
     from sherpa_cli.elmo.commands import format_value
-    from sherpa_cli.ops.tune import GAINS, read_gains
+    from sherpa_cli.ops.tune import GAINS
 
     st = state(ctx)
     cfg = st.load_config()
     refs = drive_refs(cfg, [target], configured_only=True)
     with st.session(buses=list(dict.fromkeys(r.bus for r in refs))) as session:
-        readings = read_gains(session, refs)
+        readings = Arm(session).tune_show(target)  # a layer over the Python API
     if st.json_mode:
         st.out.json({"drives": [{"drive": r.drive, "gains": r.values} for r in readings],
                      "unconfirmed": [k for k, (_, ok) in GAINS.items() if not ok]})
@@ -81,7 +81,10 @@ def set_gains(
     refs = drive_refs(cfg, [target], configured_only=True)
     targets = [DriveTarget(r.name, r.bus, r.node, values) for r in refs]
     run_program(st, "tune set", targets, [], apply=apply, save=save, yes=yes, motor_off=motor_off,
-                need_serial=save, allow_disabled=False, title=lambda drive: drive_moves(cfg, drive))
+                need_serial=save, allow_disabled=False, title=lambda drive: drive_moves(cfg, drive),
+                via=lambda arm, confirm, on_plan: arm.tune_set(target, values, apply=apply, save=save,
+                                                               motor_off=motor_off, confirm_save=confirm,
+                                                               on_plan=on_plan, check=False))
 
 
 @app.command("step")
@@ -112,9 +115,8 @@ def step(
 
     from sherpa_cli.cli.log_cmd import render_metrics, stepped_sim
     from sherpa_cli.motion.settings import MotionSettings
-    from sherpa_cli.ops.step import resolve_step_target, run_step, step_request
+    from sherpa_cli.ops.step import resolve_step_target, step_request
     from sherpa_cli.ops.tune import parse_assignments
-    from sherpa_cli.ops.tune_step import run_tune_step
 
     st = state(ctx)
     given = [(m, v) for m, v in (("position", position), ("velocity", velocity)) if v is not None]
@@ -144,16 +146,15 @@ def step(
                     f"then {'back ' if mode == 'position' else ''}with {text} (RAM only, put back after)")
         st.out.line("nothing sent; add --apply to move")
         return
+    from sherpa_cli.api import Arm
+
     settings = MotionSettings.from_config(cfg, [target.ref.bus])
     stepped, sim_factory = stepped_sim(st)
     with st.session(buses=[target.ref.bus], sim_factory=sim_factory) as session:
         timebase = stepped if stepped is not None and use_stepped(session, stepped, cfg) else None
-
-        def one(m: str, v: float) -> StepResult:
-            return run_step(session, target, m, v, duration=duration, rate=rate, settings=settings,
-                            uncalibrated=uncalibrated, timebase=timebase)
-
-        result = run_tune_step(session, target, mode, value, trial, one)
+        # a layer over the Python API
+        result = Arm(session).tune_step(joint, mode, value, trial, duration=duration, rate=rate,
+                                        uncalibrated=uncalibrated, settings=settings, timebase=timebase)
     held = " ".join(f"{k}={v:g}" for k, v in result.held.items())
     text = " ".join(f"{k}={v:g}" for k, v in result.trial.items())
     if plot is not None:

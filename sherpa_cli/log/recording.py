@@ -38,6 +38,14 @@ class Recording:
         columns = [self.columns[n] for n in names if n in self.columns]
         return [i for i in range(len(self.times)) if any(not math.isnan(c[i]) for c in columns)]
 
+    def joint(self, name: str) -> JointSeries:
+        """One joint's samples, typed: position (rad), velocity (rad/s), current (A)."""
+        return joint_series(self, name)
+
+    def drive(self, name: str) -> DriveSeries:
+        """One drive's motor samples, typed: position and velocity in counts, current (A)."""
+        return drive_series(self, name)
+
     def series(self, joint: str, signal: str) -> tuple[list[float], list[float]] | None:
         values = self.columns.get(f"{joint}.{SIGNALS[signal]}")
         if values is None:
@@ -121,3 +129,42 @@ def _read_csv(path: Path) -> Recording:
     if len(rec.times) < 2:
         raise UsageError(f"{path}: fewer than two samples")
     return rec
+
+
+@dataclass(frozen=True)
+class JointSeries:
+    """One joint of a recording in joint units, a value per row of ``times`` (nan: no sample)."""
+
+    name: str
+    times: list[float]  # s
+    position: list[float]  # rad
+    velocity: list[float]  # rad/s
+    current: list[float] | None  # A, when current was sampled
+
+
+@dataclass(frozen=True)
+class DriveSeries:
+    """One drive's motor in a recording, in counts, a value per row of ``times`` (nan: no sample)."""
+
+    name: str
+    times: list[float]  # s
+    position_counts: list[float]
+    velocity_counts: list[float]  # counts/s
+    current: list[float] | None  # A (IQ or 0x6078), when current was sampled
+
+
+def joint_series(rec: Recording, name: str) -> JointSeries:
+    """``name``'s columns of ``rec``; UsageError naming the recorded joints when it has none."""
+    if f"{name}.{SIGNALS['pos']}" not in rec.columns:
+        raise UsageError(f"{name}: not in the recording (it has {', '.join(rec.joints()) or 'no joints'})")
+    return JointSeries(name, rec.times, rec.columns[f"{name}.pos_rad"], rec.columns[f"{name}.vel_rad_s"],
+                       rec.columns.get(f"{name}.cur_a"))
+
+
+def drive_series(rec: Recording, name: str) -> DriveSeries:
+    """``name``'s motor columns of ``rec``; UsageError naming the recorded drives when it has none."""
+    if f"{name}.px" not in rec.columns:
+        drives = [n[:-3] for n in rec.columns if n.endswith(".px")]
+        raise UsageError(f"{name}: not in the recording (it has {', '.join(drives) or 'no drives'})")
+    return DriveSeries(name, rec.times, rec.columns[f"{name}.px"], rec.columns[f"{name}.vx"],
+                       rec.columns.get(f"{name}.iq_a"))

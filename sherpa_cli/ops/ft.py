@@ -18,6 +18,9 @@ if TYPE_CHECKING:
     from sherpa_cli.bus.session import ArmSession
 
 
+MAX_RATE_HZ = 200.0  # a sample is a request and two frames, a few ms on a busy bus
+
+
 def stream(session: ArmSession, dev: DeviceConfig, *, count: int | None, period: float,
            sleep: Callable[[float], None] = time.sleep,
            clock: Callable[[], float] = time.monotonic) -> Iterator[Wrench]:

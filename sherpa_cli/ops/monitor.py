@@ -21,7 +21,7 @@ from __future__ import annotations
 import contextlib
 import threading
 import time
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Callable, Generator, Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
@@ -31,7 +31,7 @@ from sherpa_cli.bus.targets import DriveRef
 from sherpa_cli.config.model import ArmConfig
 from sherpa_cli.elmo.faults import Emcy, Fault, decode_error_field, decode_mf, sr_problems
 from sherpa_cli.elmo.protocol import HEARTBEAT_BASE
-from sherpa_cli.errors import SdoError, SherpaError, UsageError
+from sherpa_cli.errors import SdoError, SherpaError, UsageError, raise_if_signalled
 from sherpa_cli.motion.calibration import encoder_on_drive
 from sherpa_cli.ops.identify import JointPosition, joint_positions, row_joint
 
@@ -335,3 +335,94 @@ def decoded_mf(mf: object) -> tuple[Fault, ...]:
 
 def _int(value: object) -> int | None:
     return value if isinstance(value, int) and not isinstance(value, bool) else None
+
+
+@dataclass(frozen=True)
+class MonitorSnapshot:
+    """Every watched drive at one poll (`Arm.monitor`): ``at`` is the monitor's clock, ``number`` counts
+    the polls from 1. Each :class:`DriveStatus` holds the joint's position in rad beside PX in counts,
+    the decoded SR and MF, the NMT state, the heartbeat and the last EMCY."""
+
+    at: float
+    number: int
+    drives: tuple[DriveStatus, ...]
+
+    def __getitem__(self, drive: str) -> DriveStatus:
+        for d in self.drives:
+            if d.drive == drive:
+                return d
+        raise KeyError(drive)
+
+    def __iter__(self) -> Iterator[DriveStatus]:
+        return iter(self.drives)
+
+    def __len__(self) -> int:
+        return len(self.drives)
+
+    @property
+    def ok(self) -> bool:
+        """Every drive answered and none has a motor failure latched (what `monitor --once` exits 1 on)."""
+        return all(d.answering and not d.mf for d in self.drives)
+
+
+class MonitorStream:
+    """Snapshots of a :class:`Monitor`, one per poll, ``interval`` s apart on ``sleep``: at most
+    ``count``, or until ``duration`` s have passed on ``clock`` (the first at once, none started
+    after that), else until the caller stops. An iterator and a context manager: the monitor starts
+    at the first snapshot and closes (0x1017 written back) when the stream ends, is closed, or the
+    ``with`` is left. ``first_waits_for_heartbeats``: the first snapshot waits until every drive
+    that produces a heartbeat was heard (`monitor --once`)."""
+
+    def __init__(self, session: ArmSession, refs: Iterable[DriveRef], *, interval: float = 0.5,
+                 count: int | None = None, duration: float | None = None, heartbeat_ms: int | None = None,
+                 clock: Callable[[], float] = time.monotonic, sleep: Callable[[float], None] = time.sleep,
+                 first_waits_for_heartbeats: bool = False) -> None:
+        if not (0 < interval <= MAX_INTERVAL_S):  # also refuses nan and inf (time.sleep(inf) overflows)
+            raise UsageError(f"--interval {interval}: expected a number of seconds > 0 and <= {MAX_INTERVAL_S:g}")
+        if count is not None and count < 1:
+            raise UsageError(f"count {count}: expected at least 1 snapshot")
+        if duration is not None and not 0 < duration <= MAX_DURATION_S:
+            raise UsageError(f"--for {duration}: expected seconds > 0 and <= {MAX_DURATION_S:g}")
+        self.monitor = Monitor(session, refs, heartbeat_ms=heartbeat_ms, clock=clock)
+        self.interval, self.count, self.duration = interval, count, duration
+        self.clock, self.sleep = clock, sleep
+        self.first_waits_for_heartbeats = first_waits_for_heartbeats
+        self._run = self._snapshots()
+
+    def _snapshots(self) -> Generator[MonitorSnapshot, None, None]:
+        with self.monitor as mon:
+            start = self.clock()
+            number = 0
+            while True:
+                if number:
+                    self.sleep(self.interval)
+                raise_if_signalled()  # a SIGTERM whose exception was lost (errors.py): no other ear for it
+                mon.poll()
+                if number == 0 and self.first_waits_for_heartbeats:
+                    mon.wait_for_heartbeats(sleep=self.sleep)
+                number += 1
+                yield MonitorSnapshot(self.clock(), number, tuple(mon.snapshot()))
+                if self.count is not None and number >= self.count:
+                    return
+                if self.duration is not None and self.clock() + self.interval - start > self.duration + 1e-9:
+                    return
+
+    def __iter__(self) -> MonitorStream:
+        return self
+
+    def __next__(self) -> MonitorSnapshot:
+        return next(self._run)
+
+    def close(self) -> None:
+        """Stop polling; the monitor puts 0x1017 back."""
+        self._run.close()
+
+    def __enter__(self) -> MonitorStream:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+MAX_INTERVAL_S = 3600.0  # s between polls
+MAX_DURATION_S = 86400.0

@@ -45,6 +45,24 @@ class RawResult:
                 "decoded": self.decoded}
 
 
+@dataclass
+class RawRun:
+    """One `sherpa cmd` run (`Arm.command`): what each expression did, in order, up to the error that
+    ended it (``error``; None: all of them ran); ``stopped``: how the guard stopped a motor a
+    guarded run started; ``warnings``: the save ledger's."""
+
+    drive: str
+    apply: bool
+    results: list[RawResult] = field(default_factory=list)
+    stopped: list[str] = field(default_factory=list)
+    warnings: list[str] = field(default_factory=list)
+    error: SherpaError | None = None
+
+    @property
+    def ok(self) -> bool:
+        return self.error is None
+
+
 def parse_all(exprs: Sequence[str], query_long: bool = False) -> list[tuple[codec.Request, bytes]]:
     """Parse every expression before anything is sent: one bad word means nothing goes out."""
     parsed = []
