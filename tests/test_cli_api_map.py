@@ -6,6 +6,7 @@ spied, so a command that reaches past the API (straight into ops/) fails here.""
 from __future__ import annotations
 
 import inspect
+import shutil
 from collections.abc import Callable
 from pathlib import Path
 
@@ -45,6 +46,9 @@ WIRED: dict[str, tuple[str, tuple[str, ...]]] = {
                               "--rate", "200", "-o", "{tmp}/step", "--apply")),
     "tune show": ("tune_show", ("--sim", "tune", "show", "elbow_pitch")),
     "tune set": ("tune_set", ("--sim", "tune", "set", "elbow_pitch", "KP[2]=0.6")),
+    "pose diff": ("pose_diff", ("--sim", "pose", "diff", "transport")),
+    "pose save": ("save_pose", ("--config", "{tmp}/arm.yaml", "--sim", "pose", "save", "dock", "--joints",
+                                "elbow_pitch")),
     "tune step": ("tune_step", ("--sim", "tune", "step", "elbow_pitch", "--velocity", "0.1", "KP[2]=0.6",
                                 "--for", "0.3", "--rate", "200", "--apply")),
 }
@@ -77,12 +81,13 @@ NOT_THE_ARM: dict[str, str] = {
     "recipe run": "runs other commands (each in this table) through the boundary",
     "commission": "runs the commissioning recipe's commands (each in this table)",
     "sim": "manages the simulated arm's saved state",
+    "pose list": "reads the config's poses",
+    "pose show": "reads one pose of the config",
 }
 
 # commands another change builds (the motion session and pose moves): they come with their Arm call
 PENDING: dict[str, str] = {
     "move": "being built with Arm.motion (the motion session): add it to WIRED with its Arm method",
-    "pose": "being built with Arm.move_pose: add it to WIRED with its Arm method",
 }
 
 
@@ -136,6 +141,8 @@ def test_the_command_calls_its_arm_method_on_the_simulator(cli, monkeypatch, tmp
     monkeypatch.setattr(ft_cmd, "sleep", lambda s: None)  # the stream's pacing: no wall time
     if command == "params restore":  # a dump to restore, written first
         assert cli("--sim", "dump-params", "elbow_pitch", "-o", f"{tmp_path}/dump.yaml").exit_code == 0
+    if command == "pose save":  # it writes into the config: a copy of the shipped one
+        shutil.copy(Path(__file__).resolve().parent.parent / "configs" / "sherpa-arm.yaml", tmp_path / "arm.yaml")
     calls: list[str] = []
     _spy_every_method(monkeypatch, calls)
     result = cli(*(a.replace("{tmp}", str(tmp_path)) for a in argv))

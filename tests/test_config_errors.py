@@ -68,6 +68,10 @@ pairs:
       switches:
         - {input: 3, kind: stop, side: low}
         - {input: 4, kind: stop, side: high}
+poses:
+  rest:
+    elbow: 0.1
+    pitch: 10deg
 """
 
 ROSPARAM_BASE = (ROOT / "configs/seed-d1.yaml").read_text(encoding="utf-8")
@@ -289,6 +293,20 @@ NATIVE = [
     Bad("catalog-motor-peak-below-cont", "pairs:\n", "catalog:\n  motors:\n    tq-robodrive-50x14: {current_peak: 1}\n"
         "pairs:\n", "current_peak: 1", "catalog.motors.tq-robodrive-50x14.current_peak",
         "current_peak 1.0 of motor 'tq-robodrive-50x14' is below its current_cont 3.5"),
+]
+
+NATIVE += [
+    # --- poses (docs/move.md)
+    Bad("pose-unknown-joint", "    elbow: 0.1\n", "    elbw: 0.1\n", "elbw: 0.1", "poses.rest.elbw",
+        "joint 'elbw' is not in the config; did you mean 'elbow'?"),
+    Bad("pose-outside-the-normal-range", "    elbow: 0.1\n", "    elbow: 3\n", "elbow: 3", "poses.rest.elbow",
+        "is 1719 counts, outside the joint's normal range [-970, 970]"),
+    Bad("pose-bad-unit", "pitch: 10deg", "pitch: 10furlongs", "pitch: 10furlongs", "poses.rest.pitch",
+        "unknown unit 'furlongs'"),
+    Bad("pose-a-list", "    pitch: 10deg\n", "    pitch: [1, 2]\n", "pitch: [1, 2]", "poses.rest.pitch",
+        "expected a position"),
+    Bad("pose-nan", "    elbow: 0.1\n", "    elbow: .nan\n", "elbow: .nan", "poses.rest.elbow",
+        "finite"),
 ]
 
 ROSPARAM = [

@@ -44,6 +44,7 @@ if TYPE_CHECKING:
     from sherpa_cli.ops.monitor import MonitorStream
     from sherpa_cli.ops.pair_match import MatchResult
     from sherpa_cli.ops.params_file import ParamDump
+    from sherpa_cli.ops.poses import PoseDiff, SavedPose
     from sherpa_cli.ops.program import DrivePlan, DriveTarget
     from sherpa_cli.ops.raw import RawRun
     from sherpa_cli.ops.recover import RecoverReport
@@ -150,6 +151,24 @@ class Arm:
         from sherpa_cli.api.joint import JointHandle
 
         return JointHandle(self, name)
+
+    def pose_diff(self, name: str) -> PoseDiff:
+        """How far the joints of pose ``name`` (config ``poses:``) stand from it, in rad and counts; a
+        joint that is not calibrated has no known position (``None``). Only reads."""
+        from sherpa_cli.ops.poses import diff_pose, pose_named
+
+        pose = pose_named(self.config, name)
+        return diff_pose(self.config, pose, self.state(list(pose.counts)))
+
+    def save_pose(self, name: str, joints: Sequence[str] | None = None, *, replace: bool = False) -> SavedPose:
+        """Teach pose ``name``: where ``joints`` (default: every joint) stand now, written into the
+        config file this arm was opened with (its comments and layout kept; the new text checked as
+        a config before it replaces the file). Every joint must be calibrated; an existing pose only
+        with ``replace``. Moves nothing; reads the drives only. The config in memory is not reloaded:
+        open the arm again to move to the new pose."""
+        from sherpa_cli.ops.poses import save_pose
+
+        return save_pose(self.config, name, self.state(joints), replace=replace)
 
     def identify(self, targets: Sequence[str] | None = None, *,
                  progress: Callable[[str, str], None] | None = None) -> IdentifyReport:

@@ -137,6 +137,7 @@ def _register() -> None:
         limits_cmd,
         monitor_cmd,
         params_cmd,
+        pose_cmd,
         program_cmd,
         recipe_cmd,
         recover_cmd,
@@ -165,6 +166,7 @@ def _register() -> None:
     app.add_typer(config_cmd.app, name="config")
     app.add_typer(bus_cmd.app, name="bus")
     app.add_typer(ft_cmd.app, name="ft")
+    app.add_typer(pose_cmd.app, name="pose")
 
     from sherpa_cli.cli import log_cmd, tune_cmd
 

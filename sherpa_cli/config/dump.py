@@ -92,6 +92,8 @@ def dump_native(cfg: ArmConfig) -> str:
         pairs[p.name] = entry
     if pairs:
         sections.append({"pairs": pairs})
+    if cfg.poses:  # after the joints they name
+        sections.append({"poses": {p.name: dict(p.values) for p in cfg.poses.values()}})
     catalog = _catalog_diff(cfg)
     if catalog:
         sections.append({"catalog": catalog})

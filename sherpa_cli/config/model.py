@@ -506,6 +506,22 @@ class SimExtraNode:
     heartbeat_ms: int = 0  # 0x1017 producer heartbeat at power-up
 
 
+PoseValue = float | str  # a number in the joint's unit (rad), or text with a unit as `jog --to` takes it
+
+
+@dataclass(frozen=True)
+class Pose:
+    """A named pose (`poses:`): joint name -> target. ``values`` are as written (rad, or text such as
+    "10deg", "1200counts"); ``counts`` the same in each joint's counts, filled in by validation
+    (config/validate.py), which refuses an unknown joint, a bad value and one outside the joint's
+    normal range."""
+
+    name: str
+    values: Mapping[str, PoseValue]
+    counts: Mapping[str, int] = field(default_factory=dict)
+    where: Location = field(default_factory=Location, compare=False)
+
+
 @dataclass(frozen=True)
 class ArmConfig:
     name: str
@@ -532,6 +548,7 @@ class ArmConfig:
     sim_ft: Mapping[str, SimFtConfig] = field(default_factory=dict)  # `sim: ft_sensors:` device name -> what it feels
     # `tuning:` gain key ("KP[2]") -> (low, high) that `tune set` accepts; ops/tune.py has the defaults
     tuning: Mapping[str, tuple[float, float]] = field(default_factory=dict)
+    poses: Mapping[str, Pose] = field(default_factory=dict)  # `poses:` name -> pose (docs/move.md)
     source: str | None = None  # file the config came from
     warnings: tuple[str, ...] = ()  # non-fatal findings of validation, shown by `config check`
 

@@ -33,6 +33,8 @@ from sherpa_cli.config.model import (
     MotionConfig,
     MotorModel,
     PairConfig,
+    Pose,
+    PoseValue,
     ProtocolConfig,
     SimDriveConfig,
     SimExtraNode,
@@ -52,6 +54,7 @@ from sherpa_cli.config.yamlnodes import (
     as_num,
     as_seq,
     as_str,
+    describe,
     named_items,
     plain,
     suggest,
@@ -59,7 +62,7 @@ from sherpa_cli.config.yamlnodes import (
 from sherpa_cli.errors import ConfigError
 
 TOP_KEYS = ["name", "il_codes", "protocol", "motion", "homing", "joystick", "sim", "buses", "drives", "devices", "joints",
-            "pairs", "catalog", "tuning"]
+            "pairs", "catalog", "tuning", "poses"]
 TUNING_KEYS = [f"{g}[{n}]" for g in ("KP", "KI", "FF") for n in (1, 2, 3)]  # `tuning:` (docs/tune.md)
 IL_KEYS = ["stop", "home", "unused"]
 BUS_KEYS = ["interface", "channel", "bitrate", "send_interval_us", "poll_interval_ms", "options"]
@@ -167,6 +170,30 @@ def parse_tuning(top: Section, locs: Locs) -> dict[str, tuple[float, float]]:
         if not low <= high:
             raise node.error(f"tuning.{key}: low {low:g} is above high {high:g}")
         out[key] = (float(low), float(high))
+    return out
+
+
+def parse_poses(top: Section, locs: Locs) -> dict[str, Pose]:
+    """``poses:`` name -> {joint: value}: shape and types only (validate.py checks the joints, reads
+    the values in each joint's counts and checks them against its range)."""
+    node = top.get("poses")
+    if node is None:
+        return {}
+    out: dict[str, Pose] = {}
+    for pname, pnode in named_items(node, "pose"):
+        locs.put(("pose", pname), pnode.loc)
+        values: dict[str, PoseValue] = {}
+        items = as_map(pnode, f"pose {pname}: a mapping of joint name -> position (rad, or text like 10deg)")
+        if not items:
+            raise pnode.error(f"pose {pname}: names no joint", hint="give it joint: position entries")
+        for jname, vnode in items.items():
+            locs.put(("pose", pname, jname), vnode.loc)
+            v = vnode.value
+            if vnode.kind != "scalar" or isinstance(v, bool) or not isinstance(v, int | float | str):
+                raise vnode.error(f"pose {pname}: {jname}: expected a position (a number in rad, or text like "
+                                  f"10deg or 1200counts), got {describe(vnode)}")
+            values[jname] = float(v) if isinstance(v, int | float) else v
+        out[pname] = Pose(pname, values, where=pnode.loc)
     return out
 
 
@@ -316,6 +343,7 @@ def load_native(root: YNode, filename: str) -> tuple[ArmConfig, Locs, list[str]]
     joystick = parse_joystick(top, locs)
     homing = parse_homing(top, locs)
     tuning = parse_tuning(top, locs)
+    poses = parse_poses(top, locs)
     sim, sim_extra_nodes = parse_sim(top, locs)
     sim_power_up, sim_wiring = parse_sim_homing(top)
     sim_reply_timeout = parse_sim_reply_timeout(top)
@@ -404,7 +432,7 @@ def load_native(root: YNode, filename: str) -> tuple[ArmConfig, Locs, list[str]]
                     il_codes=il, protocol=protocol, motion=motion, joystick=joystick, sim=sim,
                     sim_extra_nodes=sim_extra_nodes, sim_reply_timeout=sim_reply_timeout, homing=homing,
                     sim_power_up=sim_power_up, sim_wiring=sim_wiring, sim_buses=sim_buses, sim_ft=sim_ft, tuning=tuning,
-                    source=filename)
+                    poses=poses, source=filename)
     return cfg, locs, []
 
 

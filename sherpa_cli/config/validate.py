@@ -12,6 +12,7 @@ import math
 import re
 from dataclasses import replace
 
+from sherpa_cli import units
 from sherpa_cli.config.model import (
     ArmConfig,
     CurrentLimits,
@@ -19,10 +20,11 @@ from sherpa_cli.config.model import (
     DriveModel,
     JointConfig,
     JointRole,
+    Pose,
     SwitchKind,
 )
 from sherpa_cli.config.yamlnodes import Locs, suggest
-from sherpa_cli.errors import ConfigError, Location
+from sherpa_cli.errors import ConfigError, Location, UsageError
 from sherpa_cli.words import plural
 
 MAX_NODE_ID = 127
@@ -98,9 +100,10 @@ def validate(cfg: ArmConfig, locs: Locs, warnings: list[str] | None = None, *,
         _check_joint(cfg, joint, locs, r)
     _check_switch_inputs(cfg, locs, r)
     _check_joystick(cfg, locs, r)
+    poses = _check_poses(cfg, locs, r)
     _check_bounds(cfg, locs, r)
     r.raise_first()
-    return replace(cfg, warnings=tuple(r.warnings))
+    return replace(cfg, warnings=tuple(r.warnings), poses=poses)
 
 
 def _check_protocol(cfg: ArmConfig, locs: Locs, r: _Report) -> None:
@@ -730,6 +733,37 @@ def _check_joystick(cfg: ArmConfig, locs: Locs, r: _Report) -> None:
                 r.error(at(key), f"{key} '{code}' is already used by joystick map {used[code] + 1}")
             else:
                 used[code] = i
+
+
+def _check_poses(cfg: ArmConfig, locs: Locs, r: _Report) -> dict[str, Pose]:
+    """`poses:` (docs/move.md): every joint named exists, every value reads as a position in that
+    joint's units and lies inside its normal range (where the tool moves a joint). Returns the poses
+    with their values in counts."""
+    out: dict[str, Pose] = {}
+    for pose in cfg.poses.values():
+        counts: dict[str, int] = {}
+        for jname, value in pose.values.items():
+            at = locs.get("pose", pose.name, jname)
+            joint = cfg.joints.get(jname)
+            if joint is None:
+                r.error(at, f"joint '{jname}' is not in the config" + _did_you_mean(jname, list(cfg.joints)))
+                continue
+            try:
+                n = (units.parse_position(value, joint.cpr, what=jname) if isinstance(value, str)
+                     else units.rad_to_counts(value, joint.cpr))
+            except UsageError as exc:
+                r.error(at, exc.message)
+                continue
+            lo, hi = joint.normal_range
+            if not lo <= n <= hi:
+                r.error(at, f"{jname} {value!r} is {n} counts, outside the joint's normal range "
+                        f"[{lo}, {hi}] counts ({units.counts_to_rad(lo, joint.cpr):.4f} .. "
+                        f"{units.counts_to_rad(hi, joint.cpr):.4f} rad)",
+                        hint="a pose lies where the tool moves a joint: inside its range less the margin")
+                continue
+            counts[jname] = n
+        out[pose.name] = replace(pose, counts=counts)
+    return out
 
 
 # --- number bounds ---------------------------------------------------------------------------
