@@ -321,6 +321,12 @@ def move(
             if stop_report is not None and not st.json_mode:
                 for line in stop_report.lines(st.verbose):
                     st.out.info(f"stop: {line}")
+                from sherpa_cli.cli.jog_cmd import force_stop_line
+                from sherpa_cli.motion.axis import resolve_axis
+
+                where = force_stop_line(exc, [resolve_axis(cfg, p.sigma), resolve_axis(cfg, p.delta)])
+                if where is not None:
+                    st.out.line(where)
             raise
     st.out.progress(None)
     if plot is not None:

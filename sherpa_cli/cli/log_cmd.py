@@ -689,7 +689,7 @@ def step(
             # Ctrl-C during `log step` printed nothing)
             from sherpa_cli.cli.jog_cmd import show_stop_report
 
-            show_stop_report(st, exc)
+            show_stop_report(st, exc, [target])
             raise
         extras.read_status()
     if to_mcap:

@@ -53,7 +53,7 @@ from sherpa_cli.motion.drive_watch import DriveWatch, DriveWatchError
 from sherpa_cli.motion.force_watch import ForceWatch, SensorSilentError, tightened
 from sherpa_cli.motion.host_ids import HostIdListener, OtherConsumers
 from sherpa_cli.motion.lock import DriveLock, HostIdLock, drive_label
-from sherpa_cli.motion.report import RESET_DURING_STOP, DriveStop, GuardReport
+from sherpa_cli.motion.report import NOT_MOVED, RESET_DURING_STOP, DriveStop, GuardReport
 from sherpa_cli.motion.settings import PROFILE_KEYS, MotionSettings
 from sherpa_cli.motion.stopping import ask_patiently, fault_reason, stop_drive, why
 from sherpa_cli.motion.trip_clear import clear_heartbeat_trip
@@ -887,7 +887,7 @@ class MotionGuard:
             self._event(r.line())
             return r
         if not stop:
-            r.stopped_by = "not moved by this guard"
+            r.stopped_by = NOT_MOVED
             self._restore_dead_man(d, r, stop_failed=False)
             journal.forget(d.ref, JOURNAL_OWNER, d.put_back | set(PROFILE_KEYS))  # the profile was never changed
             self._event(r.line())
