@@ -175,6 +175,9 @@ def test_a_force_limit_stop_says_where_the_joint_stopped(cli):
     refused = cli("--config", config, "--sim", "jog", "wrist", "--to", "0counts", "--uncalibrated", "--apply")
     assert refused.exit_code == 1 and "force limit" in refused.stderr, refused.transcript()
     assert "stopped at" not in refused.stdout, refused.transcript()
+    # said as a refusal before anything moved, with what can back the arm out (--force-limit cannot)
+    assert "no motion starts past the limit; nothing moved" in refused.stderr, refused.transcript()
+    assert "back it out with the motor off" in refused.stderr and "move it back before" not in refused.stderr
 
 
 def test_a_force_limit_stop_of_a_pair_says_where_both_joints_stopped():

@@ -37,9 +37,21 @@ class WrenchSource(Protocol):
 class ForceLimitError(SafetyError):
     """|F| or |T| crossed its limit."""
 
-    def __init__(self, message: str, *, axis: str, value: float, limit: float, wrench: Wrench) -> None:
-        super().__init__(message, hint="the arm pressed on something: move it back before the next try")
+    def __init__(self, message: str, *, axis: str, value: float, limit: float, wrench: Wrench,
+                 hint: str = "the arm pressed on something: move it back before the next try") -> None:
+        super().__init__(message, hint=hint)
         self.axis, self.value, self.limit, self.wrench = axis, value, limit, wrench
+
+    def before_motion(self) -> ForceLimitError:
+        """The same reading found by the guard's first sample, before anything moved: the arm already
+        presses on something (after a force-limit stop, typically), and no guarded move can start, not
+        even one that would back it out -- so the hint says what can."""
+        return ForceLimitError(
+            f"{self.message}: no motion starts past the limit; nothing moved", axis=self.axis, value=self.value,
+            limit=self.limit, wrench=self.wrench,
+            hint="the arm already presses on something (or the sensor's zero is off: `sherpa ft show`); back it "
+                 "out with the motor off, by hand, or with the sensor's force_limit raised in the config for that "
+                 "one move (--force-limit only tightens it) (docs/motion.md, \"The force limit\")")
 
 
 class SensorStatusError(SafetyError):

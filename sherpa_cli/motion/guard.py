@@ -50,7 +50,7 @@ from sherpa_cli.errors import (
 from sherpa_cli.motion.bus_watch import GuardBusWatch
 from sherpa_cli.motion.deadman import COMM_ERROR, CONSUMER, LOSS_ACTION, OBJECT_NAMES, SIZES, HostHeartbeat
 from sherpa_cli.motion.drive_watch import DriveWatch, DriveWatchError
-from sherpa_cli.motion.force_watch import ForceWatch, SensorSilentError, tightened
+from sherpa_cli.motion.force_watch import ForceLimitError, ForceWatch, SensorSilentError, tightened
 from sherpa_cli.motion.host_ids import HostIdListener, OtherConsumers
 from sherpa_cli.motion.lock import DriveLock, HostIdLock, drive_label
 from sherpa_cli.motion.report import NOT_MOVED, RESET_DURING_STOP, DriveStop, GuardReport
@@ -353,6 +353,8 @@ class MotionGuard:
                                           clock=self._clock, max_misses=FORCE_SILENT_CHECKS)
             self._pulse(extra=reader.wait_s)
             error = watch.check()
+            if isinstance(error, ForceLimitError):
+                error = error.before_motion()
             if error is None and watch.last is None:
                 error = SensorSilentError(f"{watch.name} does not answer: no motion without its force watch",
                                           hint="check the sensor's power and its CAN base address (sherpa ft show)")
