@@ -63,16 +63,19 @@ def file_lock(path: Path, timeout: float = LOCK_TIMEOUT) -> filelock.BaseFileLoc
     return filelock.FileLock(str(path) + ".lock", timeout=timeout)
 
 
-def write_atomic(path: Path, text: str, mode: int | None = None) -> None:
+def write_atomic(path: Path, text: str, mode: int | None = None, durable: bool = True) -> None:
     """Write via a temporary file and rename, so a crash never leaves half a file. ``mode``: the
-    permission bits to give it (an output file keeps its old ones); None leaves mkstemp's 0600."""
+    permission bits to give it (an output file keeps its old ones); None leaves mkstemp's 0600.
+    ``durable`` False skips the fsync: the file still survives the writer's death (the kernel has it),
+    not a power cut; for a file rewritten many times a second."""
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
     try:
         with os.fdopen(fd, "w", encoding="utf-8") as handle:
             handle.write(text)
             handle.flush()
-            os.fsync(handle.fileno())
+            if durable:
+                os.fsync(handle.fileno())
         if mode is not None:
             os.chmod(tmp, mode)
         os.replace(tmp, path)

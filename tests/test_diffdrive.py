@@ -91,6 +91,22 @@ def test_coupling_of_a_sigma_move_measures_the_held_delta():
     assert c.as_dict()["held_excursion"]["rad"] == pytest.approx(6 * 2 * 3.141592653589793 / 6000, rel=1e-4)
 
 
+def test_a_planned_parity_give_way_of_the_held_joint_is_not_coupling():
+    """Σ 0 -> 101 with Δ held: whole motor positions need Σ and Δ of equal parity, so the plan moves Δ
+    to -1. That count is planned: it used to be reported as the held joint's measured coupling."""
+    samples = [(0.0, 0, 0), (0.1, 25, 25), (0.2, 50, 51), (0.3, 50, 51)]  # (Σ, Δ) (0,0) (50,0) (101,-1)
+    c = diffdrive.measure_coupling(samples, (0, 0), (101, -1), sigma_name="s", delta_name="d",
+                                   sigma_cpr=6000, delta_cpr=6000, held="d")
+    assert c.held == "d" and c.held_planned == -1 and c.held_peak == 0
+    assert c.as_dict()["held_planned_counts"] == -1 and c.as_dict()["held_excursion"]["counts"] == 0
+    beyond = diffdrive.measure_coupling([*samples, (0.4, 52, 51)], (0, 0), (101, -1), sigma_name="s",
+                                        delta_name="d", sigma_cpr=6000, delta_cpr=6000, held="d")
+    assert beyond.held_peak == 1  # Δ 0 -> -1 planned; +1 is one count beyond it, the other way
+    overshoot = diffdrive.measure_coupling([*samples, (0.4, 49, 52)], (0, 0), (101, -1), sigma_name="s",
+                                           delta_name="d", sigma_cpr=6000, delta_cpr=6000, held="d")
+    assert overshoot.held_peak == 2  # Δ -3: two counts past the planned -1
+
+
 def test_feedback_slows_the_motor_ahead_within_its_bound(cfg):
     p = diffdrive.plan_move(cfg, cfg.pairs["diff"], PairTarget(sigma="400counts"), {"left": 0, "right": 0})
     planned = p.profiles

@@ -14,6 +14,7 @@ import pytest
 MIS = ["--config", "tests/data/diffdrive-arm.yaml", "--sim"]
 FAST = ["--config", "tests/data/jog-fast-arm.yaml", "--sim"]
 CASES = [
+    # Σ 1 rad is an odd count: the held Δ gives way one count, said as planned (not as coupling)
     ("diffdrive-move-sigma", [*MIS, "diffdrive", "move", "diff", "--sigma", "1", "--apply"], 0),
     ("diffdrive-move-delta-relative", [*MIS, "diffdrive", "move", "roll", "--delta", "-200counts", "--relative",
                                        "--naive", "--apply"], 0),

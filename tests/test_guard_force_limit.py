@@ -7,16 +7,21 @@ a command's own --force-limit only tightens; without a sensor nothing changes.""
 from __future__ import annotations
 
 import dataclasses
+import json
 import math
+import re
 from pathlib import Path
 
 import pytest
 from motion_helpers import stepped_session
 
 from sherpa_cli.api import Arm
+from sherpa_cli.cli.jog_cmd import force_stop_line
 from sherpa_cli.config import load_config
+from sherpa_cli.devices.ft_sensor import Wrench
 from sherpa_cli.motion.axis import resolve_axis
 from sherpa_cli.motion.force_watch import ForceLimitError, SensorSilentError
+from sherpa_cli.motion.report import DriveStop, GuardReport
 from sherpa_cli.motion.request import parse_request
 from sherpa_cli.motion.settings import MotionSettings
 
@@ -175,3 +180,43 @@ def test_after_a_force_stop_the_arm_can_be_moved_away_and_pressing_harder_stops_
         move_to(0)  # away from the wall: allowed
         with session.sim.lock:
             assert abs(session.sim.drives["wrist_drive"].motor.counts) <= 2
+
+
+def test_a_force_limit_stop_says_where_the_joint_stopped(cli, caplog):
+    """The jog into the wall ends with the force-limit error; it used to print only the guard's stop
+    line and the error, never where the joint stood. It says it as a normal stop does, from the PX the
+    guard read at standstill (the next command reads the same); a jog refused before anything moved
+    (the wrist still presses) says no position."""
+    config = str(ARM)
+    result = cli("--config", config, "--sim", "jog", "wrist", "--to", "800counts", "--uncalibrated", "--apply")
+    assert result.exit_code == 1 and "error: force limit: F/T sensor wrist_ft" in result.stderr, result.transcript()
+    found = re.search(r"^wrist \(wrist_drive, can0:11\): stopped at ([+-]\d\.\d{4}) rad \((\d+) counts\), "
+                      r"force limit$", result.stdout, re.M)
+    assert found, result.transcript()
+    counts = int(found[2])
+    assert WALL < counts < 800 and found[1] == f"{counts * 2 * math.pi / CPR:+.4f}"
+    px = cli("--config", config, "--sim", "--json", "cmd", "wrist_drive", "PX")
+    assert json.loads(px.stdout)["results"][0]["value"] == counts
+    back = cli("--config", config, "--sim", "jog", "wrist", "--to", "0counts", "--uncalibrated", "--apply")
+    assert back.exit_code == 0, back.transcript()  # away from the contact: allowed, and said
+    # a warning on stderr (here: pytest's log capture)
+    assert "F/T sensor wrist_ft: begins past its force limit" in caplog.text, back.transcript()
+    assert "target reached" in back.stdout and "force limit:" not in back.stderr, back.transcript()
+
+
+def test_a_force_limit_stop_of_a_pair_says_where_both_joints_stopped():
+    """A Σ jog or `diffdrive move` names the joint asked for first, then the other of the pair."""
+    cfg = load_config(Path(__file__).resolve().parent.parent / "configs" / "sherpa-arm.yaml")
+    sigma, delta = resolve_axis(cfg, "shoulder_pitch"), resolve_axis(cfg, "shoulder_roll")
+    error = ForceLimitError("force limit: |F| 25 N > 20 N", axis="Fz", value=25.0, limit=20.0,
+                            wrench=Wrench(0, 0, 25, 0, 0, 0))
+    error.motion_report = GuardReport([DriveStop("shoulder_2a", "can0:20", "ST", True, True, position=150),
+                                       DriveStop("shoulder_2b", "can0:21", "ST", True, True, position=50)])
+    line = force_stop_line(error, [sigma, delta])
+    assert line == (f"shoulder_pitch: at {200 * 2 * math.pi / sigma.cpr:+.4f} rad (200 counts), stopped by the "
+                    f"force limit; shoulder_roll at {100 * 2 * math.pi / delta.cpr:+.4f} rad (100 counts)")
+    error.motion_report = GuardReport([DriveStop("shoulder_2a", "can0:20", "ST", True, True, position=None),
+                                       DriveStop("shoulder_2b", "can0:21", "ST", True, True, position=50)])
+    assert force_stop_line(error, [sigma]) == "shoulder_pitch: at an unknown position (PX unreadable), stopped by " \
+                                              "the force limit"
+    assert force_stop_line(SensorSilentError("silent"), [sigma]) is None

@@ -160,3 +160,17 @@ def test_mf4_without_asammdf_is_one_clear_message_for_capture_and_decode(tmp_pat
     (tmp_path / "old.mf4").write_bytes(b"MDF     4.10    ")
     with pytest.raises(UsageError, match=r"old\.mf4: \.mf4 needs the asammdf package"):
         list(read_frames(tmp_path / "old.mf4"))
+
+
+def test_a_sim_capture_is_refused_saying_why_and_the_way_that_works(cli, tmp_path):
+    """`--sim log capture` cannot hear another command's in-process arm: refused before any arm is
+    powered or file written, saying why (not the old "no traffic of its own") and how to capture a
+    simulated bus (a served simulator and its --bus-map)."""
+    out = tmp_path / "bus.log"
+    result = cli("--sim", "log", "capture", "-o", str(out), "--for", "1")
+    assert result.exit_code == 2, result.transcript()
+    assert result.stderr.startswith("error: log capture --sim: the in-process simulated arm talks only with the "
+                                    "command that opens it"), result.transcript()
+    assert "nothing captured" in result.stderr and "`sherpa sim --serve 127.0.0.1:54701`" in result.stderr
+    assert "--bus-map" in result.stderr and "Traceback" not in result.stderr
+    assert not out.exists() and not (tmp_path / "state" / "sherpa-cli" / "sim").exists()

@@ -4,6 +4,7 @@ and PDO settings restored (RAM only, never saved)."""
 
 from __future__ import annotations
 
+import threading
 import time
 import uuid
 from pathlib import Path
@@ -159,3 +160,48 @@ def test_cli_record_bad_input(cli, tmp_path):
     assert "only .csv" in cli("--sim", "log", "record", "--for", "1", "-o", str(tmp_path / "r.parquet")).stderr
     assert cli("--sim", "log", "record", "--for", "0", "-o", str(tmp_path / "r.csv")).exit_code == 2
     assert "nose" in cli("--sim", "log", "record", "nose", "--for", "1", "-o", str(tmp_path / "r.csv")).stderr
+
+
+def test_an_answer_to_the_first_sync_heard_before_its_source_is_noted_is_kept():
+    """A SYNC source sends its first SYNC as it starts (the kernel's send_periodic, ThreadSync's
+    thread), before the recorder has noted its log; on a loaded machine the receive thread heard the
+    drives' answers in that gap and dropped them as frames from before the recording: "1 sample missing
+    at time_s 0.000" on whole buses of `--sim log record`. Here the source waits, before it returns,
+    until the recorder's receive callback has been handed the answer to SYNC 0."""
+    cfg = load_config(ROOT / "configs/sherpa-arm.yaml")
+    clock = ManualClock()
+    heard: list[int] = []
+    answered = threading.Event()
+
+    def ours(can_id, data, timestamp):  # subscribed after the recorder's: called after it
+        heard.append(can_id)
+        answered.set()
+
+    class EagerSource:
+        def __init__(self, network, bus, cob, period):
+            self.bus, self.period = bus, period
+            network.subscribe(cob, ours)
+            bus.send(can.Message(arbitration_id=0x080, data=b"", is_extended_id=False))  # SYNC 0, at once
+            assert answered.wait(10), "no answer to SYNC 0"  # a hang guard
+
+        def stop(self) -> None:
+            pass
+
+    with ArmSession.open(cfg, sim=_arm(cfg, clock), buses=["can1"]) as session:
+        (ref,) = drive_refs(cfg, ["elbow_1a"])
+        network = session.links["can1"].network
+
+        def factory(name, bus, period):
+            return EagerSource(network, bus, 0x180 + ref.node, period)
+
+        with Recorder(session, [ref], 100, clock=clock.now, sync_factory=factory) as rec:
+            source_bus = session.links["can1"].bus
+            for k in range(1, 5):
+                clock.advance(0.01)
+                answered.clear()
+                source_bus.send(can.Message(arbitration_id=0x080, data=b"", is_extended_id=False))
+                assert answered.wait(10), f"no answer to SYNC {k}"
+        network.unsubscribe(0x180 + ref.node, ours)
+    assert len(heard) == 5
+    assert rec.counts() == {"elbow_1a": 5} and rec.expected() == 5
+    assert all(v == v for v in rec.recording().columns["elbow_1a.px"])  # SYNC 0's sample is there

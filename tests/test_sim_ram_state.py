@@ -9,6 +9,7 @@ import json
 import os
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import pytest
@@ -138,3 +139,46 @@ def test_a_damaged_ram_file_is_one_located_message(cli, content):
     result = cli("--sim", "cmd", "shoulder_1a", "PX")
     assert result.exit_code == 2 and "Traceback" not in result.stderr
     assert "RAM state is damaged" in result.stderr and "--power-cycle" in result.stderr
+
+
+def test_a_sim_jog_killed_with_sigkill_leaves_what_recover_finds_on_a_served_arm(tmp_path):
+    """`sherpa --sim jog ... --apply` SIGKILLed mid-motion: no exit path ran, so nothing saved the RAM
+    at stop. It used to leave the RAM file as before the jog, and `recover` said the drive "already
+    holds every value (reset or power-cycled since?)". The file follows the running arm now: the next
+    command's power-on finds the motor on with its consumer watching, the consumer acts (MF 0x800), and
+    `recover` says the dead-man tripped and puts it back, as on `sim --serve`."""
+    env = dict(os.environ, XDG_STATE_HOME=str(tmp_path / "state"), NO_COLOR="1", COLUMNS="100")
+    env.pop("SHERPA_CONFIG", None)
+    argv = [sys.executable, "-m", "sherpa_cli", "--sim"]
+
+    def sherpa(*args: str) -> subprocess.CompletedProcess[str]:
+        return subprocess.run([*argv, *args], cwd=ROOT, env=env, capture_output=True, text=True, timeout=120)
+
+    ram = tmp_path / "state" / "sherpa-cli" / "sim" / sim_state.ram_path(load_config(ARM)).name
+    jog = subprocess.Popen([*argv, "jog", "elbow_pitch", "--velocity", "0.05", "--for", "60", "--apply"], cwd=ROOT,
+                           env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        deadline = time.monotonic() + 120  # a hang guard: the file says when the motor runs under its dead-man
+        while True:
+            assert jog.poll() is None, f"the jog ended before the kill: {jog.communicate()}"
+            assert time.monotonic() < deadline, "the running jog's RAM file never showed its motor on"
+            try:
+                drive = json.loads(ram.read_text(encoding="utf-8"))["drives"]["elbow_1a"]
+            except (OSError, ValueError, KeyError):
+                drive = {}
+            if drive.get("motor_on") and drive.get("consumer_watching"):
+                break
+            time.sleep(0.05)
+    finally:
+        jog.kill()  # SIGKILL
+        jog.communicate(timeout=120)
+    refused = sherpa("jog", "elbow_pitch", "--velocity", "0.1", "--for", "0.3", "--apply")
+    assert refused.returncode == 1 and "did not finish (killed?) left temporary changes" in refused.stderr, \
+        refused.stderr
+    dry = sherpa("recover", "elbow_pitch")
+    assert dry.returncode == 0 and "its dead-man tripped" in dry.stdout and "MF 0x800 latched" in dry.stdout, \
+        dry.stdout + dry.stderr
+    applied = sherpa("recover", "elbow_pitch", "--apply")
+    assert applied.returncode == 0 and "MF 0x800 cleared" in applied.stdout, applied.stdout + applied.stderr
+    after = sherpa("jog", "elbow_pitch", "--velocity", "0.1", "--for", "0.3", "--apply")
+    assert after.returncode == 0, after.stdout + after.stderr

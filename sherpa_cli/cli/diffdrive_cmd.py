@@ -329,6 +329,12 @@ def move(
             if stop_report is not None and not st.json_mode:
                 for line in stop_report.lines(st.verbose):
                     st.out.info(f"stop: {line}")
+                from sherpa_cli.cli.jog_cmd import force_stop_line
+                from sherpa_cli.motion.axis import resolve_axis
+
+                where = force_stop_line(exc, [resolve_axis(cfg, p.sigma), resolve_axis(cfg, p.delta)])
+                if where is not None:
+                    st.out.line(where)
             raise
     st.out.progress(None)
     if plot is not None:
@@ -389,7 +395,13 @@ def _render_move(st: AppState, r: MoveResult, plot: str | None) -> None:
     if c is not None:
         if c.held is not None:
             cpr = c.held_cpr
-            st.out.line(f"coupling: {c.held} (held) moved up to {c.held_peak:.0f} counts "
+            beyond = ""
+            if c.held_planned:
+                st.out.line(f"planned: {c.held} (held) gives way {c.held_planned:+d} "
+                            f"count{'' if abs(c.held_planned) == 1 else 's'} "
+                            f"(Σ and Δ of whole motor positions have equal parity)")
+                beyond = " beyond that"
+            st.out.line(f"coupling: {c.held} (held) moved up to {c.held_peak:.0f} counts{beyond} "
                         f"({counts_to_rad(c.held_peak, cpr):.4f} rad, {c.fraction(c.held_peak):.1%} of the move)")
         st.out.line(f"off the straight Σ/Δ path: Σ up to {c.peak_sigma:.0f} counts "
                     f"({counts_to_rad(c.peak_sigma, c.sigma_cpr):.4f} rad), Δ up to {c.peak_delta:.0f} counts "

@@ -160,7 +160,7 @@ def jog(
             result = Arm(session).move(target, req, settings=settings, on_progress=progress)
         except BaseException as exc:
             st.out.progress(None)
-            show_stop_report(st, exc)
+            show_stop_report(st, exc, [target])
             raise
     st.out.progress(None)
     _render(st, name, result)
@@ -308,7 +308,7 @@ def _jog_pair(st: AppState, cfg: ArmConfig, axis: Axis, req: MoveRequest, positi
             result = Arm(session).move(axis, req, on_progress=progress)  # a layer over the Python API
         except BaseException as exc:
             st.out.progress(None)
-            show_stop_report(st, exc)
+            show_stop_report(st, exc, [axis, *(w for w in axis.watched if w.name != axis.name)])
             raise
     st.out.progress(None)
     _render(st, axis.name, result)
@@ -368,9 +368,10 @@ def hold_line(held_at: Mapping[str, int], ended_by: str) -> str:
     return f"hold: {at}; {ended_by or 'ended by the limit watch'}"
 
 
-def show_stop_report(st: AppState, exc: BaseException) -> None:
+def show_stop_report(st: AppState, exc: BaseException, axes: Sequence[Axis] = ()) -> None:
     """How the guard stopped the motor, on an error path too: text lines, or with --json an error
-    object on stdout (``error``, ``stop``); the error message itself still goes to stderr."""
+    object on stdout (``error``, ``stop``); the error message itself still goes to stderr. ``axes``:
+    what the command moved (the first is the one asked for), for where a force-limit stop left it."""
     from sherpa_cli.motion.report import report_of
 
     report = report_of(exc)
@@ -383,3 +384,38 @@ def show_stop_report(st: AppState, exc: BaseException) -> None:
         return
     for line in report.lines(st.verbose):
         st.out.info(f"stop: {line}")
+    where = force_stop_line(exc, axes)
+    if where is not None:
+        st.out.line(where)
+
+
+def force_stop_line(exc: BaseException, axes: Sequence[Axis]) -> str | None:
+    """Where a force-limit stop left the joints, said as a normal stop says it: the arm pressed on
+    something and the user moves it back from there. From the motors' PX the guard read once they
+    stood (its report); None for any other error."""
+    from sherpa_cli.motion.force_watch import ForceLimitError
+    from sherpa_cli.motion.report import NOT_MOVED, report_of
+
+    report = report_of(exc)
+    if not isinstance(exc, ForceLimitError) or report is None or not axes:
+        return None
+    if all(d.stopped_by == NOT_MOVED for d in report.drives):
+        return None  # refused before anything moved: the joint is where it was
+    motors = {d.drive: d.position for d in report.drives}
+
+    def where(axis: Axis) -> str:
+        known = {d: p for d in axis.drives if (p := motors.get(d)) is not None}
+        if len(known) != len(axis.drives):
+            return "an unknown position (PX unreadable)"
+        counts = axis.position(known)
+        return _pos(counts, axis.cpr) if axis.cpr is not None else f"{counts} counts"
+
+    first, *others = axes
+    if first.drive_b is None and not others:
+        ref = first.ref
+        name = first.joint.name if first.joint is not None else ref.name
+        return f"{name} ({ref.name}, {ref.address}): stopped at {where(first)}, force limit"
+    text = f"{first.name}: at {where(first)}, stopped by the force limit"
+    if others:
+        text += "; " + ", ".join(f"{a.name} at {where(a)}" for a in others)
+    return text

@@ -131,8 +131,15 @@ def capture(
 
     st = state(ctx)
     if st.sim:
-        raise UsageError("log capture listens to real buses; --sim has no traffic of its own to capture",
-                         hint="run `sherpa sim --serve` and capture with --bus-map")
+        # an in-process arm answers only the command that opened it, and sends nothing unasked (no
+        # heartbeat: 0x1017 = 0): a capture there would write an empty file, and while it ran it would
+        # hold the arm, so every other `--sim` command would wait for it
+        raise UsageError("log capture --sim: the in-process simulated arm talks only with the command that opens "
+                         "it, so a capture here would hear nothing of your other commands (and hold the arm: they "
+                         "would wait for it); nothing captured",
+                         hint="capture a simulated bus through a served simulator: `sherpa sim --serve "
+                              "127.0.0.1:54701` in one terminal, then `sherpa --bus-map ... log capture -o bus.log` "
+                              "and the commands to capture with the same --bus-map it prints (docs/simulator.md)")
     if duration is not None and not 0 < duration <= 86400:
         raise UsageError(f"--for {duration}: expected seconds > 0 and <= 86400")
     check_output(output)
@@ -634,7 +641,7 @@ def step(
             # Ctrl-C during `log step` printed nothing)
             from sherpa_cli.cli.jog_cmd import show_stop_report
 
-            show_stop_report(st, exc)
+            show_stop_report(st, exc, [target])
             raise
         extras.read_status()
     if to_mcap:

@@ -465,6 +465,12 @@ class Recorder:
         self._write_lock = threading.Lock()  # keeps batches in order when two receive threads flush
         self.rows_written = 0  # rows handed to the sink (SYNCs with at least one drive's sample)
         self.failure: SherpaError | None = None  # set by the receive thread: a second SYNC producer
+        # while the SYNC sources start: a source sends its first SYNC before its constructor returns, and
+        # an answer the receive thread hears before the source's log is noted here would be taken for
+        # a frame from before the recording; such frames wait (in order) for the log
+        self._starting = False
+        self._early: list[Callable[[], None]] = []
+        self._start_lock = threading.Lock()
 
     # -- lifetime -------------------------------------------------------------------------------
     def __enter__(self) -> Recorder:
@@ -517,6 +523,40 @@ class Recorder:
         self._ft_ports.close()
 
     def _start_syncs(self, buses: list[str]) -> None:
+        """Start a SYNC source per bus and note its log; the answers heard meanwhile are handled
+        once every log is noted, in the order they came, before any later frame (:meth:`_defer`)."""
+        with self._start_lock:
+            self._starting = True
+        try:
+            self._start_sources(buses)
+        finally:
+            while True:
+                with self._start_lock:
+                    early, self._early = self._early, []
+                    if not early:
+                        self._starting = False
+                        break
+                for handle in early:
+                    handle()
+
+    def _defer(self, handle: Callable[[], None]) -> bool:
+        """True: a frame heard while the SYNC sources start is kept (``handle`` runs it later)."""
+        if not self._starting:
+            return False
+        with self._start_lock:
+            if not self._starting:
+                return False
+            self._early.append(handle)
+            return True
+
+    def _deferring(self, handle: Callable[[int, bytes, float], None]) -> Callable[[int, bytes, float], None]:
+        """A receive callback that runs ``handle`` now, or once the SYNC sources' logs are noted."""
+        def on_frame(can_id: int, data: bytes, timestamp: float) -> None:
+            if not self._defer(functools.partial(handle, can_id, data, timestamp)):
+                handle(can_id, data, timestamp)
+        return on_frame
+
+    def _start_sources(self, buses: list[str]) -> None:
         links = self.session.links
         if self.sync_factory is None:
             threaded = [b for b in buses if not _has_bcm(links[b].bus)]
@@ -712,7 +752,7 @@ class Recorder:
         return int(log.sent_by(timestamp if plausible else None))
 
     def _encoder_callback(self, track: encoder.EncoderTrack) -> Callable[[int, bytes, float], None]:
-        def on_frame(can_id: int, data: bytes, timestamp: float) -> None:
+        def handle(can_id: int, data: bytes, timestamp: float) -> None:
             sent = self._answered_by(track.dev.bus, timestamp)
             if sent == 0 or len(data) < 4:
                 return
@@ -720,13 +760,13 @@ class Recorder:
                 k = answer_slot(track.samples, track.last, sent - 1, self._flushed)
                 if k is not None:  # else: its row is written already, or it answers no SYNC of ours
                     track.add(k, data)
-        return on_frame
+        return self._deferring(handle)
 
     def _callback(self, d: _Drive, n: int) -> Callable[[int, bytes, float], None]:
         unpack_pos, unpack_cur = struct.Struct("<ii").unpack_from, struct.Struct("<h").unpack_from
         divider = CURRENT_DIVIDER if n == TPDO_CUR else 1
 
-        def on_frame(can_id: int, data: bytes, timestamp: float) -> None:
+        def handle(can_id: int, data: bytes, timestamp: float) -> None:
             sent = self._answered_by(d.ref.bus, timestamp)
             if sent == 0:
                 return  # before this tool's first SYNC: no answer to it
@@ -757,7 +797,7 @@ class Recorder:
                 due = self.sink is not None and self._newest - self._flushed >= 2 * self.window
             if due:
                 self._flush()
-        return on_frame
+        return self._deferring(handle)
 
     @staticmethod
     def _current_rows(cur: Mapping[int, float], rows: Iterable[int]) -> dict[int, float]:

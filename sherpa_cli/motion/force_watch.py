@@ -38,9 +38,20 @@ class WrenchSource(Protocol):
 class ForceLimitError(SafetyError):
     """|F| or |T| crossed its limit."""
 
-    def __init__(self, message: str, *, axis: str, value: float, limit: float, wrench: Wrench) -> None:
-        super().__init__(message, hint="the arm pressed on something: move it back before the next try")
+    def __init__(self, message: str, *, axis: str, value: float, limit: float, wrench: Wrench,
+                 hint: str = "the arm pressed on something: move it back before the next try") -> None:
+        super().__init__(message, hint=hint)
         self.axis, self.value, self.limit, self.wrench = axis, value, limit, wrench
+
+    def before_motion(self) -> ForceLimitError:
+        """The same reading found by the guard's first sample, before anything moved. A reading past
+        the limit does not refuse (ENTRY_MARGIN): only one that cannot be known does (an axis at the
+        end of its range), so the hint says what can back the arm out."""
+        return ForceLimitError(
+            f"{self.message}: no motion starts while the force cannot be known; nothing moved", axis=self.axis,
+            value=self.value, limit=self.limit, wrench=self.wrench,
+            hint="the arm presses hard on something, or the sensor is overloaded or its zero is off (`sherpa ft "
+                 "show`); back it out with the motor off, by hand (docs/motion.md, \"The force limit\")")
 
 
 class SensorStatusError(SafetyError):

@@ -50,10 +50,10 @@ from sherpa_cli.errors import (
 from sherpa_cli.motion.bus_watch import GuardBusWatch
 from sherpa_cli.motion.deadman import COMM_ERROR, CONSUMER, LOSS_ACTION, OBJECT_NAMES, SIZES, HostHeartbeat
 from sherpa_cli.motion.drive_watch import DriveWatch, DriveWatchError
-from sherpa_cli.motion.force_watch import ForceWatch, SensorSilentError, tightened
+from sherpa_cli.motion.force_watch import ForceLimitError, ForceWatch, SensorSilentError, tightened
 from sherpa_cli.motion.host_ids import HostIdListener, OtherConsumers
 from sherpa_cli.motion.lock import DriveLock, HostIdLock, drive_label
-from sherpa_cli.motion.report import RESET_DURING_STOP, DriveStop, GuardReport
+from sherpa_cli.motion.report import NOT_MOVED, RESET_DURING_STOP, DriveStop, GuardReport
 from sherpa_cli.motion.settings import PROFILE_KEYS, MotionSettings
 from sherpa_cli.motion.stopping import ask_patiently, fault_reason, stop_drive, why
 from sherpa_cli.motion.trip_clear import clear_heartbeat_trip
@@ -354,6 +354,8 @@ class MotionGuard:
                                           clock=self._clock, max_misses=FORCE_SILENT_CHECKS)
             self._pulse(extra=reader.wait_s)
             error = watch.check()
+            if isinstance(error, ForceLimitError):
+                error = error.before_motion()
             if error is None and watch.last is None:
                 error = SensorSilentError(f"{watch.name} does not answer: no motion without its force watch",
                                           hint="check the sensor's power and its CAN base address (sherpa ft show)")
@@ -367,10 +369,12 @@ class MotionGuard:
                 limit = watch.force_limit if label == "force" else watch.torque_limit
                 unit = "N" if label == "force" else "N·m"
                 assert limit is not None
-                self._event(f"{watch.name}: begins past its {label} limit ({low:.2f} {unit} > {limit:g} {unit}; "
-                            f"still in contact?): held to its lowest reading + {watch.entry_margin:.0%} of the "
-                            f"limit until it reads below {limit:g} {unit}: moving away is allowed, pressing harder "
-                            "stops")
+                line = (f"{watch.name}: begins past its {label} limit ({low:.2f} {unit} > {limit:g} {unit}; "
+                        f"still in contact?): held to its lowest reading + {watch.entry_margin:.0%} of the "
+                        f"limit until it reads below {limit:g} {unit}: moving away is allowed, pressing harder "
+                        "stops")
+                self._event(line)
+                log.warning("%s", line)  # the technician must know the usual limit does not hold yet
         if (s.force_limit is not None or s.torque_limit is not None) and not self._forces:
             raise UsageError("--force-limit: this arm has no F/T sensor to watch (no device of type ft_sensor)",
                              hint="docs/devices.md says how to configure one")
@@ -903,7 +907,7 @@ class MotionGuard:
             self._event(r.line())
             return r
         if not stop:
-            r.stopped_by = "not moved by this guard"
+            r.stopped_by = NOT_MOVED
             self._restore_dead_man(d, r, stop_failed=False)
             journal.forget(d.ref, JOURNAL_OWNER, d.put_back | set(PROFILE_KEYS))  # the profile was never changed
             self._event(r.line())

@@ -11,7 +11,8 @@ from sherpa_cli.errors import SherpaError
 RESET_DURING_STOP = "reset during its stop"  # booted again (another node's NMT reset, power) mid-exit
 # how these read without --verbose; any other stop (ST, JV=0 + BG, TC=0 + ST, ...) reads "stopped" (the
 # method is a detail), and "not stopped" / "-" always as they are
-STOPPED_TEXT = {"motor was off": "motor was off", "not moved by this guard": "not moved",
+NOT_MOVED = "not moved by this guard"  # refused or ended before it switched the motor on
+STOPPED_TEXT = {"motor was off": "motor was off", NOT_MOVED: "not moved",
                 RESET_DURING_STOP: "reset during its stop (motor off, RAM from flash)"}
 UNSTOPPED = ("not stopped", "not reached", "-")
 

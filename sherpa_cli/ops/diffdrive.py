@@ -210,10 +210,13 @@ class Coupling:
     peak_sigma: float  # counts off the straight path, Σ component (peak of |.|)
     peak_delta: float
     held: str | None  # the joint that should have held (None: both were asked to move)
-    held_peak: float  # its peak excursion from the start, counts
+    held_peak: float  # its peak excursion beyond its planned path (start to its target), counts
     sigma_cpr: int
     delta_cpr: int
     held_cpr: int = 0
+    # the held joint's planned move, counts: ±1 when Σ and Δ of the target had mixed parity (plan_move:
+    # whole motor positions give Σ and Δ of equal parity), a give-way the plan chose, not coupling
+    held_planned: int = 0
 
     def fraction(self, counts: float) -> float:
         return counts / self.move if self.move else 0.0
@@ -227,6 +230,7 @@ class Coupling:
                                "delta_off_path": entry(self.peak_delta, self.delta_cpr), "held": self.held}
         if self.held is not None:
             out["held_excursion"] = entry(self.held_peak, self.held_cpr)
+            out["held_planned_counts"] = self.held_planned
         return out
 
 
@@ -234,8 +238,9 @@ def measure_coupling(samples: Sequence[tuple[float, int, int]], start: tuple[int
                      *, sigma_name: str, delta_name: str, sigma_cpr: int, delta_cpr: int,
                      held: str | None = None) -> Coupling:
     """Peak deviation of (Σ, Δ) from the straight segment start → target over ``samples`` of
-    (t, m_a, m_b); and the peak excursion from its start of ``held``, the joint that should have
-    held (by default the one whose target is its start)."""
+    (t, m_a, m_b); and the peak excursion of ``held``, the joint that should have held (by default the
+    one whose target is its start), beyond its planned path: from its start to its target, which
+    differ by the one count of a parity give-way (plan_move) or not at all."""
     s0, d0 = start
     ds, dd = target[0] - s0, target[1] - d0
     length2 = ds * ds + dd * dd
@@ -248,13 +253,16 @@ def measure_coupling(samples: Sequence[tuple[float, int, int]], start: tuple[int
         peak_d = max(peak_d, abs(d - (d0 + u * dd)))
     if held is None:
         held = delta_name if dd == 0 and ds != 0 else sigma_name if ds == 0 and dd != 0 else None
-    held_peak, held_cpr = 0.0, 0
+    held_peak, held_cpr, planned = 0.0, 0, 0
     if held is not None:
         sig = held == sigma_name
         held_cpr = sigma_cpr if sig else delta_cpr
         first = s0 if sig else d0
-        held_peak = max((abs((ma + mb if sig else ma - mb) - first) for _, ma, mb in samples), default=0.0)
-    return Coupling(math.sqrt(length2), peak_s, peak_d, held, held_peak, sigma_cpr, delta_cpr, held_cpr)
+        planned = (target[0] if sig else target[1]) - first
+        lo, hi = min(first, first + planned), max(first, first + planned)
+        held_peak = max((max(lo - v, v - hi, 0) for v in (ma + mb if sig else ma - mb for _, ma, mb in samples)),
+                        default=0.0)
+    return Coupling(math.sqrt(length2), peak_s, peak_d, held, held_peak, sigma_cpr, delta_cpr, held_cpr, planned)
 
 
 # --------------------------------------------------------------------------- recording

@@ -28,6 +28,7 @@ import filelock
 from sherpa_cli.config.model import ArmConfig, JointConfig, PairConfig, SimFtConfig, SwitchConfig, SwitchKind
 from sherpa_cli.config.simbus import SimBusConfig
 from sherpa_cli.elmo.protocol import NMT_ID, SDO_RX_BASE, SYNC_ID
+from sherpa_cli.errors import SherpaError
 from sherpa_cli.sim import state as sim_state
 from sherpa_cli.sim.buscontroller import BusController, SimNetlink
 from sherpa_cli.sim.clock import Clock, FrameClock, RealClock, StallMeter
@@ -308,15 +309,17 @@ class SimArm:
                  settings: Mapping[str, SimSettings] | None = None, persist: bool = False,
                  tick_s: float = 0.002, bus_factory: Callable[..., can.BusABC] | None = None,
                  event_log: str | None = None, keep_ram: bool = False, link_retry_s: float = 0.5,
-                 stalls: StallMeter | None = None) -> None:
+                 stalls: StallMeter | None = None, ram_save_s: float = 0.05) -> None:
         """``endpoints``: bus name -> keyword arguments for ``can.Bus`` (interface, channel);
         ``bus_factory`` opens them instead of ``can.Bus``; ``event_log``: a file that gets one JSON
         line per motor on/off and dead-man event (appended, flushed at once), so another process can
         tell when a motor went off; ``keep_ram``: the arm stays powered between runs (`--sim`): its RAM
         is loaded from the state directory by :meth:`start` and saved by :meth:`stop`, under a lock
-        held meanwhile (sim/state.py); ``link_retry_s``: how often a pump whose bus failed under it (a
-        kernel interface set down) reopens it; ``stalls``: an in-process arm's meter of the time its
-        process did not run, which the drives' heartbeat consumers leave out (sim/clock.py)."""
+        held meanwhile (sim/state.py), and while the arm runs it is written again every ``ram_save_s``
+        when it changed, so a command killed with SIGKILL leaves the RAM a real arm would hold;
+        ``link_retry_s``: how often a pump whose bus failed under it (a kernel interface set down) reopens
+        it; ``stalls``: an in-process arm's meter of the time its process did not run, which the drives'
+        heartbeat consumers leave out (sim/clock.py)."""
         self.cfg = cfg
         self.stalls = stalls
         self.endpoints = dict(endpoints)
@@ -384,6 +387,7 @@ class SimArm:
         self.event_log = event_log
         self._event_file: TextIO | None = None
         self.keep_ram = keep_ram
+        self.ram_save_s = ram_save_s
         # another `--sim` command holds the arm: how long to wait (None: RAM_LOCK_TIMEOUT; 0: refused at
         # once, `sherpa stop`) and where to say so at once (the CLI's stderr)
         self.ram_wait: float | None = None
@@ -501,6 +505,8 @@ class SimArm:
                     self._sdo[name] = SdoServer(drive.node, drive, drive.send_now)
             if self.stalls is not None:
                 self._start_thread(self.stalls.keep_time, (self._stop,), "sim-stalls")
+            if self.keep_ram and self._ram_lock is not None and self.ram_save_s > 0:
+                self._start_thread(self._keep_ram_saved, (), "sim-ram")
             powered = {bus_name: threading.Event() for bus_name in self._buses}
             for bus_name in self._buses:
                 self._start_thread(self._pump, (bus_name, powered[bus_name]), f"sim-{bus_name}")
@@ -592,6 +598,34 @@ class SimArm:
         with self.lock:
             snapshot = {name: node.ram_snapshot() for name, node in self._ram_nodes().items()}
         sim_state.save_ram(self.cfg, snapshot)
+
+    def _keep_ram_saved(self) -> None:
+        """While the command runs, its RAM file follows the drives: a process killed with SIGKILL runs no
+        exit path, and the next command must find what the powered arm holds (the motor on, the consumer
+        watching, the temporary changes), not what it held before. Taken as each drive stands at its
+        last step (the pumps run them), written without fsync (it must outlive the process, not the
+        machine) and only when a drive changed; an SV's flash too. A failed write is logged once: the
+        final save at stop() reports it."""
+        last: dict[str, dict[str, object]] | None = None
+        warned = False
+        while not self._stop.wait(self.ram_save_s):
+            with self.lock:
+                snapshot = {name: node.ram_snapshot(advance=False) for name, node in self._ram_nodes().items()}
+                saved_flash = any(d.save_count != self.flash[n].save_count for n, d in self.drives.items())
+            # an F/T sensor's copy carries its age, new every time: a change of the drives decides
+            drives = {name: item for name, item in snapshot.items() if name not in self.ft_sensors}
+            if drives == last and not saved_flash:
+                continue
+            try:
+                sim_state.save_ram(self.cfg, snapshot, durable=False)
+                if saved_flash:
+                    self.save_state()
+            except (SherpaError, OSError) as exc:
+                if not warned:
+                    log.warning("simulated arm: cannot keep its RAM file current: %s", exc)
+                warned = True
+                continue
+            last = drives
 
     def _release_ram(self) -> None:
         lock, self._ram_lock = self._ram_lock, None

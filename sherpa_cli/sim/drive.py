@@ -419,10 +419,13 @@ class SimDrive:
 
     # -- RAM between `--sim` commands (sim/state.py) ----------------------------------------------
 
-    def ram_snapshot(self) -> dict[str, object]:
+    def ram_snapshot(self, advance: bool = True) -> dict[str, object]:
         """What a powered drive keeps: the joint's position, RAM, objects, faults, NMT state and whether
-        its heartbeat consumer was watching (the host that armed it has gone when this is restored)."""
-        self.advance_to(self.clock.now())
+        its heartbeat consumer was watching (the host that armed it has gone when this is restored).
+        ``advance`` False: as the drive stands at its last step, for a copy taken while a bus pump runs
+        it (running it to now there could pass a host heartbeat still queued for the pump)."""
+        if advance:
+            self.advance_to(self.clock.now())
         return {"position": self.motor.position, "px_offset": self._px_offset, "motor_on": self._motor_on,
                 "ram": dict(self.ram), "od": {flash_key(*key): value for key, value in self._od.values.items()},
                 "mf": self._mf, "last_error": self.last_error, "error_field": self._error_field,

@@ -218,8 +218,8 @@ class SimEncoder(SimDrive):
         return self.tpdo.next_due() if self._nmt_state == OPERATIONAL else math.inf
 
     # -- RAM between `--sim` commands ----------------------------------------------------------
-    def ram_snapshot(self) -> dict[str, object]:
-        saved = super().ram_snapshot()
+    def ram_snapshot(self, advance: bool = True) -> dict[str, object]:
+        saved = super().ram_snapshot(advance)
         saved["encoder"] = {"operating": self.operating, "units_per_rev": self.units_per_rev,
                             "total_range": self.total_range, "offset": self.offset}
         return saved

@@ -120,7 +120,7 @@ class SimFtSensor:
         return [(self.base_id + 5, first), (self.base_id + 6, second)]
 
     # -- RAM between `--sim` commands ----------------------------------------------------------------
-    def ram_snapshot(self) -> dict[str, object]:
+    def ram_snapshot(self, advance: bool = True) -> dict[str, object]:
         # the age carries the drift on: the bias was taken against the drift of that moment
         return {"ram": True, "ft": {"bias": list(self.bias), "biased": self.biased, "sample": self.sample,
                                     "age": self.clock.now() - self.power_up}}

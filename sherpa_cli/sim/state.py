@@ -6,7 +6,10 @@ same arm merge their saves under a file lock: neither loses the other's SV.
 ``--sim`` keeps the arm powered between commands: the in-process arm's RAM (positions, parameters,
 calibration marks, PDO and dead-man objects, faults) lives beside the flash in ``<arm>.ram.json``,
 loaded when a command's arm starts and saved when it stops, under a lock held meanwhile (two `--sim`
-commands at once are serialised). `sherpa sim --power-cycle` drops the RAM (positions stay, as the
+commands at once are serialised). While the command runs the file follows the drives (SimArm
+``ram_save_s``), so a command killed with SIGKILL leaves what a real arm would hold: the next command's
+power-on lets the heartbeat consumers that were watching act (motor off, MF latched), and the killed
+command's temporary changes stay in RAM for `sherpa recover`. `sherpa sim --power-cycle` drops the RAM (positions stay, as the
 joints do), `--reset-state` drops RAM and flash.
 """
 
@@ -253,12 +256,14 @@ def ram_damaged(target: Path, problem: str) -> ConfigError:
                        hint=move_aside_hint(target, "or power the simulated arm off and on with `sherpa sim --power-cycle`"))
 
 
-def save_ram(cfg: ArmConfig, drives: dict[str, Any], powered: bool = True, path: Path | None = None) -> Path:
-    """Write the arm's RAM atomically (``powered`` False: only positions survive, a power cycle)."""
+def save_ram(cfg: ArmConfig, drives: dict[str, Any], powered: bool = True, path: Path | None = None,
+             durable: bool = True) -> Path:
+    """Write the arm's RAM atomically (``powered`` False: only positions survive, a power cycle;
+    ``durable`` False: no fsync, for the copies a running command keeps, paths.write_atomic)."""
     target = path or ram_path(cfg)
     body = {"format": RAM_FORMAT, "arm": cfg.name, "powered": powered, "drives": drives}
     try:
-        write_atomic(target, json.dumps(body, indent=1, sort_keys=True) + "\n")
+        write_atomic(target, json.dumps(body, indent=1, sort_keys=True) + "\n", durable=durable)
     except OSError as exc:
         raise SherpaError(f"{target}: cannot save the simulated arm's RAM: {exc.strerror or exc}",
                           hint=STATE_DIR_HINT) from None
