@@ -462,6 +462,8 @@ class SimDriveConfig:
     velocity_window: float = 0.0  # s: VX from the encoder's whole counts over this window (a ripple)
     cogging_torque: float = 0.0  # N m amplitude of the cogging and friction ripple
     cogging_cycles: int = 0  # its periods per joint turn
+    # a fault: counts the drive adds to every PA it stores (echoed as sent): it ends off its target
+    target_skew: int = 0
 
 
 @dataclass(frozen=True)

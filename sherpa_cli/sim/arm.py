@@ -99,7 +99,8 @@ def settings_for(cfg: ArmConfig, drive: str, **overrides: object) -> SimSettings
                     group_id_needs_reset_comm=faults.group_id_needs_reset_comm,
                     bus_capacitance=faults.bus_capacitance, supply_resistance=faults.supply_resistance,
                     velocity_window_s=faults.velocity_window, cogging_torque=faults.cogging_torque,
-                    cogging_cycles=faults.cogging_cycles)
+                    cogging_cycles=faults.cogging_cycles,
+                    store_skew=(("PA", faults.target_skew),) if faults.target_skew else ())
         if faults.firmware is not None:
             base["sw_version"] = faults.firmware
         base.update({key: getattr(faults, key) for key in LOAD_KEYS if getattr(faults, key) is not None})
