@@ -34,6 +34,7 @@ def test_without_it_a_drive_whose_motor_is_off_switches_once(cli, tmp_path):
     (["--position", "0.5", "--from-mode", "velocity", "--mode-first"], "--from-mode and --mode-first exclude"),
     # velocity steps jog in UM=5 here (motion.velocity_unit_mode): position mode is no other mode
     (["--velocity", "0.1", "--from-mode", "position"], "there would be no switch"),
+    (["--position", "0.5", "--from-mode", "velocity", "--source", "drive"], "--from-mode is for --source can"),
 ])
 def test_a_from_mode_that_cannot_give_the_seed_s_switch_is_refused_before_anything_moves(cli, tmp_path, args,
                                                                                        message):

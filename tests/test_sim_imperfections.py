@@ -192,3 +192,11 @@ def test_a_bad_imperfection_is_one_clear_message_with_its_place(tmp_path, key, v
     with pytest.raises(ConfigError) as err:
         load_config(path)
     assert message in str(err.value) and "seed.yaml:" in str(err.value) and "shoulder_1a" in str(err.value)
+
+
+def test_target_skew_is_a_drive_that_stores_every_target_off(tmp_path):
+    text = re.sub(r"(shoulder_2a: \{supply_current_limit: 1\.0)", r"\1, target_skew: -7", SEED.read_text(encoding="utf-8"))
+    path = tmp_path / "seed.yaml"
+    path.write_text(text, encoding="utf-8")
+    assert settings_for(load_config(path), "shoulder_2a").store_skew == (("PA", -7),)
+    assert settings_for(load_config(SEED), "shoulder_2a").store_skew == ()

@@ -636,6 +636,8 @@ def step(
     to_mcap = output.suffix.lower() == ".mcap" and not output.is_dir()
     if source not in ("can", "drive"):
         raise UsageError(f"--source {source}: expected can or drive")
+    if source == "drive" and from_mode is not None:
+        raise UsageError("--from-mode is for --source can: the drive recorder's step starts from the drive as it is")
     if source == "drive" and to_mcap:
         raise UsageError("--source drive writes a directory (recording.csv, can-recording.csv, metrics.json): "
                          "give -o DIR")
