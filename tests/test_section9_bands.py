@@ -166,3 +166,32 @@ def test_the_band_fails_on_its_variant(key, cli, cli_windows, tmp_path_factory):
     variant, number = FAILS[key]
     value = number(_variant(variant, cli, tmp_path_factory))
     assert not BANDS[key].holds(value), f"{key} = {value} holds on the variant {variant!r}"
+
+
+def _run(speeds: list[float], switch: tuple[str, ...] = (), switch_s: float = 0.0):
+    """A run as `log step` leaves it, in memory: the speed every 10 ms from t = 0."""
+    from sherpa_cli.log.recording import Recording
+    from sherpa_cli.log.step_compare import RunFigures
+
+    times = [i * 0.01 for i in range(len(speeds))]
+    fig = RunFigures(name="r", path="r", joint="j", mode="position", value=1.0, switch_s=switch_s,
+                     switch_steps=list(switch), settled=True, metrics={}, motion_start_s=0.0, peak_speed=max(speeds),
+                     peak_speed_after_s=None, slowing_after_s=None, steady_speed=None, steady_ripple=None)
+    return fig, Recording(times=times, columns={"j.vel_rad_s": speeds})
+
+
+def test_a_drop_is_a_speed_that_falls_before_the_strong_run_decelerates_not_one_that_levels_off():
+    rising = [min(2.0, 0.2 * i) for i in range(10)]  # 2 rad/s from 0.1 s on
+    falls = [*rising, *(2.0 - 0.1 * i for i in range(10)), *([1.0] * 30)]  # peak at 0.10 s, then down to 1
+    levels = [*rising, *([2.0] * 40)]
+    assert falls_at(_run(falls), 0.4) == pytest.approx(0.10)
+    assert falls_at(_run(levels), 0.4) is None
+    assert falls_at(_run(falls), 0.115) is None  # it falls only after the strong run decelerated: no drop
+    assert falls_at(_run(falls), None) is None
+
+
+def test_only_the_seed_s_switch_has_a_switch_time():
+    assert seed_switch_ms(_run([0.0, 1.0], ("MO=0", "UM=5", "MO=1"), 1.02)[0]) == pytest.approx(1020)
+    assert seed_switch_ms(_run([0.0, 1.0], ("MO=0", "UM=2", "MO=1"), 1.02)[0]) == pytest.approx(1020)
+    for other in [("MO=1",), ("UM=5", "MO=1"), (), ("MO=0", "MO=1", "UM=5")]:
+        assert seed_switch_ms(_run([0.0, 1.0], other, 0.51)[0]) is None, other
