@@ -37,10 +37,14 @@ def test_the_seed_figures_recipe_runs_and_its_numbers_fall_within_the_seed_bands
     # is an SDO time)
     text = (ROOT / SEED_PROFILE).read_text(encoding="utf-8")
     profile = tmp_path / "seed-figures.yaml"
+    # and a patient liveness watch: a stepped wait is whole SYNC round trips, which a loaded machine slows in
+    # wall time (the seed's two-window switch once took longer than the 1 s bound between signs of life)
     profile.write_text(text.replace("protocol: {mo_settle: 0.5, sv_blackout: 0.5}",
-                                    "protocol: {mo_settle: 0.5, sv_blackout: 0.5, sdo_timeout: 2.0}"),
+                                    "protocol: {mo_settle: 0.5, sv_blackout: 0.5, sdo_timeout: 2.0}")
+                       .replace("motion: {consumer_time_ms: 1000,", "motion: {consumer_time_ms: 1000, liveness_timeout: 10,"),
                        encoding="utf-8")
     assert "sdo_timeout: 2.0" in profile.read_text(encoding="utf-8")
+    assert "liveness_timeout: 10" in profile.read_text(encoding="utf-8")
     result = cli("--config", str(profile), "--sim", "recipe", "run", "recipes/seed-section9.yaml", "--apply",
                  "--set", f"out={out}", *SHORT, "--report", str(report))
     assert result.exit_code == 0, result.transcript() + json.dumps(

@@ -159,14 +159,15 @@ def _position_step(cli, tmp_path: Path, supply: float) -> list[dict[str, float]]
     out = tmp_path / f"step-{supply:g}A"
     assert cli("--config", str(config), "sim", "--reset-state").exit_code == 0  # a fresh arm: the joint at 0
     result = cli("--config", str(config), "--sim", "log", "step", "shoulder_yaw", "--position", "1", "--uncalibrated",
-                 "-o", str(out), "--apply")
+                 "--for", "4", "-o", str(out), "--apply")
     assert result.exit_code == 0, result.stderr
     return _csv(out / "recording.csv")
 
 
 def test_seed_profile_one_ampere_supply_slows_the_move_as_in_fig_9_4(cli, tmp_path):
-    """Fig. 9.4/9.5: with the 1 A supply the speed drops early (the supply cannot deliver the power);
-    with a 20 A supply it holds the profile's speed until the deceleration; both arrive."""
+    """Fig. 9.4/9.5: with the 1 A supply the speed drops early (the supply cannot deliver the power: its
+    bus sags to the 0.5 rad/s a 1 A supply holds); with a 20 A supply it holds the profile's speed until
+    the deceleration; both arrive."""
     weak, strong = _position_step(cli, tmp_path, 1.0), _position_step(cli, tmp_path, 20.0)
 
     def peak_speed(rows):

@@ -581,7 +581,7 @@ class Arm:
     def log_step(self, name: str, mode: str, value: float, *, duration: float = 2.0, rate: float = 1000.0,
                  uncalibrated: bool = False, mode_first: bool = False, hold: float = 0.0,
                  settings: MotionSettings | None = None, on_event: Callable[[str], None] | None = None,
-                 timebase: StepTime | None = None) -> StepResult:
+                 timebase: StepTime | None = None, from_mode: str | None = None) -> StepResult:
         """The seed's Section 9 step experiment (`sherpa log step NAME --MODE VALUE --apply`, without
         the files): record, command the step at t = 0 inside the motion guard, record until settled
         (or ``duration`` s after the step), stop, and compute the step metrics.
@@ -589,7 +589,7 @@ class Arm:
         ``name``: a plain joint or its drive (a Σ/Δ joint is refused: that is :meth:`diffdrive_move`).
         ``mode``: ``"position"`` (a step of ``value`` rad from where the joint stands),
         ``"velocity"`` (rad/s) or ``"torque"`` (A). ``rate``: samples per second. ``mode_first``,
-        ``hold``: as ``--mode-first``, ``--hold``. ``timebase``: the clock, waits and SYNC source
+        ``hold``, ``from_mode``: as ``--mode-first``, ``--hold``, ``--from-mode``. ``timebase``: the clock, waits and SYNC source
         (default wall time; `sherpa --sim log step` runs on the simulator's stepped time). The result
         holds the recording (``result.recording``) and the metrics; a limit breach is a result
         (``breach`` set), a refusal raises.
@@ -607,7 +607,7 @@ class Arm:
             settings = MotionSettings.from_config(cfg, [target.ref.bus])
         return run_step(self._session, target, mode, value, duration=duration, rate=rate, settings=settings,
                         on_event=on_event, uncalibrated=uncalibrated, timebase=timebase, mode_first=mode_first,
-                        hold=hold)
+                        hold=hold, from_mode=from_mode)
 
     def log_step_with_drive(self, name: str, mode: str, value: float, *, duration: float = 2.0, rate: float = 1000.0,
                             uncalibrated: bool = False, settings: MotionSettings | None = None,

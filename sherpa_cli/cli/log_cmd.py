@@ -519,6 +519,10 @@ def step(
     mode_first: bool = typer.Option(False, "--mode-first", help="Put the drive in the step's unit mode with its "
                                     "motor on before t = 0 and wait its settle window: the step itself has no "
                                     "MO/UM switch (seed Fig. 9.2)."),
+    from_mode: str | None = typer.Option(None, "--from-mode", metavar="position|velocity",
+                                         help="Hold the drive in this other mode with its motor on (standing "
+                                         "still) before t = 0: the step's switch is MO=0, UM, MO=1 with the "
+                                         "settle window after each MO (seed Fig. 9.1)."),
     hold: float = typer.Option(0.0, "--hold", metavar="S", help="Go on recording S seconds once the step has "
                                "settled (a velocity step's constant speed, seed Figs. 9.3/9.6); within --for."),
     compare_runs: bool = typer.Option(False, "--compare", help="Compare earlier runs (the RUN directories "
@@ -558,7 +562,7 @@ def step(
     from sherpa_cli.log.record_extras import RecordExtras
     from sherpa_cli.log.recording import write_csv
     from sherpa_cli.motion.settings import MotionSettings
-    from sherpa_cli.ops.step import check_mode_first, resolve_step_target, step_request
+    from sherpa_cli.ops.step import UM_OF, check_from_mode_switches, check_mode_first, resolve_step_target, step_request
 
     st = state(ctx)
     if compare_runs:
@@ -584,6 +588,8 @@ def step(
     to_mcap = output.suffix.lower() == ".mcap" and not output.is_dir()
     if source not in ("can", "drive"):
         raise UsageError(f"--source {source}: expected can or drive")
+    if source == "drive" and from_mode is not None:
+        raise UsageError("--from-mode is for --source can: the drive recorder's step starts from the drive as it is")
     if source == "drive" and to_mcap:
         raise UsageError("--source drive writes a directory (recording.csv, can-recording.csv, metrics.json): "
                          "give -o DIR")
@@ -603,10 +609,12 @@ def step(
     target = resolve_step_target(cfg, joint)
     req = step_request(target, mode, value, duration=duration, uncalibrated=uncalibrated,
                        max_torque_for=cfg.motion.max_torque_for)
-    check_mode_first(mode, mode_first)
+    check_mode_first(mode, mode_first, from_mode)
+    check_from_mode_switches(from_mode, UM_OF.get(mode, cfg.motion.velocity_unit_mode))
     if not apply:
         refused = _step_would_refuse(st, target, req)
-        _step_dry_run(st, cfg, target, mode, value, duration, rate, mode_first=mode_first, hold=hold, refused=refused)
+        _step_dry_run(st, cfg, target, mode, value, duration, rate, mode_first=mode_first, hold=hold, refused=refused,
+                      from_mode=from_mode)
         if refused:
             raise typer.Exit(1)
         return
@@ -635,7 +643,7 @@ def step(
         try:  # a layer over the Python API
             result = Arm(session).log_step(joint, mode, value, duration=duration, rate=rate, settings=settings,
                                            uncalibrated=uncalibrated, timebase=timebase, mode_first=mode_first,
-                                           hold=hold)
+                                           hold=hold, from_mode=from_mode)
         except BaseException as exc:
             # how the guard stopped the motor, on Ctrl-C, SIGTERM and errors too (without it a
             # Ctrl-C during `log step` printed nothing)
@@ -745,7 +753,7 @@ def _step_would_refuse(st: AppState, target: Axis, req: MoveRequest) -> list[str
 
 def _step_dry_run(st: AppState, cfg: ArmConfig, target: Axis, mode: str, value: float, duration: float,
                   rate: float, *, mode_first: bool = False, hold: float = 0.0,
-                  refused: list[str] | None = None) -> None:
+                  refused: list[str] | None = None, from_mode: str | None = None) -> None:
     """Without --apply: what the step would send; nothing is sent, no file is written."""
     from sherpa_cli.joints.units import rad_per_s_to_counts_per_s, rad_to_counts
 
@@ -762,6 +770,9 @@ def _step_dry_run(st: AppState, cfg: ArmConfig, target: Axis, mode: str, value: 
         plan = plan.replace("until settled,", f"until settled and {hold:g} s more,")
     if mode_first:
         plan = "before t = 0 the drive in the step's mode, motor on, its settle window waited; then " + plan
+    if from_mode is not None:
+        plan = (f"before t = 0 the drive in {from_mode} mode, motor on, its settle window waited; then MO=0, "
+                "the step's UM, MO=1 (a settle window after each); then " + plan)
     if st.json_mode:
         st.out.json({"joint": target.name, "drive": ref.name, "address": ref.address, "mode": mode, "value": value,
                      "applied": False, "plan": plan, "rate": rate, "checked": refused is not None,

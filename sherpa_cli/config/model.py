@@ -456,6 +456,14 @@ class SimDriveConfig:
     back_emf: float | None = None  # V s/rad
     resistance: float | None = None  # ohm
     supply_voltage: float | None = None  # V
+    # the real arm's imperfections (docs/simulator.md "Imperfections"); 0 = off, the default
+    bus_capacitance: float = 0.0  # F between supply and drive: the supply's voltage sags under a fast move
+    supply_resistance: float = 0.0  # ohm, the supply's source resistance (with bus_capacitance)
+    velocity_window: float = 0.0  # s: VX from the encoder's whole counts over this window (a ripple)
+    cogging_torque: float = 0.0  # N m amplitude of the cogging and friction ripple
+    cogging_cycles: int = 0  # its periods per joint turn
+    # a fault: counts the drive adds to every PA it stores (echoed as sent): it ends off its target
+    target_skew: int = 0
 
 
 @dataclass(frozen=True)

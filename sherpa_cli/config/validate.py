@@ -788,6 +788,9 @@ SERVO_BANDWIDTH_MAX = 100.0  # Hz
 SERVO_DAMPING_MAX = 10.0
 SIM_CURRENT_MAX = 1000.0  # A
 SIM_LOAD_MAX = 1e6  # the load's numbers (inertia, friction, gravity, EMF, ohm, V): finite and below this
+SIM_CAPACITANCE_MAX = 10.0  # F of a drive's bus: a bench supply's and a drive's capacitors are mF
+SIM_COGGING_CYCLES_MAX = 100_000  # ripple periods per joint turn (motor poles x gear ratio)
+SIM_TARGET_SKEW_MAX = 1_000_000  # counts a faulty simulated drive adds to PA
 
 
 def _bad_number(value: object) -> str | None:
@@ -851,6 +854,12 @@ def _check_bounds(cfg: ArmConfig, locs: Locs, r: _Report) -> None:
             lo = -SIM_LOAD_MAX if key == "gravity" else 0.0
             if getattr(sim_drive, key) is not None:
                 within(getattr(sim_drive, key), lo, SIM_LOAD_MAX, at_sim(key), key)
+        for key, hi, unit in (("bus_capacitance", SIM_CAPACITANCE_MAX, " F"), ("supply_resistance", SIM_LOAD_MAX, " ohm"),
+                              ("velocity_window", WAIT_MAX, " s"), ("cogging_torque", SIM_LOAD_MAX, " N m"),
+                              ("cogging_cycles", SIM_COGGING_CYCLES_MAX, " per turn")):
+            within(getattr(sim_drive, key), 0, hi, at_sim(key), key, unit)  # imperfections: 0 = off
+        within(sim_drive.target_skew, -SIM_TARGET_SKEW_MAX, SIM_TARGET_SKEW_MAX, at_sim("target_skew"), "target_skew",
+               " counts")
         for key in ("start_skew", "lag"):  # the simulator refuses a negative time (SimSettings)
             within(getattr(sim_drive, key), 0.0, WAIT_MAX, at_sim(key), key, " s")
         if _bad_number(sim_drive.drop_probability):

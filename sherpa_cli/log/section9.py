@@ -27,7 +27,8 @@ STEPS = {"fig9-1": "9.1", "fig9-2": "9.2", "fig9-3": "9.3", "fig9-4-1a": "9.4/9.
 MOVES = {"fig9-10-naive": "9.10", "fig9-10-group": "9.10 (common start)", "fig9-10-feedback": "9.10 (feedback)",
          "fig9-11-naive": "9.11", "fig9-11-group": "9.11 (common start)", "fig9-11-feedback": "9.11 (feedback)"}
 RUNS = (*STEPS, *MOVES)
-DEPART = 0.9  # the 1 A run has dropped once its speed is below this share of the 20 A run's
+DEPART = 0.9  # a move decelerates once its speed is below this share of its peak
+FALL = 0.9  # a speed is falling once it is below this share of its peak
 
 
 @dataclass(frozen=True)
@@ -39,6 +40,8 @@ class Band:
     high: float
     unit: str
     reading: str  # how the sentence becomes these numbers
+    seed: str = ""  # the seed's number (or words) for it
+    tool: str = ""  # the tool's number on the seed profile (tests/test_section9.py's run), and where it departs
 
     def holds(self, value: float | None) -> bool:
         return value is not None and math.isfinite(value) and self.low <= value <= self.high
@@ -51,7 +54,7 @@ def _number(value: object, where: str) -> float:
 
 
 def load_bands(path: Path) -> list[Band]:
-    """docs/section9/bands.yaml: ``bands:`` a list of {key, figure, quote, min, max, unit, reading}."""
+    """docs/section9/bands.yaml: ``bands:`` a list of {key, figure, quote, min, max, unit, reading, seed, tool}."""
     import yaml
 
     try:
@@ -72,7 +75,8 @@ def load_bands(path: Path) -> list[Band]:
         if low > high:
             raise UsageError(f"{where}: min {low:g} is above max {high:g}")
         out.append(Band(str(item["key"]), str(item["figure"]), " ".join(str(item["quote"]).split()), low, high,
-                        str(item["unit"]), " ".join(str(item.get("reading", "")).split())))
+                        str(item["unit"]), " ".join(str(item.get("reading", "")).split()),
+                        " ".join(str(item.get("seed", "")).split()), " ".join(str(item.get("tool", "")).split())))
     return out
 
 
@@ -83,21 +87,32 @@ def _speed_at(rec: Recording, joint: str) -> tuple[list[float], list[float]]:
     return series
 
 
-def departs_at(weak: tuple[RunFigures, Recording], strong: tuple[RunFigures, Recording]) -> float | None:
-    """First time after the command when ``weak``'s speed is below DEPART of ``strong``'s at the
-    same time, once ``strong`` moves at half its peak or more (below that a millisecond's difference
-    in when the two runs began reads as a drop): Fig. 9.5's 1 A run dropping."""
-    wt, wv = _speed_at(weak[1], weak[0].joint)
-    st, sv = _speed_at(strong[1], strong[0].joint)
-    floor = 0.5 * abs(strong[0].peak_speed)
-    # the runs side by side from where each began to move: on wall time their dead times differ by
-    # some ms, which would read as a drop or hide one
-    shift = (strong[0].motion_start_s or 0.0) - (weak[0].motion_start_s or 0.0)
-    for t, v in zip(wt, wv, strict=True):
-        s = _at(st, sv, t + shift)  # the two runs were sampled at their own times: interpolated
-        if t > 0 and s is not None and abs(s) >= floor and abs(v) < DEPART * abs(s):
-            return t
-    return None
+def falls_at(run: tuple[RunFigures, Recording], until: float | None) -> float | None:
+    """Fig. 9.5's "dropping after around 100ms": when the speed starts to fall while the move still
+    cruises -- the time (from the command) of its peak before ``until`` (the 20 A run's deceleration),
+    if the speed then falls below FALL of that peak before ``until``; None if it does not fall (a speed
+    that levels off, as a stiff supply's, is no drop)."""
+    if until is None:
+        return None
+    t, v = _speed_at(run[1], run[0].joint)
+    window = [i for i in range(len(t)) if 0 < t[i] <= until]
+    if not window:
+        return None
+    peak = max(window, key=lambda i: abs(v[i]))
+    fell = any(abs(v[i]) < FALL * abs(v[peak]) for i in window if i > peak)
+    return t[peak] if fell else None
+
+
+SEED_SWITCH = ("MO=0", "UM=", "MO=1")  # the seed's software: motor off, the mode changed, motor on
+
+
+def seed_switch_ms(run: RunFigures) -> float | None:
+    """The MO/UM switch's time in ms if the run switched as the seed's software did (Fig. 9.1: "first
+    the motor is turned off, the mode changed, and finally the motor is turned on"); None otherwise."""
+    steps = run.switch_steps
+    if len(steps) != len(SEED_SWITCH) or not all(s.startswith(p) for s, p in zip(steps, SEED_SWITCH, strict=True)):
+        return None
+    return 1000 * run.switch_s
 
 
 def _at(times: list[float], values: list[float], t: float) -> float | None:
@@ -132,14 +147,12 @@ def _move(path: Path) -> dict[str, Any]:
 
 
 def _held(doc: Mapping[str, Any]) -> tuple[float, float]:
-    """(peak excursion, |end - start|) of the joint that should have held still, in rad."""
+    """(peak excursion in rad, |end - start| in encoder counts) of the joint that should have held still."""
     c = doc["coupling"]
     held = c.get("held")
     side = "sigma" if doc["sigma"]["joint"] == held else "delta"
     j = doc[side]
-    rad_per_count = abs(j["end_rad"] / j["end"]) if j.get("end") else float(c["held_excursion"]["rad"]) / max(
-        float(c["held_excursion"]["counts"]), 1.0)
-    return float(c["held_excursion"]["rad"]), abs(j["end"] - j["start"]) * rad_per_count
+    return float(c["held_excursion"]["rad"]), float(abs(j["end"] - j["start"]))
 
 
 def summarize(folder: Path) -> dict[str, float | None]:
@@ -153,9 +166,9 @@ def summarize(folder: Path) -> dict[str, float | None]:
     f = {n: r[0] for n, r in runs.items()}
     moves = {n: _move(folder / f"{n}.json") for n in MOVES}
     out: dict[str, float | None] = {
-        "fig9_1.switch_ms": 1000 * f["fig9-1"].switch_s,
+        "fig9_1.switch_ms": seed_switch_ms(f["fig9-1"]),
         "fig9_2.switch_ms": 1000 * f["fig9-2"].switch_s,
-        "fig9_3.switch_ms": 1000 * f["fig9-3"].switch_s,
+        "fig9_3.switch_ms": seed_switch_ms(f["fig9-3"]),
         "fig9_3.speed_rad_s": f["fig9-3"].steady_speed,
         "fig9_3.ripple": f["fig9-3"].steady_ripple,
         "fig9_5.drop_1a_ms": None,
@@ -165,15 +178,17 @@ def summarize(folder: Path) -> dict[str, float | None]:
         "fig9_6.speed_rad_s": f["fig9-6"].steady_speed,
         "fig9_6.ripple": f["fig9-6"].steady_ripple,
         "fig9_8.speed_rad_s": f["fig9-8"].steady_speed,
+        "fig9_8.speed_sd_rad_s": None if f["fig9-8"].steady_ripple is None or f["fig9-8"].steady_speed is None
+        else f["fig9-8"].steady_ripple * abs(f["fig9-8"].steady_speed),
     }
-    drop = departs_at(runs["fig9-4-1a"], runs["fig9-4-20a"])
-    out["fig9_5.drop_1a_ms"] = None if drop is None else 1000 * drop
     slow = slowing_at(runs["fig9-4-20a"])
     out["fig9_5.slowing_20a_ms"] = None if slow is None else 1000 * slow
+    drop = falls_at(runs["fig9-4-1a"], slow)
+    out["fig9_5.drop_1a_ms"] = None if drop is None else 1000 * drop
     for fig, name in (("fig9_10", "delta"), ("fig9_11", "sigma")):
         peak, end = _held(moves[f"{fig.replace('_', '-')}-naive"])
         out[f"{fig}.{name}_excursion_rad"] = peak
-        out[f"{fig}.{name}_returned_rad"] = end
+        out[f"{fig}.{name}_returned_counts"] = end
         for how in ("group", "feedback"):  # the tool's common start, and with its feedback
             other, _ = _held(moves[f"{fig.replace('_', '-')}-{how}"])
             out[f"{fig}.reduction_{how}"] = other / peak if peak > 0 else None
@@ -187,7 +202,9 @@ def check(numbers: Mapping[str, float | None], bands: list[Band]) -> list[tuple[
 
 def bands_table(bands: list[Band]) -> str:
     """The Markdown table of the bands, as docs/section9.md shows it (a test keeps the two equal)."""
-    lines = ["| figure | number | band | the seed's sentence | how it is read |", "|---|---|---|---|---|"]
+    lines = ["| figure | number | the seed | the tool | band | the seed's sentence | how it is read |",
+             "|---|---|---|---|---|---|---|"]
     for b in bands:
-        lines.append(f"| {b.figure} | `{b.key}` | {b.low:g} .. {b.high:g} {b.unit} | \"{b.quote}\" | {b.reading} |")
+        lines.append(f"| {b.figure} | `{b.key}` | {b.seed} | {b.tool} | {b.low:g} .. {b.high:g} {b.unit} | "
+                     f"\"{b.quote}\" | {b.reading} |")
     return "\n".join(lines) + "\n"

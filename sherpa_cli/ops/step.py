@@ -29,7 +29,7 @@ from types import TracebackType
 from typing import TYPE_CHECKING, Any, Protocol
 
 from sherpa_cli.config.model import ArmConfig
-from sherpa_cli.elmo.protocol import UM_POSITION, UM_TORQUE
+from sherpa_cli.elmo.protocol import UM_POSITION, UM_SPEED, UM_TORQUE
 from sherpa_cli.errors import UsageError
 from sherpa_cli.joints.units import counts_per_s_to_rad_per_s, counts_to_rad, rad_per_s_to_counts_per_s, rad_to_counts
 from sherpa_cli.log.record import Recorder, bus_budget
@@ -81,6 +81,7 @@ class StepResult:
     within: float = 0.0  # s after the step was sent that the record was allowed (--for)
     switch_steps: tuple[str, ...] = ()  # what the MO/UM switch sent: ("MO=0", "UM=5", "MO=1"), () for none
     mode_first: bool = False  # the drive was put in the step's mode before t = 0 (Fig. 9.2)
+    from_mode: str | None = None  # the drive was held in this other mode, motor on, before t = 0 (Fig. 9.1)
     hold: float = 0.0  # s recorded after settling (a velocity step's constant speed, Figs. 9.3/9.6)
 
     @property
@@ -91,7 +92,8 @@ class StepResult:
         return {"joint": self.joint, "drive": self.drive, "mode": self.mode, "value": self.value,
                 "signal": self.signal, "target": round(self.target, 6), "command": self.command,
                 "switch_s": round(self.switch_s, 4), "switch_steps": list(self.switch_steps),
-                "mode_first": self.mode_first, "ended_by": self.ended_by, "settled": self.settled,
+                "mode_first": self.mode_first, "from_mode": self.from_mode, "ended_by": self.ended_by,
+                "settled": self.settled,
                 "within_s": round(self.within, 4), "hold_s": self.hold, "samples": self.samples,
                 "expected": self.expected, "metrics": self.metrics.as_json(), "ok": self.breach is None,
                 "limit": None if self.breach is None else {**self.breach.as_dict(), "recovered_to": self.recovered_to}}
@@ -146,14 +148,40 @@ def step_request(target: Axis, mode: str, value: float, *, duration: float,
     return req
 
 
-def check_mode_first(mode: str, mode_first: bool) -> None:
+# --from-mode: the drive's own modes, standing still with the motor on (velocity: the Elmo's speed mode)
+FROM_UM = {"position": UM_POSITION, "velocity": UM_SPEED}
+FROM_MODES = tuple(FROM_UM)
+
+
+def check_mode_first(mode: str, mode_first: bool, from_mode: str | None = None) -> None:
     """--mode-first holds the drive in the step's mode with its motor on before t = 0; in torque
     mode that is TC=0 for the settle window, with no limit watch yet: a joint under load would
-    sag or fall, so it is refused (the seed's Fig. 9.2 is a position step)."""
+    sag or fall, so it is refused (the seed's Fig. 9.2 is a position step). --from-mode holds it in
+    another mode (position or velocity: standing still), so the step's switch is the seed's MO=0, UM,
+    MO=1 (Fig. 9.1)."""
     if mode_first and mode == "torque":
         raise UsageError("--mode-first is for position and velocity steps: in torque mode the motor would be on "
                          "with no torque (TC=0) for the settle window before the step",
                          hint="a torque step's own switch is short: leave --mode-first out")
+    if from_mode is None:
+        return
+    if from_mode not in FROM_MODES:
+        raise UsageError(f"--from-mode {from_mode}: expected one of {', '.join(FROM_MODES)} (a mode that holds the "
+                         "joint still with its motor on)")
+    if mode_first:
+        raise UsageError("--from-mode and --mode-first exclude each other: the drive stands before t = 0 either in "
+                         "another mode (--from-mode) or in the step's own (--mode-first)")
+    if from_mode == mode:
+        raise UsageError(f"--from-mode {from_mode} is the step's own mode: that is --mode-first")
+
+
+def check_from_mode_switches(from_mode: str | None, step_unit_mode: int) -> None:
+    """--from-mode must leave the step a mode to change: a velocity step jogs in UM=5 unless
+    motion.velocity_unit_mode is 2, and then `--from-mode position` is no other mode."""
+    if from_mode is not None and FROM_UM[from_mode] == step_unit_mode:
+        raise UsageError(f"--from-mode {from_mode}: the step runs in that unit mode too (UM={step_unit_mode}), so "
+                         "there would be no switch", hint="velocity steps run in UM=motion.velocity_unit_mode "
+                         "(docs/config.md); set it to 2 for the Elmo's speed mode")
 
 
 # the lowest --rate of a step (at 0.5 Hz a step's loop stopped showing signs of life
@@ -177,18 +205,20 @@ def run_step(session: ArmSession, target: Axis, mode: str, value: float, *, dura
              settings: MotionSettings, sleep: Callable[[float], None] = time.sleep,
              on_event: Callable[[str], None] | None = None, recorder_kw: dict[str, Any] | None = None,
              uncalibrated: bool = False, timebase: StepTime | None = None, mode_first: bool = False,
-             hold: float = 0.0, drive_trace: DriveTrace | None = None) -> StepResult:
+             hold: float = 0.0, drive_trace: DriveTrace | None = None, from_mode: str | None = None) -> StepResult:
     """``timebase``: the step's clock, waits and SYNC source (the recorder's, the motion guard's
     and the waits here); without it wall time, ``sleep`` and ``recorder_kw``. ``mode_first``: the
     drive is put in the step's unit mode with its motor on before t = 0, and the drive's settle
-    window waited out, so the step itself has no MO/UM switch (seed Fig. 9.2). ``hold``: s to go
+    window waited out, so the step itself has no MO/UM switch (seed Fig. 9.2); ``from_mode`` the same
+    in another mode (standing still), so the step's switch is MO=0, UM, MO=1 (seed Fig. 9.1). ``hold``: s to go
     on recording once the step has settled (bounded by ``duration``). ``drive_trace``: the
     drive's own recorder of the same step (ops/drive_step.py, `--source drive`), armed just before
     the command and read once the guard has stopped the motor."""
     check_step_values(duration, rate, hold)
     req = step_request(target, mode, value, duration=duration, uncalibrated=uncalibrated,
                        max_torque_for=session.cfg.motion.max_torque_for)
-    check_mode_first(mode, mode_first)
+    check_mode_first(mode, mode_first, from_mode)
+    check_from_mode_switches(from_mode, UM_OF.get(mode, settings.velocity_unit_mode))
     # jog's checks before anything is armed: a position goal inside the normal range, a calibrated joint
     precheck(session, target, req)
     ref, joint = target.ref, target.joint
@@ -210,9 +240,11 @@ def run_step(session: ArmSession, target: Axis, mode: str, value: float, *, dura
             if timebase is not None:
                 timebase.follow(rec.answered)
             um = UM_OF.get(mode, settings.velocity_unit_mode)
-            if mode_first:
-                # Fig. 9.2: the drive already in the step's mode, its motor on and past the settle window
-                guard.enable(ref, um)
+            if mode_first or from_mode is not None:
+                # Fig. 9.2: the drive already in the step's mode, its motor on and past the settle window;
+                # Fig. 9.1: in another mode (standing still: no BG), so the step must switch it first
+                held_um = um if from_mode is None else FROM_UM[from_mode]
+                guard.enable(ref, held_um)
                 _wait(guard, clock, sleep, session.cfg.protocol.mo_settle)
             state["switch_steps"] = _switch_steps(guard, ref, um)
             if drive_trace is not None:  # armed before t = 0: its set-up is not in the step's dead time
@@ -261,7 +293,7 @@ def run_step(session: ArmSession, target: Axis, mode: str, value: float, *, dura
                                                stall=stall)
         # the step ends where the motor was told to stop: the stop (and a limit recovery) is not the step
         # --mode-first: the switch and its settle window before t = 0 are not the step either
-        until, since = state["t_stop"] - t_cmd, -PRE_S if mode_first else None
+        until, since = state["t_stop"] - t_cmd, -PRE_S if mode_first or from_mode is not None else None
         recording = _cut(rec.recording(t_zero=t_cmd), until, since=since)
         # what the files hold: the samples of the cut recording, of the SYNCs sent within its span
         samples = len(recording.sample_rows())
@@ -290,7 +322,8 @@ def run_step(session: ArmSession, target: Axis, mode: str, value: float, *, dura
                       command=state["command"], switch_s=state["switch"], ended_by=state["ended_by"],
                       metrics=metrics, recording=recording, samples=samples, expected=expected, stop=guard.report,
                       breach=state.get("breach"), recovered_to=state.get("recovered_to"), settled=settled,
-                      within=duration, switch_steps=tuple(state["switch_steps"]), mode_first=mode_first, hold=hold)
+                      within=duration, switch_steps=tuple(state["switch_steps"]), mode_first=mode_first, hold=hold,
+                      from_mode=from_mode)
 
 
 def _switch_steps(guard: MotionGuard, ref: DriveRef, unit_mode: int) -> list[str]:

@@ -97,7 +97,11 @@ def settings_for(cfg: ArmConfig, drive: str, **overrides: object) -> SimSettings
                     servo_current_limit=faults.servo_current_limit,
                     supply_current_limit=faults.supply_current_limit, user_program=faults.user_program,
                     reset_comm_reboots=faults.reset_comm_reboots, boot_s=faults.boot_ms / 1000,
-                    group_id_needs_reset_comm=faults.group_id_needs_reset_comm)
+                    group_id_needs_reset_comm=faults.group_id_needs_reset_comm,
+                    bus_capacitance=faults.bus_capacitance, supply_resistance=faults.supply_resistance,
+                    velocity_window_s=faults.velocity_window, cogging_torque=faults.cogging_torque,
+                    cogging_cycles=faults.cogging_cycles,
+                    store_skew=(("PA", faults.target_skew),) if faults.target_skew else ())
         if faults.firmware is not None:
             base["sw_version"] = faults.firmware
         base.update({key: getattr(faults, key) for key in LOAD_KEYS if getattr(faults, key) is not None})
@@ -260,6 +264,11 @@ def _delta_position(a: SimDrive, b: SimDrive) -> float:
     return a.position - b.position
 
 
+def _pair_angle(a: SimDrive, b: SimDrive, sign: int, counts_per_rad: float) -> float:
+    """A pair's Σ (sign +1) or Δ (sign -1) angle in rad: what gravity acts on for both its motors."""
+    return (a.position + sign * b.position) / counts_per_rad
+
+
 def _plain_reading(drive: SimDrive, offset: int) -> int:
     """An absolute encoder on a plain joint: the motor's real position minus the encoder's offset."""
     return round(drive.position) - offset
@@ -347,6 +356,14 @@ class SimArm:
                 on_event=functools.partial(self._drive_event, name),
                 stalled=None if stalls is None else stalls.read)
         self._mechanics = _Mechanics(cfg, self.drives)
+        for pair in cfg.pairs.values():
+            # a pair's motors carry its joint together: gravity (`gravity:` of each motor, N m at horizontal)
+            # acts on the Σ angle, or on Δ's where only Δ is marked gravity-loaded
+            a, b = self.drives[pair.drive_a], self.drives[pair.drive_b]
+            sign = -1 if cfg.joints[pair.delta].gravity and not cfg.joints[pair.sigma].gravity else 1
+            k = cfg.joints[pair.sigma if sign > 0 else pair.delta].cpr / (2 * math.pi)
+            for motor in (a.motor, b.motor):
+                motor.gravity_angle = functools.partial(_pair_angle, a, b, sign, k)
         for name, w in cfg.sim_wiring.items():
             if name in self.drives:
                 self.drives[name].inputs.wiring_faults(w.swap, w.invert)

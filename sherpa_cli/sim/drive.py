@@ -56,6 +56,7 @@ from sherpa_cli.sim.pdo import COB_NO_RTR, DRIVE_MAPPABLE, TpdoTable
 from sherpa_cli.sim.recorder import SDO_ENTRIES, SimRecorder
 from sherpa_cli.sim.servo import ServoMotor
 from sherpa_cli.sim.settings import SimSettings
+from sherpa_cli.sim.speed_estimate import SpeedEstimate
 
 Frame = tuple[int, bytes]
 TIME_EPS = 1e-9  # s; float error of summed clock steps, far below any drive timing
@@ -80,14 +81,14 @@ SR_PROGRAM = 1 << 12  # a user program is running (elmo-protocol.md 2.5)
 def _make_motor(settings: SimSettings, position: int) -> Motor:
     """The kinematic motor, or with ``servo_bandwidth_hz`` / ``lag_s`` the servo model (sim/servo.py);
     either drives the load (sim/load.py) in torque mode."""
-    load, k = settings.load(), settings.counts_per_rad
+    load, k, supply = settings.load(), settings.counts_per_rad, settings.supply()
     if settings.servo_bandwidth_hz > 0:
         return ServoMotor(counts=position, load=load, counts_per_rad=k, wn=2 * math.pi * settings.servo_bandwidth_hz,
-                          zeta=settings.servo_damping)
+                          zeta=settings.servo_damping, supply=supply)
     if settings.lag_s > 0:  # the same model as a first-order lag: trails by lag_s at speed
         return ServoMotor(counts=position, load=load, counts_per_rad=k, wn=2 / settings.lag_s, zeta=1.0,
-                          feed_forward=0.0, integral_gain=0.0)
-    return Motor(counts=position, load=load, counts_per_rad=k)
+                          feed_forward=0.0, integral_gain=0.0, supply=supply)
+    return Motor(counts=position, load=load, counts_per_rad=k, supply=supply)
 
 
 def _saved_int(saved: Mapping[str, object], key: str) -> int:
@@ -149,6 +150,8 @@ class SimDrive:
         self.od_writes: list[tuple[float, int, int, int]] = []  # SDO writes, for "dry run wrote nothing"
         self.boots = 0
         self.motor = _make_motor(self.settings, int(position))
+        # VX from the encoder's counts (settings.velocity_window_s), or None: the model's own speed
+        self._speed = SpeedEstimate(self.settings.velocity_window_s) if self.settings.velocity_window_s else None
         self._outbox: list[Frame] = []
         self._replies: list[tuple[float, int, Frame]] = []  # heap: (release time, seq, frame)
         self._seq = itertools.count()
@@ -886,6 +889,8 @@ class SimDrive:
         self._limit_stop = False
         self._quick_stop = False
         self._record("motor on: MO=1" if on else "motor off: MO=0")
+        if self._speed is not None:
+            self._speed.reset(self._t, self.motor.rounded)
         if on and not self.deadman_watching():
             # the tool's invariant (docs/motion.md "The dead-man"), checked by the tests over every MO=1
             self.unguarded_motor_on += 1
@@ -952,6 +957,8 @@ class SimDrive:
                 m.stop(self.ram["SD"] * self.speed_gain)
                 self._limit_stop = True
             m.step(dt)
+            if self._speed is not None:
+                self._speed.sample(self._t + dt, m.rounded)
             if self._quick_stop and m.v == 0 and m.mode in ("idle", "stop"):
                 self._shut_down(MF_HEARTBEAT, "heartbeat lost, 0x6007=3 (quick stop done)")
                 return
@@ -1037,6 +1044,8 @@ class SimDrive:
         return value
 
     def _vx(self) -> int:
+        if self._speed is not None:
+            return wrap_int32(round(self._speed.value(self._t, self.motor.rounded))) if self._motor_on else 0
         return wrap_int32(round(self.motor.v))
 
     def _ms(self) -> int:

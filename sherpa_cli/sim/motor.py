@@ -8,10 +8,12 @@ what the profile integrated.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Literal
 
 from sherpa_cli.sim.load import Load
+from sherpa_cli.sim.supply import Supply
 
 Mode = Literal["idle", "velocity", "position", "stop", "torque"]
 COUNTS_PER_RAD = 3600 / (2 * math.pi)  # a joint of 3600 counts per turn when nothing says otherwise
@@ -41,6 +43,8 @@ class Motor:
     load: Load | None = None  # what torque mode drives (sim/load.py); None: 10000 cnt/s^2 per A, no friction
     counts_per_rad: float = COUNTS_PER_RAD
     current: float = 0.0  # A through the motor in the last torque-mode step
+    supply: Supply | None = None  # a supply whose voltage sags (sim/supply.py); None: stiff, load.py's bounds
+    gravity_angle: Callable[[], float] | None = None  # the angle gravity acts on (a pair's Σ, rad); None: own
 
     @property
     def position(self) -> float:
@@ -51,6 +55,10 @@ class Motor:
         self.v = self.a = self.current = 0.0
         self.mode = "idle"
         self.at_target = False
+        if self.supply is not None:
+            # an off drive takes no steps; its supply refills the bus within C V / I (0.3 s on the seed's
+            # bench), shorter than the settle window before the motor can be on again
+            self.supply.bus = self.supply.voltage
 
     def jog(self, v_target: float, accel: float, decel: float) -> None:
         self.mode, self.v_target, self.accel, self.decel = "velocity", v_target, accel, decel
@@ -84,9 +92,13 @@ class Motor:
             self.current = amps
             self.v = v0 + amps * NO_LOAD_ACCEL * dt
         else:
-            k = self.counts_per_rad
-            self.current = self.load.current(amps, v0 / k)
-            self.v = self.load.step(self.current, v0 / k, self.position / k, dt) * k
+            k, w0 = self.counts_per_rad, v0 / self.counts_per_rad
+            supply = self.supply
+            self.current = self.load.current(amps, w0) if supply is None else supply.current(self.load, amps, w0)
+            tilt = None if self.gravity_angle is None else self.gravity_angle()
+            self.v = self.load.step(self.current, w0, self.position / k, dt, tilt) * k
+            if supply is not None:
+                supply.drain(self.load, self.current, w0, dt)
         self.a = (self.v - v0) / dt
         self._advance(((v0 + self.v) / 2 if midpoint else self.v) * dt)
 

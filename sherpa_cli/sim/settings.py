@@ -8,9 +8,11 @@ the seed / public sources suggest; a bench measurement should replace them when 
 from __future__ import annotations
 
 import math
+import random
 from dataclasses import dataclass
 
 from sherpa_cli.sim.load import Load
+from sherpa_cli.sim.supply import Supply
 
 
 @dataclass(frozen=True)
@@ -83,6 +85,19 @@ class SimSettings:
     resistance: float = 1.0  # ohm
     supply_voltage: float = 25.0  # V
     counts_per_rad: float = 3600 / (2 * math.pi)  # the joint's cpr / 2 pi
+    # The real arm's imperfections (docs/simulator.md "Imperfections"), all off by default: the seed's
+    # bench profile turns them on. bus_capacitance F between the supply and the drive: > 0 makes the
+    # supply sag (sim/supply.py) -- its supply_current_limit then limits through the bus voltage, and
+    # supply_resistance ohm is its source resistance; 0 = a stiff supply (load.py's power bound).
+    bus_capacitance: float = 0.0
+    supply_resistance: float = 0.0
+    # The speed the drive reports (VX, 0x6069/0x606C): > 0 = the encoder's whole counts over this window
+    # (a speed estimated from position differences, with the quantisation's ripple); 0 = the model's speed.
+    velocity_window_s: float = 0.0
+    # Cogging and friction ripple: a torque of this amplitude (N m), cogging_cycles periods per joint
+    # turn, its phase drawn from ``seed`` (the same run for the same seed).
+    cogging_torque: float = 0.0
+    cogging_cycles: int = 0
     # Fault injection: at die_at the drive goes silent for good (crashed CPU, power stage off);
     # at reboot_at it resets once as after NMT reset node (brown-out, watchdog).
     die_at: float | None = None
@@ -138,9 +153,18 @@ class SimSettings:
     def load(self) -> Load:
         """The load this drive's motor drives (sim/load.py)."""
         peak = self.max_current if self.servo_current_limit is None else min(self.servo_current_limit, self.max_current)
+        phase = random.Random(f"cogging:{self.seed}").uniform(0.0, 2 * math.pi) if self.cogging_torque else 0.0
         return Load(inertia=self.inertia, torque_constant=self.torque_constant, viscous=self.viscous,
                     coulomb=self.coulomb, gravity=self.gravity, back_emf=self.back_emf, resistance=self.resistance,
-                    supply_voltage=self.supply_voltage, supply_current=self.supply_current_limit, peak_current=peak)
+                    supply_voltage=self.supply_voltage, supply_current=self.supply_current_limit, peak_current=peak,
+                    cogging_torque=self.cogging_torque, cogging_cycles=self.cogging_cycles, cogging_phase=phase)
+
+    def supply(self) -> Supply | None:
+        """A supply that sags (sim/supply.py), or None: a stiff one."""
+        if not self.bus_capacitance:
+            return None
+        return Supply(voltage=self.supply_voltage, current_limit=self.supply_current_limit,
+                      capacitance=self.bus_capacitance, resistance=self.supply_resistance)
     # The drive's recorder (sim/recorder.py, real-arm.md 2): one source each, so the simulator plays
     # whatever the host's RecorderSettings (elmo/recorder.py) may assume. Sample time at RG=1 (s),
     # samples shared by the signals, 0x2030 header layout ("cob" / "aligned"), data type nibble
@@ -178,6 +202,12 @@ class SimSettings:
             raise ValueError("SimSettings.servo_damping must be a finite number > 0")
         if not (math.isfinite(self.counts_per_rad) and self.counts_per_rad > 0):
             raise ValueError("SimSettings.counts_per_rad must be a finite number > 0")
+        for name in ("bus_capacitance", "supply_resistance", "velocity_window_s", "cogging_torque"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value >= 0):
+                raise ValueError(f"SimSettings.{name} must be a finite number >= 0")
+        if self.cogging_cycles < 0:
+            raise ValueError("SimSettings.cogging_cycles must be >= 0")
         self.load()  # checks the load's numbers
         if not self.recorder_sample_s > 0 or self.recorder_capacity < 1:
             raise ValueError("SimSettings.recorder_sample_s and recorder_capacity must be > 0")
