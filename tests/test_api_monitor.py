@@ -8,6 +8,7 @@ import pytest
 from motion_helpers import stepped_session
 
 from sherpa_cli.api import Arm, MonitorSnapshot
+from sherpa_cli.bus.targets import drive_ref
 from sherpa_cli.config import load_config
 from sherpa_cli.errors import UsageError
 from sherpa_cli.joints.units import TAU
@@ -77,3 +78,20 @@ def test_the_monitor_command_is_a_layer_over_the_api(cli, monkeypatch):
     assert live.exit_code == 0, live.transcript()
     assert live.stdout.count("bus can1") == 2
     assert calls == [(["elbow_pitch"], 1), (["elbow_pitch"], 2)]
+
+
+def test_a_stream_left_by_break_without_with_puts_the_heartbeat_back_and_unhooks_its_emcy_listener():
+    """`for s in arm.monitor(..., apply=True): break` kept 0x1017 at the monitor's value: the stream
+    and its generator held each other, so dropping the stream closed nothing; and every monitor left
+    an EMCY callback on the session's client."""
+    cfg = load_config(CONFIG)
+    with stepped_session(cfg, ["can1"]) as (session, stepped):
+        arm = Arm(session)
+        client = session.client(drive_ref(cfg, "elbow_1a"))
+        before = len(client._emcy_callbacks)
+        for snap in arm.monitor(["elbow_1a"], heartbeat_ms=50, apply=True, clock=stepped.now, sleep=stepped.sleep):
+            assert snap["elbow_1a"].heartbeat_ms == 50
+            break
+        writes = [(i, s, v) for _, i, s, v in session.sim.drives["elbow_1a"].od_writes]
+        assert writes == [(0x1017, 0, 50), (0x1017, 0, 0)]
+        assert len(client._emcy_callbacks) == before

@@ -116,3 +116,16 @@ def test_the_drives_own_recorders_record_at_the_servo_rate_and_refuse_bad_values
         result = arm.record_drives(["elbow_pitch"], 0.05, clock=stepped.now, sleep=stepped.sleep)
     assert result.samples["elbow_1a"] > 10 and result.period_s < 0.005  # far above a SYNC recording's rate
     assert len(_present(result.recording.joint("elbow_pitch").position)) > 10
+
+
+def test_a_finished_recording_stops_listening_for_emcy():
+    """Each `Arm.record(..., status=True)` left its EMCY callback on the session's clients: a later
+    EMCY went into every finished result, appended from the receive thread while a writer read it."""
+    from sherpa_cli.bus.targets import drive_ref
+
+    cfg = load_config(CONFIG)
+    with stepped_session(cfg, ["can1"]) as (session, stepped):
+        client = session.client(drive_ref(cfg, "elbow_1a"))
+        before = len(client._emcy_callbacks)
+        Arm(session).record(["elbow_pitch"], rate=50, duration=0.1, status=True, timebase=stepped)
+        assert len(client._emcy_callbacks) == before

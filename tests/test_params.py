@@ -412,3 +412,13 @@ def test_dump_to_an_unwritable_path_is_one_clear_line(cli, tmp_path):
     assert result.exit_code == 2 and "Traceback" not in result.stderr
     assert result.stderr.startswith(f"error: --output {target}: cannot write the dump: ")
     assert blocker.read_text() == "x"
+
+
+def test_params_diff_of_an_empty_dump_with_the_live_drives_reads_nothing(cli, tmp_path):
+    """A dump that names no drive, diffed with `live`: the empty drive list reached the API, which
+    takes an empty list for every drive, and the command failed on a bus it had not opened (exit 2)."""
+    empty = tmp_path / "empty.yaml"
+    empty.write_text("meta: {}\ndrives: {}\n", encoding="utf-8")
+    result = cli("--sim", "params", "diff", str(empty), "live")
+    assert result.exit_code == 0, result.transcript()
+    assert "no difference" in result.stdout and "0 drives" in result.stdout, result.transcript()

@@ -114,8 +114,11 @@ def diff(
         from sherpa_cli.api import Arm
         from sherpa_cli.ops.params_file import ParamDump
 
-        with st.session(buses=sorted({cfg.drives[d].bus for d in drives})) as session:
-            live = Arm(session).dump_params(None, drives).drives  # a layer over the Python API
+        if drives:  # none (a dump of no drives): nothing to read, and an empty list to the API means all
+            with st.session(buses=sorted({cfg.drives[d].bus for d in drives})) as session:
+                live = Arm(session).dump_params(None, drives).drives
+        else:
+            live = {}
         sides[pd.LIVE] = pd.dump_side(pd.LIVE, ParamDump(meta={}, drives=live), kind="live")
     report = pd.diff_sides(sides[a], sides[b], drives, warnings)
     for warning in report.warnings:

@@ -31,6 +31,14 @@ class RecordExtras:
         self.status: list[TimedStatus] = []
         self.emcy: list[TimedEmcy] = []
         self.budget = dict(budget or {})
+        self._listening: list[tuple[DriveRef, Callable[[Emcy], None]]] = []
+
+    def stop(self) -> None:
+        """Stop listening for EMCY: a long-lived session's clients outlive this recording, and its
+        result must not change after it is handed over."""
+        for ref, heard in self._listening:
+            self.session.client(ref).remove_emcy(heard)
+        self._listening.clear()
 
     def read_status(self) -> None:
         if not self.active:
@@ -49,7 +57,9 @@ class RecordExtras:
             return
         self.read_status()
         for ref in self.refs:
-            self.session.client(ref).on_emcy(self._on_emcy(ref.name))
+            heard = self._on_emcy(ref.name)
+            self.session.client(ref).on_emcy(heard)
+            self._listening.append((ref, heard))
         if self.view is not None:
             self.view.listen({r.bus: self.session.links[r.bus] for r in self.refs}, self.budget)
 

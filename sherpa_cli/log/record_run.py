@@ -30,6 +30,7 @@ if TYPE_CHECKING:
     from sherpa_cli.log.foxglove_live import LiveView
     from sherpa_cli.log.mcap_out import TimedEmcy, TimedStatus
     from sherpa_cli.log.record import BusBudget, Gaps, SyncSource
+    from sherpa_cli.log.record_extras import RecordExtras
 
 MAX_RECORD_S = 3600.0
 # the lowest rate of a recording (the wait notices Ctrl-C and its end once a SYNC period)
@@ -197,17 +198,27 @@ def run_record(session: ArmSession, plan: RecordPlan, duration: float, *, wait: 
     ``view``: a Foxglove live view fed the newest sample; ``timebase``: the clock, sleep and SYNC
     source (default wall time; tests and `--sim` step it, sim/stepped.py).
     """
-    from sherpa_cli.log.record import Poller, Recorder
-    from sherpa_cli.log.record_extras import RecordExtras, poller_sample, recorder_sample
-    from sherpa_cli.log.recording import CsvWriter
+    from sherpa_cli.log.record_extras import RecordExtras
 
     check_record_values(duration, plan.rate)
     if stream_to is not None and plan.poll:
         raise UsageError("a polled recording is written at its end: stream_to takes a TPDO recording")
-    cfg = session.cfg
     if wait is None:
         wait = wait_on(timebase.now, timebase.sleep) if timebase is not None else wait_on(time.monotonic, time.sleep)
     extras = RecordExtras(session, list(plan.refs), mcap=status, view=view, budget=plan.loads())
+    try:
+        return _run(session, plan, duration, extras, wait, timebase, stream_to)
+    finally:
+        extras.stop()
+
+
+def _run(session: ArmSession, plan: RecordPlan, duration: float, extras: RecordExtras, wait: Wait,
+         timebase: RecordTime | None, stream_to: Path | None) -> RecordResult:
+    from sherpa_cli.log.record import Poller, Recorder
+    from sherpa_cli.log.record_extras import poller_sample, recorder_sample
+    from sherpa_cli.log.recording import CsvWriter
+
+    cfg = session.cfg
     extras.start()
     if plan.poll:
         poller = Poller(session, plan.refs, current=plan.current) if timebase is None else \

@@ -135,6 +135,7 @@ class Monitor:
         self.watches = [_Watch(ref) for ref in refs]
         self._lock = threading.Lock()
         self._subscriptions: list[tuple[Any, int, Callable]] = []
+        self._emcy_subscriptions: list[tuple[DriveRef, Callable[[Emcy], None]]] = []
 
     # -- life cycle -------------------------------------------------------------------------------
 
@@ -156,7 +157,9 @@ class Monitor:
             on_heartbeat = self._heartbeat_callback(w)
             network.subscribe(HEARTBEAT_BASE + w.ref.node, on_heartbeat)
             self._subscriptions.append((network, HEARTBEAT_BASE + w.ref.node, on_heartbeat))
-            self.session.client(w.ref).on_emcy(self._emcy_callback(w))
+            on_emcy = self._emcy_callback(w)
+            self.session.client(w.ref).on_emcy(on_emcy)
+            self._emcy_subscriptions.append((w.ref, on_emcy))
         self._per_bus(self._start_drive)
 
     def close(self) -> None:
@@ -164,6 +167,9 @@ class Monitor:
             with contextlib.suppress(KeyError, ValueError):  # the bus is already gone
                 network.unsubscribe(can_id, callback)
         self._subscriptions.clear()
+        for ref, on_emcy in self._emcy_subscriptions:  # a long-lived session's client outlives this monitor
+            self.session.client(ref).remove_emcy(on_emcy)
+        self._emcy_subscriptions.clear()
         restore = [w for w in self.watches if w.heartbeat_set_from is not None]
         if restore:
             self._per_bus(self._restore_heartbeat, restore)
@@ -365,6 +371,27 @@ class MonitorSnapshot:
         return all(d.answering and not d.mf for d in self.drives)
 
 
+def _snapshots(monitor: Monitor, interval: float, count: int | None, duration: float | None,
+               clock: Callable[[], float], sleep: Callable[[float], None],
+               first_waits_for_heartbeats: bool) -> Generator[MonitorSnapshot, None, None]:
+    with monitor as mon:
+        start = clock()
+        number = 0
+        while True:
+            if number:
+                sleep(interval)
+            raise_if_signalled()  # a SIGTERM whose exception was lost (errors.py): no other ear for it
+            mon.poll()
+            if number == 0 and first_waits_for_heartbeats:
+                mon.wait_for_heartbeats(sleep=sleep)
+            number += 1
+            yield MonitorSnapshot(clock(), number, tuple(mon.snapshot()))
+            if count is not None and number >= count:
+                return
+            if duration is not None and clock() + interval - start > duration + 1e-9:
+                return
+
+
 class MonitorStream:
     """Snapshots of a :class:`Monitor`, one per poll, ``interval`` s apart on ``sleep``: at most
     ``count``, or until ``duration`` s have passed on ``clock`` (the first at once, none started
@@ -387,25 +414,10 @@ class MonitorStream:
         self.interval, self.count, self.duration = interval, count, duration
         self.clock, self.sleep = clock, sleep
         self.first_waits_for_heartbeats = first_waits_for_heartbeats
-        self._run = self._snapshots()
-
-    def _snapshots(self) -> Generator[MonitorSnapshot, None, None]:
-        with self.monitor as mon:
-            start = self.clock()
-            number = 0
-            while True:
-                if number:
-                    self.sleep(self.interval)
-                raise_if_signalled()  # a SIGTERM whose exception was lost (errors.py): no other ear for it
-                mon.poll()
-                if number == 0 and self.first_waits_for_heartbeats:
-                    mon.wait_for_heartbeats(sleep=self.sleep)
-                number += 1
-                yield MonitorSnapshot(self.clock(), number, tuple(mon.snapshot()))
-                if self.count is not None and number >= self.count:
-                    return
-                if self.duration is not None and self.clock() + self.interval - start > self.duration + 1e-9:
-                    return
+        # a module-level generator that holds nothing of this stream: a stream dropped without
+        # close() (a `for ... break` outside a `with`) takes the generator with it, whose exit then
+        # closes the monitor (0x1017 written back); a bound method would keep both alive in a cycle
+        self._run = _snapshots(self.monitor, interval, count, duration, clock, sleep, first_waits_for_heartbeats)
 
     def __iter__(self) -> MonitorStream:
         return self
