@@ -7,6 +7,12 @@ only after the rule every motion command keeps: an id of its own (listened for, 
 action, error behaviour and consumer armed in RAM (journaled first, owner "recover"), the heartbeat
 from this process's thread and one beat before MO=1. Then MO=0 confirmed, the objects put back, the
 notes dropped.
+
+The id is none another drive of the bus still watches (0x1016:1), the rule every motion command
+keeps (motion/host_ids.py OtherConsumers): a killed pair command leaves both drives watching its id,
+and a heartbeat on it re-armed the partner's consumer, which tripped again when this heartbeat ended
+-- while the partner was being put back, on a slow enough computer. A drive a killed command left
+is NMT-started first: its own trip may have left it deaf to that read.
 """
 
 from __future__ import annotations
@@ -20,9 +26,10 @@ from typing import TYPE_CHECKING
 
 from sherpa_cli.bus import journal
 from sherpa_cli.bus.machine_lock import wire_key
+from sherpa_cli.bus.targets import drive_refs
 from sherpa_cli.errors import SafetyError, SherpaError, raise_if_signalled
 from sherpa_cli.motion.deadman import COMM_ERROR, CONSUMER, LOSS_ACTION, OBJECT_NAMES, SIZES, HostHeartbeat
-from sherpa_cli.motion.host_ids import HostIdListener
+from sherpa_cli.motion.host_ids import HostIdListener, OtherConsumers
 from sherpa_cli.motion.lock import HostIdLock
 
 if TYPE_CHECKING:
@@ -44,6 +51,8 @@ def clear_heartbeat_trip(session: ArmSession, ref: DriveRef, settings: MotionSet
     sdo = session.sdo(ref)
     listener = HostIdListener({ref.bus: link.network}, settings.host_ids)
     ids = HostIdLock({ref.bus: wire_key(link.config.interface, link.config.channel)}, settings.host_ids)
+    others = OtherConsumers([r for r in drive_refs(session.cfg, None) if r.bus == ref.bus and r.key != ref.key],
+                            settings.host_ids, lambda r: _consumer_entry(session, r))
     heartbeat: HostHeartbeat | None = None
     armed: list[tuple[tuple[int, int], int]] = []
     switched = False
@@ -59,10 +68,17 @@ def clear_heartbeat_trip(session: ArmSession, ref: DriveRef, settings: MotionSet
     listener.start()
     try:
         end = clock() + settings.host_id_listen_for(ids.private)
+        for other in others.refs:
+            if journal.leftover(other):
+                # a drive a killed command left: its own trip may have put it in NMT Stopped, deaf to
+                # the read of its consumer entry (recover NMT-starts it anyway)
+                with contextlib.suppress(SherpaError):
+                    session.client(other).nmt_start()
+        others.read_all(between=raise_if_signalled)  # while listening
         while (left := end - clock()) > 0:
             sleep(min(left, 0.05))
             raise_if_signalled()
-        host_id = ids.acquire(listener.heard())
+        host_id = ids.acquire(listener.heard(), others.watched())
         heartbeat = HostHeartbeat(lambda: [link.network], host_id, settings.heartbeat_period, allowance)
         for key, value in ((LOSS_ACTION, settings.loss_action), (COMM_ERROR, settings.comm_error_behaviour),
                            (CONSUMER, settings.consumer_entry_for(host_id))):
@@ -112,3 +128,8 @@ def clear_heartbeat_trip(session: ArmSession, ref: DriveRef, settings: MotionSet
             log.warning("%s: clearing the trip: %s", ref.name, "; ".join(problems))
             raise SafetyError(f"{ref.name}: clearing the trip: {'; '.join(problems)}",
                               hint=f"`sherpa recover {ref.name} --apply` tries again")
+
+
+def _consumer_entry(session: ArmSession, ref: DriveRef) -> int:
+    raw = session.sdo(ref).upload(*CONSUMER, name=OBJECT_NAMES[CONSUMER])
+    return int.from_bytes((bytes(raw) + bytes(4))[:4], "little")
