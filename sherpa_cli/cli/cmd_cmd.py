@@ -57,7 +57,7 @@ def cmd(
     parse_all(exprs)  # a typo must not reach the bus, not even the NMT start
     check_raw_save(exprs, apply=apply, raw_save=raw_save)  # before anything is sent
     with st.session(buses=[ref.bus]) as session:
-        run = Arm(session).command(target, exprs, apply=apply, raw_save=raw_save, check=False)  # the Python API
+        run = Arm(session).command(target, exprs, apply=apply, raw_save=raw_save, check=False)
     if run.results or run.error is None:
         _render(st, ref, apply, run.results, run.stopped)
     for w in run.warnings:

@@ -316,7 +316,7 @@ def move(
     stepped = shared_stepped(st) if st.sim else None
     with st.session(buses=sorted({cfg.drives[d].bus for d in (p.drive_a, p.drive_b)})) as session:
         timebase = stepped if stepped is not None and use_stepped(session, stepped, cfg) else None
-        try:  # a layer over the Python API
+        try:
             result = Arm(session).diffdrive_move(p.name, sigma=sigma, delta=delta, relative=relative,
                                                  velocity=velocity, feedback=feedback, naive=naive,
                                                  uncalibrated=uncalibrated, poll=poll, source=source, hold=hold,
@@ -478,7 +478,6 @@ def match(
     from sherpa_cli.api import Arm
 
     with st.session(buses=sorted({cfg.drives[d].bus for d in (p.drive_a, p.drive_b)})) as session:
-        # a layer over the Python API
         result = Arm(session).match_pair(p.name, speed=speed, rounds=rounds, uncalibrated=uncalibrated)
     if plot is not None:
         pair_match.plot(result, plot)

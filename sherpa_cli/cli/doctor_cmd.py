@@ -83,7 +83,7 @@ def _arm(st: AppState, report: DoctorReport, cfg: ArmConfig, buslink: ModuleType
         with st.session() as session:
             statuses = buslink.status(cfg, names, session=session, window=load_window, sleep=sleep)
             usable = doc.check_buses(report, statuses)
-            Arm(session).doctor(usable, report=report, window=window, clock=clock, sleep=sleep)  # the Python API
+            Arm(session).doctor(usable, report=report, window=window, clock=clock, sleep=sleep)
         return
     netlinked = [b for b in names if cfg.buses[b].interface == "socketcan"]
     statuses = {s.bus: s for s in buslink.status(cfg, netlinked, session=None, window=load_window, sleep=sleep)}
@@ -95,7 +95,7 @@ def _arm(st: AppState, report: DoctorReport, cfg: ArmConfig, buslink: ModuleType
             for s in buslink.status(cfg, others, session=session, window=load_window, sleep=sleep):
                 statuses[s.bus] = s
             usable = doc.check_buses(report, [statuses[b] for b in names])
-            Arm(session).doctor(usable, report=report, window=window, clock=clock, sleep=sleep)  # the Python API
+            Arm(session).doctor(usable, report=report, window=window, clock=clock, sleep=sleep)
     except CommunicationError as exc:
         if any(c.name.startswith("bus ") for c in report.checks):
             raise

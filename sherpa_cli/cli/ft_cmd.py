@@ -83,7 +83,7 @@ def show(
             st.out.line(describe(dev))
             st.out.line(HEADER)
         with contextlib.suppress(KeyboardInterrupt):  # Ctrl-C is how an endless stream ends
-            # a layer over the Python API; the module's sleep is looked up at each wait (tests step it)
+            # the module's sleep is looked up at each wait (tests step it)
             for w in Arm(session).wrenches(dev.name, count=count, rate=rate, sleep=lambda t: sleep(t)):
                 if st.json_mode:
                     samples.append({**{k: round(v, 4) for k, v in w.axes().items()}, "sample": w.sample,
@@ -114,7 +114,7 @@ def bias(ctx: typer.Context, sensor: str | None = Sensor, apply: Apply = False) 
     cfg = st.load_config()
     dev = sensor_named(cfg, sensor)
     with st.session(buses=[dev.bus]) as session:
-        result = Arm(session).ft_bias(dev.name, apply=apply)  # a layer over the Python API
+        result = Arm(session).ft_bias(dev.name, apply=apply)
     if st.json_mode:
         st.out.json(result.as_json())
         return

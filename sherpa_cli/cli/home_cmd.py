@@ -90,7 +90,7 @@ def home(
 
     partial = ops_home.HomeReport()
     with st.session(buses=buses) as session:
-        try:  # a layer over the Python API, which plans the same units again from the config
+        try:  # the API plans the same units again from the config
             report = Arm(session).home(joints or None, measure_range=measure_range, on_unit=done, on_step=step,
                                        report=partial)
         except BaseException as exc:

@@ -305,7 +305,7 @@ def _jog_pair(st: AppState, cfg: ArmConfig, axis: Axis, req: MoveRequest, positi
 
     with st.session(buses=buses) as session:
         try:
-            result = Arm(session).move(axis, req, on_progress=progress)  # a layer over the Python API
+            result = Arm(session).move(axis, req, on_progress=progress)
         except BaseException as exc:
             st.out.progress(None)
             show_stop_report(st, exc, [axis, *(w for w in axis.watched if w.name != axis.name)])

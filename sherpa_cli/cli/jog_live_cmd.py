@@ -69,7 +69,7 @@ def interactive(st: AppState, names: Sequence[str], *, apply: bool, uncalibrated
     from sherpa_cli.cli.jog_view import JogView
 
     with st.session(buses=_buses(cfg, axes)) as session:
-        live = Arm(session).live_jog(names, uncalibrated=uncalibrated)  # a layer over the Python API
+        live = Arm(session).live_jog(names, uncalibrated=uncalibrated)
         try:
             with live:
                 app = JogView(live)
@@ -118,7 +118,7 @@ def joystick(st: AppState, device: str | None, *, apply: bool) -> None:
     from sherpa_cli.api import Arm
 
     with st.session(buses=_buses(cfg, axes)) as session:
-        arm = Arm(session)  # a layer over the Python API
+        arm = Arm(session)
         live = arm.live_jog(arm.joystick_joints(jcfg), keepalive=keepalive, tick_period=1.0 / jcfg.rate_hz)
         try:
             with live:

@@ -377,7 +377,7 @@ def record(
     # recording leaves its rows so far); the MCAP writer is given the whole recording at the end
     stream_to = outputs[".csv"] if ".csv" in outputs and ".mcap" not in outputs and not poll else None
     with live_view(st, foxglove, foxglove_at, allow_remote) as view, st.session(buses=list(plan.buses)) as session:
-        # a layer over the Python API; the wait is the command's, which a SIGTERM or SIGHUP ends too
+        # the wait is the command's, which a SIGTERM or SIGHUP ends too
         result = Arm(session).record(targets, rate, duration, current=plan.current, poll=poll, plan=plan,
                                      stream_to=stream_to, status=".mcap" in outputs, view=view,
                                      wait=lambda d, failed: _wait_for(d, failed), check=False)
@@ -640,7 +640,7 @@ def step(
         zero_ns = _time.time_ns()  # t = 0 (the step's command) is placed at the wall time the step began
         from sherpa_cli.api import Arm
 
-        try:  # a layer over the Python API
+        try:
             result = Arm(session).log_step(joint, mode, value, duration=duration, rate=rate, settings=settings,
                                            uncalibrated=uncalibrated, timebase=timebase, mode_first=mode_first,
                                            hold=hold, from_mode=from_mode)

@@ -42,7 +42,7 @@ def record_from_drive(st: AppState, targets: Sequence[str] | None, duration: flo
     with st.session(buses=list(dict.fromkeys(r.bus for r in refs))) as session:
         if trigger == "bg":
             st.out.info("armed: waiting for the next BG (start the move now)")
-        result = Arm(session).record_drives(targets, duration, trigger=trigger)  # a layer over the Python API
+        result = Arm(session).record_drives(targets, duration, trigger=trigger)
     write_csv(result.recording, paths[0])
     rate = 1.0 / result.period_s
     if st.json_mode:
@@ -68,7 +68,6 @@ def drive_step(st: AppState, session: ArmSession, target: Axis, mode: str, value
     from sherpa_cli.api import Arm
     from sherpa_cli.log.recording import write_csv
 
-    # a layer over the Python API
     result, drive = Arm(session).log_step_with_drive(target.name, mode, value, duration=duration, rate=rate,
                                                      uncalibrated=uncalibrated, settings=settings,
                                                      timebase=timebase)

@@ -98,7 +98,7 @@ def monitor(
     from sherpa_cli.api import Arm
 
     with live_view(st, foxglove, foxglove_at, allow_remote) as view, st.session(buses=buses) as session:
-        arm = Arm(session)  # a layer over the Python API
+        arm = Arm(session)
         if once:
             from sherpa_cli.ops.ft import read_sensors
 

@@ -61,7 +61,7 @@ def recover(ctx: typer.Context, targets: Targets = None, apply: ApplyRecover = F
             _show_pending(st, pending)
         return
     with st.session(buses=plan.buses(cfg, False)) as session:
-        results = Arm(session).recover(targets, apply=apply).results  # a layer over the Python API
+        results = Arm(session).recover(targets, apply=apply).results
     if st.json_mode:
         st.out.json({"apply": apply, "drives": [{"drive": r.drive, "address": r.address, "left": r.found,
                                                  "tripped": r.tripped, "already_back": r.already_back, "put_back": r.done,

@@ -37,7 +37,7 @@ def show(ctx: typer.Context,
     cfg = st.load_config()
     refs = drive_refs(cfg, [target], configured_only=True)
     with st.session(buses=list(dict.fromkeys(r.bus for r in refs))) as session:
-        readings = Arm(session).tune_show(target)  # a layer over the Python API
+        readings = Arm(session).tune_show(target)
     if st.json_mode:
         st.out.json({"drives": [{"drive": r.drive, "gains": r.values} for r in readings],
                      "unconfirmed": [k for k, (_, ok) in GAINS.items() if not ok]})
@@ -152,7 +152,6 @@ def step(
     stepped, sim_factory = stepped_sim(st)
     with st.session(buses=[target.ref.bus], sim_factory=sim_factory) as session:
         timebase = stepped if stepped is not None and use_stepped(session, stepped, cfg) else None
-        # a layer over the Python API
         result = Arm(session).tune_step(joint, mode, value, trial, duration=duration, rate=rate,
                                         uncalibrated=uncalibrated, settings=settings, timebase=timebase)
     held = " ".join(f"{k}={v:g}" for k, v in result.held.items())
