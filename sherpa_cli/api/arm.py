@@ -425,17 +425,23 @@ class Arm:
         return report
 
     def recover(self, targets: Sequence[str] | None = None, *, apply: bool = False,
-                check_drives: bool = False) -> RecoverReport:
+                check_drives: bool = False, check: bool = True) -> RecoverReport:
         """Put back what commands that did not finish left on the drives (`sherpa recover`): every
         temporary change the journal in the state directory notes (UM, SP/AC/DC, the dead-man objects,
         the pair's group id, TPDO settings, ...), last change first, and a tripped dead-man cleared
         under a dead-man of its own. A dry run (NMT start and reads only) unless ``apply``.
         ``check_drives``: also read every other target drive for what a command leaves (a journal
         deleted by hand, another host's command); with ``apply`` a drive with a finding is reset.
-        ``report.not_recovered`` names the drives still not as they should be."""
+        ``report.not_recovered`` names the drives still not as they should be; with ``check`` (the
+        default) they raise SafetyError, the error `sherpa recover` exits with, after the report."""
+        from sherpa_cli.errors import SafetyError
         from sherpa_cli.ops.recover import plan_recover, recover
 
-        return recover(self._session, plan_recover(self.config, targets), apply=apply, check_drives=check_drives)
+        report = recover(self._session, plan_recover(self.config, targets), apply=apply, check_drives=check_drives)
+        if check and report.not_recovered:
+            raise SafetyError(f"not recovered: {', '.join(report.not_recovered)}",
+                              hint="report.results and report.checks name the problems")
+        return report
 
     # ------------------------------------------------------------------ moving
 

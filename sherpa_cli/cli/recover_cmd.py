@@ -51,7 +51,7 @@ def recover(ctx: typer.Context, targets: Targets = None, apply: ApplyRecover = F
     plan = plan_recover(cfg, targets)
     if check_drives:
         with st.session(buses=plan.buses(cfg, True)) as session:
-            _show_checked(st, Arm(session).recover(targets, apply=apply, check_drives=True), apply)
+            _show_checked(st, Arm(session).recover(targets, apply=apply, check_drives=True, check=False), apply)
         return
     if not plan.refs:
         if st.json_mode:
@@ -61,7 +61,7 @@ def recover(ctx: typer.Context, targets: Targets = None, apply: ApplyRecover = F
             _show_pending(st, pending)
         return
     with st.session(buses=plan.buses(cfg, False)) as session:
-        results = Arm(session).recover(targets, apply=apply).results
+        results = Arm(session).recover(targets, apply=apply, check=False).results
     if st.json_mode:
         st.out.json({"apply": apply, "drives": [{"drive": r.drive, "address": r.address, "left": r.found,
                                                  "tripped": r.tripped, "already_back": r.already_back, "put_back": r.done,
