@@ -387,3 +387,12 @@ def test_short_frames_with_valid_letters_always_decode(letters, rest):
 def test_random_text_raises_only_codec_error(text):
     with contextlib.suppress(CodecError):
         parse_expr(text)
+
+
+def test_an_index_of_hundreds_of_digits_is_refused_naming_the_command():
+    """The refusal said only "bad index 9999999999... (400 digits)": on a command line of several
+    expressions the technician could not tell which one."""
+    from sherpa_cli.elmo.codec import CodecError, parse_expr
+
+    with pytest.raises(CodecError, match=r"^LL: bad index 9999999999\.\.\. \(400 digits\): out of range 0\.\.16383$"):
+        parse_expr("LL[" + "9" * 400 + "]=1")

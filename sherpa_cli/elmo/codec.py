@@ -293,7 +293,8 @@ def _parse_index(spec: CommandSpec, raw_index: str | None, text: str) -> int:
     if not (raw_index.isascii() and raw_index.isdigit()):
         raise CodecError(f"bad index {raw_index!r} in {text.strip()!r}: must be a decimal number")
     if len(raw_index) > 6:  # 14 bits need at most 5 digits; int() refuses thousands of them
-        raise CodecError(f"bad index {raw_index[:10]}... ({len(raw_index)} digits): out of range 0..{INDEX_MAX}")
+        raise CodecError(f"{spec.letters}: bad index {raw_index[:10]}... ({len(raw_index)} digits): "
+                         f"out of range 0..{INDEX_MAX}")
     return spec.check_index(int(raw_index))
 
 
