@@ -240,6 +240,10 @@ def test_a_home_interrupted_past_its_switch_goes_back_before_it_instead_of_into_
         assert int(c.get("UI", cfg.protocol.calibration_flag)) == SWITCH_SEEN
         with s.sim.lock:
             drive.motor.counts += 800  # pushed on, well past the switch (it reads released there)
+        # the simulated inputs follow the motor at its next step, not at this assignment
+        deadline = time.monotonic() + 10  # a hang guard: a step is due every 2 ms
+        while c.get("IP") & 1 and time.monotonic() < deadline:
+            time.sleep(0.01)
         assert not c.get("IP") & 1  # input 1, the home switch: released
         events_before = len(drive.events)
         report = home.run_home(s, home.plan_home(cfg, [joint]))
