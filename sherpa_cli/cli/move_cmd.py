@@ -106,6 +106,10 @@ def _joint_plan(j: JointMove, plan: MotionPlan) -> str:
     return f"  {j.name}: {_pos(j.start, j.cpr)} -> {_pos(j.target, j.cpr)}{gave}, {speed}"
 
 
+def plan_cpr(prepared: PreparedMove, joint: str) -> int:
+    return next(a.joint_cpr for a in prepared.plan.watched if a.name == joint)
+
+
 def _dry_run(st: AppState, prepared: PreparedMove) -> None:
     plan = prepared.plan
     what = f"pose {prepared.pose}" if prepared.pose else "the pose"
@@ -114,7 +118,7 @@ def _dry_run(st: AppState, prepared: PreparedMove) -> None:
                      "paced_by": plan.paced_by, "speed_scale": plan.speed_scale,
                      "joints": [{"joint": j.name, "from": j.start, "to": j.target, "speed": round(j.speed, 1),
                                  "limit": j.limit} for j in plan.joints],
-                     "held": dict(plan.held),
+                     "held": {n: {"from": plan.held_from.get(n, c), "to": c} for n, c in plan.held.items()},
                      "motors": {m.drive: {"PA": m.target, **m.profile.as_dict()} for m in plan.motors}})
         return
     if not plan.motors:
@@ -127,7 +131,10 @@ def _dry_run(st: AppState, prepared: PreparedMove) -> None:
     for j in plan.joints:
         st.out.line(_joint_plan(j, plan))
     for name, counts in plan.held.items():
-        st.out.line(f"  {name}: holds at {counts} counts (its pair moves)")
+        before = plan.held_from.get(name, counts)
+        st.out.line(f"  {name}: holds at {_pos(before, plan_cpr(prepared, name))}" +
+                    (" (its pair moves)" if before == counts else
+                     f", giving way to {counts} counts: Σ and Δ share parity"))
     st.out.line("  sent: " + "; ".join(f"{m.drive} SP={m.profile.sp} AC={m.profile.ac} DC={m.profile.dc} "
                                        f"PA={m.target}" for m in plan.motors))
     st.out.line("nothing sent; add --apply to move")

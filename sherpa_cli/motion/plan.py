@@ -83,6 +83,8 @@ class MotionPlan:
     motors: tuple[MotorMove, ...]
     watched: tuple[Axis, ...]  # every joint the motors move: the limit watch
     held: Mapping[str, int] = field(default_factory=dict)  # pair joints not named: held at these counts
+    # where they stood: a held joint gives way by one count when Σ and Δ differ in parity
+    held_from: Mapping[str, int] = field(default_factory=dict)
     duration: float = 0.0
     timeout: float = 0.0
     paced_by: str | None = None  # the joint that runs at its configured speed and sets the time
@@ -149,6 +151,8 @@ def plan_motion(cfg: ArmConfig, targets: Mapping[str, int], motors: Mapping[str,
     moves: list[JointMove] = []
     motor_targets: dict[str, int] = {}
     held: dict[str, int] = {}
+    held_from: dict[str, int] = {}
+    gives_way: list[JointMove] = []
     limits: dict[str, tuple[float, float, float]] = {}  # joint -> usable speed, accel, decel (counts/s, /s²)
     done_pairs: set[str] = set()
     for name in targets:
@@ -189,15 +193,17 @@ def plan_motion(cfg: ArmConfig, targets: Mapping[str, int], motors: Mapping[str,
             motor_targets[a], motor_targets[b] = ma, mb
             for joint, start, target in ((sj, s0, s1), (dj, d0, d1)):
                 if joint.name not in targets:
-                    held[joint.name] = start
+                    held[joint.name], held_from[joint.name] = target, start
                     if target == start:
                         continue
                 if joint.vel_limit is None:
                     raise UsageError(f"{joint.name}: no speed limit configured (joints.{joint.name}.velocity.limit)",
                                      hint="give the joint `velocity: {limit: COUNTS_PER_S}`")
                 asked = targets.get(joint.name)
-                moves.append(JointMove(joint.name, joint.cpr, start, target, 0.0, joint.vel_limit,
-                                       asked=asked if asked is not None and asked != target else None))
+                move = JointMove(joint.name, joint.cpr, start, target, 0.0, joint.vel_limit,
+                                 asked=asked if asked is not None and asked != target else None)
+                # a held joint that gives way for parity bounds the speed too, but is no joint of the move
+                (moves if joint.name in targets else gives_way).append(move)
                 # two motors, each rounded up: two counts/s of margin
                 limits[joint.name] = (max(1.0, joint.vel_limit * speed_scale - 2), *_ramps(joint.vel_limit,
                                                                                          joint.accel, joint.decel))
@@ -205,9 +211,9 @@ def plan_motion(cfg: ArmConfig, targets: Mapping[str, int], motors: Mapping[str,
         limits[name] = (speed, *_ramps(j.vel_limit, j.accel, j.decel))
     order = {n: i for i, n in enumerate(cfg.joints)}
     moves.sort(key=lambda m: order[m.name])
-    moving = [m for m in moves if m.distance]
+    moving = [m for m in (*moves, *gives_way) if m.distance]
     if not moving:
-        return MotionPlan(tuple(moves), (), (), held, speed_scale=speed_scale)
+        return MotionPlan(tuple(moves), (), (), held, held_from, speed_scale=speed_scale)
     # the common progress rates: the most each joint allows, the least of them all
     v_rate = min(limits[m.name][0] / abs(m.distance) for m in moving)
     a_rate = min(limits[m.name][1] / abs(m.distance) for m in moving)
@@ -222,15 +228,19 @@ def plan_motion(cfg: ArmConfig, targets: Mapping[str, int], motors: Mapping[str,
     motor_moves = []
     for d in drives:
         dist = abs(motor_targets[d] - motors[d])
-        prof = Profile(max(1, math.ceil(v_rate * dist)), max(1, math.ceil(a_rate * dist)),
-                       max(1, math.ceil(d_rate * dist)))
+        prof = Profile(_up(v_rate * dist), _up(a_rate * dist), _up(d_rate * dist))
         motor_moves.append(MotorMove(d, drive_ref(cfg, d), motors[d], motor_targets[d], prof))
     longest = max(moving, key=lambda m: abs(m.distance))
     n = abs(longest.distance)
     duration = _trapezoid_time(v_rate, a_rate, d_rate)
     timeout = move_time_bound(n, v_rate * n, a_rate * n, d_rate * n)
-    return MotionPlan(tuple(moves), tuple(motor_moves), tuple(joints_moved_by(cfg, drives)), held,
+    return MotionPlan(tuple(moves), tuple(motor_moves), tuple(joints_moved_by(cfg, drives)), held, held_from,
                       duration=duration, timeout=timeout, paced_by=paced.name, speed_scale=speed_scale)
+
+
+def _up(x: float) -> int:
+    """Whole counts at least ``x`` (not one more for float error), at least 1."""
+    return max(1, math.ceil(x - 1e-9))
 
 
 def _ramps(limit: int, accel: int | None, decel: int | None) -> tuple[float, float]:
