@@ -210,3 +210,17 @@ def test_leaving_the_block_on_an_error_stops_every_motor_and_carries_the_report(
         raise RuntimeError("the script failed")
     assert {d.drive for d in m.report.drives} == {"yaw", "elbow"}
     assert motors_off(a.session)
+
+
+def test_the_move_command_is_a_layer_over_the_api(cli, monkeypatch):
+    calls: list[tuple[str | None, bool]] = []
+    real = Arm.run_pose
+
+    def spy(self: Arm, prepared: Any, **kw: Any) -> Any:
+        calls.append((prepared.pose, kw.get("hold", False)))
+        return real(self, prepared, **kw)
+
+    monkeypatch.setattr(Arm, "run_pose", spy)
+    result = cli("--config", str(MOVE_CONFIG), "--sim", "move", "reach", "--apply")
+    assert result.exit_code == 0, result.transcript()
+    assert calls == [("reach", False)]
