@@ -224,3 +224,39 @@ def test_the_move_command_is_a_layer_over_the_api(cli, monkeypatch):
     result = cli("--config", str(MOVE_CONFIG), "--sim", "move", "reach", "--apply")
     assert result.exit_code == 0, result.transcript()
     assert calls == [("reach", False)]
+
+
+def test_transport_brings_all_14_joints_there_together_from_a_random_start():
+    """The shipped arm: 14 joints on three buses, from a random calibrated start (one move there,
+    inside every joint's normal range) to the transport pose: every joint arrives, within 10 ms of
+    the others (one poll of the watch: each joint's arrival is when its motors' profiles ended), and
+    no joint leaves its range on the way."""
+    import random
+
+    from motion_helpers import calibrate
+
+    cfg = load_config(Path(__file__).resolve().parent.parent / "configs" / "sherpa-arm.yaml")
+    rng = random.Random(39)
+    start = {}
+    for name, j in cfg.joints.items():
+        lo, hi = j.normal_range
+        start[name] = f"{rng.randint(lo // 2, hi // 2)}counts"
+    with stepped_session(cfg) as (session, st):
+        calibrate(session, *cfg.drives)
+        arm = Arm(session)
+        first = arm.move_pose(start, clock=st.now, sleep=st.sleep)
+        assert first.ok and all(j.reached for j in first.joints.values()), first.joints
+        seen: dict[str, list[int]] = {}
+
+        def progress(joints: Any) -> None:
+            for name, p in joints.items():
+                seen.setdefault(name, []).append(p)
+        r = arm.move_pose("transport", clock=st.now, sleep=st.sleep, on_progress=progress)
+    assert r.ok and len(r.joints) == 14
+    assert all(j.reached and j.end_counts == 0 for j in r.joints.values()), r.joints
+    assert r.start is not None and set(r.start.methods) == {"can0", "can1", "can2"}
+    spread = r.arrival_spread_s
+    assert spread is not None and spread <= 0.010 + 1e-9, {n: j.time_s for n, j in r.joints.items()}
+    for name, positions in seen.items():
+        lo, hi = cfg.joints[name].full_range
+        assert lo <= min(positions) and max(positions) <= hi, name

@@ -103,3 +103,28 @@ def test_every_joint_keeps_its_limit_and_follows_the_same_progress(j1, j2, pitch
             # the joint's speed on its line, both motors rounded up by less than one count/s each
             assert abs(j.speed) + 2 <= max(3, CFG.joints[name].vel_limit * scale) + 1e-6 or not j.distance
     assert p.duration > 0 and p.timeout > p.duration
+    # every motor of a longer move ends its profile when the plan does, to 10 ms or 0.5 %: the ramps
+    # make up for SP's rounding (a very slow move, whose AC and DC are a few counts/s², keeps more of
+    # their own rounding: docs/move.md)
+    for m in p.motors:
+        d = abs(m.target - m.start)
+        if d >= 100 and scale >= 0.1:
+            assert _profile_time(d, m.profile) == pytest.approx(p.duration, abs=max(0.010, 0.005 * p.duration)), m
+
+
+def _profile_time(d: float, pr) -> float:
+    """Time of a trapezoid (or triangle) move of ``d`` counts at SP, AC, DC."""
+    v, a, dc = pr.sp, pr.ac, pr.dc
+    if v * v / (2 * a) + v * v / (2 * dc) <= d:
+        return d / v + v / (2 * a) + v / (2 * dc)
+    peak = math.sqrt(2 * d * a * dc / (a + dc))
+    return peak / a + peak / dc
+
+
+def test_rounding_the_speed_up_is_made_up_by_gentler_ramps():
+    # 1000 counts against 37: j2's exact speed is a fraction of a count/s, rounded up; its ramps give it back
+    p = plan_motion(CFG, {"j1": 1000, "j2": 37}, ZERO, speed_scale=0.01)
+    j2 = next(m for m in p.motors if m.drive == "elbow")
+    assert j2.profile.sp > 37 / 1000 * p.joint("j1").speed
+    assert _profile_time(37, j2.profile) == pytest.approx(p.duration, rel=0.02)
+    assert j2.profile.ac <= math.ceil(40000 * 37 / 1000)

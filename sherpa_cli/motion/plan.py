@@ -225,17 +225,39 @@ def plan_motion(cfg: ArmConfig, targets: Mapping[str, int], motors: Mapping[str,
     for pair in cfg.pairs.values():
         if pair.drive_a in drives or pair.drive_b in drives:
             drives = [d for d in cfg.drives if d in drives or d in (pair.drive_a, pair.drive_b)]
-    motor_moves = []
-    for d in drives:
-        dist = abs(motor_targets[d] - motors[d])
-        prof = Profile(_up(v_rate * dist), _up(a_rate * dist), _up(d_rate * dist))
-        motor_moves.append(MotorMove(d, drive_ref(cfg, d), motors[d], motor_targets[d], prof))
+    duration = _trapezoid_time(v_rate, a_rate, d_rate)
+    motor_moves = [MotorMove(d, drive_ref(cfg, d), motors[d], motor_targets[d],
+                             motor_profile(abs(motor_targets[d] - motors[d]), v_rate, a_rate, d_rate, duration))
+                   for d in drives]
     longest = max(moving, key=lambda m: abs(m.distance))
     n = abs(longest.distance)
-    duration = _trapezoid_time(v_rate, a_rate, d_rate)
     timeout = move_time_bound(n, v_rate * n, a_rate * n, d_rate * n)
     return MotionPlan(tuple(moves), tuple(motor_moves), tuple(joints_moved_by(cfg, drives)), held, held_from,
                       duration=duration, timeout=timeout, paced_by=paced.name, speed_scale=speed_scale)
+
+
+def motor_profile(dist: int, v_rate: float, a_rate: float, d_rate: float, duration: float) -> Profile:
+    """SP, AC, DC of a motor moving ``dist`` counts in the plan's common profile (progress rates
+    ``v_rate``, ``a_rate``, ``d_rate``; ``duration`` s).
+
+    SP is V·dist rounded up to whole counts/s; on a short move that is several percent fast (3.6
+    counts/s becomes 4), and the motor would arrive that much early. Where the profile reaches
+    its cruise, the ramps make up for it: AC and DC are scaled down by the k that gives the
+    trapezoid at the rounded SP the plan's duration again, ``dist/SP + SP/(2·AC) + SP/(2·DC) =
+    duration`` -- gentler ramps, never steeper than planned. A triangle (no cruise) does not depend
+    on SP: its ramps are the plan's."""
+    if dist == 0:
+        return Profile(1, 1, 1)
+    sp = _up(v_rate * dist)
+    a, d = a_rate * dist, d_rate * dist
+    cruise = v_rate * v_rate / (2 * a_rate) + v_rate * v_rate / (2 * d_rate) < 1.0
+    left = duration - dist / sp  # what the ramps must take at the rounded speed
+    if cruise and left > 0:
+        k = (sp / 2) * (1 / a + 1 / d) / left
+        # the ramps at k must still leave a cruise (else the time is a triangle's, not this one)
+        if 0 < k <= 1 and sp * sp / (2 * k * a) + sp * sp / (2 * k * d) <= dist:
+            a, d = k * a, k * d
+    return Profile(sp, _up(a), _up(d))
 
 
 def _up(x: float) -> int:

@@ -16,7 +16,8 @@ already entered (a command arms it for one move, a motion session for several):
    joint is brought back (motion/recovery.py); any other way out is an exception, on which the
    start's exit and then the guard's stop every motor from standstill.
 
-Every joint's arrival time is the first sample at most :data:`ARRIVAL_COUNTS` from its target.
+Every joint's arrival time is when the profiles of its motors ended (MS=0, the watch's poll), else
+the first sample at most :data:`ARRIVAL_COUNTS` from its target.
 """
 
 from __future__ import annotations
@@ -37,6 +38,7 @@ from sherpa_cli.motion.report import GuardReport
 if TYPE_CHECKING:
     from sherpa_cli.bus.targets import DriveRef
     from sherpa_cli.elmo.client import DriveClient
+    from sherpa_cli.motion.axis import Axis
     from sherpa_cli.motion.guard import MotionGuard
     from sherpa_cli.motion.plan import MotionPlan
     from sherpa_cli.motion.settings import MotionSettings
@@ -54,7 +56,7 @@ class JointOutcome:
     start_counts: int
     target_counts: int | None  # None: a velocity move
     end_counts: int
-    time_s: float | None = None  # from the start until it arrived (None: it did not)
+    time_s: float | None = None  # from the start until its motors' profiles ended (None: they did not)
 
     @property
     def error_counts(self) -> int | None:
@@ -182,6 +184,14 @@ def run_plan(guard: MotionGuard, plan: MotionPlan, *, settings: MotionSettings, 
             on_progress({a.name: a.position(motors) for a in plan.watched})
         return motors
 
+    profile_done: dict[str, float] = {}  # drive -> s after the start its profile ended (MS=0)
+
+    def finished(_motors: Mapping[str, int]) -> bool:
+        for d, c in clients.items():
+            if d not in profile_done and int(c.get("MS")) == 0:
+                profile_done[d] = clock() - t0
+        return len(profile_done) == len(clients)
+
     try:
         with contextlib.ExitStack() as stack:
             starts: dict[str, pair_start.CommonStart] = {}
@@ -205,7 +215,7 @@ def run_plan(guard: MotionGuard, plan: MotionPlan, *, settings: MotionSettings, 
             t0 = began = clock()
             watched = limit_watch.watch(
                 plan.watched, sample, clock=clock, sleep=sleep, interval=settings.poll_interval,
-                finished=lambda _m: all(int(c.get("MS")) == 0 for c in clients.values()), duration=plan.timeout,
+                finished=finished, duration=plan.timeout,
                 check_drives=lambda: guard.check_motors_on(refs.values(), "the move"),
                 stall=settings.stall_watch(max(m.profile.sp for m in plan.motors)))
             result.duration = clock() - began
@@ -235,8 +245,18 @@ def run_plan(guard: MotionGuard, plan: MotionPlan, *, settings: MotionSettings, 
     for j in plan.joints:
         end = axes[j.name].position(final) if j.name in axes else j.start  # a joint not moved was not read
         result.joints[j.name] = JointOutcome(j.name, j.cpr, j.start, j.target, end,
-                                             arrived.get(j.name) if j.distance else 0.0)
+                                             _arrival(j.name, axes, profile_done, arrived) if j.distance else 0.0)
     return result
+
+
+def _arrival(joint: str, axes: Mapping[str, Axis], profile_done: Mapping[str, float],
+             arrived: Mapping[str, float]) -> float | None:
+    """When a joint arrived: its motors' profiles ended (MS=0, the last of them), else the first
+    sample that found it at its target; None if neither happened."""
+    axis = axes.get(joint)
+    if axis is not None and all(d in profile_done for d in axis.drives):
+        return max(profile_done[d] for d in axis.drives)
+    return arrived.get(joint)
 
 
 def _where(plan: MotionPlan, motors: Mapping[str, int]) -> str:
