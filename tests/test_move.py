@@ -260,3 +260,12 @@ def test_transport_brings_all_14_joints_there_together_from_a_random_start():
     for name, positions in seen.items():
         lo, hi = cfg.joints[name].full_range
         assert lo <= min(positions) and max(positions) <= hi, name
+
+
+def test_a_pose_already_reached_switches_nothing_on(arm: Any) -> None:
+    a, st = arm
+    a.move_pose("reach", clock=st.now, sleep=st.sleep)
+    again = a.move_pose("reach", clock=st.now, sleep=st.sleep)
+    assert again.ok and all(j.reached and j.time_s == 0.0 for j in again.joints.values())
+    assert again.start is None and not again.stop.drives  # no guard was armed
+    assert motors_off(a.session)

@@ -106,7 +106,7 @@ def _joint_plan(j: JointMove, plan: MotionPlan) -> str:
     return f"  {j.name}: {_pos(j.start, j.cpr)} -> {_pos(j.target, j.cpr)}{gave}, {speed}"
 
 
-def plan_cpr(prepared: PreparedMove, joint: str) -> int:
+def _cpr(prepared: PreparedMove, joint: str) -> int:
     return next(a.joint_cpr for a in prepared.plan.watched if a.name == joint)
 
 
@@ -132,7 +132,7 @@ def _dry_run(st: AppState, prepared: PreparedMove) -> None:
         st.out.line(_joint_plan(j, plan))
     for name, counts in plan.held.items():
         before = plan.held_from.get(name, counts)
-        st.out.line(f"  {name}: holds at {_pos(before, plan_cpr(prepared, name))}" +
+        st.out.line(f"  {name}: holds at {_pos(before, _cpr(prepared, name))}" +
                     (" (its pair moves)" if before == counts else
                      f", giving way to {counts} counts: Σ and Δ share parity"))
     st.out.line("  sent: " + "; ".join(f"{m.drive} SP={m.profile.sp} AC={m.profile.ac} DC={m.profile.dc} "

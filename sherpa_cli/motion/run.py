@@ -148,6 +148,14 @@ class MotionOutcome:
                    else {})}
 
 
+def standing(plan: MotionPlan) -> MotionOutcome:
+    """The outcome of a plan whose joints all stand at their targets: nothing is switched on."""
+    result = MotionOutcome()
+    for j in plan.joints:
+        result.joints[j.name] = JointOutcome(j.name, j.cpr, j.start, j.target, j.start, 0.0)
+    return result
+
+
 def run_plan(guard: MotionGuard, plan: MotionPlan, *, settings: MotionSettings, clock: Callable[[], float],
              sleep: Callable[[float], None],
              on_progress: Callable[[Mapping[str, int]], None] | None = None) -> MotionOutcome:
@@ -155,11 +163,9 @@ def run_plan(guard: MotionGuard, plan: MotionPlan, *, settings: MotionSettings, 
     result (``ok`` False, the joint brought back); a fault, a lost drive, a stall, the time bound,
     a signal raise, every motor then stopped by the start's exit and the guard's. The motors stay
     on (stopped) afterwards: the guard's exit switches them off."""
-    result = MotionOutcome()
     if not plan.motors:  # every joint stands at its target already
-        for j in plan.joints:
-            result.joints[j.name] = JointOutcome(j.name, j.cpr, j.start, j.target, j.start, 0.0)
-        return result
+        return standing(plan)
+    result = MotionOutcome()
     session, cfg = guard.session, guard.session.cfg
     refs = {m.drive: m.ref for m in plan.motors}
     clients: dict[str, DriveClient] = {d: guard.client(r) for d, r in refs.items()}

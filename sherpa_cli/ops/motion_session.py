@@ -15,6 +15,7 @@ changed, as every command does; :attr:`MotionSession.report` then says how.
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Callable, Mapping, Sequence
 from types import TracebackType
@@ -133,7 +134,7 @@ class MotionSession:
         from sherpa_cli.joints.units import parse_velocity, rad_per_s_to_counts_per_s
 
         guard = self._require()
-        if not (for_ > 0 and for_ == for_):
+        if not (math.isfinite(for_) and for_ > 0):
             raise UsageError(f"velocity: for_={for_!r}: expected a time > 0 s")
         cfg = self._session.cfg
         named = self._named(speeds, "velocity")

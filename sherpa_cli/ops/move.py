@@ -125,12 +125,12 @@ def run_move(session: ArmSession, prepared: PreparedMove, *, hold: bool = False,
     (``ok`` False); a refusal or failure raises with the guard's report attached."""
     from sherpa_cli.motion import hold as holding
     from sherpa_cli.motion.guard import MotionGuard
-    from sherpa_cli.motion.run import MotionOutcome, run_plan, watch_hold
+    from sherpa_cli.motion.run import MotionOutcome, run_plan, standing, watch_hold
     from sherpa_cli.motion.settings import MotionSettings
 
     plan = prepared.plan
-    if not plan.motors:
-        return run_plan_offline(plan)
+    if not plan.motors:  # every joint stands at its target: no guard, nothing switched on
+        return standing(plan)
     settings = MotionSettings.from_config(session.cfg, {r.bus for r in plan.refs})
     guard = (guard_factory or MotionGuard)(session, plan.refs, settings=settings, clock=clock, sleep=sleep,
                                            on_event=on_event)
@@ -154,16 +154,6 @@ def run_move(session: ArmSession, prepared: PreparedMove, *, hold: bool = False,
         # the hold ended: where the guard's stop found each joint
         stopped = {d.drive: d.position for d in guard.report.drives if d.position is not None}
         _ends_from(result, plan, stopped)
-    return result
-
-
-def run_plan_offline(plan: MotionPlan) -> MotionOutcome:
-    """The outcome of a plan whose joints all stand at their targets: nothing is switched on."""
-    from sherpa_cli.motion.run import JointOutcome, MotionOutcome
-
-    result = MotionOutcome()
-    for j in plan.joints:
-        result.joints[j.name] = JointOutcome(j.name, j.cpr, j.start, j.target, j.start, 0.0)
     return result
 
 
