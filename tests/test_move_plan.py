@@ -13,7 +13,7 @@ from hypothesis import strategies as st
 from sherpa_cli.config import load_config
 from sherpa_cli.errors import UsageError
 from sherpa_cli.joints.diffpair import to_joints
-from sherpa_cli.motion.plan import joint_targets, plan_motion
+from sherpa_cli.motion.plan import joint_targets, plan_motion, profile_time
 
 CFG = load_config(Path(__file__).resolve().parent / "data" / "move-arm.yaml")
 ZERO = {"yaw": 0, "elbow": 0, "left": 0, "right": 0}
@@ -109,16 +109,7 @@ def test_every_joint_keeps_its_limit_and_follows_the_same_progress(j1, j2, pitch
     for m in p.motors:
         d = abs(m.target - m.start)
         if d >= 100 and scale >= 0.1:
-            assert _profile_time(d, m.profile) == pytest.approx(p.duration, abs=max(0.010, 0.005 * p.duration)), m
-
-
-def _profile_time(d: float, pr) -> float:
-    """Time of a trapezoid (or triangle) move of ``d`` counts at SP, AC, DC."""
-    v, a, dc = pr.sp, pr.ac, pr.dc
-    if v * v / (2 * a) + v * v / (2 * dc) <= d:
-        return d / v + v / (2 * a) + v / (2 * dc)
-    peak = math.sqrt(2 * d * a * dc / (a + dc))
-    return peak / a + peak / dc
+            assert profile_time(d, m.profile) == pytest.approx(p.duration, abs=max(0.010, 0.005 * p.duration)), m
 
 
 def test_rounding_the_speed_up_is_made_up_by_gentler_ramps():
@@ -126,5 +117,5 @@ def test_rounding_the_speed_up_is_made_up_by_gentler_ramps():
     p = plan_motion(CFG, {"j1": 1000, "j2": 37}, ZERO, speed_scale=0.01)
     j2 = next(m for m in p.motors if m.drive == "elbow")
     assert j2.profile.sp > 37 / 1000 * p.joint("j1").speed
-    assert _profile_time(37, j2.profile) == pytest.approx(p.duration, rel=0.02)
+    assert profile_time(37, j2.profile) == pytest.approx(p.duration, rel=0.02)
     assert j2.profile.ac <= math.ceil(40000 * 37 / 1000)

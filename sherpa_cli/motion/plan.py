@@ -152,6 +152,7 @@ def plan_motion(cfg: ArmConfig, targets: Mapping[str, int], motors: Mapping[str,
     motor_targets: dict[str, int] = {}
     held: dict[str, int] = {}
     held_from: dict[str, int] = {}
+    caps: dict[str, float] = {}  # drive -> the steepest ramp (counts/s²) its joints allow
     gives_way: list[JointMove] = []
     limits: dict[str, tuple[float, float, float]] = {}  # joint -> usable speed, accel, decel (counts/s, /s²)
     done_pairs: set[str] = set()
@@ -168,6 +169,7 @@ def plan_motion(cfg: ArmConfig, targets: Mapping[str, int], motors: Mapping[str,
             assert j.drive is not None  # a plain joint has its drive (config validation)
             start = motors[j.drive]
             motor_targets[j.drive] = targets[name]
+            caps[j.drive] = min(_ramps(j.vel_limit, j.accel, j.decel))
             # one motor: a speed rounded up to whole counts/s stays within the limit
             speed = max(1.0, j.vel_limit * speed_scale - 1)
             moves.append(JointMove(name, j.cpr, start, targets[name], 0.0, j.vel_limit))
@@ -191,6 +193,8 @@ def plan_motion(cfg: ArmConfig, targets: Mapping[str, int], motors: Mapping[str,
                 raise UsageError(f"{pair.name}: motor targets {a}={ma}, {b}={mb} are outside the motor box "
                                  f"{a} [{box.a[0]}, {box.a[1]}], {b} [{box.b[0]}, {box.b[1]}]")
             motor_targets[a], motor_targets[b] = ma, mb
+            # a motor at AC moves Σ or Δ at up to 2 AC (as `diffdrive move` bounds it)
+            caps[a] = caps[b] = min(min(_ramps(x.vel_limit or 1, x.accel, x.decel)) for x in (sj, dj)) / 2
             for joint, start, target in ((sj, s0, s1), (dj, d0, d1)):
                 if joint.name not in targets:
                     held[joint.name], held_from[joint.name] = target, start
@@ -227,7 +231,8 @@ def plan_motion(cfg: ArmConfig, targets: Mapping[str, int], motors: Mapping[str,
             drives = [d for d in cfg.drives if d in drives or d in (pair.drive_a, pair.drive_b)]
     duration = _trapezoid_time(v_rate, a_rate, d_rate)
     motor_moves = [MotorMove(d, drive_ref(cfg, d), motors[d], motor_targets[d],
-                             motor_profile(abs(motor_targets[d] - motors[d]), v_rate, a_rate, d_rate, duration))
+                             motor_profile(abs(motor_targets[d] - motors[d]), v_rate, a_rate, d_rate, duration,
+                                           caps[d]))
                    for d in drives]
     longest = max(moving, key=lambda m: abs(m.distance))
     n = abs(longest.distance)
@@ -236,28 +241,61 @@ def plan_motion(cfg: ArmConfig, targets: Mapping[str, int], motors: Mapping[str,
                       duration=duration, timeout=timeout, paced_by=paced.name, speed_scale=speed_scale)
 
 
-def motor_profile(dist: int, v_rate: float, a_rate: float, d_rate: float, duration: float) -> Profile:
+def motor_profile(dist: int, v_rate: float, a_rate: float, d_rate: float, duration: float,
+                  accel_cap: float = math.inf) -> Profile:
     """SP, AC, DC of a motor moving ``dist`` counts in the plan's common profile (progress rates
     ``v_rate``, ``a_rate``, ``d_rate``; ``duration`` s).
 
     SP is V·dist rounded up to whole counts/s; on a short move that is several percent fast (3.6
-    counts/s becomes 4), and the motor would arrive that much early. Where the profile reaches
-    its cruise, the ramps make up for it: AC and DC are scaled down by the k that gives the
-    trapezoid at the rounded SP the plan's duration again, ``dist/SP + SP/(2·AC) + SP/(2·DC) =
-    duration`` -- gentler ramps, never steeper than planned. A triangle (no cruise) does not depend
-    on SP: its ramps are the plan's."""
+    counts/s becomes 4), and the motor would arrive that much early. The ramps make up for it: AC
+    and DC keep the plan's ratio, scaled by the k that gives the trapezoid at the rounded SP the
+    plan's duration, ``dist/SP + SP/(2·AC) + SP/(2·DC) = duration`` -- when that trapezoid exists
+    (a cruise is left) and its ramps stay within ``accel_cap`` (counts/s², what the motor's joints
+    allow) or the plan's own; else the plan's ramps."""
     if dist == 0:
         return Profile(1, 1, 1)
     sp = _up(v_rate * dist)
     a, d = a_rate * dist, d_rate * dist
-    cruise = v_rate * v_rate / (2 * a_rate) + v_rate * v_rate / (2 * d_rate) < 1.0
     left = duration - dist / sp  # what the ramps must take at the rounded speed
-    if cruise and left > 0:
+    cap = max(a, d, accel_cap)
+    if left > 0:
         k = (sp / 2) * (1 / a + 1 / d) / left
-        # the ramps at k must still leave a cruise (else the time is a triangle's, not this one)
-        if 0 < k <= 1 and sp * sp / (2 * k * a) + sp * sp / (2 * k * d) <= dist:
-            a, d = k * a, k * d
-    return Profile(sp, _up(a), _up(d))
+        ka, kd = k * a, k * d
+        if sp * sp / (2 * ka) + sp * sp / (2 * kd) <= dist and max(ka, kd) <= cap:
+            a, d = ka, kd
+    best = Profile(sp, _up(a), _up(d))
+    if sp < SMALL_SP:
+        # a few counts/s and counts/s²: whole numbers are coarse; the whole AC and DC nearest in time
+        # (never steeper than the joints allow). A move of a count or two still cannot take long: at
+        # SP = AC = DC = 1 one count takes 2 s at most
+        for cand in _near_profiles(dist, sp, a, d, duration, cap):
+            if abs(profile_time(dist, cand) - duration) < abs(profile_time(dist, best) - duration):
+                best = cand
+    return best
+
+
+SMALL_SP = 50  # counts/s: below this the whole-number rounding of a profile is searched
+
+
+def _near_profiles(dist: int, sp: int, a: float, d: float, duration: float, cap: float) -> list[Profile]:
+    """Whole AC (either side of ``a``) and, for each, the DC either side of what keeps ``duration``."""
+    out = []
+    for ac in {max(1, math.floor(a)), max(1, math.ceil(a))}:
+        if ac > cap:
+            continue
+        rest = duration - dist / sp - sp / (2 * ac)
+        ideal = sp / (2 * rest) if rest > 0 else d
+        out += [Profile(sp, ac, dc) for dc in {max(1, math.floor(ideal)), max(1, math.ceil(ideal))} if dc <= cap]
+    return out
+
+
+def profile_time(dist: float, pr: Profile) -> float:
+    """How long a move of ``dist`` counts takes at ``pr`` (a trapezoid, or a triangle when SP is not reached)."""
+    v, a, dc = pr.sp, pr.ac, pr.dc
+    if v * v / (2 * a) + v * v / (2 * dc) <= dist:
+        return dist / v + v / (2 * a) + v / (2 * dc)
+    peak = math.sqrt(2 * dist * a * dc / (a + dc))
+    return peak / a + peak / dc
 
 
 def _up(x: float) -> int:

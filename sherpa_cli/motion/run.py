@@ -133,7 +133,12 @@ class MotionOutcome:
     @property
     def arrival_spread_s(self) -> float | None:
         """Latest minus earliest arrival of the joints that moved and arrived (None: fewer than two)."""
-        times = [j.time_s for j in self.joints.values() if j.time_s is not None and j.start_counts != j.target_counts]
+        return self.arrival_spread()
+
+    def arrival_spread(self, min_counts: int = 1) -> float | None:
+        """:attr:`arrival_spread_s` of the joints that moved at least ``min_counts``."""
+        times = [j.time_s for j in self.joints.values() if j.time_s is not None and j.target_counts is not None
+                 and abs(j.target_counts - j.start_counts) >= min_counts]
         return max(times) - min(times) if len(times) > 1 else None
 
     def as_json(self) -> dict[str, Any]:
