@@ -198,9 +198,13 @@ def run_plan(guard: MotionGuard, plan: MotionPlan, *, settings: MotionSettings, 
     profile_done: dict[str, float] = {}  # drive -> s after the start its profile ended (MS=0)
 
     def finished(_motors: Mapping[str, int]) -> bool:
+        # every drive asked every time: a drive that reads 0 before its profile began (its BG still
+        # on the way) or in between is not counted until it reads 0 for good
         for d, c in clients.items():
-            if d not in profile_done and int(c.get("MS")) == 0:
-                profile_done[d] = clock() - t0
+            if int(c.get("MS")) == 0:
+                profile_done.setdefault(d, clock() - t0)
+            else:
+                profile_done.pop(d, None)
         return len(profile_done) == len(clients)
 
     try:
