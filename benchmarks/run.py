@@ -634,6 +634,62 @@ def bench_home(joints: tuple[str, ...] = ("shoulder_diff", "elbow_pitch", "elbow
                   f"{moving[0]:.1f} s (simulator, in process, real time)")
 
 
+def bench_pose_spread(rounds: int = 3, joints: tuple[str, ...] = (), span: float = 0.5) -> Result:
+    """`sherpa move transport` on the simulated sherpa-arm, on stepped time (sim/stepped.py: the
+    simulated motors move only while the move waits, so the figure is the plan's, not the host's
+    scheduling): from a random calibrated start (one move there, within ``span`` of each joint's
+    normal range around its zero) to the transport pose, ``joints`` of it (none: all 14, on three
+    buses). Value: the largest arrival
+    spread of ``rounds`` moves (latest minus earliest joint arrival, simulated ms); ratio: / 10 ms,
+    goal <= 1.0 (issue: all joints arrive within 10 ms of each other)."""
+    import random
+    import tempfile as _tf
+
+    from sherpa_cli.api import Arm
+    from sherpa_cli.bus.session import ArmSession
+    from sherpa_cli.bus.targets import drive_ref
+    from sherpa_cli.config import load_config
+    from sherpa_cli.motion.plan import drives_of
+    from sherpa_cli.sim.arm import SimArm
+    from sherpa_cli.sim.stepped import SteppedTime
+
+    cfg = load_config(ARM_CONFIG)
+    names = list(joints) or list(cfg.poses["transport"].counts)
+    spreads: list[float] = []
+    spreads_10: list[float] = []  # of the joints that move at least 10 counts (docs/move.md: short moves)
+    with _tf.TemporaryDirectory(prefix="sherpa-bench-pose-") as state, _state_home(state):
+        for n in range(rounds):
+            rng = random.Random(n)
+            start = {j: f"{rng.randint(int(cfg.joints[j].normal_range[0] * span), int(cfg.joints[j].normal_range[1] * span))}counts"
+                     for j in names}
+            stepped = SteppedTime()
+            channels = {b: {"interface": "virtual", "channel": f"bench-pose-{os.getpid()}-{n}-{b}"} for b in cfg.buses}
+            sim = SimArm(cfg, channels, clock=stepped.clock)
+            with ArmSession.open(cfg, sim=sim) as s:
+                p = cfg.protocol
+                s.client_overrides.update(stepped.client_overrides(p.reply_timeout, p.retries, sim.unheard))
+                for d in drives_of(cfg, names):  # calibrated, as `home` leaves them
+                    c = s.client(drive_ref(cfg, d))
+                    c.nmt_start()
+                    c.set("UI", 3, 1)
+                arm = Arm(s)
+                arm.move_pose(start, clock=stepped.now, sleep=stepped.sleep)
+                r = arm.move_pose("transport", joints=names, clock=stepped.now, sleep=stepped.sleep)
+            if not (r.ok and all(j.reached for j in r.joints.values())):
+                raise RuntimeError(f"round {n}: not every joint reached the transport pose")
+            spread = r.arrival_spread_s
+            spreads.append(spread if spread is not None else 0.0)
+            longer = r.arrival_spread(min_counts=10)
+            spreads_10.append(longer if longer is not None else 0.0)
+    worst = max(spreads) * 1000
+    goal = "<= 1.0"
+    ratio = worst / 10.0
+    return Result("pose_spread", round(worst, 1), "ms", round(ratio, 2), goal, _judge(ratio, goal),
+                  f"move transport of {len(names)} joints from {rounds} random calibrated starts: arrival spread "
+                  f"{', '.join(f'{s * 1000:.0f}' for s in spreads)} ms (simulated time, one poll = 10 ms); "
+                  f"of the joints moving >= 10 counts {', '.join(f'{s * 1000:.0f}' for s in spreads_10)} ms")
+
+
 COUPLING_CONFIG = ROOT / "tests/data/diffdrive-arm.yaml"
 
 
@@ -1011,6 +1067,7 @@ BENCHMARKS: dict[str, Callable[[], Result]] = {
     "recorder": bench_recorder,
     "match": bench_match,
     "capture": bench_capture,
+    "pose_spread": bench_pose_spread,
 }
 
 
@@ -1032,6 +1089,7 @@ SMOKE: dict[str, dict[str, object]] = {
     "recorder": {"seconds": 0.1},
     "match": {"rounds": 1, "modes": ("naive",)},  # group and --feedback moves: coupling runs them
     "capture": {"frames": 300},
+    "pose_spread": {"rounds": 1, "joints": ("elbow_pitch", "wrist_1"), "span": 0.1},
 }
 
 

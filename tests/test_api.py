@@ -159,6 +159,20 @@ def test_the_docs_jog_example_passes_mypy_strict_as_written(tmp_path):
     assert out.returncode == 0, out.stdout + out.stderr
 
 
+def test_the_docs_move_example_passes_mypy_strict_as_written(tmp_path):
+    """docs/api.md's "Move several joints" example type-checks: move_pose, the motion session, typed results."""
+    text = (ROOT / "docs" / "api.md").read_text(encoding="utf-8")
+    section = text.split("\n## Move several joints\n", 1)[1].split("\n## ", 1)[0]
+    (block,) = re.findall(r"```python\n(.*?)```", section, flags=re.S)
+    assert "arm.motion(" in block and "move_pose(" in block
+    example = tmp_path / "move_example.py"
+    example.write_text(block, encoding="utf-8")
+    out = subprocess.run([sys.executable, "-m", "mypy", "--strict", "--follow-imports=silent",
+                          "--cache-dir", str(tmp_path / "cache"), str(example)],
+                         cwd=ROOT, capture_output=True, text=True, timeout=600)
+    assert out.returncode == 0, out.stdout + out.stderr
+
+
 def test_jog_takes_exactly_one_kind_of_move():
     with Arm.open(CONFIG, sim=True) as arm, pytest.raises(UsageError, match="exactly one"):
         arm.jog("elbow_pitch", velocity=0.1, torque=0.5, duration=0.2)

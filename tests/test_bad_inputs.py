@@ -394,6 +394,8 @@ def cli_cases(rng: random.Random, tally: Tally, tmp: Path) -> None:
             ([*EX1, "--sim", "bus", "watch", word, "--for", "0.1"], True),
             ([*EX1, "--sim", "bus", "up", word], True),
             ([*EX1, "--sim", "bus", "down", word], True),
+            ([*EX1, "--sim", "move", word], True),
+            ([*EX3, "--sim", "move", word, "--joints", word], True),
         ]
     for i, expr in enumerate(BAD_EXPR):
         cases.append(([*EX1, "--sim", "cmd", "joint1", expr, *(["--apply"] if i % 2 else [])], True))
@@ -583,6 +585,7 @@ def numeric_option_cases(rng: random.Random, tally: Tally, tmp: Path) -> None:
         ([*EX3, "--sim", "diffdrive", "move", "pair1", "--sigma", "0", "--uncalibrated", "--apply"], "--delta"),
         ([*EX3, "--sim", "diffdrive", "move", "pair1", "--sigma", "0", "--delta", "0", "--uncalibrated", "--apply"],
          "--velocity"),
+        ([*EX1, "--sim", "move", "transport", "--uncalibrated", "--apply"], "--speed-scale"),
     ]
     cases: list[tuple[list[str], str]] = []
     for argv, option in options:

@@ -46,6 +46,7 @@ WIRED: dict[str, tuple[str, tuple[str, ...]]] = {
                               "--rate", "200", "-o", "{tmp}/step", "--apply")),
     "tune show": ("tune_show", ("--sim", "tune", "show", "elbow_pitch")),
     "tune set": ("tune_set", ("--sim", "tune", "set", "elbow_pitch", "KP[2]=0.6")),
+    "move": ("run_pose", ("--sim", "move", "transport", "--joints", "elbow_pitch,wrist_1", "--apply")),
     "pose diff": ("pose_diff", ("--sim", "pose", "diff", "transport")),
     "pose save": ("save_pose", ("--config", "{tmp}/arm.yaml", "--sim", "pose", "save", "dock", "--joints",
                                 "elbow_pitch")),
@@ -86,9 +87,7 @@ NOT_THE_ARM: dict[str, str] = {
 }
 
 # commands another change builds (the motion session and pose moves): they come with their Arm call
-PENDING: dict[str, str] = {
-    "move": "being built with Arm.motion (the motion session): add it to WIRED with its Arm method",
-}
+PENDING: dict[str, str] = {}
 
 
 def _commands() -> list[str]:

@@ -213,3 +213,20 @@ def test_breach_json():
     b = Breach("yaw", 1751, (-1750, 1750), (-1714, 1714))
     assert b.as_dict() == {"joint": "yaw", "position": 1751, "full_range": [-1750, 1750], "side": "high",
                            "back_to": 1714}
+
+
+def test_watch_ends_when_the_time_left_is_too_small_to_move_the_clock():
+    # started at 0.15 s, twenty 10 ms sleeps later the clock reads 0.35 and the float difference is
+    # 0.19999999999999998: 0.35 plus what is left is 0.35 again -- a watch that sleeps the rest
+    # waits forever on a stepped clock
+    clock = ManualClock()
+    for _ in range(15):
+        clock.advance(0.01)
+    sleeps = []
+
+    def sleep(s: float) -> None:
+        sleeps.append(s)
+        assert len(sleeps) < 100, "the watch does not end"
+        clock.advance(s)
+    result = watch([PLAIN], Track(clock, {"m1": 100.0}), clock=clock.now, sleep=sleep, interval=0.01, duration=0.2)
+    assert result.outcome == "elapsed"

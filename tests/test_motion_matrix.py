@@ -148,6 +148,25 @@ def diffdrive(hold: bool = False) -> Callable[..., Any]:
     return run
 
 
+# `move` of several joints at once: the joint of the axis kind and a plain joint beside it (another
+# drive), so a way out on one joint must stop every joint of the move
+MOVE_WITH = {"stiff": "yaw", "pitch": "stiff", "roll": "stiff"}
+
+
+def move_pose(hold: bool = False) -> Callable[..., Any]:
+    """`sherpa move` through the Python API (`Arm.move_pose`): two joints to targets DISTANCE counts
+    (the other half as far) below where they stand, together."""
+    def run(s: ArmSession, name: str, st: SteppedTime) -> Any:
+        from sherpa_cli.api import Arm
+
+        arm = Arm(s)
+        here = arm.state([name, MOVE_WITH[name]], clock=st.now)
+        pose = {name: f"{here[name].position_counts - DISTANCE}counts",
+                MOVE_WITH[name]: f"{here[MOVE_WITH[name]].position_counts - DISTANCE // 2}counts"}
+        return arm.move_pose(pose, hold=hold, clock=st.now, sleep=st.sleep)
+    return run
+
+
 def _home(s: ArmSession, name: str, st: SteppedTime) -> Any:
     from sherpa_cli.api import Arm
     from sherpa_cli.ops.home import HomeReport
@@ -232,6 +251,8 @@ ROWS: dict[str, Row] = {
     "log-step": Row(_log_step, ("plain", "drive")),
     "diffdrive-move": Row(diffdrive(), ("sigma", "delta")),
     "diffdrive-move-hold": Row(diffdrive(hold=True), ("sigma", "delta"), HOLD_WAYS, hold=True),
+    "move-pose": Row(move_pose(), ("plain", "sigma", "delta")),
+    "move-pose-hold": Row(move_pose(hold=True), ("plain", "sigma", "delta"), HOLD_WAYS, hold=True),
     # a homing search runs into its switch (no end switch to inject) and has no limit watch to breach
     "home": Row(_home, ("home_switch", "end_switches", "pair"),
                 tuple(w for w in WAYS if w not in ("limit_breach", "end_switch")), home=True),

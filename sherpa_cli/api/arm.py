@@ -30,6 +30,7 @@ if TYPE_CHECKING:
     from sherpa_cli.log.record_run import RecordPlan, RecordResult, RecordTime, Wait
     from sherpa_cli.motion.axis import Axis
     from sherpa_cli.motion.request import MoveRequest, Value
+    from sherpa_cli.motion.run import MotionOutcome
     from sherpa_cli.motion.settings import MotionSettings
     from sherpa_cli.ops.diffdrive import MoveResult
     from sherpa_cli.ops.doctor import DoctorReport
@@ -42,6 +43,8 @@ if TYPE_CHECKING:
     from sherpa_cli.ops.joystick import EventSource, JoystickRun
     from sherpa_cli.ops.live_jog import LiveJog
     from sherpa_cli.ops.monitor import MonitorStream
+    from sherpa_cli.ops.motion_session import MotionSession
+    from sherpa_cli.ops.move import PoseTargets, PreparedMove
     from sherpa_cli.ops.pair_match import MatchResult
     from sherpa_cli.ops.params_file import ParamDump
     from sherpa_cli.ops.poses import PoseDiff, SavedPose
@@ -583,6 +586,66 @@ class Arm:
         with self._force_limit(force_limit):
             return diffdrive.run_move(self._session, p, req, on_event=on_event, timebase=timebase,
                                       on_progress=on_progress)
+
+    def plan_pose(self, pose: str | PoseTargets, *, joints: Sequence[str] | None = None, speed_scale: float = 1.0,
+                  uncalibrated: bool = False) -> PreparedMove:
+        """The plan of :meth:`move_pose` without moving (`sherpa move POSE` without --apply): where
+        each joint stands (read from the drives; NMT start is all that is sent), where it goes, at
+        what speed, and the move's time (``prepared.plan``). Refuses what :meth:`move_pose` refuses."""
+        from sherpa_cli.ops.move import prepare
+
+        return prepare(self._session, pose, joints=joints, speed_scale=speed_scale, uncalibrated=uncalibrated)
+
+    def run_pose(self, prepared: PreparedMove, *, hold: bool = False,
+                 on_event: Callable[[str], None] | None = None,
+                 on_progress: Callable[[Mapping[str, int]], None] | None = None,
+                 clock: Callable[[], float] | None = None, sleep: Callable[[float], None] | None = None
+                 ) -> MotionOutcome:
+        """Run a plan from :meth:`plan_pose` (what :meth:`move_pose` does after planning)."""
+        import time
+
+        from sherpa_cli.ops.move import run_move
+
+        return run_move(self._session, prepared, hold=hold, on_event=on_event, on_progress=on_progress,
+                        clock=clock or time.monotonic, sleep=sleep or time.sleep)
+
+    def move_pose(self, pose: str | PoseTargets, *, joints: Sequence[str] | None = None, speed_scale: float = 1.0,
+                  uncalibrated: bool = False, hold: bool = False, force_limit: float | None = None,
+                  on_event: Callable[[str], None] | None = None,
+                  on_progress: Callable[[Mapping[str, int]], None] | None = None,
+                  clock: Callable[[], float] | None = None, sleep: Callable[[float], None] | None = None
+                  ) -> MotionOutcome:
+        """Move several joints together (`sherpa move POSE --apply`): ``pose`` is a pose of the config
+        by name, or a mapping joint -> position (rad, or text with a unit: ``"10deg"``); ``joints``
+        keeps only those of the pose. Every joint starts and arrives together: the joint that needs
+        the most time at its speed limit (times ``speed_scale``) sets the time. One motion guard
+        over every motor, the limit watch on every joint; a breach is a result (``ok`` False, every
+        joint stopped, the joint brought back), a refusal or fault raises. The result has, per
+        joint, from/to/end/error in counts and rad and its arrival time. ``hold``: afterwards every
+        motor holds until Ctrl-C (a normal end) or `sherpa stop`. ``force_limit``: as :meth:`jog`'s."""
+        with self._force_limit(force_limit):
+            prepared = self.plan_pose(pose, joints=joints, speed_scale=speed_scale, uncalibrated=uncalibrated)
+            return self.run_pose(prepared, hold=hold, on_event=on_event, on_progress=on_progress, clock=clock,
+                                 sleep=sleep)
+
+    def motion(self, joints: str | Sequence[str], *, uncalibrated: bool = False,
+               on_event: Callable[[str], None] | None = None,
+               clock: Callable[[], float] | None = None, sleep: Callable[[float], None] | None = None
+               ) -> MotionSession:
+        """One motion guard for several moves: ``with arm.motion(["elbow_pitch", "wrist_1"]) as m:``
+        checks the joints' calibration (``uncalibrated`` allows joints not homed), arms the guard over
+        every motor of the joints (fault check, the dead-man on every bus, the lock), then
+        ``m.move_to({"elbow_pitch": 0.5, "wrist_1": 0.05})`` (a session of one joint also takes
+        ``m.move_to(0.5)``), ``m.velocity({...}, for_=1.0)``, ``m.hold()``, ``m.stop()`` and
+        ``m.positions()``. Each move returns a :class:`~sherpa_cli.motion.run.MotionOutcome`.
+        Leaving the block stops every motor from standstill and switches it off; ``m.report`` says how."""
+        import time
+
+        from sherpa_cli.ops.motion_session import MotionSession
+
+        return MotionSession(self._session, [joints] if isinstance(joints, str) else list(joints),
+                             uncalibrated=uncalibrated, on_event=on_event, clock=clock or time.monotonic,
+                             sleep=sleep or time.sleep)
 
     def log_step(self, name: str, mode: str, value: float, *, duration: float = 2.0, rate: float = 1000.0,
                  uncalibrated: bool = False, mode_first: bool = False, hold: float = 0.0,

@@ -136,6 +136,7 @@ def _register() -> None:
         jog_cmd,
         limits_cmd,
         monitor_cmd,
+        move_cmd,
         params_cmd,
         pose_cmd,
         program_cmd,
@@ -151,6 +152,7 @@ def _register() -> None:
     app.command("monitor")(monitor_cmd.monitor)
     app.command("cmd")(cmd_cmd.cmd)
     app.command("jog")(jog_cmd.jog)
+    app.command("move")(move_cmd.move)
     app.command("stop")(stop_cmd.stop)
     app.command("recover")(recover_cmd.recover)
     app.command("home")(home_cmd.home)

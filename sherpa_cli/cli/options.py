@@ -80,3 +80,11 @@ Verbose = Annotated[bool, typer.Option("--verbose", "-v", help="Show every step'
 SetVars = Annotated[list[str] | None, typer.Option(
     "--set", metavar="KEY=VALUE", help="Set a recipe variable (repeat), e.g. backup=FILE (where dump-params "
     "writes in the commissioning recipe).")]
+
+
+def name_list(values: list[str] | None) -> list[str] | None:
+    """A repeatable option that also takes comma-separated names (``--joints a,b --joints c``);
+    None when none was given."""
+    if not values:
+        return None
+    return [name.strip() for item in values for name in item.split(",") if name.strip()] or None

@@ -8,6 +8,7 @@ from typing import TYPE_CHECKING
 import typer
 
 from sherpa_cli.cli.context import state
+from sherpa_cli.cli.options import name_list
 from sherpa_cli.words import plural
 
 if TYPE_CHECKING:
@@ -25,12 +26,6 @@ def _value(v: float | str) -> str:
 
 def _rad(v: float | None) -> str:
     return "?" if v is None else f"{round(v, 4) + 0.0:+.4f}"
-
-
-def _joint_list(joints: list[str] | None) -> list[str] | None:
-    if not joints:
-        return None
-    return [j.strip() for item in joints for j in item.split(",") if j.strip()]
 
 
 @app.command("list")
@@ -118,7 +113,7 @@ def save(
 
     st = state(ctx)
     with st.session() as session:
-        saved = Arm(session).save_pose(name, _joint_list(joints), replace=replace)
+        saved = Arm(session).save_pose(name, name_list(joints), replace=replace)
     if st.json_mode:
         st.out.json({"pose": saved.name, "file": saved.path, "replaced": saved.replaced,
                      "joints": {j: {"rad": v, "counts": saved.counts[j]} for j, v in saved.values.items()}})

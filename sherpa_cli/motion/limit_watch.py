@@ -22,6 +22,8 @@ from sherpa_cli.joints.diffpair import Range, is_reachable, to_motors
 from sherpa_cli.motion.axis import Axis, Motors
 from sherpa_cli.motion.blocked import StallWatch
 
+TIME_EPSILON_S = 1e-9
+
 
 def _clamp(x: int, r: Range | None) -> int:
     return x if r is None else min(max(x, r[0]), r[1])
@@ -161,7 +163,9 @@ def watch(joints: Sequence[Axis], sample: Callable[[], Motors], *,
             check_drives()
         if finished is not None and finished(motors):
             return WatchResult("finished", motors, (), n, elapsed, positions)
-        if duration is not None and elapsed >= duration:
+        # a remainder below TIME_EPSILON_S is float error of the clock's sums: sleeping it would not
+        # move a stepped clock, and the watch would never end
+        if duration is not None and elapsed >= duration - TIME_EPSILON_S:
             return WatchResult("elapsed", motors, (), n, elapsed, positions)
         if stall is not None and stall.feed(motors, clock()):
             return WatchResult("stalled", motors, (), n, elapsed, positions)
