@@ -12,4 +12,4 @@ away=$(mktemp -d)
 trap 'rm -rf "$away"' EXIT
 cd "$away"
 env -u PYTHONPATH -u MYPYPATH python -m mypy --python-executable "$target" --strict --follow-imports=silent --cache-dir "$away/cache" \
-  "$repo/examples/arm_api.py" "$repo/examples/read_arm.py"
+  "$repo/examples/arm_api.py" "$repo/examples/read_arm.py" "$repo/examples/arm_script.py"

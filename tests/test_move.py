@@ -269,3 +269,23 @@ def test_a_pose_already_reached_switches_nothing_on(arm: Any) -> None:
     assert again.ok and all(j.reached and j.time_s == 0.0 for j in again.joints.values())
     assert again.start is None and not again.stop.drives  # no guard was armed
     assert motors_off(a.session)
+
+
+def test_a_sessions_later_moves_on_a_group_started_bus_start_one_bg_after_another() -> None:
+    """Two joints on one bus start by the group BG, whose id takes effect through a reset
+    communication: the session's second move, its motors still on, was refused ("motor on: no NMT
+    reset communication") -- a session of two moves failed on the shipped arm. It starts the motors
+    one BG after another instead, the skew measured."""
+    from sherpa_cli.api import Arm
+
+    cfg = load_config(Path(__file__).resolve().parent.parent / "configs" / "sherpa-arm.yaml")
+    assert cfg.motion.pair_start == "group" and cfg.motion.pair_group_reset_comm
+    with stepped_session(cfg, ["can1"]) as (session, st):
+        with Arm(session).motion(["elbow_pitch", "wrist_1"], clock=st.now, sleep=st.sleep) as m:
+            first = m.move_to({"elbow_pitch": 0.1, "wrist_1": -0.05})
+            second = m.move_to({"elbow_pitch": 0.0, "wrist_1": 0.0})
+        assert first.ok and second.ok
+        assert first.start is not None and first.start.methods == {"can1": "group"}
+        assert second.start is not None and second.start.methods == {"can1": "sequential"}
+        assert all(j.reached for j in second.joints.values())
+        assert motors_off(session)

@@ -212,6 +212,11 @@ def run_plan(guard: MotionGuard, plan: MotionPlan, *, settings: MotionSettings, 
             starts: dict[str, pair_start.CommonStart] = {}
             for bus, bus_refs in buses.items():
                 how = method if len(bus_refs) > 1 else "sequential"
+                if how == "group" and cfg.motion.pair_group_reset_comm and any(guard.motor_on(r) for r in bus_refs):
+                    # the group id takes effect only through a reset communication, which no motor
+                    # that is on may see (it puts the dead-man back): a session's later move, its
+                    # motors still on, starts them one BG after another (the skew is measured)
+                    how = "sequential"
                 starts[bus] = stack.enter_context(pair_start.CommonStart(
                     session, bus_refs, {r.name: clients[r.name] for r in bus_refs}, how, group_id,
                     stop=pair_start.stop_motors(guard, bus_refs, settings), reset_comm=pair_start.group_reset(guard, cfg)))
