@@ -40,7 +40,7 @@ def test_list_and_show_give_the_poses_as_written_and_in_joint_units(cli, golden)
 def test_an_unknown_pose_is_one_line_naming_the_known_ones(cli):
     result = cli("pose", "show", "transprot")
     assert result.exit_code == 2
-    assert result.stderr.startswith("error: no pose 'transprot'; known: transport (did you mean 'transport'?)")
+    assert result.stderr.startswith("error: pose 'transprot' is not in the config; did you mean 'transport'?")
     assert "Traceback" not in result.stderr
 
 

@@ -13,7 +13,6 @@ from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
-from sherpa_cli.config.yamlnodes import suggest
 from sherpa_cli.errors import SafetyError, UsageError
 from sherpa_cli.motion import calibration
 from sherpa_cli.motion.plan import (
@@ -25,6 +24,7 @@ from sherpa_cli.motion.plan import (
     plan_motion,
 )
 from sherpa_cli.motion.report import with_report
+from sherpa_cli.ops.poses import pose_named
 
 if TYPE_CHECKING:
     from sherpa_cli.bus.session import ArmSession
@@ -47,15 +47,7 @@ class PreparedMove:
 def pose_targets(cfg: ArmConfig, pose: str | PoseTargets, joints: Sequence[str] | None = None) -> dict[str, int]:
     """Joint -> counts of ``pose`` (a pose of the config by name, or joint -> value), limited to
     ``joints`` when given (each must be in the pose)."""
-    if isinstance(pose, str):
-        if pose not in cfg.poses:
-            close = suggest(pose, list(cfg.poses))
-            raise UsageError(f"pose '{pose}' is not in the config" + (f"; did you mean '{close}'?" if close else ""),
-                             hint=f"poses: {', '.join(cfg.poses)}" if cfg.poses else
-                             "the config has no `poses:` section (docs/config.md)")
-        targets = dict(cfg.poses[pose].counts)
-    else:
-        targets = joint_targets(cfg, pose)
+    targets = dict(pose_named(cfg, pose).counts) if isinstance(pose, str) else joint_targets(cfg, pose)
     if joints:
         check_joint_names(cfg, joints, "--joints")
         missing = [j for j in joints if j not in targets]

@@ -24,16 +24,14 @@ __all__ = ["PoseDiff", "PoseJoint", "SavedPose", "diff_pose", "pose_named", "sav
 
 
 def pose_named(cfg: ArmConfig, name: str) -> Pose:
-    """The pose ``name``; a UsageError that lists the poses (and the nearest name) otherwise."""
+    """The pose ``name``; a UsageError naming the nearest pose and listing them otherwise."""
     pose = cfg.poses.get(name)
     if pose is not None:
         return pose
-    if not cfg.poses:
-        raise UsageError(f"no pose {name!r}: the config has no poses: section",
-                         hint="teach one: sherpa pose save NAME (docs/move.md)")
-    near = suggest(name, cfg.poses)
-    raise UsageError(f"no pose {name!r}; known: {', '.join(sorted(cfg.poses))}"
-                     + (f" (did you mean {near!r}?)" if near else ""))
+    close = suggest(name, list(cfg.poses))
+    raise UsageError(f"pose '{name}' is not in the config" + (f"; did you mean '{close}'?" if close else ""),
+                     hint=f"poses: {', '.join(cfg.poses)}" if cfg.poses else
+                     "the config has no `poses:` section (docs/move.md); teach one: sherpa pose save NAME")
 
 
 @dataclass(frozen=True)
