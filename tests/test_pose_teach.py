@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import dataclasses
 import difflib
+import json
 import shutil
 from pathlib import Path
 
@@ -64,6 +65,11 @@ def test_save_then_diff_round_trips_and_keeps_every_line_of_the_file(cli, arm_fi
     off = cli("--config", str(arm_file), "--sim", "pose", "diff", "dock")
     assert off.exit_code == 0
     golden("pose/diff-after-jog.txt", off.transcript().replace(str(arm_file.parent), "<tmp>"))
+    back = cli("--config", str(arm_file), "--sim", "move", "dock", "--apply")  # taught, then reached
+    assert back.exit_code == 0, back.transcript()
+    there = cli("--config", str(arm_file), "--sim", "--json", "pose", "diff", "dock")
+    report = json.loads(there.stdout)
+    assert report["at_pose"] and all(abs(j["off_counts"]) <= 1 for j in report["joints"].values()), report
 
 
 def test_save_refuses_with_nothing_written(cli, arm_file):
