@@ -41,6 +41,7 @@ from sherpa_cli.motion import calibration, hold, limit_watch, recovery
 from sherpa_cli.motion.axis import Axis, joints_moved_by, move_time_bound
 from sherpa_cli.motion.blocked import blocked_text
 from sherpa_cli.motion.pair_start import CommonStart, group_reset, pair_settings, stop_motors
+from sherpa_cli.motion.plan import Profile
 from sherpa_cli.motion.report import with_report
 
 if TYPE_CHECKING:
@@ -80,18 +81,6 @@ class PairTarget:
     poll: bool = False  # record by polling PX instead of the recorder (TPDO on SYNC)
     source: str = "can"  # can: recorded over the bus (TPDO on SYNC, or --poll); drive: by the drives' recorders
     hold: bool = False  # after the move both motors stay on, holding, until Ctrl-C or `sherpa stop`
-
-
-@dataclass(frozen=True)
-class Profile:
-    """SP, AC, DC of one motor (counts/s, counts/s²)."""
-
-    sp: int
-    ac: int
-    dc: int
-
-    def as_dict(self) -> dict[str, int]:
-        return {"SP": self.sp, "AC": self.ac, "DC": self.dc}
 
 
 @dataclass(frozen=True)
