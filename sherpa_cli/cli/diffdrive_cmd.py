@@ -485,7 +485,8 @@ def match(
         st.out.json({**result.as_dict(), **({"plot": plot} if plot else {})})
         return
     _render_match(st, result, plot)
-    changes = result.proposal.changes
+    # a drive whose scaled gains all round to what it holds has nothing to write: no empty tune set
+    changes = {d: values for d, values in result.proposal.changes.items() if values}
     if not changes:
         return
     if not result.reached:
