@@ -1,0 +1,100 @@
+"""The drive seam: what moving a motor needs of a servo drive, whatever its protocol (docs/architecture.md).
+
+A :class:`Drive` speaks in counts, counts/s and counts/s², and in a few states: whether the power
+stage is on, in which :class:`Mode`, whether a fault forbids motion (decoded to a sentence), and
+whether the profile it was given has ended. Each drive type implements it over its own protocol --
+the Elmo binary interpreter (elmo/drive.py: MO, UM, PX, SP, PA, BG, ST ...) and the CiA 402 state
+machine over SDO (cia402/drive.py: controlword, statusword, 0x607A ...) -- and devices.REGISTRY maps
+the config's drive type to the class. The motion layer asks a drive only through this Protocol.
+
+What is not here is not portable: Elmo's group BG, its recorder, user programs and gains stay
+behind the Elmo client; a command that needs them refuses another drive type by name.
+"""
+
+from __future__ import annotations
+
+import enum
+from dataclasses import dataclass
+from typing import Protocol
+
+
+class Mode(enum.Enum):
+    """How the drive follows its set point (Elmo UM 5/2/1; CiA 402 0x6060 = 1/3/4)."""
+
+    POSITION = "position"
+    VELOCITY = "velocity"
+    TORQUE = "torque"
+    OTHER = "other"  # a mode motion does not use (Elmo UM=4 dual feedback, CiA 402 homing ...)
+
+
+@dataclass(frozen=True)
+class Ramp:
+    """A trapezoid profile: cruise speed (counts/s), acceleration and deceleration (counts/s²)."""
+
+    speed: int
+    accel: int
+    decel: int
+
+
+@dataclass(frozen=True)
+class DriveStatus:
+    """One read of a drive's state."""
+
+    enabled: bool  # the power stage is on: the motor is held or driven
+    mode: Mode
+    fault: str | None = None  # why it must not move, decoded; None: nothing forbids it
+
+
+class Drive(Protocol):
+    """One servo drive as motion uses it. Every call is one exchange (or a short confirmed
+    sequence) with the drive; a drive that does not answer raises DriveTimeoutError, a refusal
+    DriveRefusedError (sherpa_cli.errors)."""
+
+    kind: str  # the config's drive type: "elmo", "cia402"
+    label: str  # for messages: "<name> (<bus> node <n>)"
+
+    def status(self) -> DriveStatus: ...
+
+    def position(self) -> int:
+        """The actual position, counts."""
+        ...
+
+    def velocity(self) -> int:
+        """The actual velocity, counts/s."""
+        ...
+
+    def enable(self, mode: Mode) -> None:
+        """Into ``mode`` (the power stage off first where a mode change needs it), then power on,
+        confirmed by reading the state back."""
+        ...
+
+    def disable(self) -> None:
+        """Power stage off, confirmed."""
+        ...
+
+    def ramp(self) -> Ramp:
+        """The profile the drive holds now (to be put back)."""
+        ...
+
+    def set_ramp(self, ramp: Ramp) -> None: ...
+
+    def move_to(self, target: int) -> None:
+        """An absolute position target (counts); the motion starts at :meth:`begin`."""
+        ...
+
+    def jog(self, velocity: int) -> None:
+        """A velocity set point (counts/s); the motion starts at :meth:`begin`."""
+        ...
+
+    def begin(self) -> None:
+        """Start the set point given last (Elmo BG; CiA 402 new set-point / halt released)."""
+        ...
+
+    def stop(self) -> str:
+        """Decelerate to standstill with the drive's own ramp; does not wait. Returns how, for
+        the report ("ST", "halt")."""
+        ...
+
+    def profile_done(self) -> bool:
+        """The last profile has ended (Elmo MS=0; CiA 402 target reached)."""
+        ...
