@@ -50,8 +50,15 @@ class Drive(Protocol):
     sequence) with the drive; a drive that does not answer raises DriveTimeoutError, a refusal
     DriveRefusedError (sherpa_cli.errors)."""
 
-    kind: str  # the config's drive type: "elmo", "cia402"
-    label: str  # for messages: "<name> (<bus> node <n>)"
+    @property
+    def kind(self) -> str:
+        """The config's drive type: "elmo", "cia402"."""
+        ...
+
+    @property
+    def label(self) -> str:
+        """The drive for messages: "<name> (<bus> node <n>)"."""
+        ...
 
     def status(self) -> DriveStatus: ...
 

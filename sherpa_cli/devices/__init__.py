@@ -17,6 +17,7 @@ from typing import Protocol
 
 from sherpa_cli.config.model import DEVICE_TYPES
 from sherpa_cli.devices.ft_sensor import FtReader
+from sherpa_cli.elmo.drive import ElmoDrive
 from sherpa_cli.errors import UsageError
 
 CIA406_DEVICE_PROFILE = 406
@@ -28,17 +29,6 @@ class SdoClient(Protocol):
     """What a device class needs of its SDO client (bus/sdo.py ``DriveSdo``; tests pass fakes)."""
 
     def upload(self, index: int, sub: int = 0, *, name: str | None = None) -> bytes: ...
-
-
-class ElmoDrive:
-    """An Elmo SimplIQ drive: its real client is elmo/client.py (binary interpreter); listed here so
-    every configured type has a class."""
-
-    type = "elmo"
-    profile = 402
-
-    def __init__(self, sdo: SdoClient) -> None:
-        self.sdo = sdo
 
 
 class CanOpenEncoder:
@@ -63,7 +53,8 @@ class CanOpenEncoder:
         return struct.unpack_from("<i", bytes(data), 0)[0]
 
 
-# the F/T sensor is no CANopen node: its class is built on a frame port, not an SDO client
+# the F/T sensor is no CANopen node: its class is built on a frame port, not an SDO client; a drive's
+# class (the drive seam, sherpa_cli/drive.py) on its session's clients: devices/drives.py opens it
 REGISTRY: dict[str, type] = {"elmo": ElmoDrive, "canopen-encoder": CanOpenEncoder, "ft_sensor": FtReader}
 assert tuple(REGISTRY) == DEVICE_TYPES, "config.model.DEVICE_TYPES and the registry must list the same types"
 

@@ -498,3 +498,15 @@ def describe_il(value: int, roles: Mapping[int, str] | None = None) -> str:
     text = decode_il(value).text()
     role = (roles or {}).get(value)
     return f"{text} (config: {role})" if role else text
+
+
+def fault_reason(mf: int, sr: int) -> str | None:
+    """Why a drive must not move, decoded; None when MF and SR show no fault."""
+    reasons = describe_mf(mf) if mf else []
+    for fault in sr_problems(sr):
+        if fault.code == 1 << 6 and mf:  # "motor failure latched": MF already says which
+            continue
+        if fault.code == 1 << 28:  # stopped by a limit: a state, not a fault (moving away is allowed)
+            continue
+        reasons.append(fault.line())
+    return "; ".join(reasons) if reasons else None

@@ -35,8 +35,11 @@ from sherpa_cli.bus import journal
 from sherpa_cli.bus.health import preflight
 from sherpa_cli.bus.machine_lock import wire_key
 from sherpa_cli.bus.targets import drive_refs
+from sherpa_cli.devices.drives import ELMO, open_drive
 from sherpa_cli.devices.ft_sensor import open_reader
-from sherpa_cli.elmo.faults import decode_sr, describe_mf
+from sherpa_cli.drive import Drive, Mode, Ramp
+from sherpa_cli.elmo.drive import UNIT_MODES, mode_of
+from sherpa_cli.elmo.faults import decode_sr, describe_mf, fault_reason
 from sherpa_cli.elmo.protocol import UM_TORQUE
 from sherpa_cli.errors import (
     CommunicationError,
@@ -55,7 +58,7 @@ from sherpa_cli.motion.host_ids import HostIdListener, OtherConsumers
 from sherpa_cli.motion.lock import DriveLock, HostIdLock, drive_label
 from sherpa_cli.motion.report import NOT_MOVED, RESET_DURING_STOP, DriveStop, GuardReport
 from sherpa_cli.motion.settings import PROFILE_KEYS, MotionSettings
-from sherpa_cli.motion.stopping import ask_patiently, fault_reason, stop_drive, why
+from sherpa_cli.motion.stopping import ask_patiently, stop_drive, stop_other, why
 from sherpa_cli.motion.trip_clear import clear_heartbeat_trip
 
 if TYPE_CHECKING:
@@ -90,7 +93,8 @@ class _Drive:
     """The guard's record of one drive: what it found and what it changed."""
 
     ref: DriveRef
-    client: DriveClient
+    client: DriveClient  # NMT, label, silence; the interpreter's letters only for an Elmo drive
+    drive: Drive  # the drive seam: every other drive type moves through it alone
     mo: int = 0
     um: int = 0
     switched_on: bool = False
@@ -98,6 +102,13 @@ class _Drive:
     profile_before: dict[str, int] = field(default_factory=dict)  # SP/AC/DC found at entry
     put_back: set[str] = field(default_factory=set)  # journal step names put back (or never changed)
     od_before: dict[tuple[int, int], int] = field(default_factory=dict)  # the dead-man objects it wrote
+    mode: Mode | None = None  # another drive type: the mode found, then the one it was switched on in
+    ramp_before: Ramp | None = None  # another drive type: the profile found at entry
+
+    @property
+    def native(self) -> bool:
+        """An Elmo drive: the guard speaks its interpreter (journaled UM/SP/AC/DC, ST/JV stop)."""
+        return self.drive.kind == ELMO
 
 
 class MotionGuard:
@@ -250,12 +261,39 @@ class MotionGuard:
         return False
 
     def client(self, ref: DriveRef) -> DriveClient:
-        return self._drive(ref).client
+        """The interpreter client of an Elmo drive; another drive type is refused by name."""
+        d = self._drive(ref)
+        if not d.native:
+            raise UsageError(f"{d.drive.label} is a {d.drive.kind} drive: this needs an Elmo drive's interpreter",
+                             hint="docs/drives.md lists what each drive type supports")
+        return d.client
 
-    def enable(self, ref: DriveRef, unit_mode: int) -> None:
-        """UM=unit_mode only if needed (with MO=0 first), then MO=1 confirmed by reading MO back."""
+    def drive(self, ref: DriveRef) -> Drive:
+        """The drive behind the seam (sherpa_cli/drive.py), whatever its type."""
+        return self._drive(ref).drive
+
+    def position(self, ref: DriveRef) -> int:
+        """The motor's actual position (counts): PX patiently for an Elmo drive (:meth:`query`)."""
+        d = self._drive(ref)
+        if d.native:
+            return int(self.query(ref, "PX"))
+        self._raise_if_tripped()
+        self._pulse()
+        try:
+            return d.drive.position()
+        finally:
+            self._pulse()
+
+    def enable(self, ref: DriveRef, unit_mode: int | Mode) -> None:
+        """UM=unit_mode only if needed (with MO=0 first), then MO=1 confirmed by reading MO back.
+        Another drive type: into the mode, its power stage on, through the seam."""
         self.check()
         d = self._drive(ref)
+        if not d.native:
+            self._enable_other(d, unit_mode if isinstance(unit_mode, Mode) else mode_of(unit_mode))
+            return
+        if isinstance(unit_mode, Mode):
+            unit_mode = UNIT_MODES[unit_mode]
         c = d.client
         bound = c.settings.mo_confirm_timeout + 2 * self.settings.request_bound
         if d.um != unit_mode:
@@ -279,6 +317,19 @@ class MotionGuard:
             c.motor_on()
             d.mo = 1
             self._event(f"{c.label}: motor on (UM={unit_mode})")
+        self._pulse()
+
+    def _enable_other(self, d: _Drive, mode: Mode) -> None:
+        if d.mo and d.mode is mode:
+            self._pulse()
+            return
+        # the power-state walk is a few confirmed exchanges: each within the request bound
+        self._pulse(extra=8 * self.settings.request_bound + self.session.cfg.protocol.mo_confirm_timeout)
+        d.switched_on = True  # before the request: a lost confirmation must still end switched off
+        self._watch.set_moving(d.ref.bus, d.ref.node, True)
+        d.drive.enable(mode)
+        d.mo, d.mode = 1, mode
+        self._event(f"{d.drive.label}: motor on ({mode.value} mode)")
         self._pulse()
 
     def check(self) -> None:
@@ -433,6 +484,14 @@ class MotionGuard:
         another terminal ends the command with the decoded reason (``during``: "the move", "the jog")."""
         self.check()
         for ref in refs:
+            d = self._drive(ref)
+            if not d.native:
+                self._pulse()
+                st = d.drive.status()
+                if not st.enabled:
+                    why = st.fault or "switched off from elsewhere (sherpa stop, another tool)"
+                    raise SafetyError(f"{d.drive.label}: the motor was switched off during {during}: {why}")
+                continue
             if not decode_sr(int(self.query(ref, "SR"))).motor_on:
                 mf = int(self.query(ref, "MF"))
                 why = "; ".join(describe_mf(mf)) if mf else "MO=0 from elsewhere (sherpa stop, another tool)"
@@ -454,8 +513,7 @@ class MotionGuard:
     def query(self, ref: DriveRef, letters: str, index: int = 0) -> int | float:
         """A query that waits out a drive deaf for its MO settle window (another host switched the motor:
         `sherpa stop`), up to protocol.mo_confirm_timeout, keeping the dead-man fed meanwhile."""
-        d = self._drive(ref)
-        c = d.client
+        c = self.client(ref)  # an Elmo drive's letters: another drive type is refused by name
         # patient for the settle window only: one request's attempts already span it, so a drive that
         # stays silent costs one request, not the whole mo_confirm_timeout
         patience = c.settings.mo_settle
@@ -661,8 +719,11 @@ class MotionGuard:
     def _inspect(self, ref: DriveRef) -> None:
         client = self.session.client(ref)
         client.nmt_start()
-        d = _Drive(ref, client)
+        d = _Drive(ref, client, open_drive(self.session, ref))
         self._drives[(ref.bus, ref.node)] = d
+        if not d.native:
+            self._inspect_other(d)
+            return
         d.mo = int(client.get("MO"))
         d.um = int(client.get("UM"))
         sr = int(client.get("SR"))
@@ -679,6 +740,19 @@ class MotionGuard:
         d.profile_before = {key: int(client.get(key)) for key in PROFILE_KEYS}
         # on disk before anything changes them (the journal; the dead-man objects follow)
         journal.note(ref, *(journal.interp(JOURNAL_OWNER, k, 0, v) for k, v in d.profile_before.items()))
+
+    def _inspect_other(self, d: _Drive) -> None:
+        """Another drive type: its state through the seam; its profile kept to be put back (in RAM,
+        not journaled: docs/drives.md)."""
+        st = d.drive.status()
+        d.mo, d.mode = int(st.enabled), st.mode
+        if st.fault is not None and self.clears_fault:
+            self._event(f"{d.drive.label}: in fault ({st.fault})")
+        elif st.fault is not None:
+            raise SafetyError(f"{d.drive.label}: in fault, refusing to move it: {st.fault}",
+                              hint="find the cause first, then reset the fault on the drive")
+        self._event(f"{d.drive.label}: {d.drive.kind}, {'on' if st.enabled else 'off'}, {st.mode.value} mode")
+        d.ramp_before = d.drive.ramp()
 
     def _read_consumer(self, ref: DriveRef) -> int:
         raw = self.session.sdo(ref).upload(*CONSUMER, name=OBJECT_NAMES[CONSUMER])
@@ -827,6 +901,9 @@ class MotionGuard:
             if not d.mo or (entering and not d.switched_on) or (skip and key in skip):
                 continue
             try:
+                if not d.native:
+                    d.drive.stop()  # one confirmed exchange: its drive cannot be told without an answer
+                    continue
                 if d.um == UM_TORQUE:
                     d.client.send_only("TC", 0, 0.0)
                 if method == "jv0":
@@ -887,7 +964,7 @@ class MotionGuard:
         c, s = d.client, self.settings
         r = DriveStop(d.ref.name, f"{d.ref.bus}:{d.ref.node}")
         motor_confirmed_off = False
-        if c.silent and stop and not self._answers(c):
+        if c.silent and stop and not self._answers(d):
             # no answer to its last request nor to one more: a try of each step would cost a timeout
             # each and hold back the command's end; the drive's own consumer stops it (the heartbeat ends)
             r.stopped_by = "not reached"
@@ -920,11 +997,17 @@ class MotionGuard:
                 c.nmt_start()
             except Exception as exc:  # noqa: BLE001 - reported; an NMT frame that could not be sent: still try the stop
                 r.problems.append(f"NMT start: {why(exc)}")
-            how, standstill, problems = stop_drive(c, unit_mode=d.um, method=s.stop_method,
-                                                   standstill_timeout=s.standstill_timeout,
-                                                   poll_interval=s.poll_interval, clock=self._clock,
-                                                   sleep=self._sleep, pulse=self._step,
-                                                   standstill_velocity=s.standstill_velocity)
+            if d.native:
+                how, standstill, problems = stop_drive(c, unit_mode=d.um, method=s.stop_method,
+                                                       standstill_timeout=s.standstill_timeout,
+                                                       poll_interval=s.poll_interval, clock=self._clock,
+                                                       sleep=self._sleep, pulse=self._step,
+                                                       standstill_velocity=s.standstill_velocity)
+            else:
+                how, standstill, problems = stop_other(d.drive, standstill_timeout=s.standstill_timeout,
+                                                       poll_interval=s.poll_interval, clock=self._clock,
+                                                       sleep=self._sleep, pulse=self._step,
+                                                       standstill_velocity=s.standstill_velocity)
             r.stopped_by, r.standstill = how, standstill
             r.problems.extend(problems)
         except Exception as exc:  # noqa: BLE001 - reported in the drive's stop report
@@ -933,7 +1016,10 @@ class MotionGuard:
         if d.switched_on:
             try:
                 self._step(c.settings.mo_confirm_timeout + 2 * s.request_bound)
-                c.motor_off()
+                if d.native:
+                    c.motor_off()
+                else:
+                    d.drive.disable()
                 r.motor_off = motor_confirmed_off = True
             except Exception as exc:  # noqa: BLE001 - reported in the drive's stop report
                 r.problems.append(f"MO=0: {why(exc)}")
@@ -944,7 +1030,7 @@ class MotionGuard:
                                              and r.standstill is not False)
         try:
             self._step()
-            r.position = int(c.get("PX"))
+            r.position = int(c.get("PX")) if d.native else d.drive.position()
         except Exception as exc:  # noqa: BLE001 - reported in the drive's stop report
             r.problems.append(f"PX: {why(exc)}")
         if d.um_changed_from is not None:
@@ -975,21 +1061,28 @@ class MotionGuard:
         link = self.session.links.get(bus)
         return link is not None and getattr(link.network, "lost", None) is not None
 
-    def _answers(self, c: DriveClient) -> bool:
+    def _answers(self, d: _Drive) -> bool:
         """One plain request (no patience) to a drive that went silent: True if it answers again (a
         passing fault or a loaded bus), then its exit goes on as usual."""
+        c = d.client
         try:
             self._step()
             # a drive reset by another node is back in Pre-operational, deaf to the interpreter until
             # started: the same start every exit gives a tripped drive (it moves nothing)
             c.nmt_start()
-            c.get("MO")
+            if d.native:
+                c.get("MO")
+            else:
+                d.drive.status()
         except Exception:  # noqa: BLE001 - any failure means: still silent
             return False
         c.silent = False
         return True
 
     def _restore_profile(self, d: _Drive, r: DriveStop) -> None:
+        if not d.native:
+            self._restore_ramp(d, r)
+            return
         if self.keep or not d.profile_before or r.stopped_by == "not stopped":
             return
         for key, before in d.profile_before.items():
@@ -1002,6 +1095,19 @@ class MotionGuard:
                 d.put_back.add(key)
             except Exception as exc:  # noqa: BLE001 - reported in the drive's stop report
                 r.problems.append(f"{key}={before} not restored: {why(exc)}")
+
+    def _restore_ramp(self, d: _Drive, r: DriveStop) -> None:
+        before = d.ramp_before
+        if self.keep or before is None or r.stopped_by == "not stopped":
+            return
+        try:
+            self._step()
+            if d.drive.ramp() != before:
+                self._step()
+                d.drive.set_ramp(before)
+                r.restored.append(f"profile {before.speed}/{before.accel}/{before.decel}")
+        except Exception as exc:  # noqa: BLE001 - reported in the drive's stop report
+            r.problems.append(f"profile not restored: {why(exc)}")
 
     def _restore_dead_man(self, d: _Drive, r: DriveStop, stop_failed: bool) -> None:
         # the consumer entry first: once it is back, the heartbeat may stop without a trip

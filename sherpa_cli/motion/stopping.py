@@ -8,11 +8,11 @@ import time
 from collections.abc import Callable, Iterable, Mapping
 from typing import TYPE_CHECKING
 
-from sherpa_cli.elmo.faults import describe_mf, sr_problems
 from sherpa_cli.elmo.protocol import UM_TORQUE
 from sherpa_cli.errors import DriveRefusedError, DriveTimeoutError, SherpaError
 
 if TYPE_CHECKING:
+    from sherpa_cli.drive import Drive
     from sherpa_cli.elmo.client import DriveClient
 
 log = logging.getLogger(__name__)
@@ -21,18 +21,6 @@ log = logging.getLogger(__name__)
 def why(exc: BaseException) -> str:
     """An exception for the report: a SherpaError's own message, any other with its type named."""
     return str(exc) if isinstance(exc, SherpaError) else f"{type(exc).__name__}: {exc}"
-
-
-def fault_reason(mf: int, sr: int) -> str | None:
-    """Why a drive must not move, decoded; None when MF and SR show no fault."""
-    reasons = describe_mf(mf) if mf else []
-    for fault in sr_problems(sr):
-        if fault.code == 1 << 6 and mf:  # "motor failure latched": MF already says which
-            continue
-        if fault.code == 1 << 28:  # stopped by a limit: a state, not a fault (moving away is allowed)
-            continue
-        reasons.append(fault.line())
-    return "; ".join(reasons) if reasons else None
 
 
 def stop_drive(client: DriveClient, *, unit_mode: int | None, method: str = "auto", standstill_timeout: float = 2.0,
@@ -93,6 +81,31 @@ def send_stop(client: DriveClient, *, unit_mode: int | None, method: str = "auto
         client.execute("BG")
         how.append("JV=0 + BG")
     return " + ".join(how) or "-", problems
+
+
+def stop_other(drive: Drive, *, standstill_timeout: float = 2.0, poll_interval: float = 0.01,
+               clock: Callable[[], float] = time.monotonic, sleep: Callable[[float], None] = time.sleep,
+               pulse: Callable[[], None] | None = None,
+               standstill_velocity: int = 0) -> tuple[str, bool | None, list[str]]:
+    """:func:`stop_drive` for a drive of another type, through the seam (sherpa_cli/drive.py): its
+    own stop with its own deceleration, then the same standstill rule and bound."""
+    beat = pulse or (lambda: None)
+    beat()
+    if not drive.status().enabled:
+        return "motor was off", None, []
+    beat()
+    how = drive.stop()
+    deadline = clock() + standstill_timeout
+    while True:
+        beat()
+        if not drive.status().enabled:
+            return how, None, []
+        beat()
+        if abs(drive.velocity()) <= standstill_velocity:
+            return how, True, []
+        if clock() >= deadline:
+            return how, False, [f"not at standstill {standstill_timeout:g} s after the stop"]
+        sleep(poll_interval)
 
 
 def standstill(client: DriveClient, standstill_velocity: int, pulse: Callable[[], None] | None = None) -> bool | None:

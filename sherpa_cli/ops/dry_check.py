@@ -13,8 +13,8 @@ from __future__ import annotations
 from typing import TYPE_CHECKING
 
 from sherpa_cli.bus.targets import DriveRef
+from sherpa_cli.elmo.faults import fault_reason
 from sherpa_cli.motion import calibration
-from sherpa_cli.motion.stopping import fault_reason
 
 if TYPE_CHECKING:
     from sherpa_cli.bus.session import ArmSession

@@ -35,7 +35,7 @@ from typing import TYPE_CHECKING, Any, Literal
 from sherpa_cli.bus import journal
 from sherpa_cli.bus.targets import DriveRef, drive_ref
 from sherpa_cli.config.model import ArmConfig, JointConfig, JointRole, SwitchConfig, SwitchKind
-from sherpa_cli.elmo.faults import describe_mf
+from sherpa_cli.elmo.faults import describe_mf, fault_reason
 from sherpa_cli.elmo.protocol import UM_POSITION
 from sherpa_cli.errors import SafetyError, UsageError
 from sherpa_cli.motion import calibration
@@ -44,7 +44,6 @@ from sherpa_cli.motion.blocked import blocked_text
 from sherpa_cli.motion.guard import MotionGuard
 from sherpa_cli.motion.report import GuardReport
 from sherpa_cli.motion.settings import MotionSettings
-from sherpa_cli.motion.stopping import fault_reason
 
 if TYPE_CHECKING:
     from sherpa_cli.bus.session import ArmSession
