@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import enum
 from dataclasses import dataclass
-from typing import Protocol
+from typing import Protocol, runtime_checkable
 
 
 class Mode(enum.Enum):
@@ -45,6 +45,7 @@ class DriveStatus:
     fault: str | None = None  # why it must not move, decoded; None: nothing forbids it
 
 
+@runtime_checkable
 class Drive(Protocol):
     """One servo drive as motion uses it. Every call is one exchange (or a short confirmed
     sequence) with the drive; a drive that does not answer raises DriveTimeoutError, a refusal

@@ -20,9 +20,10 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Iterable, Mapping, Sequence
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, TypeAlias
 
-from sherpa_cli.elmo.protocol import UM_POSITION, UM_TORQUE
+from sherpa_cli.drive import Drive, Mode, Ramp
+from sherpa_cli.elmo.protocol import UM_TORQUE
 from sherpa_cli.errors import SafetyError
 from sherpa_cli.motion import limit_watch
 from sherpa_cli.motion.axis import Axis, move_time_bound
@@ -36,6 +37,10 @@ if TYPE_CHECKING:
     from sherpa_cli.motion.settings import MotionSettings
 
 HINT = "check the joint; `sherpa stop` stops every drive"
+
+# an Elmo drive by its interpreter client (its stop by motion.stop_method, SP alone set), any other
+# drive type through the seam (sherpa_cli/drive.py)
+Motor: TypeAlias = "DriveClient | Drive"
 
 
 class StandstillTimeout(SafetyError):
@@ -59,12 +64,15 @@ class RecoveryFailed(SafetyError):
         self.cause = cause
 
 
-def stop_now(clients: Mapping[str, DriveClient], mode: str, method: str = "auto") -> None:
+def stop_now(clients: Mapping[str, Motor], mode: str, method: str = "auto") -> None:
     """Stop every motor at once (the stop frames of each, no wait in between); nothing queued is
     sent after this. TC=0 first in torque mode, then by ``method`` (motion.stop_method). A problem
     (ST refused with ``st``) is raised once every motor got its stop."""
     problems = []
     for c in clients.values():
+        if isinstance(c, Drive):
+            c.stop()
+            continue
         _, found = send_stop(c, unit_mode=UM_TORQUE if mode == "torque" else None, method=method)
         problems += [f"{c.label}: {p}" for p in found]
     if problems:
@@ -72,7 +80,7 @@ def stop_now(clients: Mapping[str, DriveClient], mode: str, method: str = "auto"
                           hint="check the drives with `sherpa monitor --once`; `sherpa stop` stops them all")
 
 
-def wait_standstill(clients: Mapping[str, DriveClient], settings: MotionSettings, clock: Callable[[], float],
+def wait_standstill(clients: Mapping[str, Motor], settings: MotionSettings, clock: Callable[[], float],
                     sleep: Callable[[float], None], pulse: Callable[[], None] | None = None, *,
                     before: str = "the next move") -> None:
     """The one standstill rule, bounded; a drive still moving when the time is up raises
@@ -85,7 +93,7 @@ def wait_standstill(clients: Mapping[str, DriveClient], settings: MotionSettings
         raise StandstillTimeout(moving, settings.standstill_timeout, before)
 
 
-def move_to(guard: MotionGuard, refs: Mapping[str, DriveRef], clients: Mapping[str, DriveClient],
+def move_to(guard: MotionGuard, refs: Mapping[str, DriveRef], clients: Mapping[str, Motor],
             targets: Mapping[str, int], speed: int, settings: MotionSettings, clock: Callable[[], float],
             sleep: Callable[[float], None], what: str) -> None:
     """Position mode (UM=5; the guard cycles MO if the mode changes), every motor of ``targets`` to
@@ -93,22 +101,40 @@ def move_to(guard: MotionGuard, refs: Mapping[str, DriveRef], clients: Mapping[s
     never what the drive holds; the guard puts SP back), bounded by the one move-time bound."""
     if not targets:
         return
-    now = {d: int(clients[d].get("PX")) for d in targets}
+    now = {d: _position(clients[d]) for d in targets}
     longest = max(abs(t - now[d]) for d, t in targets.items())
     duration = longest / speed if longest else 0.0
     for d, t in targets.items():
-        guard.enable(refs[d], UM_POSITION)
+        guard.enable(refs[d], Mode.POSITION)
         c = clients[d]
-        c.set("SP", 0, max(1, math.ceil(abs(t - now[d]) / duration)) if duration else speed)
-        c.set("PA", 0, t)
+        sp = max(1, math.ceil(abs(t - now[d]) / duration)) if duration else speed
+        if isinstance(c, Drive):
+            ramp = c.ramp()
+            c.set_ramp(Ramp(sp, ramp.accel, ramp.decel))
+            c.move_to(t)
+        else:
+            c.set("SP", 0, sp)
+            c.set("PA", 0, t)
     for d in targets:
-        clients[d].execute("BG")
+        c = clients[d]
+        if isinstance(c, Drive):
+            c.begin()
+        else:
+            c.execute("BG")
     deadline = clock() + move_time_bound(longest, speed)
-    while not all(int(clients[d].get("MS")) == 0 for d in targets):
+    while not all(_ended(clients[d]) for d in targets):
         guard.check()
         if clock() >= deadline:
             raise SafetyError(f"{what} did not finish in time", hint=HINT)
         sleep(settings.poll_interval)
+
+
+def _position(c: Motor) -> int:
+    return c.position() if isinstance(c, Drive) else int(c.get("PX"))
+
+
+def _ended(c: Motor) -> bool:
+    return c.profile_done() if isinstance(c, Drive) else int(c.get("MS")) == 0
 
 
 def recovery_speed(settings: MotionSettings, axes: Iterable[Axis | None]) -> int:
@@ -116,7 +142,7 @@ def recovery_speed(settings: MotionSettings, axes: Iterable[Axis | None]) -> int
     return settings.recovery_speed_for(a.vel_limit for a in axes if a is not None)
 
 
-def recover(guard: MotionGuard, refs: Mapping[str, DriveRef], clients: Mapping[str, DriveClient],
+def recover(guard: MotionGuard, refs: Mapping[str, DriveRef], clients: Mapping[str, Motor],
             watched: Sequence[Axis], breaches: Sequence[Breach], sample: Callable[[], Mapping[str, int]], *,
             settings: MotionSettings, clock: Callable[[], float], sleep: Callable[[float], None],
             speed: int, torque: bool = False, hold: Mapping[str, int] | None = None,

@@ -27,7 +27,8 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
-from sherpa_cli.elmo.protocol import UM_POSITION
+from sherpa_cli.devices.drives import ELMO
+from sherpa_cli.drive import Drive, Mode, Ramp
 from sherpa_cli.errors import SafetyError
 from sherpa_cli.joints.units import counts_to_rad
 from sherpa_cli.motion import limit_watch, pair_start, recovery
@@ -173,19 +174,27 @@ def run_plan(guard: MotionGuard, plan: MotionPlan, *, settings: MotionSettings, 
     result = MotionOutcome()
     session, cfg = guard.session, guard.session.cfg
     refs = {m.drive: m.ref for m in plan.motors}
-    clients: dict[str, DriveClient] = {d: guard.client(r) for d, r in refs.items()}
+    drives: dict[str, Drive] = {d: guard.drive(r) for d, r in refs.items()}
+    # Elmo drives start together per bus (pair_start) and keep SP/AC/DC journaled; any other drive
+    # type through the seam alone, started one after the other (the guard puts its profile back)
+    clients: dict[str, DriveClient] = {d: guard.client(r) for d, r in refs.items() if drives[d].kind == ELMO}
+    movers: dict[str, DriveClient | Drive] = {d: clients.get(d, drives[d]) for d in refs}
     targets = {m.drive: m.target for m in plan.motors}
     method, group_id = pair_start.pair_settings(cfg)
     buses: dict[str, list[DriveRef]] = {}
+    others: list[DriveRef] = []
     for r in refs.values():
-        buses.setdefault(r.bus, []).append(r)
+        if r.name in clients:
+            buses.setdefault(r.bus, []).append(r)
+        else:
+            others.append(r)
     axes = {a.name: a for a in plan.watched}
     arrived: dict[str, float] = {}
     t0 = 0.0
     began: float | None = None
 
     def sample() -> dict[str, int]:
-        motors = {d: int(guard.query(r, "PX")) for d, r in refs.items()}
+        motors = {d: guard.position(r) for d, r in refs.items()}
         if began is not None:
             for j in plan.joints:
                 if j.name not in arrived and j.name in axes and \
@@ -200,12 +209,12 @@ def run_plan(guard: MotionGuard, plan: MotionPlan, *, settings: MotionSettings, 
     def finished(_motors: Mapping[str, int]) -> bool:
         # every drive asked every time: a drive that reads 0 before its profile began (its BG still
         # on the way) or in between is not counted until it reads 0 for good
-        for d, c in clients.items():
-            if int(c.get("MS")) == 0:
+        for d, drive in drives.items():
+            if drive.profile_done():
                 profile_done.setdefault(d, clock() - t0)
             else:
                 profile_done.pop(d, None)
-        return len(profile_done) == len(clients)
+        return len(profile_done) == len(drives)
 
     try:
         with contextlib.ExitStack() as stack:
@@ -221,17 +230,15 @@ def run_plan(guard: MotionGuard, plan: MotionPlan, *, settings: MotionSettings, 
                     session, bus_refs, {r.name: clients[r.name] for r in bus_refs}, how, group_id,
                     stop=pair_start.stop_motors(guard, bus_refs, settings), reset_comm=pair_start.group_reset(guard, cfg)))
             for r in refs.values():
-                guard.enable(r, UM_POSITION)
+                guard.enable(r, Mode.POSITION)
             with guard.motor_off_explains_failure(refs.values(), "the move"):
                 for m in plan.motors:
-                    starts[m.ref.bus].keep_profile(m.drive)  # SP/AC/DC put back on every way out
-                    c = clients[m.drive]
-                    c.set("SP", 0, m.profile.sp)
-                    c.set("AC", 0, m.profile.ac)
-                    c.set("DC", 0, m.profile.dc)
-                    c.set("PA", 0, m.target)
+                    if m.drive in clients:
+                        starts[m.ref.bus].keep_profile(m.drive)  # SP/AC/DC put back on every way out
+                    drives[m.drive].set_ramp(Ramp(m.profile.sp, m.profile.ac, m.profile.dc))
+                    drives[m.drive].move_to(m.target)
             result.motor_commands = {m.drive: {"PA": m.target, **m.profile.as_dict()} for m in plan.motors}
-            result.start = _start(starts, clock)
+            result.start = _start(starts, {r.name: drives[r.name] for r in others}, clock)
             t0 = began = clock()
             watched = limit_watch.watch(
                 plan.watched, sample, clock=clock, sleep=sleep, interval=settings.poll_interval,
@@ -241,7 +248,7 @@ def run_plan(guard: MotionGuard, plan: MotionPlan, *, settings: MotionSettings, 
             result.duration = clock() - began
             if watched.outcome == "breach":
                 result.breaches = list(watched.breaches)
-                recovery.recover(guard, refs, clients, plan.watched, watched.breaches, sample, settings=settings,
+                recovery.recover(guard, refs, movers, plan.watched, watched.breaches, sample, settings=settings,
                                  clock=clock, sleep=sleep, hold=plan.held,
                                  speed=recovery.recovery_speed(settings, plan.watched))
                 back = sample()
@@ -284,11 +291,19 @@ def _where(plan: MotionPlan, motors: Mapping[str, int]) -> str:
                                      if a.name in {j.name for j in plan.joints}) + " counts"
 
 
-def _start(starts: Mapping[str, pair_start.CommonStart], clock: Callable[[], float]) -> StartReport:
+def _start(starts: Mapping[str, pair_start.CommonStart], others: Mapping[str, Drive],
+           clock: Callable[[], float]) -> StartReport:
     """Every bus's start, one after the other, each timed; a sequential start with several drives
-    is timed drive by drive."""
+    is timed drive by drive, as is each drive of another type (its own begin)."""
     times: dict[str, float] = {}
+    methods = {bus: s.method for bus, s in starts.items()}
     first: float | None = None
+    for name, drive in others.items():
+        now = clock()
+        first = now if first is None else first
+        times[name] = now - first
+        drive.begin()
+        methods.setdefault(name, "own")
     for bus, start in starts.items():
         if start.method == "sequential" and len(start.refs) > 1:
             for r in start.refs:
@@ -301,7 +316,7 @@ def _start(starts: Mapping[str, pair_start.CommonStart], clock: Callable[[], flo
             first = now if first is None else first
             times[bus] = now - first
             start.begin()
-    return StartReport({bus: s.method for bus, s in starts.items()}, max(times.values(), default=0.0), times)
+    return StartReport(methods, max(times.values(), default=0.0), times)
 
 
 def watch_hold(guard: MotionGuard, plan: MotionPlan, result: MotionOutcome, *, settings: MotionSettings,

@@ -8,11 +8,11 @@ import time
 from collections.abc import Callable, Iterable, Mapping
 from typing import TYPE_CHECKING
 
+from sherpa_cli.drive import Drive
 from sherpa_cli.elmo.protocol import UM_TORQUE
 from sherpa_cli.errors import DriveRefusedError, DriveTimeoutError, SherpaError
 
 if TYPE_CHECKING:
-    from sherpa_cli.drive import Drive
     from sherpa_cli.elmo.client import DriveClient
 
 log = logging.getLogger(__name__)
@@ -95,31 +95,30 @@ def stop_other(drive: Drive, *, standstill_timeout: float = 2.0, poll_interval: 
         return "motor was off", None, []
     beat()
     how = drive.stop()
-    deadline = clock() + standstill_timeout
-    while True:
-        beat()
-        if not drive.status().enabled:
-            return how, None, []
-        beat()
-        if abs(drive.velocity()) <= standstill_velocity:
-            return how, True, []
-        if clock() >= deadline:
-            return how, False, [f"not at standstill {standstill_timeout:g} s after the stop"]
-        sleep(poll_interval)
+    still = wait_standstill(drive, standstill_timeout=standstill_timeout, poll_interval=poll_interval, clock=clock,
+                            sleep=sleep, pulse=beat, standstill_velocity=standstill_velocity)
+    return how, still, [f"not at standstill {standstill_timeout:g} s after the stop"] if still is False else []
 
 
-def standstill(client: DriveClient, standstill_velocity: int, pulse: Callable[[], None] | None = None) -> bool | None:
+def standstill(client: DriveClient | Drive, standstill_velocity: int,
+               pulse: Callable[[], None] | None = None) -> bool | None:
     """The one standstill rule, one sample: None when the motor is off (no motion left), True when
-    |VX| <= ``standstill_velocity``, else False. ``pulse`` before every request."""
+    |VX| <= ``standstill_velocity``, else False. ``pulse`` before every request. A drive of another
+    type (the seam) the same way: its power stage, then its velocity."""
     beat = pulse or (lambda: None)
     beat()
+    if isinstance(client, Drive):
+        if not client.status().enabled:
+            return None
+        beat()
+        return abs(client.velocity()) <= standstill_velocity
     if not int(client.get("MO")):
         return None
     beat()
     return abs(int(client.get("VX"))) <= standstill_velocity
 
 
-def wait_standstill(client: DriveClient, *, standstill_timeout: float = 2.0, poll_interval: float = 0.01,
+def wait_standstill(client: DriveClient | Drive, *, standstill_timeout: float = 2.0, poll_interval: float = 0.01,
                     clock: Callable[[], float] = time.monotonic, sleep: Callable[[float], None] = time.sleep,
                     pulse: Callable[[], None] | None = None, standstill_velocity: int = 0) -> bool | None:
     """After :func:`send_stop`: True once at standstill (:func:`standstill`), None if the motor went
@@ -134,7 +133,7 @@ def wait_standstill(client: DriveClient, *, standstill_timeout: float = 2.0, pol
         sleep(poll_interval)
 
 
-def wait_all_standstill(clients: Mapping[str, DriveClient], *, standstill_timeout: float, poll_interval: float,
+def wait_all_standstill(clients: Mapping[str, DriveClient | Drive], *, standstill_timeout: float, poll_interval: float,
                         standstill_velocity: int, clock: Callable[[], float] = time.monotonic,
                         sleep: Callable[[float], None] = time.sleep,
                         pulse: Callable[[], None] | None = None) -> list[str]:
