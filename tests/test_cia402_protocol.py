@@ -115,7 +115,7 @@ def test_codec_exact():
     assert p.encode(p.TARGET_POSITION, -2) == b"\xfe\xff\xff\xff"
     assert p.encode(p.MODES_OF_OPERATION, 3) == b"\x03"
     assert p.decode(p.STATUSWORD, b"\x37\x16") == 0x1637
-    with pytest.raises(ValueError, match="0x6041 .statusword.: 1 bytes, expected 2"):
+    with pytest.raises(ValueError, match=r"0x6041 \(statusword\): 1 bytes, expected 2"):
         p.decode(p.STATUSWORD, b"\x37")
 
 

@@ -205,7 +205,7 @@ def test_without_a_consumer_the_motor_on_is_counted_unguarded():
 
 
 def test_fault_and_fault_reset():
-    drive, clock = make()
+    drive, _ = make()
     enable(drive)
     drive.pop_frames()
     drive.fault(0x2310)

@@ -500,8 +500,7 @@ def _check_drives(cfg: ArmConfig, locs: Locs, r: _Report) -> None:
             seen[key] = d.name
     for pair in cfg.pairs.values():
         for name in (pair.drive_a, pair.drive_b):
-            d = cfg.drives.get(name)
-            if d is not None and d.type == "cia402":
+            if name in cfg.drives and cfg.drives[name].type == "cia402":
                 # the pair's synchronized start (one SYNC for both BGs) is Elmo's binary interpreter
                 r.error(locs.get("drive", name, "type"),
                         f"drive '{name}' of differential pair '{pair.name}' is a cia402 drive; a pair's "
