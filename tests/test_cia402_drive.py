@@ -110,6 +110,7 @@ def test_move_to_and_begin_transcript():
     drive.begin()
     assert node.log == [
         down(p.TARGET_POSITION, -100000),
+        up(SW, 0x0027),  # still Operation enabled: a begin() never powers a drive on
         down(CW, 0x3F),  # enable operation + new set-point + change set immediately
         up(SW, 0x1027),  # bit 12: acknowledged
         down(CW, 0x0F),  # bit 4 down again
@@ -123,7 +124,7 @@ def test_begin_without_change_set_immediately():
     drive.enable(Mode.POSITION)
     node.log.clear()
     drive.begin()
-    assert node.log[0] == down(CW, 0x1F)
+    assert node.log[1] == down(CW, 0x1F)
 
 
 def test_stop_and_disable_transcript():
@@ -134,10 +135,31 @@ def test_stop_and_disable_transcript():
     assert drive.stop() == "halt"
     drive.disable()
     assert node.log == [
-        down(CW, 0x010F),  # halt, still enabled
-        up(SW, 0x0027),
-        down(CW, 0x06), up(SW, 0x0021),  # shutdown -> Ready to switch on
+        up(SW, 0x0027), down(CW, 0x010F),  # halt, still enabled
+        up(SW, 0x0027), down(CW, 0x06), up(SW, 0x0021),  # shutdown -> Ready to switch on
     ]
+
+
+@pytest.mark.parametrize("state", [State.READY_TO_SWITCH_ON, State.SWITCHED_ON])
+def test_stop_and_begin_never_power_a_drive_on(state):
+    node = FakeNode()
+    drive, _ = make(node)
+    drive.enable(Mode.VELOCITY)
+    node.state = state  # switched down behind the drive's back (another tool, a shutdown)
+    node.log.clear()
+    assert drive.stop() == f"off: {state.value}"
+    with pytest.raises(SafetyError, match=f"begin refused: the drive is in {state.value}, not Operation enabled"):
+        drive.begin()
+    assert [entry for entry in node.log if entry[0] == "down"] == []
+    assert node.state is state
+
+
+def test_set_ramp_checks_every_value_before_writing():
+    node = FakeNode()
+    drive, _ = make(node)
+    with pytest.raises(UsageError, match="profile deceleration -1 outside"):
+        drive.set_ramp(Ramp(10, 20, -1))
+    assert node.log == []
 
 
 def test_velocity_mode_holds_until_begin():
@@ -148,7 +170,7 @@ def test_velocity_mode_holds_until_begin():
     node.log.clear()
     drive.jog(-300)
     drive.begin()
-    assert node.log == [down(p.TARGET_VELOCITY, -300), down(CW, 0x0F)]
+    assert node.log == [down(p.TARGET_VELOCITY, -300), up(SW, 0x0027), down(CW, 0x0F)]
 
 
 def test_fault_is_refused_with_its_code_and_nothing_is_written():

@@ -154,10 +154,12 @@ class Cia402Drive:
                     self._read(p.PROFILE_DECELERATION))
 
     def set_ramp(self, ramp: Ramp) -> None:
-        for index, value in ((p.PROFILE_VELOCITY, ramp.speed), (p.PROFILE_ACCELERATION, ramp.accel),
-                             (p.PROFILE_DECELERATION, ramp.decel)):
+        values = ((p.PROFILE_VELOCITY, ramp.speed), (p.PROFILE_ACCELERATION, ramp.accel),
+                  (p.PROFILE_DECELERATION, ramp.decel))
+        for index, value in values:  # all checked before the first is written
             if not 0 <= value <= 0xFFFFFFFF:
                 raise UsageError(f"{self.label}: {p.NAMES[index]} {value} outside 0..4294967295")
+        for index, value in values:
             self._write(index, value)
 
     def _need(self, op: p.OpMode, what: str) -> None:
@@ -172,7 +174,17 @@ class Cia402Drive:
         self._need(p.OpMode.PROFILE_VELOCITY, "jog")
         self._write(p.TARGET_VELOCITY, velocity)
 
+    def _require_enabled(self, what: str) -> None:
+        """A controlword carrying "enable operation" takes Ready to switch on and Switched on to Operation
+        enabled (the standard's transitions 3+4): a begin() or stop() must never power a drive on."""
+        state, sw = self._state()
+        if state is not State.OPERATION_ENABLED:
+            self._refuse_fault(state, sw)
+            raise SafetyError(f"{self.label}: {what} refused: the drive is in "
+                              f"{state.value if state else f'statusword 0x{sw:04X}'}, not Operation enabled")
+
     def begin(self) -> None:
+        self._require_enabled("begin")
         base = int(p.Command.ENABLE_OPERATION)
         self._halt = 0
         if self._op_mode is p.OpMode.PROFILE_VELOCITY:
@@ -198,8 +210,13 @@ class Cia402Drive:
         self._write(p.CONTROLWORD, base)  # bit 4 down: the next begin() is a rising edge again
 
     def stop(self) -> str:
-        """Halt (controlword bit 8): the drive decelerates with its profile deceleration and stays enabled."""
+        """Halt (controlword bit 8): the drive decelerates with its profile deceleration and stays
+        enabled ("halt"). A drive not in Operation enabled is not driving its motor and gets nothing:
+        the halt word would power on one in Ready to switch on or Switched on ("off: <state>")."""
         self._halt = p.CW_HALT
+        state, sw = self._state()
+        if state is not State.OPERATION_ENABLED:
+            return f"off: {state.value if state else f'statusword 0x{sw:04X}'}"
         self._write(p.CONTROLWORD, int(p.Command.ENABLE_OPERATION) | p.CW_HALT)
         return "halt"
 
