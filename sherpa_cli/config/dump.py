@@ -71,8 +71,9 @@ def dump_native(cfg: ArmConfig) -> str:
     if sim:
         sections.append({"sim": sim})
     sections.append({"buses": {b.name: _bus(b) for b in cfg.buses.values()}})
-    sections.append({"drives": {d.name: _drop_none({"bus": d.bus, "node": d.node, "model": d.model,
-                                                    "motor": d.motor})
+    # the default type is left out, so a config without cia402 drives dumps as it always did
+    sections.append({"drives": {d.name: _drop_none({"type": None if d.type == "elmo" else d.type, "bus": d.bus,
+                                                    "node": d.node, "model": d.model, "motor": d.motor})
                                 for d in cfg.drives.values()}})
     if cfg.devices:
         sections.append({"devices": {d.name: _device(d) for d in cfg.devices.values()}})

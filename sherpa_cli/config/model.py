@@ -87,7 +87,11 @@ class DriveConfig:
     model: str | None = None  # key into catalog.drives; None = unknown model (no rating checks)
     motor: str | None = None  # key into catalog.motors
     where: Location = field(default_factory=Location, compare=False)
+    type: str = "elmo"  # the drive's protocol: one of DRIVE_TYPES (docs/config.md)
 
+
+# What a `drives:` entry speaks: Elmo's binary interpreter (elmo/) or the CiA 402 profile over SDO (cia402/).
+DRIVE_TYPES = ("elmo", "cia402")
 
 # The seed's dev_type selected device-specific code; here a device type names a class in the
 # registry of sherpa_cli/devices (the way python-can maps interface names to bus classes).

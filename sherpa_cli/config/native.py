@@ -66,7 +66,7 @@ TOP_KEYS = ["name", "il_codes", "protocol", "motion", "homing", "joystick", "sim
 TUNING_KEYS = [f"{g}[{n}]" for g in ("KP", "KI", "FF") for n in (1, 2, 3)]  # `tuning:` (docs/tune.md)
 IL_KEYS = ["stop", "home", "unused"]
 BUS_KEYS = ["interface", "channel", "bitrate", "send_interval_us", "poll_interval_ms", "options"]
-DRIVE_KEYS = ["bus", "node", "model", "motor"]
+DRIVE_KEYS = ["type", "bus", "node", "model", "motor"]
 DEVICE_KEYS = ["type", "bus", "node", "position_from", "tpdo_trigger", "cyclic_ms", "base_id", "counts_per_force",
                "counts_per_torque", "frame", "force_limit", "torque_limit", "reply_ms"]
 FT_KEYS = ("base_id", "counts_per_force", "counts_per_torque", "frame", "force_limit", "torque_limit", "reply_ms")
@@ -371,7 +371,8 @@ def load_native(root: YNode, filename: str) -> tuple[ArmConfig, Locs, list[str]]
         drives[dname] = DriveConfig(
             name=dname, bus=as_str(sec.req("bus")), node=as_int(sec.req("node")),
             model=catalog_key(model) if model is not None else None,
-            motor=catalog_key(motor) if motor is not None else None, where=sec.node.loc)
+            motor=catalog_key(motor) if motor is not None else None, where=sec.node.loc,
+            type=sec.str("type", "elmo"))
 
     devices: dict[str, DeviceConfig] = {}
     if top.get("devices") is not None:

@@ -465,8 +465,13 @@ def _check_buses(cfg: ArmConfig, locs: Locs, r: _Report) -> None:
 
 
 def _check_drives(cfg: ArmConfig, locs: Locs, r: _Report) -> None:
+    from sherpa_cli.config.model import DRIVE_TYPES
+
     seen: dict[tuple[str, int], str] = {}
     for d in cfg.drives.values():
+        if d.type not in DRIVE_TYPES:
+            r.error(locs.get("drive", d.name, "type"),
+                    f"drive '{d.name}': unknown type '{d.type}'; valid: {', '.join(DRIVE_TYPES)}")
         if not 1 <= d.node <= MAX_NODE_ID:
             r.error(locs.get("drive", d.name, "node"),
                     f"node id {d.node} of drive '{d.name}' is not a valid CAN node id; expected 1..{MAX_NODE_ID}")
@@ -493,6 +498,13 @@ def _check_drives(cfg: ArmConfig, locs: Locs, r: _Report) -> None:
                     "node ids must be unique per bus")
         else:
             seen[key] = d.name
+    for pair in cfg.pairs.values():
+        for name in (pair.drive_a, pair.drive_b):
+            if name in cfg.drives and cfg.drives[name].type == "cia402":
+                # the pair's synchronized start (one SYNC for both BGs) is Elmo's binary interpreter
+                r.error(locs.get("drive", name, "type"),
+                        f"drive '{name}' of differential pair '{pair.name}' is a cia402 drive; a pair's "
+                        "synchronized start needs elmo drives")
 
 
 def _check_names(cfg: ArmConfig, locs: Locs, r: _Report) -> None:

@@ -31,6 +31,7 @@ from sherpa_cli.elmo.protocol import NMT_ID, SDO_RX_BASE, SYNC_ID
 from sherpa_cli.errors import SherpaError
 from sherpa_cli.sim import state as sim_state
 from sherpa_cli.sim.buscontroller import BusController, SimNetlink
+from sherpa_cli.sim.cia402 import SimCia402Drive
 from sherpa_cli.sim.clock import Clock, FrameClock, RealClock, StallMeter
 from sherpa_cli.sim.drive import SimDrive
 from sherpa_cli.sim.encoder import SimEncoder
@@ -51,6 +52,8 @@ SDO_RX = SDO_RX_BASE
 HOME_SWITCH_HALF_WIDTH = 0
 ENCODER_VENDOR = 0x0000_0145  # made up: a CiA 406 encoder maker (the sim's, not a real vendor id)
 ENCODER_DEVICE_TYPE = 0x0001_0196  # 0x1000: CiA 406 (0x196), single-turn absolute rotary encoder
+CIA402_VENDOR = 0x0000_0402  # made up: the simulated CiA 402 drive's maker (not a real vendor id)
+CIA402_PRODUCT = 0x0000_0001
 LOOPBACK_ROUNDS = 4  # frames drives send because of other drives' frames, per pump cycle
 # A frame that waited longer than this for its bus's pump (a starved simulator process: a loaded
 # machine, the 15-20x slower vcan guest) reaches the drives at the time it arrived, not when the pump
@@ -347,9 +350,14 @@ class SimArm:
         start = power_up_positions(cfg)
         for name, d in cfg.drives.items():
             saved = self.flash[name]
-            self.drives[name] = SimDrive(
+            # config check keeps a cia402 drive to a plain joint: the mechanics below treat it as any drive
+            cia402 = d.type == "cia402"
+            made = (settings or {}).get(name) or settings_for(
+                cfg, name, **({"vendor_id": CIA402_VENDOR, "product_code": CIA402_PRODUCT,
+                               "device_name": "CiA 402 drive"} if cia402 else {}))
+            self.drives[name] = (SimCia402Drive if cia402 else SimDrive)(
                 d.node, clock=self.clock,
-                settings=(settings or {}).get(name) or settings_for(cfg, name),
+                settings=made,
                 serial=saved.serial, flash=saved.flash, save_count=saved.save_count,
                 speed_gain=cfg.sim[name].speed_gain if name in cfg.sim else 1.0, position=start.get(name, 0),
                 on_step=functools.partial(self._drive_stepped, name),

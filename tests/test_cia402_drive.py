@@ -1,0 +1,252 @@
+"""Cia402Drive (sherpa_cli/cia402/drive.py) byte-exact: every SDO transfer of enable, move, stop and
+disable against a recording fake node that plays the standard's state machine."""
+
+from __future__ import annotations
+
+import struct
+
+import pytest
+
+from sherpa_cli.cia402 import protocol as p
+from sherpa_cli.cia402.drive import Cia402Drive, Cia402Settings
+from sherpa_cli.cia402.protocol import State
+from sherpa_cli.drive import Drive, DriveStatus, Mode, Ramp
+from sherpa_cli.errors import SafetyError, UsageError
+
+
+class FakeNode:
+    """The objects of one CiA 402 node over SDO; records (op, index, sub, bytes) of every transfer.
+    ``stuck``: states the node does not leave; ``ack``: it acknowledges a new set-point."""
+
+    def __init__(self, state: State = State.SWITCH_ON_DISABLED, *, stuck: tuple[State, ...] = (),
+                 ack: bool = True, error: int = 0) -> None:
+        self.state, self.stuck, self.ack = state, stuck, ack
+        self.log: list[tuple[str, int, int, bytes]] = []
+        self.cw = 0
+        self.values = {p.MODES_DISPLAY: 0, p.ERROR_CODE: error, p.POSITION_ACTUAL: 1234, p.VELOCITY_ACTUAL: -7,
+                       p.PROFILE_VELOCITY: 1000, p.PROFILE_ACCELERATION: 5000, p.PROFILE_DECELERATION: 6000}
+        self.extra = 0  # statusword bits beside the state's
+
+    def statusword(self) -> int:
+        return p.statusword_of(self.state) | self.extra
+
+    def upload(self, index: int, sub: int = 0, *, name: str | None = None) -> bytes:
+        data = p.encode(index, self.statusword() if index == p.STATUSWORD else self.values[index])
+        self.log.append(("up", index, sub, data))
+        return data
+
+    def download(self, index: int, sub: int, data: bytes, *, name: str | None = None) -> None:
+        self.log.append(("down", index, sub, bytes(data)))
+        value = p.decode(index, data)
+        self.values[index] = value
+        if index == p.MODES_OF_OPERATION:
+            self.values[p.MODES_DISPLAY] = value
+        if index == p.CONTROLWORD:
+            rose = value & ~self.cw
+            self.cw = value
+            if self.state not in self.stuck:
+                self.state = p.transition(self.state, value, fault_reset_edge=bool(rose & p.CW_FAULT_RESET))
+            if rose & p.CW_NEW_SET_POINT and self.ack:
+                self.extra |= p.SW_SET_POINT_ACK
+            if not value & p.CW_NEW_SET_POINT:
+                self.extra &= ~p.SW_SET_POINT_ACK
+
+
+class Clock:
+    def __init__(self) -> None:
+        self.t = 0.0
+
+    def now(self) -> float:
+        return self.t
+
+    def sleep(self, dt: float) -> None:
+        self.t += dt
+
+
+def make(node: FakeNode, **settings: object) -> tuple[Cia402Drive, Clock]:
+    clock = Clock()
+    return Cia402Drive(node, "j7 (can0 node 7)", settings=Cia402Settings(**settings),  # type: ignore[arg-type]
+                       clock=clock.now, sleep=clock.sleep), clock
+
+
+def up(index: int, value: int) -> tuple[str, int, int, bytes]:
+    return ("up", index, 0, p.encode(index, value))
+
+
+def down(index: int, value: int) -> tuple[str, int, int, bytes]:
+    return ("down", index, 0, p.encode(index, value))
+
+
+SW = p.STATUSWORD
+CW = p.CONTROLWORD
+
+
+def test_it_is_a_drive():
+    drive: Drive = make(FakeNode())[0]
+    assert drive.kind == "cia402"
+
+
+def test_enable_position_from_switch_on_disabled_transcript():
+    node = FakeNode()
+    drive, _ = make(node)
+    drive.enable(Mode.POSITION)
+    assert node.log == [
+        up(SW, 0x0060),  # Switch on disabled: nothing forbids
+        down(p.MODES_OF_OPERATION, 1), up(p.MODES_DISPLAY, 1),
+        down(CW, 0x06), up(SW, 0x0021),  # shutdown -> Ready to switch on
+        down(CW, 0x07), up(SW, 0x0023),  # switch on -> Switched on
+        down(CW, 0x0F), up(SW, 0x0027),  # enable operation -> Operation enabled
+    ]
+    # the bytes themselves, once, so the codec cannot hide a wrong width
+    assert node.log[1] == ("down", 0x6060, 0, b"\x01") and node.log[3] == ("down", 0x6040, 0, b"\x06\x00")
+
+
+def test_move_to_and_begin_transcript():
+    node = FakeNode()
+    drive, _ = make(node)
+    drive.enable(Mode.POSITION)
+    node.log.clear()
+    drive.move_to(-100000)
+    drive.begin()
+    assert node.log == [
+        down(p.TARGET_POSITION, -100000),
+        up(SW, 0x0027),  # still Operation enabled: a begin() never powers a drive on
+        down(CW, 0x3F),  # enable operation + new set-point + change set immediately
+        up(SW, 0x1027),  # bit 12: acknowledged
+        down(CW, 0x0F),  # bit 4 down again
+    ]
+    assert node.log[0][3] == b"\x60\x79\xfe\xff"
+
+
+def test_begin_without_change_set_immediately():
+    node = FakeNode()
+    drive, _ = make(node, change_set_immediately=False)
+    drive.enable(Mode.POSITION)
+    node.log.clear()
+    drive.begin()
+    assert node.log[1] == down(CW, 0x1F)
+
+
+def test_stop_and_disable_transcript():
+    node = FakeNode()
+    drive, _ = make(node)
+    drive.enable(Mode.POSITION)
+    node.log.clear()
+    assert drive.stop() == "halt"
+    drive.disable()
+    assert node.log == [
+        up(SW, 0x0027), down(CW, 0x010F),  # halt, still enabled
+        up(SW, 0x0027), down(CW, 0x06), up(SW, 0x0021),  # shutdown -> Ready to switch on
+    ]
+
+
+@pytest.mark.parametrize("state", [State.READY_TO_SWITCH_ON, State.SWITCHED_ON])
+def test_stop_and_begin_never_power_a_drive_on(state):
+    node = FakeNode()
+    drive, _ = make(node)
+    drive.enable(Mode.VELOCITY)
+    node.state = state  # switched down behind the drive's back (another tool, a shutdown)
+    node.log.clear()
+    assert drive.stop() == f"off: {state.value}"
+    with pytest.raises(SafetyError, match=f"begin refused: the drive is in {state.value}, not Operation enabled"):
+        drive.begin()
+    assert [entry for entry in node.log if entry[0] == "down"] == []
+    assert node.state is state
+
+
+def test_set_ramp_checks_every_value_before_writing():
+    node = FakeNode()
+    drive, _ = make(node)
+    with pytest.raises(UsageError, match="profile deceleration -1 outside"):
+        drive.set_ramp(Ramp(10, 20, -1))
+    assert node.log == []
+
+
+def test_velocity_mode_holds_until_begin():
+    node = FakeNode()
+    drive, _ = make(node)
+    drive.enable(Mode.VELOCITY)
+    assert node.log[-2] == down(CW, 0x010F)  # enabled with halt: a stale 0x60FF does not run
+    node.log.clear()
+    drive.jog(-300)
+    drive.begin()
+    assert node.log == [down(p.TARGET_VELOCITY, -300), up(SW, 0x0027), down(CW, 0x0F)]
+
+
+def test_fault_is_refused_with_its_code_and_nothing_is_written():
+    node = FakeNode(State.FAULT, error=0x2310)
+    drive, _ = make(node)
+    with pytest.raises(SafetyError, match=r"j7 \(can0 node 7\): the drive is in Fault \(0x2310 continuous over-current"):
+        drive.enable(Mode.POSITION)
+    assert [entry for entry in node.log if entry[0] == "down"] == []
+    assert node.state is State.FAULT
+
+
+def test_disable_leaves_a_fault_alone():
+    node = FakeNode(State.FAULT, error=0x8130)
+    drive, _ = make(node)
+    drive.disable()
+    assert node.log == [up(SW, 0x0008)]
+    assert drive.status() == DriveStatus(enabled=False, mode=Mode.OTHER,
+                                         fault="Fault: 0x8130 life guard error or heartbeat error")
+
+
+def test_a_stuck_drive_is_named_with_its_state():
+    node = FakeNode(stuck=(State.READY_TO_SWITCH_ON,))
+    drive, clock = make(node, confirm_timeout=0.1)
+    with pytest.raises(SafetyError, match=r"stuck in Ready to switch on after 'switch on' for 0.1 s \(statusword 0x0021\)"):
+        drive.enable(Mode.POSITION)
+    assert 0.1 <= clock.t < 0.2
+
+
+def test_an_unacknowledged_set_point_is_bounded():
+    node = FakeNode(ack=False)
+    drive, _ = make(node, confirm_timeout=0.05)
+    drive.enable(Mode.POSITION)
+    with pytest.raises(SafetyError, match="not acknowledged"):
+        drive.begin()
+    assert node.log[-1] == down(CW, 0x0F)  # the new set-point bit is taken back
+
+
+def test_torque_is_refused_clearly():
+    node = FakeNode()
+    drive, _ = make(node)
+    with pytest.raises(UsageError, match="torque mode is not built for CiA 402 drives"):
+        drive.enable(Mode.TORQUE)
+    assert node.log == []
+
+
+def test_quick_stop_active_leaves_by_disable_voltage():
+    node = FakeNode(State.QUICK_STOP_ACTIVE)
+    drive, _ = make(node)
+    drive.enable(Mode.POSITION)
+    writes = [struct.unpack("<H", data)[0] for op, index, _, data in node.log if op == "down" and index == CW]
+    assert writes == [0x00, 0x06, 0x07, 0x0F]
+
+
+def test_status_ramp_position_velocity():
+    node = FakeNode()
+    drive, _ = make(node)
+    drive.enable(Mode.VELOCITY)
+    assert drive.status() == DriveStatus(enabled=True, mode=Mode.VELOCITY)
+    assert drive.ramp() == Ramp(1000, 5000, 6000)
+    drive.set_ramp(Ramp(10, 20, 30))
+    assert drive.ramp() == Ramp(10, 20, 30)
+    assert (drive.position(), drive.velocity()) == (1234, -7)
+    assert drive.profile_done() is False  # PV: done when the velocity is 0
+
+
+def test_profile_done_is_target_reached_in_pp():
+    node = FakeNode()
+    drive, _ = make(node)
+    drive.enable(Mode.POSITION)
+    assert drive.profile_done() is False
+    node.extra |= p.SW_TARGET_REACHED
+    assert drive.profile_done() is True
+
+
+def test_move_needs_position_mode():
+    drive, _ = make(FakeNode())
+    drive.enable(Mode.VELOCITY)
+    with pytest.raises(UsageError, match="move_to needs the drive enabled in profile position mode"):
+        drive.move_to(5)
