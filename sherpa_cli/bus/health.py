@@ -95,7 +95,7 @@ def check_buses(session: ArmSession, buses: Iterable[str] | None = None, what: s
 
 
 def preflight(session: ArmSession, refs: Sequence[DriveRef]) -> None:
-    """Before motion: the buses of ``refs`` (state, bit rate), then each drive's user program (PS).
+    """Before motion: the buses of ``refs`` (state, bit rate), then each Elmo drive's user program (PS).
 
     The drives are NMT-started for the PS query (the binary interpreter answers in Operational only;
     the guard starts them next anyway). A running program refuses the motion unless the session
@@ -107,4 +107,7 @@ def preflight(session: ArmSession, refs: Sequence[DriveRef]) -> None:
     for ref in refs:
         client = session.client(ref)
         client.nmt_start()
+        drive = session.cfg.drives.get(ref.name)
+        if drive is not None and drive.type != "elmo":
+            continue  # user programs are Elmo's: another drive type runs none sherpa could see
         refuse_motion_while_running(client, allow=allow)

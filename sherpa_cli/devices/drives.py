@@ -10,6 +10,8 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import TYPE_CHECKING
 
+from sherpa_cli.cia402.drive import Cia402Drive
+from sherpa_cli.config.model import DRIVE_TYPES
 from sherpa_cli.elmo.drive import ElmoDrive
 from sherpa_cli.errors import UsageError
 
@@ -25,13 +27,18 @@ def _elmo(session: ArmSession, ref: DriveRef) -> Drive:
     return ElmoDrive(session.client(ref))
 
 
-DRIVES: dict[str, Callable[[ArmSession, DriveRef], Drive]] = {ELMO: _elmo}
+def _cia402(session: ArmSession, ref: DriveRef) -> Drive:
+    return Cia402Drive(session.sdo(ref), f"{ref.name} ({ref.bus} node {ref.node})")
+
+
+DRIVES: dict[str, Callable[[ArmSession, DriveRef], Drive]] = {ELMO: _elmo, "cia402": _cia402}
+assert tuple(DRIVES) == DRIVE_TYPES, "config.model.DRIVE_TYPES and the drive registry must list the same types"
 
 
 def drive_type(session: ArmSession, ref: DriveRef) -> str:
     """The configured type of the drive ``ref`` names ("elmo" for a BUS:NODE the config does not list)."""
     cfg = session.cfg.drives.get(ref.name)
-    return ELMO if cfg is None else getattr(cfg, "type", ELMO)
+    return ELMO if cfg is None else cfg.type
 
 
 def open_drive(session: ArmSession, ref: DriveRef) -> Drive:

@@ -84,6 +84,11 @@ def read_calibration(cfg: ArmConfig, joint: JointConfig, client_of: Callable[[st
     and PX is set from the encoder with the motor off (read back); a looking command (monitor,
     doctor) only says it does not match.
     """
+    others = sorted({cfg.drives[d].type for d in joint_drives(cfg, joint) if cfg.drives[d].type != "elmo"})
+    if others:
+        # the homing flag and offsets live in Elmo user variables: another drive type has none here
+        return Calibration(joint.name, False, f"on a {others[0]} drive, whose homing sherpa does not keep "
+                                              "(docs/cia402.md): pass --uncalibrated to move by its counter")
     if absolute(cfg, joint):
         mismatch = _counter_mismatch(cfg, joint, client_of)
         if mismatch is None:

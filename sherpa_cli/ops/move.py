@@ -61,12 +61,13 @@ def pose_targets(cfg: ArmConfig, pose: str | PoseTargets, joints: Sequence[str] 
 def read_motors(session: ArmSession, drives: Sequence[str]) -> dict[str, int]:
     """PX of each drive (NMT start first, as every command does); nothing else is written."""
     from sherpa_cli.bus.targets import drive_ref
+    from sherpa_cli.devices.drives import open_drive
 
     out = {}
     for d in drives:
-        c = session.client(drive_ref(session.cfg, d))
-        c.nmt_start()
-        out[d] = int(c.get("PX"))
+        ref = drive_ref(session.cfg, d)
+        session.client(ref).nmt_start()
+        out[d] = open_drive(session, ref).position()
     return out
 
 
