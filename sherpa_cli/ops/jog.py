@@ -17,6 +17,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
+from sherpa_cli.devices.drives import is_elmo
 from sherpa_cli.elmo.faults import StatusRegister, decode_sr, describe_mf
 from sherpa_cli.elmo.protocol import UM_POSITION, UM_TORQUE
 from sherpa_cli.errors import SafetyError, UsageError
@@ -29,6 +30,7 @@ from sherpa_cli.motion.report import GuardReport, MotionInterrupted, with_report
 from sherpa_cli.motion.request import MoveRequest
 from sherpa_cli.motion.settings import MotionSettings, check_torque_for
 from sherpa_cli.ops.jog_result import JogResult
+from sherpa_cli.ops.seam_jog import run_seam_jog
 
 if TYPE_CHECKING:
     from sherpa_cli.bus.session import ArmSession
@@ -94,6 +96,8 @@ def run_jog(session: ArmSession, target: Axis, req: MoveRequest, *, settings: Mo
             on_event: Callable[[str], None] | None = None, keep: bool = False) -> JogResult:
     """Move as asked inside a MotionGuard and return where it ended; every exit path stops the motor."""
     check_request(target, req, max_torque_for=session.cfg.motion.max_torque_for)
+    if not is_elmo(session, target.ref):  # the interpreter's jog below; any other type through the seam
+        return run_seam_jog(session, target, req, settings=settings, clock=clock, sleep=sleep, on_event=on_event)
     ref = target.ref
     cal = precheck(session, target, req)
     guard = MotionGuard(session, [ref], settings=settings, clock=clock, sleep=sleep, keep=keep, on_event=on_event)

@@ -17,10 +17,11 @@ from typing import TYPE_CHECKING, Any
 
 from sherpa_cli.bus.parallel import run_concurrently
 from sherpa_cli.bus.targets import DriveRef
+from sherpa_cli.devices.drives import is_elmo, open_drive
 from sherpa_cli.elmo.protocol import UM_TORQUE
 from sherpa_cli.errors import SafetyError
 from sherpa_cli.motion.settings import MotionSettings
-from sherpa_cli.motion.stopping import ask_patiently, stop_drive, why
+from sherpa_cli.motion.stopping import ask_patiently, stop_drive, stop_other, why
 from sherpa_cli.words import plural
 
 if TYPE_CHECKING:
@@ -88,6 +89,36 @@ def stop_one(client: DriveClient, ref: DriveRef, settings: MotionSettings, *, cl
     return r
 
 
+def stop_other_one(session: ArmSession, ref: DriveRef, settings: MotionSettings, *,
+                   clock: Callable[[], float] = time.monotonic,
+                   sleep: Callable[[float], None] = time.sleep) -> StopResult:
+    """:func:`stop_one` for a drive of another type, through the seam: NMT start, its own stop and
+    the standstill rule, then its power stage off; a failed step never skips the switch-off."""
+    r = StopResult(ref.name, ref.address)
+    try:
+        session.client(ref).nmt_start()
+    except Exception as exc:  # noqa: BLE001 - reported; a failed NMT start never skips the stop
+        r.problems.append(f"NMT start: {why(exc)}")
+    motor_read_off = False
+    try:
+        drive = open_drive(session, ref)
+        r.stopped_by, r.standstill, problems = stop_other(
+            drive, standstill_timeout=settings.standstill_timeout, poll_interval=settings.poll_interval,
+            clock=clock, sleep=sleep, standstill_velocity=settings.standstill_velocity)
+        r.problems.extend(problems)
+        motor_read_off = r.stopped_by == "motor was off"
+    except Exception as exc:  # noqa: BLE001 - reported; a failed stop never skips the switch-off
+        r.stopped_by = "not stopped"
+        r.problems.append(f"stop: {why(exc)}")
+    if not motor_read_off:
+        try:
+            open_drive(session, ref).disable()
+            r.motor_off = True
+        except Exception as exc:  # noqa: BLE001 - reported in the drive's result
+            r.problems.append(f"switch-off: {why(exc)}")
+    return r
+
+
 def stop_drives(session: ArmSession, refs: Sequence[DriveRef], settings: MotionSettings, *,
                 clock: Callable[[], float] = time.monotonic,
                 sleep: Callable[[float], None] = time.sleep) -> list[StopResult]:
@@ -102,8 +133,13 @@ def stop_drives(session: ArmSession, refs: Sequence[DriveRef], settings: MotionS
             continue
         by_bus.setdefault(ref.bus, []).append(ref)
 
+    def one(ref: DriveRef) -> StopResult:
+        if is_elmo(session, ref):
+            return stop_one(session.client(ref), ref, settings, clock=clock, sleep=sleep)
+        return stop_other_one(session, ref, settings, clock=clock, sleep=sleep)
+
     def job(bus_refs: list[DriveRef]) -> Callable[[], list[StopResult]]:
-        return lambda: [stop_one(session.client(ref), ref, settings, clock=clock, sleep=sleep) for ref in bus_refs]
+        return lambda: [one(ref) for ref in bus_refs]
 
     outcomes = run_concurrently({bus: job(rs) for bus, rs in by_bus.items()})
     for bus, outcome in outcomes.items():
