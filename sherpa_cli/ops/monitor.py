@@ -29,6 +29,7 @@ from sherpa_cli.bus.canopen_names import NMT_STATES, nmt_text
 from sherpa_cli.bus.parallel import run_concurrently
 from sherpa_cli.bus.targets import DriveRef
 from sherpa_cli.config.model import ArmConfig
+from sherpa_cli.devices.drives import is_elmo, open_drive
 from sherpa_cli.elmo.faults import Emcy, Fault, decode_error_field, decode_mf, sr_problems
 from sherpa_cli.elmo.protocol import HEARTBEAT_BASE
 from sherpa_cli.errors import SdoError, SherpaError, UsageError, raise_if_signalled
@@ -249,6 +250,9 @@ class Monitor:
         client = self.session.client(w.ref)
         if w.polled and not w.answering:
             client.nmt_start()  # it may have rebooted into Pre-operational
+        if not is_elmo(self.session, w.ref):
+            self._poll_other(w)
+            return
         joint = self.cfg.joint_of_drive(w.ref.name)
         # a drive that reads its joint's absolute encoder: PY too, to tell a counter that restarted
         values, problem = query(client, (*POLLED, "PY") if joint is not None and encoder_on_drive(joint) else POLLED)
@@ -261,6 +265,25 @@ class Monitor:
                 w.answered_at = self.clock()
             else:
                 w.values = {}  # never show frozen values of a drive that stopped answering
+
+    def _poll_other(self, w: _Watch) -> None:
+        """A drive of another type, through the seam: its power stage (the MO column) and position;
+        a fault it reports is the row's problem. It has no UM, SR or MF to show."""
+        drive = open_drive(self.session, w.ref)
+        fault: str | None = None
+        try:
+            st = drive.status()
+            values: dict[str, int | float] = {"MO": int(st.enabled), "PX": drive.position()}
+            problem, fault = None, st.fault
+        except SherpaError as exc:
+            values, problem = {}, str(exc).removeprefix(f"{drive.label}: ")
+        with self._lock:
+            w.polled = True
+            w.answering = problem is None
+            w.problem = problem if problem is not None else (f"fault: {fault}" if fault else None)
+            w.values = values
+            if problem is None:
+                w.answered_at = self.clock()
 
     def _heartbeat_callback(self, w: _Watch) -> Callable[[int, bytes, float], None]:
         def on_heartbeat(can_id: int, data: bytes, timestamp: float) -> None:
