@@ -30,7 +30,7 @@ from sherpa_cli.motion.report import GuardReport, MotionInterrupted, with_report
 from sherpa_cli.motion.request import MoveRequest
 from sherpa_cli.motion.settings import MotionSettings, check_torque_for
 from sherpa_cli.ops.jog_result import JogResult
-from sherpa_cli.ops.seam_jog import run_seam_jog
+from sherpa_cli.ops.seam_jog import check_seam_jog, run_seam_jog
 
 if TYPE_CHECKING:
     from sherpa_cli.bus.session import ArmSession
@@ -95,9 +95,11 @@ def run_jog(session: ArmSession, target: Axis, req: MoveRequest, *, settings: Mo
             on_progress: Callable[[JogProgress], None] | None = None,
             on_event: Callable[[str], None] | None = None, keep: bool = False) -> JogResult:
     """Move as asked inside a MotionGuard and return where it ended; every exit path stops the motor."""
-    check_request(target, req, max_torque_for=session.cfg.motion.max_torque_for)
     if not is_elmo(session, target.ref):  # the interpreter's jog below; any other type through the seam
+        check_seam_jog(session, target, req)
+        check_request(target, req, max_torque_for=session.cfg.motion.max_torque_for)
         return run_seam_jog(session, target, req, settings=settings, clock=clock, sleep=sleep, on_event=on_event)
+    check_request(target, req, max_torque_for=session.cfg.motion.max_torque_for)
     ref = target.ref
     cal = precheck(session, target, req)
     guard = MotionGuard(session, [ref], settings=settings, clock=clock, sleep=sleep, keep=keep, on_event=on_event)
