@@ -126,7 +126,7 @@ def test_stop_stops_a_moving_cia402_drive_from_standstill_and_switches_it_off(ar
 
 
 def test_monitor_shows_the_cia402_drive_power_stage_position_and_a_fault(arm):
-    session, st, _ = arm
+    session, _st, _ = arm
     ref = drive_ref(session.cfg, "wrist")
     with Monitor(session, [ref]) as mon:
         mon.poll()
