@@ -149,3 +149,27 @@ def test_a_cia402_drive_in_fault_is_refused_by_the_guard_with_the_decoded_code(a
     with pytest.raises(SafetyError, match="in fault, refusing to move it"):
         _jog(session, st, "wrist", by="10counts", uncalibrated=True)
     assert not [t for n, t in events if n == "wrist" and t.startswith("motor on")]
+
+
+@pytest.mark.parametrize(("argv", "refused"), [
+    (["identify", "wrist"], "`sherpa identify` is for Elmo drives"),
+    (["cmd", "wrist", "PX"], "`sherpa cmd` is for Elmo drives"),
+    (["tune", "show", "wrist"], "`sherpa tune` is for Elmo drives"),
+    (["program-limits", "wrist"], "`sherpa program-limits` is for Elmo drives"),
+    (["dump-params", "wrist"], "`sherpa dump-params` is for Elmo drives"),
+    (["home", "wrist", "--yes"], "sherpa homes joints on Elmo drives"),
+    (["log", "step", "wrist", "--velocity", "1", "--for", "1", "-o", "out", "--apply"], "is a cia402 drive"),
+])
+def test_an_elmo_command_refuses_a_named_cia402_drive_by_name_before_the_bus(cli, argv, refused):
+    """Nothing is opened: the refusal comes from the config alone (no --sim, no bus)."""
+    res = cli("--config", str(CONFIG), *argv)
+    assert res.exit_code == 2, res
+    assert refused in res.stderr and "Traceback" not in res.stderr, res.stderr
+
+
+def test_identify_of_every_drive_reads_the_elmo_drives():
+    from sherpa_cli.bus.targets import drive_names
+
+    cfg = load_config(CONFIG)
+    assert drive_names(cfg, None, elmo_only="identify") == ["elbow", "left", "right"]
+    assert drive_names(cfg, None) == ["elbow", "wrist", "left", "right"]

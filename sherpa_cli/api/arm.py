@@ -183,7 +183,7 @@ class Arm:
         from sherpa_cli.bus.targets import drive_names
         from sherpa_cli.ops.identify import identify
 
-        return identify(self._session, drive_names(self.config, targets), progress)
+        return identify(self._session, drive_names(self.config, targets, elmo_only="identify"), progress)
 
     def dump_params(self, path: str | Path | None = None, targets: Sequence[str] | None = None, *,
                     progress: Callable[[str, str], None] | None = None,
@@ -197,7 +197,7 @@ class Arm:
         from sherpa_cli.ops.params_file import write_dump
         from sherpa_cli.ops.params_read import dump_params
 
-        dump = dump_params(self._session, drive_names(self.config, targets), progress, now)
+        dump = dump_params(self._session, drive_names(self.config, targets, elmo_only="dump-params"), progress, now)
         if path is not None:
             write_dump(Path(path), dump, "path")
         return dump
@@ -369,7 +369,7 @@ class Arm:
         )
 
         cfg = self.config
-        ref = single_drive(cfg, target)
+        ref = single_drive(cfg, target, elmo_only="cmd")
         parse_all(exprs)  # a typo must not reach the bus, not even the NMT start
         saving = check_raw_save(exprs, apply=apply, raw_save=raw_save)  # before anything is sent
         run = RawRun(ref.name, apply)
@@ -770,7 +770,7 @@ class Arm:
 
         programming.check_options(apply, save)
         cfg = self.config
-        derived, warnings = derive_checked(cfg, drive_names(cfg, targets))
+        derived, warnings = derive_checked(cfg, drive_names(cfg, targets, elmo_only="program-limits"))
         drives = [DriveTarget(d.drive, d.bus, d.node, d.params) for d in derived]
         warnings = programming.check(drives, warnings)
         report = programming.run(self._session, drives, apply=apply, save=save, motor_off=motor_off,
@@ -814,7 +814,7 @@ class Arm:
         from sherpa_cli.bus.targets import drive_refs
         from sherpa_cli.ops.tune import read_gains
 
-        return read_gains(self._session, drive_refs(self.config, [target], configured_only=True))
+        return read_gains(self._session, drive_refs(self.config, [target], configured_only=True, elmo_only="tune"))
 
     def tune_set(self, target: str, gains: Mapping[str, float] | Sequence[str], *, apply: bool = False,
                  save: bool = False, motor_off: bool = False, confirm_save: ConfirmSave = refuse_unconfirmed,
@@ -834,7 +834,7 @@ class Arm:
         texts = [f"{k}={v!r}" for k, v in gains.items()] if isinstance(gains, Mapping) else \
             [gains] if isinstance(gains, str) else list(gains)
         values = parse_assignments(cfg, texts)
-        refs = drive_refs(cfg, [target], configured_only=True)
+        refs = drive_refs(cfg, [target], configured_only=True, elmo_only="tune")
         return self._program([DriveTarget(r.name, r.bus, r.node, values) for r in refs], apply=apply, save=save,
                              motor_off=motor_off, confirm_save=confirm_save, on_plan=on_plan, check=check)
 

@@ -209,17 +209,32 @@ def unique_drives(targets: Iterable[Target]) -> list[DriveRef]:
     return list(refs.values())
 
 
-def drive_refs(cfg: ArmConfig, names: Sequence[str] | None, *, configured_only: bool = False) -> list[DriveRef]:
-    """Every drive the names mean, in order, without repeats; default every configured drive."""
-    return unique_drives(resolve(cfg, names, configured_only=configured_only))
+def drive_refs(cfg: ArmConfig, names: Sequence[str] | None, *, configured_only: bool = False,
+               elmo_only: str | None = None) -> list[DriveRef]:
+    """Every drive the names mean, in order, without repeats; default every configured drive.
+
+    ``elmo_only`` (the command, for the message): the command speaks Elmo's interpreter or its
+    parameters. A drive of another type (docs/drives.md) that was named is refused; the default
+    "every drive" means every Elmo drive."""
+    refs = unique_drives(resolve(cfg, names, configured_only=configured_only))
+    if elmo_only is None:
+        return refs
+    others = [r for r in refs if r.config is not None and r.config.type != "elmo"]
+    if others and names:
+        kinds = sorted({r.config.type for r in others if r.config is not None})
+        raise UsageError(f"{', '.join(r.name for r in others)}: {' and '.join(kinds)} "
+                         f"drive{'s' if len(others) > 1 else ''}: `sherpa {elmo_only}` is for Elmo drives",
+                         hint="docs/drives.md says what each drive type does")
+    return [r for r in refs if r not in others]
 
 
-def drive_names(cfg: ArmConfig, names: Sequence[str] | None) -> list[str]:
-    """Configured drive names for ``names`` (BUS:NODE must be a configured drive); default all."""
-    return [ref.name for ref in drive_refs(cfg, names, configured_only=True)]
+def drive_names(cfg: ArmConfig, names: Sequence[str] | None, *, elmo_only: str | None = None) -> list[str]:
+    """Configured drive names for ``names`` (BUS:NODE must be a configured drive); default all
+    (``elmo_only``: as :func:`drive_refs`)."""
+    return [ref.name for ref in drive_refs(cfg, names, configured_only=True, elmo_only=elmo_only)]
 
 
-def single_drive(cfg: ArmConfig, text: str) -> DriveRef:
+def single_drive(cfg: ArmConfig, text: str, *, elmo_only: str | None = None) -> DriveRef:
     """The one drive a name means, for commands that talk to exactly one drive (``sherpa cmd``).
 
     A pair, or a Σ/Δ joint, is refused: it is moved by two drives.
@@ -227,6 +242,8 @@ def single_drive(cfg: ArmConfig, text: str) -> DriveRef:
     t = resolve_one(cfg, text)
     if len(t.drives) != 1:
         raise UsageError(f"'{text}' is moved by two drives ({', '.join(t.drive_names)}); name one of them")
+    if elmo_only is not None:
+        drive_refs(cfg, [text], elmo_only=elmo_only)  # a drive of another type refused by name
     return t.drives[0]
 
 

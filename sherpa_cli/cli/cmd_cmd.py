@@ -53,7 +53,7 @@ def cmd(
 
     st = state(ctx)
     cfg = st.load_config()
-    ref = single_drive(cfg, target)
+    ref = single_drive(cfg, target, elmo_only="cmd")
     parse_all(exprs)  # a typo must not reach the bus, not even the NMT start
     check_raw_save(exprs, apply=apply, raw_save=raw_save)  # before anything is sent
     with st.session(buses=[ref.bus]) as session:

@@ -51,7 +51,7 @@ def identify(
     devices = [n for n in named if cfg.devices[n].canopen]
     sensors = [cfg.devices[n] for n in named if not cfg.devices[n].canopen]  # F/T sensors: a reading, no SDO
     rest = [t for t in targets or [] if cfg.device_by_source(t) is None]
-    drives = drive_names(cfg, rest) if rest or not targets else []
+    drives = drive_names(cfg, rest, elmo_only="identify") if rest or not targets else []
     buses = sorted({cfg.drives[d].bus for d in drives} | {cfg.devices[d].bus for d in devices}
                    | {d.bus for d in sensors})
     with st.session(buses=buses) as session:

@@ -54,7 +54,7 @@ def show(ctx: typer.Context,
     if software:
         _show_software(st, cfg, list(names or []))
         return
-    derived, warnings = derive_checked(cfg, drive_names(cfg, names))
+    derived, warnings = derive_checked(cfg, drive_names(cfg, names, elmo_only="limits"))
     for w in warnings:
         st.out.warn(w)
     note = left_as_they_are(derived)

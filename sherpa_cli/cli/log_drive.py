@@ -38,7 +38,7 @@ def record_from_drive(st: AppState, targets: Sequence[str] | None, duration: flo
         raise UsageError(f"{paths[0]}: the directory does not exist")
     plan_recording(duration, RecorderSettings())  # a time the recorder cannot hold: refused before the bus opens
     cfg = st.load_config()
-    refs = drive_refs(cfg, targets, configured_only=True)
+    refs = drive_refs(cfg, targets, configured_only=True, elmo_only="log record --source drive")
     with st.session(buses=list(dict.fromkeys(r.bus for r in refs))) as session:
         if trigger == "bg":
             st.out.info("armed: waiting for the next BG (start the move now)")

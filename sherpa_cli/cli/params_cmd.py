@@ -46,7 +46,7 @@ def dump_params(
 
     st = state(ctx)
     cfg = st.load_config()
-    drives = drive_names(cfg, targets)
+    drives = drive_names(cfg, targets, elmo_only="dump-params")
     if is_stdout(output):
         output = None  # `-o -` is the default: the YAML on stdout
     check_output_path(output, "--output", "the dump")  # a directory is refused before the drives are read
@@ -101,7 +101,7 @@ def diff(
             files[spec], w = pd.file_side(Path(spec), cfg)
             warnings.extend(w)
     if targets:
-        drives = drive_names(cfg, targets)
+        drives = drive_names(cfg, targets, elmo_only="params diff")
     elif files:
         drives = pd.drives_of(list(files.values()), cfg)
     else:

@@ -66,7 +66,7 @@ def program_limits(
     st = state(ctx)
     cfg = st.load_config()
     check_options(apply, save)
-    derived, warnings = derive_checked(cfg, drive_names(cfg, names))
+    derived, warnings = derive_checked(cfg, drive_names(cfg, names, elmo_only="program-limits"))
     targets = [DriveTarget(d.drive, d.bus, d.node, d.params) for d in derived]
     run_program(st, "program-limits", targets, warnings, apply=apply, save=save, yes=yes, motor_off=motor_off,
                 need_serial=save, allow_disabled=False, title=lambda drive: drive_moves(cfg, drive),

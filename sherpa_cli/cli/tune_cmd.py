@@ -35,7 +35,7 @@ def show(ctx: typer.Context,
 
     st = state(ctx)
     cfg = st.load_config()
-    refs = drive_refs(cfg, [target], configured_only=True)
+    refs = drive_refs(cfg, [target], configured_only=True, elmo_only="tune")
     with st.session(buses=list(dict.fromkeys(r.bus for r in refs))) as session:
         readings = Arm(session).tune_show(target)
     if st.json_mode:
@@ -78,7 +78,7 @@ def set_gains(
     check_options(apply, save)
     cfg = st.load_config()
     values = parse_assignments(cfg, gains)
-    refs = drive_refs(cfg, [target], configured_only=True)
+    refs = drive_refs(cfg, [target], configured_only=True, elmo_only="tune")
     targets = [DriveTarget(r.name, r.bus, r.node, values) for r in refs]
     run_program(st, "tune set", targets, [], apply=apply, save=save, yes=yes, motor_off=motor_off,
                 need_serial=save, allow_disabled=False, title=lambda drive: drive_moves(cfg, drive),

@@ -90,7 +90,8 @@ def plan_record(cfg: ArmConfig, targets: Sequence[str] | None, rate: float, *, c
     from sherpa_cli.log.record import bus_budget
 
     # an encoder device stands for the joint it measures (recorded beside it: devices/encoder.py)
-    refs = drive_refs(cfg, encoder.targets_with_encoders(cfg, targets), configured_only=True)
+    refs = drive_refs(cfg, encoder.targets_with_encoders(cfg, targets), configured_only=True,
+                      elmo_only="log record")
     tracks = encoder.recorded_encoders(cfg, (r.name for r in refs))
     budget: tuple[BusBudget, ...] = ()
     if not poll:

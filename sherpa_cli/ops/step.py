@@ -112,7 +112,11 @@ def resolve_step_target(cfg: ArmConfig, text: str) -> Axis:
                          f"steps move both motors ({p.drive_a}, {p.drive_b})",
                          hint=f"record the pair (sherpa log record {p.sigma} {p.delta} --for S -o pair.csv) while "
                          "`sherpa diffdrive move` moves it")
-    return resolve_axis(cfg, text)
+    axis = resolve_axis(cfg, text)
+    if axis.ref.config is not None and axis.ref.config.type != "elmo":
+        raise UsageError(f"{text}: its drive {axis.ref.name} is a {axis.ref.config.type} drive: `sherpa log step` "
+                         "records with Elmo's interpreter and recorder", hint="docs/drives.md says what each drive type does")
+    return axis
 
 
 class SyncSource(Protocol):
