@@ -47,6 +47,11 @@ def test_the_contracts_hold_for_the_tree(package_copy: Path) -> None:
     # a cycle between two siblings of one package, inside a function
     ("ops/params_file.py", "def _planted():\n    from sherpa_cli.ops import params_diff  # noqa\n", "No import cycles"),
     ("bus/sdo.py", "def _planted():\n    from sherpa_cli.bus import session  # noqa\n", "No import cycles"),
+    # the pipeline speaking Elmo's letters or CiA 402's objects instead of asking through the seam
+    ("motion/run.py", "from sherpa_cli.elmo.protocol import UM_POSITION  # noqa",
+     "The motion pipeline asks every drive through the drive seam"),
+    ("ops/seam_jog.py", "def _planted():\n    from sherpa_cli.cia402 import protocol  # noqa\n",
+     "The motion pipeline asks every drive through the drive seam"),
 ])
 def test_a_wrong_import_breaks_a_contract(package_copy: Path, module: str, line: str, contract: str) -> None:
     path = package_copy / "sherpa_cli" / module

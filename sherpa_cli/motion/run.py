@@ -38,7 +38,6 @@ from sherpa_cli.motion.report import GuardReport
 
 if TYPE_CHECKING:
     from sherpa_cli.bus.targets import DriveRef
-    from sherpa_cli.elmo.client import DriveClient
     from sherpa_cli.motion.axis import Axis
     from sherpa_cli.motion.guard import MotionGuard
     from sherpa_cli.motion.plan import MotionPlan
@@ -177,8 +176,8 @@ def run_plan(guard: MotionGuard, plan: MotionPlan, *, settings: MotionSettings, 
     drives: dict[str, Drive] = {d: guard.drive(r) for d, r in refs.items()}
     # Elmo drives start together per bus (pair_start) and keep SP/AC/DC journaled; any other drive
     # type through the seam alone, started one after the other (the guard puts its profile back)
-    clients: dict[str, DriveClient] = {d: guard.client(r) for d, r in refs.items() if drives[d].kind == ELMO}
-    movers: dict[str, DriveClient | Drive] = {d: clients.get(d, drives[d]) for d in refs}
+    clients = {d: guard.client(r) for d, r in refs.items() if drives[d].kind == ELMO}
+    movers: dict[str, recovery.Motor] = {d: clients.get(d, drives[d]) for d in refs}
     targets = {m.drive: m.target for m in plan.motors}
     method, group_id = pair_start.pair_settings(cfg)
     buses: dict[str, list[DriveRef]] = {}
