@@ -173,3 +173,16 @@ def test_identify_of_every_drive_reads_the_elmo_drives():
     cfg = load_config(CONFIG)
     assert drive_names(cfg, None, elmo_only="identify") == ["elbow", "left", "right"]
     assert drive_names(cfg, None) == ["elbow", "wrist", "left", "right"]
+
+
+def test_arm_state_reads_a_cia402_joint_through_the_seam(arm):
+    import math
+
+    session, st, _ = arm
+    _jog(session, st, "wrist", by="300counts", uncalibrated=True)
+    state = {j.name: j for j in Arm(session).state()}
+    wrist = state["wrist"]
+    assert wrist.position_counts == 300 and not wrist.motor_on and wrist.faults == ()
+    assert not wrist.calibrated and "cia402 drive" in wrist.calibration
+    assert math.isnan(wrist.current)  # not read from this drive type, never a made-up 0
+    assert state["arm"].position_counts == 0 and not math.isnan(state["arm"].current)

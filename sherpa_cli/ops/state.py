@@ -10,6 +10,7 @@ joints/diffpair.py. Nothing is written to a drive; nothing here prints.
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
@@ -17,8 +18,10 @@ from typing import TYPE_CHECKING
 
 from sherpa_cli.bus.targets import DriveRef, drive_ref, resolve
 from sherpa_cli.config.model import ArmConfig, CurrentLimits, JointConfig
+from sherpa_cli.devices.drives import is_elmo, open_drive
+from sherpa_cli.elmo.drive import UNIT_MODES as UNIT_MODES_OF
 from sherpa_cli.elmo.faults import UNIT_MODES
-from sherpa_cli.errors import CommunicationError, UsageError
+from sherpa_cli.errors import CommunicationError, SherpaError, UsageError
 from sherpa_cli.joints.jointmap import joint_map
 from sherpa_cli.joints.units import counts_per_s2_to_rad_per_s2, counts_per_s_to_rad_per_s, counts_to_rad
 from sherpa_cli.motion.calibration import Calibration, joint_drives, read_calibration
@@ -143,6 +146,19 @@ def joints_of(cfg: ArmConfig, targets: Sequence[str] | None) -> tuple[list[Joint
     return joints, [drive_ref(cfg, d) for d in cfg.drives if d in wanted]
 
 
+def _other_state(session: ArmSession, ref: DriveRef) -> DriveState:
+    """A drive of another type through the seam: no current (NaN: not read), SR and MF 0, the unit
+    mode its mode's Elmo equivalent (the words say the same), a reported fault as its one fault."""
+    drive = open_drive(session, ref)
+    try:
+        st = drive.status()
+        position, velocity = drive.position(), drive.velocity()
+    except SherpaError as exc:
+        raise CommunicationError(f"{ref.name} ({ref.address}): {exc}") from exc
+    return DriveState(ref.name, ref.bus, ref.node, position, velocity, math.nan, st.enabled,
+                      UNIT_MODES_OF.get(st.mode, 0), 0, 0, (st.fault,) if st.fault else ())
+
+
 def read_state(session: ArmSession, targets: Sequence[str] | None = None, *,
                clock: Callable[[], float] = time.monotonic) -> ArmState:
     """Read the drives of ``targets`` (buses at the same time) and compute their joints.
@@ -159,6 +175,8 @@ def read_state(session: ArmSession, targets: Sequence[str] | None = None, *,
         ref = ref_of[drive]
         client = session.client(ref)
         client.nmt_start()
+        if not is_elmo(session, ref):
+            return _other_state(session, ref)
         values, problem = query(client, STATE_KEYS)
         if problem is not None:
             raise CommunicationError(f"{drive} ({ref.address}): {problem}")
