@@ -171,3 +171,18 @@ def watch(joints: Sequence[Axis], sample: Callable[[], Motors], *,
             return WatchResult("stalled", motors, (), n, elapsed, positions)
         wait = interval if duration is None else min(interval, max(duration - elapsed, 0.0))
         sleep(wait if wait > 0 else interval)
+
+
+class BreachOutcome:
+    """What a move's result says of its limit watch (the result dataclasses of the movers inherit
+    it): ``ok`` unless a joint left its full range, then ``outcome`` "limit"."""
+
+    breaches: list[Breach]
+
+    @property
+    def ok(self) -> bool:
+        return not self.breaches
+
+    @property
+    def outcome(self) -> str:
+        return "limit" if self.breaches else "done"

@@ -33,7 +33,7 @@ from sherpa_cli.errors import SafetyError
 from sherpa_cli.joints.units import counts_to_rad
 from sherpa_cli.motion import limit_watch, pair_start, recovery
 from sherpa_cli.motion.blocked import blocked_error
-from sherpa_cli.motion.limit_watch import Breach
+from sherpa_cli.motion.limit_watch import Breach, BreachOutcome
 from sherpa_cli.motion.report import GuardReport
 
 if TYPE_CHECKING:
@@ -108,7 +108,7 @@ class StartReport:
 
 
 @dataclass
-class MotionOutcome:
+class MotionOutcome(BreachOutcome):
     """What a move did: per joint start, target, end, arrival; how it ended; how the guard stopped
     the motors (``stop``, filled once the guard has exited -- a session's moves share one guard)."""
 
@@ -121,14 +121,6 @@ class MotionOutcome:
     stop: GuardReport = field(default_factory=GuardReport)
     held_at: dict[str, int] | None = None  # --hold: the PA each motor held
     held_until: str = ""
-
-    @property
-    def ok(self) -> bool:
-        return not self.breaches
-
-    @property
-    def outcome(self) -> str:
-        return "limit" if self.breaches else "done"
 
     @property
     def arrival_spread_s(self) -> float | None:

@@ -19,7 +19,7 @@ from typing import Any
 from sherpa_cli.joints.units import counts_per_s_to_rad_per_s, counts_to_rad
 from sherpa_cli.motion.axis import DRIVE, PLAIN, AxisKind
 from sherpa_cli.motion.calibration import Calibration
-from sherpa_cli.motion.limit_watch import Breach
+from sherpa_cli.motion.limit_watch import Breach, BreachOutcome
 from sherpa_cli.motion.report import GuardReport
 from sherpa_cli.motion.request import Mode
 
@@ -34,7 +34,7 @@ def letters(commands: Mapping[str, Mapping[str, int | float]]) -> str:
 
 
 @dataclass
-class JogResult:
+class JogResult(BreachOutcome):
     """One jog of one axis: where it started and ended, what was sent, how it ended, how the guard
     stopped the motors. ``ok`` is False when a joint left its full range (``breaches``; the joint
     was brought back, ``recovered_to`` says where)."""
@@ -68,14 +68,6 @@ class JogResult:
     held_until: str = ""  # --hold: how the hold ended (motion/hold.py)
     # a Σ/Δ jog: the other joint of the pair put back after start/stop skew, {joint: {"from", "to"}}
     held_correction: dict[str, dict[str, int]] = field(default_factory=dict)
-
-    @property
-    def ok(self) -> bool:
-        return not self.breaches
-
-    @property
-    def outcome(self) -> str:
-        return "limit" if self.breaches else "done"
 
     @property
     def error_counts(self) -> int | None:
