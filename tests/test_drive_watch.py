@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import struct
 import time
+from collections.abc import Callable
 
 import can
 import pytest
@@ -238,6 +239,22 @@ def test_a_trip_between_two_requests_is_raised_by_the_next_request_not_its_timeo
         assert_all_stopped(s, g)
 
 
+def reset_before_motor_off(client, other, node: int, seen: Callable[[], bool]) -> None:
+    """The client's next MO=0 (once) is preceded by an NMT reset node of ``node`` (0: every node) from
+    the other node, and goes out once ``seen()`` says the watch noticed it (bounded)."""
+    motor_off = client.motor_off
+
+    def reset_then_motor_off(*args, **kwargs):
+        client.motor_off = motor_off  # once
+        other.send(can.Message(arbitration_id=0, data=bytes([0x81, node]), is_extended_id=False))
+        deadline = time.monotonic() + BOUND
+        while not seen() and time.monotonic() < deadline:
+            time.sleep(0.005)
+        return motor_off(*args, **kwargs)
+
+    client.motor_off = reset_then_motor_off
+
+
 def test_a_drive_reset_during_its_own_stop_is_stopped_once_more_once_it_booted(tmp_path, other_node):
     """A reset that lands in the middle of the exit (here: right before its MO=0): the step it
     cuts short and every later one would wait out their reply timeouts on a deaf drive."""
@@ -247,18 +264,9 @@ def test_a_drive_reset_during_its_own_stop_is_stopped_once_more_once_it_booted(t
         other = open_other(s, other_node)
         with MotionGuard(s, refs, settings=MotionSettings.from_config(cfg)) as g:
             start_both(g, refs)
-            client = g.client(refs[0])
-            motor_off = client.motor_off
-
-            def reset_then_motor_off(*args, **kwargs):
-                client.motor_off = motor_off  # once
-                other.send(can.Message(arbitration_id=0, data=bytes([0x81, NODE1]), is_extended_id=False))
-                deadline = time.monotonic() + BOUND
-                while not g._watch.resetting("can0", NODE1) and time.monotonic() < deadline:
-                    time.sleep(0.005)  # the MO=0 goes out while the drive boots
-                return motor_off(*args, **kwargs)
-
-            client.motor_off = reset_then_motor_off
+            # the MO=0 goes out while the drive boots
+            reset_before_motor_off(g.client(refs[0]), other, NODE1,
+                                   lambda: g._watch.resetting("can0", NODE1))
             for _ in range(10):
                 g.check()
                 time.sleep(0.01)
@@ -494,18 +502,8 @@ def test_drives_that_all_boot_again_before_their_turn_in_the_exit_are_stopped_cl
         other = open_other(s, other_node)
         with MotionGuard(s, refs, settings=MotionSettings.from_config(cfg)) as g:
             start_both(g, refs)
-            client = g.client(refs[0])
-            motor_off = client.motor_off
-
-            def reset_all_then_motor_off(*args, **kwargs):
-                client.motor_off = motor_off  # once
-                other.send(can.Message(arbitration_id=0, data=bytes([0x81, 0]), is_extended_id=False))
-                deadline = time.monotonic() + BOUND
-                while g._watch.boots("can0", NODE2) == 0 and time.monotonic() < deadline:
-                    time.sleep(0.005)  # drive2 boots while drive1's stop goes on
-                return motor_off(*args, **kwargs)
-
-            client.motor_off = reset_all_then_motor_off
+            # every node reset: drive2 boots while drive1's stop goes on
+            reset_before_motor_off(g.client(refs[0]), other, 0, lambda: g._watch.boots("can0", NODE2) > 0)
             g.check()
         assert_all_stopped(s, g)
         assert [r.line() for r in g.report.drives if r.problems or "stop failed" in " ".join(r.kept)] == []
