@@ -425,7 +425,7 @@ class MotionGuard:
                         f"limit until it reads below {limit:g} {unit}: moving away is allowed, pressing harder "
                         "stops")
                 self._event(line)
-                log.warning("%s", line)  # the technician must know the usual limit does not hold yet
+                self.report.notes.append(line)  # the technician must know the usual limit does not hold yet
         if (s.force_limit is not None or s.torque_limit is not None) and not self._forces:
             raise UsageError("--force-limit: this arm has no F/T sensor to watch (no device of type ft_sensor)",
                              hint="docs/devices.md says how to configure one")

@@ -91,24 +91,28 @@ class GuardReport:
     drives: list[DriveStop] = field(default_factory=list)
     reason: str = "end"  # end | error | interrupted | SIGTERM | SIGHUP
     bus_faults: list[BusFault] = field(default_factory=list)  # in the order they were seen
+    # what the technician must know of how the guard watched (a force watch that began past its limit)
+    notes: list[str] = field(default_factory=list)
 
     @property
     def ok(self) -> bool:
         return all(not d.problems for d in self.drives)
 
     def lines(self, verbose: bool = False) -> list[str]:
-        return [f.line() for f in self.bus_faults] + [d.line(verbose) for d in self.drives]
+        return self.notes + [f.line() for f in self.bus_faults] + [d.line(verbose) for d in self.drives]
 
     @classmethod
     def from_json(cls, data: dict[str, Any]) -> GuardReport:
         """The report back from :meth:`as_json` (a result that kept only that, rendered again)."""
         return cls([DriveStop(**d) for d in data.get("drives", [])], data.get("reason", "end"),
-                   [BusFault(**f) for f in data.get("bus_faults", [])])
+                   [BusFault(**f) for f in data.get("bus_faults", [])], list(data.get("notes", [])))
 
     def as_json(self) -> dict[str, Any]:
         out: dict[str, Any] = {"reason": self.reason, "drives": [d.as_json() for d in self.drives]}
         if self.bus_faults:  # only when there were any: a clean run's JSON stays as it was
             out["bus_faults"] = [f.as_json() for f in self.bus_faults]
+        if self.notes:
+            out["notes"] = list(self.notes)
         return out
 
 
