@@ -4,12 +4,15 @@ wrote, or a planner's CSV.
 - A recording's CSV (log/recording.py): first column ``time_s``; the joints are the
   ``<joint>.pos_rad`` columns (rad); every other column (velocities, currents, motor counts) is
   left aside. A row where a joint's position is empty (a sample its drive did not deliver) is
-  skipped: the path runs through the samples around it.
+  skipped: the path runs through the samples around it. A sample closer than half the
+  recording's typical (median) interval to the one kept before it is left out too: the recorder
+  sends the SYNCs already due back to back when it falls behind (at its start), and whole counts
+  a few microseconds apart would read as an absurd speed.
 - A planner's CSV: a header ``t,<joint>,<joint>,...``, then one row per sample, time in s and
   every joint's position in rad. Every cell must be a number.
 - A recording's MCAP (`log record -o run.mcap`, log/mcap_out.py): its ``/joint_states`` messages,
   position in rad, time from their log time. A message lacking a joint's position (NaN) is
-  skipped. Reading it needs the robotics extra (mcap, mcap-ros2-support).
+  skipped, and close samples are left out as in a recording's CSV. Reading it needs the robotics extra (mcap, mcap-ros2-support).
 
 Times are taken from the first sample (it becomes 0). Positions become joint counts with the
 joint's ``cpr`` (not rounded). Any file problem is one UsageError (exit 2) naming the file and
@@ -20,6 +23,7 @@ from __future__ import annotations
 
 import csv
 import io
+import itertools
 import math
 from pathlib import Path
 
@@ -47,10 +51,7 @@ def load_trajectory(path: Path, cfg: ArmConfig, *, period: float | None = None,
         raise UsageError(f"{path}: no such file")
     if not path.is_file():
         raise UsageError(f"{path}: not a file")
-    if path.suffix.lower() == ".mcap":
-        traj = _read_mcap(path, cfg)
-    else:
-        traj = _read_csv(path, cfg)
+    traj = _read_mcap(path, cfg) if path.suffix.lower() == ".mcap" else _read_csv(path, cfg)
     if check:
         check_trajectory(cfg, traj, source=str(path), period=period)
     return traj
@@ -120,8 +121,29 @@ def _read_csv(path: Path, cfg: ArmConfig) -> Trajectory:
     if not times:
         raise UsageError(f"{path}: no samples after the header"
                          + (" (every row lacks a joint position)" if recorded else ""))
+    return _trajectory(joints, times, series, rows, thin=bool(recorded))
+
+
+def _trajectory(joints: list[str], times: list[float], series: list[list[float]], rows: list[int] | None,
+                *, thin: bool) -> Trajectory:
+    """The samples as a Trajectory from time 0; ``thin``: without the samples too close to the one
+    before (module docstring). Times that do not increase are kept for check_trajectory to name."""
+    keep = list(range(len(times)))
+    gaps = sorted(b - a for a, b in itertools.pairwise(times) if b > a)
+    if thin and gaps:
+        least = gaps[len(gaps) // 2] / 2
+        keep = [0]
+        for i in range(1, len(times)):
+            gap = times[i] - times[keep[-1]]
+            if gap >= least or gap <= 0:  # a time that repeats or goes back is kept, to be refused
+                keep.append(i)
+        if keep[-1] != len(times) - 1:
+            # the end stays the recording's end
+            keep[-1 if len(keep) > 1 else len(keep):] = [len(times) - 1]
     t0 = times[0]
-    return Trajectory(tuple(joints), tuple(t - t0 for t in times), tuple(tuple(s) for s in series), tuple(rows))
+    return Trajectory(tuple(joints), tuple(times[i] - t0 for i in keep),
+                      tuple(tuple(s[i] for i in keep) for s in series),
+                      tuple(rows[i] for i in keep) if rows is not None else ())
 
 
 def _number(path: Path, line: int, column: str, cell: str) -> float:
@@ -171,4 +193,4 @@ def _read_mcap(path: Path, cfg: ArmConfig) -> Trajectory:
     if not stamps:
         raise UsageError(f"{path}: no {TOPIC_JOINTS} message has every joint's position")
     t0 = stamps[0]
-    return Trajectory(tuple(joints), tuple((s - t0) / 1e9 for s in stamps), tuple(tuple(s) for s in series))
+    return _trajectory(joints, [(s - t0) / 1e9 for s in stamps], series, None, thin=True)
