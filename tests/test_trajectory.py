@@ -274,3 +274,24 @@ def test_the_motors_of_an_accepted_pair_stay_in_their_box(t, period):
     ms = motor_points(CFG, t, period)
     assert all(box.contains(a, b) for a, b in zip(ms.motor("left").positions, ms.motor("right").positions,
                                                    strict=True))
+
+
+@given(paths(("j1", "j2")))
+def test_at_every_sample_the_velocity_lies_between_the_speeds_of_the_segments_beside_it(t):
+    grid = Trajectory(t.joints, tuple(k * PERIOD for k in range(t.samples)), t.positions)
+    rs = resample(grid, PERIOD)
+    for name in grid.joints:
+        xs = grid.position(name)
+        secants = [(b - a) / PERIOD for a, b in itertools.pairwise(xs)]
+        for i, v in enumerate(rs.velocity(name)):
+            beside = secants[max(0, i - 1):i + 1]
+            slack = 1e-9 * max(1.0, *(abs(s) for s in beside))
+            assert min(beside) - slack <= v <= max(beside) + slack
+
+
+@given(paths(), st.floats(0.001, 0.2))
+def test_between_samples_the_speed_stays_within_one_and_a_half_times_the_fastest_segment(t, period):
+    xs = t.position("j1")
+    fastest = max(abs(b - a) / (t2 - t1) for a, b, t1, t2 in zip(xs, xs[1:], t.times, t.times[1:], strict=False))
+    rs = resample(t, period)
+    assert all(abs(v) <= 1.5 * fastest * (1 + 1e-9) + 1e-9 for v in rs.velocity("j1"))
