@@ -81,6 +81,16 @@ def test_a_recording_of_the_simulated_arm_by_log_record_is_playable(cli, tmp_pat
         assert traj.joints == ("j1", "j2", "pitch", "roll") and traj.samples >= 2
 
 
+def test_a_recording_whose_time_goes_back_is_refused_and_a_repeated_microsecond_is_left_out(tmp_path):
+    path = tmp_path / "rec.csv"
+    path.write_text("time_s,j1.pos_rad\n0.000000,0\n0.000000,0\n0.010000,0\n0.020000,0\n0.015000,0\n")
+    with pytest.raises(UsageError) as info:
+        load_trajectory(path, CFG)
+    assert one_line(info.value).startswith(f"{path}:6 (t=0.015 s): the time goes back from the previous sample's")
+    path.write_text("time_s,j1.pos_rad\n0.000000,0\n0.000000,0\n0.010000,0\n0.020000,0\n")
+    assert load_trajectory(path, CFG).rows == (2, 4, 5)
+
+
 def test_a_planner_csv(tmp_path):
     path = tmp_path / "plan.csv"
     path.write_text("t,j1,pitch,roll\n"

@@ -127,7 +127,7 @@ def _read_csv(path: Path, cfg: ArmConfig) -> Trajectory:
 def _trajectory(joints: list[str], times: list[float], series: list[list[float]], rows: list[int] | None,
                 *, thin: bool) -> Trajectory:
     """The samples as a Trajectory from time 0; ``thin``: without the samples too close to the one
-    before (module docstring). Times that do not increase are kept for check_trajectory to name."""
+    before (module docstring). A time that goes back is kept for check_trajectory to name."""
     keep = list(range(len(times)))
     gaps = sorted(b - a for a, b in itertools.pairwise(times) if b > a)
     if thin and gaps:
@@ -135,7 +135,9 @@ def _trajectory(joints: list[str], times: list[float], series: list[list[float]]
         keep = [0]
         for i in range(1, len(times)):
             gap = times[i] - times[keep[-1]]
-            if gap >= least or gap <= 0:  # a time that repeats or goes back is kept, to be refused
+            # a time that goes back is kept, to be refused; one that repeats (the CSV's microseconds) is a
+            # catch-up SYNC like the others
+            if gap >= least or gap < 0:
                 keep.append(i)
         if keep[-1] != len(times) - 1:
             # the end stays the recording's end
