@@ -101,3 +101,14 @@ def test_monitor_once_names_a_silent_sensor_and_exits_1(cli, tmp_path):
     assert result.exit_code == 1, result.stderr
     assert "wrist_ft (can0 base 0x010): F/T sensor wrist_ft (base 0x010): no reply within 200 ms" in result.stdout
     assert "no answer" in result.stdout
+
+
+def test_monitor_once_exits_1_when_a_sensor_reports_a_fault_in_its_status_word(cli, tmp_path):
+    text = (ROOT / ARM).read_text(encoding="utf-8").replace("      seed: 7\n", "      seed: 7\n      status: 0x8001\n")
+    path = tmp_path / "status.yaml"
+    path.write_text(text, encoding="utf-8")
+    result = cli("--config", str(path), "--sim", "monitor", "--once")
+    assert result.exit_code == 1, result.transcript()
+    assert "0x8001" in result.stdout, result.stdout
+    ok = cli("--config", str(ROOT / ARM), "--sim", "monitor", "--once")
+    assert ok.exit_code == 0, ok.transcript()

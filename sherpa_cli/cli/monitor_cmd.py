@@ -109,8 +109,10 @@ def monitor(
                 sensors = read_sensors(session, [d for d in cfg.ft_sensors() if d.bus in buses]) if not targets \
                     else []
             _render_once(st, rows, sensors)
-            if any(not r.answering or r.mf for r in rows) or any(s.wrench is None for s in sensors):
-                raise typer.Exit(int(ExitCode.PROBLEM))  # a silent drive or sensor, or a latched motor failure
+            if any(not r.answering or r.mf for r in rows) or \
+                    any(s.wrench is None or not s.wrench.status.ok for s in sensors):
+                # a silent drive or sensor, a latched motor failure, a sensor reporting a fault
+                raise typer.Exit(int(ExitCode.PROBLEM))
             return
         after_poll = None
         if view is not None:

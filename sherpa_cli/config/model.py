@@ -502,6 +502,7 @@ class SimFtConfig:
     drift_torque: float = 0.001  # N·m/s on each torque axis
     seed: int = 0
     silent_at: float | None = None  # s after start: the sensor stops answering
+    status: int = 0  # the 16-bit system status word every reply carries (nonzero: the sensor reports a fault)
 
 
 SIM_FT_WALL_SIDES = ("high", "low")

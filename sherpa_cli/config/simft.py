@@ -46,8 +46,15 @@ def parse_sim_ft(top: Section, locs: Locs, sim_keys: Iterable[str]) -> dict[str,
             wall_axis=sec.str("wall_axis", d.wall_axis), noise_force=sec.num("noise_force", d.noise_force),
             noise_torque=sec.num("noise_torque", d.noise_torque), drift_force=sec.num("drift_force", d.drift_force),
             drift_torque=sec.num("drift_torque", d.drift_torque), seed=sec.int("seed", d.seed),
-            silent_at=sec.num("silent_at"))
+            silent_at=sec.num("silent_at"), status=_status(sec))
     return out
+
+
+def _status(sec: Section) -> int:
+    value = sec.int("status", 0)
+    if not 0 <= value <= 0xFFFF:
+        raise ConfigError(f"status: {value} is not a 16-bit status word (0..0xFFFF)", sec.loc("status"))
+    return value
 
 
 def dump_sim_ft(sensors: Mapping[str, SimFtConfig]) -> dict[str, dict[str, object]]:

@@ -116,7 +116,7 @@ class SimFtSensor:
         sample = self.sample
         self.sample = (self.sample + 1) & 0xFFFF
         first = struct.pack("<hhhh", _int16(fx * cf), _int16(tx * ct), _int16(fy * cf), _int16(ty * ct))
-        second = struct.pack("<hhHH", _int16(fz * cf), _int16(tz * ct), 0, sample)
+        second = struct.pack("<hhHH", _int16(fz * cf), _int16(tz * ct), self.sim.status, sample)
         return [(self.base_id + 5, first), (self.base_id + 6, second)]
 
     # -- RAM between `--sim` commands ----------------------------------------------------------------
