@@ -103,7 +103,7 @@ def test_a_command_may_only_tighten_the_configured_limit():
     assert tightened(20.0, 5.0, "--force-limit") == 5.0
     assert tightened(20.0, 50.0, "--force-limit") == 20.0
     assert tightened(None, 5.0, "--force-limit") == 5.0
-    with pytest.raises(UsageError, match="--force-limit -1: expected a number > 0"):
+    with pytest.raises(UsageError, match="--force-limit -1: expected a force in N, > 0"):
         tightened(20.0, -1.0, "--force-limit")
     dev = load_config(ARM).devices["wrist_ft"]
     fw = ForceWatch.for_device(FakeReader(FakeClock(), []), dev, silent_s=0.1, force_limit=8.0, clock=FakeClock())

@@ -10,7 +10,6 @@ and a ``confirm_save`` that says yes -- as ``--apply``, ``--save`` and ``--yes``
 
 from __future__ import annotations
 
-import math
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from pathlib import Path
@@ -498,10 +497,9 @@ class Arm:
         if value is None:
             yield
             return
-        if not (value > 0 and math.isfinite(value)):
-            from sherpa_cli.errors import UsageError
+        from sherpa_cli.motion.force_watch import check_force_limit
 
-            raise UsageError(f"force_limit {value:g}: expected a force in N, > 0")
+        check_force_limit(value, "force_limit")
         before, self._session.force_limit = self._session.force_limit, value
         try:
             yield

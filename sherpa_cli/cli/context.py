@@ -49,11 +49,9 @@ class AppState:
     def use_force_limit(self, value: float | None) -> None:
         """A moving command's --force-limit, checked before anything else (the guards of its session
         watch it: motion/guard.py)."""
-        import math
+        from sherpa_cli.motion.force_watch import check_force_limit
 
-        if value is not None and not (value > 0 and math.isfinite(value)):
-            raise UsageError(f"--force-limit {value:g}: expected a force in N, > 0")
-        self.force_limit = value
+        self.force_limit = None if value is None else check_force_limit(value, "--force-limit")
 
     @contextmanager
     def session(self, buses: Iterable[str] | None = None,

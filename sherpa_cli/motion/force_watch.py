@@ -75,12 +75,18 @@ def _dominant(w: Wrench, names: tuple[str, str, str]) -> tuple[str, float]:
     return name, axes[name]
 
 
+def check_force_limit(value: float, what: str) -> float:
+    """A requested force limit (N): a finite number > 0, else one UsageError naming ``what``."""
+    if not (value > 0 and math.isfinite(value)):
+        raise UsageError(f"{what} {value:g}: expected a force in N, > 0")
+    return value
+
+
 def tightened(configured: float | None, requested: float | None, what: str) -> float | None:
     """The limit a command runs with: ``requested`` (a --force-limit) may only tighten the config's."""
     if requested is None:
         return configured
-    if not (requested > 0 and math.isfinite(requested)):
-        raise UsageError(f"{what} {requested:g}: expected a number > 0")
+    check_force_limit(requested, what)
     return requested if configured is None else min(configured, requested)
 
 
