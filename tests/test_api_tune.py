@@ -91,3 +91,19 @@ def test_the_tune_and_match_commands_are_layers_over_the_api(cli, monkeypatch):
     applied = cli(*base, "diffdrive", "match", "diff", "--apply")
     assert applied.exit_code == 0, applied.transcript()
     assert calls == ["tune_show", "tune_set", "match_pair", "tune_set"]
+
+
+def test_set_takes_any_real_number_for_a_gain_and_refuses_what_is_not_one():
+    from fractions import Fraction
+
+    from sherpa_cli.api.arm import gain_texts
+
+    # a Fraction's repr is "Fraction(4, 5)": written as text it was refused as "not a number"
+    assert gain_texts({"KP[2]": Fraction(4, 5), "KI[2]": 150}) == ["KP[2]=0.8", "KI[2]=150.0"]
+    assert gain_texts({"KP[2]": "0.8"}) == ["KP[2]=0.8"] and gain_texts("KP[2]=0.8") == ["KP[2]=0.8"]
+    with pytest.raises(UsageError, match="KP\\[2\\]: True is not a number"):
+        gain_texts({"KP[2]": True})
+    with Arm.open(CONFIG, sim=True) as arm:
+        dry = arm.tune_set("elbow_pitch", {"KP[2]": Fraction(4, 5)})
+        (plan,) = dry.plans
+        assert [(p.key, p.target) for p in plan.changes] == [("KP[2]", pytest.approx(0.8))]

@@ -60,6 +60,28 @@ if TYPE_CHECKING:
 #: per-bus scan progress: (bus, phase, done, total)
 ScanProgress = Callable[[str, str, int, int], None]
 
+
+def gain_texts(gains: Mapping[str, object] | Sequence[str] | str) -> list[str]:
+    """Gains as `tune set` reads them (``KP[2]=0.8``): a mapping's values may be any real number
+    (a numpy float, a Fraction), written as the float they are; text stays as it is."""
+    import numbers
+
+    from sherpa_cli.errors import UsageError
+
+    if isinstance(gains, str):
+        return [gains]
+    if not isinstance(gains, Mapping):
+        return list(gains)
+    out = []
+    for key, value in gains.items():
+        if isinstance(value, str):
+            out.append(f"{key}={value}")
+        elif isinstance(value, numbers.Real) and not isinstance(value, bool):
+            out.append(f"{key}={float(value)!r}")
+        else:
+            raise UsageError(f"{key}: {value!r} is not a number")
+    return out
+
 class Arm:
     """An open session with the arm. Build it with :meth:`open` (or wrap a session the caller owns)."""
 
@@ -829,8 +851,7 @@ class Arm:
 
         programming.check_options(apply, save)
         cfg = self.config
-        texts = [f"{k}={v!r}" for k, v in gains.items()] if isinstance(gains, Mapping) else \
-            [gains] if isinstance(gains, str) else list(gains)
+        texts = gain_texts(gains)
         values = parse_assignments(cfg, texts)
         refs = drive_refs(cfg, [target], configured_only=True, elmo_only="tune")
         return self._program([DriveTarget(r.name, r.bus, r.node, values) for r in refs], apply=apply, save=save,
@@ -863,8 +884,7 @@ class Arm:
         if mode not in ("position", "velocity"):
             raise UsageError(f"mode {mode!r}: expected position or velocity")
         cfg = self.config
-        texts = [f"{k}={v!r}" for k, v in gains.items()] if isinstance(gains, Mapping) else \
-            [gains] if isinstance(gains, str) else list(gains)
+        texts = gain_texts(gains)
         trial = parse_assignments(cfg, texts)
         target = resolve_step_target(cfg, joint)
         step_request(target, mode, value, duration=duration, uncalibrated=uncalibrated)
