@@ -47,7 +47,7 @@ def _read(session: Any, ref: Any, index: int, sub: int, fmt: str) -> int:
     return int(struct.unpack(fmt, raw)[0])
 
 
-@pytest.fixture(params=[1, 2], ids=["0x6007=1-fault", "0x6007=2-disabled"])
+@pytest.fixture(params=[1, 2], ids=["loss_action_1_fault", "loss_action_2_disabled"])
 def killed(request) -> Any:
     """The arm as a jog of `wrist` killed while it moved leaves it, with its consumer's 0x6007 action."""
     action = request.param
