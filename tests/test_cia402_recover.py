@@ -139,3 +139,20 @@ def test_recover_leaves_a_fault_that_is_not_the_heartbeat_loss_to_the_user(kille
     assert res.problems and "more than the heartbeat loss" in res.problems[-1], res
     assert not [t for n, t, _ in events if n == "wrist" and t == "fault reset"], "a fault reset was sent"
     assert session.sim.drives["wrist"].state is State.FAULT
+
+
+def test_with_recover_the_jog_puts_the_leftovers_back_itself_and_runs(killed):
+    """`sherpa --recover jog ...`: the guard's entry does what `recover --apply` does, then moves."""
+    session, st, ref, events, olds, action = killed
+    journal.set_auto_recover(True)
+    try:
+        r = _jog(session, st)
+    finally:
+        journal.set_auto_recover(False)
+    assert r.ok and r.end_counts == 200, r
+    assert not journal.leftover(ref)
+    resets = [watching for n, t, watching in events if n == "wrist" and t == "fault reset"]
+    assert resets == ([True] if action == 1 else []), events
+    assert {(i, s): _read(session, ref, i, s, f) for i, s, f, _ in ARMED} == olds
+    assert motors_off(session)
+    assert not [t for _n, t, _ in events if t.startswith(UNGUARDED_MO)], events
