@@ -43,6 +43,9 @@ class DriveStatus:
     enabled: bool  # the power stage is on: the motor is held or driven
     mode: Mode
     fault: str | None = None  # why it must not move, decoded; None: nothing forbids it
+    # the fault is its heartbeat consumer's alone (the tool's heartbeat ended: a killed command), what
+    # `sherpa recover --apply` may reset; any other fault is the user's to find
+    heartbeat_lost: bool = False
 
 
 @runtime_checkable
@@ -105,4 +108,14 @@ class Drive(Protocol):
 
     def profile_done(self) -> bool:
         """The last profile has ended (Elmo MS=0; CiA 402 target reached)."""
+        ...
+
+
+@runtime_checkable
+class FaultResettable(Protocol):
+    """A drive whose latched fault the tool resets on the user's word (`sherpa recover --apply`, after
+    its dead-man tripped), under a dead-man of its own. The reset leaves the power stage off."""
+
+    def fault_reset(self) -> None:
+        """Out of the fault, confirmed; raises SafetyError when the drive stays in it."""
         ...

@@ -188,7 +188,40 @@ def test_disable_leaves_a_fault_alone():
     drive.disable()
     assert node.log == [up(SW, 0x0008)]
     assert drive.status() == DriveStatus(enabled=False, mode=Mode.OTHER,
-                                         fault="Fault: 0x8130 life guard error or heartbeat error")
+                                         fault="Fault: 0x8130 life guard error or heartbeat error",
+                                         heartbeat_lost=True)
+
+
+def test_only_the_heartbeat_loss_fault_is_called_the_consumers():
+    drive, _ = make(FakeNode(State.FAULT, error=0x2310))
+    assert drive.status() == DriveStatus(enabled=False, mode=Mode.OTHER, fault="Fault: 0x2310 continuous over-current")
+    drive, _ = make(FakeNode(State.SWITCH_ON_DISABLED, error=0x8130))  # an old code, no fault: nothing to say
+    assert drive.status() == DriveStatus(enabled=False, mode=Mode.OTHER)
+
+
+def test_fault_reset_is_a_rising_bit_7_confirmed_and_leaves_the_power_stage_off():
+    node = FakeNode(State.FAULT, error=0x8130)
+    node.cw = 0x0080  # a word that left bit 7 up: without 0x00 first the reset would be no edge
+    drive, _ = make(node)
+    drive.fault_reset()
+    fault, disabled = p.statusword_of(State.FAULT), p.statusword_of(State.SWITCH_ON_DISABLED)
+    assert node.log == [up(SW, fault), down(p.CONTROLWORD, 0x0000), down(p.CONTROLWORD, 0x0080), up(SW, disabled)]
+    assert node.state is State.SWITCH_ON_DISABLED
+
+
+def test_fault_reset_sends_nothing_to_a_drive_not_in_fault():
+    node = FakeNode(State.SWITCH_ON_DISABLED)
+    drive, _ = make(node)
+    drive.fault_reset()
+    assert node.log == [up(SW, p.statusword_of(State.SWITCH_ON_DISABLED))]
+
+
+def test_a_fault_that_stays_after_its_reset_is_named():
+    node = FakeNode(State.FAULT, stuck=(State.FAULT,), error=0x2310)
+    drive, clock = make(node)
+    with pytest.raises(SafetyError, match="stuck in Fault after 'fault reset'"):
+        drive.fault_reset()
+    assert clock.t >= 0.5
 
 
 def test_a_stuck_drive_is_named_with_its_state():

@@ -1,6 +1,9 @@
 """A jog of a CiA 402 joint SIGKILLed in its own process, the simulated arm (tests/data/cia402-arm.yaml)
 served in another: the drive's own heartbeat consumer, armed by the motion guard through SDO, ends the
-motion per 0x6007 as the guard armed it (motion.loss_action), and no motor went on without an armed dead-man."""
+motion per 0x6007 as the guard armed it (motion.loss_action: 2 disables the drive, 1 puts it in Fault),
+and no motor went on without an armed dead-man. Then the way back: the next jog refuses the drive (the
+journal's leftovers) and names `sherpa recover`; `recover` says what happened, `--apply` puts the
+objects back and resets a heartbeat-loss fault under a dead-man of its own; the jog runs again."""
 
 from __future__ import annotations
 
@@ -23,10 +26,11 @@ pytestmark = [pytest.mark.realbus, pytest.mark.crossprocess]
 CONFIG = Path(__file__).resolve().parent / "data" / "cia402-arm.yaml"
 
 
-@pytest.fixture(scope="module")
-def served(tmp_path_factory):
+@pytest.fixture(scope="module", params=[2, 1], ids=["loss_action_2", "loss_action_1"])
+def served(tmp_path_factory, request):
     work = tmp_path_factory.mktemp("cia402-arm")
     cfg = load_config(CONFIG)
+    cfg = dataclasses.replace(cfg, motion=dataclasses.replace(cfg.motion, loss_action=request.param))
     # the harness's patient timeouts (a loaded machine, the QEMU guest)
     cfg = dataclasses.replace(cfg, protocol=dataclasses.replace(cfg.protocol, reply_timeout=2.0, retries=2,
                                                                 mo_confirm_timeout=20.0, sdo_timeout=3.0))
@@ -64,8 +68,9 @@ def test_a_killed_jog_of_a_cia402_joint_is_stopped_by_the_drives_own_consumer(se
         finish(proc)
     tripped = arm.wait_event(lambda text: text.startswith("heartbeat lost"), EVENT_TIMEOUT, after=t_kill,
                              drive="wrist")
-    # 0x6007 as the guard armed it: motion.loss_action (2, disable voltage: the power stage off)
-    assert tripped["event"] == f"heartbeat lost (0x6007={load_config(CONFIG).motion.loss_action})", tripped
+    # 0x6007 as the guard armed it: motion.loss_action (2 disable voltage, 1 fault: the power stage off)
+    loss_action = load_config(served.config).motion.loss_action
+    assert tripped["event"] == f"heartbeat lost (0x6007={loss_action})", tripped
     off = arm.wait_event(lambda text: text.startswith("motor off"), EVENT_TIMEOUT, after=t_kill, drive="wrist")
     assert off["t"] >= tripped["t"], (tripped, off)  # by the consumer, not by the killed tool
     # stopped within the consumer time after the last heartbeat, with margin for the two processes
@@ -78,3 +83,26 @@ def test_a_killed_jog_of_a_cia402_joint_is_stopped_by_the_drives_own_consumer(se
     assert " off " in row and "Traceback" not in err, f"{code}\n{out}\n{err}"
     code, out, err = finish(sherpa(arm, tmp_path, "stop", "wrist"))
     assert code == 0 and "motor was off" in out, f"{out}\n{err}"
+
+    # the next jog refuses the drive: what the killed one armed is still on it (the journal)
+    code, out, err = finish(sherpa(arm, tmp_path, "jog", "wrist", "--by", "20counts", "--uncalibrated", "--apply"))
+    assert code == 1 and "did not finish" in err and "sherpa recover wrist" in err, f"{code}\n{out}\n{err}"
+    # recover's dry run says what was left and what the consumer did, and changes nothing
+    code, out, err = finish(sherpa(arm, tmp_path, "recover", "wrist"))
+    assert code == 0 and "left by a command that did not finish" in out and "0x1016:1=0x0" in out, f"{out}\n{err}"
+    said = "dead-man tripped" if loss_action == 1 else "dead-man is still armed"
+    assert said in out and f"0x6007={loss_action}" in out, f"{out}\n{err}"
+    code, out, err = finish(sherpa(arm, tmp_path, "recover", "wrist"))
+    assert code == 0 and "left by a command that did not finish" in out, f"the dry run put something back:\n{out}\n{err}"
+    # --apply: the objects back, a heartbeat-loss fault reset under a dead-man of its own
+    since_apply = time.monotonic()
+    code, out, err = finish(sherpa(arm, tmp_path, "recover", "wrist", "--apply"))
+    assert code == 0 and "put back: 0x1016:1=0x0" in out, f"{code}\n{out}\n{err}"
+    if loss_action == 1:
+        assert "fault reset" in out, out
+        assert arm.wait_event(lambda text: text == "fault reset", EVENT_TIMEOUT, after=since_apply, drive="wrist")
+    # the jog runs again
+    code, out, err = finish(sherpa(arm, tmp_path, "jog", "wrist", "--by", "20counts", "--uncalibrated", "--apply"))
+    assert code == 0, f"{code}\n{out}\n{err}"
+    every = [(d, e["event"]) for d in load_config(served.config).drives for e in arm.events(d) if e["t"] >= since]
+    assert not [(d, t) for d, t in every if t.startswith(UNGUARDED_MO)], every

@@ -31,6 +31,7 @@ from sherpa_cli.paths import read_json, state_dir
 if TYPE_CHECKING:
     from sherpa_cli.bus.session import ArmSession
     from sherpa_cli.bus.targets import DriveRef
+    from sherpa_cli.drive import Drive
     from sherpa_cli.elmo.client import DriveClient
 
 log = logging.getLogger(__name__)
@@ -211,16 +212,21 @@ def leftover(ref: DriveRef) -> list[Step]:
     return steps
 
 
-def still_changed(session: ArmSession, ref: DriveRef, steps: list[Step]) -> list[Step] | None:
+def still_changed(session: ArmSession, ref: DriveRef, steps: list[Step],
+                  drive: Drive | None = None) -> list[Step] | None:
     """The steps whose value on the drive is not the one to put back (NMT start first; reads only).
     Empty: the drive already holds every old value and no tripped dead-man is latched -- a drive
     reset or power-cycled since the note (its RAM back at flash values) leaves nothing to put back.
-    None: the drive could not be read (a tripped drive, deaf in NMT Stopped until recover)."""
+    None: the drive could not be read (a tripped drive, deaf in NMT Stopped until recover).
+    ``drive``: a drive of another type than Elmo (the seam), whose state is read through it."""
     client = session.client(ref)
     out: list[Step] = []
     try:
         client.nmt_start()
-        if int(client.get("MF")) & MF_HEARTBEAT_LOSS:
+        if drive is not None:
+            if drive.status().fault is not None or any(s.kind == "interp" for s in steps):
+                return None  # a latched fault (its consumer's?) is recover's to look at
+        elif int(client.get("MF")) & MF_HEARTBEAT_LOSS:
             return None
         for s in steps:
             if s.kind == "interp":
@@ -341,13 +347,16 @@ MF_HEARTBEAT_LOSS = 0x800
 
 
 def restore(session: ArmSession, ref: DriveRef, *, apply: bool,
-            clear_trip: Callable[[], None] | None = None) -> RecoverResult:
+            clear_trip: Callable[[], None] | None = None, drive: Drive | None = None) -> RecoverResult:
     """Put back what the journal holds for ``ref`` (reverse order), NMT start first (a tripped dead-man
     leaves the drive in NMT Stopped, deaf to the interpreter and SDO), and clear a latched MF 0x800
     (heartbeat loss) once the objects are back with ``clear_trip`` (motion/trip_clear.py: MO=1, MO=0
     under a dead-man of its own; without it the MF stays and says so). The journal is dropped only
     when all of it is done: a recover killed half-way leaves it for the next. Dry run without
-    ``apply``: only reads MF. Never raises for one step: problems are reported."""
+    ``apply``: only reads MF. Never raises for one step: problems are reported. ``drive``: a drive of
+    another type than Elmo (the seam): :func:`restore_other`."""
+    if drive is not None:
+        return restore_other(session, ref, drive, apply=apply, clear_trip=clear_trip)
     steps = leftover(ref)
     done: list[str] = []
     problems: list[str] = []
@@ -400,6 +409,88 @@ def restore(session: ArmSession, ref: DriveRef, *, apply: bool,
                 problems.append(f"MF not cleared: {exc}")
     elif res.tripped and mf != MF_HEARTBEAT_LOSS:
         problems.append(f"MF=0x{mf:X} has more than the heartbeat loss: not cleared; find the cause first")
+    if not failed:
+        forget_all(ref)
+    return res
+
+
+def _loss_action(session: ArmSession, ref: DriveRef) -> int | None:
+    """0x6007 as the drive holds it (what its consumer did when the heartbeat ended); None: unread."""
+    try:
+        raw = bytes(session.sdo(ref).upload(LOSS_ACTION_INDEX, 0))[:2]
+    except SherpaError:
+        return None
+    return int.from_bytes(raw.ljust(2, b"\0"), "little", signed=True)
+
+
+LOSS_ACTION_INDEX = 0x6007
+LOSS_ACTIONS = {0: "no action", 1: "fault", 2: "disable voltage", 3: "quick stop"}
+
+
+def restore_other(session: ArmSession, ref: DriveRef, drive: Drive, *, apply: bool,
+                  clear_trip: Callable[[], None] | None = None) -> RecoverResult:
+    """:func:`restore` for a drive of another type (the seam, sherpa_cli/drive.py; CiA 402): its
+    state from the drive's own status, not the interpreter's MF/MO. A dead-man that tripped with
+    0x6007 = 1 left it in Fault for the heartbeat loss: ``clear_trip`` resets that fault under a
+    dead-man of its own once the objects are back (motion/trip_clear.py); with 0x6007 = 2 the drive
+    was only disabled and the NMT start is all it needs. Any other fault is not reset."""
+    steps = leftover(ref)
+    done: list[str] = []
+    problems: list[str] = []
+    res = RecoverResult(ref.name, f"{ref.bus}:{ref.node}", list(dict.fromkeys(s.text() for s in reversed(steps))),
+                        done=done, problems=problems)
+    try:
+        session.client(ref).nmt_start()  # 0x1029:1 may have stopped it: deaf to SDO until started
+        st = drive.status()
+    except SherpaError as exc:
+        problems.append(f"not reached: {exc}")
+        return res
+    armed = any(s.name == "0x1016:1" for s in steps)
+    action = _loss_action(session, ref) if armed else None
+    how = f" (0x6007={action}: {LOSS_ACTIONS.get(action, 'unknown')})" if action is not None else ""
+    if st.heartbeat_lost:
+        res.tripped = (f"its dead-man tripped: the drive's heartbeat consumer put it in fault after the command's "
+                       f"heartbeat ended{how}: {st.fault}" + ("; the consumer still armed" if armed else ""))
+    elif st.fault is None and armed and not st.enabled:
+        res.tripped = (f"the command's dead-man is still armed: when its heartbeat ended the drive's heartbeat "
+                       f"consumer switched the power stage off{how}; nothing latched")
+    if steps and st.fault is None and still_changed(session, ref, steps, drive) == []:
+        res.already_back = True
+        if apply:
+            forget_all(ref)
+        return res
+    if st.fault is not None and not st.heartbeat_lost:
+        res.found.append(f"in fault: {st.fault}")
+    if not apply:
+        return res
+    if st.enabled and steps:
+        problems.append("the power stage is on: another tool moves it? nothing put back")
+        return res
+    failed = False
+    for s in reversed(steps):
+        if s.kind != "sdo":
+            failed = True
+            problems.append(f"{s.text()} not put back: {drive.kind} drives have no interpreter")
+            continue
+        try:
+            session.sdo(ref).download(s.index, s.sub, int(s.old).to_bytes(s.size, "little"))
+            done.append(s.text())
+        except (SherpaError, OverflowError) as exc:
+            failed = True
+            problems.append(f"{s.text()} not put back: {exc}")
+    if st.heartbeat_lost and not failed:
+        if clear_trip is None:
+            failed = True
+            problems.append("the fault not reset: nothing to arm a dead-man with here")
+        else:
+            try:
+                clear_trip()  # the fault reset, under a dead-man of its own
+                done.append("the heartbeat-loss fault reset (controlword, under a dead-man of its own)")
+            except SherpaError as exc:
+                failed = True
+                problems.append(f"the fault not reset: {exc}")
+    elif st.fault is not None and not st.heartbeat_lost:
+        problems.append(f"in fault ({st.fault}), more than the heartbeat loss: not reset; find the cause first")
     if not failed:
         forget_all(ref)
     return res

@@ -2,7 +2,9 @@
 
 Every call is a short sequence of SDO transfers, each state change confirmed by reading the
 statusword back, bounded by ``Cia402Settings.confirm_timeout`` on the injected clock. A drive in
-Fault is refused with its 0x603F code and never reset here: a fault reset is the user's decision.
+Fault is refused with its 0x603F code and never reset on the way to a motion: a fault reset is the
+user's decision (:meth:`Cia402Drive.fault_reset`, which `sherpa recover --apply` sends for a
+tripped dead-man).
 """
 
 from __future__ import annotations
@@ -76,8 +78,11 @@ class Cia402Drive:
     def status(self) -> DriveStatus:
         state, _ = self._state()
         mode = DISPLAYED.get(self._read(p.MODES_DISPLAY), Mode.OTHER)
-        fault = f"{state.value}: {self._fault_text()}" if state in FAULTED and state is not None else None
-        return DriveStatus(enabled=state is State.OPERATION_ENABLED, mode=mode, fault=fault)
+        if state in FAULTED and state is not None:
+            code = p.decode_error(self._read(p.ERROR_CODE))
+            return DriveStatus(enabled=False, mode=mode, fault=f"{state.value}: {code}",
+                               heartbeat_lost=code.code == p.HEARTBEAT_LOSS_ERROR)
+        return DriveStatus(enabled=state is State.OPERATION_ENABLED, mode=mode)
 
     def position(self) -> int:
         return self._read(p.POSITION_ACTUAL)
@@ -146,6 +151,21 @@ class Cia402Drive:
         if state in FAULTED:
             return
         self._walk(State.READY_TO_SWITCH_ON, state, sw)
+
+    def fault_reset(self) -> None:
+        """Fault -> Switch on disabled: controlword bit 7 on its rising edge (the word without it first),
+        confirmed by the statusword; the power stage stays off. Nothing is sent to a drive not in Fault."""
+        state, sw = self._state()
+        if state is State.FAULT_REACTION_ACTIVE:
+            state, sw = self._wait_state_left(state, None)
+        if state is not State.FAULT:
+            return
+        self._write(p.CONTROLWORD, 0)  # disable voltage: a drive in Fault stays there; bit 7 down for the edge
+        self._write(p.CONTROLWORD, int(p.Command.FAULT_RESET))
+        state, sw = self._wait_state_left(State.FAULT, p.COMMAND_NAMES[int(p.Command.FAULT_RESET)])
+        if state in FAULTED or state is None:
+            raise SafetyError(f"{self.label}: still in fault after the fault reset (statusword 0x{sw:04X}: "
+                              f"{self._fault_text()})", hint="find the cause on the drive")
 
     # -- the profile ------------------------------------------------------------------------------
 

@@ -247,6 +247,8 @@ ERROR_TEXTS: dict[int, str] = {
     0x8612: "reference limit",
     0x9000: "external error",
 }
+# what a drive's heartbeat consumer reports when the producer it watches falls silent (0x6007 = 1: Fault)
+HEARTBEAT_LOSS_ERROR = 0x8130
 ERROR_CLASSES: dict[int, str] = {
     0x1: "generic", 0x2: "current", 0x3: "voltage", 0x4: "temperature", 0x5: "device hardware",
     0x6: "device software", 0x7: "additional modules", 0x8: "monitoring", 0x9: "external error",

@@ -35,7 +35,7 @@ from sherpa_cli.bus import journal
 from sherpa_cli.bus.health import preflight
 from sherpa_cli.bus.machine_lock import wire_key
 from sherpa_cli.bus.targets import drive_refs
-from sherpa_cli.devices.drives import ELMO, open_drive
+from sherpa_cli.devices.drives import ELMO, is_elmo, open_drive
 from sherpa_cli.devices.ft_sensor import open_reader
 from sherpa_cli.drive import Drive, Mode, Ramp
 from sherpa_cli.elmo.drive import UNIT_MODES, mode_of
@@ -693,7 +693,9 @@ class MotionGuard:
         if not steps:
             return
         text = journal.leftover_text(ref, steps)
-        if journal.still_changed(self.session, ref, steps) == []:
+        # another drive type than Elmo: its state (and a tripped dead-man's fault) through the seam
+        other = None if is_elmo(self.session, ref) else open_drive(self.session, ref)
+        if journal.still_changed(self.session, ref, steps, other) == []:
             # every noted value is already back (the drive was reset or power-cycled since, its RAM
             # at flash values): nothing to put back, and nothing to refuse for
             journal.forget_all(ref)
@@ -703,8 +705,8 @@ class MotionGuard:
             raise journal.LeftoverError(text + "; refusing to move it",
                                         hint=f"`sherpa recover {ref.name}` shows it, `--apply` puts it back; or "
                                              "run this command as `sherpa --recover ...`")
-        res = journal.restore(self.session, ref, apply=True, clear_trip=lambda: clear_heartbeat_trip(
-            self.session, ref, self.settings, clock=self._clock, sleep=self._sleep))
+        res = journal.restore(self.session, ref, apply=True, drive=other, clear_trip=lambda: clear_heartbeat_trip(
+            self.session, ref, self.settings, clock=self._clock, sleep=self._sleep, drive=other))
         self._event(text)
         if res.tripped:
             self._event(f"{drive_label(ref)}: {res.tripped}")

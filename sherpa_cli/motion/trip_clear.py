@@ -13,6 +13,11 @@ keeps (motion/host_ids.py OtherConsumers): a killed pair command leaves both dri
 and a heartbeat on it re-armed the partner's consumer, which tripped again when this heartbeat ended
 -- while the partner was being put back, on a slow enough computer. A drive a killed command left
 is NMT-started first: its own trip may have left it deaf to that read.
+
+A drive of another type (the seam; CiA 402) has no MO=1 to clear with: its consumer's 0x6007 = 1 left
+it in Fault, and the fault reset (controlword bit 7) takes it to Switch on disabled, its power stage
+still off. It is sent under the same dead-man all the same: the rule is that nothing is sent to clear
+a trip without one, whatever the drive type does with it.
 """
 
 from __future__ import annotations
@@ -27,6 +32,7 @@ from typing import TYPE_CHECKING
 from sherpa_cli.bus import journal
 from sherpa_cli.bus.machine_lock import wire_key
 from sherpa_cli.bus.targets import drive_refs
+from sherpa_cli.drive import Drive, FaultResettable
 from sherpa_cli.errors import SafetyError, SherpaError, raise_if_signalled
 from sherpa_cli.motion.deadman import COMM_ERROR, CONSUMER, LOSS_ACTION, OBJECT_NAMES, SIZES, HostHeartbeat
 from sherpa_cli.motion.host_ids import HostIdListener, OtherConsumers
@@ -43,9 +49,13 @@ OWNER = "recover"
 
 def clear_heartbeat_trip(session: ArmSession, ref: DriveRef, settings: MotionSettings, *,
                          clock: Callable[[], float] = time.monotonic,
-                         sleep: Callable[[float], None] = time.sleep) -> None:
-    """MO=1, MO=0 on ``ref`` with its dead-man armed for this process (see the module docstring).
+                         sleep: Callable[[float], None] = time.sleep, drive: Drive | None = None) -> None:
+    """MO=1, MO=0 on ``ref`` with its dead-man armed for this process (see the module docstring);
+    ``drive`` (another drive type, the seam): its fault reset instead, under the same dead-man.
     Raises SherpaError when it could not; whatever it armed and could not put back stays journaled."""
+    if drive is not None and not isinstance(drive, FaultResettable):
+        raise SafetyError(f"{drive.label}: a {drive.kind} drive's fault is not reset by sherpa",
+                          hint="reset it on the drive once the cause is found")
     client = session.client(ref)
     link = session.links[ref.bus]
     sdo = session.sdo(ref)
@@ -92,15 +102,19 @@ def clear_heartbeat_trip(session: ArmSession, ref: DriveRef, settings: MotionSet
         heartbeat.beat_now()  # the consumer watches from the first heartbeat after its entry: before MO=1
         if listener.foreign(host_id, heartbeat.sent):
             raise SafetyError(f"{ref.name}: another node sends heartbeats as {host_id}, the dead-man id taken "
-                              "to clear the trip: MF not cleared")
-        if int(client.get("UM")) == 1 and client.get("TC") != 0:
-            client.set("TC", 0, 0.0)  # MO=1 in torque mode applies TC at once
-        heartbeat.pulse(allowance + client.settings.mo_confirm_timeout)
-        switched = True
-        client.motor_on()
-        heartbeat.pulse(allowance + client.settings.mo_confirm_timeout)
-        client.motor_off()
-        switched = False
+                              f"to clear the trip: {'fault not reset' if drive is not None else 'MF not cleared'}")
+        if isinstance(drive, FaultResettable):
+            heartbeat.pulse(allowance + client.settings.mo_confirm_timeout)
+            drive.fault_reset()  # to Switch on disabled: the power stage stays off
+        else:
+            if int(client.get("UM")) == 1 and client.get("TC") != 0:
+                client.set("TC", 0, 0.0)  # MO=1 in torque mode applies TC at once
+            heartbeat.pulse(allowance + client.settings.mo_confirm_timeout)
+            switched = True
+            client.motor_on()
+            heartbeat.pulse(allowance + client.settings.mo_confirm_timeout)
+            client.motor_off()
+            switched = False
     finally:
         problems: list[str] = []
         if switched:  # an error between MO=1 and its MO=0: off before anything is disarmed

@@ -13,6 +13,7 @@ from sherpa_cli.bus.targets import DriveRef, drive_refs
 if TYPE_CHECKING:
     from sherpa_cli.bus.session import ArmSession
     from sherpa_cli.config.model import ArmConfig
+    from sherpa_cli.drive import Drive
     from sherpa_cli.ops.drive_rest import DriveRest
 
 
@@ -54,6 +55,7 @@ def plan_recover(cfg: ArmConfig, targets: Sequence[str] | None) -> RecoverPlan:
 def recover(session: ArmSession, plan: RecoverPlan, *, apply: bool, check_drives: bool = False) -> RecoverReport:
     """Each journal drive put back (a damaged journal: reset from flash), dry run unless ``apply``;
     with ``check_drives`` every other drive read (and with ``apply`` one with a finding reset)."""
+    from sherpa_cli.devices.drives import is_elmo, open_drive
     from sherpa_cli.motion.settings import MotionSettings
     from sherpa_cli.motion.trip_clear import clear_heartbeat_trip
     from sherpa_cli.ops.drive_rest import check_drive
@@ -66,10 +68,13 @@ def recover(session: ArmSession, plan: RecoverPlan, *, apply: bool, check_drives
             report.results.append(journal.restore_damaged(session, r, plan.broken[r.name], apply=apply,
                                                           boot_timeout=boot))
         else:
-            def clear(ref: DriveRef = r) -> None:
-                clear_heartbeat_trip(session, ref, MotionSettings.from_config(cfg, [ref.bus]))
+            # another drive type than Elmo: its state and its fault reset through the drive seam
+            drive = None if is_elmo(session, r) else open_drive(session, r)
 
-            report.results.append(journal.restore(session, r, apply=apply, clear_trip=clear))
+            def clear(ref: DriveRef = r, drive: Drive | None = drive) -> None:
+                clear_heartbeat_trip(session, ref, MotionSettings.from_config(cfg, [ref.bus]), drive=drive)
+
+            report.results.append(journal.restore(session, r, apply=apply, clear_trip=clear, drive=drive))
     if check_drives:
         report.checks = [check_drive(session, cfg, r, apply=apply, boot_timeout=boot) for r in plan.others]
     return report
