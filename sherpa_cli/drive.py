@@ -119,3 +119,23 @@ class FaultResettable(Protocol):
     def fault_reset(self) -> None:
         """Out of the fault, confirmed; raises SafetyError when the drive stays in it."""
         ...
+
+
+@dataclass(frozen=True)
+class ObjectValue:
+    """One object of the drive's dictionary and the value it holds (to be put back by SDO)."""
+
+    index: int
+    sub: int
+    size: int  # bytes
+    value: int
+
+
+@runtime_checkable
+class RampObjects(Protocol):
+    """A drive whose profile lives in dictionary objects: the guard journals them before it changes
+    the profile, so `sherpa recover` can put them back after a killed command."""
+
+    def ramp_objects(self, ramp: Ramp) -> tuple[ObjectValue, ...]:
+        """The objects that hold ``ramp`` on this drive, with its values."""
+        ...

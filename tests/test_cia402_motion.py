@@ -186,3 +186,37 @@ def test_arm_state_reads_a_cia402_joint_through_the_seam(arm):
     assert not wrist.calibrated and "cia402 drive" in wrist.calibration
     assert math.isnan(wrist.current)  # not read from this drive type, never a made-up 0
     assert state["arm"].position_counts == 0 and not math.isnan(state["arm"].current)
+
+
+def test_the_guard_journals_the_cia402_profile_before_it_changes_it_and_forgets_it_once_put_back(arm):
+    """What `sherpa recover` puts back after a killed command: the profile objects (0x6081/3/4) as
+    they were, on disk before the first of them changes; dropped from the journal once restored."""
+    import json
+
+    from sherpa_cli.bus import journal
+
+    session, st, _ = arm
+    ref = drive_ref(session.cfg, "wrist")
+    drive = open_drive(session, ref)
+    session.client(ref).nmt_start()
+    before = drive.ramp()
+    path = journal.path_for(ref.bus, ref.node)
+    seen: list[dict[str, int]] = []
+    sleep = st.sleep
+
+    def peek(s: float) -> None:
+        if path.exists() and not seen:
+            steps = json.loads(path.read_text()).get("steps", [])
+            names = {x["name"]: x["old"] for x in steps}
+            if "0x6081:0" in names:
+                seen.append(names)
+        sleep(s)
+
+    axis = resolve_axis(session.cfg, "wrist")
+    req = parse_request(axis, "position", by="500counts", uncalibrated=True)
+    r = run_jog(session, axis, req, settings=MotionSettings.from_config(session.cfg), clock=st.now, sleep=peek)
+    assert r.ok
+    assert seen and seen[0]["0x6081:0"] == before.speed and seen[0]["0x6083:0"] == before.accel \
+        and seen[0]["0x6084:0"] == before.decel, seen
+    assert drive.ramp() == before  # put back
+    assert not path.exists() or not json.loads(path.read_text()).get("steps"), path.read_text()

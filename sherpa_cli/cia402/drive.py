@@ -16,7 +16,7 @@ from typing import Protocol
 
 from sherpa_cli.cia402 import protocol as p
 from sherpa_cli.cia402.protocol import State
-from sherpa_cli.drive import DriveStatus, Mode, Ramp
+from sherpa_cli.drive import DriveStatus, Mode, ObjectValue, Ramp
 from sherpa_cli.errors import SafetyError, UsageError
 
 MODES = {Mode.POSITION: p.OpMode.PROFILE_POSITION, Mode.VELOCITY: p.OpMode.PROFILE_VELOCITY}
@@ -172,6 +172,10 @@ class Cia402Drive:
     def ramp(self) -> Ramp:
         return Ramp(self._read(p.PROFILE_VELOCITY), self._read(p.PROFILE_ACCELERATION),
                     self._read(p.PROFILE_DECELERATION))
+
+    def ramp_objects(self, ramp: Ramp) -> tuple[ObjectValue, ...]:
+        return tuple(ObjectValue(index, 0, 4, value) for index, value in (
+            (p.PROFILE_VELOCITY, ramp.speed), (p.PROFILE_ACCELERATION, ramp.accel), (p.PROFILE_DECELERATION, ramp.decel)))
 
     def set_ramp(self, ramp: Ramp) -> None:
         values = ((p.PROFILE_VELOCITY, ramp.speed), (p.PROFILE_ACCELERATION, ramp.accel),

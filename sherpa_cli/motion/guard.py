@@ -37,7 +37,7 @@ from sherpa_cli.bus.machine_lock import wire_key
 from sherpa_cli.bus.targets import drive_refs
 from sherpa_cli.devices.drives import ELMO, is_elmo, open_drive
 from sherpa_cli.devices.ft_sensor import open_reader
-from sherpa_cli.drive import Drive, Mode, Ramp
+from sherpa_cli.drive import Drive, Mode, Ramp, RampObjects
 from sherpa_cli.elmo.drive import UNIT_MODES, mode_of
 from sherpa_cli.elmo.faults import decode_sr, describe_mf, fault_reason
 from sherpa_cli.elmo.protocol import UM_TORQUE
@@ -104,6 +104,7 @@ class _Drive:
     od_before: dict[tuple[int, int], int] = field(default_factory=dict)  # the dead-man objects it wrote
     mode: Mode | None = None  # another drive type: the mode found, then the one it was switched on in
     ramp_before: Ramp | None = None  # another drive type: the profile found at entry
+    ramp_journal: set[str] = field(default_factory=set)  # its journal step names (RampObjects)
 
     @property
     def native(self) -> bool:
@@ -744,8 +745,8 @@ class MotionGuard:
         journal.note(ref, *(journal.interp(JOURNAL_OWNER, k, 0, v) for k, v in d.profile_before.items()))
 
     def _inspect_other(self, d: _Drive) -> None:
-        """Another drive type: its state through the seam; its profile kept to be put back (in RAM,
-        not journaled: docs/drives.md)."""
+        """Another drive type: its state through the seam; its profile kept to be put back, and
+        journaled where it lives in dictionary objects (RampObjects)."""
         st = d.drive.status()
         d.mo, d.mode = int(st.enabled), st.mode
         if st.fault is not None and self.clears_fault:
@@ -755,6 +756,10 @@ class MotionGuard:
                               hint="find the cause first, then reset the fault on the drive")
         self._event(f"{d.drive.label}: {d.drive.kind}, {'on' if st.enabled else 'off'}, {st.mode.value} mode")
         d.ramp_before = d.drive.ramp()
+        if isinstance(d.drive, RampObjects):  # on disk before anything changes them, as Elmo's SP/AC/DC
+            objects = d.drive.ramp_objects(d.ramp_before)
+            d.ramp_journal = {f"0x{o.index:04X}:{o.sub}" for o in objects}
+            journal.note(d.ref, *(journal.sdo(JOURNAL_OWNER, o.index, o.sub, o.size, o.value) for o in objects))
 
     def _read_consumer(self, ref: DriveRef) -> int:
         raw = self.session.sdo(ref).upload(*CONSUMER, name=OBJECT_NAMES[CONSUMER])
@@ -988,7 +993,7 @@ class MotionGuard:
         if not stop:
             r.stopped_by = NOT_MOVED
             self._restore_dead_man(d, r, stop_failed=False)
-            journal.forget(d.ref, JOURNAL_OWNER, d.put_back | set(PROFILE_KEYS))  # the profile was never changed
+            journal.forget(d.ref, JOURNAL_OWNER, d.put_back | set(PROFILE_KEYS) | d.ramp_journal)  # the profile was never changed
             self._event(r.line())
             return r
         try:
@@ -1108,6 +1113,7 @@ class MotionGuard:
                 self._step()
                 d.drive.set_ramp(before)
                 r.restored.append(f"profile {before.speed}/{before.accel}/{before.decel}")
+            d.put_back |= d.ramp_journal
         except Exception as exc:  # noqa: BLE001 - reported in the drive's stop report
             r.problems.append(f"profile not restored: {why(exc)}")
 
