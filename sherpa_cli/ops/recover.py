@@ -76,5 +76,7 @@ def recover(session: ArmSession, plan: RecoverPlan, *, apply: bool, check_drives
 
             report.results.append(journal.restore(session, r, apply=apply, clear_trip=clear, drive=drive))
     if check_drives:
-        report.checks = [check_drive(session, cfg, r, apply=apply, boot_timeout=boot) for r in plan.others]
+        # what a command leaves is read in Elmo's interpreter (the journal covers every drive type)
+        report.checks = [check_drive(session, cfg, r, apply=apply, boot_timeout=boot) for r in plan.others
+                         if is_elmo(session, r)]
     return report
