@@ -179,11 +179,13 @@ def test_rpdo_mapping_keeps_cia301_rules():
     with pytest.raises(ODError):
         drive.od_write(0x1602, 1, 0x60640020)  # only the PVT record maps to an RPDO
     drive.od_write(0x1602, 1, 0x20010040)
-    with pytest.raises(ODError):
-        drive.od_write(0x1402, 1, 0x400 + NODE + 1)  # made valid: mapping count still 0... and another id
     drive.od_write(0x1602, 0, 1)
+    with pytest.raises(ODError):
+        drive.od_write(0x1602, 2, 0x20010040)  # an entry while the count is not 0
     drive.od_write(0x1402, 1, 0x400 + NODE)
     assert drive.rpdos.record_cob(0x400 + NODE)
+    with pytest.raises(ODError):
+        drive.od_write(0x1402, 1, 0x400 + NODE + 1)  # another CAN-ID while valid
 
 
 def test_st_and_motor_off_end_the_pvt_motion():

@@ -1051,6 +1051,8 @@ class SimDrive:
 
     def _pvt_configure(self) -> None:
         r, s = self.ram, self.settings
+        if self.pvt.active and self._motor_on:
+            self.motor.stop(self.ram["DC"] * self.speed_gain)  # a new table ends the motion: never coast on
         self.pvt.configure(int(r.get("MP[1]", 0)), int(r.get("MP[2]", 0)), int(r.get("MP[3]", 0)),
                            int(r.get("MP[4]", 0)), int(r.get(s.pvt_write_pointer_key, 0)))
 

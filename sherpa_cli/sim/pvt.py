@@ -2,7 +2,8 @@
 
 RPDO1/3/4 (0x1400 + n / 0x1600 + n; RPDO2 is the interpreter's) keep CiA 301's rules as the TPDOs do
 (sim/pdo.py): a mapping changes only while the PDO is off (COB-ID bit 31), an entry only while the count is
-0, a valid PDO's CAN-ID does not change; a write that leaves a value as it is is accepted. The one object
+0, a valid PDO's CAN-ID does not change; a write that leaves a value as it is is accepted. Unlike a TPDO, an
+RPDO that maps nothing may be valid: it is so at power-up (configs/eds/whistle.eds), and is put back so. The one object
 an RPDO can map is the PVT record (``SimSettings.pvt_object``, 64 bits: INT32 position + INT32 velocity).
 
 The queue ([IG] 13-28): rows MP[1]..MP[2] (at most ``SimSettings.pvt_rows``), a write pointer that starts
@@ -88,8 +89,6 @@ class RpdoTable:
                     raise ODError(f"0x{index:04X}:1: bits 11..29 must be 0", ABORT_RANGE)
                 if pdo.valid and not value & COB_INVALID and value != pdo.cob:
                     raise ODError(f"0x{index:04X}:1: the CAN-ID of a valid PDO cannot change", ABORT_RANGE)
-                if not value & COB_INVALID and pdo.count == 0:
-                    raise ODError(f"0x{index:04X}:1: a PDO that maps nothing cannot be made valid", ABORT_RANGE)
                 pdo.cob = value
             elif sub == 2:
                 if 241 <= value <= 253 or not 0 <= value <= 255:
