@@ -118,7 +118,10 @@ def test_a_starved_sender_stops_every_drive_before_its_queue_runs_out(arm):
 
     def sleep(seconds: float) -> None:
         calls[0] += 1
-        st.sleep(seconds + (0.15 if calls[0] == 40 else 0.0))  # the host stalls 150 ms once
+        st.sleep(seconds)
+        if calls[0] == 40:  # the sender's thread stalls for 1 s of the clock, as a starved thread does:
+            for _ in range(100):  # time passes while it does not run, longer than its queues last
+                st.sleep(0.01)
 
     guard, refs = guard_of(session, st)
     with pytest.raises(StreamStoppedError) as info, guard as g:
@@ -126,7 +129,8 @@ def test_a_starved_sender_stops_every_drive_before_its_queue_runs_out(arm):
     err = info.value
     assert "starved" in str(err) and "yaw" in err.drive and "elbow" in err.drive
     assert err.report.stopped is not None and err.report.stopped.startswith("starved")
-    assert err.report.max_lateness_s == pytest.approx(0.15)
+    # stopped while the sender was still stuck, past the bound and long before its queues' 310 ms ran out
+    assert StreamSettings().late_bound < err.report.max_lateness_s < 0.3
     assert g.report.reason == "error"
     for r in g.report.drives:
         assert r.stopped_by != "not stopped", r.line()
@@ -164,6 +168,33 @@ def test_an_underflow_on_one_drive_stops_every_drive(arm):
     assert_put_back(session, refs)
 
 
+def test_a_queue_low_while_rows_are_still_sent_stops_every_drive(arm):
+    session, st = arm
+    calls = [0]
+
+    def sleep(seconds: float) -> None:
+        calls[0] += 1
+        if calls[0] == 30:
+            with session.sim.lock:  # the yaw loses 20 queued rows (as if lost on the bus): it runs low
+                d = sim_drive(session, "yaw")
+                d.advance_to(st.now())
+                for _ in range(20):
+                    d.pvt.queue.pop()
+        st.sleep(seconds)
+
+    guard, refs = guard_of(session, st)
+    with pytest.raises(StreamStoppedError) as info, guard as g:
+        stream_pvt(g, tracks(2.0), clock=st.now, sleep=sleep)
+    err = info.value
+    assert err.drive == "yaw" and "PVT queue low" in str(err)
+    assert err.report.queue_low == {"yaw": 1}
+    assert g.report.reason == "error"
+    for name in DRIVES:
+        d = sim_drive(session, name)
+        assert not d.motor_on and not any("PVT underflow" in text for _, text in d.events), name
+    assert_put_back(session, refs)
+
+
 def test_tracks_that_cannot_be_streamed_are_refused_before_anything_is_sent(arm):
     session, st = arm
     guard, refs = guard_of(session, st)
@@ -193,5 +224,7 @@ def test_stream_settings_bounds():
     assert StreamSettings().late_bound == pytest.approx((32 - 16) * PERIOD / 2)
     with pytest.raises(ValueError):
         StreamSettings(prime=65)
+    with pytest.raises(ValueError):
+        StreamSettings(prime=19)  # a fed queue would read low
     with pytest.raises(ValueError):
         StreamSettings(late_bound_s=0)

@@ -13,7 +13,8 @@
    records due by then go out, ``prime`` periods ahead of the drive's consumption; the thread calls
    ``guard.check()`` each period and counts the periods served on time.
 
-A send later than ``StreamSettings.late_bound_s`` (a starved stream), an underflow or any other PVT
+A send later than ``StreamSettings.late_bound_s`` (a starved stream), a queue-low while rows are still to be
+sent (the sender on time, so rows were lost: it cannot be answered), an underflow or any other PVT
 emergency that ends a stream (queue full, a lost message, a bad pointer) before the trajectory's end stops
 every drive at once (the guard's stop frames) and raises :class:`StreamStoppedError` naming the drive; the
 guard's exit then stops every drive from standstill. A drive is never left to run to the end of its queue.
@@ -24,6 +25,7 @@ from __future__ import annotations
 import collections
 import dataclasses
 import logging
+import math
 import threading
 import time
 from collections.abc import Callable, Mapping, Sequence
@@ -55,6 +57,8 @@ if TYPE_CHECKING:
 log = logging.getLogger(__name__)
 
 JOURNAL_OWNER = "pvt stream"
+WATCH_POLL_S = 0.005  # wall s between the watch's looks at the sender's deadline
+HANG_GUARD_S = 10.0  # wall s to wait for a stopped sender's thread to end
 Record = tuple[int, int]  # (position counts, velocity counts/s)
 
 
@@ -69,8 +73,12 @@ class StreamSettings:
     end_margin_periods: int = 2  # periods after the last row is played before the stream counts as ended
 
     def __post_init__(self) -> None:
-        if isinstance(self.prime, bool) or not isinstance(self.prime, int) or not 1 <= self.prime <= self.pvt.queue_size:
-            raise ValueError(f"StreamSettings.prime must be 1..{self.pvt.queue_size}, got {self.prime!r}")
+        # a fed queue holds prime - 2 rows just before a send, minus the periods a late send may lag
+        # (half the rows above the threshold): at least 4 above MP[4], or a healthy stream reads queue-low
+        lo = self.pvt.low_threshold + 4
+        if isinstance(self.prime, bool) or not isinstance(self.prime, int) or not lo <= self.prime <= self.pvt.queue_size:
+            raise ValueError(f"StreamSettings.prime must be {lo}..{self.pvt.queue_size} (queue-low threshold "
+                             f"{self.pvt.low_threshold} + 4 .. the queue), got {self.prime!r}")
         if self.late_bound_s is not None and not self.late_bound_s > 0:
             raise ValueError(f"StreamSettings.late_bound_s must be > 0, got {self.late_bound_s!r}")
 
@@ -281,9 +289,21 @@ def _stop_all(guard: MotionGuard, streams: list[_Stream], report: StreamReport) 
             report.events.append(f"{st.ref.name}: stop: {problem}")
 
 
+@dataclass
+class _Pace:
+    """What the sender and the watch of it share, under ``lock``: the send due now and by when it must
+    have gone out (inf: nothing left to send)."""
+
+    lock: threading.Lock = field(default_factory=threading.Lock)
+    stop: threading.Event = field(default_factory=threading.Event)
+    due: float = math.inf
+    deadline: float = math.inf
+
+
 def _run_sender(guard: MotionGuard, streams: list[_Stream], s: StreamSettings, report: StreamReport,
                 clock: Callable[[], float], sleep: Callable[[float], None]) -> None:
-    """The sender's thread, and this thread waiting for it. Whatever ends it early ends the stream."""
+    """The sender's thread, and this thread watching it: a send not out by its deadline stops every drive
+    now, while the sender is still stuck (a sleep that overran, a hung request), not when it wakes."""
     events: collections.deque[tuple[float, str, PvtEvent]] = collections.deque()
     callbacks = []
     for st in streams:
@@ -293,12 +313,12 @@ def _run_sender(guard: MotionGuard, streams: list[_Stream], s: StreamSettings, r
                 events.append((clock(), name, event))
         st.client.on_emcy(on_emcy)
         callbacks.append((st.client, on_emcy))
-    stop = threading.Event()
+    pace = _Pace()
     failure: list[BaseException] = []
 
     def run() -> None:
         try:
-            _sender(guard, streams, s, report, clock, sleep, events, stop)
+            _sender(guard, streams, s, report, clock, sleep, events, pace)
         except BaseException as exc:  # noqa: BLE001 - handed to the command's thread, which raises it
             failure.append(exc)
 
@@ -306,10 +326,26 @@ def _run_sender(guard: MotionGuard, streams: list[_Stream], s: StreamSettings, r
     try:
         thread.start()
         while thread.is_alive():
-            thread.join(0.05)  # the sender keeps time; this only waits for it (and takes Ctrl-C)
+            thread.join(WATCH_POLL_S)  # wall time: how often the watch looks; the deadline is the clock's
+            now = clock()
+            if now <= pace.deadline:
+                continue
+            # the sender may be between its sleep and its sends: let it finish those first (bounded)
+            got = pace.lock.acquire(timeout=s.late_bound)
+            try:
+                starved = not pace.stop.is_set() and clock() > pace.deadline
+                if starved:
+                    pace.stop.set()
+            finally:
+                if got:
+                    pace.lock.release()
+            if starved:
+                late = clock() - pace.due
+                report.max_lateness_s = max(report.max_lateness_s, late)
+                raise _starved(guard, streams, s, report, late)
     except BaseException:
-        stop.set()
-        thread.join()
+        pace.stop.set()
+        thread.join(HANG_GUARD_S)  # the sender ends at its next wake-up; a hung one is a daemon thread
         raise
     finally:
         for client, callback in callbacks:
@@ -318,64 +354,81 @@ def _run_sender(guard: MotionGuard, streams: list[_Stream], s: StreamSettings, r
         raise failure[0]
 
 
+def _starved(guard: MotionGuard, streams: list[_Stream], s: StreamSettings, report: StreamReport,
+             late: float) -> StreamStoppedError:
+    """Every drive stopped now; the error to raise."""
+    name = ", ".join(st.ref.name for st in streams)  # one sender feeds them all: all starve
+    report.stopped = f"starved: a send {late * 1000:.0f} ms late (bound {s.late_bound * 1000:.0f} ms)"
+    _stop_all(guard, streams, report)
+    return StreamStoppedError(f"PVT stream starved ({name}): the records were {late * 1000:.0f} ms late, "
+                              f"more than {s.late_bound * 1000:.0f} ms; every drive stopped",
+                              drive=name, report=report,
+                              hint="the host could not keep the stream's period: lower the load or "
+                                   "raise StreamSettings.prime")
+
+
 def _sender(guard: MotionGuard, streams: list[_Stream], s: StreamSettings, report: StreamReport,
             clock: Callable[[], float], sleep: Callable[[float], None],
-            events: collections.deque[tuple[float, str, PvtEvent]], stop: threading.Event) -> None:
+            events: collections.deque[tuple[float, str, PvtEvent]], pace: _Pace) -> None:
     period = s.pvt.period_s
     total = len(streams[0].records)
     t0 = min(st.started for st in streams if st.started is not None)
     # row k (from 0) is taken by the drive at t0 + k T and played until t0 + (k + 1) T; the last row ends then
     end = t0 + total * period
+    sending_until = t0 + (total - s.prime) * period  # the last row goes out then; the queue drains after
     next_row = s.prime
     k = 0
-    while not stop.is_set():
+    while not pace.stop.is_set():
         k += 1
         due = t0 + k * period
+        with pace.lock:
+            pace.due = due
+            pace.deadline = due + s.late_bound if next_row < total else math.inf
         wait = due - clock()
         if wait > 0:
             sleep(wait)
-        now = clock()
-        guard.check()
-        late = now - due
-        report.periods += 1
-        report.max_lateness_s = max(report.max_lateness_s, late)
-        if late <= period:
-            report.on_time += 1
-        else:
-            report.late += 1
-        _answer_events(guard, streams, events, report, end, period)
-        if late > s.late_bound and next_row < total:
-            name = ", ".join(st.ref.name for st in streams)  # one sender feeds them all: all starve
-            report.stopped = f"starved: a send {late * 1000:.0f} ms late (bound {s.late_bound * 1000:.0f} ms)"
-            _stop_all(guard, streams, report)
-            raise StreamStoppedError(f"PVT stream starved ({name}): the records went out {late * 1000:.0f} ms "
-                                     f"late, more than {s.late_bound * 1000:.0f} ms; every drive stopped",
-                                     drive=name, report=report,
-                                     hint="the host could not keep the stream's period: lower the load or "
-                                          "raise StreamSettings.prime")
-        # every row due by now: the drives take row j at t0 + j T, it goes out prime periods before
-        due_rows = min(total, s.prime + int((now - t0) / period + 1e-9))
-        while next_row < due_rows:
-            for st in streams:
-                _send(guard, st, st.records[next_row])
-                report.sent += 1
-            next_row += 1
-        if now >= end + s.end_margin_periods * period:
-            _answer_events(guard, streams, events, report, end, period)
-            return
+        with pace.lock:
+            if pace.stop.is_set():
+                return  # the watch stopped the stream (or the command is ending)
+            now = clock()
+            late = now - due
+            report.periods += 1
+            report.max_lateness_s = max(report.max_lateness_s, late)
+            if late <= period:
+                report.on_time += 1
+            else:
+                report.late += 1
+            if late > s.late_bound and next_row < total:
+                pace.stop.set()
+                raise _starved(guard, streams, s, report, late)
+            guard.check()
+            # after the lateness: a late host also makes the queues run low, and lateness is the cause to name
+            _answer_events(guard, streams, events, report, end, period, sending_until)
+            # every row due by now: the drives take row j at t0 + j T, it goes out prime periods before
+            due_rows = min(total, s.prime + int((now - t0) / period + 1e-9))
+            while next_row < due_rows:
+                for st in streams:
+                    _send(guard, st, st.records[next_row])
+                    report.sent += 1
+                next_row += 1
+            if now >= end + s.end_margin_periods * period:
+                _answer_events(guard, streams, events, report, end, period, sending_until)
+                return
 
 
 def _answer_events(guard: MotionGuard, streams: list[_Stream], events: collections.deque[tuple[float, str, PvtEvent]],
-                   report: StreamReport, end: float, period: float) -> None:
+                   report: StreamReport, end: float, period: float, sending_until: float) -> None:
     """Count queue-lows; stop everything on an emergency that ends a stream before the trajectory's end
-    (an underflow when the last row has played out is the stream's normal end)."""
+    (an underflow when the last row has played out is the stream's normal end), and on a queue-low while
+    rows are still to be sent: the drive has fewer rows than were sent, so some were lost."""
     while events:
         at, name, event = events.popleft()
         report.events.append(f"{name}: {event.text}")
         if not event.ends_stream:
             report.queue_low[name] = report.queue_low.get(name, 0) + 1
-            continue
-        if event.underflow and at >= end - period / 2:
+            if at >= sending_until:
+                continue  # the queue drains after the last row: expected
+        elif event.underflow and at >= end - period / 2:
             continue
         report.stopped = f"{name}: {event.text}"
         _stop_all(guard, streams, report)
