@@ -218,3 +218,18 @@ def test_a_write_pointer_outside_the_rows_is_refused_at_the_start():
     emcys = [pvt_event(decode_emcy(d)) for c, d in drive.pop_frames() if c == EMCY]
     assert [e.kind for e in emcys if e] == [PvtEventKind.BAD_SETUP]
     assert not drive.pvt.active
+
+
+@pytest.mark.parametrize("command", [0x81, 0x82])  # reset node, reset communication
+def test_a_reset_puts_the_rpdos_back_and_ends_the_pvt_motion(command):
+    clock = ManualClock()
+    drive = pvt_drive(clock)
+    for k in range(1, 20):
+        record(drive, 20 * k, 2000)
+    start(drive)
+    step(clock, drive)
+    drive.receive(0x000, bytes([command, NODE]))
+    drive.advance_to(clock.now())
+    assert not drive.pvt.active and not drive.pvt.queue
+    assert (drive.od_read(0x1602, 0), drive.od_read(0x1602, 1)) == (0, 0)
+    assert not drive.rpdos.record_cob(0x400 + NODE)

@@ -45,7 +45,7 @@ from sherpa_cli.elmo.pvt import (
     pvt_event,
     start_steps,
 )
-from sherpa_cli.errors import CodecError, SafetyError, SherpaError, UsageError
+from sherpa_cli.errors import CodecError, SafetyError, UsageError
 from sherpa_cli.motion.stopping import send_stop, why
 
 if TYPE_CHECKING:
@@ -262,7 +262,7 @@ def _restore_all(guard: MotionGuard, streams: list[_Stream], report: StreamRepor
             for old in st.interp_old:
                 st.client.set(old.letters, old.index, old.value)
                 done.append(f"{old.name}={old.value}")
-        except SherpaError as exc:
+        except Exception as exc:  # noqa: BLE001 - reported; this runs in a finally and must not mask the cause
             failed = True
             problems.append(f"{st.ref.name}: {why(exc)}")
         if not failed:

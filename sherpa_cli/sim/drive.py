@@ -591,6 +591,8 @@ class SimDrive:
         self._next_heartbeat = self._t + period / 1000 if period else math.inf
         self._replies.clear()
         self.tpdo.reset()  # PDO settings are RAM only here
+        self.rpdos.reset()
+        self.pvt.stop()
         self._rpdo2_type = 255  # 0x1401:2, RAM only: asynchronous, every frame runs when it arrives
         self._rpdo2_buffer = None
         self.recorder.reset()  # the recorder is RAM

@@ -56,10 +56,16 @@ class RpdoTable:
         self.node = node
         self.record_entry = record_entry  # the mapping value of the PVT record (index << 16 | sub << 8 | 64)
         self.pdos: dict[int, Rpdo] = {}
+        self._record_cobs: frozenset[int] = frozenset()  # kept with every write: each frame on the bus asks
         self.reset()
 
     def reset(self) -> None:
         self.pdos = {n: Rpdo(base + self.node) for n, base in RPDO_BASES.items()}
+        self._update()
+
+    def _update(self) -> None:
+        self._record_cobs = frozenset(p.cob & 0x7FF for p in self.pdos.values()
+                                      if p.valid and p.count == 1 and p.entries[0] == self.record_entry)
 
     @staticmethod
     def serves(index: int) -> bool:
@@ -79,6 +85,10 @@ class RpdoTable:
         raise ODError(f"object 0x{index:04X} has no sub-index {sub}", ABORT_NO_SUBINDEX)
 
     def write(self, index: int, sub: int, value: int) -> None:
+        self._write(index, sub, value)
+        self._update()
+
+    def _write(self, index: int, sub: int, value: int) -> None:
         if self.read(index, sub) == value:
             return  # nothing changes: accepted in any state
         comm = index < 0x1600
@@ -117,10 +127,7 @@ class RpdoTable:
 
     def record_cob(self, can_id: int) -> bool:
         """Whether ``can_id`` is a valid RPDO that maps the PVT record."""
-        for pdo in self.pdos.values():
-            if pdo.valid and pdo.count == 1 and pdo.entries[0] == self.record_entry and pdo.cob & 0x7FF == can_id:
-                return True
-        return False
+        return can_id in self._record_cobs
 
     def snapshot(self) -> dict[str, Any]:
         return {str(n): {"cob": p.cob, "ttype": p.ttype, "count": p.count, "entries": list(p.entries)}
@@ -133,6 +140,7 @@ class RpdoTable:
                 entries = [int(e) for e in raw["entries"]][:MAX_ENTRIES]
                 self.pdos[n] = Rpdo(int(raw["cob"]), int(raw["ttype"]), int(raw["count"]),
                                     entries + [0] * (MAX_ENTRIES - len(entries)))
+        self._update()
 
 
 @dataclass(frozen=True)
