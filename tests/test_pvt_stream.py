@@ -5,6 +5,7 @@ stepped clock, so lateness only comes from what a test injects."""
 
 from __future__ import annotations
 
+import json
 import math
 from pathlib import Path
 
@@ -81,8 +82,13 @@ def test_a_two_joint_stream_tracks_its_path(arm):
     session, st = arm
     duration = 2.0
     samples: dict[str, list[tuple[float, int]]] = {name: [] for name in DRIVES}
+    noted: dict[str, list[tuple[str, int]]] = {}
 
     def sleep(seconds: float) -> None:
+        if not noted:  # while streaming, the journal holds what a killed command would leave
+            for ref in refs:
+                data = json.loads(journal.path_for(ref.bus, ref.node).read_text(encoding="utf-8"))
+                noted[ref.name] = [(step["name"], step["old"]) for step in data["steps"] if step["owner"] == "pvt stream"]
         st.sleep(seconds)
         with session.sim.lock:
             for name in DRIVES:
@@ -109,6 +115,13 @@ def test_a_two_joint_stream_tracks_its_path(arm):
         assert d.pvt_records == round(duration / PERIOD)
         assert not d.motor_on  # the guard switched it off again
     assert g.report.reason == "end"
+    for ref in refs:
+        cob = 0x400 + ref.node
+        # the interpreter values, then the RPDO's way back last step first: `sherpa recover` replays it
+        # backwards (off, mapping emptied, entry, count, type, its old COB-ID)
+        assert noted[ref.name] == [("MP[1]", 0), ("MP[2]", 0), ("MP[3]", 0), ("MP[4]", 0), ("MP[6]", 0), ("QT[1]", 0),
+                                   ("0x1402:1", cob), ("0x1402:2", 255), ("0x1602:0", 0), ("0x1602:1", 0),
+                                   ("0x1602:0", 0), ("0x1402:1", cob | 0x80000000)], noted
     assert_put_back(session, refs)
 
 

@@ -4,6 +4,8 @@ elmo/pvt.py's settings describe, a queue played one row per period, the PVT emer
 from __future__ import annotations
 
 import pytest
+from hypothesis import given
+from hypothesis import strategies as st
 
 from sherpa_cli.elmo.codec import decode_reply, encode_execute, encode_set
 from sherpa_cli.elmo.faults import decode_emcy
@@ -19,6 +21,7 @@ from sherpa_cli.elmo.pvt import (
 from sherpa_cli.sim import ManualClock, SimSettings
 from sherpa_cli.sim.drive import SimDrive
 from sherpa_cli.sim.od import ODError
+from sherpa_cli.sim.pvt import Segment
 
 NODE = 3
 RPDO2, TPDO2, EMCY = 0x300 + NODE, 0x280 + NODE, 0x80 + NODE
@@ -233,3 +236,20 @@ def test_a_reset_puts_the_rpdos_back_and_ends_the_pvt_motion(command):
     assert not drive.pvt.active and not drive.pvt.queue
     assert (drive.od_read(0x1602, 0), drive.od_read(0x1602, 1)) == (0, 0)
     assert not drive.rpdos.record_cob(0x400 + NODE)
+
+
+FINITE = st.floats(-1e6, 1e6, allow_nan=False)
+
+
+@given(FINITE, FINITE, FINITE, FINITE, st.floats(1e-3, 1.0), st.floats(-10.0, 10.0))
+def test_a_segment_meets_both_rows_position_and_velocity(x0, v0, x1, v1, period, t0):
+    seg = Segment(t0, x0, v0, x1, v1, period)
+    scale = 1 + abs(x0) + abs(x1) + (abs(v0) + abs(v1)) * period
+    for (x, v), (xe, ve) in ((seg.at(t0), (x0, v0)), (seg.at(t0 + period), (x1, v1))):
+        assert x == pytest.approx(xe, abs=1e-9 * scale)
+        assert v == pytest.approx(ve, abs=1e-9 * scale / period)
+
+
+def test_a_segment_of_constant_velocity_is_a_straight_line():
+    seg = Segment(0.0, 0.0, 1000.0, 10.0, 1000.0, 0.01)
+    assert seg.at(0.005) == pytest.approx((5.0, 1000.0))

@@ -231,9 +231,11 @@ def _set_up(guard: MotionGuard, st: _Stream, p: PvtSettings, report: StreamRepor
         if (w.index, w.sub) not in old_pdo:
             old_pdo[(w.index, w.sub)] = int.from_bytes(sdo.upload(w.index, w.sub)[:w.size], "little")
     guard.check()
+    # `sherpa recover` replays a journal backwards: the PDO's safe way back (off, mapping, type, its old
+    # COB-ID last) is noted last step first
+    back = reversed(pdo_restore(p, old_pdo))
     journal.note(st.ref, *(journal.interp(JOURNAL_OWNER, o.letters, o.index, o.value) for o in old_interp),
-                 *(journal.sdo(JOURNAL_OWNER, w.index, w.sub, w.size, old_pdo[(w.index, w.sub)]) for w in writes
-                   if w.value != old_pdo[(w.index, w.sub)]))
+                 *(journal.sdo(JOURNAL_OWNER, w.index, w.sub, w.size, w.value) for w in back))
     st.noted = True
     st.interp_old, st.pdo_old = old_interp, old_pdo
     for step in sets:
