@@ -216,6 +216,7 @@ def test_tracks_that_cannot_be_streamed_are_refused_before_anything_is_sent(arm)
         for bad, words in (({"yaw": good["yaw"], "elbow": good["elbow"][:-1]}, "same number"),
                            ({"yaw": [*good["yaw"][:-1], (1000, 5)], "elbow": good["elbow"]}, "last PVT record"),
                            ({"yaw": [(2**31, 0)], "elbow": [(0, 0)]}, "int32"),
+                           ({"yaw": [(500, 0)], "elbow": [(0, 0)]}, "the first PVT record is at 500"),
                            ({"wrist": good["yaw"]}, "not a drive of this motion guard"),
                            ({}, "at least one")):
             with pytest.raises(UsageError, match=words):

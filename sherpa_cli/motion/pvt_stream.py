@@ -71,6 +71,9 @@ class StreamSettings:
     prime: int = 32  # rows queued before the start and kept ahead of the drive's consumption
     late_bound_s: float | None = None
     end_margin_periods: int = 2  # periods after the last row is played before the stream counts as ended
+    # the first row is one period from where the motor stands: farther than its own speed takes it in a
+    # period, plus this, and the drive would jump there
+    start_tolerance: int = 2  # counts
 
     def __post_init__(self) -> None:
         # a fed queue holds prime - 2 rows just before a send, minus the periods a late send may lag
@@ -213,6 +216,14 @@ def _prepare(guard: MotionGuard, tracks: Mapping[str, Sequence[Record]], s: Stre
         except CodecError as exc:
             raise UsageError(f"{name}: {exc.message}") from None
         out.append(_Stream(ref, guard.client(ref), frames, s.pvt))
+    for st in out:
+        position, velocity = tracks[st.ref.name][0]
+        here = guard.position(st.ref)
+        reach = abs(velocity) * s.pvt.period_s + s.start_tolerance
+        if abs(position - here) > reach:
+            raise UsageError(f"{st.ref.name}: the first PVT record is at {position}, the motor at {here}: "
+                             f"more than {reach:.0f} counts for the first {s.pvt.period_ms} ms",
+                             hint="a trajectory starts where the motor stands")
     return out
 
 
