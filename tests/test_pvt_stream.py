@@ -242,3 +242,26 @@ def test_stream_settings_bounds():
         StreamSettings(prime=19)  # a fed queue would read low
     with pytest.raises(ValueError):
         StreamSettings(late_bound_s=0)
+
+
+def test_sherpa_recover_puts_back_what_a_killed_stream_left(arm, monkeypatch):
+    """A stream killed before its restore leaves its set-up on the drives and its notes in the journal:
+    the journal's replay (`sherpa recover`, backwards) puts every value back without a refusal."""
+    from sherpa_cli.motion import pvt_stream
+
+    session, st = arm
+    monkeypatch.setattr(pvt_stream, "_restore_all", lambda guard, streams, report: [])  # killed: no restore
+    guard, refs = guard_of(session, st)
+    with guard as g:
+        stream_pvt(g, tracks(0.5), clock=st.now, sleep=st.sleep)
+    for ref in refs:
+        with session.sim.lock:
+            assert sim_drive(session, ref.name).rpdos.record_cob(0x400 + ref.node)  # still set up
+        path = journal.path_for(ref.bus, ref.node)
+        data = json.loads(path.read_text(encoding="utf-8"))
+        for step in data["steps"]:
+            step["proc"] = "a process that has ended"  # as after a kill: the note's process is gone
+        path.write_text(json.dumps(data), encoding="utf-8")
+        result = journal.restore(session, ref, apply=True)
+        assert result.problems == [], result.problems
+    assert_put_back(session, refs)
