@@ -45,12 +45,6 @@ RANGE, TOO_HIGH, TOO_LOW = 0x06090030, 0x06090031, 0x06090032
 KNOWN_GAPS = {
     0x1023: "OS interpreter: the simulator has no ASCII command interpreter, and the tool does not use it",
     0x1024: "OS interpreter command mode: see 0x1023",
-    0x1400: "RPDO1: the simulator has no RPDO-mappable (writable DS 402) object, so an RPDO could map nothing",
-    0x1402: "RPDO3: see RPDO1",
-    0x1403: "RPDO4: see RPDO1",
-    0x1600: "RPDO1 mapping: see RPDO1",
-    0x1602: "RPDO3 mapping: see RPDO1",
-    0x1603: "RPDO4 mapping: see RPDO1",
     0x2F20: "TPDO event mask: the simulated TPDOs send on SYNC and event timer only, TPDO2 on every reply; "
             "a mask it stored and ignored would pass here and mislead",
     0x2F21: "EMCY event mask: its default is not documented; the simulator sends every EMCY it models, "

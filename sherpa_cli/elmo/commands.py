@@ -200,6 +200,12 @@ _TABLE: tuple[CommandSpec, ...] = (
     _cmd("KP", "float", "rw", "proportional gain: 2 speed loop, 3 position loop (1 UNCONFIRMED)", index=(1, 3)),
     _cmd("KI", "float", "rw", "integral gain: 2 speed loop (1, 3 UNCONFIRMED)", index=(1, 3)),
     _cmd("FF", "float", "rw", "feed-forward (index meanings UNCONFIRMED)", index=(1, 3)),
+    # PVT table motion (real-arm.md 5, [IG] 13-28; elmo/pvt.py, docs/pvt.md): MP[4] and MP[6] are named
+    # by [IG] 13-28, the other indexes, QT as the PVT period and PV as the start are UNCONFIRMED.
+    _cmd("MP", "int", "rw", "PVT/PT set-up: 1 first row, 2 last row, 3 cyclic, 4 queue-low rows, 6 write pointer "
+         "(1, 2, 3 UNCONFIRMED)", index=(1, 6)),
+    _cmd("QT", "int", "rw", "PT/PVT row time (UNCONFIRMED for PVT)", index=(1, 64), units="ms"),
+    _cmd("PV", "int", "rw", "start PVT motion at this row, then BG (UNCONFIRMED)"),
 )
 
 COMMANDS: Mapping[str, CommandSpec] = MappingProxyType({c.letters: c for c in _TABLE})

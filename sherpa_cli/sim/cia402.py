@@ -86,6 +86,7 @@ class SimCia402Drive(SimDrive):
     sdo_tpdos = (0, 1, 2, 3)
     sdo_fixed_tpdos: frozenset[int] = frozenset()
     sdo_rpdo2 = False
+    sdo_rpdos: tuple[int, ...] = ()  # its RPDOs carry no PVT records
 
     def __init__(self, node: int, *, position: int = 0, stalled: Callable[[], float] | None = None,
                  **kwargs: Unpack[DriveOptions]) -> None:
@@ -305,8 +306,8 @@ class SimCia402Drive(SimDrive):
         if self.state is not State.FAULT:
             self._fault(FAULT_OF_MF.get(mf_bit, 0x1000))
 
-    def _emcy(self, code: int, register: int, elmo_code: int = 0) -> None:
-        super()._emcy(EMCY_OF_ELMO.get(code, code), register, elmo_code)
+    def _emcy(self, code: int, register: int, elmo_code: int = 0, field1: int = 0, field2: int = 0) -> None:
+        super()._emcy(EMCY_OF_ELMO.get(code, code), register, elmo_code, field1, field2)
 
     def _heartbeat_lost(self) -> None:
         """The consumer timed out: EMCY 0x8130, then 0x6007 acts on a drive in Operation enabled

@@ -53,6 +53,7 @@ from sherpa_cli.sim.od import (
 )
 from sherpa_cli.sim.params import Value, factory_ram, is_persistent, parse_flash, wrap_int32
 from sherpa_cli.sim.pdo import COB_NO_RTR, DRIVE_MAPPABLE, TpdoTable
+from sherpa_cli.sim.pvt import PvtEmcy, PvtQueue, RpdoTable
 from sherpa_cli.sim.recorder import SDO_ENTRIES, SimRecorder
 from sherpa_cli.sim.servo import ServoMotor
 from sherpa_cli.sim.settings import SimSettings
@@ -73,6 +74,7 @@ UNGUARDED_MO = "motor on without an armed dead-man"
 EMCY_HEARTBEAT, EMCY_SPEED_LIMIT, EMCY_POSITION_LIMIT = 0x8130, 0x8481, 0x8680
 ERR_REG_GENERIC, ERR_REG_COMMUNICATION = 0x01, 0x11  # 0x1001 values from the 0x2F21 table
 EMCY_FRAME = struct.Struct("<HBBHH")
+EMCY_PVT, ERR_REG_PVT = 0xFF00, 0x81  # [IG] 13-28: the PVT/PT emergencies, the Elmo code in byte 3
 
 SR_MO, SR_MF, SR_UM_SHIFT, SR_MS_SHIFT, SR_LIMIT_STOP = 1 << 4, 1 << 6, 7, 14, 1 << 28
 SR_PROGRAM = 1 << 12  # a user program is running (elmo-protocol.md 2.5)
@@ -167,6 +169,9 @@ class SimDrive:
         self.inputs = Inputs(self.settings.inputs)
         self._od_live = dict(od_live or {})  # extra live objects: another device type's profile (sim/arm.py)
         self.tpdo = self._make_tpdo_table(node)
+        self.rpdos = RpdoTable(node, self.settings.pvt_record_entry)  # RPDO1/3/4: PVT records (sim/pvt.py)
+        self.pvt = PvtQueue(self.settings.pvt_rows)
+        self.pvt_records = 0  # PVT records taken into the queue
         self.last_request = b""  # the last binary interpreter request (0x2012) and reply (0x2013)
         self.last_reply = b""
         self.syncs = 0  # SYNC frames this drive answered (Operational)
@@ -296,6 +301,9 @@ class SimDrive:
                 self._via_group = False
         elif can_id == HEARTBEAT_BASE + self._consumer()[0]:
             self._hb_last, self._hb_stalled = t, self._stalled()
+        elif self.rpdos.record_cob(can_id) and self._nmt_state == OPERATIONAL:  # PDOs live in Operational only
+            self.pvt_records += 1
+            self._pvt_emcy(self.pvt.push(data))
         return True
 
     def send_now(self, can_id: int, data: bytes) -> None:
@@ -319,6 +327,8 @@ class SimDrive:
         lies: +1 positive side, -1 negative, 0 both (a hard stop freezes motion either way)."""
         self.inputs.set(n, active, direction)
 
+    # RPDO1/3/4 (0x1400/0x1600 + n), served from :attr:`rpdos` (sim/pvt.py)
+    sdo_rpdos: tuple[int, ...] = (0, 2, 3)
     # 0x2030, the recorder's upload: added to the Whistle's objects by sim/sdo.py
     sdo_more: tuple[tuple[int, int | None, str, int, str], ...] = SDO_ENTRIES
 
@@ -331,6 +341,8 @@ class SimDrive:
             return self.tpdo.read(index, sub)
         if index in (RPDO2_COMM, RPDO2_MAP):
             return self._rpdo2_read(index, sub)
+        if self.rpdos.serves(index):
+            return self.rpdos.read(index, sub)
         if sub == 0 and index in self._pdo_values():
             return self._pdo_values()[index]()
         if (index, sub) in ((INTERPRETER_IN, 0), (INTERPRETER_OUT, 0)):
@@ -355,6 +367,10 @@ class SimDrive:
             return
         if index in (RPDO2_COMM, RPDO2_MAP):
             self._rpdo2_write(index, sub, value)
+            self.od_writes.append((self._t, index, sub, value))
+            return
+        if self.rpdos.serves(index):
+            self.rpdos.write(index, sub, value)
             self.od_writes.append((self._t, index, sub, value))
             return
         value = self._od.check_write(index, sub, value)
@@ -433,7 +449,7 @@ class SimDrive:
                 "ram": dict(self.ram), "od": {flash_key(*key): value for key, value in self._od.values.items()},
                 "mf": self._mf, "last_error": self.last_error, "error_field": self._error_field,
                 "error_register": self._error_register, "limit_stop": self._limit_stop, "nmt": self._nmt_state,
-                "tpdo": self.tpdo.snapshot(), "rpdo2_type": self._rpdo2_type,
+                "tpdo": self.tpdo.snapshot(), "rpdo2_type": self._rpdo2_type, "rpdos": self.rpdos.snapshot(),
                 "consumer_watching": self._hb_last is not None and self._consumer()[1] > 0}
 
     def restore_position(self, position: float) -> None:
@@ -462,6 +478,10 @@ class SimDrive:
             index, sub = (int(part, 16) if i == 0 else int(part) for i, part in enumerate(str(key).split(":")))
             values[(index, sub)] = self._od.check_write(index, sub, value)
         self.tpdo.restore(tpdo)
+        rpdos = saved.get("rpdos", {})
+        if not isinstance(rpdos, dict):
+            raise TypeError("rpdos must be a mapping")
+        self.rpdos.restore(rpdos)
         self.ram = {str(k): v for k, v in ram.items() if isinstance(v, (int, float)) and not isinstance(v, bool)}
         self._od.values.update(values)
         self.restore_position(float(position))
@@ -508,7 +528,9 @@ class SimDrive:
                 if key == "RR":
                     self.recorder.write_rr(int(value))
             self.ram[key] = value
-            if key in ("PA", "PR", "JV"):
+            if key[:3] == "MP[" or key == self.settings.pvt_write_pointer_key:
+                self._pvt_configure()  # a new PVT table: the rows sent before are gone
+            if key in ("PA", "PR", "JV") or key == self.settings.pvt_start_key:
                 self._target_kind = key  # what the next BG starts in UM=5: a move or a jog
             elif key == "TC" and self._motor_on and self.ram["UM"] == 1:
                 self._apply_torque()
@@ -528,6 +550,7 @@ class SimDrive:
             if self.settings.st_refused_in_speed_mode and self.ram["UM"] == 2:
                 raise Refused(interpreter.EC_NOT_IN_THIS_UM)  # [BLISS]: "cannot be executed in speed mode"
             self._begin_due = None
+            self.pvt.stop()
             if self._motor_on:
                 self.motor.stop(self.ram["SD"] * self.speed_gain)
         elif letters in ("SV", "LD"):
@@ -568,6 +591,8 @@ class SimDrive:
         self._next_heartbeat = self._t + period / 1000 if period else math.inf
         self._replies.clear()
         self.tpdo.reset()  # PDO settings are RAM only here
+        self.rpdos.reset()
+        self.pvt.stop()
         self._rpdo2_type = 255  # 0x1401:2, RAM only: asynchronous, every frame runs when it arrives
         self._rpdo2_buffer = None
         self.recorder.reset()  # the recorder is RAM
@@ -630,6 +655,8 @@ class SimDrive:
         period = self._od.values[(0x1017, 0)]
         self._next_heartbeat = self._t + period / 1000 if period else math.inf
         self.tpdo.reset()
+        self.rpdos.reset()
+        self.pvt.stop()
         self._rpdo2_type = 255
         self._rpdo2_buffer = None
         self._send(HEARTBEAT_BASE + self.node, b"\x00")
@@ -730,6 +757,8 @@ class SimDrive:
             times.append(self._trip_due)
         if self._begin_due is not None:
             times.append(self._begin_due)
+        if self.pvt.active:
+            times.append(self.pvt.next_due())
         if self._hb_last is not None:  # checked first: _consumer() is a lookup on every step
             due = self._consumer_due()
             if due is not None:
@@ -765,6 +794,8 @@ class SimDrive:
             self._begin_due = None
             if self._motor_on:
                 self._begin()
+        if self.pvt.active and t >= self.pvt.next_due():
+            self._pvt_boundary()
         if self._trip_due is not None and t >= self._trip_due:
             self._trip_due = None
             self._shut_down(MF_POSITION_LIMIT, "position limit (injected trip)")
@@ -797,7 +828,9 @@ class SimDrive:
         if self.group_id and can_id == RPDO2_BASE + self.group_id:
             return True
         host, timeout = self._consumer()
-        return bool(timeout) and can_id == HEARTBEAT_BASE + host
+        if timeout and can_id == HEARTBEAT_BASE + host:
+            return True
+        return self.rpdos.record_cob(can_id)
 
     def _dropped(self) -> bool:
         p = self.settings.drop_probability
@@ -812,14 +845,14 @@ class SimDrive:
         """A TPDO the table made (on SYNC or its event timer)."""
         self._send(can_id, data)
 
-    def _emcy(self, code: int, register: int, elmo_code: int = 0) -> None:
+    def _emcy(self, code: int, register: int, elmo_code: int = 0, field1: int = 0, field2: int = 0) -> None:
         self._error_register = register
         if code:
             self._error_field = encode_error_field(code, register, elmo_code)
         cob = self._od.values[(0x1014, 0)]
         # CiA 301: a Stopped node sends no EMCY, nor one whose COB-ID is not valid (the error is still stored)
         if self._nmt_state != STOPPED and not cob & COB_INVALID:
-            self._send(cob & 0x7FF, EMCY_FRAME.pack(code, register, elmo_code, 0, 0))
+            self._send(cob & 0x7FF, EMCY_FRAME.pack(code, register, elmo_code, field1 & 0xFFFF, field2 & 0xFFFF))
 
     def _interpreter_frame(self, data: bytes) -> None:
         # PDOs only live in Operational; during the MO settle window the interpreter is deaf.
@@ -901,6 +934,7 @@ class SimDrive:
         if not on:
             self._motor_on = False
             self._begin_due = None
+            self.pvt.stop()
             self.motor.off()
             return
         self._motor_on = True
@@ -927,6 +961,8 @@ class SimDrive:
         if um == 2:
             jv = min(max(r["JV"], r["VL[2]"]), r["VH[2]"])
             self.motor.jog(jv * g, r["AC"] * g, r["DC"] * g)
+        elif um == 5 and self._target_kind == self.settings.pvt_start_key:
+            self._pvt_start()
         elif um == 5 and self._target_kind == "JV":
             # a jog in position mode: the speed command is clipped like UM=2's; VL[3]/VH[3] still
             # hold the position reference, so the jog stops at them (SR bit 28)
@@ -954,9 +990,13 @@ class SimDrive:
             moving = heading and m.mode in ("velocity", "position", "torque")
             if moving and heading in self.inputs.blocked(self._il, self.settings.stop_code):
                 # stop switches act in every mode, torque included (seed C.1.1)
+                self.pvt.stop()
                 m.stop(self.ram["SD"] * self.speed_gain)
                 self._limit_stop = True
-            m.step(dt)
+            if self.pvt.active:
+                self._pvt_step(dt)
+            else:
+                m.step(dt)
             if self._speed is not None:
                 self._speed.sample(self._t + dt, m.rounded)
             if self._quick_stop and m.v == 0 and m.mode in ("idle", "stop"):
@@ -1006,6 +1046,46 @@ class SimDrive:
         r["HM[1]"] = 0
         self._record(f"home event: PX={self.px}")
 
+    # -- PVT (sim/pvt.py) --------------------------------------------------------------------------
+
+    def _pvt_period(self) -> float:
+        return float(self.ram.get(self.settings.pvt_period_key, 0)) / 1000
+
+    def _pvt_configure(self) -> None:
+        r, s = self.ram, self.settings
+        if self.pvt.active and self._motor_on:
+            self.motor.stop(self.ram["DC"] * self.speed_gain)  # a new table ends the motion: never coast on
+        self.pvt.configure(int(r.get("MP[1]", 0)), int(r.get("MP[2]", 0)), int(r.get("MP[3]", 0)),
+                           int(r.get("MP[4]", 0)), int(r.get(s.pvt_write_pointer_key, 0)))
+
+    def _pvt_start(self) -> None:
+        self._pvt_emcy(self.pvt.start(self._t, self.motor.position + self._px_offset, self._pvt_period()))
+        if self.pvt.active:
+            self.motor.jog(self.motor.v, 0.0, 0.0)  # MS 2, a heading for the stop switches; _pvt_step moves it
+
+    def _pvt_step(self, dt: float) -> None:
+        seg, m = self.pvt.segment, self.motor
+        assert seg is not None
+        x, v = seg.at(self._t + dt)
+        v0 = m.v
+        whole = math.floor(x - self._px_offset)
+        m.counts, m.frac = whole, x - self._px_offset - whole
+        m.v, m.a, m.v_target = v, (v - v0) / dt, v
+        if isinstance(m, ServoMotor):
+            m.ref.counts, m.ref.frac, m.ref.v = m.counts, m.frac, v
+
+    def _pvt_boundary(self) -> None:
+        emcy = self.pvt.boundary(self._t, self._pvt_period())
+        if not self.pvt.active:  # the queue ran empty while moving: the drive stops the motor itself
+            key = "SD" if self.settings.pvt_underflow_decel == "SD" else "DC"
+            self.motor.stop(self.ram[key] * self.speed_gain)
+            self._record(f"PVT underflow after {self.pvt.played} rows: stopping with {key}")
+        self._pvt_emcy(emcy)
+
+    def _pvt_emcy(self, emcy: PvtEmcy | None) -> None:
+        if emcy is not None:
+            self._emcy(EMCY_PVT, ERR_REG_PVT, emcy.code, emcy.field1, emcy.field2)
+
     def _check_limits(self) -> None:
         r = self.ram
         if r["UM"] == 1:
@@ -1026,6 +1106,7 @@ class SimDrive:
         self._motor_on = False
         self._quick_stop = False
         self._begin_due = None
+        self.pvt.stop()
         self.motor.off()
         self._mf |= mf_bit
 

@@ -60,10 +60,12 @@ _RECORD_NAMES = {0x2030: "Bring recorded data", 0x1003: "Pre-defined error field
 
 
 def build_object_dictionary(extra: tuple[ObjectSpec, ...] = DRIVE_OBJECTS, tpdos: tuple[int, ...] = (0, 1, 2, 3),
-                            fixed: frozenset[int] = frozenset({1}), rpdo2: bool = True) -> od.ObjectDictionary:
+                            fixed: frozenset[int] = frozenset({1}), rpdo2: bool = True,
+                            rpdos: tuple[int, ...] = ()) -> od.ObjectDictionary:
     """``extra``: more (index, sub or None, name, data type, access) of the device type (a Whistle's by
     default; sim/encoder.py has its own); ``tpdos``: its TPDO numbers - 1, ``fixed`` those that
-    refuse writes (the interpreter's TPDO2); ``rpdo2``: it has the interpreter's RPDO2."""
+    refuse writes (the interpreter's TPDO2); ``rpdo2``: it has the interpreter's RPDO2; ``rpdos``: the
+    numbers - 1 of its other RPDOs (a Whistle's carry PVT records, sim/pvt.py)."""
     dictionary = od.ObjectDictionary()
     records: dict[int, od.ODRecord] = {}
     for index, sub, name, data_type, access in (*_OBJECTS, *extra):
@@ -86,6 +88,7 @@ def build_object_dictionary(extra: tuple[ObjectSpec, ...] = DRIVE_OBJECTS, tpdos
     for record in records.values():
         record[0].default = max(k for k in record.subindices)
     _add_pdo_objects(dictionary, tpdos, fixed, rpdo2)
+    _add_rpdo_objects(dictionary, rpdos)
     return dictionary
 
 
@@ -119,6 +122,18 @@ def _add_pdo_objects(dictionary: od.ObjectDictionary, tpdos: tuple[int, ...], fi
         _record(dictionary, f"TPDO{n + 1} mapping parameter", 0x1A00 + n,
                 tuple((sub, "Number of mapped objects" if sub == 0 else f"Mapped object {sub}", u8 if sub == 0 else u32,
                        access) for sub in range(9)))
+
+
+def _add_rpdo_objects(dictionary: od.ObjectDictionary, rpdos: tuple[int, ...]) -> None:
+    """RPDO communication (0x1400 + n: COB-ID, transmission type) and mapping (0x1600 + n: count, eight
+    entries), served from the node's RAM (sim/pvt.py)."""
+    u8, u32 = od.UNSIGNED8, od.UNSIGNED32
+    for n in rpdos:
+        _record(dictionary, f"RPDO{n + 1} communication parameter", 0x1400 + n,
+                ((0, "Highest sub-index supported", u8, "ro"), (1, "COB-ID", u32, "rw"), (2, "Transmission type", u8, "rw")))
+        _record(dictionary, f"RPDO{n + 1} mapping parameter", 0x1600 + n,
+                tuple((sub, "Number of mapped objects" if sub == 0 else f"Mapped object {sub}", u8 if sub == 0 else u32,
+                       "rw") for sub in range(9)))
 
 
 class _Task:
@@ -172,7 +187,8 @@ def dictionary_of(drive: object) -> od.ObjectDictionary:
     ``sdo_tpdos``, ``sdo_fixed_tpdos``, ``sdo_rpdo2``; sim/encoder.py)."""
     return build_object_dictionary(tuple(getattr(drive, "sdo_extra", DRIVE_OBJECTS)) + tuple(getattr(drive, "sdo_more", ())),
                                    getattr(drive, "sdo_tpdos", (0, 1, 2, 3)),
-                                   getattr(drive, "sdo_fixed_tpdos", frozenset({1})), getattr(drive, "sdo_rpdo2", True))
+                                   getattr(drive, "sdo_fixed_tpdos", frozenset({1})), getattr(drive, "sdo_rpdo2", True),
+                                   tuple(getattr(drive, "sdo_rpdos", ())))
 
 
 class SdoServer:

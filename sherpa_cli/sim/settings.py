@@ -126,6 +126,15 @@ class SimSettings:
     # begin commands). A BG sent to the drive's group id (0x2040) or executed at SYNC starts at
     # once on every drive of the group.
     start_skew_s: float = 0.0
+    # PVT (sim/pvt.py, docs/pvt.md; all UNCONFIRMED): the rows of the PVT table ([IG] 13-28: 1..64), the
+    # RPDO mapping value of the PVT record (0x2001 sub 0, 64 bits), the interpreter keys that hold the period
+    # (ms) and the first row written, and what the motor stops with on an underflow ("DC" or "SD").
+    pvt_rows: int = 64
+    pvt_record_entry: int = 0x20010040
+    pvt_period_key: str = "QT[1]"
+    pvt_write_pointer_key: str = "MP[6]"
+    pvt_start_key: str = "PV"
+    pvt_underflow_decel: str = "DC"
     # The servo model (sim/servo.py), one model for both settings: lag_s > 0 (diffdrive) is its
     # first-order-lag form (damping 1, no velocity feed-forward, bandwidth 1 / (pi lag_s)): the motor
     # trails its profile by lag_s at speed; servo_bandwidth_hz > 0 (`log step`) its PID form with
