@@ -25,6 +25,7 @@ if TYPE_CHECKING:
     from sherpa_cli.bus.session import ArmSession
     from sherpa_cli.config.model import ArmConfig, JoystickConfig
     from sherpa_cli.devices.ft_sensor import Wrench
+    from sherpa_cli.joints.trajectory import Trajectory
     from sherpa_cli.log.foxglove_live import LiveView
     from sherpa_cli.log.record_run import RecordPlan, RecordResult, RecordTime, Wait
     from sherpa_cli.motion.axis import Axis
@@ -46,6 +47,7 @@ if TYPE_CHECKING:
     from sherpa_cli.ops.move import PoseTargets, PreparedMove
     from sherpa_cli.ops.pair_match import MatchResult
     from sherpa_cli.ops.params_file import ParamDump
+    from sherpa_cli.ops.play import PlayResult, PreparedPlay
     from sherpa_cli.ops.poses import PoseDiff, SavedPose
     from sherpa_cli.ops.program import DrivePlan, DriveTarget
     from sherpa_cli.ops.raw import RawRun
@@ -647,6 +649,36 @@ class Arm:
             prepared = self.plan_pose(pose, joints=joints, speed_scale=speed_scale, uncalibrated=uncalibrated)
             return self.run_pose(prepared, hold=hold, on_event=on_event, on_progress=on_progress, clock=clock,
                                  sleep=sleep)
+
+    def plan_play(self, trajectory: str | Path | Trajectory, *, uncalibrated: bool = False) -> PreparedPlay:
+        """The checks of :meth:`play` without moving (`sherpa move --trajectory FILE` without --apply):
+        the path read (a `log record` CSV or MCAP, a planner's CSV; or a :class:`Trajectory`), checked
+        against every joint's limits, resampled to the stream's period, and found to start where the
+        arm stands (read from the drives; NMT start is all that is sent)."""
+        from sherpa_cli.joints.trajectory import Trajectory
+        from sherpa_cli.ops.play import prepare_play
+
+        return prepare_play(self._session, trajectory if isinstance(trajectory, Trajectory) else Path(trajectory),
+                            uncalibrated=uncalibrated)
+
+    def play(self, trajectory: str | Path | Trajectory | PreparedPlay, *, uncalibrated: bool = False,
+             force_limit: float | None = None, on_event: Callable[[str], None] | None = None,
+             clock: Callable[[], float] | None = None, sleep: Callable[[float], None] | None = None) -> PlayResult:
+        """Play a time-stamped multi-joint path (`sherpa move --trajectory FILE --apply`; docs/trajectory.md):
+        checked as :meth:`plan_play` does, then streamed to the drives (Elmo PVT) in one motion guard.
+        Every joint is watched while it plays: one outside its full range or farther than
+        ``motion.tracking_bound`` from the path stops every joint (raised); so do a starved stream,
+        an underflow, a fault and Ctrl-C. The result has the stream's periods on time and, per joint,
+        the largest tracking error seen and where it ended."""
+        import time
+
+        from sherpa_cli.ops.play import PreparedPlay, run_play
+
+        with self._force_limit(force_limit):
+            prepared = trajectory if isinstance(trajectory, PreparedPlay) else \
+                self.plan_play(trajectory, uncalibrated=uncalibrated)
+            return run_play(self._session, prepared, on_event=on_event, clock=clock or time.monotonic,
+                            sleep=sleep or time.sleep)
 
     def motion(self, joints: str | Sequence[str], *, uncalibrated: bool = False,
                on_event: Callable[[str], None] | None = None,

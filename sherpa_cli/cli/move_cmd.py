@@ -3,22 +3,28 @@ the work through `Arm.move_pose`; docs/move.md)."""
 
 from __future__ import annotations
 
+from pathlib import Path
 from typing import TYPE_CHECKING
 
 import typer
 
 from sherpa_cli.cli.context import AppState, state
 from sherpa_cli.cli.options import ApplyMotion, name_list
+from sherpa_cli.errors import UsageError
 
 if TYPE_CHECKING:
     from sherpa_cli.motion.plan import JointMove, MotionPlan
     from sherpa_cli.motion.run import JointOutcome, MotionOutcome
     from sherpa_cli.ops.move import PreparedMove
+    from sherpa_cli.ops.play import PlayResult, PreparedPlay
 
 
 def move(
     ctx: typer.Context,
-    pose: str = typer.Argument(..., metavar="POSE", help="A pose of the config's `poses:` section."),
+    pose: str | None = typer.Argument(None, metavar="POSE", help="A pose of the config's `poses:` section."),
+    trajectory: Path | None = typer.Option(None, "--trajectory", metavar="FILE",
+                                           help="Play a time-stamped path instead: a `log record` CSV or MCAP, "
+                                                "or a planner's CSV (t,<joint>,... in s and rad)."),
     joints: list[str] | None = typer.Option(None, "--joints", metavar="JOINT",
                                             help="Move only these joints of the pose (comma-separated or repeated)."),
     speed_scale: float = typer.Option(1.0, "--speed-scale", metavar="F",
@@ -44,10 +50,18 @@ def move(
     back (exit 1); a fault, a lost drive, Ctrl-C or a signal stops every joint from standstill.
 
     \b
+    With --trajectory FILE the path is played instead (docs/trajectory.md): checked against every
+    joint's range, speed and acceleration, resampled to the stream's period, and it must start where
+    the arm stands. With --apply it is streamed to the drives (Elmo PVT), every joint watched: one
+    outside its range or farther than motion.tracking_bound from the path, a starved stream or a
+    fault stops every joint.
+
+    \b
     Examples:
       sherpa move transport
       sherpa move transport --apply
       sherpa move transport --joints elbow_pitch --joints wrist_1 --speed-scale 0.5 --apply
+      sherpa move --trajectory path.csv --apply
     """
     from sherpa_cli.api import Arm
     from sherpa_cli.motion.plan import check_speed_scale, drives_of
@@ -55,6 +69,15 @@ def move(
 
     st = state(ctx)
     st.use_force_limit(force_limit)
+    if (pose is None) == (trajectory is None):
+        raise UsageError("name a POSE or give --trajectory FILE (one of them)",
+                         hint="`sherpa pose list` shows the config's poses")
+    if trajectory is not None:
+        if joints or speed_scale != 1.0 or hold:
+            raise UsageError("--joints, --speed-scale and --hold move to a pose; a trajectory is played as it is")
+        _play(st, trajectory, uncalibrated=uncalibrated, apply=apply)
+        return
+    assert pose is not None
     cfg = st.load_config()
     check_speed_scale(speed_scale)
     joints = name_list(joints)
@@ -171,3 +194,74 @@ def _render(st: AppState, prepared: PreparedMove, r: MotionOutcome) -> None:
                                else "stopped by the joint-limit watch" if not r.ok else "not every joint arrived"))
     for j in r.joints.values():
         st.out.line(_joint_end(j))
+
+
+def _play(st: AppState, path: Path, *, uncalibrated: bool, apply: bool) -> None:
+    """`move --trajectory FILE`: the checks and the dry run, or the play (ops/play.py via `Arm.play`)."""
+    from sherpa_cli.api import Arm
+    from sherpa_cli.log.trajectory_file import load_trajectory
+    from sherpa_cli.motion.plan import drives_of
+
+    cfg = st.load_config()
+    joints = load_trajectory(path, cfg, check=False).joints  # the buses to open; checked in plan_play
+    buses = sorted({cfg.drives[d].bus for d in drives_of(cfg, [j for j in joints if j in cfg.joints])},
+                   key=list(cfg.buses).index)
+    with st.session(buses=buses) as session:
+        arm = Arm(session)
+        prepared = arm.plan_play(path, uncalibrated=uncalibrated)
+        if not apply:
+            _play_dry_run(st, prepared)
+            return
+        try:
+            result = arm.play(prepared)
+        except BaseException as exc:
+            from sherpa_cli.cli.jog_cmd import show_stop_report
+
+            show_stop_report(st, exc)
+            raise
+    _render_play(st, result, prepared)
+    if not result.ok:
+        raise typer.Exit(1)
+
+
+def _play_dry_run(st: AppState, prepared: PreparedPlay) -> None:
+    from sherpa_cli.joints.units import counts_per_s_to_rad_per_s
+
+    traj, rs, cfg = prepared.trajectory, prepared.resampled, st.load_config()
+    if st.json_mode:
+        st.out.json({"trajectory": prepared.source, "applied": False, "duration_s": round(traj.duration, 3),
+                     "samples": traj.samples, "period_s": rs.period, "points": len(rs.times),
+                     "joints": [{"joint": j, "from": round(rs.position(j)[0]), "to": round(rs.position(j)[-1]),
+                                 "peak_speed": round(max(abs(v) for v in rs.velocity(j))),
+                                 "limit": cfg.joints[j].vel_limit, "start_off": prepared.start_off[j]}
+                                for j in traj.joints]})
+        return
+    st.out.line(f"dry run: would play {prepared.source}: {len(traj.joints)} joint(s), {traj.duration:.2f} s, "
+                f"{traj.samples} samples -> {len(rs.times)} points every {rs.period * 1000:g} ms (Elmo PVT)")
+    for j in traj.joints:
+        joint = cfg.joints[j]
+        peak = max(abs(v) for v in rs.velocity(j))
+        limit = f" (limit {counts_per_s_to_rad_per_s(joint.vel_limit, joint.cpr):.4f})" if joint.vel_limit else ""
+        st.out.line(f"  {j}: {_pos(round(rs.position(j)[0]), joint.cpr)} -> {_pos(round(rs.position(j)[-1]), joint.cpr)}, "
+                    f"peak {counts_per_s_to_rad_per_s(peak, joint.cpr):.4f} rad/s{limit}; "
+                    f"starts {prepared.start_off[j]:+d} counts from where it stands")
+    st.out.line("nothing sent; add --apply to play")
+
+
+def _render_play(st: AppState, result: PlayResult, prepared: PreparedPlay) -> None:
+    if st.json_mode:
+        st.out.json({"applied": True, **result.as_json()})
+        return
+    for line in result.stop.lines(st.verbose):
+        st.out.line(f"stop: {line}")
+    s = result.stream
+    if s is not None:
+        st.out.line(f"played {prepared.source}: {s.periods} periods, {s.on_time_pct:.2f} % on time "
+                    f"(max {s.max_lateness_s * 1000:.1f} ms late), start skew {s.skew_s * 1000:.1f} ms")
+    cfg = st.load_config()
+    for j, target in result.target.items():
+        end = result.end.get(j)
+        where = "?" if end is None else _pos(end, cfg.joints[j].cpr)
+        err = "" if end is None else f"; error {end - target:+d} counts"
+        st.out.line(f"  {j}: at {where}, the path's end {target} counts{err}; "
+                    f"largest tracking error {result.tracking.get(j, 0)} counts")

@@ -334,6 +334,8 @@ class MotionConfig:
     recovery_speed: float = 0.5
     # a commanded move with no progress for this long ends as blocked, naming an active end switch (0: off)
     stall_time: float = 1.0
+    # counts a joint may lag or lead a played trajectory (move --trajectory) before every joint stops
+    tracking_bound: int = 100
     recovery_fallback_speed: int = 100
     # differential pairs (docs/diffdrive.md): how both motors start together. "group": one BG to the
     # group id pair_group_id written to 0x2040 of both drives (RAM, restored afterwards; made effective

@@ -174,6 +174,8 @@ def _check_motion(cfg: ArmConfig, locs: Locs, r: _Report) -> None:
                 "the id of a command killed a moment ago while its drives still watch it")
     if not 0 <= m.stall_time <= 30:
         r.error(where("stall_time"), f"stall_time {m.stall_time} must be 0 (off) .. 30 s")
+    if not 1 <= m.tracking_bound <= 1_000_000:
+        r.error(where("tracking_bound"), f"tracking_bound {m.tracking_bound} counts must be 1..1000000")
     if not 0 < m.recovery_speed <= 1:
         r.error(where("recovery_speed"), f"recovery_speed {m.recovery_speed} must be > 0 and at most 1 "
                 "(a share of the joint's velocity.limit)")

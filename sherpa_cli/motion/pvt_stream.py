@@ -147,10 +147,15 @@ class _Stream:
 
 
 def stream_pvt(guard: MotionGuard, tracks: Mapping[str, Sequence[Record]], *, settings: StreamSettings | None = None,
-               clock: Callable[[], float] = time.monotonic, sleep: Callable[[float], None] = time.sleep) -> StreamReport:
+               clock: Callable[[], float] = time.monotonic, sleep: Callable[[float], None] = time.sleep,
+               watch: Callable[[float], None] | None = None, watch_interval: float = 0.01) -> StreamReport:
     """Stream ``tracks`` (drive name -> records, one per period) to the guard's drives; see the module
     docstring. Returns the report; raises :class:`StreamStoppedError` (every drive stopped) when the stream
-    could not be kept up, UsageError for tracks that cannot be streamed (nothing sent)."""
+    could not be kept up, UsageError for tracks that cannot be streamed (nothing sent).
+
+    ``watch(elapsed)`` (s since the first start, the injected clock) runs on the command's thread every
+    ``watch_interval`` s while the stream plays: the caller's limit and tracking watch. What it raises
+    stops every drive at once and ends the stream with it."""
     s = settings or StreamSettings()
     report = StreamReport(period_s=s.pvt.period_s)
     streams = _prepare(guard, tracks, s)
@@ -173,7 +178,8 @@ def stream_pvt(guard: MotionGuard, tracks: Mapping[str, Sequence[Record]], *, se
             report.starts[st.ref.name] = st.started
         starts = [st.started for st in streams if st.started is not None]
         report.skew_s = max(starts) - min(starts)
-        _run_sender(guard, streams, s, report, clock, sleep)
+        _run_sender(guard, streams, s, report, clock, sleep, watch=watch, watch_interval=watch_interval,
+                    t0=min(starts))
         for st in streams:
             report.last_position[st.ref.name] = guard.position(st.ref)
     except BaseException as exc:
@@ -314,7 +320,8 @@ class _Pace:
 
 
 def _run_sender(guard: MotionGuard, streams: list[_Stream], s: StreamSettings, report: StreamReport,
-                clock: Callable[[], float], sleep: Callable[[float], None]) -> None:
+                clock: Callable[[], float], sleep: Callable[[float], None], *,
+                watch: Callable[[float], None] | None = None, watch_interval: float = 0.01, t0: float = 0.0) -> None:
     """The sender's thread, and this thread watching it: a send not out by its deadline stops every drive
     now, while the sender is still stuck (a sleep that overran, a hung request), not when it wakes."""
     events: collections.deque[tuple[float, str, PvtEvent]] = collections.deque()
@@ -336,11 +343,15 @@ def _run_sender(guard: MotionGuard, streams: list[_Stream], s: StreamSettings, r
             failure.append(exc)
 
     thread = threading.Thread(target=run, name="pvt-stream", daemon=True)
+    next_watch = t0
     try:
         thread.start()
         while thread.is_alive():
             thread.join(WATCH_POLL_S)  # wall time: how often the watch looks; the deadline is the clock's
             now = clock()
+            if watch is not None and now >= next_watch and not pace.stop.is_set():
+                next_watch = now + watch_interval
+                watch(now - t0)
             if now <= pace.deadline:
                 continue
             # the sender may be between its sleep and its sends: let it finish those first (bounded)
