@@ -103,6 +103,8 @@ def test_set_takes_any_real_number_for_a_gain_and_refuses_what_is_not_one():
     assert gain_texts({"KP[2]": "0.8"}) == ["KP[2]=0.8"] and gain_texts("KP[2]=0.8") == ["KP[2]=0.8"]
     with pytest.raises(UsageError, match="KP\\[2\\]: True is not a number"):
         gain_texts({"KP[2]": True})
+    with pytest.raises(UsageError, match="too large for a gain"):
+        gain_texts({"KP[2]": 10 ** 400})
     with Arm.open(CONFIG, sim=True) as arm:
         dry = arm.tune_set("elbow_pitch", {"KP[2]": Fraction(4, 5)})
         (plan,) = dry.plans

@@ -220,3 +220,14 @@ def test_the_guard_journals_the_cia402_profile_before_it_changes_it_and_forgets_
         and seen[0]["0x6084:0"] == before.decel, seen
     assert drive.ramp() == before  # put back
     assert not path.exists() or not json.loads(path.read_text()).get("steps"), path.read_text()
+
+
+def test_a_cia402_drive_in_fault_makes_a_monitor_snapshot_not_ok(arm):
+    session, _st, _ = arm
+    with Arm(session).monitor(["wrist"], count=1) as stream:
+        assert next(stream).ok
+    with session.sim.lock:
+        session.sim.drives["wrist"].fault(0x2310)
+    with Arm(session).monitor(["wrist"], count=1) as stream:
+        snap = next(stream)
+    assert not snap.ok and snap["wrist"].answering and snap["wrist"].problem.startswith("fault: ")

@@ -183,3 +183,11 @@ def test_silence_counts_from_the_first_unanswered_request_not_from_the_last_samp
     results = [fw.check() for _ in range(6)]
     assert results[:4] == [None] * 4
     assert isinstance(results[4], SensorSilentError) and "silent for 50 ms" in results[4].message
+
+
+def test_a_torque_limit_is_refused_in_its_own_unit():
+    from sherpa_cli.motion.force_watch import tightened
+
+    with pytest.raises(UsageError, match="--torque-limit -1: expected a torque in N·m, > 0"):
+        tightened(None, -1.0, "--torque-limit")
+    assert tightened(2.0, 1.0, "--torque-limit") == 1.0

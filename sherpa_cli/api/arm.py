@@ -79,7 +79,10 @@ def gain_texts(gains: Mapping[str, object] | Sequence[str] | str) -> list[str]:
         if isinstance(value, str):
             out.append(f"{key}={value}")
         elif isinstance(value, numbers.Real) and not isinstance(value, bool):
-            out.append(f"{key}={float(value)!r}")
+            try:
+                out.append(f"{key}={float(value)!r}")
+            except OverflowError:
+                raise UsageError(f"{key}: {value!r} is too large for a gain") from None
         else:
             raise UsageError(f"{key}: {value!r} is not a number")
     return out

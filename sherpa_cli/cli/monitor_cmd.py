@@ -109,7 +109,7 @@ def monitor(
                 sensors = read_sensors(session, [d for d in cfg.ft_sensors() if d.bus in buses]) if not targets \
                     else []
             _render_once(st, rows, sensors)
-            if any(not r.answering or r.mf for r in rows) or \
+            if any(not r.answering or r.mf or r.problem for r in rows) or \
                     any(s.wrench is None or not s.wrench.status.ok for s in sensors):
                 # a silent drive or sensor, a latched motor failure, a sensor reporting a fault
                 raise typer.Exit(int(ExitCode.PROBLEM))

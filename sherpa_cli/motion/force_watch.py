@@ -75,18 +75,19 @@ def _dominant(w: Wrench, names: tuple[str, str, str]) -> tuple[str, float]:
     return name, axes[name]
 
 
-def check_force_limit(value: float, what: str) -> float:
-    """A requested force limit (N): a finite number > 0, else one UsageError naming ``what``."""
+def check_force_limit(value: float, what: str, quantity: str = "a force in N") -> float:
+    """A requested force (or torque) limit: a finite number > 0, else one UsageError naming ``what``."""
     if not (value > 0 and math.isfinite(value)):
-        raise UsageError(f"{what} {value:g}: expected a force in N, > 0")
+        raise UsageError(f"{what} {value:g}: expected {quantity}, > 0")
     return value
 
 
 def tightened(configured: float | None, requested: float | None, what: str) -> float | None:
-    """The limit a command runs with: ``requested`` (a --force-limit) may only tighten the config's."""
+    """The limit a command runs with: ``requested`` (a --force-limit, --torque-limit) may only tighten
+    the config's."""
     if requested is None:
         return configured
-    check_force_limit(requested, what)
+    check_force_limit(requested, what, "a torque in N·m" if "torque" in what else "a force in N")
     return requested if configured is None else min(configured, requested)
 
 

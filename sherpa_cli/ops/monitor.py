@@ -390,8 +390,9 @@ class MonitorSnapshot:
 
     @property
     def ok(self) -> bool:
-        """Every drive answered and none has a motor failure latched (what `monitor --once` exits 1 on)."""
-        return all(d.answering and not d.mf for d in self.drives)
+        """Every drive answered and none has a motor failure latched nor reports a fault (a drive of
+        another type: its problem); what `monitor --once` exits 1 on."""
+        return all(d.answering and not d.mf and not d.problem for d in self.drives)
 
 
 def _snapshots(monitor: Monitor, interval: float, count: int | None, duration: float | None,
