@@ -229,15 +229,18 @@ def test_a_linear_ramp_has_its_exact_velocity_everywhere(speed, start, n, period
 @st.composite
 def inside_limits(draw):
     """A path built inside every joint's limits of the config: sampled at PERIOD, each segment's speed
-    within the speed limit, the speed changing by no more than the acceleration allows, positions
-    inside the normal range (a path of at most 20 samples at 8000 counts/s travels 1520 counts)."""
+    within the speed limit, the speed changing by no more than half the acceleration allows, positions
+    inside the normal range (a path of at most 20 samples at 8000 counts/s travels 1520 counts). Half:
+    the stream's speeds at the samples are the cubic's tangents, each between its two neighbouring
+    segments' speeds, so two tangents differ by at most the change across two segments -- twice the
+    samples' own; the resampled stream is checked against the acceleration too."""
     n = draw(st.integers(2, 20))
     values = {}
     for name in JOINTS:
         j = CFG.joints[name]
         vel = [draw(st.floats(-1.0, 1.0)) * j.vel_limit]
         for _ in range(n - 2):
-            dv = draw(st.floats(-1.0, 1.0)) * j.accel * PERIOD
+            dv = draw(st.floats(-1.0, 1.0)) * j.accel * PERIOD / 2
             vel.append(max(-j.vel_limit, min(j.vel_limit, vel[-1] + dv)))
         lo, hi = j.normal_range
         x = [draw(st.floats(lo / 4, hi / 4))]
@@ -295,3 +298,18 @@ def test_between_samples_the_speed_stays_within_one_and_a_half_times_the_fastest
     fastest = max(abs(b - a) / (t2 - t1) for a, b, t1, t2 in zip(xs, xs[1:], t.times, t.times[1:], strict=False))
     rs = resample(t, period)
     assert all(abs(v) <= 1.5 * fastest * (1 + 1e-9) + 1e-9 for v in rs.velocity("j1"))
+
+
+def test_the_stream_between_samples_and_from_rest_is_held_to_the_acceleration():
+    from sherpa_cli.joints.trajectory import check_played_from_rest, resample
+
+    # segments at 0, 390, 780 counts/s: each change 39000 counts/s², within j1's 40000; the cubic's
+    # tangents at the samples are 0 and 520 counts/s (between their segments): 52000 counts/s² apart
+    sharp = traj([0.0, 0.01, 0.02, 0.03], j1=[0, 0, 3.9, 11.7])
+    with pytest.raises(UsageError, match=r"j1 would (accelerate|decelerate) at .* in the stream resampled to 0\.01 s"):
+        check_trajectory(CFG, sharp, source=SRC, period=0.01)
+    # a path that starts moving at 1000 counts/s: from rest in one period is 100000 counts/s²
+    moving = traj([0.0, 0.1, 0.2], j1=[0, 100, 200])
+    check_trajectory(CFG, moving, source=SRC, period=0.01)  # its samples are within every limit
+    with pytest.raises(UsageError, match=r"j1 would accelerate .* \(from rest at its start, to rest at its end\)"):
+        check_played_from_rest(CFG, resample(moving, 0.01), SRC)

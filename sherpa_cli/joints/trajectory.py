@@ -27,7 +27,7 @@ import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
-from sherpa_cli.config.model import ArmConfig, JointRole
+from sherpa_cli.config.model import ArmConfig, JointConfig, JointRole
 from sherpa_cli.config.yamlnodes import suggest
 from sherpa_cli.errors import UsageError
 from sherpa_cli.joints import diffpair
@@ -277,6 +277,8 @@ def _check_motor_box(cfg: ArmConfig, traj: Trajectory, source: str) -> None:
 
 
 def _check_resampled(cfg: ArmConfig, rs: Resampled, source: str) -> None:
+    """What the drives are sent, not only the samples: the speed and the acceleration between samples
+    (the cubic is only C1), a pair's motor box."""
     for name, series in zip(rs.joints, rs.velocities, strict=True):
         j = cfg.joints[name]
         limit = j.vel_limit
@@ -287,6 +289,57 @@ def _check_resampled(cfg: ArmConfig, rs: Resampled, source: str) -> None:
                                  f"in the stream resampled to {rs.period:g} s, above its speed limit {limit} "
                                  "counts/s (the samples start or turn too sharply at that speed)",
                                  hint="slow the trajectory down (stretch its times)")
+        _check_stream_accelerations(j, name, rs, series, source, from_rest=False)
+    for pair in cfg.pairs.values():
+        if pair.sigma not in rs.joints or pair.delta not in rs.joints:
+            continue
+        dj = cfg.joints[pair.delta]
+        box = diffpair.motor_box(cfg.joints[pair.sigma].full_range, dj.full_range)
+        for k, (s, d) in enumerate(zip(rs.position(pair.sigma), rs.position(pair.delta), strict=True)):
+            ma, mb = _pair_motors(s, d, dj.normal_range)
+            if not box.contains(ma, mb):
+                raise UsageError(f"{source}: t={rs.times[k]:.3f} s: {pair.name}: between samples the motors would "
+                                 f"reach {pair.drive_a}={ma}, {pair.drive_b}={mb}, outside the motor box "
+                                 f"{pair.drive_a} [{box.a[0]}, {box.a[1]}], {pair.drive_b} [{box.b[0]}, {box.b[1]}]")
+
+
+def check_played_from_rest(cfg: ArmConfig, rs: Resampled, source: str) -> None:
+    """A path played on the drives starts from standstill and ends at it: the speed change from rest
+    to its first point, and from its last back to rest, within each joint's configured acceleration."""
+    for name, series in zip(rs.joints, rs.velocities, strict=True):
+        _check_stream_accelerations(cfg.joints[name], name, rs, series, source, from_rest=True)
+
+
+def _check_stream_accelerations(j: JointConfig, name: str, rs: Resampled, series: Sequence[float],
+                                source: str, *, from_rest: bool) -> None:
+    """The resampled speed changes (``from_rest``: only from rest before the first point and to rest
+    after the last) against the joint's configured acceleration (a joint with one of accel/decel takes
+    it both ways)."""
+    if j.accel is None and j.decel is None:
+        return
+    if from_rest:
+        speeds = [0.0, series[0], series[-1], 0.0]
+        times = [rs.times[0] - rs.period, rs.times[0], rs.times[-1], rs.times[-1] + rs.period]
+    else:
+        speeds, times = list(series), list(rs.times)
+    for k in range(1, len(speeds)):
+        dt = times[k] - times[k - 1]
+        if dt <= 0 or (from_rest and k == 2):
+            continue  # from_rest: the first and last points' own speeds, not the path between them
+        a = (speeds[k] - speeds[k - 1]) / dt
+        speeding_up = abs(speeds[k]) >= abs(speeds[k - 1]) and speeds[k] * speeds[k - 1] >= 0
+        key = ("accel" if speeding_up else "decel") if j.accel is not None and j.decel is not None \
+            else ("accel" if j.accel is not None else "decel")
+        limit = j.accel if key == "accel" else j.decel
+        assert limit is not None
+        if abs(a) > limit * (1 + _SLACK):
+            when = min(max(times[k], rs.times[0]), rs.times[-1])
+            raise UsageError(f"{source}: t={when:.3f} s: {name} would {'accelerate' if speeding_up else 'decelerate'} "
+                             f"at {abs(a):.0f} counts/s² in the stream resampled to {rs.period:g} s"
+                             f"{' (from rest at its start, to rest at its end)' if from_rest else ''}, above its "
+                             f"{key} {limit} counts/s² "
+                             f"(joints.{name}.acceleration.{key})",
+                             hint="start and end the trajectory at rest, slow it down or smooth it")
 
 
 # --------------------------------------------------------------------------- resampling

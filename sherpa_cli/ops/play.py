@@ -21,7 +21,14 @@ from typing import TYPE_CHECKING, Any
 
 from sherpa_cli.config.model import ArmConfig
 from sherpa_cli.errors import SafetyError, UsageError
-from sherpa_cli.joints.trajectory import Resampled, Trajectory, check_trajectory, motor_points, resample
+from sherpa_cli.joints.trajectory import (
+    Resampled,
+    Trajectory,
+    check_played_from_rest,
+    check_trajectory,
+    motor_points,
+    resample,
+)
 from sherpa_cli.motion import calibration, limit_watch
 from sherpa_cli.motion.axis import Axis, joint_axis
 from sherpa_cli.motion.plan import drives_of
@@ -102,6 +109,7 @@ def prepare_play(session: ArmSession, path: Path | Trajectory, *, uncalibrated: 
                          "streamed as Elmo PVT, and CiA 402 interpolated position is not built yet",
                          hint="docs/drives.md says what each drive type does")
     rs = resample(traj, period)
+    check_played_from_rest(cfg, rs, source)
     for name in traj.joints:
         end_v, limit = rs.velocity(name)[-1], cfg.joints[name].vel_limit or 0
         if abs(end_v) > END_AT_REST * limit:
