@@ -153,9 +153,10 @@ def stream_pvt(guard: MotionGuard, tracks: Mapping[str, Sequence[Record]], *, se
     docstring. Returns the report; raises :class:`StreamStoppedError` (every drive stopped) when the stream
     could not be kept up, UsageError for tracks that cannot be streamed (nothing sent).
 
-    ``watch(elapsed)`` (s since the first start, the injected clock) runs on the command's thread every
-    ``watch_interval`` s while the stream plays: the caller's limit and tracking watch. What it raises
-    stops every drive at once and ends the stream with it."""
+    ``watch(elapsed)`` (s since the first start, the injected clock) runs on the sender's thread every
+    ``watch_interval`` s while the stream plays, after that period's sends (on the stream's own clock,
+    so what it sees does not depend on the host): the caller's limit and tracking watch. What it
+    raises stops every drive at once and ends the stream with it."""
     s = settings or StreamSettings()
     report = StreamReport(period_s=s.pvt.period_s)
     streams = _prepare(guard, tracks, s)
@@ -178,8 +179,7 @@ def stream_pvt(guard: MotionGuard, tracks: Mapping[str, Sequence[Record]], *, se
             report.starts[st.ref.name] = st.started
         starts = [st.started for st in streams if st.started is not None]
         report.skew_s = max(starts) - min(starts)
-        _run_sender(guard, streams, s, report, clock, sleep, watch=watch, watch_interval=watch_interval,
-                    t0=min(starts))
+        _run_sender(guard, streams, s, report, clock, sleep, watch=watch, watch_interval=watch_interval)
         for st in streams:
             report.last_position[st.ref.name] = guard.position(st.ref)
     except BaseException as exc:
@@ -321,7 +321,7 @@ class _Pace:
 
 def _run_sender(guard: MotionGuard, streams: list[_Stream], s: StreamSettings, report: StreamReport,
                 clock: Callable[[], float], sleep: Callable[[float], None], *,
-                watch: Callable[[float], None] | None = None, watch_interval: float = 0.01, t0: float = 0.0) -> None:
+                watch: Callable[[float], None] | None = None, watch_interval: float = 0.01) -> None:
     """The sender's thread, and this thread watching it: a send not out by its deadline stops every drive
     now, while the sender is still stuck (a sleep that overran, a hung request), not when it wakes."""
     events: collections.deque[tuple[float, str, PvtEvent]] = collections.deque()
@@ -338,20 +338,16 @@ def _run_sender(guard: MotionGuard, streams: list[_Stream], s: StreamSettings, r
 
     def run() -> None:
         try:
-            _sender(guard, streams, s, report, clock, sleep, events, pace)
+            _sender(guard, streams, s, report, clock, sleep, events, pace, watch, watch_interval)
         except BaseException as exc:  # noqa: BLE001 - handed to the command's thread, which raises it
             failure.append(exc)
 
     thread = threading.Thread(target=run, name="pvt-stream", daemon=True)
-    next_watch = t0
     try:
         thread.start()
         while thread.is_alive():
             thread.join(WATCH_POLL_S)  # wall time: how often the watch looks; the deadline is the clock's
             now = clock()
-            if watch is not None and now >= next_watch and not pace.stop.is_set():
-                next_watch = now + watch_interval
-                watch(now - t0)
             if now <= pace.deadline:
                 continue
             # the sender may be between its sleep and its sends: let it finish those first (bounded)
@@ -393,7 +389,8 @@ def _starved(guard: MotionGuard, streams: list[_Stream], s: StreamSettings, repo
 
 def _sender(guard: MotionGuard, streams: list[_Stream], s: StreamSettings, report: StreamReport,
             clock: Callable[[], float], sleep: Callable[[float], None],
-            events: collections.deque[tuple[float, str, PvtEvent]], pace: _Pace) -> None:
+            events: collections.deque[tuple[float, str, PvtEvent]], pace: _Pace,
+            watch: Callable[[float], None] | None = None, watch_interval: float = 0.01) -> None:
     period = s.pvt.period_s
     total = len(streams[0].records)
     t0 = min(st.started for st in streams if st.started is not None)
@@ -401,6 +398,7 @@ def _sender(guard: MotionGuard, streams: list[_Stream], s: StreamSettings, repor
     end = t0 + total * period
     sending_until = t0 + (total - s.prime) * period  # the last row goes out then; the queue drains after
     next_row = s.prime
+    next_watch = t0
     k = 0
     while not pace.stop.is_set():
         k += 1
@@ -435,6 +433,9 @@ def _sender(guard: MotionGuard, streams: list[_Stream], s: StreamSettings, repor
                     _send(guard, st, st.records[next_row])
                     report.sent += 1
                 next_row += 1
+            if watch is not None and now >= next_watch:
+                next_watch = now + watch_interval
+                watch(now - t0)
             if now >= end + s.end_margin_periods * period:
                 _answer_events(guard, streams, events, report, end, period, sending_until)
                 return

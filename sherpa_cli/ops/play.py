@@ -38,6 +38,9 @@ from sherpa_cli.motion.report import GuardReport, with_report
 # a path ends at rest: the speed its resampled end may still have (numerical tangents of a recording
 # or a planner's last samples), as a share of the joint's speed limit; the last row then stops there
 END_AT_REST = 0.05
+# s between two looks of the watch: it reads every drive's position from the stream's own thread,
+# between two periods' sends, so it must leave the sender most of each period
+WATCH_S = 0.02
 
 if TYPE_CHECKING:
     from sherpa_cli.bus.session import ArmSession
@@ -184,7 +187,7 @@ def run_play(session: ArmSession, prepared: PreparedPlay, *, settings: StreamSet
     try:
         with guard:
             result.stream = stream_pvt(guard, tracks, settings=s, clock=clock, sleep=sleep, watch=watch,
-                                       watch_interval=motion.poll_interval)
+                                       watch_interval=WATCH_S)
     except BaseException as exc:
         carried = with_report(exc, guard.report)  # the CLI shows how the guard stopped the motors
         if carried is exc:
