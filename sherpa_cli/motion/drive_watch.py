@@ -88,9 +88,11 @@ class DriveWatch:
     """Watch the drives of one motion guard (see the module docstring)."""
 
     def __init__(self, networks: Callable[[str], Any], *, warning_codes: Iterable[int] = DEFAULT_EMCY_WARNING_CODES,
-                 min_silence: float = 0.05, now: Callable[[], float] = time.monotonic) -> None:
+                 answered_codes: Iterable[int] = (), min_silence: float = 0.05,
+                 now: Callable[[], float] = time.monotonic) -> None:
         self._networks = networks
         self.warning_codes = frozenset(int(c) for c in warning_codes) | {EMCY_ERROR_RESET}
+        self.answered_codes = frozenset(int(c) for c in answered_codes)
         self.min_silence = min_silence
         self._now = now
         self._lock = threading.Lock()
@@ -218,6 +220,8 @@ class DriveWatch:
     # -- the receive thread -----------------------------------------------------------------------
 
     def _on_emcy(self, w: _Watched, emcy: Emcy) -> None:
+        if emcy.code in self.answered_codes:
+            return  # the command listens to these itself and says what they meant
         if emcy.code in self.warning_codes:
             w.warnings += 1
             if w.warnings == 1:

@@ -157,7 +157,7 @@ class MotionGuard:
         self.host_id = settings.host_node_id
         # the watch of the drives: error EMCYs, NMT commands of other nodes, the drives' heartbeats
         self._watch = DriveWatch(lambda bus: session.links[bus].network, warning_codes=settings.emcy_warning_codes,
-                                 min_silence=3 * settings.poll_interval)
+                                 answered_codes=settings.emcy_answered_codes, min_silence=3 * settings.poll_interval)
         # the watch of the buses: bus-off / error-passive of a bus the command moves on (motion/bus_watch.py)
         self._bus = GuardBusWatch.for_session(session, buses, settings, now=clock, on_trip=self._abort_requests,
                                               on_event=self._event)

@@ -125,11 +125,12 @@ class StreamStoppedError(SafetyError):
 
 
 def stream_motion_settings(settings: MotionSettings) -> MotionSettings:
-    """``settings`` with the PVT emergencies (0xFF00) as warnings for the guard: the streamer answers them
-    itself (a queue-low is no fault, an underflow at the end of the trajectory is its normal end)."""
-    if EMCY_PVT in settings.emcy_warning_codes:
+    """``settings`` with the PVT emergencies (0xFF00) answered by the streamer, not the guard: a queue-low
+    is no fault, an underflow at the end of the trajectory is its normal end, and the streamer stops
+    every drive on the ones that end a stream early (its report names them)."""
+    if EMCY_PVT in settings.emcy_answered_codes:
         return settings
-    return dataclasses.replace(settings, emcy_warning_codes=(*settings.emcy_warning_codes, EMCY_PVT))
+    return dataclasses.replace(settings, emcy_answered_codes=(*settings.emcy_answered_codes, EMCY_PVT))
 
 
 @dataclass
@@ -199,7 +200,7 @@ def stream_pvt(guard: MotionGuard, tracks: Mapping[str, Sequence[Record]], *, se
 def _prepare(guard: MotionGuard, tracks: Mapping[str, Sequence[Record]], s: StreamSettings) -> list[_Stream]:
     if not tracks:
         raise UsageError("a PVT stream needs at least one drive's records")
-    if EMCY_PVT not in guard.settings.emcy_warning_codes:
+    if EMCY_PVT not in guard.settings.emcy_answered_codes and EMCY_PVT not in guard.settings.emcy_warning_codes:
         raise UsageError("the motion guard would stop on the PVT emergencies (EMCY 0xFF00)",
                          hint="enter the guard with stream_motion_settings(settings)")
     by_name = {ref.name: ref for ref in guard.refs}

@@ -39,6 +39,9 @@ class MotionSettings:
     poll_interval: float = 0.01  # s between polls while waiting (the bus's poll_interval_ms)
     request_bound: float = 0.2  # s one interpreter request can take at worst (timeout x attempts)
     emcy_warning_codes: tuple[int, ...] = DEFAULT_EMCY_WARNING_CODES  # EMCYs that do not stop a motion
+    # EMCYs the command answers itself (a PVT stream's queue-low and its normal end): neither acted on
+    # by the guard nor logged as a warning
+    emcy_answered_codes: tuple[int, ...] = ()
     deadman_check_interval: float = 0.5  # s between reads of a moving drive's 0x1016:1
     bus_error_passive: str = "stop"  # stop | warn: an ERROR-PASSIVE bus during motion (motion/bus_watch.py)
     bus_check_interval: float = 0.1  # s between reads of the command's buses' controller state
