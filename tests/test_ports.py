@@ -69,3 +69,15 @@ def test_bus_map_bad_port_through_the_cli(cli):
     result = cli("--bus-map", "can0=remote:127.0.0.1:99999", "scan")
     assert result.exit_code == 2 and "Traceback" not in result.stderr
     assert result.stderr.startswith("error: --bus-map: 'can0=remote:127.0.0.1:99999'"), result.transcript()
+
+
+def test_sim_in_process_puts_the_sigterm_handler_back(cli):
+    """`sherpa sim` stops on SIGTERM while it serves; run in-process (tests, recipes) it must not leave
+    its handler behind, or a later motion guard finds a stranger's handler instead of the process's."""
+    import signal
+    import uuid
+
+    before = signal.getsignal(signal.SIGTERM)
+    result = cli("--bus-map", f"can0=virtual:sigterm-{uuid.uuid4().hex[:8]}", "sim", "--duration", "0.05")
+    assert result.exit_code == 0, result.transcript()
+    assert signal.getsignal(signal.SIGTERM) is before

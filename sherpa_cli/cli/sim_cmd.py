@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
+import contextlib
 import math
 import threading
+from collections.abc import Iterator
 
 import typer
 
@@ -14,11 +16,20 @@ from sherpa_cli.words import plural
 MAX_SERVE_S = 30 * 24 * 3600.0  # --duration: a month; longer is a typo (leave it out to serve until Ctrl-C)
 
 
-def _stop_on_sigterm(stop: threading.Event) -> None:
+@contextlib.contextmanager
+def _stop_on_sigterm(stop: threading.Event) -> Iterator[None]:
+    """SIGTERM sets ``stop`` while the simulator serves; the handler before is put back afterwards
+    (the CLI runs in-process in tests and recipes: a handler left behind outlives the command)."""
     import signal
 
-    if threading.current_thread() is threading.main_thread():  # signal handlers live there only
-        signal.signal(signal.SIGTERM, lambda signum, frame: stop.set())
+    if threading.current_thread() is not threading.main_thread():  # signal handlers live there only
+        yield
+        return
+    before = signal.signal(signal.SIGTERM, lambda signum, frame: stop.set())
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, before)
 
 
 def sim(
@@ -120,14 +131,14 @@ def sim(
 
     sys.stdout.flush()
     stop = threading.Event()
-    _stop_on_sigterm(stop)
-    try:
-        if stop.wait(duration):
-            st.out.info("terminated: stopping the simulated arm")
-    except KeyboardInterrupt:
-        st.out.info("stopping the simulated arm")
-    finally:
-        stopper()  # saves the drives' flash: a service manager's SIGTERM must not lose an SV
+    with _stop_on_sigterm(stop):
+        try:
+            if stop.wait(duration):
+                st.out.info("terminated: stopping the simulated arm")
+        except KeyboardInterrupt:
+            st.out.info("stopping the simulated arm")
+        finally:
+            stopper()  # saves the drives' flash: a service manager's SIGTERM must not lose an SV
     if arm.errors:
         # each was logged with its traceback when it happened; the exit says so in one line, as every
         # other error of the CLI (a signal's stop must not end in a traceback)
