@@ -690,6 +690,61 @@ def bench_pose_spread(rounds: int = 3, joints: tuple[str, ...] = (), span: float
                   f"of the joints moving >= 10 counts {', '.join(f'{s * 1000:.0f}' for s in spreads_10)} ms")
 
 
+def bench_trajectory(seconds: float = 10.0, joints: tuple[str, ...] = (), busy: int = 2) -> Result:
+    """`sherpa move --trajectory` on the in-process simulated sherpa-arm on WALL time (the stream's
+    period is the host's to keep): a ``seconds`` path of ``joints`` (none: all 14, on three buses),
+    each along a cosine of up to a tenth of its normal range (half its speed and acceleration limits at
+    most) from where it stands, streamed at 100 Hz while
+    ``busy`` processes spin beside it. Value: the share of periods served on time (%); ratio: / 99.9,
+    goal >= 1.0 (issue: >= 99.9 % of periods on time); the note has the largest tracking error against
+    motion.tracking_bound and the largest lateness."""
+    import math as _m
+    import tempfile as _tf
+
+    from sherpa_cli.api import Arm
+    from sherpa_cli.config import load_config
+    from sherpa_cli.joints.trajectory import Trajectory
+
+    cfg = load_config(ARM_CONFIG)
+    names = list(joints) or list(cfg.poses["transport"].counts)
+    spinners = [subprocess.Popen([sys.executable, "-c", "while True: pass"]) for _ in range(busy)]
+    try:
+        with _tf.TemporaryDirectory(prefix="sherpa-bench-traj-") as state, _state_home(state), \
+                Arm.open(ARM_CONFIG, sim=True) as arm:
+            now = {j.name: j.position_counts for j in arm.state(names)}
+            # sampled at the stream's period, as a planner would: the cubic starts at the first
+            # segment's speed, which a coarser sampling of a gentle start would make abrupt
+            times = [k * 0.01 for k in range(int(round(seconds / 0.01)) + 1)]
+            shape = [0.5 - 0.5 * _m.cos(_m.pi * t / seconds) for t in times]
+            series = []
+            for j in names:
+                joint = cfg.joints[j]
+                lo, hi = joint.normal_range
+                # a cosine of D over T peaks at pi D / 2T and pi^2 D / 2T^2: half of each limit at most
+                reach = [(hi - lo) / 10]
+                if joint.vel_limit:
+                    reach.append(0.5 * joint.vel_limit * 2 * seconds / _m.pi)
+                if joint.accel:
+                    reach.append(0.5 * joint.accel * 2 * seconds ** 2 / _m.pi ** 2)
+                span = min(reach) * (1 if now[j] < (lo + hi) / 2 else -1)
+                series.append(tuple(now[j] + span * s for s in shape))
+            r = arm.play(Trajectory(tuple(names), tuple(times), tuple(series)), uncalibrated=True)
+    finally:
+        for p in spinners:
+            p.kill()
+            p.wait()
+    if r.stream is None or not r.ok:
+        raise RuntimeError("the trajectory did not play to its end")
+    pct = r.stream.on_time_pct
+    goal = ">= 1.0"
+    ratio = pct / 99.9
+    worst = max(r.tracking.values()) if r.tracking else 0
+    return Result("trajectory", round(pct, 3), "%", round(ratio, 4), goal, _judge(ratio, goal),
+                  f"{seconds:g} s path of {len(names)} joints at 100 Hz beside {busy} busy processes: "
+                  f"{r.stream.periods} periods, {r.stream.late} late, max {r.stream.max_lateness_s * 1000:.1f} ms; "
+                  f"largest tracking error {worst} counts (motion.tracking_bound {cfg.motion.tracking_bound})")
+
+
 COUPLING_CONFIG = ROOT / "tests/data/diffdrive-arm.yaml"
 
 
@@ -1068,6 +1123,7 @@ BENCHMARKS: dict[str, Callable[[], Result]] = {
     "match": bench_match,
     "capture": bench_capture,
     "pose_spread": bench_pose_spread,
+    "trajectory": bench_trajectory,
 }
 
 
@@ -1090,6 +1146,7 @@ SMOKE: dict[str, dict[str, object]] = {
     "match": {"rounds": 1, "modes": ("naive",)},  # group and --feedback moves: coupling runs them
     "capture": {"frames": 300},
     "pose_spread": {"rounds": 1, "joints": ("elbow_pitch", "wrist_1"), "span": 0.1},
+    "trajectory": {"seconds": 1.0, "joints": ("elbow_pitch", "wrist_1"), "busy": 0},
 }
 
 
