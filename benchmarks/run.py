@@ -704,6 +704,7 @@ def bench_trajectory(seconds: float = 10.0, joints: tuple[str, ...] = (), busy: 
     from sherpa_cli.api import Arm
     from sherpa_cli.config import load_config
     from sherpa_cli.joints.trajectory import Trajectory
+    from sherpa_cli.motion.pvt_stream import StreamStoppedError
 
     cfg = load_config(ARM_CONFIG)
     names = list(joints) or list(cfg.poses["transport"].counts)
@@ -728,21 +729,28 @@ def bench_trajectory(seconds: float = 10.0, joints: tuple[str, ...] = (), busy: 
                     reach.append(0.5 * joint.accel * 2 * seconds ** 2 / _m.pi ** 2)
                 span = min(reach) * (1 if now[j] < (lo + hi) / 2 else -1)
                 series.append(tuple(now[j] + span * s for s in shape))
-            r = arm.play(Trajectory(tuple(names), tuple(times), tuple(series)), uncalibrated=True)
+            path = Trajectory(tuple(names), tuple(times), tuple(series))
+            stopped = ""
+            try:
+                r = arm.play(path, uncalibrated=True)
+                report, tracking = r.stream, r.tracking
+            except StreamStoppedError as exc:  # the host could not keep the period: that is the figure
+                report, tracking, stopped = exc.report, {}, f"; STOPPED: {exc}"
     finally:
         for p in spinners:
             p.kill()
             p.wait()
-    if r.stream is None or not r.ok:
-        raise RuntimeError("the trajectory did not play to its end")
-    pct = r.stream.on_time_pct
+    if report is None:
+        raise RuntimeError("the trajectory gave no stream report")
+    pct = report.on_time_pct
     goal = ">= 1.0"
     ratio = pct / 99.9
-    worst = max(r.tracking.values()) if r.tracking else 0
-    return Result("trajectory", round(pct, 3), "%", round(ratio, 4), goal, _judge(ratio, goal),
+    worst = max(tracking.values()) if tracking else None
+    return Result("trajectory", round(pct, 3), "%", round(ratio, 4), goal, _judge(ratio, goal) and not stopped,
                   f"{seconds:g} s path of {len(names)} joints at 100 Hz beside {busy} busy processes: "
-                  f"{r.stream.periods} periods, {r.stream.late} late, max {r.stream.max_lateness_s * 1000:.1f} ms; "
-                  f"largest tracking error {worst} counts (motion.tracking_bound {cfg.motion.tracking_bound})")
+                  f"{report.periods} periods, {report.late} late, max {report.max_lateness_s * 1000:.1f} ms; "
+                  f"largest tracking error {worst} counts (motion.tracking_bound {cfg.motion.tracking_bound})"
+                  + stopped)
 
 
 COUPLING_CONFIG = ROOT / "tests/data/diffdrive-arm.yaml"
