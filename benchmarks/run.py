@@ -715,7 +715,7 @@ def bench_trajectory(seconds: float = 10.0, joints: tuple[str, ...] = (), busy: 
             now = {j.name: j.position_counts for j in arm.state(names)}
             # sampled at the stream's period, as a planner would: the cubic starts at the first
             # segment's speed, which a coarser sampling of a gentle start would make abrupt
-            times = [k * 0.01 for k in range(int(round(seconds / 0.01)) + 1)]
+            times = [k * 0.01 for k in range(round(seconds / 0.01) + 1)]
             shape = [0.5 - 0.5 * _m.cos(_m.pi * t / seconds) for t in times]
             series = []
             for j in names:
