@@ -8,6 +8,7 @@ from __future__ import annotations
 import json
 import struct
 import time
+from collections.abc import Iterator
 from dataclasses import dataclass
 
 import pytest
@@ -57,6 +58,20 @@ MOVING = {
 }
 
 
+def served_process(config: str, work) -> Iterator[ArmProcess]:
+    """`sherpa sim --serve` of ``config`` on 127.0.0.1 for a fixture: started (skipped if it cannot
+    start), stopped afterwards."""
+    proc = ArmProcess(TestBus("remote"), ROOT, config, work)
+    try:
+        proc.start()
+    except RuntimeError as exc:
+        pytest.skip(f"the served simulator did not start: {exc}")
+    try:
+        yield proc
+    finally:
+        proc.stop()
+
+
 @pytest.fixture(scope="module")
 def shared_arm(arm_process, tmp_path_factory):
     """One simulator process for the module (the harness's if it runs one)."""
@@ -66,15 +81,7 @@ def shared_arm(arm_process, tmp_path_factory):
     work = tmp_path_factory.mktemp("arm")
     # the harness's patient timeouts: on a loaded machine the served arm once missed the bundled
     # 0.1 s reply timeout of the jog that follows `recover` (exit 3, not the killed tool's doing)
-    proc = ArmProcess(TestBus("remote"), ROOT, _patient_config(work), work)
-    try:
-        proc.start()
-    except RuntimeError as exc:
-        pytest.skip(f"the served simulator did not start: {exc}")
-    try:
-        yield proc
-    finally:
-        proc.stop()
+    yield from served_process(_patient_config(work), work)
 
 
 @pytest.fixture(scope="module")

@@ -13,9 +13,7 @@ import time
 from pathlib import Path
 
 import pytest
-from arm_harness import ArmProcess, TestBus
-from conftest import ROOT
-from killed_helpers import fresh
+from killed_helpers import fresh, served_process
 from test_motion_crossprocess import EVENT_TIMEOUT, START_TIMEOUT, finish, sherpa
 
 from sherpa_cli.config import dump_native, load_config
@@ -39,15 +37,7 @@ def served(tmp_path_factory, request):
     cfg = dataclasses.replace(cfg, joints={**cfg.joints, "wrist": slow})
     path = work / "arm.yaml"
     path.write_text(dump_native(cfg))
-    proc = ArmProcess(TestBus("remote"), ROOT, str(path), work)
-    try:
-        proc.start()
-    except RuntimeError as exc:
-        pytest.skip(f"the served simulator did not start: {exc}")
-    try:
-        yield proc
-    finally:
-        proc.stop()
+    yield from served_process(str(path), work)
 
 
 def test_a_killed_jog_of_a_cia402_joint_is_stopped_by_the_drives_own_consumer(served, tmp_path):

@@ -248,17 +248,23 @@ def _check_accelerations(cfg: ArmConfig, traj: Trajectory, source: str) -> None:
             # the speed change around sample i over the time between the segments' midpoints
             a = (v[i] - v[i - 1]) / ((traj.times[i + 1] - traj.times[i - 1]) / 2)
             speeding_up = abs(v[i]) >= abs(v[i - 1]) and v[i] * v[i - 1] >= 0
-            # a joint with only one of them configured takes it both ways
-            key = ("accel" if speeding_up else "decel") if j.accel is not None and j.decel is not None \
-                else ("accel" if j.accel is not None else "decel")
-            limit = j.accel if key == "accel" else j.decel
-            assert limit is not None
+            key, limit = _accel_limit(j, speeding_up)
             if abs(a) > limit * (1 + _SLACK):
                 what = "accelerates" if speeding_up else "decelerates"
                 raise UsageError(f"{traj.where(source, i)}: {name} {what} at {abs(a):.0f} counts/s² "
                                  f"({abs(counts_per_s_to_rad_per_s(a, j.cpr)):.3f} rad/s²), above its "
                                  f"{key} {limit} counts/s² (joints.{name}.acceleration.{key})",
                                  hint="slow the trajectory down or smooth it")
+
+
+def _accel_limit(j: JointConfig, speeding_up: bool) -> tuple[str, int]:
+    """The configured limit a speed change is held to, and its key: accel when it speeds up, decel when
+    it slows down; a joint with only one of them configured takes it both ways."""
+    key = ("accel" if speeding_up else "decel") if j.accel is not None and j.decel is not None \
+        else ("accel" if j.accel is not None else "decel")
+    limit = j.accel if key == "accel" else j.decel
+    assert limit is not None  # the callers check a joint with at least one of them
+    return key, limit
 
 
 def _check_motor_box(cfg: ArmConfig, traj: Trajectory, source: str) -> None:
@@ -328,10 +334,7 @@ def _check_stream_accelerations(j: JointConfig, name: str, rs: Resampled, series
             continue  # from_rest: the first and last points' own speeds, not the path between them
         a = (speeds[k] - speeds[k - 1]) / dt
         speeding_up = abs(speeds[k]) >= abs(speeds[k - 1]) and speeds[k] * speeds[k - 1] >= 0
-        key = ("accel" if speeding_up else "decel") if j.accel is not None and j.decel is not None \
-            else ("accel" if j.accel is not None else "decel")
-        limit = j.accel if key == "accel" else j.decel
-        assert limit is not None
+        key, limit = _accel_limit(j, speeding_up)
         if abs(a) > limit * (1 + _SLACK):
             when = min(max(times[k], rs.times[0]), rs.times[-1])
             raise UsageError(f"{source}: t={when:.3f} s: {name} would {'accelerate' if speeding_up else 'decelerate'} "

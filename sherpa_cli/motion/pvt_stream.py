@@ -400,7 +400,10 @@ def _sender(guard: MotionGuard, streams: list[_Stream], s: StreamSettings, repor
     sending_until = t0 + (total - s.prime) * period  # the last row goes out then; the queue drains after
     next_row = s.prime
     next_watch = t0
-    k = 0
+    # the drives were started one after the other: the periods that passed meanwhile are not the
+    # sender's lateness (their rows go out at its first wake-up; the primed queue covered them, and a
+    # queue that ran low meanwhile says so with its EMCY)
+    k = max(0, math.floor((clock() - t0) / period))
     while not pace.stop.is_set():
         k += 1
         due = t0 + k * period
