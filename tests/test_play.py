@@ -77,12 +77,14 @@ def test_a_breach_a_joint_that_cannot_follow_or_ctrl_c_stops_every_joint_from_st
     a, st, events = arm
     sim, sleep = a.session.sim, st.sleep
     path = _path(a, {"j1": 300, "j2": -300}, seconds=3.0)
-    t_start = st.now()
+    t_on: list[float] = []
     done: list[bool] = []
 
     def wrapped(s: float) -> None:
         sleep(s)
-        if done or st.now() - t_start < 1.0:
+        if not t_on and any(text.startswith("motor on") for _d, text, _v in events):
+            t_on.append(st.now())
+        if done or not t_on or st.now() - t_on[0] < 1.0:  # well into the stream
             return
         done.append(True)
         # the PVT table drives the simulated motor itself: what the drive reports (PX) is moved instead

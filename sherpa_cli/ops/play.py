@@ -5,8 +5,9 @@
 the pairs' motor box), resamples it to the stream's period, reads where every joint stands and
 refuses a path that does not start there -- nothing is sent but NMT start. :func:`run_play` streams
 it inside one motion guard (motion/pvt_stream.py: Elmo PVT), watching every joint on the command's
-thread: a joint outside its full range, or farther than ``motion.tracking_bound`` counts from where
-the path puts it at that moment, stops every joint at once, from standstill on the guard's exit. A
+thread, one joint per period in turn: a joint outside its full range, or farther than
+``motion.tracking_bound`` counts from where the path puts it at that moment, stops every joint at
+once, from standstill on the guard's exit. A
 starved stream, an underflow, a fault, Ctrl-C or a signal stop every joint the same way.
 """
 
@@ -38,9 +39,9 @@ from sherpa_cli.motion.report import GuardReport, with_report
 # a path ends at rest: the speed its resampled end may still have (numerical tangents of a recording
 # or a planner's last samples), as a share of the joint's speed limit; the last row then stops there
 END_AT_REST = 0.05
-# s between two looks of the watch: it reads every drive's position from the stream's own thread,
-# between two periods' sends, so it must leave the sender most of each period
-WATCH_S = 0.02
+# s between two looks of the watch, each at one joint in turn (its drives' positions read from the
+# stream's own thread, between two periods' sends): every joint is looked at every WATCH_S x joints
+WATCH_S = 0.01
 
 if TYPE_CHECKING:
     from sherpa_cli.bus.session import ArmSession
@@ -169,20 +170,24 @@ def run_play(session: ArmSession, prepared: PreparedPlay, *, settings: StreamSet
     tracks = {d: [*zip(prepared.stream.motor(d).positions[1:-1], prepared.stream.motor(d).velocities[1:-1],
                        strict=True), (prepared.stream.motor(d).positions[-1], 0)] for d in drives}
 
+    turn = [0]
+
     def watch(elapsed: float) -> None:
-        motors = {d: guard.position(r) for d, r in by_name.items()}
-        breaches = limit_watch.check(axes, motors)
+        # one joint per look, in turn: the sender's period must not wait for every drive's answer
+        a = axes[turn[0] % len(axes)]
+        turn[0] += 1
+        motors = {d: guard.position(by_name[d]) for d in a.drives}
+        breaches = limit_watch.check([a], motors)
         if breaches:
             result.breaches = list(breaches)
             raise SafetyError("trajectory: " + "; ".join(b.describe() for b in breaches) + "; every joint stopped",
                               hint="check the joint; the path was checked against the normal ranges")
-        for a in axes:
-            err = a.position(motors) - round(_at(rs, a.name, elapsed))
-            result.tracking[a.name] = max(result.tracking.get(a.name, 0), abs(err))
-            if abs(err) > bound:
-                raise SafetyError(f"trajectory: {a.name} is {err:+d} counts from the path at t={elapsed:.2f} s "
-                                  f"(motion.tracking_bound {bound}); every joint stopped",
-                                  hint="a joint that cannot follow: lower the path's speed, or check the joint")
+        err = a.position(motors) - round(_at(rs, a.name, elapsed))
+        result.tracking[a.name] = max(result.tracking.get(a.name, 0), abs(err))
+        if abs(err) > bound:
+            raise SafetyError(f"trajectory: {a.name} is {err:+d} counts from the path at t={elapsed:.2f} s "
+                              f"(motion.tracking_bound {bound}); every joint stopped",
+                              hint="a joint that cannot follow: lower the path's speed, or check the joint")
 
     try:
         with guard:
