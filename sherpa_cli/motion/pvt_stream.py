@@ -10,8 +10,8 @@
    way out, then UM and the motor through :meth:`MotionGuard.enable`;
 3. primes each queue, starts the drives one after the other (PV=n, BG) and measures the skew;
 4. keeps every queue filled from a thread of its own on the injected clock/sleep: at each period the
-   records due by then go out, ``prime`` periods ahead of the drive's consumption; the thread calls
-   ``guard.check()`` each period and counts the periods served on time.
+   records due by then go out, ``prime`` periods ahead of the drive's consumption, and counts the
+   periods served on time; the command's thread calls ``guard.check()`` while it watches the sender.
 
 A send later than ``StreamSettings.late_bound_s`` (a starved stream), a queue-low while rows are still to be
 sent (the sender on time, so rows were lost: it cannot be answered), an underflow or any other PVT
@@ -348,6 +348,9 @@ def _run_sender(guard: MotionGuard, streams: list[_Stream], s: StreamSettings, r
         thread.start()
         while thread.is_alive():
             thread.join(WATCH_POLL_S)  # wall time: how often the watch looks; the deadline is the clock's
+            # the guard's sign of life and its checks (signals, the dead-man's read-back of every drive
+            # now and then) from this thread: on the sender's they held its period past the late bound
+            guard.check()
             now = clock()
             if now <= pace.deadline:
                 continue
@@ -427,7 +430,6 @@ def _sender(guard: MotionGuard, streams: list[_Stream], s: StreamSettings, repor
             if late > s.late_bound and next_row < total:
                 pace.stop.set()
                 raise _starved(guard, streams, s, report, late)
-            guard.check()
             # after the lateness: a late host also makes the queues run low, and lateness is the cause to name
             _answer_events(guard, streams, events, report, end, period, sending_until)
             # every row due by now: the drives take row j at t0 + j T, it goes out prime periods before
