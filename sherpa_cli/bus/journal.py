@@ -25,6 +25,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from sherpa_cli.elmo.protocol import LOSS_ACTION
 from sherpa_cli.errors import SafetyError, SherpaError
 from sherpa_cli.paths import read_json, state_dir
 
@@ -417,13 +418,12 @@ def restore(session: ArmSession, ref: DriveRef, *, apply: bool,
 def _loss_action(session: ArmSession, ref: DriveRef) -> int | None:
     """0x6007 as the drive holds it (what its consumer did when the heartbeat ended); None: unread."""
     try:
-        raw = bytes(session.sdo(ref).upload(LOSS_ACTION_INDEX, 0))[:2]
+        raw = bytes(session.sdo(ref).upload(*LOSS_ACTION))[:2]
     except SherpaError:
         return None
     return int.from_bytes(raw.ljust(2, b"\0"), "little", signed=True)
 
 
-LOSS_ACTION_INDEX = 0x6007
 LOSS_ACTIONS = {0: "no action", 1: "fault", 2: "disable voltage", 3: "quick stop"}
 
 

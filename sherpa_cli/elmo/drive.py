@@ -3,6 +3,11 @@
 One call, the fewest requests: status reads MO, UM, SR, MF; a mode change switches the motor off
 first (the drive refuses UM with MO=1); stop is ST, with JV=0 + BG where the firmware refuses ST
 in speed mode (motion.stop_method "auto"); a profile has ended when MS reads 0.
+
+The motion guard keeps its own Elmo path for what must be journaled or configured -- UM changes
+(put back by `recover` after a kill), the stop by motion.stop_method with TC=0 first in torque mode
+-- and asks this class only for the rest (positions, profiles, targets, a profile's end). A caller
+outside the guard that uses :meth:`enable` or :meth:`stop` gets neither the journal nor the setting.
 """
 
 from __future__ import annotations
