@@ -139,3 +139,17 @@ class RampObjects(Protocol):
     def ramp_objects(self, ramp: Ramp) -> tuple[ObjectValue, ...]:
         """The objects that hold ``ramp`` on this drive, with its values."""
         ...
+
+
+@runtime_checkable
+class ModeObject(Protocol):
+    """A drive whose mode lives in a dictionary object (CiA 402 0x6060): the guard journals the mode
+    found before it changes it and puts it back once the power stage is off, as Elmo's UM."""
+
+    def mode_object(self) -> ObjectValue:
+        """The object that selects the mode, with the value it holds now (unsigned, ``size`` bytes)."""
+        ...
+
+    def put_back(self, obj: ObjectValue) -> None:
+        """Write ``obj``'s value back (with the power stage off)."""
+        ...
