@@ -46,6 +46,9 @@ class DriveStatus:
     # the fault is its heartbeat consumer's alone (the tool's heartbeat ended: a killed command), what
     # `sherpa recover --apply` may reset; any other fault is the user's to find
     heartbeat_lost: bool = False
+    # powered but ramping down on its own, deaf to set-points (CiA 402 Quick stop active, Fault
+    # reaction active): the state's name; None: following its set-points or off
+    stopping: str | None = None
 
 
 @runtime_checkable

@@ -313,9 +313,11 @@ def test_move_needs_position_mode():
 # -- Quick stop active and Fault reaction active keep the power stage on -------------------------------
 
 def test_quick_stop_active_and_fault_reaction_active_are_powered():
-    assert make(FakeNode(State.QUICK_STOP_ACTIVE))[0].status() == DriveStatus(enabled=True, mode=Mode.OTHER)
+    assert make(FakeNode(State.QUICK_STOP_ACTIVE))[0].status() == DriveStatus(enabled=True, mode=Mode.OTHER,
+                                                                              stopping="Quick stop active")
     status = make(FakeNode(State.FAULT_REACTION_ACTIVE, error=0x2310))[0].status()
     assert status.enabled and status.fault == "Fault reaction active: 0x2310 continuous over-current"
+    assert status.stopping == "Fault reaction active"
 
 
 def test_stop_sends_nothing_to_a_drive_ramping_down_on_its_own():

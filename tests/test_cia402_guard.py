@@ -111,6 +111,28 @@ def test_recover_writes_nothing_to_a_drive_in_quick_stop_active(arm):
     assert journal.leftover(ref)
 
 
+def test_a_quick_stop_from_elsewhere_during_a_jog_ends_it_by_name(arm):
+    """Powered is not following: a drive put in Quick stop active during the move is named, as a
+    drive switched off is (it was, before Quick stop active counted as powered)."""
+    session, st, ref, sim = arm
+    session.sdo(ref).download(p.QUICK_STOP_OPTION, 0, p.encode(p.QUICK_STOP_OPTION, 6))  # held there
+    sent: list[bool] = []
+
+    def quick_stop_once_moving(s: float) -> None:
+        with session.sim.lock:
+            moving = sim.state is State.OPERATION_ENABLED and sim.motor.v != 0
+        if moving and not sent:
+            sent.append(True)
+            with session.sim.lock:
+                sim.od_write(p.CONTROLWORD, 0, 0x02)
+        st.sleep(s)
+
+    from sherpa_cli.errors import SafetyError
+    with pytest.raises(SafetyError, match=r"wrist \(can0 node 7\): Quick stop active during"):
+        _jog(session, st, by="3000counts", sleep=quick_stop_once_moving)
+    assert sent and motors_off(session)
+
+
 # -- 2: the mode object is journaled and put back ----------------------------------------------------
 
 def test_a_mode_found_is_journaled_before_it_changes_and_put_back_once_switched_off(arm):

@@ -88,14 +88,15 @@ class Cia402Drive:
         state, _ = self._state()
         mode = DISPLAYED.get(self._read(p.MODES_DISPLAY), Mode.OTHER)
         powered = state in p.POWERED
+        stopping = state.value if state is State.QUICK_STOP_ACTIVE or state is State.FAULT_REACTION_ACTIVE else None
         if state in FAULTED and state is not None:
             code = p.decode_error(self._read(p.ERROR_CODE))
             if code.code != p.HEARTBEAT_LOSS_ERROR:
-                return DriveStatus(enabled=powered, mode=mode, fault=f"{state.value}: {code}")
+                return DriveStatus(enabled=powered, mode=mode, fault=f"{state.value}: {code}", stopping=stopping)
             more = self._besides_heartbeat_loss()
             fault = f"{state.value}: {code}" + (f"; {more}" if more else "")
-            return DriveStatus(enabled=powered, mode=mode, fault=fault, heartbeat_lost=more is None)
-        return DriveStatus(enabled=powered, mode=mode)
+            return DriveStatus(enabled=powered, mode=mode, fault=fault, heartbeat_lost=more is None, stopping=stopping)
+        return DriveStatus(enabled=powered, mode=mode, stopping=stopping)
 
     def _besides_heartbeat_loss(self) -> str | None:
         """With 0x603F = 0x8130: what else the drive reports as an error (0x1001 bits other than

@@ -496,6 +496,9 @@ class MotionGuard:
                 if not st.enabled:
                     why = st.fault or "switched off from elsewhere (sherpa stop, another tool)"
                     raise SafetyError(f"{d.drive.label}: the motor was switched off during {during}: {why}")
+                if st.stopping is not None:  # powered, but ramping down on its own: it follows nothing
+                    why = st.fault or "a quick stop from elsewhere (another tool) or its own reaction"
+                    raise SafetyError(f"{d.drive.label}: {st.stopping} during {during}: {why}")
                 continue
             if not decode_sr(int(self.query(ref, "SR"))).motor_on:
                 mf = int(self.query(ref, "MF"))
