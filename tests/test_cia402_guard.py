@@ -171,9 +171,30 @@ def test_recover_puts_the_mode_back_after_a_killed_command(arm):
     (res,) = recover(session, plan_recover(session.cfg, ["wrist"]), apply=True).results
     assert not res.problems, res
     assert res.done is not None and res.done[0] == f"{MODE_STEP}=0x8", res
+    # what was reset is named
+    assert res.done[-1].startswith("the heartbeat-loss fault reset (Fault: 0x8130 life guard error or heartbeat error;")
     with session.sim.lock:
         assert sim.mode == 8
     assert not journal.leftover(ref)
+
+
+# -- 7: the heartbeat loss is reset only when it is the only error -----------------------------------
+
+def test_recover_leaves_a_heartbeat_loss_with_another_error_to_the_user(arm):
+    """0x603F = 0x8130, but the error register also shows a voltage error: not the consumer's alone."""
+    session, _st, ref, sim = arm
+    journal.note(ref, dataclasses.replace(journal.sdo("motion command", p.PROFILE_VELOCITY, 0, 4, 1234),
+                                          pid=_dead_pid(), proc=""))
+    with session.sim.lock:
+        sim.fault(0x8130)
+        sim._error_register = 0x05  # generic + voltage, as a second EMCY would leave it
+    (res,) = recover(session, plan_recover(session.cfg, ["wrist"]), apply=True).results
+    assert res.tripped is None, res
+    assert any("error register (0x1001) 0x05: more than a communication error" in x and "not reset" in x
+               for x in res.problems), res
+    assert not any("fault reset" in x for x in res.done or []), res
+    with session.sim.lock:
+        assert sim.state is State.FAULT
 
 
 # -- 5: a drive found in Operation enabled moves ----------------------------------------------------
