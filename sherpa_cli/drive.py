@@ -46,6 +46,9 @@ class DriveStatus:
     # the fault is its heartbeat consumer's alone (the tool's heartbeat ended: a killed command), what
     # `sherpa recover --apply` may reset; any other fault is the user's to find
     heartbeat_lost: bool = False
+    # powered but ramping down on its own, deaf to set-points (CiA 402 Quick stop active, Fault
+    # reaction active): the state's name; None: following its set-points or off
+    stopping: str | None = None
 
 
 @runtime_checkable
@@ -138,4 +141,18 @@ class RampObjects(Protocol):
 
     def ramp_objects(self, ramp: Ramp) -> tuple[ObjectValue, ...]:
         """The objects that hold ``ramp`` on this drive, with its values."""
+        ...
+
+
+@runtime_checkable
+class ModeObject(Protocol):
+    """A drive whose mode lives in a dictionary object (CiA 402 0x6060): the guard journals the mode
+    found before it changes it and puts it back once the power stage is off, as Elmo's UM."""
+
+    def mode_object(self) -> ObjectValue:
+        """The object that selects the mode, with the value it holds now (unsigned, ``size`` bytes)."""
+        ...
+
+    def put_back(self, obj: ObjectValue) -> None:
+        """Write ``obj``'s value back (with the power stage off)."""
         ...

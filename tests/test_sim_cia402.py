@@ -97,11 +97,35 @@ def test_the_power_state_machine_and_the_motor():
     assert drive.state is State.READY_TO_SWITCH_ON and not drive.motor_on
 
 
-def test_modes_the_simulator_does_not_play_are_refused():
-    drive, _ = make()
+def test_a_mode_the_simulator_does_not_play_is_taken_shown_and_holds_the_motor_still():
+    drive, clock = make()
+    drive.od_write(p.MODES_OF_OPERATION, 0, 8)  # CSP: a drive is found in it, and it is put back
+    assert drive.od_read(p.MODES_DISPLAY, 0) == 8
+    enable(drive, 8)
+    drive.od_write(p.TARGET_POSITION, 0, 5000)
+    drive.od_write(p.CONTROLWORD, 0, 0x1F)
+    run(drive, clock, 0.5)
+    assert drive.od_read(p.POSITION_ACTUAL, 0) == 0
     with pytest.raises(ODError) as err:
-        drive.od_write(p.MODES_OF_OPERATION, 0, 4)
+        drive.od_write(p.MODES_OF_OPERATION, 0, 200)
     assert err.value.abort_code == 0x06090030
+
+
+def test_a_mode_change_while_enabled_acts_at_once_pv_runs_its_old_target_velocity():
+    """As a drive does: 0x6060 := PV in Operation enabled without halt runs to 0x60FF at once."""
+    drive, clock = make()
+    enable(drive)
+    drive.od_write(p.TARGET_VELOCITY, 0, 500)  # left from an earlier jog
+    drive.od_write(p.MODES_OF_OPERATION, 0, 3)
+    run(drive, clock, 0.5)
+    assert drive.od_read(p.VELOCITY_ACTUAL, 0) == 500
+    halted, clock = make()
+    enable(halted)
+    halted.od_write(p.TARGET_VELOCITY, 0, 500)
+    halted.od_write(p.CONTROLWORD, 0, 0x010F)  # halt first: the new mode holds still
+    halted.od_write(p.MODES_OF_OPERATION, 0, 3)
+    run(halted, clock, 0.5)
+    assert halted.od_read(p.VELOCITY_ACTUAL, 0) == 0 and halted.od_read(p.POSITION_ACTUAL, 0) == 0
 
 
 def test_pp_move_arrives_in_the_trapezoid_time():
@@ -114,9 +138,12 @@ def test_pp_move_arrives_in_the_trapezoid_time():
     assert drive.od_read(p.STATUSWORD, 0) & p.SW_SET_POINT_ACK
     assert not drive.od_read(p.STATUSWORD, 0) & p.SW_TARGET_REACHED
     drive.od_write(p.CONTROLWORD, 0, 0x0F)
+    # bit 12 falls on the drive's next cycle after bit 4 fell, not with the write
+    assert drive.od_read(p.STATUSWORD, 0) & p.SW_SET_POINT_ACK
+    run(drive, clock, 0.01)
     assert not drive.od_read(p.STATUSWORD, 0) & p.SW_SET_POINT_ACK
     # 0.1 s up to 1000 counts/s (50 counts), 9.9 s at speed, 0.1 s down: 10.1 s
-    run(drive, clock, 10.05)
+    run(drive, clock, 10.04)
     assert not drive.od_read(p.STATUSWORD, 0) & p.SW_TARGET_REACHED
     assert drive.od_read(p.VELOCITY_ACTUAL, 0) > 0
     run(drive, clock, 0.07)

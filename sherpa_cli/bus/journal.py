@@ -464,7 +464,10 @@ def restore_other(session: ArmSession, ref: DriveRef, drive: Drive, *, apply: bo
     if not apply:
         return res
     if st.enabled and steps:
-        problems.append("the power stage is on: another tool moves it? nothing put back")
+        # Operation enabled, or a quick stop / fault reaction still ramping (or held, 0x605A = 5..8):
+        # the mode and profile objects are not written to a powered drive
+        problems.append("the power stage is on: another tool moves it, or a quick stop holds it? nothing put back; "
+                        f"`sherpa stop {ref.name}` switches it off at standstill")
         return res
     failed = False
     for s in reversed(steps):
@@ -485,7 +488,7 @@ def restore_other(session: ArmSession, ref: DriveRef, drive: Drive, *, apply: bo
         else:
             try:
                 clear_trip()  # the fault reset, under a dead-man of its own
-                done.append("the heartbeat-loss fault reset (controlword, under a dead-man of its own)")
+                done.append(f"the heartbeat-loss fault reset ({st.fault}; controlword, under a dead-man of its own)")
             except SherpaError as exc:
                 failed = True
                 problems.append(f"the fault not reset: {exc}")

@@ -17,7 +17,7 @@ from typing import Protocol
 from sherpa_cli.cia402 import protocol as p
 from sherpa_cli.cia402.protocol import State
 from sherpa_cli.drive import DriveStatus, Mode, ObjectValue, Ramp
-from sherpa_cli.errors import SafetyError, UsageError
+from sherpa_cli.errors import SafetyError, SdoError, UsageError
 
 MODES = {Mode.POSITION: p.OpMode.PROFILE_POSITION, Mode.VELOCITY: p.OpMode.PROFILE_VELOCITY}
 DISPLAYED: dict[int, Mode] = {p.OpMode.PROFILE_POSITION: Mode.POSITION, p.OpMode.PROFILE_VELOCITY: Mode.VELOCITY,
@@ -43,6 +43,10 @@ class Cia402Settings:
     # PP: the new set-point replaces a running one at once (controlword bit 5); off: it waits for the
     # running one to end (a drive that buffers). UNCONFIRMED which a given drive supports.
     change_set_immediately: bool = True
+    # s a drive ramping down on its own (quick stop, halt before a mode change) may take to stand
+    # still before its power stage goes off or its mode changes; |0x606C| <= standstill_velocity
+    standstill_timeout: float = 2.0
+    standstill_velocity: int = 0
 
 
 class Cia402Drive:
@@ -75,14 +79,41 @@ class Cia402Drive:
     def _fault_text(self) -> str:
         return str(p.decode_error(self._read(p.ERROR_CODE)))
 
+    def _read_sub(self, index: int, sub: int) -> int:
+        return p.decode(index, self.sdo.upload(index, sub, name=p.NAMES[index]))
+
     def status(self) -> DriveStatus:
+        """``enabled``: the power stage is on -- Operation enabled, and Quick stop active and Fault
+        reaction active too, whose ramp still drives the motor."""
         state, _ = self._state()
         mode = DISPLAYED.get(self._read(p.MODES_DISPLAY), Mode.OTHER)
+        powered = state in p.POWERED
+        stopping = state.value if state is State.QUICK_STOP_ACTIVE or state is State.FAULT_REACTION_ACTIVE else None
         if state in FAULTED and state is not None:
             code = p.decode_error(self._read(p.ERROR_CODE))
-            return DriveStatus(enabled=False, mode=mode, fault=f"{state.value}: {code}",
-                               heartbeat_lost=code.code == p.HEARTBEAT_LOSS_ERROR)
-        return DriveStatus(enabled=state is State.OPERATION_ENABLED, mode=mode)
+            if code.code != p.HEARTBEAT_LOSS_ERROR:
+                return DriveStatus(enabled=powered, mode=mode, fault=f"{state.value}: {code}", stopping=stopping)
+            more = self._besides_heartbeat_loss()
+            fault = f"{state.value}: {code}" + (f"; {more}" if more else "")
+            return DriveStatus(enabled=powered, mode=mode, fault=fault, heartbeat_lost=more is None, stopping=stopping)
+        return DriveStatus(enabled=powered, mode=mode, stopping=stopping)
+
+    def _besides_heartbeat_loss(self) -> str | None:
+        """With 0x603F = 0x8130: what else the drive reports as an error (0x1001 bits other than
+        generic and communication; the newest 0x1003 entry, where the drive has one, not 0x8130),
+        named; None: the heartbeat loss is the only error (what a fault reset may clear)."""
+        register = self._read(p.ERROR_REGISTER)
+        if register & ~(p.ERR_REG_GENERIC | p.ERR_REG_COMMUNICATION):
+            return f"error register (0x1001) 0x{register:02X}: more than a communication error"
+        try:
+            newest = self._read_sub(p.ERROR_FIELD, 1)
+        except SdoError as exc:
+            if exc.reason != "abort":
+                raise
+            return None  # 0x1003 is optional (CiA 301): the error register is all there is
+        if newest & 0xFFFF not in (0, p.HEARTBEAT_LOSS_ERROR):
+            return f"newest error (0x1003:1) {p.decode_error(newest)}: more than the heartbeat loss"
+        return None
 
     def position(self) -> int:
         return self._read(p.POSITION_ACTUAL)
@@ -125,6 +156,22 @@ class Cia402Drive:
                                   f"for {self.settings.confirm_timeout:g} s (statusword 0x{sw:04X})")
             self._sleep(self.settings.poll_interval)
 
+    def _wait_still(self, why: str) -> None:
+        """Until |0x606C| <= standstill_velocity (bounded): a drive ramping down on its own is left
+        to do so before its power stage goes off (it would coast) or its mode changes."""
+        deadline = self._clock() + self.settings.standstill_timeout
+        while True:
+            velocity = self.velocity()
+            if abs(velocity) <= self.settings.standstill_velocity:
+                return
+            if self._clock() >= deadline:
+                state, sw = self._state()
+                raise SafetyError(f"{self.label}: still moving ({velocity} counts/s) "
+                                  f"{self.settings.standstill_timeout:g} s {why} "
+                                  f"(now {state.value if state else f'statusword 0x{sw:04X}'})",
+                                  hint="the drive ramps down on its own; `sherpa stop` switches it off at standstill")
+            self._sleep(self.settings.poll_interval)
+
     def enable(self, mode: Mode) -> None:
         if mode not in MODES:
             raise UsageError(f"{self.label}: {mode.value} mode is not built for CiA 402 drives "
@@ -132,6 +179,12 @@ class Cia402Drive:
         state, sw = self._state()
         self._refuse_fault(state, sw)  # nothing is written to a drive in Fault
         op = MODES[mode]
+        if state is State.QUICK_STOP_ACTIVE:
+            self._wait_still("into the quick stop")  # left by disable voltage: the power stage goes off
+        elif state is State.OPERATION_ENABLED and self._read(p.MODES_DISPLAY) != op:
+            # halted first: the new mode acts at once on its own set-point (PV runs the old 0x60FF)
+            self._write(p.CONTROLWORD, int(p.Command.ENABLE_OPERATION) | p.CW_HALT)
+            self._wait_still("after the halt before the mode change")
         self._write(p.MODES_OF_OPERATION, int(op))
         shown = self._read(p.MODES_DISPLAY)
         if shown != op:
@@ -150,6 +203,8 @@ class Cia402Drive:
         state, sw = self._state()
         if state in FAULTED:
             return
+        if state is State.QUICK_STOP_ACTIVE:
+            self._wait_still("into the quick stop")  # the disable voltage it leaves by cuts the power stage
         self._walk(State.READY_TO_SWITCH_ON, state, sw)
 
     def fault_reset(self) -> None:
@@ -168,6 +223,13 @@ class Cia402Drive:
                               f"{self._fault_text()})", hint="find the cause on the drive")
 
     # -- the profile ------------------------------------------------------------------------------
+
+    def mode_object(self) -> ObjectValue:
+        return ObjectValue(p.MODES_OF_OPERATION, 0, 1, self._read(p.MODES_OF_OPERATION) & 0xFF)
+
+    def put_back(self, obj: ObjectValue) -> None:
+        self.sdo.download(obj.index, obj.sub, obj.value.to_bytes(obj.size, "little"),
+                          name=p.NAMES.get(obj.index, f"0x{obj.index:04X}"))
 
     def ramp(self) -> Ramp:
         return Ramp(self._read(p.PROFILE_VELOCITY), self._read(p.PROFILE_ACCELERATION),
@@ -216,29 +278,48 @@ class Cia402Drive:
             return
         self._need(p.OpMode.PROFILE_POSITION, "begin")
         edge = p.CW_NEW_SET_POINT | (p.CW_CHANGE_SET_IMMEDIATELY if self.settings.change_set_immediately else 0)
+        # a bit 12 still set from the set-point before would pass for this one's acknowledge
+        self._wait_ack(False, "before the new set-point")
         self._write(p.CONTROLWORD, base | edge)
+        try:
+            self._wait_ack(True, "waiting for the set-point acknowledge")
+        except SafetyError:
+            self._write(p.CONTROLWORD, base)
+            raise
+        self._write(p.CONTROLWORD, base)  # bit 4 down: the next begin() is a rising edge again
+        self._wait_ack(False, "after the set-point was acknowledged")
+
+    def _wait_ack(self, up: bool, when: str) -> None:
+        """Until statusword bit 12 (set-point acknowledge) is ``up`` (bounded by confirm_timeout)."""
         deadline = self._clock() + self.settings.confirm_timeout
         while True:
             state, sw = self._state()
-            if sw & p.SW_SET_POINT_ACK:
-                break
+            if bool(sw & p.SW_SET_POINT_ACK) is up:
+                return
             if state is not State.OPERATION_ENABLED:
                 self._refuse_fault(state, sw)
-                raise SafetyError(f"{self.label}: left Operation enabled waiting for the set-point acknowledge "
+                raise SafetyError(f"{self.label}: left Operation enabled {when} "
                                   f"(now {state.value if state else f'statusword 0x{sw:04X}'})")
             if self._clock() >= deadline:
-                self._write(p.CONTROLWORD, base)
-                raise SafetyError(f"{self.label}: the new set-point was not acknowledged (statusword bit 12) "
-                                  f"within {self.settings.confirm_timeout:g} s")
+                if up:
+                    raise SafetyError(f"{self.label}: the new set-point was not acknowledged (statusword bit 12) "
+                                      f"within {self.settings.confirm_timeout:g} s")
+                raise SafetyError(f"{self.label}: the set-point acknowledge (statusword bit 12) still set {when} "
+                                  f"for {self.settings.confirm_timeout:g} s ({state.value}, statusword 0x{sw:04X})")
             self._sleep(self.settings.poll_interval)
-        self._write(p.CONTROLWORD, base)  # bit 4 down: the next begin() is a rising edge again
 
     def stop(self) -> str:
         """Halt (controlword bit 8): the drive decelerates with its profile deceleration and stays
-        enabled ("halt"). A drive not in Operation enabled is not driving its motor and gets nothing:
+        enabled ("halt"). A drive in Quick stop active or Fault reaction active ramps down on its
+        own and gets nothing ("quick stop", "fault reaction"). A drive in another state is not driving
+        its motor and gets nothing either:
         the halt word would power on one in Ready to switch on or Switched on ("off: <state>")."""
         self._halt = p.CW_HALT
         state, sw = self._state()
+        if state is State.QUICK_STOP_ACTIVE:
+            return "quick stop"  # ramping down on its own; halt + enable operation could take it back (16)
+        if state is State.FAULT_REACTION_ACTIVE:
+            return "fault reaction"
         if state is not State.OPERATION_ENABLED:
             return f"off: {state.value if state else f'statusword 0x{sw:04X}'}"
         self._write(p.CONTROLWORD, int(p.Command.ENABLE_OPERATION) | p.CW_HALT)

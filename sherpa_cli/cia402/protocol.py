@@ -10,6 +10,8 @@ import struct
 from dataclasses import dataclass
 
 # -- objects (index, sub 0) and their CiA 402 data types ---------------------------------------------
+ERROR_REGISTER = 0x1001  # UNSIGNED8: CiA 301's error register (bit 0 generic, bit 4 communication ...)
+ERROR_FIELD = 0x1003  # sub 1: UNSIGNED32, the newest error (its code in bits 0-15); optional in CiA 301
 ABORT_CONNECTION_OPTION = 0x6007  # INTEGER16: what a lost heartbeat (or other comm loss) does
 ERROR_CODE = 0x603F  # UNSIGNED16: the last error (CiA 301 / 402 error code)
 CONTROLWORD = 0x6040  # UNSIGNED16
@@ -28,12 +30,14 @@ TARGET_VELOCITY = 0x60FF  # INTEGER32, counts/s
 
 # struct formats of each object's value (little endian, as SDO carries them)
 FORMATS: dict[int, str] = {
+    ERROR_REGISTER: "<B", ERROR_FIELD: "<I",
     ABORT_CONNECTION_OPTION: "<h", ERROR_CODE: "<H", CONTROLWORD: "<H", STATUSWORD: "<H",
     QUICK_STOP_OPTION: "<h", MODES_OF_OPERATION: "<b", MODES_DISPLAY: "<b", POSITION_ACTUAL: "<i",
     VELOCITY_ACTUAL: "<i", TARGET_POSITION: "<i", PROFILE_VELOCITY: "<I", PROFILE_ACCELERATION: "<I",
     PROFILE_DECELERATION: "<I", QUICK_STOP_DECELERATION: "<I", TARGET_VELOCITY: "<i",
 }
 NAMES: dict[int, str] = {
+    ERROR_REGISTER: "error register", ERROR_FIELD: "pre-defined error field",
     ABORT_CONNECTION_OPTION: "abort connection option code", ERROR_CODE: "error code", CONTROLWORD: "controlword",
     STATUSWORD: "statusword", QUICK_STOP_OPTION: "quick stop option code", MODES_OF_OPERATION: "modes of operation",
     MODES_DISPLAY: "modes of operation display", POSITION_ACTUAL: "position actual value",
@@ -93,6 +97,9 @@ STATE_BITS: dict[State, tuple[int, int]] = {
     State.FAULT_REACTION_ACTIVE: (0x4F, 0x0F),
     State.FAULT: (0x4F, 0x08),
 }
+# the states whose power stage is on: a quick stop and a fault reaction still drive the motor to
+# standstill on the drive's own ramp (the standard's table of the states' functions)
+POWERED = (State.OPERATION_ENABLED, State.QUICK_STOP_ACTIVE, State.FAULT_REACTION_ACTIVE)
 SW_VOLTAGE_ENABLED = 1 << 4
 SW_WARNING = 1 << 7
 SW_REMOTE = 1 << 9
@@ -247,6 +254,9 @@ ERROR_TEXTS: dict[int, str] = {
     0x8612: "reference limit",
     0x9000: "external error",
 }
+# 0x1001 bits: generic (set with any error) and communication; a heartbeat loss sets these alone
+ERR_REG_GENERIC = 0x01
+ERR_REG_COMMUNICATION = 0x10
 # what a drive's heartbeat consumer reports when the producer it watches falls silent (0x6007 = 1: Fault)
 HEARTBEAT_LOSS_ERROR = 0x8130
 ERROR_CLASSES: dict[int, str] = {

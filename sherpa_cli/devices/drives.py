@@ -28,6 +28,12 @@ def _elmo(session: ArmSession, ref: DriveRef) -> Drive:
 
 
 def _cia402(session: ArmSession, ref: DriveRef) -> Drive:
+    # its confirmations wait on the session's clock, as the drive clients do (a stepped simulated
+    # arm moves only while the tool waits: on the wall clock a drive's acknowledge would never come)
+    overrides = getattr(session, "client_overrides", {})
+    clock, sleep = overrides.get("clock"), overrides.get("sleep")
+    if clock is not None and sleep is not None:
+        return Cia402Drive(session.sdo(ref), f"{ref.name} ({ref.bus} node {ref.node})", clock=clock, sleep=sleep)
     return Cia402Drive(session.sdo(ref), f"{ref.name} ({ref.bus} node {ref.node})")
 
 

@@ -37,7 +37,7 @@ from sherpa_cli.bus.machine_lock import wire_key
 from sherpa_cli.bus.targets import drive_refs
 from sherpa_cli.devices.drives import ELMO, is_elmo, open_drive
 from sherpa_cli.devices.ft_sensor import open_reader
-from sherpa_cli.drive import Drive, Mode, Ramp, RampObjects
+from sherpa_cli.drive import Drive, Mode, ModeObject, ObjectValue, Ramp, RampObjects
 from sherpa_cli.elmo.drive import UNIT_MODES, mode_of
 from sherpa_cli.elmo.faults import decode_sr, describe_mf, fault_reason
 from sherpa_cli.elmo.protocol import UM_TORQUE
@@ -105,6 +105,8 @@ class _Drive:
     mode: Mode | None = None  # another drive type: the mode found, then the one it was switched on in
     ramp_before: Ramp | None = None  # another drive type: the profile found at entry
     ramp_journal: set[str] = field(default_factory=set)  # its journal step names (RampObjects)
+    mode_found: ObjectValue | None = None  # another drive type: the mode object found at entry (ModeObject)
+    enabled_as: Mode | None = None  # another drive type: the mode this guard enabled it in
 
     @property
     def native(self) -> bool:
@@ -321,15 +323,17 @@ class MotionGuard:
         self._pulse()
 
     def _enable_other(self, d: _Drive, mode: Mode) -> None:
-        if d.mo and d.mode is mode:
+        if d.enabled_as is mode:
             self._pulse()
             return
-        # the power-state walk is a few confirmed exchanges: each within the request bound
+        # a drive found powered is enabled all the same: the drive learns the mode it moves in (and
+        # is taken out of a quick stop); the power-state walk is a few confirmed exchanges, each
+        # within the request bound
         self._pulse(extra=8 * self.settings.request_bound + self.session.cfg.protocol.mo_confirm_timeout)
         d.switched_on = True  # before the request: a lost confirmation must still end switched off
         self._watch.set_moving(d.ref.bus, d.ref.node, True)
         d.drive.enable(mode)
-        d.mo, d.mode = 1, mode
+        d.mo, d.mode, d.enabled_as = 1, mode, mode
         self._event(f"{d.drive.label}: motor on ({mode.value} mode)")
         self._pulse()
 
@@ -492,6 +496,9 @@ class MotionGuard:
                 if not st.enabled:
                     why = st.fault or "switched off from elsewhere (sherpa stop, another tool)"
                     raise SafetyError(f"{d.drive.label}: the motor was switched off during {during}: {why}")
+                if st.stopping is not None:  # powered, but ramping down on its own: it follows nothing
+                    why = st.fault or "a quick stop from elsewhere (another tool) or its own reaction"
+                    raise SafetyError(f"{d.drive.label}: {st.stopping} during {during}: {why}")
                 continue
             if not decode_sr(int(self.query(ref, "SR"))).motor_on:
                 mf = int(self.query(ref, "MF"))
@@ -755,6 +762,9 @@ class MotionGuard:
             raise SafetyError(f"{d.drive.label}: in fault, refusing to move it: {st.fault}",
                               hint="find the cause first, then reset the fault on the drive")
         self._event(f"{d.drive.label}: {d.drive.kind}, {'on' if st.enabled else 'off'}, {st.mode.value} mode")
+        if isinstance(d.drive, ModeObject):  # on disk before anything changes it, as Elmo's UM
+            o = d.mode_found = d.drive.mode_object()
+            journal.note(d.ref, journal.sdo(JOURNAL_OWNER, o.index, o.sub, o.size, o.value))
         d.ramp_before = d.drive.ramp()
         if isinstance(d.drive, RampObjects):  # on disk before anything changes them, as Elmo's SP/AC/DC
             objects = d.drive.ramp_objects(d.ramp_before)
@@ -904,13 +914,12 @@ class MotionGuard:
         careful per-drive exit (standstill, MO=0, restore) follows. Otherwise a drive that does not
         answer would hold back the stop of the drives after it by its timeouts."""
         method = self.settings.stop_method
-        for key, d in list(self._drives.items()):
-            if not d.mo or (entering and not d.switched_on) or (skip and key in skip):
+        due = [d for key, d in self._drives.items()
+               if d.mo and not (entering and not d.switched_on) and not (skip and key in skip)]
+        for d in due:
+            if not d.native:
                 continue
             try:
-                if not d.native:
-                    d.drive.stop()  # one confirmed exchange: its drive cannot be told without an answer
-                    continue
                 if d.um == UM_TORQUE:
                     d.client.send_only("TC", 0, 0.0)
                 if method == "jv0":
@@ -918,6 +927,16 @@ class MotionGuard:
                     d.client.send_only("BG")
                 else:
                     d.client.send_only("ST")
+            except Exception as exc:  # noqa: BLE001 - logged; the per-drive exit tries again and reports
+                log.debug("motion guard: first stop pass to %s: %s", d.ref.name, exc)
+        # then the drives that are told only by a confirmed exchange (CiA 402 over SDO): after every
+        # frame that needs no answer, so a silent one holds back none of those; one known silent
+        # would only cost its timeouts here (its exit says so)
+        for d in due:
+            if d.native or d.client.silent:
+                continue
+            try:
+                d.drive.stop()
             except Exception as exc:  # noqa: BLE001 - logged; the per-drive exit tries again and reports
                 log.debug("motion guard: first stop pass to %s: %s", d.ref.name, exc)
 
@@ -993,7 +1012,8 @@ class MotionGuard:
         if not stop:
             r.stopped_by = NOT_MOVED
             self._restore_dead_man(d, r, stop_failed=False)
-            journal.forget(d.ref, JOURNAL_OWNER, d.put_back | set(PROFILE_KEYS) | d.ramp_journal)  # the profile was never changed
+            # the profile and mode were never changed
+            journal.forget(d.ref, JOURNAL_OWNER, d.put_back | set(PROFILE_KEYS) | d.ramp_journal | self._mode_name(d))
             self._event(r.line())
             return r
         try:
@@ -1054,6 +1074,8 @@ class MotionGuard:
             else:
                 r.kept.append(f"UM={d.um} (motor not confirmed off)")
                 r.problems.append(f"UM={d.um_changed_from} not restored: the motor is not confirmed off")
+        if d.mode_found is not None:
+            self._restore_mode(d, r, d.mode_found)
         self._restore_profile(d, r)
         self._restore_dead_man(d, r, stop_failed)
         if self.keep:  # left as the motion left them on purpose: not a leftover of a killed command
@@ -1102,6 +1124,36 @@ class MotionGuard:
                 d.put_back.add(key)
             except Exception as exc:  # noqa: BLE001 - reported in the drive's stop report
                 r.problems.append(f"{key}={before} not restored: {why(exc)}")
+
+    @staticmethod
+    def _mode_name(d: _Drive) -> set[str]:
+        o = d.mode_found
+        return set() if o is None else {f"0x{o.index:04X}:{o.sub}"}
+
+    def _restore_mode(self, d: _Drive, r: DriveStop, found: ObjectValue) -> None:
+        """The mode object found at entry, put back once the power stage is off (as Elmo's UM)."""
+        name = f"0x{found.index:04X}:{found.sub}"
+        if self.keep:
+            r.kept.append(name)
+            return
+        if not isinstance(d.drive, ModeObject):
+            return
+        try:
+            self._step()
+            if d.drive.mode_object().value == found.value:
+                d.put_back.add(name)
+                return
+            self._step()
+            if not (r.motor_off or not d.switched_on) or d.drive.status().enabled:
+                r.kept.append(f"{name} (power stage not confirmed off)")
+                r.problems.append(f"{name}={found.value} not restored: the power stage is not confirmed off")
+                return
+            self._step()
+            d.drive.put_back(found)
+            r.restored.append(f"{name}={found.value}")
+            d.put_back.add(name)
+        except Exception as exc:  # noqa: BLE001 - reported in the drive's stop report
+            r.problems.append(f"{name}={found.value} not restored: {why(exc)}")
 
     def _restore_ramp(self, d: _Drive, r: DriveStop) -> None:
         before = d.ramp_before

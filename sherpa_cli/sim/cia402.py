@@ -70,7 +70,9 @@ RANGES: dict[int, tuple[int, int]] = {
     p.PROFILE_VELOCITY: (0, 2**32 - 1), p.PROFILE_ACCELERATION: (1, 2**32 - 1), p.PROFILE_DECELERATION: (1, 2**32 - 1),
     p.QUICK_STOP_DECELERATION: (1, 2**32 - 1), p.QUICK_STOP_OPTION: (0, 8),
 }
-PLAYED_MODES = (p.OpMode.PROFILE_POSITION, p.OpMode.PROFILE_VELOCITY)  # what this simulator plays
+# what this simulator plays; any other mode (CSP, homing ...) is taken and shown, and holds the motor
+# still: a drive is found in it, and it is put back
+PLAYED_MODES = (p.OpMode.PROFILE_POSITION, p.OpMode.PROFILE_VELOCITY)
 # the Whistle's own shut-downs (an injected trip, sim/drive.py) as CiA 402 faults: 0x603F and the EMCY
 FAULT_OF_MF = {MF_POSITION_LIMIT: 0x8612, MF_SPEED_LIMIT: 0x8400, MF_HEARTBEAT: 0x8130}
 EMCY_OF_ELMO = {EMCY_POSITION_LIMIT: 0x8612, EMCY_SPEED_LIMIT: 0x8400}
@@ -180,13 +182,18 @@ class SimCia402Drive(SimDrive):
         lo, hi = RANGES[index]
         if not lo <= value <= hi:
             raise ODError(f"0x{index:04X}: {value} outside {lo}..{hi}", ABORT_RANGE)
-        if index == p.MODES_OF_OPERATION and value not in PLAYED_MODES:
-            raise ODError(f"0x6060: mode {value} is not played by the simulator (1 PP, 3 PV)", ABORT_RANGE)
         self.od_writes.append((self._t, index, sub, value))
+        changed = self.objects[index] != value
         self.objects[index] = value
-        if index == p.MODES_OF_OPERATION and self.state is State.OPERATION_ENABLED:
+        if index == p.MODES_OF_OPERATION and changed and self.state is State.OPERATION_ENABLED:
+            # the new mode acts at once, on its own set-point, as a drive's does: PV runs to 0x60FF
+            # unless halted; PP (and a mode not played) holds until a new set-point
             self._pending, self._ack = None, False
-            self._halt_motion()  # a mode change does not carry the old motion over
+            if self._pv_running():
+                self._record(f"PV: mode change while enabled, running to 0x60FF = {self.objects[p.TARGET_VELOCITY]}")
+                self._run_velocity()
+            else:
+                self._halt_motion()
         elif index == p.TARGET_VELOCITY and self._pv_running():
             self._run_velocity()  # PV follows its target velocity while running
         return None
@@ -237,8 +244,6 @@ class SimCia402Drive(SimDrive):
     def _operate(self, rose: int) -> None:
         """What a controlword does in Operation enabled, by mode: halt, a PP set-point, PV running."""
         cw = self.controlword
-        if not cw & p.CW_NEW_SET_POINT:
-            self._ack = False
         if cw & p.CW_HALT:
             self._halt_motion()
             return
@@ -275,6 +280,9 @@ class SimCia402Drive(SimDrive):
     def _model_step(self, dt: float) -> None:
         super()._model_step(dt)
         m = self.motor
+        if self._ack and not self.controlword & p.CW_NEW_SET_POINT:
+            # bit 12 falls after bit 4 did, on the drive's next cycle (not with the write)
+            self._ack = False
         still = m.v == 0 and m.mode in ("idle", "stop")
         if self.state is State.QUICK_STOP_ACTIVE and still and self.objects[p.QUICK_STOP_OPTION] not in (5, 6, 7, 8):
             self._off("quick stop done")
