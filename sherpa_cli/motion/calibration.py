@@ -84,7 +84,9 @@ def read_calibration(cfg: ArmConfig, joint: JointConfig, client_of: Callable[[st
     and PX is set from the encoder with the motor off (read back); a looking command (monitor,
     doctor) only says it does not match.
     """
-    others = sorted({cfg.drives[d].type for d in joint_drives(cfg, joint) if cfg.drives[d].type != "elmo"})
+    # a drive the config does not list (a joint built by hand) is Elmo's, as every drive by default
+    kinds = {dc.type for d in joint_drives(cfg, joint) if (dc := cfg.drives.get(d)) is not None}
+    others = sorted(k for k in kinds if k != "elmo")
     if others:
         # the homing flag and offsets live in Elmo user variables: another drive type has none here
         return Calibration(joint.name, False, f"on a {others[0]} drive, whose homing sherpa does not keep "

@@ -143,7 +143,8 @@ def _home_switch(joint: JointConfig) -> SwitchConfig | None:
 
 def _plain_unit(cfg: ArmConfig, joint: JointConfig, measure_range: bool) -> HomeUnit | str:
     assert joint.drive is not None
-    kind = cfg.drives[joint.drive].type
+    drive = cfg.drives.get(joint.drive)
+    kind = "elmo" if drive is None else drive.type
     if kind != "elmo":  # the homing switches, HM and the calibration flag are Elmo's
         return f"its drive {joint.drive} is a {kind} drive: sherpa homes joints on Elmo drives (docs/drives.md)"
     if joint.abs_encoder is not None:
