@@ -13,6 +13,20 @@ from sherpa_cli.sim.arm import SimArm
 from sherpa_cli.sim.stepped import SteppedTime
 
 JOG_CONFIG = Path(__file__).resolve().parent / "data" / "jog-fast-arm.yaml"
+VIEW_LIVENESS_S = 5.0
+
+
+def view_config(path: Path = JOG_CONFIG) -> ArmConfig:
+    """An arm (default: the fast jog arm) for the interactive view's tests, with a liveness of 5 s: the textual app runs
+    in the test's process, and with four busy processes beside the suite its loop once went over the
+    default 1 s without a tick, so the dead-man (rightly) stopped the jog. A busy host's setting
+    (docs/motion.md "Dead-man"), not a change to what the view does."""
+    import dataclasses
+
+    from sherpa_cli.config import load_config
+
+    cfg = load_config(path)
+    return dataclasses.replace(cfg, motion=dataclasses.replace(cfg.motion, liveness_timeout=VIEW_LIVENESS_S))
 
 
 def calibrate(session, *drives: str) -> None:

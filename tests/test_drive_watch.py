@@ -125,12 +125,16 @@ def test_warning_class_emcys_are_counted_and_a_flood_never_stalls_the_command(tm
     # The in-process simulator shares this process: on a loaded machine its pump, busy with the two
     # floods of 3000 frames, once kept drive1's heartbeat (20 ms then) away 0.37 s and the silence watch
     # stopped the command first. Heartbeats of 0.5 s (silent after 1.5 s) leave the floods the test.
+    # The same pump answers the guard's SDO reads on its way out, after the floods: with four busy
+    # processes beside the suite that took more than the real bus's 0.3 s, hence 2 s here.
     path = tmp_path / "arm.yaml"
     path.write_text(CONFIG.replace("drive1: {heartbeat_ms: 200}", "drive1: {heartbeat_ms: 500}\n"
-                                   "    drive2: {heartbeat_ms: 500}"), encoding="utf-8")
+                                   "    drive2: {heartbeat_ms: 500}")
+                    .replace("retries: 2}", "retries: 2, sdo_timeout: 2.0}"), encoding="utf-8")
     cfg = load_config(path)
     with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
         assert [d.settings.heartbeat_ms for d in s.sim.drives.values()] == [500, 500]
+        assert cfg.protocol.sdo_timeout == 2.0
         refs = [resolve_target(cfg, "drive1"), resolve_target(cfg, "drive2")]
         other = open_other(s, other_node)
         with pytest.raises(DriveWatchError, match="EMCY 0x2340: short circuit"), \

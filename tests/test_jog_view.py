@@ -9,7 +9,7 @@ import time
 from pathlib import Path
 
 import pytest
-from motion_helpers import JOG_CONFIG
+from motion_helpers import view_config
 
 from sherpa_cli.bus.session import ArmSession
 from sherpa_cli.cli.jog_view import HomeConfirm, JogView, bar
@@ -23,12 +23,11 @@ from tests.test_home import physical, px
 # command (2026-11-29, 4 workers and 2 busy processes). .ci/run runs `serial` tests alone
 pytestmark = pytest.mark.serial
 
-CONFIG = JOG_CONFIG
 
 
 @pytest.fixture
 def cfg():
-    return load_config(CONFIG)
+    return view_config()
 
 
 def cpr_of(cfg, joint: str) -> int:

@@ -14,11 +14,10 @@ import time
 from pathlib import Path
 
 import pytest
-from motion_helpers import JOG_CONFIG, stepped_session
+from motion_helpers import stepped_session, view_config
 
 from sherpa_cli.bus.session import ArmSession
 from sherpa_cli.cli.jog_view import KEY_HELP, HomeConfirm, JogView, SetPointDialog
-from sherpa_cli.config import load_config
 from sherpa_cli.joints import units
 from sherpa_cli.ops import joystick
 from sherpa_cli.ops.joystick import ScriptedSource, run_joystick
@@ -65,7 +64,7 @@ async def type_set_point(pilot, app, text: str) -> None:
 
 
 def test_every_joint_of_the_shipped_arm_is_reachable_at_80x24_with_the_key_help_visible(cli_windows):
-    cfg = load_config(SHIPPED)
+    cfg = view_config(SHIPPED)
     cli_windows(True)  # short MO windows in the simulator and the session
 
     async def scenario(session) -> list[str]:
@@ -100,7 +99,7 @@ def test_every_joint_of_the_shipped_arm_is_reachable_at_80x24_with_the_key_help_
 
 
 def test_typed_targets_start_stop_and_get_status_in_joint_units():
-    cfg = load_config(JOG_CONFIG)
+    cfg = view_config()
     cpr = cfg.joints["j2"].cpr
 
     async def scenario(session) -> dict:
@@ -190,7 +189,7 @@ def test_an_expired_velocity_set_point_goes_back_to_0_on_screen():
     """docs/jog.md: a velocity or torque command that expires sets its set point back to 0, so the
     next press starts small; the panel kept showing the expired +0.1 rad/s. On stepped time, the
     view's ticks called by hand: the expiry comes when the test moves the clock, whatever the load."""
-    cfg = load_config(JOG_CONFIG)
+    cfg = view_config()
 
     async def scenario(session, stepped) -> dict:
         seen: dict = {}
@@ -227,7 +226,7 @@ def test_an_expired_velocity_set_point_goes_back_to_0_on_screen():
 def test_a_taller_wider_terminal_lists_every_joint_and_gives_the_rest_to_the_panel(size):
     """At 120x40 the shipped arm's list kept 16 blank lines and the bars 16 columns; at 80x24 the
     list scrolls as before and the detail keeps its six lines."""
-    cfg = load_config(SHIPPED)
+    cfg = view_config(SHIPPED)
     names = list(cfg.joints)
 
     async def scenario(session) -> dict:
@@ -270,7 +269,7 @@ def test_the_shipped_joystick_section_is_the_seeds_mapping_and_drives_it(cli_win
     import conftest
 
     monkeypatch.setattr(conftest, "TEST_PROTOCOL_WINDOWS", {**conftest.TEST_PROTOCOL_WINDOWS, "set_echo": True})
-    cfg = load_config(SHIPPED)
+    cfg = view_config(SHIPPED)
     cli_windows(True)
     j = cfg.joystick
     maps = {(m.axis, m.joint) if m.joint else (m.x, m.y, m.pair, m.mix) for m in j.axes}
@@ -360,7 +359,7 @@ def test_docs_jog_md_shows_the_views_key_help_and_step_sizes():
 def test_the_running_torque_of_a_sigma_joint_is_its_set_point_not_the_sum_of_its_motors():
     """A 0.1 A torque on the Σ joint sends about 0.1 A to each motor; "running:" said +0.2 A (their
     sum). It says the joint's current now, IΣ = (Ia + Ib) / 2 (docs/motion.md)."""
-    cfg = load_config(JOG_CONFIG)
+    cfg = view_config()
     with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s, \
             LiveJog(s, resolve_axes(cfg, ["pitch"]), keepalive=30.0) as live:
         message = live.set_torque("pitch", 0.1)

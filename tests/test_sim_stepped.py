@@ -9,7 +9,8 @@ import time
 import pytest
 
 from sherpa_cli.errors import CommunicationError
-from sherpa_cli.sim.stepped import SteppedTime
+from sherpa_cli.sim.clock import ManualClock
+from sherpa_cli.sim.stepped import PACED_SLICE_S, SteppedTime
 
 
 class Bus:
@@ -53,6 +54,36 @@ def test_it_never_runs_ahead_of_wall_time():
     assert time.monotonic() - t >= 0.15
 
 
+class WatchedClock(ManualClock):
+    """Notes, at each step, how far simulated time got ahead of the wall time since ``begin``."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.lead: list[float] = []
+        self.begin = time.monotonic()
+
+    def advance(self, dt: float) -> float:
+        now = super().advance(dt)
+        self.lead.append(now - (time.monotonic() - self.begin))
+        return now
+
+
+@pytest.mark.parametrize("sync", [False, True])
+def test_a_long_wait_never_puts_simulated_time_a_slice_ahead_of_the_wall(sync):
+    # A wait of 0.3 s moved in one jump put simulated time 0.3 s ahead of the wall-time host heartbeat:
+    # a drive's consumer of less than that tripped though no beat was missed. Whatever the load, each
+    # step starts only once the wall has caught up with the last one.
+    clock = WatchedClock()
+    st = SteppedTime(clock)
+    if sync:
+        st.sync_factory("can0", Bus(clock), 0.01)
+        st.follow(lambda n: True)
+    clock.begin = time.monotonic()
+    st.sleep(0.3)
+    assert len(clock.lead) >= 0.3 / max(PACED_SLICE_S, 0.01) - 1
+    assert max(clock.lead) <= max(PACED_SLICE_S, 0.01) + 1e-9, max(clock.lead)
+
+
 def test_an_unanswered_sync_is_a_communication_error():
     st = SteppedTime(pace=False, answer_timeout=0.05)
     st.sync_factory("can0", Bus(st.clock), 0.01)
@@ -77,3 +108,10 @@ def test_a_client_wait_is_charged_what_unheard_requests_cost_the_host():
     options["sleep"](0.01)
     assert st.now() == pytest.approx(0.26)
     assert options["clock"]() == st.now()
+
+
+def test_a_wait_shorter_than_the_rounding_still_moves_the_clock():
+    # a loop "until the deadline, sleep what is left" would spin for ever on a clock that stood still
+    st = SteppedTime()
+    st.sleep(1e-12)
+    assert st.now() == 1e-12

@@ -55,3 +55,12 @@ def test_sim_reply_timeout_is_checked_and_round_trips(cli, tmp_path):
     again = tmp_path / "again.yaml"
     again.write_text(dump_native(cfg))
     assert load_config(again).sim_reply_timeout == 2.5
+
+
+def test_a_slow_simulated_sdo_answer_is_waited_for_too(cli, tmp_path):
+    # 0.5 s per SDO answer: beyond protocol.sdo_timeout (0.3 s), inside the sim's 1 s: the in-process
+    # simulator shares a possibly loaded machine, so its SDO answers get the patient timeout as well
+    cfg = _config(tmp_path, "  drives:\n    drive1: {sdo_latency: 0.5}\n")
+    r = cli("--config", cfg, "--sim", "--json", "identify", "drive1")
+    assert r.exit_code == 0, r.transcript()
+    assert json.loads(r.stdout)["drives"][0]["error"] is None

@@ -162,8 +162,10 @@ class ArmSession:
             from sherpa_cli.bus.machine_lock import TransferLock, wire_key
 
             link = self.links[ref.bus]
-            sdo = DriveSdo(link.network, ref.node, label=f"{ref.name} (node {ref.node})",
-                           timeout=self.cfg.protocol.sdo_timeout,
+            timeout = self.cfg.protocol.sdo_timeout
+            if self.sim is not None:  # the in-process simulator answers SDO on this loaded machine too
+                timeout = max(timeout, self.cfg.sim_reply_timeout)
+            sdo = DriveSdo(link.network, ref.node, label=f"{ref.name} (node {ref.node})", timeout=timeout,
                            channel_lock=TransferLock(wire_key(link.config.interface, link.config.channel), ref.node))
             sdo.on_request = functools.partial(self._request_sent, ref.key)
             self._sdo[ref.key] = sdo

@@ -57,7 +57,9 @@ def recover(ctx: typer.Context, targets: Targets = None, apply: ApplyRecover = F
         if st.json_mode:
             st.out.json({"drives": [], "sv_pending": pending})
         else:
-            st.out.line("nothing to recover: no drive has changes left by a command that did not finish")
+            st.out.line("nothing to recover: no drive has changes left by a command that did not finish "
+                        "(the journal's view; `sherpa recover --check-drives --apply` reads each drive for a "
+                        "dead-man that tripped, homing left armed, a recorder left on, and clears them)")
             _show_pending(st, pending)
         return
     with st.session(buses=plan.buses(cfg, False)) as session:

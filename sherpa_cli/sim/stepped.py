@@ -43,6 +43,7 @@ ANSWER_TIMEOUT_S = 5.0  # wall time to wait for the TPDOs of one SYNC (a loaded 
 STEPPED_REPLY_S = 0.3  # wall time a client waits for one reply from the stepped in-process arm (a deaf
 # poll costs this much wall time; an answerable one later than this on a loaded machine would cost
 # one more charged wait, so it is generous)
+PACED_SLICE_S = 0.02  # the longest step simulated time takes at once in a paced wait (heartbeats: 10-100 ms)
 STEPPED_RETRIES = 4  # at least this many resends (a late reply on a loaded machine; sim time stands still)
 _EPS = 1e-9
 
@@ -116,18 +117,33 @@ class SteppedTime:
             return
         with self._lock:
             start = time.monotonic()
-            if self._period is None:
+            if self._period is not None:
+                self._sync_for(seconds, start)
+            elif not self.pace:
                 self.clock.advance(seconds)
-                ahead = seconds
             else:
-                ahead = self._sync_for(seconds)
-            if self.pace:
-                rest = ahead - (time.monotonic() - start)
-                if rest > 0:
-                    time.sleep(rest)
+                # in slices, each paced: one long wait (a charged one, a settle) moved in a single jump
+                # would put simulated time a whole wait ahead of the wall-time heartbeat, and a drive's
+                # consumer, counting simulated time, would trip in the jump though no beat was missed
+                ahead = 0.0
+                while True:  # at least once: a wait shorter than _EPS still moves the clock
+                    step = min(PACED_SLICE_S, seconds - ahead)
+                    self.clock.advance(step)
+                    ahead += step
+                    self._pace(start, ahead)
+                    if ahead >= seconds - _EPS:
+                        break
 
-    def _sync_for(self, seconds: float) -> float:
-        """Whole SYNC periods covering ``seconds``, each SYNC answered before the clock moves on."""
+    def _pace(self, start: float, ahead: float) -> None:
+        """Wait until ``ahead`` s of wall time have passed since ``start`` (with ``pace``)."""
+        if self.pace:
+            rest = ahead - (time.monotonic() - start)
+            if rest > 0:
+                time.sleep(rest)
+
+    def _sync_for(self, seconds: float, start: float) -> None:
+        """Whole SYNC periods covering ``seconds``, each SYNC answered before the clock moves on, and
+        paced (from ``start``, wall time) at each SYNC instant, as :meth:`sleep` paces its slices."""
         import can
 
         period = self._period
@@ -142,6 +158,7 @@ class SteppedTime:
             if due > self.clock.now():
                 ahead += due - self.clock.now()
                 self.clock.advance(due - self.clock.now())
+                self._pace(start, ahead)
             for name, bus in list(self._buses.items()):
                 # noted before the send: its answer's receive timestamp is never earlier
                 self._sources[name].log.sent(self.clock.now(), time.time())
@@ -154,7 +171,6 @@ class SteppedTime:
                                              f"{self.answer_timeout:g} s", hint="a simulated drive left Operational "
                                              "or died during the recording")
                 time.sleep(0.0002)
-        return ahead
 
 
 class SentSyncs:
