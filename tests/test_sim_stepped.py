@@ -115,3 +115,13 @@ def test_a_wait_shorter_than_the_rounding_still_moves_the_clock():
     st = SteppedTime()
     st.sleep(1e-12)
     assert st.now() == 1e-12
+
+
+def test_a_paced_wait_ends_where_one_step_would():
+    # ten slices of 20 ms summed to 0.19999999999999998, and a test asking for 0.2 s between two
+    # snapshots failed: each slice ends at an instant reckoned from the start
+    st = SteppedTime()
+    st.sleep(0.2)
+    assert st.now() == 0.2
+    st.sleep(0.1)
+    assert st.now() == 0.2 + 0.1

@@ -125,13 +125,15 @@ class SteppedTime:
                 # in slices, each paced: one long wait (a charged one, a settle) moved in a single jump
                 # would put simulated time a whole wait ahead of the wall-time heartbeat, and a drive's
                 # consumer, counting simulated time, would trip in the jump though no beat was missed
-                ahead = 0.0
+                # (each slice ends at an instant reckoned from the start, so the wait ends at exactly
+                # begin + seconds, as one step would: no sum of slices drifts off it)
+                begin = self.clock.now()
+                end = begin + seconds
                 while True:  # at least once: a wait shorter than _EPS still moves the clock
-                    step = min(PACED_SLICE_S, seconds - ahead)
-                    self.clock.advance(step)
-                    ahead += step
-                    self._pace(start, ahead)
-                    if ahead >= seconds - _EPS:
+                    now = self.clock.now()
+                    self.clock.advance(min(now + PACED_SLICE_S, end) - now)
+                    self._pace(start, self.clock.now() - begin)
+                    if self.clock.now() >= end:
                         break
 
     def _pace(self, start: float, ahead: float) -> None:
