@@ -25,6 +25,21 @@ def test_example_runs(code, monkeypatch, capsys):
     assert "None" not in out
 
 
+def test_no_example_needs_what_the_first_install_lacks():
+    """The README's first install is `pip install -e .`: an example that imports a test tool (pytest
+    was one) fails for the user who copies it. Only the standard library and sherpa_cli."""
+    import ast
+    import sys
+
+    for k, code in enumerate(BLOCKS, 1):
+        for node in ast.walk(ast.parse(code)):
+            names = ([a.name for a in node.names] if isinstance(node, ast.Import)
+                     else [node.module or ""] if isinstance(node, ast.ImportFrom) else [])
+            for name in names:
+                top = name.split(".")[0]
+                assert top == "sherpa_cli" or top in sys.stdlib_module_names, f"example {k} imports {name}"
+
+
 # the sections whose examples call what the API grew for the rest of the command line
 TYPED_SECTIONS = ("Record", "Monitor", "Tune the loops, match a pair", "Raw commands, recovery, the doctor")
 

@@ -240,8 +240,11 @@ def test_a_switch_that_never_triggers_stops_at_the_bound(tmp_path):
     plan, ctx = homed(cfg, ["yaw"])
     with ctx as s:
         with pytest.raises(SafetyError, match=r"yaw: the switch on input 1 never triggered: stopped at the "
-                                              r"search bound \(820 counts up at 1000 counts/s\)"):
+                                              r"search bound \(820 counts up at 1000 counts/s\)") as refused:
             home.run_home(s, plan)
+        # a newcomer whose home was cut short past the switch read "where the joint stands" and did not
+        # know which way: the hint says the search goes up only, and the jog that brings it back
+        assert "goes up only" in refused.value.hint and "jog yaw --by -820counts --uncalibrated" in refused.value.hint
         with s.sim.lock:
             d = s.sim.drives["yaw_drive"]
             assert not d.motor_on and d.ram.get("UI[3]", 0) == 0  # stopped, switched off, not marked

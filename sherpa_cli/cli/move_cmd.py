@@ -159,7 +159,7 @@ def _dry_run(st: AppState, prepared: PreparedMove) -> None:
         st.out.line(f"  {name}: holds at {_pos(before, _cpr(prepared, name))}" +
                     (" (its pair moves)" if before == counts else
                      f", giving way to {counts} counts: Σ and Δ share parity"))
-    st.out.line("  sent: " + "; ".join(f"{m.drive} SP={m.profile.sp} AC={m.profile.ac} DC={m.profile.dc} "
+    st.out.line("  would send: " + "; ".join(f"{m.drive} SP={m.profile.sp} AC={m.profile.ac} DC={m.profile.dc} "
                                        f"PA={m.target}" for m in plan.motors))
     st.out.line("nothing sent; add --apply to move")
 

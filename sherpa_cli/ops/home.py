@@ -535,10 +535,14 @@ class _Runner:
             self.start_pr(guard, refs, {name: d * search}, {name: speed})
             if not self.wait(guard, refs, distance=search, speed=speed, homing=True, what=f"{joint.name}: the search"):
                 c.set("HM", 1, 0)
+                went, return_way = ("up", "down") if d > 0 else ("down", "up")
                 raise SafetyError(f"{joint.name}: the switch on input {sw.input} never triggered: stopped at the "
-                                  f"search bound ({search} counts {'up' if d > 0 else 'down'} at {speed} counts/s)",
+                                  f"search bound ({search} counts {went} at {speed} counts/s)",
                                   hint="check the switch and its wiring (`sherpa home --check-wiring "
-                                       f"{joint.name}`) and where the joint stands")
+                                       f"{joint.name}`) and where the joint stands: the search goes {went} only, so "
+                                       f"a joint already {'above' if d > 0 else 'below'} its switch (a home cut short "
+                                       f"past it) never meets it; jog it {return_way} past the switch first (`sherpa jog "
+                                       f"{joint.name} --by {-d * search}counts --uncalibrated --apply`, watching it)")
             calibration.mark_switch_seen(self.cfg, c)  # PX counts from the switch now; not homed yet
             if unit.kind == "home_switch":
                 self.move_to(guard, refs, {name: pos - d * b}, speed, f"{joint.name}: the back-off")

@@ -9,9 +9,10 @@ simulated drive and the commands sent, not on how fast or loaded the host is.
 
 Two bounds keep the rest of the protocol honest:
 
-- simulated time never runs faster than wall time (each :meth:`sleep` lasts at least as long
-  on the wall): the motion guard's host heartbeat comes from a thread in wall time, and the
-  drive's heartbeat consumer counts simulated time;
+- simulated time never runs faster than wall time: a :meth:`sleep` moves the clock in slices of
+  at most ``PACED_SLICE_S`` (or SYNC periods), each only once the wall has caught up with the one
+  before, so it is never more than a slice ahead: the motion guard's host heartbeat comes from a
+  thread in wall time, and the drive's heartbeat consumer counts simulated time;
 - while recording, the clock stops only on SYNC instants (a wait is rounded up to whole
   periods), so the simulated drives are always stepped to the same instants.
 
