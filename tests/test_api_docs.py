@@ -59,3 +59,13 @@ def test_the_record_monitor_tune_and_raw_examples_pass_mypy_strict(tmp_path):
                           "--cache-dir", str(tmp_path / "cache"), *map(str, files)],
                          cwd=ROOT, capture_output=True, text=True, timeout=600)
     assert out.returncode == 0, out.stdout + out.stderr
+
+
+def test_the_unconfirmed_save_example_runs_on_an_arm_commissioned_before(cli, capsys):
+    """A newcomer runs the README's first command, then docs/api.md's examples in that one state
+    directory: wrist_3 then needs nothing, so the refusal the example showed never came and its
+    `else: raise AssertionError` fired. It says why nothing was asked instead."""
+    (block,) = [b for b in BLOCKS if "nobody confirmed" in b]
+    assert cli("--sim", "program-limits", "--apply", "--save", "--yes").exit_code == 0
+    exec(compile(block, f"{DOC}:example", "exec"), {"__name__": "docs_api_example"})
+    assert "nothing to change, so nothing to confirm" in capsys.readouterr().out

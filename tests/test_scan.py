@@ -233,7 +233,8 @@ def test_sdo_timeout_comes_from_the_config(tmp_path):
     from sherpa_cli.errors import SdoError
 
     cfg = load_config("configs/appendix-c/example1.yaml")
-    cfg = dataclasses.replace(cfg, protocol=dataclasses.replace(cfg.protocol, sdo_timeout=0.05))
+    # (with the in-process simulator a session's SDO waits the longer of this and `sim: reply_timeout`)
+    cfg = dataclasses.replace(cfg, protocol=dataclasses.replace(cfg.protocol, sdo_timeout=0.05), sim_reply_timeout=0.01)
     with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as session:
         network = next(iter(session.links.values())).network
         assert network.sdo_timeout == 0.05

@@ -64,3 +64,13 @@ def test_a_slow_simulated_sdo_answer_is_waited_for_too(cli, tmp_path):
     r = cli("--config", cfg, "--sim", "--json", "identify", "drive1")
     assert r.exit_code == 0, r.transcript()
     assert json.loads(r.stdout)["drives"][0]["error"] is None
+
+
+def test_an_unanswered_simulated_sdo_says_the_simulated_arm_was_too_slow(cli, tmp_path):
+    # docs/simulator.md: a --sim timeout names the simulated arm, not the drive's power; the SDO
+    # transfers said "check that the drive is powered" still
+    cfg = _config(tmp_path, "  reply_timeout: 0.05\n  drives:\n    drive1: {sdo_latency: 0.9}\n")
+    r = cli("--config", cfg, "--sim", "identify", "drive1")
+    assert "no answer to the SDO upload" in r.stderr and "within 0.3 s" in r.stderr, r.transcript()
+    assert "the simulated arm answered too slowly" in r.stderr
+    assert "check that the drive is powered" not in r.stderr

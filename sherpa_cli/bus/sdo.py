@@ -90,10 +90,12 @@ class DriveSdo:
     """
 
     def __init__(self, network: canopen.Network, node: int, *, label: str | None = None, timeout: float | None = None,
-                 channel_lock: TransferLock | None = None, clock: Callable[[], float] = time.monotonic) -> None:
+                 channel_lock: TransferLock | None = None, clock: Callable[[], float] = time.monotonic,
+                 timeout_hint: str = NO_ANSWER_HINT) -> None:
         import canopen
 
         self.node = node
+        self.timeout_hint = timeout_hint  # what an unanswered transfer's error suggests (--sim: its own)
         self._clock = clock
         self.label = label or f"node {node}"
         self._network = network
@@ -304,13 +306,13 @@ class DriveSdo:
             reason, detail = "abort", f"SDO {op} of {what} aborted with 0x{code:08X} ({abort_text(code)})"
         elif timed_out:
             reason, detail = "timeout", f"no answer to the SDO {op} of {what} within {self.timeout:g} s"
-            hint = NO_ANSWER_HINT
+            hint = self.timeout_hint
         elif isinstance(exc, SdoAbortedError):
             code = exc.code
             reason, detail = "abort", f"SDO {op} of {what} aborted with 0x{code:08X} ({abort_text(code)})"
         elif isinstance(exc, SdoCommunicationError) and isinstance(exc.__context__, queue.Empty):
             reason, detail = "timeout", f"no answer to the SDO {op} of {what} within {self.timeout:g} s"
-            hint = NO_ANSWER_HINT
+            hint = self.timeout_hint
         elif isinstance(exc, (SdoCommunicationError, struct.error)):
             why = "too short" if isinstance(exc, struct.error) else str(exc)
             reason, detail = "malformed", f"SDO {op} of {what}: malformed answer ({why})"

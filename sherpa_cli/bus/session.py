@@ -153,7 +153,7 @@ class ArmSession:
 
     def sdo(self, ref: DriveRef) -> DriveSdo:
         """The SDO client of a drive (bus/sdo.py DriveSdo), one per drive for the whole session."""
-        from sherpa_cli.bus.sdo import DriveSdo
+        from sherpa_cli.bus.sdo import NO_ANSWER_HINT, DriveSdo
 
         sdo = self._sdo.get(ref.key)
         if sdo is None:
@@ -162,11 +162,11 @@ class ArmSession:
             from sherpa_cli.bus.machine_lock import TransferLock, wire_key
 
             link = self.links[ref.bus]
-            timeout = self.cfg.protocol.sdo_timeout
+            timeout, hint = self.cfg.protocol.sdo_timeout, NO_ANSWER_HINT
             if self.sim is not None:  # the in-process simulator answers SDO on this loaded machine too
-                timeout = max(timeout, self.cfg.sim_reply_timeout)
+                timeout, hint = max(timeout, self.cfg.sim_reply_timeout), SIM_TIMEOUT_HINT
             sdo = DriveSdo(link.network, ref.node, label=f"{ref.name} (node {ref.node})", timeout=timeout,
-                           channel_lock=TransferLock(wire_key(link.config.interface, link.config.channel), ref.node))
+                           timeout_hint=hint, channel_lock=TransferLock(wire_key(link.config.interface, link.config.channel), ref.node))
             sdo.on_request = functools.partial(self._request_sent, ref.key)
             self._sdo[ref.key] = sdo
         return sdo
