@@ -60,6 +60,62 @@ def test_the_stalled_time_never_decreases_and_grows_by_a_gap_beyond_max_gap(step
         last = got
 
 
+def test_stalled_at_leaves_out_what_was_counted_after_the_instant():
+    wall = Wall()
+    meter = StallMeter(0.1, wall=wall)
+    meter.read()
+    wall.t = 101.0  # a stretch of 1 s, 0.9 s counted: taken as its last 0.9 s (100.1 .. 101.0)
+    assert meter.read() == pytest.approx(0.9)
+    assert meter.stalled_at(100.05) == pytest.approx(0.0)  # before it: none of it
+    assert meter.stalled_at(100.6) == pytest.approx(0.5)  # inside it: the part before
+    assert meter.stalled_at(101.0) == pytest.approx(0.9)
+    wall.t = 101.05
+    assert meter.stalled_at(99.0) == pytest.approx(0.0)
+
+
+@given(steps=st.lists(st.floats(min_value=0, max_value=2, allow_nan=False), max_size=30),
+       when=st.floats(min_value=99, max_value=140, allow_nan=False))
+def test_stalled_at_never_exceeds_the_reading_nor_goes_below_zero(steps, when):
+    wall = Wall()
+    meter = StallMeter(0.1, wall=wall)
+    meter.read()
+    for dt in steps:
+        wall.t += dt
+        meter.read()
+    at = meter.stalled_at(when)
+    assert -1e-9 <= at <= meter.read() + 1e-9
+
+
+def test_a_heartbeat_handled_after_a_stall_is_not_charged_the_stall():
+    # The pump of a starved process hands a heartbeat late, stamped with its arrival: paired with the
+    # meter read when it was handled, its window lost the stall and the consumer tripped (a pair move
+    # on a busy machine; a SIGSTOPped jog). It counts from the arrival with the stall left out.
+    wall = Wall()
+    meter = StallMeter(0.1, wall=wall)
+    clock = ManualClock()
+    clock.advance(100.0)
+    drive = SimDrive(5, clock=clock, stalled=meter.read, stalled_at=meter.stalled_at)
+    drive.od_write(0x1016, 1, 126 << 16 | 500)  # host 126, 500 ms
+    meter.read()
+    drive.receive(0x77E, bytes([5]))  # armed at 100.0
+
+    def run(seconds: float) -> bool:  # the process runs: the meter read every 50 ms; whether it tripped
+        for _ in range(round(seconds / 0.05)):
+            wall.t = clock.advance(0.05)
+            meter.read()
+            drive.tick()
+        return any("heartbeat lost" in text for _, text in drive.events)
+
+    assert not run(0.4)  # a beat arrives at 100.4 ...
+    arrived = clock.now()
+    wall.t = clock.advance(0.8)  # ... and the process stops for 0.8 s before its pump gets to it
+    drive.receive(0x77E, bytes([5]), at=arrived)
+    drive.tick()
+    assert not any("heartbeat lost" in text for _, text in drive.events), drive.events
+    assert not run(0.25)  # the host's silence since the beat: 0.1 s before the stall, 0.25 after: 0.35 of 0.5
+    assert run(0.15)  # then its silence is the consumer's time
+
+
 def test_a_max_gap_that_is_not_positive_is_refused():
     with pytest.raises(ValueError, match="max_gap must be positive"):
         StallMeter(0)

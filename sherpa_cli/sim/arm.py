@@ -362,7 +362,8 @@ class SimArm:
                 speed_gain=cfg.sim[name].speed_gain if name in cfg.sim else 1.0, position=start.get(name, 0),
                 on_step=functools.partial(self._drive_stepped, name),
                 on_event=functools.partial(self._drive_event, name),
-                stalled=None if stalls is None else stalls.read)
+                stalled=None if stalls is None else stalls.read,
+                stalled_at=None if stalls is None else stalls.stalled_at)
         self._mechanics = _Mechanics(cfg, self.drives)
         for pair in cfg.pairs.values():
             # a pair's motors carry its joint together: gravity (`gravity:` of each motor, N m at horizontal)

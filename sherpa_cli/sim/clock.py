@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import collections
 import threading
 import time
 from collections.abc import Callable
@@ -53,6 +54,9 @@ class RealClock:
         return time.monotonic() - (time.time() - timestamp)
 
 
+STRETCHES_KEPT = 1024  # stretches stalled_at looks back over (each one at least max_gap long)
+
+
 class StallMeter:
     """How long the process that runs an in-process simulator (``--sim``, the tests' arms) did not run.
 
@@ -77,15 +81,31 @@ class StallMeter:
         self._wall = wall
         self._last: float | None = None
         self._lock = threading.Lock()
+        # the recent stretches: (wall time it ended, s counted), for stalled_at
+        self._stretches: collections.deque[tuple[float, float]] = collections.deque(maxlen=STRETCHES_KEPT)
 
     def read(self) -> float:
         """The stalled seconds so far (never decreasing); a reading also ends a stretch."""
         with self._lock:
             wall = self._wall()
             if self._last is not None and wall - self._last > self.max_gap:
-                self.stalled += wall - self._last - self.max_gap
+                counted = wall - self._last - self.max_gap
+                self.stalled += counted
+                self._stretches.append((wall, counted))
             self._last = max(wall, self._last if self._last is not None else wall)
             return self.stalled
+
+    def stalled_at(self, when: float) -> float:
+        """The stalled seconds as of wall instant ``when`` (at most :meth:`read`'s): what a stretch
+        counted after ``when`` is left out, a stretch's count taken as its last seconds.
+
+        A frame the simulator handles late carries the instant it arrived. Paired with the meter
+        read when it is handled, a heartbeat that came before a stall would be charged that stall:
+        its consumer's window, counted from the arrival, would lose the very time the process did
+        not run, and a busy machine's late pump tripped a dead-man the host had kept."""
+        now = self.read()
+        with self._lock:
+            return now - sum(min(counted, end - when) for end, counted in self._stretches if end > when)
 
     def keep_time(self, stop: threading.Event, every: float = 0.01) -> None:
         """Read the meter every ``every`` s until ``stop`` is set (a thread of the simulator): a gap

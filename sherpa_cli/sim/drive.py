@@ -130,7 +130,8 @@ class SimDrive:
                  position: int = 0, on_step: Callable[[SimDrive], None] | None = None,
                  on_event: Callable[[SimDrive, float, str], None] | None = None,
                  od_live: Mapping[tuple[int, int], Callable[[], OdValue]] | None = None,
-                 stalled: Callable[[], float] | None = None) -> None:
+                 stalled: Callable[[], float] | None = None,
+                 stalled_at: Callable[[float], float] | None = None) -> None:
         if isinstance(node, bool) or not isinstance(node, int) or not 1 <= node <= 127:
             raise ValueError(f"node id must be 1..127, got {node!r}")
         if not speed_gain > 0:
@@ -204,6 +205,9 @@ class SimDrive:
         # seconds the simulator's own process did not run (sim/clock.py StallMeter), and their count
         # at the last heartbeat: the consumer leaves them out, they were no silence of the host
         self._stalled = stalled or (lambda: 0.0)
+        # the same meter as of an earlier instant (StallMeter.stalled_at): a heartbeat handled late is
+        # charged only what the process did not run after it arrived
+        self._stalled_at = stalled_at or (lambda _when: self._stalled())
         self._hb_stalled = 0.0
         self._settle_until = -math.inf  # the interpreter is deaf until then (MO settle window)
         self._blackout_until = -math.inf  # SV blackout: nothing in or out until then
@@ -300,7 +304,7 @@ class SimDrive:
             finally:
                 self._via_group = False
         elif can_id == HEARTBEAT_BASE + self._consumer()[0]:
-            self._hb_last, self._hb_stalled = t, self._stalled()
+            self._hb_last, self._hb_stalled = t, self._stalled_at(t)
         elif self.rpdos.record_cob(can_id) and self._nmt_state == OPERATIONAL:  # PDOs live in Operational only
             self.pvt_records += 1
             self._pvt_emcy(self.pvt.push(data))

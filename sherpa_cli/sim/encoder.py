@@ -79,6 +79,7 @@ class DriveOptions(TypedDict, total=False):
     on_step: Callable[[SimDrive], None] | None
     on_event: Callable[[SimDrive, float, str], None] | None
     od_live: Mapping[tuple[int, int], Callable[[], OdValue]] | None
+    stalled_at: Callable[[float], float] | None
 
 
 class SimEncoder(SimDrive):
