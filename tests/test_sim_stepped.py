@@ -54,34 +54,48 @@ def test_it_never_runs_ahead_of_wall_time():
     assert time.monotonic() - t >= 0.15
 
 
-class WatchedClock(ManualClock):
-    """Notes, at each step, how far simulated time got ahead of the wall time since ``begin``."""
+class FakeWall:
+    """Wall time that moves only when pacing sleeps on it."""
 
     def __init__(self) -> None:
+        self.t = 0.0
+
+    def __call__(self) -> float:
+        return self.t
+
+    def sleep(self, seconds: float) -> None:
+        self.t += seconds
+
+
+class WatchedClock(ManualClock):
+    """Notes, at each step, how far simulated time got ahead of the (fake) wall since it began."""
+
+    def __init__(self, wall: FakeWall) -> None:
         super().__init__()
+        self.wall = wall
         self.lead: list[float] = []
-        self.begin = time.monotonic()
 
     def advance(self, dt: float) -> float:
         now = super().advance(dt)
-        self.lead.append(now - (time.monotonic() - self.begin))
+        self.lead.append(now - self.wall())
         return now
 
 
 @pytest.mark.parametrize("sync", [False, True])
 def test_a_long_wait_never_puts_simulated_time_a_slice_ahead_of_the_wall(sync):
     # A wait of 0.3 s moved in one jump put simulated time 0.3 s ahead of the wall-time host heartbeat:
-    # a drive's consumer of less than that tripped though no beat was missed. Whatever the load, each
-    # step starts only once the wall has caught up with the last one.
-    clock = WatchedClock()
-    st = SteppedTime(clock)
+    # a drive's consumer of less than that tripped though no beat was missed. Each step starts only once
+    # the wall has caught up with the last one (a fake wall: pacing is what moves it).
+    wall = FakeWall()
+    clock = WatchedClock(wall)
+    st = SteppedTime(clock, wall=wall, wall_sleep=wall.sleep)
     if sync:
         st.sync_factory("can0", Bus(clock), 0.01)
         st.follow(lambda n: True)
-    clock.begin = time.monotonic()
     st.sleep(0.3)
     assert len(clock.lead) >= 0.3 / max(PACED_SLICE_S, 0.01) - 1
     assert max(clock.lead) <= max(PACED_SLICE_S, 0.01) + 1e-9, max(clock.lead)
+    assert wall.t == pytest.approx(clock.now())
 
 
 def test_an_unanswered_sync_is_a_communication_error():

@@ -87,13 +87,16 @@ class StallMeter:
     def read(self) -> float:
         """The stalled seconds so far (never decreasing); a reading also ends a stretch."""
         with self._lock:
-            wall = self._wall()
-            if self._last is not None and wall - self._last > self.max_gap:
-                counted = wall - self._last - self.max_gap
-                self.stalled += counted
-                self._stretches.append((wall, counted))
-            self._last = max(wall, self._last if self._last is not None else wall)
-            return self.stalled
+            return self._read_locked()
+
+    def _read_locked(self) -> float:
+        wall = self._wall()
+        if self._last is not None and wall - self._last > self.max_gap:
+            counted = wall - self._last - self.max_gap
+            self.stalled += counted
+            self._stretches.append((wall, counted))
+        self._last = max(wall, self._last if self._last is not None else wall)
+        return self.stalled
 
     def stalled_at(self, when: float) -> float:
         """The stalled seconds as of wall instant ``when`` (at most :meth:`read`'s): what a stretch
@@ -103,8 +106,8 @@ class StallMeter:
         read when it is handled, a heartbeat that came before a stall would be charged that stall:
         its consumer's window, counted from the arrival, would lose the very time the process did
         not run, and a busy machine's late pump tripped a dead-man the host had kept."""
-        now = self.read()
-        with self._lock:
+        with self._lock:  # one reading and the stretches it saw: none added in between
+            now = self._read_locked()
             return now - sum(min(counted, end - when) for end, counted in self._stretches if end > when)
 
     def keep_time(self, stop: threading.Event, every: float = 0.01) -> None:

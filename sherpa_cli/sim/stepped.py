@@ -59,8 +59,10 @@ class SteppedTime:
     """``now``/``sleep`` for the tool, and a SYNC source (``sync_factory``) for its Recorder."""
 
     def __init__(self, clock: ManualClock | None = None, *, pace: bool = True,
-                 answer_timeout: float = ANSWER_TIMEOUT_S) -> None:
+                 answer_timeout: float = ANSWER_TIMEOUT_S, wall: Callable[[], float] = time.monotonic,
+                 wall_sleep: Callable[[float], None] = time.sleep) -> None:
         self.clock = clock or ManualClock()
+        self._wall, self._wall_sleep = wall, wall_sleep  # what pacing waits on (tests: a fake wall)
         self.pace = pace
         self.answer_timeout = answer_timeout
         self._buses: dict[str, SyncBus] = {}
@@ -117,7 +119,7 @@ class SteppedTime:
         if not seconds > 0:
             return
         with self._lock:
-            start = time.monotonic()
+            start = self._wall()
             if self._period is not None:
                 self._sync_for(seconds, start)
             elif not self.pace:
@@ -140,9 +142,9 @@ class SteppedTime:
     def _pace(self, start: float, ahead: float) -> None:
         """Wait until ``ahead`` s of wall time have passed since ``start`` (with ``pace``)."""
         if self.pace:
-            rest = ahead - (time.monotonic() - start)
+            rest = ahead - (self._wall() - start)
             if rest > 0:
-                time.sleep(rest)
+                self._wall_sleep(rest)
 
     def _sync_for(self, seconds: float, start: float) -> None:
         """Whole SYNC periods covering ``seconds``, each SYNC answered before the clock moves on, and
