@@ -11,6 +11,7 @@ from motion_helpers import JOG_CONFIG, calibrate, motors_off
 from sherpa_cli.bus.session import ArmSession
 from sherpa_cli.bus.targets import drive_ref
 from sherpa_cli.config import load_config
+from sherpa_cli.errors import SafetyError
 from sherpa_cli.motion.axis import resolve_axis
 from sherpa_cli.motion.pair_start import CommonStart
 from sherpa_cli.motion.request import parse_request
@@ -206,3 +207,63 @@ def test_one_pair_drive_dying_stops_the_partner_at_once_and_ends_the_command_nam
         # timeout per exit step (those cost 11 requests and more)
         assert len(after_silent) <= 1, after_silent
         assert motors_off(s)
+
+
+def _group_id(s, name):
+    return bytes(s.sdo(drive_ref(s.cfg, name)).upload(0x2040, 0))[0]
+
+
+def test_a_group_id_the_start_could_not_put_back_goes_back_at_the_guards_exit():
+    """The start's close skips a drive that did not answer its stop; the guard's exit reaches it
+    again and puts its group id back, naming it, instead of reading "settings put back" over it."""
+    from sherpa_cli.bus import journal
+    from sherpa_cli.motion.guard import MotionGuard
+    from sherpa_cli.motion.settings import MotionSettings
+
+    cfg = load_config(JOG_CONFIG)
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
+        refs = [drive_ref(cfg, d) for d in ("left", "right")]
+        before = {r.name: _group_id(s, r.name) for r in refs}
+        with MotionGuard(s, refs, settings=MotionSettings.from_config(cfg)) as g:
+            start = CommonStart(s, refs, {r.name: g.client(r) for r in refs}, "group", cfg.motion.pair_group_id,
+                                stop=lambda: ["right"])  # as if right had not answered the stop
+            with start:
+                assert _group_id(s, "right") == cfg.motion.pair_group_id != before["right"]
+            assert _group_id(s, "right") == cfg.motion.pair_group_id  # the close skipped it
+            assert journal.leftover(refs[1]) == [] and journal.own_steps(refs[1], "pair start")
+        assert {r.name: _group_id(s, r.name) for r in refs} == before
+        assert all(not journal.steps_of(journal._load(journal.path_for(r.bus, r.node))) for r in refs)
+        right = next(d for d in g.report.drives if d.drive == "right")
+        assert f"0x2040:0={before['right']:#x}" in right.restored and not right.problems
+        left = next(d for d in g.report.drives if d.drive == "left")
+        assert not any(x.startswith("0x2040") for x in left.restored)  # the close put it back
+
+
+def test_a_group_id_that_cannot_be_put_back_at_the_exit_is_named_with_recover(monkeypatch):
+    from sherpa_cli.bus import journal
+    from sherpa_cli.motion.guard import MotionGuard
+    from sherpa_cli.motion.settings import MotionSettings
+
+    cfg = load_config(JOG_CONFIG)
+    with ArmSession.open(cfg, sim=SimArm.in_process(cfg)) as s:
+        refs = [drive_ref(cfg, d) for d in ("left", "right")]
+        with (pytest.raises(SafetyError, match=r"right: 0x2040:0=0x0 not put back .*`sherpa recover` puts it back"),
+              MotionGuard(s, refs, settings=MotionSettings.from_config(cfg)) as g):
+            with CommonStart(s, refs, {r.name: g.client(r) for r in refs}, "group", cfg.motion.pair_group_id,
+                             stop=lambda: ["right"]):
+                pass
+            # the group id object refuses every write from now on
+            sdo = s.sdo(refs[1])
+            real = sdo.download
+
+            def refuse(index, sub, data, *, name=None):
+                if index == 0x2040:
+                    from sherpa_cli.errors import SdoError
+                    raise SdoError("right: SDO abort (read only)", detail="read only", reason="abort")
+                return real(index, sub, data, name=name)
+            monkeypatch.setattr(sdo, "download", refuse)
+        right = next(d for d in g.report.drives if d.drive == "right")
+        assert any(p.startswith("0x2040:0=") and "`sherpa recover` puts it back" in p for p in right.problems)
+        assert right.line().endswith("`sherpa recover` puts it back")
+        assert [st.name for st in journal.own_steps(refs[1], "pair start")] == ["0x2040:0"]
+        journal.forget(refs[1], "pair start")

@@ -150,6 +150,12 @@ def note(ref: DriveRef, *steps: Step) -> None:
                               hint=f"make {journal_dir()} a directory this user can write") from None
 
 
+def own_steps(ref: DriveRef, owner: str) -> list[Step]:
+    """``owner``'s notes on this drive that this process made and has not put back."""
+    me = os.getpid()
+    return [s for s in steps_of(_load(path_for(ref.bus, ref.node))) if s.owner == owner and s.pid == me]
+
+
 def forget(ref: DriveRef, owner: str, names: set[str] | None = None) -> None:
     """The change was put back: drop ``owner``'s steps (only those named, if ``names``)."""
     path = path_for(ref.bus, ref.node)

@@ -56,6 +56,7 @@ from sherpa_cli.motion.drive_watch import DriveWatch, DriveWatchError
 from sherpa_cli.motion.force_watch import ForceLimitError, ForceWatch, SensorSilentError, tightened
 from sherpa_cli.motion.host_ids import HostIdListener, OtherConsumers
 from sherpa_cli.motion.lock import DriveLock, HostIdLock, drive_label
+from sherpa_cli.motion.pair_start import JOURNAL_OWNER as PAIR_START_OWNER
 from sherpa_cli.motion.report import NOT_MOVED, RESET_DURING_STOP, DriveStop, GuardReport
 from sherpa_cli.motion.settings import PROFILE_KEYS, MotionSettings
 from sherpa_cli.motion.stopping import ask_patiently, stop_drive, stop_other, why
@@ -997,6 +998,7 @@ class MotionGuard:
             r.problems.append(f"no answer (dead or silent): not confirmed stopped; its heartbeat consumer "
                               f"switches the motor off {s.consumer_time_ms} ms after the tool's heartbeat ends")
             r.kept.extend(f"{name} (no answer)" for name in ("0x1016:1", "0x1029:1", "0x6007:0"))
+            r.kept.extend(f"{s.name} (no answer)" for s in journal.own_steps(d.ref, PAIR_START_OWNER))
             self._event(r.line())
             return r
         if stop and self._bus_lost(d.ref.bus):
@@ -1007,10 +1009,12 @@ class MotionGuard:
                               f"{s.consumer_time_ms} ms after the tool's heartbeat ends")
             r.kept.extend(f"{name} (bus lost)" for name in ("0x1016:1", "0x1029:1", "0x6007:0")
                           if name in {f"0x{k[0]:04X}:{k[1]}" for k in d.od_before})
+            r.kept.extend(f"{s.name} (bus lost)" for s in journal.own_steps(d.ref, PAIR_START_OWNER))
             self._event(r.line())
             return r
         if not stop:
             r.stopped_by = NOT_MOVED
+            self._put_back_pair_start(d, r)
             self._restore_dead_man(d, r, stop_failed=False)
             # the profile and mode were never changed
             journal.forget(d.ref, JOURNAL_OWNER, d.put_back | set(PROFILE_KEYS) | d.ramp_journal | self._mode_name(d))
@@ -1024,6 +1028,8 @@ class MotionGuard:
                 c.nmt_start()
             except Exception as exc:  # noqa: BLE001 - reported; an NMT frame that could not be sent: still try the stop
                 r.problems.append(f"NMT start: {why(exc)}")
+            # before the careful stop: an RPDO2 left synchronous would hold that stop back until a SYNC
+            self._put_back_pair_start(d, r)
             if d.native:
                 how, standstill, problems = stop_drive(c, unit_mode=d.um, method=s.stop_method,
                                                        standstill_timeout=s.standstill_timeout,
@@ -1084,6 +1090,24 @@ class MotionGuard:
             journal.forget(d.ref, JOURNAL_OWNER, d.put_back)
         self._event(r.line())
         return r
+
+    def _put_back_pair_start(self, d: _Drive, r: DriveStop) -> None:
+        """What a pair start inside this guard changed (0x2040, 0x1401:2; motion/pair_start.py) and
+        did not put back itself -- its close skips a drive that did not answer the stop, and that
+        drive may answer again by now. Put back here, or reported: an exit never reads "settings put
+        back" over a group id left set."""
+        for s in journal.own_steps(d.ref, PAIR_START_OWNER):
+            if s.kind != "sdo":
+                continue
+            try:
+                self._step()
+                self.session.sdo(d.ref).download(s.index, s.sub, int(s.old).to_bytes(s.size, "little"), name=s.name)
+            except Exception as exc:  # noqa: BLE001 - reported in the drive's stop report; the next step is tried
+                r.problems.append(f"{s.text()} not put back (the pair start's): {why(exc)}; `sherpa recover` "
+                                  "puts it back")
+                continue
+            journal.forget(d.ref, PAIR_START_OWNER, {s.name})
+            r.restored.append(s.text())
 
     def _bus_lost(self, bus: str) -> bool:
         """The connection to ``bus`` went away (its receive thread ended: bus/links.py PacedNetwork.lost)."""

@@ -23,6 +23,7 @@ if TYPE_CHECKING:
 RPDO2_COMM = 0x1401  # RPDO2 (the binary interpreter's) communication parameter; sub 2 = transmission type
 SYNC_RPDO_TYPE = 1  # synchronous: executed at the next SYNC ([IG] 5-4)
 RPDO2_TYPE_NAME = "RPDO2 transmission type"
+JOURNAL_OWNER = "pair start"
 
 
 def group_reset(guard: MotionGuard, cfg: ArmConfig) -> Callable[[Sequence[DriveRef]], None] | None:
@@ -99,7 +100,7 @@ class CommonStart:
                 if self.method == "group":
                     old = (bytes(sdo.upload(GROUP_INDEX, 0, name="group id")) + b"\0")[0]
                     if old != self.group_id:
-                        journal.note(r, journal.sdo("pair start", GROUP_INDEX, 0, 1, old))
+                        journal.note(r, journal.sdo(JOURNAL_OWNER, GROUP_INDEX, 0, 1, old))
                         sdo.download(GROUP_INDEX, 0, bytes([self.group_id]), name="group id")
                         self._old[r.name] = old
                 elif self.method == "sync_rpdo":
@@ -151,7 +152,7 @@ class CommonStart:
             for r in self.refs:
                 if self._rpdo_type[r.name] != SYNC_RPDO_TYPE:
                     self._synchronous.add(r.name)
-                    journal.note(r, journal.sdo("pair start", RPDO2_COMM, 2, 1, self._rpdo_type[r.name]))
+                    journal.note(r, journal.sdo(JOURNAL_OWNER, RPDO2_COMM, 2, 1, self._rpdo_type[r.name]))
                     self.session.sdo(r).download(RPDO2_COMM, 2, bytes([SYNC_RPDO_TYPE]), name=RPDO2_TYPE_NAME)
             for r in self.refs:
                 callback = listener(r.name)
@@ -191,7 +192,7 @@ class CommonStart:
 
     def _put_rpdo_type(self, ref: DriveRef) -> None:
         self.session.sdo(ref).download(RPDO2_COMM, 2, bytes([self._rpdo_type[ref.name]]), name=RPDO2_TYPE_NAME)
-        journal.forget(ref, "pair start", {f"0x{RPDO2_COMM:04X}:2"})
+        journal.forget(ref, JOURNAL_OWNER, {f"0x{RPDO2_COMM:04X}:2"})
         self._synchronous.discard(ref.name)
 
     def keep_profile(self, drive: str) -> None:
@@ -233,7 +234,7 @@ class CommonStart:
 
     def _put_group_id(self, ref: DriveRef, value: int) -> None:
         self.session.sdo(ref).download(GROUP_INDEX, 0, bytes([value]), name="group id")
-        journal.forget(ref, "pair start", {f"0x{GROUP_INDEX:04X}:0"})
+        journal.forget(ref, JOURNAL_OWNER, {f"0x{GROUP_INDEX:04X}:0"})
 
     def __exit__(self, *exc: object) -> None:
         deaf: Sequence[str] = ()
