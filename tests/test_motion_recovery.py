@@ -61,6 +61,9 @@ class FakeGuard:
     def enable(self, ref: DriveRef, um: int) -> None:
         self.enabled.append(um)
 
+    def query(self, ref: DriveRef, letters: str, index: int = 0) -> int:
+        return {"MO": 1, "MS": 0}[letters]
+
 
 def _run(drive: FakeDrive, clock: Clock) -> dict[str, int]:
     breaches = limit_watch.check([JOINT], {"m1": drive.px})
@@ -107,3 +110,39 @@ def test_a_motion_error_carries_the_guard_report_as_a_typed_field():
     bug = ValueError("a bug")
     assert with_report(bug, report) is bug and report_of(bug) is None
     assert report_of(SafetyError("x", motion_report=report)) is report  # a constructor field
+
+
+def test_a_position_move_whose_motor_is_switched_off_from_elsewhere_names_that_not_its_time_bound():
+    """`sherpa stop` from another terminal during home's back-off (ST, standstill, MO=0): the drive
+    stands short of its target, so the wait ran out its bound and said "the back-off did not finish in
+    time" instead of who stopped it."""
+    from motion_helpers import JOG_CONFIG, stepped_session
+
+    from sherpa_cli.bus.targets import drive_ref
+    from sherpa_cli.config import load_config
+    from sherpa_cli.motion.guard import MotionGuard
+
+    cfg = load_config(JOG_CONFIG)
+    with stepped_session(cfg) as (s, stepped):
+        ref = drive_ref(cfg, "elbow")
+        settings = MotionSettings.from_config(cfg)
+        switched_off = []
+
+        def sleep(dt: float) -> None:
+            with s.sim.lock:
+                drive = s.sim.drives["elbow"]
+                if not switched_off and drive.motor_on and drive.px > 300:
+                    # the move under way: MO=0, as another node's `sherpa stop` leaves it
+                    drive.write_param("MO", 0)
+                    switched_off.append(drive.px)
+            stepped.sleep(dt)
+
+        with (pytest.raises(SafetyError, match=r"^elbow .*the motor was switched off during j2: the back-off: "
+                                                r"MO=0 from elsewhere"),
+              MotionGuard(s, [ref], settings=settings, clock=stepped.now, sleep=sleep) as g):
+            c = g.client(ref)
+            c.nmt_start()
+            assert int(c.get("PX")) < 300
+            recovery.move_to(g, {"elbow": ref}, {"elbow": c}, {"elbow": 1500}, 500, settings,
+                             stepped.now, sleep, "j2: the back-off")
+        assert switched_off

@@ -93,8 +93,6 @@ def test_abort_names_the_code_and_its_text():
 
 @pytest.mark.parametrize("reply, why", [
     (bytes.fromhex("43 18"), "too short"),  # 2 bytes: not even command and index
-    (bytes.fromhex("60 18 10 04 00 00 00 00"), "Unexpected response 0x60"),  # a download's answer
-    (bytes.fromhex("43 18 10 05 01 02 03 04"), "Node returned a value for 0x1018:05 instead"),
     (bytes.fromhex("43 18 10 04 01 02"), "2 data byte(s) where the answer announces 4"),  # expedited, cut short
 ])
 def test_malformed_answers(reply, why):
@@ -104,6 +102,18 @@ def test_malformed_answers(reply, why):
     assert e.reason == "malformed" and e.abort_code is None
     assert str(e).startswith("node 10: SDO upload of 0x1018:4 (serial number): malformed answer (")
     assert why in str(e)
+
+
+@pytest.mark.parametrize("reply", [
+    bytes.fromhex("60 18 10 04 00 00 00 00"),  # a download's answer
+    bytes.fromhex("43 18 10 05 01 02 03 04"),  # another object's
+])
+def test_an_answer_that_cannot_be_the_uploads_is_another_transfers_not_a_malformed_one(reply):
+    """On the drive's one SDO channel these are the late answers of other transfers (another process's,
+    a retried request's second): the upload waits for its own, and without it the drive did not answer."""
+    with pytest.raises(SdoError) as info:
+        DriveSdo(ScriptedNetwork(lambda can_id, req: reply), 10).upload(0x1018, 4, name="serial number")
+    assert info.value.reason == "timeout"
 
 
 def test_a_request_that_cannot_be_sent():
@@ -268,3 +278,39 @@ def test_a_late_answer_of_another_transfer_is_never_taken_for_the_uploads(stray)
     "malformed answer (Unexpected response 0x60)"; nor is another object's upload answer ours."""
     sdo = DriveSdo(StrayAnswerNetwork(bytes.fromhex(stray)), 10, label="drive1 (node 10)")
     assert sdo.upload(0x1016, 1) == bytes.fromhex("2C 01 7E 00")
+
+
+class StrayThenAnswer(ScriptedNetwork):
+    """canopen's path: each request is first "answered" by ``stray`` (another transfer's late answer on
+    the drive), then by the drive's own answer."""
+
+    def __init__(self, stray: bytes, answer: Callable[[int, bytes], bytes | None]) -> None:
+        super().__init__(answer)
+        self.stray = stray
+
+    def send_message(self, can_id: int, data: bytes, remote: bool = False) -> None:
+        if 0x600 < can_id < 0x680 and data[0] != 0x80:
+            for callback in list(self.subscribers.get(can_id - 0x600 + 0x580, [])):
+                callback(can_id - 0x600 + 0x580, self.stray, 0.0)
+        super().send_message(can_id, data, remote)
+
+
+@pytest.mark.parametrize("stray", [
+    "43 00 1A 02 10 00 60 60",  # a recording's expedited upload answer, late
+    "60 16 10 01 00 00 00 00",  # a download answer of another object
+    "80 00 1A 02 00 00 04 05",  # another transfer's abort
+])
+def test_a_download_never_takes_another_transfers_late_answer_for_its_own(stray):
+    """A jog's download of 0x6007 took a recording's late upload answer for its own, beside a
+    `log record` on a busy host: "malformed answer (Unexpected response 0x43)"."""
+    net = StrayThenAnswer(bytes.fromhex(stray), lambda can_id, req: bytes([0x60]) + req[1:4] + bytes(4))
+    sdo = DriveSdo(net, 10, label="drive1 (node 10)")
+    sdo.download(0x6007, 0, bytes.fromhex("01 00"))
+    assert [d for _, d in net.sent] == [bytes.fromhex("2B 07 60 00 01 00 00 00")]
+
+
+def test_a_download_whose_only_answer_is_another_transfers_is_no_answer():
+    net = StrayThenAnswer(bytes.fromhex("43 00 1A 02 10 00 60 60"), lambda can_id, req: None)
+    sdo = DriveSdo(net, 10, label="drive1 (node 10)")
+    with pytest.raises(SdoError, match=r"no answer to the SDO download of 0x6007"):
+        sdo.download(0x6007, 0, bytes.fromhex("01 00"))

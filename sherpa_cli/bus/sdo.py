@@ -111,6 +111,7 @@ class DriveSdo:
         wait_for = getattr(network, "wait_for", None)
         self._wait = wait_for if callable(wait_for) else None
         self._answer: _Answer | None = None
+        self._current: tuple[str, int, int] = ("upload", 0, 0)  # the canopen transfer under way (op, index, sub)
         self._segmented: set[tuple[int, int]] = set(SEGMENTED_OBJECTS)  # (index, sub) learnt or known
         if self._wait is None:
             self._remote.associate_network(network)
@@ -249,23 +250,47 @@ class DriveSdo:
         responses = client.responses  # the queue of this transfer (canopen replaces it between transfers)
         timeout = float(client.RESPONSE_TIMEOUT)
         began = self._clock()
-        try:
+        deadline, extended = began + timeout, False
+        while True:
             try:
-                response: bytes = responses.get(block=True, timeout=timeout)
+                response: bytes = responses.get(block=True, timeout=max(deadline - self._clock(), 0.0))
             except queue.Empty:
                 late = self._clock() - began - timeout
-                if late <= timeout / 4:
-                    raise
+                if extended or late <= timeout / 4:
+                    raise SdoCommunicationError("No SDO response received") from None
                 log.debug("%s: SDO answer: this thread was %.0f ms late; waiting once more", self.label, late * 1000)
-                response = responses.get(block=True, timeout=min(late, timeout))
-        except queue.Empty:
-            raise SdoCommunicationError("No SDO response received")  # noqa: B904 - _error reads its context
+                deadline, extended = self._clock() + min(late, timeout), True
+                continue
+            if not self._stray(bytes(response)):
+                break
+            # the late answer of another transfer on this drive (another process's, or a retried
+            # request's second answer): not this transfer's, which may still come
+            log.debug("%s: SDO answer %s is not this transfer's (%s of 0x%04X:%d): ignored", self.label,
+                      bytes(response).hex(" "), *self._current)
         if response[:1] == b"\x80":
             raise SdoAbortedError(struct.unpack_from("<L", response.ljust(8, b"\0"), 4)[0])
         return response
 
+    def _stray(self, response: bytes) -> bool:
+        """Whether ``response`` cannot answer the transfer under way (:attr:`_current`): an upload's
+        answer in a download, a download's in an upload, or an initiate answer or abort of another
+        object. Segment answers carry no object: those are taken, as canopen takes them."""
+        if len(response) < 4:
+            return False  # too short to tell: canopen refuses it as malformed
+        op, index, sub = self._current
+        command, obj = response[0], (response[1] | response[2] << 8, response[3])
+        kind = command & 0xE0
+        if kind == 0x40:  # an initiate upload answer
+            return op != "upload" or obj != (index, sub)
+        if kind == 0x60:  # an initiate download answer
+            return op != "download" or obj != (index, sub)
+        if command == 0x80:
+            return obj != (index, sub)
+        return False
+
     def _canopen_upload(self, index: int, sub: int) -> tuple[int | None, bytes]:
         """One upload through canopen's client: (the size the drive announced, the data)."""
+        self._current = ("upload", index, sub)
         with self._canopen(), self._remote.sdo.open(index, sub, "rb", buffering=0) as fp:
             size = getattr(fp, "size", None)
             return (size if isinstance(size, int) else None), bytes(fp.read())
@@ -275,6 +300,7 @@ class DriveSdo:
         if self.on_request is not None:
             self.on_request()
         with self._transfer("download", index, sub, name):
+            self._current = ("download", index, sub)
             try:
                 with self._canopen():
                     self._remote.sdo.download(index, sub, data)

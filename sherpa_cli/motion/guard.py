@@ -56,7 +56,6 @@ from sherpa_cli.motion.drive_watch import DriveWatch, DriveWatchError
 from sherpa_cli.motion.force_watch import ForceLimitError, ForceWatch, SensorSilentError, tightened
 from sherpa_cli.motion.host_ids import HostIdListener, OtherConsumers
 from sherpa_cli.motion.lock import DriveLock, HostIdLock, drive_label
-from sherpa_cli.motion.pair_start import JOURNAL_OWNER as PAIR_START_OWNER
 from sherpa_cli.motion.report import NOT_MOVED, RESET_DURING_STOP, DriveStop, GuardReport
 from sherpa_cli.motion.settings import PROFILE_KEYS, MotionSettings
 from sherpa_cli.motion.stopping import ask_patiently, stop_drive, stop_other, why
@@ -73,6 +72,9 @@ log = logging.getLogger(__name__)
 FORCE_SILENT_CHECKS = 5
 MS_PROFILER_ACTIVE = 2
 JOURNAL_OWNER = "motion command"
+# the journal's owner of what a pair start inside the guard changes (motion/pair_start.py), which the
+# guard's exit puts back if the start's own close could not
+PAIR_START_OWNER = "pair start"
 
 
 def _size(key: tuple[int, int]) -> int:

@@ -11,6 +11,7 @@ from sherpa_cli.bus import journal, syncgate
 from sherpa_cli.config.model import PAIR_START_METHODS, ArmConfig
 from sherpa_cli.elmo.protocol import GROUP_INDEX, RPDO2_BASE, SYNC_ID, TPDO2_BASE
 from sherpa_cli.errors import ConfigError, DriveTimeoutError
+from sherpa_cli.motion.guard import PAIR_START_OWNER as JOURNAL_OWNER
 from sherpa_cli.motion.settings import PROFILE_KEYS, MotionSettings
 
 if TYPE_CHECKING:
@@ -23,7 +24,6 @@ if TYPE_CHECKING:
 RPDO2_COMM = 0x1401  # RPDO2 (the binary interpreter's) communication parameter; sub 2 = transmission type
 SYNC_RPDO_TYPE = 1  # synchronous: executed at the next SYNC ([IG] 5-4)
 RPDO2_TYPE_NAME = "RPDO2 transmission type"
-JOURNAL_OWNER = "pair start"
 
 
 def group_reset(guard: MotionGuard, cfg: ArmConfig) -> Callable[[Sequence[DriveRef]], None] | None:

@@ -122,9 +122,12 @@ def move_to(guard: MotionGuard, refs: Mapping[str, DriveRef], clients: Mapping[s
         else:
             c.execute("BG")
     deadline = clock() + move_time_bound(longest, speed)
-    while not all(_ended(clients[d]) for d in targets):
+    while not all(_ended(guard, refs[d], clients[d]) for d in targets):
         guard.check()
         if clock() >= deadline:
+            # a motor switched off meanwhile (`sherpa stop` from another terminal: ST, standstill
+            # short of the target, MO=0) is the reason, named as such, not the time bound
+            guard.check_motors_on([refs[d] for d in targets], what)
             raise SafetyError(f"{what} did not finish in time", hint=HINT)
         sleep(settings.poll_interval)
 
@@ -133,8 +136,10 @@ def _position(c: Motor) -> int:
     return c.position() if isinstance(c, Drive) else int(c.get("PX"))
 
 
-def _ended(c: Motor) -> bool:
-    return c.profile_done() if isinstance(c, Drive) else int(c.get("MS")) == 0
+def _ended(guard: MotionGuard, ref: DriveRef, c: Motor) -> bool:
+    # the guard's query: a drive deaf for its MO settle window (`sherpa stop` from elsewhere) is
+    # waited for, not taken for a drive that stopped answering
+    return c.profile_done() if isinstance(c, Drive) else int(guard.query(ref, "MS")) == 0
 
 
 def recovery_speed(settings: MotionSettings, axes: Iterable[Axis | None]) -> int:
