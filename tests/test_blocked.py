@@ -97,3 +97,60 @@ def test_a_torque_jog_into_a_pressed_end_switch_ends_blocked_naming_it():
                     settings=MotionSettings.from_config(cfg))
         with s.sim.lock:
             assert not s.sim.drives["stiff_drive"].motor_on
+
+
+class _StopFromElsewhere:
+    """A sleep on stepped time that, once ``name`` has moved past ``after`` counts, stops it as
+    `sherpa stop` from another terminal does on a busy host: ST, then MO=0 only ``mo_off_after`` s
+    later (None: never)."""
+
+    def __init__(self, session, stepped, name: str, after: int, mo_off_after: float | None) -> None:
+        self.s, self.stepped, self.name, self.after, self.mo_off_after = session, stepped, name, after, mo_off_after
+        self.st_at: float | None = None
+
+    def __call__(self, dt: float) -> None:
+        with self.s.sim.lock:
+            drive = self.s.sim.drives[self.name]
+            if self.st_at is None and drive.motor_on and abs(drive.px) > self.after:
+                drive.execute("ST")
+                self.st_at = self.stepped.now()
+            elif (self.st_at is not None and self.mo_off_after is not None and drive.motor_on
+                  and self.stepped.now() - self.st_at >= self.mo_off_after):
+                drive.write_param("MO", 0)
+        self.stepped.sleep(dt)
+
+
+@pytest.mark.parametrize("mo_off_after,said", [
+    (1.5, r"the motor was switched off during the (jog|move): MO=0 from elsewhere"),
+    (None, r"the motors stand short of the target with their profiles ended, still on: stopped \(ST\) "
+           r"from elsewhere"),
+])
+def test_a_position_jog_stopped_from_elsewhere_is_never_called_blocked(mo_off_after, said):
+    """`sherpa stop` from another terminal on a busy host: its ST stopped the jog and its MO=0 came
+    more than the stall time later; the jog said "blocked: no progress for 1 s ... a hard stop or a
+    load?" -- the stop from elsewhere is the reason, named (or, without the MO=0, the ST)."""
+    from motion_helpers import JOG_CONFIG, stepped_session
+
+    cfg = load_config(JOG_CONFIG)
+    with stepped_session(cfg) as (s, stepped):
+        target = resolve_axis(cfg, "j2")
+        sleep = _StopFromElsewhere(s, stepped, "elbow", 200, mo_off_after)
+        with pytest.raises(SafetyError, match=said) as info:
+            run_jog(s, target, parse_request(target, mode="position", to="1500counts", uncalibrated=True),
+                    settings=MotionSettings.from_config(cfg), clock=stepped.now, sleep=sleep)
+        assert "blocked" not in str(info.value) and sleep.st_at is not None
+
+
+@pytest.mark.parametrize("mo_off_after", [1.5, None])
+def test_a_pair_move_stopped_from_elsewhere_is_never_called_blocked(mo_off_after):
+    from motion_helpers import JOG_CONFIG, stepped_session
+
+    cfg = load_config(JOG_CONFIG)
+    with stepped_session(cfg) as (s, stepped):
+        sleep = _StopFromElsewhere(s, stepped, "left", 150, mo_off_after)
+        with pytest.raises(SafetyError) as info:
+            diffdrive.run_move(s, cfg.pairs["diff"], PairTarget(sigma="1500counts", delta="0counts", relative=True,
+                                                                uncalibrated=True),
+                               clock=stepped.now, sleep=sleep)
+        assert "blocked" not in str(info.value) and sleep.st_at is not None
+        assert "from elsewhere" in str(info.value)

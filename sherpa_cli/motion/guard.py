@@ -508,6 +508,30 @@ class MotionGuard:
                 why = "; ".join(describe_mf(mf)) if mf else "MO=0 from elsewhere (sherpa stop, another tool)"
                 raise SafetyError(f"{self._drive(ref).client.label}: the motor was switched off during {during}: {why}")
 
+    def explain_stall(self, refs: Iterable[DriveRef], during: str) -> None:
+        """Before a position move's stall is called blocked: a motor switched off meanwhile is the
+        reason (:meth:`check_motors_on`); and an Elmo motor whose profiler has ended short of its
+        target was stopped, not blocked -- a stop (ST) from elsewhere: `sherpa stop` switches it off
+        once it stands, so that MO=0 is waited for, up to the standstill timeout. Returns when
+        the profiler still runs (blocked: the reference moves on, the motor does not) or an end
+        switch is active (the drive stopped itself on it)."""
+        refs = list(refs)
+        self.check_motors_on(refs, during)
+        elmo = [r for r in refs if self._drive(r).native]
+        if len(elmo) != len(refs) or any(int(self.query(r, "MS")) == MS_PROFILER_ACTIVE for r in elmo):
+            return  # another drive type's profiler is not asked here: its stall is called blocked
+        from sherpa_cli.motion.blocked import active_switches
+
+        if any(active_switches(self.session.cfg, r.name, self.client(r)) for r in elmo):
+            return  # the drive's own end-switch stop: blocked, and the switch is named
+        deadline = self._clock() + self.settings.standstill_timeout
+        while self._clock() < deadline:
+            self._sleep(self.settings.poll_interval)
+            self.check_motors_on(refs, during)
+        raise SafetyError(f"{during}: the motors stand short of the target with their profiles ended, still on: "
+                          "stopped (ST) from elsewhere, by another tool?",
+                          hint="check who else talks to the drives (`sherpa doctor`: host node id)")
+
     @contextlib.contextmanager
     def motor_off_explains_failure(self, refs: Iterable[DriveRef], during: str) -> Iterator[None]:
         """Around the sets right after the motors went on (JV, SP/PA, TC): one that fails because a

@@ -245,6 +245,7 @@ def run_plan(guard: MotionGuard, plan: MotionPlan, *, settings: MotionSettings, 
                 back = sample()
                 result.recovered_to = {a.name: a.position(back) for a in plan.watched}
             elif watched.outcome == "stalled":
+                guard.explain_stall(refs.values(), "the move")
                 raise blocked_error(cfg, clients, list(clients), settings.stall_time, who="move",
                                     at=_where(plan, watched.motors))
             elif watched.outcome == "elapsed":

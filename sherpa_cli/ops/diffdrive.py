@@ -696,6 +696,7 @@ def run_move(session: ArmSession, pair: PairConfig, request: PairTarget, *,
                                      clock=clock, sleep=sleep, hold={},
                                      speed=recovery.recovery_speed(settings, watched))
                 elif w.outcome == "stalled":
+                    guard.explain_stall([by_name[d] for d in drives], "the move")
                     s_now, d_now = w.joints.get(sj.name), w.joints.get(dj.name)
                     raise SafetyError(f"{pair.name}: {blocked_text(session.cfg, clients, drives, settings.stall_time)}; "
                                       f"at Σ={s_now}, Δ={d_now} on the way to Σ={p.target[0]}, Δ={p.target[1]}",

@@ -308,6 +308,8 @@ def _watch(guard: MotionGuard, c: DriveClient, target: Axis, clock: Callable[[],
         if done is not None and done(sr):
             return
         if stall is not None and stall.feed({target.ref.name: px}, clock()):
+            if done is not None:  # a move: stopped from elsewhere is not blocked
+                guard.explain_stall([target.ref], "the jog")
             raise blocked_error(guard.session.cfg, {target.ref.name: c}, [target.ref.name], settings.stall_time,
                                 who=c.label, at=f"at {px} counts")
         if limit is not None and elapsed >= limit:
