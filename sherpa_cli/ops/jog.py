@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 from sherpa_cli.devices.drives import is_elmo
@@ -29,8 +28,10 @@ from sherpa_cli.motion.guard import MotionGuard
 from sherpa_cli.motion.report import GuardReport, MotionInterrupted, with_report
 from sherpa_cli.motion.request import MoveRequest
 from sherpa_cli.motion.settings import MotionSettings, check_torque_for
-from sherpa_cli.ops.jog_result import JogResult
-from sherpa_cli.ops.seam_jog import check_seam_jog, run_seam_jog
+from sherpa_cli.ops.jog_result import JogProgress, JogResult
+from sherpa_cli.ops.seam_jog import check_seam_jog, run_seam_jog, runs_as_a_plan
+
+__all__ = ["MODES", "JogProgress", "check_request", "precheck", "run_jog"]
 
 if TYPE_CHECKING:
     from sherpa_cli.bus.session import ArmSession
@@ -39,13 +40,6 @@ if TYPE_CHECKING:
     from sherpa_cli.motion.limit_watch import Breach
 
 MODES = ("position", "velocity", "torque")
-
-
-@dataclass
-class JogProgress:
-    elapsed: float
-    counts: int
-    rad: float | None
 
 
 def check_request(target: Axis, req: MoveRequest, *, max_torque_for: float | None = None) -> None:
@@ -95,11 +89,14 @@ def run_jog(session: ArmSession, target: Axis, req: MoveRequest, *, settings: Mo
             on_progress: Callable[[JogProgress], None] | None = None,
             on_event: Callable[[str], None] | None = None, keep: bool = False) -> JogResult:
     """Move as asked inside a MotionGuard and return where it ended; every exit path stops the motor."""
-    if not is_elmo(session, target.ref):  # the interpreter's jog below; any other type through the seam
+    if not is_elmo(session, target.ref):
         check_seam_jog(session, target, req)
-        check_request(target, req, max_torque_for=session.cfg.motion.max_torque_for)
-        return run_seam_jog(session, target, req, settings=settings, clock=clock, sleep=sleep, on_event=on_event)
     check_request(target, req, max_torque_for=session.cfg.motion.max_torque_for)
+    if runs_as_a_plan(session, target, req) and not keep:
+        # a joint's position jog, any drive type: the one pipeline (ops/seam_jog.py)
+        cal = precheck(session, target, req) if is_elmo(session, target.ref) else None
+        return run_seam_jog(session, target, req, settings=settings, clock=clock, sleep=sleep, on_event=on_event,
+                            on_progress=on_progress, cal=cal)
     ref = target.ref
     cal = precheck(session, target, req)
     guard = MotionGuard(session, [ref], settings=settings, clock=clock, sleep=sleep, keep=keep, on_event=on_event)

@@ -34,6 +34,15 @@ def letters(commands: Mapping[str, Mapping[str, int | float]]) -> str:
 
 
 @dataclass
+class JogProgress:
+    """A jog under way: s since its start, where the axis is (counts, and rad where it has a cpr)."""
+
+    elapsed: float
+    counts: int
+    rad: float | None
+
+
+@dataclass
 class JogResult(BreachOutcome):
     """One jog of one axis: where it started and ended, what was sent, how it ended, how the guard
     stopped the motors. ``ok`` is False when a joint left its full range (``breaches``; the joint
