@@ -529,8 +529,10 @@ class MotionGuard:
             self._sleep(self.settings.poll_interval)
             self.check_motors_on(refs, during)
         raise SafetyError(f"{during}: the motors stand short of the target with their profiles ended, still on: "
-                          "stopped (ST) from elsewhere, by another tool?",
-                          hint="check who else talks to the drives (`sherpa doctor`: host node id)")
+                          "stopped (ST) from elsewhere, by another tool, or blocked as the profile ended (a hard "
+                          "stop or a load?)",
+                          hint="check who else talks to the drives (`sherpa doctor`: host node id), and what "
+                               "blocks the joint")
 
     @contextlib.contextmanager
     def motor_off_explains_failure(self, refs: Iterable[DriveRef], during: str) -> Iterator[None]:
